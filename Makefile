@@ -1,0 +1,50 @@
+# subdivd — build, test, benchmark. See README.md.
+CC      ?= cc
+CXX     ?= g++
+CFLAGS  ?= -O2 -g
+CFLAGS  += -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -fPIC
+LDLIBS  += -llapacke -llapack -lm
+PYTHON  ?= /usr/bin/python3
+B       := build
+
+CORE_SRC := $(wildcard core/*.c)
+CORE_OBJ := $(patsubst %.c,$(B)/%.o,$(CORE_SRC))
+CORE_LIB := $(B)/libsubdiv.a
+
+.PHONY: all test test-c test-py bench sanitize run deps clean
+all: $(CORE_LIB) $(B)/sdlevel $(B)/test_core
+
+$(B)/%.o: %.c $(wildcard core/*.h)
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) -c $< -o $@
+
+$(CORE_LIB): $(CORE_OBJ)
+	ar rcs $@ $^
+
+$(B)/sdlevel: tests/tools/sdlevel.c $(CORE_LIB)
+	$(CC) $(CFLAGS) $< $(CORE_LIB) $(LDLIBS) -o $@
+
+TEST_SRC := $(wildcard tests/core/*.c)
+$(B)/test_core: $(TEST_SRC) $(CORE_LIB) $(wildcard tests/core/*.h)
+	$(CC) $(CFLAGS) $(TEST_SRC) $(CORE_LIB) $(LDLIBS) -o $@
+
+-include tests/peers/Makefile.inc
+-include bench/Makefile.inc
+
+deps:
+	@sh tools/deps.sh
+
+# Runs every suite and ends with one line: "N passed, N failed".
+test: all $(OSD_LOOP)
+	@sh tests/run_all.sh
+
+sanitize:
+	$(MAKE) clean-build B=build-asan
+	$(MAKE) all B=build-asan CFLAGS="-O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all" LDLIBS="$(LDLIBS) -fsanitize=address,undefined"
+	SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core sh tests/run_all.sh
+
+clean-build:
+	rm -rf $(B)
+
+clean:
+	rm -rf build build-asan

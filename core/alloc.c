@@ -1,0 +1,87 @@
+/* alloc.c — the one allocation wrapper of the core.
+ *
+ * Every byte the core allocates goes through sd_mem: a pluggable allocator (libc by default), a
+ * running count of bytes in use (feeds per-session memory accounting and /metrics) and an
+ * optional cap. A failing allocation returns NULL; callers turn it into SD_ERR_NOMEM or
+ * SD_ERR_LIMIT and leave the complex as it was. Tests plug an allocator that fails the Nth call.
+ * Each block carries a 16-byte header holding its size so that frees can be counted.
+ */
+#include "internal.h"
+#include <stdlib.h>
+#include <string.h>
+
+#define HDR 16
+
+void sd_mem_init(sd_mem *m, const sd_allocator *a, size_t limit)
+{
+    memset(m, 0, sizeof *m);
+    if (a)
+        m->a = *a;
+    m->limit = limit;
+}
+
+static void *raw_alloc(sd_mem *m, size_t n)
+{
+    return m->a.alloc ? m->a.alloc(n, m->a.ud) : malloc(n);
+}
+
+static void raw_free(sd_mem *m, void *p, size_t n)
+{
+    if (m->a.release)
+        m->a.release(p, n, m->a.ud);
+    else
+        free(p);
+}
+
+void *sd_alloc(sd_mem *m, size_t n)
+{
+    if (n > SIZE_MAX - HDR)
+        return NULL;
+    if (m->limit && (m->used + n + HDR > m->limit || m->used + n + HDR < m->used)) {
+        m->failed_limit = true;
+        return NULL;
+    }
+    unsigned char *p = raw_alloc(m, n + HDR);
+    if (!p)
+        return NULL;
+    memcpy(p, &n, sizeof n);
+    m->used += n + HDR;
+    if (m->used > m->peak)
+        m->peak = m->used;
+    return p + HDR;
+}
+
+void *sd_calloc(sd_mem *m, size_t n, size_t size)
+{
+    if (size && n > SIZE_MAX / size)
+        return NULL;
+    void *p = sd_alloc(m, n * size);
+    if (p)
+        memset(p, 0, n * size);
+    return p;
+}
+
+void sd_free(sd_mem *m, void *p)
+{
+    if (!p)
+        return;
+    unsigned char *b = (unsigned char *)p - HDR;
+    size_t n;
+    memcpy(&n, b, sizeof n);
+    m->used -= n + HDR;
+    raw_free(m, b, n + HDR);
+}
+
+void *sd_realloc(sd_mem *m, void *p, size_t n)
+{
+    if (!p)
+        return sd_alloc(m, n);
+    size_t old;
+    memcpy(&old, (unsigned char *)p - HDR, sizeof old);
+    void *q = sd_alloc(m, n);
+    if (!q)
+        return NULL;
+    memcpy(q, p, old < n ? old : n);
+    sd_free(m, p);
+    return q;
+}

@@ -1,0 +1,345 @@
+/* classify.c — classification of the control complex (000 Sec. 2; Algorithms 2-4) and the
+ * first choice of major diagonals (001 Algorithm 2).
+ *
+ * For every vertex and edge of level 0 we derive:
+ *   family    which C_k it belongs to (bit k): the k-subcomplex of maximal k-simplices and faces;
+ *   dC        whether it lies in the boundary complex: boundary simplices (a (k-1)-face of a
+ *             maximal k-simplex that is a face of nothing else) and their faces;
+ *   type 1-4  non-manifold type (000 Sec. 2.4): 1 in C_k and C_l (k != l); 2 a (k-1)-simplex of
+ *             C_k alone shared by 3+ k-simplices; 3 a lower-dimensional simplex of C_k alone where
+ *             parts meet — tested, as 002 Sec. 5.2 does, by the connected components of its link;
+ *             4 a face (of C_k alone, dim < k-1) of a type-1..3 simplex.
+ * Deeper levels inherit these classes entity by entity (split.c), which is exact: the link of a
+ * vertex point is isomorphic to its parent's, and the children of a simplex keep its type.
+ */
+#include "internal.h"
+#include <string.h>
+
+static int popcount4(uint8_t f) { return (f & 1) + (f >> 1 & 1) + (f >> 2 & 1) + (f >> 3 & 1); }
+
+/* A vertex -> incident items table in CSR form. */
+typedef struct inc {
+    uint32_t *off, *item;
+} inc;
+
+static bool inc_build(sd_mem *m, inc *x, uint32_t n, uint32_t nitems, int per,
+                      const uint32_t *keys /* nitems*per keys */)
+{
+    x->off = sd_calloc(m, (size_t)n + 1, sizeof *x->off);
+    x->item = sd_alloc(m, ((size_t)nitems * per + 1) * sizeof *x->item);
+    if (!x->off || !x->item)
+        return false;
+    for (size_t i = 0; i < (size_t)nitems * per; i++)
+        x->off[keys[i] + 1]++;
+    for (uint32_t i = 0; i < n; i++)
+        x->off[i + 1] += x->off[i];
+    uint32_t *pos = sd_alloc(m, ((size_t)n + 1) * sizeof *pos);
+    if (!pos)
+        return false;
+    memcpy(pos, x->off, ((size_t)n + 1) * sizeof *pos);
+    for (size_t i = 0; i < (size_t)nitems * per; i++)
+        x->item[pos[keys[i]]++] = (uint32_t)(i / per);
+    sd_free(m, pos);
+    return true;
+}
+
+static void inc_free(sd_mem *m, inc *x)
+{
+    sd_free(m, x->off);
+    sd_free(m, x->item);
+}
+
+/* Union-find over the link's nodes, numbered locally through `loc` (stamped per query). */
+typedef struct linkuf {
+    uint32_t *loc, *stamp, *parent, n, cur;
+} linkuf;
+
+static uint32_t uf_node(linkuf *u, uint32_t v)
+{
+    if (u->stamp[v] != u->cur) {
+        u->stamp[v] = u->cur;
+        u->loc[v] = u->n;
+        u->parent[u->n] = u->n;
+        u->n++;
+    }
+    return u->loc[v];
+}
+static uint32_t uf_find(linkuf *u, uint32_t a)
+{
+    while (u->parent[a] != a)
+        a = u->parent[a] = u->parent[u->parent[a]];
+    return a;
+}
+static void uf_union(linkuf *u, uint32_t a, uint32_t b)
+{
+    a = uf_find(u, uf_node(u, a));
+    b = uf_find(u, uf_node(u, b));
+    if (a != b)
+        u->parent[a] = b;
+}
+static uint32_t uf_components(linkuf *u)
+{
+    uint32_t c = 0;
+    for (uint32_t i = 0; i < u->n; i++)
+        c += u->parent[i] == i;
+    return c;
+}
+static void uf_begin(linkuf *u)
+{
+    u->cur++;
+    u->n = 0;
+}
+
+sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
+{
+    uint32_t nv = t->nv, ne = t->ne;
+    t->vfam = sd_calloc(m, nv, 1);
+    t->vflag = sd_calloc(m, nv, 1);
+    t->vnm = sd_calloc(m, nv, 1);
+    t->efam = sd_calloc(m, ne ? ne : 1, 1);
+    t->eflag = sd_calloc(m, ne ? ne : 1, 1);
+    t->enm = sd_calloc(m, ne ? ne : 1, 1);
+    uint32_t *cdeg = sd_calloc(m, nv, sizeof *cdeg);
+    uint32_t *n2 = sd_calloc(m, ne ? ne : 1, sizeof *n2);
+    inc vt = {0}, vtri = {0}, et = {0};
+    linkuf u = {0};
+    uint32_t *trv = NULL, *tetv = NULL;
+    if (!t->vfam || !t->vflag || !t->vnm || !t->efam || !t->eflag || !t->enm || !cdeg || !n2)
+        goto nomem;
+
+    /* families (Algorithm 2) */
+    for (uint32_t i = 0; i < t->npt; i++)
+        t->vfam[t->pt[i]] |= FAM0;
+    for (uint32_t i = 0; i < t->ncu; i++) {
+        uint32_t e = t->cu[i];
+        t->efam[e] |= FAM1;
+        t->eflag[e] |= EF_CURVE;
+        for (int k = 0; k < 2; k++) {
+            t->vfam[t->ev[e][k]] |= FAM1;
+            cdeg[t->ev[e][k]]++;
+        }
+    }
+    for (uint32_t i = 0; i < t->ntr; i++) {
+        uint32_t f = t->tr[i];
+        for (int j = 0; j < 3; j++) {
+            t->efam[t->fe[f][j]] |= FAM2;
+            n2[t->fe[f][j]]++;
+            t->vfam[t->fv[f][j]] |= FAM2;
+        }
+    }
+    for (uint32_t i = 0; i < t->ntet; i++) {
+        for (int k = 0; k < 6; k++)
+            t->efam[t->tet_e[i][k]] |= FAM3;
+        for (int k = 0; k < 4; k++)
+            t->vfam[t->tet[i][k]] |= FAM3;
+    }
+
+    /* boundary simplices and dC (Algorithm 3) */
+    for (uint32_t f = 0; f < t->nf; f++)
+        if (!(t->fflag[f] & FF_MAX) && t->fn3[f] == 1) {
+            t->fflag[f] |= FF_BND3;
+            for (int j = 0; j < 3; j++) {
+                t->eflag[t->fe[f][j]] |= EF_DC;
+                t->vflag[t->fv[f][j]] |= VF_DC;
+            }
+        }
+    for (uint32_t e = 0; e < ne; e++)
+        if (t->efam[e] == FAM2 && n2[e] == 1) {
+            t->eflag[e] |= EF_BND2 | EF_DC;
+            t->vflag[t->ev[e][0]] |= VF_DC;
+            t->vflag[t->ev[e][1]] |= VF_DC;
+        }
+    for (uint32_t v = 0; v < nv; v++)
+        if (t->vfam[v] == FAM1 && cdeg[v] == 1)
+            t->vflag[v] |= VF_CURVE_END | VF_DC;
+
+    /* types 1 and 2 */
+    for (uint32_t v = 0; v < nv; v++) {
+        if (popcount4(t->vfam[v]) >= 2)
+            t->vnm[v] = 1;
+        else if (t->vfam[v] == FAM1 && cdeg[v] >= 3)
+            t->vnm[v] = 2;
+    }
+    for (uint32_t e = 0; e < ne; e++) {
+        if (popcount4(t->efam[e]) >= 2)
+            t->enm[e] = 1;
+        else if (t->efam[e] == FAM2 && n2[e] >= 3)
+            t->enm[e] = 2;
+    }
+    /* type 4: faces of type-2 simplices (exclusive members, dim < k-1) */
+    for (uint32_t f = 0; f < t->nf; f++)
+        if (t->fn3[f] >= 3)
+            for (int j = 0; j < 3; j++) {
+                if (t->enm[t->fe[f][j]] == 0)
+                    t->enm[t->fe[f][j]] = 4;
+                if (t->vnm[t->fv[f][j]] == 0)
+                    t->vnm[t->fv[f][j]] = 4;
+            }
+    for (uint32_t e = 0; e < ne; e++)
+        if (t->enm[e] == 2)
+            for (int k = 0; k < 2; k++)
+                if (t->vnm[t->ev[e][k]] == 0)
+                    t->vnm[t->ev[e][k]] = 4;
+
+    /* type 3: link components (002 Sec. 5.2) */
+    trv = sd_alloc(m, ((size_t)t->ntr * 3 + 1) * sizeof *trv);
+    tetv = sd_alloc(m, ((size_t)t->ntet * 6 + 1) * sizeof *tetv);
+    if (!trv || !tetv)
+        goto nomem;
+    for (uint32_t i = 0; i < t->ntr; i++)
+        memcpy(trv + 3 * (size_t)i, t->fv[t->tr[i]], 3 * sizeof *trv);
+    if (!inc_build(m, &vtri, nv, t->ntr, 3, trv) ||
+        !inc_build(m, &vt, nv, t->ntet, 4, &t->tet[0][0]) ||
+        !inc_build(m, &et, ne, t->ntet, 6, &t->tet_e[0][0]))
+        goto nomem;
+    u.loc = sd_alloc(m, (size_t)nv * sizeof *u.loc);
+    u.stamp = sd_calloc(m, nv, sizeof *u.stamp);
+    u.parent = sd_alloc(m, (size_t)nv * sizeof *u.parent);
+    if (!u.loc || !u.stamp || !u.parent)
+        goto nomem;
+
+    for (uint32_t e = 0; e < ne; e++) {
+        if (t->efam[e] != FAM3 || t->enm[e])
+            continue;
+        uf_begin(&u);
+        for (uint32_t k = et.off[e]; k < et.off[e + 1]; k++) {
+            const uint32_t *q = t->tet[et.item[k]];
+            uint32_t o[2], n = 0;
+            for (int i = 0; i < 4; i++)
+                if (q[i] != t->ev[e][0] && q[i] != t->ev[e][1])
+                    o[n++] = q[i];
+            uf_union(&u, o[0], o[1]);
+        }
+        if (uf_components(&u) > 1) {
+            t->enm[e] = 3;
+            for (int k = 0; k < 2; k++)
+                if (t->vnm[t->ev[e][k]] == 0)
+                    t->vnm[t->ev[e][k]] = 4;
+        }
+    }
+    for (uint32_t v = 0; v < nv; v++) {
+        if (t->vnm[v] || (t->vfam[v] != FAM2 && t->vfam[v] != FAM3))
+            continue;
+        uf_begin(&u);
+        if (t->vfam[v] == FAM3) {
+            for (uint32_t k = vt.off[v]; k < vt.off[v + 1]; k++) {
+                const uint32_t *q = t->tet[vt.item[k]];
+                uint32_t o[3], n = 0;
+                for (int i = 0; i < 4; i++)
+                    if (q[i] != v)
+                        o[n++] = q[i];
+                uf_union(&u, o[0], o[1]);
+                uf_union(&u, o[1], o[2]);
+            }
+        } else {
+            for (uint32_t k = vtri.off[v]; k < vtri.off[v + 1]; k++) {
+                const uint32_t *q = t->fv[t->tr[vtri.item[k]]];
+                uint32_t o[2], n = 0;
+                for (int i = 0; i < 3; i++)
+                    if (q[i] != v)
+                        o[n++] = q[i];
+                uf_union(&u, o[0], o[1]);
+            }
+        }
+        if (uf_components(&u) > 1)
+            t->vnm[v] = 3;
+    }
+
+    sd_free(m, cdeg);
+    sd_free(m, n2);
+    sd_free(m, trv);
+    sd_free(m, tetv);
+    inc_free(m, &vt);
+    inc_free(m, &vtri);
+    inc_free(m, &et);
+    sd_free(m, u.loc);
+    sd_free(m, u.stamp);
+    sd_free(m, u.parent);
+    return SD_OK;
+
+nomem:
+    sd_free(m, cdeg);
+    sd_free(m, n2);
+    sd_free(m, trv);
+    sd_free(m, tetv);
+    inc_free(m, &vt);
+    inc_free(m, &vtri);
+    inc_free(m, &et);
+    sd_free(m, u.loc);
+    sd_free(m, u.stamp);
+    sd_free(m, u.parent);
+    return sd_fail_nomem(err, m);
+}
+
+/* The edge of tetrahedron c's diagonal pair that lies in its local face i (each opposite pair
+ * has exactly one edge in every face: the one not touching vertex i). */
+static uint32_t pair_edge_in_face(const sd_topo *t, uint32_t c, int pair, int i)
+{
+    int k = (SD_TET_E[pair][0] == i || SD_TET_E[pair][1] == i) ? 5 - pair : pair;
+    return t->tet_e[c][k];
+}
+
+/* 001 Algorithm 2 (MAJOR-DIAGONAL-CHOOSE): breadth-first over face-adjacent tetrahedra, each
+ * taking the pair with the fewest conflicts against its already visited neighbours (then the
+ * lowest pair index, so the result is deterministic); every connected component gets its own
+ * search. A conflict is measured by 001 Def. 3.2 (proper diagonals): two tetrahedra sharing a
+ * face are proper when their pairs cross that face at the same edge, so that both octahedra's
+ * diagonals meet at its midpoint. (Reading Algorithm 2's "c.edges - s" literally, i.e. avoiding
+ * the neighbours' edges, makes every shared face improper: after 3 levels of two tetrahedra the
+ * shared face then carries interior edges with |rho(e)| = 5; with this rule all are 4 or 6.) */
+sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err)
+{
+    if (t->ntet == 0)
+        return SD_OK;
+    inc ft = {0};
+    uint32_t *queue = sd_alloc(m, (size_t)t->ntet * sizeof *queue);
+    uint8_t *state = sd_calloc(m, t->ntet, 1); /* 0 new, 1 queued, 2 visited */
+    if (!queue || !state || !inc_build(m, &ft, t->nf, t->ntet, 4, &t->tet_f[0][0])) {
+        sd_free(m, queue);
+        sd_free(m, state);
+        inc_free(m, &ft);
+        return sd_fail_nomem(err, m);
+    }
+    for (uint32_t start = 0; start < t->ntet; start++) {
+        if (state[start])
+            continue;
+        uint32_t head = 0, tail = 0;
+        queue[tail++] = start;
+        state[start] = 1;
+        while (head < tail) {
+            uint32_t c = queue[head++];
+            int conflicts[3] = {0, 0, 0};
+            for (int i = 0; i < 4; i++) {
+                uint32_t f = t->tet_f[c][i];
+                for (uint32_t k = ft.off[f]; k < ft.off[f + 1]; k++) {
+                    uint32_t d = ft.item[k];
+                    if (d == c)
+                        continue;
+                    if (state[d] == 0) {
+                        state[d] = 1;
+                        queue[tail++] = d;
+                        continue;
+                    }
+                    if (state[d] != 2)
+                        continue;
+                    int j = 0;
+                    while (j < 3 && t->tet_f[d][j] != f)
+                        j++;
+                    uint32_t theirs = pair_edge_in_face(t, d, t->tet_d[d], j);
+                    for (int p = 0; p < 3; p++)
+                        conflicts[p] += pair_edge_in_face(t, c, p, i) != theirs;
+                }
+            }
+            int best = 0;
+            for (int p = 1; p < 3; p++)
+                if (conflicts[p] < conflicts[best])
+                    best = p;
+            t->tet_d[c] = (uint8_t)best;
+            state[c] = 2;
+        }
+    }
+    sd_free(m, queue);
+    sd_free(m, state);
+    inc_free(m, &ft);
+    return SD_OK;
+}

@@ -1,0 +1,353 @@
+/* complex.c — the control complex: validation of the input and construction of level 0.
+ *
+ * Input is Algorithm 1's minimum (000 Sec. 5.1): vertices and maximal simplices of any dimension.
+ * Validation is its own pass and runs before anything is built, so a refused complex costs no
+ * more than the check: every coordinate finite and of sane magnitude; every simplex 1..4
+ * vertices, indices in range, no vertex twice, no simplex listed twice, no (near-)zero length,
+ * area or volume. Errors name the simplex (`item`) and the slot (`field`).
+ *
+ * Construction derives all faces (000 Algorithm 2): unique edges and triangles via a hash, each
+ * tetrahedron's edge and face ids, and which listed simplices are really maximal — a listed
+ * simplex that is a face of another listed one is absorbed. Tetrahedra are reoriented to positive
+ * volume (slots 2 and 3 swapped) so that every later cell is positively oriented too.
+ */
+#include "hash.h"
+#include <math.h>
+#include <string.h>
+
+#define SD_MAX_COORD 1e15
+#define SD_DEGENERATE_TOL 1e-12
+
+const uint8_t SD_TET_E[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
+const uint8_t SD_TET_F[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+const uint8_t SD_OCT_E[12][2] = {{0, 2}, {0, 4}, {0, 3}, {0, 5}, {1, 2}, {1, 4},
+                                 {1, 3}, {1, 5}, {2, 4}, {4, 3}, {3, 5}, {5, 2}};
+const uint8_t SD_OCT_F[8][3] = {{0, 2, 4}, {0, 4, 3}, {0, 3, 5}, {0, 5, 2},
+                                {1, 4, 2}, {1, 3, 4}, {1, 5, 3}, {1, 2, 5}};
+
+static void sub3(double *o, const double *a, const double *b)
+{
+    o[0] = a[0] - b[0];
+    o[1] = a[1] - b[1];
+    o[2] = a[2] - b[2];
+}
+static void cross3(double *o, const double *a, const double *b)
+{
+    o[0] = a[1] * b[2] - a[2] * b[1];
+    o[1] = a[2] * b[0] - a[0] * b[2];
+    o[2] = a[0] * b[1] - a[1] * b[0];
+}
+static double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+/* Signed 6x volume of a tetrahedron. */
+static double tet_vol6(const double *xyz, const uint32_t *t)
+{
+    double a[3], b[3], d[3], n[3];
+    sub3(a, xyz + 3 * (size_t)t[1], xyz + 3 * (size_t)t[0]);
+    sub3(b, xyz + 3 * (size_t)t[2], xyz + 3 * (size_t)t[0]);
+    sub3(d, xyz + 3 * (size_t)t[3], xyz + 3 * (size_t)t[0]);
+    cross3(n, a, b);
+    return dot3(n, d);
+}
+
+/* Is simplex `s` (k+1 vertices) degenerate? Longest edge L: an edge shorter than tol*bbox, a
+ * triangle of area < tol*L^2, a tetrahedron of volume < tol*L^3 are. */
+static bool degenerate(const double *xyz, const uint32_t *s, int n, double diag)
+{
+    if (n < 2)
+        return false;
+    double lmax = 0;
+    for (int i = 0; i < n; i++)
+        for (int j = i + 1; j < n; j++) {
+            double d[3];
+            sub3(d, xyz + 3 * (size_t)s[i], xyz + 3 * (size_t)s[j]);
+            double l = sqrt(dot3(d, d));
+            if (l <= SD_DEGENERATE_TOL * diag)
+                return true;
+            if (l > lmax)
+                lmax = l;
+        }
+    if (n == 3) {
+        double a[3], b[3], c[3];
+        sub3(a, xyz + 3 * (size_t)s[1], xyz + 3 * (size_t)s[0]);
+        sub3(b, xyz + 3 * (size_t)s[2], xyz + 3 * (size_t)s[0]);
+        cross3(c, a, b);
+        return 0.5 * sqrt(dot3(c, c)) <= SD_DEGENERATE_TOL * lmax * lmax;
+    }
+    if (n == 4)
+        return fabs(tet_vol6(xyz, s)) / 6 <= SD_DEGENERATE_TOL * lmax * lmax * lmax;
+    return false;
+}
+
+static const char *const kind_name[] = {"", "point", "edge", "triangle", "tetrahedron"};
+
+/* The validation pass: nothing is allocated but the duplicate hash. */
+static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint32_t *idx,
+                          const uint8_t *size, uint32_t ns, sd_error *err)
+{
+    if (nv == 0)
+        return sd_fail(err, SD_ERR_EMPTY, -1, -1, "the complex has no vertices");
+    if (ns == 0)
+        return sd_fail(err, SD_ERR_EMPTY, -1, -1, "the complex has no simplices");
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t v = 0; v < nv; v++)
+        for (int k = 0; k < 3; k++) {
+            double x = xyz[3 * (size_t)v + k];
+            if (!isfinite(x))
+                return sd_fail(err, SD_ERR_VALUE, v, k, "vertex %u: coordinate %d is not finite", v, k);
+            if (fabs(x) > SD_MAX_COORD)
+                return sd_fail(err, SD_ERR_VALUE, v, k,
+                               "vertex %u: coordinate %d = %g exceeds the allowed magnitude %g", v, k,
+                               x, SD_MAX_COORD);
+            lo[k] = fmin(lo[k], x);
+            hi[k] = fmax(hi[k], x);
+        }
+    double d[3];
+    sub3(d, hi, lo);
+    double diag = sqrt(dot3(d, d));
+
+    size_t off = 0;
+    for (uint32_t s = 0; s < ns; s++) {
+        int n = size[s];
+        if (n < 1 || n > 4)
+            return sd_fail(err, SD_ERR_ARITY, s, -1,
+                           "simplex %u has %d vertices; a simplex has 1 to 4 (point, edge, "
+                           "triangle, tetrahedron)", s, n);
+        const uint32_t *t = idx + off;
+        for (int i = 0; i < n; i++) {
+            if (t[i] >= nv)
+                return sd_fail(err, SD_ERR_INDEX, s, i,
+                               "simplex %u: vertex index %u out of range (%u vertices)", s, t[i], nv);
+            for (int j = 0; j < i; j++)
+                if (t[j] == t[i])
+                    return sd_fail(err, SD_ERR_REPEATED, s, i,
+                                   "simplex %u: vertex %u appears twice", s, t[i]);
+        }
+        if (degenerate(xyz, t, n, diag))
+            return sd_fail(err, SD_ERR_DEGENERATE, s, -1,
+                           "simplex %u: degenerate %s (zero or near-zero %s)", s, kind_name[n],
+                           n == 2 ? "length" : n == 3 ? "area" : "volume");
+        off += n;
+    }
+
+    sd_hash h;
+    if (!sd_hash_init(m, &h, ns))
+        return sd_fail_nomem(err, m);
+    off = 0;
+    for (uint32_t s = 0; s < ns; s++) {
+        uint32_t k[4];
+        sd_key(k, idx + off, size[s]);
+        uint32_t prev = sd_hash_get_or_put(&h, k, s);
+        if (prev != UINT32_MAX) {
+            sd_hash_free(m, &h);
+            return sd_fail(err, SD_ERR_DUPLICATE, s, -1,
+                           "simplex %u repeats simplex %u (same vertices)", s, prev);
+        }
+        off += size[s];
+    }
+    sd_hash_free(m, &h);
+    return SD_OK;
+}
+
+void sd_topo_free(sd_mem *m, sd_topo *t)
+{
+    void *arrays[] = {t->ev, t->fv, t->fe, t->pt, t->cu, t->tr, t->tet, t->tet_e, t->tet_f,
+                      t->tet_d, t->oct, t->oct_e, t->oct_f, t->vfam, t->vflag, t->vnm,
+                      t->efam, t->eflag, t->enm, t->fn3, t->fflag};
+    for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
+        sd_free(m, arrays[i]);
+    memset(t, 0, sizeof *t);
+}
+
+static uint32_t edge_id(sd_hash *h, sd_topo *t, uint32_t a, uint32_t b)
+{
+    uint32_t ids[2] = {a, b}, k[4];
+    sd_key(k, ids, 2);
+    uint32_t e = sd_hash_get_or_put(h, k, t->ne);
+    if (e != UINT32_MAX)
+        return e;
+    t->ev[t->ne][0] = a;
+    t->ev[t->ne][1] = b;
+    return t->ne++;
+}
+
+/* Face id of triangle (a,b,c); *isnew tells whether it was created now. */
+static uint32_t face_id(sd_hash *h, sd_topo *t, const uint32_t v[3], bool *isnew)
+{
+    uint32_t k[4];
+    sd_key(k, v, 3);
+    uint32_t f = sd_hash_get_or_put(h, k, t->nf);
+    *isnew = f == UINT32_MAX;
+    if (!*isnew)
+        return f;
+    memcpy(t->fv[t->nf], v, 3 * sizeof *v);
+    return t->nf++;
+}
+
+sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
+                          const uint8_t *size, uint32_t ns, sd_error *err)
+{
+    sd_mem *m = &c->mem;
+    sd_result r = validate(m, xyz, nv, idx, size, ns, err);
+    if (r)
+        return r;
+
+    size_t count[5] = {0};
+    for (uint32_t s = 0; s < ns; s++)
+        count[size[s]]++;
+    size_t emax = 6 * count[4] + 3 * count[3] + count[2];
+    size_t fmax = 4 * count[4] + count[3];
+    if (emax >= UINT32_MAX || fmax >= UINT32_MAX)
+        return sd_fail(err, SD_ERR_LIMIT, -1, -1, "too many simplices for 32-bit ids");
+
+    sd_level *lv = sd_calloc(m, 1, sizeof *lv);
+    if (!lv)
+        return sd_fail_nomem(err, m);
+    sd_topo *t = &lv->t;
+    sd_hash he = {0}, hf = {0};
+    uint8_t *used = NULL;
+    t->nv = nv;
+    t->ev = sd_alloc(m, (emax ? emax : 1) * sizeof *t->ev);
+    t->fv = sd_alloc(m, (fmax ? fmax : 1) * sizeof *t->fv);
+    t->fe = sd_alloc(m, (fmax ? fmax : 1) * sizeof *t->fe);
+    t->fflag = sd_calloc(m, fmax ? fmax : 1, 1);
+    t->fn3 = sd_calloc(m, fmax ? fmax : 1, 1);
+    t->pt = sd_alloc(m, (count[1] + 1) * sizeof *t->pt);
+    t->cu = sd_alloc(m, (count[2] + 1) * sizeof *t->cu);
+    t->tr = sd_alloc(m, (count[3] + 1) * sizeof *t->tr);
+    t->tet = sd_alloc(m, (count[4] + 1) * sizeof *t->tet);
+    t->tet_e = sd_alloc(m, (count[4] + 1) * sizeof *t->tet_e);
+    t->tet_f = sd_alloc(m, (count[4] + 1) * sizeof *t->tet_f);
+    t->tet_d = sd_calloc(m, count[4] + 1, 1);
+    c->in_tet = sd_alloc(m, (size_t)ns * sizeof *c->in_tet);
+    c->tet_swapped = sd_calloc(m, count[4] + 1, 1);
+    used = sd_calloc(m, nv, 1);
+    if (!t->ev || !t->fv || !t->fe || !t->fflag || !t->fn3 || !t->pt || !t->cu || !t->tr ||
+        !t->tet || !t->tet_e || !t->tet_f || !t->tet_d || !c->in_tet || !c->tet_swapped ||
+        !used || !sd_hash_init(m, &he, emax) || !sd_hash_init(m, &hf, fmax))
+        goto nomem;
+    c->nin = ns;
+
+    /* offsets of each simplex */
+    size_t off = 0;
+    /* pass 1: tetrahedra, so that faces of tets are known before triangles are looked at */
+    for (uint32_t s = 0; s < ns; s++) {
+        c->in_tet[s] = UINT32_MAX;
+        if (size[s] == 4) {
+            uint32_t *q = t->tet[t->ntet];
+            memcpy(q, idx + off, 4 * sizeof *q);
+            if (tet_vol6(xyz, q) < 0) {
+                uint32_t tmp = q[2];
+                q[2] = q[3];
+                q[3] = tmp;
+                c->tet_swapped[t->ntet] = 1;
+            }
+            for (int k = 0; k < 6; k++)
+                t->tet_e[t->ntet][k] = edge_id(&he, t, q[SD_TET_E[k][0]], q[SD_TET_E[k][1]]);
+            for (int i = 0; i < 4; i++) {
+                uint32_t fv[3] = {q[SD_TET_F[i][0]], q[SD_TET_F[i][1]], q[SD_TET_F[i][2]]};
+                bool isnew;
+                uint32_t f = face_id(&hf, t, fv, &isnew);
+                t->tet_f[t->ntet][i] = f;
+                if (t->fn3[f] < 255)
+                    t->fn3[f]++;
+            }
+            for (int i = 0; i < 4; i++)
+                used[q[i]] = 1;
+            c->in_tet[s] = t->ntet++;
+        }
+        off += size[s];
+    }
+    /* pass 2: triangles; a triangle that is a tet face is absorbed */
+    off = 0;
+    for (uint32_t s = 0; s < ns; s++) {
+        if (size[s] == 3) {
+            const uint32_t *q = idx + off;
+            bool isnew;
+            uint32_t f = face_id(&hf, t, q, &isnew);
+            if (isnew) {
+                t->fflag[f] |= FF_MAX;
+                t->tr[t->ntr++] = f;
+                for (int k = 0; k < 3; k++)
+                    edge_id(&he, t, q[k], q[(k + 1) % 3]);
+                for (int i = 0; i < 3; i++)
+                    used[q[i]] = 1;
+            }
+        }
+        off += size[s];
+    }
+    /* pass 3: curve segments; one that is an edge of a triangle or tet is absorbed */
+    off = 0;
+    for (uint32_t s = 0; s < ns; s++) {
+        if (size[s] == 2) {
+            const uint32_t *q = idx + off;
+            uint32_t before = t->ne;
+            uint32_t e = edge_id(&he, t, q[0], q[1]);
+            if (e == before) {
+                t->cu[t->ncu++] = e;
+                used[q[0]] = used[q[1]] = 1;
+            }
+        }
+        off += size[s];
+    }
+    /* pass 4: isolated points; a vertex of anything else is absorbed */
+    off = 0;
+    for (uint32_t s = 0; s < ns; s++) {
+        if (size[s] == 1 && !used[idx[off]]) {
+            used[idx[off]] = 2;
+            t->pt[t->npt++] = idx[off];
+        }
+        off += size[s];
+    }
+    /* face -> edge ids */
+    for (uint32_t f = 0; f < t->nf; f++)
+        for (int j = 0; j < 3; j++) {
+            uint32_t ids[2] = {t->fv[f][j], t->fv[f][(j + 1) % 3]}, k[4];
+            sd_key(k, ids, 2);
+            t->fe[f][j] = sd_hash_get(&he, k);
+        }
+    sd_hash_free(m, &he);
+    sd_hash_free(m, &hf);
+    sd_free(m, used);
+    used = NULL;
+
+    /* channel 0: positions */
+    lv->nch = 1;
+    lv->ch[0].ncomp = 3;
+    lv->ch[0].data = sd_alloc(m, (size_t)nv * 3 * sizeof(double));
+    if (!lv->ch[0].data)
+        goto nomem;
+    memcpy(lv->ch[0].data, xyz, (size_t)nv * 3 * sizeof(double));
+
+    c->lv[0] = lv;
+    c->nlevels = 1;
+    if ((r = sd_classify_level0(m, t, err)) || (r = sd_choose_diagonals(m, t, err))) {
+        c->lv[0] = NULL;
+        c->nlevels = 0;
+        sd_level_free(m, lv);
+        return r;
+    }
+    return SD_OK;
+
+nomem:
+    sd_hash_free(m, &he);
+    sd_hash_free(m, &hf);
+    sd_free(m, used);
+    sd_level_free(m, lv);
+    return sd_fail_nomem(err, m);
+}
+
+void sd_level_free(sd_mem *m, sd_level *lv)
+{
+    if (!lv)
+        return;
+    sd_topo_free(m, &lv->t);
+    sd_free(m, lv->vrule);
+    sd_free(m, lv->erule);
+    sd_free(m, lv->vval);
+    sd_free(m, lv->ering);
+    sd_csrb_free(m, &lv->S);
+    for (int i = 0; i < lv->nch; i++)
+        sd_free(m, lv->ch[i].data);
+    sd_free(m, lv);
+}

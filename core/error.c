@@ -1,0 +1,44 @@
+/* error.c — filling the caller's sd_error, and the names of result codes and rules. */
+#include "internal.h"
+#include <stdarg.h>
+#include <stdio.h>
+
+sd_result sd_fail(sd_error *err, sd_result code, long item, int field, const char *fmt, ...)
+{
+    if (err) {
+        err->code = code;
+        err->item = item;
+        err->field = field;
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(err->message, sizeof err->message, fmt, ap);
+        va_end(ap);
+    }
+    return code;
+}
+
+sd_result sd_fail_nomem(sd_error *err, const sd_mem *m)
+{
+    if (m->failed_limit)
+        return sd_fail(err, SD_ERR_LIMIT, -1, -1,
+                       "memory limit of %zu bytes reached (%zu in use)", m->limit, m->used);
+    return sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory (%zu bytes in use)", m->used);
+}
+
+const char *sd_result_name(sd_result r)
+{
+    static const char *const names[] = {
+        "ok", "out-of-memory", "limit", "empty", "value", "arity", "index",
+        "repeated-vertex", "duplicate-simplex", "degenerate-simplex", "argument",
+    };
+    return (unsigned)r < sizeof names / sizeof *names ? names[r] : "unknown";
+}
+
+const char *sd_rule_name(sd_rule r)
+{
+    static const char *const names[] = {
+        "corner", "curve", "loop", "loop-boundary", "solid", "solid-boundary",
+        "N1", "N2", "G1", "G2",
+    };
+    return (unsigned)r < SD_RULE_COUNT ? names[r] : "unknown";
+}

@@ -1,0 +1,80 @@
+/* hash.c — see hash.h. Linear probing over a power-of-two table at most half full. */
+#include "hash.h"
+#include <string.h>
+
+bool sd_hash_init(sd_mem *m, sd_hash *h, size_t expected)
+{
+    size_t cap = 16;
+    while (cap < 2 * expected + 16)
+        cap <<= 1;
+    h->cap = cap;
+    h->n = 0;
+    h->key = sd_alloc(m, cap * sizeof *h->key);
+    h->val = sd_alloc(m, cap * sizeof *h->val);
+    if (!h->key || !h->val) {
+        sd_hash_free(m, h);
+        return false;
+    }
+    memset(h->key, 0xff, cap * sizeof *h->key);
+    return true;
+}
+
+void sd_hash_free(sd_mem *m, sd_hash *h)
+{
+    sd_free(m, h->key);
+    sd_free(m, h->val);
+    h->key = NULL;
+    h->val = NULL;
+}
+
+static size_t hash4(const uint32_t k[4])
+{
+    uint64_t x = k[0] * 0x9E3779B97F4A7C15ull;
+    x ^= (k[1] + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full;
+    x ^= (k[2] + 0x85EBCA77C2B2AE63ull) * 0x165667B19E3779F9ull;
+    x ^= (k[3] + 0x27D4EB2F165667C5ull) * 0x9E3779B97F4A7C15ull;
+    x ^= x >> 29;
+    return (size_t)x;
+}
+
+uint32_t sd_hash_get_or_put(sd_hash *h, const uint32_t k[4], uint32_t v)
+{
+    size_t i = hash4(k) & (h->cap - 1);
+    for (;;) {
+        uint32_t *s = h->key[i];
+        if (s[0] == UINT32_MAX) {
+            memcpy(s, k, 4 * sizeof *k);
+            h->val[i] = v;
+            h->n++;
+            return UINT32_MAX;
+        }
+        if (!memcmp(s, k, 4 * sizeof *k))
+            return h->val[i];
+        i = (i + 1) & (h->cap - 1);
+    }
+}
+
+uint32_t sd_hash_get(const sd_hash *h, const uint32_t k[4])
+{
+    size_t i = hash4(k) & (h->cap - 1);
+    for (;;) {
+        const uint32_t *s = h->key[i];
+        if (s[0] == UINT32_MAX)
+            return UINT32_MAX;
+        if (!memcmp(s, k, 4 * sizeof *k))
+            return h->val[i];
+        i = (i + 1) & (h->cap - 1);
+    }
+}
+
+void sd_key(uint32_t k[4], const uint32_t *ids, int n)
+{
+    for (int i = 0; i < 4; i++)
+        k[i] = i < n ? ids[i] : UINT32_MAX;
+    for (int i = 1; i < n; i++)
+        for (int j = i; j > 0 && k[j - 1] > k[j]; j--) {
+            uint32_t t = k[j];
+            k[j] = k[j - 1];
+            k[j - 1] = t;
+        }
+}

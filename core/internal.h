@@ -1,0 +1,154 @@
+/* internal.h — data structures shared by the core's files (not part of the public API).
+ *
+ * A level is flat arrays (struct-of-arrays, uint32_t ids). Every level keeps its unique edges and
+ * triangles (faces) with, for each cell, the ids of its edges and faces. That lets the split
+ * (split.c) number the next level's edges and faces directly from the parent's — no hashing after
+ * level 0 — and lets classification be inherited entity by entity (classify.c).
+ *
+ * Local numbering (used everywhere):
+ *   tetrahedron t[0..3]: edges TET_E, face i opposite vertex i (TET_F, outward for positive
+ *     volume); diagonal pair k = (edge k, edge 5-k).
+ *   octahedron o[0..5] = p, q, a, a2, b, b2 (three opposite pairs, the major diagonal p-q first);
+ *     equator cycle a, b, a2, b2; edges OCT_E; faces OCT_F (outward for positive orientation).
+ *   face f: fv[f][0..2], fe[f][j] = edge (fv[j], fv[j+1]).
+ */
+#ifndef SD_INTERNAL_H
+#define SD_INTERNAL_H
+
+#include "sd.h"
+#include <stdbool.h>
+
+extern const uint8_t SD_TET_E[6][2];
+extern const uint8_t SD_TET_F[4][3];
+extern const uint8_t SD_OCT_E[12][2];
+extern const uint8_t SD_OCT_F[8][3];
+
+/* ---- memory (alloc.c) ------------------------------------------------------------------- */
+typedef struct sd_mem {
+    sd_allocator a;
+    size_t used, peak, limit;
+    bool failed_limit;
+} sd_mem;
+
+void sd_mem_init(sd_mem *m, const sd_allocator *a, size_t limit);
+void *sd_alloc(sd_mem *m, size_t n);                 /* NULL on failure or over the limit */
+void *sd_calloc(sd_mem *m, size_t n, size_t size);   /* zeroed, overflow-checked */
+void *sd_realloc(sd_mem *m, void *p, size_t n);
+void sd_free(sd_mem *m, void *p);
+
+/* ---- errors (error.c) ------------------------------------------------------------------- */
+sd_result sd_fail(sd_error *err, sd_result code, long item, int field, const char *fmt, ...)
+    __attribute__((format(printf, 5, 6)));
+sd_result sd_fail_nomem(sd_error *err, const sd_mem *m);
+
+/* ---- flags ------------------------------------------------------------------------------ */
+enum {
+    VF_DC = 1,          /* vertex in the boundary complex dC */
+    VF_CURVE_END = 2,   /* boundary simplex of C_1 (end of a curve) */
+};
+enum {
+    EF_DC = 1,          /* edge in dC */
+    EF_BND2 = 2,        /* boundary simplex of C_2: edge of exactly one triangle, nothing else */
+    EF_CURVE = 4,       /* a maximal 1-simplex (curve segment) */
+};
+enum {
+    FF_MAX = 1,         /* a maximal triangle (surface part) */
+    FF_BND3 = 2,        /* boundary simplex of C_3: face of exactly one 3-cell */
+};
+enum { FAM0 = 1, FAM1 = 2, FAM2 = 4, FAM3 = 8 };
+
+/* ---- one level's topology and classification ---------------------------------------- */
+typedef struct sd_topo {
+    uint32_t nv, ne, nf;
+    uint32_t (*ev)[2];
+    uint32_t (*fv)[3];
+    uint32_t (*fe)[3];
+    uint32_t npt, ncu, ntr, ntet, noct;
+    uint32_t *pt;              /* vertex ids of isolated points */
+    uint32_t *cu;              /* edge ids of curve segments */
+    uint32_t *tr;              /* face ids of maximal triangles */
+    uint32_t (*tet)[4];
+    uint32_t (*tet_e)[6];
+    uint32_t (*tet_f)[4];
+    uint8_t *tet_d;            /* diagonal pair 0..2 */
+    uint32_t (*oct)[6];
+    uint32_t (*oct_e)[12];
+    uint32_t (*oct_f)[8];
+    /* classification (classify.c) */
+    uint8_t *vfam, *vflag, *vnm;
+    uint8_t *efam, *eflag, *enm;
+    uint8_t *fn3, *fflag;      /* fn3: number of 3-cells on the face (saturating) */
+} sd_topo;
+
+void sd_topo_free(sd_mem *m, sd_topo *t);
+
+/* ---- a matrix under construction (csr.c) ---------------------------------------------- */
+typedef struct sd_csrb {
+    uint32_t nrows, ncols, cap_rows;
+    size_t nnz, cap;
+    uint32_t *rowptr, *col;
+    double *val;
+} sd_csrb;
+
+bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nrows, uint32_t ncols, size_t nnz_hint);
+bool sd_csrb_reserve(sd_mem *m, sd_csrb *b, size_t extra);
+static inline void sd_csrb_put(sd_csrb *b, uint32_t c, double w)
+{
+    b->col[b->nnz] = c;
+    b->val[b->nnz] = w;
+    b->nnz++;
+}
+static inline void sd_csrb_end_row(sd_csrb *b, uint32_t r) { b->rowptr[r + 1] = (uint32_t)b->nnz; }
+void sd_csrb_free(sd_mem *m, sd_csrb *b);
+/* out[r*nc + k] = sum_j S[r][j] in[j*nc + k] */
+void sd_csr_apply(const sd_csrb *s, const double *in, double *out, int nc);
+
+/* ---- levels and the complex -------------------------------------------------------------- */
+typedef struct sd_channel {
+    int ncomp;
+    double *data;
+} sd_channel;
+
+#define SD_MAX_CHANNELS 32
+
+struct sd_level {
+    int index;
+    uint32_t parent_nv, parent_ne;   /* sizes of level index-1 (origin of the points) */
+    sd_topo t;
+    /* rules and stencils (rules.c), built lazily: they define S mapping this level to the next */
+    bool have_rules;
+    uint8_t *vrule, *erule;
+    uint32_t *vval, *ering;   /* |rho| used by each vertex / edge rule */
+    sd_csrb S;
+    /* channels of this level (channel 0 = positions) */
+    int nch;
+    sd_channel ch[SD_MAX_CHANNELS];
+};
+
+struct sd_complex {
+    sd_mem mem;
+    sd_options opt;
+    /* input bookkeeping */
+    uint32_t nin;              /* number of input simplices */
+    uint32_t *in_tet;          /* input simplex -> tetrahedron id (or UINT32_MAX) */
+    uint8_t *tet_swapped;      /* level-0 tet reoriented (slots 2,3 swapped) */
+    int nlevels;               /* computed levels */
+    sd_level *lv[SD_MAX_LEVEL + 1];
+};
+
+/* complex.c */
+sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
+                          const uint8_t *size, uint32_t ns, sd_error *err);
+void sd_level_free(sd_mem *m, sd_level *lv);
+/* classify.c */
+sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err);
+sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err);
+/* split.c: child topology and inherited classification of the next level */
+sd_result sd_split(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
+/* rules.c */
+sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
+sd_result sd_ensure_rules(sd_complex *cx, int level, sd_error *err);
+/* analysis.c helpers */
+uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b);
+
+#endif

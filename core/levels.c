@@ -1,0 +1,361 @@
+/* levels.c — the subdivision hierarchy of a complex and the public accessors.
+ *
+ * Levels are computed one from the previous, on demand, and kept: level l+1's topology comes from
+ * sd_split (topology only), its points from S_l (rules.c) applied to every channel of level l.
+ * A failed step leaves the hierarchy as it was (all-or-nothing per level).
+ * sd_complex_counts gives the exact size of any level from the split table without computing it,
+ * so callers can enforce limits before allocating.
+ */
+#include "internal.h"
+#include <math.h>
+#include <string.h>
+
+sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
+                           size_t ns, const sd_options *opt, sd_error *err)
+{
+    sd_options o = {0};
+    if (opt)
+        o = *opt;
+    if (err)
+        memset(err, 0, sizeof *err);
+    if (o.surface_weights != SD_WEIGHTS_WARREN && o.surface_weights != SD_WEIGHTS_LOOP) {
+        sd_fail(err, SD_ERR_ARG, -1, -1, "unknown surface_weights %d", o.surface_weights);
+        return NULL;
+    }
+    if (o.solid_scheme != SD_SOLID_BOX && o.solid_scheme != SD_SOLID_AVERAGED) {
+        sd_fail(err, SD_ERR_ARG, -1, -1, "unknown solid_scheme %d", o.solid_scheme);
+        return NULL;
+    }
+    if (nv >= UINT32_MAX || ns >= UINT32_MAX) {
+        sd_fail(err, SD_ERR_LIMIT, -1, -1, "too many vertices or simplices for 32-bit ids");
+        return NULL;
+    }
+    if ((nv && !xyz) || (ns && (!idx || !size))) {
+        sd_fail(err, SD_ERR_ARG, -1, -1, "missing input array");
+        return NULL;
+    }
+    sd_mem mem;
+    sd_mem_init(&mem, &o.allocator, o.max_bytes);
+    sd_complex *c = sd_alloc(&mem, sizeof *c);
+    if (!c) {
+        sd_fail_nomem(err, &mem);
+        return NULL;
+    }
+    memset(c, 0, sizeof *c);
+    c->mem = mem;
+    c->opt = o;
+    if (sd_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err)) {
+        sd_complex_free(c);
+        return NULL;
+    }
+    return c;
+}
+
+static void drop_levels(sd_complex *c, int from)
+{
+    for (int l = from; l < c->nlevels; l++) {
+        sd_level_free(&c->mem, c->lv[l]);
+        c->lv[l] = NULL;
+    }
+    if (c->nlevels > from)
+        c->nlevels = from;
+}
+
+void sd_complex_free(sd_complex *c)
+{
+    if (!c)
+        return;
+    drop_levels(c, 0);
+    sd_free(&c->mem, c->in_tet);
+    sd_free(&c->mem, c->tet_swapped);
+    sd_mem m = c->mem;
+    sd_free(&m, c);
+}
+
+/* Map a pair index in the input's vertex order to the stored (possibly reoriented) order:
+ * swapping slots 2 and 3 exchanges pairs 1 (02|13) and 2 (03|12). */
+static int map_pair(int pair, bool swapped) { return swapped && pair ? 3 - pair : pair; }
+
+sd_result sd_complex_set_diagonal(sd_complex *c, size_t simplex, int pair, sd_error *err)
+{
+    if (simplex >= c->nin || c->in_tet[simplex] == UINT32_MAX)
+        return sd_fail(err, SD_ERR_ARG, (long)simplex, -1, "simplex %zu is not a tetrahedron", simplex);
+    if (pair < 0 || pair > 2)
+        return sd_fail(err, SD_ERR_ARG, (long)simplex, -1, "diagonal pair must be 0, 1 or 2");
+    uint32_t t = c->in_tet[simplex];
+    drop_levels(c, 1);
+    sd_level *l0 = c->lv[0]; /* level 0's stencils do not depend on diagonals: kept */
+    l0->t.tet_d[t] = (uint8_t)map_pair(pair, c->tet_swapped[t]);
+    return SD_OK;
+}
+
+int sd_complex_diagonal(const sd_complex *c, size_t simplex)
+{
+    if (simplex >= c->nin || c->in_tet[simplex] == UINT32_MAX)
+        return -1;
+    uint32_t t = c->in_tet[simplex];
+    return map_pair(c->lv[0]->t.tet_d[t], c->tet_swapped[t]);
+}
+
+int sd_complex_add_channel(sd_complex *c, const double *data, int ncomp, sd_error *err)
+{
+    sd_level *l0 = c->lv[0];
+    if (ncomp < 1 || ncomp > 16) {
+        sd_fail(err, SD_ERR_ARG, -1, -1, "a channel has 1 to 16 components, not %d", ncomp);
+        return -1;
+    }
+    if (l0->nch >= SD_MAX_CHANNELS) {
+        sd_fail(err, SD_ERR_LIMIT, -1, -1, "at most %d channels", SD_MAX_CHANNELS - 1);
+        return -1;
+    }
+    size_t n = (size_t)l0->t.nv * ncomp;
+    for (size_t i = 0; i < n; i++)
+        if (!isfinite(data[i])) {
+            sd_fail(err, SD_ERR_VALUE, (long)(i / ncomp), (int)(i % ncomp),
+                    "vertex %zu: channel value %zu is not finite", i / ncomp, i % ncomp);
+            return -1;
+        }
+    double *copy = sd_alloc(&c->mem, n * sizeof *copy);
+    if (!copy) {
+        sd_fail_nomem(err, &c->mem);
+        return -1;
+    }
+    memcpy(copy, data, n * sizeof *copy);
+    drop_levels(c, 1);
+    l0->ch[l0->nch].ncomp = ncomp;
+    l0->ch[l0->nch].data = copy;
+    return l0->nch++;
+}
+
+void sd_complex_counts(const sd_complex *c, int level, sd_counts *o)
+{
+    const sd_topo *t = &c->lv[0]->t;
+    uint64_t V = t->nv, E = t->ne, F = t->nf, P = t->npt, Cu = t->ncu, Tr = t->ntr, T = t->ntet, O = t->noct;
+    for (int l = 0; l < level; l++) {
+        uint64_t V2 = V + E + O, E2 = 2 * E + 3 * F + 12 * O, F2 = 4 * F + 4 * T + 24 * O;
+        uint64_t T2 = 4 * T + 8 * O, O2 = T + 6 * O;
+        V = V2, E = E2, F = F2, T = T2, O = O2, Cu *= 2, Tr *= 4;
+    }
+    o->vertices = V, o->edges = E, o->faces = F, o->points = P, o->curves = Cu;
+    o->triangles = Tr, o->tetrahedra = T, o->octahedra = O;
+}
+
+size_t sd_complex_memory(const sd_complex *c) { return c->mem.used; }
+int sd_complex_levels_computed(const sd_complex *c) { return c->nlevels; }
+
+sd_result sd_ensure_rules(sd_complex *c, int level, sd_error *err)
+{
+    sd_level *lv = c->lv[level];
+    return lv->have_rules ? SD_OK : sd_build_rules(c, lv, err);
+}
+
+/* Compute level l+1 from level l. */
+static sd_result next_level(sd_complex *c, int l, sd_error *err)
+{
+    sd_mem *m = &c->mem;
+    sd_level *p = c->lv[l];
+    sd_result r = sd_ensure_rules(c, l, err);
+    if (r)
+        return r;
+    sd_level *lv = sd_calloc(m, 1, sizeof *lv);
+    if (!lv)
+        return sd_fail_nomem(err, m);
+    lv->index = l + 1;
+    lv->parent_nv = p->t.nv;
+    lv->parent_ne = p->t.ne;
+    if ((r = sd_split(m, &p->t, &lv->t, err))) {
+        sd_free(m, lv);
+        return r;
+    }
+    lv->nch = p->nch;
+    for (int i = 0; i < p->nch; i++) {
+        int nc = p->ch[i].ncomp;
+        lv->ch[i].ncomp = nc;
+        lv->ch[i].data = sd_alloc(m, (size_t)lv->t.nv * nc * sizeof(double));
+        if (!lv->ch[i].data) {
+            sd_level_free(m, lv);
+            return sd_fail_nomem(err, m);
+        }
+        sd_csr_apply(&p->S, p->ch[i].data, lv->ch[i].data, nc);
+    }
+    c->lv[l + 1] = lv;
+    c->nlevels = l + 2;
+    return SD_OK;
+}
+
+const sd_level *sd_complex_level(sd_complex *c, int level, sd_error *err)
+{
+    if (level < 0 || level > SD_MAX_LEVEL) {
+        sd_fail(err, SD_ERR_ARG, level, -1, "level %d out of range 0..%d", level, SD_MAX_LEVEL);
+        return NULL;
+    }
+    while (c->nlevels <= level)
+        if (next_level(c, c->nlevels - 1, err))
+            return NULL;
+    return c->lv[level];
+}
+
+uint32_t sd_level_index(const sd_level *lv) { return (uint32_t)lv->index; }
+uint32_t sd_level_num_vertices(const sd_level *lv) { return lv->t.nv; }
+
+const double *sd_level_channel(const sd_level *lv, int channel, int *ncomp)
+{
+    if (channel < 0 || channel >= lv->nch)
+        return NULL;
+    if (ncomp)
+        *ncomp = lv->ch[channel].ncomp;
+    return lv->ch[channel].data;
+}
+
+int sd_cell_size(sd_cell_kind k)
+{
+    static const int n[] = {1, 2, 3, 4, 6};
+    return (unsigned)k < 5 ? n[k] : 0;
+}
+
+uint32_t sd_level_num_cells(const sd_level *lv, sd_cell_kind k)
+{
+    const sd_topo *t = &lv->t;
+    switch (k) {
+    case SD_CELL_POINT: return t->npt;
+    case SD_CELL_CURVE: return t->ncu;
+    case SD_CELL_TRIANGLE: return t->ntr;
+    case SD_CELL_TETRA: return t->ntet;
+    case SD_CELL_OCTA: return t->noct;
+    }
+    return 0;
+}
+
+void sd_level_cell(const sd_level *lv, sd_cell_kind k, uint32_t i, uint32_t *v)
+{
+    const sd_topo *t = &lv->t;
+    switch (k) {
+    case SD_CELL_POINT: v[0] = t->pt[i]; break;
+    case SD_CELL_CURVE: memcpy(v, t->ev[t->cu[i]], 2 * sizeof *v); break;
+    case SD_CELL_TRIANGLE: memcpy(v, t->fv[t->tr[i]], 3 * sizeof *v); break;
+    case SD_CELL_TETRA: memcpy(v, t->tet[i], 4 * sizeof *v); break;
+    case SD_CELL_OCTA: memcpy(v, t->oct[i], 6 * sizeof *v); break;
+    }
+}
+
+const uint32_t *sd_level_edges(const sd_level *lv, uint32_t *n)
+{
+    *n = lv->t.ne;
+    return &lv->t.ev[0][0];
+}
+
+sd_origin_kind sd_level_origin(const sd_level *lv, uint32_t i, uint32_t *a, uint32_t *b)
+{
+    *a = *b = UINT32_MAX;
+    if (lv->index == 0) {
+        *a = i;
+        return SD_ORIGIN_INPUT;
+    }
+    const sd_topo *t = &lv->t;
+    if (i < lv->parent_nv) {
+        *a = i;
+        return SD_ORIGIN_VERTEX;
+    }
+    if (i < lv->parent_nv + lv->parent_ne) {
+        uint32_t e = i - lv->parent_nv; /* the halves 2e, 2e+1 run from one end to the other */
+        *a = t->ev[2 * e][0];
+        *b = t->ev[2 * e + 1][1];
+        return SD_ORIGIN_EDGE;
+    }
+    *a = i - lv->parent_nv - lv->parent_ne;
+    return SD_ORIGIN_CELL;
+}
+
+uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b)
+{
+    for (uint32_t e = 0; e < t->ne; e++)
+        if ((t->ev[e][0] == a && t->ev[e][1] == b) || (t->ev[e][0] == b && t->ev[e][1] == a))
+            return e;
+    return UINT32_MAX;
+}
+
+uint32_t sd_level_find_edge(const sd_level *lv, uint32_t a, uint32_t b)
+{
+    return sd_topo_find_edge(&lv->t, a, b);
+}
+
+static bool extraordinary(uint8_t rule, uint32_t k, bool edge)
+{
+    switch (rule) {
+    case SD_RULE_LOOP:
+    case SD_RULE_SOLID_BOUNDARY:
+        return !edge && k != 6;
+    case SD_RULE_SOLID:
+        return edge ? (k != 4 && k != 6) : k != 14;
+    default:
+        return false;
+    }
+}
+
+static sd_result class_of(sd_complex *c, int level, sd_error *err, sd_level **out)
+{
+    sd_error local;
+    if (!err)
+        err = &local;
+    *out = NULL;
+    if (!sd_complex_level(c, level, err))
+        return err->code;
+    sd_result r = sd_ensure_rules(c, level, err);
+    *out = c->lv[level];
+    return r;
+}
+
+sd_result sd_complex_vertex_class(sd_complex *c, int level, uint32_t i, sd_class *o, sd_error *err)
+{
+    sd_level *lv = NULL;
+    sd_result r = class_of(c, level, err, &lv);
+    if (r)
+        return r;
+    if (i >= lv->t.nv)
+        return sd_fail(err, SD_ERR_ARG, i, -1, "vertex %u out of range (%u vertices)", i, lv->t.nv);
+    const sd_topo *t = &lv->t;
+    o->family = t->vfam[i];
+    o->boundary = (t->vflag[i] & VF_DC) != 0;
+    o->nonmanifold = t->vnm[i];
+    o->rule = lv->vrule[i];
+    o->valence = lv->vval[i];
+    o->extraordinary = extraordinary(o->rule, o->valence, false);
+    return SD_OK;
+}
+
+sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *o, sd_error *err)
+{
+    sd_level *lv = NULL;
+    sd_result r = class_of(c, level, err, &lv);
+    if (r)
+        return r;
+    if (e >= lv->t.ne)
+        return sd_fail(err, SD_ERR_ARG, e, -1, "edge %u out of range (%u edges)", e, lv->t.ne);
+    const sd_topo *t = &lv->t;
+    o->family = t->efam[e];
+    o->boundary = (t->eflag[e] & EF_DC) != 0;
+    o->nonmanifold = t->enm[e];
+    o->rule = lv->erule[e];
+    o->valence = lv->ering[e];
+    o->extraordinary = extraordinary(o->rule, o->valence, true);
+    return SD_OK;
+}
+
+sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err)
+{
+    sd_error local;
+    if (!err)
+        err = &local;
+    if (!sd_complex_level(c, level, err))
+        return err->code;
+    sd_result r = sd_ensure_rules(c, level, err);
+    if (r)
+        return r;
+    const sd_csrb *s = &c->lv[level]->S;
+    out->nrows = s->nrows;
+    out->ncols = s->ncols;
+    out->rowptr = s->rowptr;
+    out->col = s->col;
+    out->val = s->val;
+    return SD_OK;
+}

@@ -1,0 +1,652 @@
+/* rules.c — one rule per vertex and edge, and the stencils that make up S_l (SPEC Sec. 3).
+ *
+ * Rule choice (priority: non-manifold default > boundary > interior; tags and user choices come
+ * with the non-manifold issue):
+ *   isolated point, curve end, junction of 3+ curves   corner (0-mask)
+ *   curve                    cubic B-spline: (6x + a + b)/8, edge midpoint
+ *   surface                  Loop: (1 - m c) x + c sum rho, Warren c (default) or Loop's beta;
+ *                            edge 3/8 (a+b) + 1/8 (c+d)
+ *   surface boundary         cubic B-spline along the boundary curve
+ *   solid                    box spline (001 eqs. 3.3-3.8): vertex 9/16 x + 7/(16k) sum rho, rho by
+ *                            edges and major diagonals (001 Def. 3.3); edge by the ring rho(e):
+ *                            k=6: 10/32, 2/32; k=4: 8/32, 4/32; else 5/16, 3/(8k); cell point of
+ *                            an octahedron 1/4 on its diagonal ends, 1/8 on the others. Or the
+ *                            averaged scheme (001 App. A; SPEC Sec. 3.1 fixes its masks).
+ *   solid boundary           Loop on the boundary surface (rho restricted to it)
+ *   non-manifold (types 1-4) G2: the 3-simplex rules with the relieved topology condition
+ *                            (000 Sec. 3.5): rho = every vertex joined by an edge (or diagonal);
+ *                            where the junction lies on dC, neighbours strictly inside a solid
+ *                            are left out (000 Fig. 14). An edge's ring = common neighbours.
+ * rho is filtered to the rule's family (000 Algorithm 5 line 3) by the edges it is read through:
+ * a curve vertex reads curve edges, a surface-boundary vertex boundary edges, and so on.
+ *
+ * The ring of an edge is the set of the other vertices of the cells that contain it, an
+ * octahedron counted as the 4 tetrahedra around its major diagonal (SPEC Sec. 3). A rule whose
+ * neighbourhood is degenerate (no neighbours) falls back to the 0-mask / midpoint; the rule
+ * reported is then the one actually used.
+ *
+ * S is assembled in two passes — count each row, then fill in place — so no adjacency lists are
+ * built for the common cases and memory stays at the matrix itself. Every row sums to 1.
+ */
+#include "internal.h"
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+static uint8_t vertex_rule(const sd_topo *t, uint32_t v)
+{
+    uint8_t fam = t->vfam[v], nm = t->vnm[v], fl = t->vflag[v];
+    if (nm)
+        return nm == 2 && fam == FAM1 ? SD_RULE_CORNER : SD_RULE_G2;
+    switch (fam) {
+    case FAM1:
+        return fl & VF_CURVE_END ? SD_RULE_CORNER : SD_RULE_CURVE;
+    case FAM2:
+        return fl & VF_DC ? SD_RULE_LOOP_BOUNDARY : SD_RULE_LOOP;
+    case FAM3:
+        return fl & VF_DC ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID;
+    default:
+        return SD_RULE_CORNER;
+    }
+}
+
+static uint8_t edge_rule(const sd_topo *t, uint32_t e)
+{
+    if (t->enm[e])
+        return SD_RULE_G2;
+    switch (t->efam[e]) {
+    case FAM1:
+        return SD_RULE_CURVE;
+    case FAM2:
+        return t->eflag[e] & EF_BND2 ? SD_RULE_LOOP_BOUNDARY : SD_RULE_LOOP;
+    case FAM3:
+        return t->eflag[e] & EF_DC ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID;
+    default:
+        return SD_RULE_CURVE;
+    }
+}
+
+/* G2's relieved ring: keep neighbour n of a junction c unless c lies on dC (or outside solids)
+ * and n is strictly inside a solid. `inside` tells whether the centre is strictly inside. */
+static inline bool strictly_inside(const sd_topo *t, uint32_t v)
+{
+    return t->vfam[v] == FAM3 && !(t->vflag[v] & VF_DC);
+}
+static inline bool g2_keep(const sd_topo *t, bool centre_inside, uint32_t n)
+{
+    return centre_inside || !strictly_inside(t, n);
+}
+
+/* Does neighbour n, reached from centre c (rule r) through edge e, belong to c's rho? */
+static inline bool via_edge(const sd_topo *t, uint8_t r, uint32_t c, uint32_t n, uint32_t e)
+{
+    switch (r) {
+    case SD_RULE_CURVE:
+        return t->eflag[e] & EF_CURVE;
+    case SD_RULE_LOOP:
+        return t->efam[e] & FAM2;
+    case SD_RULE_LOOP_BOUNDARY:
+        return t->eflag[e] & EF_BND2;
+    case SD_RULE_SOLID:
+        return t->efam[e] & FAM3;
+    case SD_RULE_SOLID_BOUNDARY:
+        return (t->efam[e] & FAM3) && (t->eflag[e] & EF_DC);
+    case SD_RULE_G2:
+        return g2_keep(t, strictly_inside(t, c), n);
+    default:
+        return false;
+    }
+}
+static inline bool via_diag(const sd_topo *t, uint8_t r, int scheme, uint32_t c, uint32_t n)
+{
+    if (r == SD_RULE_SOLID)
+        return scheme == SD_SOLID_BOX;
+    if (r == SD_RULE_G2)
+        return g2_keep(t, strictly_inside(t, c), n);
+    return false;
+}
+
+/* Loop's original beta(m) (SPEC Sec. 3), or Warren's c. */
+static double loop_weight(int weights, uint32_t m)
+{
+    if (weights == SD_WEIGHTS_LOOP) {
+        double x = 3.0 / 8.0 + cos(2 * M_PI / m) / 4;
+        return (5.0 / 8.0 - x * x) / m;
+    }
+    return m == 3 ? 3.0 / 16.0 : 3.0 / (8.0 * m);
+}
+
+/* Weights of a vertex row: self, class A (rho), class B (octahedral opposites, averaged). */
+typedef struct vw {
+    double self, a, b;
+} vw;
+
+static vw vertex_weights(uint8_t r, int weights, int scheme, uint32_t na, uint32_t nb,
+                         const double *loopc)
+{
+    vw w = {1, 0, 0};
+    switch (r) {
+    case SD_RULE_CURVE:
+    case SD_RULE_LOOP_BOUNDARY:
+        w.self = 6.0 / 8.0;
+        w.a = 1.0 / 8.0;
+        break;
+    case SD_RULE_LOOP:
+    case SD_RULE_SOLID_BOUNDARY: {
+        double c = na < 64 ? loopc[na] : loop_weight(weights, na);
+        w.self = 1 - na * c;
+        w.a = c;
+        break;
+    }
+    case SD_RULE_SOLID:
+        w.self = 9.0 / 16.0;
+        if (scheme == SD_SOLID_AVERAGED) {
+            double d = 3.0 * na + nb;
+            w.a = 7.0 / 16.0 * 3.0 / d;
+            w.b = 7.0 / 16.0 / d;
+        } else {
+            w.a = 7.0 / (16.0 * na);
+        }
+        break;
+    case SD_RULE_G2:
+        w.self = 9.0 / 16.0;
+        w.a = 7.0 / (16.0 * na);
+        break;
+    default:
+        break;
+    }
+    return w;
+}
+
+/* 3-simplex edge weights for a ring of k (001 eqs. 3.4, 3.5, 3.8): ends, ring. */
+static void solid_edge_weights(uint32_t k, double *end, double *ring)
+{
+    if (k == 6) {
+        *end = 10.0 / 32.0;
+        *ring = 2.0 / 32.0;
+    } else if (k == 4) {
+        *end = 8.0 / 32.0;
+        *ring = 4.0 / 32.0;
+    } else {
+        *end = 5.0 / 16.0;
+        *ring = 3.0 / (8.0 * k);
+    }
+}
+
+/* Equator neighbours in an octahedron: cycle a(2), b(4), a2(3), b2(5). */
+static const uint8_t OCT_EQ_NB[6][2] = {{0, 0}, {0, 0}, {5, 4}, {4, 5}, {2, 3}, {3, 2}};
+
+/* Per-edge variable-size rings (solid and G2 edges), CSR; class 0 = ring/face, 1 = diagonal. */
+typedef struct rings {
+    uint32_t *off, *v;
+    uint8_t *cls;
+    uint32_t *len;   /* after dedup */
+} rings;
+
+static void rings_free(sd_mem *m, rings *r)
+{
+    sd_free(m, r->off);
+    sd_free(m, r->v);
+    sd_free(m, r->cls);
+    sd_free(m, r->len);
+}
+
+static int cmp_u32(const void *x, const void *y)
+{
+    uint32_t a = *(const uint32_t *)x, b = *(const uint32_t *)y;
+    return a < b ? -1 : a > b;
+}
+
+static int cmp_entry(const void *x, const void *y)
+{
+    uint64_t a = *(const uint64_t *)x, b = *(const uint64_t *)y;
+    return a < b ? -1 : a > b;
+}
+
+/* Ring candidates of SOLID edges from the cells; then sorted and deduplicated per edge. */
+static bool solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int scheme, rings *R)
+{
+    uint32_t ne = t->ne;
+    R->off = sd_calloc(m, (size_t)ne + 1, sizeof *R->off);
+    R->len = sd_calloc(m, ne ? ne : 1, sizeof *R->len);
+    if (!R->off || !R->len)
+        return false;
+    bool avg = scheme == SD_SOLID_AVERAGED;
+    /* count */
+    for (uint32_t c = 0; c < t->ntet; c++)
+        for (int k = 0; k < 6; k++)
+            if (erule[t->tet_e[c][k]] == SD_RULE_SOLID)
+                R->off[t->tet_e[c][k] + 1] += 2;
+    for (uint32_t o = 0; o < t->noct; o++)
+        for (int k = 0; k < 12; k++)
+            if (erule[t->oct_e[o][k]] == SD_RULE_SOLID)
+                R->off[t->oct_e[o][k] + 1] += avg ? 4 : (k < 8 ? 3 : 2);
+    for (uint32_t e = 0; e < ne; e++)
+        R->off[e + 1] += R->off[e];
+    size_t total = R->off[ne];
+    R->v = sd_alloc(m, (total + 1) * sizeof *R->v);
+    R->cls = sd_alloc(m, total + 1);
+    uint32_t *cur = sd_alloc(m, ((size_t)ne + 1) * sizeof *cur);
+    if (!R->v || !R->cls || !cur) {
+        sd_free(m, cur);
+        return false;
+    }
+    memcpy(cur, R->off, (size_t)ne * sizeof *cur);
+#define PUSH(e, x, c)                                                                        \
+    do {                                                                                     \
+        R->v[cur[e]] = (x);                                                                  \
+        R->cls[cur[e]++] = (c);                                                              \
+    } while (0)
+    for (uint32_t c = 0; c < t->ntet; c++)
+        for (int k = 0; k < 6; k++) {
+            uint32_t e = t->tet_e[c][k];
+            if (erule[e] != SD_RULE_SOLID)
+                continue;
+            /* the two vertices not on edge k: those of the opposite edge 5-k */
+            PUSH(e, t->tet[c][SD_TET_E[5 - k][0]], 0);
+            PUSH(e, t->tet[c][SD_TET_E[5 - k][1]], 0);
+        }
+    for (uint32_t o = 0; o < t->noct; o++)
+        for (int k = 0; k < 12; k++) {
+            uint32_t e = t->oct_e[o][k];
+            if (erule[e] != SD_RULE_SOLID)
+                continue;
+            const uint32_t *q = t->oct[o];
+            int i = SD_OCT_E[k][0], j = SD_OCT_E[k][1];
+            if (avg) {
+                /* faces of the octahedron on the edge: the two common neighbours;
+                 * through the octahedron's diagonals: the opposites of both ends */
+                int com[2], nc = 0;
+                for (int w = 0; w < 6 && nc < 2; w++)
+                    if (w != i && w != j && w != (i ^ 1) && w != (j ^ 1))
+                        com[nc++] = w;
+                PUSH(e, q[com[0]], 0);
+                PUSH(e, q[com[1]], 0);
+                PUSH(e, q[i ^ 1], 1);
+                PUSH(e, q[j ^ 1], 1);
+            } else if (k < 8) {
+                /* [P, x] with P on the diagonal: tets (p,q,x,prev), (p,q,x,next) */
+                int P = i, x = j;
+                PUSH(e, q[P ^ 1], 0);
+                PUSH(e, q[OCT_EQ_NB[x][0]], 0);
+                PUSH(e, q[OCT_EQ_NB[x][1]], 0);
+            } else {
+                /* an equator edge lies in one of the 4 tets: (p,q,x,y) */
+                PUSH(e, q[0], 0);
+                PUSH(e, q[1], 0);
+            }
+        }
+#undef PUSH
+    sd_free(m, cur);
+    /* sort and deduplicate each edge's list (as (vertex, class) pairs) */
+    uint64_t buf[256];
+    for (uint32_t e = 0; e < ne; e++) {
+        uint32_t b = R->off[e], n = R->off[e + 1] - b, w = 0;
+        if (n == 0)
+            continue;
+        uint64_t *s = n <= 256 ? buf : malloc(n * sizeof *s);
+        if (!s)
+            return false;
+        for (uint32_t i = 0; i < n; i++)
+            s[i] = (uint64_t)R->v[b + i] << 1 | R->cls[b + i];
+        qsort(s, n, sizeof *s, cmp_entry);
+        for (uint32_t i = 0; i < n; i++)
+            if (i == 0 || s[i] != s[i - 1]) {
+                R->v[b + w] = (uint32_t)(s[i] >> 1);
+                R->cls[b + w] = (uint8_t)(s[i] & 1);
+                w++;
+            }
+        R->len[e] = w;
+        if (s != buf)
+            free(s);
+    }
+    return true;
+}
+
+/* Rings of G2 edges: the common neighbours (edges and diagonals) of both ends, filtered. */
+static bool g2_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, rings *R)
+{
+    uint32_t nv = t->nv, ne = t->ne;
+    uint32_t *off = sd_calloc(m, (size_t)nv + 1, sizeof *off), *adj = NULL, *cur = NULL;
+    R->off = sd_calloc(m, (size_t)ne + 1, sizeof *R->off);
+    R->len = sd_calloc(m, ne ? ne : 1, sizeof *R->len);
+    if (!off || !R->off || !R->len)
+        goto fail;
+    for (uint32_t e = 0; e < ne; e++) {
+        off[t->ev[e][0] + 1]++;
+        off[t->ev[e][1] + 1]++;
+    }
+    for (uint32_t o = 0; o < t->noct; o++) {
+        off[t->oct[o][0] + 1]++;
+        off[t->oct[o][1] + 1]++;
+    }
+    for (uint32_t v = 0; v < nv; v++)
+        off[v + 1] += off[v];
+    adj = sd_alloc(m, ((size_t)off[nv] + 1) * sizeof *adj);
+    cur = sd_alloc(m, ((size_t)nv + 1) * sizeof *cur);
+    if (!adj || !cur)
+        goto fail;
+    memcpy(cur, off, (size_t)nv * sizeof *cur);
+    for (uint32_t e = 0; e < ne; e++) {
+        adj[cur[t->ev[e][0]]++] = t->ev[e][1];
+        adj[cur[t->ev[e][1]]++] = t->ev[e][0];
+    }
+    for (uint32_t o = 0; o < t->noct; o++) {
+        adj[cur[t->oct[o][0]]++] = t->oct[o][1];
+        adj[cur[t->oct[o][1]]++] = t->oct[o][0];
+    }
+    for (uint32_t v = 0; v < nv; v++)
+        qsort(adj + off[v], off[v + 1] - off[v], sizeof *adj, cmp_u32);
+    /* count, then fill, the common neighbours of each G2 edge */
+    for (int pass = 0; pass < 2; pass++) {
+        for (uint32_t e = 0; e < ne; e++) {
+            if (erule[e] != SD_RULE_G2)
+                continue;
+            uint32_t a = t->ev[e][0], b = t->ev[e][1], n = 0;
+            bool inside = (t->efam[e] == FAM3) && !(t->eflag[e] & EF_DC);
+            uint32_t i = off[a], j = off[b];
+            while (i < off[a + 1] && j < off[b + 1]) {
+                if (adj[i] < adj[j])
+                    i++;
+                else if (adj[i] > adj[j])
+                    j++;
+                else {
+                    uint32_t x = adj[i];
+                    if ((i == off[a] || adj[i - 1] != x) && x != a && x != b && g2_keep(t, inside, x)) {
+                        if (pass)
+                            R->v[R->off[e] + n] = x;
+                        n++;
+                    }
+                    i++;
+                    j++;
+                }
+            }
+            if (pass == 0)
+                R->off[e + 1] = n;
+            else
+                R->len[e] = n;
+        }
+        if (pass == 0) {
+            for (uint32_t e = 0; e < ne; e++)
+                R->off[e + 1] += R->off[e];
+            R->v = sd_alloc(m, ((size_t)R->off[ne] + 1) * sizeof *R->v);
+            R->cls = sd_calloc(m, (size_t)R->off[ne] + 1, 1);
+            if (!R->v || !R->cls)
+                goto fail;
+        }
+    }
+    sd_free(m, off);
+    sd_free(m, adj);
+    sd_free(m, cur);
+    return true;
+fail:
+    sd_free(m, off);
+    sd_free(m, adj);
+    sd_free(m, cur);
+    return false;
+}
+
+sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
+{
+    sd_mem *m = &cx->mem;
+    const sd_topo *t = &lv->t;
+    const int weights = cx->opt.surface_weights, scheme = cx->opt.solid_scheme;
+    const uint32_t nv = t->nv, ne = t->ne, no = t->noct;
+    uint32_t *cnt_a = NULL, *cnt_b = NULL, *cur = NULL;
+    uint32_t(*opp)[2] = NULL;
+    uint8_t *nopp = NULL;
+    rings sr = {0}, gr = {0};
+    sd_result rc = SD_OK;
+    double loopc[64];
+    for (uint32_t k = 1; k < 64; k++)
+        loopc[k] = loop_weight(weights, k);
+    loopc[0] = 0;
+
+    uint64_t nrows = (uint64_t)nv + ne + no;
+    if (nrows >= UINT32_MAX)
+        return sd_fail(err, SD_ERR_LIMIT, -1, -1, "too many points for 32-bit ids");
+    lv->vrule = sd_alloc(m, (size_t)nv + 1);
+    lv->erule = sd_alloc(m, (size_t)ne + 1);
+    lv->vval = sd_alloc(m, ((size_t)nv + 1) * sizeof *lv->vval);
+    lv->ering = sd_alloc(m, ((size_t)ne + 1) * sizeof *lv->ering);
+    cnt_a = sd_calloc(m, nv, sizeof *cnt_a);
+    cnt_b = sd_calloc(m, nv, sizeof *cnt_b);
+    if (!lv->vrule || !lv->erule || !lv->vval || !lv->ering || !cnt_a || !cnt_b)
+        goto nomem;
+    uint8_t *vr = lv->vrule, *er = lv->erule;
+    for (uint32_t v = 0; v < nv; v++)
+        vr[v] = vertex_rule(t, v);
+    bool any_g2e = false, any_opp = false;
+    for (uint32_t e = 0; e < ne; e++) {
+        er[e] = edge_rule(t, e);
+        any_g2e |= er[e] == SD_RULE_G2;
+        any_opp |= er[e] == SD_RULE_LOOP || er[e] == SD_RULE_SOLID_BOUNDARY;
+    }
+
+    /* vertex rho sizes */
+    for (uint32_t e = 0; e < ne; e++) {
+        uint32_t a = t->ev[e][0], b = t->ev[e][1];
+        if (via_edge(t, vr[a], a, b, e))
+            cnt_a[a]++;
+        if (via_edge(t, vr[b], b, a, e))
+            cnt_a[b]++;
+    }
+    for (uint32_t o = 0; o < no; o++) {
+        uint32_t p = t->oct[o][0], q = t->oct[o][1];
+        if (via_diag(t, vr[p], scheme, p, q))
+            cnt_a[p]++;
+        if (via_diag(t, vr[q], scheme, q, p))
+            cnt_a[q]++;
+        if (scheme == SD_SOLID_AVERAGED)
+            for (int i = 0; i < 6; i++)
+                if (vr[t->oct[o][i]] == SD_RULE_SOLID)
+                    cnt_b[t->oct[o][i]]++;
+    }
+    for (uint32_t v = 0; v < nv; v++) {
+        bool degenerate = false;
+        switch (vr[v]) {
+        case SD_RULE_CURVE:
+        case SD_RULE_LOOP_BOUNDARY:
+            degenerate = cnt_a[v] != 2;
+            break;
+        default:
+            degenerate = vr[v] != SD_RULE_CORNER && cnt_a[v] == 0;
+        }
+        if (degenerate || vr[v] == SD_RULE_CORNER) {
+            vr[v] = SD_RULE_CORNER;
+            cnt_a[v] = cnt_b[v] = 0;
+        }
+        lv->vval[v] = cnt_a[v] + cnt_b[v];
+    }
+
+    /* edge neighbourhoods */
+    if (any_opp) {
+        opp = sd_alloc(m, (size_t)ne * sizeof *opp);
+        nopp = sd_calloc(m, ne, 1);
+        if (!opp || !nopp)
+            goto nomem;
+        for (uint32_t f = 0; f < t->nf; f++) {
+            uint8_t ff = t->fflag[f];
+            if (!(ff & (FF_MAX | FF_BND3)))
+                continue;
+            for (int j = 0; j < 3; j++) {
+                uint32_t e = t->fe[f][j];
+                bool use = (ff & FF_MAX) ? er[e] == SD_RULE_LOOP : er[e] == SD_RULE_SOLID_BOUNDARY;
+                if (!use)
+                    continue;
+                if (nopp[e] < 2)
+                    opp[e][nopp[e]] = t->fv[f][(j + 2) % 3];
+                if (nopp[e] < 255)
+                    nopp[e]++;
+            }
+        }
+    }
+    if ((t->ntet || no) && !solid_rings(m, t, er, scheme, &sr))
+        goto nomem;
+    if (any_g2e && !g2_rings(m, t, er, &gr))
+        goto nomem;
+
+    /* row sizes */
+    if (!sd_csrb_init(m, &lv->S, (uint32_t)nrows, nv, 0))
+        goto nomem;
+    uint32_t *rp = lv->S.rowptr;
+    uint64_t acc = 0;
+    for (uint32_t v = 0; v < nv; v++) {
+        rp[v] = (uint32_t)acc;
+        acc += 1 + cnt_a[v] + cnt_b[v];
+    }
+    for (uint32_t e = 0; e < ne; e++) {
+        rp[nv + e] = (uint32_t)acc;
+        uint32_t k = 0;
+        switch (er[e]) {
+        case SD_RULE_LOOP:
+        case SD_RULE_SOLID_BOUNDARY:
+            k = nopp[e] == 2 ? 2 : 0;
+            break;
+        case SD_RULE_SOLID:
+            k = sr.len[e];
+            break;
+        case SD_RULE_G2:
+            k = gr.len[e];
+            break;
+        default:
+            break;
+        }
+        lv->ering[e] = k;
+        acc += 2 + k;
+    }
+    for (uint32_t o = 0; o < no; o++) {
+        rp[nv + ne + o] = (uint32_t)acc;
+        acc += 6;
+    }
+    if (acc >= UINT32_MAX) {
+        rc = sd_fail(err, SD_ERR_LIMIT, -1, -1, "subdivision matrix too large for 32-bit offsets");
+        goto fail;
+    }
+    rp[nrows] = (uint32_t)acc;
+    if (!sd_csrb_reserve(m, &lv->S, acc))
+        goto nomem;
+    lv->S.nnz = acc;
+    uint32_t *col = lv->S.col;
+    double *val = lv->S.val;
+
+    /* vertex rows: the self weight first, then rho in edge order */
+    cur = sd_alloc(m, ((size_t)nv + 1) * sizeof *cur);
+    if (!cur)
+        goto nomem;
+    for (uint32_t v = 0; v < nv; v++) {
+        vw w = vertex_weights(vr[v], weights, scheme, cnt_a[v], cnt_b[v], loopc);
+        col[rp[v]] = v;
+        val[rp[v]] = w.self;
+        cur[v] = rp[v] + 1;
+    }
+#define PUT(v, x, w)                                                                         \
+    do {                                                                                     \
+        col[cur[v]] = (x);                                                                   \
+        val[cur[v]++] = (w);                                                                 \
+    } while (0)
+    for (uint32_t e = 0; e < ne; e++) {
+        uint32_t a = t->ev[e][0], b = t->ev[e][1];
+        if (vr[a] != SD_RULE_CORNER && via_edge(t, vr[a], a, b, e))
+            PUT(a, b, vertex_weights(vr[a], weights, scheme, cnt_a[a], cnt_b[a], loopc).a);
+        if (vr[b] != SD_RULE_CORNER && via_edge(t, vr[b], b, a, e))
+            PUT(b, a, vertex_weights(vr[b], weights, scheme, cnt_a[b], cnt_b[b], loopc).a);
+    }
+    for (uint32_t o = 0; o < no; o++) {
+        const uint32_t *q = t->oct[o];
+        for (int i = 0; i < 2; i++)
+            if (vr[q[i]] != SD_RULE_CORNER && via_diag(t, vr[q[i]], scheme, q[i], q[i ^ 1]))
+                PUT(q[i], q[i ^ 1], vertex_weights(vr[q[i]], weights, scheme, cnt_a[q[i]], cnt_b[q[i]], loopc).a);
+        if (scheme == SD_SOLID_AVERAGED)
+            for (int i = 0; i < 6; i++)
+                if (vr[q[i]] == SD_RULE_SOLID)
+                    PUT(q[i], q[i ^ 1], vertex_weights(vr[q[i]], weights, scheme, cnt_a[q[i]], cnt_b[q[i]], loopc).b);
+    }
+#undef PUT
+
+    /* edge rows */
+    for (uint32_t e = 0; e < ne; e++) {
+        uint32_t r = rp[nv + e], a = t->ev[e][0], b = t->ev[e][1], k = lv->ering[e];
+        double wend = 0.5, wring = 0, wdiag = 0;
+        const uint32_t *ring = NULL;
+        const uint8_t *cls = NULL;
+        switch (er[e]) {
+        case SD_RULE_LOOP:
+        case SD_RULE_SOLID_BOUNDARY:
+            if (k == 2) {
+                wend = 3.0 / 8.0;
+                wring = 1.0 / 8.0;
+                ring = opp[e];
+            }
+            break;
+        case SD_RULE_SOLID:
+            ring = sr.v + sr.off[e];
+            cls = sr.cls + sr.off[e];
+            if (scheme == SD_SOLID_AVERAGED) {
+                uint32_t nf = 0, nd = 0;
+                for (uint32_t i = 0; i < k; i++)
+                    cls[i] ? nd++ : nf++;
+                double d = 4.0 * nf + nd;
+                wend = 7.0 / 24.0;
+                wring = 5.0 / 12.0 * 4.0 / d;
+                wdiag = 5.0 / 12.0 / d;
+            } else {
+                solid_edge_weights(k, &wend, &wring);
+            }
+            break;
+        case SD_RULE_G2:
+            if (k) {
+                ring = gr.v + gr.off[e];
+                solid_edge_weights(k, &wend, &wring);
+            }
+            break;
+        default:
+            break;
+        }
+        col[r] = a;
+        val[r] = wend;
+        col[r + 1] = b;
+        val[r + 1] = wend;
+        for (uint32_t i = 0; i < k; i++) {
+            col[r + 2 + i] = ring[i];
+            val[r + 2 + i] = cls && cls[i] ? wdiag : wring;
+        }
+    }
+    /* cell points of octahedra: box 1/4 on the diagonal, 1/8 on the rest; averaged: centroid */
+    for (uint32_t o = 0; o < no; o++) {
+        uint32_t r = rp[nv + ne + o];
+        for (int i = 0; i < 6; i++) {
+            col[r + i] = t->oct[o][i];
+            val[r + i] = scheme == SD_SOLID_AVERAGED ? 1.0 / 6.0 : (i < 2 ? 0.25 : 0.125);
+        }
+    }
+
+    sd_free(m, cnt_a);
+    sd_free(m, cnt_b);
+    sd_free(m, cur);
+    sd_free(m, opp);
+    sd_free(m, nopp);
+    rings_free(m, &sr);
+    rings_free(m, &gr);
+    lv->have_rules = true;
+    return SD_OK;
+
+nomem:
+    rc = sd_fail_nomem(err, m);
+fail:
+    sd_free(m, cnt_a);
+    sd_free(m, cnt_b);
+    sd_free(m, cur);
+    sd_free(m, opp);
+    sd_free(m, nopp);
+    rings_free(m, &sr);
+    rings_free(m, &gr);
+    sd_free(m, lv->vrule);
+    sd_free(m, lv->erule);
+    sd_free(m, lv->vval);
+    sd_free(m, lv->ering);
+    lv->vrule = lv->erule = NULL;
+    lv->vval = lv->ering = NULL;
+    sd_csrb_free(m, &lv->S);
+    return rc;
+}

@@ -1,0 +1,199 @@
+/* sd.h — the public C API of subdivd's core library.
+ *
+ * The core turns a control complex (vertices + maximal simplices of dimension 0..3, mixed freely)
+ * into a hierarchy of uniformly subdivided levels. Each level is the previous one split (edge 1->2,
+ * triangle 1->4, tetrahedron -> 4 tets + octahedron, octahedron -> 6 octahedra + 8 tets) and its
+ * points are a sparse linear map of the previous level's points: p^{l+1} = S_l p^l. The same S_l
+ * subdivide positions and any per-vertex attribute ("channel").
+ *
+ * The core does no I/O: arrays in, arrays out, result codes and a caller-owned error struct.
+ * Ownership: every *_new returns an object the caller frees with the matching *_free; pointers
+ * returned by accessors are borrowed from the complex and stay valid until the complex is freed
+ * or changed (set_diagonal, add_channel).
+ *
+ * Threading: a complex is not thread-safe; different complexes are fully independent (the core
+ * keeps no global state), so one thread per complex needs no locking.
+ */
+#ifndef SD_H
+#define SD_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum sd_result {
+    SD_OK = 0,
+    SD_ERR_NOMEM,      /* the allocator refused */
+    SD_ERR_LIMIT,      /* a configured limit (bytes, vertices, cells) would be exceeded */
+    SD_ERR_EMPTY,      /* no vertices or no simplices */
+    SD_ERR_VALUE,      /* a coordinate or attribute is NaN, infinite or too large */
+    SD_ERR_ARITY,      /* a simplex has 0 or more than 4 vertices */
+    SD_ERR_INDEX,      /* a vertex index is out of range */
+    SD_ERR_REPEATED,   /* a vertex appears twice in one simplex */
+    SD_ERR_DUPLICATE,  /* the same simplex is listed twice */
+    SD_ERR_DEGENERATE, /* a simplex has (nearly) zero length, area or volume */
+    SD_ERR_ARG         /* a bad argument to an API call (level, vertex, option) */
+} sd_result;
+
+/* Filled by every fallible call. `item` is the index of the offending input element (simplex,
+ * vertex, ...) or -1; `field` the position inside it (vertex slot, coordinate) or -1. */
+typedef struct sd_error {
+    sd_result code;
+    long item;
+    int field;
+    char message[240];
+} sd_error;
+
+const char *sd_result_name(sd_result r);
+
+/* A pluggable allocator (NULL functions = libc). */
+typedef struct sd_allocator {
+    void *(*alloc)(size_t size, void *ud);
+    void (*release)(void *ptr, size_t size, void *ud);
+    void *ud;
+} sd_allocator;
+
+enum { SD_WEIGHTS_WARREN = 0, SD_WEIGHTS_LOOP = 1 };   /* Loop vertex weights, SPEC Sec. 3 */
+enum { SD_SOLID_BOX = 0, SD_SOLID_AVERAGED = 1 };      /* solid scheme, 001 Sec. 3 / App. A */
+
+/* Options: zero means default. */
+typedef struct sd_options {
+    int surface_weights;     /* SD_WEIGHTS_* */
+    int solid_scheme;        /* SD_SOLID_* */
+    size_t max_bytes;        /* memory cap for the whole complex (0 = none) */
+    sd_allocator allocator;
+} sd_options;
+
+typedef struct sd_complex sd_complex;
+
+/* Build and validate a control complex. `xyz` has 3*nv doubles. Simplex s has `size[s]` (1..4)
+ * vertex indices, stored consecutively in `idx` (simplex s starts after the sizes of 0..s-1).
+ * Listed simplices that are faces of other listed simplices are absorbed (not maximal).
+ * Returns NULL and fills `err` on failure. Free with sd_complex_free. */
+sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
+                           size_t ns, const sd_options *opt, sd_error *err);
+void sd_complex_free(sd_complex *c);
+
+/* Force the major diagonal of the tetrahedron given as input simplex `simplex` to its
+ * opposite-edge pair `pair` (0: edges 01|23, 1: 02|13, 2: 03|12 in the input's vertex order),
+ * overriding 001 Algorithm 2's choice. Drops computed levels >= 1. */
+sd_result sd_complex_set_diagonal(sd_complex *c, size_t simplex, int pair, sd_error *err);
+/* The diagonal pair in use for input simplex `simplex` (a tetrahedron), or -1. */
+int sd_complex_diagonal(const sd_complex *c, size_t simplex);
+
+/* Add a per-vertex channel of `ncomp` (1..16) doubles per control vertex; returns the channel
+ * id (>= 1; channel 0 is the positions) or -1. Data are copied. */
+int sd_complex_add_channel(sd_complex *c, const double *data, int ncomp, sd_error *err);
+
+/* Exact sizes of level L, from the split table, without computing it. */
+typedef struct sd_counts {
+    uint64_t vertices, edges, faces;
+    uint64_t points, curves, triangles, tetrahedra, octahedra;
+} sd_counts;
+void sd_complex_counts(const sd_complex *c, int level, sd_counts *out);
+
+/* Memory in use by the complex (all levels, matrices, channels), in bytes. */
+size_t sd_complex_memory(const sd_complex *c);
+int sd_complex_levels_computed(const sd_complex *c);
+
+/* ---- levels ------------------------------------------------------------------------------ */
+
+typedef struct sd_level sd_level;
+
+#define SD_MAX_LEVEL 12
+
+/* Level L (0 = control complex), computing missing levels first. NULL + err on failure. */
+const sd_level *sd_complex_level(sd_complex *c, int level, sd_error *err);
+
+uint32_t sd_level_index(const sd_level *lv);
+uint32_t sd_level_num_vertices(const sd_level *lv);
+/* Channel data (ncomp doubles per vertex); channel 0 = positions (ncomp 3). */
+const double *sd_level_channel(const sd_level *lv, int channel, int *ncomp);
+
+/* Top cells of each part: isolated points, curve segments, surface triangles (not faces of
+ * solids), tetrahedra and octahedra. An octahedron lists three opposite pairs (p,q),(a,a2),(b,b2),
+ * the major diagonal (p,q) first. */
+typedef enum { SD_CELL_POINT = 0, SD_CELL_CURVE, SD_CELL_TRIANGLE, SD_CELL_TETRA, SD_CELL_OCTA } sd_cell_kind;
+int sd_cell_size(sd_cell_kind k);   /* 1, 2, 3, 4, 6 */
+uint32_t sd_level_num_cells(const sd_level *lv, sd_cell_kind k);
+/* Write the vertex ids of cell i of kind k into v (sd_cell_size(k) ids). */
+void sd_level_cell(const sd_level *lv, sd_cell_kind k, uint32_t i, uint32_t *v);
+
+/* All edges of the level (2n ids), in the order edge points are numbered at level L+1. */
+const uint32_t *sd_level_edges(const sd_level *lv, uint32_t *n);
+
+/* Where vertex i of level L >= 1 came from in level L-1. */
+typedef enum { SD_ORIGIN_INPUT = 0, SD_ORIGIN_VERTEX, SD_ORIGIN_EDGE, SD_ORIGIN_CELL } sd_origin_kind;
+sd_origin_kind sd_level_origin(const sd_level *lv, uint32_t i, uint32_t *a, uint32_t *b);
+
+/* ---- classification and rules (000 Sec. 2, SPEC Sec. 1 and 3) ----------------------------- */
+
+typedef enum sd_rule {
+    SD_RULE_CORNER = 0,       /* fixed: 0-mask */
+    SD_RULE_CURVE,            /* cubic B-spline */
+    SD_RULE_LOOP,             /* Loop surface */
+    SD_RULE_LOOP_BOUNDARY,    /* boundary of a surface: cubic B-spline along it */
+    SD_RULE_SOLID,            /* box-spline (or averaged) solid */
+    SD_RULE_SOLID_BOUNDARY,   /* boundary of a solid: Loop on the boundary surface */
+    SD_RULE_N1, SD_RULE_N2, SD_RULE_G1, SD_RULE_G2,
+    SD_RULE_COUNT
+} sd_rule;
+const char *sd_rule_name(sd_rule r);
+
+enum { SD_CLASS_BOUNDARY = 1 };  /* flags */
+
+typedef struct sd_class {
+    uint8_t family;     /* bit k set: the simplex is in C_k (k = 0..3) */
+    uint8_t boundary;   /* in the boundary complex dC */
+    uint8_t nonmanifold;/* 0 = manifold, 1..4 = non-manifold type (000 Sec. 2.4) */
+    uint8_t rule;       /* sd_rule */
+    uint32_t valence;   /* |rho| the rule uses (vertex: 1-ring, edge: ring) */
+    uint8_t extraordinary;
+} sd_class;
+
+/* Classification of vertex i / edge e of a level (builds that level's stencils if needed). */
+sd_result sd_complex_vertex_class(sd_complex *c, int level, uint32_t i, sd_class *out, sd_error *err);
+sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *out, sd_error *err);
+/* Edge id of the edge a-b at a level, or UINT32_MAX. */
+uint32_t sd_level_find_edge(const sd_level *lv, uint32_t a, uint32_t b);
+
+/* ---- subdivision matrices --------------------------------------------------------------- */
+
+/* Compressed sparse rows: row r has entries rowptr[r] .. rowptr[r+1]-1. */
+typedef struct sd_csr {
+    uint32_t nrows, ncols;
+    const uint32_t *rowptr;
+    const uint32_t *col;
+    const double *val;
+} sd_csr;
+
+/* The matrix S_L mapping level L points to level L+1 points (built if needed). */
+sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err);
+
+/* ---- local analysis (001 Sec. 4.1, Appendix B) ------------------------------------------- */
+
+typedef struct sd_analysis {
+    int size;                 /* n: the matrix is n x n */
+    sd_rule rule;
+    double *matrix;           /* n*n, row-major */
+    double *eig_re, *eig_im;  /* n eigenvalues, largest magnitude first */
+    uint32_t *points;         /* n ids of the level the matrix acts on (centre first) */
+    int level;                /* that level */
+    int closed;               /* every row's support lies inside the block */
+} sd_analysis;
+
+/* The 1-ring block M ((k+1)x(k+1)) of control vertex v: its vertex point and the edge points
+ * of its k edges as functions of v and its 1-ring. */
+sd_result sd_analyze_vertex(sd_complex *c, uint32_t v, sd_analysis *out, sd_error *err);
+/* The block L ((2k+3)x(2k+3)) of control edge a-b: the 1-ring block of the edge's midpoint
+ * after one level (001 Sec. 4.1). */
+sd_result sd_analyze_edge(sd_complex *c, uint32_t a, uint32_t b, sd_analysis *out, sd_error *err);
+void sd_analysis_free(sd_analysis *a);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,495 @@
+/* split.c — the topology of one level (SPEC Sec. 2; 000 Algorithm 6; 001 Algorithm 1).
+ *
+ *   edge        -> 2 edges at the edge point
+ *   triangle    -> 4 triangles
+ *   tetrahedron -> 4 corner tetrahedra + 1 octahedron on the 6 edge points
+ *   octahedron  -> 6 corner octahedra + 8 face tetrahedra around the new cell point
+ *
+ * Numbering is direct, with no search: level l+1 has vertices [vertex points | edge points |
+ * cell points]; edges [2 halves per edge | 3 per face (cutting its corners) | 12 per octahedron
+ * (cell point to edge points)]; faces [4 per face (corners, middle) | 4 per tetrahedron | 24 per
+ * octahedron]. Each cell type has a template, built once per split from the local tables, that
+ * says for every child cell which parent entity each of its vertices, edges and faces comes from;
+ * the split then only maps local references to global ids.
+ *
+ * Diagonals (SPEC Sec. 3.1): a tetrahedron with pair (e_k, e_5-k) gives its octahedron the
+ * diagonal joining those edges' points; corner tetrahedra keep the parent's pair (they are
+ * scaled copies). An octahedron with diagonal (p,q) gives its corner octahedra diagonals parallel
+ * to it — [vertex point, cell point] at p and q, [m(v,p), m(v,q)] at an equator vertex v — and its
+ * face tetrahedron over (P,U,W) the pair ([m(P,U), m(P,W)], [m(U,W), cell point]).
+ * Every child is oriented like its parent (checked on reference coordinates when the templates
+ * are built).
+ *
+ * Classification is inherited (see classify.c): halves keep their edge's class; an edge point
+ * takes its edge's family and dC flag and becomes type 1 (if the edge was) or type 4 (if the edge
+ * was of type 2, 3 or 4); edges inside a face take the face's family and boundary status and are
+ * type 4 inside a type-2 face; everything inside a cell is interior and manifold.
+ */
+#include "internal.h"
+#include <assert.h>
+#include <string.h>
+
+enum { R_HALF, R_FINT, R_OINT };   /* edge references */
+enum { R_FCHILD, R_CINT };         /* face references */
+#define MKREF(t, a, b) ((uint16_t)((t) << 12 | (a) << 4 | (b)))
+#define RT(r) ((r) >> 12)
+#define RA(r) (((r) >> 4) & 0xff)
+#define RB(r) ((r) & 0xf)
+#define MIDDLE 15
+
+typedef struct tcell {
+    uint8_t kind, diag; /* kind 4 = tetrahedron, 6 = octahedron */
+    uint8_t v[6];
+    uint16_t e[12], f[8];
+} tcell;
+
+typedef struct tface {
+    uint8_t v[3];
+    uint16_t e[3];
+} tface;
+
+typedef struct tmpl {
+    int n, ne, nfc;
+    const uint8_t (*pe)[2];
+    const uint8_t (*pf)[3];
+    int ncell;
+    tcell cell[14];
+    int nif;
+    tface iface[24];
+} tmpl;
+
+static int vkind(const tmpl *T, int u) { return u < T->n ? 0 : u < T->n + T->ne ? 1 : 2; }
+
+static int tm_face(const tmpl *T, int a, int b, int c)
+{
+    for (int f = 0; f < T->nfc; f++) {
+        int hit = 0;
+        for (int j = 0; j < 3; j++)
+            hit += T->pf[f][j] == a || T->pf[f][j] == b || T->pf[f][j] == c;
+        if (hit == 3)
+            return f;
+    }
+    return -1;
+}
+
+static uint16_t tm_edge_ref(const tmpl *T, int u, int w)
+{
+    if (vkind(T, u) > vkind(T, w)) {
+        int x = u;
+        u = w;
+        w = x;
+    }
+    int ku = vkind(T, u), kw = vkind(T, w);
+    if (ku == 0 && kw == 1) {
+        int k = w - T->n;
+        assert(T->pe[k][0] == u || T->pe[k][1] == u);
+        return MKREF(R_HALF, k, u);
+    }
+    if (ku == 1 && kw == 1) {
+        const uint8_t *a = T->pe[u - T->n], *b = T->pe[w - T->n];
+        int s = (a[0] == b[0] || a[0] == b[1]) ? a[0] : a[1];
+        int oa = a[0] == s ? a[1] : a[0], ob = b[0] == s ? b[1] : b[0];
+        int lf = tm_face(T, s, oa, ob);
+        assert(lf >= 0);
+        return MKREF(R_FINT, lf, s);
+    }
+    assert(ku == 1 && kw == 2);
+    return MKREF(R_OINT, u - T->n, 0);
+}
+
+static uint16_t tm_face_ref(tmpl *T, int u, int w, int z)
+{
+    int s[3] = {u, w, z};
+    for (int i = 1; i < 3; i++) /* sort by kind, then id */
+        for (int j = i; j > 0 && (vkind(T, s[j - 1]) * 64 + s[j - 1] > vkind(T, s[j]) * 64 + s[j]); j--) {
+            int x = s[j];
+            s[j] = s[j - 1];
+            s[j - 1] = x;
+        }
+    int k0 = vkind(T, s[0]), k1 = vkind(T, s[1]), k2 = vkind(T, s[2]);
+    if (k0 == 0 && k1 == 1 && k2 == 1) {
+        const uint8_t *a = T->pe[s[1] - T->n], *b = T->pe[s[2] - T->n];
+        int oa = a[0] == s[0] ? a[1] : a[0], ob = b[0] == s[0] ? b[1] : b[0];
+        int lf = tm_face(T, s[0], oa, ob);
+        assert(lf >= 0);
+        return MKREF(R_FCHILD, lf, s[0]);
+    }
+    if (k0 == 1 && k1 == 1 && k2 == 1) {
+        int vs[6], nvs = 0;
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 2; j++) {
+                int x = T->pe[s[i] - T->n][j], seen = 0;
+                for (int q = 0; q < nvs; q++)
+                    seen |= vs[q] == x;
+                if (!seen)
+                    vs[nvs++] = x;
+            }
+        if (nvs == 3) {
+            int lf = tm_face(T, vs[0], vs[1], vs[2]);
+            assert(lf >= 0);
+            return MKREF(R_FCHILD, lf, MIDDLE);
+        }
+    }
+    /* a face inside the parent cell */
+    for (int i = 0; i < T->nif; i++) {
+        int hit = 0;
+        for (int j = 0; j < 3; j++)
+            hit += T->iface[i].v[j] == u || T->iface[i].v[j] == w || T->iface[i].v[j] == z;
+        if (hit == 3)
+            return MKREF(R_CINT, i, 0);
+    }
+    assert(T->nif < 24);
+    tface *f = &T->iface[T->nif];
+    f->v[0] = (uint8_t)u;
+    f->v[1] = (uint8_t)w;
+    f->v[2] = (uint8_t)z;
+    for (int j = 0; j < 3; j++)
+        f->e[j] = tm_edge_ref(T, f->v[j], f->v[(j + 1) % 3]);
+    return MKREF(R_CINT, T->nif++, 0);
+}
+
+/* Reference coordinates of template vertex u (for the orientation check). */
+static void tm_coord(const tmpl *T, const double (*ref)[3], int u, double *o)
+{
+    if (u < T->n) {
+        memcpy(o, ref[u], 3 * sizeof *o);
+    } else if (u < T->n + T->ne) {
+        const uint8_t *e = T->pe[u - T->n];
+        for (int k = 0; k < 3; k++)
+            o[k] = 0.5 * (ref[e[0]][k] + ref[e[1]][k]);
+    } else {
+        for (int k = 0; k < 3; k++) {
+            o[k] = 0;
+            for (int i = 0; i < T->n; i++)
+                o[k] += ref[i][k] / T->n;
+        }
+    }
+}
+
+static double orient(const tmpl *T, const double (*ref)[3], const tcell *c)
+{
+    double x[6][3];
+    for (int i = 0; i < c->kind; i++)
+        tm_coord(T, ref, c->v[i], x[i]);
+    double a[3], b[3], d[3];
+    if (c->kind == 4) {
+        for (int k = 0; k < 3; k++) {
+            a[k] = x[1][k] - x[0][k];
+            b[k] = x[2][k] - x[0][k];
+            d[k] = x[3][k] - x[0][k];
+        }
+    } else { /* (a - centre) x (b - centre) . (p - centre) */
+        double ctr[3] = {0, 0, 0};
+        for (int i = 0; i < 6; i++)
+            for (int k = 0; k < 3; k++)
+                ctr[k] += x[i][k] / 6;
+        for (int k = 0; k < 3; k++) {
+            a[k] = x[2][k] - ctr[k];
+            b[k] = x[4][k] - ctr[k];
+            d[k] = x[0][k] - ctr[k];
+        }
+    }
+    return (a[1] * b[2] - a[2] * b[1]) * d[0] + (a[2] * b[0] - a[0] * b[2]) * d[1] +
+           (a[0] * b[1] - a[1] * b[0]) * d[2];
+}
+
+static void tm_add(tmpl *T, const double (*ref)[3], int kind, const int *v, int diag)
+{
+    tcell *c = &T->cell[T->ncell++];
+    memset(c, 0, sizeof *c);
+    c->kind = (uint8_t)kind;
+    c->diag = (uint8_t)diag;
+    for (int i = 0; i < kind; i++)
+        c->v[i] = (uint8_t)v[i];
+    if (orient(T, ref, c) < 0) {
+        int a = kind == 4 ? 2 : 4, b = kind == 4 ? 3 : 5;
+        uint8_t x = c->v[a];
+        c->v[a] = c->v[b];
+        c->v[b] = x;
+        if (kind == 4 && diag)
+            c->diag = (uint8_t)(3 - diag); /* slots 2,3 swapped: pairs 1 and 2 trade places */
+    }
+    assert(orient(T, ref, c) > 0);
+    const uint8_t (*E)[2] = kind == 4 ? SD_TET_E : SD_OCT_E;
+    const uint8_t (*F)[3] = kind == 4 ? SD_TET_F : SD_OCT_F;
+    for (int k = 0; k < (kind == 4 ? 6 : 12); k++)
+        c->e[k] = tm_edge_ref(T, c->v[E[k][0]], c->v[E[k][1]]);
+    for (int k = 0; k < (kind == 4 ? 4 : 8); k++)
+        c->f[k] = tm_face_ref(T, c->v[F[k][0]], c->v[F[k][1]], c->v[F[k][2]]);
+}
+
+static int ledge(const tmpl *T, int i, int j)
+{
+    for (int k = 0; k < T->ne; k++)
+        if ((T->pe[k][0] == i && T->pe[k][1] == j) || (T->pe[k][0] == j && T->pe[k][1] == i))
+            return T->n + k;
+    assert(0);
+    return -1;
+}
+
+static void tm_tet(tmpl *T, int d)
+{
+    static const double ref[4][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    memset(T, 0, sizeof *T);
+    T->n = 4;
+    T->ne = 6;
+    T->nfc = 4;
+    T->pe = SD_TET_E;
+    T->pf = SD_TET_F;
+    for (int i = 0; i < 4; i++) { /* corner tetrahedra: scaled copies, same pair */
+        int v[4];
+        for (int s = 0; s < 4; s++)
+            v[s] = s == i ? i : ledge(T, i, s);
+        tm_add(T, ref, 4, v, d);
+    }
+    int o[6] = {4 + d, 4 + 5 - d}, n = 2;
+    for (int k = 0; k < 3; k++)
+        if (k != d) {
+            o[n++] = 4 + k;
+            o[n++] = 4 + 5 - k;
+        }
+    tm_add(T, ref, 6, o, 0);
+}
+
+static void tm_oct(tmpl *T)
+{
+    static const double ref[6][3] = {{0, 0, 1}, {0, 0, -1}, {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}};
+    memset(T, 0, sizeof *T);
+    T->n = 6;
+    T->ne = 12;
+    T->nfc = 8;
+    T->pe = SD_OCT_E;
+    T->pf = SD_OCT_F;
+    const int C = 18;
+#define E(i, j) ledge(T, i, j)
+    /* corner octahedra; slots (p,q,a,a2,b,b2), diagonal first (SPEC Sec. 3.1) */
+    int c0[6] = {0, C, E(0, 2), E(0, 3), E(0, 4), E(0, 5)};
+    int c1[6] = {1, C, E(1, 2), E(1, 3), E(1, 4), E(1, 5)};
+    int c2[6] = {E(2, 0), E(2, 1), 2, C, E(2, 4), E(2, 5)};
+    int c3[6] = {E(3, 0), E(3, 1), 3, C, E(3, 4), E(3, 5)};
+    int c4[6] = {E(4, 0), E(4, 1), 4, C, E(4, 2), E(4, 3)};
+    int c5[6] = {E(5, 0), E(5, 1), 5, C, E(5, 2), E(5, 3)};
+    const int *corners[6] = {c0, c1, c2, c3, c4, c5};
+    for (int i = 0; i < 6; i++)
+        tm_add(T, ref, 6, corners[i], 0);
+    /* face tetrahedra over (P,U,W), pair 0 = ([m(P,U), m(P,W)], [m(U,W), cell point]) */
+    for (int f = 0; f < 8; f++) {
+        int P = SD_OCT_F[f][0], U = SD_OCT_F[f][1], W = SD_OCT_F[f][2];
+        int v[4] = {E(P, U), E(P, W), E(U, W), C};
+        tm_add(T, ref, 4, v, 0);
+    }
+#undef E
+}
+
+/* ---- runtime ---------------------------------------------------------------------------- */
+
+typedef struct ctx {
+    const sd_topo *P;
+    const uint32_t *pv, *pe, *pf;
+    uint32_t center, ibase_e, ibase_f;
+} ctx;
+
+static inline int fpos(const sd_topo *P, uint32_t f, uint32_t x)
+{
+    return P->fv[f][0] == x ? 0 : P->fv[f][1] == x ? 1 : 2;
+}
+static inline uint32_t half(const sd_topo *P, uint32_t e, uint32_t x)
+{
+    return 2 * e + (P->ev[e][0] == x ? 0 : 1);
+}
+static inline uint32_t map_v(const ctx *x, const tmpl *T, int u)
+{
+    if (u < T->n)
+        return x->pv[u];
+    if (u < T->n + T->ne)
+        return x->P->nv + x->pe[u - T->n];
+    return x->center;
+}
+static inline uint32_t map_e(const ctx *x, uint16_t r)
+{
+    switch (RT(r)) {
+    case R_HALF:
+        return half(x->P, x->pe[RA(r)], x->pv[RB(r)]);
+    case R_FINT: {
+        uint32_t f = x->pf[RA(r)];
+        return 2 * x->P->ne + 3 * f + (uint32_t)fpos(x->P, f, x->pv[RB(r)]);
+    }
+    default:
+        return x->ibase_e + RA(r);
+    }
+}
+static inline uint32_t map_f(const ctx *x, uint16_t r)
+{
+    if (RT(r) == R_CINT)
+        return x->ibase_f + RA(r);
+    uint32_t f = x->pf[RA(r)];
+    return 4 * f + (RB(r) == MIDDLE ? 3u : (uint32_t)fpos(x->P, f, x->pv[RB(r)]));
+}
+
+/* Emit the children of one parent cell. */
+static void emit(sd_topo *C, const ctx *x, const tmpl *T, uint32_t *tet_at, uint32_t *oct_at)
+{
+    for (int i = 0; i < T->nif; i++) {
+        uint32_t f = x->ibase_f + (uint32_t)i;
+        for (int j = 0; j < 3; j++) {
+            C->fv[f][j] = map_v(x, T, T->iface[i].v[j]);
+            C->fe[f][j] = map_e(x, T->iface[i].e[j]);
+        }
+        C->fn3[f] = 2;
+        C->fflag[f] = 0;
+    }
+    for (int i = 0; i < T->ncell; i++) {
+        const tcell *c = &T->cell[i];
+        if (c->kind == 4) {
+            uint32_t t = (*tet_at)++;
+            for (int k = 0; k < 4; k++)
+                C->tet[t][k] = map_v(x, T, c->v[k]);
+            for (int k = 0; k < 6; k++)
+                C->tet_e[t][k] = map_e(x, c->e[k]);
+            for (int k = 0; k < 4; k++)
+                C->tet_f[t][k] = map_f(x, c->f[k]);
+            C->tet_d[t] = c->diag;
+        } else {
+            uint32_t o = (*oct_at)++;
+            for (int k = 0; k < 6; k++)
+                C->oct[o][k] = map_v(x, T, c->v[k]);
+            for (int k = 0; k < 12; k++)
+                C->oct_e[o][k] = map_e(x, c->e[k]);
+            for (int k = 0; k < 8; k++)
+                C->oct_f[o][k] = map_f(x, c->f[k]);
+        }
+    }
+}
+
+sd_result sd_split(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
+{
+    uint64_t nv = (uint64_t)P->nv + P->ne + P->noct;
+    uint64_t ne = 2ull * P->ne + 3ull * P->nf + 12ull * P->noct;
+    uint64_t nf = 4ull * P->nf + 4ull * P->ntet + 24ull * P->noct;
+    uint64_t ntet = 4ull * P->ntet + 8ull * P->noct, noct = (uint64_t)P->ntet + 6ull * P->noct;
+    if (nv >= UINT32_MAX || ne >= UINT32_MAX || nf >= UINT32_MAX || ntet >= UINT32_MAX ||
+        noct >= UINT32_MAX || 4ull * P->ntr >= UINT32_MAX)
+        return sd_fail(err, SD_ERR_LIMIT, -1, -1,
+                       "the next level would exceed 32-bit ids (%llu edges, %llu faces)",
+                       (unsigned long long)ne, (unsigned long long)nf);
+    memset(C, 0, sizeof *C);
+    C->nv = (uint32_t)nv;
+    C->ne = (uint32_t)ne;
+    C->nf = (uint32_t)nf;
+    C->npt = P->npt;
+    C->ncu = 2 * P->ncu;
+    C->ntr = 4 * P->ntr;
+    C->ntet = (uint32_t)ntet;
+    C->noct = (uint32_t)noct;
+#define A(f, n) (C->f = sd_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
+    if (!A(ev, ne) || !A(fv, nf) || !A(fe, nf) || !A(pt, C->npt) || !A(cu, C->ncu) ||
+        !A(tr, C->ntr) || !A(tet, ntet) || !A(tet_e, ntet) || !A(tet_f, ntet) ||
+        !A(tet_d, ntet) || !A(oct, noct) || !A(oct_e, noct) || !A(oct_f, noct) ||
+        !A(vfam, nv) || !A(vflag, nv) || !A(vnm, nv) || !A(efam, ne) || !A(eflag, ne) ||
+        !A(enm, ne) || !A(fn3, nf) || !A(fflag, nf)) {
+        sd_topo_free(m, C);
+        return sd_fail_nomem(err, m);
+    }
+#undef A
+    const uint32_t pnv = P->nv, pne = P->ne, pnf = P->nf;
+
+    /* vertices: classes */
+    memcpy(C->vfam, P->vfam, pnv);
+    memcpy(C->vflag, P->vflag, pnv);
+    memcpy(C->vnm, P->vnm, pnv);
+    for (uint32_t e = 0; e < pne; e++) {
+        uint32_t v = pnv + e;
+        C->vfam[v] = P->efam[e];
+        C->vflag[v] = (P->eflag[e] & EF_DC) ? VF_DC : 0;
+        C->vnm[v] = P->enm[e] == 1 ? 1 : P->enm[e] ? 4 : 0;
+    }
+    for (uint32_t o = 0; o < P->noct; o++) {
+        uint32_t v = pnv + pne + o;
+        C->vfam[v] = FAM3;
+        C->vflag[v] = 0;
+        C->vnm[v] = 0;
+    }
+    /* edges: halves */
+    for (uint32_t e = 0; e < pne; e++) {
+        uint32_t mid = pnv + e;
+        C->ev[2 * e][0] = P->ev[e][0];
+        C->ev[2 * e][1] = mid;
+        C->ev[2 * e + 1][0] = mid;
+        C->ev[2 * e + 1][1] = P->ev[e][1];
+        for (int k = 0; k < 2; k++) {
+            C->efam[2 * e + k] = P->efam[e];
+            C->eflag[2 * e + k] = P->eflag[e];
+            C->enm[2 * e + k] = P->enm[e];
+        }
+    }
+    /* edges and faces inside faces */
+    for (uint32_t f = 0; f < pnf; f++) {
+        const uint32_t *x = P->fv[f], *fe = P->fe[f];
+        uint8_t fam = (P->fflag[f] & FF_MAX) ? FAM2 : FAM3;
+        uint8_t flag = (P->fflag[f] & FF_BND3) ? EF_DC : 0;
+        uint8_t nm = P->fn3[f] >= 3 ? 4 : 0;
+        for (int j = 0; j < 3; j++) {
+            uint32_t e = 2 * pne + 3 * f + j;
+            uint32_t jp = (uint32_t)(j + 2) % 3;
+            C->ev[e][0] = pnv + fe[jp];
+            C->ev[e][1] = pnv + fe[j];
+            C->efam[e] = fam;
+            C->eflag[e] = flag;
+            C->enm[e] = nm;
+            uint32_t g = 4 * f + j;
+            C->fv[g][0] = x[j];
+            C->fv[g][1] = pnv + fe[j];
+            C->fv[g][2] = pnv + fe[jp];
+            C->fe[g][0] = half(P, fe[j], x[j]);
+            C->fe[g][1] = e;
+            C->fe[g][2] = half(P, fe[jp], x[j]);
+        }
+        uint32_t g = 4 * f + 3;
+        for (int j = 0; j < 3; j++) {
+            C->fv[g][j] = pnv + fe[j];
+            C->fe[g][j] = 2 * pne + 3 * f + (uint32_t)(j + 1) % 3;
+        }
+        for (int j = 0; j < 4; j++) {
+            C->fn3[4 * f + j] = P->fn3[f];
+            C->fflag[4 * f + j] = P->fflag[f];
+        }
+    }
+    /* edges inside octahedra: cell point to each edge point */
+    for (uint32_t o = 0; o < P->noct; o++)
+        for (int k = 0; k < 12; k++) {
+            uint32_t e = 2 * pne + 3 * pnf + 12 * o + k;
+            C->ev[e][0] = pnv + pne + o;
+            C->ev[e][1] = pnv + P->oct_e[o][k];
+            C->efam[e] = FAM3;
+            C->eflag[e] = 0;
+            C->enm[e] = 0;
+        }
+    /* lower-dimensional cells */
+    memcpy(C->pt, P->pt, (size_t)P->npt * sizeof *C->pt);
+    for (uint32_t i = 0; i < P->ncu; i++) {
+        C->cu[2 * i] = 2 * P->cu[i];
+        C->cu[2 * i + 1] = 2 * P->cu[i] + 1;
+    }
+    for (uint32_t i = 0; i < P->ntr; i++)
+        for (uint32_t j = 0; j < 4; j++)
+            C->tr[4 * i + j] = 4 * P->tr[i] + j;
+    /* solid cells */
+    if (P->ntet || P->noct) {
+        tmpl tt[3], to;
+        for (int d = 0; d < 3; d++)
+            tm_tet(&tt[d], d);
+        tm_oct(&to);
+        uint32_t tet_at = 0, oct_at = 0;
+        for (uint32_t t = 0; t < P->ntet; t++) {
+            ctx x = {P, P->tet[t], P->tet_e[t], P->tet_f[t], 0, 0, 4 * pnf + 4 * t};
+            emit(C, &x, &tt[P->tet_d[t] % 3], &tet_at, &oct_at);
+        }
+        for (uint32_t o = 0; o < P->noct; o++) {
+            ctx x = {P, P->oct[o], P->oct_e[o], P->oct_f[o], pnv + pne + o,
+                     2 * pne + 3 * pnf + 12 * o, 4 * pnf + 4 * P->ntet + 24 * o};
+            emit(C, &x, &to, &tet_at, &oct_at);
+        }
+        assert(tet_at == C->ntet && oct_at == C->noct);
+    }
+    return SD_OK;
+}

@@ -1,0 +1,228 @@
+/* sdlevel — read a complex in the text format of docs/TEXT_FORMAT.md, subdivide it with the
+ * core library and print one level (with origins, classes or matrix rows on request).
+ * A thin client of core/: parsing and printing only. Exit codes: 0 ok, 1 core error, 2 usage or
+ * input error. */
+#define _POSIX_C_SOURCE 200809L
+#include "../../core/sd.h"
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+typedef struct buf {
+    void *p;
+    size_t n, cap, elt;
+} buf;
+
+static void *push(buf *b)
+{
+    if (b->n == b->cap) {
+        b->cap = b->cap ? 2 * b->cap : 64;
+        b->p = realloc(b->p, b->cap * b->elt);
+        if (!b->p) {
+            fprintf(stderr, "sdlevel: out of memory\n");
+            exit(2);
+        }
+    }
+    return (char *)b->p + b->elt * b->n++;
+}
+
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static void usage(void)
+{
+    fprintf(stderr, "usage: sdlevel [-l L] [-w warren|loop] [-s box|averaged] [--classes] "
+                    "[--matrix] [--stats] INPUT\n");
+    exit(2);
+}
+
+int main(int argc, char **argv)
+{
+    int level = 1, classes = 0, matrix = 0, stats = 0;
+    sd_options opt = {0};
+    const char *path = NULL;
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "-l") && i + 1 < argc)
+            level = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "-w") && i + 1 < argc) {
+            const char *w = argv[++i];
+            if (!strcmp(w, "loop"))
+                opt.surface_weights = SD_WEIGHTS_LOOP;
+            else if (strcmp(w, "warren"))
+                usage();
+        } else if (!strcmp(argv[i], "-s") && i + 1 < argc) {
+            const char *s = argv[++i];
+            if (!strcmp(s, "averaged"))
+                opt.solid_scheme = SD_SOLID_AVERAGED;
+            else if (strcmp(s, "box"))
+                usage();
+        } else if (!strcmp(argv[i], "--classes"))
+            classes = 1;
+        else if (!strcmp(argv[i], "--matrix"))
+            matrix = 1;
+        else if (!strcmp(argv[i], "--stats"))
+            stats = 1;
+        else if (argv[i][0] == '-' && argv[i][1])
+            usage();
+        else
+            path = argv[i];
+    }
+    if (!path)
+        usage();
+    FILE *f = strcmp(path, "-") ? fopen(path, "r") : stdin;
+    if (!f) {
+        fprintf(stderr, "sdlevel: %s: %s\n", path, strerror(errno));
+        return 2;
+    }
+    buf xyz = {.elt = sizeof(double)}, idx = {.elt = sizeof(uint32_t)}, sz = {.elt = 1};
+    buf diag = {.elt = 2 * sizeof(long)};
+    char line[4096];
+    long lineno = 0;
+    while (fgets(line, sizeof line, f)) {
+        lineno++;
+        char *p = line;
+        while (*p == ' ' || *p == '\t')
+            p++;
+        if (*p == '#' || *p == '\n' || *p == 0)
+            continue;
+        if (p[0] == 'v' && (p[1] == ' ' || p[1] == '\t')) {
+            double x, y, z;
+            if (sscanf(p + 1, "%lf %lf %lf", &x, &y, &z) != 3)
+                goto bad;
+            *(double *)push(&xyz) = x;
+            *(double *)push(&xyz) = y;
+            *(double *)push(&xyz) = z;
+        } else if (p[0] == 's' && (p[1] == ' ' || p[1] == '\t')) {
+            char *q = p + 1, *end;
+            int n = 0;
+            for (;;) {
+                long v = strtol(q, &end, 10);
+                if (end == q)
+                    break;
+                if (v < 0)
+                    goto bad;
+                *(uint32_t *)push(&idx) = (uint32_t)v;
+                n++;
+                q = end;
+            }
+            if (n == 0 || n > 255)
+                goto bad;
+            *(uint8_t *)push(&sz) = (uint8_t)n;
+        } else if (p[0] == 'd' && (p[1] == ' ' || p[1] == '\t')) {
+            long *d = push(&diag);
+            if (sscanf(p + 1, "%ld %ld", &d[0], &d[1]) != 2)
+                goto bad;
+        } else {
+            goto bad;
+        }
+    }
+    if (f != stdin)
+        fclose(f);
+
+    sd_error err;
+    double t0 = now();
+    sd_complex *c = sd_complex_new(xyz.p, xyz.n / 3, idx.p, sz.p, sz.n, &opt, &err);
+    if (!c) {
+        fprintf(stderr, "sdlevel: %s (item %ld, field %d): %s\n", sd_result_name(err.code), err.item,
+                err.field, err.message);
+        return 1;
+    }
+    /* `d t k`: t counts tetrahedra among the simplices in input order */
+    for (size_t i = 0; i < diag.n; i++) {
+        long *d = (long *)diag.p + 2 * i, seen = -1;
+        size_t s;
+        for (s = 0; s < sz.n; s++)
+            if (((uint8_t *)sz.p)[s] == 4 && ++seen == d[0])
+                break;
+        if (s == sz.n || sd_complex_set_diagonal(c, s, (int)d[1], &err)) {
+            fprintf(stderr, "sdlevel: bad diagonal line 'd %ld %ld'\n", d[0], d[1]);
+            return 2;
+        }
+    }
+    const sd_level *lv = sd_complex_level(c, level, &err);
+    if (!lv) {
+        fprintf(stderr, "sdlevel: %s: %s\n", sd_result_name(err.code), err.message);
+        return 1;
+    }
+    double t1 = now();
+    static const char *const kinds[] = {"points", "edges", "triangles", "tetrahedra", "octahedra"};
+    static const char tags[] = "petTO";
+    if (stats) {
+        printf("level %d vertices %u", level, sd_level_num_vertices(lv));
+        for (int k = 0; k < 5; k++)
+            printf(" %s %u", kinds[k], sd_level_num_cells(lv, (sd_cell_kind)k));
+        printf(" seconds %.6f memory %zu\n", t1 - t0, sd_complex_memory(c));
+        sd_complex_free(c);
+        return 0;
+    }
+    int nc;
+    const double *x = sd_level_channel(lv, 0, &nc);
+    uint32_t nv = sd_level_num_vertices(lv);
+    printf("level %d\nvertices %u\n", level, nv);
+    for (uint32_t i = 0; i < nv; i++) {
+        uint32_t a, b;
+        sd_origin_kind k = sd_level_origin(lv, i, &a, &b);
+        printf("v %.17g %.17g %.17g", x[3 * i], x[3 * i + 1], x[3 * i + 2]);
+        switch (k) {
+        case SD_ORIGIN_INPUT: printf(" I\n"); break;
+        case SD_ORIGIN_VERTEX: printf(" V %u\n", a); break;
+        case SD_ORIGIN_EDGE: printf(" E %u %u\n", a, b); break;
+        case SD_ORIGIN_CELL: printf(" C %u\n", a); break;
+        }
+    }
+    for (int k = 0; k < 5; k++) {
+        uint32_t n = sd_level_num_cells(lv, (sd_cell_kind)k), v[6];
+        int m = sd_cell_size((sd_cell_kind)k);
+        printf("%s %u\n", kinds[k], n);
+        for (uint32_t i = 0; i < n; i++) {
+            sd_level_cell(lv, (sd_cell_kind)k, i, v);
+            putchar(tags[k]);
+            for (int j = 0; j < m; j++)
+                printf(" %u", v[j]);
+            putchar('\n');
+        }
+    }
+    if (classes) {
+        sd_class cl;
+        for (uint32_t i = 0; i < nv; i++) {
+            if (sd_complex_vertex_class(c, level, i, &cl, &err))
+                return 1;
+            printf("vclass %u %u %u %u %s %u\n", i, cl.family, cl.boundary, cl.nonmanifold,
+                   sd_rule_name((sd_rule)cl.rule), cl.valence);
+        }
+        uint32_t ne;
+        const uint32_t *ev = sd_level_edges(lv, &ne);
+        for (uint32_t e = 0; e < ne; e++) {
+            if (sd_complex_edge_class(c, level, e, &cl, &err))
+                return 1;
+            printf("eclass %u %u %u %u %u %s %u\n", ev[2 * e], ev[2 * e + 1], cl.family, cl.boundary,
+                   cl.nonmanifold, sd_rule_name((sd_rule)cl.rule), cl.valence);
+        }
+    }
+    if (matrix && level > 0) {
+        sd_csr s;
+        if (sd_complex_matrix(c, level - 1, &s, &err))
+            return 1;
+        for (uint32_t r = 0; r < s.nrows; r++) {
+            printf("row %u %u", r, s.rowptr[r + 1] - s.rowptr[r]);
+            for (uint32_t k = s.rowptr[r]; k < s.rowptr[r + 1]; k++)
+                printf(" %u %.17g", s.col[k], s.val[k]);
+            putchar('\n');
+        }
+    }
+    sd_complex_free(c);
+    free(xyz.p);
+    free(idx.p);
+    free(sz.p);
+    free(diag.p);
+    return 0;
+bad:
+    fprintf(stderr, "sdlevel: %s:%ld: cannot parse line\n", path, lineno);
+    return 2;
+}
