@@ -35,10 +35,11 @@ deps:
 	@sh tools/deps.sh
 
 # Runs every suite and ends with one line: "N passed, N failed".
-test: all $(OSD_LOOP)
+test: deps
+	$(MAKE) all $(OSD_LOOP)
 	@sh tests/run_all.sh
 
-sanitize:
+sanitize: deps
 	$(MAKE) clean-build B=build-asan
 	$(MAKE) all B=build-asan CFLAGS="-O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all" LDLIBS="$(LDLIBS) -fsanitize=address,undefined"
 	SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core sh tests/run_all.sh
