@@ -11,7 +11,7 @@ CORE_SRC := $(wildcard core/*.c)
 CORE_OBJ := $(patsubst %.c,$(B)/%.o,$(CORE_SRC))
 CORE_LIB := $(B)/libsubdiv.a
 
-.PHONY: all test test-c test-py bench sanitize run deps clean
+.PHONY: all test bench sanitize run deps clean clean-build
 all: $(CORE_LIB) $(B)/sdlevel $(B)/test_core
 
 $(B)/%.o: %.c $(wildcard core/*.h)
@@ -21,8 +21,8 @@ $(B)/%.o: %.c $(wildcard core/*.h)
 $(CORE_LIB): $(CORE_OBJ)
 	ar rcs $@ $^
 
-$(B)/sdlevel: tests/tools/sdlevel.c $(CORE_LIB)
-	$(CC) $(CFLAGS) $< $(CORE_LIB) $(LDLIBS) -o $@
+$(B)/sdlevel: tests/tools/sdlevel.c tests/tools/textmesh.c tests/tools/textmesh.h $(CORE_LIB)
+	$(CC) $(CFLAGS) tests/tools/sdlevel.c tests/tools/textmesh.c $(CORE_LIB) $(LDLIBS) -o $@
 
 TEST_SRC := $(wildcard tests/core/*.c)
 $(B)/test_core: $(TEST_SRC) $(CORE_LIB) $(wildcard tests/core/*.h)
@@ -33,6 +33,16 @@ $(B)/test_core: $(TEST_SRC) $(CORE_LIB) $(wildcard tests/core/*.h)
 
 deps:
 	@sh tools/deps.sh
+
+# Until the daemon lands (server/), `make run` subdivides the bundled example with the core and
+# prints what each level holds and how every control vertex is classified.
+run: deps
+	$(MAKE) all
+	@echo "== examples/mixed.txt: levels 0..3"
+	@for L in 0 1 2 3; do ./$(B)/sdlevel --stats -l $$L examples/mixed.txt; done
+	@echo "== classes of the control vertices (vclass id family boundary type rule valence)"
+	@./$(B)/sdlevel --classes -l 0 examples/mixed.txt | grep '^vclass'
+	@echo "Try: ./$(B)/sdlevel -l 2 examples/mixed.txt  (format: docs/TEXT_FORMAT.md)"
 
 # Runs every suite and ends with one line: "N passed, N failed".
 test: deps

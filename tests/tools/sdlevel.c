@@ -4,29 +4,11 @@
  * input error. */
 #define _POSIX_C_SOURCE 200809L
 #include "../../core/sd.h"
-#include <errno.h>
+#include "textmesh.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-
-typedef struct buf {
-    void *p;
-    size_t n, cap, elt;
-} buf;
-
-static void *push(buf *b)
-{
-    if (b->n == b->cap) {
-        b->cap = b->cap ? 2 * b->cap : 64;
-        b->p = realloc(b->p, b->cap * b->elt);
-        if (!b->p) {
-            fprintf(stderr, "sdlevel: out of memory\n");
-            exit(2);
-        }
-    }
-    return (char *)b->p + b->elt * b->n++;
-}
 
 static double now(void)
 {
@@ -75,72 +57,28 @@ int main(int argc, char **argv)
     }
     if (!path)
         usage();
-    FILE *f = strcmp(path, "-") ? fopen(path, "r") : stdin;
-    if (!f) {
-        fprintf(stderr, "sdlevel: %s: %s\n", path, strerror(errno));
+    textmesh tm;
+    char msg[512];
+    if (textmesh_read(path, &tm, msg, sizeof msg)) {
+        fprintf(stderr, "sdlevel: %s\n", msg);
         return 2;
     }
-    buf xyz = {.elt = sizeof(double)}, idx = {.elt = sizeof(uint32_t)}, sz = {.elt = 1};
-    buf diag = {.elt = 2 * sizeof(long)};
-    char line[4096];
-    long lineno = 0;
-    while (fgets(line, sizeof line, f)) {
-        lineno++;
-        char *p = line;
-        while (*p == ' ' || *p == '\t')
-            p++;
-        if (*p == '#' || *p == '\n' || *p == 0)
-            continue;
-        if (p[0] == 'v' && (p[1] == ' ' || p[1] == '\t')) {
-            double x, y, z;
-            if (sscanf(p + 1, "%lf %lf %lf", &x, &y, &z) != 3)
-                goto bad;
-            *(double *)push(&xyz) = x;
-            *(double *)push(&xyz) = y;
-            *(double *)push(&xyz) = z;
-        } else if (p[0] == 's' && (p[1] == ' ' || p[1] == '\t')) {
-            char *q = p + 1, *end;
-            int n = 0;
-            for (;;) {
-                long v = strtol(q, &end, 10);
-                if (end == q)
-                    break;
-                if (v < 0)
-                    goto bad;
-                *(uint32_t *)push(&idx) = (uint32_t)v;
-                n++;
-                q = end;
-            }
-            if (n == 0 || n > 255)
-                goto bad;
-            *(uint8_t *)push(&sz) = (uint8_t)n;
-        } else if (p[0] == 'd' && (p[1] == ' ' || p[1] == '\t')) {
-            long *d = push(&diag);
-            if (sscanf(p + 1, "%ld %ld", &d[0], &d[1]) != 2)
-                goto bad;
-        } else {
-            goto bad;
-        }
-    }
-    if (f != stdin)
-        fclose(f);
-
     sd_error err;
     double t0 = now();
-    sd_complex *c = sd_complex_new(xyz.p, xyz.n / 3, idx.p, sz.p, sz.n, &opt, &err);
+    sd_complex *c = sd_complex_new(tm.xyz, tm.nv, tm.idx, tm.size, tm.ns, &opt, &err);
     if (!c) {
         fprintf(stderr, "sdlevel: %s (item %ld, field %d): %s\n", sd_result_name(err.code), err.item,
                 err.field, err.message);
         return 1;
     }
     /* `d t k`: t counts tetrahedra among the simplices in input order */
-    for (size_t i = 0; i < diag.n; i++) {
-        long *d = (long *)diag.p + 2 * i, seen = -1;
+    for (size_t i = 0; i < tm.ndiag; i++) {
+        long *d = tm.diag + 2 * i, seen = -1;
         size_t s;
-        for (s = 0; s < sz.n; s++)
-            if (((uint8_t *)sz.p)[s] == 4 && ++seen == d[0])
+        for (s = 0; s < tm.ns; s++)
+            if (tm.size[s] == 4 && ++seen == d[0])
                 break;
-        if (s == sz.n || sd_complex_set_diagonal(c, s, (int)d[1], &err)) {
+        if (s == tm.ns || sd_complex_set_diagonal(c, s, (int)d[1], &err)) {
             fprintf(stderr, "sdlevel: bad diagonal line 'd %ld %ld'\n", d[0], d[1]);
             return 2;
         }
@@ -217,12 +155,6 @@ int main(int argc, char **argv)
         }
     }
     sd_complex_free(c);
-    free(xyz.p);
-    free(idx.p);
-    free(sz.p);
-    free(diag.p);
+    textmesh_free(&tm);
     return 0;
-bad:
-    fprintf(stderr, "sdlevel: %s:%ld: cannot parse line\n", path, lineno);
-    return 2;
 }
