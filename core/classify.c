@@ -104,6 +104,7 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
     inc vt = {0}, vtri = {0}, et = {0};
     linkuf u = {0};
     uint32_t *trv = NULL, *tetv = NULL;
+    sd_result rc = SD_OK;
     if (!t->vfam || !t->vflag || !t->vnm || !t->efam || !t->eflag || !t->enm || !cdeg || !n2)
         goto nomem;
 
@@ -245,19 +246,10 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
             t->vnm[v] = 3;
     }
 
-    sd_free(m, cdeg);
-    sd_free(m, n2);
-    sd_free(m, trv);
-    sd_free(m, tetv);
-    inc_free(m, &vt);
-    inc_free(m, &vtri);
-    inc_free(m, &et);
-    sd_free(m, u.loc);
-    sd_free(m, u.stamp);
-    sd_free(m, u.parent);
-    return SD_OK;
-
+    goto out;
 nomem:
+    rc = sd_fail_nomem(err, m);
+out:
     sd_free(m, cdeg);
     sd_free(m, n2);
     sd_free(m, trv);
@@ -268,7 +260,7 @@ nomem:
     sd_free(m, u.loc);
     sd_free(m, u.stamp);
     sd_free(m, u.parent);
-    return sd_fail_nomem(err, m);
+    return rc;
 }
 
 /* The edge of tetrahedron c's diagonal pair that lies in its local face i (each opposite pair

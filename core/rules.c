@@ -621,26 +621,12 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         }
     }
 
-    sd_free(m, cnt_a);
-    sd_free(m, cnt_b);
-    sd_free(m, cur);
-    sd_free(m, opp);
-    sd_free(m, nopp);
-    rings_free(m, &sr);
-    rings_free(m, &gr);
     lv->have_rules = true;
-    return SD_OK;
+    goto out;
 
 nomem:
     rc = sd_fail_nomem(err, m);
 fail:
-    sd_free(m, cnt_a);
-    sd_free(m, cnt_b);
-    sd_free(m, cur);
-    sd_free(m, opp);
-    sd_free(m, nopp);
-    rings_free(m, &sr);
-    rings_free(m, &gr);
     sd_free(m, lv->vrule);
     sd_free(m, lv->erule);
     sd_free(m, lv->vval);
@@ -648,5 +634,13 @@ fail:
     lv->vrule = lv->erule = NULL;
     lv->vval = lv->ering = NULL;
     sd_csrb_free(m, &lv->S);
+out:
+    sd_free(m, cnt_a);
+    sd_free(m, cnt_b);
+    sd_free(m, cur);
+    sd_free(m, opp);
+    sd_free(m, nopp);
+    rings_free(m, &sr);
+    rings_free(m, &gr);
     return rc;
 }
