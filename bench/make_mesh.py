@@ -1,10 +1,13 @@
 #!/usr/bin/python3
-"""Closed triangle meshes (and tetrahedral blocks) in the text format of docs/TEXT_FORMAT.md.
+"""Closed, consistently oriented triangle meshes (and tetrahedral blocks) in the text format of
+docs/TEXT_FORMAT.md, written to stdout. Deterministic: the same arguments give the same bytes.
 
     make_mesh.py icosphere N      icosahedron split 1->4 N times, on the unit sphere
-    make_mesh.py bumpy N          the same with a deterministic bumpy radius (irregular, asymmetric)
-    make_mesh.py torus U V        U x V torus grid (R = 1, r = 0.35), quads split in two
-    make_mesh.py octahedron
+    make_mesh.py bumpy N          the same with a deterministic bumpy radius and unequal axes
+                                  (no symmetry; valence 5, and 6 for N >= 1)
+    make_mesh.py torus U V        U x V torus grid (R = 1, r = 0.35), quads split in two (U, V >= 3;
+                                  every vertex has valence 6; torus 100 100 = 20000 triangles)
+    make_mesh.py octahedron       the regular octahedron (valence 4)
     make_mesh.py cubes N          N^3 unit cubes, 6 tetrahedra each (a solid block)
 """
 import math
@@ -85,14 +88,22 @@ def cubes(n):
     return v, f
 
 
+MAKERS = {"icosphere": (icosphere, 1, 0), "bumpy": (bumpy, 1, 0), "torus": (torus, 2, 3),
+          "octahedron": (octahedron, 0, 0), "cubes": (cubes, 1, 1)}  # name: (maker, args, minimum)
+
+
 def main(argv):
     kind = argv[1] if len(argv) > 1 else ""
-    args = [int(a) for a in argv[2:]]
-    makers = {"icosphere": icosphere, "bumpy": bumpy, "torus": torus, "octahedron": octahedron,
-              "cubes": cubes}
-    if kind not in makers:
+    if kind not in MAKERS:
         sys.exit(__doc__)
-    v, f = makers[kind](*args)
+    maker, nargs, least = MAKERS[kind]
+    try:
+        args = [int(a) for a in argv[2:]]
+    except ValueError:
+        args = None
+    if args is None or len(args) != nargs or any(a < least for a in args):
+        sys.exit(f"make_mesh.py {kind}: expected {nargs} whole number(s) >= {least}\n{__doc__}")
+    v, f = maker(*args)
     out = [f"# {' '.join(argv[1:])}: {len(v)} vertices, {len(f)} simplices"]
     out += ["v %.17g %.17g %.17g" % p for p in v]
     out += ["s " + " ".join(map(str, s)) for s in f]

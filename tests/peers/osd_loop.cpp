@@ -1,17 +1,40 @@
 // osd_loop — the peer: OpenSubdiv's uniform Loop refinement of a triangle mesh, in double
-// precision (Far::PrimvarRefinerReal<double>), for tests and benchmarks of subdivd.
+// precision, for tests and benchmarks of subdivd.
 //
 //   osd_loop [-l L] [--time N] INPUT
 //
-// INPUT is the text format of docs/TEXT_FORMAT.md (v lines and 3-index s lines only). Prints the
-// level-L vertices and triangles in the same format, or with --time N the best and median wall
-// time of N complete runs (topology refinement + interpolation of every level; no file I/O).
-// OpenSubdiv uses Loop's original weights; boundaries are VTX_BOUNDARY_EDGE_ONLY.
+// INPUT is the text format of docs/TEXT_FORMAT.md, restricted to `v x y z` lines and 3-index
+// `s i j k` lines (triangles); anything else is refused with exit status 2.
+//
+// Default output: level L in the format of docs/TEXT_FORMAT.md (`level`, `vertices`, `v x y z`
+// with %.17g, `triangles`, `t i j k`). With --time N: one line
+//   osd_loop level=L faces_in=F faces_out=G seconds_best=S seconds_median=M
+// with the best and median CLOCK_MONOTONIC wall time of N complete runs (topology construction
+// and refinement plus position interpolation of every level; reading the file and freeing the
+// result are not timed, as in bench/bench.c).
+//
+// OpenSubdiv's Loop scheme uses Loop's original vertex weights, beta(n) =
+// (5/8 - (3/8 + cos(2 pi/n)/4)^2) / n; Warren's simplified weights are not available in it, so
+// there is no --warren. Boundaries are VTX_BOUNDARY_EDGE_ONLY; all other Sdc options default.
+//
+// Notes on OpenSubdiv 3.5 (Debian libosd-dev):
+// - Far::PrimvarRefinerReal<REAL> exists (far/primvarRefiner.h); Far::PrimvarRefiner is
+//   PrimvarRefinerReal<float>, whose weights are floats and agree with exact Loop only to ~1e-7.
+//   PrimvarRefinerReal<double> computes the weights in double as well.
+// - With the default UniformOptions (orderVerticesFromFacesFirst = false) the vertices of level
+//   l+1 are: the child of vertex i of level l at index i, then the children of the faces (none
+//   for Loop), then the child of edge e at index N_l + e, in OpenSubdiv's own edge order.
+// - The default error and warning callbacks print to stdout; they are sent to stderr here.
+// - TopologyDescriptor does not check vertex indices: an index out of range corrupts memory,
+//   so indices are checked while reading.
+#include <opensubdiv/far/error.h>
 #include <opensubdiv/far/primvarRefiner.h>
 #include <opensubdiv/far/topologyDescriptor.h>
 
+#include <time.h>
+
 #include <algorithm>
-#include <chrono>
+#include <cerrno>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -22,9 +45,15 @@
 
 using namespace OpenSubdiv;
 
+namespace {
+
+const char *const kUsage = "usage: osd_loop [-l L] [--time N] INPUT";
+const int kMaxLevel = 10;  // Far's limit for uniform refinement
+
+// The primvar type Far::PrimvarRefinerReal<double> interpolates.
 struct Vertex {
     double p[3];
-    void Clear(void * = nullptr) { p[0] = p[1] = p[2] = 0; }
+    void Clear(void * = nullptr) { p[0] = p[1] = p[2] = 0.0; }
     void AddWithWeight(Vertex const &s, double w) {
         p[0] += w * s.p[0];
         p[1] += w * s.p[1];
@@ -32,111 +61,198 @@ struct Vertex {
     }
 };
 
-static void die(const char *msg, const std::string &what = "") {
-    std::fprintf(stderr, "osd_loop: %s%s\n", msg, what.c_str());
+[[noreturn]] void die(const std::string &msg) {
+    std::fprintf(stderr, "osd_loop: %s\n", msg.c_str());
     std::exit(2);
 }
 
-struct Result {
-    Far::TopologyRefiner *refiner;
-    std::vector<Vertex> verts;   // all levels, level after level
-    size_t finest;               // offset of the finest level
-};
+bool g_far_error = false;
 
-static Result run(const std::vector<double> &xyz, const std::vector<int> &tris, int level) {
-    typedef Far::TopologyDescriptor Descriptor;
-    Sdc::Options options;
-    options.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
-    int nf = (int)tris.size() / 3;
-    std::vector<int> per(nf, 3);
-    Descriptor desc;
-    desc.numVertices = (int)xyz.size() / 3;
-    desc.numFaces = nf;
-    desc.numVertsPerFace = per.data();
-    desc.vertIndicesPerFace = tris.data();
-    Far::TopologyRefiner *refiner = Far::TopologyRefinerFactory<Descriptor>::Create(
-        desc, Far::TopologyRefinerFactory<Descriptor>::Options(Sdc::SCHEME_LOOP, options));
-    if (!refiner)
-        die("OpenSubdiv refused the mesh");
-    refiner->RefineUniform(Far::TopologyRefiner::UniformOptions(level));
-    Result r{refiner, std::vector<Vertex>(refiner->GetNumVerticesTotal()), 0};
-    for (int i = 0; i < desc.numVertices; i++)
-        std::memcpy(r.verts[i].p, &xyz[3 * i], 3 * sizeof(double));
-    Far::PrimvarRefinerReal<double> primvar(*refiner);
-    Vertex *src = r.verts.data();
-    for (int l = 1; l <= level; l++) {
-        Vertex *dst = src + refiner->GetLevel(l - 1).GetNumVertices();
-        primvar.Interpolate(l, src, dst);
-        src = dst;
-    }
-    r.finest = (size_t)(src - r.verts.data());
-    return r;
+void on_far_error(Far::ErrorType, const char *message) {
+    g_far_error = true;
+    std::fprintf(stderr, "osd_loop: OpenSubdiv: %s\n", message);
 }
 
-int main(int argc, char **argv) {
-    int level = 2, reps = 0;
-    const char *path = nullptr;
-    for (int i = 1; i < argc; i++) {
-        if (!std::strcmp(argv[i], "-l") && i + 1 < argc)
-            level = std::atoi(argv[++i]);
-        else if (!std::strcmp(argv[i], "--time") && i + 1 < argc)
-            reps = std::atoi(argv[++i]);
-        else if (argv[i][0] == '-')
-            die("usage: osd_loop [-l L] [--time N] INPUT");
-        else
-            path = argv[i];
-    }
-    if (!path || level < 0 || level > 10)
-        die("usage: osd_loop [-l L] [--time N] INPUT");
+void on_far_warning(const char *message) {
+    std::fprintf(stderr, "osd_loop: OpenSubdiv warning: %s\n", message);
+}
+
+struct Mesh {
+    std::vector<double> xyz;  // 3 per vertex
+    std::vector<int> tris;    // 3 per triangle
+};
+
+// A whole-number command-line argument in [lo, hi].
+int int_arg(const char *s, const char *what, int lo, int hi) {
+    char *end = nullptr;
+    errno = 0;
+    long v = std::strtol(s, &end, 10);
+    if (errno || end == s || *end || v < lo || v > hi)
+        die(std::string("bad ") + what + " '" + s + "' (expected " + std::to_string(lo) + ".." +
+            std::to_string(hi) + ")");
+    return (int)v;
+}
+
+// True if nothing but whitespace or a comment is left in ss.
+bool at_end(std::istringstream &ss) {
+    std::string rest;
+    return !(ss >> rest) || rest[0] == '#';
+}
+
+Mesh read_mesh(const char *path) {
     std::ifstream in(path);
     if (!in)
-        die("cannot open ", path);
-    std::vector<double> xyz;
-    std::vector<int> tris;
+        die(std::string("cannot open ") + path);
+    Mesh m;
     std::string line;
+    int lineno = 0;
     while (std::getline(in, line)) {
+        lineno++;
+        std::string where = std::string(path) + ":" + std::to_string(lineno) + ": ";
         std::istringstream ss(line);
         std::string tag;
         if (!(ss >> tag) || tag[0] == '#')
             continue;
         if (tag == "v") {
             double x, y, z;
-            if (!(ss >> x >> y >> z))
-                die("bad vertex line: ", line);
-            xyz.insert(xyz.end(), {x, y, z});
+            if (!(ss >> x >> y >> z) || !at_end(ss))
+                die(where + "bad vertex line: " + line);
+            m.xyz.insert(m.xyz.end(), {x, y, z});
         } else if (tag == "s") {
-            std::vector<int> ids;
-            int v;
-            while (ss >> v)
+            std::vector<long> ids;
+            std::string tok;
+            while (ss >> tok && tok[0] != '#') {
+                char *end = nullptr;
+                long v = std::strtol(tok.c_str(), &end, 10);
+                if (end == tok.c_str() || *end)
+                    die(where + "bad index '" + tok + "': " + line);
                 ids.push_back(v);
+            }
             if (ids.size() != 3)
-                die("only triangles are supported: ", line);
-            tris.insert(tris.end(), ids.begin(), ids.end());
+                die(where + "only triangles (3-index s lines) are supported: " + line);
+            for (long v : ids)
+                if (v < 0 || v >= (long)(m.xyz.size() / 3))
+                    die(where + "vertex index " + std::to_string(v) +
+                        " is not a vertex defined above: " + line);
+            if (ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2])
+                die(where + "degenerate triangle: " + line);
+            m.tris.insert(m.tris.end(), ids.begin(), ids.end());
         } else {
-            die("unsupported line: ", line);
+            die(where + "unsupported line (only v and 3-index s): " + line);
         }
     }
+    if (in.bad())
+        die(std::string("error reading ") + path);
+    if (m.tris.empty())
+        die(std::string(path) + ": no triangles");
+    return m;
+}
+
+struct Result {
+    Far::TopologyRefiner *refiner = nullptr;
+    std::vector<Vertex> verts;  // every level, one after the other, level 0 first
+    size_t finest = 0;          // index of the first vertex of level L in verts
+    Result() = default;
+    Result(const Result &) = delete;
+    Result &operator=(const Result &) = delete;
+    ~Result() { delete refiner; }
+};
+
+// The timed job: build the topology, refine it uniformly to `level` and interpolate the
+// positions of every level.
+void run(const Mesh &m, int level, Result &r) {
+    typedef Far::TopologyDescriptor Descriptor;
+    int nv = (int)(m.xyz.size() / 3);
+    int nf = (int)(m.tris.size() / 3);
+    std::vector<int> per_face(nf, 3);
+    Descriptor desc;
+    desc.numVertices = nv;
+    desc.numFaces = nf;
+    desc.numVertsPerFace = per_face.data();
+    desc.vertIndicesPerFace = m.tris.data();
+
+    Sdc::Options options;
+    options.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
+    g_far_error = false;
+    r.refiner = Far::TopologyRefinerFactory<Descriptor>::Create(
+        desc, Far::TopologyRefinerFactory<Descriptor>::Options(Sdc::SCHEME_LOOP, options));
+    if (!r.refiner || g_far_error)
+        die("OpenSubdiv refused the mesh");
+    r.refiner->RefineUniform(Far::TopologyRefiner::UniformOptions(level));
+    if (g_far_error)
+        die("OpenSubdiv failed to refine the mesh");
+
+    r.verts.resize(r.refiner->GetNumVerticesTotal());
+    for (int i = 0; i < nv; i++)
+        std::memcpy(r.verts[i].p, &m.xyz[3 * i], sizeof r.verts[i].p);
+    Far::PrimvarRefinerReal<double> primvar(*r.refiner);
+    Vertex *src = r.verts.data();
+    for (int l = 1; l <= level; l++) {
+        Vertex *dst = src + r.refiner->GetLevel(l - 1).GetNumVertices();
+        primvar.Interpolate(l, src, dst);
+        src = dst;
+    }
+    r.finest = (size_t)(src - r.verts.data());
+}
+
+double now() {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+}  // namespace
+
+int main(int argc, char **argv) {
+    int level = 2, reps = 0;
+    const char *path = nullptr;
+    for (int i = 1; i < argc; i++) {
+        if (!std::strcmp(argv[i], "-l")) {
+            if (i + 1 >= argc)
+                die(kUsage);
+            level = int_arg(argv[++i], "level", 0, kMaxLevel);
+        } else if (!std::strcmp(argv[i], "--time")) {
+            if (i + 1 >= argc)
+                die(kUsage);
+            reps = int_arg(argv[++i], "repetition count", 1, 1000000);
+        } else if (argv[i][0] == '-' && argv[i][1]) {
+            die(std::string("unknown option ") + argv[i] + "\n" + kUsage);
+        } else if (path) {
+            die(std::string("more than one input\n") + kUsage);
+        } else {
+            path = argv[i];
+        }
+    }
+    if (!path)
+        die(kUsage);
+    Far::SetErrorCallback(on_far_error);
+    Far::SetWarningCallback(on_far_warning);
+    Mesh mesh = read_mesh(path);
+
     if (reps > 0) {
-        std::vector<double> t;
-        int nout = 0;
-        for (int r = 0; r < reps; r++) {
-            auto t0 = std::chrono::steady_clock::now();
-            Result res = run(xyz, tris, level);
-            auto t1 = std::chrono::steady_clock::now();
-            t.push_back(std::chrono::duration<double>(t1 - t0).count());
-            nout = res.refiner->GetLevel(level).GetNumFaces();
-            delete res.refiner;
+        std::vector<double> t(reps);
+        int faces_out = 0;
+        for (int k = 0; k < reps; k++) {
+            Result r;
+            double t0 = now();
+            run(mesh, level, r);
+            t[k] = now() - t0;  // freeing is not timed (as in bench/bench.c)
+            faces_out = r.refiner->GetLevel(level).GetNumFaces();
         }
         std::sort(t.begin(), t.end());
-        std::printf("osd_loop level=%d faces_in=%zu faces_out=%d seconds_best=%.6f seconds_median=%.6f\n",
-                    level, tris.size() / 3, nout, t[0], t[t.size() / 2]);
+        double median = t[reps / 2];  // the upper median for even N, as in bench/bench.c
+        std::printf("osd_loop level=%d faces_in=%zu faces_out=%d seconds_best=%.6f "
+                    "seconds_median=%.6f\n",
+                    level, mesh.tris.size() / 3, faces_out, t[0], median);
         return 0;
     }
-    Result res = run(xyz, tris, level);
-    Far::TopologyLevel const &fin = res.refiner->GetLevel(level);
+
+    Result r;
+    run(mesh, level, r);
+    Far::TopologyLevel const &fin = r.refiner->GetLevel(level);
     std::printf("level %d\nvertices %d\n", level, fin.GetNumVertices());
     for (int i = 0; i < fin.GetNumVertices(); i++) {
-        const double *p = res.verts[res.finest + i].p;
+        const double *p = r.verts[r.finest + i].p;
         std::printf("v %.17g %.17g %.17g\n", p[0], p[1], p[2]);
     }
     std::printf("triangles %d\n", fin.GetNumFaces());
@@ -144,6 +260,9 @@ int main(int argc, char **argv) {
         Far::ConstIndexArray fv = fin.GetFaceVertices(f);
         std::printf("t %d %d %d\n", fv[0], fv[1], fv[2]);
     }
-    delete res.refiner;
+    if (std::fflush(stdout) != 0 || std::ferror(stdout)) {
+        std::fprintf(stderr, "osd_loop: error writing output\n");
+        return 2;
+    }
     return 0;
 }
