@@ -46,8 +46,6 @@ void *sd_alloc(sd_mem *m, size_t n)
         return NULL;
     memcpy(p, &n, sizeof n);
     m->used += n + HDR;
-    if (m->used > m->peak)
-        m->peak = m->used;
     return p + HDR;
 }
 

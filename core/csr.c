@@ -1,7 +1,7 @@
 /* csr.c — sparse subdivision matrices in compressed-row form.
  *
- * One builder and one apply serve positions, attributes and (later) edits: rules.c appends rows
- * in order (vertex points, edge points, cell points), sd_csr_apply multiplies any channel.
+ * One builder and one apply serve positions, attributes and (later) edits: rules.c sizes every
+ * row first and fills the arrays in place, sd_csr_apply multiplies any channel.
  * Column indices are uint32_t; nnz is checked to fit.
  */
 #include "internal.h"

@@ -26,7 +26,7 @@ extern const uint8_t SD_OCT_F[8][3];
 /* ---- memory (alloc.c) ------------------------------------------------------------------- */
 typedef struct sd_mem {
     sd_allocator a;
-    size_t used, peak, limit;
+    size_t used, limit;
     bool failed_limit;
 } sd_mem;
 
@@ -92,13 +92,6 @@ typedef struct sd_csrb {
 
 bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nrows, uint32_t ncols, size_t nnz_hint);
 bool sd_csrb_reserve(sd_mem *m, sd_csrb *b, size_t extra);
-static inline void sd_csrb_put(sd_csrb *b, uint32_t c, double w)
-{
-    b->col[b->nnz] = c;
-    b->val[b->nnz] = w;
-    b->nnz++;
-}
-static inline void sd_csrb_end_row(sd_csrb *b, uint32_t r) { b->rowptr[r + 1] = (uint32_t)b->nnz; }
 void sd_csrb_free(sd_mem *m, sd_csrb *b);
 /* out[r*nc + k] = sum_j S[r][j] in[j*nc + k] */
 void sd_csr_apply(const sd_csrb *s, const double *in, double *out, int nc);

@@ -143,8 +143,6 @@ typedef enum sd_rule {
 } sd_rule;
 const char *sd_rule_name(sd_rule r);
 
-enum { SD_CLASS_BOUNDARY = 1 };  /* flags */
-
 typedef struct sd_class {
     uint8_t family;     /* bit k set: the simplex is in C_k (k = 0..3) */
     uint8_t boundary;   /* in the boundary complex dC */

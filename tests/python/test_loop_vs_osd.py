@@ -5,27 +5,13 @@ OpenSubdiv's to 1e-12, matched by position (not by order): every one of our poin
 OpenSubdiv point within 1e-12 and the matching is one-to-one. The peer itself is checked
 against Loop's formulas in test_osd_peer.py.
 """
-import os
-import pathlib
 import subprocess
-import sys
 
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-REPO = pathlib.Path(__file__).resolve().parents[2]
-SDLEVEL = pathlib.Path(os.environ.get("SDLEVEL", str(REPO / "build" / "sdlevel"))).resolve()
-OSD = REPO / "build" / "osd_loop"
-MAKE_MESH = REPO / "bench" / "make_mesh.py"
-
-
-def mesh_file(tmp_path, *args):
-    text = subprocess.run([sys.executable, str(MAKE_MESH), *map(str, args)], check=True,
-                          capture_output=True, text=True).stdout
-    p = tmp_path / ("_".join(map(str, args)) + ".txt")
-    p.write_text(text)
-    return p
+from conftest import OSD, SDLEVEL, make_mesh_file as mesh_file  # noqa: E402
 
 
 def read_points(text):
@@ -47,7 +33,7 @@ def our_points(path, level, weights="loop"):
 
 @pytest.mark.parametrize("shape", [("bumpy", 1), ("icosphere", 2), ("torus", 7, 5),
                                    ("octahedron",)])
-def test_loop_two_levels_equal_opensubdiv(tmp_path, shape):
+def test_loop_two_levels_equal_opensubdiv(tmp_path, osd_loop, shape):
     path = mesh_file(tmp_path, *shape)
     ours = our_points(path, 2)
     theirs, _ = osd_points(path, 2)

@@ -7,39 +7,17 @@ counts, Loop's original vertex and edge rules computed independently, OpenSubdiv
 order, the error paths and the --time line.
 """
 import math
-import pathlib
 import re
 import subprocess
-import sys
 from collections import defaultdict
 
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-REPO = pathlib.Path(__file__).resolve().parents[2]
-OSD = REPO / "build" / "osd_loop"
-OSD_SRC = REPO / "tests" / "peers" / "osd_loop.cpp"
-MAKE_MESH = REPO / "bench" / "make_mesh.py"
+from conftest import make_mesh_file as mesh_file  # noqa: E402
+
 TOL = 1e-12
-
-
-@pytest.fixture(scope="session")
-def osd_loop():
-    if not OSD.exists() or OSD.stat().st_mtime < OSD_SRC.stat().st_mtime:
-        r = subprocess.run(["make", "-f", "tests/peers/Makefile.inc", "build/osd_loop"], cwd=REPO,
-                           capture_output=True, text=True)
-        assert r.returncode == 0, f"building the peer failed:\n{r.stdout}\n{r.stderr}"
-    assert OSD.exists()
-    return OSD
-
-
-def mesh_file(tmp_path, *args):
-    text = subprocess.run([sys.executable, str(MAKE_MESH), *map(str, args)], check=True,
-                          capture_output=True, text=True).stdout
-    p = tmp_path / ("_".join(map(str, args)) + ".txt")
-    p.write_text(text)
-    return p
 
 
 def read_input(path):

@@ -10,8 +10,6 @@ Run from the repository root:  /usr/bin/python3 -m pytest tests/python/test_ref_
 """
 
 import functools
-import pathlib
-import os
 import math
 import subprocess
 import sys
@@ -29,7 +27,7 @@ import refimpl  # noqa: E402
 import sdtext  # noqa: E402
 
 REPO = HERE.parent.parent
-SDLEVEL = pathlib.Path(os.environ.get("SDLEVEL", str(REPO / "build" / "sdlevel"))).resolve()
+from conftest import SDLEVEL  # noqa: E402
 CASES = ["tetgen_ball", "tetgen_cube"]
 WEIGHTS = ["warren", "loop"]
 TOL = 1e-12
