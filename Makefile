@@ -4,6 +4,8 @@ CXX     ?= g++
 CFLAGS  ?= -O2 -g
 CFLAGS  += -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -fPIC
 LDLIBS  += -llapacke -llapack -lm
+API_LIBS := $(shell pkg-config --libs jansson 2>/dev/null || echo -ljansson)
+SRV_LIBS := $(shell pkg-config --libs libmicrohttpd 2>/dev/null || echo -lmicrohttpd) -lpthread
 PYTHON  ?= /usr/bin/python3
 B       := build
 
@@ -21,6 +23,16 @@ $(B)/%.o: %.c $(wildcard core/*.h)
 $(CORE_LIB): $(CORE_OBJ)
 	ar rcs $@ $^
 
+# api/: JSON mapping and output writers (no HTTP)
+API_SRC := $(wildcard api/*.c)
+API_OBJ := $(patsubst %.c,$(B)/%.o,$(API_SRC))
+API_LIB := $(B)/libsubdivapi.a
+$(B)/api/%.o: api/%.c $(wildcard api/*.h) $(wildcard core/*.h)
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) -c $< -o $@
+$(API_LIB): $(API_OBJ)
+	ar rcs $@ $^
+
 $(B)/sdlevel: tests/tools/sdlevel.c tests/tools/textmesh.c tests/tools/textmesh.h $(CORE_LIB)
 	$(CC) $(CFLAGS) tests/tools/sdlevel.c tests/tools/textmesh.c $(CORE_LIB) $(LDLIBS) -o $@
 
@@ -29,6 +41,8 @@ $(B)/test_core: $(TEST_SRC) $(CORE_LIB) $(wildcard tests/core/*.h)
 	$(CC) $(CFLAGS) $(TEST_SRC) $(CORE_LIB) $(LDLIBS) -o $@
 
 -include tests/peers/Makefile.inc
+-include tests/tools/Makefile.inc
+all: $(API_LIB) $(EXTRA_ALL)
 -include bench/Makefile.inc
 
 deps:

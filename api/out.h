@@ -1,0 +1,79 @@
+/* out.h — streaming writers of one subdivided level: GLB / glTF, VTU / legacy VTK, JSON.
+ *
+ * A writer is a pull stream: out_open() validates the request and does every precomputation
+ * (counts, sizes, bounding boxes, normals) so that errors surface before the first byte; then
+ * out_read() fills the caller's buffer chunk by chunk, producing the bytes as it goes (never a
+ * whole copy of the output in memory). The daemon hands out_read to libmicrohttpd's callback
+ * response; the offline `subdivd refine` mode loops it into a file. Same bytes either way.
+ *
+ * The stream borrows the level (and its arrays) from the complex: the caller keeps the complex
+ * alive and does not change that level until out_close(). Computing further levels of the same
+ * complex is allowed meanwhile (it never touches the lower levels' arrays the writers read).
+ */
+#ifndef SUBDIVD_OUT_H
+#define SUBDIVD_OUT_H
+
+#include "../core/sd.h"
+#include <stddef.h>
+#include <stdint.h>
+#include <sys/types.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum out_format { OUT_GLB = 0, OUT_GLTF, OUT_VTU, OUT_VTK, OUT_JSON, OUT_FORMAT_COUNT } out_format;
+
+/* "glb", "gltf", "vtu", "vtk", "json" <-> enum; -1 if unknown. */
+int out_format_parse(const char *name);
+const char *out_format_name(out_format f);
+const char *out_content_type(out_format f);   /* model/gltf-binary, model/gltf+json, ... */
+const char *out_file_extension(out_format f); /* ".glb", ... */
+
+enum {
+    OUT_PART_POINTS = 1,
+    OUT_PART_CURVES = 2,
+    OUT_PART_SURFACES = 4,
+    OUT_PART_SOLIDS = 8,
+    OUT_PART_ALL = 15
+};
+
+#define OUT_MAX_ATTRS 32
+
+/* One per-vertex attribute to write: a channel of the complex. */
+typedef struct out_attr {
+    const char *name;   /* as posted, e.g. "temperature" (glTF writes "_TEMPERATURE") */
+    int channel;        /* sd channel id (>= 1) */
+    int ncomp;          /* components per vertex (1..16) */
+} out_attr;
+
+typedef struct out_request {
+    sd_complex *complex;     /* the level is computed already; the writer may ensure its rules */
+    int level;
+    uint64_t version;        /* written into JSON output ("version") and glTF asset.extras */
+    unsigned parts;          /* OUT_PART_* mask; 0 means all */
+    int has_slice;           /* cross-section of the solids by the plane n.x = d */
+    double slice[4];         /* nx, ny, nz, d (n need not be unit; must be non-zero) */
+    int nattrs;
+    out_attr attrs[OUT_MAX_ATTRS];
+    int colormap_attr;       /* index into attrs of the attribute coloured into COLOR_0, or -1 */
+    double colormap_min, colormap_max;
+    int octahedra_as_polyhedra; /* VTU/VTK: octahedra as VTK_POLYHEDRON (42) instead of 4 tets */
+} out_request;
+
+typedef struct out_stream out_stream;
+
+/* Validate and prepare. Returns NULL and fills err (code SD_ERR_ARG for a bad request, message
+ * naming the offending option) on failure. */
+out_stream *out_open(const out_request *rq, out_format f, sd_error *err);
+/* Total size in bytes if known in advance (GLB, glTF, VTU, VTK), else UINT64_MAX (JSON). */
+uint64_t out_size(const out_stream *s);
+/* Fill up to `cap` bytes of buf; returns the number written (> 0), 0 at the end, -1 on an
+ * internal failure (the stream can only be cut short then). */
+ssize_t out_read(out_stream *s, char *buf, size_t cap);
+void out_close(out_stream *s);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
