@@ -1,0 +1,693 @@
+/* handlers.c — complex, tags, rules, levels and stats (API.md) as transport-free functions.
+ *
+ * Every handler validates its whole request before it builds anything, and builds the new state
+ * beside the old one: the caller publishes the result or drops it, so a refused request leaves
+ * the session untouched. Sizes are checked against api_limits before the arrays are allocated.
+ */
+#include "handlers.h"
+#include "jsonin.h"
+#include <ctype.h>
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ---- PUT /complex ------------------------------------------------------------------------- */
+
+static int parse_vertices(json_t *v, const api_limits *lim, api_input *in, api_problem *p)
+{
+    if (!json_is_array(v))
+        return api_fail_at(p, 400, "wrong-type", "/vertices", "must be an array of [x, y, z]");
+    size_t n = json_array_size(v);
+    if (n > lim->max_vertices)
+        return api_fail_limit(p, "max_vertices", lim->max_vertices, n,
+                              "%zu vertices exceed the limit of %u; split the model or raise "
+                              "--max-vertices", n, lim->max_vertices);
+    in->xyz = malloc((n ? n : 1) * 3 * sizeof *in->xyz);
+    if (!in->xyz)
+        return api_fail(p, 503, "out-of-memory", "out of memory reading %zu vertices", n);
+    in->nv = (uint32_t)n;
+    char ptr[96];
+    for (size_t i = 0; i < n; i++) {
+        json_t *x = json_array_get(v, i);
+        api_ptr_index(ptr, sizeof ptr, "/vertices", i);
+        if (!json_is_array(x) || json_array_size(x) != 3)
+            return api_fail_at(p, 400, "wrong-type", ptr, "a vertex is an array of 3 numbers");
+        for (int k = 0; k < 3; k++) {
+            json_t *c = json_array_get(x, k);
+            if (!json_is_number(c)) {
+                api_ptr_index(ptr, sizeof ptr, ptr, k);
+                return api_fail_at(p, 400, "wrong-type", ptr, "a coordinate must be a number");
+            }
+            in->xyz[3 * i + k] = json_number_value(c);
+        }
+    }
+    return 0;
+}
+
+static int parse_simplices(json_t *v, const api_limits *lim, api_input *in, api_problem *p)
+{
+    if (!json_is_array(v))
+        return api_fail_at(p, 400, "wrong-type", "/simplices",
+                           "must be an array of simplices (arrays of 1 to 4 vertex indices)");
+    size_t n = json_array_size(v);
+    if (n > lim->max_simplices)
+        return api_fail_limit(p, "max_simplices", lim->max_simplices, n,
+                              "%zu simplices exceed the limit of %u; split the model or raise "
+                              "--max-simplices", n, lim->max_simplices);
+    char ptr[96];
+    size_t total = 0;
+    for (size_t i = 0; i < n; i++) {   /* shapes first, so the index array is sized exactly */
+        json_t *s = json_array_get(v, i);
+        api_ptr_index(ptr, sizeof ptr, "/simplices", i);
+        if (!json_is_array(s))
+            return api_fail_at(p, 400, "wrong-type", ptr,
+                               "a simplex is an array of 1 to 4 vertex indices");
+        size_t k = json_array_size(s);
+        if (k < 1 || k > 4)
+            return api_fail_at(p, 422, "invalid-complex", ptr,
+                               "simplex %zu has %zu vertices; a simplex has 1 to 4 (point, edge, "
+                               "triangle, tetrahedron)", i, k);
+        total += k;
+    }
+    in->size = malloc(n ? n : 1);
+    in->idx = malloc((total ? total : 1) * sizeof *in->idx);
+    if (!in->size || !in->idx)
+        return api_fail(p, 503, "out-of-memory", "out of memory reading %zu simplices", n);
+    in->ns = (uint32_t)n;
+    size_t off = 0;
+    for (size_t i = 0; i < n; i++) {
+        json_t *s = json_array_get(v, i);
+        size_t k = json_array_size(s);
+        in->size[i] = (uint8_t)k;
+        for (size_t j = 0; j < k; j++) {
+            long long x;
+            char at[96];
+            api_ptr_index(ptr, sizeof ptr, "/simplices", i);
+            api_ptr_index(at, sizeof at, ptr, j);
+            json_t *e = json_array_get(s, j);
+            if (!json_is_integer(e))
+                return api_fail_at(p, 400, "wrong-type", at, "a vertex index must be an integer");
+            x = json_integer_value(e);
+            if (x < 0 || x >= (long long)in->nv)
+                return api_fail_at(p, 422, "invalid-complex", at,
+                                   "index %lld out of range (%u vertices)", x, in->nv);
+            in->idx[off++] = (uint32_t)x;
+        }
+    }
+    return 0;
+}
+
+static int valid_name(const char *s)
+{
+    size_t n = strlen(s);
+    if (n < 1 || n > API_MAX_ATTRIBUTE_NAME)
+        return 0;
+    for (const char *c = s; *c; c++)
+        if (!isalnum((unsigned char)*c) && *c != '_' && *c != '-')
+            return 0;
+    return 1;
+}
+
+static int parse_attributes(json_t *v, api_input *in, api_problem *p)
+{
+    if (!json_is_object(v))
+        return api_fail_at(p, 400, "wrong-type", "/attributes",
+                           "must be an object: name -> one value per vertex");
+    if (json_object_size(v) > API_MAX_ATTRIBUTES)
+        return api_fail_at(p, 422, "too-many-attributes", "/attributes",
+                           "%zu attributes; at most %d", json_object_size(v), API_MAX_ATTRIBUTES);
+    const char *name;
+    json_t *a;
+    char ptr[96], at[96];
+    json_object_foreach(v, name, a) {
+        api_ptr_key(ptr, sizeof ptr, "/attributes", name);
+        if (!valid_name(name))
+            return api_fail_at(p, 422, "invalid-name", ptr,
+                               "attribute names have 1 to %d letters, digits, '_' or '-'",
+                               API_MAX_ATTRIBUTE_NAME);
+        if (!json_is_array(a))
+            return api_fail_at(p, 400, "wrong-type", ptr, "must be an array with one value per vertex");
+        if (json_array_size(a) != in->nv)
+            return api_fail_at(p, 422, "wrong-length", ptr, "has %zu values for %u vertices",
+                               json_array_size(a), in->nv);
+        api_attribute *t = &in->attrs[in->nattrs];
+        snprintf(t->name, sizeof t->name, "%s", name);
+        json_t *first = json_array_get(a, 0);
+        t->scalar_form = !json_is_array(first);
+        t->ncomp = t->scalar_form ? 1 : (int)json_array_size(first);
+        if (t->ncomp < 1 || t->ncomp > 16) {
+            api_ptr_index(at, sizeof at, ptr, 0);
+            return api_fail_at(p, 422, "wrong-length", at,
+                               "a vector value has 1 to 16 components, not %d", t->ncomp);
+        }
+        t->data = malloc((in->nv ? in->nv : 1) * (size_t)t->ncomp * sizeof *t->data);
+        if (!t->data)
+            return api_fail(p, 503, "out-of-memory", "out of memory reading attribute %s", name);
+        in->nattrs++;
+        for (uint32_t i = 0; i < in->nv; i++) {
+            json_t *x = json_array_get(a, i);
+            api_ptr_index(at, sizeof at, ptr, i);
+            if (t->scalar_form) {
+                if (!json_is_number(x))
+                    return api_fail_at(p, 400, "wrong-type", at,
+                                       "must be a number like the attribute's first value");
+                t->data[i] = json_number_value(x);
+                continue;
+            }
+            if (!json_is_array(x) || json_array_size(x) != (size_t)t->ncomp)
+                return api_fail_at(p, 400, "wrong-type", at,
+                                   "must be an array of %d numbers like the attribute's first value",
+                                   t->ncomp);
+            for (int k = 0; k < t->ncomp; k++) {
+                json_t *c = json_array_get(x, k);
+                if (!json_is_number(c)) {
+                    char ck[96];
+                    api_ptr_index(ck, sizeof ck, at, k);
+                    return api_fail_at(p, 400, "wrong-type", ck, "must be a number");
+                }
+                t->data[(size_t)i * t->ncomp + k] = json_number_value(c);
+            }
+        }
+    }
+    return 0;
+}
+
+/* Build the model of `in` + rules, mapping core refusals to problems with pointers. */
+static int build_model(api_input *in, const api_rules *rules, const api_limits *lim,
+                       api_model **out, api_problem *p)
+{
+    sd_error e = {0};
+    api_model *m = api_model_new(in, rules, lim->max_session_bytes, &e);
+    if (!m) {
+        if (e.code == SD_ERR_VALUE && e.item >= 0 && in && in->nattrs && strstr(e.message, "channel")) {
+            char ptr[96];
+            api_ptr_key(ptr, sizeof ptr, "/attributes", in->attrs[e.item].name);
+            return api_fail_at(p, 422, "invalid-complex", ptr, "%s", e.message);
+        }
+        return api_fail_core(p, &e, "/simplices", "/vertices");
+    }
+    m->summary = api_summary(m);
+    *out = m;
+    return 0;
+}
+
+int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
+                    api_problem *p)
+{
+    static const char *const keys[] = {"vertices", "simplices", "attributes", "fill", NULL};
+    *out = NULL;
+    if (api_only_keys(body, "", keys, p))
+        return p->status;
+    json_t *vs = json_object_get(body, "vertices"), *ss = json_object_get(body, "simplices");
+    if (!vs)
+        return api_fail_at(p, 400, "missing-field", "/vertices", "\"vertices\" is required");
+    if (!ss && !json_object_get(body, "fill"))
+        return api_fail_at(p, 400, "missing-field", "/simplices", "\"simplices\" is required");
+    api_input *in = api_input_new();
+    if (!in)
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    int rc = parse_vertices(vs, lim, in, p);
+    if (!rc && ss)
+        rc = parse_simplices(ss, lim, in, p);
+    json_t *attrs = json_object_get(body, "attributes");
+    if (!rc && attrs)
+        rc = parse_attributes(attrs, in, p);
+    if (!rc && json_object_get(body, "fill"))
+        rc = api_fail_at(p, 501, "not-implemented", "/fill",
+                         "TetGen fill is not available in this version; post the tetrahedra "
+                         "themselves");
+    if (!rc)
+        rc = build_model(in, &cur->rules, lim, out, p);
+    api_input_unref(in);
+    return rc;
+}
+
+/* ---- PUT /rules, PUT /tags ------------------------------------------------------------------ */
+
+int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
+                  api_problem *p)
+{
+    static const char *const keys[] = {"nonmanifold_default", "overrides", "solid_scheme",
+                                       "surface_weights", "nonmanifold_surface", NULL};
+    static const char *const nm_rules[] = {"G2", "G1", "N1", "N2", NULL};
+    static const char *const schemes[] = {"box", "averaged", NULL};
+    static const char *const weights[] = {"warren", "loop", NULL};
+    static const char *const surfaces[] = {"chang-qin", "ying-zorin", NULL};
+    *out = NULL;
+    if (api_only_keys(body, "", keys, p))
+        return p->status;
+    api_rules r = {0};
+    json_t *v;
+    int nm = 0, surf = 0;
+    if ((v = json_object_get(body, "solid_scheme")) &&
+        (r.solid_scheme = api_get_enum(v, "/solid_scheme", schemes, p)) < 0)
+        return p->status;
+    if ((v = json_object_get(body, "surface_weights")) &&
+        (r.surface_weights = api_get_enum(v, "/surface_weights", weights, p)) < 0)
+        return p->status;
+    if ((v = json_object_get(body, "nonmanifold_default")) &&
+        (nm = api_get_enum(v, "/nonmanifold_default", nm_rules, p)) < 0)
+        return p->status;
+    if ((v = json_object_get(body, "nonmanifold_surface")) &&
+        (surf = api_get_enum(v, "/nonmanifold_surface", surfaces, p)) < 0)
+        return p->status;
+    if (nm >= 2)
+        return api_fail_at(p, 422, "invalid-rule", "/nonmanifold_default",
+                           "%s needs a per-simplex choice of dimension or pair; use G1 or G2 as "
+                           "the default and give N1/N2 in \"overrides\"", nm_rules[nm]);
+    json_t *ov = json_object_get(body, "overrides");
+    if (ov && !json_is_array(ov))
+        return api_fail_at(p, 400, "wrong-type", "/overrides", "must be an array of overrides");
+    if (ov && json_array_size(ov) && !cur->in)
+        return api_fail_at(p, 409, "no-complex", "/overrides",
+                           "overrides name simplices of the complex; PUT the complex first");
+    size_t i;
+    json_t *o;
+    char ptr[96];
+    json_array_foreach(ov, i, o) {
+        static const char *const okeys[] = {"simplex", "rule", "dimension", "pair", NULL};
+        api_ptr_index(ptr, sizeof ptr, "/overrides", i);
+        if (!json_is_object(o))
+            return api_fail_at(p, 400, "wrong-type", ptr, "an override is an object");
+        if (api_only_keys(o, ptr, okeys, p))
+            return p->status;
+    }
+    if (nm == 1 || surf == 1 || json_array_size(ov) > 0) {
+        const char *what = nm == 1 ? "/nonmanifold_default" : surf == 1 ? "/nonmanifold_surface"
+                                                                        : "/overrides";
+        return api_fail_at(p, 501, "not-implemented", what,
+                           "only the default non-manifold rules (G2, chang-qin, no overrides) are "
+                           "available in this version");
+    }
+    return build_model(cur->in, &r, lim, out, p);
+}
+
+int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
+                 api_problem *p)
+{
+    static const char *const keys[] = {"singular", NULL};
+    *out = NULL;
+    if (api_only_keys(body, "", keys, p))
+        return p->status;
+    json_t *s = json_object_get(body, "singular");
+    if (!s)
+        return api_fail_at(p, 400, "missing-field", "/singular", "\"singular\" is required");
+    if (!json_is_array(s))
+        return api_fail_at(p, 400, "wrong-type", "/singular",
+                           "must be an array of simplices (1 to 3 vertex indices)");
+    if (json_array_size(s) && !cur->in)
+        return api_fail_at(p, 409, "no-complex", "/singular",
+                           "tags name simplices of the complex; PUT the complex first");
+    size_t i;
+    json_t *t;
+    char ptr[96], at[96];
+    json_array_foreach(s, i, t) {
+        api_ptr_index(ptr, sizeof ptr, "/singular", i);
+        if (!json_is_array(t))
+            return api_fail_at(p, 400, "wrong-type", ptr, "a tag is an array of 1 to 3 vertex indices");
+        size_t k = json_array_size(t);
+        if (k < 1 || k > 3)
+            return api_fail_at(p, 422, "invalid-tag", ptr,
+                               "a singular simplex is a vertex, an edge or a triangle (1 to 3 "
+                               "indices), not %zu", k);
+        for (size_t j = 0; j < k; j++) {
+            long long x;
+            api_ptr_index(at, sizeof at, ptr, j);
+            if (api_get_int(json_array_get(t, j), at, 0, (long long)cur->in->nv - 1, &x, p))
+                return p->status;
+        }
+    }
+    if (json_array_size(s))
+        return api_fail_at(p, 501, "not-implemented", "/singular",
+                           "singular tags are validated but not yet applied by this version");
+    return build_model(cur->in, &cur->rules, lim, out, p);
+}
+
+/* ---- summary and GET /complex ------------------------------------------------------------- */
+
+static json_t *family_json(uint8_t fam)
+{
+    json_t *a = json_array();
+    for (int k = 0; k < 4; k++)
+        if (fam & (1u << k))
+            json_array_append_new(a, json_integer(k));
+    return a;
+}
+
+static json_t *class_json(const sd_class *c)
+{
+    return json_pack("{s:o, s:b, s:i, s:b, s:s, s:i, s:b}", "family", family_json(c->family),
+                     "boundary", c->boundary, "nonmanifold", c->nonmanifold, "singular", 0,
+                     "rule", sd_rule_name((sd_rule)c->rule), "valence", (int)c->valence,
+                     "extraordinary", c->extraordinary);
+}
+
+json_t *api_summary(const api_model *m)
+{
+    if (!m->c)
+        return json_object();
+    sd_complex *c = m->c;
+    sd_counts n;
+    sd_complex_counts(c, 0, &n);
+    uint64_t bv = 0, be = 0, xv = 0, xe = 0, nmv[5] = {0}, nme[5] = {0};
+    sd_error e;
+    sd_class k;
+    const sd_level *lv = sd_complex_level(c, 0, &e);
+    for (uint32_t i = 0; lv && i < n.vertices; i++)
+        if (!sd_complex_vertex_class(c, 0, i, &k, &e)) {
+            bv += k.boundary;
+            xv += k.extraordinary;
+            nmv[k.nonmanifold < 5 ? k.nonmanifold : 0]++;
+        }
+    for (uint32_t i = 0; lv && i < n.edges; i++)
+        if (!sd_complex_edge_class(c, 0, i, &k, &e)) {
+            be += k.boundary;
+            xe += k.extraordinary;
+            nme[k.nonmanifold < 5 ? k.nonmanifold : 0]++;
+        }
+    json_t *nm = json_object();
+    for (int t = 1; t <= 4; t++) {
+        char key[8];
+        snprintf(key, sizeof key, "type%d", t);
+        json_object_set_new(nm, key, json_pack("{s:I, s:I}", "vertices", (json_int_t)nmv[t],
+                                               "edges", (json_int_t)nme[t]));
+    }
+    return json_pack("{s:I, s:I, s:I, s:{s:I, s:I, s:I, s:I}, s:{s:I, s:I}, s:o, s:{s:I, s:I}}",
+                     "vertices", (json_int_t)n.vertices, "edges", (json_int_t)n.edges, "faces",
+                     (json_int_t)n.faces, "simplices", "0", (json_int_t)n.points, "1",
+                     (json_int_t)n.curves, "2", (json_int_t)n.triangles, "3",
+                     (json_int_t)n.tetrahedra, "boundary", "vertices", (json_int_t)bv, "edges",
+                     (json_int_t)be, "nonmanifold", nm, "extraordinary", "vertices",
+                     (json_int_t)xv, "edges", (json_int_t)xe);
+}
+
+static json_t *doubles_json(const double *x, size_t n)
+{
+    json_t *a = json_array();
+    for (size_t i = 0; i < n; i++)
+        json_array_append_new(a, json_real(x[i]));
+    return a;
+}
+
+json_t *api_get_complex(api_model *m, api_problem *p)
+{
+    const api_input *in = m->in;
+    if (!in) {
+        api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+        return NULL;
+    }
+    json_t *vs = json_array(), *ss = json_array(), *at = json_object();
+    for (uint32_t i = 0; i < in->nv; i++)
+        json_array_append_new(vs, doubles_json(in->xyz + 3 * (size_t)i, 3));
+    size_t off = 0;
+    for (uint32_t s = 0; s < in->ns; s++) {
+        json_t *a = json_array();
+        for (int j = 0; j < in->size[s]; j++)
+            json_array_append_new(a, json_integer(in->idx[off++]));
+        json_array_append_new(ss, a);
+    }
+    for (int a = 0; a < in->nattrs; a++) {
+        const api_attribute *t = &in->attrs[a];
+        json_t *arr = json_array();
+        for (uint32_t i = 0; i < in->nv; i++)
+            json_array_append_new(arr, t->scalar_form ? json_real(t->data[i])
+                                                      : doubles_json(t->data + (size_t)i * t->ncomp,
+                                                                     t->ncomp));
+        json_object_set_new(at, t->name, arr);
+    }
+    json_t *cv = json_array(), *ce = json_array();
+    pthread_mutex_lock(&m->lock);
+    sd_error e = {0};
+    const sd_level *lv = api_model_level_locked(m, 0, &e);
+    uint32_t ne = 0;
+    const uint32_t *ev = lv ? sd_level_edges(lv, &ne) : NULL;
+    sd_class k;
+    for (uint32_t i = 0; lv && i < in->nv; i++)
+        if (!sd_complex_vertex_class(m->c, 0, i, &k, &e))
+            json_array_append_new(cv, class_json(&k));
+    for (uint32_t i = 0; lv && i < ne; i++)
+        if (!sd_complex_edge_class(m->c, 0, i, &k, &e)) {
+            json_t *o = class_json(&k);
+            json_object_set_new(o, "vertices", json_pack("[I, I]", (json_int_t)ev[2 * i],
+                                                         (json_int_t)ev[2 * i + 1]));
+            json_array_append_new(ce, o);
+        }
+    pthread_mutex_unlock(&m->lock);
+    static const char *const schemes[] = {"box", "averaged"}, *const weights[] = {"warren", "loop"};
+    return json_pack("{s:o, s:o, s:o, s:{s:o, s:o}, s:{s:[]}, s:{s:s, s:[], s:s, s:s, s:s}, s:O}",
+                     "vertices", vs, "simplices", ss, "attributes", at, "classes", "vertices", cv,
+                     "edges", ce, "tags", "singular", "rules", "nonmanifold_default", "G2",
+                     "overrides", "solid_scheme", schemes[m->rules.solid_scheme & 1],
+                     "surface_weights", weights[m->rules.surface_weights & 1],
+                     "nonmanifold_surface", "chang-qin", "summary", m->summary);
+}
+
+/* ---- levels ------------------------------------------------------------------------------- */
+
+int api_parse_level(const char *s, api_problem *p)
+{
+    char *end;
+    errno = 0;
+    if (!s || !*s || !isdigit((unsigned char)*s))
+        return -(api_fail(p, 400, "bad-level", "the level must be a non-negative integer") != 0);
+    long l = strtol(s, &end, 10);
+    if (*end)
+        return -(api_fail(p, 400, "bad-level", "the level must be a non-negative integer") != 0);
+    if (errno || l > SD_MAX_LEVEL)
+        return -(api_fail(p, 422, "level-out-of-range",
+                          "level %.20s is out of range 0..%d", s, SD_MAX_LEVEL) != 0);
+    return (int)l;
+}
+
+uint64_t api_estimate_bytes(const sd_complex *c, int level)
+{
+    /* Per-entity bytes of the core's arrays (internal.h): topology, classes, rules, one stencil
+     * row per next-level point (~16 entries of 12 bytes) and the positions, summed over the
+     * levels not yet computed. An over-estimate by design: it guards a limit. */
+    uint64_t total = 0;
+    for (int l = sd_complex_levels_computed(c); l <= level; l++) {
+        sd_counts n;
+        sd_complex_counts(c, l, &n);
+        total += n.vertices * (24 + 16 + 200) + n.edges * 24 + n.faces * 26 +
+                 n.tetrahedra * 57 + n.octahedra * 104 + n.curves * 4 + n.triangles * 4 +
+                 n.points * 4;
+    }
+    return total;
+}
+
+static int check_level_limits(api_model *m, int level, const api_limits *lim, api_problem *p)
+{
+    sd_counts n;
+    sd_complex_counts(m->c, level, &n);
+    uint64_t cells = n.points + n.curves + n.triangles + n.tetrahedra + n.octahedra;
+    if (cells > lim->max_cells)
+        return api_fail_limit(p, "max_cells", lim->max_cells, cells,
+                              "level %d has %llu cells, over the limit of %llu per level; ask for "
+                              "a lower level or refine locally", level, (unsigned long long)cells,
+                              (unsigned long long)lim->max_cells);
+    uint64_t need = atomic_load(&m->memory_bytes) + api_estimate_bytes(m->c, level);
+    if (need > lim->max_session_bytes)
+        return api_fail_limit(p, "max_session_bytes", lim->max_session_bytes, need,
+                              "level %d needs about %llu bytes, over the session limit of %llu; "
+                              "ask for a lower level", level, (unsigned long long)need,
+                              (unsigned long long)lim->max_session_bytes);
+    return 0;
+}
+
+/* Comma-separated list item iteration: copies the next item into buf; returns 0 at the end. */
+static int next_item(const char **s, char *buf, size_t cap)
+{
+    if (!*s || !**s)
+        return 0;
+    const char *e = strchr(*s, ',');
+    size_t n = e ? (size_t)(e - *s) : strlen(*s);
+    snprintf(buf, cap, "%.*s", (int)(n < cap ? n : cap - 1), *s);
+    *s = e ? e + 1 : *s + n;
+    return 1;
+}
+
+static int parse_double(const char *s, double *x)
+{
+    char *end;
+    errno = 0;
+    *x = strtod(s, &end);
+    return *s && !*end && !errno && isfinite(*x);
+}
+
+static int find_attr(const api_input *in, const char *name)
+{
+    for (int a = 0; a < in->nattrs; a++)
+        if (!strcmp(in->attrs[a].name, name))
+            return a;
+    return -1;
+}
+
+static int add_attr(const api_model *m, out_request *rq, int a)
+{
+    for (int i = 0; i < rq->nattrs; i++)
+        if (rq->attrs[i].channel == m->channel[a])
+            return i;
+    out_attr *o = &rq->attrs[rq->nattrs];
+    o->name = m->in->attrs[a].name;
+    o->channel = m->channel[a];
+    o->ncomp = m->in->attrs[a].ncomp;
+    return rq->nattrs++;
+}
+
+static int parse_query(const api_model *m, const api_level_query *q, out_request *rq,
+                       out_format *fmt, api_problem *p)
+{
+    char item[64];
+    *fmt = OUT_GLB;
+    if (q->format) {
+        int f = out_format_parse(q->format);
+        if (f < 0)
+            return api_fail_at(p, 422, "unknown-value", "format",
+                               "format \"%.20s\" is not one of glb, gltf, vtu, vtk, json", q->format);
+        *fmt = (out_format)f;
+    }
+    rq->parts = OUT_PART_ALL;
+    if (q->parts) {
+        static const char *const names[] = {"points", "curves", "surfaces", "solids"};
+        const char *s = q->parts;
+        rq->parts = 0;
+        while (next_item(&s, item, sizeof item)) {
+            int k = 0;
+            while (k < 4 && strcmp(item, names[k]))
+                k++;
+            if (k == 4)
+                return api_fail_at(p, 422, "unknown-value", "parts",
+                                   "part \"%.20s\" is not one of points, curves, surfaces, solids",
+                                   item);
+            rq->parts |= 1u << k;
+        }
+        if (!rq->parts)
+            return api_fail_at(p, 422, "unknown-value", "parts", "parts must name at least one part");
+    }
+    if (q->slice) {
+        const char *s = q->slice;
+        int k = 0;
+        while (next_item(&s, item, sizeof item)) {
+            if (k == 4 || !parse_double(item, &rq->slice[k]))
+                return api_fail_at(p, 422, "bad-slice", "slice",
+                                   "slice is nx,ny,nz,d: four finite numbers");
+            k++;
+        }
+        if (k != 4)
+            return api_fail_at(p, 422, "bad-slice", "slice", "slice is nx,ny,nz,d: four finite numbers");
+        if (rq->slice[0] == 0 && rq->slice[1] == 0 && rq->slice[2] == 0)
+            return api_fail_at(p, 422, "bad-slice", "slice", "the slice normal must not be zero");
+        rq->has_slice = 1;
+    }
+    rq->colormap_attr = -1;
+    const api_input *in = m->in;
+    if (q->attributes) {
+        const char *s = q->attributes;
+        while (next_item(&s, item, sizeof item)) {
+            int a = find_attr(in, item);
+            if (a < 0)
+                return api_fail_at(p, 422, "unknown-attribute", "attributes",
+                                   "no attribute \"%.40s\" in this complex", item);
+            add_attr(m, rq, a);
+        }
+    } else
+        for (int a = 0; a < in->nattrs; a++)
+            add_attr(m, rq, a);
+    if (q->colormap) {
+        char name[API_MAX_ATTRIBUTE_NAME + 1];
+        const char *c1 = strchr(q->colormap, ':'), *c2 = c1 ? strchr(c1 + 1, ':') : NULL;
+        double lo, hi;
+        char num[40];
+        if (!c1 || !c2 || (size_t)(c1 - q->colormap) > API_MAX_ATTRIBUTE_NAME ||
+            (size_t)(c2 - c1 - 1) >= sizeof num)
+            return api_fail_at(p, 422, "bad-colormap", "colormap", "colormap is NAME:min:max");
+        snprintf(name, sizeof name, "%.*s", (int)(c1 - q->colormap), q->colormap);
+        snprintf(num, sizeof num, "%.*s", (int)(c2 - c1 - 1), c1 + 1);
+        if (!parse_double(num, &lo) || !parse_double(c2 + 1, &hi) || !(lo < hi))
+            return api_fail_at(p, 422, "bad-colormap", "colormap",
+                               "colormap min and max must be finite numbers with min < max");
+        int a = find_attr(in, name);
+        if (a < 0)
+            return api_fail_at(p, 422, "unknown-attribute", "colormap",
+                               "no attribute \"%.40s\" in this complex", name);
+        rq->colormap_attr = add_attr(m, rq, a);
+        rq->colormap_min = lo;
+        rq->colormap_max = hi;
+    }
+    if (q->octahedra) {
+        if (!strcmp(q->octahedra, "polyhedra"))
+            rq->octahedra_as_polyhedra = 1;
+        else if (strcmp(q->octahedra, "tets"))
+            return api_fail_at(p, 422, "unknown-value", "octahedra",
+                               "octahedra is \"tets\" (4 tetrahedra each) or \"polyhedra\"");
+    }
+    return 0;
+}
+
+int api_level_open(api_model *m, int level, const api_level_query *q, const api_limits *lim,
+                   uint64_t version, out_stream **out, out_format *fmt, api_problem *p)
+{
+    *out = NULL;
+    if (!m->c)
+        return api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+    out_request rq;
+    memset(&rq, 0, sizeof rq);
+    if (parse_query(m, q, &rq, fmt, p) || check_level_limits(m, level, lim, p))
+        return p->status;
+    rq.complex = m->c;
+    rq.level = level;
+    rq.version = version;
+    sd_error e = {0};
+    pthread_mutex_lock(&m->lock);
+    if (api_model_level_locked(m, level, &e))
+        *out = out_open(&rq, *fmt, &e);
+    pthread_mutex_unlock(&m->lock);
+    if (!*out)
+        return e.code == SD_ERR_ARG ? api_fail(p, 422, "invalid-argument", "%s", e.message)
+                                    : api_fail_core(p, &e, NULL, NULL);
+    return 0;
+}
+
+json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_problem *p)
+{
+    if (!m->c) {
+        api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+        return NULL;
+    }
+    if (check_level_limits(m, level, lim, p))
+        return NULL;
+    sd_error e = {0};
+    pthread_mutex_lock(&m->lock);
+    const sd_level *lv = api_model_level_locked(m, level, &e);
+    json_t *bytes = json_object();
+    double secs = m->seconds[level];
+    for (int f = 0; lv && f < OUT_FORMAT_COUNT; f++) {
+        out_request rq;
+        memset(&rq, 0, sizeof rq);
+        rq.complex = m->c;
+        rq.level = level;
+        rq.parts = OUT_PART_ALL;
+        rq.colormap_attr = -1;
+        out_stream *s = out_open(&rq, (out_format)f, &e);
+        if (s && out_size(s) != UINT64_MAX)
+            json_object_set_new(bytes, out_format_name((out_format)f), json_integer((json_int_t)out_size(s)));
+        out_close(s);
+    }
+    pthread_mutex_unlock(&m->lock);
+    if (!lv) {
+        json_decref(bytes);
+        api_fail_core(p, &e, NULL, NULL);
+        return NULL;
+    }
+    sd_counts n;
+    sd_complex_counts(m->c, level, &n);
+    return json_pack("{s:i, s:{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:I}, s:o, s:f, s:I}", "level",
+                     level, "counts", "vertices", (json_int_t)n.vertices, "edges",
+                     (json_int_t)n.edges, "faces", (json_int_t)n.faces, "points",
+                     (json_int_t)n.points, "curves", (json_int_t)n.curves, "triangles",
+                     (json_int_t)n.triangles, "tetrahedra", (json_int_t)n.tetrahedra, "octahedra",
+                     (json_int_t)n.octahedra, "bytes", bytes, "seconds", secs, "memory_bytes",
+                     (json_int_t)atomic_load(&m->memory_bytes));
+}

@@ -1,0 +1,55 @@
+/* handlers.h — the v1 endpoints as functions of (model, parsed request) -> (new model, JSON).
+ *
+ * No HTTP here: the transport (server/http.c, or the offline `subdivd refine`) parses the body
+ * with api_parse_body, picks the handler from its route table, and maps the returned status and
+ * api_problem to a response. Handlers that change a session return a NEW model (the current one
+ * is never modified) which the caller publishes with the next version number; on any failure
+ * nothing is returned and the session stays as it was (all-or-nothing).
+ */
+#ifndef SUBDIVD_HANDLERS_H
+#define SUBDIVD_HANDLERS_H
+
+#include "limits.h"
+#include "model.h"
+#include "out.h"
+#include "problem.h"
+#include <jansson.h>
+
+/* The signature shared by the three change handlers below. */
+typedef int (*change_fn_t)(const api_model *cur, json_t *body, const api_limits *lim,
+                           api_model **out, api_problem *p);
+
+/* PUT /complex: the body of API.md. Keeps the current rule choices. On success *out is the new
+ * model and the function returns 0; else the problem's status. */
+int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
+                    api_problem *p);
+/* PUT /rules: replaces every rule preference (absent fields = defaults). */
+int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
+                  api_problem *p);
+/* PUT /tags: validates the singular simplices against the complex. */
+int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
+                 api_problem *p);
+
+/* The summary of a model's complex (new reference; {} without a complex). */
+json_t *api_summary(const api_model *m);
+/* GET /complex (new reference), or NULL + 409 when no complex was posted. Locks the model. */
+json_t *api_get_complex(api_model *m, api_problem *p);
+
+/* Query options of GET /levels/{L} (NULL = absent). */
+typedef struct api_level_query {
+    const char *format, *parts, *slice, *attributes, *colormap, *octahedra;
+} api_level_query;
+
+/* Checks the query and the limits, computes level L if needed (locking the model), and opens the
+ * output stream; the caller keeps a reference on the model until out_close. */
+int api_level_open(api_model *m, int level, const api_level_query *q, const api_limits *lim,
+                   uint64_t version, out_stream **out, out_format *fmt, api_problem *p);
+/* GET /levels/{L}/stats (new reference). */
+json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_problem *p);
+
+/* Level from a path segment: 0..SD_MAX_LEVEL, else -1 + problem (400 not a number, 422 range). */
+int api_parse_level(const char *s, api_problem *p);
+/* Estimated core bytes needed to hold levels up to `level` (limits check before computing). */
+uint64_t api_estimate_bytes(const sd_complex *c, int level);
+
+#endif

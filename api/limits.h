@@ -1,0 +1,41 @@
+/* limits.h — every configurable limit of the service in one place, with its default.
+ *
+ * The daemon fills api_limits from flags and environment (server/config.c); the offline mode
+ * uses the defaults. Limits are checked before anything is allocated for a request: body bytes
+ * from Content-Length, element counts before parsing arrays, the cells of a level from the split
+ * table (sd_complex_counts) before computing it.
+ */
+#ifndef SUBDIVD_LIMITS_H
+#define SUBDIVD_LIMITS_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define API_DEFAULT_MAX_BODY_BYTES      (64u << 20)   /* request body */
+#define API_DEFAULT_MAX_VERTICES        2000000u      /* control vertices */
+#define API_DEFAULT_MAX_SIMPLICES       8000000u      /* control simplices */
+#define API_DEFAULT_MAX_CELLS           20000000ull   /* top cells of one level */
+#define API_DEFAULT_MAX_SESSION_BYTES   (4ull << 30)  /* core memory of one session */
+#define API_DEFAULT_MAX_SESSIONS        64
+#define API_DEFAULT_TTL_S               3600
+#define API_MAX_TTL_S                   (7 * 24 * 3600)
+#define API_MAX_JSON_DEPTH              16
+#define API_MAX_ATTRIBUTES              16
+#define API_MAX_ATTRIBUTE_NAME          48
+
+typedef struct api_limits {
+    size_t max_body_bytes;
+    uint32_t max_vertices;
+    uint32_t max_simplices;
+    uint64_t max_cells;
+    uint64_t max_session_bytes;
+} api_limits;
+
+static inline api_limits api_default_limits(void)
+{
+    api_limits l = {API_DEFAULT_MAX_BODY_BYTES, API_DEFAULT_MAX_VERTICES, API_DEFAULT_MAX_SIMPLICES,
+                    API_DEFAULT_MAX_CELLS, API_DEFAULT_MAX_SESSION_BYTES};
+    return l;
+}
+
+#endif

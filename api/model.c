@@ -1,0 +1,99 @@
+/* model.c — building, sharing and freeing session models (see model.h). */
+#include "model.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <jansson.h>
+
+api_input *api_input_new(void)
+{
+    api_input *in = calloc(1, sizeof *in);
+    if (in)
+        atomic_init(&in->refs, 1);
+    return in;
+}
+
+void api_input_unref(api_input *in)
+{
+    if (!in || atomic_fetch_sub(&in->refs, 1) != 1)
+        return;
+    free(in->xyz);
+    free(in->size);
+    free(in->idx);
+    for (int a = 0; a < in->nattrs; a++)
+        free(in->attrs[a].data);
+    free(in);
+}
+
+static void publish(api_model *m)
+{
+    atomic_store(&m->levels_cached, m->c ? sd_complex_levels_computed(m->c) : 0);
+    atomic_store(&m->memory_bytes, m->c ? sd_complex_memory(m->c) : 0);
+}
+
+api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_bytes, sd_error *err)
+{
+    api_model *m = calloc(1, sizeof *m);
+    if (!m) {
+        err->code = SD_ERR_NOMEM;
+        snprintf(err->message, sizeof err->message, "out of memory");
+        return NULL;
+    }
+    atomic_init(&m->refs, 1);
+    pthread_mutex_init(&m->lock, NULL);
+    if (rules)
+        m->rules = *rules;
+    if (in) {
+        sd_options opt = {.surface_weights = m->rules.surface_weights,
+                          .solid_scheme = m->rules.solid_scheme,
+                          .max_bytes = (size_t)max_bytes};
+        m->c = sd_complex_new(in->xyz, in->nv, in->idx, in->size, in->ns, &opt, err);
+        if (!m->c) {
+            api_model_unref(m);
+            return NULL;
+        }
+        for (int a = 0; a < in->nattrs; a++) {
+            m->channel[a] = sd_complex_add_channel(m->c, in->attrs[a].data, in->attrs[a].ncomp, err);
+            if (m->channel[a] < 0) {
+                err->item = a; /* which attribute; the core's item (vertex) is in the message */
+                api_model_unref(m);
+                return NULL;
+            }
+        }
+        atomic_fetch_add(&in->refs, 1);
+        m->in = in;
+    }
+    publish(m);
+    return m;
+}
+
+api_model *api_model_ref(api_model *m)
+{
+    atomic_fetch_add(&m->refs, 1);
+    return m;
+}
+
+void api_model_unref(api_model *m)
+{
+    if (!m || atomic_fetch_sub(&m->refs, 1) != 1)
+        return;
+    json_decref(m->summary);
+    sd_complex_free(m->c);
+    api_input_unref(m->in);
+    pthread_mutex_destroy(&m->lock);
+    free(m);
+}
+
+const sd_level *api_model_level_locked(api_model *m, int level, sd_error *err)
+{
+    struct timespec t0, t1;
+    int before = sd_complex_levels_computed(m->c);
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    const sd_level *lv = sd_complex_level(m->c, level, err);
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    if (lv && before <= level) /* the time of the levels computed now goes to the highest */
+        m->seconds[level] += (double)(t1.tv_sec - t0.tv_sec) + (t1.tv_nsec - t0.tv_nsec) * 1e-9;
+    publish(m);
+    return lv;
+}

@@ -1,0 +1,75 @@
+/* model.h — what one session holds: the posted control complex, its tags and rule choices, and
+ * the core complex built from them (with its cached levels).
+ *
+ * A model is immutable once published, except for the core complex's lazily computed levels,
+ * which only grow and are computed under `lock`. Every change (PUT complex, tags, rules) builds a
+ * new model next to the old one and the session swaps the pointer, so a request that is still
+ * streaming a level of the old model keeps reading valid memory: models are reference counted
+ * (api_model_ref / api_model_unref) and the last holder frees them.
+ *
+ * The posted input (coordinates, simplices, attributes) is shared between successive models of a
+ * session through its own reference count, since tags and rules changes do not copy it.
+ */
+#ifndef SUBDIVD_MODEL_H
+#define SUBDIVD_MODEL_H
+
+#include "../core/sd.h"
+#include "limits.h"
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdint.h>
+
+struct json_t;
+
+typedef struct api_attribute {
+    char name[API_MAX_ATTRIBUTE_NAME + 1];
+    int ncomp;
+    int scalar_form;          /* posted as plain numbers (ncomp 1) rather than arrays */
+    double *data;             /* nv * ncomp */
+} api_attribute;
+
+typedef struct api_input {
+    atomic_int refs;
+    uint32_t nv;
+    double *xyz;              /* 3 nv */
+    uint32_t ns;
+    uint8_t *size;            /* ns */
+    uint32_t *idx;            /* sum of sizes */
+    int nattrs;
+    api_attribute attrs[API_MAX_ATTRIBUTES];
+} api_input;
+
+/* The rule preferences of PUT /rules (API.md); zero = the default. */
+typedef struct api_rules {
+    int solid_scheme;         /* SD_SOLID_* */
+    int surface_weights;      /* SD_WEIGHTS_* */
+} api_rules;
+
+typedef struct api_model {
+    atomic_int refs;
+    pthread_mutex_t lock;     /* serialises computation on `c` */
+    api_input *in;            /* NULL: no complex posted yet */
+    api_rules rules;
+    sd_complex *c;            /* NULL iff in == NULL */
+    int channel[API_MAX_ATTRIBUTES]; /* core channel id of each attribute */
+    double seconds[SD_MAX_LEVEL + 1]; /* time spent computing each level (under lock) */
+    struct json_t *summary;   /* level-0 summary (API.md PUT /complex), read-only once built */
+    /* published figures, readable without the lock */
+    atomic_int levels_cached;
+    atomic_size_t memory_bytes;
+} api_model;
+
+api_input *api_input_new(void);
+void api_input_unref(api_input *in);
+
+/* A new model from an input (borrowed: the model takes its own reference; may be NULL) and
+ * rules; builds and classifies the core complex under `max_bytes`. NULL + err on failure. */
+api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_bytes, sd_error *err);
+api_model *api_model_ref(api_model *m);
+void api_model_unref(api_model *m);
+
+/* Compute level L (under the model's lock) and record the time; NULL + err on failure. The
+ * caller holds m->lock. */
+const sd_level *api_model_level_locked(api_model *m, int level, sd_error *err);
+
+#endif

@@ -1,0 +1,163 @@
+/* config.c — one table of settings drives defaults, SUBDIVD_* environment variables, flags and
+ * the usage text, so the three can never disagree. */
+#include "config.h"
+#include <ctype.h>
+#include <errno.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+typedef enum { T_INT, T_U32, T_U64, T_SIZE, T_STR, T_FLAG, T_LOG } kind;
+
+typedef struct setting {
+    const char *flag;   /* --flag; env SUBDIVD_FLAG with '-' -> '_' */
+    kind k;
+    size_t off;
+    long long lo, hi;
+    const char *help;
+} setting;
+
+#define OFF(f) offsetof(config, f)
+static const setting S[] = {
+    {"listen", T_STR, OFF(listen), 0, 0, "address to bind (default 127.0.0.1)"},
+    {"port", T_INT, OFF(port), 0, 65535, "TCP port (default 8080; 0 picks a free one)"},
+    {"threads", T_INT, OFF(threads), 1, 256, "concurrent computations (default: CPU count)"},
+    {"max-connections", T_INT, OFF(max_connections), 1, 100000, "open connections (default 256)"},
+    {"connection-timeout", T_INT, OFF(connection_timeout_s), 1, 86400,
+     "idle connection timeout in seconds (default 30)"},
+    {"queue-timeout", T_INT, OFF(queue_timeout_s), 0, 3600,
+     "seconds a computation waits for a free thread before 429 (default 30)"},
+    {"max-sessions", T_INT, OFF(max_sessions), 1, 1000000, "live sessions (default 64)"},
+    {"ttl", T_INT, OFF(ttl_s), 1, API_MAX_TTL_S, "default session idle TTL in seconds (3600)"},
+    {"max-body-bytes", T_SIZE, OFF(limits.max_body_bytes), 1, 1LL << 40,
+     "request body bytes (default 64 MiB)"},
+    {"max-vertices", T_U32, OFF(limits.max_vertices), 1, 0xfffffffeLL,
+     "control vertices per complex (default 2000000)"},
+    {"max-simplices", T_U32, OFF(limits.max_simplices), 1, 0xfffffffeLL,
+     "control simplices per complex (default 8000000)"},
+    {"max-cells", T_U64, OFF(limits.max_cells), 1, 1LL << 40,
+     "top cells of one level (default 20000000)"},
+    {"max-session-bytes", T_U64, OFF(limits.max_session_bytes), 1 << 20, 1LL << 50,
+     "core memory per session (default 4 GiB)"},
+    {"cors-origin", T_STR, OFF(cors_origin), 0, 0, "allowed browser origin (default *)"},
+    {"log-level", T_LOG, OFF(log_level), 0, 0, "error|warn|info|debug (default info)"},
+    {"no-auth", T_FLAG, OFF(no_auth), 0, 0, "accept requests without bearer tokens (local dev)"},
+};
+#define NS (sizeof S / sizeof *S)
+
+void config_usage(FILE *f)
+{
+    fprintf(f, "usage: subdivd [options]            run the daemon\n"
+               "       subdivd refine INPUT.json --level L [--tags T.json] [--rules R.json]\n"
+               "               [--format F] [--parts P] [--slice nx,ny,nz,d] [--attributes A]\n"
+               "               [--colormap NAME:min:max] -o OUT.glb|.gltf|.vtu|.vtk|.json\n"
+               "       subdivd --list-routes\n\noptions (each also read from SUBDIVD_<NAME>):\n");
+    for (size_t i = 0; i < NS; i++)
+        fprintf(f, "  --%-20s %s\n", S[i].flag, S[i].help);
+}
+
+static int set(config *c, const setting *s, const char *v, const char *from)
+{
+    char *p = (char *)c + s->off;
+    if (s->k == T_STR) {
+        if (strlen(v) >= (s->off == OFF(listen) ? sizeof c->listen : sizeof c->cors_origin))
+            goto bad;
+        strcpy(p, v);
+        return 0;
+    }
+    if (s->k == T_FLAG) {
+        *(int *)p = !(!strcmp(v, "0") || !strcmp(v, "false") || !strcmp(v, "no"));
+        return 0;
+    }
+    if (s->k == T_LOG) {
+        static const char *const lv[] = {"error", "warn", "info", "debug"};
+        for (int i = 0; i < 4; i++)
+            if (!strcmp(v, lv[i])) {
+                *(int *)p = i;
+                return 0;
+            }
+        goto bad;
+    }
+    char *end;
+    errno = 0;
+    long long x = strtoll(v, &end, 10);
+    if (!*v || *end || errno || x < s->lo || x > s->hi)
+        goto bad;
+    switch (s->k) {
+    case T_INT: *(int *)p = (int)x; break;
+    case T_U32: *(uint32_t *)p = (uint32_t)x; break;
+    case T_U64: *(uint64_t *)p = (uint64_t)x; break;
+    case T_SIZE: *(size_t *)p = (size_t)x; break;
+    default: break;
+    }
+    return 0;
+bad:
+    fprintf(stderr, "subdivd: bad value \"%s\" for %s%s (%s)\n", v, from, s->flag, s->help);
+    return -1;
+}
+
+int config_load(config *c, int argc, char **argv, int first, int *exit_code)
+{
+    memset(c, 0, sizeof *c);
+    strcpy(c->listen, "127.0.0.1");
+    c->port = 8080;
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    c->threads = n > 0 ? (int)n : 2;
+    c->max_connections = 256;
+    c->connection_timeout_s = 30;
+    c->queue_timeout_s = 30;
+    c->max_sessions = API_DEFAULT_MAX_SESSIONS;
+    c->ttl_s = API_DEFAULT_TTL_S;
+    c->log_level = LOG_INFO;
+    strcpy(c->cors_origin, "*");
+    c->limits = api_default_limits();
+    *exit_code = 2;
+    for (size_t i = 0; i < NS; i++) {
+        char env[64] = "SUBDIVD_";
+        for (const char *f = S[i].flag; *f; f++) {
+            size_t l = strlen(env);
+            env[l] = *f == '-' ? '_' : (char)toupper((unsigned char)*f);
+            env[l + 1] = 0;
+        }
+        const char *v = getenv(env);
+        if (v && set(c, &S[i], v, "environment for --"))
+            return 1;
+    }
+    for (int a = first; a < argc; a++) {
+        if (!strcmp(argv[a], "-h") || !strcmp(argv[a], "--help")) {
+            config_usage(stdout);
+            *exit_code = 0;
+            return 1;
+        }
+        const char *arg = argv[a];
+        if (strncmp(arg, "--", 2)) {
+            fprintf(stderr, "subdivd: unexpected argument \"%s\"\n", arg);
+            config_usage(stderr);
+            return 1;
+        }
+        arg += 2;
+        const char *eq = strchr(arg, '=');
+        size_t len = eq ? (size_t)(eq - arg) : strlen(arg);
+        size_t i = 0;
+        while (i < NS && !(strlen(S[i].flag) == len && !strncmp(S[i].flag, arg, len)))
+            i++;
+        if (i == NS) {
+            fprintf(stderr, "subdivd: unknown option \"%s\"\n", argv[a]);
+            config_usage(stderr);
+            return 1;
+        }
+        const char *v = eq ? eq + 1 : NULL;
+        if (!v && S[i].k == T_FLAG)
+            v = "1";
+        if (!v) {
+            if (a + 1 >= argc) {
+                fprintf(stderr, "subdivd: --%s needs a value\n", S[i].flag);
+                return 1;
+            }
+            v = argv[++a];
+        }
+        if (set(c, &S[i], v, "--"))
+            return 1;
+    }
+    return 0;
+}

@@ -1,0 +1,30 @@
+/* config.h — the daemon's settings: defaults, then environment (SUBDIVD_*), then flags. */
+#ifndef SUBDIVD_CONFIG_H
+#define SUBDIVD_CONFIG_H
+
+#include "../api/limits.h"
+#include <stdio.h>
+
+enum { LOG_ERROR = 0, LOG_WARN, LOG_INFO, LOG_DEBUG };
+
+typedef struct config {
+    char listen[64];          /* address to bind, default 127.0.0.1 */
+    int port;                 /* default 8080; 0 = any free port (printed at start) */
+    int threads;              /* concurrent computations (default: CPU count) */
+    int max_connections;
+    int connection_timeout_s;
+    int queue_timeout_s;      /* how long a computation waits for a slot before 429 */
+    int max_sessions;
+    int ttl_s;                /* default session idle TTL */
+    int no_auth;
+    int log_level;
+    char cors_origin[256];    /* "*" or one origin */
+    api_limits limits;
+} config;
+
+/* Fill from defaults, environment and argv (argv[first..]). Returns 0, or 1 after printing usage
+ * (help asked: *exit_code = 0; bad flag: 2). */
+int config_load(config *c, int argc, char **argv, int first, int *exit_code);
+void config_usage(FILE *f);
+
+#endif

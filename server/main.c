@@ -1,0 +1,244 @@
+/* main.c — the subdivd binary: the daemon, and `subdivd refine` (the offline mode).
+ *
+ * Both modes go through the same api/ handlers: the daemon maps HTTP requests onto them, the
+ * offline mode maps files and flags onto them and writes the level with the same streaming
+ * writer into a file — same validation, same errors (printed as problem+json), same bytes.
+ */
+#include "../api/handlers.h"
+#include "../api/jsonin.h"
+#include "metrics.h"
+#include "server.h"
+#include <errno.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static volatile sig_atomic_t stop_requested;
+static void on_signal(int sig) { (void)sig; stop_requested = 1; }
+
+/* ---- offline mode ------------------------------------------------------------------------- */
+
+static char *read_file(const char *path, size_t max, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        fprintf(stderr, "subdivd: cannot open %s: %s\n", path, strerror(errno));
+        return NULL;
+    }
+    size_t cap = 1 << 16, n = 0;
+    char *b = malloc(cap);
+    while (b) {
+        if (n == cap) {
+            if (cap > max) {
+                fprintf(stderr, "subdivd: %s is larger than --max-body-bytes (%zu)\n", path, max);
+                free(b);
+                fclose(f);
+                return NULL;
+            }
+            char *nb = realloc(b, cap * 2);
+            if (!nb) {
+                free(b);
+                b = NULL;
+                break;
+            }
+            b = nb;
+            cap *= 2;
+        }
+        size_t r = fread(b + n, 1, cap - n, f);
+        n += r;
+        if (r == 0)
+            break;
+    }
+    fclose(f);
+    *len = n;
+    return b;
+}
+
+static int report(const api_problem *p, const char *what)
+{
+    json_t *j = api_problem_json(p);
+    char *t = json_dumps(j, JSON_INDENT(2));
+    fprintf(stderr, "subdivd: %s refused (%d):\n%s\n", what, p->status, t ? t : "");
+    free(t);
+    json_decref(j);
+    return p->status == 413 || p->status == 422 || p->status == 400 ? 1 : 3;
+}
+
+/* Apply one change handler to *m from a JSON file. */
+static int apply_file(api_model **m, const char *path, change_fn_t fn, const api_limits *lim,
+                      const char *what)
+{
+    size_t len;
+    char *buf = read_file(path, lim->max_body_bytes, &len);
+    if (!buf)
+        return 2;
+    api_problem p = {0};
+    json_t *b = api_parse_body(buf, len, 0, &p);
+    free(buf);
+    api_model *next = NULL;
+    if (b)
+        fn(*m, b, lim, &next, &p);
+    json_decref(b);
+    if (!next)
+        return report(&p, what);
+    api_model_unref(*m);
+    *m = next;
+    return 0;
+}
+
+static int refine_main(int argc, char **argv)
+{
+    const char *input = NULL, *out = NULL, *tags = NULL, *rules = NULL, *level_s = NULL;
+    api_level_query q = {0};
+    for (int i = 2; i < argc; i++) {
+        const char *a = argv[i];
+        const char **dst = !strcmp(a, "--level") || !strcmp(a, "-l") ? &level_s
+                           : !strcmp(a, "-o") || !strcmp(a, "--output") ? &out
+                           : !strcmp(a, "--tags") ? &tags
+                           : !strcmp(a, "--rules") ? &rules
+                           : !strcmp(a, "--format") ? &q.format
+                           : !strcmp(a, "--parts") ? &q.parts
+                           : !strcmp(a, "--slice") ? &q.slice
+                           : !strcmp(a, "--attributes") ? &q.attributes
+                           : !strcmp(a, "--colormap") ? &q.colormap
+                           : !strcmp(a, "--octahedra") ? &q.octahedra
+                                                       : NULL;
+        if (dst) {
+            if (i + 1 >= argc) {
+                fprintf(stderr, "subdivd refine: %s needs a value\n", a);
+                return 2;
+            }
+            *dst = argv[++i];
+        } else if (a[0] == '-' && a[1]) {
+            fprintf(stderr, "subdivd refine: unknown option %s\n", a);
+            config_usage(stderr);
+            return 2;
+        } else if (!input)
+            input = a;
+        else {
+            fprintf(stderr, "subdivd refine: unexpected argument %s\n", a);
+            return 2;
+        }
+    }
+    if (!input || !out || !level_s) {
+        fprintf(stderr, "subdivd refine: INPUT.json, --level L and -o OUT are required\n");
+        config_usage(stderr);
+        return 2;
+    }
+    if (!q.format) { /* from the output's extension */
+        const char *dot = strrchr(out, '.');
+        if (!dot || out_format_parse(dot + 1) < 0) {
+            fprintf(stderr, "subdivd refine: cannot tell the format from \"%s\"; use "
+                            ".glb, .gltf, .vtu, .vtk or .json, or --format\n", out);
+            return 2;
+        }
+        q.format = dot + 1;
+    }
+    api_limits lim = api_default_limits();
+    api_problem p = {0};
+    int level = api_parse_level(level_s, &p);
+    if (level < 0)
+        return report(&p, "--level");
+    sd_error e = {0};
+    api_model *m = api_model_new(NULL, NULL, 0, &e);
+    if (!m)
+        return 3;
+    int rc = 0;
+    if (rules)
+        rc = apply_file(&m, rules, api_put_rules, &lim, rules);
+    if (!rc)
+        rc = apply_file(&m, input, api_put_complex, &lim, input);
+    if (!rc && tags)
+        rc = apply_file(&m, tags, api_put_tags, &lim, tags);
+    out_stream *os = NULL;
+    out_format fmt;
+    if (!rc && api_level_open(m, level, &q, &lim, 1, &os, &fmt, &p))
+        rc = report(&p, "the level request");
+    if (rc) {
+        api_model_unref(m);
+        return rc;
+    }
+    char tmp[4096];
+    snprintf(tmp, sizeof tmp, "%s.part", out);
+    FILE *f = fopen(tmp, "wb");
+    if (!f) {
+        fprintf(stderr, "subdivd refine: cannot write %s: %s\n", tmp, strerror(errno));
+        rc = 2;
+    }
+    static char buf[1 << 16];
+    uint64_t total = 0;
+    ssize_t n;
+    while (!rc && (n = out_read(os, buf, sizeof buf)) > 0) {
+        if (fwrite(buf, 1, (size_t)n, f) != (size_t)n)
+            rc = 2;
+        total += (uint64_t)n;
+    }
+    if (!rc && n < 0)
+        rc = 3;
+    if (f && fclose(f))
+        rc = 2;
+    if (!rc && rename(tmp, out))
+        rc = 2;
+    if (rc && f)
+        unlink(tmp); /* nothing half-written is left behind */
+    else if (!rc)
+        fprintf(stderr, "subdivd refine: level %d -> %s (%llu bytes, %.3f s)\n", level, out,
+                (unsigned long long)total, m->seconds[level]);
+    out_close(os);
+    api_model_unref(m);
+    return rc;
+}
+
+/* ---- daemon ------------------------------------------------------------------------------- */
+
+int main(int argc, char **argv)
+{
+    if (argc > 1 && !strcmp(argv[1], "refine"))
+        return refine_main(argc, argv);
+    if (argc > 1 && !strcmp(argv[1], "--list-routes")) {
+        http_list_routes(stdout);
+        return 0;
+    }
+    static server srv;
+    int code;
+    if (config_load(&srv.cfg, argc, argv, 1, &code))
+        return code;
+    srv.st = store_new(srv.cfg.max_sessions);
+    if (!srv.st || sem_init(&srv.compute, 0, (unsigned)srv.cfg.threads)) {
+        fprintf(stderr, "subdivd: out of memory\n");
+        return 1;
+    }
+    atomic_store(&srv.draining, 1);
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    signal(SIGPIPE, SIG_IGN);
+    metrics_init();
+    if (http_start(&srv))
+        return 1;
+    atomic_store(&srv.draining, 0);
+    printf("subdivd listening on http://%s:%d/ (%d compute threads%s)\n", srv.cfg.listen, srv.port,
+           srv.cfg.threads, srv.cfg.no_auth ? ", no auth" : "");
+    fflush(stdout);
+    log_line(&srv, LOG_INFO, "listening on %s:%d, limits: body %zu B, %u vertices, %llu cells/level, "
+             "%llu B/session, %d sessions", srv.cfg.listen, srv.port, srv.cfg.limits.max_body_bytes,
+             srv.cfg.limits.max_vertices, (unsigned long long)srv.cfg.limits.max_cells,
+             (unsigned long long)srv.cfg.limits.max_session_bytes, srv.cfg.max_sessions);
+    while (!stop_requested) {
+        usleep(200 * 1000);
+        int gone = store_expire(srv.st, mono_now());
+        if (gone)
+            log_line(&srv, LOG_INFO, "expired %d idle session(s)", gone);
+    }
+    atomic_store(&srv.draining, 1);
+    log_line(&srv, LOG_INFO, "shutting down");
+    http_stop(&srv);
+    store_free(srv.st);
+    sem_destroy(&srv.compute);
+    log_line(&srv, LOG_INFO, "stopped");
+    return 0;
+}

@@ -1,0 +1,82 @@
+/* metrics.c — request counters, latency histogram and streamed bytes (see metrics.h). */
+#include "metrics.h"
+#include <pthread.h>
+#include <stdatomic.h>
+#include <string.h>
+
+#define MAX_SERIES 512
+static const double bucket_le[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05,
+                                   0.1,    0.25,  0.5,    1,     2.5,  5,     10};
+#define NBUCKETS (sizeof bucket_le / sizeof *bucket_le)
+
+static struct {
+    pthread_mutex_t mu;
+    int n;
+    struct { const char *route, *method; int status; uint64_t count; } s[MAX_SERIES];
+    uint64_t bucket[NBUCKETS + 1], count;
+    double sum;
+    atomic_uint_fast64_t bytes;
+} M = {.mu = PTHREAD_MUTEX_INITIALIZER};
+
+void metrics_init(void) {}
+
+void metrics_request(const char *route, const char *method, int status, double seconds)
+{
+    pthread_mutex_lock(&M.mu);
+    int i = 0;
+    while (i < M.n && !(M.s[i].status == status && !strcmp(M.s[i].route, route) &&
+                        !strcmp(M.s[i].method, method)))
+        i++;
+    if (i == M.n && M.n < MAX_SERIES) {
+        M.s[i].route = route; /* route templates and methods are static strings */
+        M.s[i].method = method;
+        M.s[i].status = status;
+        M.s[i].count = 0;
+        M.n++;
+    }
+    if (i < M.n)
+        M.s[i].count++;
+    size_t b = 0;
+    while (b < NBUCKETS && seconds > bucket_le[b])
+        b++;
+    M.bucket[b]++;
+    M.count++;
+    M.sum += seconds;
+    pthread_mutex_unlock(&M.mu);
+}
+
+void metrics_bytes(uint64_t n) { atomic_fetch_add(&M.bytes, n); }
+
+void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t session_bytes)
+{
+    pthread_mutex_lock(&M.mu);
+    fprintf(f, "# HELP subdivd_requests_total HTTP requests by route template, method and status.\n"
+               "# TYPE subdivd_requests_total counter\n");
+    for (int i = 0; i < M.n; i++)
+        fprintf(f, "subdivd_requests_total{route=\"%s\",method=\"%s\",status=\"%d\"} %llu\n",
+                M.s[i].route, M.s[i].method, M.s[i].status, (unsigned long long)M.s[i].count);
+    fprintf(f, "# HELP subdivd_request_duration_seconds Time from request start to response queued.\n"
+               "# TYPE subdivd_request_duration_seconds histogram\n");
+    uint64_t cum = 0;
+    for (size_t b = 0; b < NBUCKETS; b++) {
+        cum += M.bucket[b];
+        fprintf(f, "subdivd_request_duration_seconds_bucket{le=\"%g\"} %llu\n", bucket_le[b],
+                (unsigned long long)cum);
+    }
+    cum += M.bucket[NBUCKETS];
+    fprintf(f, "subdivd_request_duration_seconds_bucket{le=\"+Inf\"} %llu\n", (unsigned long long)cum);
+    fprintf(f, "subdivd_request_duration_seconds_sum %.6f\n", M.sum);
+    fprintf(f, "subdivd_request_duration_seconds_count %llu\n", (unsigned long long)M.count);
+    pthread_mutex_unlock(&M.mu);
+    fprintf(f, "# HELP subdivd_sessions Live sessions.\n# TYPE subdivd_sessions gauge\n"
+               "subdivd_sessions %d\n", sessions);
+    fprintf(f, "# HELP subdivd_cached_cells Top cells of every computed level of every session.\n"
+               "# TYPE subdivd_cached_cells gauge\nsubdivd_cached_cells %llu\n",
+            (unsigned long long)cached_cells);
+    fprintf(f, "# HELP subdivd_session_memory_bytes Core memory held by all sessions.\n"
+               "# TYPE subdivd_session_memory_bytes gauge\nsubdivd_session_memory_bytes %llu\n",
+            (unsigned long long)session_bytes);
+    fprintf(f, "# HELP subdivd_streamed_bytes_total Body bytes of streamed level responses.\n"
+               "# TYPE subdivd_streamed_bytes_total counter\nsubdivd_streamed_bytes_total %llu\n",
+            (unsigned long long)atomic_load(&M.bytes));
+}

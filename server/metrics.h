@@ -1,0 +1,19 @@
+/* metrics.h — Prometheus counters of the daemon (text exposition format 0.0.4).
+ *
+ * Requests are counted by route template (not raw path, so the label set stays small), method
+ * and status; one latency histogram covers all requests. Gauges (sessions, cached cells, session
+ * memory) are sampled when /metrics is scraped.
+ */
+#ifndef SUBDIVD_METRICS_H
+#define SUBDIVD_METRICS_H
+
+#include <stdint.h>
+#include <stdio.h>
+
+void metrics_init(void);
+void metrics_request(const char *route, const char *method, int status, double seconds);
+void metrics_bytes(uint64_t n);
+/* Write every metric; the gauges are passed in. */
+void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t session_bytes);
+
+#endif

@@ -1,0 +1,226 @@
+/* sessions.c — session ids, tokens, the store and expiry (see sessions.h). */
+#include "sessions.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/random.h>
+
+struct store {
+    pthread_mutex_t mu;
+    int cap, n;
+    session **s;
+};
+
+double mono_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static int random_bytes(unsigned char *b, size_t n)
+{
+    while (n) {
+        ssize_t r = getrandom(b, n, 0);
+        if (r < 0)
+            return -1;
+        b += r;
+        n -= (size_t)r;
+    }
+    return 0;
+}
+
+store *store_new(int max_sessions)
+{
+    store *st = calloc(1, sizeof *st);
+    if (!st)
+        return NULL;
+    st->cap = max_sessions;
+    st->s = calloc((size_t)max_sessions, sizeof *st->s);
+    if (!st->s) {
+        free(st);
+        return NULL;
+    }
+    pthread_mutex_init(&st->mu, NULL);
+    return st;
+}
+
+void store_free(store *st)
+{
+    if (!st)
+        return;
+    for (int i = 0; i < st->n; i++)
+        session_unref(st->s[i]);
+    pthread_mutex_destroy(&st->mu);
+    free(st->s);
+    free(st);
+}
+
+session *store_create(store *st, int ttl_s)
+{
+    unsigned char rid[16], rtok[32];
+    if (random_bytes(rid, sizeof rid) || random_bytes(rtok, sizeof rtok))
+        return NULL;
+    session *s = calloc(1, sizeof *s);
+    if (!s)
+        return NULL;
+    sd_error e;
+    s->model = api_model_new(NULL, NULL, 0, &e);
+    if (!s->model) {
+        free(s);
+        return NULL;
+    }
+    for (int i = 0; i < 16; i++)
+        sprintf(s->id + 2 * i, "%02x", rid[i]);
+    static const char b64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
+    int k = 0; /* 32 bytes -> 43 base64url characters, no padding */
+    for (int i = 0; i < 32; i += 3) {
+        uint32_t v = (uint32_t)rtok[i] << 16 | (i + 1 < 32 ? (uint32_t)rtok[i + 1] << 8 : 0) |
+                     (i + 2 < 32 ? rtok[i + 2] : 0);
+        int nch = i + 2 < 32 ? 4 : 3;
+        for (int j = 0; j < nch; j++)
+            s->token[k++] = b64[(v >> (18 - 6 * j)) & 63];
+    }
+    s->token[k] = 0;
+    atomic_init(&s->refs, 2); /* the store's and the caller's */
+    pthread_mutex_init(&s->mu, NULL);
+    pthread_mutex_init(&s->write, NULL);
+    s->ttl_s = ttl_s;
+    s->last_used = mono_now();
+    s->created = time(NULL);
+    atomic_init(&s->busy_level, -1);
+    pthread_mutex_lock(&st->mu);
+    if (st->n >= st->cap) {
+        pthread_mutex_unlock(&st->mu);
+        atomic_store(&s->refs, 1);
+        session_unref(s);
+        return NULL;
+    }
+    st->s[st->n++] = s;
+    pthread_mutex_unlock(&st->mu);
+    return s;
+}
+
+session *store_get(store *st, const char *id)
+{
+    session *found = NULL;
+    if (strlen(id) != 32)
+        return NULL;
+    pthread_mutex_lock(&st->mu);
+    for (int i = 0; i < st->n && !found; i++)
+        if (!memcmp(st->s[i]->id, id, 32))
+            found = st->s[i];
+    if (found) {
+        atomic_fetch_add(&found->refs, 1);
+        pthread_mutex_lock(&found->mu);
+        found->last_used = mono_now();
+        pthread_mutex_unlock(&found->mu);
+    }
+    pthread_mutex_unlock(&st->mu);
+    return found;
+}
+
+static int remove_at(store *st, int i)
+{
+    session *s = st->s[i];
+    st->s[i] = st->s[--st->n];
+    st->s[st->n] = NULL;
+    session_unref(s);
+    return 1;
+}
+
+int store_remove(store *st, session *s)
+{
+    int done = 0;
+    pthread_mutex_lock(&st->mu);
+    for (int i = 0; i < st->n && !done; i++)
+        if (st->s[i] == s)
+            done = remove_at(st, i);
+    pthread_mutex_unlock(&st->mu);
+    return done;
+}
+
+int store_expire(store *st, double now)
+{
+    int gone = 0;
+    pthread_mutex_lock(&st->mu);
+    for (int i = 0; i < st->n;) {
+        session *s = st->s[i];
+        pthread_mutex_lock(&s->mu);
+        int idle = now - s->last_used > s->ttl_s && atomic_load(&s->busy_level) < 0;
+        pthread_mutex_unlock(&s->mu);
+        if (idle)
+            gone += remove_at(st, i);
+        else
+            i++;
+    }
+    pthread_mutex_unlock(&st->mu);
+    return gone;
+}
+
+int store_count(store *st)
+{
+    pthread_mutex_lock(&st->mu);
+    int n = st->n;
+    pthread_mutex_unlock(&st->mu);
+    return n;
+}
+
+void store_foreach(store *st, void (*fn)(session *s, void *ud), void *ud)
+{
+    pthread_mutex_lock(&st->mu);
+    for (int i = 0; i < st->n; i++)
+        fn(st->s[i], ud);
+    pthread_mutex_unlock(&st->mu);
+}
+
+void session_unref(session *s)
+{
+    if (!s || atomic_fetch_sub(&s->refs, 1) != 1)
+        return;
+    api_model_unref(s->model);
+    pthread_mutex_destroy(&s->mu);
+    pthread_mutex_destroy(&s->write);
+    explicit_bzero(s->token, sizeof s->token);
+    free(s);
+}
+
+api_model *session_model(session *s, uint64_t *version)
+{
+    pthread_mutex_lock(&s->mu);
+    api_model *m = api_model_ref(s->model);
+    if (version)
+        *version = s->version;
+    pthread_mutex_unlock(&s->mu);
+    return m;
+}
+
+uint64_t session_publish(session *s, api_model *m)
+{
+    pthread_mutex_lock(&s->mu);
+    api_model *old = s->model;
+    s->model = m;
+    uint64_t v = ++s->version;
+    pthread_mutex_unlock(&s->mu);
+    api_model_unref(old);
+    return v;
+}
+
+time_t session_expires_at(session *s)
+{
+    pthread_mutex_lock(&s->mu);
+    time_t t = time(NULL) + (time_t)(s->ttl_s - (mono_now() - s->last_used));
+    pthread_mutex_unlock(&s->mu);
+    return t;
+}
+
+int session_token_ok(const session *s, const char *presented)
+{
+    size_t n = strlen(s->token);
+    if (!presented || strlen(presented) != n)
+        return 0;
+    unsigned char d = 0;
+    for (size_t i = 0; i < n; i++)
+        d |= (unsigned char)(s->token[i] ^ presented[i]);
+    return d == 0;
+}

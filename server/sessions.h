@@ -1,0 +1,67 @@
+/* sessions.h — the in-memory session store of the daemon.
+ *
+ * A session is an unguessable id (128 random bits, hex) plus a bearer token (256 random bits,
+ * base64url) and the session's current api_model. Sessions are reference counted: the store
+ * holds one reference, every request in flight another, so deleting or expiring a session while
+ * one of its levels is still streaming is safe. Locking: `mu` guards the few fields that change
+ * (model pointer, version, expiry; held for microseconds), `write` serialises the requests that
+ * change the session (held while the new model is built), and computation happens under the
+ * model's own lock — so one session's long computation never blocks another session, nor the
+ * reads of its own already computed levels.
+ */
+#ifndef SUBDIVD_SESSIONS_H
+#define SUBDIVD_SESSIONS_H
+
+#include "../api/model.h"
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdint.h>
+#include <time.h>
+
+typedef struct session {
+    atomic_int refs;
+    char id[33];
+    char token[48];
+    pthread_mutex_t mu;       /* model, version, ttl, last_used */
+    pthread_mutex_t write;    /* serialises changes */
+    api_model *model;
+    uint64_t version;
+    int ttl_s;
+    double last_used;         /* monotonic seconds */
+    time_t created;
+    /* progress of a computation in this session, readable without a lock */
+    atomic_int busy_level;    /* -1 when idle */
+    _Atomic double busy_since;
+} session;
+
+typedef struct store store;
+
+store *store_new(int max_sessions);
+void store_free(store *st);
+
+/* Create a session (new reference). NULL when the store is full. */
+session *store_create(store *st, int ttl_s);
+/* The live session with this id (new reference) or NULL. Touches its idle clock. */
+session *store_get(store *st, const char *id);
+/* Remove from the store (the session lives on until its last reference goes). 0 if absent. */
+int store_remove(store *st, session *s);
+/* Remove sessions idle for longer than their TTL; returns how many went. */
+int store_expire(store *st, double now);
+int store_count(store *st);
+/* Call fn for every live session under the store lock (metrics). */
+void store_foreach(store *st, void (*fn)(session *s, void *ud), void *ud);
+
+void session_unref(session *s);
+/* The current model and version (model: new reference). */
+api_model *session_model(session *s, uint64_t *version);
+/* Publish a new model (the session takes the reference); returns the new version. */
+uint64_t session_publish(session *s, api_model *m);
+/* Expiry time (wall clock, seconds since the epoch). */
+time_t session_expires_at(session *s);
+
+/* Constant-time comparison of a presented token with the session's. */
+int session_token_ok(const session *s, const char *presented);
+
+double mono_now(void);
+
+#endif
