@@ -67,15 +67,12 @@ all: $(API_LIB) $(if $(wildcard api/out.c),$(B)/subdivd) $(EXTRA_ALL)
 deps:
 	@sh tools/deps.sh
 
-# Until the daemon lands (server/), `make run` subdivides the bundled example with the core and
-# prints what each level holds and how every control vertex is classified.
+# Starts the daemon on localhost:8080 (web front end at /, API under /v1, OpenAPI at
+# /v1/openapi.json). Flags: make run ARGS="--port 9000 --log-level debug".
 run: deps
 	$(MAKE) all
-	@echo "== examples/mixed.txt: levels 0..3"
-	@for L in 0 1 2 3; do ./$(B)/sdlevel --stats -l $$L examples/mixed.txt; done
-	@echo "== classes of the control vertices (vclass id family boundary type rule valence)"
-	@./$(B)/sdlevel --classes -l 0 examples/mixed.txt | grep '^vclass'
-	@echo "Try: ./$(B)/sdlevel -l 2 examples/mixed.txt  (format: docs/TEXT_FORMAT.md)"
+	@echo "subdivd: open http://127.0.0.1:8080/ (API: http://127.0.0.1:8080/v1/openapi.json); Ctrl-C stops it"
+	./$(B)/subdivd $(ARGS)
 
 # Runs every suite and ends with one line: "N passed, N failed".
 test: deps
@@ -85,7 +82,7 @@ test: deps
 sanitize: deps
 	$(MAKE) clean-build B=build-asan
 	$(MAKE) all B=build-asan CFLAGS="-O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all" LDLIBS="$(LDLIBS) -fsanitize=address,undefined"
-	SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core sh tests/run_all.sh
+	SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core SUBDIVD=build-asan/subdivd sh tests/run_all.sh
 
 clean-build:
 	rm -rf $(B)
