@@ -61,6 +61,7 @@ $(B)/subdivd: $(SRV_OBJ) $(API_LIB) $(CORE_LIB)
 
 -include tests/peers/Makefile.inc
 -include tests/tools/Makefile.inc
+-include tests/fuzz/Makefile.inc
 all: $(API_LIB) $(if $(wildcard api/out.c),$(B)/subdivd) $(EXTRA_ALL)
 -include bench/Makefile.inc
 
@@ -82,7 +83,7 @@ test: deps
 sanitize: deps
 	$(MAKE) clean-build B=build-asan
 	$(MAKE) all B=build-asan CFLAGS="-O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all" LDLIBS="$(LDLIBS) -fsanitize=address,undefined"
-	SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core SUBDIVD=build-asan/subdivd sh tests/run_all.sh
+	SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core SUBDIVD=build-asan/subdivd FUZZ_API=build-asan/fuzz_api sh tests/run_all.sh
 
 clean-build:
 	rm -rf $(B)

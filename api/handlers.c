@@ -369,7 +369,7 @@ json_t *api_summary(const api_model *m)
         }
     json_t *nm = json_object();
     for (int t = 1; t <= 4; t++) {
-        char key[8];
+        char key[16];
         snprintf(key, sizeof key, "type%d", t);
         json_object_set_new(nm, key, json_pack("{s:I, s:I}", "vertices", (json_int_t)nmv[t],
                                                "edges", (json_int_t)nme[t]));

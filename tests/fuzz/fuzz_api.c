@@ -1,0 +1,192 @@
+/* fuzz_api — a self-contained mutation fuzzer for the request path of the api/ layer.
+ *
+ * Starting from valid seed bodies (PUT /complex, /rules, /tags), it applies deterministic random
+ * mutations (byte flips, insertions of JSON tokens, deletions, truncations, splices between
+ * seeds) and runs each result through api_parse_body and the change handlers with small limits,
+ * then opens and drains level 0-2 in every format. It asserts nothing about the answers but
+ * that each call returns either a model or a problem with a 4xx/5xx status and a detail; the
+ * point is to run under ASan/UBSan (make sanitize) where any memory error aborts.
+ * usage: fuzz_api [ITERATIONS [SEED]]
+ */
+#include "../../api/handlers.h"
+#include "../../api/jsonin.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *const seeds[] = {
+    "{\"vertices\":[[0,0,0],[1,0,0],[0,1,0],[0,0,1],[1,1,0],[0,0,2],[0.5,0,3],[3,3,3]],"
+    "\"simplices\":[[0,1,2,3],[1,2,4],[3,5],[5,6],[7]],\"attributes\":{\"h\":[0,0,0,1,0,2,3,3],"
+    "\"v\":[[0,1],[1,1],[2,1],[3,1],[4,1],[5,1],[6,1],[7,1]]}}",
+    "{\"vertices\":[[0,0,0],[1,0,0],[0,1,0],[0,0,1],[1,1,1]],\"simplices\":[[0,1,2,3],[1,2,3,4]]}",
+    "{\"vertices\":[[0,0,0],[1,0,0],[0,1,0],[1,1,0]],\"simplices\":[[0,1,2],[1,3,2],[0,3]]}",
+    "{\"solid_scheme\":\"averaged\",\"surface_weights\":\"loop\",\"nonmanifold_default\":\"G2\","
+    "\"overrides\":[]}",
+    "{\"singular\":[]}",
+    "{\"singular\":[[0],[0,1],[0,1,2]]}",
+};
+#define NSEEDS (sizeof seeds / sizeof *seeds)
+static const char *const tokens[] = {"[", "]", "{", "}", ",", ":", "\"", "0", "-1", "1e308",
+                                     "4294967296", "null", "true", "1.5", "\"x\"", "[]", "{}",
+                                     "99999999999999999999", "[0,0,0]", "[0,1,2,3,4]"};
+
+static uint64_t rng;
+static uint32_t rnd(uint32_t n)
+{
+    rng ^= rng << 13;
+    rng ^= rng >> 7;
+    rng ^= rng << 17;
+    return n ? (uint32_t)(rng % n) : 0;
+}
+
+static size_t mutate(char *buf, size_t len, size_t cap)
+{
+    int steps = (int)rnd(3);
+    for (int s = 0; s < steps; s++) {
+        switch (rnd(6)) {
+        case 5: { /* replace one number (a run of digits) by a token: keeps the shape */
+            size_t at = rnd((uint32_t)len + 1);
+            while (at < len && !(buf[at] >= '0' && buf[at] <= '9'))
+                at++;
+            size_t end = at;
+            while (end < len && ((buf[end] >= '0' && buf[end] <= '9') || buf[end] == '.'))
+                end++;
+            const char *t = tokens[rnd(sizeof tokens / sizeof *tokens)];
+            size_t n = strlen(t);
+            if (at < len && len - (end - at) + n < cap) {
+                memmove(buf + at + n, buf + end, len - end);
+                memcpy(buf + at, t, n);
+                len = len - (end - at) + n;
+            }
+            break;
+        }
+        case 0: /* flip a byte */
+            if (len)
+                buf[rnd((uint32_t)len)] ^= (char)(1 + rnd(255));
+            break;
+        case 1: { /* insert a token */
+            const char *t = tokens[rnd(sizeof tokens / sizeof *tokens)];
+            size_t n = strlen(t), at = rnd((uint32_t)len + 1);
+            if (len + n < cap) {
+                memmove(buf + at + n, buf + at, len - at);
+                memcpy(buf + at, t, n);
+                len += n;
+            }
+            break;
+        }
+        case 2: { /* delete a run */
+            if (!len)
+                break;
+            size_t at = rnd((uint32_t)len), n = 1 + rnd(8);
+            if (at + n > len)
+                n = len - at;
+            memmove(buf + at, buf + at + n, len - at - n);
+            len -= n;
+            break;
+        }
+        case 3: /* truncate */
+            len = rnd((uint32_t)len + 1);
+            break;
+        default: { /* splice the tail of another seed */
+            const char *o = seeds[rnd(NSEEDS)];
+            size_t ol = strlen(o), from = rnd((uint32_t)ol), at = rnd((uint32_t)len + 1);
+            size_t n = ol - from;
+            if (at + n < cap) {
+                memcpy(buf + at, o + from, n);
+                len = at + n;
+            }
+            break;
+        }
+        }
+    }
+    return len;
+}
+
+static void check_problem(const api_problem *p, const char *what)
+{
+    if (p->status < 400 || p->status > 599 || !p->detail[0]) {
+        fprintf(stderr, "fuzz_api: %s returned status %d without a problem\n", what, p->status);
+        abort();
+    }
+}
+
+static void drain_levels(api_model *m, const api_limits *lim)
+{
+    static char buf[4096];
+    static const char *const fmts[] = {"glb", "gltf", "vtu", "vtk", "json"};
+    for (int level = 0; level <= 2; level++)
+        for (int f = 0; f < 5; f++) {
+            api_level_query q = {.format = fmts[f], .slice = f & 1 ? "0,0,1,0.3" : NULL};
+            api_problem p = {0};
+            out_stream *os = NULL;
+            out_format fmt;
+            if (api_level_open(m, level, &q, lim, 1, &os, &fmt, &p)) {
+                check_problem(&p, "api_level_open");
+                continue;
+            }
+            while (out_read(os, buf, sizeof buf) > 0)
+                ;
+            out_close(os);
+        }
+}
+
+int main(int argc, char **argv)
+{
+    long iters = argc > 1 ? atol(argv[1]) : 2000;
+    rng = argc > 2 ? strtoull(argv[2], NULL, 10) : 88172645463325252ull;
+    if (!rng)
+        rng = 1;
+    api_limits lim = api_default_limits();
+    lim.max_vertices = 64;
+    lim.max_simplices = 64;
+    lim.max_cells = 20000;
+    lim.max_session_bytes = 64u << 20;
+    static char buf[8192];
+    long accepted = 0;
+    for (long i = 0; i < iters; i++) {
+        const char *seed = seeds[rnd(NSEEDS)];
+        size_t len = strlen(seed);
+        memcpy(buf, seed, len);
+        len = mutate(buf, len, sizeof buf);
+        sd_error e;
+        api_model *cur = api_model_new(NULL, NULL, 0, &e), *next = NULL;
+        if (!cur)
+            return 1;
+        /* a valid complex first, so tags and overrides have something to refer to */
+        if (rnd(2)) {
+            api_problem p = {0};
+            const char *valid = seeds[rnd(3)];
+            json_t *b = api_parse_body(valid, strlen(valid), 0, &p);
+            if (b && !api_put_complex(cur, b, &lim, &next, &p)) {
+                api_model_unref(cur);
+                cur = next;
+                next = NULL;
+            }
+            json_decref(b);
+        }
+        api_problem p = {0};
+        json_t *b = api_parse_body(buf, len, rnd(2), &p);
+        if (!b) {
+            check_problem(&p, "api_parse_body");
+        } else {
+            change_fn_t fns[] = {api_put_complex, api_put_rules, api_put_tags};
+            int which = (int)rnd(3);
+            if (fns[which](cur, b, &lim, &next, &p))
+                check_problem(&p, "a change handler");
+            else {
+                accepted++;
+                api_model_unref(cur);
+                cur = next;
+                if (cur->c)
+                    drain_levels(cur, &lim);
+                api_problem gp = {0};
+                json_t *g = api_get_complex(cur, &gp);
+                json_decref(g);
+            }
+            json_decref(b);
+        }
+        api_model_unref(cur);
+    }
+    printf("fuzz_api: %ld inputs, %ld accepted, no memory errors\n", iters, accepted);
+    return 0;
+}
