@@ -62,7 +62,7 @@ $(B)/subdivd: $(SRV_OBJ) $(API_LIB) $(CORE_LIB)
 -include tests/peers/Makefile.inc
 -include tests/tools/Makefile.inc
 -include tests/fuzz/Makefile.inc
-all: $(API_LIB) $(if $(wildcard api/out.c),$(B)/subdivd) $(EXTRA_ALL)
+all: $(API_LIB) $(B)/subdivd $(EXTRA_ALL)
 -include bench/Makefile.inc
 
 deps:

@@ -5,11 +5,19 @@ cd "$(dirname "$0")/.."
 pkgs=$(grep -v '^#' tools/packages.txt | tr '\n' ' ')
 missing=""
 for p in $pkgs; do
+    # node and npm may come from another distribution of Node.js (e.g. nodesource, which bundles
+    # npm): a working command counts as installed
+    case $p in nodejs|npm) command -v "${p%js}" >/dev/null 2>&1 && continue ;; esac
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
 done
-[ -z "$missing" ] && exit 0
-echo "installing:$missing"
-SUDO=""
-[ "$(id -u)" -ne 0 ] && SUDO=sudo
-$SUDO apt-get update -qq
-DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing
+if [ -n "$missing" ]; then
+    echo "installing:$missing"
+    SUDO=""
+    [ "$(id -u)" -ne 0 ] && SUDO=sudo
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing
+fi
+# npm tools of the tests (tests/tools/package.json: the Khronos glTF validator)
+if [ ! -d tests/tools/node_modules/gltf-validator ]; then
+    (cd tests/tools && npm install --no-audit --no-fund --loglevel=error)
+fi

@@ -1,0 +1,420 @@
+/* out_vtk.c — VTK unstructured grids: XML .vtu (appended raw binary) and legacy .vtk (binary).
+ *
+ * Cells are written sorted by VTK type, as meshio expects: vertices (1) for isolated points,
+ * lines (3) for curve segments, triangles (5) for surface triangles followed by the slice
+ * triangles, tetrahedra (10) for tetrahedra followed by the octahedra split into 4 tets along
+ * their major diagonal — or, on request in VTU, octahedra as polyhedra (42) last.
+ * Points: the level's vertices, then 3 points per slice triangle.
+ * Point data: every requested attribute (Float64; slice points interpolated along the cut edge)
+ * and "rule" (the sd_rule id; 255 for slice points). Cell data: "dimension" (0..3; 2 for the
+ * slice), "kind" (sd_cell_kind; 5 for the slice) and "source_cell" (the cell's index within its
+ * kind at this level; for an octahedron's tets and a slice triangle, the cut/split cell's).
+ *
+ * Both formats are a sequence of arrays produced item by item; their sizes are exact before the
+ * first byte. VTU blocks carry a UInt64 byte count; legacy data are big-endian.
+ */
+#include "out_internal.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum { VT_VERTEX = 1, VT_LINE = 3, VT_TRIANGLE = 5, VT_TETRA = 10, VT_POLYHEDRON = 42 };
+enum { SLICE_KIND = 5 };
+
+typedef enum {
+    A_ATTR, A_RULE, A_DIM, A_KIND, A_SRC, A_POINTS, A_CONN, A_OFFS, A_TYPES, A_FACES, A_FOFFS
+} arr_id;
+
+typedef struct arr {
+    arr_id id;
+    int attr;            /* A_ATTR: which */
+    int ncomp;
+    int width;           /* bytes per component: 8 (Float64), 4 (Int32), 1 (UInt8) */
+    uint64_t count;      /* items (tuples or cells) */
+    uint64_t bytes;      /* data bytes */
+    char head[192];      /* text before the data (XML: none; legacy: the keyword lines) */
+} arr;
+
+typedef struct vstate {
+    bool legacy;
+    uint64_t npts, ncell, nconn;
+    /* cell ranges (start of each block, in cells) */
+    uint64_t r_pt, r_cu, r_tr, r_sl, r_tet, r_oct, r_poly, r_end;
+    int narr;
+    arr a[OUT_MAX_ATTRS + 12];
+    char *header;        /* XML text before the appended data, or legacy file header */
+    size_t header_len;
+    int phase;           /* 0 header, 1 arrays, 2 trailer */
+    bool prefix_done;
+} vstate;
+
+/* ---- cells in file order ------------------------------------------------------------------ */
+
+typedef struct vcell {
+    int type, dim, kind, n;
+    long src;
+    uint32_t v[6];
+    bool slice;
+    uint64_t slice_tri;
+} vcell;
+
+static void cell_at(const out_stream *s, const vstate *st, uint64_t c, vcell *o)
+{
+    o->slice = false;
+    if (c < st->r_cu) {
+        sd_level_cell(s->lv, SD_CELL_POINT, (uint32_t)(c - st->r_pt), o->v);
+        *o = (vcell){VT_VERTEX, 0, SD_CELL_POINT, 1, (long)(c - st->r_pt), {o->v[0]}, false, 0};
+    } else if (c < st->r_tr) {
+        uint32_t v[6];
+        sd_level_cell(s->lv, SD_CELL_CURVE, (uint32_t)(c - st->r_cu), v);
+        *o = (vcell){VT_LINE, 1, SD_CELL_CURVE, 2, (long)(c - st->r_cu), {v[0], v[1]}, false, 0};
+    } else if (c < st->r_sl) {
+        uint32_t v[6];
+        sd_level_cell(s->lv, SD_CELL_TRIANGLE, (uint32_t)(c - st->r_tr), v);
+        *o = (vcell){VT_TRIANGLE, 2, SD_CELL_TRIANGLE, 3, (long)(c - st->r_tr), {v[0], v[1], v[2]}, false, 0};
+    } else if (c < st->r_tet) {
+        uint64_t t = c - st->r_sl, p = s->nv + 3 * t;
+        *o = (vcell){VT_TRIANGLE, 2, SLICE_KIND, 3, (long)s->slice.cell[t],
+                     {(uint32_t)p, (uint32_t)p + 1, (uint32_t)p + 2}, true, t};
+    } else if (c < st->r_oct) {
+        uint32_t v[6];
+        sd_level_cell(s->lv, SD_CELL_TETRA, (uint32_t)(c - st->r_tet), v);
+        *o = (vcell){VT_TETRA, 3, SD_CELL_TETRA, 4, (long)(c - st->r_tet), {v[0], v[1], v[2], v[3]}, false, 0};
+    } else if (c < st->r_poly) {
+        uint64_t k = c - st->r_oct;
+        uint32_t v[6], t[4];
+        sd_level_cell(s->lv, SD_CELL_OCTA, (uint32_t)(k / 4), v);
+        out_oct_tet(v, (int)(k % 4), t);
+        *o = (vcell){VT_TETRA, 3, SD_CELL_OCTA, 4, (long)(k / 4), {t[0], t[1], t[2], t[3]}, false, 0};
+    } else {
+        uint32_t v[6];
+        sd_level_cell(s->lv, SD_CELL_OCTA, (uint32_t)(c - st->r_poly), v);
+        *o = (vcell){VT_POLYHEDRON, 3, SD_CELL_OCTA, 6, (long)(c - st->r_poly),
+                     {v[0], v[1], v[2], v[3], v[4], v[5]}, false, 0};
+    }
+}
+
+/* Connectivity entries before cell c (closed form per block). */
+static uint64_t conn_before(const vstate *st, uint64_t c)
+{
+    static const int per[] = {1, 2, 3, 3, 4, 4, 6};
+    const uint64_t start[] = {st->r_pt, st->r_cu, st->r_tr, st->r_sl, st->r_tet, st->r_oct, st->r_poly, st->r_end};
+    uint64_t n = 0;
+    for (int b = 0; b < 7; b++) {
+        if (c <= start[b])
+            break;
+        uint64_t end = c < start[b + 1] ? c : start[b + 1];
+        n += (end - start[b]) * per[b];
+    }
+    return n;
+}
+
+/* ---- items -------------------------------------------------------------------------------- */
+
+static void put_num(out_stream *s, const vstate *st, int width, double x, long long i)
+{
+    unsigned char b[8];
+    if (width == 8)
+        memcpy(b, &x, 8);
+    else if (width == 4) {
+        int32_t v = (int32_t)i;
+        memcpy(b, &v, 4);
+    } else
+        b[0] = (unsigned char)i;
+    if (st->legacy) /* big-endian */
+        for (int k = 0; k < width / 2; k++) {
+            unsigned char t = b[k];
+            b[k] = b[width - 1 - k];
+            b[width - 1 - k] = t;
+        }
+    out_put(s, b, (size_t)width);
+}
+
+static const uint8_t OCT_FACES[8][3] = {{0, 2, 4}, {0, 4, 3}, {0, 3, 5}, {0, 5, 2},
+                                        {1, 4, 2}, {1, 3, 4}, {1, 5, 3}, {1, 2, 5}};
+
+static void put_item(out_stream *s, const vstate *st, const arr *a, uint64_t i)
+{
+    vcell c;
+    switch (a->id) {
+    case A_ATTR:
+    case A_POINTS: {
+        const double *x;
+        int nc = a->ncomp;
+        if (i < s->nv)
+            x = a->id == A_POINTS ? s->xyz + 3 * i : s->attr[a->attr] + i * nc;
+        else
+            x = a->id == A_POINTS ? s->slice.xyz + 3 * (i - s->nv)
+                                  : s->slice.attr[a->attr] + (i - s->nv) * nc;
+        for (int k = 0; k < nc; k++)
+            put_num(s, st, 8, x[k], 0);
+        break;
+    }
+    case A_RULE: put_num(s, st, a->width, 0, i < s->nv ? s->vrule[i] : 255); break;
+    case A_DIM:
+    case A_KIND:
+    case A_SRC:
+    case A_TYPES:
+        cell_at(s, st, i, &c);
+        put_num(s, st, a->width, 0,
+                a->id == A_DIM ? c.dim : a->id == A_KIND ? c.kind : a->id == A_SRC ? c.src : c.type);
+        break;
+    case A_CONN:
+        cell_at(s, st, i, &c);
+        if (st->legacy)
+            put_num(s, st, 4, 0, c.n);
+        for (int k = 0; k < c.n; k++)
+            put_num(s, st, 4, 0, c.v[k]);
+        break;
+    case A_OFFS: put_num(s, st, 4, 0, (long long)conn_before(st, i + 1)); break;
+    case A_FACES: /* polyhedra only: 8 faces of 3 */
+        cell_at(s, st, st->r_poly + i, &c);
+        put_num(s, st, 4, 0, 8);
+        for (int f = 0; f < 8; f++) {
+            put_num(s, st, 4, 0, 3);
+            for (int k = 0; k < 3; k++)
+                put_num(s, st, 4, 0, c.v[OCT_FACES[f][k]]);
+        }
+        break;
+    case A_FOFFS:
+        put_num(s, st, 4, 0, i < st->r_poly ? -1 : (long long)(33 * (i - st->r_poly + 1)));
+        break;
+    }
+}
+
+/* ---- generator ---------------------------------------------------------------------------- */
+
+#define ROOM(s) ((s)->len < OUT_BUF_CAP / 2)
+
+static int produce(out_stream *s)
+{
+    vstate *st = s->fmt_state;
+    if (st->phase == 0) { /* the header is at most a few kB */
+        out_put(s, st->header, st->header_len);
+        st->phase = 1;
+        s->section = 0;
+        s->item = 0;
+        return 1;
+    }
+    while (st->phase == 1 && ROOM(s)) {
+        if (s->section == st->narr) {
+            st->phase = 2;
+            break;
+        }
+        const arr *a = &st->a[s->section];
+        if (!st->prefix_done) {
+            if (st->legacy)
+                out_printf(s, "%s", a->head);
+            else
+                out_put(s, &a->bytes, 8); /* UInt64 block size, little-endian like the data */
+            st->prefix_done = true;
+        }
+        uint64_t i = s->item;
+        for (; i < a->count && ROOM(s); i++)
+            put_item(s, st, a, i);
+        s->item = i;
+        if (i < a->count)
+            return 1;
+        if (st->legacy)
+            out_put(s, "\n", 1);
+        s->section++;
+        s->item = 0;
+        st->prefix_done = false;
+    }
+    if (st->phase == 2) {
+        if (!st->legacy)
+            out_printf(s, "\n  </AppendedData>\n</VTKFile>\n");
+        st->phase = 3;
+        return 0;
+    }
+    return 1;
+}
+
+static void vfree(void *p)
+{
+    vstate *st = p;
+    if (st)
+        free(st->header);
+    free(st);
+}
+
+static arr *add_arr(vstate *st, arr_id id, int attr, int ncomp, int width, uint64_t count)
+{
+    arr *a = &st->a[st->narr++];
+    memset(a, 0, sizeof *a);
+    a->id = id;
+    a->attr = attr;
+    a->ncomp = ncomp;
+    a->width = width;
+    a->count = count;
+    a->bytes = count * (uint64_t)ncomp * (uint64_t)width;
+    return a;
+}
+
+static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
+{
+    st->legacy = legacy;
+    bool poly = !legacy && s->rq.octahedra_as_polyhedra;
+    uint64_t ns = s->slice.ntri;
+    st->r_pt = 0;
+    st->r_cu = st->r_pt + s->ncells[SD_CELL_POINT];
+    st->r_tr = st->r_cu + s->ncells[SD_CELL_CURVE];
+    st->r_sl = st->r_tr + s->ncells[SD_CELL_TRIANGLE];
+    st->r_tet = st->r_sl + ns;
+    st->r_oct = st->r_tet + s->ncells[SD_CELL_TETRA];
+    st->r_poly = st->r_oct + (poly ? 0 : 4ull * s->ncells[SD_CELL_OCTA]);
+    st->r_end = st->r_poly + (poly ? s->ncells[SD_CELL_OCTA] : 0);
+    st->ncell = st->r_end;
+    st->nconn = conn_before(st, st->ncell);
+    st->npts = s->nv + 3 * ns;
+    if (st->ncell > INT32_MAX || st->nconn + st->ncell > INT32_MAX || st->npts > INT32_MAX) {
+        err->code = SD_ERR_LIMIT;
+        snprintf(err->message, sizeof err->message, "the level is too large for 32-bit VTK ids");
+        return SD_ERR_LIMIT;
+    }
+    arr *a;
+    /* legacy order: POINTS, CELLS, CELL_TYPES, CELL_DATA, POINT_DATA; XML: point data, cell
+     * data, points, cells (the order of the XML elements) */
+    if (legacy) {
+        a = add_arr(st, A_POINTS, 0, 3, 8, st->npts);
+        snprintf(a->head, sizeof a->head, "POINTS %llu double\n", (unsigned long long)st->npts);
+        a = add_arr(st, A_CONN, 0, 1, 4, st->ncell);
+        a->bytes = 4 * (st->nconn + st->ncell);
+        snprintf(a->head, sizeof a->head, "CELLS %llu %llu\n", (unsigned long long)st->ncell,
+                 (unsigned long long)(st->nconn + st->ncell));
+        a = add_arr(st, A_TYPES, 0, 1, 4, st->ncell);
+        snprintf(a->head, sizeof a->head, "CELL_TYPES %llu\n", (unsigned long long)st->ncell);
+        static const char *const cnames[] = {"dimension", "kind", "source_cell"};
+        for (int k = 0; k < 3; k++) {
+            a = add_arr(st, k == 0 ? A_DIM : k == 1 ? A_KIND : A_SRC, 0, 1, 4, st->ncell);
+            snprintf(a->head, sizeof a->head, "%s%s 1 %llu int\n",
+                     k ? "" : "CELL_DATA ", cnames[k], (unsigned long long)st->ncell);
+            if (!k) {
+                char tmp[192];
+                snprintf(tmp, sizeof tmp, "CELL_DATA %llu\nFIELD FieldData 3\n%s",
+                         (unsigned long long)st->ncell, a->head + strlen("CELL_DATA "));
+                memcpy(a->head, tmp, sizeof tmp);
+            }
+        }
+        for (int i = 0; i <= s->rq.nattrs; i++) {
+            bool rule = i == s->rq.nattrs;
+            a = rule ? add_arr(st, A_RULE, 0, 1, 4, st->npts)
+                     : add_arr(st, A_ATTR, i, s->rq.attrs[i].ncomp, 8, st->npts);
+            char body[128];
+            snprintf(body, sizeof body, "%s %d %llu %s\n", rule ? "rule" : s->rq.attrs[i].name,
+                     a->ncomp, (unsigned long long)st->npts, rule ? "int" : "double");
+            if (i == 0)
+                snprintf(a->head, sizeof a->head, "POINT_DATA %llu\nFIELD FieldData %d\n%s",
+                         (unsigned long long)st->npts, s->rq.nattrs + 1, body);
+            else
+                snprintf(a->head, sizeof a->head, "%s", body);
+        }
+    } else {
+        for (int i = 0; i < s->rq.nattrs; i++)
+            add_arr(st, A_ATTR, i, s->rq.attrs[i].ncomp, 8, st->npts);
+        add_arr(st, A_RULE, 0, 1, 1, st->npts);
+        add_arr(st, A_DIM, 0, 1, 1, st->ncell);
+        add_arr(st, A_KIND, 0, 1, 1, st->ncell);
+        add_arr(st, A_SRC, 0, 1, 4, st->ncell);
+        add_arr(st, A_POINTS, 0, 3, 8, st->npts);
+        a = add_arr(st, A_CONN, 0, 1, 4, st->ncell);
+        a->bytes = 4 * st->nconn;
+        add_arr(st, A_OFFS, 0, 1, 4, st->ncell);
+        add_arr(st, A_TYPES, 0, 1, 1, st->ncell);
+        if (poly) {
+            add_arr(st, A_FACES, 0, 1, 4, st->r_end - st->r_poly)->bytes =
+                4ull * 33 * (st->r_end - st->r_poly);
+            add_arr(st, A_FOFFS, 0, 1, 4, st->ncell);
+        }
+    }
+    return 0;
+}
+
+static int build_header(out_stream *s, vstate *st, sd_error *err)
+{
+    char *text = NULL;
+    size_t n = 0;
+    FILE *f = open_memstream(&text, &n);
+    if (!f) {
+        err->code = SD_ERR_NOMEM;
+        snprintf(err->message, sizeof err->message, "out of memory");
+        return SD_ERR_NOMEM;
+    }
+    if (st->legacy) {
+        fprintf(f, "# vtk DataFile Version 3.0\nsubdivd level %d version %llu\nBINARY\n"
+                   "DATASET UNSTRUCTURED_GRID\n", s->rq.level, (unsigned long long)s->rq.version);
+    } else {
+        static const char *const tname[] = {[1] = "UInt8", [4] = "Int32", [8] = "Float64"};
+        uint64_t off = 0;
+        int i = 0;
+        fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" "
+                   "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <UnstructuredGrid>\n"
+                   "    <Piece NumberOfPoints=\"%llu\" NumberOfCells=\"%llu\">\n      <PointData>\n",
+                (unsigned long long)st->npts, (unsigned long long)st->ncell);
+#define DA(name, extra)                                                                            \
+    do {                                                                                           \
+        const arr *a = &st->a[i++];                                                                \
+        fprintf(f, "        <DataArray type=\"%s\" Name=\"%s\"%s format=\"appended\" "             \
+                   "offset=\"%llu\"/>\n", tname[a->width], name, extra, (unsigned long long)off);  \
+        off += 8 + a->bytes;                                                                       \
+    } while (0)
+        for (int k = 0; k < s->rq.nattrs; k++) {
+            char nc[48];
+            snprintf(nc, sizeof nc, " NumberOfComponents=\"%d\"", s->rq.attrs[k].ncomp);
+            DA(s->rq.attrs[k].name, nc);
+        }
+        DA("rule", "");
+        fprintf(f, "      </PointData>\n      <CellData>\n");
+        DA("dimension", "");
+        DA("kind", "");
+        DA("source_cell", "");
+        fprintf(f, "      </CellData>\n      <Points>\n");
+        DA("Points", " NumberOfComponents=\"3\"");
+        fprintf(f, "      </Points>\n      <Cells>\n");
+        DA("connectivity", "");
+        DA("offsets", "");
+        DA("types", "");
+        if (i < st->narr) {
+            DA("faces", "");
+            DA("faceoffsets", "");
+        }
+#undef DA
+        fprintf(f, "      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n"
+                   "  <AppendedData encoding=\"raw\">\n   _");
+    }
+    if (fclose(f)) {
+        free(text);
+        err->code = SD_ERR_NOMEM;
+        snprintf(err->message, sizeof err->message, "out of memory");
+        return SD_ERR_NOMEM;
+    }
+    st->header = text;
+    st->header_len = n;
+    uint64_t total = n;
+    for (int i = 0; i < st->narr; i++)
+        total += st->legacy ? strlen(st->a[i].head) + st->a[i].bytes + 1 : 8 + st->a[i].bytes;
+    if (!st->legacy)
+        total += strlen("\n  </AppendedData>\n</VTKFile>\n");
+    s->size = total;
+    return 0;
+}
+
+static int init(out_stream *s, bool legacy, sd_error *err)
+{
+    vstate *st = calloc(1, sizeof *st);
+    if (!st) {
+        err->code = SD_ERR_NOMEM;
+        snprintf(err->message, sizeof err->message, "out of memory");
+        return SD_ERR_NOMEM;
+    }
+    s->fmt_state = st;
+    s->fmt_free = vfree;
+    int rc = setup(s, st, legacy, err);
+    if (!rc)
+        rc = build_header(s, st, err);
+    s->produce = produce;
+    return rc;
+}
+
+int out_vtu_init(out_stream *s, sd_error *err) { return init(s, false, err); }
+int out_vtk_init(out_stream *s, sd_error *err) { return init(s, true, err); }
