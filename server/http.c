@@ -78,6 +78,17 @@ void log_line(const server *srv, int level, const char *fmt, ...)
     fprintf(stderr, "%s.%03ldZ %s %s\n", ts, now.tv_nsec / 1000000, names[level], msg);
 }
 
+/* The method as a static string (MHD's own buffer does not outlive the request; metrics keep
+ * the pointer). */
+static const char *intern_method(const char *m)
+{
+    static const char *const known[] = {"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"};
+    for (size_t i = 0; i < sizeof known / sizeof *known; i++)
+        if (!strcmp(known[i], m))
+            return known[i];
+    return "OTHER";
+}
+
 static void req_unref(req *r)
 {
     if (atomic_fetch_sub(&r->refs, 1) != 1)
@@ -833,7 +844,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
         atomic_init(&r->refs, 1);
         r->srv = srv;
         r->conn = conn;
-        r->method = method;
+        r->method = intern_method(method);
         r->t0 = mono_now();
         r->route_name = "unknown";
         snprintf(r->path, sizeof r->path, "%s", url);
