@@ -641,8 +641,11 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
     rq.version = version;
     sd_error e = {0};
     pthread_mutex_lock(&m->lock);
-    if (api_model_level_locked(m, level, &e))
+    if (api_model_level_locked(m, level, &e)) {
+        if (*fmt == OUT_GLB || *fmt == OUT_GLTF)
+            rq.geometry = api_model_geometry_locked(m, level);
         *out = out_open(&rq, *fmt, &e);
+    }
     pthread_mutex_unlock(&m->lock);
     if (!*out)
         return e.code == SD_ERR_ARG ? api_fail(p, 422, "invalid-argument", "%s", e.message)
@@ -670,6 +673,8 @@ json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_prob
         rq.level = level;
         rq.parts = OUT_PART_ALL;
         rq.colormap_attr = -1;
+        if (f == OUT_GLB || f == OUT_GLTF)
+            rq.geometry = api_model_geometry_locked(m, level);
         out_stream *s = out_open(&rq, (out_format)f, &e);
         if (s && out_size(s) != UINT64_MAX)
             json_object_set_new(bytes, out_format_name((out_format)f), json_integer((json_int_t)out_size(s)));

@@ -5,6 +5,7 @@
 #include <string.h>
 #include <time.h>
 #include <jansson.h>
+#include "out.h"
 
 api_input *api_input_new(void)
 {
@@ -28,8 +29,23 @@ void api_input_unref(api_input *in)
 
 static void publish(api_model *m)
 {
+    size_t geo = 0;
+    for (int l = 0; l <= SD_MAX_LEVEL; l++)
+        geo += m->geometry[l] ? m->geometry[l]->bytes : 0;
     atomic_store(&m->levels_cached, m->c ? sd_complex_levels_computed(m->c) : 0);
-    atomic_store(&m->memory_bytes, m->c ? sd_complex_memory(m->c) : 0);
+    atomic_store(&m->memory_bytes, (m->c ? sd_complex_memory(m->c) : 0) + geo);
+}
+
+const struct out_geometry *api_model_geometry_locked(api_model *m, int level)
+{
+    if (!m->geometry[level]) {
+        sd_error e;
+        const sd_level *lv = sd_complex_level(m->c, level, &e);
+        if (lv)
+            m->geometry[level] = out_geometry_compute(lv);
+        publish(m);
+    }
+    return m->geometry[level];
 }
 
 api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_bytes, sd_error *err)
@@ -79,6 +95,8 @@ void api_model_unref(api_model *m)
     if (!m || atomic_fetch_sub(&m->refs, 1) != 1)
         return;
     json_decref(m->summary);
+    for (int l = 0; l <= SD_MAX_LEVEL; l++)
+        out_geometry_free(m->geometry[l]);
     sd_complex_free(m->c);
     api_input_unref(m->in);
     pthread_mutex_destroy(&m->lock);

@@ -54,6 +54,7 @@ typedef struct api_model {
     int channel[API_MAX_ATTRIBUTES]; /* core channel id of each attribute */
     double seconds[SD_MAX_LEVEL + 1]; /* time spent computing each level (under lock) */
     struct json_t *summary;   /* level-0 summary (API.md PUT /complex), read-only once built */
+    struct out_geometry *geometry[SD_MAX_LEVEL + 1]; /* glTF geometry per level, built under lock */
     /* published figures, readable without the lock */
     atomic_int levels_cached;
     atomic_size_t memory_bytes;
@@ -71,5 +72,9 @@ void api_model_unref(api_model *m);
 /* Compute level L (under the model's lock) and record the time; NULL + err on failure. The
  * caller holds m->lock. */
 const sd_level *api_model_level_locked(api_model *m, int level, sd_error *err);
+
+/* The glTF geometry (solid boundary, normals) of a computed level, built once (NULL if out of
+ * memory — writers then compute their own). The caller holds m->lock. */
+const struct out_geometry *api_model_geometry_locked(api_model *m, int level);
 
 #endif

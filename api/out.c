@@ -243,8 +243,8 @@ void out_close(out_stream *s)
     if (s->fmt_free)
         s->fmt_free(s->fmt_state);
     free(s->buf);
-    free(s->bnd);
-    free(s->normals);
+    free(s->own_bnd);
+    free(s->own_normals);
     free(s->slice.xyz);
     free(s->slice.cell);
     free(s->slice.kind);
@@ -299,8 +299,7 @@ out_stream *out_open(const out_request *rq, out_format f, sd_error *err)
     s->fmt = f;
     sd_error e = {0};
     s->lv = sd_complex_level(rq->complex, rq->level, &e);
-    s->vrule = s->lv ? sd_complex_vertex_rules(rq->complex, rq->level, &e) : NULL;
-    if (!s->lv || !s->vrule) {
+    if (!s->lv) {
         if (err)
             *err = e;
         out_close(s);
@@ -328,12 +327,17 @@ out_stream *out_open(const out_request *rq, out_format f, sd_error *err)
     switch (f) {
     case OUT_GLB:
     case OUT_GLTF:
-        if (solids) {
+        if (solids && rq->geometry) { /* precomputed with every part: reuse what applies */
+            s->nbnd = rq->geometry->nbnd;
+            s->bnd = rq->geometry->bnd;
+            if (s->rq.parts == OUT_PART_ALL)
+                s->normals = rq->geometry->normals;
+        } else if (solids) {
             s->nbnd = sd_level_solid_boundary(s->lv, NULL);
-            s->bnd = malloc(((size_t)s->nbnd * 3 + 1) * sizeof *s->bnd);
+            s->bnd = s->own_bnd = malloc(((size_t)s->nbnd * 3 + 1) * sizeof *s->bnd);
             if (!s->bnd)
                 return fail(s, err, SD_ERR_NOMEM, "out of memory");
-            sd_level_solid_boundary(s->lv, s->bnd);
+            sd_level_solid_boundary(s->lv, s->own_bnd);
         }
         rc = out_gltf_init(s, err);
         break;

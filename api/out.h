@@ -59,7 +59,22 @@ typedef struct out_request {
     int colormap_attr;       /* index into attrs of the attribute coloured into COLOR_0, or -1 */
     double colormap_min, colormap_max;
     int octahedra_as_polyhedra; /* VTU/VTK: octahedra as VTK_POLYHEDRON (42) instead of 4 tets */
+    /* Optional, borrowed: geometry computed earlier for this level with all parts (see
+     * out_geometry_compute), so that a cached level streams without recomputing it. */
+    const struct out_geometry *geometry;
 } out_request;
+
+/* The solid boundary and vertex normals of a level with every part shown — what glTF needs
+ * before its first byte. Computing it once per level and passing it in out_request.geometry
+ * makes later glTF responses of that level stream at once. */
+typedef struct out_geometry {
+    uint32_t nbnd;
+    uint32_t *bnd;      /* 3 per boundary triangle, outward */
+    float *normals;     /* 3 per vertex */
+    size_t bytes;
+} out_geometry;
+out_geometry *out_geometry_compute(const sd_level *lv);
+void out_geometry_free(out_geometry *g);
 
 typedef struct out_stream out_stream;
 

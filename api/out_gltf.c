@@ -55,34 +55,38 @@ static const char B64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0
 
 /* ---- normals ------------------------------------------------------------------------------ */
 
-static void add_normal(double *acc, const double *x, const uint32_t *t)
+static void add_normal(float *acc, const double *x, const uint32_t *t)
 {
     const double *a = x + 3 * (size_t)t[0], *b = x + 3 * (size_t)t[1], *c = x + 3 * (size_t)t[2];
     double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-    double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+    float n[3] = {(float)(u[1] * v[2] - u[2] * v[1]), (float)(u[2] * v[0] - u[0] * v[2]),
+                  (float)(u[0] * v[1] - u[1] * v[0])};
     for (int k = 0; k < 3; k++)
         for (int j = 0; j < 3; j++)
             acc[3 * (size_t)t[k] + j] += n[j];
 }
 
-static bool compute_normals(out_stream *s)
+/* Area-weighted vertex normals, accumulated in place (float is plenty for a unit direction). */
+float *out_normals(const sd_level *lv, uint32_t ntr, const uint32_t *bnd, uint32_t nbnd)
 {
-    double *acc = calloc((size_t)s->nv * 3, sizeof *acc);
-    s->normals = malloc((size_t)s->nv * 3 * sizeof *s->normals);
-    if (!acc || !s->normals) {
-        free(acc);
-        return false;
-    }
+    uint32_t nv = sd_level_num_vertices(lv);
+    const double *xyz = sd_level_channel(lv, 0, NULL);
+    float *acc = calloc((size_t)nv * 3 + 1, sizeof *acc);
+    if (!acc)
+        return NULL;
     uint32_t v[6];
-    for (uint32_t i = 0; i < s->ncells[SD_CELL_TRIANGLE]; i++) {
-        sd_level_cell(s->lv, SD_CELL_TRIANGLE, i, v);
-        add_normal(acc, s->xyz, v);
+    for (uint32_t i = 0; i < ntr; i++) {
+        sd_level_cell(lv, SD_CELL_TRIANGLE, i, v);
+        add_normal(acc, xyz, v);
     }
-    for (uint32_t i = 0; i < s->nbnd; i++)
-        add_normal(acc, s->xyz, s->bnd + 3 * (size_t)i);
-    for (uint32_t i = 0; i < s->nv; i++) {
-        double *n = acc + 3 * (size_t)i;
-        float f[3] = {(float)n[0], (float)n[1], (float)n[2]};
+    for (uint32_t i = 0; i < nbnd; i++)
+        add_normal(acc, xyz, bnd + 3 * (size_t)i);
+    for (uint32_t i = 0; i < nv; i++) {
+        float *f = acc + 3 * (size_t)i;
+        if (f[0] == 0 && f[1] == 0 && f[2] == 0) { /* on no triangle (most solid vertices) */
+            f[2] = 1;
+            continue;
+        }
         double len = sqrt((double)f[0] * f[0] + (double)f[1] * f[1] + (double)f[2] * f[2]);
         if (!(len > 1e-30) || !isfinite(len)) {
             f[0] = f[1] = 0;
@@ -90,10 +94,36 @@ static bool compute_normals(out_stream *s)
         } else
             for (int k = 0; k < 3; k++)
                 f[k] = (float)(f[k] / len);
-        memcpy(s->normals + 3 * (size_t)i, f, sizeof f);
     }
-    free(acc);
-    return true;
+    return acc;
+}
+
+out_geometry *out_geometry_compute(const sd_level *lv)
+{
+    out_geometry *g = calloc(1, sizeof *g);
+    if (!g)
+        return NULL;
+    g->nbnd = sd_level_solid_boundary(lv, NULL);
+    g->bnd = malloc(((size_t)g->nbnd * 3 + 1) * sizeof *g->bnd);
+    if (g->bnd) {
+        sd_level_solid_boundary(lv, g->bnd);
+        g->normals = out_normals(lv, sd_level_num_cells(lv, SD_CELL_TRIANGLE), g->bnd, g->nbnd);
+    }
+    if (!g->bnd || !g->normals) {
+        out_geometry_free(g);
+        return NULL;
+    }
+    g->bytes = sizeof *g + (size_t)g->nbnd * 12 + (size_t)sd_level_num_vertices(lv) * 12;
+    return g;
+}
+
+void out_geometry_free(out_geometry *g)
+{
+    if (!g)
+        return;
+    free(g->bnd);
+    free(g->normals);
+    free(g);
 }
 
 /* ---- binary ------------------------------------------------------------------------------- */
@@ -128,7 +158,7 @@ static void put_item(out_stream *s, gstate *g, const gsec *c, uint64_t i)
             put_f(s, s->attr[c->attr][i * nc + k]);
         break;
     }
-    case G_RULE: put_f(s, s->vrule[i]); break;
+    case G_RULE: put_f(s, sd_level_vertex_rule(s->lv, (uint32_t)i)); break;
     case G_COLOR: {
         int a = s->rq.colormap_attr, nc = s->rq.attrs[a].ncomp;
         double t = (s->attr[a][i * nc] - s->rq.colormap_min) / (s->rq.colormap_max - s->rq.colormap_min);
@@ -160,12 +190,52 @@ static void put_item(out_stream *s, gstate *g, const gsec *c, uint64_t i)
 
 #define ROOM(s) ((s)->len < OUT_BUF_CAP / 3)
 
+/* Bulk conversion of items [i, end) of the float sections that dominate the output: one tight
+ * loop instead of a call per item. Returns the next item. */
+static uint64_t put_bulk(out_stream *s, const gsec *c, uint64_t i, uint64_t end)
+{
+    float *dst = (float *)(void *)(s->buf + s->len); /* s->len is a multiple of 4 here */
+    size_t k = 0;
+    switch (c->id) {
+    case G_POS:
+        for (const double *x = s->xyz + 3 * i; i < end; i++, x += 3) {
+            dst[k++] = (float)x[0];
+            dst[k++] = (float)x[1];
+            dst[k++] = (float)x[2];
+        }
+        break;
+    case G_NRM:
+        memcpy(dst, s->normals + 3 * i, (end - i) * 12);
+        k = 3 * (end - i);
+        i = end;
+        break;
+    case G_RULE:
+        for (; i < end; i++)
+            dst[k++] = (float)sd_level_vertex_rule(s->lv, (uint32_t)i);
+        break;
+    default: {
+        int nc = s->rq.attrs[c->attr].ncomp;
+        for (const double *x = s->attr[c->attr] + i * nc; i < end; i++, x += nc)
+            for (int j = 0; j < c->ncomp; j++)
+                dst[k++] = (float)x[j];
+        break;
+    }
+    }
+    s->len += k * 4;
+    return i;
+}
+
 /* Binary bytes into s->buf while there is room; returns 0 when the binary part is complete. */
 static int produce_bin(out_stream *s, gstate *g)
 {
     while (ROOM(s) && s->section < g->nsec) {
         const gsec *c = &g->sec[s->section];
         uint64_t i = s->item;
+        if ((c->id == G_POS || c->id == G_NRM || c->id == G_RULE || c->id == G_ATTR) &&
+            s->len % 4 == 0) {
+            uint64_t fit = (OUT_BUF_CAP / 3 - s->len) / ((uint64_t)c->ncomp * 4) + 1;
+            i = put_bulk(s, c, i, c->count - i < fit ? c->count : i + fit);
+        }
         for (; i < c->count && ROOM(s); i++)
             put_item(s, g, c, i);
         s->item = i;
@@ -297,8 +367,11 @@ int out_gltf_init(out_stream *s, sd_error *err)
         return nomem(err);
     uint32_t ntr = s->ncells[SD_CELL_TRIANGLE], nst = s->slice.ntri;
     bool tris = ntr || s->nbnd;
-    if (tris && !compute_normals(s))
-        return nomem(err);
+    if (tris && !s->normals) {
+        if (!(s->own_normals = out_normals(s->lv, ntr, s->bnd, s->nbnd)))
+            return nomem(err);
+        s->normals = s->own_normals;
+    }
     int iw = s->nv <= 65535 ? 2 : 4;
     gsec *pos = add_sec(g, G_POS, 0, 3, 4, s->nv), *nrm = NULL, *col = NULL, *rule;
     if (tris)

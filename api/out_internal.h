@@ -30,12 +30,13 @@ struct out_stream {
     const sd_level *lv;
     uint32_t nv;
     const double *xyz;
-    const uint8_t *vrule;
     const double *attr[OUT_MAX_ATTRS];
     uint32_t ncells[5];        /* per sd_cell_kind, after the parts filter */
     uint32_t nbnd;             /* solid boundary triangles */
-    uint32_t *bnd;             /* 3 per triangle */
-    float *normals;            /* glTF: 3 per vertex */
+    const uint32_t *bnd;       /* 3 per triangle (owned unless borrowed from rq.geometry) */
+    const float *normals;      /* glTF: 3 per vertex (idem) */
+    uint32_t *own_bnd;
+    float *own_normals;
     out_slice slice;
     uint64_t size;             /* total bytes, or UINT64_MAX */
     /* generator */
@@ -66,5 +67,8 @@ int out_json_init(out_stream *s, sd_error *err);
 int out_vtu_init(out_stream *s, sd_error *err);
 int out_vtk_init(out_stream *s, sd_error *err);
 int out_gltf_init(out_stream *s, sd_error *err);
+/* Area-weighted unit vertex normals of the level's surface triangles (first ntr) and the given
+ * boundary triangles; (0,0,1) where a vertex has none. NULL when out of memory. */
+float *out_normals(const sd_level *lv, uint32_t ntr, const uint32_t *bnd, uint32_t nbnd);
 
 #endif

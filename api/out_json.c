@@ -70,7 +70,7 @@ static void item(out_stream *s, const section *c, uint64_t i)
         nc == 1 ? num(s, *x) : vec(s, x, nc);
         break;
     }
-    case K_RULE: out_printf(s, "\"%s\"", sd_rule_name((sd_rule)s->vrule[i])); break;
+    case K_RULE: out_printf(s, "\"%s\"", sd_rule_name(sd_level_vertex_rule(s->lv, (uint32_t)i))); break;
     case K_VOF:
     case K_EOF:
     case K_COF: {

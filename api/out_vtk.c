@@ -113,6 +113,12 @@ static uint64_t conn_before(const vstate *st, uint64_t c)
 
 static void put_num(out_stream *s, const vstate *st, int width, double x, long long i)
 {
+    if (!st->legacy && width == 4) { /* the common case: a little-endian Int32 */
+        int32_t v = (int32_t)i;
+        memcpy(s->buf + s->len, &v, 4);
+        s->len += 4;
+        return;
+    }
     unsigned char b[8];
     if (width == 8)
         memcpy(b, &x, 8);
@@ -150,7 +156,7 @@ static void put_item(out_stream *s, const vstate *st, const arr *a, uint64_t i)
             put_num(s, st, 8, x[k], 0);
         break;
     }
-    case A_RULE: put_num(s, st, a->width, 0, i < s->nv ? s->vrule[i] : 255); break;
+    case A_RULE: put_num(s, st, a->width, 0, i < s->nv ? sd_level_vertex_rule(s->lv, (uint32_t)i) : 255); break;
     case A_DIM:
     case A_KIND:
     case A_SRC:

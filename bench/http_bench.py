@@ -92,6 +92,10 @@ def stream_rate(port, path, headers, reps=3):
 class Quiet(SimpleHTTPRequestHandler):
     protocol_version = "HTTP/1.1"
 
+    def setup(self):
+        super().setup()  # no Nagle delay between the header and body writes
+        self.connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
     def log_message(self, *a):
         pass
 
@@ -134,6 +138,8 @@ def main():
         print(f"  http.server  median {pmed:.3f} ms  (same bytes from a file)")
         print(f"  ratio subdivd/http.server = {med / pmed:.2f}   goal: median <= 1 ms")
 
+        conn.close()
+        conn = http.client.HTTPConnection("127.0.0.1", port)
         st, body = call(conn, "POST", "/v1/sessions", {})
         big = json.loads(body)
         bbase = f"/v1/sessions/{big['id']}"

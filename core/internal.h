@@ -141,6 +141,8 @@ sd_result sd_split(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
 /* rules.c */
 sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
 sd_result sd_ensure_rules(sd_complex *cx, int level, sd_error *err);
+/* The rule of vertex v from the level's classification alone (no stencils needed). */
+uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v);
 /* analysis.c helpers */
 uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b);
 

@@ -341,29 +341,31 @@ sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *
     return SD_OK;
 }
 
-const uint8_t *sd_complex_vertex_rules(sd_complex *c, int level, sd_error *err)
+sd_rule sd_level_vertex_rule(const sd_level *lv, uint32_t i)
 {
-    sd_level *lv = NULL;
-    return class_of(c, level, err, &lv) ? NULL : lv->vrule;
+    return (sd_rule)sd_vertex_rule(&lv->t, i);
 }
 
 uint32_t sd_level_solid_boundary(const sd_level *lv, uint32_t *tri)
 {
     const sd_topo *t = &lv->t;
     uint32_t n = 0;
+    if (!tri) { /* each such face belongs to exactly one cell: count the flagged faces */
+        for (uint32_t f = 0; f < t->nf; f++)
+            n += (t->fflag[f] & FF_BND3) != 0;
+        return n;
+    }
     for (uint32_t c = 0; c < t->ntet; c++)
         for (int i = 0; i < 4; i++)
             if (t->fflag[t->tet_f[c][i]] & FF_BND3) {
-                if (tri)
-                    for (int k = 0; k < 3; k++)
+                for (int k = 0; k < 3; k++)
                         tri[3 * n + k] = t->tet[c][SD_TET_F[i][k]];
                 n++;
             }
     for (uint32_t c = 0; c < t->noct; c++)
         for (int i = 0; i < 8; i++)
             if (t->fflag[t->oct_f[c][i]] & FF_BND3) {
-                if (tri)
-                    for (int k = 0; k < 3; k++)
+                for (int k = 0; k < 3; k++)
                         tri[3 * n + k] = t->oct[c][SD_OCT_F[i][k]];
                 n++;
             }

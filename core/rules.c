@@ -33,7 +33,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-static uint8_t vertex_rule(const sd_topo *t, uint32_t v)
+uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v)
 {
     uint8_t fam = t->vfam[v], nm = t->vnm[v], fl = t->vflag[v];
     if (nm)
@@ -415,7 +415,7 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         goto nomem;
     uint8_t *vr = lv->vrule, *er = lv->erule;
     for (uint32_t v = 0; v < nv; v++)
-        vr[v] = vertex_rule(t, v);
+        vr[v] = sd_vertex_rule(t, v);
     bool any_g2e = false, any_opp = false;
     for (uint32_t e = 0; e < ne; e++) {
         er[e] = edge_rule(t, e);

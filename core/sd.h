@@ -158,9 +158,9 @@ sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *
 /* Edge id of the edge a-b at a level, or UINT32_MAX. */
 uint32_t sd_level_find_edge(const sd_level *lv, uint32_t a, uint32_t b);
 
-/* The rule (sd_rule) of every vertex of a level, nv entries (builds the level's rules if
- * needed). Borrowed; NULL + err on failure. */
-const uint8_t *sd_complex_vertex_rules(sd_complex *c, int level, sd_error *err);
+/* The rule vertex i of a level follows, from its classification alone (cheap: no stencils are
+ * built, unlike sd_complex_vertex_class). */
+sd_rule sd_level_vertex_rule(const sd_level *lv, uint32_t i);
 
 /* The boundary surface of the solids of a level: triangles that are a face of exactly one
  * tetrahedron or octahedron, oriented outward. Returns their number and, if `tri` is not NULL,

@@ -550,7 +550,7 @@ static void h_get_level(req *r)
     atomic_fetch_add(&r->refs, 1);
     uint64_t size = out_size(os);
     struct MHD_Response *resp = MHD_create_response_from_callback(
-        size == UINT64_MAX ? MHD_SIZE_UNKNOWN : size, 64 * 1024, stream_read, sc, stream_free);
+        size == UINT64_MAX ? MHD_SIZE_UNKNOWN : size, 256 * 1024, stream_read, sc, stream_free);
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, out_content_type(fmt));
     char disp[96];
     snprintf(disp, sizeof disp, "%s; filename=\"level-%d%s\"",
