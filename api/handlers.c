@@ -37,8 +37,9 @@ static int parse_vertices(json_t *v, const api_limits *lim, api_input *in, api_p
         for (int k = 0; k < 3; k++) {
             json_t *c = json_array_get(x, k);
             if (!json_is_number(c)) {
-                api_ptr_index(ptr, sizeof ptr, ptr, k);
-                return api_fail_at(p, 400, "wrong-type", ptr, "a coordinate must be a number");
+                char at[96];
+                api_ptr_index(at, sizeof at, ptr, k);
+                return api_fail_at(p, 400, "wrong-type", at, "a coordinate must be a number");
             }
             in->xyz[3 * i + k] = json_number_value(c);
         }
