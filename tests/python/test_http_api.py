@@ -435,6 +435,10 @@ def test_offline_refine_same_bytes(daemon, tmp_path, fmt):
     http = s.level(2, format=fmt, slice="0,0,1,0.3", colormap="t:0:7")
     assert http.status_code == 200
     assert out.read_bytes() == http.content
+    if fmt in ("glb", "gltf"):
+        r = subprocess.run(["node", str(REPO / "tests" / "tools" / "gltf_validate.js"), str(out)],
+                           capture_output=True, text=True)
+        assert r.returncode == 0, r.stdout
 
 
 def test_offline_refine_rules(tmp_path):

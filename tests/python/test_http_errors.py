@@ -193,6 +193,16 @@ def test_refused_change_keeps_state(daemon):
     assert s.req("GET").json()["version"] == 1
 
 
+def test_needs_a_complex_first(daemon):
+    s = Session(daemon)
+    check_problem(s.req("PUT", "/tags", json={"singular": [[0]]}), 409, "/singular")
+    check_problem(s.req("PUT", "/rules", json={"overrides": [{"simplex": [0], "rule": "G1"}]}), 409, "/overrides")
+    check_problem(s.req("GET", "/complex"), 409, None)
+    check_problem(s.level(1), 409, None)
+    check_problem(s.req("GET", "/levels/1/stats"), 409, None)
+    assert s.req("PUT", "/rules", json={"solid_scheme": "averaged"}).status_code == 200
+
+
 def test_auth_errors(daemon):
     s, other = Session(daemon), Session(daemon)
     url = s.base + "/complex"

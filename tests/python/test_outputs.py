@@ -22,6 +22,10 @@ def refine(tmp_path, body, level, name, *opts):
     out = tmp_path / name
     subprocess.run([str(SUBDIVD), "refine", str(inp), "--level", str(level), *opts, "-o", str(out)],
                    check=True, capture_output=True)
+    if out.suffix in (".glb", ".gltf"):  # every glTF the tests make must validate cleanly
+        r = subprocess.run(["node", str(REPO / "tests" / "tools" / "gltf_validate.js"), str(out)],
+                           capture_output=True, text=True)
+        assert r.returncode == 0, r.stdout + r.stderr
     return out
 
 
