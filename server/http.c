@@ -485,27 +485,40 @@ static int if_none_match_hit(req *r, uint64_t version)
     return h && (strstr(h, want) || !strcmp(h, "*"));
 }
 
-/* Compute level L of m inside a compute slot unless it is cached already. */
-static int level_ready(req *r, api_model *m, int level, api_problem *p)
+/* The query check and level of a /levels/{L} request; -1 when a problem was answered. */
+static int level_of(req *r, const char *const *keys)
 {
-    (void)p;
+    if (query_only(r, keys))
+        return -1;
+    api_problem p = {0};
+    int level = api_parse_level(r->seg_level, &p);
+    if (level < 0)
+        reply_problem(r, &p);
+    return level;
+}
+
+/* Take a compute slot when level L of m still has to be computed (*slot says whether one was
+ * taken; give it back with give_slot). Non-zero with a problem when none came free in time. */
+static int slot_for_level(req *r, api_model *m, int level, int *slot, api_problem *p)
+{
+    *slot = 0;
     if (!m->c || atomic_load(&m->levels_cached) > level)
         return 0;
-    return take_slot(r, p);
+    if (take_slot(r, p))
+        return -1;
+    *slot = 1;
+    atomic_store(&r->s->busy_level, level);
+    return 0;
 }
 
 static void h_get_level(req *r)
 {
     static const char *const keys[] = {"format", "parts", "slice", "attributes", "colormap",
                                        "octahedra", NULL};
-    if (query_only(r, keys))
+    int level = level_of(r, keys);
+    if (level < 0)
         return;
     api_problem p = {0};
-    int level = api_parse_level(r->seg_level, &p);
-    if (level < 0) {
-        reply_problem(r, &p);
-        return;
-    }
     uint64_t version;
     api_model *m = session_model(r->s, &version);
     if (m->c && if_none_match_hit(r, version)) {
@@ -521,13 +534,7 @@ static void h_get_level(req *r)
 #undef Q
     out_stream *os = NULL;
     out_format fmt;
-    int slot = 0, rc = 0;
-    if (m->c && atomic_load(&m->levels_cached) <= level) {
-        rc = level_ready(r, m, level, &p);
-        slot = !rc;
-        if (slot)
-            atomic_store(&r->s->busy_level, level);
-    }
+    int slot, rc = slot_for_level(r, m, level, &slot, &p);
     if (!rc)
         rc = api_level_open(m, level, &q, &r->srv->cfg.limits, version, &os, &fmt, &p);
     if (slot)
@@ -564,23 +571,13 @@ static void h_get_level(req *r)
 static void h_level_stats(req *r)
 {
     static const char *const keys[] = {NULL};
-    if (query_only(r, keys))
+    int level = level_of(r, keys);
+    if (level < 0)
         return;
     api_problem p = {0};
-    int level = api_parse_level(r->seg_level, &p);
-    if (level < 0) {
-        reply_problem(r, &p);
-        return;
-    }
     uint64_t version;
     api_model *m = session_model(r->s, &version);
-    int slot = 0, rc = 0;
-    if (m->c && atomic_load(&m->levels_cached) <= level) {
-        rc = level_ready(r, m, level, &p);
-        slot = !rc;
-        if (slot)
-            atomic_store(&r->s->busy_level, level);
-    }
+    int slot, rc = slot_for_level(r, m, level, &slot, &p);
     json_t *j = rc ? NULL : api_level_stats(m, level, &r->srv->cfg.limits, &p);
     if (slot)
         give_slot(r);
@@ -772,6 +769,16 @@ static int early(req *r)
     if (r->rt->pattern[0] == '/')
         r->route_name = r->rt->pattern;
     match(r->rt->pattern, r->path, r); /* re-capture the segments of the chosen route */
+    /* MHD frames a body only by Content-Length or chunked; any other transfer coding would have
+     * it read until the client closes (RFC 9112 6.1: 501 for a coding we do not understand) */
+    const char *te0 = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
+                                                  MHD_HTTP_HEADER_TRANSFER_ENCODING);
+    if (te0 && strcasecmp(te0, "chunked")) {
+        fail(r, 501, "unsupported-transfer-encoding",
+             "Transfer-Encoding \"%.40s\" is not supported; send the body with Content-Length or "
+             "chunked", te0);
+        return 1;
+    }
     const char *cl = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
                                                  MHD_HTTP_HEADER_CONTENT_LENGTH);
     if (cl) {
@@ -816,7 +823,23 @@ static int early(req *r)
         if (!r->srv->cfg.no_auth) {
             const char *h = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
                                                         MHD_HTTP_HEADER_AUTHORIZATION);
-            const char *tok = h && !strncasecmp(h, "Bearer ", 7) ? h + 7 : NULL;
+            /* credentials = auth-scheme 1*SP token68 (RFC 9110 11.4): the scheme is
+             * case-insensitive, and trailing whitespace is not part of the field value */
+            const char *tok = NULL;
+            char tbuf[128];
+            if (h && !strncasecmp(h, "Bearer ", 7)) {
+                const char *t = h + 7;
+                while (*t == ' ')
+                    t++;
+                size_t n = strlen(t);
+                while (n && (t[n - 1] == ' ' || t[n - 1] == '\t'))
+                    n--;
+                if (n < sizeof tbuf) {
+                    memcpy(tbuf, t, n);
+                    tbuf[n] = 0;
+                    tok = tbuf;
+                }
+            }
             if (!session_token_ok(r->s, tok)) {
                 api_problem p = {0};
                 api_fail(&p, 401, "unauthorized",
