@@ -346,7 +346,7 @@ static void h_get_session(req *r)
     json_t *progress = json_null();
     int busy = atomic_load(&r->s->busy_level);
     if (busy >= 0)
-        progress = json_pack("{s:s, s:f}", "state", "computing", "seconds",
+        progress = json_pack("{s:s, s:i, s:f}", "state", "computing", "level", busy, "seconds",
                              mono_now() - atomic_load(&r->s->busy_since));
     json_t *summary = m->summary ? json_incref(m->summary) : json_object();
     json_t *j = json_pack("{s:s, s:I, s:i, s:I, s:o, s:s, s:o}", "id", r->s->id, "version",

@@ -375,6 +375,7 @@ def test_progress_is_reported():
         t.join()
         assert seen == [200]
         assert progress is not None and progress["state"] == "computing"
+        assert 0 <= progress["level"] <= 3 and progress["seconds"] >= 0
     finally:
         assert d.stop() == 0
 
