@@ -54,43 +54,41 @@ typedef struct vcell {
     int type, dim, kind, n;
     long src;
     uint32_t v[6];
-    bool slice;
-    uint64_t slice_tri;
 } vcell;
 
 static void cell_at(const out_stream *s, const vstate *st, uint64_t c, vcell *o)
 {
-    o->slice = false;
     if (c < st->r_cu) {
-        sd_level_cell(s->lv, SD_CELL_POINT, (uint32_t)(c - st->r_pt), o->v);
-        *o = (vcell){VT_VERTEX, 0, SD_CELL_POINT, 1, (long)(c - st->r_pt), {o->v[0]}, false, 0};
+        uint32_t v[6];
+        sd_level_cell(s->lv, SD_CELL_POINT, (uint32_t)(c - st->r_pt), v);
+        *o = (vcell){VT_VERTEX, 0, SD_CELL_POINT, 1, (long)(c - st->r_pt), {v[0]}};
     } else if (c < st->r_tr) {
         uint32_t v[6];
         sd_level_cell(s->lv, SD_CELL_CURVE, (uint32_t)(c - st->r_cu), v);
-        *o = (vcell){VT_LINE, 1, SD_CELL_CURVE, 2, (long)(c - st->r_cu), {v[0], v[1]}, false, 0};
+        *o = (vcell){VT_LINE, 1, SD_CELL_CURVE, 2, (long)(c - st->r_cu), {v[0], v[1]}};
     } else if (c < st->r_sl) {
         uint32_t v[6];
         sd_level_cell(s->lv, SD_CELL_TRIANGLE, (uint32_t)(c - st->r_tr), v);
-        *o = (vcell){VT_TRIANGLE, 2, SD_CELL_TRIANGLE, 3, (long)(c - st->r_tr), {v[0], v[1], v[2]}, false, 0};
+        *o = (vcell){VT_TRIANGLE, 2, SD_CELL_TRIANGLE, 3, (long)(c - st->r_tr), {v[0], v[1], v[2]}};
     } else if (c < st->r_tet) {
         uint64_t t = c - st->r_sl, p = s->nv + 3 * t;
         *o = (vcell){VT_TRIANGLE, 2, SLICE_KIND, 3, (long)s->slice.cell[t],
-                     {(uint32_t)p, (uint32_t)p + 1, (uint32_t)p + 2}, true, t};
+                     {(uint32_t)p, (uint32_t)p + 1, (uint32_t)p + 2}};
     } else if (c < st->r_oct) {
         uint32_t v[6];
         sd_level_cell(s->lv, SD_CELL_TETRA, (uint32_t)(c - st->r_tet), v);
-        *o = (vcell){VT_TETRA, 3, SD_CELL_TETRA, 4, (long)(c - st->r_tet), {v[0], v[1], v[2], v[3]}, false, 0};
+        *o = (vcell){VT_TETRA, 3, SD_CELL_TETRA, 4, (long)(c - st->r_tet), {v[0], v[1], v[2], v[3]}};
     } else if (c < st->r_poly) {
         uint64_t k = c - st->r_oct;
         uint32_t v[6], t[4];
         sd_level_cell(s->lv, SD_CELL_OCTA, (uint32_t)(k / 4), v);
         out_oct_tet(v, (int)(k % 4), t);
-        *o = (vcell){VT_TETRA, 3, SD_CELL_OCTA, 4, (long)(k / 4), {t[0], t[1], t[2], t[3]}, false, 0};
+        *o = (vcell){VT_TETRA, 3, SD_CELL_OCTA, 4, (long)(k / 4), {t[0], t[1], t[2], t[3]}};
     } else {
         uint32_t v[6];
         sd_level_cell(s->lv, SD_CELL_OCTA, (uint32_t)(c - st->r_poly), v);
         *o = (vcell){VT_POLYHEDRON, 3, SD_CELL_OCTA, 6, (long)(c - st->r_poly),
-                     {v[0], v[1], v[2], v[3], v[4], v[5]}, false, 0};
+                     {v[0], v[1], v[2], v[3], v[4], v[5]}};
     }
 }
 
@@ -291,16 +289,15 @@ static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
         a = add_arr(st, A_TYPES, 0, 1, 4, st->ncell);
         snprintf(a->head, sizeof a->head, "CELL_TYPES %llu\n", (unsigned long long)st->ncell);
         static const char *const cnames[] = {"dimension", "kind", "source_cell"};
+        static const arr_id cids[] = {A_DIM, A_KIND, A_SRC};
         for (int k = 0; k < 3; k++) {
-            a = add_arr(st, k == 0 ? A_DIM : k == 1 ? A_KIND : A_SRC, 0, 1, 4, st->ncell);
-            snprintf(a->head, sizeof a->head, "%s%s 1 %llu int\n",
-                     k ? "" : "CELL_DATA ", cnames[k], (unsigned long long)st->ncell);
-            if (!k) {
-                char tmp[192];
-                snprintf(tmp, sizeof tmp, "CELL_DATA %llu\nFIELD FieldData 3\n%s",
-                         (unsigned long long)st->ncell, a->head + strlen("CELL_DATA "));
-                memcpy(a->head, tmp, sizeof tmp);
-            }
+            a = add_arr(st, cids[k], 0, 1, 4, st->ncell);
+            char first[64] = "";
+            if (k == 0) /* the block header comes with the first array */
+                snprintf(first, sizeof first, "CELL_DATA %llu\nFIELD FieldData 3\n",
+                         (unsigned long long)st->ncell);
+            snprintf(a->head, sizeof a->head, "%s%s 1 %llu int\n", first, cnames[k],
+                     (unsigned long long)st->ncell);
         }
         for (int i = 0; i <= s->rq.nattrs; i++) {
             bool rule = i == s->rq.nattrs;
