@@ -219,6 +219,8 @@ int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, a
         rc = api_fail_at(p, 501, "not-implemented", "/fill",
                          "TetGen fill is not available in this version; post the tetrahedra "
                          "themselves");
+    if (!rc && !in->nv)   /* the core's "no vertices" would point at /simplices */
+        rc = api_fail_at(p, 422, "invalid-complex", "/vertices", "the complex has no vertices");
     if (!rc)
         rc = build_model(in, &cur->rules, lim, out, p);
     api_input_unref(in);
