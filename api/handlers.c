@@ -189,6 +189,14 @@ static int build_model(api_input *in, const api_rules *rules, const api_limits *
         }
         return api_fail_core(p, &e, "/simplices", "/vertices");
     }
+    sd_error e0 = {0};
+    sd_class k;
+    if (m->c && sd_complex_vertex_class(m->c, 0, 0, &k, &e0) == SD_OK) /* builds level-0 rules */
+        m->level0 = sd_complex_level(m->c, 0, &e0);
+    else if (m->c) {
+        api_model_unref(m);
+        return api_fail_core(p, &e0, NULL, NULL);
+    }
     m->summary = api_summary(m);
     *out = m;
     return 0;
@@ -315,11 +323,15 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
             return api_fail_at(p, 422, "invalid-tag", ptr,
                                "a singular simplex is a vertex, an edge or a triangle (1 to 3 "
                                "indices), not %zu", k);
+        long long seen[3];
         for (size_t j = 0; j < k; j++) {
-            long long x;
             api_ptr_index(at, sizeof at, ptr, j);
-            if (api_get_int(json_array_get(t, j), at, 0, (long long)cur->in->nv - 1, &x, p))
+            if (api_get_int(json_array_get(t, j), at, 0, (long long)cur->in->nv - 1, &seen[j], p))
                 return p->status;
+            for (size_t q = 0; q < j; q++)
+                if (seen[q] == seen[j])
+                    return api_fail_at(p, 422, "invalid-tag", at, "vertex %lld appears twice",
+                                       seen[j]);
         }
     }
     if (json_array_size(s))
@@ -355,17 +367,16 @@ json_t *api_summary(const api_model *m)
     sd_counts n;
     sd_complex_counts(c, 0, &n);
     uint64_t bv = 0, be = 0, xv = 0, xe = 0, nmv[5] = {0}, nme[5] = {0};
-    sd_error e;
     sd_class k;
-    const sd_level *lv = sd_complex_level(c, 0, &e);
+    const sd_level *lv = m->level0;
     for (uint32_t i = 0; lv && i < n.vertices; i++)
-        if (!sd_complex_vertex_class(c, 0, i, &k, &e)) {
+        if (!sd_level_vertex_class(lv, i, &k)) {
             bv += k.boundary;
             xv += k.extraordinary;
             nmv[k.nonmanifold < 5 ? k.nonmanifold : 0]++;
         }
     for (uint32_t i = 0; lv && i < n.edges; i++)
-        if (!sd_complex_edge_class(c, 0, i, &k, &e)) {
+        if (!sd_level_edge_class(lv, i, &k)) {
             be += k.boundary;
             xe += k.extraordinary;
             nme[k.nonmanifold < 5 ? k.nonmanifold : 0]++;
@@ -421,23 +432,20 @@ json_t *api_get_complex(api_model *m, api_problem *p)
         json_object_set_new(at, t->name, arr);
     }
     json_t *cv = json_array(), *ce = json_array();
-    pthread_mutex_lock(&m->lock);
-    sd_error e = {0};
-    const sd_level *lv = api_model_level_locked(m, 0, &e);
+    const sd_level *lv = m->level0; /* immutable: no lock, so a computing session still answers */
     uint32_t ne = 0;
-    const uint32_t *ev = lv ? sd_level_edges(lv, &ne) : NULL;
+    const uint32_t *ev = sd_level_edges(lv, &ne);
     sd_class k;
-    for (uint32_t i = 0; lv && i < in->nv; i++)
-        if (!sd_complex_vertex_class(m->c, 0, i, &k, &e))
+    for (uint32_t i = 0; i < in->nv; i++)
+        if (!sd_level_vertex_class(lv, i, &k))
             json_array_append_new(cv, class_json(&k));
-    for (uint32_t i = 0; lv && i < ne; i++)
-        if (!sd_complex_edge_class(m->c, 0, i, &k, &e)) {
+    for (uint32_t i = 0; i < ne; i++)
+        if (!sd_level_edge_class(lv, i, &k)) {
             json_t *o = class_json(&k);
             json_object_set_new(o, "vertices", json_pack("[I, I]", (json_int_t)ev[2 * i],
                                                          (json_int_t)ev[2 * i + 1]));
             json_array_append_new(ce, o);
         }
-    pthread_mutex_unlock(&m->lock);
     static const char *const schemes[] = {"box", "averaged"}, *const weights[] = {"warren", "loop"};
     return json_pack("{s:o, s:o, s:o, s:{s:o, s:o}, s:{s:[]}, s:{s:s, s:[], s:s, s:s, s:s}, s:O}",
                      "vertices", vs, "simplices", ss, "attributes", at, "classes", "vertices", cv,

@@ -51,6 +51,7 @@ typedef struct api_model {
     api_input *in;            /* NULL: no complex posted yet */
     api_rules rules;
     sd_complex *c;            /* NULL iff in == NULL */
+    const sd_level *level0;   /* level 0 with its rules built (read without the lock) */
     int channel[API_MAX_ATTRIBUTES]; /* core channel id of each attribute */
     double seconds[SD_MAX_LEVEL + 1]; /* time spent computing each level (under lock) */
     struct json_t *summary;   /* level-0 summary (API.md PUT /complex), read-only once built */

@@ -305,6 +305,34 @@ static sd_result class_of(sd_complex *c, int level, sd_error *err, sd_level **ou
     return r;
 }
 
+sd_result sd_level_vertex_class(const sd_level *lv, uint32_t i, sd_class *o)
+{
+    const sd_topo *t = &lv->t;
+    if (!lv->have_rules || i >= t->nv)
+        return SD_ERR_ARG;
+    o->family = t->vfam[i];
+    o->boundary = (t->vflag[i] & VF_DC) != 0;
+    o->nonmanifold = t->vnm[i];
+    o->rule = lv->vrule[i];
+    o->valence = lv->vval[i];
+    o->extraordinary = extraordinary(o->rule, o->valence, false);
+    return SD_OK;
+}
+
+sd_result sd_level_edge_class(const sd_level *lv, uint32_t e, sd_class *o)
+{
+    const sd_topo *t = &lv->t;
+    if (!lv->have_rules || e >= t->ne)
+        return SD_ERR_ARG;
+    o->family = t->efam[e];
+    o->boundary = (t->eflag[e] & EF_DC) != 0;
+    o->nonmanifold = t->enm[e];
+    o->rule = lv->erule[e];
+    o->valence = lv->ering[e];
+    o->extraordinary = extraordinary(o->rule, o->valence, true);
+    return SD_OK;
+}
+
 sd_result sd_complex_vertex_class(sd_complex *c, int level, uint32_t i, sd_class *o, sd_error *err)
 {
     sd_level *lv = NULL;
@@ -313,14 +341,7 @@ sd_result sd_complex_vertex_class(sd_complex *c, int level, uint32_t i, sd_class
         return r;
     if (i >= lv->t.nv)
         return sd_fail(err, SD_ERR_ARG, i, -1, "vertex %u out of range (%u vertices)", i, lv->t.nv);
-    const sd_topo *t = &lv->t;
-    o->family = t->vfam[i];
-    o->boundary = (t->vflag[i] & VF_DC) != 0;
-    o->nonmanifold = t->vnm[i];
-    o->rule = lv->vrule[i];
-    o->valence = lv->vval[i];
-    o->extraordinary = extraordinary(o->rule, o->valence, false);
-    return SD_OK;
+    return sd_level_vertex_class(lv, i, o);
 }
 
 sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *o, sd_error *err)
@@ -331,14 +352,7 @@ sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *
         return r;
     if (e >= lv->t.ne)
         return sd_fail(err, SD_ERR_ARG, e, -1, "edge %u out of range (%u edges)", e, lv->t.ne);
-    const sd_topo *t = &lv->t;
-    o->family = t->efam[e];
-    o->boundary = (t->eflag[e] & EF_DC) != 0;
-    o->nonmanifold = t->enm[e];
-    o->rule = lv->erule[e];
-    o->valence = lv->ering[e];
-    o->extraordinary = extraordinary(o->rule, o->valence, true);
-    return SD_OK;
+    return sd_level_edge_class(lv, e, o);
 }
 
 sd_rule sd_level_vertex_rule(const sd_level *lv, uint32_t i)

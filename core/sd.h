@@ -155,6 +155,11 @@ typedef struct sd_class {
 /* Classification of vertex i / edge e of a level (builds that level's stencils if needed). */
 sd_result sd_complex_vertex_class(sd_complex *c, int level, uint32_t i, sd_class *out, sd_error *err);
 sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *out, sd_error *err);
+/* The same for a level whose rules are built already (by one of the calls above): const and
+ * lock-free, so it may run while other levels of the complex are being computed. SD_ERR_ARG when
+ * the index is out of range or the level's rules are not built. */
+sd_result sd_level_vertex_class(const sd_level *lv, uint32_t i, sd_class *out);
+sd_result sd_level_edge_class(const sd_level *lv, uint32_t e, sd_class *out);
 /* Edge id of the edge a-b at a level, or UINT32_MAX. */
 uint32_t sd_level_find_edge(const sd_level *lv, uint32_t a, uint32_t b);
 

@@ -468,3 +468,26 @@ def test_offline_refine_errors(tmp_path):
     r = subprocess.run([str(SUBDIVD), "refine", str(bad), "--level", "1", "-o", str(tmp_path / "x.obj")],
                        capture_output=True, text=True)
     assert r.returncode == 2 and "format" in r.stderr
+
+
+def test_reads_of_a_computing_session_do_not_wait(tmp_path):
+    """GET /complex and the session state answer while the same session computes a level."""
+    d = Daemon()
+    try:
+        s = Session(d)
+        assert s.put_complex(complex_from_text(make_mesh_file(tmp_path, "cubes", 8))).status_code == 200
+        t = threading.Thread(target=lambda: s.req("GET", "/levels/4/stats"))
+        t.start()
+        worst, n = 0.0, 0
+        time.sleep(0.05)
+        while t.is_alive():
+            a = time.time()
+            assert s.req("GET", "/complex").status_code == 200
+            assert s.req("GET").status_code == 200
+            worst = max(worst, time.time() - a)
+            n += 1
+        t.join()
+        assert n >= 2
+        assert worst < 0.5, f"a read waited {worst:.2f} s behind its own session's computation"
+    finally:
+        assert d.stop() == 0

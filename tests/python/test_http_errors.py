@@ -97,6 +97,7 @@ CASES = [
     ("tags-501", "PUT", "/tags", {"singular": [[0, 1]]}, None, 501, "/singular"),
     ("tags-arity", "PUT", "/tags", {"singular": [[0, 1, 2, 3]]}, None, 422, "/singular/0"),
     ("tags-range", "PUT", "/tags", {"singular": [[0, 9]]}, None, 422, "/singular/0/1"),
+    ("tags-repeated", "PUT", "/tags", {"singular": [[1, 1]]}, None, 422, "/singular/0/1"),
     ("tags-type", "PUT", "/tags", {"singular": [[0, "1"]]}, None, 400, "/singular/0/1"),
     ("tags-missing", "PUT", "/tags", {}, None, 400, "/singular"),
     # --- levels ---
