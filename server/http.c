@@ -769,6 +769,44 @@ static int early(req *r)
     if (r->rt->pattern[0] == '/')
         r->route_name = r->rt->pattern;
     match(r->rt->pattern, r->path, r); /* re-capture the segments of the chosen route */
+    /* who is asking comes first: a client without the session's token learns nothing else */
+    if (r->rt->session) {
+        r->s = store_get(r->srv->st, r->seg_id);
+        if (!r->s) {
+            fail(r, 404, "no-session", "no session %.40s (it may have expired or been deleted)",
+                 r->seg_id);
+            return 1;
+        }
+        if (!r->srv->cfg.no_auth) {
+            const char *h = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
+                                                        MHD_HTTP_HEADER_AUTHORIZATION);
+            /* credentials = auth-scheme 1*SP token68 (RFC 9110 11.4): the scheme is
+             * case-insensitive, and trailing whitespace is not part of the field value */
+            const char *tok = NULL;
+            char tbuf[128];
+            if (h && !strncasecmp(h, "Bearer ", 7)) {
+                const char *t = h + 7;
+                while (*t == ' ')
+                    t++;
+                size_t n = strlen(t);
+                while (n && (t[n - 1] == ' ' || t[n - 1] == '\t'))
+                    n--;
+                if (n < sizeof tbuf) {
+                    memcpy(tbuf, t, n);
+                    tbuf[n] = 0;
+                    tok = tbuf;
+                }
+            }
+            if (!session_token_ok(r->s, tok)) {
+                api_problem p = {0};
+                api_fail(&p, 401, "unauthorized",
+                         h ? "the bearer token does not match this session"
+                           : "send the session's token as \"Authorization: Bearer <token>\"");
+                reply_problem(r, &p);
+                return 1;
+            }
+        }
+    }
     /* MHD frames a body only by Content-Length or chunked; any other transfer coding would have
      * it read until the client closes (RFC 9112 6.1: 501 for a coding we do not understand) */
     const char *te0 = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
@@ -811,43 +849,6 @@ static int early(req *r)
             fail(r, 415, "unsupported-media-type",
                  "send the body as application/json (got %.60s)", ct ? ct : "no Content-Type");
             return 1;
-        }
-    }
-    if (r->rt->session) {
-        r->s = store_get(r->srv->st, r->seg_id);
-        if (!r->s) {
-            fail(r, 404, "no-session", "no session %.40s (it may have expired or been deleted)",
-                 r->seg_id);
-            return 1;
-        }
-        if (!r->srv->cfg.no_auth) {
-            const char *h = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
-                                                        MHD_HTTP_HEADER_AUTHORIZATION);
-            /* credentials = auth-scheme 1*SP token68 (RFC 9110 11.4): the scheme is
-             * case-insensitive, and trailing whitespace is not part of the field value */
-            const char *tok = NULL;
-            char tbuf[128];
-            if (h && !strncasecmp(h, "Bearer ", 7)) {
-                const char *t = h + 7;
-                while (*t == ' ')
-                    t++;
-                size_t n = strlen(t);
-                while (n && (t[n - 1] == ' ' || t[n - 1] == '\t'))
-                    n--;
-                if (n < sizeof tbuf) {
-                    memcpy(tbuf, t, n);
-                    tbuf[n] = 0;
-                    tok = tbuf;
-                }
-            }
-            if (!session_token_ok(r->s, tok)) {
-                api_problem p = {0};
-                api_fail(&p, 401, "unauthorized",
-                         h ? "the bearer token does not match this session"
-                           : "send the session's token as \"Authorization: Bearer <token>\"");
-                reply_problem(r, &p);
-                return 1;
-            }
         }
     }
     return 0;
