@@ -707,3 +707,83 @@ json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_prob
                      (json_int_t)n.octahedra, "bytes", bytes, "seconds", secs, "memory_bytes",
                      (json_int_t)atomic_load(&m->memory_bytes));
 }
+
+/* ---- local analysis ----------------------------------------------------------------------- */
+
+/* A non-negative decimal index below `n` from a query value; -1 + problem otherwise. */
+static long query_index(const char *s, uint32_t n, const char *name, api_problem *p)
+{
+    char *end;
+    errno = 0;
+    long v = s && isdigit((unsigned char)*s) ? strtol(s, &end, 10) : -1;
+    if (v < 0 || *end || errno) {
+        api_fail_at(p, 400, "wrong-type", name, "%s must be a vertex index (a non-negative integer)",
+                    name);
+        return -1;
+    }
+    if ((unsigned long)v >= n) {
+        api_fail_at(p, 422, "out-of-range", name, "vertex %ld out of range (%u vertices)", v, n);
+        return -1;
+    }
+    return v;
+}
+
+json_t *api_analysis(api_model *m, const char *vertex, const char *edge, api_problem *p)
+{
+    if (!m->c) {
+        api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+        return NULL;
+    }
+    if (!vertex == !edge) {
+        api_fail(p, 400, "missing-field", "give exactly one of vertex=i or edge=i,j");
+        return NULL;
+    }
+    long a, b = -1;
+    if (vertex) {
+        if ((a = query_index(vertex, m->in->nv, "vertex", p)) < 0)
+            return NULL;
+    } else {
+        char first[24];
+        const char *comma = strchr(edge, ',');
+        if (!comma || (size_t)(comma - edge) >= sizeof first) {
+            api_fail_at(p, 400, "wrong-type", "edge", "edge is two vertex indices: edge=i,j");
+            return NULL;
+        }
+        snprintf(first, sizeof first, "%.*s", (int)(comma - edge), edge);
+        if ((a = query_index(first, m->in->nv, "edge", p)) < 0 ||
+            (b = query_index(comma + 1, m->in->nv, "edge", p)) < 0)
+            return NULL;
+        if (sd_level_find_edge(m->level0, (uint32_t)a, (uint32_t)b) == UINT32_MAX) {
+            api_fail_at(p, 422, "no-such-edge", "edge", "%ld-%ld is not an edge of the complex", a, b);
+            return NULL;
+        }
+    }
+    sd_analysis an;
+    sd_error e = {0};
+    pthread_mutex_lock(&m->lock);
+    sd_result r = b < 0 ? sd_analyze_vertex(m->c, (uint32_t)a, &an, &e)
+                        : sd_analyze_edge(m->c, (uint32_t)a, (uint32_t)b, &an, &e);
+    pthread_mutex_unlock(&m->lock);
+    if (r) {
+        if (r == SD_ERR_ARG)
+            api_fail_at(p, 422, "not-analysable", b < 0 ? "vertex" : "edge", "%s", e.message);
+        else
+            api_fail_core(p, &e, NULL, NULL);
+        return NULL;
+    }
+    json_t *mat = json_array(), *eig = json_array(), *pts = json_array();
+    for (int i = 0; i < an.size; i++) {
+        json_array_append_new(mat, doubles_json(an.matrix + (size_t)i * an.size, (size_t)an.size));
+        /* a real eigenvalue as a number, a complex one as [re, im] */
+        if (fabs(an.eig_im[i]) <= 1e-12 * (1 + fabs(an.eig_re[i])))
+            json_array_append_new(eig, json_real(an.eig_re[i]));
+        else
+            json_array_append_new(eig, json_pack("[f, f]", an.eig_re[i], an.eig_im[i]));
+        json_array_append_new(pts, json_integer(an.points[i]));
+    }
+    json_t *j = json_pack("{s:s, s:i, s:o, s:o, s:{s:i, s:o}, s:b}", "rule",
+                          sd_rule_name(an.rule), "size", an.size, "matrix", mat, "eigenvalues", eig,
+                          "points", "level", an.level, "ids", pts, "closed", an.closed);
+    sd_analysis_free(&an);
+    return j;
+}

@@ -47,6 +47,11 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
 /* GET /levels/{L}/stats (new reference). */
 json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_problem *p);
 
+/* GET /analysis?vertex=i | ?edge=i,j (001 Sec. 4.1): the local subdivision matrix of a control
+ * vertex (1-ring block M) or edge (block L of its midpoint) and its eigenvalues, largest in
+ * magnitude first. Locks the model (an edge needs level 1). New reference or NULL + problem. */
+json_t *api_analysis(api_model *m, const char *vertex, const char *edge, api_problem *p);
+
 /* Level from a path segment: 0..SD_MAX_LEVEL, else -1 + problem (400 not a number, 422 range). */
 int api_parse_level(const char *s, api_problem *p);
 /* Estimated core bytes needed to hold levels up to `level` (limits check before computing). */

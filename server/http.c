@@ -590,6 +590,30 @@ static void h_level_stats(req *r)
     reply_json(r, 200, j, version);
 }
 
+static void h_analysis(req *r)
+{
+    static const char *const keys[] = {"vertex", "edge", NULL};
+    if (query_only(r, keys))
+        return;
+    uint64_t version;
+    api_model *m = session_model(r->s, &version);
+    api_problem p = {0};
+    int slot, rc = slot_for_level(r, m, 1, &slot, &p); /* an edge's block lives at level 1 */
+    json_t *j = rc ? NULL
+                   : api_analysis(m,
+                                  MHD_lookup_connection_value(r->conn, MHD_GET_ARGUMENT_KIND, "vertex"),
+                                  MHD_lookup_connection_value(r->conn, MHD_GET_ARGUMENT_KIND, "edge"), &p);
+    if (slot)
+        give_slot(r);
+    api_model_unref(m);
+    if (!j) {
+        reply_problem(r, &p);
+        return;
+    }
+    json_object_set_new(j, "version", json_integer((json_int_t)version));
+    reply_json(r, 200, j, version);
+}
+
 /* ---- routing ---------------------------------------------------------------------------- */
 
 static const route ROUTES[] = {
@@ -602,6 +626,7 @@ static const route ROUTES[] = {
     {"PUT", "/v1/sessions/{id}/rules", h_put_rules, 1, 1},
     {"GET", "/v1/sessions/{id}/levels/{L}", h_get_level, 1, 0},
     {"GET", "/v1/sessions/{id}/levels/{L}/stats", h_level_stats, 1, 0},
+    {"GET", "/v1/sessions/{id}/analysis", h_analysis, 1, 0},
     {"GET", "/healthz", h_healthz, 0, 0},
     {"GET", "/livez", h_healthz, 0, 0},
     {"GET", "/readyz", h_readyz, 0, 0},
