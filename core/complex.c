@@ -347,6 +347,10 @@ void sd_level_free(sd_mem *m, sd_level *lv)
     sd_free(m, lv->vval);
     sd_free(m, lv->ering);
     sd_csrb_free(m, &lv->S);
+    sd_free(m, lv->tcol);
+    sd_free(m, lv->trow);
+    sd_free(m, lv->tpos);
+    sd_free(m, lv->slot);
     for (int i = 0; i < lv->nch; i++)
         sd_free(m, lv->ch[i].data);
     sd_free(m, lv);

@@ -113,6 +113,11 @@ struct sd_level {
     uint8_t *vrule, *erule;
     uint32_t *vval, *ering;   /* |rho| used by each vertex / edge rule */
     sd_csrb S;
+    /* for edits (edit.c), built on the first edit: S by columns (for each point of this level, the
+     * next level's rows that use it and the entry's position in S), and a scratch map from this
+     * level's point ids to slots in an edit's list of changed points (-1 = unchanged) */
+    uint32_t *tcol, *trow, *tpos;
+    int32_t *slot;
     /* channels of this level (channel 0 = positions) */
     int nch;
     sd_channel ch[SD_MAX_CHANNELS];

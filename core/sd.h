@@ -185,6 +185,18 @@ typedef struct sd_csr {
 /* The matrix S_L mapping level L points to level L+1 points (built if needed). */
 sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err);
 
+/* ---- edits (SPEC Sec. 5) ------------------------------------------------------------------ */
+
+/* Set new values of channel `channel` (0 = positions) at n control points: point idx[i] gets
+ * values[i*ncomp .. i*ncomp+ncomp-1]. Every computed level is updated through the cached
+ * matrices, pushing the changes down level by level (p^{l+1} += S_l dp^l over the rows that use a
+ * changed point only), so the cost follows the edited region, not the mesh. All-or-nothing:
+ * indices, repeated indices and values are checked and all memory is taken before anything
+ * changes. counts (optional, SD_MAX_LEVEL+1 entries) receives the points updated per level.
+ * Not thread-safe with readers of the same complex: the caller excludes them. */
+sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *idx,
+                          const double *values, uint64_t *counts, sd_error *err);
+
 /* ---- local analysis (001 Sec. 4.1, Appendix B) ------------------------------------------- */
 
 typedef struct sd_analysis {

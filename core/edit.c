@@ -1,0 +1,196 @@
+/* edit.c — control-point and attribute edits pushed through the cached subdivision matrices.
+ *
+ * Positions and attributes of level l+1 are S_l times those of level l, so a change dp^0 on a
+ * few control points changes level l+1 by S_l dp^l, which is non-zero only on the rows that use
+ * a changed point. With S_l stored by columns as well (built once per level on the first edit:
+ * for each point, the rows that use it), an edit walks down the levels touching just those rows:
+ * its cost follows the edited region. The per-level `slot` array (one int per point, kept
+ * between edits and reset after use) gathers the changes of a level without a search.
+ *
+ * All-or-nothing: the whole cascade of changes is computed into temporary lists first; only when
+ * every allocation has succeeded are they added to the levels' arrays.
+ */
+#include "internal.h"
+#include <math.h>
+#include <string.h>
+
+/* S_l by columns: tcol[j]..tcol[j+1]-1 index trow (row) and tpos (position of the entry in S). */
+static bool build_columns(sd_mem *m, sd_level *lv)
+{
+    const sd_csrb *S = &lv->S;
+    uint32_t nc = S->ncols;
+    uint32_t *col = sd_calloc(m, (size_t)nc + 1, sizeof *col);
+    uint32_t *row = sd_alloc(m, (S->nnz ? S->nnz : 1) * sizeof *row);
+    uint32_t *pos = sd_alloc(m, (S->nnz ? S->nnz : 1) * sizeof *pos);
+    int32_t *slot = sd_alloc(m, ((size_t)nc + 1) * sizeof *slot);
+    if (!col || !row || !pos || !slot) {
+        sd_free(m, col);
+        sd_free(m, row);
+        sd_free(m, pos);
+        sd_free(m, slot);
+        return false;
+    }
+    for (size_t k = 0; k < S->nnz; k++)
+        col[S->col[k] + 1]++;
+    for (uint32_t j = 0; j < nc; j++)
+        col[j + 1] += col[j];
+    for (uint32_t r = 0; r < S->nrows; r++)
+        for (uint32_t k = S->rowptr[r]; k < S->rowptr[r + 1]; k++) {
+            uint32_t at = col[S->col[k]]++;
+            row[at] = r;
+            pos[at] = k;
+        }
+    for (uint32_t j = nc; j > 0; j--) /* shift back: col[j] is the start of column j again */
+        col[j] = col[j - 1];
+    col[0] = 0;
+    for (uint32_t j = 0; j < nc; j++)
+        slot[j] = -1;
+    lv->tcol = col;
+    lv->trow = row;
+    lv->tpos = pos;
+    lv->slot = slot;
+    return true;
+}
+
+/* The changed points of one level: ids and their deltas (nc values each). */
+typedef struct change {
+    uint32_t n, cap;
+    uint32_t *id;
+    double *d;
+} change;
+
+static void change_free(sd_mem *m, change *c)
+{
+    sd_free(m, c->id);
+    sd_free(m, c->d);
+}
+
+sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *idx,
+                          const double *values, uint64_t *counts, sd_error *err)
+{
+    sd_mem *m = &c->mem;
+    sd_level *l0 = c->lv[0];
+    if (channel < 0 || channel >= l0->nch)
+        return sd_fail(err, SD_ERR_ARG, -1, -1, "no channel %d", channel);
+    const int nc = l0->ch[channel].ncomp;
+    const uint32_t nv = l0->t.nv;
+    for (size_t i = 0; i < n; i++) {
+        if (idx[i] >= nv)
+            return sd_fail(err, SD_ERR_INDEX, (long)i, -1, "point %u out of range (%u points)",
+                           idx[i], nv);
+        for (int k = 0; k < nc; k++) {
+            double x = values[i * nc + k];
+            if (!isfinite(x) || (channel == 0 && fabs(x) > 1e15))
+                return sd_fail(err, SD_ERR_VALUE, (long)i, k, "point %u: value %d is not finite "
+                               "or too large", idx[i], k);
+        }
+    }
+    int nl = c->nlevels;
+    for (int l = 0; l + 1 < nl; l++) /* every level that feeds a computed one has its S */
+        if (!c->lv[l]->tcol && !build_columns(m, c->lv[l]))
+            return sd_fail_nomem(err, m);
+    if (l0->slot)
+        for (size_t i = 0; i < n; i++) /* repeated points make an edit ambiguous */
+            if (l0->slot[idx[i]] != -1 || (l0->slot[idx[i]] = (int32_t)i, false)) {
+                for (size_t j = 0; j < i; j++)
+                    l0->slot[idx[j]] = -1;
+                return sd_fail(err, SD_ERR_REPEATED, (long)i, -1, "point %u is edited twice",
+                               idx[i]);
+            }
+    if (l0->slot)
+        for (size_t i = 0; i < n; i++)
+            l0->slot[idx[i]] = -1;
+    else
+        for (size_t i = 0; i < n; i++)
+            for (size_t j = 0; j < i; j++)
+                if (idx[j] == idx[i])
+                    return sd_fail(err, SD_ERR_REPEATED, (long)i, -1, "point %u is edited twice",
+                                   idx[i]);
+
+    change ch[SD_MAX_LEVEL + 1];
+    memset(ch, 0, sizeof ch);
+    sd_result rc = SD_OK;
+    /* level 0: the deltas themselves */
+    ch[0].id = sd_alloc(m, (n ? n : 1) * sizeof *ch[0].id);
+    ch[0].d = sd_alloc(m, (n ? n : 1) * nc * sizeof *ch[0].d);
+    if (!ch[0].id || !ch[0].d)
+        goto nomem;
+    const double *p0 = l0->ch[channel].data;
+    for (size_t i = 0; i < n; i++) {
+        ch[0].id[i] = idx[i];
+        for (int k = 0; k < nc; k++)
+            ch[0].d[i * nc + k] = values[i * nc + k] - p0[(size_t)idx[i] * nc + k];
+    }
+    ch[0].n = (uint32_t)n;
+    /* push down: rows of level l+1 that use a changed point of level l */
+    for (int l = 0; l + 1 < nl; l++) {
+        sd_level *lv = c->lv[l], *next = c->lv[l + 1];
+        int32_t *slot = next->slot;
+        bool temp_slot = false;
+        if (!slot) { /* the finest level has no columns of its own: a temporary map */
+            slot = sd_alloc(m, ((size_t)next->t.nv + 1) * sizeof *slot);
+            if (!slot)
+                goto nomem;
+            for (uint32_t v = 0; v < next->t.nv; v++)
+                slot[v] = -1;
+            temp_slot = true;
+        }
+        change *in = &ch[l], *out = &ch[l + 1];
+        bool ok = true;
+        for (uint32_t i = 0; i < in->n && ok; i++) {
+            uint32_t j = in->id[i];
+            for (uint32_t k = lv->tcol[j]; k < lv->tcol[j + 1]; k++) {
+                uint32_t r = lv->trow[k];
+                double w = lv->S.val[lv->tpos[k]];
+                if (slot[r] < 0) {
+                    if (out->n == out->cap) {
+                        uint32_t cap = out->cap ? 2 * out->cap : 64;
+                        uint32_t *id = sd_realloc(m, out->id, (size_t)cap * sizeof *id);
+                        if (id)
+                            out->id = id;
+                        double *d = sd_realloc(m, out->d, (size_t)cap * nc * sizeof *d);
+                        if (d)
+                            out->d = d;
+                        if (!id || !d) {
+                            ok = false;
+                            break;
+                        }
+                        out->cap = cap;
+                    }
+                    slot[r] = (int32_t)out->n;
+                    out->id[out->n] = r;
+                    memset(out->d + (size_t)out->n * nc, 0, nc * sizeof *out->d);
+                    out->n++;
+                }
+                double *d = out->d + (size_t)slot[r] * nc;
+                for (int q = 0; q < nc; q++)
+                    d[q] += w * in->d[(size_t)i * nc + q];
+            }
+        }
+        for (uint32_t i = 0; i < out->n; i++) /* leave the map clean for the next edit */
+            slot[out->id[i]] = -1;
+        if (temp_slot)
+            sd_free(m, slot);
+        if (!ok)
+            goto nomem;
+    }
+    /* every change is known: apply them */
+    for (int l = 0; l < nl; l++) {
+        double *p = c->lv[l]->ch[channel].data;
+        for (uint32_t i = 0; i < ch[l].n; i++)
+            for (int k = 0; k < nc; k++)
+                p[(size_t)ch[l].id[i] * nc + k] += ch[l].d[(size_t)i * nc + k];
+        if (counts)
+            counts[l] = ch[l].n;
+    }
+    if (counts)
+        for (int l = nl; l <= SD_MAX_LEVEL; l++)
+            counts[l] = 0;
+    goto done;
+nomem:
+    rc = sd_fail_nomem(err, m);
+done:
+    for (int l = 0; l <= SD_MAX_LEVEL; l++)
+        change_free(m, &ch[l]);
+    return rc;
+}

@@ -1,0 +1,113 @@
+/* Edits through the cached matrices (SPEC Sec. 5): after random edits every computed level equals
+ * a recomputation from the edited control points to 1e-12; refused edits change nothing; a
+ * one-point edit touches a bounded neighbourhood. */
+#include "test.h"
+
+static uint64_t rng = 12345;
+static double urand(void)
+{
+    rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+    return (double)(rng >> 11) / 9007199254740992.0;
+}
+
+/* Compare every level of `a` (edited) with a fresh complex built on `m` (edited input). */
+static int same_levels(sd_complex *a, const mesh *m, int levels, const double *attr, int nattr)
+{
+    sd_complex *b = mesh_complex(m, NULL, NULL);
+    if (!b)
+        return 0;
+    int ok = attr ? sd_complex_add_channel(b, attr, nattr, NULL) == 1 : 1;
+    for (int l = 0; ok && l <= levels; l++) {
+        const sd_level *la = sd_complex_level(a, l, NULL), *lb = sd_complex_level(b, l, NULL);
+        ok = la && lb && sd_level_num_vertices(la) == sd_level_num_vertices(lb);
+        for (int ch = 0; ok && ch <= (attr ? 1 : 0); ch++) {
+            int na, nb;
+            const double *pa = sd_level_channel(la, ch, &na), *pb = sd_level_channel(lb, ch, &nb);
+            for (size_t i = 0; ok && i < (size_t)sd_level_num_vertices(la) * na; i++)
+                ok = fabs(pa[i] - pb[i]) <= 1e-12 * (1 + fabs(pb[i]));
+        }
+    }
+    sd_complex_free(b);
+    return ok;
+}
+
+TEST(edit_random_equals_recompute)
+{
+    for (int shape = 0; shape < 3; shape++) {
+        mesh m = {0};
+        if (shape == 0)
+            shape_cube_tets(&m, 2);
+        else if (shape == 1)
+            shape_mixed(&m);
+        else
+            shape_icosahedron(&m);
+        double *attr = malloc(m.nv * 2 * sizeof *attr);
+        for (size_t i = 0; i < 2 * m.nv; i++)
+            attr[i] = urand();
+        sd_complex *c = mesh_complex(&m, NULL, NULL);
+        CHECK(c && sd_complex_add_channel(c, attr, 2, NULL) == 1);
+        CHECK(sd_complex_level(c, 3, NULL));
+        for (int round = 0; round < 5; round++) {
+            uint32_t idx[3];
+            double val[9], aval[6];
+            size_t n = 1 + (size_t)(urand() * 3);
+            for (size_t i = 0; i < n; i++) {
+                do
+                    idx[i] = (uint32_t)(urand() * m.nv);
+                while ((i > 0 && idx[i] == idx[0]) || (i > 1 && idx[i] == idx[1]));
+                for (int k = 0; k < 3; k++)
+                    m.xyz[3 * idx[i] + k] = val[3 * i + k] = m.xyz[3 * idx[i] + k] + 0.1 * (urand() - 0.5);
+                for (int k = 0; k < 2; k++)
+                    attr[2 * idx[i] + k] = aval[2 * i + k] = urand();
+            }
+            uint64_t counts[SD_MAX_LEVEL + 1];
+            CHECK(sd_complex_edit(c, 0, n, idx, val, counts, NULL) == SD_OK);
+            CHECK(counts[0] == n && counts[1] >= n && counts[4] == 0);
+            CHECK(sd_complex_edit(c, 1, n, idx, aval, NULL, NULL) == SD_OK);
+            CHECK(same_levels(c, &m, 3, attr, 2));
+        }
+        sd_complex_free(c);
+        free(attr);
+        mesh_free(&m);
+    }
+}
+
+TEST(edit_refused_changes_nothing)
+{
+    mesh m = {0};
+    shape_two_tets(&m);
+    sd_complex *c = mesh_complex(&m, NULL, NULL);
+    CHECK(c && sd_complex_level(c, 2, NULL));
+    uint32_t idx[2] = {1, 1};
+    double val[6] = {0, 0, 0, 1, 1, 1};
+    sd_error e;
+    CHECK(sd_complex_edit(c, 0, 2, idx, val, NULL, &e) == SD_ERR_REPEATED && e.item == 1);
+    idx[1] = 99;
+    CHECK(sd_complex_edit(c, 0, 2, idx, val, NULL, &e) == SD_ERR_INDEX && e.item == 1);
+    idx[1] = 2;
+    val[4] = NAN;
+    CHECK(sd_complex_edit(c, 0, 2, idx, val, NULL, &e) == SD_ERR_VALUE && e.item == 1 && e.field == 1);
+    CHECK(sd_complex_edit(c, 3, 1, idx, val, NULL, &e) == SD_ERR_ARG);
+    CHECK(same_levels(c, &m, 2, NULL, 0)); /* still the unedited complex */
+    sd_complex_free(c);
+    mesh_free(&m);
+}
+
+TEST(edit_cost_is_local)
+{
+    /* a corner point's influence: the same region of space at every level, so the points it
+     * touches stay a small share of a fine mesh (here 8^3 cubes, level 2) */
+    mesh m = {0};
+    shape_cube_tets(&m, 8);
+    sd_complex *c = mesh_complex(&m, NULL, NULL);
+    CHECK(c && sd_complex_level(c, 2, NULL));
+    uint32_t idx = 0;
+    double val[3] = {-0.1, -0.1, -0.1};
+    uint64_t counts[SD_MAX_LEVEL + 1];
+    CHECK(sd_complex_edit(c, 0, 1, &idx, val, counts, NULL) == SD_OK);
+    uint32_t nv2 = sd_level_num_vertices(sd_complex_level(c, 2, NULL));
+    CHECK(counts[0] == 1 && counts[1] > 1 && counts[2] > counts[1]);
+    CHECK(counts[2] * 50 < nv2);
+    sd_complex_free(c);
+    mesh_free(&m);
+}
