@@ -58,6 +58,11 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
     }
     atomic_init(&m->refs, 1);
     pthread_mutex_init(&m->lock, NULL);
+    pthread_rwlockattr_t ra;
+    pthread_rwlockattr_init(&ra); /* an edit waits for the streams in flight, not for new ones */
+    pthread_rwlockattr_setkind_np(&ra, PTHREAD_RWLOCK_PREFER_WRITER_NONRECURSIVE_NP);
+    pthread_rwlock_init(&m->data, &ra);
+    pthread_rwlockattr_destroy(&ra);
     if (rules)
         m->rules = *rules;
     if (in) {
@@ -100,6 +105,7 @@ void api_model_unref(api_model *m)
     sd_complex_free(m->c);
     api_input_unref(m->in);
     pthread_mutex_destroy(&m->lock);
+    pthread_rwlock_destroy(&m->data);
     free(m);
 }
 

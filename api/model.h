@@ -47,7 +47,9 @@ typedef struct api_rules {
 
 typedef struct api_model {
     atomic_int refs;
-    pthread_mutex_t lock;     /* serialises computation on `c` */
+    pthread_mutex_t lock;     /* serialises computation on `c` (and edits) */
+    pthread_rwlock_t data;    /* readers of level data (streams, GET /complex) vs edits, which
+                               * change positions and attributes in place */
     api_input *in;            /* NULL: no complex posted yet */
     api_rules rules;
     sd_complex *c;            /* NULL iff in == NULL */

@@ -429,6 +429,52 @@ static void h_put_complex(req *r) { change(r, api_put_complex, 1); }
 static void h_put_tags(req *r) { change(r, api_put_tags, 0); }
 static void h_put_rules(req *r) { change(r, api_put_rules, 0); }
 
+/* PATCH control-points: If-Match is required (428 without, 412 when stale); the model is changed
+ * in place under its data lock, so the edit waits for that session's streams in flight. */
+static void h_edit(req *r)
+{
+    api_problem p = {0};
+    if (!MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND, MHD_HTTP_HEADER_IF_MATCH)) {
+        api_fail(&p, 428, "precondition-required",
+                 "send If-Match: \"<version>\" (the session's ETag) with an edit");
+        reply_problem(r, &p);
+        return;
+    }
+    json_t *b = parse_body(r, 0, &p);
+    if (!b) {
+        reply_problem(r, &p);
+        return;
+    }
+    pthread_mutex_lock(&r->s->write);
+    uint64_t version;
+    api_model *m = session_model(r->s, &version);
+    uint64_t counts[SD_MAX_LEVEL + 1];
+    int levels = 0, rc;
+    if (!if_match_ok(r, version))
+        rc = api_fail(&p, 412, "stale-version",
+                      "If-Match does not match the current version \"%llu\"; GET the session "
+                      "again", (unsigned long long)version);
+    else
+        rc = api_edit(m, b, counts, &levels, &p);
+    if (!rc)
+        version = session_bump(r->s);
+    pthread_mutex_unlock(&r->s->write);
+    json_decref(b);
+    api_model_unref(m);
+    if (rc) {
+        reply_problem(r, &p);
+        return;
+    }
+    json_t *up = json_object();
+    for (int l = 0; l < levels; l++) {
+        char key[8];
+        snprintf(key, sizeof key, "%d", l);
+        json_object_set_new(up, key, json_integer((json_int_t)counts[l]));
+    }
+    reply_json(r, 200, json_pack("{s:I, s:o}", "version", (json_int_t)version, "updated_points", up),
+               version);
+}
+
 static void h_get_complex(req *r)
 {
     uint64_t version;
@@ -468,7 +514,7 @@ static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
 static void stream_free(void *cls)
 {
     stream_ctx *sc = cls;
-    out_close(sc->os);
+    api_level_close(sc->m, sc->os);
     api_model_unref(sc->m);
     req_unref(sc->r);
     free(sc);
@@ -546,7 +592,7 @@ static void h_get_level(req *r)
     }
     stream_ctx *sc = malloc(sizeof *sc);
     if (!sc) {
-        out_close(os);
+        api_level_close(m, os);
         api_model_unref(m);
         fail(r, 503, "out-of-memory", "out of memory");
         return;
@@ -622,6 +668,7 @@ static const route ROUTES[] = {
     {"DELETE", "/v1/sessions/{id}", h_delete_session, 1, 0},
     {"PUT", "/v1/sessions/{id}/complex", h_put_complex, 1, 1},
     {"GET", "/v1/sessions/{id}/complex", h_get_complex, 1, 0},
+    {"PATCH", "/v1/sessions/{id}/control-points", h_edit, 1, 1},
     {"PUT", "/v1/sessions/{id}/tags", h_put_tags, 1, 1},
     {"PUT", "/v1/sessions/{id}/rules", h_put_rules, 1, 1},
     {"GET", "/v1/sessions/{id}/levels/{L}", h_get_level, 1, 0},

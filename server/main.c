@@ -186,7 +186,7 @@ static int refine_main(int argc, char **argv)
     else if (!rc)
         fprintf(stderr, "subdivd refine: level %d -> %s (%llu bytes, %.3f s)\n", level, out,
                 (unsigned long long)total, m->seconds[level]);
-    out_close(os);
+    api_level_close(m, os);
     api_model_unref(m);
     return rc;
 }

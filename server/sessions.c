@@ -206,6 +206,14 @@ uint64_t session_publish(session *s, api_model *m)
     return v;
 }
 
+uint64_t session_bump(session *s)
+{
+    pthread_mutex_lock(&s->mu);
+    uint64_t v = ++s->version;
+    pthread_mutex_unlock(&s->mu);
+    return v;
+}
+
 time_t session_expires_at(session *s)
 {
     pthread_mutex_lock(&s->mu);

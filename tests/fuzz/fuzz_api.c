@@ -126,7 +126,7 @@ static void drain_levels(api_model *m, const api_limits *lim)
             }
             while (out_read(os, buf, sizeof buf) > 0)
                 ;
-            out_close(os);
+            api_level_close(m, os);
         }
 }
 
