@@ -22,12 +22,14 @@ static bool build_columns(sd_mem *m, sd_level *lv)
     uint32_t *col = sd_calloc(m, (size_t)nc + 1, sizeof *col);
     uint32_t *row = sd_alloc(m, (S->nnz ? S->nnz : 1) * sizeof *row);
     uint32_t *pos = sd_alloc(m, (S->nnz ? S->nnz : 1) * sizeof *pos);
-    int32_t *slot = sd_alloc(m, ((size_t)nc + 1) * sizeof *slot);
+    /* the level may have been the finest at an earlier edit: its scratch map exists already */
+    int32_t *slot = lv->slot ? lv->slot : sd_alloc(m, ((size_t)nc + 1) * sizeof *slot);
     if (!col || !row || !pos || !slot) {
         sd_free(m, col);
         sd_free(m, row);
         sd_free(m, pos);
-        sd_free(m, slot);
+        if (slot != lv->slot)
+            sd_free(m, slot);
         return false;
     }
     for (size_t k = 0; k < S->nnz; k++)
@@ -89,6 +91,13 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
     for (int l = 0; l + 1 < nl; l++) /* every level that feeds a computed one has its S */
         if (!c->lv[l]->tcol && !build_columns(m, c->lv[l]))
             return sd_fail_nomem(err, m);
+    sd_level *fin = c->lv[nl - 1];
+    if (!fin->slot) { /* the finest level needs only the scratch map, kept like the others */
+        if (!(fin->slot = sd_alloc(m, ((size_t)fin->t.nv + 1) * sizeof *fin->slot)))
+            return sd_fail_nomem(err, m);
+        for (uint32_t v = 0; v < fin->t.nv; v++)
+            fin->slot[v] = -1;
+    }
     if (l0->slot)
         for (size_t i = 0; i < n; i++) /* repeated points make an edit ambiguous */
             if (l0->slot[idx[i]] != -1 || (l0->slot[idx[i]] = (int32_t)i, false)) {
@@ -126,15 +135,6 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
     for (int l = 0; l + 1 < nl; l++) {
         sd_level *lv = c->lv[l], *next = c->lv[l + 1];
         int32_t *slot = next->slot;
-        bool temp_slot = false;
-        if (!slot) { /* the finest level has no columns of its own: a temporary map */
-            slot = sd_alloc(m, ((size_t)next->t.nv + 1) * sizeof *slot);
-            if (!slot)
-                goto nomem;
-            for (uint32_t v = 0; v < next->t.nv; v++)
-                slot[v] = -1;
-            temp_slot = true;
-        }
         change *in = &ch[l], *out = &ch[l + 1];
         bool ok = true;
         for (uint32_t i = 0; i < in->n && ok; i++) {
@@ -169,8 +169,6 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
         }
         for (uint32_t i = 0; i < out->n; i++) /* leave the map clean for the next edit */
             slot[out->id[i]] = -1;
-        if (temp_slot)
-            sd_free(m, slot);
         if (!ok)
             goto nomem;
     }

@@ -111,3 +111,28 @@ TEST(edit_cost_is_local)
     sd_complex_free(c);
     mesh_free(&m);
 }
+
+TEST(edit_then_deeper_level)
+{
+    /* edit at level 1, compute level 3, edit again: the new levels follow the edited points and
+     * the second edit reaches them (the old finest level's scratch map is reused, not leaked) */
+    mesh m = {0};
+    shape_cube_tets(&m, 2);
+    sd_complex *c = mesh_complex(&m, NULL, NULL);
+    CHECK(c && sd_complex_level(c, 1, NULL));
+    /* small moves: a fresh build of a grossly deformed complex may orient its tetrahedra, and
+     * so choose its diagonals, differently — an edit keeps the topology it was made on */
+    uint32_t idx = 5;
+    double v[3] = {m.xyz[15] + 0.03, m.xyz[16] - 0.02, m.xyz[17] + 0.01};
+    CHECK(sd_complex_edit(c, 0, 1, &idx, v, NULL, NULL) == SD_OK);
+    memcpy(m.xyz + 15, v, sizeof v);
+    CHECK(sd_complex_level(c, 3, NULL));
+    idx = 7;
+    double w[3] = {m.xyz[21] - 0.02, m.xyz[22] + 0.01, m.xyz[23] + 0.03};
+    uint64_t counts[SD_MAX_LEVEL + 1];
+    CHECK(sd_complex_edit(c, 0, 1, &idx, w, counts, NULL) == SD_OK && counts[3] > 0);
+    memcpy(m.xyz + 21, w, sizeof w);
+    CHECK(same_levels(c, &m, 3, NULL, 0));
+    sd_complex_free(c);
+    mesh_free(&m);
+}
