@@ -977,3 +977,43 @@ int api_edit(api_model *m, json_t *body, uint64_t *counts, int *levels, api_prob
     edit_parts_free(parts, np);
     return rc;
 }
+
+/* ---- GET /matrices/{L} -------------------------------------------------------------------- */
+
+int api_matrix_open(api_model *m, int level, const char *from, const char *format,
+                    const api_limits *lim, out_stream **out, const char **ctype, api_problem *p)
+{
+    *out = NULL;
+    if (!m->c)
+        return api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+    bool json = false;
+    if (format && !(json = !strcmp(format, "json")) && strcmp(format, "mtx"))
+        return api_fail_at(p, 422, "unknown-value", "format",
+                           "format \"%.20s\" is not one of mtx, json", format);
+    long f = 0;
+    if (from) {
+        char *end;
+        errno = 0;
+        f = isdigit((unsigned char)*from) ? strtol(from, &end, 10) : -1;
+        if (f < 0 || *end || errno)
+            return api_fail_at(p, 400, "wrong-type", "from", "from must be a level number");
+    }
+    if (level < 1 || f >= level)
+        return api_fail_at(p, 422, "out-of-range", "from",
+                           "from (%ld) must be below the level (%d); level 0 has no matrix", f, level);
+    if (check_level_limits(m, level, lim, p))
+        return p->status;
+    sd_error e = {0};
+    pthread_mutex_lock(&m->lock);
+    if (api_model_level_locked(m, level, &e))
+        *out = out_matrix_open(m->c, (int)f, level, json, 32 * lim->max_cells, &e);
+    pthread_mutex_unlock(&m->lock);
+    if (!*out)
+        return e.code == SD_ERR_LIMIT
+                   ? api_fail_limit(p, "max_cells", lim->max_cells, 0,
+                                    "%s (the limit is 32 entries per allowed cell); ask for a "
+                                    "closer from-level", e.message)
+                   : api_fail_core(p, &e, NULL, NULL);
+    *ctype = json ? "application/json" : "text/plain; charset=utf-8";
+    return 0;
+}

@@ -60,6 +60,11 @@ json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_prob
  * magnitude first. Locks the model (an edge needs level 1). New reference or NULL + problem. */
 json_t *api_analysis(api_model *m, const char *vertex, const char *edge, api_problem *p);
 
+/* GET /matrices/{L}?from=F&format=mtx|json: computes level L if needed and opens the stream of
+ * the matrix mapping level F (default 0) to level L. *ctype: the Content-Type. */
+int api_matrix_open(api_model *m, int level, const char *from, const char *format,
+                    const api_limits *lim, out_stream **out, const char **ctype, api_problem *p);
+
 /* Level from a path segment: 0..SD_MAX_LEVEL, else -1 + problem (400 not a number, 422 range). */
 int api_parse_level(const char *s, api_problem *p);
 /* Estimated core bytes needed to hold levels up to `level` (limits check before computing). */

@@ -14,6 +14,7 @@
 #define SUBDIVD_OUT_H
 
 #include "../core/sd.h"
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <sys/types.h>
@@ -87,6 +88,13 @@ uint64_t out_size(const out_stream *s);
  * internal failure (the stream can only be cut short then). */
 ssize_t out_read(out_stream *s, char *buf, size_t cap);
 void out_close(out_stream *s);
+
+/* The subdivision matrix mapping level `from` points to level `to` points (the product of the
+ * cached S_l; level `to` computed already), streamed as Matrix Market (1-based coordinate) or as
+ * JSON CSR {"from","to","rows","cols","nnz","rowptr","col","val"}. Refuses (SD_ERR_LIMIT) a
+ * product with more than max_nnz entries. Close with out_close. */
+out_stream *out_matrix_open(sd_complex *c, int from, int to, bool json, uint64_t max_nnz,
+                            sd_error *err);
 
 #ifdef __cplusplus
 }

@@ -496,6 +496,7 @@ typedef struct stream_ctx {
     req *r;
     api_model *m;
     out_stream *os;
+    int level_data;   /* a level stream: holds the model's data lock (api_level_close) */
 } stream_ctx;
 
 static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
@@ -514,7 +515,10 @@ static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
 static void stream_free(void *cls)
 {
     stream_ctx *sc = cls;
-    api_level_close(sc->m, sc->os);
+    if (sc->level_data)
+        api_level_close(sc->m, sc->os);
+    else
+        out_close(sc->os);
     api_model_unref(sc->m);
     req_unref(sc->r);
     free(sc);
@@ -600,6 +604,7 @@ static void h_get_level(req *r)
     sc->r = r;
     sc->m = m;
     sc->os = os;
+    sc->level_data = 1;
     atomic_fetch_add(&r->refs, 1);
     uint64_t size = out_size(os);
     struct MHD_Response *resp = MHD_create_response_from_callback(
@@ -634,6 +639,46 @@ static void h_level_stats(req *r)
     }
     json_object_set_new(j, "version", json_integer((json_int_t)version));
     reply_json(r, 200, j, version);
+}
+
+static void h_matrix(req *r)
+{
+    static const char *const keys[] = {"from", "format", NULL};
+    int level = level_of(r, keys);
+    if (level < 0)
+        return;
+    uint64_t version;
+    api_model *m = session_model(r->s, &version);
+    api_problem p = {0};
+    out_stream *os = NULL;
+    const char *ctype = NULL;
+    const char *from = MHD_lookup_connection_value(r->conn, MHD_GET_ARGUMENT_KIND, "from");
+    const char *fmt = MHD_lookup_connection_value(r->conn, MHD_GET_ARGUMENT_KIND, "format");
+    int slot, rc = slot_for_level(r, m, level, &slot, &p);
+    if (!rc)
+        rc = api_matrix_open(m, level, from, fmt, &r->srv->cfg.limits, &os, &ctype, &p);
+    if (slot)
+        give_slot(r);
+    stream_ctx *sc = rc ? NULL : malloc(sizeof *sc);
+    if (!sc) {
+        out_close(os);
+        api_model_unref(m);
+        if (!rc)
+            api_fail(&p, 503, "out-of-memory", "out of memory");
+        reply_problem(r, &p);
+        return;
+    }
+    *sc = (stream_ctx){r, m, os, 0};
+    atomic_fetch_add(&r->refs, 1);
+    struct MHD_Response *resp =
+        MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 256 * 1024, stream_read, sc, stream_free);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
+    char disp[96];
+    snprintf(disp, sizeof disp, "attachment; filename=\"S_%s_%d.%s\"", from ? from : "0", level,
+             fmt && !strcmp(fmt, "json") ? "json" : "mtx");
+    MHD_add_response_header(resp, "Content-Disposition", disp);
+    set_etag(resp, version);
+    queue(r, 200, resp);
 }
 
 static void h_analysis(req *r)
@@ -674,6 +719,7 @@ static const route ROUTES[] = {
     {"GET", "/v1/sessions/{id}/levels/{L}", h_get_level, 1, 0},
     {"GET", "/v1/sessions/{id}/levels/{L}/stats", h_level_stats, 1, 0},
     {"GET", "/v1/sessions/{id}/analysis", h_analysis, 1, 0},
+    {"GET", "/v1/sessions/{id}/matrices/{L}", h_matrix, 1, 0},
     {"GET", "/healthz", h_healthz, 0, 0},
     {"GET", "/livez", h_healthz, 0, 0},
     {"GET", "/readyz", h_readyz, 0, 0},
