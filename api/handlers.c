@@ -175,6 +175,52 @@ static int parse_attributes(json_t *v, api_input *in, api_problem *p)
     return 0;
 }
 
+/* "diagonals": [[simplex, pair]...] — the major diagonal of chosen tetrahedra (001 Sec. 3:
+ * pair 0 = edges 01|23, 1 = 02|13, 2 = 03|12 of the simplex as posted). */
+static int parse_diagonals(json_t *v, api_input *in, api_problem *p)
+{
+    if (!json_is_array(v))
+        return api_fail_at(p, 400, "wrong-type", "/diagonals", "must be an array of [simplex, pair]");
+    size_t n = json_array_size(v);
+    if (n > in->ns)
+        return api_fail_at(p, 422, "repeated-index", "/diagonals",
+                           "%zu choices for %u simplices: some tetrahedron is listed twice", n, in->ns);
+    in->diag = malloc((n ? n : 1) * sizeof *in->diag);
+    uint8_t *seen = calloc((size_t)in->ns + 1, 1);
+    int rc = 0;
+    if (!in->diag || !seen)
+        rc = api_fail(p, 503, "out-of-memory", "out of memory");
+    char ptr[96], at[96];
+    for (size_t i = 0; i < n && !rc; i++) {
+        json_t *d = json_array_get(v, i);
+        long long s, k;
+        api_ptr_index(ptr, sizeof ptr, "/diagonals", i);
+        if (!json_is_array(d) || json_array_size(d) != 2) {
+            rc = api_fail_at(p, 400, "wrong-type", ptr, "a choice is [simplex index, pair 0..2]");
+            break;
+        }
+        api_ptr_index(at, sizeof at, ptr, 0);
+        if ((rc = api_get_int(json_array_get(d, 0), at, 0, (long long)in->ns - 1, &s, p)))
+            break;
+        if (in->size[s] != 4) {
+            rc = api_fail_at(p, 422, "not-a-tetrahedron", at, "simplex %lld is not a tetrahedron", s);
+            break;
+        }
+        if (seen[s]++) {
+            rc = api_fail_at(p, 422, "repeated-index", at, "simplex %lld is listed twice", s);
+            break;
+        }
+        api_ptr_index(at, sizeof at, ptr, 1);
+        if ((rc = api_get_int(json_array_get(d, 1), at, 0, 2, &k, p)))
+            break;
+        in->diag[i][0] = (uint32_t)s;
+        in->diag[i][1] = (uint32_t)k;
+        in->ndiag++;
+    }
+    free(seen);
+    return rc;
+}
+
 /* Build the model of `in` + rules, mapping core refusals to problems with pointers. */
 static int build_model(api_input *in, const api_rules *rules, const api_limits *lim,
                        api_model **out, api_problem *p)
@@ -205,7 +251,8 @@ static int build_model(api_input *in, const api_rules *rules, const api_limits *
 int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                     api_problem *p)
 {
-    static const char *const keys[] = {"vertices", "simplices", "attributes", "fill", NULL};
+    static const char *const keys[] = {"vertices", "simplices", "attributes", "diagonals",
+                                       "fill", NULL};
     *out = NULL;
     if (api_only_keys(body, "", keys, p))
         return p->status;
@@ -223,6 +270,9 @@ int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, a
     json_t *attrs = json_object_get(body, "attributes");
     if (!rc && attrs)
         rc = parse_attributes(attrs, in, p);
+    json_t *dg = json_object_get(body, "diagonals");
+    if (!rc && dg)
+        rc = parse_diagonals(dg, in, p);
     if (!rc && json_object_get(body, "fill"))
         rc = api_fail_at(p, 501, "not-implemented", "/fill",
                          "TetGen fill is not available in this version; post the tetrahedra "
@@ -447,10 +497,15 @@ json_t *api_get_complex(api_model *m, api_problem *p)
                                                          (json_int_t)ev[2 * i + 1]));
             json_array_append_new(ce, o);
         }
+    json_t *dj = json_array();
+    for (uint32_t s = 0; s < in->ns; s++)
+        if (in->size[s] == 4)
+            json_array_append_new(dj, json_pack("[I, i]", (json_int_t)s, sd_complex_diagonal(m->c, s)));
     pthread_rwlock_unlock(&m->data);
     static const char *const schemes[] = {"box", "averaged"}, *const weights[] = {"warren", "loop"};
-    return json_pack("{s:o, s:o, s:o, s:{s:o, s:o}, s:{s:[]}, s:{s:s, s:[], s:s, s:s, s:s}, s:O}",
-                     "vertices", vs, "simplices", ss, "attributes", at, "classes", "vertices", cv,
+    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:{s:[]}, s:{s:s, s:[], s:s, s:s, s:s}, s:O}",
+                     "vertices", vs, "simplices", ss, "attributes", at, "diagonals", dj,
+                     "classes", "vertices", cv,
                      "edges", ce, "tags", "singular", "rules", "nonmanifold_default", "G2",
                      "overrides", "solid_scheme", schemes[m->rules.solid_scheme & 1],
                      "surface_weights", weights[m->rules.surface_weights & 1],

@@ -24,6 +24,7 @@ void api_input_unref(api_input *in)
     free(in->idx);
     for (int a = 0; a < in->nattrs; a++)
         free(in->attrs[a].data);
+    free(in->diag);
     free(in);
 }
 
@@ -74,6 +75,11 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
             api_model_unref(m);
             return NULL;
         }
+        for (uint32_t d = 0; d < in->ndiag; d++)
+            if (sd_complex_set_diagonal(m->c, in->diag[d][0], (int)in->diag[d][1], err)) {
+                api_model_unref(m);
+                return NULL;
+            }
         for (int a = 0; a < in->nattrs; a++) {
             m->channel[a] = sd_complex_add_channel(m->c, in->attrs[a].data, in->attrs[a].ncomp, err);
             if (m->channel[a] < 0) {

@@ -37,6 +37,8 @@ typedef struct api_input {
     uint32_t *idx;            /* sum of sizes */
     int nattrs;
     api_attribute attrs[API_MAX_ATTRIBUTES];
+    uint32_t ndiag;           /* major diagonals chosen by the client: */
+    uint32_t (*diag)[2];      /* (simplex index, pair 0..2) */
 } api_input;
 
 /* The rule preferences of PUT /rules (API.md); zero = the default. */

@@ -91,3 +91,52 @@ def test_analysis_errors(daemon, params, status, pointer):
 def test_analysis_needs_complex(daemon):
     r = Session(daemon).req("GET", "/analysis", params={"vertex": 0})
     assert r.status_code == 409
+
+
+def test_appendix_b2_edge_skew_diagonals(daemon):
+    """001 B.2: the valence-4 edge with skew diagonals (Fig. 23, first row) — pair 1 of each
+    tetrahedron (p0, p2, c_i, c_i+1) is p0-c_i | p2-c_i+1 — has the printed eigenvalues."""
+    s = Session(daemon)
+    body = edge_star(4)
+    body["diagonals"] = [[i, 1] for i in range(4)]
+    assert s.put_complex(body).status_code == 200
+    assert s.req("GET", "/complex").json()["diagonals"] == body["diagonals"]
+    j = s.req("GET", "/analysis", params={"edge": "0,1"}).json()
+    assert j["size"] == 11 and j["closed"] and j["points"]["level"] == 1
+    r2 = math.sqrt(2)
+    want = sorted([1, (45 + math.sqrt(985)) / 160, (25 + 6 * r2) / 80, (25 + 6 * r2) / 80, 19 / 80,
+                   (25 - 6 * r2) / 80, (25 - 6 * r2) / 80, 3 / 16, 13 / 80, 13 / 80,
+                   (45 - math.sqrt(985)) / 160], key=lambda x: -abs(x))
+    np.testing.assert_allclose(j["eigenvalues"], want, atol=1e-9)
+
+
+def test_edge_with_diagonals_toward_it_is_regular(daemon):
+    """All diagonals at the edge (pair 0): its midpoint is a regular octet-truss vertex, so the
+    block has the regular box-spline spectrum {1, 1/2 x3, 1/4 x6, 1/8 x4, 1/16}
+    (docs/DECISIONS.md 2)."""
+    s = Session(daemon)
+    body = edge_star(4)
+    body["diagonals"] = [[i, 0] for i in range(4)]
+    assert s.put_complex(body).status_code == 200
+    j = s.req("GET", "/analysis", params={"edge": "0,1"}).json()
+    want = [1] + [0.5] * 3 + [0.25] * 6 + [0.125] * 4 + [1 / 16]
+    np.testing.assert_allclose(sorted(j["eigenvalues"], reverse=True), want, atol=1e-9)
+
+
+@pytest.mark.parametrize("diag,status,pointer", [
+    ([[0, 3]], 422, "/diagonals/0/1"), ([[9, 0]], 422, "/diagonals/0/0"),
+    ([[0, 1], [0, 2]], 422, "/diagonals/1/0"), ([[0]], 400, "/diagonals/0"),
+    ("x", 400, "/diagonals")])
+def test_diagonal_errors(daemon, diag, status, pointer):
+    s = Session(daemon)
+    body = edge_star(4)
+    body["diagonals"] = diag
+    r = s.put_complex(body)
+    assert r.status_code == status and r.json()["errors"][0]["pointer"] == pointer
+
+
+def test_diagonal_on_a_triangle(daemon):
+    s = Session(daemon)
+    body = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "simplices": [[0, 1, 2]], "diagonals": [[0, 0]]}
+    r = s.put_complex(body)
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/diagonals/0/0"
