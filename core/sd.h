@@ -197,6 +197,28 @@ sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err
 sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *idx,
                           const double *values, uint64_t *counts, sd_error *err);
 
+/* ---- local red-green refinement (000 Sec. 4.2) ------------------------------------------ */
+
+typedef struct sd_refinement {
+    double *xyz;              /* 3 nv: the old vertices, then one per split edge (midpoints) */
+    size_t nv;
+    uint32_t *idx;            /* the new simplices, like sd_complex_new's input */
+    uint8_t *size;
+    size_t ns;
+    uint32_t *parent;         /* ns: the input simplex each new simplex comes from */
+    uint32_t (*split)[2];     /* nsplit: the ends of the edge each new vertex splits */
+    size_t nsplit;
+    uint64_t red, green;      /* simplices split red (marked or upgraded) / by a green pattern */
+} sd_refinement;
+
+/* Refine a control complex (arrays as for sd_complex_new) red where marked[s] != 0 and green
+ * around, so the result is conforming (see core/refine.c for the patterns). Untouched simplices
+ * keep their vertex lists and order; new vertices follow the old ones, at edge midpoints (move
+ * them as you like). Free the result with sd_refine_free (it uses the C library's allocator). */
+sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
+                    size_t ns, const uint8_t *marked, sd_refinement *out, sd_error *err);
+void sd_refine_free(sd_refinement *r);
+
 /* ---- local analysis (001 Sec. 4.1, Appendix B) ------------------------------------------- */
 
 typedef struct sd_analysis {

@@ -1,0 +1,263 @@
+/* refine.c — local red-green refinement of a control complex (000 Sec. 4.2, 002).
+ *
+ * Marked simplices are split red (segment -> 2, triangle -> 4, tetrahedron -> 4 corner tets + its
+ * octahedron cut into 4 tets along the diagonal joining the midpoints of edges 01 and 23). The
+ * closure then makes the result conforming, deciding every simplex by the set of its edges that
+ * are split (shared edges are split for all their simplices at once, so faces always match):
+ *   triangle: none -> kept; one -> green (2 triangles); three -> red; two -> upgraded to red;
+ *   tetrahedron: none -> kept; one -> Green-I (2 tets); the three edges of one face ->
+ *     Green-III (that face split in 4, coned to the opposite vertex); six -> red; any other set
+ *     -> upgraded to red;
+ *   segment: split when its edge is.
+ * Upgrades split more edges, so the closure repeats until nothing changes (it ends: edges only
+ * ever become split). A face then has 0, 1 or 3 split edges and both its cells cut it the same
+ * way: no hanging vertex. Untouched simplices keep their place and vertex order; new vertices
+ * (one per split edge, placed at the midpoint — the caller may move them) follow the old ones.
+ */
+#include "hash.h"
+#include <stdlib.h>
+#include <string.h>
+
+static const uint8_t TRI_E[3][2] = {{0, 1}, {1, 2}, {2, 0}};
+/* SD_TET_E order: 01 02 03 12 13 23 */
+static const uint8_t TE[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
+/* the three edges of the face opposite vertex i, as indices into TE */
+static const uint8_t FACE_EDGES[4][3] = {{3, 4, 5}, {1, 2, 5}, {0, 2, 4}, {0, 1, 3}};
+
+typedef struct ref {
+    sd_mem *m;
+    sd_hash h;
+    uint32_t ne;
+    uint8_t *split;       /* per edge */
+    uint32_t *mid;        /* per edge: new vertex id */
+    uint32_t *eids;       /* per simplex slot: edge ids (6 per simplex) */
+} ref;
+
+static uint32_t edge_of(ref *r, uint32_t a, uint32_t b)
+{
+    uint32_t ab[2] = {a, b}, k[4];
+    sd_key(k, ab, 2);
+    uint32_t got = sd_hash_get_or_put(&r->h, k, r->ne);
+    return got == UINT32_MAX ? r->ne++ : got;
+}
+
+void sd_refine_free(sd_refinement *o)
+{
+    if (!o)
+        return;
+    free(o->xyz);
+    free(o->idx);
+    free(o->size);
+    free(o->parent);
+    free(o->split);
+    memset(o, 0, sizeof *o);
+}
+
+static int tet_pattern(const uint8_t *s, int *face)
+{
+    int n = 0;
+    for (int i = 0; i < 6; i++)
+        n += s[i];
+    if (n == 0 || n == 1 || n == 6)
+        return n;
+    if (n == 3)
+        for (int f = 0; f < 4; f++)
+            if (s[FACE_EDGES[f][0]] && s[FACE_EDGES[f][1]] && s[FACE_EDGES[f][2]]) {
+                *face = f;
+                return 3;
+            }
+    return -1; /* no green pattern: red */
+}
+
+sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
+                    size_t ns, const uint8_t *marked, sd_refinement *out, sd_error *err)
+{
+    memset(out, 0, sizeof *out);
+    sd_mem mem;
+    sd_mem_init(&mem, NULL, 0);
+    ref r = {.m = &mem};
+    sd_result rc = SD_OK;
+    size_t nidx = 0;
+    for (size_t s = 0; s < ns; s++) {
+        if (size[s] < 1 || size[s] > 4)
+            return sd_fail(err, SD_ERR_ARITY, (long)s, -1, "simplex %zu has %d vertices", s, size[s]);
+        nidx += size[s];
+    }
+    if (!sd_hash_init(&mem, &r.h, 6 * ns + 16))
+        return sd_fail_nomem(err, &mem);
+    r.eids = malloc((6 * ns + 1) * sizeof *r.eids);
+    r.split = calloc(6 * ns + 1, 1);
+    r.mid = malloc((6 * ns + 1) * sizeof *r.mid);
+    uint8_t *red = calloc(ns + 1, 1);
+    if (!r.eids || !r.split || !r.mid || !red) {
+        rc = sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
+        goto done;
+    }
+    /* edge ids of every simplex */
+    for (size_t s = 0, off = 0; s < ns; off += size[s++]) {
+        const uint32_t *v = idx + off;
+        int k = size[s];
+        if (k == 2)
+            r.eids[6 * s] = edge_of(&r, v[0], v[1]);
+        else if (k == 3)
+            for (int e = 0; e < 3; e++)
+                r.eids[6 * s + e] = edge_of(&r, v[TRI_E[e][0]], v[TRI_E[e][1]]);
+        else if (k == 4)
+            for (int e = 0; e < 6; e++)
+                r.eids[6 * s + e] = edge_of(&r, v[TE[e][0]], v[TE[e][1]]);
+    }
+    static const int nedges[5] = {0, 0, 1, 3, 6};
+    for (size_t s = 0; s < ns; s++)
+        if (marked[s] && size[s] >= 2) {
+            red[s] = 1;
+            for (int e = 0; e < nedges[size[s]]; e++)
+                r.split[r.eids[6 * s + e]] = 1;
+        }
+    /* closure */
+    for (bool changed = true; changed;) {
+        changed = false;
+        for (size_t s = 0; s < ns; s++) {
+            int k = size[s], n = 0, face;
+            if (k < 3 || red[s])
+                continue;
+            uint8_t st[6];
+            for (int e = 0; e < nedges[k]; e++)
+                n += st[e] = r.split[r.eids[6 * s + e]];
+            bool upgrade = k == 3 ? n == 2 || n == 3 : tet_pattern(st, &face) < 0 || n == 6;
+            if (upgrade) {
+                red[s] = 1;
+                for (int e = 0; e < nedges[k]; e++)
+                    if (!r.split[r.eids[6 * s + e]]) {
+                        r.split[r.eids[6 * s + e]] = 1;
+                        changed = true;
+                    }
+            }
+        }
+    }
+    /* new vertices */
+    uint32_t nsplit = 0;
+    for (uint32_t e = 0; e < r.ne; e++)
+        if (r.split[e])
+            r.mid[e] = (uint32_t)nv + nsplit++;
+    out->nv = nv + nsplit;
+    out->xyz = malloc(out->nv * 3 * sizeof *out->xyz);
+    out->split = malloc(((size_t)nsplit + 1) * sizeof *out->split);
+    /* at most 8 children of 4 ids per simplex */
+    out->idx = malloc((32 * ns + 1) * sizeof *out->idx);
+    out->size = malloc(8 * ns + 1);
+    out->parent = malloc((8 * ns + 1) * sizeof *out->parent);
+    if (!out->xyz || !out->split || !out->idx || !out->size || !out->parent) {
+        rc = sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
+        goto done;
+    }
+    memcpy(out->xyz, xyz, nv * 3 * sizeof *xyz);
+    for (size_t i = 0; i < r.h.cap; i++) { /* every split edge: its ends and midpoint */
+        uint32_t e = r.h.val[i];
+        if (r.h.key[i][0] == UINT32_MAX || !r.split[e])
+            continue;
+        uint32_t a = r.h.key[i][0], b = r.h.key[i][1], m = r.mid[e];
+        out->split[m - nv][0] = a;
+        out->split[m - nv][1] = b;
+        for (int q = 0; q < 3; q++)
+            out->xyz[3 * (size_t)m + q] = 0.5 * (xyz[3 * (size_t)a + q] + xyz[3 * (size_t)b + q]);
+    }
+    out->nsplit = nsplit;
+    size_t on = 0, oi = 0;
+#define EMIT(n, ...)                                                                               \
+    do {                                                                                           \
+        const uint32_t t_[] = {__VA_ARGS__};                                                       \
+        memcpy(out->idx + oi, t_, (n) * sizeof *t_);                                               \
+        oi += (n);                                                                                 \
+        out->parent[on] = (uint32_t)s;                                                             \
+        out->size[on++] = (n);                                                                     \
+    } while (0)
+    for (size_t s = 0, off = 0; s < ns; off += size[s++]) {
+        const uint32_t *v = idx + off;
+        int k = size[s];
+        const uint32_t *E = r.eids + 6 * s;
+        int n = 0, face = -1;
+        uint8_t st[6] = {0};
+        for (int e = 0; k >= 2 && e < nedges[k]; e++)
+            n += st[e] = r.split[E[e]];
+        if (n == 0) {
+            memcpy(out->idx + oi, v, k * sizeof *v);
+            oi += k;
+            out->parent[on] = (uint32_t)s;
+            out->size[on++] = (uint8_t)k;
+            continue;
+        }
+        if (k == 2) {
+            uint32_t m = r.mid[E[0]];
+            EMIT(2, v[0], m);
+            EMIT(2, m, v[1]);
+            out->red += red[s];
+            out->green += !red[s];
+        } else if (k == 3 && n == 1) {
+            int e = st[0] ? 0 : st[1] ? 1 : 2;
+            uint32_t a = v[TRI_E[e][0]], b = v[TRI_E[e][1]], c = v[3 - TRI_E[e][0] - TRI_E[e][1]];
+            uint32_t m = r.mid[E[e]];
+            EMIT(3, a, m, c);
+            EMIT(3, m, b, c);
+            out->green++;
+        } else if (k == 3) {
+            uint32_t m01 = r.mid[E[0]], m12 = r.mid[E[1]], m20 = r.mid[E[2]];
+            EMIT(3, v[0], m01, m20);
+            EMIT(3, m01, v[1], m12);
+            EMIT(3, m20, m12, v[2]);
+            EMIT(3, m01, m12, m20);
+            out->red++;
+        } else if (tet_pattern(st, &face) == 1) {
+            int e = 0;
+            while (!st[e])
+                e++;
+            uint32_t a = v[TE[e][0]], b = v[TE[e][1]], c = UINT32_MAX, d = UINT32_MAX;
+            for (int i = 0; i < 4; i++)
+                if (i != TE[e][0] && i != TE[e][1])
+                    *(c == UINT32_MAX ? &c : &d) = v[i];
+            uint32_t m = r.mid[E[e]];
+            EMIT(4, a, m, c, d);
+            EMIT(4, m, b, c, d);
+            out->green++;
+        } else if (n == 3) { /* Green-III: face opposite vertex `face` */
+            uint32_t apex = v[face], f[3], fm[3];
+            int j = 0;
+            for (int i = 0; i < 4; i++)
+                if (i != face)
+                    f[j++] = v[i];
+            /* the midpoint of f[i]-f[i+1] */
+            for (int i = 0; i < 3; i++) {
+                uint32_t x = f[i], y = f[(i + 1) % 3];
+                for (int e = 0; e < 6; e++)
+                    if ((v[TE[e][0]] == x && v[TE[e][1]] == y) || (v[TE[e][0]] == y && v[TE[e][1]] == x))
+                        fm[i] = r.mid[E[e]];
+            }
+            EMIT(4, f[0], fm[0], fm[2], apex);
+            EMIT(4, fm[0], f[1], fm[1], apex);
+            EMIT(4, fm[2], fm[1], f[2], apex);
+            EMIT(4, fm[0], fm[1], fm[2], apex);
+            out->green++;
+        } else { /* red: 4 corners + the octahedron around the diagonal m01-m23 */
+            uint32_t m01 = r.mid[E[0]], m02 = r.mid[E[1]], m03 = r.mid[E[2]], m12 = r.mid[E[3]],
+                     m13 = r.mid[E[4]], m23 = r.mid[E[5]];
+            EMIT(4, v[0], m01, m02, m03);
+            EMIT(4, m01, v[1], m12, m13);
+            EMIT(4, m02, m12, v[2], m23);
+            EMIT(4, m03, m13, m23, v[3]);
+            const uint32_t eq[4] = {m02, m03, m13, m12}; /* the equator around m01-m23, a cycle */
+            for (int i = 0; i < 4; i++)
+                EMIT(4, m01, m23, eq[i], eq[(i + 1) % 4]);
+            out->red++;
+        }
+    }
+#undef EMIT
+    out->ns = on;
+done:
+    free(r.eids);
+    free(r.split);
+    free(r.mid);
+    free(red);
+    sd_hash_free(&mem, &r.h);
+    if (rc)
+        sd_refine_free(out);
+    return rc;
+}
