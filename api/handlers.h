@@ -65,6 +65,12 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, api_pro
 int api_matrix_open(api_model *m, int level, const char *from, const char *format,
                     const api_limits *lim, out_stream **out, const char **ctype, api_problem *p);
 
+/* POST /refine: red-green refinement of the control complex (000 Sec. 4.2) around the selected
+ * simplices (by vertex lists), box or sphere (centroids), `depth` times, new points placed by
+ * the subdivision rules or at midpoints. A new model; *red / *green count the split simplices. */
+int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
+               uint64_t *red, uint64_t *green, api_problem *p);
+
 /* Level from a path segment: 0..SD_MAX_LEVEL, else -1 + problem (400 not a number, 422 range). */
 int api_parse_level(const char *s, api_problem *p);
 /* Estimated core bytes needed to hold levels up to `level` (limits check before computing). */

@@ -425,6 +425,43 @@ static void change(req *r, change_fn_t fn, int with_summary)
     reply_json(r, 200, j, version);
 }
 
+/* POST refine: like a change (new model, If-Match optional), and it reports what was split. */
+static void h_refine(req *r)
+{
+    api_problem p = {0};
+    json_t *b = parse_body(r, 0, &p);
+    if (!b) {
+        reply_problem(r, &p);
+        return;
+    }
+    pthread_mutex_lock(&r->s->write);
+    uint64_t version, red = 0, green = 0;
+    api_model *cur = session_model(r->s, &version), *next = NULL;
+    int rc;
+    if (!if_match_ok(r, version))
+        rc = api_fail(&p, 412, "stale-version",
+                      "If-Match does not match the current version \"%llu\"; GET the session "
+                      "again", (unsigned long long)version);
+    else if (!(rc = take_slot(r, &p))) {
+        rc = api_refine(cur, b, &r->srv->cfg.limits, &next, &red, &green, &p);
+        give_slot(r);
+    }
+    json_decref(b);
+    api_model_unref(cur);
+    if (rc) {
+        pthread_mutex_unlock(&r->s->write);
+        reply_problem(r, &p);
+        return;
+    }
+    json_t *summary = next->summary ? json_incref(next->summary) : json_object();
+    version = session_publish(r->s, next);
+    pthread_mutex_unlock(&r->s->write);
+    reply_json(r, 200,
+               json_pack("{s:I, s:o, s:{s:I, s:I}}", "version", (json_int_t)version, "summary",
+                         summary, "refined", "red", (json_int_t)red, "green", (json_int_t)green),
+               version);
+}
+
 static void h_put_complex(req *r) { change(r, api_put_complex, 1); }
 static void h_put_tags(req *r) { change(r, api_put_tags, 0); }
 static void h_put_rules(req *r) { change(r, api_put_rules, 0); }
@@ -714,6 +751,7 @@ static const route ROUTES[] = {
     {"PUT", "/v1/sessions/{id}/complex", h_put_complex, 1, 1},
     {"GET", "/v1/sessions/{id}/complex", h_get_complex, 1, 0},
     {"PATCH", "/v1/sessions/{id}/control-points", h_edit, 1, 1},
+    {"POST", "/v1/sessions/{id}/refine", h_refine, 1, 1},
     {"PUT", "/v1/sessions/{id}/tags", h_put_tags, 1, 1},
     {"PUT", "/v1/sessions/{id}/rules", h_put_rules, 1, 1},
     {"GET", "/v1/sessions/{id}/levels/{L}", h_get_level, 1, 0},

@@ -1,0 +1,156 @@
+"""POST /refine (000 Sec. 4.2, red-green): the refined control complex is conforming (the volume
+and the boundary area are unchanged, no face has a hanging vertex), untouched tetrahedra stay,
+the selected region reaches the requested depth, new points sit where the subdivision rules put
+them (the level-1 edge points) or at midpoints, and the result subdivides."""
+import itertools
+
+import numpy as np
+import pytest
+
+from conftest import REPO
+from daemon import Daemon, Session, complex_from_text
+
+CUBE = REPO / "tests" / "cases" / "tetgen_cube" / "mesh.txt"
+MIXED = REPO / "examples" / "mixed.txt"
+
+
+@pytest.fixture(scope="module")
+def daemon():
+    d = Daemon()
+    yield d
+    assert d.stop() == 0
+
+
+def tets_of(c):
+    return [t for t in c["simplices"] if len(t) == 4]
+
+
+def volume_and_boundary(c):
+    p = np.array(c["vertices"])
+    vol, faces = 0.0, {}
+    for t in tets_of(c):
+        a, b, cc, d = p[t]
+        vol += abs(np.dot(np.cross(b - a, cc - a), d - a)) / 6
+        for f in itertools.combinations(sorted(t), 3):
+            faces[f] = faces.get(f, 0) + 1
+    area = sum(np.linalg.norm(np.cross(p[f[1]] - p[f[0]], p[f[2]] - p[f[0]])) / 2
+               for f, n in faces.items() if n == 1)
+    assert max(faces.values()) <= 2, "a face shared by more than two tetrahedra"
+    return vol, area
+
+
+def no_hanging_vertex(c):
+    """No vertex lies at the midpoint of an edge of a simplex (the split edges are all gone)."""
+    p = np.array(c["vertices"])
+    edges = {tuple(sorted(e)) for s in c["simplices"] for e in itertools.combinations(s, 2)}
+    mids = {tuple(np.round((p[a] + p[b]) / 2, 12)): (a, b) for a, b in edges}
+    for i, q in enumerate(p):
+        hit = mids.get(tuple(np.round(q, 12)))
+        assert hit is None or i in hit, f"vertex {i} hangs on edge {hit}"
+
+
+def test_refine_one_tetrahedron(daemon):
+    body = complex_from_text(CUBE)
+    s = Session(daemon)
+    assert s.put_complex(body).status_code == 200
+    vol0, area0 = volume_and_boundary(body)
+    t0 = tets_of(body)[5]
+    r = s.req("POST", "/refine", json={"select": {"simplices": [t0]}, "positions": "midpoint"})
+    assert r.status_code == 200, r.text
+    j = r.json()
+    assert j["version"] == 2 and j["refined"]["red"] == 1 and j["refined"]["green"] >= 1
+    c = s.req("GET", "/complex").json()
+    assert len(c["vertices"]) == len(body["vertices"]) + 6
+    vol, area = volume_and_boundary(c)
+    assert abs(vol - vol0) < 1e-12 * vol0 and abs(area - area0) < 1e-12 * area0
+    no_hanging_vertex(c)
+    before = {tuple(t) for t in tets_of(body)}
+    after = {tuple(t) for t in tets_of(c)}
+    assert len(before & after) == len(before) - j["refined"]["red"] - j["refined"]["green"]
+    assert s.level(2, format="json").status_code == 200       # it subdivides
+    assert all(cl["rule"] for cl in c["classes"]["vertices"])
+
+
+def test_subdivision_positions_are_level1_edge_points(daemon):
+    body = complex_from_text(CUBE)
+    s = Session(daemon)
+    assert s.put_complex(body).status_code == 200
+    l1 = s.level(1, format="json").json()
+    edge_point = {tuple(sorted(e)): l1["vertices"][i]
+                  for i, e in enumerate(l1["origin"]["edge_of"]) if e}
+    r = s.req("POST", "/refine", json={"select": {"sphere": {"center": [0, 0, 0], "radius": 0.3}}})
+    assert r.status_code == 200, r.text
+    c = s.req("GET", "/complex").json()
+    p = np.array(c["vertices"])
+    n0 = len(body["vertices"])
+    assert len(p) > n0
+    # each new point is a level-1 edge point of the complex before the refinement
+    new_pts = p[n0:]
+    targets = np.array(list(edge_point.values()))
+    for q in new_pts:
+        assert np.min(np.linalg.norm(targets - q, axis=1)) < 1e-12
+
+
+@pytest.mark.parametrize("depth", [1, 2])
+def test_depth(daemon, depth):
+    body = complex_from_text(CUBE)
+    s = Session(daemon)
+    assert s.put_complex(body).status_code == 200
+    t0 = tets_of(body)[0]
+    p0 = np.array(body["vertices"])
+    v0 = abs(np.dot(np.cross(p0[t0[1]] - p0[t0[0]], p0[t0[2]] - p0[t0[0]]), p0[t0[3]] - p0[t0[0]])) / 6
+    r = s.req("POST", "/refine", json={"select": {"simplices": [t0]}, "depth": depth,
+                                      "positions": "midpoint"})
+    assert r.status_code == 200, r.text
+    c = s.req("GET", "/complex").json()
+    p = np.array(c["vertices"])
+    # red splits give 8 children of 1/8 the volume each: after `depth` steps the smallest
+    # tetrahedra (inside the selected one) have 1/8^depth of its volume
+    vols = [abs(np.dot(np.cross(p[t[1]] - p[t[0]], p[t[2]] - p[t[0]]), p[t[3]] - p[t[0]])) / 6
+            for t in tets_of(c)]
+    assert min(vols) == pytest.approx(v0 / 8 ** depth, rel=1e-9)
+    vol0, area0 = volume_and_boundary(body)
+    vol, area = volume_and_boundary(c)
+    assert abs(vol - vol0) < 1e-12 * vol0 and abs(area - area0) < 1e-12 * area0
+    no_hanging_vertex(c)
+
+
+def test_box_on_mixed_complex(daemon):
+    s = Session(daemon)
+    body = complex_from_text(MIXED)
+    body["attributes"] = {"h": [v[2] for v in body["vertices"]]}
+    assert s.put_complex(body).status_code == 200
+    r = s.req("POST", "/refine", json={"select": {"box": {"min": [-1, -1, -1], "max": [2, 2, 2]}},
+                                      "positions": "midpoint"})
+    assert r.status_code == 200, r.text
+    c = s.req("GET", "/complex").json()
+    # attributes carried to the new points (midpoints of a linear function stay on it)
+    h = np.array(c["attributes"]["h"])
+    np.testing.assert_allclose(h, np.array(c["vertices"])[:, 2], atol=1e-12)
+    no_hanging_vertex(c)
+    assert s.level(1, format="json").status_code == 200
+
+
+@pytest.mark.parametrize("body,status,pointer", [
+    ({}, 400, "/select"), ({"select": {}}, 400, "/select"),
+    ({"select": {"simplices": [[0, 1, 2, 99999]]}}, 422, "/select/simplices/0/3"),
+    ({"select": {"simplices": [[0, 1]]}}, 422, "/select/simplices/0"),
+    ({"select": {"box": {"min": [1, 1, 1], "max": [0, 0, 0]}}}, 422, "/select/box"),
+    ({"select": {"sphere": {"center": [0, 0, 0], "radius": 0}}}, 422, "/select/sphere/radius"),
+    ({"select": {"sphere": {"center": [0, 0], "radius": 1}}}, 400, "/select/sphere/center"),
+    ({"select": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}, "depth": 5}, 422, "/depth"),
+    ({"select": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}, "positions": "cubic"}, 422, "/positions"),
+    ({"select": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}, "colour": 1}, 400, "/colour"),
+])
+def test_refine_errors(daemon, body, status, pointer):
+    s = Session(daemon)
+    assert s.put_complex(complex_from_text(CUBE)).status_code == 200
+    r = s.req("POST", "/refine", json=body)
+    assert r.status_code == status, r.text
+    assert r.json()["errors"][0]["pointer"] == pointer
+    assert s.req("GET").json()["version"] == 1
+
+
+def test_refine_needs_complex(daemon):
+    r = Session(daemon).req("POST", "/refine", json={"select": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}})
+    assert r.status_code == 409
