@@ -24,6 +24,11 @@ static const char *const seeds[] = {
     "\"overrides\":[]}",
     "{\"singular\":[]}",
     "{\"singular\":[[0],[0,1],[0,1,2]]}",
+    "{\"select\":{\"simplices\":[[0,1,2,3]]},\"depth\":2,\"positions\":\"subdivision\"}",
+    "{\"select\":{\"box\":{\"min\":[0,0,0],\"max\":[1,1,1]}},\"positions\":\"midpoint\"}",
+    "{\"select\":{\"sphere\":{\"center\":[0,0,0],\"radius\":0.5}}}",
+    "{\"moves\":[{\"index\":1,\"position\":[1,0.1,0]}],\"attributes\":{\"h\":[{\"index\":2,"
+    "\"value\":5}]}}",
 };
 #define NSEEDS (sizeof seeds / sizeof *seeds)
 static const char *const tokens[] = {"[", "]", "{", "}", ",", ":", "\"", "0", "-1", "1e308",
@@ -170,8 +175,23 @@ int main(int argc, char **argv)
             check_problem(&p, "api_parse_body");
         } else {
             change_fn_t fns[] = {api_put_complex, api_put_rules, api_put_tags};
-            int which = (int)rnd(3);
-            if (fns[which](cur, b, &lim, &next, &p))
+            int which = (int)rnd(5);
+            uint64_t red, green, counts[SD_MAX_LEVEL + 1];
+            int levels;
+            if (which == 3) { /* refinement: a new model like the changes */
+                if (api_refine(cur, b, &lim, &next, &red, &green, &p))
+                    check_problem(&p, "api_refine");
+                else {
+                    accepted++;
+                    api_model_unref(cur);
+                    cur = next;
+                }
+            } else if (which == 4) { /* an edit changes the model in place */
+                if (api_edit(cur, b, counts, &levels, &p))
+                    check_problem(&p, "api_edit");
+                else
+                    accepted++;
+            } else if (fns[which](cur, b, &lim, &next, &p))
                 check_problem(&p, "a change handler");
             else {
                 accepted++;
