@@ -387,9 +387,15 @@ static int if_match_ok(req *r, uint64_t version)
     return 0;
 }
 
-/* PUT complex / tags / rules: parse, check If-Match, build the new model in a compute slot,
- * publish. The session's write lock makes concurrent changes of one session sequential. */
-static void change(req *r, change_fn_t fn, int with_summary)
+/* A change builds the session's next model from the current one and may add members to the
+ * answer (the summary, what was refined). */
+typedef int (*change_op)(const api_model *cur, json_t *body, const api_limits *lim,
+                         api_model **next, json_t *answer, api_problem *p);
+
+/* PUT complex / tags / rules, POST refine: parse, check If-Match, build the new model in a
+ * compute slot, publish. The session's write lock makes concurrent changes of one session
+ * sequential. */
+static void change(req *r, change_op op)
 {
     api_problem p = {0};
     json_t *b = parse_body(r, 0, &p);
@@ -400,71 +406,71 @@ static void change(req *r, change_fn_t fn, int with_summary)
     pthread_mutex_lock(&r->s->write);
     uint64_t version;
     api_model *cur = session_model(r->s, &version), *next = NULL;
+    json_t *answer = json_object();
     int rc;
     if (!if_match_ok(r, version))
         rc = api_fail(&p, 412, "stale-version",
                       "If-Match does not match the current version \"%llu\"; GET the session "
                       "again", (unsigned long long)version);
     else if (!(rc = take_slot(r, &p))) {
-        rc = fn(cur, b, &r->srv->cfg.limits, &next, &p);
+        rc = op(cur, b, &r->srv->cfg.limits, &next, answer, &p);
         give_slot(r);
     }
     json_decref(b);
     api_model_unref(cur);
     if (rc) {
         pthread_mutex_unlock(&r->s->write);
+        json_decref(answer);
         reply_problem(r, &p);
         return;
     }
-    json_t *summary = with_summary && next->summary ? json_incref(next->summary) : NULL;
     version = session_publish(r->s, next);
     pthread_mutex_unlock(&r->s->write);
-    json_t *j = json_pack("{s:I}", "version", (json_int_t)version);
-    if (summary)
-        json_object_set_new(j, "summary", summary);
-    reply_json(r, 200, j, version);
+    json_object_set_new(answer, "version", json_integer((json_int_t)version));
+    reply_json(r, 200, answer, version);
 }
 
-/* POST refine: like a change (new model, If-Match optional), and it reports what was split. */
-static void h_refine(req *r)
+static int op_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
+                      json_t *answer, api_problem *p)
 {
-    api_problem p = {0};
-    json_t *b = parse_body(r, 0, &p);
-    if (!b) {
-        reply_problem(r, &p);
-        return;
-    }
-    pthread_mutex_lock(&r->s->write);
-    uint64_t version, red = 0, green = 0;
-    api_model *cur = session_model(r->s, &version), *next = NULL;
-    int rc;
-    if (!if_match_ok(r, version))
-        rc = api_fail(&p, 412, "stale-version",
-                      "If-Match does not match the current version \"%llu\"; GET the session "
-                      "again", (unsigned long long)version);
-    else if (!(rc = take_slot(r, &p))) {
-        rc = api_refine(cur, b, &r->srv->cfg.limits, &next, &red, &green, &p);
-        give_slot(r);
-    }
-    json_decref(b);
-    api_model_unref(cur);
-    if (rc) {
-        pthread_mutex_unlock(&r->s->write);
-        reply_problem(r, &p);
-        return;
-    }
-    json_t *summary = next->summary ? json_incref(next->summary) : json_object();
-    version = session_publish(r->s, next);
-    pthread_mutex_unlock(&r->s->write);
-    reply_json(r, 200,
-               json_pack("{s:I, s:o, s:{s:I, s:I}}", "version", (json_int_t)version, "summary",
-                         summary, "refined", "red", (json_int_t)red, "green", (json_int_t)green),
-               version);
+    int rc = api_put_complex(cur, body, lim, next, p);
+    if (!rc && (*next)->summary)
+        json_object_set(answer, "summary", (*next)->summary);
+    return rc;
 }
 
-static void h_put_complex(req *r) { change(r, api_put_complex, 1); }
-static void h_put_tags(req *r) { change(r, api_put_tags, 0); }
-static void h_put_rules(req *r) { change(r, api_put_rules, 0); }
+static int op_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
+                   json_t *answer, api_problem *p)
+{
+    (void)answer;
+    return api_put_tags(cur, body, lim, next, p);
+}
+
+static int op_rules(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
+                    json_t *answer, api_problem *p)
+{
+    (void)answer;
+    return api_put_rules(cur, body, lim, next, p);
+}
+
+static int op_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
+                     json_t *answer, api_problem *p)
+{
+    uint64_t red, green;
+    int rc = api_refine(cur, body, lim, next, &red, &green, p);
+    if (!rc) {
+        if ((*next)->summary)
+            json_object_set(answer, "summary", (*next)->summary);
+        json_object_set_new(answer, "refined", json_pack("{s:I, s:I}", "red", (json_int_t)red,
+                                                         "green", (json_int_t)green));
+    }
+    return rc;
+}
+
+static void h_put_complex(req *r) { change(r, op_complex); }
+static void h_put_tags(req *r) { change(r, op_tags); }
+static void h_put_rules(req *r) { change(r, op_rules); }
+static void h_refine(req *r) { change(r, op_refine); }
 
 /* PATCH control-points: If-Match is required (428 without, 412 when stale); the model is changed
  * in place under its data lock, so the edit waits for that session's streams in flight. */
