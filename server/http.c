@@ -174,6 +174,17 @@ static void reply_problem(req *r, const api_problem *p)
     queue(r, p->status ? p->status : 500, resp);
 }
 
+/* A JSON answer that carries the session version (member and ETag), or the problem if none. */
+static void reply_versioned(req *r, json_t *j, uint64_t version, const api_problem *p)
+{
+    if (!j) {
+        reply_problem(r, p);
+        return;
+    }
+    json_object_set_new(j, "version", json_integer((json_int_t)version));
+    reply_json(r, 200, j, version);
+}
+
 static void fail(req *r, int status, const char *slug, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
 static void fail(req *r, int status, const char *slug, const char *fmt, ...)
@@ -525,12 +536,7 @@ static void h_get_complex(req *r)
     api_problem p = {0};
     json_t *j = api_get_complex(m, &p);
     api_model_unref(m);
-    if (!j) {
-        reply_problem(r, &p);
-        return;
-    }
-    json_object_set_new(j, "version", json_integer((json_int_t)version));
-    reply_json(r, 200, j, version);
+    reply_versioned(r, j, version, &p);
 }
 
 /* ---- handlers: levels ------------------------------------------------------------------- */
@@ -676,12 +682,7 @@ static void h_level_stats(req *r)
     if (slot)
         give_slot(r);
     api_model_unref(m);
-    if (!j) {
-        reply_problem(r, &p);
-        return;
-    }
-    json_object_set_new(j, "version", json_integer((json_int_t)version));
-    reply_json(r, 200, j, version);
+    reply_versioned(r, j, version, &p);
 }
 
 static void h_matrix(req *r)
@@ -740,12 +741,7 @@ static void h_analysis(req *r)
     if (slot)
         give_slot(r);
     api_model_unref(m);
-    if (!j) {
-        reply_problem(r, &p);
-        return;
-    }
-    json_object_set_new(j, "version", json_integer((json_int_t)version));
-    reply_json(r, 200, j, version);
+    reply_versioned(r, j, version, &p);
 }
 
 /* ---- routing ---------------------------------------------------------------------------- */
