@@ -1027,6 +1027,7 @@ int api_edit(api_model *m, json_t *body, uint64_t *counts, int *levels, api_prob
             m->geometry[l] = NULL;
         }
     }
+    api_model_publish(m); /* the by-column matrices of the first edit count as session memory */
     pthread_rwlock_unlock(&m->data);
     pthread_mutex_unlock(&m->lock);
     edit_parts_free(parts, np);

@@ -28,7 +28,7 @@ void api_input_unref(api_input *in)
     free(in);
 }
 
-static void publish(api_model *m)
+void api_model_publish(api_model *m)
 {
     size_t geo = 0;
     for (int l = 0; l <= SD_MAX_LEVEL; l++)
@@ -44,7 +44,7 @@ const struct out_geometry *api_model_geometry_locked(api_model *m, int level)
         const sd_level *lv = sd_complex_level(m->c, level, &e);
         if (lv)
             m->geometry[level] = out_geometry_compute(lv);
-        publish(m);
+        api_model_publish(m);
     }
     return m->geometry[level];
 }
@@ -91,7 +91,7 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
         atomic_fetch_add(&in->refs, 1);
         m->in = in;
     }
-    publish(m);
+    api_model_publish(m);
     return m;
 }
 
@@ -124,6 +124,6 @@ const sd_level *api_model_level_locked(api_model *m, int level, sd_error *err)
     clock_gettime(CLOCK_MONOTONIC, &t1);
     if (lv && before <= level) /* the time of the levels computed now goes to the highest */
         m->seconds[level] += (double)(t1.tv_sec - t0.tv_sec) + (t1.tv_nsec - t0.tv_nsec) * 1e-9;
-    publish(m);
+    api_model_publish(m);
     return lv;
 }

@@ -78,6 +78,9 @@ void api_model_unref(api_model *m);
  * caller holds m->lock. */
 const sd_level *api_model_level_locked(api_model *m, int level, sd_error *err);
 
+/* Refresh levels_cached and memory_bytes after the complex changed (caller holds m->lock). */
+void api_model_publish(api_model *m);
+
 /* The glTF geometry (solid boundary, normals) of a computed level, built once (NULL if out of
  * memory — writers then compute their own). The caller holds m->lock. */
 const struct out_geometry *api_model_geometry_locked(api_model *m, int level);
