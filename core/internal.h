@@ -45,16 +45,26 @@ sd_result sd_fail_nomem(sd_error *err, const sd_mem *m);
 enum {
     VF_DC = 1,          /* vertex in the boundary complex dC */
     VF_CURVE_END = 2,   /* boundary simplex of C_1 (end of a curve) */
+    /* the singular complex S of tags (000 Sec. 4.1), inherited by children (tags.c) */
+    VF_SING = 4,        /* tagged vertex: a corner */
+    VF_SCREASE = 8,     /* on a crease (a tagged edge that is not a side of a tagged triangle) */
+    VF_SSURF = 16,      /* on an embedded surface (a tagged triangle) */
+    VF_SBND = 32,       /* on the boundary of an embedded surface */
 };
 enum {
     EF_DC = 1,          /* edge in dC */
     EF_BND2 = 2,        /* boundary simplex of C_2: edge of exactly one triangle, nothing else */
     EF_CURVE = 4,       /* a maximal 1-simplex (curve segment) */
+    EF_CREASE = 8,      /* a crease of S */
+    EF_SSURF = 16,      /* a side of a tagged triangle */
+    EF_SBND = 32,       /* ... of exactly one (the embedded surface's boundary) */
 };
 enum {
     FF_MAX = 1,         /* a maximal triangle (surface part) */
     FF_BND3 = 2,        /* boundary simplex of C_3: face of exactly one 3-cell */
+    FF_SING = 4,        /* tagged: part of an embedded surface */
 };
+enum { VF_S_ANY = VF_SCREASE | VF_SSURF };
 enum { FAM0 = 1, FAM1 = 2, FAM2 = 4, FAM3 = 8 };
 
 /* ---- one level's topology and classification ---------------------------------------- */
@@ -143,6 +153,8 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err);
 sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err);
 /* split.c: child topology and inherited classification of the next level */
 sd_result sd_split(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
+/* levels.c: forget a level's rules and every finer level */
+void sd_drop_rules(sd_complex *c, sd_level *lv);
 /* rules.c */
 sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
 sd_result sd_ensure_rules(sd_complex *cx, int level, sd_error *err);

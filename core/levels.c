@@ -61,6 +61,27 @@ static void drop_levels(sd_complex *c, int from)
         c->nlevels = from;
 }
 
+/* Forget level lv's rules, stencils and edit columns, and every finer level (tags changed). */
+void sd_drop_rules(sd_complex *c, sd_level *lv)
+{
+    drop_levels(c, lv->index + 1);
+    sd_mem *m = &c->mem;
+    sd_free(m, lv->vrule);
+    sd_free(m, lv->erule);
+    sd_free(m, lv->vval);
+    sd_free(m, lv->ering);
+    sd_csrb_free(m, &lv->S);
+    sd_free(m, lv->tcol);
+    sd_free(m, lv->trow);
+    sd_free(m, lv->tpos);
+    sd_free(m, lv->slot);
+    lv->vrule = lv->erule = NULL;
+    lv->vval = lv->ering = NULL;
+    lv->tcol = lv->trow = lv->tpos = NULL;
+    lv->slot = NULL;
+    lv->have_rules = false;
+}
+
 void sd_complex_free(sd_complex *c)
 {
     if (!c)

@@ -36,6 +36,15 @@
 uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v)
 {
     uint8_t fam = t->vfam[v], nm = t->vnm[v], fl = t->vflag[v];
+    /* singular tags first (SPEC Sec. 3 priority): corner; crease (B-spline along the creases);
+     * embedded surface (Loop over the tagged triangles, B-spline along its boundary). A vertex
+     * where creases meet a surface is a corner. */
+    if (fl & VF_SING || (fl & VF_S_ANY) == VF_S_ANY)
+        return SD_RULE_CORNER;
+    if (fl & VF_SCREASE)
+        return SD_RULE_CURVE;
+    if (fl & VF_SSURF)
+        return fl & VF_SBND ? SD_RULE_LOOP_BOUNDARY : SD_RULE_LOOP;
     if (nm)
         return nm == 2 && fam == FAM1 ? SD_RULE_CORNER : SD_RULE_G2;
     switch (fam) {
@@ -52,6 +61,11 @@ uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v)
 
 static uint8_t edge_rule(const sd_topo *t, uint32_t e)
 {
+    uint8_t fl = t->eflag[e];
+    if (fl & (EF_CREASE | EF_SBND))
+        return SD_RULE_CURVE;
+    if (fl & EF_SSURF)
+        return SD_RULE_LOOP;
     if (t->enm[e])
         return SD_RULE_G2;
     switch (t->efam[e]) {
@@ -80,6 +94,10 @@ static inline bool g2_keep(const sd_topo *t, bool centre_inside, uint32_t n)
 /* Does neighbour n, reached from centre c (rule r) through edge e, belong to c's rho? */
 static inline bool via_edge(const sd_topo *t, uint8_t r, uint32_t c, uint32_t n, uint32_t e)
 {
+    if (t->vflag[c] & VF_S_ANY) /* a singular vertex sees only the singular complex */
+        return r == SD_RULE_CURVE ? (t->eflag[e] & EF_CREASE) != 0
+               : r == SD_RULE_LOOP ? (t->eflag[e] & EF_SSURF) != 0
+               : r == SD_RULE_LOOP_BOUNDARY && (t->eflag[e] & EF_SBND);
     switch (r) {
     case SD_RULE_CURVE:
         return t->eflag[e] & EF_CURVE;
@@ -467,11 +485,14 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             goto nomem;
         for (uint32_t f = 0; f < t->nf; f++) {
             uint8_t ff = t->fflag[f];
-            if (!(ff & (FF_MAX | FF_BND3)))
+            if (!(ff & (FF_MAX | FF_BND3 | FF_SING)))
                 continue;
             for (int j = 0; j < 3; j++) {
                 uint32_t e = t->fe[f][j];
-                bool use = (ff & FF_MAX) ? er[e] == SD_RULE_LOOP : er[e] == SD_RULE_SOLID_BOUNDARY;
+                /* an embedded surface's edge takes its opposite vertices from tagged triangles */
+                bool use = (t->eflag[e] & EF_SSURF) ? (ff & FF_SING) && er[e] == SD_RULE_LOOP
+                           : (ff & FF_MAX)          ? er[e] == SD_RULE_LOOP
+                                                    : er[e] == SD_RULE_SOLID_BOUNDARY;
                 if (!use)
                     continue;
                 if (nopp[e] < 2)

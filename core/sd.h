@@ -155,6 +155,18 @@ typedef struct sd_class {
 /* Classification of vertex i / edge e of a level (builds that level's stencils if needed). */
 sd_result sd_complex_vertex_class(sd_complex *c, int level, uint32_t i, sd_class *out, sd_error *err);
 sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *out, sd_error *err);
+/* Singular tags (000 Sec. 4.1): vertices (1 id: corners, fixed), edges (2 ids: creases, cubic
+ * B-spline along them; a vertex where other than 2 creases meet is a corner) and triangles
+ * (3 ids: an embedded surface, Loop over the tagged triangles and B-spline along its boundary;
+ * inside a solid it splits it smoothly on each side). Each tag must be a vertex, edge or
+ * triangle of the complex (SD_ERR_ARG otherwise, item = the tag). Replaces earlier tags; children
+ * stay tagged at every level; drops computed levels >= 1. idx/size as for sd_complex_new. */
+sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint8_t *size,
+                                  size_t n, sd_error *err);
+/* Whether vertex i / edge e of a level belongs to the singular complex. */
+int sd_level_vertex_singular(const sd_level *lv, uint32_t i);
+int sd_level_edge_singular(const sd_level *lv, uint32_t e);
+
 /* The same for a level whose rules are built already (by one of the calls above): const and
  * lock-free, so it may run while other levels of the complex are being computed. SD_ERR_ARG when
  * the index is out of range or the level's rules are not built. */

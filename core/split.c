@@ -400,7 +400,9 @@ sd_result sd_split(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
     for (uint32_t e = 0; e < pne; e++) {
         uint32_t v = pnv + e;
         C->vfam[v] = P->efam[e];
-        C->vflag[v] = (P->eflag[e] & EF_DC) ? VF_DC : 0;
+        uint8_t pf = P->eflag[e];
+        C->vflag[v] = ((pf & EF_DC) ? VF_DC : 0) | ((pf & EF_CREASE) ? VF_SCREASE : 0) |
+                      ((pf & EF_SSURF) ? VF_SSURF : 0) | ((pf & EF_SBND) ? VF_SBND : 0);
         C->vnm[v] = P->enm[e] == 1 ? 1 : P->enm[e] ? 4 : 0;
     }
     for (uint32_t o = 0; o < P->noct; o++) {
@@ -426,7 +428,8 @@ sd_result sd_split(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
     for (uint32_t f = 0; f < pnf; f++) {
         const uint32_t *x = P->fv[f], *fe = P->fe[f];
         uint8_t fam = (P->fflag[f] & FF_MAX) ? FAM2 : FAM3;
-        uint8_t flag = (P->fflag[f] & FF_BND3) ? EF_DC : 0;
+        uint8_t flag = ((P->fflag[f] & FF_BND3) ? EF_DC : 0) |
+                       ((P->fflag[f] & FF_SING) ? EF_SSURF : 0); /* inside an embedded surface */
         uint8_t nm = P->fn3[f] >= 3 ? 4 : 0;
         for (int j = 0; j < 3; j++) {
             uint32_t e = 2 * pne + 3 * f + j;
