@@ -222,11 +222,19 @@ static int parse_diagonals(json_t *v, api_input *in, api_problem *p)
 }
 
 /* Build the model of `in` + rules, mapping core refusals to problems with pointers. */
-static int build_model(api_input *in, const api_rules *rules, const api_limits *lim,
-                       api_model **out, api_problem *p)
+static int build_model(api_input *in, const api_rules *rules, const api_tags *tags,
+                       const api_limits *lim, api_model **out, api_problem *p)
 {
     sd_error e = {0};
     api_model *m = api_model_new(in, rules, lim->max_session_bytes, &e);
+    if (m && tags && tags->n && api_model_set_tags(m, tags, &e)) {
+        api_model_unref(m);
+        if (e.code == SD_ERR_NOMEM)
+            return api_fail(p, 503, "out-of-memory", "out of memory");
+        char ptr[96];
+        api_ptr_index(ptr, sizeof ptr, "/singular", (size_t)(e.item < 0 ? 0 : e.item));
+        return api_fail_at(p, 422, "invalid-tag", ptr, "%s", e.message);
+    }
     if (!m) {
         if (e.code == SD_ERR_VALUE && e.item >= 0 && in && in->nattrs && strstr(e.message, "channel")) {
             char ptr[96];
@@ -280,7 +288,7 @@ int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, a
     if (!rc && !in->nv)   /* the core's "no vertices" would point at /simplices */
         rc = api_fail_at(p, 422, "invalid-complex", "/vertices", "the complex has no vertices");
     if (!rc)
-        rc = build_model(in, &cur->rules, lim, out, p);
+        rc = build_model(in, &cur->rules, NULL, lim, out, p);
     api_input_unref(in);
     return rc;
 }
@@ -342,7 +350,7 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
                            "only the default non-manifold rules (G2, chang-qin, no overrides) are "
                            "available in this version");
     }
-    return build_model(cur->in, &r, lim, out, p);
+    return build_model(cur->in, &r, &cur->tags, lim, out, p);
 }
 
 int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
@@ -361,33 +369,49 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
     if (json_array_size(s) && !cur->in)
         return api_fail_at(p, 409, "no-complex", "/singular",
                            "tags name simplices of the complex; PUT the complex first");
-    size_t i;
+    size_t n = json_array_size(s);
+    api_tags tags = {0};
+    tags.size = malloc(n + 1);
+    tags.idx = malloc((3 * n + 1) * sizeof *tags.idx);
+    int rc = !tags.size || !tags.idx ? api_fail(p, 503, "out-of-memory", "out of memory") : 0;
+    size_t i, off = 0;
     json_t *t;
     char ptr[96], at[96];
     json_array_foreach(s, i, t) {
+        if (rc)
+            break;
         api_ptr_index(ptr, sizeof ptr, "/singular", i);
-        if (!json_is_array(t))
-            return api_fail_at(p, 400, "wrong-type", ptr, "a tag is an array of 1 to 3 vertex indices");
-        size_t k = json_array_size(t);
-        if (k < 1 || k > 3)
-            return api_fail_at(p, 422, "invalid-tag", ptr,
-                               "a singular simplex is a vertex, an edge or a triangle (1 to 3 "
-                               "indices), not %zu", k);
-        long long seen[3];
-        for (size_t j = 0; j < k; j++) {
-            api_ptr_index(at, sizeof at, ptr, j);
-            if (api_get_int(json_array_get(t, j), at, 0, (long long)cur->in->nv - 1, &seen[j], p))
-                return p->status;
-            for (size_t q = 0; q < j; q++)
-                if (seen[q] == seen[j])
-                    return api_fail_at(p, 422, "invalid-tag", at, "vertex %lld appears twice",
-                                       seen[j]);
+        if (!json_is_array(t)) {
+            rc = api_fail_at(p, 400, "wrong-type", ptr, "a tag is an array of 1 to 3 vertex indices");
+            break;
         }
+        size_t k = json_array_size(t);
+        if (k < 1 || k > 3) {
+            rc = api_fail_at(p, 422, "invalid-tag", ptr,
+                             "a singular simplex is a vertex, an edge or a triangle (1 to 3 "
+                             "indices), not %zu", k);
+            break;
+        }
+        long long seen[3];
+        for (size_t j = 0; j < k && !rc; j++) {
+            api_ptr_index(at, sizeof at, ptr, j);
+            if ((rc = api_get_int(json_array_get(t, j), at, 0, (long long)cur->in->nv - 1,
+                                  &seen[j], p)))
+                break;
+            for (size_t q = 0; q < j && !rc; q++)
+                if (seen[q] == seen[j])
+                    rc = api_fail_at(p, 422, "invalid-tag", at, "vertex %lld appears twice", seen[j]);
+            tags.idx[off + j] = (uint32_t)seen[j];
+        }
+        tags.size[i] = (uint8_t)k;
+        off += k;
+        tags.n++;
     }
-    if (json_array_size(s))
-        return api_fail_at(p, 501, "not-implemented", "/singular",
-                           "singular tags are validated but not yet applied by this version");
-    return build_model(cur->in, &cur->rules, lim, out, p);
+    if (!rc) /* the core checks each tag is a vertex, edge or triangle of the complex */
+        rc = build_model(cur->in, &cur->rules, &tags, lim, out, p);
+    free(tags.size);
+    free(tags.idx);
+    return rc;
 }
 
 /* ---- summary and GET /complex ------------------------------------------------------------- */
@@ -401,10 +425,10 @@ static json_t *family_json(uint8_t fam)
     return a;
 }
 
-static json_t *class_json(const sd_class *c)
+static json_t *class_json(const sd_class *c, int singular)
 {
     return json_pack("{s:o, s:b, s:i, s:b, s:s, s:i, s:b}", "family", family_json(c->family),
-                     "boundary", c->boundary, "nonmanifold", c->nonmanifold, "singular", 0,
+                     "boundary", c->boundary, "nonmanifold", c->nonmanifold, "singular", singular,
                      "rule", sd_rule_name((sd_rule)c->rule), "valence", (int)c->valence,
                      "extraordinary", c->extraordinary);
 }
@@ -489,24 +513,31 @@ json_t *api_get_complex(api_model *m, api_problem *p)
     sd_class k;
     for (uint32_t i = 0; i < in->nv; i++)
         if (!sd_level_vertex_class(lv, i, &k))
-            json_array_append_new(cv, class_json(&k));
+            json_array_append_new(cv, class_json(&k, sd_level_vertex_singular(lv, i)));
     for (uint32_t i = 0; i < ne; i++)
         if (!sd_level_edge_class(lv, i, &k)) {
-            json_t *o = class_json(&k);
+            json_t *o = class_json(&k, sd_level_edge_singular(lv, i));
             json_object_set_new(o, "vertices", json_pack("[I, I]", (json_int_t)ev[2 * i],
                                                          (json_int_t)ev[2 * i + 1]));
             json_array_append_new(ce, o);
         }
+    json_t *tj = json_array();
+    for (uint32_t i = 0, off = 0; i < m->tags.n; off += m->tags.size[i++]) {
+        json_t *a = json_array();
+        for (int j = 0; j < m->tags.size[i]; j++)
+            json_array_append_new(a, json_integer(m->tags.idx[off + j]));
+        json_array_append_new(tj, a);
+    }
     json_t *dj = json_array();
     for (uint32_t s = 0; s < in->ns; s++)
         if (in->size[s] == 4)
             json_array_append_new(dj, json_pack("[I, i]", (json_int_t)s, sd_complex_diagonal(m->c, s)));
     pthread_rwlock_unlock(&m->data);
     static const char *const schemes[] = {"box", "averaged"}, *const weights[] = {"warren", "loop"};
-    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:{s:[]}, s:{s:s, s:[], s:s, s:s, s:s}, s:O}",
+    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:{s:o}, s:{s:s, s:[], s:s, s:s, s:s}, s:O}",
                      "vertices", vs, "simplices", ss, "attributes", at, "diagonals", dj,
                      "classes", "vertices", cv,
-                     "edges", ce, "tags", "singular", "rules", "nonmanifold_default", "G2",
+                     "edges", ce, "tags", "singular", tj, "rules", "nonmanifold_default", "G2",
                      "overrides", "solid_scheme", schemes[m->rules.solid_scheme & 1],
                      "surface_weights", weights[m->rules.surface_weights & 1],
                      "nonmanifold_surface", "chang-qin", "summary", m->summary);
@@ -1391,7 +1422,7 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
     free(marked);
     free(sel.keys);
     if (!rc)
-        rc = build_model(in, &cur->rules, lim, out, p);
+        rc = build_model(in, &cur->rules, NULL, lim, out, p);
     api_input_unref(in);
     return rc;
 }

@@ -95,6 +95,24 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
     return m;
 }
 
+int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err)
+{
+    size_t nidx = 0;
+    for (uint32_t i = 0; i < t->n; i++)
+        nidx += t->size[i];
+    m->tags.size = malloc(t->n + 1);
+    m->tags.idx = malloc((nidx + 1) * sizeof *m->tags.idx);
+    if (!m->tags.size || !m->tags.idx) {
+        err->code = SD_ERR_NOMEM;
+        snprintf(err->message, sizeof err->message, "out of memory");
+        return SD_ERR_NOMEM;
+    }
+    memcpy(m->tags.size, t->size, t->n);
+    memcpy(m->tags.idx, t->idx, nidx * sizeof *t->idx);
+    m->tags.n = t->n;
+    return m->c ? sd_complex_set_singular(m->c, t->idx, t->size, t->n, err) : 0;
+}
+
 api_model *api_model_ref(api_model *m)
 {
     atomic_fetch_add(&m->refs, 1);
@@ -105,6 +123,8 @@ void api_model_unref(api_model *m)
 {
     if (!m || atomic_fetch_sub(&m->refs, 1) != 1)
         return;
+    free(m->tags.size);
+    free(m->tags.idx);
     json_decref(m->summary);
     for (int l = 0; l <= SD_MAX_LEVEL; l++)
         out_geometry_free(m->geometry[l]);

@@ -47,6 +47,13 @@ typedef struct api_rules {
     int surface_weights;      /* SD_WEIGHTS_* */
 } api_rules;
 
+/* Singular tags (PUT /tags): n simplices of 1..3 vertex ids, stored consecutively. */
+typedef struct api_tags {
+    uint32_t n;
+    uint8_t *size;
+    uint32_t *idx;
+} api_tags;
+
 typedef struct api_model {
     atomic_int refs;
     pthread_mutex_t lock;     /* serialises computation on `c` (and edits) */
@@ -54,6 +61,7 @@ typedef struct api_model {
                                * change positions and attributes in place */
     api_input *in;            /* NULL: no complex posted yet */
     api_rules rules;
+    api_tags tags;            /* owned copy */
     sd_complex *c;            /* NULL iff in == NULL */
     const sd_level *level0;   /* level 0 with its rules built (read without the lock) */
     int channel[API_MAX_ATTRIBUTES]; /* core channel id of each attribute */
@@ -73,6 +81,9 @@ void api_input_unref(api_input *in);
 api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_bytes, sd_error *err);
 api_model *api_model_ref(api_model *m);
 void api_model_unref(api_model *m);
+
+/* Apply singular tags to a model being built (copies them). SD_ERR_* + err (item = the tag). */
+int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err);
 
 /* Compute level L (under the model's lock) and record the time; NULL + err on failure. The
  * caller holds m->lock. */

@@ -299,6 +299,8 @@ out_stream *out_open(const out_request *rq, out_format f, sd_error *err)
     s->fmt = f;
     sd_error e = {0};
     s->lv = sd_complex_level(rq->complex, rq->level, &e);
+    if (s->lv && sd_complex_prepare_vertex_rules(rq->complex, rq->level, &e))
+        s->lv = NULL;
     if (!s->lv) {
         if (err)
             *err = e;

@@ -122,6 +122,7 @@ struct sd_level {
     bool have_rules;
     uint8_t *vrule, *erule;
     uint32_t *vval, *ering;   /* |rho| used by each vertex / edge rule */
+    uint8_t *vrule_only;      /* the vertex rules alone, for outputs of a level without stencils */
     sd_csrb S;
     /* for edits (edit.c), built on the first edit: S by columns (for each point of this level, the
      * next level's rows that use it and the entry's position in S), and a scratch map from this
@@ -160,6 +161,9 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
 sd_result sd_ensure_rules(sd_complex *cx, int level, sd_error *err);
 /* The rule of vertex v from the level's classification alone (no stencils needed). */
 uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v);
+/* The rules vertices actually follow (corners where the neighbourhood does not fit the
+ * classification), without building stencils: nv entries into vr. */
+sd_result sd_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr);
 /* analysis.c helpers */
 uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b);
 

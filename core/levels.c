@@ -75,6 +75,8 @@ void sd_drop_rules(sd_complex *c, sd_level *lv)
     sd_free(m, lv->trow);
     sd_free(m, lv->tpos);
     sd_free(m, lv->slot);
+    sd_free(m, lv->vrule_only);
+    lv->vrule_only = NULL;
     lv->vrule = lv->erule = NULL;
     lv->vval = lv->ering = NULL;
     lv->tcol = lv->trow = lv->tpos = NULL;
@@ -378,7 +380,30 @@ sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *
 
 sd_rule sd_level_vertex_rule(const sd_level *lv, uint32_t i)
 {
-    return (sd_rule)sd_vertex_rule(&lv->t, i);
+    /* vrule_only first: once set it never changes, while a later computation of the next level
+     * may build vrule (same values) concurrently with a reader of this one */
+    if (lv->vrule_only)
+        return (sd_rule)lv->vrule_only[i];
+    if (lv->have_rules)
+        return (sd_rule)lv->vrule[i];
+    return (sd_rule)sd_vertex_rule(&lv->t, i); /* the classification's (see sd.h) */
+}
+
+sd_result sd_complex_prepare_vertex_rules(sd_complex *c, int level, sd_error *err)
+{
+    const sd_level *l = sd_complex_level(c, level, err);
+    if (!l)
+        return err ? err->code : SD_ERR_ARG;
+    sd_level *lv = c->lv[level];
+    if (lv->have_rules || lv->vrule_only)
+        return SD_OK;
+    uint8_t *vr = sd_alloc(&c->mem, (size_t)lv->t.nv + 1);
+    if (!vr || sd_vertex_rules_only(&c->mem, &lv->t, c->opt.solid_scheme, vr)) {
+        sd_free(&c->mem, vr);
+        return sd_fail_nomem(err, &c->mem);
+    }
+    lv->vrule_only = vr;
+    return SD_OK;
 }
 
 uint32_t sd_level_solid_boundary(const sd_level *lv, uint32_t *tri)

@@ -404,43 +404,15 @@ fail:
     return false;
 }
 
-sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
+/* The rule of every vertex and the sizes of its rho (cnt_a: edge and diagonal neighbours,
+ * cnt_b: the averaged scheme's octahedral opposites; both zeroed by the caller): the
+ * classification's rule, turned into a corner where its neighbourhood does not fit it (a curve or
+ * surface boundary point with other than 2 neighbours, any rule with none). */
+static void vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b)
 {
-    sd_mem *m = &cx->mem;
-    const sd_topo *t = &lv->t;
-    const int weights = cx->opt.surface_weights, scheme = cx->opt.solid_scheme;
     const uint32_t nv = t->nv, ne = t->ne, no = t->noct;
-    uint32_t *cnt_a = NULL, *cnt_b = NULL, *cur = NULL;
-    uint32_t(*opp)[2] = NULL;
-    uint8_t *nopp = NULL;
-    rings sr = {0}, gr = {0};
-    sd_result rc = SD_OK;
-    double loopc[64];
-    for (uint32_t k = 1; k < 64; k++)
-        loopc[k] = loop_weight(weights, k);
-    loopc[0] = 0;
-
-    uint64_t nrows = (uint64_t)nv + ne + no;
-    if (nrows >= UINT32_MAX)
-        return sd_fail(err, SD_ERR_LIMIT, -1, -1, "too many points for 32-bit ids");
-    lv->vrule = sd_alloc(m, (size_t)nv + 1);
-    lv->erule = sd_alloc(m, (size_t)ne + 1);
-    lv->vval = sd_alloc(m, ((size_t)nv + 1) * sizeof *lv->vval);
-    lv->ering = sd_alloc(m, ((size_t)ne + 1) * sizeof *lv->ering);
-    cnt_a = sd_calloc(m, nv, sizeof *cnt_a);
-    cnt_b = sd_calloc(m, nv, sizeof *cnt_b);
-    if (!lv->vrule || !lv->erule || !lv->vval || !lv->ering || !cnt_a || !cnt_b)
-        goto nomem;
-    uint8_t *vr = lv->vrule, *er = lv->erule;
     for (uint32_t v = 0; v < nv; v++)
         vr[v] = sd_vertex_rule(t, v);
-    bool any_g2e = false, any_opp = false;
-    for (uint32_t e = 0; e < ne; e++) {
-        er[e] = edge_rule(t, e);
-        any_g2e |= er[e] == SD_RULE_G2;
-        any_opp |= er[e] == SD_RULE_LOOP || er[e] == SD_RULE_SOLID_BOUNDARY;
-    }
-
     /* vertex rho sizes */
     for (uint32_t e = 0; e < ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
@@ -474,8 +446,58 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             vr[v] = SD_RULE_CORNER;
             cnt_a[v] = cnt_b[v] = 0;
         }
-        lv->vval[v] = cnt_a[v] + cnt_b[v];
     }
+
+}
+
+sd_result sd_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr)
+{
+    uint32_t *a = sd_calloc(m, (size_t)t->nv + 1, sizeof *a), *b = sd_calloc(m, (size_t)t->nv + 1, sizeof *b);
+    if (a && b)
+        vertex_rules(t, scheme, vr, a, b);
+    sd_free(m, a);
+    sd_free(m, b);
+    return a && b ? SD_OK : SD_ERR_NOMEM;
+}
+
+sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
+{
+    sd_mem *m = &cx->mem;
+    const sd_topo *t = &lv->t;
+    const int weights = cx->opt.surface_weights, scheme = cx->opt.solid_scheme;
+    const uint32_t nv = t->nv, ne = t->ne, no = t->noct;
+    uint32_t *cnt_a = NULL, *cnt_b = NULL, *cur = NULL;
+    uint32_t(*opp)[2] = NULL;
+    uint8_t *nopp = NULL;
+    rings sr = {0}, gr = {0};
+    sd_result rc = SD_OK;
+    double loopc[64];
+    for (uint32_t k = 1; k < 64; k++)
+        loopc[k] = loop_weight(weights, k);
+    loopc[0] = 0;
+
+    uint64_t nrows = (uint64_t)nv + ne + no;
+    if (nrows >= UINT32_MAX)
+        return sd_fail(err, SD_ERR_LIMIT, -1, -1, "too many points for 32-bit ids");
+    lv->vrule = sd_alloc(m, (size_t)nv + 1);
+    lv->erule = sd_alloc(m, (size_t)ne + 1);
+    lv->vval = sd_alloc(m, ((size_t)nv + 1) * sizeof *lv->vval);
+    lv->ering = sd_alloc(m, ((size_t)ne + 1) * sizeof *lv->ering);
+    cnt_a = sd_calloc(m, nv, sizeof *cnt_a);
+    cnt_b = sd_calloc(m, nv, sizeof *cnt_b);
+    if (!lv->vrule || !lv->erule || !lv->vval || !lv->ering || !cnt_a || !cnt_b)
+        goto nomem;
+    uint8_t *vr = lv->vrule, *er = lv->erule;
+    bool any_g2e = false, any_opp = false;
+    for (uint32_t e = 0; e < ne; e++) {
+        er[e] = edge_rule(t, e);
+        any_g2e |= er[e] == SD_RULE_G2;
+        any_opp |= er[e] == SD_RULE_LOOP || er[e] == SD_RULE_SOLID_BOUNDARY;
+    }
+
+    vertex_rules(t, scheme, vr, cnt_a, cnt_b);
+    for (uint32_t v = 0; v < nv; v++)
+        lv->vval[v] = cnt_a[v] + cnt_b[v];
 
     /* edge neighbourhoods */
     if (any_opp) {

@@ -175,9 +175,12 @@ sd_result sd_level_edge_class(const sd_level *lv, uint32_t e, sd_class *out);
 /* Edge id of the edge a-b at a level, or UINT32_MAX. */
 uint32_t sd_level_find_edge(const sd_level *lv, uint32_t a, uint32_t b);
 
-/* The rule vertex i of a level follows, from its classification alone (cheap: no stencils are
- * built, unlike sd_complex_vertex_class). */
+/* The rule vertex i of a level follows, without building stencils (unlike
+ * sd_complex_vertex_class): exact once the level's rules are built or after
+ * sd_complex_prepare_vertex_rules; before that, the classification's rule (which a vertex whose
+ * neighbourhood does not fit it, e.g. where three creases meet, follows as a corner). */
 sd_rule sd_level_vertex_rule(const sd_level *lv, uint32_t i);
+sd_result sd_complex_prepare_vertex_rules(sd_complex *c, int level, sd_error *err);
 
 /* The boundary surface of the solids of a level: triangles that are a face of exactly one
  * tetrahedron or octahedron, oriented outward. Returns their number and, if `tri` is not NULL,

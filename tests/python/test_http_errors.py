@@ -94,7 +94,6 @@ CASES = [
     ("G1-501", "PUT", "/rules", {"nonmanifold_default": "G1"}, None, 501, "/nonmanifold_default"),
     ("overrides-501", "PUT", "/rules", {"overrides": [{"simplex": [1], "rule": "G1"}]}, None, 501, "/overrides"),
     ("fill-501", "PUT", "/complex", cx(fill=[{"surface": [[0, 1, 2]]}]), None, 501, "/fill"),
-    ("tags-501", "PUT", "/tags", {"singular": [[0, 1]]}, None, 501, "/singular"),
     ("tags-arity", "PUT", "/tags", {"singular": [[0, 1, 2, 3]]}, None, 422, "/singular/0"),
     ("tags-range", "PUT", "/tags", {"singular": [[0, 9]]}, None, 422, "/singular/0/1"),
     ("tags-repeated", "PUT", "/tags", {"singular": [[1, 1]]}, None, 422, "/singular/0/1"),

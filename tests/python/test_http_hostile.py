@@ -265,7 +265,8 @@ CASES = [
     C("not-implemented-ying-zorin", "PUT", "{s}/rules", 501, "/nonmanifold_surface", body={"nonmanifold_surface": "ying-zorin"}),
     C("not-implemented-G1-default", "PUT", "{s}/rules", 501, "/nonmanifold_default", body={"nonmanifold_default": "G1"}),
     C("not-implemented-overrides", "PUT", "{s}/rules", 501, "/overrides", body={"overrides": [{"simplex": [1], "rule": "G1"}]}),
-    C("not-implemented-tags", "PUT", "{s}/tags", 501, "/singular", body={"singular": [[3], [1, 2]]}),
+    C("tags-not-an-edge", "PUT", "{s}/tags", 422, "/singular/1", body={"singular": [[3], [0, 4]]}),
+    C("tags-not-a-triangle", "PUT", "{s}/tags", 422, "/singular/0", body={"singular": [[0, 1, 4]]}),
     # --- tags ---
     C("tags-arity-4", "PUT", "{s}/tags", 422, "/singular/0", body={"singular": [[0, 1, 2, 3]]}),
     C("tags-arity-0", "PUT", "{s}/tags", 422, "/singular/1", body={"singular": [[0], []]}),

@@ -1,0 +1,70 @@
+"""PUT /tags (000 Sec. 4.1): a cube made of tetrahedra with its 12 edges tagged keeps straight
+creases and fixed corners at every level; tags show in GET /complex; they must name simplices of
+the complex; a new complex drops them and a rule change keeps them."""
+import numpy as np
+import pytest
+
+from daemon import Daemon, Session
+
+# the unit cube as 6 tetrahedra around its main diagonal 0-7 (vertex id = x + 2y + 4z)
+CUBE_V = [[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)]
+CUBE_T = [[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]]
+CUBE_EDGES = [[a, b] for a in range(8) for b in range(a + 1, 8) if (a ^ b) in (1, 2, 4)]
+
+
+@pytest.fixture(scope="module")
+def daemon():
+    d = Daemon()
+    yield d
+    assert d.stop() == 0
+
+
+def on_cube_edge(p):
+    return sum(abs(c) < 1e-12 or abs(c - 1) < 1e-12 for c in p) >= 2
+
+
+def test_cube_creases(daemon):
+    s = Session(daemon)
+    assert s.put_complex({"vertices": CUBE_V, "simplices": CUBE_T}).status_code == 200
+    r = s.req("PUT", "/tags", json={"singular": CUBE_EDGES})
+    assert r.status_code == 200 and r.json()["version"] == 2
+    c = s.req("GET", "/complex").json()
+    assert c["tags"] == {"singular": CUBE_EDGES}
+    assert all(v["singular"] and v["rule"] == "corner" for v in c["classes"]["vertices"])
+    sing = {tuple(sorted(e["vertices"])) for e in c["classes"]["edges"] if e["singular"]}
+    assert sing == {tuple(e) for e in CUBE_EDGES}
+    for level in (1, 2, 3):
+        j = s.level(level, format="json").json()
+        p = np.array(j["vertices"])
+        np.testing.assert_array_equal(p[:8], np.array(CUBE_V, dtype=float))  # fixed corners
+        crease = [i for i, r in enumerate(j["rules"]) if r == "curve"]
+        assert len(crease) == 12 * (2 ** level - 1)
+        assert all(on_cube_edge(p[i]) for i in crease)                       # straight creases
+    # without tags the corners move (the tag is what fixes them)
+    t = Session(daemon)
+    assert t.put_complex({"vertices": CUBE_V, "simplices": CUBE_T}).status_code == 200
+    assert not np.allclose(np.array(t.level(1, format="json").json()["vertices"])[:8], CUBE_V)
+
+
+def test_tags_survive_rules_not_a_new_complex(daemon):
+    s = Session(daemon)
+    body = {"vertices": CUBE_V, "simplices": CUBE_T}
+    assert s.put_complex(body).status_code == 200
+    assert s.req("PUT", "/tags", json={"singular": [[0], [1, 3]]}).status_code == 200
+    assert s.req("PUT", "/rules", json={"solid_scheme": "averaged"}).status_code == 200
+    assert s.req("GET", "/complex").json()["tags"] == {"singular": [[0], [1, 3]]}
+    assert s.put_complex(body).status_code == 200
+    assert s.req("GET", "/complex").json()["tags"] == {"singular": []}
+
+
+@pytest.mark.parametrize("tags,pointer", [
+    ([[1, 2]], "/singular/0"),            # 1-2 is not an edge of the cube's tetrahedra
+    ([[0, 1], [1, 2, 4]], "/singular/1"),  # not a triangle
+    ([[0, 0]], "/singular/0/1"),           # repeated vertex
+])
+def test_tags_must_name_simplices(daemon, tags, pointer):
+    s = Session(daemon)
+    assert s.put_complex({"vertices": CUBE_V, "simplices": CUBE_T}).status_code == 200
+    r = s.req("PUT", "/tags", json={"singular": tags})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == pointer
+    assert s.req("GET").json()["version"] == 1
