@@ -91,7 +91,7 @@ static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out,
             if (q == n)
                 out->closed = 0;
             else
-                out->matrix[(size_t)p * n + q] += S->val[k];
+                out->matrix[(size_t)p * n + q] += sd_csrb_weight(S, rows[p], k);
         }
     }
     free(rows);

@@ -149,11 +149,30 @@ static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint3
     return SD_OK;
 }
 
+void sd_topo_free_derived(sd_mem *m, sd_topo *t)
+{
+    if (t->fv != t->trv) /* fv may be the triangles' own array (tr_ident) */
+        sd_free(m, t->fv);
+    void *arrays[] = {t->ev, t->fe, t->cu, t->tr, t->tet_e, t->tet_f, t->oct_e, t->oct_f,
+                      t->efam, t->eflag, t->enm, t->fn3, t->fflag};
+    for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
+        sd_free(m, arrays[i]);
+    t->ev = NULL;
+    t->fv = t->fe = NULL;
+    t->cu = t->tr = NULL;
+    t->tet_e = NULL;
+    t->tet_f = NULL;
+    t->oct_e = NULL;
+    t->oct_f = NULL;
+    t->efam = t->eflag = t->enm = t->fn3 = t->fflag = NULL;
+    t->derived = false;
+}
+
 void sd_topo_free(sd_mem *m, sd_topo *t)
 {
-    void *arrays[] = {t->ev, t->fv, t->fe, t->pt, t->cu, t->tr, t->tet, t->tet_e, t->tet_f,
-                      t->tet_d, t->oct, t->oct_e, t->oct_f, t->vfam, t->vflag, t->vnm,
-                      t->efam, t->eflag, t->enm, t->fn3, t->fflag};
+    sd_topo_free_derived(m, t);
+    void *arrays[] = {t->pt, t->cuv, t->trv, t->tet, t->tet_d, t->tet_b, t->oct, t->oct_b,
+                      t->vfam, t->vflag, t->vnm};
     for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
         sd_free(m, arrays[i]);
     memset(t, 0, sizeof *t);
@@ -219,11 +238,12 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
     t->tet_e = sd_alloc(m, (count[4] + 1) * sizeof *t->tet_e);
     t->tet_f = sd_alloc(m, (count[4] + 1) * sizeof *t->tet_f);
     t->tet_d = sd_calloc(m, count[4] + 1, 1);
+    t->tet_b = sd_calloc(m, count[4] + 1, 1);
     c->in_tet = sd_alloc(m, (size_t)ns * sizeof *c->in_tet);
     c->tet_swapped = sd_calloc(m, count[4] + 1, 1);
     used = sd_calloc(m, nv, 1);
     if (!t->ev || !t->fv || !t->fe || !t->fflag || !t->fn3 || !t->pt || !t->cu || !t->tr ||
-        !t->tet || !t->tet_e || !t->tet_f || !t->tet_d || !c->in_tet || !c->tet_swapped ||
+        !t->tet || !t->tet_e || !t->tet_f || !t->tet_d || !t->tet_b || !c->in_tet || !c->tet_swapped ||
         !used || !sd_hash_init(m, &he, emax) || !sd_hash_init(m, &hf, fmax))
         goto nomem;
     c->nin = ns;
@@ -319,6 +339,11 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
         goto nomem;
     memcpy(lv->ch[0].data, xyz, (size_t)nv * 3 * sizeof(double));
 
+    lv->cx = c;
+    t->derived = true;
+    t->tr_ident = t->nf == t->ntr;
+    for (uint32_t i = 0; i < t->ntr && t->tr_ident; i++)
+        t->tr_ident = t->tr[i] == i;
     c->lv[0] = lv;
     c->nlevels = 1;
     if ((r = sd_classify_level0(m, t, err)) || (r = sd_choose_diagonals(m, t, err))) {
@@ -327,6 +352,10 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
         sd_level_free(m, lv);
         return r;
     }
+    for (uint32_t q = 0; q < t->ntet; q++) /* the solids' boundary faces, as later levels inherit */
+        for (int i = 0; i < 4; i++)
+            if (t->fflag[t->tet_f[q][i]] & FF_BND3)
+                t->tet_b[q] |= (uint8_t)(1u << i);
     return SD_OK;
 
 nomem:

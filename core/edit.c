@@ -141,7 +141,7 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
             uint32_t j = in->id[i];
             for (uint32_t k = lv->tcol[j]; k < lv->tcol[j + 1]; k++) {
                 uint32_t r = lv->trow[k];
-                double w = lv->S.val[lv->tpos[k]];
+                double w = sd_csrb_weight(&lv->S, r, lv->tpos[k]);
                 if (slot[r] < 0) {
                     if (out->n == out->cap) {
                         uint32_t cap = out->cap ? 2 * out->cap : 64;

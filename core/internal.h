@@ -68,41 +68,79 @@ enum { VF_S_ANY = VF_SCREASE | VF_SSURF };
 enum { FAM0 = 1, FAM1 = 2, FAM2 = 4, FAM3 = 8 };
 
 /* ---- one level's topology and classification ---------------------------------------- */
+/* Two parts. The cells (phase A, sd_split_cells): counts, cell vertices, tet diagonals, boundary
+ * masks and vertex classes — all that a level's accessors read. The derived part (phase B,
+ * sd_split_derived, `derived`): edges, faces, per-cell edge and face ids, edge and face classes —
+ * what the rules and the next split need. A level is split into its cells only; its derived part
+ * is built when a deeper level, its rules or an edge accessor asks for it (levels.c), so the
+ * finest level costs its cells and points. Level 0 is built whole. Arrays of the cells are never
+ * moved or freed once built (lock-free readers may hold them while the derived part is added). */
 typedef struct sd_topo {
     uint32_t nv, ne, nf;
+    uint32_t npt, ncu, ntr, ntet, noct;
+    bool derived;              /* the derived part is built */
+    bool tr_ident;             /* every face is a maximal triangle and face i is triangle i: at
+                                * levels >= 1, tr is not stored and fv is trv */
+    /* cells */
+    uint32_t *pt;              /* vertex ids of isolated points */
+    uint32_t (*cuv)[2];        /* vertex ids of curve segments (levels >= 1) */
+    uint32_t (*trv)[3];        /* vertex ids of maximal triangles (levels >= 1) */
+    uint32_t (*tet)[4];
+    uint8_t *tet_d;            /* diagonal pair 0..2 */
+    uint8_t *tet_b;            /* bit i: face i lies on the solids' boundary (a face of one cell) */
+    uint32_t (*oct)[6];
+    uint8_t *oct_b;            /* the same for the 8 faces of an octahedron */
+    uint8_t *vfam, *vflag, *vnm;   /* vertex classification (classify.c) */
+    /* derived */
     uint32_t (*ev)[2];
     uint32_t (*fv)[3];
     uint32_t (*fe)[3];
-    uint32_t npt, ncu, ntr, ntet, noct;
-    uint32_t *pt;              /* vertex ids of isolated points */
     uint32_t *cu;              /* edge ids of curve segments */
-    uint32_t *tr;              /* face ids of maximal triangles */
-    uint32_t (*tet)[4];
+    uint32_t *tr;              /* face ids of maximal triangles (NULL: tr_ident, face i) */
     uint32_t (*tet_e)[6];
     uint32_t (*tet_f)[4];
-    uint8_t *tet_d;            /* diagonal pair 0..2 */
-    uint32_t (*oct)[6];
     uint32_t (*oct_e)[12];
     uint32_t (*oct_f)[8];
-    /* classification (classify.c) */
-    uint8_t *vfam, *vflag, *vnm;
     uint8_t *efam, *eflag, *enm;
     uint8_t *fn3, *fflag;      /* fn3: number of 3-cells on the face (saturating) */
 } sd_topo;
 
-void sd_topo_free(sd_mem *m, sd_topo *t);
+static inline uint32_t sd_tr(const sd_topo *t, uint32_t i) { return t->tr ? t->tr[i] : i; }
 
-/* ---- a matrix under construction (csr.c) ---------------------------------------------- */
+void sd_topo_free(sd_mem *m, sd_topo *t);
+void sd_topo_free_derived(sd_mem *m, sd_topo *t);   /* the derived part only */
+
+/* ---- subdivision matrices (csr.c) ------------------------------------------------------ */
+/* S in CSR form with shared weight patterns: row r's weights are wt[woff[pat[r]] ..], one per
+ * entry of the row. val (per-entry values) exists only once a public view asked for it. */
 typedef struct sd_csrb {
-    uint32_t nrows, ncols, cap_rows;
-    size_t nnz, cap;
-    uint32_t *rowptr, *col;
+    uint32_t nrows, ncols, npat;
+    size_t nnz;
+    uint32_t *rowptr, *col, *pat, *woff;
+    double *wt;
     double *val;
 } sd_csrb;
 
-bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nrows, uint32_t ncols, size_t nnz_hint);
-bool sd_csrb_reserve(sd_mem *m, sd_csrb *b, size_t extra);
+/* Interning of weight patterns while a matrix is built. */
+typedef struct sd_pats {
+    double *w;
+    uint32_t *off, *slot;
+    uint32_t n, capn, capw, hcap;
+} sd_pats;
+
+/* rowptr (nrows+1) and pat (nrows) allocated; the caller fills them and allocates col. */
+bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nrows, uint32_t ncols);
 void sd_csrb_free(sd_mem *m, sd_csrb *b);
+uint32_t sd_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len); /* UINT32_MAX: no memory */
+bool sd_pats_finish(sd_mem *m, sd_pats *p, sd_csrb *b);   /* moves the patterns into b; frees p */
+void sd_pats_free(sd_mem *m, sd_pats *p);
+/* The weight of entry k (of row r). */
+static inline double sd_csrb_weight(const sd_csrb *s, uint32_t r, size_t k)
+{
+    return s->wt[s->woff[s->pat[r]] + (k - s->rowptr[r])];
+}
+/* Per-entry values (materialized once and kept with the matrix), or NULL for lack of memory. */
+const double *sd_csrb_values(sd_mem *m, sd_csrb *b);
 /* out[r*nc + k] = sum_j S[r][j] in[j*nc + k] */
 void sd_csr_apply(const sd_csrb *s, const double *in, double *out, int nc);
 
@@ -117,6 +155,8 @@ typedef struct sd_channel {
 struct sd_level {
     int index;
     uint32_t parent_nv, parent_ne;   /* sizes of level index-1 (origin of the points) */
+    sd_complex *cx;                  /* the owner (lazy parts are built with its allocator) */
+    const sd_topo *parent;           /* level index-1's topology (derived), or NULL */
     sd_topo t;
     /* rules and stencils (rules.c), built lazily: they define S mapping this level to the next */
     bool have_rules;
@@ -152,13 +192,19 @@ void sd_level_free(sd_mem *m, sd_level *lv);
 /* classify.c */
 sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err);
 sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err);
-/* split.c: child topology and inherited classification of the next level */
-sd_result sd_split(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
+/* split.c: child topology and inherited classification of the next level, in two phases (see
+ * sd_topo); p must be derived */
+sd_result sd_split_cells(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
+sd_result sd_split_derived(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
 /* levels.c: forget a level's rules and every finer level */
 void sd_drop_rules(sd_complex *c, sd_level *lv);
 /* rules.c */
 sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
 sd_result sd_ensure_rules(sd_complex *cx, int level, sd_error *err);
+/* levels.c: build level `level`'s derived topology if it is not yet (under the caller's lock) */
+sd_result sd_ensure_derived(sd_complex *cx, int level, sd_error *err);
+/* The same from a const accessor of the level (see sd.h on locking); false if it failed. */
+bool sd_need_derived(const sd_level *lv);
 /* The rule of vertex v from the level's classification alone (no stencils needed). */
 uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v);
 /* The rules vertices actually follow (corners where the neighbourhood does not fit the

@@ -166,10 +166,21 @@ void sd_complex_counts(const sd_complex *c, int level, sd_counts *o)
 size_t sd_complex_memory(const sd_complex *c) { return c->mem.used; }
 int sd_complex_levels_computed(const sd_complex *c) { return c->nlevels; }
 
+sd_result sd_ensure_derived(sd_complex *c, int level, sd_error *err)
+{
+    sd_level *lv = c->lv[level];
+    if (lv->t.derived)
+        return SD_OK;
+    return sd_split_derived(&c->mem, lv->parent, &lv->t, err);
+}
+
 sd_result sd_ensure_rules(sd_complex *c, int level, sd_error *err)
 {
     sd_level *lv = c->lv[level];
-    return lv->have_rules ? SD_OK : sd_build_rules(c, lv, err);
+    if (lv->have_rules)
+        return SD_OK;
+    sd_result r = sd_ensure_derived(c, level, err);
+    return r ? r : sd_build_rules(c, lv, err);
 }
 
 /* Compute level l+1 from level l. */
@@ -186,7 +197,9 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
     lv->index = l + 1;
     lv->parent_nv = p->t.nv;
     lv->parent_ne = p->t.ne;
-    if ((r = sd_split(m, &p->t, &lv->t, err))) {
+    lv->cx = c;
+    lv->parent = &p->t;
+    if ((r = sd_split_cells(m, &p->t, &lv->t, err))) {
         sd_free(m, lv);
         return r;
     }
@@ -254,15 +267,26 @@ void sd_level_cell(const sd_level *lv, sd_cell_kind k, uint32_t i, uint32_t *v)
     const sd_topo *t = &lv->t;
     switch (k) {
     case SD_CELL_POINT: v[0] = t->pt[i]; break;
-    case SD_CELL_CURVE: memcpy(v, t->ev[t->cu[i]], 2 * sizeof *v); break;
-    case SD_CELL_TRIANGLE: memcpy(v, t->fv[t->tr[i]], 3 * sizeof *v); break;
+    case SD_CELL_CURVE: memcpy(v, t->cuv ? t->cuv[i] : t->ev[t->cu[i]], 2 * sizeof *v); break;
+    case SD_CELL_TRIANGLE: memcpy(v, t->trv ? t->trv[i] : t->fv[t->tr[i]], 3 * sizeof *v); break;
     case SD_CELL_TETRA: memcpy(v, t->tet[i], 4 * sizeof *v); break;
     case SD_CELL_OCTA: memcpy(v, t->oct[i], 6 * sizeof *v); break;
     }
 }
 
+/* Accessors of the derived topology build it the first time (under the caller's lock, see
+ * sd.h); false if that failed. */
+bool sd_need_derived(const sd_level *lv)
+{
+    return lv->t.derived || sd_ensure_derived(lv->cx, lv->index, NULL) == SD_OK;
+}
+
 const uint32_t *sd_level_edges(const sd_level *lv, uint32_t *n)
 {
+    if (!sd_need_derived(lv)) {
+        *n = 0;
+        return NULL;
+    }
     *n = lv->t.ne;
     return &lv->t.ev[0][0];
 }
@@ -274,15 +298,14 @@ sd_origin_kind sd_level_origin(const sd_level *lv, uint32_t i, uint32_t *a, uint
         *a = i;
         return SD_ORIGIN_INPUT;
     }
-    const sd_topo *t = &lv->t;
     if (i < lv->parent_nv) {
         *a = i;
         return SD_ORIGIN_VERTEX;
     }
     if (i < lv->parent_nv + lv->parent_ne) {
-        uint32_t e = i - lv->parent_nv; /* the halves 2e, 2e+1 run from one end to the other */
-        *a = t->ev[2 * e][0];
-        *b = t->ev[2 * e + 1][1];
+        uint32_t e = i - lv->parent_nv; /* the parent's edge (its halves run from end to end) */
+        *a = lv->parent->ev[e][0];
+        *b = lv->parent->ev[e][1];
         return SD_ORIGIN_EDGE;
     }
     *a = i - lv->parent_nv - lv->parent_ne;
@@ -299,7 +322,7 @@ uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b)
 
 uint32_t sd_level_find_edge(const sd_level *lv, uint32_t a, uint32_t b)
 {
-    return sd_topo_find_edge(&lv->t, a, b);
+    return sd_need_derived(lv) ? sd_topo_find_edge(&lv->t, a, b) : UINT32_MAX;
 }
 
 static bool extraordinary(uint8_t rule, uint32_t k, bool edge)
@@ -397,6 +420,9 @@ sd_result sd_complex_prepare_vertex_rules(sd_complex *c, int level, sd_error *er
     sd_level *lv = c->lv[level];
     if (lv->have_rules || lv->vrule_only)
         return SD_OK;
+    sd_result r = sd_ensure_derived(c, level, err);
+    if (r)
+        return r;
     uint8_t *vr = sd_alloc(&c->mem, (size_t)lv->t.nv + 1);
     if (!vr || sd_vertex_rules_only(&c->mem, &lv->t, c->opt.solid_scheme, vr)) {
         sd_free(&c->mem, vr);
@@ -408,25 +434,27 @@ sd_result sd_complex_prepare_vertex_rules(sd_complex *c, int level, sd_error *er
 
 uint32_t sd_level_solid_boundary(const sd_level *lv, uint32_t *tri)
 {
-    const sd_topo *t = &lv->t;
+    const sd_topo *t = &lv->t; /* the cells' boundary masks: no derived topology needed */
     uint32_t n = 0;
-    if (!tri) { /* each such face belongs to exactly one cell: count the flagged faces */
-        for (uint32_t f = 0; f < t->nf; f++)
-            n += (t->fflag[f] & FF_BND3) != 0;
+    if (!tri) {
+        for (uint32_t c = 0; c < t->ntet; c++)
+            n += (uint32_t)__builtin_popcount(t->tet_b[c]);
+        for (uint32_t c = 0; c < t->noct; c++)
+            n += (uint32_t)__builtin_popcount(t->oct_b[c]);
         return n;
     }
     for (uint32_t c = 0; c < t->ntet; c++)
-        for (int i = 0; i < 4; i++)
-            if (t->fflag[t->tet_f[c][i]] & FF_BND3) {
+        for (int i = 0; t->tet_b[c] && i < 4; i++)
+            if (t->tet_b[c] >> i & 1) {
                 for (int k = 0; k < 3; k++)
-                        tri[3 * n + k] = t->tet[c][SD_TET_F[i][k]];
+                    tri[3 * n + k] = t->tet[c][SD_TET_F[i][k]];
                 n++;
             }
     for (uint32_t c = 0; c < t->noct; c++)
-        for (int i = 0; i < 8; i++)
-            if (t->fflag[t->oct_f[c][i]] & FF_BND3) {
+        for (int i = 0; t->oct_b[c] && i < 8; i++)
+            if (t->oct_b[c] >> i & 1) {
                 for (int k = 0; k < 3; k++)
-                        tri[3 * n + k] = t->oct[c][SD_OCT_F[i][k]];
+                    tri[3 * n + k] = t->oct[c][SD_OCT_F[i][k]];
                 n++;
             }
     return n;
@@ -442,11 +470,14 @@ sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err
     sd_result r = sd_ensure_rules(c, level, err);
     if (r)
         return r;
-    const sd_csrb *s = &c->lv[level]->S;
+    sd_csrb *s = &c->lv[level]->S;
+    const double *val = sd_csrb_values(&c->mem, s); /* per-entry values, made once and kept */
+    if (!val)
+        return sd_fail_nomem(err, &c->mem);
     out->nrows = s->nrows;
     out->ncols = s->ncols;
     out->rowptr = s->rowptr;
     out->col = s->col;
-    out->val = s->val;
+    out->val = val;
     return SD_OK;
 }

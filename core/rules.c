@@ -469,6 +469,8 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     uint32_t *cnt_a = NULL, *cnt_b = NULL, *cur = NULL;
     uint32_t(*opp)[2] = NULL;
     uint8_t *nopp = NULL;
+    double *wbuf = NULL;
+    sd_pats pats = {0};
     rings sr = {0}, gr = {0};
     sd_result rc = SD_OK;
     double loopc[64];
@@ -530,13 +532,15 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         goto nomem;
 
     /* row sizes */
-    if (!sd_csrb_init(m, &lv->S, (uint32_t)nrows, nv, 0))
+    if (!sd_csrb_init(m, &lv->S, (uint32_t)nrows, nv))
         goto nomem;
-    uint32_t *rp = lv->S.rowptr;
+    uint32_t *rp = lv->S.rowptr, *pat = lv->S.pat, maxlen = 6;
     uint64_t acc = 0;
     for (uint32_t v = 0; v < nv; v++) {
         rp[v] = (uint32_t)acc;
-        acc += 1 + cnt_a[v] + cnt_b[v];
+        uint32_t n = 1 + cnt_a[v] + cnt_b[v];
+        maxlen = n > maxlen ? n : maxlen;
+        acc += n;
     }
     for (uint32_t e = 0; e < ne; e++) {
         rp[nv + e] = (uint32_t)acc;
@@ -556,6 +560,7 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             break;
         }
         lv->ering[e] = k;
+        maxlen = 2 + k > maxlen ? 2 + k : maxlen;
         acc += 2 + k;
     }
     for (uint32_t o = 0; o < no; o++) {
@@ -567,49 +572,67 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         goto fail;
     }
     rp[nrows] = (uint32_t)acc;
-    if (!sd_csrb_reserve(m, &lv->S, acc))
-        goto nomem;
     lv->S.nnz = acc;
-    uint32_t *col = lv->S.col;
-    double *val = lv->S.val;
+    uint32_t *col = lv->S.col = sd_alloc(m, (acc + 1) * sizeof *col);
+    wbuf = sd_alloc(m, ((size_t)maxlen + 1) * sizeof *wbuf);
+    if (!col || !wbuf)
+        goto nomem;
 
-    /* vertex rows: the self weight first, then rho in edge order */
+    /* weight patterns: a vertex row is [self, a x |rho|, b x octahedral opposites], an edge row
+     * [end, end, ring...]; the common ones are memoized by rule and size */
+    enum { MEMO = 64 };
+    uint32_t vmemo[SD_RULE_COUNT][MEMO], ememo[SD_RULE_COUNT][MEMO];
+    memset(vmemo, 0xff, sizeof vmemo);
+    memset(ememo, 0xff, sizeof ememo);
+    for (uint32_t v = 0; v < nv; v++) {
+        uint32_t na = cnt_a[v], nb = cnt_b[v], id = UINT32_MAX;
+        bool memo = nb == 0 && na < MEMO;
+        if (memo)
+            id = vmemo[vr[v]][na];
+        if (id == UINT32_MAX) {
+            vw w = vertex_weights(vr[v], weights, scheme, na, nb, loopc);
+            wbuf[0] = w.self;
+            for (uint32_t i = 0; i < na; i++)
+                wbuf[1 + i] = w.a;
+            for (uint32_t i = 0; i < nb; i++)
+                wbuf[1 + na + i] = w.b;
+            if ((id = sd_pats_intern(m, &pats, wbuf, 1 + na + nb)) == UINT32_MAX)
+                goto nomem;
+            if (memo)
+                vmemo[vr[v]][na] = id;
+        }
+        pat[v] = id;
+    }
+
+    /* vertex rows: the centre first, then rho in edge order */
     cur = sd_alloc(m, ((size_t)nv + 1) * sizeof *cur);
     if (!cur)
         goto nomem;
     for (uint32_t v = 0; v < nv; v++) {
-        vw w = vertex_weights(vr[v], weights, scheme, cnt_a[v], cnt_b[v], loopc);
         col[rp[v]] = v;
-        val[rp[v]] = w.self;
         cur[v] = rp[v] + 1;
     }
-#define PUT(v, x, w)                                                                         \
-    do {                                                                                     \
-        col[cur[v]] = (x);                                                                   \
-        val[cur[v]++] = (w);                                                                 \
-    } while (0)
     for (uint32_t e = 0; e < ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
         if (vr[a] != SD_RULE_CORNER && via_edge(t, vr[a], a, b, e))
-            PUT(a, b, vertex_weights(vr[a], weights, scheme, cnt_a[a], cnt_b[a], loopc).a);
+            col[cur[a]++] = b;
         if (vr[b] != SD_RULE_CORNER && via_edge(t, vr[b], b, a, e))
-            PUT(b, a, vertex_weights(vr[b], weights, scheme, cnt_a[b], cnt_b[b], loopc).a);
+            col[cur[b]++] = a;
     }
     for (uint32_t o = 0; o < no; o++) {
         const uint32_t *q = t->oct[o];
         for (int i = 0; i < 2; i++)
             if (vr[q[i]] != SD_RULE_CORNER && via_diag(t, vr[q[i]], scheme, q[i], q[i ^ 1]))
-                PUT(q[i], q[i ^ 1], vertex_weights(vr[q[i]], weights, scheme, cnt_a[q[i]], cnt_b[q[i]], loopc).a);
+                col[cur[q[i]]++] = q[i ^ 1];
         if (scheme == SD_SOLID_AVERAGED)
             for (int i = 0; i < 6; i++)
                 if (vr[q[i]] == SD_RULE_SOLID)
-                    PUT(q[i], q[i ^ 1], vertex_weights(vr[q[i]], weights, scheme, cnt_a[q[i]], cnt_b[q[i]], loopc).b);
+                    col[cur[q[i]]++] = q[i ^ 1];
     }
-#undef PUT
 
     /* edge rows */
     for (uint32_t e = 0; e < ne; e++) {
-        uint32_t r = rp[nv + e], a = t->ev[e][0], b = t->ev[e][1], k = lv->ering[e];
+        uint32_t r = rp[nv + e], k = lv->ering[e];
         double wend = 0.5, wring = 0, wdiag = 0;
         const uint32_t *ring = NULL;
         const uint8_t *cls = NULL;
@@ -624,8 +647,8 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             break;
         case SD_RULE_SOLID:
             ring = sr.v + sr.off[e];
-            cls = sr.cls + sr.off[e];
             if (scheme == SD_SOLID_AVERAGED) {
+                cls = sr.cls + sr.off[e];
                 uint32_t nf = 0, nd = 0;
                 for (uint32_t i = 0; i < k; i++)
                     cls[i] ? nd++ : nf++;
@@ -646,23 +669,37 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         default:
             break;
         }
-        col[r] = a;
-        val[r] = wend;
-        col[r + 1] = b;
-        val[r + 1] = wend;
-        for (uint32_t i = 0; i < k; i++) {
+        col[r] = t->ev[e][0];
+        col[r + 1] = t->ev[e][1];
+        for (uint32_t i = 0; i < k; i++)
             col[r + 2 + i] = ring[i];
-            val[r + 2 + i] = cls && cls[i] ? wdiag : wring;
+        bool memo = !cls && k < MEMO;
+        uint32_t id = memo ? ememo[er[e]][k] : UINT32_MAX;
+        if (id == UINT32_MAX) {
+            wbuf[0] = wbuf[1] = wend;
+            for (uint32_t i = 0; i < k; i++)
+                wbuf[2 + i] = cls && cls[i] ? wdiag : wring;
+            if ((id = sd_pats_intern(m, &pats, wbuf, 2 + k)) == UINT32_MAX)
+                goto nomem;
+            if (memo)
+                ememo[er[e]][k] = id;
         }
+        pat[nv + e] = id;
     }
     /* cell points of octahedra: box 1/4 on the diagonal, 1/8 on the rest; averaged: centroid */
-    for (uint32_t o = 0; o < no; o++) {
-        uint32_t r = rp[nv + ne + o];
-        for (int i = 0; i < 6; i++) {
-            col[r + i] = t->oct[o][i];
-            val[r + i] = scheme == SD_SOLID_AVERAGED ? 1.0 / 6.0 : (i < 2 ? 0.25 : 0.125);
+    if (no) {
+        for (int i = 0; i < 6; i++)
+            wbuf[i] = scheme == SD_SOLID_AVERAGED ? 1.0 / 6.0 : (i < 2 ? 0.25 : 0.125);
+        uint32_t id = sd_pats_intern(m, &pats, wbuf, 6);
+        if (id == UINT32_MAX)
+            goto nomem;
+        for (uint32_t o = 0; o < no; o++) {
+            memcpy(col + rp[nv + ne + o], t->oct[o], 6 * sizeof *col);
+            pat[nv + ne + o] = id;
         }
     }
+    if (!sd_pats_finish(m, &pats, &lv->S))
+        goto nomem;
 
     lv->have_rules = true;
     goto out;
@@ -678,6 +715,8 @@ fail:
     lv->vval = lv->ering = NULL;
     sd_csrb_free(m, &lv->S);
 out:
+    sd_pats_free(m, &pats);
+    sd_free(m, wbuf);
     sd_free(m, cnt_a);
     sd_free(m, cnt_b);
     sd_free(m, cur);

@@ -12,7 +12,19 @@
  * or changed (set_diagonal, add_channel).
  *
  * Threading: a complex is not thread-safe; different complexes are fully independent (the core
- * keeps no global state), so one thread per complex needs no locking.
+ * keeps no global state), so one thread per complex needs no locking. Within one complex the
+ * caller serialises every call that takes a non-const sd_complex * (and the lazily building
+ * accessors below) with a lock, and may read a level without that lock under this contract:
+ * once level L has been returned by sd_complex_level() and its rules built (sd_complex_vertex_class
+ * or any call that builds them, e.g. computing level L+1), the arrays that the accessors of level
+ * L return or read — channels (positions), cells, edges, origins, vertex rules and classes, solid
+ * boundary — stay valid and unchanged while other levels are computed. Parts of level L that are
+ * built lazily later (its rules and stencils, the derived topology of the finest level, a matrix
+ * view) are only ever added, under the caller's lock; arrays already handed out are never freed
+ * or moved (only sd_complex_free, set_diagonal, add_channel, set_singular and edits change
+ * them). Lazily building accessors: the finest computed level is stored as its cells and points
+ * only; sd_level_edges, sd_level_find_edge and sd_level_edge_singular build its edges and faces
+ * the first time they are asked (so call them under the lock until the level's rules are built).
  */
 #ifndef SD_H
 #define SD_H
@@ -123,6 +135,8 @@ uint32_t sd_level_num_cells(const sd_level *lv, sd_cell_kind k);
 void sd_level_cell(const sd_level *lv, sd_cell_kind k, uint32_t i, uint32_t *v);
 
 /* All edges of the level (2n ids), in the order edge points are numbered at level L+1. */
+/* On the finest computed level, the first call builds the level's edges (see Threading above);
+ * NULL and *n = 0 if that fails for lack of memory. */
 const uint32_t *sd_level_edges(const sd_level *lv, uint32_t *n);
 
 /* Where vertex i of level L >= 1 came from in level L-1. */
@@ -173,7 +187,7 @@ int sd_level_edge_singular(const sd_level *lv, uint32_t e);
 sd_result sd_level_vertex_class(const sd_level *lv, uint32_t i, sd_class *out);
 sd_result sd_level_edge_class(const sd_level *lv, uint32_t e, sd_class *out);
 /* Edge id of the edge a-b at a level, or UINT32_MAX. */
-uint32_t sd_level_find_edge(const sd_level *lv, uint32_t a, uint32_t b);
+uint32_t sd_level_find_edge(const sd_level *lv, uint32_t a, uint32_t b);   /* builds edges as sd_level_edges */
 
 /* The rule vertex i of a level follows, without building stencils (unlike
  * sd_complex_vertex_class): exact once the level's rules are built or after
@@ -197,7 +211,9 @@ typedef struct sd_csr {
     const double *val;
 } sd_csr;
 
-/* The matrix S_L mapping level L points to level L+1 points (built if needed). */
+/* The matrix S_L mapping level L points to level L+1 points (built if needed). The complex
+ * stores S_L as column indices plus shared weight patterns; the per-entry values of this view
+ * are materialized on the first call and kept (counted by sd_complex_memory). */
 sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err);
 
 /* ---- edits (SPEC Sec. 5) ------------------------------------------------------------------ */

@@ -20,6 +20,12 @@
  * Every child is oriented like its parent (checked on reference coordinates when the templates
  * are built).
  *
+ * Two phases (see sd_topo in internal.h): sd_split_cells makes the child's cells, vertex classes
+ * and boundary masks (which faces of a cell are on the solids' boundary: the children of a
+ * boundary face are, faces inside a parent cell are not); sd_split_derived, run only when the
+ * child's rules or its own children are needed, its edges, faces, per-cell ids and their classes.
+ * Both walk the parent's cells with the same templates, so they agree on every child's number.
+ *
  * Classification is inherited (see classify.c): halves keep their edge's class; an edge point
  * takes its edge's family and dC flag and becomes type 1 (if the edge was) or type 4 (if the edge
  * was of type 2, 3 or 4); edges inside a face take the face's family and boundary status and are
@@ -326,8 +332,40 @@ static inline uint32_t map_f(const ctx *x, uint16_t r)
     return 4 * f + (RB(r) == MIDDLE ? 3u : (uint32_t)fpos(x->P, f, x->pv[RB(r)]));
 }
 
-/* Emit the children of one parent cell. */
-static void emit(sd_topo *C, const ctx *x, const tmpl *T, uint32_t *tet_at, uint32_t *oct_at)
+/* Boundary mask of a child cell: face k lies on the solids' boundary iff it is a child of a
+ * parent face that does (bit RA of the parent's mask); faces inside the parent never do. */
+static inline uint8_t child_mask(const tcell *c, unsigned pmask)
+{
+    unsigned m = 0;
+    for (int k = 0; k < (c->kind == 4 ? 4 : 8); k++)
+        if (RT(c->f[k]) == R_FCHILD)
+            m |= (pmask >> RA(c->f[k]) & 1u) << k;
+    return (uint8_t)m;
+}
+
+/* Phase A: the vertices, diagonal and boundary mask of the children of one parent cell. */
+static void emit_cells(sd_topo *C, const ctx *x, const tmpl *T, unsigned pmask, uint32_t tet_at,
+                       uint32_t oct_at)
+{
+    for (int i = 0; i < T->ncell; i++) {
+        const tcell *c = &T->cell[i];
+        if (c->kind == 4) {
+            uint32_t t = tet_at++;
+            for (int k = 0; k < 4; k++)
+                C->tet[t][k] = map_v(x, T, c->v[k]);
+            C->tet_d[t] = c->diag;
+            C->tet_b[t] = child_mask(c, pmask);
+        } else {
+            uint32_t o = oct_at++;
+            for (int k = 0; k < 6; k++)
+                C->oct[o][k] = map_v(x, T, c->v[k]);
+            C->oct_b[o] = child_mask(c, pmask);
+        }
+    }
+}
+
+/* Phase B: the faces inside one parent cell and the edge and face ids of its children. */
+static void emit_ids(sd_topo *C, const ctx *x, const tmpl *T, uint32_t tet_at, uint32_t oct_at)
 {
     for (int i = 0; i < T->nif; i++) {
         uint32_t f = x->ibase_f + (uint32_t)i;
@@ -341,18 +379,13 @@ static void emit(sd_topo *C, const ctx *x, const tmpl *T, uint32_t *tet_at, uint
     for (int i = 0; i < T->ncell; i++) {
         const tcell *c = &T->cell[i];
         if (c->kind == 4) {
-            uint32_t t = (*tet_at)++;
-            for (int k = 0; k < 4; k++)
-                C->tet[t][k] = map_v(x, T, c->v[k]);
+            uint32_t t = tet_at++;
             for (int k = 0; k < 6; k++)
                 C->tet_e[t][k] = map_e(x, c->e[k]);
             for (int k = 0; k < 4; k++)
                 C->tet_f[t][k] = map_f(x, c->f[k]);
-            C->tet_d[t] = c->diag;
         } else {
-            uint32_t o = (*oct_at)++;
-            for (int k = 0; k < 6; k++)
-                C->oct[o][k] = map_v(x, T, c->v[k]);
+            uint32_t o = oct_at++;
             for (int k = 0; k < 12; k++)
                 C->oct_e[o][k] = map_e(x, c->e[k]);
             for (int k = 0; k < 8; k++)
@@ -361,7 +394,21 @@ static void emit(sd_topo *C, const ctx *x, const tmpl *T, uint32_t *tet_at, uint
     }
 }
 
-sd_result sd_split(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
+static void templates(tmpl tt[3], tmpl *to)
+{
+    for (int d = 0; d < 3; d++)
+        tm_tet(&tt[d], d);
+    tm_oct(to);
+}
+
+/* Children of parent tetrahedron t: tets 4t..4t+3, octahedron t; of parent octahedron o: tets
+ * 4 ntet + 8o.., octahedra ntet + 6o.. (the order emit_* produce them in). */
+#define TET_CTX(P, t) {P, P->tet[t], P->tet_e[t], P->tet_f ? P->tet_f[t] : NULL, 0, 0, 4 * P->nf + 4 * (t)}
+#define OCT_CTX(P, o)                                                                              \
+    {P, P->oct[o], P->oct_e[o], P->oct_f ? P->oct_f[o] : NULL, P->nv + P->ne + (o),                \
+     2 * P->ne + 3 * P->nf + 12 * (o), 4 * P->nf + 4 * P->ntet + 24 * (o)}
+
+sd_result sd_split_cells(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
 {
     uint64_t nv = (uint64_t)P->nv + P->ne + P->noct;
     uint64_t ne = 2ull * P->ne + 3ull * P->nf + 12ull * P->noct;
@@ -381,17 +428,16 @@ sd_result sd_split(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
     C->ntr = 4 * P->ntr;
     C->ntet = (uint32_t)ntet;
     C->noct = (uint32_t)noct;
+    C->tr_ident = P->tr_ident && C->nf == C->ntr;
 #define A(f, n) (C->f = sd_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
-    if (!A(ev, ne) || !A(fv, nf) || !A(fe, nf) || !A(pt, C->npt) || !A(cu, C->ncu) ||
-        !A(tr, C->ntr) || !A(tet, ntet) || !A(tet_e, ntet) || !A(tet_f, ntet) ||
-        !A(tet_d, ntet) || !A(oct, noct) || !A(oct_e, noct) || !A(oct_f, noct) ||
-        !A(vfam, nv) || !A(vflag, nv) || !A(vnm, nv) || !A(efam, ne) || !A(eflag, ne) ||
-        !A(enm, ne) || !A(fn3, nf) || !A(fflag, nf)) {
+    if (!A(pt, C->npt) || !A(cuv, C->ncu) || !A(trv, C->ntr) || !A(tet, ntet) ||
+        !A(tet_d, ntet) || !A(tet_b, ntet) || !A(oct, noct) || !A(oct_b, noct) ||
+        !A(vfam, nv) || !A(vflag, nv) || !A(vnm, nv)) {
         sd_topo_free(m, C);
         return sd_fail_nomem(err, m);
     }
 #undef A
-    const uint32_t pnv = P->nv, pne = P->ne, pnf = P->nf;
+    const uint32_t pnv = P->nv, pne = P->ne;
 
     /* vertices: classes */
     memcpy(C->vfam, P->vfam, pnv);
@@ -405,12 +451,62 @@ sd_result sd_split(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
                       ((pf & EF_SSURF) ? VF_SSURF : 0) | ((pf & EF_SBND) ? VF_SBND : 0);
         C->vnm[v] = P->enm[e] == 1 ? 1 : P->enm[e] ? 4 : 0;
     }
-    for (uint32_t o = 0; o < P->noct; o++) {
-        uint32_t v = pnv + pne + o;
-        C->vfam[v] = FAM3;
-        C->vflag[v] = 0;
-        C->vnm[v] = 0;
+    memset(C->vfam + pnv + pne, FAM3, P->noct);
+    memset(C->vflag + pnv + pne, 0, P->noct);
+    memset(C->vnm + pnv + pne, 0, P->noct);
+    /* lower-dimensional cells */
+    memcpy(C->pt, P->pt, (size_t)P->npt * sizeof *C->pt);
+    for (uint32_t i = 0; i < P->ncu; i++) {
+        uint32_t e = P->cu[i];
+        C->cuv[2 * i][0] = P->ev[e][0];
+        C->cuv[2 * i][1] = pnv + e;
+        C->cuv[2 * i + 1][0] = pnv + e;
+        C->cuv[2 * i + 1][1] = P->ev[e][1];
     }
+    for (uint32_t i = 0; i < P->ntr; i++) { /* the children of face f, as fv[4f..4f+3] below */
+        uint32_t f = sd_tr(P, i);
+        const uint32_t *x = P->fv[f], *fe = P->fe[f];
+        uint32_t(*c)[3] = C->trv + 4 * (size_t)i;
+        for (int j = 0; j < 3; j++) {
+            int jp = (j + 2) % 3;
+            c[j][0] = x[j];
+            c[j][1] = pnv + fe[j];
+            c[j][2] = pnv + fe[jp];
+            c[3][j] = pnv + fe[j];
+        }
+    }
+    /* solid cells */
+    if (P->ntet || P->noct) {
+        tmpl tt[3], to;
+        templates(tt, &to);
+        for (uint32_t t = 0; t < P->ntet; t++) {
+            ctx x = TET_CTX(P, t);
+            emit_cells(C, &x, &tt[P->tet_d[t] % 3], P->tet_b[t], 4 * t, t);
+        }
+        for (uint32_t o = 0; o < P->noct; o++) {
+            ctx x = OCT_CTX(P, o);
+            emit_cells(C, &x, &to, P->oct_b[o], 4 * P->ntet + 8 * o, P->ntet + 6 * o);
+        }
+    }
+    return SD_OK;
+}
+
+sd_result sd_split_derived(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
+{
+    const uint32_t ne = C->ne, nf = C->nf, ntet = C->ntet, noct = C->noct;
+    /* a pure surface whose face i is triangle i: the faces' vertices are the triangles' */
+    bool alias = C->tr_ident && C->trv;
+#define A(f, n) (C->f = sd_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
+    if (!A(ev, ne) || (alias ? !(C->fv = C->trv) : !A(fv, nf)) || !A(fe, nf) ||
+        !A(cu, C->ncu) || (!C->tr_ident && !A(tr, C->ntr)) || !A(tet_e, ntet) ||
+        !A(tet_f, ntet) || !A(oct_e, noct) || !A(oct_f, noct) || !A(efam, ne) ||
+        !A(eflag, ne) || !A(enm, ne) || !A(fn3, nf) || !A(fflag, nf)) {
+        sd_topo_free_derived(m, C);
+        return sd_fail_nomem(err, m);
+    }
+#undef A
+    const uint32_t pnv = P->nv, pne = P->ne, pnf = P->nf;
+
     /* edges: halves */
     for (uint32_t e = 0; e < pne; e++) {
         uint32_t mid = pnv + e;
@@ -440,16 +536,19 @@ sd_result sd_split(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
             C->eflag[e] = flag;
             C->enm[e] = nm;
             uint32_t g = 4 * f + j;
-            C->fv[g][0] = x[j];
-            C->fv[g][1] = pnv + fe[j];
-            C->fv[g][2] = pnv + fe[jp];
+            if (!alias) {
+                C->fv[g][0] = x[j];
+                C->fv[g][1] = pnv + fe[j];
+                C->fv[g][2] = pnv + fe[jp];
+            }
             C->fe[g][0] = half(P, fe[j], x[j]);
             C->fe[g][1] = e;
             C->fe[g][2] = half(P, fe[jp], x[j]);
         }
         uint32_t g = 4 * f + 3;
         for (int j = 0; j < 3; j++) {
-            C->fv[g][j] = pnv + fe[j];
+            if (!alias)
+                C->fv[g][j] = pnv + fe[j];
             C->fe[g][j] = 2 * pne + 3 * f + (uint32_t)(j + 1) % 3;
         }
         for (int j = 0; j < 4; j++) {
@@ -467,32 +566,28 @@ sd_result sd_split(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
             C->eflag[e] = 0;
             C->enm[e] = 0;
         }
-    /* lower-dimensional cells */
-    memcpy(C->pt, P->pt, (size_t)P->npt * sizeof *C->pt);
+    /* lower-dimensional cells as edge and face ids */
     for (uint32_t i = 0; i < P->ncu; i++) {
         C->cu[2 * i] = 2 * P->cu[i];
         C->cu[2 * i + 1] = 2 * P->cu[i] + 1;
     }
-    for (uint32_t i = 0; i < P->ntr; i++)
-        for (uint32_t j = 0; j < 4; j++)
-            C->tr[4 * i + j] = 4 * P->tr[i] + j;
+    if (C->tr)
+        for (uint32_t i = 0; i < P->ntr; i++)
+            for (uint32_t j = 0; j < 4; j++)
+                C->tr[4 * i + j] = 4 * sd_tr(P, i) + j;
     /* solid cells */
     if (P->ntet || P->noct) {
         tmpl tt[3], to;
-        for (int d = 0; d < 3; d++)
-            tm_tet(&tt[d], d);
-        tm_oct(&to);
-        uint32_t tet_at = 0, oct_at = 0;
+        templates(tt, &to);
         for (uint32_t t = 0; t < P->ntet; t++) {
-            ctx x = {P, P->tet[t], P->tet_e[t], P->tet_f[t], 0, 0, 4 * pnf + 4 * t};
-            emit(C, &x, &tt[P->tet_d[t] % 3], &tet_at, &oct_at);
+            ctx x = TET_CTX(P, t);
+            emit_ids(C, &x, &tt[P->tet_d[t] % 3], 4 * t, t);
         }
         for (uint32_t o = 0; o < P->noct; o++) {
-            ctx x = {P, P->oct[o], P->oct_e[o], P->oct_f[o], pnv + pne + o,
-                     2 * pne + 3 * pnf + 12 * o, 4 * pnf + 4 * P->ntet + 24 * o};
-            emit(C, &x, &to, &tet_at, &oct_at);
+            ctx x = OCT_CTX(P, o);
+            emit_ids(C, &x, &to, 4 * P->ntet + 8 * o, P->ntet + 6 * o);
         }
-        assert(tet_at == C->ntet && oct_at == C->noct);
     }
+    C->derived = true;
     return SD_OK;
 }

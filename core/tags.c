@@ -103,5 +103,5 @@ int sd_level_vertex_singular(const sd_level *lv, uint32_t i)
 
 int sd_level_edge_singular(const sd_level *lv, uint32_t e)
 {
-    return e < lv->t.ne && (lv->t.eflag[e] & (EF_CREASE | EF_SSURF)) != 0;
+    return e < lv->t.ne && sd_need_derived(lv) && (lv->t.eflag[e] & (EF_CREASE | EF_SSURF)) != 0;
 }
