@@ -62,6 +62,7 @@ $(B)/subdivd: $(SRV_OBJ) $(API_LIB) $(CORE_LIB)
 -include tests/peers/Makefile.inc
 -include tests/tools/Makefile.inc
 -include tests/fuzz/Makefile.inc
+-include tetgen/Makefile.inc
 all: $(API_LIB) $(B)/subdivd $(EXTRA_ALL)
 -include bench/Makefile.inc
 
