@@ -5,6 +5,7 @@
  * the session untouched. Sizes are checked against api_limits before the arrays are allocated.
  */
 #include "handlers.h"
+#include "fill.h"
 #include "jsonin.h"
 #include <ctype.h>
 #include <errno.h>
@@ -281,14 +282,14 @@ int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, a
     json_t *dg = json_object_get(body, "diagonals");
     if (!rc && dg)
         rc = parse_diagonals(dg, in, p);
-    if (!rc && json_object_get(body, "fill"))
-        rc = api_fail_at(p, 501, "not-implemented", "/fill",
-                         "TetGen fill is not available in this version; post the tetrahedra "
-                         "themselves");
+    uint32_t nv_posted = in->nv, ns_posted = in->ns;
+    json_t *fill = json_object_get(body, "fill");
+    if (!rc && fill) /* TetGen: the tets and Steiner points are appended to `in` (api/fill.c) */
+        rc = api_fill(fill, in, lim, p);
     if (!rc && !in->nv)   /* the core's "no vertices" would point at /simplices */
         rc = api_fail_at(p, 422, "invalid-complex", "/vertices", "the complex has no vertices");
-    if (!rc)
-        rc = build_model(in, &cur->rules, NULL, lim, out, p);
+    if (!rc && (rc = build_model(in, &cur->rules, NULL, lim, out, p)) && in->nfill)
+        api_fill_blame(in, nv_posted, ns_posted, p);
     api_input_unref(in);
     return rc;
 }
@@ -462,13 +463,14 @@ json_t *api_summary(const api_model *m)
         json_object_set_new(nm, key, json_pack("{s:I, s:I}", "vertices", (json_int_t)nmv[t],
                                                "edges", (json_int_t)nme[t]));
     }
-    return json_pack("{s:I, s:I, s:I, s:{s:I, s:I, s:I, s:I}, s:{s:I, s:I}, s:o, s:{s:I, s:I}}",
+    json_t *fill = api_fill_summary(m->in);
+    return json_pack("{s:I, s:I, s:I, s:{s:I, s:I, s:I, s:I}, s:{s:I, s:I}, s:o, s:{s:I, s:I}, s:o*}",
                      "vertices", (json_int_t)n.vertices, "edges", (json_int_t)n.edges, "faces",
                      (json_int_t)n.faces, "simplices", "0", (json_int_t)n.points, "1",
                      (json_int_t)n.curves, "2", (json_int_t)n.triangles, "3",
                      (json_int_t)n.tetrahedra, "boundary", "vertices", (json_int_t)bv, "edges",
                      (json_int_t)be, "nonmanifold", nm, "extraordinary", "vertices",
-                     (json_int_t)xv, "edges", (json_int_t)xe);
+                     (json_int_t)xv, "edges", (json_int_t)xe, "fill", fill);
 }
 
 static json_t *doubles_json(const double *x, size_t n)

@@ -22,6 +22,9 @@
 #define API_MAX_JSON_DEPTH              16
 #define API_MAX_ATTRIBUTES              16
 #define API_MAX_ATTRIBUTE_NAME          48
+#define API_DEFAULT_FILL_SECONDS        60            /* wall deadline of one TetGen run */
+#define API_DEFAULT_FILL_MEMORY_BYTES   (2ull << 30)  /* address space of the TetGen helper */
+#define API_MAX_FILL_SURFACES           16            /* entries of "fill" in one request */
 
 typedef struct api_limits {
     size_t max_body_bytes;
@@ -29,12 +32,17 @@ typedef struct api_limits {
     uint32_t max_simplices;
     uint64_t max_cells;
     uint64_t max_session_bytes;
+    /* TetGen fill (api/fill.c): limits of the helper process, and where it is */
+    uint32_t fill_seconds;        /* wall deadline of one fill; also its CPU-time limit */
+    uint64_t fill_memory_bytes;   /* RLIMIT_AS of the helper */
+    char tetgen_helper[256];      /* "" = subdivd-tetgen beside the running binary, else on PATH */
 } api_limits;
 
 static inline api_limits api_default_limits(void)
 {
     api_limits l = {API_DEFAULT_MAX_BODY_BYTES, API_DEFAULT_MAX_VERTICES, API_DEFAULT_MAX_SIMPLICES,
-                    API_DEFAULT_MAX_CELLS, API_DEFAULT_MAX_SESSION_BYTES};
+                    API_DEFAULT_MAX_CELLS, API_DEFAULT_MAX_SESSION_BYTES, API_DEFAULT_FILL_SECONDS,
+                    API_DEFAULT_FILL_MEMORY_BYTES, ""};
     return l;
 }
 

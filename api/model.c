@@ -25,6 +25,7 @@ void api_input_unref(api_input *in)
     for (int a = 0; a < in->nattrs; a++)
         free(in->attrs[a].data);
     free(in->diag);
+    free(in->fill);
     free(in);
 }
 

@@ -28,6 +28,13 @@ typedef struct api_attribute {
     double *data;             /* nv * ncomp */
 } api_attribute;
 
+/* What one entry of "fill" added (api/fill.c): tets are simplices [first_simplex, +tets),
+ * TetGen's Steiner points vertices [first_vertex, +added_vertices). */
+typedef struct api_fill_stats {
+    uint32_t surface_triangles, tets, added_vertices, first_vertex, first_simplex;
+    double volume;            /* of the tetrahedra */
+} api_fill_stats;
+
 typedef struct api_input {
     atomic_int refs;
     uint32_t nv;
@@ -39,6 +46,8 @@ typedef struct api_input {
     api_attribute attrs[API_MAX_ATTRIBUTES];
     uint32_t ndiag;           /* major diagonals chosen by the client: */
     uint32_t (*diag)[2];      /* (simplex index, pair 0..2) */
+    uint32_t nfill;           /* "fill" entries run; their tets and points are in the arrays above */
+    api_fill_stats *fill;
 } api_input;
 
 /* The rule preferences of PUT /rules (API.md); zero = the default. */

@@ -41,6 +41,16 @@ int api_fail_at(api_problem *p, int status, const char *slug, const char *pointe
     return status;
 }
 
+void api_add_error(api_problem *p, const char *pointer, const char *fmt, ...)
+{
+    char msg[sizeof p->errors[0].message];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    add_error(p, pointer, msg);
+}
+
 int api_fail_limit(api_problem *p, const char *limit_name, uint64_t limit, uint64_t requested,
                    const char *fmt, ...)
 {

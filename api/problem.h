@@ -38,6 +38,9 @@ int api_fail(api_problem *p, int status, const char *slug, const char *fmt, ...)
 /* Same, and add one field error at `pointer` whose message is the detail. */
 int api_fail_at(api_problem *p, int status, const char *slug, const char *pointer,
                 const char *fmt, ...) __attribute__((format(printf, 5, 6)));
+/* Add one more field error (after api_fail_at; ignored beyond API_MAX_FIELD_ERRORS). */
+void api_add_error(api_problem *p, const char *pointer, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
 /* A limit refusal (413): names the limit, the configured value and what was asked. */
 int api_fail_limit(api_problem *p, const char *limit_name, uint64_t limit, uint64_t requested,
                    const char *fmt, ...) __attribute__((format(printf, 5, 6)));

@@ -39,6 +39,12 @@ static const setting S[] = {
      "top cells of one level (default 20000000)"},
     {"max-session-bytes", T_U64, OFF(limits.max_session_bytes), 1 << 20, 1LL << 50,
      "core memory per session (default 4 GiB)"},
+    {"fill-timeout", T_U32, OFF(limits.fill_seconds), 1, 86400,
+     "seconds one TetGen fill may take, wall and CPU (default 60)"},
+    {"fill-memory", T_U64, OFF(limits.fill_memory_bytes), 64LL << 20, 1LL << 46,
+     "address space of the TetGen helper in bytes (default 2 GiB)"},
+    {"tetgen", T_STR, OFF(limits.tetgen_helper), 0, 0,
+     "the TetGen helper (default: subdivd-tetgen beside subdivd, else on PATH)"},
     {"cors-origin", T_STR, OFF(cors_origin), 0, 0, "allowed browser origin (default *)"},
     {"log-level", T_LOG, OFF(log_level), 0, 0, "error|warn|info|debug (default info)"},
     {"no-auth", T_FLAG, OFF(no_auth), 0, 0, "accept requests without bearer tokens (local dev)"},
@@ -60,7 +66,10 @@ static int set(config *c, const setting *s, const char *v, const char *from)
 {
     char *p = (char *)c + s->off;
     if (s->k == T_STR) {
-        if (strlen(v) >= (s->off == OFF(listen) ? sizeof c->listen : sizeof c->cors_origin))
+        size_t cap = s->off == OFF(listen)                 ? sizeof c->listen
+                     : s->off == OFF(limits.tetgen_helper) ? sizeof c->limits.tetgen_helper
+                                                           : sizeof c->cors_origin;
+        if (strlen(v) >= cap)
             goto bad;
         strcpy(p, v);
         return 0;
