@@ -41,10 +41,18 @@ static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out,
     const sd_level *lv = c->lv[level];
     const sd_topo *t = &lv->t;
     const sd_csrb *S = &lv->S;
-    uint32_t rb = S->rowptr[v], re = S->rowptr[v + 1];
+    size_t *start = sd_csrb_starts(&c->mem, S); /* rows of S by id (a temporary table) */
+    uint32_t *vcols = start ? malloc(2 * ((size_t)S->maxlen + 1) * sizeof *vcols) : NULL;
+    if (!vcols) {
+        sd_free(&c->mem, start);
+        return sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
+    }
+    uint32_t *pcols = vcols + S->maxlen + 1, vn = sd_csrb_len(S, v);
+    size_t k0 = start[v];
+    sd_csrb_row(S, v, &k0, vcols);
     int n = 1;
-    for (uint32_t k = rb; k < re; k++)
-        n += S->col[k] != v;
+    for (uint32_t k = 0; k < vn; k++)
+        n += vcols[k] != v;
     memset(out, 0, sizeof *out);
     out->size = n;
     out->level = level;
@@ -58,14 +66,16 @@ static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out,
     if (!out->points || !rows || !out->matrix || !out->eig_re || !out->eig_im || !a) {
         free(rows);
         free(a);
+        free(vcols);
+        sd_free(&c->mem, start);
         sd_analysis_free(out);
         return sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
     }
     out->points[0] = v;
     rows[0] = v;
     int i = 1;
-    for (uint32_t k = rb; k < re; k++) {
-        uint32_t x = S->col[k];
+    for (uint32_t k = 0; k < vn; k++) {
+        uint32_t x = vcols[k];
         if (x == v)
             continue;
         out->points[i] = x;
@@ -84,17 +94,22 @@ static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out,
             out->closed = 0;
             continue;
         }
-        for (uint32_t k = S->rowptr[rows[p]]; k < S->rowptr[rows[p] + 1]; k++) {
+        size_t k = start[rows[p]];
+        uint32_t pn = sd_csrb_len(S, rows[p]);
+        const double *w = sd_csrb_row(S, rows[p], &k, pcols);
+        for (uint32_t j = 0; j < pn; j++) {
             int q = 0;
-            while (q < n && out->points[q] != S->col[k])
+            while (q < n && out->points[q] != pcols[j])
                 q++;
             if (q == n)
                 out->closed = 0;
             else
-                out->matrix[(size_t)p * n + q] += sd_csrb_weight(S, rows[p], k);
+                out->matrix[(size_t)p * n + q] += w[j];
         }
     }
     free(rows);
+    free(vcols);
+    sd_free(&c->mem, start);
     memcpy(a, out->matrix, (size_t)n * n * sizeof *a);
     lapack_int info = LAPACKE_dgeev(LAPACK_ROW_MAJOR, 'N', 'N', n, a, n, out->eig_re, out->eig_im,
                                     NULL, 1, NULL, 1);

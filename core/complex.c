@@ -149,28 +149,37 @@ static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint3
     return SD_OK;
 }
 
-void sd_topo_free_derived(sd_mem *m, sd_topo *t)
+void sd_topo_free_faces(sd_mem *m, sd_topo *t)
 {
     if (t->fv != t->trv) /* fv may be the triangles' own array (tr_ident) */
         sd_free(m, t->fv);
-    void *arrays[] = {t->ev, t->fe, t->cu, t->tr, t->tet_e, t->tet_f, t->oct_e, t->oct_f,
-                      t->efam, t->eflag, t->enm, t->fn3, t->fflag};
+    void *arrays[] = {t->fe, t->cu, t->tr, t->tet_e, t->tet_f, t->oct_e, t->oct_f, t->fn3, t->fflag};
     for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
         sd_free(m, arrays[i]);
-    t->ev = NULL;
     t->fv = t->fe = NULL;
     t->cu = t->tr = NULL;
     t->tet_e = NULL;
     t->tet_f = NULL;
     t->oct_e = NULL;
     t->oct_f = NULL;
-    t->efam = t->eflag = t->enm = t->fn3 = t->fflag = NULL;
+    t->fn3 = t->fflag = NULL;
+    t->faces = false;
+}
+
+void sd_topo_free_edges(sd_mem *m, sd_topo *t)
+{
+    void *arrays[] = {t->ev, t->efam, t->eflag, t->enm};
+    for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
+        sd_free(m, arrays[i]);
+    t->ev = NULL;
+    t->efam = t->eflag = t->enm = NULL;
     t->derived = false;
 }
 
 void sd_topo_free(sd_mem *m, sd_topo *t)
 {
-    sd_topo_free_derived(m, t);
+    sd_topo_free_faces(m, t);
+    sd_topo_free_edges(m, t);
     void *arrays[] = {t->pt, t->cuv, t->trv, t->tet, t->tet_d, t->tet_b, t->oct, t->oct_b,
                       t->vfam, t->vflag, t->vnm};
     for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
@@ -340,7 +349,7 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
     memcpy(lv->ch[0].data, xyz, (size_t)nv * 3 * sizeof(double));
 
     lv->cx = c;
-    t->derived = true;
+    t->derived = t->faces = true;
     t->tr_ident = t->nf == t->ntr;
     for (uint32_t i = 0; i < t->ntr && t->tr_ident; i++)
         t->tr_ident = t->tr[i] == i;
@@ -373,8 +382,6 @@ void sd_level_free(sd_mem *m, sd_level *lv)
     sd_topo_free(m, &lv->t);
     sd_free(m, lv->vrule);
     sd_free(m, lv->erule);
-    sd_free(m, lv->vval);
-    sd_free(m, lv->ering);
     sd_csrb_free(m, &lv->S);
     sd_free(m, lv->tcol);
     sd_free(m, lv->trow);

@@ -14,7 +14,7 @@
 #include <math.h>
 #include <string.h>
 
-/* S_l by columns: tcol[j]..tcol[j+1]-1 index trow (row) and tpos (position of the entry in S). */
+/* S_l by columns: tcol[j]..tcol[j+1]-1 index trow (row) and tpos (the entry's weight in S.wt). */
 static bool build_columns(sd_mem *m, sd_level *lv)
 {
     const sd_csrb *S = &lv->S;
@@ -22,26 +22,38 @@ static bool build_columns(sd_mem *m, sd_level *lv)
     uint32_t *col = sd_calloc(m, (size_t)nc + 1, sizeof *col);
     uint32_t *row = sd_alloc(m, (S->nnz ? S->nnz : 1) * sizeof *row);
     uint32_t *pos = sd_alloc(m, (S->nnz ? S->nnz : 1) * sizeof *pos);
+    uint32_t *cols = sd_alloc(m, ((size_t)S->maxlen + 1) * sizeof *cols);
     /* the level may have been the finest at an earlier edit: its scratch map exists already */
     int32_t *slot = lv->slot ? lv->slot : sd_alloc(m, ((size_t)nc + 1) * sizeof *slot);
-    if (!col || !row || !pos || !slot) {
+    if (!col || !row || !pos || !cols || !slot) {
         sd_free(m, col);
         sd_free(m, row);
         sd_free(m, pos);
+        sd_free(m, cols);
         if (slot != lv->slot)
             sd_free(m, slot);
         return false;
     }
-    for (size_t k = 0; k < S->nnz; k++)
-        col[S->col[k] + 1]++;
+    size_t k = 0;
+    for (uint32_t r = 0; r < S->nrows; r++) {
+        uint32_t n = sd_csrb_len(S, r);
+        sd_csrb_row(S, r, &k, cols);
+        for (uint32_t i = 0; i < n; i++)
+            col[cols[i] + 1]++;
+    }
     for (uint32_t j = 0; j < nc; j++)
         col[j + 1] += col[j];
-    for (uint32_t r = 0; r < S->nrows; r++)
-        for (uint32_t k = S->rowptr[r]; k < S->rowptr[r + 1]; k++) {
-            uint32_t at = col[S->col[k]]++;
+    k = 0;
+    for (uint32_t r = 0; r < S->nrows; r++) {
+        uint32_t n = sd_csrb_len(S, r);
+        uint32_t w = (uint32_t)(sd_csrb_row(S, r, &k, cols) - S->wt);
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t at = col[cols[i]]++;
             row[at] = r;
-            pos[at] = k;
+            pos[at] = w + i;
         }
+    }
+    sd_free(m, cols);
     for (uint32_t j = nc; j > 0; j--) /* shift back: col[j] is the start of column j again */
         col[j] = col[j - 1];
     col[0] = 0;
@@ -141,7 +153,7 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
             uint32_t j = in->id[i];
             for (uint32_t k = lv->tcol[j]; k < lv->tcol[j + 1]; k++) {
                 uint32_t r = lv->trow[k];
-                double w = sd_csrb_weight(&lv->S, r, lv->tpos[k]);
+                double w = lv->S.wt[lv->tpos[k]];
                 if (slot[r] < 0) {
                     if (out->n == out->cap) {
                         uint32_t cap = out->cap ? 2 * out->cap : 64;

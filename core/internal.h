@@ -68,17 +68,23 @@ enum { VF_S_ANY = VF_SCREASE | VF_SSURF };
 enum { FAM0 = 1, FAM1 = 2, FAM2 = 4, FAM3 = 8 };
 
 /* ---- one level's topology and classification ---------------------------------------- */
-/* Two parts. The cells (phase A, sd_split_cells): counts, cell vertices, tet diagonals, boundary
- * masks and vertex classes — all that a level's accessors read. The derived part (phase B,
- * sd_split_derived, `derived`): edges, faces, per-cell edge and face ids, edge and face classes —
- * what the rules and the next split need. A level is split into its cells only; its derived part
- * is built when a deeper level, its rules or an edge accessor asks for it (levels.c), so the
- * finest level costs its cells and points. Level 0 is built whole. Arrays of the cells are never
- * moved or freed once built (lock-free readers may hold them while the derived part is added). */
+/* Three parts, built at different times (split.c, levels.c):
+ *   cells    counts, cell vertices, tet diagonals, boundary masks, vertex classes: all that the
+ *            lock-free accessors of a level read. Made when the level is computed.
+ *   edges    (`derived`) ev and the edge classes: persistent once built, as sd_level_edges hands
+ *            ev out and S_l reads its edge rows' ends from it. Built when the level's rules, its
+ *            children's derived parts or an edge accessor need them.
+ *   faces    (`faces`) fv, fe, face classes, per-cell edge and face ids, cu, tr: only the rules of
+ *            the level and the next split read them, so they are transient at levels >= 1 —
+ *            made (from the parent's faces, again if need be) for those and dropped after, so a
+ *            computed hierarchy holds no faces but level 0's.
+ * Arrays of the cells and edges are never moved or freed once built (lock-free readers may hold
+ * them while other parts are added). */
 typedef struct sd_topo {
     uint32_t nv, ne, nf;
     uint32_t npt, ncu, ntr, ntet, noct;
-    bool derived;              /* the derived part is built */
+    bool derived;              /* the edges part is built */
+    bool faces;                /* the faces part is built */
     bool tr_ident;             /* every face is a maximal triangle and face i is triangle i: at
                                 * levels >= 1, tr is not stored and fv is trv */
     /* cells */
@@ -91,8 +97,10 @@ typedef struct sd_topo {
     uint32_t (*oct)[6];
     uint8_t *oct_b;            /* the same for the 8 faces of an octahedron */
     uint8_t *vfam, *vflag, *vnm;   /* vertex classification (classify.c) */
-    /* derived */
+    /* edges */
     uint32_t (*ev)[2];
+    uint8_t *efam, *eflag, *enm;
+    /* faces */
     uint32_t (*fv)[3];
     uint32_t (*fe)[3];
     uint32_t *cu;              /* edge ids of curve segments */
@@ -101,24 +109,32 @@ typedef struct sd_topo {
     uint32_t (*tet_f)[4];
     uint32_t (*oct_e)[12];
     uint32_t (*oct_f)[8];
-    uint8_t *efam, *eflag, *enm;
     uint8_t *fn3, *fflag;      /* fn3: number of 3-cells on the face (saturating) */
 } sd_topo;
 
 static inline uint32_t sd_tr(const sd_topo *t, uint32_t i) { return t->tr ? t->tr[i] : i; }
 
 void sd_topo_free(sd_mem *m, sd_topo *t);
-void sd_topo_free_derived(sd_mem *m, sd_topo *t);   /* the derived part only */
+void sd_topo_free_edges(sd_mem *m, sd_topo *t);
+void sd_topo_free_faces(sd_mem *m, sd_topo *t);
 
 /* ---- subdivision matrices (csr.c) ------------------------------------------------------ */
-/* S in CSR form with shared weight patterns: row r's weights are wt[woff[pat[r]] ..], one per
- * entry of the row. val (per-entry values) exists only once a public view asked for it. */
+/* S_l: rows [vertex rows | edge rows | octahedron rows]; per row a weight-pattern id and the
+ * columns that are not implicit (see csr.c). The public view (vrowptr, vcol, vval) is made only
+ * when sd_complex_matrix asks for it. */
 typedef struct sd_csrb {
-    uint32_t nrows, ncols, npat;
-    size_t nnz;
-    uint32_t *rowptr, *col, *pat, *woff;
+    uint32_t nrows, ncols, npat, maxlen;
+    uint32_t nvr, ner;                /* vertex rows [0,nvr), edge rows [nvr,nvr+ner), then cells */
+    const uint32_t (*ev)[2];          /* implicit columns: the level's edges and octahedra */
+    const uint32_t (*oct)[6];
+    size_t nnz, nexp;                 /* entries: all / explicit (in col) */
+    uint8_t pw;                       /* bytes per pattern id: 1, 2 or 4 */
+    void *pat;
+    uint32_t *col;
+    uint32_t *woff;                   /* npat + 1 */
     double *wt;
-    double *val;
+    uint32_t *vrowptr, *vcol;         /* the public CSR view, or NULL */
+    double *vval;
 } sd_csrb;
 
 /* Interning of weight patterns while a matrix is built. */
@@ -128,19 +144,62 @@ typedef struct sd_pats {
     uint32_t n, capn, capw, hcap;
 } sd_pats;
 
-/* rowptr (nrows+1) and pat (nrows) allocated; the caller fills them and allocates col. */
-bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nrows, uint32_t ncols);
+/* Allocates col (nexp) and the pattern ids; the caller fills col, sets every row's pattern
+ * (sd_csrb_set_pat) and calls finish. */
+bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nvr, uint32_t ner, uint32_t nor, uint32_t ncols,
+                  const uint32_t (*ev)[2], const uint32_t (*oct)[6], size_t nexp);
 void sd_csrb_free(sd_mem *m, sd_csrb *b);
 uint32_t sd_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len); /* UINT32_MAX: no memory */
-bool sd_pats_finish(sd_mem *m, sd_pats *p, sd_csrb *b);   /* moves the patterns into b; frees p */
 void sd_pats_free(sd_mem *m, sd_pats *p);
-/* The weight of entry k (of row r). */
-static inline double sd_csrb_weight(const sd_csrb *s, uint32_t r, size_t k)
+/* Copy the patterns into b (the caller frees p); nnz: the number of entries. */
+bool sd_csrb_finish(sd_mem *m, sd_csrb *b, sd_pats *p, size_t nnz);
+
+static inline uint32_t sd_csrb_pat(const sd_csrb *s, uint32_t r)
 {
-    return s->wt[s->woff[s->pat[r]] + (k - s->rowptr[r])];
+    return s->pw == 1 ? ((const uint8_t *)s->pat)[r]
+         : s->pw == 2 ? ((const uint16_t *)s->pat)[r] : ((const uint32_t *)s->pat)[r];
 }
-/* Per-entry values (materialized once and kept with the matrix), or NULL for lack of memory. */
-const double *sd_csrb_values(sd_mem *m, sd_csrb *b);
+/* Row r's pattern id; ids are stored in 1 byte until one needs 2 or 4 (then all are widened). */
+bool sd_csrb_set_pat_slow(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id);
+static inline bool sd_csrb_set_pat(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id)
+{
+    if (b->pw == 1 && id < 256) {
+        ((uint8_t *)b->pat)[r] = (uint8_t)id;
+        return true;
+    }
+    return sd_csrb_set_pat_slow(m, b, r, id);
+}
+/* Entries of row r, and how many of them are implicit. */
+static inline uint32_t sd_csrb_len(const sd_csrb *s, uint32_t r)
+{
+    uint32_t q = sd_csrb_pat(s, r);
+    return s->woff[q + 1] - s->woff[q];
+}
+static inline uint32_t sd_csrb_nimp(const sd_csrb *s, uint32_t r)
+{
+    return r < s->nvr ? 1 : r < s->nvr + s->ner ? 2 : 6;
+}
+/* Row r, whose explicit columns start at col[*k]: its columns into cols (sd_csrb_len of them);
+ * returns its weights and moves *k past the row. */
+static inline const double *sd_csrb_row(const sd_csrb *s, uint32_t r, size_t *k, uint32_t *cols)
+{
+    uint32_t q = sd_csrb_pat(s, r), n = s->woff[q + 1] - s->woff[q], i = 0;
+    if (r < s->nvr)
+        cols[i++] = r;
+    else if (r < s->nvr + s->ner) {
+        cols[i++] = s->ev[r - s->nvr][0];
+        cols[i++] = s->ev[r - s->nvr][1];
+    } else
+        for (; i < 6; i++)
+            cols[i] = s->oct[r - s->nvr - s->ner][i];
+    for (; i < n; i++)
+        cols[i] = s->col[(*k)++];
+    return s->wt + s->woff[q];
+}
+/* The start in col of every row (nrows + 1), for random access; the caller frees it. */
+size_t *sd_csrb_starts(sd_mem *m, const sd_csrb *b);
+/* Make the public CSR view (kept with the matrix); false for lack of memory. */
+bool sd_csrb_view(sd_mem *m, sd_csrb *b);
 /* out[r*nc + k] = sum_j S[r][j] in[j*nc + k] */
 void sd_csr_apply(const sd_csrb *s, const double *in, double *out, int nc);
 
@@ -156,12 +215,11 @@ struct sd_level {
     int index;
     uint32_t parent_nv, parent_ne;   /* sizes of level index-1 (origin of the points) */
     sd_complex *cx;                  /* the owner (lazy parts are built with its allocator) */
-    const sd_topo *parent;           /* level index-1's topology (derived), or NULL */
+    const sd_topo *parent;           /* level index-1's topology, or NULL */
     sd_topo t;
     /* rules and stencils (rules.c), built lazily: they define S mapping this level to the next */
     bool have_rules;
-    uint8_t *vrule, *erule;
-    uint32_t *vval, *ering;   /* |rho| used by each vertex / edge rule */
+    uint8_t *vrule, *erule;   /* the |rho| / |ring| a rule uses is its row's length in S - 1 / - 2 */
     uint8_t *vrule_only;      /* the vertex rules alone, for outputs of a level without stencils */
     sd_csrb S;
     /* for edits (edit.c), built on the first edit: S by columns (for each point of this level, the
@@ -192,16 +250,19 @@ void sd_level_free(sd_mem *m, sd_level *lv);
 /* classify.c */
 sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err);
 sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err);
-/* split.c: child topology and inherited classification of the next level, in two phases (see
- * sd_topo); p must be derived */
+/* split.c: child topology and inherited classification of the next level, part by part (see
+ * sd_topo); each needs the parent's edges and faces (cells: and the child's nothing; faces: the
+ * child's edges) */
 sd_result sd_split_cells(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
-sd_result sd_split_derived(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
+sd_result sd_split_edges(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
+sd_result sd_split_faces(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
 /* levels.c: forget a level's rules and every finer level */
 void sd_drop_rules(sd_complex *c, sd_level *lv);
 /* rules.c */
 sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
 sd_result sd_ensure_rules(sd_complex *cx, int level, sd_error *err);
-/* levels.c: build level `level`'s derived topology if it is not yet (under the caller's lock) */
+/* levels.c: build level `level`'s edges if they are not yet (under the caller's lock; faces
+ * made on the way are dropped again) */
 sd_result sd_ensure_derived(sd_complex *cx, int level, sd_error *err);
 /* The same from a const accessor of the level (see sd.h on locking); false if it failed. */
 bool sd_need_derived(const sd_level *lv);

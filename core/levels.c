@@ -68,8 +68,6 @@ void sd_drop_rules(sd_complex *c, sd_level *lv)
     sd_mem *m = &c->mem;
     sd_free(m, lv->vrule);
     sd_free(m, lv->erule);
-    sd_free(m, lv->vval);
-    sd_free(m, lv->ering);
     sd_csrb_free(m, &lv->S);
     sd_free(m, lv->tcol);
     sd_free(m, lv->trow);
@@ -78,7 +76,6 @@ void sd_drop_rules(sd_complex *c, sd_level *lv)
     sd_free(m, lv->vrule_only);
     lv->vrule_only = NULL;
     lv->vrule = lv->erule = NULL;
-    lv->vval = lv->ering = NULL;
     lv->tcol = lv->trow = lv->tpos = NULL;
     lv->slot = NULL;
     lv->have_rules = false;
@@ -166,21 +163,58 @@ void sd_complex_counts(const sd_complex *c, int level, sd_counts *o)
 size_t sd_complex_memory(const sd_complex *c) { return c->mem.used; }
 int sd_complex_levels_computed(const sd_complex *c) { return c->nlevels; }
 
-sd_result sd_ensure_derived(sd_complex *c, int level, sd_error *err)
+/* The parts of a level's topology (see sd_topo): edges need the parent's faces; faces need the
+ * level's edges and the parent's faces; level 0 has all of them. */
+static sd_result ensure_faces(sd_complex *c, int l, sd_error *err);
+
+static sd_result ensure_edges(sd_complex *c, int l, sd_error *err)
 {
-    sd_level *lv = c->lv[level];
+    sd_level *lv = c->lv[l];
     if (lv->t.derived)
         return SD_OK;
-    return sd_split_derived(&c->mem, lv->parent, &lv->t, err);
+    sd_result r = ensure_faces(c, l - 1, err);
+    return r ? r : sd_split_edges(&c->mem, lv->parent, &lv->t, err);
 }
 
-sd_result sd_ensure_rules(sd_complex *c, int level, sd_error *err)
+static sd_result ensure_faces(sd_complex *c, int l, sd_error *err)
+{
+    sd_level *lv = c->lv[l];
+    if (lv->t.faces)
+        return SD_OK;
+    sd_result r = ensure_edges(c, l, err);
+    if (!r)
+        r = ensure_faces(c, l - 1, err);
+    return r ? r : sd_split_faces(&c->mem, lv->parent, &lv->t, err);
+}
+
+/* Faces are only needed while rules or the next level are made: drop them at levels >= 1. */
+static void drop_faces(sd_complex *c)
+{
+    for (int l = 1; l < c->nlevels; l++)
+        sd_topo_free_faces(&c->mem, &c->lv[l]->t);
+}
+
+static sd_result rules_keep_faces(sd_complex *c, int level, sd_error *err)
 {
     sd_level *lv = c->lv[level];
     if (lv->have_rules)
         return SD_OK;
-    sd_result r = sd_ensure_derived(c, level, err);
+    sd_result r = ensure_faces(c, level, err);
     return r ? r : sd_build_rules(c, lv, err);
+}
+
+sd_result sd_ensure_derived(sd_complex *c, int level, sd_error *err)
+{
+    sd_result r = ensure_edges(c, level, err);
+    drop_faces(c);
+    return r;
+}
+
+sd_result sd_ensure_rules(sd_complex *c, int level, sd_error *err)
+{
+    sd_result r = rules_keep_faces(c, level, err);
+    drop_faces(c);
+    return r;
 }
 
 /* Compute level l+1 from level l. */
@@ -188,7 +222,9 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
 {
     sd_mem *m = &c->mem;
     sd_level *p = c->lv[l];
-    sd_result r = sd_ensure_rules(c, l, err);
+    sd_result r = rules_keep_faces(c, l, err);
+    if (!r)
+        r = ensure_faces(c, l, err); /* the rules may have been built before, the faces dropped */
     if (r)
         return r;
     sd_level *lv = sd_calloc(m, 1, sizeof *lv);
@@ -226,8 +262,11 @@ const sd_level *sd_complex_level(sd_complex *c, int level, sd_error *err)
         return NULL;
     }
     while (c->nlevels <= level)
-        if (next_level(c, c->nlevels - 1, err))
+        if (next_level(c, c->nlevels - 1, err)) {
+            drop_faces(c);
             return NULL;
+        }
+    drop_faces(c);
     return c->lv[level];
 }
 
@@ -360,7 +399,7 @@ sd_result sd_level_vertex_class(const sd_level *lv, uint32_t i, sd_class *o)
     o->boundary = (t->vflag[i] & VF_DC) != 0;
     o->nonmanifold = t->vnm[i];
     o->rule = lv->vrule[i];
-    o->valence = lv->vval[i];
+    o->valence = sd_csrb_len(&lv->S, i) - 1;
     o->extraordinary = extraordinary(o->rule, o->valence, false);
     return SD_OK;
 }
@@ -374,7 +413,7 @@ sd_result sd_level_edge_class(const sd_level *lv, uint32_t e, sd_class *o)
     o->boundary = (t->eflag[e] & EF_DC) != 0;
     o->nonmanifold = t->enm[e];
     o->rule = lv->erule[e];
-    o->valence = lv->ering[e];
+    o->valence = sd_csrb_len(&lv->S, t->nv + e) - 2;
     o->extraordinary = extraordinary(o->rule, o->valence, true);
     return SD_OK;
 }
@@ -471,13 +510,12 @@ sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err
     if (r)
         return r;
     sd_csrb *s = &c->lv[level]->S;
-    const double *val = sd_csrb_values(&c->mem, s); /* per-entry values, made once and kept */
-    if (!val)
+    if (!sd_csrb_view(&c->mem, s)) /* the plain CSR view, made once and kept */
         return sd_fail_nomem(err, &c->mem);
     out->nrows = s->nrows;
     out->ncols = s->ncols;
-    out->rowptr = s->rowptr;
-    out->col = s->col;
-    out->val = val;
+    out->rowptr = s->vrowptr;
+    out->col = s->vcol;
+    out->val = s->vval;
     return SD_OK;
 }

@@ -307,7 +307,16 @@ static bool solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int s
             return false;
         for (uint32_t i = 0; i < n; i++)
             s[i] = (uint64_t)R->v[b + i] << 1 | R->cls[b + i];
-        qsort(s, n, sizeof *s, cmp_entry);
+        if (n <= 32) /* the usual few candidates: insertion sort */
+            for (uint32_t i = 1; i < n; i++) {
+                uint64_t x = s[i];
+                uint32_t j = i;
+                for (; j > 0 && s[j - 1] > x; j--)
+                    s[j] = s[j - 1];
+                s[j] = x;
+            }
+        else
+            qsort(s, n, sizeof *s, cmp_entry);
         for (uint32_t i = 0; i < n; i++)
             if (i == 0 || s[i] != s[i - 1]) {
                 R->v[b + w] = (uint32_t)(s[i] >> 1);
@@ -404,23 +413,53 @@ fail:
     return false;
 }
 
+/* The rules (other than the G2 and singular ones, which ask via_edge) whose rho reads
+ * through an edge of family `fam` and flags `fl`, as a bit mask over sd_rule. */
+static inline unsigned edge_readers(uint8_t fam, uint8_t fl)
+{
+    unsigned m = 0;
+    if (fl & EF_CURVE)
+        m |= 1u << SD_RULE_CURVE;
+    if (fam & FAM2)
+        m |= 1u << SD_RULE_LOOP;
+    if (fl & EF_BND2)
+        m |= 1u << SD_RULE_LOOP_BOUNDARY;
+    if (fam & FAM3) {
+        m |= 1u << SD_RULE_SOLID;
+        if (fl & EF_DC)
+            m |= 1u << SD_RULE_SOLID_BOUNDARY;
+    }
+    return m;
+}
+
 /* The rule of every vertex and the sizes of its rho (cnt_a: edge and diagonal neighbours,
  * cnt_b: the averaged scheme's octahedral opposites; both zeroed by the caller): the
  * classification's rule, turned into a corner where its neighbourhood does not fit it (a curve or
- * surface boundary point with other than 2 neighbours, any rule with none). */
-static void vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b)
+ * surface boundary point with other than 2 neighbours, any rule with none). If `take` is not
+ * NULL, take[e] gets bit 0 if ev[e][0] reads ev[e][1] through e, bit 1 for the converse. */
+static void vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b,
+                         uint8_t *take)
 {
     const uint32_t nv = t->nv, ne = t->ne, no = t->noct;
-    for (uint32_t v = 0; v < nv; v++)
-        vr[v] = sd_vertex_rule(t, v);
+    enum { SLOW = 0x80 }; /* in vr while counting: the rule needs via_edge (G2, singular) */
+    for (uint32_t v = 0; v < nv; v++) {
+        uint8_t r = sd_vertex_rule(t, v);
+        vr[v] = r | ((r == SD_RULE_G2 || (t->vflag[v] & VF_S_ANY)) ? SLOW : 0);
+    }
     /* vertex rho sizes */
     for (uint32_t e = 0; e < ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
-        if (via_edge(t, vr[a], a, b, e))
-            cnt_a[a]++;
-        if (via_edge(t, vr[b], b, a, e))
-            cnt_a[b]++;
+        unsigned m = edge_readers(t->efam[e], t->eflag[e]);
+        uint8_t ra = vr[a], rb = vr[b];
+        unsigned ta = ra & SLOW ? via_edge(t, ra & ~SLOW, a, b, e) : (m >> ra) & 1u;
+        unsigned tb = rb & SLOW ? via_edge(t, rb & ~SLOW, b, a, e) : (m >> rb) & 1u;
+        cnt_a[a] += ta;
+        cnt_a[b] += tb;
+        if (take)
+            take[e] = (uint8_t)(ta | tb << 1);
     }
+    for (uint32_t v = 0; v < nv; v++)
+        vr[v] &= (uint8_t)~SLOW;
     for (uint32_t o = 0; o < no; o++) {
         uint32_t p = t->oct[o][0], q = t->oct[o][1];
         if (via_diag(t, vr[p], scheme, p, q))
@@ -447,14 +486,13 @@ static void vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cn
             cnt_a[v] = cnt_b[v] = 0;
         }
     }
-
 }
 
 sd_result sd_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr)
 {
     uint32_t *a = sd_calloc(m, (size_t)t->nv + 1, sizeof *a), *b = sd_calloc(m, (size_t)t->nv + 1, sizeof *b);
     if (a && b)
-        vertex_rules(t, scheme, vr, a, b);
+        vertex_rules(t, scheme, vr, a, b, NULL);
     sd_free(m, a);
     sd_free(m, b);
     return a && b ? SD_OK : SD_ERR_NOMEM;
@@ -470,6 +508,7 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     uint32_t(*opp)[2] = NULL;
     uint8_t *nopp = NULL;
     double *wbuf = NULL;
+    uint8_t *take = NULL;   /* per edge: which end reads the other through it */
     sd_pats pats = {0};
     rings sr = {0}, gr = {0};
     sd_result rc = SD_OK;
@@ -483,11 +522,9 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         return sd_fail(err, SD_ERR_LIMIT, -1, -1, "too many points for 32-bit ids");
     lv->vrule = sd_alloc(m, (size_t)nv + 1);
     lv->erule = sd_alloc(m, (size_t)ne + 1);
-    lv->vval = sd_alloc(m, ((size_t)nv + 1) * sizeof *lv->vval);
-    lv->ering = sd_alloc(m, ((size_t)ne + 1) * sizeof *lv->ering);
     cnt_a = sd_calloc(m, nv, sizeof *cnt_a);
     cnt_b = sd_calloc(m, nv, sizeof *cnt_b);
-    if (!lv->vrule || !lv->erule || !lv->vval || !lv->ering || !cnt_a || !cnt_b)
+    if (!lv->vrule || !lv->erule || !cnt_a || !cnt_b)
         goto nomem;
     uint8_t *vr = lv->vrule, *er = lv->erule;
     bool any_g2e = false, any_opp = false;
@@ -497,32 +534,39 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         any_opp |= er[e] == SD_RULE_LOOP || er[e] == SD_RULE_SOLID_BOUNDARY;
     }
 
-    vertex_rules(t, scheme, vr, cnt_a, cnt_b);
-    for (uint32_t v = 0; v < nv; v++)
-        lv->vval[v] = cnt_a[v] + cnt_b[v];
+    take = sd_alloc(m, (size_t)ne + 1);
+    if (!take)
+        goto nomem;
+    vertex_rules(t, scheme, vr, cnt_a, cnt_b, take);
 
-    /* edge neighbourhoods */
+    /* edge neighbourhoods: the opposite vertices of Loop and solid-boundary edges. nopp[e]: the
+     * number of faces seen (bits 0-1, saturating at 3) and which faces count (the mode bits) */
     if (any_opp) {
+        enum { M_SSURF = 4, M_LOOP = 8, M_SB = 16 };
         opp = sd_alloc(m, (size_t)ne * sizeof *opp);
-        nopp = sd_calloc(m, ne, 1);
+        nopp = sd_alloc(m, (size_t)ne + 1);
         if (!opp || !nopp)
             goto nomem;
+        for (uint32_t e = 0; e < ne; e++) {
+            /* an embedded surface's edge takes its opposite vertices from tagged triangles */
+            bool ss = t->eflag[e] & EF_SSURF;
+            nopp[e] = er[e] == SD_RULE_LOOP ? (ss ? M_SSURF : M_LOOP)
+                    : er[e] == SD_RULE_SOLID_BOUNDARY && !ss ? M_SB : 0;
+        }
         for (uint32_t f = 0; f < t->nf; f++) {
             uint8_t ff = t->fflag[f];
             if (!(ff & (FF_MAX | FF_BND3 | FF_SING)))
                 continue;
+            unsigned want = (ff & FF_SING ? M_SSURF : 0) | (ff & FF_MAX ? M_LOOP : M_SB);
             for (int j = 0; j < 3; j++) {
                 uint32_t e = t->fe[f][j];
-                /* an embedded surface's edge takes its opposite vertices from tagged triangles */
-                bool use = (t->eflag[e] & EF_SSURF) ? (ff & FF_SING) && er[e] == SD_RULE_LOOP
-                           : (ff & FF_MAX)          ? er[e] == SD_RULE_LOOP
-                                                    : er[e] == SD_RULE_SOLID_BOUNDARY;
-                if (!use)
+                unsigned n = nopp[e];
+                if (!(n & want))
                     continue;
-                if (nopp[e] < 2)
-                    opp[e][nopp[e]] = t->fv[f][(j + 2) % 3];
-                if (nopp[e] < 255)
-                    nopp[e]++;
+                if ((n & 3) < 2)
+                    opp[e][n & 3] = t->fv[f][(j + 2) % 3];
+                if ((n & 3) < 3)
+                    nopp[e] = (uint8_t)(n + 1);
             }
         }
     }
@@ -531,51 +575,39 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     if (any_g2e && !g2_rings(m, t, er, &gr))
         goto nomem;
 
-    /* row sizes */
-    if (!sd_csrb_init(m, &lv->S, (uint32_t)nrows, nv))
+    /* sizes: the explicit columns of every row (rho of a vertex, ring of an edge) */
+#define RING(e)                                                                                    \
+    (er[e] == SD_RULE_LOOP || er[e] == SD_RULE_SOLID_BOUNDARY ? ((nopp[e] & 3) == 2 ? 2u : 0u)    \
+     : er[e] == SD_RULE_SOLID                                 ? sr.len[e]                         \
+     : er[e] == SD_RULE_G2                                    ? gr.len[e]                         \
+                                                              : 0u)
+    uint64_t nexp = 0, nnz = 0;
+    uint32_t maxlen = 6;
+    cur = sd_alloc(m, ((size_t)nv + 1) * sizeof *cur);
+    if (!cur)
         goto nomem;
-    uint32_t *rp = lv->S.rowptr, *pat = lv->S.pat, maxlen = 6;
-    uint64_t acc = 0;
     for (uint32_t v = 0; v < nv; v++) {
-        rp[v] = (uint32_t)acc;
-        uint32_t n = 1 + cnt_a[v] + cnt_b[v];
-        maxlen = n > maxlen ? n : maxlen;
-        acc += n;
+        uint32_t n = cnt_a[v] + cnt_b[v];
+        cur[v] = (uint32_t)nexp; /* where v's rho goes */
+        maxlen = 1 + n > maxlen ? 1 + n : maxlen;
+        nexp += n;
     }
+    uint64_t ebase = nexp;
     for (uint32_t e = 0; e < ne; e++) {
-        rp[nv + e] = (uint32_t)acc;
-        uint32_t k = 0;
-        switch (er[e]) {
-        case SD_RULE_LOOP:
-        case SD_RULE_SOLID_BOUNDARY:
-            k = nopp[e] == 2 ? 2 : 0;
-            break;
-        case SD_RULE_SOLID:
-            k = sr.len[e];
-            break;
-        case SD_RULE_G2:
-            k = gr.len[e];
-            break;
-        default:
-            break;
-        }
-        lv->ering[e] = k;
+        uint32_t k = RING(e);
         maxlen = 2 + k > maxlen ? 2 + k : maxlen;
-        acc += 2 + k;
+        nexp += k;
     }
-    for (uint32_t o = 0; o < no; o++) {
-        rp[nv + ne + o] = (uint32_t)acc;
-        acc += 6;
-    }
-    if (acc >= UINT32_MAX) {
+    nnz = nexp + nv + 2ull * ne + 6ull * no;
+    if (nnz >= UINT32_MAX) {
         rc = sd_fail(err, SD_ERR_LIMIT, -1, -1, "subdivision matrix too large for 32-bit offsets");
         goto fail;
     }
-    rp[nrows] = (uint32_t)acc;
-    lv->S.nnz = acc;
-    uint32_t *col = lv->S.col = sd_alloc(m, (acc + 1) * sizeof *col);
+    if (!sd_csrb_init(m, &lv->S, nv, ne, no, nv, t->ev, t->oct, nexp))
+        goto nomem;
+    uint32_t *col = lv->S.col;
     wbuf = sd_alloc(m, ((size_t)maxlen + 1) * sizeof *wbuf);
-    if (!col || !wbuf)
+    if (!wbuf)
         goto nomem;
 
     /* weight patterns: a vertex row is [self, a x |rho|, b x octahedral opposites], an edge row
@@ -601,22 +633,16 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             if (memo)
                 vmemo[vr[v]][na] = id;
         }
-        pat[v] = id;
+        if (!sd_csrb_set_pat(m, &lv->S, v, id))
+            goto nomem;
     }
 
-    /* vertex rows: the centre first, then rho in edge order */
-    cur = sd_alloc(m, ((size_t)nv + 1) * sizeof *cur);
-    if (!cur)
-        goto nomem;
-    for (uint32_t v = 0; v < nv; v++) {
-        col[rp[v]] = v;
-        cur[v] = rp[v] + 1;
-    }
+    /* vertex rows: (the centre, implicit) then rho in edge order */
     for (uint32_t e = 0; e < ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
-        if (vr[a] != SD_RULE_CORNER && via_edge(t, vr[a], a, b, e))
+        if ((take[e] & 1) && vr[a] != SD_RULE_CORNER)
             col[cur[a]++] = b;
-        if (vr[b] != SD_RULE_CORNER && via_edge(t, vr[b], b, a, e))
+        if ((take[e] & 2) && vr[b] != SD_RULE_CORNER)
             col[cur[b]++] = a;
     }
     for (uint32_t o = 0; o < no; o++) {
@@ -630,9 +656,10 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
                     col[cur[q[i]]++] = q[i ^ 1];
     }
 
-    /* edge rows */
+    /* edge rows: (the ends, implicit) then the ring */
+    uint64_t at = ebase;
     for (uint32_t e = 0; e < ne; e++) {
-        uint32_t r = rp[nv + e], k = lv->ering[e];
+        uint32_t k = RING(e);
         double wend = 0.5, wring = 0, wdiag = 0;
         const uint32_t *ring = NULL;
         const uint8_t *cls = NULL;
@@ -669,10 +696,8 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         default:
             break;
         }
-        col[r] = t->ev[e][0];
-        col[r + 1] = t->ev[e][1];
         for (uint32_t i = 0; i < k; i++)
-            col[r + 2 + i] = ring[i];
+            col[at++] = ring[i];
         bool memo = !cls && k < MEMO;
         uint32_t id = memo ? ememo[er[e]][k] : UINT32_MAX;
         if (id == UINT32_MAX) {
@@ -684,21 +709,23 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             if (memo)
                 ememo[er[e]][k] = id;
         }
-        pat[nv + e] = id;
+        if (!sd_csrb_set_pat(m, &lv->S, nv + e, id))
+            goto nomem;
     }
-    /* cell points of octahedra: box 1/4 on the diagonal, 1/8 on the rest; averaged: centroid */
+#undef RING
+    /* cell points of octahedra (all implicit): box 1/4 on the diagonal, 1/8 on the rest;
+     * averaged: centroid */
     if (no) {
         for (int i = 0; i < 6; i++)
             wbuf[i] = scheme == SD_SOLID_AVERAGED ? 1.0 / 6.0 : (i < 2 ? 0.25 : 0.125);
         uint32_t id = sd_pats_intern(m, &pats, wbuf, 6);
         if (id == UINT32_MAX)
             goto nomem;
-        for (uint32_t o = 0; o < no; o++) {
-            memcpy(col + rp[nv + ne + o], t->oct[o], 6 * sizeof *col);
-            pat[nv + ne + o] = id;
-        }
+        for (uint32_t o = 0; o < no; o++)
+            if (!sd_csrb_set_pat(m, &lv->S, nv + ne + o, id))
+                goto nomem;
     }
-    if (!sd_pats_finish(m, &pats, &lv->S))
+    if (!sd_csrb_finish(m, &lv->S, &pats, nnz))
         goto nomem;
 
     lv->have_rules = true;
@@ -709,13 +736,11 @@ nomem:
 fail:
     sd_free(m, lv->vrule);
     sd_free(m, lv->erule);
-    sd_free(m, lv->vval);
-    sd_free(m, lv->ering);
     lv->vrule = lv->erule = NULL;
-    lv->vval = lv->ering = NULL;
     sd_csrb_free(m, &lv->S);
 out:
     sd_pats_free(m, &pats);
+    sd_free(m, take);
     sd_free(m, wbuf);
     sd_free(m, cnt_a);
     sd_free(m, cnt_b);

@@ -20,11 +20,12 @@
  * Every child is oriented like its parent (checked on reference coordinates when the templates
  * are built).
  *
- * Two phases (see sd_topo in internal.h): sd_split_cells makes the child's cells, vertex classes
- * and boundary masks (which faces of a cell are on the solids' boundary: the children of a
- * boundary face are, faces inside a parent cell are not); sd_split_derived, run only when the
- * child's rules or its own children are needed, its edges, faces, per-cell ids and their classes.
- * Both walk the parent's cells with the same templates, so they agree on every child's number.
+ * In three parts (see sd_topo in internal.h): sd_split_cells makes the child's cells, vertex
+ * classes and boundary masks (which faces of a cell are on the solids' boundary: the children of a
+ * boundary face are, faces inside a parent cell are not); sd_split_edges its edges and their
+ * classes, sd_split_faces its faces, per-cell edge and face ids and face classes — both only when
+ * the child's rules, its own children or an edge accessor need them. They walk the parent's cells
+ * with the same templates, so they agree on every child's number.
  *
  * Classification is inherited (see classify.c): halves keep their edge's class; an edge point
  * takes its edge's family and dC flag and becomes type 1 (if the edge was) or type 4 (if the edge
@@ -491,23 +492,17 @@ sd_result sd_split_cells(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
     return SD_OK;
 }
 
-sd_result sd_split_derived(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
+sd_result sd_split_edges(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
 {
-    const uint32_t ne = C->ne, nf = C->nf, ntet = C->ntet, noct = C->noct;
-    /* a pure surface whose face i is triangle i: the faces' vertices are the triangles' */
-    bool alias = C->tr_ident && C->trv;
+    const uint32_t ne = C->ne;
 #define A(f, n) (C->f = sd_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
-    if (!A(ev, ne) || (alias ? !(C->fv = C->trv) : !A(fv, nf)) || !A(fe, nf) ||
-        !A(cu, C->ncu) || (!C->tr_ident && !A(tr, C->ntr)) || !A(tet_e, ntet) ||
-        !A(tet_f, ntet) || !A(oct_e, noct) || !A(oct_f, noct) || !A(efam, ne) ||
-        !A(eflag, ne) || !A(enm, ne) || !A(fn3, nf) || !A(fflag, nf)) {
-        sd_topo_free_derived(m, C);
+    if (!A(ev, ne) || !A(efam, ne) || !A(eflag, ne) || !A(enm, ne)) {
+        sd_topo_free_edges(m, C);
         return sd_fail_nomem(err, m);
     }
 #undef A
     const uint32_t pnv = P->nv, pne = P->ne, pnf = P->nf;
-
-    /* edges: halves */
+    /* halves */
     for (uint32_t e = 0; e < pne; e++) {
         uint32_t mid = pnv + e;
         C->ev[2 * e][0] = P->ev[e][0];
@@ -520,21 +515,56 @@ sd_result sd_split_derived(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *er
             C->enm[2 * e + k] = P->enm[e];
         }
     }
-    /* edges and faces inside faces */
+    /* inside faces: cutting the corners */
     for (uint32_t f = 0; f < pnf; f++) {
-        const uint32_t *x = P->fv[f], *fe = P->fe[f];
+        const uint32_t *fe = P->fe[f];
         uint8_t fam = (P->fflag[f] & FF_MAX) ? FAM2 : FAM3;
         uint8_t flag = ((P->fflag[f] & FF_BND3) ? EF_DC : 0) |
                        ((P->fflag[f] & FF_SING) ? EF_SSURF : 0); /* inside an embedded surface */
         uint8_t nm = P->fn3[f] >= 3 ? 4 : 0;
         for (int j = 0; j < 3; j++) {
             uint32_t e = 2 * pne + 3 * f + j;
-            uint32_t jp = (uint32_t)(j + 2) % 3;
-            C->ev[e][0] = pnv + fe[jp];
+            C->ev[e][0] = pnv + fe[(j + 2) % 3];
             C->ev[e][1] = pnv + fe[j];
             C->efam[e] = fam;
             C->eflag[e] = flag;
             C->enm[e] = nm;
+        }
+    }
+    /* inside octahedra: cell point to each edge point */
+    for (uint32_t o = 0; o < P->noct; o++)
+        for (int k = 0; k < 12; k++) {
+            uint32_t e = 2 * pne + 3 * pnf + 12 * o + k;
+            C->ev[e][0] = pnv + pne + o;
+            C->ev[e][1] = pnv + P->oct_e[o][k];
+            C->efam[e] = FAM3;
+            C->eflag[e] = 0;
+            C->enm[e] = 0;
+        }
+    C->derived = true;
+    return SD_OK;
+}
+
+sd_result sd_split_faces(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
+{
+    const uint32_t nf = C->nf, ntet = C->ntet, noct = C->noct;
+    /* a pure surface whose face i is triangle i: the faces' vertices are the triangles' */
+    bool alias = C->tr_ident && C->trv;
+#define A(f, n) (C->f = sd_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
+    if ((alias ? !(C->fv = C->trv) : !A(fv, nf)) || !A(fe, nf) || !A(cu, C->ncu) ||
+        (!C->tr_ident && !A(tr, C->ntr)) || !A(tet_e, ntet) || !A(tet_f, ntet) ||
+        !A(oct_e, noct) || !A(oct_f, noct) || !A(fn3, nf) || !A(fflag, nf)) {
+        sd_topo_free_faces(m, C);
+        return sd_fail_nomem(err, m);
+    }
+#undef A
+    const uint32_t pnv = P->nv, pne = P->ne, pnf = P->nf;
+    /* the 4 children of each face */
+    for (uint32_t f = 0; f < pnf; f++) {
+        const uint32_t *x = P->fv[f], *fe = P->fe[f];
+        for (int j = 0; j < 3; j++) {
+            uint32_t e = 2 * pne + 3 * f + j;
+            uint32_t jp = (uint32_t)(j + 2) % 3;
             uint32_t g = 4 * f + j;
             if (!alias) {
                 C->fv[g][0] = x[j];
@@ -556,16 +586,6 @@ sd_result sd_split_derived(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *er
             C->fflag[4 * f + j] = P->fflag[f];
         }
     }
-    /* edges inside octahedra: cell point to each edge point */
-    for (uint32_t o = 0; o < P->noct; o++)
-        for (int k = 0; k < 12; k++) {
-            uint32_t e = 2 * pne + 3 * pnf + 12 * o + k;
-            C->ev[e][0] = pnv + pne + o;
-            C->ev[e][1] = pnv + P->oct_e[o][k];
-            C->efam[e] = FAM3;
-            C->eflag[e] = 0;
-            C->enm[e] = 0;
-        }
     /* lower-dimensional cells as edge and face ids */
     for (uint32_t i = 0; i < P->ncu; i++) {
         C->cu[2 * i] = 2 * P->cu[i];
@@ -588,6 +608,6 @@ sd_result sd_split_derived(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *er
             emit_ids(C, &x, &to, 4 * P->ntet + 8 * o, P->ntet + 6 * o);
         }
     }
-    C->derived = true;
+    C->faces = true;
     return SD_OK;
 }
