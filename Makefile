@@ -63,6 +63,7 @@ $(B)/subdivd: $(SRV_OBJ) $(API_LIB) $(CORE_LIB)
 -include tests/tools/Makefile.inc
 -include tests/fuzz/Makefile.inc
 -include tetgen/Makefile.inc
+-include clients/python/Makefile.inc
 all: $(API_LIB) $(B)/subdivd $(EXTRA_ALL)
 -include bench/Makefile.inc
 

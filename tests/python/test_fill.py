@@ -5,7 +5,6 @@ daemon."""
 import json
 import math
 import os
-import pathlib
 import stat
 import struct
 import subprocess

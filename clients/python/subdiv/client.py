@@ -1,0 +1,374 @@
+"""The subdivd HTTP client: one method per endpoint of the v1 API (docs/SERVICE.md, API.md).
+
+    from subdiv import Client
+    c = Client("http://127.0.0.1:8080")
+    with c.create_session() as s:                  # DELETEd when the block ends
+        s.put_complex({"vertices": [...], "simplices": [...]})
+        s.put_rules({"solid_scheme": "averaged"})
+        s.level(3, format="vtu", out="level3.vtu")  # streamed to the file
+        s.edit(moves=[{"index": 0, "position": [0, 0, 0.1]}])   # If-Match sent for you
+
+Errors are typed (subdiv.errors): every refusal raises the ProblemError subclass of its status with
+the problem+json attached. Versions: each answer's ETag updates `Session.version`; `edit()` sends
+it as If-Match (the daemon requires one), other changes send it when asked (`if_match=True`, or a
+version number) so that a concurrent change makes them fail with PreconditionFailed (412).
+
+Progress: pass `progress=callable(kind, done, total)`; kind is "upload" or "download" (bytes;
+total None when unknown) or "server" (done = seconds computing, total = the level being computed,
+from GET /v1/sessions/{id}'s "progress"), polled while the daemon works on a request.
+"""
+import io
+import json
+import os
+import threading
+import time
+
+import requests
+
+from .errors import ProblemError, TransportError, error_for
+
+FORMATS = ("glb", "gltf", "vtu", "vtk", "json")
+LEVEL_OPTIONS = ("parts", "slice", "attributes", "colormap", "octahedra")
+
+
+class _Upload:
+    """A request body that reports how much of it has been read (sent)."""
+
+    def __init__(self, data, progress):
+        self._buf = io.BytesIO(data)
+        self._n = len(data)
+        self._progress = progress
+        self._progress("upload", 0, self._n)
+
+    def __len__(self):
+        return self._n
+
+    def read(self, size=-1):
+        chunk = self._buf.read(size)
+        self._progress("upload", self._buf.tell(), self._n)
+        return chunk
+
+
+class _ServerProgress:
+    """Polls GET /v1/sessions/{id} on its own connection while a request is in flight."""
+
+    def __init__(self, session, progress):
+        self.s, self.progress, self.interval = session, progress, session.client.poll_interval
+        self.stop = threading.Event()
+        self.t = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self):
+        if self.progress:
+            self.t.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop.set()
+        if self.t.is_alive():
+            self.t.join(2)
+
+    def _run(self):
+        http = requests.Session()
+        while not self.stop.wait(self.interval):
+            try:
+                r = http.get(self.s.url, headers=self.s.headers(), timeout=5)
+                p = r.json().get("progress") if r.status_code == 200 else None
+            except (requests.RequestException, ValueError):
+                p = None
+            if p and not self.stop.is_set():
+                self.progress("server", p.get("seconds", 0.0), p.get("level"))
+        http.close()
+
+
+class Client:
+    """The daemon at `url`. `retries`: how often a 429/503 answer is retried after its
+    Retry-After (capped at `max_wait` seconds each). `poll_interval`: seconds between looks at
+    the session's progress while a request with a progress callback runs."""
+
+    def __init__(self, url="http://127.0.0.1:8080", *, timeout=600, retries=0, max_wait=10,
+                 poll_interval=0.25, http=None):
+        self.url = url.rstrip("/")
+        self.poll_interval = poll_interval
+        self.timeout = timeout
+        self.retries = retries
+        self.max_wait = max_wait
+        self.http = http or requests.Session()
+
+    def close(self):
+        self.http.close()
+
+    # ---- transport ------------------------------------------------------------------------
+
+    def request(self, method, path, *, json_body=None, data=None, headers=None, params=None,
+                stream=False, progress=None, expect=(200,), timeout=None):
+        """One request; `path` is absolute ("/healthz") or a full URL. Raises the typed error
+        for any status outside `expect`; returns the requests.Response."""
+        url = path if path.startswith("http") else self.url + path
+        h = dict(headers or {})
+        body = None
+        if json_body is not None:
+            body = json.dumps(json_body, separators=(",", ":")).encode()
+            h.setdefault("Content-Type", "application/json")
+        elif data is not None:
+            body = data
+        for attempt in range(self.retries + 1):
+            send = _Upload(body, progress) if (progress and body is not None) else body
+            try:
+                r = self.http.request(method, url, data=send, headers=h, params=params,
+                                      stream=stream, timeout=timeout or self.timeout)
+            except requests.RequestException as e:
+                raise TransportError(f"{method} {url}: {e}") from e
+            if r.status_code in expect:
+                return r
+            err = error_for(r)
+            r.close()
+            if r.status_code in (429, 503) and attempt < self.retries:
+                time.sleep(min(err.retry_after or 1, self.max_wait))
+                continue
+            raise err
+        raise AssertionError("unreachable")
+
+    # ---- service ----------------------------------------------------------------------------
+
+    def healthz(self):
+        """GET /healthz: {"status": "ok"} while the daemon lives."""
+        return self.request("GET", "/healthz").json()
+
+    def livez(self):
+        """GET /livez: the same as /healthz."""
+        return self.request("GET", "/livez").json()
+
+    def readyz(self):
+        """GET /readyz: {"status": "ready"}, or ServiceUnavailable while starting or stopping."""
+        return self.request("GET", "/readyz").json()
+
+    def metrics(self):
+        """GET /metrics: the Prometheus text."""
+        return self.request("GET", "/metrics").text
+
+    def openapi(self):
+        """GET /v1/openapi.json."""
+        return self.request("GET", "/v1/openapi.json").json()
+
+    def wait_ready(self, timeout=10):
+        """Poll /readyz until it answers 200 (TransportError after `timeout` seconds)."""
+        deadline = time.time() + timeout
+        while True:
+            try:
+                return self.readyz()
+            except (TransportError, ProblemError):
+                if time.time() > deadline:
+                    raise
+                time.sleep(0.05)
+
+    # ---- sessions -----------------------------------------------------------------------------
+
+    def create_session(self, ttl_s=None):
+        """POST /v1/sessions: a new Session (deleted by `with ... as s` at the end of the block)."""
+        r = self.request("POST", "/v1/sessions", json_body={} if ttl_s is None else {"ttl_s": ttl_s},
+                         expect=(201,))
+        j = r.json()
+        s = Session(self, j["id"], j["token"])
+        s.expires_at = j.get("expires_at")
+        return s
+
+    def session(self, id, token):
+        """A Session object for an existing session (not deleted on exit)."""
+        s = Session(self, id, token)
+        s.owned = False
+        return s
+
+
+class Session:
+    """One session of the daemon: `id`, `token`, and `version` (the last ETag seen)."""
+
+    def __init__(self, client, id, token):
+        self.client = client
+        self.id, self.token = id, token
+        self.url = f"{client.url}/v1/sessions/{id}"
+        self.version = None
+        self.expires_at = None
+        self.owned = True
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self.owned:
+            try:
+                self.delete()
+            except (ProblemError, TransportError):
+                pass
+
+    def headers(self, if_match=None, extra=None):
+        h = {"Authorization": f"Bearer {self.token}"}
+        if if_match is True:
+            if self.version is None:
+                self.info()
+            h["If-Match"] = f'"{self.version}"'
+        elif if_match not in (None, False):
+            h["If-Match"] = f'"{int(if_match)}"' if str(if_match).isdigit() else str(if_match)
+        h.update(extra or {})
+        return h
+
+    def _note(self, r):
+        etag = r.headers.get("ETag", "").strip('"')
+        if etag.isdigit():
+            self.version = int(etag)
+        return r
+
+    def _call(self, method, path="", *, if_match=None, expect=(200,), **kw):
+        r = self.client.request(method, self.url + path, headers=self.headers(if_match), expect=expect, **kw)
+        return self._note(r)
+
+    def _change(self, method, path, body, if_match, progress):
+        with _ServerProgress(self, progress):
+            j = self._call(method, path, json_body=body, if_match=if_match, progress=progress).json()
+        self.version = j.get("version", self.version)
+        return j
+
+    # GET/DELETE /v1/sessions/{id}
+    def info(self):
+        """GET /v1/sessions/{id}: version, levels_cached, memory_bytes, summary, progress."""
+        j = self._call("GET").json()
+        self.version = j.get("version", self.version)
+        return j
+
+    def delete(self):
+        """DELETE /v1/sessions/{id}."""
+        self._call("DELETE", expect=(204,))
+        self.owned = False
+
+    # the complex, tags and rules
+    def put_complex(self, body, *, if_match=None, progress=None):
+        """PUT /complex (vertices, simplices, attributes, diagonals, fill): {"version", "summary"}."""
+        return self._change("PUT", "/complex", body, if_match, progress)
+
+    def get_complex(self):
+        """GET /complex: the complex (with filled tetrahedra), classes, tags, rules, summary."""
+        return self._call("GET", "/complex").json()
+
+    def put_tags(self, singular=None, *, body=None, if_match=None):
+        """PUT /tags with {"singular": singular} (or a whole `body`)."""
+        return self._change("PUT", "/tags", body if body is not None else {"singular": singular or []},
+                            if_match, None)
+
+    def put_rules(self, rules=None, *, if_match=None):
+        """PUT /rules: every preference at once (absent fields are the defaults)."""
+        return self._change("PUT", "/rules", rules or {}, if_match, None)
+
+    def refine(self, select, depth=1, positions="subdivision", *, if_match=None):
+        """POST /refine: red-green refinement of the control complex around `select`."""
+        return self._change("POST", "/refine", {"select": select, "depth": depth, "positions": positions},
+                            if_match, None)
+
+    def edit(self, moves=None, attributes=None, *, if_match=True):
+        """PATCH /control-points; If-Match is the session's known version unless given."""
+        body = {}
+        if moves is not None:
+            body["moves"] = moves
+        if attributes is not None:
+            body["attributes"] = attributes
+        return self._change("PATCH", "/control-points", body, if_match, None)
+
+    # levels
+    def level(self, level, format="glb", *, out=None, progress=None, if_none_match=None, **options):
+        """GET /levels/{L}: the level in `format` with the options of docs/OUTPUTS.md (parts,
+        slice, attributes, colormap, octahedra). With `out` (a path) it is streamed into the
+        file (written as OUT.part, renamed when complete) and the byte count is returned;
+        otherwise the bytes. With `if_none_match` (a version): None when unchanged (304)."""
+        params = {"format": format}
+        for k, v in options.items():
+            if k not in LEVEL_OPTIONS:
+                raise TypeError(f"unknown level option {k!r}; one of {', '.join(LEVEL_OPTIONS)}")
+            if v is not None:
+                params[k] = v
+        extra = {"If-None-Match": f'"{if_none_match}"'} if if_none_match is not None else None
+        with _ServerProgress(self, progress):
+            r = self.client.request("GET", f"{self.url}/levels/{int(level)}", params=params,
+                                    headers=self.headers(extra=extra), stream=True,
+                                    expect=(200, 304))
+        self._note(r)
+        if r.status_code == 304:
+            r.close()
+            return None
+        total = r.headers.get("Content-Length")
+        total = int(total) if total and total.isdigit() else None
+        done = 0
+        sink = open(f"{out}.part", "wb") if out else io.BytesIO()
+        try:
+            try:
+                for chunk in r.iter_content(1 << 16):
+                    sink.write(chunk)
+                    done += len(chunk)
+                    if progress:
+                        progress("download", done, total)
+            except requests.RequestException as e:
+                raise TransportError(f"the level stream broke after {done} bytes: {e}") from e
+            if total is not None and done != total:
+                raise TransportError(f"the level stream ended after {done} of {total} bytes")
+            if out:
+                sink.close()
+                os.replace(f"{out}.part", out)
+                return done
+            return sink.getvalue()
+        finally:
+            r.close()
+            if out and not sink.closed:
+                sink.close()
+            if out and os.path.exists(f"{out}.part"):
+                os.unlink(f"{out}.part")
+
+    def level_json(self, level, **options):
+        """The level as the JSON of API.md (vertices, cells, attributes, rules, origin)."""
+        return json.loads(self.level(level, format="json", **options))
+
+    def level_stats(self, level):
+        """GET /levels/{L}/stats: counts per cell kind, bytes per format, seconds."""
+        return self._call("GET", f"/levels/{int(level)}/stats").json()
+
+    def matrix(self, level, from_level=0, format="mtx", *, out=None):
+        """GET /matrices/{L}?from=F: Matrix Market text, or the JSON CSR as a dict; with `out`
+        written to that file (the byte count is returned)."""
+        r = self._call("GET", f"/matrices/{int(level)}", params={"from": from_level, "format": format},
+                       stream=True)
+        data = b"".join(r.iter_content(1 << 16))
+        r.close()
+        if out:
+            with open(out, "wb") as f:
+                f.write(data)
+            return len(data)
+        return json.loads(data) if format == "json" else data.decode()
+
+    def analysis(self, vertex=None, edge=None):
+        """GET /analysis?vertex=i or ?edge=i,j: local subdivision matrix and eigenvalues."""
+        params = {}
+        if vertex is not None:
+            params["vertex"] = vertex
+        if edge is not None:
+            params["edge"] = ",".join(map(str, edge)) if not isinstance(edge, str) else edge
+        return self._call("GET", "/analysis", params=params).json()
+
+
+# The daemon's routes and the methods that serve them (a test compares this table with
+# `subdivd --list-routes`).
+ROUTES = {
+    ("POST", "/v1/sessions"): "Client.create_session",
+    ("GET", "/v1/sessions/{id}"): "Session.info",
+    ("DELETE", "/v1/sessions/{id}"): "Session.delete",
+    ("PUT", "/v1/sessions/{id}/complex"): "Session.put_complex",
+    ("GET", "/v1/sessions/{id}/complex"): "Session.get_complex",
+    ("PATCH", "/v1/sessions/{id}/control-points"): "Session.edit",
+    ("POST", "/v1/sessions/{id}/refine"): "Session.refine",
+    ("PUT", "/v1/sessions/{id}/tags"): "Session.put_tags",
+    ("PUT", "/v1/sessions/{id}/rules"): "Session.put_rules",
+    ("GET", "/v1/sessions/{id}/levels/{L}"): "Session.level",
+    ("GET", "/v1/sessions/{id}/levels/{L}/stats"): "Session.level_stats",
+    ("GET", "/v1/sessions/{id}/analysis"): "Session.analysis",
+    ("GET", "/v1/sessions/{id}/matrices/{L}"): "Session.matrix",
+    ("GET", "/healthz"): "Client.healthz",
+    ("GET", "/livez"): "Client.livez",
+    ("GET", "/readyz"): "Client.readyz",
+    ("GET", "/metrics"): "Client.metrics",
+    ("GET", "/v1/openapi.json"): "Client.openapi",
+}

@@ -1,0 +1,150 @@
+"""Mesh files -> PUT /complex bodies (SPEC Sec. 7: clients read mesh files, the daemon takes JSON).
+
+Formats: OBJ, OFF, STL, Gmsh .msh (2.2 and 4.1, ASCII or binary), VTK legacy .vtk, VTK XML .vtu,
+TetGen .node/.ele, all read with meshio (Debian python3-meshio); plus .json, a PUT /complex body
+used as it is. Cells become simplices: vertex, line, triangle and tetra as they are; quads and
+polygons are split into triangles around their first vertex; other cell kinds (hexahedra,
+wedges, pyramids, quadratic cells) are refused with MeshError, since the daemon's complex is
+simplicial. Every point is posted in the file's order (as meshio reads it; STL points are merged),
+so indices in a tags file are the file's point numbers, 0-based. Numeric point data become
+attributes (names outside [A-Za-z0-9_-] are rewritten with "_"; meshio's own "gmsh:", "obj:" ...
+arrays are left out).
+
+Gmsh physical groups name tags: the cells of the groups chosen as singular (by default every group
+whose name starts with "singular", "crease" or "corner", case-insensitive) become singular
+simplices of PUT /tags — points are corners, lines creases, triangles embedded surfaces.
+
+With fill, the triangles become the surface of a "fill" entry (TetGen tetrahedralizes what they
+enclose) instead of simplices.
+"""
+import json
+import math
+import pathlib
+import re
+
+FORMATS = {".obj": "obj", ".off": "off", ".stl": "stl", ".msh": "gmsh", ".vtk": "vtk",
+           ".vtu": "vtu", ".node": "tetgen", ".ele": "tetgen", ".json": "json"}
+DEFAULT_SINGULAR = ("singular", "crease", "corner")
+SKIP_DATA = re.compile(r"^(gmsh|obj|medit|flac3d|tetgen|ansys|abaqus|permas|avsucd|vtk):|^facet_normals$")
+
+
+class MeshError(Exception):
+    """The file cannot be read or turned into a simplicial complex (CLI exit code 2)."""
+
+
+def read(path, *, fill=None, singular_groups=None):
+    """(body, tags) for the file at `path`: `body` a PUT /complex body, `tags` a list of singular
+    simplices from Gmsh physical groups (None when the file has none chosen). `fill`: None, or a
+    dict of fill switches ({"max_volume": v, "min_ratio": r}) to post the triangles as a fill
+    surface. `singular_groups`: names of the physical groups that are tags (None: the default
+    prefixes)."""
+    p = pathlib.Path(path)
+    kind = FORMATS.get(p.suffix.lower())
+    if kind is None:
+        raise MeshError(f"{path}: unknown mesh format {p.suffix!r}; use one of "
+                        + ", ".join(sorted(FORMATS)))
+    if not p.exists():
+        raise MeshError(f"{path}: no such file")
+    if kind == "json":
+        try:
+            body = json.loads(p.read_text())
+        except (ValueError, UnicodeDecodeError) as e:
+            raise MeshError(f"{path}: not a JSON document: {e}") from e
+        if not isinstance(body, dict):
+            raise MeshError(f"{path}: a complex is a JSON object (a PUT /complex body)")
+        if fill is not None:
+            tris = [s for s in body.get("simplices", []) if len(s) == 3]
+            body["simplices"] = [s for s in body.get("simplices", []) if len(s) != 3]
+            body.setdefault("fill", []).append(dict(fill, surface=tris))
+        return body, None
+    try:
+        import meshio
+    except ImportError as e:  # pragma: no cover - Debian python3-meshio is in tools/packages.txt
+        raise MeshError("reading mesh files needs meshio (Debian: python3-meshio)") from e
+    try:
+        m = meshio.read(str(p), file_format=kind)
+    except Exception as e:  # meshio raises many kinds (ReadError, ValueError, KeyError ...)
+        raise MeshError(f"{path}: meshio could not read it as {kind}: {type(e).__name__}: {e}") from e
+    return from_meshio(m, path=str(path), fill=fill, singular_groups=singular_groups)
+
+
+def _split(kind, cells, path):
+    """Simplices of one meshio cell block."""
+    if kind in ("vertex", "line", "triangle", "tetra"):
+        return [list(map(int, c)) for c in cells]
+    if kind in ("quad",) or kind.startswith("polygon"):
+        out = []
+        for c in cells:
+            c = list(map(int, c))
+            out += [[c[0], c[i], c[i + 1]] for i in range(1, len(c) - 1)]
+        return out
+    raise MeshError(f"{path}: cells of kind {kind!r} are not simplices; the daemon takes points, "
+                    "lines, triangles and tetrahedra (convert the mesh, e.g. with gmsh)")
+
+
+def from_meshio(m, *, path="mesh", fill=None, singular_groups=None):
+    verts = [[float(x) for x in (list(p) + [0.0, 0.0])[:3]] for p in m.points]
+    if not verts:
+        raise MeshError(f"{path}: the mesh has no points")
+    if any(not math.isfinite(x) for v in verts for x in v):
+        raise MeshError(f"{path}: the mesh has a non-finite coordinate")
+    simplices, surface = [], []
+    phys = m.cell_data.get("gmsh:physical")
+    groups = {}  # physical tag -> name, for the chosen singular groups
+    names = {str(k): v for k, v in (m.field_data or {}).items()}
+    if singular_groups is None:
+        chosen = {k for k in names if k.lower().startswith(DEFAULT_SINGULAR)}
+    else:
+        chosen = set(singular_groups)
+        missing = chosen - set(names)
+        if missing:
+            raise MeshError(f"{path}: no physical group named {', '.join(sorted(missing))} "
+                            f"(the file has: {', '.join(sorted(names)) or 'none'})")
+    for name in chosen:
+        tag, dim = int(names[name][0]), int(names[name][1])
+        groups[(dim, tag)] = name
+    tags = []
+    dims = {"vertex": 0, "line": 1, "triangle": 2, "tetra": 3}
+    for b, block in enumerate(m.cells):
+        s = _split(block.type, block.data, path)
+        if fill is not None and block.type == "triangle":
+            surface += s
+        else:
+            simplices += s
+        if phys is not None and groups and block.type in ("vertex", "line", "triangle"):
+            dim = dims[block.type]
+            for cell, tag in zip(block.data, phys[b]):
+                if (dim, int(tag)) in groups:
+                    tags.append(sorted(int(x) for x in cell))
+    body = {"vertices": verts}
+    if simplices or fill is None:
+        body["simplices"] = simplices
+    if fill is not None:
+        if not surface:
+            raise MeshError(f"{path}: fill needs triangles (a closed surface), and the mesh has none")
+        body["fill"] = [dict(fill, surface=surface)]
+    attrs = {}
+    for name, data in (m.point_data or {}).items():
+        if SKIP_DATA.match(name) or len(attrs) == 16:
+            continue
+        try:
+            rows = [[float(x) for x in (r if hasattr(r, "__len__") else [r])] for r in data]
+        except (TypeError, ValueError):
+            continue
+        if not rows or len(rows) != len(verts) or not 1 <= len(rows[0]) <= 16:
+            continue
+        if any(not math.isfinite(x) for r in rows for x in r):
+            continue
+        key = re.sub(r"[^A-Za-z0-9_-]", "_", name)[:48] or "attribute"
+        attrs[key] = [r[0] for r in rows] if len(rows[0]) == 1 else rows
+    if attrs:
+        body["attributes"] = attrs
+    if tags:
+        uniq = []
+        seen = set()
+        for t in tags:
+            if tuple(t) not in seen:
+                seen.add(tuple(t))
+                uniq.append(t)
+        tags = uniq
+    return body, (tags if groups else None)

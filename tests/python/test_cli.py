@@ -1,0 +1,274 @@
+"""The `subdiv` command (clients/python/subdiv/cli.py, installed as build/subdiv): every supported
+input format round-trips to VTU and GLB through the real daemon (checked with meshio, VTK and the
+Khronos validator), tags come from job files and Gmsh physical groups, job files run several
+meshes, and the exit codes are the documented ones."""
+import json
+import os
+import pathlib
+import subprocess
+
+import pytest
+
+from conftest import REPO
+from daemon import SUBDIVD, Daemon
+from test_fill import surface
+
+SUBDIV = REPO / "build" / "subdiv"
+VALIDATOR = REPO / "tests" / "tools" / "gltf_validate.js"
+ENV = dict(os.environ, SUBDIVD=str(SUBDIVD))
+
+
+@pytest.fixture(scope="module")
+def daemon():
+    d = Daemon("--max-sessions", "100")
+    yield d
+    assert d.stop() == 0
+
+
+def run(*args, cwd=None, env=None):
+    return subprocess.run([str(SUBDIV), *map(str, args)], capture_output=True, text=True, cwd=cwd,
+                          env=env or ENV, timeout=300)
+
+
+def write_msh41(path, points, blocks, names):
+    """Gmsh 4.1 ASCII (meshio cannot write physical groups in 4.1). blocks: [(dim, cells,
+    physical tag or 0)], names: {name: (dim, tag)}."""
+    et = {0: 15, 1: 1, 2: 2, 3: 4}
+    L = ["$MeshFormat", "4.1 0 8", "$EndMeshFormat", "$PhysicalNames", str(len(names))]
+    L += [f'{d} {t} "{n}"' for n, (d, t) in names.items()]
+    L += ["$EndPhysicalNames", "$Entities"]
+    ents = {0: [], 1: [], 2: [], 3: []}
+    for d, _, phys in blocks:
+        ents[d].append((len(ents[d]) + 1, phys))
+    L.append(" ".join(str(len(ents[d])) for d in range(4)))
+    lo = [min(p[k] for p in points) for k in range(3)]
+    hi = [max(p[k] for p in points) for k in range(3)]
+    for d in range(4):
+        for tag, phys in ents[d]:
+            ph = f"1 {phys}" if phys else "0"
+            L.append(f"{tag} {' '.join(map(str, lo))} {ph}" if d == 0 else
+                     f"{tag} {' '.join(map(str, lo + hi))} {ph} 0")
+    L.append("$EndEntities")
+    n = len(points)
+    L += ["$Nodes", f"1 {n} 1 {n}", f"{blocks[0][0]} 1 0 {n}"] + [str(i + 1) for i in range(n)]
+    L += [" ".join(repr(float(x)) for x in p) for p in points] + ["$EndNodes", "$Elements"]
+    total = sum(len(c) for _, c, _ in blocks)
+    L.append(f"{len(blocks)} {total} 1 {total}")
+    seen, k = {0: 0, 1: 0, 2: 0, 3: 0}, 1
+    for d, cells, _ in blocks:
+        seen[d] += 1
+        L.append(f"{d} {seen[d]} {et[d]} {len(cells)}")
+        for c in cells:
+            L.append(f"{k} " + " ".join(str(i + 1) for i in c))
+            k += 1
+    L.append("$EndElements")
+    pathlib.Path(path).write_text("\n".join(L) + "\n")
+
+
+# A mixed complex: a block of 6 tets (unit cube), a fin triangle on its edge 0-1, a curve from
+# vertex 7 and an isolated point. Counts per kind: 6 tets, 1 triangle, 2 segments, 1 point.
+CUBE = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1], [1, 1, 1]]
+TETS = [[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]]
+MIXED_PTS = CUBE + [[0.5, -1, 0], [1.5, 1.5, 1.5], [2, 2, 2.5], [3, 0, 0]]
+MIXED = {"tetra": TETS, "triangle": [[0, 1, 8]], "line": [[7, 9], [9, 10]], "vertex": [[11]]}
+
+
+def expected(counts, level):
+    P, C, F, T, O = counts.get("vertex", 0), counts.get("line", 0), counts.get("triangle", 0), counts.get("tetra", 0), 0
+    for _ in range(level):
+        C, F, T, O = 2 * C, 4 * F, 4 * T + 8 * O, T + 6 * O
+    return {k: v for k, v in (("vertex", P), ("line", C), ("triangle", F), ("tetra", T + 4 * O)) if v}
+
+
+def write_inputs(d):
+    """{file: (cell counts of the complex the CLI should post, cli extra args)}"""
+    import meshio
+    import numpy as np
+    out = {}
+    mixed = meshio.Mesh(np.array(MIXED_PTS, float), [(k, np.array(v)) for k, v in MIXED.items()],
+                        point_data={"height": np.array([p[2] for p in MIXED_PTS])})
+    mixed_counts = {k: len(v) for k, v in MIXED.items()}
+    for name, kw in (("mixed.vtu", {}), ("mixed.vtk", {}), ("mixed22.msh", {"file_format": "gmsh22", "binary": False}),
+                     ("mixed22b.msh", {"file_format": "gmsh22", "binary": True})):
+        meshio.write(d / name, mixed, **kw)
+        out[name] = (mixed_counts, [])
+    blocks = [(3, TETS, 1), (2, MIXED["triangle"], 2), (1, MIXED["line"], 3), (0, MIXED["vertex"], 4)]
+    write_msh41(d / "mixed41.msh", MIXED_PTS, blocks, {"solid": (3, 1), "fin": (2, 2), "wire": (1, 3), "dot": (0, 4)})
+    out["mixed41.msh"] = (mixed_counts, [])
+    tets = meshio.Mesh(np.array(CUBE, float), [("tetra", np.array(TETS))])
+    meshio.write(d / "cube.node", tets)     # writes cube.node and cube.ele
+    out["cube.ele"] = ({"tetra": 6}, [])
+    out["cube.node"] = ({"tetra": 6}, [])
+    v, f = surface("icosphere", 1)
+    sph = meshio.Mesh(np.array(v), [("triangle", np.array(f))])
+    for name in ("sphere.obj", "sphere.off"):
+        meshio.write(d / name, sph)
+        out[name] = ({"triangle": len(f)}, [])
+    meshio.write(d / "sphere.stl", sph)
+    out["sphere.stl"] = (None, ["--fill", "--min-ratio", "1.5"])     # filled: tets from TetGen
+    # an OBJ with quads (split into triangles by the client): a cube's six faces
+    obj = ["v %g %g %g" % tuple(p) for p in CUBE]
+    quads = [(1, 3, 4, 2), (5, 6, 8, 7), (1, 2, 6, 5), (3, 7, 8, 4), (1, 5, 7, 3), (2, 4, 8, 6)]
+    (d / "box.obj").write_text("\n".join(obj + ["f %d %d %d %d" % q for q in quads]) + "\n")
+    out["box.obj"] = ({"triangle": 12}, [])
+    body = {"vertices": MIXED_PTS, "simplices": TETS + MIXED["triangle"] + MIXED["line"] + MIXED["vertex"]}
+    (d / "mixed.json").write_text(json.dumps(body))
+    out["mixed.json"] = (mixed_counts, [])
+    return out
+
+
+def test_every_format_to_vtu_and_glb(daemon, tmp_path):
+    import meshio
+    import vtk
+    inputs = write_inputs(tmp_path)
+    glbs = []
+    for name, (counts, extra) in inputs.items():
+        vtu, glb = tmp_path / f"{name}.vtu", tmp_path / f"{name}.glb"
+        r = run("refine", tmp_path / name, "--level", 2, "-o", vtu, "-o", glb, "--url", daemon.url,
+                "--progress", "lines", *extra)
+        assert r.returncode == 0, (name, r.stdout, r.stderr)
+        assert "received" in r.stderr and f"level 2 -> {vtu}" in r.stderr
+        m = meshio.read(vtu)
+        got = {}
+        for b in m.cells:
+            got[b.type] = got.get(b.type, 0) + len(b.data)
+        if counts is None:   # filled sphere: only tetrahedra, 64 per generated tet at level 2
+            assert set(got) == {"tetra"} and got["tetra"] % 64 == 0, got
+        else:
+            assert got == expected(counts, 2), (name, got)
+        rd = vtk.vtkXMLUnstructuredGridReader()
+        rd.SetFileName(str(vtu))
+        rd.Update()
+        assert rd.GetOutput().GetNumberOfCells() == sum(got.values())
+        if name.startswith("mixed") and name != "mixed.json" and not name.startswith("mixed2") and not name.startswith("mixed4"):
+            assert "height" in m.point_data                               # point data became an attribute
+        glbs.append(glb)
+    r = subprocess.run(["node", str(VALIDATOR), *map(str, glbs)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_gmsh_physical_groups_are_tags(daemon, tmp_path):
+    """Lines of the group "singular-crease" (the default prefix) become crease tags; a named
+    group list overrides the default; an unknown group name is a usage error."""
+    v, f = surface("octahedron")
+    crease = [[0, 2], [2, 1]]                                         # edges of the octahedron
+    blocks = [(2, f, 1), (1, crease, 2), (0, [[4]], 3)]
+    names = {"skin": (2, 1), "singular-crease": (1, 2), "tip": (0, 3)}
+    write_msh41(tmp_path / "oct41.msh", v, blocks, names)
+    import meshio
+    import numpy as np
+    meshio.write(tmp_path / "oct22.msh", meshio.Mesh(np.array(v), [("triangle", np.array(f)), ("line", np.array(crease)), ("vertex", np.array([[4]]))],
+                 cell_data={"gmsh:physical": [np.full(len(f), 1), np.array([2, 2]), np.array([3])],
+                            "gmsh:geometrical": [np.full(len(f), 1), np.array([2, 2]), np.array([3])]},
+                 field_data={k: np.array([t, d]) for k, (d, t) in names.items()}), file_format="gmsh22")
+    for name in ("oct41.msh", "oct22.msh"):
+        saved = tmp_path / f"{name}.complex.json"
+        r = run("refine", tmp_path / name, "--level", 1, "-o", tmp_path / "o.vtu", "--url", daemon.url,
+                "--save-complex", saved)
+        assert r.returncode == 0, r.stderr
+        c = json.loads(saved.read_text())
+        assert sorted(c["tags"]["singular"]) == [[0, 2], [1, 2]], c["tags"]
+        assert sum(k["singular"] for k in c["classes"]["edges"]) == 2
+        r = run("refine", tmp_path / name, "--level", 1, "-o", tmp_path / "o.vtu", "--url", daemon.url,
+                "--save-complex", saved, "--singular-groups", "singular-crease,tip")
+        assert r.returncode == 0, r.stderr
+        assert sorted(json.loads(saved.read_text())["tags"]["singular"]) == [[0, 2], [1, 2], [4]]
+    r = run("refine", tmp_path / "oct41.msh", "--level", 1, "-o", tmp_path / "o.vtu", "--url", daemon.url,
+            "--singular-groups", "nope")
+    assert r.returncode == 2 and "no physical group named nope" in r.stderr
+    # tags change the result: the crease stays a B-spline, so level 1 differs from untagged
+    a = run("refine", tmp_path / "oct41.msh", "--level", 1, "-o", tmp_path / "a.json", "--url", daemon.url)
+    b = run("refine", tmp_path / "oct41.msh", "--level", 1, "-o", tmp_path / "b.json", "--url", daemon.url,
+            "--singular-groups", "")
+    assert a.returncode == b.returncode == 0
+    assert json.loads((tmp_path / "a.json").read_text())["vertices"] != json.loads((tmp_path / "b.json").read_text())["vertices"]
+
+
+def test_job_file(daemon, tmp_path):
+    """Several meshes in one job file: defaults, {name} outputs, inline and file tags/rules,
+    fill, and a failing job that makes the exit code 1 without stopping the others."""
+    import meshio
+    import numpy as np
+    v, f = surface("icosphere", 1)
+    (tmp_path / "in").mkdir()
+    meshio.write(tmp_path / "in" / "ball.stl", meshio.Mesh(np.array(v), [("triangle", np.array(f))]))
+    meshio.write(tmp_path / "in" / "shell.obj", meshio.Mesh(np.array(v), [("triangle", np.array(f))]))
+    g = [t for i, t in enumerate(f) if i != 3]
+    meshio.write(tmp_path / "in" / "open.off", meshio.Mesh(np.array(v), [("triangle", np.array(g))]))
+    (tmp_path / "rules.json").write_text(json.dumps({"surface_weights": "loop"}))
+    jobs = {"defaults": {"level": 1, "outputs": ["out/{name}.vtu", "out/{name}-L{level}.glb"], "rules": "rules.json"},
+            "jobs": [{"input": "in/ball.stl", "fill": {"min_ratio": 1.5}, "save_complex": "ball.json"},
+                     {"input": "in/open.off", "fill": True},
+                     {"input": "in/shell.obj", "level": 2, "tags": {"singular": [f[0][:2]]},
+                      "save_complex": "shell.json", "options": {"parts": "surfaces"}}]}
+    (tmp_path / "jobs.json").write_text(json.dumps(jobs))
+    r = run("batch", tmp_path / "jobs.json", "--url", daemon.url, "--progress", "lines", cwd="/")
+    assert r.returncode == 1, r.stderr                                   # the open surface: 422
+    assert "job 2 (in/open.off): refused (422 invalid-surface)" in r.stderr
+    assert "/fill/0/surface/" in r.stderr
+    assert "3 job(s): 2 done, 1 failed" in r.stderr
+    out = tmp_path / "out"
+    assert sorted(p.name for p in out.iterdir()) == ["ball-L1.glb", "ball.vtu", "shell-L2.glb", "shell.vtu"]
+    ball = json.loads((tmp_path / "ball.json").read_text())
+    assert ball["summary"]["fill"][0]["tets"] > 0 and ball["rules"]["surface_weights"] == "loop"
+    shell = json.loads((tmp_path / "shell.json").read_text())
+    assert shell["tags"]["singular"] == [sorted(f[0][:2])]
+    r = run("batch", tmp_path / "jobs.json", "--url", daemon.url, "--fail-fast", "--progress", "none")
+    assert r.returncode == 1 and "3 job(s): 1 done, 1 failed, 1 not run" in r.stderr
+    # job-file mistakes are usage errors, named by their place
+    (tmp_path / "bad.json").write_text(json.dumps({"jobs": [{"input": "x.stl", "outputs": ["y.vtu"], "levle": 2}]}))
+    r = run("batch", tmp_path / "bad.json", "--url", daemon.url)
+    assert r.returncode == 2 and "/jobs/0: unknown member 'levle'" in r.stderr
+
+
+def test_exit_codes(daemon, tmp_path):
+    v, f = surface("icosphere", 1)
+    (tmp_path / "s.json").write_text(json.dumps({"vertices": v, "simplices": f}))
+    ok = ["--url", daemon.url, "--progress", "none"]
+    assert run("refine", tmp_path / "s.json", "--level", 1, "-o", tmp_path / "s.glb", *ok).returncode == 0
+    # 2: usage and local files
+    assert run("refine", tmp_path / "s.json", "--level", 1, *ok).returncode == 2            # no -o
+    r = run("refine", tmp_path / "s.json", "--level", 1, "-o", tmp_path / "s.png", *ok)
+    assert r.returncode == 2 and "cannot tell the format" in r.stderr
+    r = run("refine", tmp_path / "missing.stl", "--level", 1, "-o", tmp_path / "m.vtu", *ok)
+    assert r.returncode == 2 and "no such file" in r.stderr
+    (tmp_path / "hex.vtu").write_bytes(b"")
+    import meshio
+    import numpy as np
+    meshio.write(tmp_path / "hex.vtu", meshio.Mesh(np.array(CUBE, float), [("hexahedron", np.array([[0, 1, 3, 2, 4, 5, 7, 6]]))]))
+    r = run("refine", tmp_path / "hex.vtu", "--level", 1, "-o", tmp_path / "h.vtu", *ok)
+    assert r.returncode == 2 and "not simplices" in r.stderr
+    # 1: the daemon refused the input (with the pointer)
+    (tmp_path / "bad.json").write_text(json.dumps({"vertices": v, "simplices": [[0, 1, 99]]}))
+    r = run("refine", tmp_path / "bad.json", "--level", 1, "-o", tmp_path / "b.vtu", *ok)
+    assert r.returncode == 1 and "refused (422" in r.stderr and "/simplices/0/2" in r.stderr
+    assert not (tmp_path / "b.vtu").exists() and not (tmp_path / "b.vtu.part").exists()
+    r = run("refine", tmp_path / "s.json", "--level", 13, "-o", tmp_path / "s.glb", *ok)
+    assert r.returncode == 1 and "level-out-of-range" in r.stderr
+    # 4: an option the daemon does not implement (501)
+    (tmp_path / "yz.json").write_text(json.dumps({"nonmanifold_surface": "ying-zorin"}))
+    r = run("refine", tmp_path / "s.json", "--level", 1, "-o", tmp_path / "s.glb", "--rules", tmp_path / "yz.json", *ok)
+    assert r.returncode == 4 and "not implemented by the daemon (501" in r.stderr
+    # 3: no daemon there
+    r = run("refine", tmp_path / "s.json", "--level", 1, "-o", tmp_path / "s.glb", "--url", "http://127.0.0.1:1")
+    assert r.returncode == 3, r.stderr
+
+
+def test_spawn_progress_bar_and_convert(tmp_path):
+    """--spawn starts a private daemon (found beside build/subdiv); --progress bar draws one
+    updating line; convert writes the body `subdivd refine` takes offline, with the same bytes."""
+    v, f = surface("torus", 12, 8)
+    import meshio
+    import numpy as np
+    meshio.write(tmp_path / "t.off", meshio.Mesh(np.array(v), [("triangle", np.array(f))]))
+    env = {k: x for k, x in ENV.items() if k != "SUBDIVD"}
+    r = run("refine", tmp_path / "t.off", "--fill", "--level", 1, "-o", tmp_path / "a.vtu", "--spawn",
+            "--progress", "bar", env=env)
+    assert r.returncode == 0, r.stderr
+    assert "\x1b[K" in r.stderr and "upload 100%" in r.stderr and "download 100%" in r.stderr
+    r = run("convert", tmp_path / "t.off", "--fill", "-o", tmp_path / "t.json")
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run([str(SUBDIVD), "refine", str(tmp_path / "t.json"), "--level", "1", "-o",
+                        str(tmp_path / "b.vtu")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "a.vtu").read_bytes() == (tmp_path / "b.vtu").read_bytes()

@@ -1,0 +1,247 @@
+"""The Python client (clients/python/subdiv) over HTTP against the real daemon: every endpoint,
+every error status mapped to its typed exception with the problem+json, ETag/If-Match, progress."""
+import http.server
+import json
+import subprocess
+import sys
+import threading
+
+import pytest
+
+from conftest import REPO
+from daemon import SUBDIVD, Daemon
+
+sys.path.insert(0, str(REPO / "clients" / "python"))
+import subdiv  # noqa: E402
+from subdiv import errors as E  # noqa: E402
+
+MIXED = json.loads((REPO / "examples" / "mixed.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def daemon():
+    d = Daemon("--max-sessions", "100")
+    yield d
+    assert d.stop() == 0
+
+
+@pytest.fixture
+def client(daemon):
+    c = subdiv.Client(daemon.url)
+    yield c
+    c.close()
+
+
+def test_routes_table_matches_the_daemon():
+    """ROUTES names a method for every route of `subdivd --list-routes`, and nothing else."""
+    out = subprocess.run([str(SUBDIVD), "--list-routes"], capture_output=True, text=True, check=True).stdout
+    routes = {tuple(line.split(" ", 1)) for line in out.splitlines() if line}
+    assert routes == set(subdiv.ROUTES)
+    for method in subdiv.ROUTES.values():
+        cls, name = method.split(".")
+        assert callable(getattr(getattr(subdiv, cls), name)), method
+
+
+def test_every_endpoint(client, tmp_path):
+    assert client.healthz() == {"status": "ok"}
+    assert client.livez() == {"status": "ok"}
+    assert client.readyz() == {"status": "ready"}
+    assert "subdivd_requests_total" in client.metrics()
+    assert client.openapi()["openapi"] == "3.1.0"
+    s = client.create_session(ttl_s=600)
+    assert s.expires_at and s.version is None
+    assert s.info()["version"] == 0 and s.version == 0
+    assert s.put_rules({"solid_scheme": "averaged"})["version"] == 1 and s.version == 1
+    a = s.put_complex(MIXED)
+    assert a["version"] == 2 and a["summary"]["simplices"]["3"] == 1
+    c = s.get_complex()
+    assert c["vertices"] == [[float(x) for x in v] for v in MIXED["vertices"]]
+    assert c["rules"]["solid_scheme"] == "averaged"
+    assert s.put_tags([[3]])["version"] == 3
+    assert s.get_complex()["tags"]["singular"] == [[3]]
+    glb = s.level(1)
+    assert glb[:4] == b"glTF"
+    n = s.level(2, format="vtu", out=tmp_path / "l2.vtu", parts="solids,curves")
+    assert n == (tmp_path / "l2.vtu").stat().st_size and not (tmp_path / "l2.vtu.part").exists()
+    assert s.level(1, if_none_match=s.version) is None          # 304: unchanged
+    lj = s.level_json(1)
+    assert lj["level"] == 1 and lj["vertices"]
+    st = s.level_stats(2)
+    assert (st["counts"]["tetrahedra"], st["counts"]["octahedra"]) == (24, 10)
+    v = s.version
+    e = s.edit(moves=[{"index": 7, "position": [3, 3, 3.5]}])
+    assert e["version"] == v + 1 and s.version == v + 1 and "1" in e["updated_points"]
+    mtx = s.matrix(1)
+    assert mtx.startswith("%%MatrixMarket")
+    csr = s.matrix(1, format="json")
+    assert csr["rows"] == len(lj["vertices"]) and csr["cols"] == len(MIXED["vertices"])
+    assert s.matrix(1, out=tmp_path / "s.mtx") == (tmp_path / "s.mtx").stat().st_size
+    an = s.analysis(vertex=0)
+    assert an["eigenvalues"] and an["rule"]
+    assert s.analysis(edge=(0, 1))["eigenvalues"]
+    r = s.refine({"simplices": [[0, 1, 2, 3]]}, depth=1)
+    assert r["refined"]["red"] >= 1 and r["version"] == s.version
+    s.delete()
+    with pytest.raises(E.NotFound):
+        s.info()
+
+
+def test_session_context_deletes(client):
+    with client.create_session() as s:
+        s.put_complex(MIXED)
+        sid = s.id
+    with pytest.raises(E.NotFound):
+        client.session(sid, s.token).info()
+
+
+def make_error(kind, client, daemon):
+    """Provoke one error status; returns the callable that raises it."""
+    s = client.create_session()
+    if kind == 400:
+        return lambda: s.put_complex({"vertices": 3, "simplices": []})
+    if kind == 401:
+        return lambda: client.session(s.id, "wrong-token").info()
+    if kind == 404:
+        s.delete()
+        return lambda: s.info()
+    if kind == 405:
+        return lambda: client.request("POST", s.url + "/complex", headers=s.headers(), json_body={})
+    if kind == 409:
+        return lambda: s.get_complex()
+    if kind == 412:
+        s.put_complex(MIXED)
+        return lambda: s.put_rules({}, if_match=99)
+    if kind == 415:
+        return lambda: client.request("PUT", s.url + "/complex", data=b"{}",
+                                      headers=s.headers(extra={"Content-Type": "text/plain"}))
+    if kind == 422:
+        return lambda: s.put_complex({"vertices": [[0, 0, 0]], "simplices": [[0, 5]]})
+    if kind == 428:
+        s.put_complex(MIXED)
+        return lambda: s.edit(moves=[{"index": 0, "position": [0, 0, 0]}], if_match=False)
+    if kind == 501:
+        return lambda: s.put_rules({"nonmanifold_surface": "ying-zorin"})
+    raise AssertionError(kind)
+
+
+@pytest.mark.parametrize("status,cls,pointer", [
+    (400, E.BadRequest, "/vertices"), (401, E.Unauthorized, None), (404, E.NotFound, None),
+    (405, E.MethodNotAllowed, None), (409, E.Conflict, None), (412, E.PreconditionFailed, None),
+    (415, E.UnsupportedMediaType, None), (422, E.Unprocessable, "/simplices/0/1"),
+    (428, E.PreconditionRequired, None), (501, E.NotImplementedByServer, "/nonmanifold_surface")])
+def test_error_mapping(client, daemon, status, cls, pointer):
+    call = make_error(status, client, daemon)
+    with pytest.raises(cls) as ei:
+        call()
+    e = ei.value
+    assert isinstance(e, E.ProblemError) and isinstance(e, E.SubdivError)
+    assert e.status == status and e.problem["status"] == status
+    assert e.type.startswith("/errors/") and e.slug and e.title and e.detail
+    assert e.response is not None and e.response.headers["Content-Type"] == "application/problem+json"
+    if pointer:
+        assert e.pointer == pointer and e.errors[0]["message"]
+    assert str(status) in str(e)
+    assert e.exit_code == {400: 1, 409: 1, 412: 1, 415: 1, 422: 1, 428: 1, 501: 4}.get(status, 3)
+
+
+def test_limit_and_busy_and_server_errors(tmp_path):
+    """413 with the limit, 429 with Retry-After, 500 from a missing TetGen helper."""
+    d = Daemon("--max-vertices", "10", "--max-sessions", "1", "--tetgen", str(tmp_path / "none"))
+    try:
+        c = subdiv.Client(d.url)
+        s = c.create_session()
+        with pytest.raises(E.ContentTooLarge) as ei:
+            s.put_complex({"vertices": [[i, 0, 0] for i in range(11)], "simplices": [[0]]})
+        assert (ei.value.limit_name, ei.value.limit, ei.value.requested) == ("max_vertices", 10, 11)
+        with pytest.raises(E.TooManyRequests) as ei:
+            c.create_session()
+        assert ei.value.retry_after > 0 and ei.value.slug == "too-many-sessions"
+        tet = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
+        with pytest.raises(E.ServerError) as ei:
+            s.put_complex({"vertices": tet, "fill": [{"surface": [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]}]})
+        assert ei.value.status == 500 and ei.value.slug == "fill-failed"
+        assert type(ei.value) is E.ServerError
+        s.delete()
+    finally:
+        assert d.stop() == 0
+
+
+class _Fake(http.server.BaseHTTPRequestHandler):
+    """Answers 503 problem+json twice, then 200; any other path: an HTML 502."""
+    hits = 0
+
+    def do_GET(self):
+        if self.path == "/readyz":
+            _Fake.hits += 1
+            if _Fake.hits <= 2:
+                body = json.dumps({"type": "/errors/not-ready", "title": "Service Unavailable",
+                                   "status": 503, "detail": "starting"}).encode()
+                self.send_response(503)
+                self.send_header("Content-Type", "application/problem+json")
+                self.send_header("Retry-After", "1")
+            else:
+                body = b'{"status":"ready"}'
+                self.send_response(200)
+                self.send_header("Content-Type", "application/json")
+        else:
+            body = b"<html>bad gateway</html>"
+            self.send_response(502)
+            self.send_header("Content-Type", "text/html")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, *a):
+        pass
+
+
+def test_503_retry_html_errors_and_transport():
+    srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _Fake)
+    threading.Thread(target=srv.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{srv.server_address[1]}"
+    try:
+        with pytest.raises(E.ServiceUnavailable) as ei:
+            subdiv.Client(url).readyz()
+        assert ei.value.retry_after == 1 and ei.value.slug == "not-ready"
+        assert subdiv.Client(url, retries=2, max_wait=0.05).readyz() == {"status": "ready"}
+        with pytest.raises(E.ServerError) as ei:
+            subdiv.Client(url).healthz()
+        assert ei.value.status == 502 and "bad gateway" in ei.value.detail
+    finally:
+        srv.shutdown()
+    with pytest.raises(E.TransportError):
+        subdiv.Client("http://127.0.0.1:1", timeout=2).healthz()
+
+
+def test_if_match_between_two_writers(client):
+    a = client.create_session()
+    a.put_complex(MIXED)
+    b = client.session(a.id, a.token)
+    b.info()
+    a.put_rules({"surface_weights": "loop"}, if_match=True)        # a is current: accepted
+    with pytest.raises(E.PreconditionFailed):
+        b.put_rules({"solid_scheme": "averaged"}, if_match=True)  # b saw an older version
+    b.info()
+    assert b.put_rules({"solid_scheme": "averaged"}, if_match=True)["version"] == a.version + 1
+    with pytest.raises(E.PreconditionFailed):
+        a.edit(moves=[{"index": 0, "position": [0, 0, 0]}])        # edits always send If-Match
+    a.delete()
+
+
+def test_progress_events(client):
+    from test_fill import surface
+    events = []
+    cb = lambda kind, done, total: events.append((kind, done, total))
+    c = subdiv.Client(client.url, poll_interval=0.02)
+    s = c.create_session()
+    v, f = surface("icosphere", 2)
+    s.put_complex({"vertices": v, "fill": [{"surface": f, "max_volume": 4e-5}]}, progress=cb)
+    up = [e for e in events if e[0] == "upload"]
+    assert up[0][1] == 0 and up[-1][1] == up[-1][2] > 0
+    assert [e for e in events if e[0] == "server"], "TetGen's fill shows as server-side work"
+    events.clear()
+    data = s.level(1, format="vtu", progress=cb)
+    down = [e for e in events if e[0] == "download"]
+    assert down[-1][1] == down[-1][2] == len(data)
+    assert all(x[1] <= y[1] for x, y in zip(down, down[1:]))
+    s.delete()
