@@ -57,7 +57,10 @@ void config_usage(FILE *f)
                "       subdivd refine INPUT.json --level L [--tags T.json] [--rules R.json]\n"
                "               [--format F] [--parts P] [--slice nx,ny,nz,d] [--attributes A]\n"
                "               [--colormap NAME:min:max] -o OUT.glb|.gltf|.vtu|.vtk|.json\n"
-               "       subdivd --list-routes\n\noptions (each also read from SUBDIVD_<NAME>):\n");
+               "       subdivd --list-routes\n"
+               "       subdivd --healthcheck [URL]   (exit 0 if URL, default "
+               "http://127.0.0.1:8080/healthz, answers 200)\n\noptions (each also read from "
+               "SUBDIVD_<NAME>):\n");
     for (size_t i = 0; i < NS; i++)
         fprintf(f, "  --%-20s %s\n", S[i].flag, S[i].help);
 }

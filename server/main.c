@@ -7,6 +7,7 @@
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
 #include "metrics.h"
+#include "probe.h"
 #include "server.h"
 #include <errno.h>
 #include <signal.h>
@@ -197,6 +198,8 @@ int main(int argc, char **argv)
 {
     if (argc > 1 && !strcmp(argv[1], "refine"))
         return refine_main(argc, argv);
+    if (argc > 1 && !strcmp(argv[1], "--healthcheck")) /* Docker HEALTHCHECK: no curl needed */
+        return probe_main(argc > 2 ? argv[2] : NULL);
     if (argc > 1 && !strcmp(argv[1], "--list-routes")) {
         http_list_routes(stdout);
         return 0;
