@@ -29,6 +29,11 @@ static const char *const seeds[] = {
     "{\"select\":{\"sphere\":{\"center\":[0,0,0],\"radius\":0.5}}}",
     "{\"moves\":[{\"index\":1,\"position\":[1,0.1,0]}],\"attributes\":{\"h\":[{\"index\":2,"
     "\"value\":5}]}}",
+    /* TetGen fill of an octahedron with a fin (api/fill.c: the surface checks, the helper) */
+    "{\"vertices\":[[1,0,0],[-1,0,0],[0,1,0],[0,-1,0],[0,0,1],[0,0,-1],[2,2,2]],"
+    "\"simplices\":[[0,2,6]],\"attributes\":{\"h\":[0,1,2,3,4,5,6]},\"fill\":[{\"surface\":"
+    "[[0,2,4],[2,1,4],[1,3,4],[3,0,4],[2,0,5],[1,2,5],[3,1,5],[0,3,5]],\"min_ratio\":1.5,"
+    "\"max_volume\":0.5}]}",
 };
 #define NSEEDS (sizeof seeds / sizeof *seeds)
 static const char *const tokens[] = {"[", "]", "{", "}", ",", ":", "\"", "0", "-1", "1e308",
