@@ -1,6 +1,6 @@
 /* bench — uniform subdivision throughput of the core.
  *
- *   bench [--reps N] [-w warren|loop] [-s box|averaged] MESH LEVEL
+ *   bench [--reps N] [-j THREADS] [-w warren|loop] [-s box|averaged] MESH LEVEL
  *
  * Times N complete runs (build the complex from arrays, compute levels 1..LEVEL: topology,
  * classification, stencil matrices and positions; file reading excluded) and prints one line:
@@ -35,6 +35,8 @@ int main(int argc, char **argv)
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--reps") && i + 1 < argc)
             reps = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "-j") && i + 1 < argc)
+            opt.threads = atoi(argv[++i]);
         else if (!strcmp(argv[i], "-w") && i + 1 < argc)
             opt.surface_weights = !strcmp(argv[++i], "loop") ? SD_WEIGHTS_LOOP : SD_WEIGHTS_WARREN;
         else if (!strcmp(argv[i], "-s") && i + 1 < argc)
@@ -45,7 +47,7 @@ int main(int argc, char **argv)
             level = atoi(argv[i]);
     }
     if (!path || level < 0 || reps < 1) {
-        fprintf(stderr, "usage: bench [--reps N] [-w warren|loop] [-s box|averaged] MESH LEVEL\n");
+        fprintf(stderr, "usage: bench [--reps N] [-j THREADS] [-w warren|loop] [-s box|averaged] MESH LEVEL\n");
         return 2;
     }
     textmesh tm;
@@ -75,9 +77,9 @@ int main(int argc, char **argv)
         sd_complex_free(c);
     }
     qsort(t, reps, sizeof *t, cmpd);
-    printf("subdivd level=%d cells_in=%zu cells_out=%llu vertices_out=%llu seconds_best=%.6f "
+    printf("subdivd threads=%d level=%d cells_in=%zu cells_out=%llu vertices_out=%llu seconds_best=%.6f "
            "seconds_median=%.6f cells_per_s=%.3g bytes_per_cell=%.1f\n",
-           level, tm.ns, (unsigned long long)cells, (unsigned long long)verts, t[0], t[reps / 2],
+           opt.threads > 1 ? opt.threads : 1, level, tm.ns, (unsigned long long)cells, (unsigned long long)verts, t[0], t[reps / 2],
            cells / t[0], (double)bytes / cells);
     free(t);
     textmesh_free(&tm);

@@ -18,7 +18,7 @@
 #include <string.h>
 
 bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nvr, uint32_t ner, uint32_t nor, uint32_t ncols,
-                  const uint32_t (*ev)[2], const uint32_t (*oct)[6], size_t nexp)
+                  const uint32_t (*ev)[2], const uint32_t (*oct)[6])
 {
     memset(b, 0, sizeof *b);
     b->nrows = nvr + ner + nor;
@@ -27,11 +27,10 @@ bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nvr, uint32_t ner, uint32_t no
     b->ncols = ncols;
     b->ev = ev;
     b->oct = oct;
-    b->nexp = nexp;
     b->pw = 1;
-    b->col = sd_alloc(m, (nexp + 1) * sizeof *b->col);
     b->pat = sd_alloc(m, (size_t)b->nrows + 1);
-    return b->col && b->pat;
+    b->kchk = sd_alloc(m, ((size_t)b->nrows / SD_CHK + 2) * sizeof *b->kchk);
+    return b->pat && b->kchk;
 }
 
 bool sd_csrb_set_pat_slow(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id)
@@ -70,6 +69,7 @@ void sd_csrb_free(sd_mem *m, sd_csrb *b)
     sd_free(m, b->vrowptr);
     sd_free(m, b->vcol);
     sd_free(m, b->vval);
+    sd_free(m, b->kchk);
     memset(b, 0, sizeof *b);
 }
 
@@ -219,68 +219,97 @@ bool sd_csrb_view(sd_mem *m, sd_csrb *b)
     return true;
 }
 
-/* One block of rows [r0, r1) whose first `imp` columns are implicit (IMP(r, i)), for pattern ids
- * of type T. */
-#define APPLY3(T, imp, IMP)                                                                        \
-    for (uint32_t r = r0; r < r1; r++) {                                                           \
+/* Rows [lo, hi) of the block that starts at row `base` and whose first `imp` columns are
+ * implicit (IMP: row r - base, entry i), for pattern ids of type T; k: the cursor into col.
+ * The entries are summed in row order, as the public view lists them. */
+#define APPLY3(T, base, lo, hi, imp, IMP)                                                          \
+    for (uint32_t r = (lo); r < (hi); r++) {                                                       \
         uint32_t q = ((const T *)s->pat)[r], n = woff[q + 1] - woff[q];                            \
         const double *w = wt + woff[q];                                                            \
         double x = 0, y = 0, z = 0;                                                                \
-        for (uint32_t i = 0; i < n; i++) {                                                         \
-            const double *p = in + 3 * (size_t)(i < (imp) ? (IMP) : col[k++]);                     \
+        uint32_t i = 0;                                                                            \
+        for (; i < (imp) && i < n; i++) {                                                          \
+            const double *p = in + 3 * (size_t)(IMP);                                              \
             x += w[i] * p[0];                                                                      \
             y += w[i] * p[1];                                                                      \
             z += w[i] * p[2];                                                                      \
         }                                                                                          \
+        const uint32_t *c = col + k;                                                               \
+        for (uint32_t j = 0; i < n; i++, j++) {                                                    \
+            const double *p = in + 3 * (size_t)c[j];                                               \
+            x += w[i] * p[0];                                                                      \
+            y += w[i] * p[1];                                                                      \
+            z += w[i] * p[2];                                                                      \
+        }                                                                                          \
+        k += n - (n < (imp) ? n : (imp));                                                          \
         out[3 * (size_t)r] = x;                                                                    \
         out[3 * (size_t)r + 1] = y;                                                                \
         out[3 * (size_t)r + 2] = z;                                                                \
     }
 
-#define APPLY3_ALL(T)                                                                              \
-    do {                                                                                           \
-        uint32_t r0 = 0, r1 = s->nvr;                                                              \
-        APPLY3(T, 1, r)                                                                            \
-        r0 = r1, r1 += s->ner;                                                                     \
-        APPLY3(T, 2, ev[r - r0][i])                                                                \
-        r0 = r1, r1 = s->nrows;                                                                    \
-        APPLY3(T, 6, oct[r - r0][i])                                                               \
-    } while (0)
-
-void sd_csr_apply(const sd_csrb *s, const double *in, double *out, int nc)
-{
-    const uint32_t *col = s->col, *woff = s->woff;
-    const uint32_t(*ev)[2] = s->ev;
-    const uint32_t(*oct)[6] = s->oct;
-    const double *wt = s->wt;
-    size_t k = 0;
-    if (nc == 3) {
-        switch (s->pw) {
-        case 1: APPLY3_ALL(uint8_t); break;
-        case 2: APPLY3_ALL(uint16_t); break;
-        default: APPLY3_ALL(uint32_t); break;
-        }
-        return;
-    }
-    /* any number of components */
-#define APPLYN(imp, IMP)                                                                           \
-    for (uint32_t r = r0; r < r1; r++) {                                                           \
+#define APPLYN(base, lo, hi, imp, IMP)                                                             \
+    for (uint32_t r = (lo); r < (hi); r++) {                                                       \
         uint32_t q = sd_csrb_pat(s, r), n = woff[q + 1] - woff[q];                                 \
         const double *w = wt + woff[q];                                                            \
         double *o = out + (size_t)nc * r;                                                          \
         for (int j = 0; j < nc; j++)                                                               \
             o[j] = 0;                                                                              \
         for (uint32_t i = 0; i < n; i++) {                                                         \
-            const double *p = in + (size_t)nc * (i < (imp) ? (IMP) : col[k++]);                    \
+            const double *p = in + (size_t)nc * (i < (imp) ? (IMP) : col[k++]);                   \
             for (int j = 0; j < nc; j++)                                                           \
                 o[j] += w[i] * p[j];                                                               \
         }                                                                                          \
     }
-    uint32_t r0 = 0, r1 = s->nvr;
-    APPLYN(1, r)
-    r0 = r1, r1 += s->ner;
-    APPLYN(2, ev[r - r0][i])
-    r0 = r1, r1 = s->nrows;
-    APPLYN(6, oct[r - r0][i])
-#undef APPLYN
+
+#define MAXU(a, b) ((a) > (b) ? (a) : (b))
+#define MINU(a, b) ((a) < (b) ? (a) : (b))
+/* The three blocks of rows (vertex, edge, octahedron) clipped to [rlo, rhi). */
+#define BLOCKS(APPLY, ...)                                                                         \
+    do {                                                                                           \
+        uint32_t b1 = s->nvr, b2 = s->nvr + s->ner;                                                \
+        APPLY(__VA_ARGS__ 0, rlo, MINU(rhi, b1), 1, r)                                             \
+        APPLY(__VA_ARGS__ b1, MAXU(rlo, b1), MINU(rhi, b2), 2, ev[r - b1][i])                      \
+        APPLY(__VA_ARGS__ b2, MAXU(rlo, b2), rhi, 6, oct[r - b2][i])                               \
+    } while (0)
+
+typedef struct ajob {
+    const sd_csrb *s;
+    const double *in;
+    double *out;
+    int nc;
+} ajob;
+
+static void apply_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const ajob *J = arg;
+    const sd_csrb *s = J->s;
+    const double *in = J->in;
+    double *out = J->out;
+    const int nc = J->nc;
+    const uint32_t *col = s->col, *woff = s->woff;
+    const uint32_t(*ev)[2] = s->ev;
+    const uint32_t(*oct)[6] = s->oct;
+    const double *wt = s->wt;
+    /* whole chunks of SD_CHK rows, whose first explicit column kchk gives */
+    uint64_t c0, c1, nchunks = ((uint64_t)s->nrows + SD_CHK - 1) / SD_CHK;
+    sd_range(nchunks, part, nparts, &c0, &c1);
+    uint32_t rlo = (uint32_t)(c0 * SD_CHK), rhi = (uint32_t)MINU(c1 * SD_CHK, (uint64_t)s->nrows);
+    if (rlo >= rhi)
+        return;
+    size_t k = s->kchk[c0];
+    if (nc == 3) {
+        switch (s->pw) {
+        case 1: BLOCKS(APPLY3, uint8_t,); break;
+        case 2: BLOCKS(APPLY3, uint16_t,); break;
+        default: BLOCKS(APPLY3, uint32_t,); break;
+        }
+    } else {
+        BLOCKS(APPLYN, );
+    }
+}
+
+void sd_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads)
+{
+    ajob J = {s, in, out, nc};
+    sd_par(threads, s->nnz, apply_part, &J);
 }

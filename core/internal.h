@@ -36,6 +36,19 @@ void *sd_calloc(sd_mem *m, size_t n, size_t size);   /* zeroed, overflow-checked
 void *sd_realloc(sd_mem *m, void *p, size_t n);
 void sd_free(sd_mem *m, void *p);
 
+/* ---- parallel regions (par.c) ------------------------------------------------------------ */
+#define SD_PAR_MIN 65536   /* items of work below which a region runs serially */
+#define SD_PAR_MAXT 64     /* parts at most */
+typedef void (*sd_part_fn)(void *arg, uint32_t part, uint32_t nparts);
+/* How many parts a region of `work` items is split into with `threads` threads (1 = serial). */
+uint32_t sd_par_parts(int threads, uint64_t work);
+/* fn(arg, i, n) for every part i of n; part 0 in the calling thread. */
+void sd_par(int threads, uint64_t work, sd_part_fn fn, void *arg);
+/* f0(a0) and f1(a1) at once (one after the other if serial). */
+void sd_par2(int threads, uint64_t work, void (*f0)(void *), void *a0, void (*f1)(void *), void *a1);
+/* Part `part` of nparts of [0, n): [*lo, *hi). */
+void sd_range(uint64_t n, uint32_t part, uint32_t nparts, uint64_t *lo, uint64_t *hi);
+
 /* ---- errors (error.c) ------------------------------------------------------------------- */
 sd_result sd_fail(sd_error *err, sd_result code, long item, int field, const char *fmt, ...)
     __attribute__((format(printf, 5, 6)));
@@ -133,6 +146,7 @@ typedef struct sd_csrb {
     uint32_t *col;
     uint32_t *woff;                   /* npat + 1 */
     double *wt;
+    size_t *kchk;                     /* col position of rows 0, SD_CHK, 2 SD_CHK, ... */
     uint32_t *vrowptr, *vcol;         /* the public CSR view, or NULL */
     double *vval;
 } sd_csrb;
@@ -144,10 +158,10 @@ typedef struct sd_pats {
     uint32_t n, capn, capw, hcap;
 } sd_pats;
 
-/* Allocates col (nexp) and the pattern ids; the caller fills col, sets every row's pattern
- * (sd_csrb_set_pat) and calls finish. */
+/* Allocates the pattern ids and kchk; the caller sets every row's pattern (sd_csrb_set_pat) and
+ * kchk, allocates and fills col (nexp) and calls finish. */
 bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nvr, uint32_t ner, uint32_t nor, uint32_t ncols,
-                  const uint32_t (*ev)[2], const uint32_t (*oct)[6], size_t nexp);
+                  const uint32_t (*ev)[2], const uint32_t (*oct)[6]);
 void sd_csrb_free(sd_mem *m, sd_csrb *b);
 uint32_t sd_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len); /* UINT32_MAX: no memory */
 void sd_pats_free(sd_mem *m, sd_pats *p);
@@ -200,8 +214,9 @@ static inline const double *sd_csrb_row(const sd_csrb *s, uint32_t r, size_t *k,
 size_t *sd_csrb_starts(sd_mem *m, const sd_csrb *b);
 /* Make the public CSR view (kept with the matrix); false for lack of memory. */
 bool sd_csrb_view(sd_mem *m, sd_csrb *b);
-/* out[r*nc + k] = sum_j S[r][j] in[j*nc + k] */
-void sd_csr_apply(const sd_csrb *s, const double *in, double *out, int nc);
+#define SD_CHK 65536u
+/* out[r*nc + k] = sum_j S[r][j] in[j*nc + k], rows in parallel parts (same bytes for any number) */
+void sd_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads);
 
 /* ---- levels and the complex -------------------------------------------------------------- */
 typedef struct sd_channel {
@@ -253,9 +268,9 @@ sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err);
 /* split.c: child topology and inherited classification of the next level, part by part (see
  * sd_topo); each needs the parent's edges and faces (cells: and the child's nothing; faces: the
  * child's edges) */
-sd_result sd_split_cells(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
-sd_result sd_split_edges(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
-sd_result sd_split_faces(sd_mem *m, const sd_topo *p, sd_topo *c, sd_error *err);
+sd_result sd_split_cells(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
+sd_result sd_split_edges(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
+sd_result sd_split_faces(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
 /* levels.c: forget a level's rules and every finer level */
 void sd_drop_rules(sd_complex *c, sd_level *lv);
 /* rules.c */

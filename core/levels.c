@@ -173,7 +173,7 @@ static sd_result ensure_edges(sd_complex *c, int l, sd_error *err)
     if (lv->t.derived)
         return SD_OK;
     sd_result r = ensure_faces(c, l - 1, err);
-    return r ? r : sd_split_edges(&c->mem, lv->parent, &lv->t, err);
+    return r ? r : sd_split_edges(&c->mem, lv->parent, &lv->t, c->opt.threads, err);
 }
 
 static sd_result ensure_faces(sd_complex *c, int l, sd_error *err)
@@ -184,7 +184,7 @@ static sd_result ensure_faces(sd_complex *c, int l, sd_error *err)
     sd_result r = ensure_edges(c, l, err);
     if (!r)
         r = ensure_faces(c, l - 1, err);
-    return r ? r : sd_split_faces(&c->mem, lv->parent, &lv->t, err);
+    return r ? r : sd_split_faces(&c->mem, lv->parent, &lv->t, c->opt.threads, err);
 }
 
 /* Faces are only needed while rules or the next level are made: drop them at levels >= 1. */
@@ -235,7 +235,7 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
     lv->parent_ne = p->t.ne;
     lv->cx = c;
     lv->parent = &p->t;
-    if ((r = sd_split_cells(m, &p->t, &lv->t, err))) {
+    if ((r = sd_split_cells(m, &p->t, &lv->t, c->opt.threads, err))) {
         sd_free(m, lv);
         return r;
     }
@@ -248,7 +248,7 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
             sd_level_free(m, lv);
             return sd_fail_nomem(err, m);
         }
-        sd_csr_apply(&p->S, p->ch[i].data, lv->ch[i].data, nc);
+        sd_csr_apply(&p->S, p->ch[i].data, lv->ch[i].data, nc, c->opt.threads);
     }
     c->lv[l + 1] = lv;
     c->nlevels = l + 2;

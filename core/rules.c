@@ -222,7 +222,54 @@ static int cmp_entry(const void *x, const void *y)
 }
 
 /* Ring candidates of SOLID edges from the cells; then sorted and deduplicated per edge. */
-static bool solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int scheme, rings *R)
+typedef struct ring_sort_job {
+    rings *R;
+    uint32_t ne;
+    volatile bool ok;
+} ring_sort_job;
+
+static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    ring_sort_job *J = arg;
+    rings *R = J->R;
+    uint64_t lo, hi;
+    sd_range(J->ne, part, nparts, &lo, &hi);
+    uint64_t buf[256];
+    for (uint32_t e = (uint32_t)lo; e < (uint32_t)hi; e++) {
+        uint32_t b = R->off[e], n = R->off[e + 1] - b, w = 0;
+        if (n == 0)
+            continue;
+        uint64_t *s = n <= 256 ? buf : malloc(n * sizeof *s);
+        if (!s) {
+            J->ok = false;
+            return;
+        }
+        for (uint32_t i = 0; i < n; i++)
+            s[i] = (uint64_t)R->v[b + i] << 1 | R->cls[b + i];
+        if (n <= 32) /* the usual few candidates: insertion sort */
+            for (uint32_t i = 1; i < n; i++) {
+                uint64_t x = s[i];
+                uint32_t j = i;
+                for (; j > 0 && s[j - 1] > x; j--)
+                    s[j] = s[j - 1];
+                s[j] = x;
+            }
+        else
+            qsort(s, n, sizeof *s, cmp_entry);
+        for (uint32_t i = 0; i < n; i++)
+            if (i == 0 || s[i] != s[i - 1]) {
+                R->v[b + w] = (uint32_t)(s[i] >> 1);
+                R->cls[b + w] = (uint8_t)(s[i] & 1);
+                w++;
+            }
+        R->len[e] = w;
+        if (s != buf)
+            free(s);
+    }
+}
+
+static bool solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int scheme, int threads,
+                        rings *R)
 {
     uint32_t ne = t->ne;
     R->off = sd_calloc(m, (size_t)ne + 1, sizeof *R->off);
@@ -296,38 +343,10 @@ static bool solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int s
         }
 #undef PUSH
     sd_free(m, cur);
-    /* sort and deduplicate each edge's list (as (vertex, class) pairs) */
-    uint64_t buf[256];
-    for (uint32_t e = 0; e < ne; e++) {
-        uint32_t b = R->off[e], n = R->off[e + 1] - b, w = 0;
-        if (n == 0)
-            continue;
-        uint64_t *s = n <= 256 ? buf : malloc(n * sizeof *s);
-        if (!s)
-            return false;
-        for (uint32_t i = 0; i < n; i++)
-            s[i] = (uint64_t)R->v[b + i] << 1 | R->cls[b + i];
-        if (n <= 32) /* the usual few candidates: insertion sort */
-            for (uint32_t i = 1; i < n; i++) {
-                uint64_t x = s[i];
-                uint32_t j = i;
-                for (; j > 0 && s[j - 1] > x; j--)
-                    s[j] = s[j - 1];
-                s[j] = x;
-            }
-        else
-            qsort(s, n, sizeof *s, cmp_entry);
-        for (uint32_t i = 0; i < n; i++)
-            if (i == 0 || s[i] != s[i - 1]) {
-                R->v[b + w] = (uint32_t)(s[i] >> 1);
-                R->cls[b + w] = (uint8_t)(s[i] & 1);
-                w++;
-            }
-        R->len[e] = w;
-        if (s != buf)
-            free(s);
-    }
-    return true;
+    /* sort and deduplicate each edge's list (as (vertex, class) pairs), edges in parallel */
+    ring_sort_job J = {R, ne, true};
+    sd_par(threads, R->off[ne], ring_sort_part, &J);
+    return J.ok;
 }
 
 /* Rings of G2 edges: the common neighbours (edges and diagonals) of both ends, filtered. */
@@ -498,16 +517,155 @@ sd_result sd_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t 
     return a && b ? SD_OK : SD_ERR_NOMEM;
 }
 
+/* The state shared by the steps of sd_build_rules that may run in parallel (each writes only its
+ * own arrays or its own rows of col). */
+typedef struct rjob {
+    const sd_topo *t;
+    int scheme;
+    uint8_t *vr, *er, *take, *nopp;
+    uint32_t *cnt_a, *cnt_b, *cur, *col;
+    uint32_t (*opp)[2];
+    const rings *sr, *gr;
+    uint64_t ebase;
+    bool any_g2e[SD_PAR_MAXT], any_opp[SD_PAR_MAXT];   /* per part */
+} rjob;
+
+enum { M_SSURF = 4, M_LOOP = 8, M_SB = 16 }; /* which faces give an edge its opposite vertices */
+
+/* The explicit columns of edge e's row: its ring. */
+static inline uint32_t ring_len(const rjob *J, uint32_t e)
+{
+    switch (J->er[e]) {
+    case SD_RULE_LOOP:
+    case SD_RULE_SOLID_BOUNDARY:
+        return (J->nopp[e] & 3) == 2 ? 2u : 0u;
+    case SD_RULE_SOLID:
+        return J->sr->len[e];
+    case SD_RULE_G2:
+        return J->gr->len[e];
+    default:
+        return 0;
+    }
+}
+static inline const uint32_t *ring_of(const rjob *J, uint32_t e)
+{
+    switch (J->er[e]) {
+    case SD_RULE_LOOP:
+    case SD_RULE_SOLID_BOUNDARY:
+        return J->opp[e];
+    case SD_RULE_SOLID:
+        return J->sr->v + J->sr->off[e];
+    default:
+        return J->gr->v + J->gr->off[e];
+    }
+}
+
+static void erule_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    rjob *J = arg;
+    uint64_t lo, hi;
+    sd_range(J->t->ne, part, nparts, &lo, &hi);
+    bool g2 = false, op = false;
+    for (uint32_t e = (uint32_t)lo; e < (uint32_t)hi; e++) {
+        uint8_t r = J->er[e] = edge_rule(J->t, e);
+        g2 |= r == SD_RULE_G2;
+        op |= r == SD_RULE_LOOP || r == SD_RULE_SOLID_BOUNDARY;
+    }
+    J->any_g2e[part] = g2;
+    J->any_opp[part] = op;
+}
+
+static void vrules_task(void *arg)
+{
+    rjob *J = arg;
+    vertex_rules(J->t, J->scheme, J->vr, J->cnt_a, J->cnt_b, J->take);
+}
+
+/* Edge neighbourhoods: the opposite vertices of Loop and solid-boundary edges. nopp[e]: the
+ * number of faces seen (bits 0-1, saturating at 3) and which faces count (the mode bits). */
+static void opp_task(void *arg)
+{
+    rjob *J = arg;
+    const sd_topo *t = J->t;
+    uint8_t *nopp = J->nopp, *er = J->er;
+    if (!nopp)
+        return;
+    for (uint32_t e = 0; e < t->ne; e++) {
+        /* an embedded surface's edge takes its opposite vertices from tagged triangles */
+        bool ss = t->eflag[e] & EF_SSURF;
+        nopp[e] = er[e] == SD_RULE_LOOP ? (ss ? M_SSURF : M_LOOP)
+                : er[e] == SD_RULE_SOLID_BOUNDARY && !ss ? M_SB : 0;
+    }
+    for (uint32_t f = 0; f < t->nf; f++) {
+        uint8_t ff = t->fflag[f];
+        if (!(ff & (FF_MAX | FF_BND3 | FF_SING)))
+            continue;
+        unsigned want = (ff & FF_SING ? M_SSURF : 0) | (ff & FF_MAX ? M_LOOP : M_SB);
+        for (int j = 0; j < 3; j++) {
+            uint32_t e = t->fe[f][j];
+            unsigned n = nopp[e];
+            if (!(n & want))
+                continue;
+            if ((n & 3) < 2)
+                J->opp[e][n & 3] = t->fv[f][(j + 2) % 3];
+            if ((n & 3) < 3)
+                nopp[e] = (uint8_t)(n + 1);
+        }
+    }
+}
+
+/* Vertex rows: (the centre, implicit) then rho in edge order, then diagonals and opposites. */
+static void vrows_task(void *arg)
+{
+    rjob *J = arg;
+    const sd_topo *t = J->t;
+    const uint8_t *vr = J->vr, *take = J->take;
+    uint32_t *cur = J->cur, *col = J->col;
+    for (uint32_t e = 0; e < t->ne; e++) {
+        uint32_t a = t->ev[e][0], b = t->ev[e][1];
+        if ((take[e] & 1) && vr[a] != SD_RULE_CORNER)
+            col[cur[a]++] = b;
+        if ((take[e] & 2) && vr[b] != SD_RULE_CORNER)
+            col[cur[b]++] = a;
+    }
+    for (uint32_t o = 0; o < t->noct; o++) {
+        const uint32_t *q = t->oct[o];
+        for (int i = 0; i < 2; i++)
+            if (vr[q[i]] != SD_RULE_CORNER && via_diag(t, vr[q[i]], J->scheme, q[i], q[i ^ 1]))
+                col[cur[q[i]]++] = q[i ^ 1];
+        if (J->scheme == SD_SOLID_AVERAGED)
+            for (int i = 0; i < 6; i++)
+                if (vr[q[i]] == SD_RULE_SOLID)
+                    col[cur[q[i]]++] = q[i ^ 1];
+    }
+}
+
+/* Edge rows: (the ends, implicit) then the ring. */
+static void erows_task(void *arg)
+{
+    rjob *J = arg;
+    uint64_t at = J->ebase;
+    for (uint32_t e = 0; e < J->t->ne; e++) {
+        uint32_t k = ring_len(J, e);
+        if (k) {
+            memcpy(J->col + at, ring_of(J, e), k * sizeof *J->col);
+            at += k;
+        }
+    }
+}
+
 sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
 {
     sd_mem *m = &cx->mem;
     const sd_topo *t = &lv->t;
     const int weights = cx->opt.surface_weights, scheme = cx->opt.solid_scheme;
+    const int threads = cx->opt.threads;
     const uint32_t nv = t->nv, ne = t->ne, no = t->noct;
     uint32_t *cnt_a = NULL, *cnt_b = NULL, *cur = NULL;
     uint32_t(*opp)[2] = NULL;
     uint8_t *nopp = NULL;
     double *wbuf = NULL;
+    uint32_t wcap = 64;
     uint8_t *take = NULL;   /* per edge: which end reads the other through it */
     sd_pats pats = {0};
     rings sr = {0}, gr = {0};
@@ -524,105 +682,66 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     lv->erule = sd_alloc(m, (size_t)ne + 1);
     cnt_a = sd_calloc(m, nv, sizeof *cnt_a);
     cnt_b = sd_calloc(m, nv, sizeof *cnt_b);
-    if (!lv->vrule || !lv->erule || !cnt_a || !cnt_b)
+    take = sd_alloc(m, (size_t)ne + 1);
+    if (!lv->vrule || !lv->erule || !cnt_a || !cnt_b || !take)
         goto nomem;
     uint8_t *vr = lv->vrule, *er = lv->erule;
+    rjob J = {.t = t, .scheme = scheme, .vr = vr, .er = er, .take = take, .cnt_a = cnt_a,
+              .cnt_b = cnt_b, .sr = &sr, .gr = &gr};
+    sd_par(threads, ne, erule_part, &J);
     bool any_g2e = false, any_opp = false;
-    for (uint32_t e = 0; e < ne; e++) {
-        er[e] = edge_rule(t, e);
-        any_g2e |= er[e] == SD_RULE_G2;
-        any_opp |= er[e] == SD_RULE_LOOP || er[e] == SD_RULE_SOLID_BOUNDARY;
+    for (uint32_t i = 0; i < sd_par_parts(threads, ne); i++) {
+        any_g2e |= J.any_g2e[i];
+        any_opp |= J.any_opp[i];
     }
-
-    take = sd_alloc(m, (size_t)ne + 1);
-    if (!take)
-        goto nomem;
-    vertex_rules(t, scheme, vr, cnt_a, cnt_b, take);
-
-    /* edge neighbourhoods: the opposite vertices of Loop and solid-boundary edges. nopp[e]: the
-     * number of faces seen (bits 0-1, saturating at 3) and which faces count (the mode bits) */
     if (any_opp) {
-        enum { M_SSURF = 4, M_LOOP = 8, M_SB = 16 };
-        opp = sd_alloc(m, (size_t)ne * sizeof *opp);
-        nopp = sd_alloc(m, (size_t)ne + 1);
+        J.opp = opp = sd_alloc(m, (size_t)ne * sizeof *opp);
+        J.nopp = nopp = sd_alloc(m, (size_t)ne + 1);
         if (!opp || !nopp)
             goto nomem;
-        for (uint32_t e = 0; e < ne; e++) {
-            /* an embedded surface's edge takes its opposite vertices from tagged triangles */
-            bool ss = t->eflag[e] & EF_SSURF;
-            nopp[e] = er[e] == SD_RULE_LOOP ? (ss ? M_SSURF : M_LOOP)
-                    : er[e] == SD_RULE_SOLID_BOUNDARY && !ss ? M_SB : 0;
-        }
-        for (uint32_t f = 0; f < t->nf; f++) {
-            uint8_t ff = t->fflag[f];
-            if (!(ff & (FF_MAX | FF_BND3 | FF_SING)))
-                continue;
-            unsigned want = (ff & FF_SING ? M_SSURF : 0) | (ff & FF_MAX ? M_LOOP : M_SB);
-            for (int j = 0; j < 3; j++) {
-                uint32_t e = t->fe[f][j];
-                unsigned n = nopp[e];
-                if (!(n & want))
-                    continue;
-                if ((n & 3) < 2)
-                    opp[e][n & 3] = t->fv[f][(j + 2) % 3];
-                if ((n & 3) < 3)
-                    nopp[e] = (uint8_t)(n + 1);
-            }
-        }
     }
-    if ((t->ntet || no) && !solid_rings(m, t, er, scheme, &sr))
+    /* vertex rules and rho sizes, and the edges' opposite vertices, at once */
+    sd_par2(threads, nv + (uint64_t)ne, vrules_task, &J, opp_task, &J);
+    if ((t->ntet || no) && !solid_rings(m, t, er, scheme, threads, &sr))
         goto nomem;
     if (any_g2e && !g2_rings(m, t, er, &gr))
         goto nomem;
 
-    /* sizes: the explicit columns of every row (rho of a vertex, ring of an edge) */
-#define RING(e)                                                                                    \
-    (er[e] == SD_RULE_LOOP || er[e] == SD_RULE_SOLID_BOUNDARY ? ((nopp[e] & 3) == 2 ? 2u : 0u)    \
-     : er[e] == SD_RULE_SOLID                                 ? sr.len[e]                         \
-     : er[e] == SD_RULE_G2                                    ? gr.len[e]                         \
-                                                              : 0u)
-    uint64_t nexp = 0, nnz = 0;
-    uint32_t maxlen = 6;
+    /* sizes and weight patterns of the rows: a vertex row is [self, a x |rho|, b x octahedral
+     * opposites], an edge row [end, end, ring...]; the common ones are memoized by rule and
+     * size. cur[v]: where v's rho goes in col. */
     cur = sd_alloc(m, ((size_t)nv + 1) * sizeof *cur);
-    if (!cur)
+    wbuf = sd_alloc(m, (size_t)wcap * sizeof *wbuf);
+    if (!cur || !wbuf || !sd_csrb_init(m, &lv->S, nv, ne, no, nv, t->ev, t->oct))
         goto nomem;
-    for (uint32_t v = 0; v < nv; v++) {
-        uint32_t n = cnt_a[v] + cnt_b[v];
-        cur[v] = (uint32_t)nexp; /* where v's rho goes */
-        maxlen = 1 + n > maxlen ? 1 + n : maxlen;
-        nexp += n;
-    }
-    uint64_t ebase = nexp;
-    for (uint32_t e = 0; e < ne; e++) {
-        uint32_t k = RING(e);
-        maxlen = 2 + k > maxlen ? 2 + k : maxlen;
-        nexp += k;
-    }
-    nnz = nexp + nv + 2ull * ne + 6ull * no;
-    if (nnz >= UINT32_MAX) {
-        rc = sd_fail(err, SD_ERR_LIMIT, -1, -1, "subdivision matrix too large for 32-bit offsets");
-        goto fail;
-    }
-    if (!sd_csrb_init(m, &lv->S, nv, ne, no, nv, t->ev, t->oct, nexp))
-        goto nomem;
-    uint32_t *col = lv->S.col;
-    wbuf = sd_alloc(m, ((size_t)maxlen + 1) * sizeof *wbuf);
-    if (!wbuf)
-        goto nomem;
-
-    /* weight patterns: a vertex row is [self, a x |rho|, b x octahedral opposites], an edge row
-     * [end, end, ring...]; the common ones are memoized by rule and size */
+#define WBUF(n)                                                                                    \
+    do {                                                                                           \
+        if ((n) > wcap) {                                                                          \
+            double *w_ = sd_realloc(m, wbuf, (size_t)(n) * sizeof *wbuf);                          \
+            if (!w_)                                                                               \
+                goto nomem;                                                                        \
+            wbuf = w_;                                                                             \
+            wcap = (n);                                                                            \
+        }                                                                                          \
+    } while (0)
     enum { MEMO = 64 };
     uint32_t vmemo[SD_RULE_COUNT][MEMO], ememo[SD_RULE_COUNT][MEMO];
     memset(vmemo, 0xff, sizeof vmemo);
     memset(ememo, 0xff, sizeof ememo);
+    size_t *kchk = lv->S.kchk;
+    uint64_t nexp = 0;
     for (uint32_t v = 0; v < nv; v++) {
         uint32_t na = cnt_a[v], nb = cnt_b[v], id = UINT32_MAX;
+        if (v % SD_CHK == 0)
+            kchk[v / SD_CHK] = nexp;
+        cur[v] = (uint32_t)nexp;
+        nexp += na + nb;
         bool memo = nb == 0 && na < MEMO;
         if (memo)
             id = vmemo[vr[v]][na];
         if (id == UINT32_MAX) {
             vw w = vertex_weights(vr[v], weights, scheme, na, nb, loopc);
+            WBUF(1 + na + nb);
             wbuf[0] = w.self;
             for (uint32_t i = 0; i < na; i++)
                 wbuf[1 + i] = w.a;
@@ -636,71 +755,47 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         if (!sd_csrb_set_pat(m, &lv->S, v, id))
             goto nomem;
     }
-
-    /* vertex rows: (the centre, implicit) then rho in edge order */
+    J.ebase = nexp;
     for (uint32_t e = 0; e < ne; e++) {
-        uint32_t a = t->ev[e][0], b = t->ev[e][1];
-        if ((take[e] & 1) && vr[a] != SD_RULE_CORNER)
-            col[cur[a]++] = b;
-        if ((take[e] & 2) && vr[b] != SD_RULE_CORNER)
-            col[cur[b]++] = a;
-    }
-    for (uint32_t o = 0; o < no; o++) {
-        const uint32_t *q = t->oct[o];
-        for (int i = 0; i < 2; i++)
-            if (vr[q[i]] != SD_RULE_CORNER && via_diag(t, vr[q[i]], scheme, q[i], q[i ^ 1]))
-                col[cur[q[i]]++] = q[i ^ 1];
-        if (scheme == SD_SOLID_AVERAGED)
-            for (int i = 0; i < 6; i++)
-                if (vr[q[i]] == SD_RULE_SOLID)
-                    col[cur[q[i]]++] = q[i ^ 1];
-    }
-
-    /* edge rows: (the ends, implicit) then the ring */
-    uint64_t at = ebase;
-    for (uint32_t e = 0; e < ne; e++) {
-        uint32_t k = RING(e);
-        double wend = 0.5, wring = 0, wdiag = 0;
-        const uint32_t *ring = NULL;
-        const uint8_t *cls = NULL;
-        switch (er[e]) {
-        case SD_RULE_LOOP:
-        case SD_RULE_SOLID_BOUNDARY:
-            if (k == 2) {
-                wend = 3.0 / 8.0;
-                wring = 1.0 / 8.0;
-                ring = opp[e];
-            }
-            break;
-        case SD_RULE_SOLID:
-            ring = sr.v + sr.off[e];
-            if (scheme == SD_SOLID_AVERAGED) {
-                cls = sr.cls + sr.off[e];
-                uint32_t nf = 0, nd = 0;
-                for (uint32_t i = 0; i < k; i++)
-                    cls[i] ? nd++ : nf++;
-                double d = 4.0 * nf + nd;
-                wend = 7.0 / 24.0;
-                wring = 5.0 / 12.0 * 4.0 / d;
-                wdiag = 5.0 / 12.0 / d;
-            } else {
-                solid_edge_weights(k, &wend, &wring);
-            }
-            break;
-        case SD_RULE_G2:
-            if (k) {
-                ring = gr.v + gr.off[e];
-                solid_edge_weights(k, &wend, &wring);
-            }
-            break;
-        default:
-            break;
-        }
-        for (uint32_t i = 0; i < k; i++)
-            col[at++] = ring[i];
+        uint32_t k = ring_len(&J, e), r = nv + e;
+        if (r % SD_CHK == 0)
+            kchk[r / SD_CHK] = nexp;
+        nexp += k;
+        const uint8_t *cls = er[e] == SD_RULE_SOLID && scheme == SD_SOLID_AVERAGED
+                             ? sr.cls + sr.off[e] : NULL;
         bool memo = !cls && k < MEMO;
         uint32_t id = memo ? ememo[er[e]][k] : UINT32_MAX;
         if (id == UINT32_MAX) {
+            double wend = 0.5, wring = 0, wdiag = 0;
+            switch (er[e]) {
+            case SD_RULE_LOOP:
+            case SD_RULE_SOLID_BOUNDARY:
+                if (k == 2) {
+                    wend = 3.0 / 8.0;
+                    wring = 1.0 / 8.0;
+                }
+                break;
+            case SD_RULE_SOLID:
+                if (cls) {
+                    uint32_t nf = 0, nd = 0;
+                    for (uint32_t i = 0; i < k; i++)
+                        cls[i] ? nd++ : nf++;
+                    double d = 4.0 * nf + nd;
+                    wend = 7.0 / 24.0;
+                    wring = 5.0 / 12.0 * 4.0 / d;
+                    wdiag = 5.0 / 12.0 / d;
+                } else {
+                    solid_edge_weights(k, &wend, &wring);
+                }
+                break;
+            case SD_RULE_G2:
+                if (k)
+                    solid_edge_weights(k, &wend, &wring);
+                break;
+            default:
+                break;
+            }
+            WBUF(2 + k);
             wbuf[0] = wbuf[1] = wend;
             for (uint32_t i = 0; i < k; i++)
                 wbuf[2 + i] = cls && cls[i] ? wdiag : wring;
@@ -712,9 +807,12 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         if (!sd_csrb_set_pat(m, &lv->S, nv + e, id))
             goto nomem;
     }
-#undef RING
     /* cell points of octahedra (all implicit): box 1/4 on the diagonal, 1/8 on the rest;
      * averaged: centroid */
+    for (uint64_t r = (uint64_t)nv + ne; r < nrows; r++)
+        if (r % SD_CHK == 0)
+            kchk[r / SD_CHK] = nexp;
+    kchk[(nrows + SD_CHK - 1) / SD_CHK] = nexp;
     if (no) {
         for (int i = 0; i < 6; i++)
             wbuf[i] = scheme == SD_SOLID_AVERAGED ? 1.0 / 6.0 : (i < 2 ? 0.25 : 0.125);
@@ -725,8 +823,19 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             if (!sd_csrb_set_pat(m, &lv->S, nv + ne + o, id))
                 goto nomem;
     }
-    if (!sd_csrb_finish(m, &lv->S, &pats, nnz))
+#undef WBUF
+    uint64_t nnz = nexp + nv + 2ull * ne + 6ull * no;
+    if (nnz >= UINT32_MAX) {
+        rc = sd_fail(err, SD_ERR_LIMIT, -1, -1, "subdivision matrix too large for 32-bit offsets");
+        goto fail;
+    }
+    lv->S.nexp = nexp;
+    J.col = lv->S.col = sd_alloc(m, (nexp + 1) * sizeof *lv->S.col);
+    J.cur = cur;
+    if (!lv->S.col || !sd_csrb_finish(m, &lv->S, &pats, nnz))
         goto nomem;
+    /* the columns: vertex rows and edge rows at once */
+    sd_par2(threads, nexp, vrows_task, &J, erows_task, &J);
 
     lv->have_rules = true;
     goto out;

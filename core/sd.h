@@ -77,6 +77,9 @@ typedef struct sd_options {
     int solid_scheme;        /* SD_SOLID_* */
     size_t max_bytes;        /* memory cap for the whole complex (0 = none) */
     sd_allocator allocator;
+    int threads;             /* threads computing a level may use (0, 1 = the caller's only;
+                              * the others are created and joined within the call, and never
+                              * allocate); results are the same bytes for any number */
 } sd_options;
 
 typedef struct sd_complex sd_complex;

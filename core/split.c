@@ -409,7 +409,86 @@ static void templates(tmpl tt[3], tmpl *to)
     {P, P->oct[o], P->oct_e[o], P->oct_f ? P->oct_f[o] : NULL, P->nv + P->ne + (o),                \
      2 * P->ne + 3 * P->nf + 12 * (o), 4 * P->nf + 4 * P->ntet + 24 * (o)}
 
-sd_result sd_split_cells(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
+/* A split's loops run in parts (par.c): each part takes its share of every loop below and
+ * writes only the children of its own parent entities. */
+typedef struct sjob {
+    const sd_topo *P;
+    sd_topo *C;
+    tmpl tt[3], to;
+    bool alias;
+} sjob;
+
+#define RANGE(n, i0, i1)                                                                           \
+    uint64_t i0##_, i1##_;                                                                         \
+    sd_range((n), part, nparts, &i0##_, &i1##_);                                                   \
+    const uint32_t i0 = (uint32_t)i0##_, i1 = (uint32_t)i1##_
+
+static uint64_t split_work(const sd_topo *P)
+{
+    return (uint64_t)P->nv + P->ne + P->nf + 8ull * P->ntet + 14ull * P->noct;
+}
+
+static void cells_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const sjob *J = arg;
+    const sd_topo *P = J->P;
+    sd_topo *C = J->C;
+    const uint32_t pnv = P->nv, pne = P->ne;
+    {   /* vertices: classes */
+        RANGE(pnv, v0, v1);
+        memcpy(C->vfam + v0, P->vfam + v0, v1 - v0);
+        memcpy(C->vflag + v0, P->vflag + v0, v1 - v0);
+        memcpy(C->vnm + v0, P->vnm + v0, v1 - v0);
+    }
+    {
+        RANGE(pne, e0, e1);
+        for (uint32_t e = e0; e < e1; e++) {
+            uint32_t v = pnv + e;
+            C->vfam[v] = P->efam[e];
+            uint8_t pf = P->eflag[e];
+            C->vflag[v] = ((pf & EF_DC) ? VF_DC : 0) | ((pf & EF_CREASE) ? VF_SCREASE : 0) |
+                          ((pf & EF_SSURF) ? VF_SSURF : 0) | ((pf & EF_SBND) ? VF_SBND : 0);
+            C->vnm[v] = P->enm[e] == 1 ? 1 : P->enm[e] ? 4 : 0;
+        }
+    }
+    {
+        RANGE(P->noct, o0, o1);
+        memset(C->vfam + pnv + pne + o0, FAM3, o1 - o0);
+        memset(C->vflag + pnv + pne + o0, 0, o1 - o0);
+        memset(C->vnm + pnv + pne + o0, 0, o1 - o0);
+    }
+    {
+        RANGE(P->ntr, i0, i1);
+        for (uint32_t i = i0; i < i1; i++) { /* the children of face f, as fv[4f..4f+3] below */
+            uint32_t f = sd_tr(P, i);
+            const uint32_t *x = P->fv[f], *fe = P->fe[f];
+            uint32_t(*c)[3] = C->trv + 4 * (size_t)i;
+            for (int j = 0; j < 3; j++) {
+                int jp = (j + 2) % 3;
+                c[j][0] = x[j];
+                c[j][1] = pnv + fe[j];
+                c[j][2] = pnv + fe[jp];
+                c[3][j] = pnv + fe[j];
+            }
+        }
+    }
+    {   /* solid cells */
+        RANGE(P->ntet, t0, t1);
+        for (uint32_t t = t0; t < t1; t++) {
+            ctx x = TET_CTX(P, t);
+            emit_cells(C, &x, &J->tt[P->tet_d[t] % 3], P->tet_b[t], 4 * t, t);
+        }
+    }
+    {
+        RANGE(P->noct, o0, o1);
+        for (uint32_t o = o0; o < o1; o++) {
+            ctx x = OCT_CTX(P, o);
+            emit_cells(C, &x, &J->to, P->oct_b[o], 4 * P->ntet + 8 * o, P->ntet + 6 * o);
+        }
+    }
+}
+
+sd_result sd_split_cells(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, sd_error *err)
 {
     uint64_t nv = (uint64_t)P->nv + P->ne + P->noct;
     uint64_t ne = 2ull * P->ne + 3ull * P->nf + 12ull * P->noct;
@@ -438,61 +517,76 @@ sd_result sd_split_cells(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
         return sd_fail_nomem(err, m);
     }
 #undef A
-    const uint32_t pnv = P->nv, pne = P->ne;
-
-    /* vertices: classes */
-    memcpy(C->vfam, P->vfam, pnv);
-    memcpy(C->vflag, P->vflag, pnv);
-    memcpy(C->vnm, P->vnm, pnv);
-    for (uint32_t e = 0; e < pne; e++) {
-        uint32_t v = pnv + e;
-        C->vfam[v] = P->efam[e];
-        uint8_t pf = P->eflag[e];
-        C->vflag[v] = ((pf & EF_DC) ? VF_DC : 0) | ((pf & EF_CREASE) ? VF_SCREASE : 0) |
-                      ((pf & EF_SSURF) ? VF_SSURF : 0) | ((pf & EF_SBND) ? VF_SBND : 0);
-        C->vnm[v] = P->enm[e] == 1 ? 1 : P->enm[e] ? 4 : 0;
-    }
-    memset(C->vfam + pnv + pne, FAM3, P->noct);
-    memset(C->vflag + pnv + pne, 0, P->noct);
-    memset(C->vnm + pnv + pne, 0, P->noct);
-    /* lower-dimensional cells */
+    /* lower-dimensional cells: few */
     memcpy(C->pt, P->pt, (size_t)P->npt * sizeof *C->pt);
     for (uint32_t i = 0; i < P->ncu; i++) {
         uint32_t e = P->cu[i];
         C->cuv[2 * i][0] = P->ev[e][0];
-        C->cuv[2 * i][1] = pnv + e;
-        C->cuv[2 * i + 1][0] = pnv + e;
+        C->cuv[2 * i][1] = P->nv + e;
+        C->cuv[2 * i + 1][0] = P->nv + e;
         C->cuv[2 * i + 1][1] = P->ev[e][1];
     }
-    for (uint32_t i = 0; i < P->ntr; i++) { /* the children of face f, as fv[4f..4f+3] below */
-        uint32_t f = sd_tr(P, i);
-        const uint32_t *x = P->fv[f], *fe = P->fe[f];
-        uint32_t(*c)[3] = C->trv + 4 * (size_t)i;
-        for (int j = 0; j < 3; j++) {
-            int jp = (j + 2) % 3;
-            c[j][0] = x[j];
-            c[j][1] = pnv + fe[j];
-            c[j][2] = pnv + fe[jp];
-            c[3][j] = pnv + fe[j];
-        }
-    }
-    /* solid cells */
-    if (P->ntet || P->noct) {
-        tmpl tt[3], to;
-        templates(tt, &to);
-        for (uint32_t t = 0; t < P->ntet; t++) {
-            ctx x = TET_CTX(P, t);
-            emit_cells(C, &x, &tt[P->tet_d[t] % 3], P->tet_b[t], 4 * t, t);
-        }
-        for (uint32_t o = 0; o < P->noct; o++) {
-            ctx x = OCT_CTX(P, o);
-            emit_cells(C, &x, &to, P->oct_b[o], 4 * P->ntet + 8 * o, P->ntet + 6 * o);
-        }
-    }
+    sjob J = {.P = P, .C = C};
+    if (P->ntet || P->noct)
+        templates(J.tt, &J.to);
+    sd_par(threads, split_work(P), cells_part, &J);
     return SD_OK;
 }
 
-sd_result sd_split_edges(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
+static void edges_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const sjob *J = arg;
+    const sd_topo *P = J->P;
+    sd_topo *C = J->C;
+    const uint32_t pnv = P->nv, pne = P->ne, pnf = P->nf;
+    {   /* halves */
+        RANGE(pne, e0, e1);
+        for (uint32_t e = e0; e < e1; e++) {
+            uint32_t mid = pnv + e;
+            C->ev[2 * e][0] = P->ev[e][0];
+            C->ev[2 * e][1] = mid;
+            C->ev[2 * e + 1][0] = mid;
+            C->ev[2 * e + 1][1] = P->ev[e][1];
+            for (int k = 0; k < 2; k++) {
+                C->efam[2 * e + k] = P->efam[e];
+                C->eflag[2 * e + k] = P->eflag[e];
+                C->enm[2 * e + k] = P->enm[e];
+            }
+        }
+    }
+    {   /* inside faces: cutting the corners */
+        RANGE(pnf, f0, f1);
+        for (uint32_t f = f0; f < f1; f++) {
+            const uint32_t *fe = P->fe[f];
+            uint8_t fam = (P->fflag[f] & FF_MAX) ? FAM2 : FAM3;
+            uint8_t flag = ((P->fflag[f] & FF_BND3) ? EF_DC : 0) |
+                           ((P->fflag[f] & FF_SING) ? EF_SSURF : 0); /* inside an embedded surface */
+            uint8_t nm = P->fn3[f] >= 3 ? 4 : 0;
+            for (int j = 0; j < 3; j++) {
+                uint32_t e = 2 * pne + 3 * f + j;
+                C->ev[e][0] = pnv + fe[(j + 2) % 3];
+                C->ev[e][1] = pnv + fe[j];
+                C->efam[e] = fam;
+                C->eflag[e] = flag;
+                C->enm[e] = nm;
+            }
+        }
+    }
+    {   /* inside octahedra: cell point to each edge point */
+        RANGE(P->noct, o0, o1);
+        for (uint32_t o = o0; o < o1; o++)
+            for (int k = 0; k < 12; k++) {
+                uint32_t e = 2 * pne + 3 * pnf + 12 * o + k;
+                C->ev[e][0] = pnv + pne + o;
+                C->ev[e][1] = pnv + P->oct_e[o][k];
+                C->efam[e] = FAM3;
+                C->eflag[e] = 0;
+                C->enm[e] = 0;
+            }
+    }
+}
+
+sd_result sd_split_edges(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, sd_error *err)
 {
     const uint32_t ne = C->ne;
 #define A(f, n) (C->f = sd_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
@@ -501,51 +595,71 @@ sd_result sd_split_edges(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
         return sd_fail_nomem(err, m);
     }
 #undef A
-    const uint32_t pnv = P->nv, pne = P->ne, pnf = P->nf;
-    /* halves */
-    for (uint32_t e = 0; e < pne; e++) {
-        uint32_t mid = pnv + e;
-        C->ev[2 * e][0] = P->ev[e][0];
-        C->ev[2 * e][1] = mid;
-        C->ev[2 * e + 1][0] = mid;
-        C->ev[2 * e + 1][1] = P->ev[e][1];
-        for (int k = 0; k < 2; k++) {
-            C->efam[2 * e + k] = P->efam[e];
-            C->eflag[2 * e + k] = P->eflag[e];
-            C->enm[2 * e + k] = P->enm[e];
-        }
-    }
-    /* inside faces: cutting the corners */
-    for (uint32_t f = 0; f < pnf; f++) {
-        const uint32_t *fe = P->fe[f];
-        uint8_t fam = (P->fflag[f] & FF_MAX) ? FAM2 : FAM3;
-        uint8_t flag = ((P->fflag[f] & FF_BND3) ? EF_DC : 0) |
-                       ((P->fflag[f] & FF_SING) ? EF_SSURF : 0); /* inside an embedded surface */
-        uint8_t nm = P->fn3[f] >= 3 ? 4 : 0;
-        for (int j = 0; j < 3; j++) {
-            uint32_t e = 2 * pne + 3 * f + j;
-            C->ev[e][0] = pnv + fe[(j + 2) % 3];
-            C->ev[e][1] = pnv + fe[j];
-            C->efam[e] = fam;
-            C->eflag[e] = flag;
-            C->enm[e] = nm;
-        }
-    }
-    /* inside octahedra: cell point to each edge point */
-    for (uint32_t o = 0; o < P->noct; o++)
-        for (int k = 0; k < 12; k++) {
-            uint32_t e = 2 * pne + 3 * pnf + 12 * o + k;
-            C->ev[e][0] = pnv + pne + o;
-            C->ev[e][1] = pnv + P->oct_e[o][k];
-            C->efam[e] = FAM3;
-            C->eflag[e] = 0;
-            C->enm[e] = 0;
-        }
+    sjob J = {.P = P, .C = C};
+    sd_par(threads, split_work(P), edges_part, &J);
     C->derived = true;
     return SD_OK;
 }
 
-sd_result sd_split_faces(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
+static void faces_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const sjob *J = arg;
+    const sd_topo *P = J->P;
+    sd_topo *C = J->C;
+    const bool alias = J->alias;
+    const uint32_t pnv = P->nv, pne = P->ne;
+    {   /* the 4 children of each face */
+        RANGE(P->nf, f0, f1);
+        for (uint32_t f = f0; f < f1; f++) {
+            const uint32_t *x = P->fv[f], *fe = P->fe[f];
+            for (int j = 0; j < 3; j++) {
+                uint32_t e = 2 * pne + 3 * f + j;
+                uint32_t jp = (uint32_t)(j + 2) % 3;
+                uint32_t g = 4 * f + j;
+                if (!alias) {
+                    C->fv[g][0] = x[j];
+                    C->fv[g][1] = pnv + fe[j];
+                    C->fv[g][2] = pnv + fe[jp];
+                }
+                C->fe[g][0] = half(P, fe[j], x[j]);
+                C->fe[g][1] = e;
+                C->fe[g][2] = half(P, fe[jp], x[j]);
+            }
+            uint32_t g = 4 * f + 3;
+            for (int j = 0; j < 3; j++) {
+                if (!alias)
+                    C->fv[g][j] = pnv + fe[j];
+                C->fe[g][j] = 2 * pne + 3 * f + (uint32_t)(j + 1) % 3;
+            }
+            for (int j = 0; j < 4; j++) {
+                C->fn3[4 * f + j] = P->fn3[f];
+                C->fflag[4 * f + j] = P->fflag[f];
+            }
+        }
+    }
+    if (C->tr) {
+        RANGE(P->ntr, i0, i1);
+        for (uint32_t i = i0; i < i1; i++)
+            for (uint32_t j = 0; j < 4; j++)
+                C->tr[4 * i + j] = 4 * sd_tr(P, i) + j;
+    }
+    {   /* solid cells */
+        RANGE(P->ntet, t0, t1);
+        for (uint32_t t = t0; t < t1; t++) {
+            ctx x = TET_CTX(P, t);
+            emit_ids(C, &x, &J->tt[P->tet_d[t] % 3], 4 * t, t);
+        }
+    }
+    {
+        RANGE(P->noct, o0, o1);
+        for (uint32_t o = o0; o < o1; o++) {
+            ctx x = OCT_CTX(P, o);
+            emit_ids(C, &x, &J->to, 4 * P->ntet + 8 * o, P->ntet + 6 * o);
+        }
+    }
+}
+
+sd_result sd_split_faces(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, sd_error *err)
 {
     const uint32_t nf = C->nf, ntet = C->ntet, noct = C->noct;
     /* a pure surface whose face i is triangle i: the faces' vertices are the triangles' */
@@ -558,56 +672,14 @@ sd_result sd_split_faces(sd_mem *m, const sd_topo *P, sd_topo *C, sd_error *err)
         return sd_fail_nomem(err, m);
     }
 #undef A
-    const uint32_t pnv = P->nv, pne = P->ne, pnf = P->nf;
-    /* the 4 children of each face */
-    for (uint32_t f = 0; f < pnf; f++) {
-        const uint32_t *x = P->fv[f], *fe = P->fe[f];
-        for (int j = 0; j < 3; j++) {
-            uint32_t e = 2 * pne + 3 * f + j;
-            uint32_t jp = (uint32_t)(j + 2) % 3;
-            uint32_t g = 4 * f + j;
-            if (!alias) {
-                C->fv[g][0] = x[j];
-                C->fv[g][1] = pnv + fe[j];
-                C->fv[g][2] = pnv + fe[jp];
-            }
-            C->fe[g][0] = half(P, fe[j], x[j]);
-            C->fe[g][1] = e;
-            C->fe[g][2] = half(P, fe[jp], x[j]);
-        }
-        uint32_t g = 4 * f + 3;
-        for (int j = 0; j < 3; j++) {
-            if (!alias)
-                C->fv[g][j] = pnv + fe[j];
-            C->fe[g][j] = 2 * pne + 3 * f + (uint32_t)(j + 1) % 3;
-        }
-        for (int j = 0; j < 4; j++) {
-            C->fn3[4 * f + j] = P->fn3[f];
-            C->fflag[4 * f + j] = P->fflag[f];
-        }
-    }
-    /* lower-dimensional cells as edge and face ids */
-    for (uint32_t i = 0; i < P->ncu; i++) {
+    for (uint32_t i = 0; i < P->ncu; i++) { /* curves as edge ids: few */
         C->cu[2 * i] = 2 * P->cu[i];
         C->cu[2 * i + 1] = 2 * P->cu[i] + 1;
     }
-    if (C->tr)
-        for (uint32_t i = 0; i < P->ntr; i++)
-            for (uint32_t j = 0; j < 4; j++)
-                C->tr[4 * i + j] = 4 * sd_tr(P, i) + j;
-    /* solid cells */
-    if (P->ntet || P->noct) {
-        tmpl tt[3], to;
-        templates(tt, &to);
-        for (uint32_t t = 0; t < P->ntet; t++) {
-            ctx x = TET_CTX(P, t);
-            emit_ids(C, &x, &tt[P->tet_d[t] % 3], 4 * t, t);
-        }
-        for (uint32_t o = 0; o < P->noct; o++) {
-            ctx x = OCT_CTX(P, o);
-            emit_ids(C, &x, &to, 4 * P->ntet + 8 * o, P->ntet + 6 * o);
-        }
-    }
+    sjob J = {.P = P, .C = C, .alias = alias};
+    if (P->ntet || P->noct)
+        templates(J.tt, &J.to);
+    sd_par(threads, split_work(P), faces_part, &J);
     C->faces = true;
     return SD_OK;
 }
