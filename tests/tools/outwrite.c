@@ -1,0 +1,246 @@
+/* outwrite — write one subdivided level of a text-format complex (docs/TEXT_FORMAT.md) through
+ * the streaming writers of api/out.h, the same code the daemon streams with. A test tool: it pulls
+ * the output in chunks of a chosen size (every size must give the same bytes) and checks that the
+ * byte count equals out_size() where that is known in advance.
+ *
+ *   outwrite MESH.txt -l L -f glb|gltf|vtu|vtk|json -o OUT
+ *            [--parts points,curves,surfaces,solids] [--slice nx,ny,nz,d]
+ *            [--xattr NAME[:N]]... [--colormap NAME:min:max] [--polyhedra]
+ *            [--chunk N] [--geometry] [--version V] [--stats]
+ *
+ * The text format has no attributes: `--xattr NAME:N` adds a synthetic N-component attribute
+ * (default 1) whose component k at a control vertex (x,y,z) is x + k*y + k*k*z + k. Subdivision
+ * rows sum to 1, so at every level the attribute is the same affine function of the subdivided
+ * positions — tests check values without trusting the writer. `--geometry` passes a precomputed
+ * out_geometry (the daemon's per-level cache) instead of letting out_open compute it.
+ * `--stats` prints one line: level, vertices, the cell counts per kind, boundary triangles and
+ * the byte count. Exit codes: 0 ok, 1 core or writer error, 2 usage or input error.
+ */
+#define _POSIX_C_SOURCE 200809L
+#include "../../api/out.h"
+#include "textmesh.h"
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static void usage(void)
+{
+    fprintf(stderr,
+            "usage: outwrite MESH.txt [-l L] -f glb|gltf|vtu|vtk|json -o OUT [--parts LIST]\n"
+            "       [--slice nx,ny,nz,d] [--xattr NAME[:N]]... [--colormap NAME:min:max]\n"
+            "       [--polyhedra] [--chunk N] [--geometry] [--version V] [--stats]\n");
+    exit(2);
+}
+
+static unsigned parse_parts(const char *s)
+{
+    static const char *const names[] = {"points", "curves", "surfaces", "solids"};
+    unsigned mask = 0;
+    char *copy = strdup(s), *save = NULL;
+    for (char *t = strtok_r(copy, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
+        int k;
+        for (k = 0; k < 4 && strcmp(t, names[k]); k++)
+            ;
+        if (k == 4) {
+            fprintf(stderr, "outwrite: unknown part '%s'\n", t);
+            exit(2);
+        }
+        mask |= 1u << k;
+    }
+    free(copy);
+    return mask;
+}
+
+int main(int argc, char **argv)
+{
+    const char *path = NULL, *outpath = NULL, *fmtname = NULL, *parts = NULL, *slice = NULL,
+               *cmap = NULL;
+    const char *xname[OUT_MAX_ATTRS];
+    int xcomp[OUT_MAX_ATTRS], nx = 0, level = 1, poly = 0, stats = 0, use_geometry = 0;
+    size_t chunk = 65536;
+    unsigned long long version = 1;
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        bool more = i + 1 < argc;
+        if (!strcmp(a, "-l") && more)
+            level = atoi(argv[++i]);
+        else if (!strcmp(a, "-f") && more)
+            fmtname = argv[++i];
+        else if (!strcmp(a, "-o") && more)
+            outpath = argv[++i];
+        else if (!strcmp(a, "--parts") && more)
+            parts = argv[++i];
+        else if (!strcmp(a, "--slice") && more)
+            slice = argv[++i];
+        else if (!strcmp(a, "--colormap") && more)
+            cmap = argv[++i];
+        else if (!strcmp(a, "--chunk") && more) {
+            long n = atol(argv[++i]);
+            if (n < 1)
+                usage();
+            chunk = (size_t)n;
+        } else if (!strcmp(a, "--version") && more)
+            version = strtoull(argv[++i], NULL, 10);
+        else if (!strcmp(a, "--xattr") && more) {
+            if (nx == OUT_MAX_ATTRS)
+                usage();
+            char *spec = argv[++i], *colon = strchr(spec, ':');
+            xcomp[nx] = 1;
+            if (colon) {
+                *colon = 0;
+                xcomp[nx] = atoi(colon + 1);
+            }
+            if (!*spec || xcomp[nx] < 1 || xcomp[nx] > 16)
+                usage();
+            xname[nx++] = spec;
+        } else if (!strcmp(a, "--polyhedra"))
+            poly = 1;
+        else if (!strcmp(a, "--stats"))
+            stats = 1;
+        else if (!strcmp(a, "--geometry"))
+            use_geometry = 1;
+        else if (a[0] == '-' && a[1])
+            usage();
+        else if (!path)
+            path = a;
+        else
+            usage();
+    }
+    int fmt = fmtname ? out_format_parse(fmtname) : -1;
+    if (!path || fmt < 0 || (!outpath && !stats))
+        usage();
+
+    textmesh tm;
+    char msg[512];
+    if (textmesh_read(path, &tm, msg, sizeof msg)) {
+        fprintf(stderr, "outwrite: %s\n", msg);
+        return 2;
+    }
+    sd_error err = {0};
+    sd_complex *c = sd_complex_new(tm.xyz, tm.nv, tm.idx, tm.size, tm.ns, NULL, &err);
+    if (!c) {
+        fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
+        return 1;
+    }
+    for (size_t i = 0; i < tm.ndiag; i++) { /* `d t k`: t counts tetrahedra in input order */
+        long *d = tm.diag + 2 * i, seen = -1;
+        size_t s;
+        for (s = 0; s < tm.ns; s++)
+            if (tm.size[s] == 4 && ++seen == d[0])
+                break;
+        if (s == tm.ns || sd_complex_set_diagonal(c, s, (int)d[1], &err)) {
+            fprintf(stderr, "outwrite: bad diagonal line 'd %ld %ld'\n", d[0], d[1]);
+            return 2;
+        }
+    }
+
+    out_request rq = {.complex = c, .level = level, .version = version, .colormap_attr = -1,
+                      .octahedra_as_polyhedra = poly, .nattrs = nx};
+    for (int a = 0; a < nx; a++) {
+        int n = xcomp[a];
+        double *data = malloc(tm.nv * (size_t)n * sizeof *data + 1);
+        if (!data)
+            return 1;
+        for (size_t v = 0; v < tm.nv; v++)
+            for (int k = 0; k < n; k++) {
+                const double *p = tm.xyz + 3 * v;
+                data[v * n + k] = p[0] + k * p[1] + k * k * p[2] + k;
+            }
+        int ch = sd_complex_add_channel(c, data, n, &err);
+        free(data);
+        if (ch < 0) {
+            fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
+            return 1;
+        }
+        rq.attrs[a] = (out_attr){.name = xname[a], .channel = ch, .ncomp = n};
+    }
+    if (parts)
+        rq.parts = parse_parts(parts);
+    if (slice) {
+        if (sscanf(slice, "%lf,%lf,%lf,%lf", &rq.slice[0], &rq.slice[1], &rq.slice[2],
+                   &rq.slice[3]) != 4)
+            usage();
+        rq.has_slice = 1;
+    }
+    if (cmap) {
+        char name[128];
+        if (sscanf(cmap, "%127[^:]:%lf:%lf", name, &rq.colormap_min, &rq.colormap_max) != 3)
+            usage();
+        for (int a = 0; a < nx; a++)
+            if (!strcmp(name, xname[a]))
+                rq.colormap_attr = a;
+        if (rq.colormap_attr < 0) {
+            fprintf(stderr, "outwrite: --colormap: no attribute '%s' (add it with --xattr)\n", name);
+            return 2;
+        }
+    }
+
+    const sd_level *lv = sd_complex_level(c, level, &err);
+    if (!lv) {
+        fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
+        return 1;
+    }
+    out_geometry *geo = NULL;
+    if (use_geometry && !(rq.geometry = geo = out_geometry_compute(lv))) {
+        fprintf(stderr, "outwrite: out of memory computing the geometry\n");
+        return 1;
+    }
+    out_stream *s = out_open(&rq, (out_format)fmt, &err);
+    if (!s) {
+        fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
+        return 1;
+    }
+    FILE *f = NULL;
+    if (outpath && !(f = fopen(outpath, "wb"))) {
+        fprintf(stderr, "outwrite: %s: %s\n", outpath, strerror(errno));
+        return 2;
+    }
+    char *buf = malloc(chunk);
+    if (!buf)
+        return 1;
+    uint64_t total = 0;
+    ssize_t n;
+    while ((n = out_read(s, buf, chunk)) > 0) {
+        if ((size_t)n > chunk) {
+            fprintf(stderr, "outwrite: out_read returned %zd > %zu bytes\n", n, chunk);
+            return 1;
+        }
+        if (f && fwrite(buf, 1, (size_t)n, f) != (size_t)n) {
+            fprintf(stderr, "outwrite: %s: %s\n", outpath, strerror(errno));
+            return 2;
+        }
+        total += (uint64_t)n;
+    }
+    if (n < 0) {
+        fprintf(stderr, "outwrite: the writer failed after %llu bytes\n", (unsigned long long)total);
+        return 1;
+    }
+    if (out_read(s, buf, chunk) != 0) { /* the end stays the end */
+        fprintf(stderr, "outwrite: bytes after the end of the stream\n");
+        return 1;
+    }
+    if (out_size(s) != UINT64_MAX && out_size(s) != total) {
+        fprintf(stderr, "outwrite: out_size %llu but %llu bytes written\n",
+                (unsigned long long)out_size(s), (unsigned long long)total);
+        return 1;
+    }
+    if (f && fclose(f)) {
+        fprintf(stderr, "outwrite: %s: %s\n", outpath, strerror(errno));
+        return 2;
+    }
+    if (stats) {
+        static const char *const kinds[] = {"points", "edges", "triangles", "tetrahedra", "octahedra"};
+        printf("level %d vertices %u", level, sd_level_num_vertices(lv));
+        for (int k = 0; k < 5; k++)
+            printf(" %s %u", kinds[k], sd_level_num_cells(lv, (sd_cell_kind)k));
+        printf(" boundary %u bytes %llu\n", sd_level_solid_boundary(lv, NULL),
+               (unsigned long long)total);
+    }
+    free(buf);
+    out_close(s);
+    out_geometry_free(geo);
+    sd_complex_free(c);
+    textmesh_free(&tm);
+    return 0;
+}
