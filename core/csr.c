@@ -63,6 +63,7 @@ bool sd_csrb_set_pat_slow(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id)
 void sd_csrb_free(sd_mem *m, sd_csrb *b)
 {
     sd_free(m, b->col);
+    sd_free(m, b->eopp);
     sd_free(m, b->pat);
     sd_free(m, b->wt);
     sd_free(m, b->woff);
@@ -185,7 +186,7 @@ size_t *sd_csrb_starts(sd_mem *m, const sd_csrb *b)
         return NULL;
     for (uint32_t r = 0; r < b->nrows; r++) {
         s[r] = k;
-        k += sd_csrb_len(b, r) - sd_csrb_nimp(b, r);
+        k += sd_csrb_nexp(b, r);
     }
     s[b->nrows] = k;
     return s;
@@ -222,7 +223,7 @@ bool sd_csrb_view(sd_mem *m, sd_csrb *b)
 /* Rows [lo, hi) of the block that starts at row `base` and whose first `imp` columns are
  * implicit (IMP: row r - base, entry i), for pattern ids of type T; k: the cursor into col.
  * The entries are summed in row order, as the public view lists them. */
-#define APPLY3(T, base, lo, hi, imp, IMP)                                                          \
+#define APPLY3(T, base, lo, hi, imp, IMP, EXP)                                                     \
     for (uint32_t r = (lo); r < (hi); r++) {                                                       \
         uint32_t q = ((const T *)s->pat)[r], n = woff[q + 1] - woff[q];                            \
         const double *w = wt + woff[q];                                                            \
@@ -234,20 +235,21 @@ bool sd_csrb_view(sd_mem *m, sd_csrb *b)
             y += w[i] * p[1];                                                                      \
             z += w[i] * p[2];                                                                      \
         }                                                                                          \
-        const uint32_t *c = col + k;                                                               \
+        const uint32_t *c = (EXP) ? (EXP) : col + k;                                               \
         for (uint32_t j = 0; i < n; i++, j++) {                                                    \
             const double *p = in + 3 * (size_t)c[j];                                               \
             x += w[i] * p[0];                                                                      \
             y += w[i] * p[1];                                                                      \
             z += w[i] * p[2];                                                                      \
         }                                                                                          \
-        k += n - (n < (imp) ? n : (imp));                                                          \
+        if (!(EXP))                                                                                \
+            k += n - (n < (imp) ? n : (imp));                                                      \
         out[3 * (size_t)r] = x;                                                                    \
         out[3 * (size_t)r + 1] = y;                                                                \
         out[3 * (size_t)r + 2] = z;                                                                \
     }
 
-#define APPLYN(base, lo, hi, imp, IMP)                                                             \
+#define APPLYN(base, lo, hi, imp, IMP, EXP)                                                        \
     for (uint32_t r = (lo); r < (hi); r++) {                                                       \
         uint32_t q = sd_csrb_pat(s, r), n = woff[q + 1] - woff[q];                                 \
         const double *w = wt + woff[q];                                                            \
@@ -255,7 +257,7 @@ bool sd_csrb_view(sd_mem *m, sd_csrb *b)
         for (int j = 0; j < nc; j++)                                                               \
             o[j] = 0;                                                                              \
         for (uint32_t i = 0; i < n; i++) {                                                         \
-            const double *p = in + (size_t)nc * (i < (imp) ? (IMP) : col[k++]);                   \
+            const double *p = in + (size_t)nc * (i < (imp) ? (IMP) : (EXP) ? (EXP)[i - (imp)] : col[k++]); \
             for (int j = 0; j < nc; j++)                                                           \
                 o[j] += w[i] * p[j];                                                               \
         }                                                                                          \
@@ -267,9 +269,9 @@ bool sd_csrb_view(sd_mem *m, sd_csrb *b)
 #define BLOCKS(APPLY, ...)                                                                         \
     do {                                                                                           \
         uint32_t b1 = s->nvr, b2 = s->nvr + s->ner;                                                \
-        APPLY(__VA_ARGS__ 0, rlo, MINU(rhi, b1), 1, r)                                             \
-        APPLY(__VA_ARGS__ b1, MAXU(rlo, b1), MINU(rhi, b2), 2, ev[r - b1][i])                      \
-        APPLY(__VA_ARGS__ b2, MAXU(rlo, b2), rhi, 6, oct[r - b2][i])                               \
+        APPLY(__VA_ARGS__ 0, rlo, MINU(rhi, b1), 1, r, NOEXP)                                      \
+        APPLY(__VA_ARGS__ b1, MAXU(rlo, b1), MINU(rhi, b2), 2, ev[r - b1][i], EOPP)                \
+        APPLY(__VA_ARGS__ b2, MAXU(rlo, b2), rhi, 6, oct[r - b2][i], NOEXP)                        \
     } while (0)
 
 typedef struct ajob {
@@ -290,6 +292,8 @@ static void apply_part(void *arg, uint32_t part, uint32_t nparts)
     const uint32_t(*ev)[2] = s->ev;
     const uint32_t(*oct)[6] = s->oct;
     const double *wt = s->wt;
+    const uint32_t *const NOEXP = NULL; /* explicit columns in col */
+#define EOPP (s->eopp ? s->eopp[r - b1] : NOEXP)
     /* whole chunks of SD_CHK rows, whose first explicit column kchk gives */
     uint64_t c0, c1, nchunks = ((uint64_t)s->nrows + SD_CHK - 1) / SD_CHK;
     sd_range(nchunks, part, nparts, &c0, &c1);
@@ -306,6 +310,7 @@ static void apply_part(void *arg, uint32_t part, uint32_t nparts)
     } else {
         BLOCKS(APPLYN, );
     }
+#undef EOPP
 }
 
 void sd_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads)

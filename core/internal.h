@@ -144,6 +144,8 @@ typedef struct sd_csrb {
     uint8_t pw;                       /* bytes per pattern id: 1, 2 or 4 */
     void *pat;
     uint32_t *col;
+    uint32_t (*eopp)[2];              /* if set, edge row e's ring is eopp[e] (rings of 0 or 2
+                                       * entries, a surface's opposite vertices), not in col */
     uint32_t *woff;                   /* npat + 1 */
     double *wt;
     size_t *kchk;                     /* col position of rows 0, SD_CHK, 2 SD_CHK, ... */
@@ -193,6 +195,13 @@ static inline uint32_t sd_csrb_nimp(const sd_csrb *s, uint32_t r)
 {
     return r < s->nvr ? 1 : r < s->nvr + s->ner ? 2 : 6;
 }
+/* Entries of row r kept in col. */
+static inline uint32_t sd_csrb_nexp(const sd_csrb *s, uint32_t r)
+{
+    if (s->eopp && r >= s->nvr && r < s->nvr + s->ner)
+        return 0;
+    return sd_csrb_len(s, r) - sd_csrb_nimp(s, r);
+}
 /* Row r, whose explicit columns start at col[*k]: its columns into cols (sd_csrb_len of them);
  * returns its weights and moves *k past the row. */
 static inline const double *sd_csrb_row(const sd_csrb *s, uint32_t r, size_t *k, uint32_t *cols)
@@ -203,6 +212,11 @@ static inline const double *sd_csrb_row(const sd_csrb *s, uint32_t r, size_t *k,
     else if (r < s->nvr + s->ner) {
         cols[i++] = s->ev[r - s->nvr][0];
         cols[i++] = s->ev[r - s->nvr][1];
+        if (s->eopp) {
+            for (; i < n; i++)
+                cols[i] = s->eopp[r - s->nvr][i - 2];
+            return s->wt + s->woff[q];
+        }
     } else
         for (; i < 6; i++)
             cols[i] = s->oct[r - s->nvr - s->ner][i];

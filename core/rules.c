@@ -452,7 +452,8 @@ static inline unsigned edge_readers(uint8_t fam, uint8_t fl)
 }
 
 /* The rule of every vertex and the sizes of its rho (cnt_a: edge and diagonal neighbours,
- * cnt_b: the averaged scheme's octahedral opposites; both zeroed by the caller): the
+ * cnt_b: the averaged scheme's octahedral opposites, NULL for the box scheme; zeroed by the
+ * caller): the
  * classification's rule, turned into a corner where its neighbourhood does not fit it (a curve or
  * surface boundary point with other than 2 neighbours, any rule with none). If `take` is not
  * NULL, take[e] gets bit 0 if ev[e][0] reads ev[e][1] through e, bit 1 for the converse. */
@@ -502,7 +503,9 @@ static void vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cn
         }
         if (degenerate || vr[v] == SD_RULE_CORNER) {
             vr[v] = SD_RULE_CORNER;
-            cnt_a[v] = cnt_b[v] = 0;
+            cnt_a[v] = 0;
+            if (cnt_b)
+                cnt_b[v] = 0;
         }
     }
 }
@@ -527,6 +530,7 @@ typedef struct rjob {
     uint32_t (*opp)[2];
     const rings *sr, *gr;
     uint64_t ebase;
+    bool stride;                     /* edge rings stay in opp (S.eopp): no solid or G2 rings */
     bool any_g2e[SD_PAR_MAXT], any_opp[SD_PAR_MAXT];   /* per part */
 } rjob;
 
@@ -644,6 +648,8 @@ static void vrows_task(void *arg)
 static void erows_task(void *arg)
 {
     rjob *J = arg;
+    if (J->stride)
+        return;
     uint64_t at = J->ebase;
     for (uint32_t e = 0; e < J->t->ne; e++) {
         uint32_t k = ring_len(J, e);
@@ -661,7 +667,7 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     const int weights = cx->opt.surface_weights, scheme = cx->opt.solid_scheme;
     const int threads = cx->opt.threads;
     const uint32_t nv = t->nv, ne = t->ne, no = t->noct;
-    uint32_t *cnt_a = NULL, *cnt_b = NULL, *cur = NULL;
+    uint32_t *cnt_a = NULL, *cnt_b = NULL, *cur;
     uint32_t(*opp)[2] = NULL;
     uint8_t *nopp = NULL;
     double *wbuf = NULL;
@@ -681,9 +687,10 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     lv->vrule = sd_alloc(m, (size_t)nv + 1);
     lv->erule = sd_alloc(m, (size_t)ne + 1);
     cnt_a = sd_calloc(m, nv, sizeof *cnt_a);
-    cnt_b = sd_calloc(m, nv, sizeof *cnt_b);
+    if (scheme == SD_SOLID_AVERAGED && (t->ntet || no))
+        cnt_b = sd_calloc(m, nv, sizeof *cnt_b);
     take = sd_alloc(m, (size_t)ne + 1);
-    if (!lv->vrule || !lv->erule || !cnt_a || !cnt_b || !take)
+    if (!lv->vrule || !lv->erule || !cnt_a || (!cnt_b && scheme == SD_SOLID_AVERAGED && (t->ntet || no)) || !take)
         goto nomem;
     uint8_t *vr = lv->vrule, *er = lv->erule;
     rjob J = {.t = t, .scheme = scheme, .vr = vr, .er = er, .take = take, .cnt_a = cnt_a,
@@ -706,13 +713,14 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         goto nomem;
     if (any_g2e && !g2_rings(m, t, er, &gr))
         goto nomem;
+    J.stride = any_opp && !t->ntet && !no && !any_g2e;
 
     /* sizes and weight patterns of the rows: a vertex row is [self, a x |rho|, b x octahedral
      * opposites], an edge row [end, end, ring...]; the common ones are memoized by rule and
-     * size. cur[v]: where v's rho goes in col. */
-    cur = sd_alloc(m, ((size_t)nv + 1) * sizeof *cur);
+     * size. cur[v] (in cnt_a's place): where v's rho goes in col. */
+    cur = cnt_a;
     wbuf = sd_alloc(m, (size_t)wcap * sizeof *wbuf);
-    if (!cur || !wbuf || !sd_csrb_init(m, &lv->S, nv, ne, no, nv, t->ev, t->oct))
+    if (!wbuf || !sd_csrb_init(m, &lv->S, nv, ne, no, nv, t->ev, t->oct))
         goto nomem;
 #define WBUF(n)                                                                                    \
     do {                                                                                           \
@@ -729,9 +737,9 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     memset(vmemo, 0xff, sizeof vmemo);
     memset(ememo, 0xff, sizeof ememo);
     size_t *kchk = lv->S.kchk;
-    uint64_t nexp = 0;
+    uint64_t nexp = 0, nring = 0;
     for (uint32_t v = 0; v < nv; v++) {
-        uint32_t na = cnt_a[v], nb = cnt_b[v], id = UINT32_MAX;
+        uint32_t na = cnt_a[v], nb = cnt_b ? cnt_b[v] : 0, id = UINT32_MAX;
         if (v % SD_CHK == 0)
             kchk[v / SD_CHK] = nexp;
         cur[v] = (uint32_t)nexp;
@@ -760,7 +768,9 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         uint32_t k = ring_len(&J, e), r = nv + e;
         if (r % SD_CHK == 0)
             kchk[r / SD_CHK] = nexp;
-        nexp += k;
+        nring += k;
+        if (!J.stride)
+            nexp += k;
         const uint8_t *cls = er[e] == SD_RULE_SOLID && scheme == SD_SOLID_AVERAGED
                              ? sr.cls + sr.off[e] : NULL;
         bool memo = !cls && k < MEMO;
@@ -824,7 +834,7 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
                 goto nomem;
     }
 #undef WBUF
-    uint64_t nnz = nexp + nv + 2ull * ne + 6ull * no;
+    uint64_t nnz = (nexp - (J.stride ? 0 : nring)) + nring + nv + 2ull * ne + 6ull * no;
     if (nnz >= UINT32_MAX) {
         rc = sd_fail(err, SD_ERR_LIMIT, -1, -1, "subdivision matrix too large for 32-bit offsets");
         goto fail;
@@ -834,6 +844,10 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     J.cur = cur;
     if (!lv->S.col || !sd_csrb_finish(m, &lv->S, &pats, nnz))
         goto nomem;
+    if (J.stride) { /* the opposite vertices are the edge rows' explicit columns as they are */
+        lv->S.eopp = opp;
+        opp = NULL;
+    }
     /* the columns: vertex rows and edge rows at once */
     sd_par2(threads, nexp, vrows_task, &J, erows_task, &J);
 
@@ -853,7 +867,6 @@ out:
     sd_free(m, wbuf);
     sd_free(m, cnt_a);
     sd_free(m, cnt_b);
-    sd_free(m, cur);
     sd_free(m, opp);
     sd_free(m, nopp);
     rings_free(m, &sr);
