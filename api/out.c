@@ -265,6 +265,20 @@ static out_stream *fail(out_stream *s, sd_error *err, sd_result code, const char
     return NULL;
 }
 
+/* Attribute names go verbatim into JSON keys, XML attributes and VTK keyword lines: keep them
+ * to characters that need no escaping anywhere (the API's rule for names, api/handlers.c). */
+static bool valid_name(const char *name)
+{
+    size_t n = 0;
+    if (!name)
+        return false;
+    for (; name[n]; n++)
+        if (n == 63 || !((name[n] >= 'a' && name[n] <= 'z') || (name[n] >= 'A' && name[n] <= 'Z') ||
+                         (name[n] >= '0' && name[n] <= '9') || name[n] == '_' || name[n] == '-'))
+            return false;
+    return n > 0;
+}
+
 out_stream *out_open(const out_request *rq, out_format f, sd_error *err)
 {
     if ((unsigned)f >= OUT_FORMAT_COUNT)
@@ -273,6 +287,16 @@ out_stream *out_open(const out_request *rq, out_format f, sd_error *err)
         return fail(NULL, err, SD_ERR_ARG, "parts: unknown part");
     if (rq->nattrs < 0 || rq->nattrs > OUT_MAX_ATTRS)
         return fail(NULL, err, SD_ERR_ARG, "attributes: too many");
+    for (int a = 0; a < rq->nattrs; a++) {
+        if (!valid_name(rq->attrs[a].name))
+            return fail(NULL, err, SD_ERR_ARG,
+                        "attributes: names have 1 to 63 letters, digits, '_' or '-'");
+        if (rq->attrs[a].ncomp < 1 || rq->attrs[a].ncomp > 16)
+            return fail(NULL, err, SD_ERR_ARG, "attributes: 1 to 16 components");
+        for (int b = 0; b < a; b++)
+            if (!strcmp(rq->attrs[a].name, rq->attrs[b].name))
+                return fail(NULL, err, SD_ERR_ARG, "attributes: a name is given twice");
+    }
     if (rq->has_slice) {
         double n2 = 0;
         for (int k = 0; k < 4; k++)
@@ -283,7 +307,7 @@ out_stream *out_open(const out_request *rq, out_format f, sd_error *err)
         if (!(n2 > 0))
             return fail(NULL, err, SD_ERR_ARG, "slice: the normal must not be zero");
     }
-    if (rq->colormap_attr >= rq->nattrs ||
+    if (rq->colormap_attr < -1 || rq->colormap_attr >= rq->nattrs ||
         (rq->colormap_attr >= 0 &&
          !(isfinite(rq->colormap_min) && isfinite(rq->colormap_max) &&
            rq->colormap_min < rq->colormap_max)))

@@ -3,12 +3,13 @@
  * One scene, one node, one mesh whose primitives share the level's vertex accessors:
  *   points (mode 0, isolated points), curves (mode 1, curve segments), surfaces (mode 4, surface
  *   triangles), solids (mode 4, the outward boundary of the tetrahedra and octahedra), and the
- *   optional slice (mode 4, non-indexed, its own POSITION and NORMAL: the cross-section of the
- *   solids by the plane, facing +n).
+ *   optional slice (mode 4, non-indexed, its own POSITION, NORMAL, `_<NAME>` and COLOR_0: the
+ *   cross-section of the solids by the plane, facing +n, attributes interpolated on the cut edges).
  * Shared accessors: POSITION (float32, min/max from the written floats), NORMAL (area-weighted,
  * unit; (0,0,1) where a vertex has no triangle; triangle primitives only), `_<NAME>` per
- * attribute (float32, the first 4 components of longer vectors), `_RULE` (the sd_rule id as a
- * float) and COLOR_0 (viridis of an attribute's first component over [min,max], float32 RGB).
+ * attribute (float32, the first 4 components of longer vectors; made unique with a `_2` suffix),
+ * `_RULE` (the sd_rule id as a float) and COLOR_0 (viridis of an attribute's first component
+ * over [min,max], float32 RGB).
  * Indices are u16 when the level has at most 65535 vertices, else u32. One material:
  * metallicFactor 0, doubleSided. asset.extras carries the level and version.
  *
@@ -22,8 +23,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-typedef enum {
-    G_POS, G_NRM, G_ATTR, G_RULE, G_COLOR, G_IPT, G_ILN, G_ITR, G_IBD, G_SPOS, G_SNRM
+typedef enum { /* in buffer order; the index sections are G_IPT..G_IBD */
+    G_POS, G_NRM, G_ATTR, G_RULE, G_COLOR, G_IPT, G_ILN, G_ITR, G_IBD, G_SPOS, G_SNRM, G_SATTR,
+    G_SCOLOR
 } gsec_id;
 
 typedef struct gsec {
@@ -39,7 +41,7 @@ typedef struct gsec {
 typedef struct gstate {
     bool glb;
     int nsec;
-    gsec sec[16 + OUT_MAX_ATTRS];
+    gsec sec[16 + 2 * OUT_MAX_ATTRS];
     char *json;           /* GLB: the JSON chunk (padded); glTF: everything before the base64 */
     size_t json_len;
     uint64_t bin_len;     /* padded */
@@ -49,6 +51,7 @@ typedef struct gstate {
     unsigned char carry[3];
     int ncarry;
     float nrm_plane[3];
+    char name[OUT_MAX_ATTRS + 1][80]; /* glTF attribute names: `_<NAME>` per attribute, _RULE */
 } gstate;
 
 static const char B64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
@@ -143,6 +146,12 @@ static void put_index(out_stream *s, int width, uint32_t i)
         out_put(s, &i, 4);
 }
 
+/* Position of value x in the colour map's range (out_viridis clamps it to [0,1]). */
+static double colormap_t(const out_stream *s, double x)
+{
+    return (x - s->rq.colormap_min) / (s->rq.colormap_max - s->rq.colormap_min);
+}
+
 static void put_item(out_stream *s, gstate *g, const gsec *c, uint64_t i)
 {
     uint32_t v[6];
@@ -161,9 +170,8 @@ static void put_item(out_stream *s, gstate *g, const gsec *c, uint64_t i)
     case G_RULE: put_f(s, sd_level_vertex_rule(s->lv, (uint32_t)i)); break;
     case G_COLOR: {
         int a = s->rq.colormap_attr, nc = s->rq.attrs[a].ncomp;
-        double t = (s->attr[a][i * nc] - s->rq.colormap_min) / (s->rq.colormap_max - s->rq.colormap_min);
         float rgb[3];
-        out_viridis(t, rgb);
+        out_viridis(colormap_t(s, s->attr[a][i * nc]), rgb);
         out_put(s, rgb, 12);
         break;
     }
@@ -185,6 +193,19 @@ static void put_item(out_stream *s, gstate *g, const gsec *c, uint64_t i)
             put_f(s, s->slice.xyz[3 * i + k]);
         break;
     case G_SNRM: out_put(s, g->nrm_plane, 12); break;
+    case G_SATTR: {
+        int nc = s->rq.attrs[c->attr].ncomp;
+        for (int k = 0; k < c->ncomp; k++)
+            put_f(s, s->slice.attr[c->attr][i * nc + k]);
+        break;
+    }
+    case G_SCOLOR: {
+        int a = s->rq.colormap_attr, nc = s->rq.attrs[a].ncomp;
+        float rgb[3];
+        out_viridis(colormap_t(s, s->slice.attr[a][i * nc]), rgb);
+        out_put(s, rgb, 12);
+        break;
+    }
     }
 }
 
@@ -354,6 +375,31 @@ static int nomem(sd_error *err)
     return SD_ERR_NOMEM;
 }
 
+/* glTF names of the per-vertex attributes: `_RULE` (name[nattrs]) first, then per attribute `_` +
+ * the posted name upper-cased with `-` as `_` (custom semantics must start with `_`); a name
+ * already taken (e.g. "a-b" and "A_B", or an attribute called "rule") gets `_2`, `_3`, ... */
+static void attribute_names(const out_stream *s, gstate *g)
+{
+    int n = s->rq.nattrs;
+    snprintf(g->name[n], sizeof g->name[n], "_RULE");
+    for (int a = 0; a < n; a++) {
+        char base[72];
+        size_t k = 0;
+        base[k++] = '_';
+        for (const char *p = s->rq.attrs[a].name; *p && k < 64; p++)
+            base[k++] = *p == '-' ? '_' : (char)toupper((unsigned char)*p);
+        base[k] = 0;
+        snprintf(g->name[a], sizeof g->name[a], "%s", base);
+        for (int suffix = 2, clash = 1; clash; suffix++) {
+            clash = !strcmp(g->name[a], g->name[n]);
+            for (int b = 0; b < a && !clash; b++)
+                clash = !strcmp(g->name[a], g->name[b]);
+            if (clash)
+                snprintf(g->name[a], sizeof g->name[a], "%s_%d", base, suffix);
+        }
+    }
+}
+
 int out_gltf_init(out_stream *s, sd_error *err)
 {
     gstate *g = calloc(1, sizeof *g);
@@ -388,6 +434,11 @@ int out_gltf_init(out_stream *s, sd_error *err)
     gsec *ibd = s->nbnd ? add_sec(g, G_IBD, 0, 3, iw, s->nbnd) : NULL;
     gsec *spos = nst ? add_sec(g, G_SPOS, 0, 3, 4, 3ull * nst) : NULL;
     gsec *snrm = nst ? add_sec(g, G_SNRM, 0, 3, 4, 3ull * nst) : NULL;
+    int first_sattr = g->nsec; /* the slice's own attribute values, interpolated on the cut edges */
+    for (int a = 0; nst && a < s->rq.nattrs; a++)
+        add_sec(g, G_SATTR, a, s->rq.attrs[a].ncomp < 4 ? s->rq.attrs[a].ncomp : 4, 4, 3ull * nst);
+    gsec *scol = nst && col ? add_sec(g, G_SCOLOR, 0, 3, 4, 3ull * nst) : NULL;
+    attribute_names(s, g);
     if (nst) {
         double l = sqrt(s->rq.slice[0] * s->rq.slice[0] + s->rq.slice[1] * s->rq.slice[1] +
                         s->rq.slice[2] * s->rq.slice[2]);
@@ -446,21 +497,6 @@ int out_gltf_init(out_stream *s, sd_error *err)
     }
     fprintf(f, "],\"materials\":[{\"name\":\"subdivd\",\"pbrMetallicRoughness\":{\"baseColorFactor\":"
                "[0.8,0.8,0.8,1],\"metallicFactor\":0,\"roughnessFactor\":0.8},\"doubleSided\":true}],");
-    /* the shared vertex attributes */
-    char shared[2048];
-    size_t sl = (size_t)snprintf(shared, sizeof shared, "\"POSITION\":%d", pos->accessor);
-    for (int a = 0; a < s->rq.nattrs; a++) {
-        char name[64];
-        size_t k = 0;
-        name[k++] = '_';
-        for (const char *p = s->rq.attrs[a].name; *p && k < sizeof name - 1; p++)
-            name[k++] = *p == '-' ? '_' : (char)toupper((unsigned char)*p);
-        name[k] = 0;
-        sl += (size_t)snprintf(shared + sl, sizeof shared - sl, ",\"%s\":%d", name, first_attr + a);
-    }
-    sl += (size_t)snprintf(shared + sl, sizeof shared - sl, ",\"_RULE\":%d", rule->accessor);
-    if (col)
-        snprintf(shared + sl, sizeof shared - sl, ",\"COLOR_0\":%d", col->accessor);
     int nprim = 0;
     fprintf(f, "\"meshes\":[{\"name\":\"level %d\",\"primitives\":[", s->rq.level);
     const gsec *prims[4] = {ipt, iln, itr, ibd};
@@ -468,14 +504,24 @@ int out_gltf_init(out_stream *s, sd_error *err)
     for (int p = 0; p < 4; p++) {
         if (!prims[p])
             continue;
-        fprintf(f, "%s{\"attributes\":{%s", nprim++ ? "," : "", shared);
+        fprintf(f, "%s{\"attributes\":{\"POSITION\":%d", nprim++ ? "," : "", pos->accessor);
         if (modes[p] == 4)
             fprintf(f, ",\"NORMAL\":%d", nrm->accessor);
+        for (int a = 0; a < s->rq.nattrs; a++)
+            fprintf(f, ",\"%s\":%d", g->name[a], first_attr + a);
+        fprintf(f, ",\"%s\":%d", g->name[s->rq.nattrs], rule->accessor);
+        if (col)
+            fprintf(f, ",\"COLOR_0\":%d", col->accessor);
         fprintf(f, "},\"indices\":%d,\"mode\":%d,\"material\":0}", prims[p]->accessor, modes[p]);
     }
     if (spos) {
-        fprintf(f, "%s{\"attributes\":{\"POSITION\":%d,\"NORMAL\":%d},\"mode\":4,\"material\":0}",
-                nprim++ ? "," : "", spos->accessor, snrm->accessor);
+        fprintf(f, "%s{\"attributes\":{\"POSITION\":%d,\"NORMAL\":%d", nprim++ ? "," : "",
+                spos->accessor, snrm->accessor);
+        for (int a = 0; a < s->rq.nattrs; a++)
+            fprintf(f, ",\"%s\":%d", g->name[a], first_sattr + a);
+        if (scol)
+            fprintf(f, ",\"COLOR_0\":%d", scol->accessor);
+        fprintf(f, "},\"mode\":4,\"material\":0}");
     }
     fprintf(f, "]}],");
     if (nprim)

@@ -11,6 +11,7 @@
  * commas, and a closing string; the generator resumes inside a section at any item.
  */
 #include "out_internal.h"
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -33,7 +34,13 @@ typedef struct jstate {
     section sec[16 + OUT_MAX_ATTRS];
 } jstate;
 
-static void num(out_stream *s, double x) { out_printf(s, "%.17g", x); }
+static void num(out_stream *s, double x)
+{
+    if (isfinite(x))
+        out_printf(s, "%.17g", x);
+    else /* JSON has no NaN or infinity (the core refuses them in input; never invalid JSON) */
+        out_put(s, "null", 4);
+}
 
 static void vec(out_stream *s, const double *x, int n)
 {

@@ -6,7 +6,7 @@
  * their major diagonal — or, on request in VTU, octahedra as polyhedra (42) last.
  * Points: the level's vertices, then 3 points per slice triangle.
  * Point data: every requested attribute (Float64; slice points interpolated along the cut edge)
- * and "rule" (the sd_rule id; 255 for slice points). Cell data: "dimension" (0..3; 2 for the
+ * and "rule" (the sd_rule id; 255 for slice points; "rule_2" if an attribute is called "rule"). Cell data: "dimension" (0..3; 2 for the
  * slice), "kind" (sd_cell_kind; 5 for the slice) and "source_cell" (the cell's index within its
  * kind at this level; for an octahedron's tets and a slice triangle, the cut/split cell's).
  *
@@ -46,6 +46,7 @@ typedef struct vstate {
     size_t header_len;
     int phase;           /* 0 header, 1 arrays, 2 trailer */
     bool prefix_done;
+    char rule_name[80];  /* "rule", or "rule_2", ... if an attribute is called that */
 } vstate;
 
 /* ---- cells in file order ------------------------------------------------------------------ */
@@ -258,6 +259,14 @@ static arr *add_arr(vstate *st, arr_id id, int attr, int ncomp, int width, uint6
 static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
 {
     st->legacy = legacy;
+    snprintf(st->rule_name, sizeof st->rule_name, "rule");
+    for (int suffix = 2, clash = 1; clash; suffix++) {
+        clash = 0;
+        for (int a = 0; a < s->rq.nattrs && !clash; a++)
+            clash = !strcmp(s->rq.attrs[a].name, st->rule_name);
+        if (clash)
+            snprintf(st->rule_name, sizeof st->rule_name, "rule_%d", suffix);
+    }
     bool poly = !legacy && s->rq.octahedra_as_polyhedra;
     uint64_t ns = s->slice.ntri;
     st->r_pt = 0;
@@ -304,7 +313,7 @@ static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
             a = rule ? add_arr(st, A_RULE, 0, 1, 4, st->npts)
                      : add_arr(st, A_ATTR, i, s->rq.attrs[i].ncomp, 8, st->npts);
             char body[128];
-            snprintf(body, sizeof body, "%s %d %llu %s\n", rule ? "rule" : s->rq.attrs[i].name,
+            snprintf(body, sizeof body, "%s %d %llu %s\n", rule ? st->rule_name : s->rq.attrs[i].name,
                      a->ncomp, (unsigned long long)st->npts, rule ? "int" : "double");
             if (i == 0)
                 snprintf(a->head, sizeof a->head, "POINT_DATA %llu\nFIELD FieldData %d\n%s",
@@ -366,7 +375,7 @@ static int build_header(out_stream *s, vstate *st, sd_error *err)
             snprintf(nc, sizeof nc, " NumberOfComponents=\"%d\"", s->rq.attrs[k].ncomp);
             DA(s->rq.attrs[k].name, nc);
         }
-        DA("rule", "");
+        DA(st->rule_name, "");
         fprintf(f, "      </PointData>\n      <CellData>\n");
         DA("dimension", "");
         DA("kind", "");
