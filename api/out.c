@@ -253,13 +253,18 @@ void out_close(out_stream *s)
     free(s);
 }
 
-static out_stream *fail(out_stream *s, sd_error *err, sd_result code, const char *msg)
+static out_stream *fail(out_stream *s, sd_error *err, sd_result code, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+static out_stream *fail(out_stream *s, sd_error *err, sd_result code, const char *fmt, ...)
 {
     if (err) {
         err->code = code;
         err->item = -1;
         err->field = -1;
-        snprintf(err->message, sizeof err->message, "%s", msg);
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(err->message, sizeof err->message, fmt, ap);
+        va_end(ap);
     }
     out_close(s);
     return NULL;
@@ -282,11 +287,11 @@ static bool valid_name(const char *name)
 out_stream *out_open(const out_request *rq, out_format f, sd_error *err)
 {
     if ((unsigned)f >= OUT_FORMAT_COUNT)
-        return fail(NULL, err, SD_ERR_ARG, "unknown output format");
+        return fail(NULL, err, SD_ERR_ARG, "format: unknown output format");
     if (rq->parts & ~(unsigned)OUT_PART_ALL)
-        return fail(NULL, err, SD_ERR_ARG, "parts: unknown part");
+        return fail(NULL, err, SD_ERR_ARG, "parts: unknown part (mask 0x%x)", rq->parts);
     if (rq->nattrs < 0 || rq->nattrs > OUT_MAX_ATTRS)
-        return fail(NULL, err, SD_ERR_ARG, "attributes: too many");
+        return fail(NULL, err, SD_ERR_ARG, "attributes: %d; at most %d", rq->nattrs, OUT_MAX_ATTRS);
     for (int a = 0; a < rq->nattrs; a++) {
         if (!valid_name(rq->attrs[a].name))
             return fail(NULL, err, SD_ERR_ARG,
@@ -307,13 +312,18 @@ out_stream *out_open(const out_request *rq, out_format f, sd_error *err)
         if (!(n2 > 0))
             return fail(NULL, err, SD_ERR_ARG, "slice: the normal must not be zero");
     }
-    if (rq->colormap_attr < -1 || rq->colormap_attr >= rq->nattrs ||
-        (rq->colormap_attr >= 0 &&
-         !(isfinite(rq->colormap_min) && isfinite(rq->colormap_max) &&
-           rq->colormap_min < rq->colormap_max)))
-        return fail(NULL, err, SD_ERR_ARG, "colormap: needs an attribute and finite min < max");
-    if (!rq->complex || rq->level < 0 || rq->level >= sd_complex_levels_computed(rq->complex))
-        return fail(NULL, err, SD_ERR_ARG, "the level has not been computed");
+    if (rq->colormap_attr < -1 || rq->colormap_attr >= rq->nattrs)
+        return fail(NULL, err, SD_ERR_ARG, "colormap: attribute %d of %d", rq->colormap_attr,
+                    rq->nattrs);
+    if (rq->colormap_attr >= 0 && !(isfinite(rq->colormap_min) && isfinite(rq->colormap_max) &&
+                                    rq->colormap_min < rq->colormap_max))
+        return fail(NULL, err, SD_ERR_ARG, "colormap: min and max must be finite with min < max");
+    if (!rq->complex)
+        return fail(NULL, err, SD_ERR_ARG, "level: no complex");
+    int computed = sd_complex_levels_computed(rq->complex);
+    if (rq->level < 0 || rq->level >= computed)
+        return fail(NULL, err, SD_ERR_ARG, "level: %d has not been computed (%d levels are)",
+                    rq->level, computed);
     out_stream *s = calloc(1, sizeof *s);
     if (!s)
         return fail(NULL, err, SD_ERR_NOMEM, "out of memory");
@@ -337,7 +347,8 @@ out_stream *out_open(const out_request *rq, out_format f, sd_error *err)
     for (int a = 0; a < rq->nattrs; a++) {
         s->attr[a] = sd_level_channel(s->lv, rq->attrs[a].channel, &nc);
         if (!s->attr[a] || nc != rq->attrs[a].ncomp)
-            return fail(s, err, SD_ERR_ARG, "attributes: unknown channel");
+            return fail(s, err, SD_ERR_ARG, "attributes: \"%s\" is not a channel of %d components",
+                        rq->attrs[a].name, rq->attrs[a].ncomp);
     }
     static const unsigned part_of[5] = {OUT_PART_POINTS, OUT_PART_CURVES, OUT_PART_SURFACES,
                                         OUT_PART_SOLIDS, OUT_PART_SOLIDS};

@@ -6,7 +6,8 @@
  *   outwrite MESH.txt -l L -f glb|gltf|vtu|vtk|json -o OUT
  *            [--parts points,curves,surfaces,solids] [--slice nx,ny,nz,d]
  *            [--xattr NAME[:N]]... [--colormap NAME:min:max] [--polyhedra]
- *            [--chunk N] [--geometry] [--version V] [--stats]
+ *            [--chunk N] [--geometry] [--version V] [--compute C] [--stats]
+ *   outwrite MESH.txt --check-errors
  *
  * The text format has no attributes: `--xattr NAME:N` adds a synthetic N-component attribute
  * (default 1) whose component k at a control vertex (x,y,z) is x + k*y + k*k*z + k. Subdivision
@@ -14,12 +15,17 @@
  * positions — tests check values without trusting the writer. `--geometry` passes a precomputed
  * out_geometry (the daemon's per-level cache) instead of letting out_open compute it.
  * `--stats` prints one line: level, vertices, the cell counts per kind, boundary triangles and
- * the byte count. Exit codes: 0 ok, 1 core or writer error, 2 usage or input error.
+ * the byte count. `--parts` also takes a raw OUT_PART_* mask (a number); `--compute C` computes
+ * only levels up to C before out_open (default L). `--check-errors` runs out_open on a list of
+ * bad requests and prints one line per case: its name, the result code and the message; exit 0
+ * if every one was refused with SD_ERR_ARG.
+ * Exit codes: 0 ok, 1 core or writer error, 2 usage or input error.
  */
 #define _POSIX_C_SOURCE 200809L
 #include "../../api/out.h"
 #include "textmesh.h"
 #include <errno.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -29,12 +35,15 @@ static void usage(void)
     fprintf(stderr,
             "usage: outwrite MESH.txt [-l L] -f glb|gltf|vtu|vtk|json -o OUT [--parts LIST]\n"
             "       [--slice nx,ny,nz,d] [--xattr NAME[:N]]... [--colormap NAME:min:max]\n"
-            "       [--polyhedra] [--chunk N] [--geometry] [--version V] [--stats]\n");
+            "       [--polyhedra] [--chunk N] [--geometry] [--version V] [--compute C] [--stats]\n"
+            "       outwrite MESH.txt --check-errors\n");
     exit(2);
 }
 
 static unsigned parse_parts(const char *s)
 {
+    if (*s >= '0' && *s <= '9')
+        return (unsigned)strtoul(s, NULL, 0);
     static const char *const names[] = {"points", "curves", "surfaces", "solids"};
     unsigned mask = 0;
     char *copy = strdup(s), *save = NULL;
@@ -52,12 +61,72 @@ static unsigned parse_parts(const char *s)
     return mask;
 }
 
+/* out_open must refuse each of these with SD_ERR_ARG and a message naming the option. */
+static int check_errors(sd_complex *c)
+{
+    sd_error err;
+    if (!sd_complex_level(c, 1, &err))
+        return 1;
+    double *one = calloc(sd_level_num_vertices(sd_complex_level(c, 0, &err)), sizeof *one);
+    int ch = sd_complex_add_channel(c, one, 1, &err);
+    free(one);
+    if (ch < 0 || !sd_complex_level(c, 1, &err))
+        return 1;
+    const out_request ok = {.complex = c, .level = 1, .colormap_attr = -1, .nattrs = 1,
+                            .attrs = {{.name = "t", .channel = ch, .ncomp = 1}}};
+    struct bad { const char *name; out_request rq; int fmt; } cases[32];
+    int n = 0;
+#define CASE(nm, f, ...)                                                                           \
+    do {                                                                                           \
+        cases[n] = (struct bad){nm, ok, f};                                                        \
+        out_request *r = &cases[n++].rq;                                                           \
+        __VA_ARGS__;                                                                               \
+        (void)r;                                                                                   \
+    } while (0)
+    CASE("format", OUT_FORMAT_COUNT);
+    CASE("parts-unknown", OUT_GLB, r->parts = 16);
+    CASE("slice-zero", OUT_GLB, r->has_slice = 1, r->slice[3] = 1);
+    CASE("slice-nan", OUT_VTU, r->has_slice = 1, r->slice[0] = 1, r->slice[1] = NAN);
+    CASE("slice-inf-d", OUT_JSON, r->has_slice = 1, r->slice[2] = 1, r->slice[3] = INFINITY);
+    CASE("colormap-index", OUT_GLB, r->colormap_attr = 1);
+    CASE("colormap-negative", OUT_GLB, r->colormap_attr = -2);
+    CASE("colormap-range", OUT_GLB, r->colormap_attr = 0, r->colormap_min = 1, r->colormap_max = 1);
+    CASE("colormap-nan", OUT_GLB, r->colormap_attr = 0, r->colormap_min = NAN, r->colormap_max = 1);
+    CASE("colormap-inf", OUT_GLTF, r->colormap_attr = 0, r->colormap_max = INFINITY);
+    CASE("level-not-computed", OUT_VTK, r->level = 2);
+    CASE("level-negative", OUT_JSON, r->level = -1);
+    CASE("attributes-name", OUT_VTU, r->attrs[0].name = "a\"b");
+    CASE("attributes-empty-name", OUT_VTU, r->attrs[0].name = "");
+    CASE("attributes-null-name", OUT_VTU, r->attrs[0].name = NULL);
+    CASE("attributes-ncomp", OUT_GLB, r->attrs[0].ncomp = 0);
+    CASE("attributes-channel", OUT_GLB, r->attrs[0].channel = ch + 1);
+    CASE("attributes-ncomp-mismatch", OUT_JSON, r->attrs[0].ncomp = 2);
+    CASE("attributes-duplicate", OUT_JSON, r->nattrs = 2, r->attrs[1] = r->attrs[0]);
+    CASE("attributes-count", OUT_JSON, r->nattrs = OUT_MAX_ATTRS + 1);
+    CASE("no-complex", OUT_JSON, r->complex = NULL);
+#undef CASE
+    int bad = 0;
+    for (int i = 0; i < n; i++) {
+        sd_error e = {0};
+        out_stream *s = out_open(&cases[i].rq, (out_format)cases[i].fmt, &e);
+        printf("%s %s %s\n", cases[i].name, s ? "ACCEPTED" : sd_result_name(e.code), s ? "" : e.message);
+        bad += s != NULL || e.code != SD_ERR_ARG;
+        out_close(s);
+    }
+    out_stream *s = out_open(&ok, OUT_GLB, &err); /* and the good request is fine */
+    printf("ok %s\n", s ? "OK" : err.message);
+    bad += s == NULL;
+    out_close(s);
+    return bad ? 1 : 0;
+}
+
 int main(int argc, char **argv)
 {
     const char *path = NULL, *outpath = NULL, *fmtname = NULL, *parts = NULL, *slice = NULL,
                *cmap = NULL;
     const char *xname[OUT_MAX_ATTRS];
-    int xcomp[OUT_MAX_ATTRS], nx = 0, level = 1, poly = 0, stats = 0, use_geometry = 0;
+    int xcomp[OUT_MAX_ATTRS], nx = 0, level = 1, compute = -1, poly = 0, stats = 0,
+        use_geometry = 0, errors = 0;
     size_t chunk = 65536;
     unsigned long long version = 1;
     for (int i = 1; i < argc; i++) {
@@ -94,7 +163,11 @@ int main(int argc, char **argv)
             if (!*spec || xcomp[nx] < 1 || xcomp[nx] > 16)
                 usage();
             xname[nx++] = spec;
-        } else if (!strcmp(a, "--polyhedra"))
+        } else if (!strcmp(a, "--compute") && more)
+            compute = atoi(argv[++i]);
+        else if (!strcmp(a, "--check-errors"))
+            errors = 1;
+        else if (!strcmp(a, "--polyhedra"))
             poly = 1;
         else if (!strcmp(a, "--stats"))
             stats = 1;
@@ -108,7 +181,7 @@ int main(int argc, char **argv)
             usage();
     }
     int fmt = fmtname ? out_format_parse(fmtname) : -1;
-    if (!path || fmt < 0 || (!outpath && !stats))
+    if (!path || (!errors && (fmt < 0 || (!outpath && !stats))))
         usage();
 
     textmesh tm;
@@ -135,6 +208,8 @@ int main(int argc, char **argv)
         }
     }
 
+    if (errors)
+        return check_errors(c);
     out_request rq = {.complex = c, .level = level, .version = version, .colormap_attr = -1,
                       .octahedra_as_polyhedra = poly, .nattrs = nx};
     for (int a = 0; a < nx; a++) {
@@ -176,7 +251,19 @@ int main(int argc, char **argv)
         }
     }
 
-    const sd_level *lv = sd_complex_level(c, level, &err);
+    const sd_level *lv = sd_complex_level(c, compute >= 0 ? compute : level, &err);
+    if (lv && compute >= 0)
+        lv = compute >= level ? sd_complex_level(c, level, &err) : NULL;
+    if (!lv && compute >= 0 && compute < level) { /* out_open must refuse an uncomputed level */
+        out_stream *s = out_open(&rq, (out_format)fmt, &err);
+        if (s) {
+            fprintf(stderr, "outwrite: out_open accepted level %d with %d computed\n", level,
+                    sd_complex_levels_computed(c));
+            return 1;
+        }
+        fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
+        return 1;
+    }
     if (!lv) {
         fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
         return 1;
