@@ -5,9 +5,13 @@
 #   cold  a fresh process, one run: every page is touched for the first time
 #   warm  best of REPS runs in one process with glibc keeping freed memory (mmap_max=0), the
 #         steady state of a long-running service
+# This VM's speed drifts by up to 2x within minutes, so each Loop figure is taken ROUNDS times,
+# subdivd (1 and 2 threads) and OpenSubdiv one right after the other, and the median of each and
+# the median of the per-round ratios are printed.
 set -eu
 cd "$(dirname "$0")/.."
 REPS=${REPS:-5}
+ROUNDS=${ROUNDS:-3}
 PY=/usr/bin/python3
 mkdir -p build/bench-data
 D=build/bench-data
@@ -15,20 +19,31 @@ $PY bench/make_mesh.py torus 100 100 > $D/torus.txt
 $PY bench/make_mesh.py cubes 12 > $D/cubes12.txt
 WARM="glibc.malloc.mmap_max=0:glibc.malloc.trim_threshold=4294967295"
 best() { sed -E 's/.*seconds_best=([0-9.]+).*/\1/'; }
+median() { sort -n | awk '{a[NR] = $1} END {print a[int((NR + 1) / 2)]}'; }
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
-echo "== surface: uniform Loop (loop weights) of torus 100x100 (20000 triangles)"
+echo "== surface: uniform Loop (loop weights) of torus 100x100 (20000 triangles), $ROUNDS rounds"
+T=$(mktemp)
 for L in 1 2 3 4; do
     for mode in cold warm; do
         if [ $mode = cold ]; then reps=1; tun=""; else reps=$REPS; tun=$WARM; fi
-        ours=$(GLIBC_TUNABLES=$tun build/bench --reps $reps -w loop $D/torus.txt $L)
-        osd=$(GLIBC_TUNABLES=$tun build/osd_loop --time $reps -l $L $D/torus.txt)
-        a=$(echo "$ours" | best); b=$(echo "$osd" | best)
-        echo "$mode L$L  $ours"
-        echo "$mode L$L  $osd"
-        echo "$mode L$L  time ratio subdivd/opensubdiv = $(echo "$a $b" | awk '{printf "%.2f", $1/$2}')"
+        : > "$T"
+        for r in $(seq "$ROUNDS"); do
+            o1=$(GLIBC_TUNABLES=$tun build/bench --reps $reps -j 1 -w loop $D/torus.txt $L)
+            o2=$(GLIBC_TUNABLES=$tun build/bench --reps $reps -j 2 -w loop $D/torus.txt $L)
+            osd=$(GLIBC_TUNABLES=$tun build/osd_loop --time $reps -l $L $D/torus.txt)
+            echo "$mode L$L  $o1"
+            echo "$mode L$L  $o2"
+            echo "$mode L$L  $osd"
+            echo "$(echo "$o1" | best) $(echo "$o2" | best) $(echo "$osd" | best)" >> "$T"
+        done
+        echo "$mode L$L  median seconds: subdivd 1 thread $(awk '{print $1}' "$T" | median)," \
+            "2 threads $(awk '{print $2}' "$T" | median), opensubdiv $(awk '{print $3}' "$T" | median);" \
+            "median ratio subdivd/opensubdiv: 1 thread $(awk '{printf "%.2f\n", $1 / $3}' "$T" | median)," \
+            "2 threads $(awk '{printf "%.2f\n", $2 / $3}' "$T" | median)"
     done
 done
-echo "== solid: box-spline scheme on 12^3 cubes (10368 tetrahedra)"
+rm -f "$T"
+echo "== solid: box-spline scheme on 12^3 cubes (10368 tetrahedra), one thread"
 for L in 1 2 3; do
     echo "cold L$L  $(build/bench --reps 1 $D/cubes12.txt $L)"
     echo "warm L$L  $(GLIBC_TUNABLES=$WARM build/bench --reps $REPS $D/cubes12.txt $L)"
