@@ -18,13 +18,16 @@
  * once level L has been returned by sd_complex_level() and its rules built (sd_complex_vertex_class
  * or any call that builds them, e.g. computing level L+1), the arrays that the accessors of level
  * L return or read — channels (positions), cells, edges, origins, vertex rules and classes, solid
- * boundary — stay valid and unchanged while other levels are computed. Parts of level L that are
- * built lazily later (its rules and stencils, the derived topology of the finest level, a matrix
- * view) are only ever added, under the caller's lock; arrays already handed out are never freed
- * or moved (only sd_complex_free, set_diagonal, add_channel, set_singular and edits change
- * them). Lazily building accessors: the finest computed level is stored as its cells and points
- * only; sd_level_edges, sd_level_find_edge and sd_level_edge_singular build its edges and faces
- * the first time they are asked (so call them under the lock until the level's rules are built).
+ * boundary — stay valid and unchanged while other levels are computed. What is built lazily
+ * later (a level's rules and stencils, the edges of the finest level, a matrix view) is only
+ * added, under the caller's lock; arrays already handed out or read by these accessors are never
+ * freed or moved (only sd_complex_free, set_diagonal, add_channel and set_singular drop levels,
+ * and edits change channel values in place). The core's own working arrays (faces, per-cell
+ * edge ids) are made and dropped again inside such calls; no accessor reads them.
+ * Lazily building accessors: the finest computed level is stored as its cells and points only;
+ * sd_level_edges, sd_level_find_edge and sd_level_edge_singular build its edges the first time
+ * they are asked (so call them under the lock until the level's rules are built).
+ * sd_options.threads lets one call use more threads internally; it changes none of the above.
  */
 #ifndef SD_H
 #define SD_H
