@@ -12,6 +12,12 @@
  *
  * Both formats are a sequence of arrays produced item by item; their sizes are exact before the
  * first byte. VTU blocks carry a UInt64 byte count; legacy data are big-endian.
+ *
+ * VTU's appended blocks are stored in the reverse order of their <DataArray> elements. VTK does
+ * not care; meshio 7 does: its raw reader walks the blocks in file order, finds each one's element
+ * by `offset` and rewrites that offset (to a base64 position) as it goes, so a rewritten offset
+ * can equal a later block's and capture it. With the elements in reverse order the element it
+ * looks for always comes before every rewritten one.
  */
 #include "out_internal.h"
 #include <stdio.h>
@@ -321,23 +327,23 @@ static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
             else
                 snprintf(a->head, sizeof a->head, "%s", body);
         }
-    } else {
-        for (int i = 0; i < s->rq.nattrs; i++)
-            add_arr(st, A_ATTR, i, s->rq.attrs[i].ncomp, 8, st->npts);
-        add_arr(st, A_RULE, 0, 1, 1, st->npts);
-        add_arr(st, A_DIM, 0, 1, 1, st->ncell);
-        add_arr(st, A_KIND, 0, 1, 1, st->ncell);
-        add_arr(st, A_SRC, 0, 1, 4, st->ncell);
-        add_arr(st, A_POINTS, 0, 3, 8, st->npts);
-        a = add_arr(st, A_CONN, 0, 1, 4, st->ncell);
-        a->bytes = 4 * st->nconn;
-        add_arr(st, A_OFFS, 0, 1, 4, st->ncell);
-        add_arr(st, A_TYPES, 0, 1, 1, st->ncell);
+    } else { /* the appended blocks in the reverse order of their XML elements (see the top) */
         if (poly) {
+            add_arr(st, A_FOFFS, 0, 1, 4, st->ncell);
             add_arr(st, A_FACES, 0, 1, 4, st->r_end - st->r_poly)->bytes =
                 4ull * 33 * (st->r_end - st->r_poly);
-            add_arr(st, A_FOFFS, 0, 1, 4, st->ncell);
         }
+        add_arr(st, A_TYPES, 0, 1, 1, st->ncell);
+        add_arr(st, A_OFFS, 0, 1, 4, st->ncell);
+        a = add_arr(st, A_CONN, 0, 1, 4, st->ncell);
+        a->bytes = 4 * st->nconn;
+        add_arr(st, A_POINTS, 0, 3, 8, st->npts);
+        add_arr(st, A_SRC, 0, 1, 4, st->ncell);
+        add_arr(st, A_KIND, 0, 1, 1, st->ncell);
+        add_arr(st, A_DIM, 0, 1, 1, st->ncell);
+        add_arr(st, A_RULE, 0, 1, 1, st->npts);
+        for (int i = s->rq.nattrs - 1; i >= 0; i--)
+            add_arr(st, A_ATTR, i, s->rq.attrs[i].ncomp, 8, st->npts);
     }
     return 0;
 }
@@ -357,18 +363,20 @@ static int build_header(out_stream *s, vstate *st, sd_error *err)
                    "DATASET UNSTRUCTURED_GRID\n", s->rq.level, (unsigned long long)s->rq.version);
     } else {
         static const char *const tname[] = {[1] = "UInt8", [4] = "Int32", [8] = "Float64"};
-        uint64_t off = 0;
-        int i = 0;
+        uint64_t off[OUT_MAX_ATTRS + 12];
+        for (int k = 0; k < st->narr; k++)
+            off[k] = k ? off[k - 1] + 8 + st->a[k - 1].bytes : 0;
+        int i = st->narr - 1; /* elements in XML order = blocks from the last */
         fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" "
                    "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <UnstructuredGrid>\n"
                    "    <Piece NumberOfPoints=\"%llu\" NumberOfCells=\"%llu\">\n      <PointData>\n",
                 (unsigned long long)st->npts, (unsigned long long)st->ncell);
 #define DA(name, extra)                                                                            \
     do {                                                                                           \
-        const arr *a = &st->a[i++];                                                                \
+        const arr *a = &st->a[i];                                                                  \
         fprintf(f, "        <DataArray type=\"%s\" Name=\"%s\"%s format=\"appended\" "             \
-                   "offset=\"%llu\"/>\n", tname[a->width], name, extra, (unsigned long long)off);  \
-        off += 8 + a->bytes;                                                                       \
+                   "offset=\"%llu\"/>\n", tname[a->width], name, extra, (unsigned long long)off[i]); \
+        i--;                                                                                       \
     } while (0)
         for (int k = 0; k < s->rq.nattrs; k++) {
             char nc[48];
@@ -386,7 +394,7 @@ static int build_header(out_stream *s, vstate *st, sd_error *err)
         DA("connectivity", "");
         DA("offsets", "");
         DA("types", "");
-        if (i < st->narr) {
+        if (i >= 0) {
             DA("faces", "");
             DA("faceoffsets", "");
         }

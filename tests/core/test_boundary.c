@@ -17,7 +17,8 @@ static double det3(const double *a, const double *b, const double *c, const doub
 }
 
 /* Volume of the level's solids, from the cells: a tetrahedron's |det|/6; an octahedron's the
- * sum over its 8 faces of the cone from its centroid. */
+ * absolute value of the signed sum of the cones from its centroid over its 8 faces (consistently
+ * oriented: (p, e_k, e_k+1) and (q, e_k+1, e_k) around the equator e). */
 static double cells_volume(const sd_level *lv)
 {
     const double *x = sd_level_channel(lv, 0, NULL);
@@ -35,9 +36,12 @@ static double cells_volume(const sd_level *lv)
         for (int j = 0; j < 6; j++)
             for (int k = 0; k < 3; k++)
                 c[k] += x[3 * v[j] + k] / 6;
-        for (int pole = 0; pole < 2; pole++)
-            for (int e = 0; e < 4; e++)
-                vol += fabs(det3(c, x + 3 * v[pole], x + 3 * v[eq[e]], x + 3 * v[eq[(e + 1) & 3]])) / 6;
+        double o = 0;
+        for (int e = 0; e < 4; e++) {
+            const double *a = x + 3 * v[eq[e]], *b = x + 3 * v[eq[(e + 1) & 3]];
+            o += det3(c, x + 3 * v[0], a, b) + det3(c, x + 3 * v[1], b, a);
+        }
+        vol += fabs(o) / 6;
     }
     return vol;
 }

@@ -1,142 +1,787 @@
-"""Geometry carried by the outputs, checked independently of the writers' own bookkeeping:
-the solid boundary in glTF is closed and outward (its enclosed volume equals the volume of the
-level's tetrahedra and octahedra, computed from the JSON cells), slice points lie on the plane,
-the colour map hits viridis' published end colours, and normals are unit vectors."""
+"""The output writers (api/out*.c) through build/outwrite, checked against independent sources.
+
+Expected values never come from the file under test: counts, cells, coordinates, origins and
+rules come from `sdlevel` (a different program printing the core's level as text), the solid
+boundary and the cross-section are recomputed here from those cells, attribute values from the
+affine function `outwrite --xattr` defines (subdivision reproduces affine functions), and files
+are read back by the Khronos glTF-Validator, VTK's own readers and meshio.
+
+Meshes: a mixed complex (examples/mixed.txt), a TetGen cube (pure tets), a block of cubes, a
+closed triangle surface, and curves + points only; levels 0..2; every format.
+"""
+import base64
+import functools
+import itertools
 import json
+import os
+import pathlib
 import struct
 import subprocess
 
 import numpy as np
 import pytest
 
-from conftest import REPO, make_mesh_file
-from daemon import SUBDIVD, complex_from_text
+from conftest import REPO, SDLEVEL, make_mesh_file
+from sdtext import parse_level_text
 
-CUBE = REPO / "tests" / "cases" / "tetgen_cube" / "mesh.txt"
-MIXED = REPO / "examples" / "mixed.txt"
+OUTWRITE = pathlib.Path(os.environ.get("OUTWRITE", str(REPO / "build" / "outwrite"))).resolve()
+VALIDATOR = REPO / "tests" / "tools" / "gltf_validate.js"
+RULES = ["corner", "curve", "loop", "loop-boundary", "solid", "solid-boundary", "N1", "N2", "G1", "G2"]
+FORMATS = ["glb", "gltf", "vtu", "vtk", "json"]
+LEVELS = [0, 1, 2]
+CURVES_TEXT = """# curves and isolated points only
+v 0 0 0
+v 1 0 0
+v 2 1 0
+v 3 1 1
+v 1 2 0.5
+v 5 5 5
+v 6 5 5
+s 0 1
+s 1 2
+s 2 3
+s 1 4
+s 5
+s 6
+"""
+# planes n.x = d through each mesh's solids (none for meshes without solids); no control
+# vertex lies on them
+SLICES = {"mixed": (1, 1, 1, 0.7531), "cube": (1, 2, -0.5, 1.0123), "blocks": (0.3, -1, 2, 1.7123),
+          "surface": (0, 0, 1, 0.1), "curves": (1, 0, 0, 1.5)}
+# matplotlib's viridis at 0, 0.5 and 1 (its published 256-entry table: entries 0, 128, 255)
+VIRIDIS_0 = (0.267004, 0.004874, 0.329415)
+VIRIDIS_HALF = (0.127568, 0.566949, 0.550556)
+VIRIDIS_1 = (0.993248, 0.906157, 0.143936)
+ATTRS = ["--xattr", "temp", "--xattr", "vec:3", "--xattr", "wide:6"]
 
 
-def refine(tmp_path, body, level, name, *opts):
-    inp = tmp_path / "in.json"
-    inp.write_text(json.dumps(body))
-    out = tmp_path / name
-    subprocess.run([str(SUBDIVD), "refine", str(inp), "--level", str(level), *opts, "-o", str(out)],
-                   check=True, capture_output=True)
-    if out.suffix in (".glb", ".gltf"):  # every glTF the tests make must validate cleanly
-        r = subprocess.run(["node", str(REPO / "tests" / "tools" / "gltf_validate.js"), str(out)],
-                           capture_output=True, text=True)
-        assert r.returncode == 0, r.stdout + r.stderr
+@pytest.fixture(scope="session")
+def meshes(tmp_path_factory):
+    d = tmp_path_factory.mktemp("meshes")
+    curves = d / "curves.txt"
+    curves.write_text(CURVES_TEXT)
+    return {
+        "mixed": REPO / "examples" / "mixed.txt",
+        "cube": REPO / "tests" / "cases" / "tetgen_cube" / "mesh.txt",
+        "blocks": make_mesh_file(d, "cubes", 2),
+        "surface": make_mesh_file(d, "icosphere", 1),
+        "curves": curves,
+    }
+
+
+# ---- tools ----------------------------------------------------------------------------------
+
+
+def outwrite(mesh, level, fmt, out, *opts, check=True):
+    r = subprocess.run([str(OUTWRITE), str(mesh), "-l", str(level), "-f", fmt, "-o", str(out),
+                        *map(str, opts)], capture_output=True, text=True)
+    if check:
+        assert r.returncode == 0, r.stderr
+    return r
+
+
+def validate(*files):
+    """The Khronos validator on every file: 0 errors and 0 warnings (infos/hints allowed)."""
+    r = subprocess.run(["node", str(VALIDATOR), *map(str, files)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    return r.stdout
+
+
+@functools.lru_cache(maxsize=None)
+def sdlevel(mesh, level):
+    """The level as printed by sdlevel, with each vertex's rule (--classes)."""
+    r = subprocess.run([str(SDLEVEL), "-l", str(level), "--classes", str(mesh)], check=True,
+                       capture_output=True, text=True)
+    lv = parse_level_text(r.stdout)
+    lv["rules"] = [lv["vclass"][i]["rule"] for i in range(len(lv["verts"]))]
+    return lv
+
+
+def affine(p, k):
+    """Component k of the --xattr attribute at positions p (outwrite's definition)."""
+    return p[:, 0] + k * p[:, 1] + k * k * p[:, 2] + k
+
+
+def oct_tets(o):
+    """The 4 tetrahedra around the major diagonal p-q of octahedra (p,q,a,a2,b,b2): around the
+    equator cycle a, b, a2, b2 (API.md; docs/OUTPUTS.md)."""
+    eq = [2, 4, 3, 5]
+    return [o[:, [0, 1, eq[k], eq[(k + 1) % 4]]] for k in range(4)]
+
+
+def det(a, b, c, d):
+    return np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a)
+
+
+def cells_volume(lv):
+    """Volume of the solids: |det|/6 per tetrahedron; per octahedron the absolute value of the
+    signed sum over its 4 tetrahedra around p-q (one of them may be inverted where the
+    octahedron is not convex along that diagonal: a few at level 2)."""
+    p = lv["verts"]
+    t = lv["tetrahedra"]
+    vol = np.abs(det(*(p[t[:, k]] for k in range(4)))).sum() / 6
+    if len(lv["octahedra"]):
+        signed = sum(det(*(p[q[:, k]] for k in range(4))) for q in oct_tets(lv["octahedra"]))
+        vol += np.abs(signed).sum() / 6
+    return vol
+
+
+def independent_boundary(lv):
+    """Faces of exactly one tetrahedron or octahedron, each oriented away from its cell's
+    centroid: {sorted triple: oriented triple}."""
+    p = lv["verts"]
+    faces = {}
+    for t in lv["tetrahedra"]:
+        for k in range(4):
+            f = tuple(int(v) for j, v in enumerate(t) if j != k)
+            faces.setdefault(tuple(sorted(f)), []).append((f, p[t].mean(0)))
+    eq = [2, 4, 3, 5]
+    for o in lv["octahedra"]:
+        for pole in (0, 1):
+            for k in range(4):
+                f = (int(o[pole]), int(o[eq[k]]), int(o[eq[(k + 1) % 4]]))
+                faces.setdefault(tuple(sorted(f)), []).append((f, p[o].mean(0)))
+    out = {}
+    for key, owners in faces.items():
+        if len(owners) != 1:
+            continue
+        (a, b, c), centre = owners[0]
+        n = np.cross(p[b] - p[a], p[c] - p[a])
+        out[key] = (a, b, c) if n @ (p[[a, b, c]].mean(0) - centre) > 0 else (a, c, b)
     return out
 
 
-def read_glb(path):
-    """(gltf json, accessor reader) for a GLB file, parsed from the spec, not from our code."""
-    data = path.read_bytes()
+def slice_count(lv, plane):
+    """Cross-section triangles: 1 per tetrahedron cut 1|3, 2 per cut 2|2, octahedra as their 4
+    tetrahedra around the major diagonal."""
+    n, d = np.array(plane[:3], float), plane[3]
+    n, d = n / np.linalg.norm(n), d / np.linalg.norm(n)
+    f = lv["verts"] @ n - d
+    total = 0
+    for t in [lv["tetrahedra"], *oct_tets(lv["octahedra"])]:
+        pos = (f[t] > 0).sum(1)
+        total += int(((pos == 1) | (pos == 3)).sum() + 2 * (pos == 2).sum())
+    return total
+
+
+# ---- glTF reading (from the specification, not from our code) -------------------------------
+
+
+def split_glb(data):
     magic, version, length = struct.unpack_from("<III", data, 0)
     assert magic == 0x46546C67 and version == 2 and length == len(data)
     jlen, jtype = struct.unpack_from("<II", data, 12)
-    assert jtype == 0x4E4F534A
+    assert jtype == 0x4E4F534A and jlen % 4 == 0
     doc = json.loads(data[20:20 + jlen])
     blen, btype = struct.unpack_from("<II", data, 20 + jlen)
-    assert btype == 0x004E4942
-    bin_ = data[28 + jlen:28 + jlen + blen]
+    assert btype == 0x004E4942 and blen % 4 == 0 and 28 + jlen + blen == len(data)
+    return doc, data[28 + jlen:]
 
+
+def accessor_reader(doc, bin_):
     def accessor(i):
         a = doc["accessors"][i]
         v = doc["bufferViews"][a["bufferView"]]
         dt = {5126: np.float32, 5125: np.uint32, 5123: np.uint16}[a["componentType"]]
         n = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[a["type"]]
-        arr = np.frombuffer(bin_, dtype=dt, count=a["count"] * n,
+        arr = np.frombuffer(bin_, dtype=np.dtype(dt).newbyteorder("<"), count=a["count"] * n,
                             offset=v.get("byteOffset", 0) + a.get("byteOffset", 0))
         return arr.reshape(a["count"], n) if n > 1 else arr
-    return doc, accessor
+    return accessor
 
 
-def tet_volume(p, t):
-    a, b, c, d = (p[t[:, k]] for k in range(4))
-    return np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a) / 6
+def read_glb(path):
+    doc, bin_ = split_glb(path.read_bytes())
+    return doc, accessor_reader(doc, bin_)
 
 
-def oct_volume(p, o):
-    """An octahedron (p,q,a,a2,b,b2) is 4 tetrahedra around p-q; absolute volumes."""
-    total = 0
-    for a, b in ((2, 4), (4, 3), (3, 5), (5, 2)):
-        total += np.abs(tet_volume(p, o[:, [0, 1, a, b]]))
-    return total
+def primitives_by_role(doc, lv, nslice):
+    """Map the primitives to points/curves/surfaces/solids/slice: documented order, empty parts
+    left out."""
+    roles = [r for r, n in (("points", len(lv["points"])), ("curves", len(lv["edges"])),
+                            ("surfaces", len(lv["triangles"])),
+                            ("solids", len(lv["tetrahedra"]) + len(lv["octahedra"])),
+                            ("slice", nslice)) if n]
+    prims = doc["meshes"][0]["primitives"] if roles else []
+    assert len(prims) == len(roles)
+    return dict(zip(roles, prims))
 
 
-@pytest.mark.parametrize("level", [0, 1, 2])
-def test_solid_boundary_closed_outward(tmp_path, level):
-    body = complex_from_text(CUBE)
-    j = json.loads(refine(tmp_path, body, level, "l.json").read_text())
-    p = np.array(j["vertices"])
-    tets = np.array(j["cells"]["tetrahedra"], dtype=np.int64).reshape(-1, 4)
-    octs = np.array(j["cells"]["octahedra"], dtype=np.int64).reshape(-1, 6)
-    vol = np.abs(tet_volume(p, tets)).sum() + (oct_volume(p, octs).sum() if len(octs) else 0)
-    doc, acc = read_glb(refine(tmp_path, body, level, "l.glb"))
-    prims = doc["meshes"][0]["primitives"]
-    assert len(prims) == 1 and prims[0]["mode"] == 4  # a pure solid: only its boundary
-    pos = acc(prims[0]["attributes"]["POSITION"]).astype(np.float64)
-    tri = acc(prims[0]["indices"]).astype(np.int64).reshape(-1, 3)
-    a, b, c = pos[tri[:, 0]], pos[tri[:, 1]], pos[tri[:, 2]]
-    enclosed = np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6  # divergence theorem
+# ---- the level in every format, compared with sdlevel -----------------------------------------
+
+
+@pytest.mark.parametrize("level", LEVELS)
+@pytest.mark.parametrize("name", ["mixed", "cube", "blocks", "surface", "curves"])
+def test_gltf(tmp_path, meshes, name, level):
+    mesh = meshes[name]
+    lv = sdlevel(mesh, level)
+    p = lv["verts"]
+    lo, hi = p[:, 0].min(), p[:, 0].max()
+    lo, hi = lo + 0.25 * (hi - lo), hi - 0.25 * (hi - lo)
+    opts = [*ATTRS, "--colormap", f"temp:{lo!r}:{hi!r}", "--version", 7]
+    glb, gltf = tmp_path / "l.glb", tmp_path / "l.gltf"
+    outwrite(mesh, level, "glb", glb, *opts)
+    outwrite(mesh, level, "gltf", gltf, *opts)
+    validate(glb, gltf)
+    doc, bin_ = split_glb(glb.read_bytes())
+    acc = accessor_reader(doc, bin_)
+
+    # .gltf: the same document, its buffer as a base64 data: URI of the same bytes
+    tdoc = json.loads(gltf.read_text())
+    uri = tdoc["buffers"][0].pop("uri")
+    prefix = "data:application/octet-stream;base64,"
+    assert uri.startswith(prefix) and base64.b64decode(uri[len(prefix):]) == bin_
+    assert tdoc == doc
+
+    assert doc["asset"]["version"] == "2.0" and doc["asset"]["generator"] == "subdivd"
+    assert doc["asset"]["extras"] == {"level": level, "version": 7}
+    mat = doc["materials"][0]
+    assert mat["pbrMetallicRoughness"]["metallicFactor"] == 0 and mat["doubleSided"] is True
+    for v in doc["bufferViews"]:
+        assert v.get("byteOffset", 0) % 4 == 0 and v["target"] in (34962, 34963)
+        assert "byteStride" not in v or v["target"] == 34962
+
+    prims = primitives_by_role(doc, lv, 0)
+    assert doc["nodes"][0].get("mesh") == (0 if prims else None)
+    index_type = 5123 if len(p) <= 65535 else 5125
+    expect = {"points": (0, lv["points"]), "curves": (1, lv["edges"]),
+              "surfaces": (4, lv["triangles"])}
+    for role, (mode, cells) in expect.items():
+        if role in prims:
+            pr = prims[role]
+            assert pr["mode"] == mode
+            assert doc["accessors"][pr["indices"]]["componentType"] == index_type
+            np.testing.assert_array_equal(acc(pr["indices"]), cells.reshape(-1))
+    if "solids" in prims:
+        pr = prims["solids"]
+        tri = acc(pr["indices"]).astype(np.int64).reshape(-1, 3)
+        bnd = independent_boundary(lv)
+        assert len(tri) == len(bnd)
+        for t in tri:  # the same faces, each oriented outward
+            key = tuple(sorted(int(v) for v in t))
+            ref = bnd[key]
+            assert tuple(t) in (ref, ref[1:] + ref[:1], ref[2:] + ref[:2])
+    for pr in prims.values():
+        a = pr["attributes"]
+        pos = acc(a["POSITION"])
+        np.testing.assert_array_equal(pos, p.astype(np.float32))
+        assert "NORMAL" in a if pr["mode"] == 4 else "NORMAL" not in a
+        if "NORMAL" in a:
+            assert np.allclose(np.linalg.norm(acc(a["NORMAL"]), axis=1), 1, atol=1e-6)
+        np.testing.assert_allclose(acc(a["_TEMP"]), affine(p, 0), rtol=1e-6, atol=1e-5)
+        for k in range(3):
+            np.testing.assert_allclose(acc(a["_VEC"])[:, k], affine(p, k), rtol=1e-6, atol=1e-5)
+        wide = acc(a["_WIDE"])  # 6 components: the first 4 are written
+        assert wide.shape == (len(p), 4)
+        for k in range(4):
+            np.testing.assert_allclose(wide[:, k], affine(p, k), rtol=1e-6, atol=1e-5)
+        assert [RULES[int(r)] for r in acc(a["_RULE"])] == lv["rules"]
+        col = acc(a["COLOR_0"])
+        assert ((col >= 0) & (col <= 1)).all()
+        x = p[:, 0]
+        np.testing.assert_allclose(col[x <= lo], np.tile(VIRIDIS_0, ((x <= lo).sum(), 1)), atol=1e-6)
+        np.testing.assert_allclose(col[x >= hi], np.tile(VIRIDIS_1, ((x >= hi).sum(), 1)), atol=1e-6)
+    # POSITION min/max are those of the written floats (the validator checks it too)
+    if prims:
+        a = doc["accessors"][next(iter(prims.values()))["attributes"]["POSITION"]]
+        f = p.astype(np.float32)
+        # printed with 9 digits: parsed back to float32 they are the written values exactly
+        np.testing.assert_array_equal(np.float32(a["min"]), f.min(0))
+        np.testing.assert_array_equal(np.float32(a["max"]), f.max(0))
+
+
+def test_gltf_normals_point_outward(tmp_path, meshes):
+    """On a closed outward sphere the area-weighted normals point away from the centre; on the
+    pure solid they are the boundary's, outward too."""
+    for name, level in (("surface", 2), ("cube", 1)):
+        lv = sdlevel(meshes[name], level)
+        outwrite(meshes[name], level, "glb", tmp_path / "n.glb")
+        doc, acc = read_glb(tmp_path / "n.glb")
+        pr = doc["meshes"][0]["primitives"][0]
+        nrm = acc(pr["attributes"]["NORMAL"]).astype(float)
+        used = np.unique(acc(pr["indices"]))
+        centre = lv["verts"].mean(0)
+        assert (np.einsum("ij,ij->i", nrm[used], lv["verts"][used] - centre) > 0).all()
+
+
+@pytest.mark.parametrize("fmt", ["vtu", "vtk"])
+@pytest.mark.parametrize("level", LEVELS)
+@pytest.mark.parametrize("name", ["mixed", "cube", "blocks", "surface", "curves"])
+def test_vtk(tmp_path, meshes, name, level, fmt):
+    import meshio
+    import vtk
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    lv = sdlevel(meshes[name], level)
+    p = lv["verts"]
+    f = tmp_path / f"l.{fmt}"
+    outwrite(meshes[name], level, fmt, f, *ATTRS)
+    if fmt == "vtu":
+        text = f.read_bytes()
+        head = text[:text.index(b"<AppendedData")]
+        assert b'version="1.0"' in head and b'header_type="UInt64"' in head
+        assert b'byte_order="LittleEndian"' in head
+        assert text.endswith(b"\n  </AppendedData>\n</VTKFile>\n")
+    else:
+        assert f.read_bytes().startswith(b"# vtk DataFile Version 3.0\n")
+    ntet, noct = len(lv["tetrahedra"]), len(lv["octahedra"])
+    counts = {1: len(lv["points"]), 3: len(lv["edges"]), 5: len(lv["triangles"]), 10: ntet + 4 * noct}
+    counts = {k: v for k, v in counts.items() if v}
+
+    r = vtk.vtkXMLUnstructuredGridReader() if fmt == "vtu" else vtk.vtkUnstructuredGridReader()
+    r.SetFileName(str(f))
+    r.Update()
+    g = r.GetOutput()
+    pts = vtk_to_numpy(g.GetPoints().GetData())
+    np.testing.assert_array_equal(pts, p)  # Float64 both ways: exact
+    types = np.array([g.GetCellType(i) for i in range(g.GetNumberOfCells())])
+    assert (np.diff(types) >= 0).all()  # sorted by type
+    assert {int(t): int((types == t).sum()) for t in np.unique(types)} == counts
+    conn = [[g.GetCell(i).GetPointId(k) for k in range(g.GetCell(i).GetNumberOfPoints())]
+            for i in range(g.GetNumberOfCells())]
+    cd, pd = g.GetCellData(), g.GetPointData()
+    dim = vtk_to_numpy(cd.GetArray("dimension"))
+    kind = vtk_to_numpy(cd.GetArray("kind"))
+    src = vtk_to_numpy(cd.GetArray("source_cell"))
+    np.testing.assert_array_equal(dim, [{1: 0, 3: 1, 5: 2, 10: 3}[t] for t in types])
+    start = 0
+    for k, (key, n) in enumerate((("points", len(lv["points"])), ("edges", len(lv["edges"])),
+                                  ("triangles", len(lv["triangles"])), ("tetrahedra", ntet))):
+        np.testing.assert_array_equal(np.array(conn[start:start + n], dtype=np.int64).reshape(-1, lv[key].shape[1]), lv[key])
+        np.testing.assert_array_equal(kind[start:start + n], k)
+        np.testing.assert_array_equal(src[start:start + n], np.arange(n))
+        start += n
+    if noct:
+        split = np.array(conn[start:], dtype=np.int64).reshape(noct, 4, 4)
+        np.testing.assert_array_equal(kind[start:], 4)
+        np.testing.assert_array_equal(src[start:], np.repeat(np.arange(noct), 4))
+        for o, tets in zip(lv["octahedra"], split):
+            assert set(tets.reshape(-1)) == set(o)  # 4 tets filling the octahedron ...
+            assert all(o[0] in t and o[1] in t for t in tets)  # ... around its major diagonal
+    tets = np.array([c for c, t in zip(conn, types) if t == 10], dtype=np.int64).reshape(-1, 4)
+    if len(tets):  # positively oriented: every tetrahedron; each octahedron's 4 as a whole
+        vol = det(*(p[tets[:, k]] for k in range(4)))
+        assert (vol[:ntet] > 0).all()
+        assert (vol[ntet:].reshape(-1, 4).sum(1) > 0).all()
+        # a sub-tetrahedron is inverted only where its octahedron is not convex along p-q
+        assert (vol[ntet:] <= 0).sum() <= 1e-3 * len(vol[ntet:]) if level >= 2 else (vol > 0).all()
+    rule = vtk_to_numpy(pd.GetArray("rule"))
+    assert [RULES[int(x)] for x in rule] == lv["rules"]
+    np.testing.assert_allclose(vtk_to_numpy(pd.GetArray("temp")), affine(p, 0), rtol=1e-12, atol=1e-12)
+    wide = vtk_to_numpy(pd.GetArray("wide"))
+    assert wide.shape == (len(p), 6)
+    for k in range(6):
+        np.testing.assert_allclose(wide[:, k], affine(p, k), rtol=1e-12, atol=1e-12)
+
+    m = meshio.read(str(f))
+    np.testing.assert_array_equal(m.points, p)
+    names = {"vertex": 1, "line": 3, "triangle": 5, "tetra": 10}
+    assert {names[c.type]: len(c.data) for c in m.cells} == counts
+    assert set(m.cell_data) >= {"dimension", "kind", "source_cell"}
+    assert set(m.point_data) >= {"temp", "vec", "wide", "rule"}
+    np.testing.assert_array_equal(np.concatenate([c.data.reshape(-1) for c in m.cells]),
+                                  np.concatenate([np.array(c, dtype=np.int64) for c in conn]) if conn else [])
+
+
+@pytest.mark.parametrize("level", LEVELS)
+@pytest.mark.parametrize("name", ["mixed", "cube", "surface", "curves"])
+def test_json(tmp_path, meshes, name, level):
+    lv = sdlevel(meshes[name], level)
+    f = tmp_path / "l.json"
+    outwrite(meshes[name], level, "json", f, "--xattr", "temp", "--xattr", "vec:3", "--version", 42)
+    j = json.loads(f.read_text())
+    assert list(j) == ["level", "version", "vertices", "cells", "attributes", "rules", "origin"]
+    assert j["level"] == level and j["version"] == 42
+    np.testing.assert_array_equal(np.array(j["vertices"]).reshape(-1, 3), lv["verts"])  # %.17g
+    for key in ("points", "edges", "triangles", "tetrahedra", "octahedra"):
+        ours = np.array(j["cells"][key], dtype=np.int64).reshape(-1, lv[key].shape[1])
+        np.testing.assert_array_equal(ours, lv[key])
+    assert list(j["attributes"]) == ["temp", "vec"]
+    np.testing.assert_allclose(j["attributes"]["temp"], affine(lv["verts"], 0), rtol=1e-12, atol=1e-12)
+    vec = np.array(j["attributes"]["vec"])
+    for k in range(3):
+        np.testing.assert_allclose(vec[:, k], affine(lv["verts"], k), rtol=1e-12, atol=1e-12)
+    assert j["rules"] == lv["rules"]
+    o = j["origin"]
+    assert len(o["vertex_of"]) == len(o["edge_of"]) == len(o["cell_of"]) == len(lv["verts"])
+    for i, tag in enumerate(lv["origins"]):
+        want = {"I": lambda: (i, None, -1),  # level 0: every vertex is its own origin
+                "V": lambda: (tag[1], None, -1),
+                "E": lambda: (-1, [tag[1], tag[2]], -1),
+                "C": lambda: (-1, None, tag[1])}[tag[0]]()
+        assert (o["vertex_of"][i], o["edge_of"][i], o["cell_of"][i]) == want, i
+
+
+def test_formats_agree(tmp_path, meshes):
+    """The same level in every format: positions equal (float32 in glTF), cells equal."""
+    mesh, level = meshes["mixed"], 2
+    for fmt in FORMATS:
+        outwrite(mesh, level, fmt, tmp_path / f"a.{fmt}")
+    j = json.loads((tmp_path / "a.json").read_text())
+    x = np.array(j["vertices"])
+    doc, acc = read_glb(tmp_path / "a.glb")
+    np.testing.assert_allclose(acc(doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"]), x,
+                               rtol=1e-7, atol=1e-7)
+    import meshio
+    for fmt in ("vtu", "vtk"):
+        np.testing.assert_array_equal(meshio.read(str(tmp_path / f"a.{fmt}")).points, x)
+
+
+# ---- streaming -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.parametrize("name,level", [("mixed", 2), ("cube", 1)])
+def test_chunks_identical(tmp_path, meshes, name, level, fmt):
+    """Any read size gives the same bytes (and the size announced by out_size: outwrite checks
+    it); so does the precomputed per-level geometry the daemon caches."""
+    opts = [*ATTRS, "--colormap", "temp:0:1", "--slice", ",".join(map(str, SLICES[name]))]
+    ref = tmp_path / f"ref.{fmt}"
+    outwrite(meshes[name], level, fmt, ref, *opts, "--chunk", 65536)
+    data = ref.read_bytes()
+    for extra in (["--chunk", 1], ["--chunk", 7], ["--chunk", 4096], ["--chunk", (1 << 20) + 3],
+                  ["--geometry"], ["--geometry", "--chunk", 3]):
+        f = tmp_path / f"c.{fmt}"
+        outwrite(meshes[name], level, fmt, f, *opts, *extra)
+        assert f.read_bytes() == data, extra
+
+
+def test_large_level_u32_indices(tmp_path):
+    """More than 65535 vertices: 32-bit indices, still validator-clean; chunked output the same."""
+    mesh = make_mesh_file(tmp_path, "torus", 150, 150)
+    glb = tmp_path / "t.glb"
+    r = outwrite(mesh, 1, "glb", glb, "--stats", "--chunk", 5)
+    nv = int(r.stdout.split()[3])
+    assert nv > 65535
+    validate(glb)
+    doc, acc = read_glb(glb)
+    pr = doc["meshes"][0]["primitives"][0]
+    assert doc["accessors"][pr["indices"]]["componentType"] == 5125
+    assert int(acc(pr["indices"]).max()) == nv - 1
+
+
+# ---- parts ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("parts", ["points", "curves", "surfaces", "solids", "points,solids",
+                                   "curves,surfaces", "points,curves,surfaces,solids"])
+def test_parts(tmp_path, meshes, parts):
+    mesh, level = meshes["mixed"], 1
+    lv = sdlevel(mesh, level)
+    want = set(parts.split(","))
+    keys = {"points": ["points"], "curves": ["edges"], "surfaces": ["triangles"],
+            "solids": ["tetrahedra", "octahedra"]}
+    outwrite(mesh, level, "json", tmp_path / "p.json", "--parts", parts)
+    j = json.loads((tmp_path / "p.json").read_text())
+    assert len(j["vertices"]) == len(lv["verts"])  # every vertex stays (shared numbering)
+    for part, ks in keys.items():
+        for k in ks:
+            n = len(j["cells"][k])
+            assert n == (len(lv[k]) if part in want else 0)
+    outwrite(mesh, level, "glb", tmp_path / "p.glb", "--parts", parts, "--slice", "1,1,1,0.7531")
+    validate(tmp_path / "p.glb")
+    doc, _ = read_glb(tmp_path / "p.glb")
+    modes = [p["mode"] for p in doc["meshes"][0]["primitives"]]
+    expect = [m for part, m in (("points", [0]), ("curves", [1]), ("surfaces", [4]),
+                                ("solids", [4, 4])) if part in want for m in m]  # solids: + slice
+    assert modes == expect
+    outwrite(mesh, level, "vtu", tmp_path / "p.vtu", "--parts", parts)
+    import meshio
+    m = meshio.read(str(tmp_path / "p.vtu"))
+    got = {c.type: len(c.data) for c in m.cells}
+    vt = {"points": ("vertex", len(lv["points"])), "curves": ("line", len(lv["edges"])),
+          "surfaces": ("triangle", len(lv["triangles"])),
+          "solids": ("tetra", len(lv["tetrahedra"]) + 4 * len(lv["octahedra"]))}
+    assert got == dict(vt[p] for p in want)
+
+
+def test_nothing_to_draw(tmp_path, meshes):
+    """A selection with no cells: a valid glTF without mesh, a VTU with no cells, empty JSON."""
+    mesh = meshes["surface"]
+    for fmt in ("glb", "gltf"):
+        outwrite(mesh, 1, fmt, tmp_path / f"e.{fmt}", "--parts", "points,curves,solids",
+                 "--slice", "0,0,1,0", "--xattr", "t", "--colormap", "t:0:1")
+        validate(tmp_path / f"e.{fmt}")
+    doc, _ = read_glb(tmp_path / "e.glb")
+    assert "meshes" not in doc and "mesh" not in doc["nodes"][0]
+    import vtk
+    outwrite(mesh, 1, "vtu", tmp_path / "e.vtu", "--parts", "points")
+    r = vtk.vtkXMLUnstructuredGridReader()
+    r.SetFileName(str(tmp_path / "e.vtu"))
+    r.Update()
+    assert r.GetOutput().GetNumberOfCells() == 0
+    assert r.GetOutput().GetNumberOfPoints() == len(sdlevel(mesh, 1)["verts"])
+    # (meshio 7 cannot read a grid without cells: IndexError in _vtk_common, not checked here)
+    outwrite(mesh, 1, "json", tmp_path / "e.json", "--parts", "solids")
+    j = json.loads((tmp_path / "e.json").read_text())
+    assert all(v == [] for v in j["cells"].values())
+
+
+# ---- the solid boundary --------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("level", LEVELS)
+@pytest.mark.parametrize("name", ["mixed", "cube", "blocks"])
+def test_solid_boundary_encloses_the_solid(tmp_path, meshes, name, level):
+    """Divergence theorem over the glTF solids primitive (its indices on the float64 positions):
+    the enclosed volume is positive and equals the volume of the cells; closed (each directed
+    edge meets its reverse once)."""
+    lv = sdlevel(meshes[name], level)
+    outwrite(meshes[name], level, "glb", tmp_path / "b.glb", "--parts", "solids")
+    doc, acc = read_glb(tmp_path / "b.glb")
+    (pr,) = doc["meshes"][0]["primitives"]
+    tri = acc(pr["indices"]).astype(np.int64).reshape(-1, 3)
+    p = lv["verts"]
+    a, b, c = p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]]
+    enclosed = np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6
+    vol = cells_volume(lv)
     assert enclosed > 0
-    assert abs(enclosed - vol) <= 1e-5 * vol
-    # closed: every boundary edge is used twice, once in each direction
-    edges = {}
+    assert abs(enclosed - vol) <= 1e-9 * vol
+    directed = {}
     for t in tri:
         for k in range(3):
-            e = (t[k], t[(k + 1) % 3])
-            edges[e] = edges.get(e, 0) + 1
-    assert all(edges.get((b_, a_), 0) == 1 for (a_, b_) in edges)
-    nrm = acc(prims[0]["attributes"]["NORMAL"])
-    assert np.allclose(np.linalg.norm(nrm, axis=1), 1, atol=1e-6)
+            e = (int(t[k]), int(t[(k + 1) % 3]))
+            directed[e] = directed.get(e, 0) + 1
+    assert all(n == 1 and directed.get((e[1], e[0])) == 1 for e, n in directed.items())
 
 
-def test_slice_on_plane(tmp_path):
-    body = complex_from_text(CUBE)
-    n, d = np.array([1.0, 2.0, -0.5]), 0.1
-    j = json.loads(refine(tmp_path, body, 1, "s.json", "--slice", "1,2,-0.5,0.1").read_text())
-    sv = np.array(j["slice"]["vertices"])
-    assert len(sv) > 0 and len(j["slice"]["triangles"]) * 3 == len(sv)
-    assert np.abs(sv @ n - d).max() < 1e-9 * np.linalg.norm(n)
-    lo, hi = np.array(j["vertices"]).min(0), np.array(j["vertices"]).max(0)
-    assert (sv >= lo - 1e-12).all() and (sv <= hi + 1e-12).all()
-    # the slice primitive of the GLB has the same points (float32) and the plane's normal
-    doc, acc = read_glb(refine(tmp_path, body, 1, "s.glb", "--slice", "1,2,-0.5,0.1"))
-    sp = doc["meshes"][0]["primitives"][-1]
-    assert "indices" not in sp
-    np.testing.assert_allclose(acc(sp["attributes"]["POSITION"]), sv, atol=1e-6)
-    np.testing.assert_allclose(acc(sp["attributes"]["NORMAL"]), np.tile(n / np.linalg.norm(n), (len(sv), 1)), atol=1e-6)
-
-
-def test_colormap_endpoints(tmp_path):
-    body = complex_from_text(MIXED)
-    body["attributes"] = {"t": [float(i) for i in range(len(body["vertices"]))]}
-    doc, acc = read_glb(refine(tmp_path, body, 0, "c.glb", "--colormap", "t:1:6"))
-    prim = doc["meshes"][0]["primitives"][0]
-    col = acc(prim["attributes"]["COLOR_0"])
-    t = acc(prim["attributes"]["_T"])
-    assert ((col >= 0) & (col <= 1)).all()
-    # matplotlib's viridis(0) = (0.267004, 0.004874, 0.329415), viridis(1) = (0.993248, 0.906157, 0.143936)
-    np.testing.assert_allclose(col[t <= 1], [[0.267004, 0.004874, 0.329415]] * int((t <= 1).sum()), atol=1e-6)
-    np.testing.assert_allclose(col[t >= 6], [[0.993248, 0.906157, 0.143936]] * int((t >= 6).sum()), atol=1e-6)
-    # rules as a float attribute: the values are sd_rule ids, consistent with the JSON names
-    j = json.loads(refine(tmp_path, body, 0, "c.json").read_text())
-    names = ["corner", "curve", "loop", "loop-boundary", "solid", "solid-boundary", "N1", "N2", "G1", "G2"]
-    assert [names[int(r)] for r in acc(prim["attributes"]["_RULE"])] == j["rules"]
-
-
-def test_polyhedra_vtu(tmp_path):
+def test_polyhedra_vtu(tmp_path, meshes):
+    import meshio
     import vtk
-    body = complex_from_text(CUBE)
-    f = refine(tmp_path, body, 1, "p.vtu", "--octahedra", "polyhedra")
+    lv = sdlevel(meshes["cube"], 1)
+    f = tmp_path / "p.vtu"
+    outwrite(meshes["cube"], 1, "vtu", f, "--polyhedra")
     r = vtk.vtkXMLUnstructuredGridReader()
     r.SetFileName(str(f))
     r.Update()
     g = r.GetOutput()
-    ntet = sum(1 for s in body["simplices"] if len(s) == 4)
     types = [g.GetCellType(i) for i in range(g.GetNumberOfCells())]
-    assert types.count(10) == 4 * ntet and types.count(42) == ntet
-    oct_cell = g.GetCell(types.index(42))
-    assert oct_cell.GetNumberOfFaces() == 8 and oct_cell.GetNumberOfPoints() == 6
+    assert types.count(10) == len(lv["tetrahedra"]) and types.count(42) == len(lv["octahedra"])
+    assert types == sorted(types)
+    p = lv["verts"]
+    oct_vol = 0
+    for k, o in enumerate(lv["octahedra"]):
+        cell = g.GetCell(types.index(42) + k)
+        assert cell.GetNumberOfFaces() == 8 and cell.GetNumberOfPoints() == 6
+        assert {cell.GetPointId(i) for i in range(6)} == set(o)
+        centre = p[o].mean(0)
+        for fi in range(8):  # every face outward: the cell's centre behind it
+            face = cell.GetFace(fi)
+            ids = [face.GetPointId(i) for i in range(3)]
+            x = p[ids]
+            nrm = np.cross(x[1] - x[0], x[2] - x[0])
+            assert nrm @ (x.mean(0) - centre) > 0
+            oct_vol += nrm @ x[0] / 6
+    expect = cells_volume({"verts": p, "tetrahedra": np.zeros((0, 4), int), "octahedra": lv["octahedra"]})
+    assert abs(oct_vol - expect) <= 1e-9 * expect
+    # legacy VTK has no polyhedra: the request falls back to tetrahedra
+    outwrite(meshes["cube"], 1, "vtk", tmp_path / "p.vtk", "--polyhedra")
+    m = meshio.read(str(tmp_path / "p.vtk"))
+    assert {c.type: len(c.data) for c in m.cells} == {"tetra": len(lv["tetrahedra"]) + 4 * len(lv["octahedra"])}
+
+
+# ---- the cross-section ---------------------------------------------------------------------
+
+
+def boundary_section_area(lv, n, d):
+    """Area enclosed by the plane's intersection with the outward boundary (Green's theorem,
+    each segment oriented along n x N)."""
+    p = lv["verts"]
+    area = 0.0
+    for a, b, c in independent_boundary(lv).values():
+        x = p[[a, b, c]]
+        f = x @ n - d
+        cuts = []
+        for i, j in ((0, 1), (1, 2), (2, 0)):
+            if (f[i] > 0) != (f[j] > 0):
+                cuts.append(x[i] + f[i] / (f[i] - f[j]) * (x[j] - x[i]))
+        if len(cuts) != 2:
+            continue
+        u, v = cuts
+        N = np.cross(x[1] - x[0], x[2] - x[0])
+        if (v - u) @ np.cross(n, N) < 0:
+            u, v = v, u
+        area += n @ np.cross(u, v) / 2
+    return area
+
+
+@pytest.mark.parametrize("level", LEVELS)
+@pytest.mark.parametrize("name", ["mixed", "cube", "blocks"])
+def test_slice(tmp_path, meshes, name, level):
+    lv = sdlevel(meshes[name], level)
+    plane = SLICES[name]
+    n0 = np.array(plane[:3], float)
+    n, d = n0 / np.linalg.norm(n0), plane[3] / np.linalg.norm(n0)
+    assert (np.abs(lv["verts"] @ n - d) > 1e-9).all()  # no vertex on the plane: a clean test
+    arg = ",".join(map(str, plane))
+    opts = ["--slice", arg, "--xattr", "temp", "--xattr", "vec:3", "--colormap", "temp:0:2"]
+    outwrite(meshes[name], level, "json", tmp_path / "s.json", *opts)
+    j = json.loads((tmp_path / "s.json").read_text())
+    sv = np.array(j["slice"]["vertices"]).reshape(-1, 3)
+    st = np.array(j["slice"]["triangles"], dtype=np.int64).reshape(-1, 3)
+    ns = slice_count(lv, plane)
+    assert ns > 0 and len(st) == ns and len(sv) == 3 * ns
+    assert np.abs(sv @ n0 - plane[3]).max() < 1e-9 * np.linalg.norm(n0)  # on the plane
+    solid = np.unique(np.concatenate([lv["tetrahedra"].reshape(-1), lv["octahedra"].reshape(-1)]))
+    lo, hi = lv["verts"][solid].min(0), lv["verts"][solid].max(0)
+    assert (sv >= lo - 1e-12).all() and (sv <= hi + 1e-12).all()  # inside the solid's box
+    cr = np.cross(sv[st[:, 1]] - sv[st[:, 0]], sv[st[:, 2]] - sv[st[:, 0]])
+    assert (cr @ n > -1e-15).all()  # facing +n
+    area = np.linalg.norm(cr, axis=1).sum() / 2
+    ref = boundary_section_area(lv, n, d)
+    assert abs(area - ref) <= 1e-9 * ref, (area, ref)
+
+    # VTU: the same points after the level's, triangles marked as slice cells, attributes
+    # interpolated (an affine function stays exact)
+    import vtk
+    from vtk.util.numpy_support import vtk_to_numpy
+    outwrite(meshes[name], level, "vtu", tmp_path / "s.vtu", *opts)
+    r = vtk.vtkXMLUnstructuredGridReader()
+    r.SetFileName(str(tmp_path / "s.vtu"))
+    r.Update()
+    g = r.GetOutput()
+    nv = len(lv["verts"])
+    pts = vtk_to_numpy(g.GetPoints().GetData())
+    np.testing.assert_array_equal(pts[nv:], sv)
+    kind = vtk_to_numpy(g.GetCellData().GetArray("kind"))
+    dim = vtk_to_numpy(g.GetCellData().GetArray("dimension"))
+    src = vtk_to_numpy(g.GetCellData().GetArray("source_cell"))
+    sl = np.flatnonzero(kind == 5)
+    assert len(sl) == ns and (dim[sl] == 2).all() and all(g.GetCellType(int(i)) == 5 for i in sl)
+    assert src[sl].max() < max(len(lv["tetrahedra"]), len(lv["octahedra"]))
+    conn = np.array([[g.GetCell(int(i)).GetPointId(k) for k in range(3)] for i in sl])
+    np.testing.assert_array_equal(conn, nv + st)
+    pd = g.GetPointData()
+    np.testing.assert_allclose(vtk_to_numpy(pd.GetArray("temp"))[nv:], affine(sv, 0), rtol=1e-9, atol=1e-12)
+    assert (vtk_to_numpy(pd.GetArray("rule"))[nv:] == 255).all()
+
+    # glTF: the last primitive, non-indexed, own POSITION, plane normal, attributes, colours
+    outwrite(meshes[name], level, "glb", tmp_path / "s.glb", *opts)
+    validate(tmp_path / "s.glb")
+    doc, acc = read_glb(tmp_path / "s.glb")
+    prims = primitives_by_role(doc, lv, ns)
+    sp = prims["slice"]
+    assert sp["mode"] == 4 and "indices" not in sp
+    a = sp["attributes"]
+    np.testing.assert_array_equal(acc(a["POSITION"]), sv.astype(np.float32))
+    np.testing.assert_allclose(acc(a["NORMAL"]), np.tile(n, (len(sv), 1)), atol=1e-6)
+    np.testing.assert_allclose(acc(a["_TEMP"]), affine(sv, 0), rtol=1e-6, atol=1e-5)
+    np.testing.assert_allclose(acc(a["_VEC"])[:, 2], affine(sv, 2), rtol=1e-6, atol=1e-5)
+    col = acc(a["COLOR_0"])
+    assert ((col >= 0) & (col <= 1)).all()
+    t = affine(sv, 0)
+    np.testing.assert_allclose(col[t <= 0], np.tile(VIRIDIS_0, ((t <= 0).sum(), 1)), atol=1e-6)
+
+
+def test_slice_area_of_the_unit_cube(tmp_path, meshes):
+    """Level 0 of the TetGen cube is [0,1]^3: the plane x = 0.37 cuts a unit square."""
+    outwrite(meshes["cube"], 0, "json", tmp_path / "q.json", "--slice", "2,0,0,0.74")
+    j = json.loads((tmp_path / "q.json").read_text())
+    sv = np.array(j["slice"]["vertices"]).reshape(-1, 3)
+    st = np.array(j["slice"]["triangles"]).reshape(-1, 3)
+    area = np.linalg.norm(np.cross(sv[st[:, 1]] - sv[st[:, 0]], sv[st[:, 2]] - sv[st[:, 0]]), axis=1).sum() / 2
+    assert abs(area - 1) < 1e-12 and np.allclose(sv[:, 0], 0.37, atol=1e-15)
+
+
+def test_slice_without_solids(tmp_path, meshes):
+    """No solid cut: an empty slice (JSON), no slice primitive/cells."""
+    for name in ("surface", "curves"):
+        outwrite(meshes[name], 1, "json", tmp_path / "s.json", "--slice", "0,0,1,0")
+        assert json.loads((tmp_path / "s.json").read_text())["slice"] == {"vertices": [], "triangles": []}
+    outwrite(meshes["mixed"], 1, "json", tmp_path / "m.json", "--slice", "1,1,1,0.7531", "--parts", "surfaces")
+    assert json.loads((tmp_path / "m.json").read_text())["slice"] == {"vertices": [], "triangles": []}
+
+
+# ---- colour map and names -------------------------------------------------------------------
+
+
+def test_colormap_viridis(tmp_path, meshes):
+    """COLOR_0 = viridis((t - min) / (max - min)) clamped: the published end and middle colours."""
+    mesh = meshes["surface"]
+    lv = sdlevel(mesh, 1)
+    x = lv["verts"][:, 0]
+    f = tmp_path / "c.glb"
+    outwrite(mesh, 1, "glb", f, "--xattr", "t", "--colormap", "t:-0.5:0.5")
+    doc, acc = read_glb(f)
+    col = acc(doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"])
+    assert ((col >= 0) & (col <= 1)).all()
+    np.testing.assert_allclose(col[x <= -0.5], np.tile(VIRIDIS_0, ((x <= -0.5).sum(), 1)), atol=1e-6)
+    np.testing.assert_allclose(col[x >= 0.5], np.tile(VIRIDIS_1, ((x >= 0.5).sum(), 1)), atol=1e-6)
+    mid = np.abs(x) < 1e-12
+    assert mid.any()
+    np.testing.assert_allclose(col[mid], np.tile(VIRIDIS_HALF, (mid.sum(), 1)), atol=1e-6)
+    # the luminance of viridis grows with t: colours ordered like the attribute
+    lum = col @ np.array([0.2126, 0.7152, 0.0722])
+    order = np.argsort(x)
+    assert (np.diff(lum[order]) >= -1e-6).all()
+
+
+def test_attribute_names(tmp_path, meshes):
+    """glTF names are `_` + upper case, unique (`_RULE` stays the rule's); VTK keeps the posted
+    names and renames its own rule array on a clash; JSON keeps the posted names."""
+    mesh = meshes["mixed"]
+    opts = ["--xattr", "rule", "--xattr", "a-b", "--xattr", "A_B:2", "--xattr", "Rule"]
+    outwrite(mesh, 1, "gltf", tmp_path / "n.gltf", *opts)
+    validate(tmp_path / "n.gltf")
+    doc = json.loads((tmp_path / "n.gltf").read_text())
+    attrs = doc["meshes"][0]["primitives"][0]["attributes"]
+    assert set(attrs) == {"POSITION", "_RULE", "_RULE_2", "_A_B", "_A_B_2", "_RULE_3"}
+    assert doc["accessors"][attrs["_A_B_2"]]["type"] == "VEC2"
+    outwrite(mesh, 1, "vtu", tmp_path / "n.vtu", *opts)
+    import meshio
+    m = meshio.read(str(tmp_path / "n.vtu"))
+    assert set(m.point_data) == {"rule", "a-b", "A_B", "Rule", "rule_2"}
+    lv = sdlevel(mesh, 1)
+    assert [RULES[int(r)] for r in m.point_data["rule_2"]] == lv["rules"]
+    np.testing.assert_allclose(m.point_data["rule"].reshape(-1), affine(lv["verts"], 0), rtol=1e-12, atol=1e-12)
+
+
+# ---- refused requests ----------------------------------------------------------------------
+
+
+def test_bad_requests_refused(meshes, tmp_path):
+    r = subprocess.run([str(OUTWRITE), str(meshes["mixed"]), "--check-errors"], capture_output=True,
+                       text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    lines = dict(line.split(" ", 1) for line in r.stdout.splitlines())
+    assert lines.pop("ok") == "OK"
+    assert len(lines) >= 20
+    for case, rest in lines.items():
+        assert rest.startswith("argument "), (case, rest)
+        option = case.split("-")[0]
+        if option != "no":
+            assert rest[len("argument "):].startswith(option + ":"), (case, rest)
+    # a level that is not computed, from the command line
+    r = outwrite(meshes["mixed"], 2, "glb", tmp_path / "x.glb", "--compute", 1, check=False)
+    assert r.returncode == 1 and "level: 2 has not been computed" in r.stderr
+
+
+@pytest.mark.parametrize("name", ["mixed", "blocks", "surface"])
+def test_meshio_reads_every_layout(tmp_path, meshes, name):
+    """meshio's raw VTU reader rewrites block offsets as it walks them (see out_vtk.c): many
+    layouts (levels, parts, attribute counts and sizes, slice), every one must read back."""
+    import meshio
+    for level in LEVELS:
+        lv = sdlevel(meshes[name], level)
+        for parts in ("points", "curves,solids", "points,solids", "surfaces,solids",
+                      "points,curves,surfaces,solids"):
+            for attrs, cut in itertools.product(([], ["a"], ["a", "b:2"], ["a:3", "b", "c:5", "d:16"]),
+                                                (False, True)):
+                opts = ["--parts", parts]
+                if cut:
+                    opts += ["--slice", ",".join(map(str, SLICES[name]))]
+                for a in attrs:
+                    opts += ["--xattr", a]
+                f = tmp_path / "m.vtu"
+                outwrite(meshes[name], level, "vtu", f, *opts)
+                import vtk
+                r = vtk.vtkXMLUnstructuredGridReader()
+                r.SetFileName(str(f))
+                r.Update()
+                if r.GetOutput().GetNumberOfCells() == 0:
+                    continue  # meshio 7 cannot read a grid without cells
+                m = meshio.read(str(f))
+                np.testing.assert_array_equal(m.points[:len(lv["verts"])], lv["verts"])
+                for a in attrs:
+                    nm, _, nc = a.partition(":")
+                    assert m.point_data[nm].reshape(len(m.points), -1).shape[1] == int(nc or 1)
