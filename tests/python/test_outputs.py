@@ -24,7 +24,8 @@ import pytest
 from conftest import REPO, SDLEVEL, make_mesh_file
 from sdtext import parse_level_text
 
-OUTWRITE = pathlib.Path(os.environ.get("OUTWRITE", str(REPO / "build" / "outwrite"))).resolve()
+# beside sdlevel by default, so that `make sanitize` (SDLEVEL=build-asan/sdlevel) runs ASan's
+OUTWRITE = pathlib.Path(os.environ.get("OUTWRITE", str(SDLEVEL.parent / "outwrite"))).resolve()
 VALIDATOR = REPO / "tests" / "tools" / "gltf_validate.js"
 RULES = ["corner", "curve", "loop", "loop-boundary", "solid", "solid-boundary", "N1", "N2", "G1", "G2"]
 FORMATS = ["glb", "gltf", "vtu", "vtk", "json"]

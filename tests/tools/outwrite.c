@@ -194,6 +194,7 @@ int main(int argc, char **argv)
     sd_complex *c = sd_complex_new(tm.xyz, tm.nv, tm.idx, tm.size, tm.ns, NULL, &err);
     if (!c) {
         fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
+        textmesh_free(&tm);
         return 1;
     }
     for (size_t i = 0; i < tm.ndiag; i++) { /* `d t k`: t counts tetrahedra in input order */
@@ -204,19 +205,30 @@ int main(int argc, char **argv)
                 break;
         if (s == tm.ns || sd_complex_set_diagonal(c, s, (int)d[1], &err)) {
             fprintf(stderr, "outwrite: bad diagonal line 'd %ld %ld'\n", d[0], d[1]);
+            sd_complex_free(c);
+            textmesh_free(&tm);
             return 2;
         }
     }
 
-    if (errors)
-        return check_errors(c);
+    /* from here on every exit goes through `done`, which frees everything (clean under LSan) */
+    out_geometry *geo = NULL;
+    out_stream *s = NULL;
+    FILE *f = NULL;
+    char *buf = NULL;
+    const sd_level *lv = NULL;
+    int rc = 1;
+    if (errors) {
+        rc = check_errors(c);
+        goto done;
+    }
     out_request rq = {.complex = c, .level = level, .version = version, .colormap_attr = -1,
                       .octahedra_as_polyhedra = poly, .nattrs = nx};
     for (int a = 0; a < nx; a++) {
         int n = xcomp[a];
         double *data = malloc(tm.nv * (size_t)n * sizeof *data + 1);
         if (!data)
-            return 1;
+            goto done;
         for (size_t v = 0; v < tm.nv; v++)
             for (int k = 0; k < n; k++) {
                 const double *p = tm.xyz + 3 * v;
@@ -226,7 +238,7 @@ int main(int argc, char **argv)
         free(data);
         if (ch < 0) {
             fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
-            return 1;
+            goto done;
         }
         rq.attrs[a] = (out_attr){.name = xname[a], .channel = ch, .ncomp = n};
     }
@@ -247,74 +259,75 @@ int main(int argc, char **argv)
                 rq.colormap_attr = a;
         if (rq.colormap_attr < 0) {
             fprintf(stderr, "outwrite: --colormap: no attribute '%s' (add it with --xattr)\n", name);
-            return 2;
+            rc = 2;
+            goto done;
         }
     }
 
-    const sd_level *lv = sd_complex_level(c, compute >= 0 ? compute : level, &err);
+    lv = sd_complex_level(c, compute >= 0 ? compute : level, &err);
     if (lv && compute >= 0)
         lv = compute >= level ? sd_complex_level(c, level, &err) : NULL;
     if (!lv && compute >= 0 && compute < level) { /* out_open must refuse an uncomputed level */
-        out_stream *s = out_open(&rq, (out_format)fmt, &err);
-        if (s) {
+        if ((s = out_open(&rq, (out_format)fmt, &err)))
             fprintf(stderr, "outwrite: out_open accepted level %d with %d computed\n", level,
                     sd_complex_levels_computed(c));
-            return 1;
-        }
-        fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
-        return 1;
+        else
+            fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
+        goto done;
     }
     if (!lv) {
         fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
-        return 1;
+        goto done;
     }
-    out_geometry *geo = NULL;
     if (use_geometry && !(rq.geometry = geo = out_geometry_compute(lv))) {
         fprintf(stderr, "outwrite: out of memory computing the geometry\n");
-        return 1;
+        goto done;
     }
-    out_stream *s = out_open(&rq, (out_format)fmt, &err);
+    s = out_open(&rq, (out_format)fmt, &err);
     if (!s) {
         fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
-        return 1;
+        goto done;
     }
-    FILE *f = NULL;
     if (outpath && !(f = fopen(outpath, "wb"))) {
         fprintf(stderr, "outwrite: %s: %s\n", outpath, strerror(errno));
-        return 2;
+        rc = 2;
+        goto done;
     }
-    char *buf = malloc(chunk);
-    if (!buf)
-        return 1;
+    if (!(buf = malloc(chunk)))
+        goto done;
     uint64_t total = 0;
     ssize_t n;
     while ((n = out_read(s, buf, chunk)) > 0) {
         if ((size_t)n > chunk) {
             fprintf(stderr, "outwrite: out_read returned %zd > %zu bytes\n", n, chunk);
-            return 1;
+            goto done;
         }
         if (f && fwrite(buf, 1, (size_t)n, f) != (size_t)n) {
             fprintf(stderr, "outwrite: %s: %s\n", outpath, strerror(errno));
-            return 2;
+            rc = 2;
+            goto done;
         }
         total += (uint64_t)n;
     }
     if (n < 0) {
         fprintf(stderr, "outwrite: the writer failed after %llu bytes\n", (unsigned long long)total);
-        return 1;
+        goto done;
     }
     if (out_read(s, buf, chunk) != 0) { /* the end stays the end */
         fprintf(stderr, "outwrite: bytes after the end of the stream\n");
-        return 1;
+        goto done;
     }
     if (out_size(s) != UINT64_MAX && out_size(s) != total) {
         fprintf(stderr, "outwrite: out_size %llu but %llu bytes written\n",
                 (unsigned long long)out_size(s), (unsigned long long)total);
-        return 1;
+        goto done;
     }
-    if (f && fclose(f)) {
+    FILE *closing = f;
+    f = NULL;
+    if (closing && fclose(closing)) {
         fprintf(stderr, "outwrite: %s: %s\n", outpath, strerror(errno));
-        return 2;
+        rc = 2;
+        goto done;
     }
     if (stats) {
         static const char *const kinds[] = {"points", "edges", "triangles", "tetrahedra", "octahedra"};
@@ -324,10 +337,14 @@ int main(int argc, char **argv)
         printf(" boundary %u bytes %llu\n", sd_level_solid_boundary(lv, NULL),
                (unsigned long long)total);
     }
+    rc = 0;
+done:
+    if (f)
+        fclose(f);
     free(buf);
     out_close(s);
     out_geometry_free(geo);
     sd_complex_free(c);
     textmesh_free(&tm);
-    return 0;
+    return rc;
 }
