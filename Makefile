@@ -40,20 +40,23 @@ TEST_SRC := $(wildcard tests/core/*.c)
 $(B)/test_core: $(TEST_SRC) $(CORE_LIB) $(wildcard tests/core/*.h)
 	$(CC) $(CFLAGS) $(TEST_SRC) $(CORE_LIB) $(LDLIBS) -o $@
 
-# server/: the daemon (and the offline `subdivd refine`), with embedded OpenAPI + web files
+# web/: the front end served at / (npm + esbuild into $(B)/web; defines WEB_LIST)
+include web/Makefile.inc
+
+# server/: the daemon (and the offline `subdivd refine`), with embedded OpenAPI + web files.
+# Assets are URLPATH|CONTENT_TYPE|CACHE_CONTROL|FILE (tools/embed.c); the built web front end
+# lists its own in $(WEB_LIST) (web/Makefile.inc), one per line, since its names carry hashes.
 SRV_SRC := $(wildcard server/*.c)
 SRV_OBJ := $(patsubst %.c,$(B)/%.o,$(SRV_SRC)) $(B)/assets.o
-ASSETS  := /v1/openapi.json|application/json|api/openapi.json \
-           /|text/html;charset=utf-8|web/index.html \
-           $(foreach f,$(filter-out web/index.html,$(wildcard web/*.html web/*.js web/*.css)),/$(f)|$(if $(filter %.js,$(f)),text/javascript,$(if $(filter %.css,$(f)),text/css,text/html;charset=utf-8))|$(f))
+ASSETS  := /v1/openapi.json|application/json|no-cache|api/openapi.json
 $(B)/server/%.o: server/%.c $(wildcard server/*.h) $(wildcard api/*.h) $(wildcard core/*.h)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c $< -o $@
 $(B)/embed: tools/embed.c
 	@mkdir -p $(B)
 	$(CC) -O1 -o $@ $<
-$(B)/assets.c: $(B)/embed api/openapi.json $(wildcard web/*)
-	$(B)/embed $@ $(foreach a,$(ASSETS),'$(a)')
+$(B)/assets.c: $(B)/embed api/openapi.json $(WEB_LIST)
+	$(B)/embed $@ $(foreach a,$(ASSETS),'$(a)') $$(cat $(WEB_LIST))
 $(B)/assets.o: $(B)/assets.c server/server.h
 	$(CC) $(CFLAGS) -Wno-overlength-strings -c $< -o $@
 $(B)/subdivd: $(SRV_OBJ) $(API_LIB) $(CORE_LIB)

@@ -288,12 +288,20 @@ static void h_asset(req *r)
         fail(r, 404, "not-found", "no resource at %.100s", r->path);
         return;
     }
+    /* The web front end's bundles have content-hashed names and are immutable; index.html and
+     * the OpenAPI document are revalidated (no-cache) against the ETag: 304 while unchanged. */
+    const char *inm = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
+                                                  MHD_HTTP_HEADER_IF_NONE_MATCH);
+    int fresh = inm && (strstr(inm, a->etag) || !strcmp(inm, "*"));
     struct MHD_Response *resp =
-        MHD_create_response_from_buffer(a->size, (void *)a->data, MHD_RESPMEM_PERSISTENT);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, a->content_type);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
-    atomic_store(&r->bytes, a->size);
-    queue(r, 200, resp);
+        fresh ? MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT)
+              : MHD_create_response_from_buffer(a->size, (void *)a->data, MHD_RESPMEM_PERSISTENT);
+    if (!fresh)
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, a->content_type);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, a->cache_control);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, a->etag);
+    atomic_store(&r->bytes, fresh ? 0 : a->size);
+    queue(r, fresh ? 304 : 200, resp);
 }
 
 /* ---- handlers: sessions ------------------------------------------------------------------ */

@@ -21,3 +21,12 @@ fi
 if [ ! -d tests/tools/node_modules/gltf-validator ]; then
     (cd tests/tools && npm install --no-audit --no-fund --loglevel=error)
 fi
+# npm packages of the web front end (web/package-lock.json: three, esbuild; the Makefile runs the
+# same npm ci when the lock file is newer) and of its browser test (tests/web: playwright-core,
+# which drives the chromium package and never downloads a browser)
+if [ ! -f web/node_modules/.package-lock.json ]; then
+    (cd web && npm ci --no-audit --no-fund --loglevel=error)
+fi
+if [ ! -d tests/web/node_modules/playwright-core ]; then
+    (cd tests/web && npm ci --no-audit --no-fund --loglevel=error)
+fi

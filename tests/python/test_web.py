@@ -1,0 +1,136 @@
+"""The web front end served at / (web/, built by web/build.mjs into build/web and embedded).
+
+HTTP: the page and its content-hashed bundles are served with their content types, index.html is
+revalidated (no-cache + ETag, 304), the bundles are immutable.
+
+Browser: tests/web/browser_test.mjs drives Debian's chromium (headless, playwright-core) against
+a daemon started here the way `make run` starts it (default flags, another port). It prints one
+JSON report; each of its checks is one test below, so a missing check fails too. Screenshots go
+to test-output/web/.
+"""
+import json
+import os
+import re
+import shutil
+import subprocess
+
+import pytest
+import requests
+
+from conftest import REPO
+from daemon import Daemon
+
+CHROMIUM = os.environ.get("CHROMIUM", "/usr/bin/chromium")
+OUTDIR = REPO / "test-output" / "web"
+BROWSER_TEST = REPO / "tests" / "web" / "browser_test.mjs"
+
+# The checks browser_test.mjs reports, in its order.
+CHECKS = [
+    "first_load",        # an example at level 2 within seconds, with a hint, no interaction
+    "examples",          # the three built-in examples are accepted and drawn
+    "level_slider",      # the slider (keyboard) moves to 0 and back to 2
+    "canvas_geometry",   # non-blank pixels (screenshot and read back)
+    "stats_shown",       # the panel shows the level's stats as GET /levels/2/stats has them
+    "cross_section",     # slice on (primitive present, picture changes), moved, off
+    "show_hide",         # solid boundary and cage toggles
+    "attribute_colour",  # colormap=NAME:min:max and its legend
+    "crease_tag",        # clicking a control edge with the crease tool: PUT /tags 200, tagged
+    "crease_colour",     # ... its rule turns to the crease's (curve) and so does its colour
+    "nonmanifold_rule",  # G1 for a vertex: 501 shown in words (until issue 4), else its colour
+    "solid_scheme",      # a rule the daemon has (averaged) changes the level
+    "drag_point",        # dragging a control point: version advances, GLB and picture change
+    "undo_redo",         # Ctrl+Z puts it back exactly, Redo moves it again
+    "file_open",         # an OBJ from disk
+    "file_errors",       # a broken file and a refused one are explained
+    "console_clean",     # no console errors but the refusals the test provokes
+]
+
+
+@pytest.fixture(scope="module")
+def daemon():
+    d = Daemon()
+    yield d
+    d.stop()
+
+
+@pytest.fixture(scope="module")
+def report(daemon):
+    assert os.path.exists(CHROMIUM), f"{CHROMIUM} missing: apt-get install chromium (tools/packages.txt)"
+    assert (REPO / "tests" / "web" / "node_modules" / "playwright-core").is_dir(), \
+        "playwright-core missing: run tools/deps.sh (npm ci in tests/web)"
+    if OUTDIR.exists():
+        shutil.rmtree(OUTDIR)
+    r = subprocess.run(["node", str(BROWSER_TEST), daemon.url + "/", str(OUTDIR)], cwd=REPO,
+                       capture_output=True, text=True, timeout=600)
+    lines = r.stdout.strip().splitlines()
+    assert lines and lines[-1].startswith("{"), \
+        f"browser test did not finish (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    (OUTDIR / "report.txt").write_text(r.stdout + r.stderr)
+    return {c["name"]: c for c in json.loads(lines[-1])["checks"]}
+
+
+@pytest.mark.parametrize("name", CHECKS)
+def test_browser(report, name):
+    assert name in report, f"check {name} was not reached (see test-output/web/report.txt)"
+    assert report[name]["ok"], report[name]["detail"]
+
+
+def test_browser_reports_only_known_checks(report):
+    assert sorted(report) == sorted(CHECKS)
+
+
+# ---- the assets over HTTP --------------------------------------------------------------------
+
+def bundles(html):
+    return re.findall(r'(?:src|href)="(/assets/app-[A-Za-z0-9]+\.(?:js|css))"', html)
+
+
+def test_index_html(daemon):
+    r = requests.get(daemon.url + "/")
+    assert r.status_code == 200
+    assert r.headers["Content-Type"] == "text/html;charset=utf-8"
+    assert r.headers["Cache-Control"] == "no-cache"
+    assert re.fullmatch(r'"[0-9a-f]{16}"', r.headers["ETag"])
+    assert r.headers["X-Content-Type-Options"] == "nosniff"
+    names = bundles(r.text)
+    assert sorted(n.rsplit(".", 1)[1] for n in names) == ["css", "js"]
+    assert "%APP_" not in r.text  # the build filled the template in
+
+
+def test_index_revalidates_with_etag(daemon):
+    tag = requests.get(daemon.url + "/").headers["ETag"]
+    r = requests.get(daemon.url + "/", headers={"If-None-Match": tag})
+    assert r.status_code == 304 and r.content == b"" and r.headers["ETag"] == tag
+    assert r.headers["Cache-Control"] == "no-cache"
+    r = requests.get(daemon.url + "/", headers={"If-None-Match": '"0000000000000000"'})
+    assert r.status_code == 200 and r.content
+
+
+def test_bundles_are_immutable_with_their_types(daemon):
+    html = requests.get(daemon.url + "/").text
+    types = {"js": "text/javascript;charset=utf-8", "css": "text/css;charset=utf-8"}
+    for name in bundles(html):
+        r = requests.get(daemon.url + name)
+        assert r.status_code == 200, name
+        assert r.headers["Content-Type"] == types[name.rsplit(".", 1)[1]]
+        assert r.headers["Cache-Control"] == "public,max-age=31536000,immutable"
+        assert int(r.headers["Content-Length"]) == len(r.content) > 0
+        h = requests.head(daemon.url + name)
+        assert h.status_code == 200 and h.headers["Content-Type"] == r.headers["Content-Type"]
+    # the bundle is three.js and the app, built from web/ (no CDN, no source maps)
+    js = requests.get(daemon.url + [n for n in bundles(html) if n.endswith(".js")][0]).text
+    assert "window.subdivd" in js or "subdivd=" in js
+    assert "sourceMappingURL" not in js
+
+
+def test_unknown_asset_and_stale_bundle_are_404(daemon):
+    r = requests.get(daemon.url + "/assets/app-STALE.js")
+    assert r.status_code == 404
+    assert r.headers["Content-Type"] == "application/problem+json"
+
+
+def test_openapi_is_revalidated(daemon):
+    r = requests.get(daemon.url + "/v1/openapi.json")
+    assert r.status_code == 200 and r.headers["Cache-Control"] == "no-cache"
+    assert requests.get(daemon.url + "/v1/openapi.json",
+                        headers={"If-None-Match": r.headers["ETag"]}).status_code == 304

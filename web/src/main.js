@@ -1,0 +1,821 @@
+// The subdivd front end: the panel, the tools and the conversation with the daemon.
+//
+// Every request of the session goes through App.run(), one after the other, so versions stay
+// consistent (a PATCH sends the version the previous answer reported as If-Match). Level fetches
+// and point moves are coalesced: while one is under way, later wishes collapse into one more
+// round (requestLevel, queueMove), which is what lets a dragged point and the level slider follow
+// the mouse without a backlog. Every failure ends up in App.error(), shown in words.
+import './style.css';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+import * as THREE from 'three';
+import { Session, ApiError } from './api.js';
+import { EXAMPLES } from './examples.js';
+import { parseMeshFile } from './meshfile.js';
+import { Viewer } from './viewer.js';
+import { RULE_NAMES, RULE_DESCRIPTIONS, ruleFamily, ruleHex, viridisCss } from './colors.js';
+
+const $ = (id) => document.getElementById(id);
+const FIRST_LEVEL = 2;
+const MAX_LEVEL = 6;
+const MAX_CELLS = 1.5e6; // the slider stops before a level would have more top cells than this
+
+const TOOL_HINTS = {
+  move: 'Drag a round control point to reshape it · slide the level · tag creases with the tools on the left',
+  corner: 'Click a control vertex to tag it as a corner (click again to untag)',
+  crease: 'Click a control edge to tag it as a crease (click again to untag)',
+  surface: 'Click a control triangle to tag it as an embedded surface (click again to untag)',
+  rule: 'Click a control vertex or edge, then choose its non-manifold rule in the panel',
+};
+
+const key = (s) => [...s].sort((a, b) => a - b).join(',');
+
+// Top cells of the finest level the slider offers: segments double, triangles quadruple, a
+// tetrahedron splits into 4 tetrahedra + 1 octahedron and an octahedron into 8 + 6 (core/split.c).
+function maxLevel(summary) {
+  const s = summary?.simplices || {};
+  const P = s['0'] || 0;
+  let E = s['1'] || 0, T = s['2'] || 0, Tet = s['3'] || 0, O = 0;
+  for (let L = 1; L <= MAX_LEVEL; L++) {
+    E *= 2;
+    T *= 4;
+    [Tet, O] = [4 * Tet + 8 * O, Tet + 6 * O];
+    if (P + E + T + Tet + O > MAX_CELLS) return Math.max(1, L - 1);
+  }
+  return MAX_LEVEL;
+}
+
+function fnv1a(buf) {
+  const b = new Uint8Array(buf);
+  let h = 0x811c9dc5;
+  for (let i = 0; i < b.length; i++) h = Math.imul(h ^ b[i], 0x01000193) >>> 0;
+  return h.toString(16).padStart(8, '0');
+}
+
+const fmt = (x) => (Number.isInteger(x) ? x.toLocaleString('en') : Number(x).toPrecision(4));
+
+class App {
+  constructor() {
+    this.viewer = new Viewer($('view'));
+    this.session = new Session();
+    this.loader = new GLTFLoader();
+    this.queue = Promise.resolve();
+    this.pending = 0;
+    this.model = null; // {name, complex (GET /complex), summary, ranges, bbox, maxLevel}
+    this.shown = null; // what the view shows: level, version, stats, GLB size and hash
+    this.level = FIRST_LEVEL;
+    this.color = { mode: 'rule', attr: null, min: 0, max: 1 };
+    this.slice = { on: false, axis: 'z', t: 0.5 };
+    this.tool = 'move';
+    this.undoStack = [];
+    this.redoStack = [];
+    this.levelWanted = false;
+    this.levelPromise = null;
+    this.pendingMove = null;
+    this.movePromise = null;
+    this.selected = null;
+    this.messages = [];
+    this.ready = false;
+  }
+
+  // ---- the request queue ------------------------------------------------------------------
+
+  run(fn) {
+    const p = this.queue.then(() => this.#withSession(fn));
+    this.queue = p.then(() => {}, () => {}); // the chain goes on; the caller handles p's error
+    this.#busy(+1);
+    const done = () => this.#busy(-1);
+    p.then(done, done);
+    return p;
+  }
+
+  #busy(d) {
+    this.pending += d;
+    $('busy').hidden = this.pending === 0;
+  }
+
+  // A session that expired (404 no-session) is replaced by a new one holding the same model.
+  async #withSession(fn) {
+    try {
+      return await fn();
+    } catch (e) {
+      if (!(e instanceof ApiError && e.status === 404 && e.type.endsWith('no-session') && this.model)) throw e;
+      const c = this.model.complex;
+      await this.session.open();
+      await this.session.putComplex({ vertices: c.vertices, simplices: c.simplices, attributes: c.attributes });
+      if (c.tags?.singular?.length) await this.session.putTags(c.tags.singular, 'Restoring the tags');
+      await this.session.putRules(c.rules, 'Restoring the rules');
+      await this.#refreshComplex();
+      this.info('The session had expired; a new one was started with the same model.');
+      return fn();
+    }
+  }
+
+  idle() {
+    return this.pending === 0 && !this.levelPromise && !this.movePromise && !this.levelWanted;
+  }
+
+  // ---- messages ---------------------------------------------------------------------------
+
+  error(e) {
+    const text = e instanceof Error ? e.message : String(e);
+    this.#message('error', text);
+  }
+
+  info(text) {
+    this.#message('info', text);
+  }
+
+  #message(kind, text) {
+    this.messages.push({ kind, text, at: Date.now() });
+    const box = $('messages');
+    const el = document.createElement('div');
+    el.className = `message ${kind}`;
+    el.setAttribute('role', kind === 'error' ? 'alert' : 'status');
+    const t = document.createElement('span');
+    t.className = 'text';
+    t.textContent = text;
+    const x = document.createElement('button');
+    x.type = 'button';
+    x.title = 'dismiss';
+    x.textContent = '×';
+    x.onclick = () => el.remove();
+    el.append(t, x);
+    box.append(el);
+    while (box.children.length > 4) box.firstChild.remove();
+    if (kind === 'info') setTimeout(() => el.remove(), 6000);
+  }
+
+  #hint(text) {
+    $('hint').textContent = text;
+  }
+
+  // ---- models -----------------------------------------------------------------------------
+
+  async loadModel(name, body, { attribute } = {}) {
+    try {
+      await this.run(async () => {
+        if (!this.session.id) await this.session.open();
+        const put = await this.session.putComplex(body);
+        const complex = await this.session.getComplex();
+        this.#setModel(name, complex, put.summary, attribute);
+      });
+    } catch (e) {
+      this.error(e);
+      return;
+    }
+    await this.requestLevel();
+  }
+
+  #setModel(name, complex, summary, attribute) {
+    const ranges = {};
+    for (const [a, vals] of Object.entries(complex.attributes || {})) {
+      const first = vals.map((v) => (Array.isArray(v) ? v[0] : v)).filter(Number.isFinite);
+      ranges[a] = first.length ? [Math.min(...first), Math.max(...first)] : [0, 1];
+    }
+    const bbox = new THREE.Box3().setFromArray(complex.vertices.flat());
+    // the cross-section moves through the solids (all of the model when it has none)
+    const inSolids = complex.simplices.filter((s) => s.length === 4).flat();
+    const solidBox = inSolids.length ? new THREE.Box3().setFromPoints(inSolids.map((i) => new THREE.Vector3(...complex.vertices[i]))) : bbox;
+    this.model = { name, complex, summary, ranges, bbox, solidBox, maxLevel: maxLevel(summary) };
+    this.undoStack = [];
+    this.redoStack = [];
+    this.selected = null;
+    $('override').hidden = true;
+    this.level = Math.min(this.level, this.model.maxLevel);
+    $('level').max = this.model.maxLevel;
+    $('level').value = this.level;
+    $('level-value').textContent = this.level;
+    $('model-name').textContent = `${name}: ${complex.vertices.length} vertices, ${complex.simplices.length} simplices`;
+    // colour choices: rule families, each attribute, plain
+    const sel = $('color-mode');
+    sel.replaceChildren(new Option('rule family', 'rule'));
+    for (const a of Object.keys(ranges)) sel.append(new Option(`attribute: ${a}`, `attr:${a}`));
+    sel.append(new Option('plain', 'plain'));
+    if (this.color.mode === 'attribute' && !(this.color.attr in ranges)) this.color.mode = 'rule';
+    if (attribute && attribute in ranges && this.color.mode === 'attribute') this.#setColorAttr(attribute);
+    sel.value = this.color.mode === 'attribute' ? `attr:${this.color.attr}` : this.color.mode;
+    this.viewer.setCage(complex);
+    this.viewer.frame(bbox);
+    this.#sliceToViewer();
+    this.#syncRuleControls();
+    this.#syncUndo();
+    this.#tagsNote();
+  }
+
+  async #refreshComplex() {
+    const complex = await this.session.getComplex();
+    this.model.complex = complex;
+    this.viewer.setCage(complex);
+    this.#syncRuleControls();
+    this.#tagsNote();
+    if (this.selected) this.#showOverride(this.selected);
+  }
+
+  async resync() {
+    try {
+      await this.run(() => this.#refreshComplex());
+    } catch (e) {
+      this.error(e);
+    }
+    this.requestLevel();
+  }
+
+  async openFile(file) {
+    let body;
+    try {
+      body = parseMeshFile(file.name, await file.text());
+    } catch (e) {
+      this.error(`Reading ${file.name} failed: ${e.message}`);
+      return;
+    }
+    await this.loadModel(file.name, body);
+  }
+
+  // ---- levels -----------------------------------------------------------------------------
+
+  levelQuery() {
+    const q = {};
+    if (this.slice.on) {
+      const { n, d } = this.#slicePlane();
+      q.slice = [...n, d].map((x) => +x.toPrecision(9)).join(',');
+    }
+    if (this.color.mode === 'attribute') q.colormap = `${this.color.attr}:${this.color.min}:${this.color.max}`;
+    return q;
+  }
+
+  // Fetch the wanted level (coalescing): resolves once the view shows the latest wish.
+  requestLevel() {
+    this.levelWanted = true;
+    if (this.levelPromise) return this.levelPromise;
+    this.levelPromise = (async () => {
+      try {
+        while (this.levelWanted && this.model) {
+          this.levelWanted = false;
+          await this.run(() => this.#fetchLevel());
+        }
+      } catch (e) {
+        this.levelWanted = false;
+        this.error(e);
+      } finally {
+        this.levelPromise = null;
+      }
+    })();
+    return this.levelPromise;
+  }
+
+  async #fetchLevel() {
+    const L = this.level, query = this.levelQuery();
+    const t0 = performance.now();
+    const stats = await this.session.stats(L);
+    const buf = await this.session.levelGlb(L, query);
+    const gltf = await this.loader.parseAsync(buf, '');
+    this.viewer.setLevel(gltf, stats);
+    this.shown = {
+      level: L, version: this.session.version, query, stats, bytes: buf.byteLength,
+      hash: fnv1a(buf), ms: performance.now() - t0, parts: Object.keys(this.viewer.parts),
+      rules: this.#levelRuleCounts(),
+    };
+    this.#showStats();
+    this.#legend();
+    this.#updateSession();
+    if (this.tool === 'move') this.#hint(`Level ${L} of “${this.model.name}”. ${TOOL_HINTS.move}.`);
+  }
+
+  // How many vertices of the shown level follow each rule family (the GLB's `_RULE`, one
+  // accessor shared by the primitives).
+  #levelRuleCounts() {
+    const counts = {};
+    const o = Object.values(this.viewer.parts).find((p) => (p.userData.source || p.geometry).attributes._rule);
+    const r = o && (o.userData.source || o.geometry).attributes._rule;
+    for (let i = 0; r && i < r.count; i++) {
+      const fam = ruleFamily(RULE_NAMES[Math.round(r.getX(i))] ?? 'unknown');
+      counts[fam] = (counts[fam] || 0) + 1;
+    }
+    return counts;
+  }
+
+  #showStats() {
+    const s = this.shown.stats, c = s.counts || {};
+    const rows = [
+      ['level', s.level], ['version', s.version ?? this.shown.version],
+      ['vertices', c.vertices], ['edges', c.edges], ['faces', c.faces],
+      ['points', c.points], ['curve segments', c.curves], ['surface triangles', c.triangles],
+      ['tetrahedra', c.tetrahedra], ['octahedra', c.octahedra],
+      ['compute (s)', s.seconds], ['memory (bytes)', s.memory_bytes],
+      ['GLB (bytes)', this.shown.bytes], ['fetch (ms)', Math.round(this.shown.ms)],
+    ];
+    const dl = document.createElement('dl');
+    dl.className = 'stats';
+    for (const [k, v] of rows) {
+      if (v === undefined) continue;
+      const dt = document.createElement('dt');
+      dt.textContent = k;
+      const dd = document.createElement('dd');
+      dd.textContent = fmt(v);
+      dd.dataset.stat = k;
+      dl.append(dt, dd);
+    }
+    $('stats').replaceChildren(dl);
+  }
+
+  #updateSession() {
+    const s = this.session;
+    $('session').textContent = s.id ? `session ${s.id.slice(0, 8)} · v${s.version}` : 'no session';
+  }
+
+  // ---- colour -----------------------------------------------------------------------------
+
+  #setColorAttr(a) {
+    this.color.mode = 'attribute';
+    this.color.attr = a;
+    let [lo, hi] = this.model.ranges[a];
+    if (!(hi > lo)) hi = lo + 1;
+    this.color.min = +lo.toPrecision(6);
+    this.color.max = +hi.toPrecision(6);
+    $('color-min').value = this.color.min;
+    $('color-max').value = this.color.max;
+  }
+
+  setColorMode(value) {
+    if (value.startsWith('attr:')) this.#setColorAttr(value.slice(5));
+    else this.color.mode = value;
+    $('range').hidden = this.color.mode !== 'attribute';
+    this.viewer.setColorMode(this.color.mode);
+    this.#legend();
+    this.requestLevel(); // COLOR_0 comes with colormap=
+  }
+
+  #legend() {
+    const box = $('legend');
+    box.replaceChildren();
+    if (this.color.mode === 'attribute') {
+      const title = document.createElement('div');
+      title.textContent = `${this.color.attr} (first component, viridis)`;
+      const bar = document.createElement('div');
+      bar.className = 'bar';
+      bar.style.background = viridisCss();
+      const labels = document.createElement('div');
+      labels.className = 'bar-labels';
+      const mid = (this.color.min + this.color.max) / 2;
+      for (const v of [this.color.min, mid, this.color.max]) {
+        const s = document.createElement('span');
+        s.textContent = +v.toPrecision(4);
+        labels.append(s);
+      }
+      box.append(title, bar, labels);
+      return;
+    }
+    if (this.color.mode !== 'rule' || !this.model) return;
+    // the families present: the cage's vertices and edges, and the shown level's vertices
+    const seen = new Set();
+    for (const c of this.model.complex.classes.vertices) seen.add(ruleFamily(c.rule));
+    for (const c of this.model.complex.classes.edges) seen.add(ruleFamily(c.rule));
+    for (const o of Object.values(this.viewer.parts)) {
+      const r = (o.userData.source || o.geometry).attributes._rule;
+      if (r) for (let i = 0; i < r.count; i++) seen.add(ruleFamily(RULE_NAMES[Math.round(r.getX(i))] ?? 'unknown'));
+    }
+    const order = [...RULE_NAMES, 'ying-zorin', 'unknown'];
+    for (const fam of order.filter((f) => seen.has(f))) {
+      const row = document.createElement('div');
+      row.className = 'legend-row';
+      row.dataset.rule = fam;
+      const sw = document.createElement('span');
+      sw.className = 'swatch';
+      sw.style.background = ruleHex(fam);
+      const name = document.createElement('span');
+      name.className = 'name';
+      name.textContent = fam;
+      const desc = document.createElement('span');
+      desc.className = 'desc';
+      desc.textContent = RULE_DESCRIPTIONS[fam] || '';
+      row.append(sw, name, desc);
+      box.append(row);
+    }
+  }
+
+  // ---- cross-section ----------------------------------------------------------------------
+
+  #slicePlane() {
+    const axis = { x: 0, y: 1, z: 2 }[this.slice.axis];
+    const n = [0, 0, 0];
+    n[axis] = 1;
+    const lo = this.model.solidBox.min.getComponent(axis), hi = this.model.solidBox.max.getComponent(axis);
+    return { n, d: lo + this.slice.t * (hi - lo) };
+  }
+
+  #sliceToViewer() {
+    if (this.slice.on && this.model) {
+      const { n, d } = this.#slicePlane();
+      this.viewer.setSlice(n, d);
+    } else this.viewer.setSlice(null);
+  }
+
+  setSlice(change) {
+    Object.assign(this.slice, change);
+    this.#sliceToViewer();
+    this.requestLevel();
+  }
+
+  // ---- moving control points ----------------------------------------------------------------
+
+  // Ask the daemon to move control point `index` (coalescing: only the latest position of a
+  // burst is sent once the previous PATCH is answered), then show the changed level.
+  queueMove(index, position, what = 'Moving a control point') {
+    if (this.pendingMove && this.pendingMove.index !== index) this.#flushMove();
+    this.pendingMove = { index, position: position.toArray(), what };
+    if (this.movePromise) return this.movePromise;
+    this.movePromise = (async () => {
+      try {
+        while (this.pendingMove) {
+          const m = this.pendingMove;
+          this.pendingMove = null;
+          await this.run(async () => {
+            await this.session.moveControlPoints([{ index: m.index, position: m.position }], m.what);
+            this.model.complex.vertices[m.index] = m.position;
+          });
+          this.requestLevel();
+        }
+      } catch (e) {
+        this.pendingMove = null;
+        this.error(e);
+        this.resync(); // show the daemon's positions again
+      } finally {
+        this.movePromise = null;
+      }
+    })();
+    return this.movePromise;
+  }
+
+  // A pending move of another point is sent as its own PATCH before the new one.
+  #flushMove() {
+    const m = this.pendingMove;
+    this.pendingMove = null;
+    this.run(() => this.session.moveControlPoints([{ index: m.index, position: m.position }], m.what)
+      .then(() => { this.model.complex.vertices[m.index] = m.position; }))
+      .catch((e) => { this.error(e); this.resync(); });
+  }
+
+  #move(entry, to, what) {
+    const p = new THREE.Vector3(...to);
+    this.viewer.moveCageVertex(entry.index, p);
+    this.queueMove(entry.index, p, what);
+  }
+
+  undo() {
+    const e = this.undoStack.pop();
+    if (!e) return;
+    this.redoStack.push(e);
+    this.#move(e, e.from, `Undoing the move of point ${e.index}`);
+    this.#syncUndo();
+  }
+
+  redo() {
+    const e = this.redoStack.pop();
+    if (!e) return;
+    this.undoStack.push(e);
+    this.#move(e, e.to, `Redoing the move of point ${e.index}`);
+    this.#syncUndo();
+  }
+
+  #syncUndo() {
+    $('undo').disabled = !this.undoStack.length;
+    $('redo').disabled = !this.redoStack.length;
+  }
+
+  // ---- tags -------------------------------------------------------------------------------
+
+  async toggleTag(simplex) {
+    const kind = ['corner', 'crease', 'embedded-surface triangle'][simplex.length - 1];
+    const cur = this.model.complex.tags?.singular || [];
+    const k = key(simplex);
+    const has = cur.some((t) => key(t) === k);
+    const next = has ? cur.filter((t) => key(t) !== k) : [...cur, simplex];
+    await this.setTags(next, `${has ? 'Untagging' : 'Tagging'} the ${kind} ${simplex.join('–')}`);
+  }
+
+  async setTags(list, what) {
+    try {
+      await this.run(async () => {
+        await this.session.putTags(list, what);
+        await this.#refreshComplex();
+      });
+    } catch (e) {
+      this.error(e);
+      return;
+    }
+    await this.requestLevel();
+  }
+
+  #tagsNote() {
+    const t = this.model?.complex.tags?.singular || [];
+    const n = [1, 2, 3].map((k) => t.filter((s) => s.length === k).length);
+    $('tags-note').textContent = t.length ? `Tagged: ${n[0]} corners, ${n[1]} crease edges, ${n[2]} surface triangles.` : 'No tags.';
+  }
+
+  // ---- rules ------------------------------------------------------------------------------
+
+  #syncRuleControls() {
+    const r = this.model?.complex.rules || {};
+    $('rule-default').value = r.nonmanifold_default || 'G2';
+    $('rule-solid').value = r.solid_scheme || 'box';
+    $('rule-surface').value = r.surface_weights || 'warren';
+    $('rule-nms').value = r.nonmanifold_surface || 'chang-qin';
+  }
+
+  async changeRules(patch, what) {
+    const rules = { ...this.model.complex.rules, ...patch };
+    try {
+      await this.run(async () => {
+        await this.session.putRules(rules, what);
+        await this.#refreshComplex();
+      });
+    } catch (e) {
+      this.error(e);
+      this.#syncRuleControls(); // back to what the daemon has
+      return;
+    }
+    await this.requestLevel();
+  }
+
+  // The rule tool picked a vertex or edge: show what it is and the override editor.
+  #showOverride(simplex) {
+    this.selected = simplex;
+    const c = this.model.complex;
+    const cls = simplex.length === 1 ? c.classes.vertices[simplex[0]]
+      : c.classes.edges.find((e) => key(e.vertices) === key(simplex));
+    const name = simplex.length === 1 ? `vertex ${simplex[0]}` : `edge ${simplex.join('–')}`;
+    $('override').hidden = false;
+    $('override-what').textContent = cls
+      ? `${name}: rule ${cls.rule}, dimensions ${cls.family.join(', ')}, non-manifold type ${cls.nonmanifold}`
+      : name;
+    const cur = (c.rules.overrides || []).find((o) => key(o.simplex) === key(simplex));
+    $('override-rule').value = cur?.rule || '';
+    const dims = cls?.family || [];
+    $('override-dim').replaceChildren(...dims.map((d) => new Option(`${d}`, d)));
+    if (cur?.dimension !== undefined) $('override-dim').value = cur.dimension;
+    // N2 pairs: two of the (k+1)-simplices through the picked one
+    const incident = new Map();
+    for (const s of c.simplices) {
+      if (!simplex.every((v) => s.includes(v)) || s.length <= simplex.length) continue;
+      const rest = s.filter((v) => !simplex.includes(v));
+      for (const v of rest) {
+        const f = [...simplex, v];
+        incident.set(key(f), f);
+      }
+    }
+    const inc = [...incident.values()];
+    const pairs = [];
+    for (let i = 0; i < inc.length && pairs.length < 60; i++)
+      for (let j = i + 1; j < inc.length && pairs.length < 60; j++) pairs.push([inc[i], inc[j]]);
+    $('override-pair').replaceChildren(...pairs.map((p) => new Option(p.map((f) => `[${f.join(',')}]`).join(' + '), JSON.stringify(p))));
+    this.#overrideFields();
+  }
+
+  #overrideFields() {
+    const r = $('override-rule').value;
+    $('override-dim-field').hidden = r !== 'N1';
+    $('override-pair-field').hidden = r !== 'N2';
+  }
+
+  async applyOverride() {
+    const simplex = this.selected;
+    if (!simplex) return;
+    const rule = $('override-rule').value;
+    const others = (this.model.complex.rules.overrides || []).filter((o) => key(o.simplex) !== key(simplex));
+    const o = { simplex, rule };
+    if (rule === 'N1') o.dimension = Number($('override-dim').value);
+    if (rule === 'N2' && $('override-pair').value) o.pair = JSON.parse($('override-pair').value);
+    const overrides = rule ? [...others, o] : others;
+    const name = simplex.length === 1 ? `vertex ${simplex[0]}` : `edge ${simplex.join('–')}`;
+    await this.changeRules({ overrides }, rule ? `Choosing rule ${rule} for ${name}` : `Restoring the default rule of ${name}`);
+  }
+
+  // ---- pointer tools ----------------------------------------------------------------------
+
+  #local(ev) {
+    const r = this.viewer.canvas.getBoundingClientRect();
+    return { x: ev.clientX - r.left, y: ev.clientY - r.top };
+  }
+
+  // Capture phase on the canvas: runs before OrbitControls, and stops it when a point is grabbed.
+  onPointerDown(ev) {
+    if (ev.button !== 0 || !this.model) return;
+    const { x, y } = this.#local(ev);
+    this.press = { x, y };
+    if (this.tool !== 'move' || !this.viewer.visible.cage) return;
+    const i = this.viewer.vertexAt(x, y);
+    if (i < 0) return;
+    ev.stopImmediatePropagation();
+    ev.preventDefault();
+    this.viewer.canvas.setPointerCapture(ev.pointerId);
+    this.viewer.controls.enabled = false;
+    const from = this.viewer.cagePosition(i); // float32, for the drag plane
+    this.drag = { index: i, from, to: null, start: this.model.complex.vertices[i].slice() };
+    this.#hint(`Moving control point ${i}…`);
+  }
+
+  onPointerMove(ev) {
+    if (!this.drag) return;
+    const { x, y } = this.#local(ev);
+    const p = this.viewer.pointOnViewPlane(x, y, this.drag.from);
+    if (!p) return;
+    this.drag.to = p;
+    this.viewer.moveCageVertex(this.drag.index, p);
+    this.queueMove(this.drag.index, p);
+  }
+
+  onPointerUp(ev) {
+    if (this.drag) {
+      const d = this.drag;
+      this.drag = null;
+      this.viewer.controls.enabled = true;
+      if (this.viewer.canvas.hasPointerCapture(ev.pointerId)) this.viewer.canvas.releasePointerCapture(ev.pointerId);
+      if (d.to && d.to.distanceTo(d.from) > 0) {
+        this.undoStack.push({ index: d.index, from: d.start, to: d.to.toArray() });
+        this.redoStack = [];
+        this.#syncUndo();
+      }
+      return;
+    }
+    if (!this.press || !this.model || ev.button !== 0) return;
+    const { x, y } = this.#local(ev);
+    const moved = Math.hypot(x - this.press.x, y - this.press.y);
+    this.press = null;
+    if (moved > 4 || this.tool === 'move') return; // an orbit, not a click
+    this.#click(x, y);
+  }
+
+  #click(x, y) {
+    const v = this.viewer;
+    if (this.tool === 'corner') {
+      const i = v.vertexAt(x, y);
+      if (i >= 0) this.toggleTag([i]);
+      else this.info('No control vertex there: click on a round control point.');
+    } else if (this.tool === 'crease') {
+      const e = v.edgeAt(x, y);
+      if (e) this.toggleTag([...e]);
+      else this.info('No control edge there: click on a line of the control cage.');
+    } else if (this.tool === 'surface') {
+      const f = v.faceAt(x, y);
+      if (f) this.toggleTag([...f]);
+      else this.info('No control triangle there.');
+    } else if (this.tool === 'rule') {
+      const i = v.vertexAt(x, y);
+      const e = i < 0 ? v.edgeAt(x, y) : null;
+      if (i >= 0) this.#showOverride([i]);
+      else if (e) this.#showOverride([...e]);
+      else this.info('No control vertex or edge there.');
+    }
+  }
+
+  setTool(t) {
+    this.tool = t;
+    this.#hint(TOOL_HINTS[t] + '.');
+  }
+
+  // ---- wiring -------------------------------------------------------------------------------
+
+  wire() {
+    const sel = $('example');
+    for (const ex of EXAMPLES) sel.append(new Option(ex.name, ex.id));
+    const loadExample = () => {
+      const ex = EXAMPLES.find((e) => e.id === sel.value);
+      this.loadModel(ex.name, ex.make(), { attribute: ex.attribute });
+    };
+    sel.addEventListener('change', loadExample);
+    $('load-example').addEventListener('click', loadExample);
+    $('file').addEventListener('change', (ev) => {
+      const f = ev.target.files[0];
+      if (f) this.openFile(f);
+      ev.target.value = '';
+    });
+    const view = $('view');
+    view.addEventListener('dragover', (ev) => ev.preventDefault());
+    view.addEventListener('drop', (ev) => {
+      ev.preventDefault();
+      const f = ev.dataTransfer?.files?.[0];
+      if (f) this.openFile(f);
+    });
+
+    $('level').addEventListener('input', (ev) => {
+      this.level = Number(ev.target.value);
+      $('level-value').textContent = this.level;
+      this.requestLevel();
+    });
+    for (const part of ['cage', 'points', 'curves', 'surfaces', 'solids'])
+      $(`show-${part}`).addEventListener('change', (ev) => this.viewer.setVisible(part, ev.target.checked));
+
+    $('color-mode').addEventListener('change', (ev) => this.setColorMode(ev.target.value));
+    for (const id of ['color-min', 'color-max'])
+      $(id).addEventListener('change', () => {
+        const lo = Number($('color-min').value), hi = Number($('color-max').value);
+        if (!(Number.isFinite(lo) && Number.isFinite(hi) && hi > lo)) {
+          this.error(`The colour range needs min < max (got ${$('color-min').value} and ${$('color-max').value}).`);
+          return;
+        }
+        this.color.min = lo;
+        this.color.max = hi;
+        this.#legend();
+        this.requestLevel();
+      });
+
+    $('xsec').addEventListener('change', (ev) => this.setSlice({ on: ev.target.checked }));
+    $('xsec-axis').addEventListener('change', (ev) => this.setSlice({ axis: ev.target.value }));
+    $('xsec-pos').addEventListener('input', (ev) => this.setSlice({ t: Number(ev.target.value) }));
+
+    for (const r of document.querySelectorAll('input[name=tool]'))
+      r.addEventListener('change', (ev) => ev.target.checked && this.setTool(ev.target.value));
+    $('undo').addEventListener('click', () => this.undo());
+    $('redo').addEventListener('click', () => this.redo());
+    $('clear-tags').addEventListener('click', () => this.model && this.setTags([], 'Removing every tag'));
+
+    const rule = (id, field, label) => $(id).addEventListener('change', (ev) =>
+      this.model && this.changeRules({ [field]: ev.target.value }, `Choosing ${label} ${ev.target.value}`));
+    rule('rule-default', 'nonmanifold_default', 'the non-manifold default rule');
+    rule('rule-solid', 'solid_scheme', 'the solid scheme');
+    rule('rule-surface', 'surface_weights', 'the surface weights');
+    rule('rule-nms', 'nonmanifold_surface', 'the non-manifold surface rules');
+    $('override-rule').addEventListener('change', () => this.#overrideFields());
+    $('override-apply').addEventListener('click', () => this.applyOverride());
+
+    const c = this.viewer.canvas;
+    c.addEventListener('pointerdown', (ev) => this.onPointerDown(ev), { capture: true });
+    c.addEventListener('pointermove', (ev) => this.onPointerMove(ev));
+    c.addEventListener('pointerup', (ev) => this.onPointerUp(ev));
+    c.addEventListener('pointercancel', (ev) => this.onPointerUp(ev));
+
+    window.addEventListener('keydown', (ev) => {
+      if (ev.target.matches?.('input[type=number], input[type=text]')) return;
+      const mod = ev.ctrlKey || ev.metaKey;
+      if (mod && ev.key.toLowerCase() === 'z') {
+        ev.preventDefault();
+        if (ev.shiftKey) this.redo();
+        else this.undo();
+      } else if (mod && ev.key.toLowerCase() === 'y') {
+        ev.preventDefault();
+        this.redo();
+      }
+    });
+    window.addEventListener('pagehide', () => this.session.closeOnExit());
+    window.addEventListener('error', (ev) => this.error(ev.error || ev.message));
+    window.addEventListener('unhandledrejection', (ev) => this.error(ev.reason));
+  }
+
+  // ---- for tests and the curious: window.subdivd ------------------------------------------
+
+  snapshot() {
+    const c = this.model?.complex;
+    return {
+      ready: this.ready,
+      idle: this.idle(),
+      model: this.model?.name ?? null,
+      session: this.session.id,
+      version: this.session.version,
+      level: this.level,
+      maxLevel: this.model?.maxLevel ?? null,
+      shown: this.shown && { ...this.shown },
+      tags: c?.tags?.singular ?? [],
+      rules: c?.rules ?? null,
+      vertexRules: c?.classes.vertices.map((v) => v.rule) ?? [],
+      edgeRules: c?.classes.edges.map((e) => ({ vertices: e.vertices, rule: e.rule, singular: e.singular })) ?? [],
+      controlPoints: c?.vertices ?? [],
+      undo: this.undoStack.length,
+      redo: this.redoStack.length,
+      slicing: this.viewer.slicing,
+      messages: this.messages.slice(),
+    };
+  }
+
+  // Page coordinates of a control vertex, or of the middle of an edge / triangle.
+  screenOf(simplex) {
+    const p = new THREE.Vector3();
+    for (const i of simplex) p.add(this.viewer.cagePosition(i));
+    p.divideScalar(simplex.length);
+    const s = this.viewer.toScreen(p);
+    const r = this.viewer.canvas.getBoundingClientRect();
+    return { x: r.left + s.x, y: r.top + s.y };
+  }
+
+  pixels() {
+    return this.viewer.pixelStats();
+  }
+
+  async start() {
+    this.wire();
+    window.subdivd = this;
+    $('range').hidden = true;
+    const ex = EXAMPLES[0];
+    this.#hint(`Loading the example “${ex.name}”…`);
+    await this.loadModel(ex.name, ex.make(), { attribute: ex.attribute });
+    this.ready = true;
+  }
+}
+
+let app;
+try {
+  app = new App();
+} catch (e) {
+  document.getElementById('hint').textContent = `The 3D view could not start: ${e.message} (WebGL needed).`;
+  throw e;
+}
+app.start();
