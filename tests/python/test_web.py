@@ -42,6 +42,7 @@ CHECKS = [
     "undo_redo",         # Ctrl+Z puts it back exactly, Redo moves it again
     "file_open",         # an OBJ from disk
     "file_errors",       # a broken file and a refused one are explained
+    "session_recovery",  # an expired session is replaced with the same model, and the user told
     "console_clean",     # no console errors but the refusals the test provokes
 ]
 
@@ -61,11 +62,11 @@ def report(daemon):
     if OUTDIR.exists():
         shutil.rmtree(OUTDIR)
     r = subprocess.run(["node", str(BROWSER_TEST), daemon.url + "/", str(OUTDIR)], cwd=REPO,
-                       capture_output=True, text=True, timeout=600)
+                       capture_output=True, encoding="utf-8", timeout=600)
     lines = r.stdout.strip().splitlines()
     assert lines and lines[-1].startswith("{"), \
         f"browser test did not finish (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
-    (OUTDIR / "report.txt").write_text(r.stdout + r.stderr)
+    (OUTDIR / "report.txt").write_text(r.stdout + r.stderr, encoding="utf-8")
     return {c["name"]: c for c in json.loads(lines[-1])["checks"]}
 
 

@@ -452,7 +452,24 @@ await step(['file_open', 'file_errors'], async () => {
     `broken file: ${m1}; refused file: ${m2}`);
 });
 
-// 13. no console errors other than the refusals provoked above
+// 13. a session that expired (deleted here behind the page's back) is replaced, and the user told
+await step('session_recovery', async () => {
+  const before = await snap();
+  const n = before.messages.length;
+  expectedFailures.push([before.session, 404]);
+  const del = await page.evaluate(async (id) => (await fetch(`/v1/sessions/${id}`, {
+    method: 'DELETE', headers: { Authorization: `Bearer ${window.subdivd.session.token}` } })).status, before.session);
+  await page.focus('#level');
+  await page.keyboard.press('ArrowLeft');
+  await idle(`window.subdivd.snapshot().shown.level === ${before.shown.level - 1}`);
+  const after = await snap();
+  const said = (await messagesSince(n)).map((m) => `${m.kind}: ${m.text}`).join(' | ');
+  check('session_recovery', del === 204 && after.session !== before.session && /expired/.test(said) &&
+    after.controlPoints.length === before.controlPoints.length && !/error:/.test(said),
+    `DELETE ${del}; session ${before.session.slice(0, 8)} -> ${after.session.slice(0, 8)}; said: ${said}`);
+});
+
+// 14. no console errors other than the refusals provoked above
 check('console_clean', consoleErrors.length === 0, consoleErrors.join(' | '));
 
 await browser.close();
