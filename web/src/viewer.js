@@ -86,7 +86,10 @@ export class Viewer {
     this.camera.add(head);
 
     this.controls = new OrbitControls(this.camera, this.canvas);
-    this.controls.addEventListener('change', () => this.render());
+    this.controls.addEventListener('change', () => {
+      this.#orientClip();
+      this.render();
+    });
 
     this.levelGroup = new THREE.Group();
     this.cageGroup = new THREE.Group();
@@ -229,8 +232,8 @@ export class Viewer {
     this.cageGroup.visible = this.visible.cage;
   }
 
-  // The cross-section plane n·x = d (n any length), or null for none. The side n·x > d is cut
-  // away so the slice shows.
+  // The cross-section plane n·x = d (n any length), or null for none. The half on the camera's
+  // side is cut away (and swaps as the camera orbits), so the slice faces the viewer.
   setSlice(n, d) {
     this.slicing = !!n;
     if (this.planeHelper) {
@@ -243,7 +246,8 @@ export class Viewer {
       const u = new THREE.Vector3(...n);
       const len = u.length();
       u.divideScalar(len);
-      this.clipPlane.set(u.clone().negate(), d / len);
+      this.slicePlane = new THREE.Plane(u.clone(), -d / len); // distance = u·x - d/|n|
+      this.#orientClip();
       const box = this.bbox || new THREE.Box3(new THREE.Vector3(-1, -1, -1), new THREE.Vector3(1, 1, 1));
       const c = box.getCenter(new THREE.Vector3());
       const size = box.getSize(new THREE.Vector3()).length() * 0.8;
@@ -261,6 +265,14 @@ export class Viewer {
 
   // The plane cuts the solid boundary (the slice primitive closes it) and the surfaces, so
   // internal walls show; curves and points stay whole.
+  // Keep the half of the cut away from the camera: three clips where the plane's distance < 0.
+  #orientClip() {
+    if (!this.slicePlane) return;
+    const camSide = this.slicePlane.distanceToPoint(this.camera.position);
+    this.clipPlane.copy(this.slicePlane);
+    if (camSide > 0) this.clipPlane.negate();
+  }
+
   applyClipping() {
     for (const part of ['solids', 'surfaces']) {
       const o = this.parts[part];
