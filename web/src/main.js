@@ -647,6 +647,10 @@ class App {
 
   #click(x, y) {
     const v = this.viewer;
+    if (!v.visible.cage) {
+      this.info('Show the control cage to pick its vertices, edges and triangles.');
+      return;
+    }
     if (this.tool === 'corner') {
       const i = v.vertexAt(x, y);
       if (i >= 0) this.toggleTag([i]);
@@ -807,6 +811,7 @@ class App {
     const ex = EXAMPLES[0];
     this.#hint(`Loading the example “${ex.name}”…`);
     await this.loadModel(ex.name, ex.make(), { attribute: ex.attribute });
+    if (!this.model) this.#hint('The example could not be loaded — the message below says why.');
     this.ready = true;
   }
 }
