@@ -6,9 +6,9 @@
 # docker build -t subdivd . && docker run -p 8080:8080 subdivd
 FROM debian:12 AS build
 WORKDIR /src
-COPY tools/packages.txt tools/packages.txt
+COPY tools/packages.txt tools/apt-packages.sh tools/
 RUN apt-get update \
- && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends make $(grep -v '^#' tools/packages.txt | tr '\n' ' ') \
+ && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends make $(sh tools/apt-packages.sh | tr '\n' ' ') \
  && rm -rf /var/lib/apt/lists/*
 COPY . .
 RUN make build/subdivd build/subdivd-tetgen build/sdlevel \

@@ -5,6 +5,7 @@ every shared library the shipped binaries load comes from a package the runtime 
 (or from libc6, which every Debian image has)."""
 import os
 import re
+import shutil
 import subprocess
 
 
@@ -37,7 +38,7 @@ def install_args(cmd):
     return " ".join(m.group(2).split())
 
 
-def test_build_stage_installs_what_ci_installs():
+def test_build_stage_installs_what_ci_installs(tmp_path):
     ins = instructions()
     froms = [a for s, w, a in ins if w == "FROM"]
     assert len(froms) >= 2, "multi-stage: build, then runtime"
@@ -48,14 +49,32 @@ def test_build_stage_installs_what_ci_installs():
     (ci_install,) = [" ".join(l.split()) for l in ci_lines if "apt-get install" in l]
     ci_args = install_args(ci_install)
     assert install_args(build_runs[0]) == ci_args
-    assert ci_args.startswith("make ") and "tools/packages.txt" in ci_args
+    assert ci_args.startswith("make ") and "tools/apt-packages.sh" in ci_args
     # ... and the expression really reads the list (both run it the same way)
-    assert any(w == "COPY" and "tools/packages.txt" in a for s, w, a in ins if s == 0)
-    pkgs = subprocess.run(["sh", "-c", f"echo {ci_args}"], cwd=REPO, capture_output=True,
-                          text=True, check=True).stdout.split()[1:]
+    copies = [a for s, w, a in ins if s == 0 and w == "COPY"]
+    assert any("tools/packages.txt" in a and "tools/apt-packages.sh" in a for a in copies)
     listed = [l.strip() for l in (REPO / "tools" / "packages.txt").read_text().splitlines()
               if l.strip() and not l.startswith("#")]
-    assert pkgs == listed and "libtet1.5-dev" in pkgs
+
+    def expand(path):
+        out = subprocess.run(["sh", "-c", f"echo {ci_args}"], cwd=REPO, capture_output=True,
+                             text=True, check=True, env={"PATH": path}).stdout.split()
+        assert out[0] == "make"
+        return out[1:]
+    assert "libtet1.5-dev" in listed and "nodejs" in listed and "npm" in listed
+    # a machine without Node.js (debian:12) gets every listed package ...
+    bare = tmp_path / "bin"
+    bare.mkdir()
+    for tool in ("sh", "grep", "tr", "dirname", "printf"):
+        found = shutil.which(tool)
+        if found:
+            (bare / tool).symlink_to(found)
+    assert expand(str(bare)) == listed
+    # ... one whose Node.js brings its own npm (nodesource) gets all but nodejs and npm, which
+    # would conflict with it
+    for tool in ("node", "npm"):
+        (bare / tool).symlink_to("/bin/true")
+    assert expand(str(bare)) == [p for p in listed if p not in ("nodejs", "npm")]
 
 
 def test_runtime_stage():
