@@ -228,6 +228,21 @@ static int build_model(api_input *in, const api_rules *rules, const api_tags *ta
 {
     sd_error e = {0};
     api_model *m = api_model_new(in, rules, lim->max_session_bytes, &e);
+    /* overrides name simplices: kept by a change of tags or rules, not by a new complex (the
+     * callers with a new complex pass rules without them) */
+    if (m && rules && rules->noverrides &&
+        api_model_set_overrides(m, rules->overrides, rules->noverrides, &e)) {
+        api_model_unref(m);
+        if (e.code == SD_ERR_NOMEM)
+            return api_fail(p, 503, "out-of-memory", "out of memory");
+        static const char *const fields[] = {"/simplex", "/rule", "/dimension", "/pair",
+                                             "/pair/0", "/pair/1"};
+        char ptr[128];
+        api_ptr_index(ptr, sizeof ptr, "/overrides", (size_t)(e.item < 0 ? 0 : e.item));
+        if (e.field >= 0 && e.field < 6)
+            strncat(ptr, fields[e.field], sizeof ptr - strlen(ptr) - 1);
+        return api_fail_at(p, 422, "invalid-override", ptr, "%s", e.message);
+    }
     if (m && tags && tags->n && api_model_set_tags(m, tags, &e)) {
         api_model_unref(m);
         if (e.code == SD_ERR_NOMEM)
@@ -288,7 +303,10 @@ int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, a
         rc = api_fill(fill, in, lim, p);
     if (!rc && !in->nv)   /* the core's "no vertices" would point at /simplices */
         rc = api_fail_at(p, 422, "invalid-complex", "/vertices", "the complex has no vertices");
-    if (!rc && (rc = build_model(in, &cur->rules, NULL, lim, out, p)) && in->nfill)
+    api_rules keep = cur->rules; /* the preferences stay; overrides named the old simplices */
+    keep.noverrides = 0;
+    keep.overrides = NULL;
+    if (!rc && (rc = build_model(in, &keep, NULL, lim, out, p)) && in->nfill)
         api_fill_blame(in, nv_posted, ns_posted, p);
     api_input_unref(in);
     return rc;
@@ -327,31 +345,145 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
         return api_fail_at(p, 422, "invalid-rule", "/nonmanifold_default",
                            "%s needs a per-simplex choice of dimension or pair; use G1 or G2 as "
                            "the default and give N1/N2 in \"overrides\"", nm_rules[nm]);
+    r.nonmanifold_default = nm == 1 ? SD_NM_G1 : SD_NM_G2;
+    r.nonmanifold_surface = surf == 1 ? SD_NMSURF_YING_ZORIN : SD_NMSURF_CHANG_QIN;
+    if (surf == 1)
+        return api_fail_at(p, 501, "not-implemented", "/nonmanifold_surface",
+                           "the Ying-Zorin rules are not available in this version");
     json_t *ov = json_object_get(body, "overrides");
     if (ov && !json_is_array(ov))
         return api_fail_at(p, 400, "wrong-type", "/overrides", "must be an array of overrides");
-    if (ov && json_array_size(ov) && !cur->in)
+    size_t nov = ov ? json_array_size(ov) : 0;
+    if (nov && !cur->in)
         return api_fail_at(p, 409, "no-complex", "/overrides",
                            "overrides name simplices of the complex; PUT the complex first");
+    if (nov && nov > (size_t)cur->in->nv + cur->in->ns)
+        return api_fail_at(p, 422, "limit-exceeded", "/overrides",
+                           "%zu overrides for a complex of %u vertices: at most one per vertex or "
+                           "edge", nov, cur->in->nv);
+    sd_override *list = calloc(nov + 1, sizeof *list);
+    if (!list)
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    int rc = 0;
     size_t i;
     json_t *o;
-    char ptr[96];
+    char ptr[96], at[128], at2[160];
     json_array_foreach(ov, i, o) {
         static const char *const okeys[] = {"simplex", "rule", "dimension", "pair", NULL};
+        sd_override *x = &list[i];
         api_ptr_index(ptr, sizeof ptr, "/overrides", i);
-        if (!json_is_object(o))
-            return api_fail_at(p, 400, "wrong-type", ptr, "an override is an object");
-        if (api_only_keys(o, ptr, okeys, p))
-            return p->status;
+        if (!json_is_object(o)) {
+            rc = api_fail_at(p, 400, "wrong-type", ptr, "an override is an object");
+            break;
+        }
+        if ((rc = api_only_keys(o, ptr, okeys, p)))
+            break;
+        json_t *sx = json_object_get(o, "simplex"), *ru = json_object_get(o, "rule");
+        json_t *dim = json_object_get(o, "dimension"), *pr = json_object_get(o, "pair");
+        snprintf(at, sizeof at, "%s/simplex", ptr);
+        if (!sx) {
+            rc = api_fail_at(p, 400, "missing-field", at, "\"simplex\" is required");
+            break;
+        }
+        if (!json_is_array(sx)) {
+            rc = api_fail_at(p, 400, "wrong-type", at, "a simplex is an array of vertex indices");
+            break;
+        }
+        size_t k = json_array_size(sx);
+        if (k < 1 || k > 2) {
+            rc = api_fail_at(p, 422, "invalid-override", at,
+                             "rules are chosen per vertex or edge (1 or 2 indices), not for %zu "
+                             "vertices: a %s has no point of its own", k,
+                             k == 3 ? "triangle" : k == 4 ? "tetrahedron" : "simplex");
+            break;
+        }
+        for (size_t j = 0; j < k && !rc; j++) {
+            long long id;
+            api_ptr_index(at2, sizeof at2, at, j);
+            if (!(rc = api_get_int(json_array_get(sx, j), at2, 0, (long long)cur->in->nv - 1, &id, p)))
+                x->simplex[j] = (uint32_t)id;
+        }
+        if (rc)
+            break;
+        x->nverts = (int)k;
+        snprintf(at, sizeof at, "%s/rule", ptr);
+        if (!ru) {
+            rc = api_fail_at(p, 400, "missing-field", at, "\"rule\" is required");
+            break;
+        }
+        int which = api_get_enum(ru, at, nm_rules, p);
+        if (which < 0) {
+            rc = p->status;
+            break;
+        }
+        static const sd_rule map[] = {SD_RULE_G2, SD_RULE_G1, SD_RULE_N1, SD_RULE_N2};
+        x->rule = map[which];
+        snprintf(at, sizeof at, "%s/dimension", ptr);
+        if (x->rule == SD_RULE_N1 && !dim) {
+            rc = api_fail_at(p, 400, "missing-field", at, "N1 needs the \"dimension\" to follow");
+            break;
+        }
+        if (x->rule != SD_RULE_N1 && dim) {
+            rc = api_fail_at(p, 422, "invalid-override", at, "only N1 takes a dimension");
+            break;
+        }
+        if (dim) {
+            long long d;
+            if ((rc = api_get_int(dim, at, 1, 3, &d, p)))
+                break;
+            x->dimension = (int)d;
+        }
+        snprintf(at, sizeof at, "%s/pair", ptr);
+        if (x->rule == SD_RULE_N2 && !pr) {
+            rc = api_fail_at(p, 400, "missing-field", at, "N2 needs the \"pair\" of simplices to follow");
+            break;
+        }
+        if (x->rule != SD_RULE_N2 && pr) {
+            rc = api_fail_at(p, 422, "invalid-override", at, "only N2 takes a pair");
+            break;
+        }
+        if (pr) {
+            if (!json_is_array(pr) || json_array_size(pr) != 2) {
+                rc = api_fail_at(p, json_is_array(pr) ? 422 : 400,
+                                 json_is_array(pr) ? "invalid-override" : "wrong-type", at,
+                                 "a pair is an array of two simplices");
+                break;
+            }
+            for (size_t j = 0; j < 2 && !rc; j++) {
+                json_t *q = json_array_get(pr, j);
+                api_ptr_index(at2, sizeof at2, at, j);
+                if (!json_is_array(q)) {
+                    rc = api_fail_at(p, 400, "wrong-type", at2, "a simplex is an array of vertex indices");
+                    break;
+                }
+                size_t kq = json_array_size(q);
+                if (kq < 2 || kq > 3 || (j == 1 && (int)kq != x->pair_size)) {
+                    rc = api_fail_at(p, 422, "invalid-override", at2,
+                                     "the pair is two curve segments (2 indices each) or two "
+                                     "triangles (3 each)");
+                    break;
+                }
+                x->pair_size = (int)kq;
+                for (size_t u = 0; u < kq && !rc; u++) {
+                    long long id;
+                    char at3[192];
+                    api_ptr_index(at3, sizeof at3, at2, u);
+                    if (!(rc = api_get_int(json_array_get(q, u), at3, 0, (long long)cur->in->nv - 1,
+                                           &id, p)))
+                        x->pair[j][u] = (uint32_t)id;
+                }
+            }
+            if (rc)
+                break;
+        }
     }
-    if (nm == 1 || surf == 1 || json_array_size(ov) > 0) {
-        const char *what = nm == 1 ? "/nonmanifold_default" : surf == 1 ? "/nonmanifold_surface"
-                                                                        : "/overrides";
-        return api_fail_at(p, 501, "not-implemented", what,
-                           "only the default non-manifold rules (G2, chang-qin, no overrides) are "
-                           "available in this version");
+    if (!rc) {
+        r.overrides = list;
+        r.noverrides = (uint32_t)nov;
+        rc = build_model(cur->in, &r, &cur->tags, lim, out, p);
     }
-    return build_model(cur->in, &r, &cur->tags, lim, out, p);
+    free(list);
+    return rc;
 }
 
 int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
@@ -1423,8 +1555,11 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
     }
     free(marked);
     free(sel.keys);
+    api_rules keep = cur->rules; /* overrides named the old simplices */
+    keep.noverrides = 0;
+    keep.overrides = NULL;
     if (!rc)
-        rc = build_model(in, &cur->rules, NULL, lim, out, p);
+        rc = build_model(in, &keep, NULL, lim, out, p);
     api_input_unref(in);
     return rc;
 }

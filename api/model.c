@@ -67,9 +67,13 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
     pthread_rwlockattr_destroy(&ra);
     if (rules)
         m->rules = *rules;
+    m->rules.overrides = NULL; /* copied by api_model_set_overrides */
+    m->rules.noverrides = 0;
     if (in) {
         sd_options opt = {.surface_weights = m->rules.surface_weights,
                           .solid_scheme = m->rules.solid_scheme,
+                          .nonmanifold_default = m->rules.nonmanifold_default,
+                          .nonmanifold_surface = m->rules.nonmanifold_surface,
                           .max_bytes = (size_t)max_bytes};
         m->c = sd_complex_new(in->xyz, in->nv, in->idx, in->size, in->ns, &opt, err);
         if (!m->c) {
@@ -114,6 +118,21 @@ int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err)
     return m->c ? sd_complex_set_singular(m->c, t->idx, t->size, t->n, err) : 0;
 }
 
+int api_model_set_overrides(api_model *m, const sd_override *ov, uint32_t n, sd_error *err)
+{
+    if (!n)
+        return 0;
+    m->rules.overrides = malloc(n * sizeof *ov);
+    if (!m->rules.overrides) {
+        err->code = SD_ERR_NOMEM;
+        snprintf(err->message, sizeof err->message, "out of memory");
+        return SD_ERR_NOMEM;
+    }
+    memcpy(m->rules.overrides, ov, n * sizeof *ov);
+    m->rules.noverrides = n;
+    return m->c ? sd_complex_set_overrides(m->c, ov, n, err) : 0;
+}
+
 api_model *api_model_ref(api_model *m)
 {
     atomic_fetch_add(&m->refs, 1);
@@ -126,6 +145,7 @@ void api_model_unref(api_model *m)
         return;
     free(m->tags.size);
     free(m->tags.idx);
+    free(m->rules.overrides);
     json_decref(m->summary);
     for (int l = 0; l <= SD_MAX_LEVEL; l++)
         out_geometry_free(m->geometry[l]);

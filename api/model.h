@@ -54,6 +54,10 @@ typedef struct api_input {
 typedef struct api_rules {
     int solid_scheme;         /* SD_SOLID_* */
     int surface_weights;      /* SD_WEIGHTS_* */
+    int nonmanifold_default;  /* SD_NM_* */
+    int nonmanifold_surface;  /* SD_NMSURF_* */
+    uint32_t noverrides;      /* per-simplex choices (owned by the model that holds them) */
+    sd_override *overrides;
 } api_rules;
 
 /* Singular tags (PUT /tags): n simplices of 1..3 vertex ids, stored consecutively. */
@@ -88,6 +92,9 @@ void api_input_unref(api_input *in);
 /* A new model from an input (borrowed: the model takes its own reference; may be NULL) and
  * rules; builds and classifies the core complex under `max_bytes`. NULL + err on failure. */
 api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_bytes, sd_error *err);
+/* Apply per-simplex rule overrides to a model being built (copies them into m->rules).
+ * SD_ERR_* + err (item = the override, field = SD_OV_FIELD_*). */
+int api_model_set_overrides(api_model *m, const sd_override *ov, uint32_t n, sd_error *err);
 api_model *api_model_ref(api_model *m);
 void api_model_unref(api_model *m);
 

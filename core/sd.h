@@ -73,11 +73,15 @@ typedef struct sd_allocator {
 
 enum { SD_WEIGHTS_WARREN = 0, SD_WEIGHTS_LOOP = 1 };   /* Loop vertex weights, SPEC Sec. 3 */
 enum { SD_SOLID_BOX = 0, SD_SOLID_AVERAGED = 1 };      /* solid scheme, 001 Sec. 3 / App. A */
+enum { SD_NM_G2 = 0, SD_NM_G1 = 1 };                   /* default non-manifold rule, 000 Sec. 3.5 */
+enum { SD_NMSURF_CHANG_QIN = 0, SD_NMSURF_YING_ZORIN = 1 }; /* pure-triangle non-manifold regions */
 
 /* Options: zero means default. */
 typedef struct sd_options {
     int surface_weights;     /* SD_WEIGHTS_* */
     int solid_scheme;        /* SD_SOLID_* */
+    int nonmanifold_default; /* SD_NM_*: the rule of non-manifold simplices without an override */
+    int nonmanifold_surface; /* SD_NMSURF_*: rules of non-manifold regions made of triangles only */
     size_t max_bytes;        /* memory cap for the whole complex (0 = none) */
     sd_allocator allocator;
     int threads;             /* threads computing a level may use (0, 1 = the caller's only;
@@ -183,6 +187,36 @@ sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *
  * stay tagged at every level; drops computed levels >= 1. idx/size as for sd_complex_new. */
 sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint8_t *size,
                                   size_t n, sd_error *err);
+/* Per-simplex non-manifold rules (000 Sec. 3.5, SPEC Sec. 3), for non-manifold vertices and
+ * edges of level 0; their descendants at every level keep them:
+ *   SD_RULE_N1  (type 1) the rules of dimension `dimension` alone: the simplex follows the rule it
+ *               has in C_dimension (the complex of the maximal simplices of that dimension), so
+ *               that part subdivides as if the others were absent; the other parts read it as an
+ *               ordinary neighbour.
+ *   SD_RULE_N2  (types 2 and 4) the rules of the pair of incident maximal simplices `pair` (two
+ *               curve segments or two triangles, `pair_size` = 2 or 3 ids each), as if only they
+ *               existed: at a vertex, the two whole fans (petals) of triangles around it that hold
+ *               them. The chosen curve segments / triangles are marked; a marked simplex may not
+ *               meet another N2 simplex whose pair leaves it out.
+ *   SD_RULE_G1  a singularity: a vertex is fixed (0-mask), an edge a crease (as a singular tag).
+ *   SD_RULE_G2  the default 3-simplex rule with the relieved topology condition (also undoes a
+ *               G1 default for this simplex).
+ * `nonmanifold_default` (sd_options) picks G2 or G1 for the rest: with G1 the non-manifold edges
+ * become creases and the non-manifold vertices on none of them corners. Singular tags win over
+ * every override. Errors: SD_ERR_ARG / SD_ERR_INDEX with item = the override and field = one of
+ * SD_OV_FIELD_*. Replaces earlier overrides; drops computed levels >= 1. */
+typedef struct sd_override {
+    uint32_t simplex[2];
+    int nverts;                /* 1 vertex, 2 edge */
+    sd_rule rule;
+    int dimension;             /* N1: 1..3 */
+    uint32_t pair[2][3];       /* N2 */
+    int pair_size;
+} sd_override;
+enum { SD_OV_FIELD_SIMPLEX = 0, SD_OV_FIELD_RULE, SD_OV_FIELD_DIMENSION, SD_OV_FIELD_PAIR,
+       SD_OV_FIELD_PAIR0, SD_OV_FIELD_PAIR1 };
+sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t n, sd_error *err);
+
 /* Whether vertex i / edge e of a level belongs to the singular complex. */
 int sd_level_vertex_singular(const sd_level *lv, uint32_t i);
 int sd_level_edge_singular(const sd_level *lv, uint32_t e);

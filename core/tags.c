@@ -105,3 +105,12 @@ int sd_level_edge_singular(const sd_level *lv, uint32_t e)
 {
     return e < lv->t.ne && sd_need_derived(lv) && (lv->t.eflag[e] & (EF_CREASE | EF_SSURF)) != 0;
 }
+
+sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t n, sd_error *err)
+{
+    (void)c;
+    (void)ov;
+    if (n)
+        return sd_fail(err, SD_ERR_ARG, 0, SD_OV_FIELD_RULE, "overrides are not implemented yet");
+    return SD_OK;
+}
