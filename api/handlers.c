@@ -668,13 +668,37 @@ json_t *api_get_complex(api_model *m, api_problem *p)
             json_array_append_new(dj, json_pack("[I, i]", (json_int_t)s, sd_complex_diagonal(m->c, s)));
     pthread_rwlock_unlock(&m->data);
     static const char *const schemes[] = {"box", "averaged"}, *const weights[] = {"warren", "loop"};
-    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:{s:o}, s:{s:s, s:[], s:s, s:s, s:s}, s:O}",
+    static const char *const nmd[] = {"G2", "G1"}, *const surfs[] = {"chang-qin", "ying-zorin"};
+    json_t *oj = json_array();
+    for (uint32_t i = 0; i < m->rules.noverrides; i++) {
+        const sd_override *o = &m->rules.overrides[i];
+        json_t *sx = json_array();
+        for (int j = 0; j < o->nverts; j++)
+            json_array_append_new(sx, json_integer(o->simplex[j]));
+        json_t *x = json_pack("{s:o, s:s}", "simplex", sx, "rule", sd_rule_name(o->rule));
+        if (o->rule == SD_RULE_N1)
+            json_object_set_new(x, "dimension", json_integer(o->dimension));
+        if (o->rule == SD_RULE_N2) {
+            json_t *pr = json_array();
+            for (int j = 0; j < 2; j++) {
+                json_t *q = json_array();
+                for (int u = 0; u < o->pair_size; u++)
+                    json_array_append_new(q, json_integer(o->pair[j][u]));
+                json_array_append_new(pr, q);
+            }
+            json_object_set_new(x, "pair", pr);
+        }
+        json_array_append_new(oj, x);
+    }
+    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:{s:o}, s:{s:s, s:o, s:s, s:s, s:s}, s:O}",
                      "vertices", vs, "simplices", ss, "attributes", at, "diagonals", dj,
                      "classes", "vertices", cv,
-                     "edges", ce, "tags", "singular", tj, "rules", "nonmanifold_default", "G2",
-                     "overrides", "solid_scheme", schemes[m->rules.solid_scheme & 1],
+                     "edges", ce, "tags", "singular", tj, "rules", "nonmanifold_default",
+                     nmd[m->rules.nonmanifold_default & 1], "overrides", oj,
+                     "solid_scheme", schemes[m->rules.solid_scheme & 1],
                      "surface_weights", weights[m->rules.surface_weights & 1],
-                     "nonmanifold_surface", "chang-qin", "summary", m->summary);
+                     "nonmanifold_surface", surfs[m->rules.nonmanifold_surface & 1],
+                     "summary", m->summary);
 }
 
 /* ---- levels ------------------------------------------------------------------------------- */

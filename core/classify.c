@@ -167,17 +167,20 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
         else if (t->efam[e] == FAM2 && n2[e] >= 3)
             t->enm[e] = 2;
     }
+    for (uint32_t e = 0; e < ne; e++)
+        if ((t->efam[e] & FAM2) && n2[e] != 2)
+            t->enm[e] |= NM_C2B;
     /* type 4: faces of type-2 simplices (exclusive members, dim < k-1) */
     for (uint32_t f = 0; f < t->nf; f++)
         if (t->fn3[f] >= 3)
             for (int j = 0; j < 3; j++) {
-                if (t->enm[t->fe[f][j]] == 0)
-                    t->enm[t->fe[f][j]] = 4;
+                if (nm_type(t->enm[t->fe[f][j]]) == 0)
+                    t->enm[t->fe[f][j]] |= 4;
                 if (t->vnm[t->fv[f][j]] == 0)
                     t->vnm[t->fv[f][j]] = 4;
             }
     for (uint32_t e = 0; e < ne; e++)
-        if (t->enm[e] == 2)
+        if (nm_type(t->enm[e]) == 2)
             for (int k = 0; k < 2; k++)
                 if (t->vnm[t->ev[e][k]] == 0)
                     t->vnm[t->ev[e][k]] = 4;
@@ -200,7 +203,7 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
         goto nomem;
 
     for (uint32_t e = 0; e < ne; e++) {
-        if (t->efam[e] != FAM3 || t->enm[e])
+        if (t->efam[e] != FAM3 || nm_type(t->enm[e]))
             continue;
         uf_begin(&u);
         for (uint32_t k = et.off[e]; k < et.off[e + 1]; k++) {
@@ -212,7 +215,7 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
             uf_union(&u, o[0], o[1]);
         }
         if (uf_components(&u) > 1) {
-            t->enm[e] = 3;
+            t->enm[e] |= 3;
             for (int k = 0; k < 2; k++)
                 if (t->vnm[t->ev[e][k]] == 0)
                     t->vnm[t->ev[e][k]] = 4;

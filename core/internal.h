@@ -78,6 +78,20 @@ enum {
     FF_SING = 4,        /* tagged: part of an embedded surface */
 };
 enum { VF_S_ANY = VF_SCREASE | VF_SSURF };
+enum {
+    EF_N2SEL = 64,      /* a curve segment chosen by an N2 pair, or a side of a chosen triangle */
+    EF_N2BND = 128,     /* ... of exactly one chosen triangle */
+    FF_N2SEL = 8,       /* a maximal triangle chosen by an N2 pair (or in a chosen petal) */
+};
+/* vnm / enm pack the non-manifold type (bits 0-2) with the per-simplex rule (tags.c):
+ * bits 3-5 an override code, NM_C2B (edges) "in C_2 but not between exactly 2 maximal
+ * triangles" (a boundary of C_2 for N1 with dimension 2), NM_G1 "singular by rule G1". All are
+ * inherited by children (split.c). */
+enum { NM_TYPE = 7, NM_OV_SHIFT = 3, NM_OV = 7 << 3, NM_C2B = 64, NM_G1 = 128 };
+enum { OV_NONE = 0, OV_N1_1 = 1, OV_N1_2 = 2, OV_N1_3 = 3, OV_N2 = 4, OV_G2 = 5 };
+static inline int nm_type(uint8_t x) { return x & NM_TYPE; }
+static inline int nm_ov(uint8_t x) { return (x & NM_OV) >> NM_OV_SHIFT; }
+enum { OVM_N1 = 1, OVM_N2T = 2, OVM_N2C = 4 }; /* sd_topo.ovmask: which overrides occur */
 enum { FAM0 = 1, FAM1 = 2, FAM2 = 4, FAM3 = 8 };
 
 /* ---- one level's topology and classification ---------------------------------------- */
@@ -98,6 +112,7 @@ typedef struct sd_topo {
     uint32_t npt, ncu, ntr, ntet, noct;
     bool derived;              /* the edges part is built */
     bool faces;                /* the faces part is built */
+    uint8_t ovmask;            /* OVM_*: per-simplex rules occur (tags.c; same at every level) */
     bool tr_ident;             /* every face is a maximal triangle and face i is triangle i: at
                                 * levels >= 1, tr is not stored and fv is trv */
     /* cells */
@@ -269,6 +284,12 @@ struct sd_complex {
     uint32_t *in_tet;          /* input simplex -> tetrahedron id (or UINT32_MAX) */
     uint8_t *tet_swapped;      /* level-0 tet reoriented (slots 2,3 swapped) */
     int nlevels;               /* computed levels */
+    /* the singular tags and per-simplex rules as given (tags.c re-applies both to level 0) */
+    size_t ntags;
+    uint32_t *tag_at;          /* vertex, edge or face id of level 0 */
+    uint8_t *tag_k;            /* 1, 2, 3 */
+    size_t nov;
+    sd_override *ov;
     sd_level *lv[SD_MAX_LEVEL + 1];
 };
 
@@ -300,6 +321,11 @@ uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v);
 /* The rules vertices actually follow (corners where the neighbourhood does not fit the
  * classification), without building stencils: nv entries into vr. */
 sd_result sd_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr);
+/* tags.c: (re)apply tags, overrides and the default non-manifold rule to level 0's flags */
+sd_result sd_apply_singular(sd_complex *c, sd_error *err);
+/* The rule reported for a vertex / edge whose computed rule is r (N1, N2, G1 where they apply) */
+sd_rule sd_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r);
+sd_rule sd_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
 /* analysis.c helpers */
 uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b);
 

@@ -22,6 +22,14 @@ sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, co
         sd_fail(err, SD_ERR_ARG, -1, -1, "unknown surface_weights %d", o.surface_weights);
         return NULL;
     }
+    if (o.nonmanifold_default != SD_NM_G2 && o.nonmanifold_default != SD_NM_G1) {
+        sd_fail(err, SD_ERR_ARG, -1, -1, "unknown nonmanifold_default %d", o.nonmanifold_default);
+        return NULL;
+    }
+    if (o.nonmanifold_surface != SD_NMSURF_CHANG_QIN && o.nonmanifold_surface != SD_NMSURF_YING_ZORIN) {
+        sd_fail(err, SD_ERR_ARG, -1, -1, "unknown nonmanifold_surface %d", o.nonmanifold_surface);
+        return NULL;
+    }
     if (o.solid_scheme != SD_SOLID_BOX && o.solid_scheme != SD_SOLID_AVERAGED) {
         sd_fail(err, SD_ERR_ARG, -1, -1, "unknown solid_scheme %d", o.solid_scheme);
         return NULL;
@@ -44,7 +52,8 @@ sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, co
     memset(c, 0, sizeof *c);
     c->mem = mem;
     c->opt = o;
-    if (sd_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err)) {
+    if (sd_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err) ||
+        (o.nonmanifold_default == SD_NM_G1 && sd_apply_singular(c, err))) {
         sd_complex_free(c);
         return NULL;
     }
@@ -86,6 +95,9 @@ void sd_complex_free(sd_complex *c)
     if (!c)
         return;
     drop_levels(c, 0);
+    sd_free(&c->mem, c->tag_at);
+    sd_free(&c->mem, c->tag_k);
+    sd_free(&c->mem, c->ov);
     sd_free(&c->mem, c->in_tet);
     sd_free(&c->mem, c->tet_swapped);
     sd_mem m = c->mem;
@@ -397,10 +409,11 @@ sd_result sd_level_vertex_class(const sd_level *lv, uint32_t i, sd_class *o)
         return SD_ERR_ARG;
     o->family = t->vfam[i];
     o->boundary = (t->vflag[i] & VF_DC) != 0;
-    o->nonmanifold = t->vnm[i];
+    o->nonmanifold = (uint8_t)nm_type(t->vnm[i]);
     o->rule = lv->vrule[i];
     o->valence = sd_csrb_len(&lv->S, i) - 1;
     o->extraordinary = extraordinary(o->rule, o->valence, false);
+    o->rule = (uint8_t)sd_reported_vertex_rule(t, i, lv->vrule[i]);
     return SD_OK;
 }
 
@@ -411,10 +424,11 @@ sd_result sd_level_edge_class(const sd_level *lv, uint32_t e, sd_class *o)
         return SD_ERR_ARG;
     o->family = t->efam[e];
     o->boundary = (t->eflag[e] & EF_DC) != 0;
-    o->nonmanifold = t->enm[e];
+    o->nonmanifold = (uint8_t)nm_type(t->enm[e]);
     o->rule = lv->erule[e];
     o->valence = sd_csrb_len(&lv->S, t->nv + e) - 2;
     o->extraordinary = extraordinary(o->rule, o->valence, true);
+    o->rule = (uint8_t)sd_reported_edge_rule(t, e, lv->erule[e]);
     return SD_OK;
 }
 
@@ -445,10 +459,11 @@ sd_rule sd_level_vertex_rule(const sd_level *lv, uint32_t i)
     /* vrule_only first: once set it never changes, while a later computation of the next level
      * may build vrule (same values) concurrently with a reader of this one */
     if (lv->vrule_only)
-        return (sd_rule)lv->vrule_only[i];
+        return sd_reported_vertex_rule(&lv->t, i, lv->vrule_only[i]);
     if (lv->have_rules)
-        return (sd_rule)lv->vrule[i];
-    return (sd_rule)sd_vertex_rule(&lv->t, i); /* the classification's (see sd.h) */
+        return sd_reported_vertex_rule(&lv->t, i, lv->vrule[i]);
+    /* the classification's (see sd.h) */
+    return sd_reported_vertex_rule(&lv->t, i, sd_vertex_rule(&lv->t, i));
 }
 
 sd_result sd_complex_prepare_vertex_rules(sd_complex *c, int level, sd_error *err)

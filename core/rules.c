@@ -45,8 +45,20 @@ uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v)
         return SD_RULE_CURVE;
     if (fl & VF_SSURF)
         return fl & VF_SBND ? SD_RULE_LOOP_BOUNDARY : SD_RULE_LOOP;
-    if (nm)
-        return nm == 2 && fam == FAM1 ? SD_RULE_CORNER : SD_RULE_G2;
+    switch (nm_ov(nm)) { /* the simplex's own choice (tags.c); vertex_rules settles N1 and N2 */
+    case OV_N1_1:
+        return SD_RULE_CURVE;
+    case OV_N1_2:
+        return SD_RULE_LOOP;
+    case OV_N1_3:
+        return fl & VF_DC ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID;
+    case OV_N2:
+        return fam == FAM1 ? SD_RULE_CURVE : SD_RULE_LOOP;
+    default:
+        break;
+    }
+    if (nm_type(nm))
+        return nm_type(nm) == 2 && fam == FAM1 ? SD_RULE_CORNER : SD_RULE_G2;
     switch (fam) {
     case FAM1:
         return fl & VF_CURVE_END ? SD_RULE_CORNER : SD_RULE_CURVE;
@@ -66,7 +78,19 @@ static uint8_t edge_rule(const sd_topo *t, uint32_t e)
         return SD_RULE_CURVE;
     if (fl & EF_SSURF)
         return SD_RULE_LOOP;
-    if (t->enm[e])
+    switch (nm_ov(t->enm[e])) { /* the edge's own choice (tags.c) */
+    case OV_N1_1:
+        return SD_RULE_CURVE;
+    case OV_N1_2: /* as in C_2 alone: between two triangles, or its boundary */
+        return t->enm[e] & NM_C2B ? SD_RULE_LOOP_BOUNDARY : SD_RULE_LOOP;
+    case OV_N1_3: /* as in C_3 alone */
+        return fl & EF_DC ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID;
+    case OV_N2: /* Loop between the two chosen triangles (opp_task) */
+        return SD_RULE_LOOP;
+    default:
+        break;
+    }
+    if (nm_type(t->enm[e]))
         return SD_RULE_G2;
     switch (t->efam[e]) {
     case FAM1:
@@ -78,6 +102,28 @@ static uint8_t edge_rule(const sd_topo *t, uint32_t e)
     default:
         return SD_RULE_CURVE;
     }
+}
+
+sd_rule sd_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r)
+{
+    uint8_t nm = t->vnm[v];
+    if (nm & NM_G1)
+        return SD_RULE_G1;
+    if (t->vflag[v] & (VF_SING | VF_S_ANY)) /* a tag wins over the vertex's choice */
+        return (sd_rule)r;
+    int ov = nm_ov(nm);
+    return ov >= OV_N1_1 && ov <= OV_N1_3 ? SD_RULE_N1 : ov == OV_N2 ? SD_RULE_N2 : (sd_rule)r;
+}
+
+sd_rule sd_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r)
+{
+    uint8_t nm = t->enm[e];
+    if (nm & NM_G1)
+        return SD_RULE_G1;
+    if (t->eflag[e] & (EF_CREASE | EF_SSURF))
+        return (sd_rule)r;
+    int ov = nm_ov(nm);
+    return ov >= OV_N1_1 && ov <= OV_N1_3 ? SD_RULE_N1 : ov == OV_N2 ? SD_RULE_N2 : (sd_rule)r;
 }
 
 /* G2's relieved ring: keep neighbour n of a junction c unless c lies on dC (or outside solids)
@@ -451,6 +497,41 @@ static inline unsigned edge_readers(uint8_t fam, uint8_t fl)
     return m;
 }
 
+/* N1 / N2 (tags.c): is e, at a vertex with choice ov, on the boundary of the part it follows? */
+static inline bool ov_boundary_edge(const sd_topo *t, int ov, uint32_t e)
+{
+    switch (ov) {
+    case OV_N1_2:
+        return (t->efam[e] & FAM2) && (t->enm[e] & NM_C2B);
+    case OV_N1_3:
+        return (t->efam[e] & FAM3) && (t->eflag[e] & EF_DC);
+    case OV_N2:
+        return (t->eflag[e] & EF_N2BND) != 0;
+    default:
+        return false;
+    }
+}
+/* ... and does a vertex with choice ov, following rule r, read its neighbour through e? */
+static inline bool ov_take(const sd_topo *t, uint8_t r, uint32_t v, uint32_t e)
+{
+    int ov = nm_ov(t->vnm[v]);
+    uint8_t fam = t->efam[e], fl = t->eflag[e];
+    switch (ov) {
+    case OV_N1_1:
+        return fl & EF_CURVE;
+    case OV_N1_2:
+        return r == SD_RULE_LOOP ? (fam & FAM2) != 0 : ov_boundary_edge(t, ov, e);
+    case OV_N1_3:
+        return r == SD_RULE_SOLID ? (fam & FAM3) != 0 : ov_boundary_edge(t, ov, e);
+    case OV_N2:
+        if (t->vfam[v] == FAM1)
+            return (fl & (EF_CURVE | EF_N2SEL)) == (EF_CURVE | EF_N2SEL);
+        return r == SD_RULE_LOOP ? (fl & EF_N2SEL) != 0 : ov_boundary_edge(t, ov, e);
+    default:
+        return false;
+    }
+}
+
 /* The rule of every vertex and the sizes of its rho (cnt_a: edge and diagonal neighbours,
  * cnt_b: the averaged scheme's octahedral opposites, NULL for the box scheme; zeroed by the
  * caller): the
@@ -461,25 +542,48 @@ static void vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cn
                          uint8_t *take)
 {
     const uint32_t nv = t->nv, ne = t->ne, no = t->noct;
-    enum { SLOW = 0x80 }; /* in vr while counting: the rule needs via_edge (G2, singular) */
+    /* in vr while counting: the rule needs via_edge (G2, singular) or ov_take (a simplex's own
+     * N1/N2 choice); ON_BND: such a vertex has an edge of its part's boundary */
+    enum { SLOW = 0x80, OVR = 0x40, ON_BND = 0x10 };
     for (uint32_t v = 0; v < nv; v++) {
         uint8_t r = sd_vertex_rule(t, v);
-        vr[v] = r | ((r == SD_RULE_G2 || (t->vflag[v] & VF_S_ANY)) ? SLOW : 0);
+        int ov = nm_ov(t->vnm[v]);
+        bool own = t->ovmask && ov && ov != OV_G2 && !(t->vflag[v] & (VF_SING | VF_S_ANY));
+        vr[v] = r | (own ? OVR : (r == SD_RULE_G2 || (t->vflag[v] & VF_S_ANY)) ? SLOW : 0);
+    }
+    if (t->ovmask) { /* N1 / N2 vertices: interior or boundary of the part they follow */
+        for (uint32_t e = 0; e < ne; e++)
+            for (int k = 0; k < 2; k++) {
+                uint32_t v = t->ev[e][k];
+                if (vr[v] & OVR && ov_boundary_edge(t, nm_ov(t->vnm[v]), e))
+                    vr[v] |= ON_BND;
+            }
+        for (uint32_t v = 0; v < nv; v++)
+            if (vr[v] & OVR) {
+                int ov = nm_ov(t->vnm[v]);
+                bool bnd = vr[v] & ON_BND;
+                uint8_t r = ov == OV_N1_1 || (ov == OV_N2 && t->vfam[v] == FAM1) ? SD_RULE_CURVE
+                          : ov == OV_N1_3 ? (bnd ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID)
+                          : bnd ? SD_RULE_LOOP_BOUNDARY : SD_RULE_LOOP;
+                vr[v] = r | OVR;
+            }
     }
     /* vertex rho sizes */
     for (uint32_t e = 0; e < ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
         unsigned m = edge_readers(t->efam[e], t->eflag[e]);
         uint8_t ra = vr[a], rb = vr[b];
-        unsigned ta = ra & SLOW ? via_edge(t, ra & ~SLOW, a, b, e) : (m >> ra) & 1u;
-        unsigned tb = rb & SLOW ? via_edge(t, rb & ~SLOW, b, a, e) : (m >> rb) & 1u;
+        unsigned ta = ra & OVR ? ov_take(t, ra & 0x0f, a, e)
+                    : ra & SLOW ? via_edge(t, ra & ~SLOW, a, b, e) : (m >> ra) & 1u;
+        unsigned tb = rb & OVR ? ov_take(t, rb & 0x0f, b, e)
+                    : rb & SLOW ? via_edge(t, rb & ~SLOW, b, a, e) : (m >> rb) & 1u;
         cnt_a[a] += ta;
         cnt_a[b] += tb;
         if (take)
             take[e] = (uint8_t)(ta | tb << 1);
     }
     for (uint32_t v = 0; v < nv; v++)
-        vr[v] &= (uint8_t)~SLOW;
+        vr[v] &= 0x0f;
     for (uint32_t o = 0; o < no; o++) {
         uint32_t p = t->oct[o][0], q = t->oct[o][1];
         if (via_diag(t, vr[p], scheme, p, q))
@@ -534,7 +638,8 @@ typedef struct rjob {
     bool any_g2e[SD_PAR_MAXT], any_opp[SD_PAR_MAXT];   /* per part */
 } rjob;
 
-enum { M_SSURF = 4, M_LOOP = 8, M_SB = 16 }; /* which faces give an edge its opposite vertices */
+enum { M_SSURF = 4, M_LOOP = 8, M_SB = 16, M_N2 = 32 }; /* which faces give an edge its opposite
+                                                          * vertices */
 
 /* The explicit columns of edge e's row: its ring. */
 static inline uint32_t ring_len(const rjob *J, uint32_t e)
@@ -597,14 +702,16 @@ static void opp_task(void *arg)
     for (uint32_t e = 0; e < t->ne; e++) {
         /* an embedded surface's edge takes its opposite vertices from tagged triangles */
         bool ss = t->eflag[e] & EF_SSURF;
-        nopp[e] = er[e] == SD_RULE_LOOP ? (ss ? M_SSURF : M_LOOP)
+        bool n2 = nm_ov(t->enm[e]) == OV_N2 && !ss && !(t->eflag[e] & EF_CREASE);
+        nopp[e] = er[e] == SD_RULE_LOOP ? (ss ? M_SSURF : n2 ? M_N2 : M_LOOP)
                 : er[e] == SD_RULE_SOLID_BOUNDARY && !ss ? M_SB : 0;
     }
     for (uint32_t f = 0; f < t->nf; f++) {
         uint8_t ff = t->fflag[f];
         if (!(ff & (FF_MAX | FF_BND3 | FF_SING)))
             continue;
-        unsigned want = (ff & FF_SING ? M_SSURF : 0) | (ff & FF_MAX ? M_LOOP : M_SB);
+        unsigned want = (ff & FF_SING ? M_SSURF : 0) | (ff & FF_MAX ? M_LOOP : M_SB) |
+                        (ff & FF_N2SEL ? M_N2 : 0);
         for (int j = 0; j < 3; j++) {
             uint32_t e = t->fe[f][j];
             unsigned n = nopp[e];

@@ -448,7 +448,8 @@ static void cells_part(void *arg, uint32_t part, uint32_t nparts)
             uint8_t pf = P->eflag[e];
             C->vflag[v] = ((pf & EF_DC) ? VF_DC : 0) | ((pf & EF_CREASE) ? VF_SCREASE : 0) |
                           ((pf & EF_SSURF) ? VF_SSURF : 0) | ((pf & EF_SBND) ? VF_SBND : 0);
-            C->vnm[v] = P->enm[e] == 1 ? 1 : P->enm[e] ? 4 : 0;
+            uint8_t pt = (uint8_t)nm_type(P->enm[e]);
+            C->vnm[v] = (uint8_t)((pt == 1 ? 1 : pt ? 4 : 0) | (P->enm[e] & (NM_OV | NM_G1)));
         }
     }
     {
@@ -509,6 +510,7 @@ sd_result sd_split_cells(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, s
     C->ntet = (uint32_t)ntet;
     C->noct = (uint32_t)noct;
     C->tr_ident = P->tr_ident && C->nf == C->ntr;
+    C->ovmask = P->ovmask;
 #define A(f, n) (C->f = sd_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
     if (!A(pt, C->npt) || !A(cuv, C->ncu) || !A(trv, C->ntr) || !A(tet, ntet) ||
         !A(tet_d, ntet) || !A(tet_b, ntet) || !A(oct, noct) || !A(oct_b, noct) ||
@@ -560,7 +562,8 @@ static void edges_part(void *arg, uint32_t part, uint32_t nparts)
             const uint32_t *fe = P->fe[f];
             uint8_t fam = (P->fflag[f] & FF_MAX) ? FAM2 : FAM3;
             uint8_t flag = ((P->fflag[f] & FF_BND3) ? EF_DC : 0) |
-                           ((P->fflag[f] & FF_SING) ? EF_SSURF : 0); /* inside an embedded surface */
+                           ((P->fflag[f] & FF_SING) ? EF_SSURF : 0) | /* inside an embedded surface */
+                           ((P->fflag[f] & FF_N2SEL) ? EF_N2SEL : 0); /* ... a chosen triangle */
             uint8_t nm = P->fn3[f] >= 3 ? 4 : 0;
             for (int j = 0; j < 3; j++) {
                 uint32_t e = 2 * pne + 3 * f + j;

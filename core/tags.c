@@ -1,79 +1,459 @@
-/* tags.c — the singular complex S (000 Sec. 4.1): tagged vertices (corners), edges (creases)
- * and triangles (embedded surfaces), stored as flag bits on level 0 and inherited by every
- * child in split.c (halves of a crease are creases, children of a tagged triangle and the edges
- * inside it are tagged, edge points of S-edges lie on S).
+/* tags.c — the singular complex S (000 Sec. 4.1) and the per-simplex non-manifold rules
+ * (000 Sec. 3.5), stored as bits on level 0 and inherited by every child in split.c.
  *
- * Derived bits: a tagged edge that is a side of a tagged triangle belongs to the surface, not to
- * a crease; a surface edge with exactly one tagged triangle is the surface's boundary; a vertex
- * carries the kinds of S-edges it lies on. rules.c turns the bits into rules.
+ * Singular tags: vertices (corners), edges (creases) and triangles (embedded surfaces). Halves of
+ * a crease are creases, children of a tagged triangle and the edges inside it are tagged, edge
+ * points of S-edges lie on S. Derived bits: a tagged edge that is a side of a tagged triangle
+ * belongs to the surface, not to a crease; a surface edge with exactly one tagged triangle is the
+ * surface's boundary; a vertex carries the kinds of S-edges it lies on.
+ *
+ * Per-simplex rules (sd_override): G1 is a singularity — a vertex becomes a corner, an edge a
+ * crease, exactly as a tag, marked NM_G1 so that it is reported as G1. N1 and N2 are codes in
+ * the high bits of vnm / enm that children keep (the edge point of an N1 edge is an N1 vertex of
+ * the same dimension). N2 marks the chosen curve segments (EF_N2SEL) or triangles (FF_N2SEL; at
+ * a vertex the whole petals holding the two chosen triangles), and their sides (EF_N2SEL, and
+ * EF_N2BND where exactly one chosen triangle meets). The default G1 makes every non-manifold
+ * edge without a choice a crease and every such vertex on none of them a corner.
+ *
+ * Priority (SPEC Sec. 3): tag > the simplex's own choice > the default rule. rules.c turns the
+ * bits into rules. Everything is recomputed from the stored tags and overrides on each change.
  */
 #include "internal.h"
+#include <stdio.h>
 #include <string.h>
 
-static uint32_t find_face(const sd_topo *t, const uint32_t v[3])
+/* vertex -> incident edges and faces of level 0, for lookups of many tags or overrides */
+typedef struct vinc {
+    uint32_t *eoff, *e, *foff, *f;
+} vinc;
+
+static void vinc_free(sd_mem *m, vinc *x)
 {
-    for (uint32_t f = 0; f < t->nf; f++) {
-        int hit = 0;
-        for (int i = 0; i < 3; i++)
-            for (int j = 0; j < 3; j++)
-                hit += t->fv[f][i] == v[j];
-        if (hit == 3)
+    sd_free(m, x->eoff);
+    sd_free(m, x->e);
+    sd_free(m, x->foff);
+    sd_free(m, x->f);
+}
+
+static bool csr(sd_mem *m, uint32_t nv, uint32_t n, int per, const uint32_t *keys, uint32_t **off,
+                uint32_t **item)
+{
+    *off = sd_calloc(m, (size_t)nv + 2, sizeof **off);
+    *item = sd_alloc(m, ((size_t)n * per + 1) * sizeof **item);
+    if (!*off || !*item)
+        return false;
+    for (size_t i = 0; i < (size_t)n * per; i++)
+        (*off)[keys[i] + 2]++;
+    for (uint32_t v = 0; v < nv; v++)
+        (*off)[v + 2] += (*off)[v + 1];
+    for (size_t i = 0; i < (size_t)n * per; i++)
+        (*item)[(*off)[keys[i] + 1]++] = (uint32_t)(i / per);
+    return true;
+}
+
+static bool vinc_build(sd_mem *m, const sd_topo *t, vinc *x)
+{
+    memset(x, 0, sizeof *x);
+    if (csr(m, t->nv, t->ne, 2, &t->ev[0][0], &x->eoff, &x->e) &&
+        csr(m, t->nv, t->nf, 3, &t->fv[0][0], &x->foff, &x->f))
+        return true;
+    vinc_free(m, x);
+    return false;
+}
+
+static uint32_t find_edge(const sd_topo *t, const vinc *x, uint32_t a, uint32_t b)
+{
+    for (uint32_t k = x->eoff[a]; k < x->eoff[a + 1]; k++) {
+        uint32_t e = x->e[k];
+        if (t->ev[e][0] == b || t->ev[e][1] == b)
+            return e;
+    }
+    return UINT32_MAX;
+}
+
+static bool face_has(const sd_topo *t, uint32_t f, uint32_t v)
+{
+    return t->fv[f][0] == v || t->fv[f][1] == v || t->fv[f][2] == v;
+}
+
+static uint32_t find_face(const sd_topo *t, const vinc *x, const uint32_t v[3])
+{
+    for (uint32_t k = x->foff[v[0]]; k < x->foff[v[0] + 1]; k++) {
+        uint32_t f = x->f[k];
+        if (face_has(t, f, v[1]) && face_has(t, f, v[2]))
             return f;
     }
     return UINT32_MAX;
 }
 
+static bool edge_has(const sd_topo *t, uint32_t e, uint32_t v)
+{
+    return t->ev[e][0] == v || t->ev[e][1] == v;
+}
+
+/* ---- the petals of a vertex: its maximal triangles, joined across edges that lie between
+ * exactly two of them and in nothing else that is maximal (not NM_C2B) ---------------------- */
+
+/* Mark with FF_N2SEL every maximal triangle of the petal of v holding triangle f0; returns the
+ * number of triangles marked now (already marked ones are walked through but not counted). */
+static uint32_t mark_petal(sd_topo *t, const vinc *x, uint32_t v, uint32_t f0, uint32_t *stack)
+{
+    uint32_t top = 0, added = 0;
+    static const uint8_t SEEN = 128; /* a scratch bit of fflag, cleared before returning */
+    stack[top++] = f0;
+    t->fflag[f0] |= SEEN;
+    while (top) {
+        uint32_t f = stack[--top];
+        if (!(t->fflag[f] & FF_N2SEL)) {
+            t->fflag[f] |= FF_N2SEL;
+            added++;
+        }
+        for (int j = 0; j < 3; j++) {
+            uint32_t e = t->fe[f][j];
+            if (!edge_has(t, e, v) || (t->enm[e] & NM_C2B))
+                continue;
+            /* the other maximal triangle on e */
+            for (uint32_t k = x->foff[v]; k < x->foff[v + 1]; k++) {
+                uint32_t g = x->f[k];
+                if (g == f || !(t->fflag[g] & FF_MAX) || (t->fflag[g] & SEEN))
+                    continue;
+                if (t->fe[g][0] == e || t->fe[g][1] == e || t->fe[g][2] == e) {
+                    t->fflag[g] |= SEEN;
+                    stack[top++] = g;
+                }
+            }
+        }
+    }
+    for (uint32_t k = x->foff[v]; k < x->foff[v + 1]; k++)
+        t->fflag[x->f[k]] &= (uint8_t)~SEEN;
+    return added;
+}
+
+/* ---- tags -------------------------------------------------------------------------------- */
+
 sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint8_t *size,
                                   size_t n, sd_error *err)
+{
+    sd_topo *t = &c->lv[0]->t;
+    sd_mem *m = &c->mem;
+    /* validate and locate every tag first: all-or-nothing */
+    uint32_t *where = sd_alloc(m, (n ? n : 1) * sizeof *where);
+    uint8_t *kind = sd_alloc(m, n ? n : 1);
+    vinc x = {0};
+    if (!where || !kind || (n && !vinc_build(m, t, &x))) {
+        sd_free(m, where);
+        sd_free(m, kind);
+        return sd_fail_nomem(err, m);
+    }
+    size_t off = 0;
+    sd_result rc = SD_OK;
+    for (size_t i = 0; i < n && !rc; off += size[i++]) {
+        const uint32_t *v = idx + off;
+        int k = size[i];
+        if (k < 1 || k > 3) {
+            rc = sd_fail(err, SD_ERR_ARITY, (long)i, -1,
+                         "tag %zu has %d vertices: a vertex, an edge or a triangle", i, k);
+            break;
+        }
+        for (int j = 0; j < k && !rc; j++)
+            if (v[j] >= t->nv)
+                rc = sd_fail(err, SD_ERR_INDEX, (long)i, j, "tag %zu: vertex %u out of range", i,
+                             v[j]);
+        if (rc)
+            break;
+        kind[i] = (uint8_t)k;
+        where[i] = k == 1 ? v[0] : k == 2 ? find_edge(t, &x, v[0], v[1]) : find_face(t, &x, v);
+        if (where[i] == UINT32_MAX)
+            rc = sd_fail(err, SD_ERR_ARG, (long)i, -1, "tag %zu is not %s of the complex", i,
+                         k == 2 ? "an edge" : "a triangle");
+    }
+    vinc_free(m, &x);
+    if (rc) {
+        sd_free(m, where);
+        sd_free(m, kind);
+        return rc;
+    }
+    uint32_t *old_at = c->tag_at;
+    uint8_t *old_k = c->tag_k;
+    size_t old_n = c->ntags;
+    c->tag_at = where;
+    c->tag_k = kind;
+    c->ntags = n;
+    if ((rc = sd_apply_singular(c, err))) { /* only for lack of memory: put the old ones back */
+        c->tag_at = old_at;
+        c->tag_k = old_k;
+        c->ntags = old_n;
+        sd_error ignore;
+        sd_apply_singular(c, &ignore);
+        sd_free(m, where);
+        sd_free(m, kind);
+        return rc;
+    }
+    sd_free(m, old_at);
+    sd_free(m, old_k);
+    return SD_OK;
+}
+
+/* ---- per-simplex rules -------------------------------------------------------------------- */
+
+/* Check one override against level 0 (t) and find its simplex; item i. */
+static sd_result check_override(const sd_topo *t, const vinc *x, const sd_override *o, size_t i,
+                                uint32_t *at, sd_error *err)
+{
+    const uint32_t *s = o->simplex;
+    if (o->nverts < 1 || o->nverts > 2)
+        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
+                       "rules are chosen per vertex or edge, not for a simplex of %d vertices",
+                       o->nverts);
+    for (int j = 0; j < o->nverts; j++)
+        if (s[j] >= t->nv)
+            return sd_fail(err, SD_ERR_INDEX, (long)i, SD_OV_FIELD_SIMPLEX,
+                           "vertex %u out of range (%u vertices)", s[j], t->nv);
+    bool edge = o->nverts == 2;
+    if (edge && s[0] == s[1])
+        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX, "vertex %u appears twice", s[0]);
+    uint32_t id = edge ? find_edge(t, x, s[0], s[1]) : s[0];
+    if (id == UINT32_MAX)
+        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
+                       "[%u, %u] is not an edge of the complex", s[0], s[1]);
+    *at = id;
+    char name[40];
+    if (edge)
+        snprintf(name, sizeof name, "edge [%u, %u]", s[0], s[1]);
+    else
+        snprintf(name, sizeof name, "vertex %u", s[0]);
+    uint8_t fam = edge ? t->efam[id] : t->vfam[id];
+    int type = nm_type(edge ? t->enm[id] : t->vnm[id]);
+    if (o->rule != SD_RULE_N1 && o->rule != SD_RULE_N2 && o->rule != SD_RULE_G1 &&
+        o->rule != SD_RULE_G2)
+        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
+                       "the rule of a simplex is N1, N2, G1 or G2");
+    if (!type)
+        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
+                       "%s is manifold: non-manifold rules are for non-manifold simplices (tag "
+                       "it singular to make it a corner or a crease)", name);
+    if (o->rule == SD_RULE_N1) {
+        if (type != 1)
+            return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
+                           "N1 is for type-1 simplices, where parts of different dimensions "
+                           "meet; %s is of type %d (use %s, G1 or G2)", name, type,
+                           type == 2 || type == 4 ? "N2" : "G2");
+        int d = o->dimension;
+        if (d < 1 || d > 3 || !((fam >> d) & 1)) {
+            char dims[16] = "", *p = dims;
+            for (int k = 1; k <= 3; k++)
+                if ((fam >> k) & 1)
+                    p += snprintf(p, (size_t)(dims + sizeof dims - p), "%s%d", p == dims ? "" : ", ", k);
+            return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
+                           "%s has no part of dimension %d (its parts: %s)", name, d, dims);
+        }
+        return SD_OK;
+    }
+    if (o->rule != SD_RULE_N2)
+        return SD_OK;
+    if (type != 2 && type != 4)
+        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
+                       "N2 is for type-2 simplices (three or more parts of one dimension sharing "
+                       "it) and their faces; %s is of type %d (use %s, G1 or G2)", name, type,
+                       type == 1 ? "N1" : "G2");
+    bool curves = fam == FAM1;
+    if (!curves && !(fam & FAM2))
+        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
+                       "N2 at %s would choose a pair of tetrahedra: only pairs of curve segments "
+                       "or triangles are supported (use G1 or G2)", name);
+    if (edge && nm_type(t->enm[id]) != 2)
+        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
+                       "N2 at an edge chooses two of the triangles sharing it; %s is of type %d",
+                       name, type);
+    int want = curves ? 2 : 3;
+    if (o->pair_size != want)
+        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR,
+                       "the pair at %s is two %s (%d vertex ids each)", name,
+                       curves ? "curve segments" : "triangles", want);
+    uint32_t got[2];
+    for (int j = 0; j < 2; j++) {
+        const uint32_t *q = o->pair[j];
+        for (int u = 0; u < want; u++)
+            if (q[u] >= t->nv)
+                return sd_fail(err, SD_ERR_INDEX, (long)i, SD_OV_FIELD_PAIR0 + j,
+                               "vertex %u out of range (%u vertices)", q[u], t->nv);
+        got[j] = curves ? find_edge(t, x, q[0], q[1]) : find_face(t, x, q);
+        bool ok = got[j] != UINT32_MAX &&
+                  (curves ? (t->eflag[got[j]] & EF_CURVE) != 0 : (t->fflag[got[j]] & FF_MAX) != 0);
+        if (!ok)
+            return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR0 + j,
+                           "pair %d is not a %s of the complex", j,
+                           curves ? "curve segment" : "triangle (a maximal one, not a face of a tetrahedron)");
+        bool contains = true;
+        for (int k = 0; k < o->nverts; k++) {
+            bool in = false;
+            for (int u = 0; u < want; u++)
+                in |= q[u] == s[k];
+            contains &= in;
+        }
+        if (!contains)
+            return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR0 + j,
+                           "pair %d does not contain %s", j, name);
+    }
+    if (got[0] == got[1])
+        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR1,
+                       "the pair names the same simplex twice");
+    return SD_OK;
+}
+
+sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t n, sd_error *err)
+{
+    sd_topo *t = &c->lv[0]->t;
+    sd_mem *m = &c->mem;
+    vinc x = {0};
+    sd_override *copy = sd_alloc(m, (n ? n : 1) * sizeof *copy);
+    uint32_t *at = sd_alloc(m, (n ? n : 1) * sizeof *at);
+    uint32_t *vseen = NULL, *eseen = NULL;
+    sd_result rc = SD_OK;
+    if (!copy || !at || (n && !vinc_build(m, t, &x))) {
+        rc = sd_fail_nomem(err, m);
+        goto out;
+    }
+    if (n) {
+        vseen = sd_alloc(m, ((size_t)t->nv + 1) * sizeof *vseen);
+        eseen = sd_alloc(m, ((size_t)t->ne + 1) * sizeof *eseen);
+        if (!vseen || !eseen) {
+            rc = sd_fail_nomem(err, m);
+            goto out;
+        }
+        memset(vseen, 0xff, ((size_t)t->nv + 1) * sizeof *vseen);
+        memset(eseen, 0xff, ((size_t)t->ne + 1) * sizeof *eseen);
+    }
+    for (size_t i = 0; i < n; i++) {
+        if ((rc = check_override(t, &x, &ov[i], i, &at[i], err)))
+            goto out;
+        uint32_t *seen = ov[i].nverts == 2 ? &eseen[at[i]] : &vseen[at[i]];
+        if (*seen != UINT32_MAX) {
+            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
+                         "this simplex already has a rule (override %u)", *seen);
+            goto out;
+        }
+        *seen = (uint32_t)i;
+        copy[i] = ov[i];
+    }
+    sd_override *old = c->ov;
+    size_t old_n = c->nov;
+    c->ov = copy;
+    c->nov = n;
+    if ((rc = sd_apply_singular(c, err))) { /* a conflict between pairs: put the old ones back */
+        c->ov = old;
+        c->nov = old_n;
+        sd_error ignore;
+        sd_apply_singular(c, &ignore);
+        goto out;
+    }
+    copy = old;
+out:
+    sd_free(m, copy);
+    sd_free(m, at);
+    sd_free(m, vseen);
+    sd_free(m, eseen);
+    vinc_free(m, &x);
+    return rc;
+}
+
+/* ---- applying tags and rules to level 0 --------------------------------------------------- */
+
+sd_result sd_apply_singular(sd_complex *c, sd_error *err)
 {
     sd_level *l0 = c->lv[0];
     sd_topo *t = &l0->t;
     sd_mem *m = &c->mem;
-    /* validate and locate every tag first: all-or-nothing */
-    uint32_t *where = sd_alloc(m, (n ? n : 1) * sizeof *where);
-    if (!where)
-        return sd_fail_nomem(err, m);
-    size_t off = 0;
-    for (size_t i = 0; i < n; off += size[i++]) {
-        const uint32_t *v = idx + off;
-        int k = size[i];
-        if (k < 1 || k > 3) {
-            sd_free(m, where);
-            return sd_fail(err, SD_ERR_ARITY, (long)i, -1,
-                           "tag %zu has %d vertices: a vertex, an edge or a triangle", i, k);
-        }
-        for (int j = 0; j < k; j++)
-            if (v[j] >= t->nv) {
-                sd_free(m, where);
-                return sd_fail(err, SD_ERR_INDEX, (long)i, j, "tag %zu: vertex %u out of range", i,
-                               v[j]);
+    bool g1_default = c->opt.nonmanifold_default == SD_NM_G1;
+    vinc x = {0};
+    uint8_t *nface = NULL;
+    uint32_t *stack = NULL;
+    sd_result rc = SD_OK;
+    if (c->nov && !vinc_build(m, t, &x))
+        goto nomem;
+
+    /* clear */
+    for (uint32_t v = 0; v < t->nv; v++) {
+        t->vflag[v] &= (uint8_t)~(VF_SING | VF_SCREASE | VF_SSURF | VF_SBND);
+        t->vnm[v] &= NM_TYPE;
+    }
+    for (uint32_t e = 0; e < t->ne; e++) {
+        t->eflag[e] &= (uint8_t)~(EF_CREASE | EF_SSURF | EF_SBND | EF_N2SEL | EF_N2BND);
+        t->enm[e] &= NM_TYPE | NM_C2B;
+    }
+    for (uint32_t f = 0; f < t->nf; f++)
+        t->fflag[f] &= (uint8_t)~(FF_SING | FF_N2SEL);
+    t->ovmask = 0;
+
+    /* tags */
+    for (size_t i = 0; i < c->ntags; i++)
+        if (c->tag_k[i] == 1)
+            t->vflag[c->tag_at[i]] |= VF_SING;
+        else if (c->tag_k[i] == 2)
+            t->eflag[c->tag_at[i]] |= EF_CREASE;
+        else
+            t->fflag[c->tag_at[i]] |= FF_SING;
+
+    /* per-simplex rules */
+    if (c->nov) {
+        stack = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *stack);
+        if (!stack)
+            goto nomem;
+    }
+    for (size_t i = 0; i < c->nov; i++) {
+        const sd_override *o = &c->ov[i];
+        bool edge = o->nverts == 2;
+        uint32_t id = edge ? find_edge(t, &x, o->simplex[0], o->simplex[1]) : o->simplex[0];
+        uint8_t *nm = edge ? &t->enm[id] : &t->vnm[id];
+        switch (o->rule) {
+        case SD_RULE_G1:
+            *nm |= NM_G1;
+            if (edge)
+                t->eflag[id] |= EF_CREASE;
+            else
+                t->vflag[id] |= VF_SING;
+            break;
+        case SD_RULE_G2:
+            *nm |= OV_G2 << NM_OV_SHIFT;
+            break;
+        case SD_RULE_N1:
+            *nm |= (uint8_t)((OV_N1_1 + o->dimension - 1) << NM_OV_SHIFT);
+            t->ovmask |= OVM_N1;
+            break;
+        default: /* N2 */
+            *nm |= OV_N2 << NM_OV_SHIFT;
+            if (o->pair_size == 2) {
+                for (int j = 0; j < 2; j++)
+                    t->eflag[find_edge(t, &x, o->pair[j][0], o->pair[j][1])] |= EF_N2SEL;
+                t->ovmask |= OVM_N2C;
+            } else {
+                for (int j = 0; j < 2; j++) {
+                    uint32_t f = find_face(t, &x, o->pair[j]);
+                    if (edge)
+                        t->fflag[f] |= FF_N2SEL;
+                    else
+                        mark_petal(t, &x, id, f, stack);
+                }
+                t->ovmask |= OVM_N2T;
             }
-        where[i] = k == 1 ? v[0] : k == 2 ? sd_topo_find_edge(t, v[0], v[1]) : find_face(t, v);
-        if (where[i] == UINT32_MAX) {
-            sd_free(m, where);
-            return sd_fail(err, SD_ERR_ARG, (long)i, -1, "tag %zu is not %s of the complex", i,
-                           k == 2 ? "an edge" : "a triangle");
         }
     }
-    /* clear old tags, set the new ones */
-    for (uint32_t v = 0; v < t->nv; v++)
-        t->vflag[v] &= (uint8_t)~(VF_SING | VF_SCREASE | VF_SSURF | VF_SBND);
-    for (uint32_t e = 0; e < t->ne; e++)
-        t->eflag[e] &= (uint8_t)~(EF_CREASE | EF_SSURF | EF_SBND);
-    for (uint32_t f = 0; f < t->nf; f++)
-        t->fflag[f] &= (uint8_t)~FF_SING;
-    for (size_t i = 0; i < n; i++)
-        if (size[i] == 1)
-            t->vflag[where[i]] |= VF_SING;
-        else if (size[i] == 2)
-            t->eflag[where[i]] |= EF_CREASE;
-        else
-            t->fflag[where[i]] |= FF_SING;
-    sd_free(m, where);
+
+    /* the default rule G1: non-manifold edges without a choice or a tag become creases, then
+     * non-manifold vertices without one become corners unless they lie on a crease */
+    if (g1_default) {
+        for (uint32_t e = 0; e < t->ne; e++)
+            if (nm_type(t->enm[e]) && !nm_ov(t->enm[e]) && !(t->enm[e] & NM_G1) &&
+                !(t->eflag[e] & EF_CREASE)) {
+                t->enm[e] |= NM_G1;
+                t->eflag[e] |= EF_CREASE;
+            }
+    }
+
     /* derived: surface edges, their boundary, and the vertices on them */
-    uint8_t *nface = sd_calloc(m, (size_t)t->ne + 1, 1);
+    nface = sd_calloc(m, (size_t)t->ne + 1, 1);
     if (!nface)
-        return sd_fail_nomem(err, m);
+        goto nomem;
     for (uint32_t f = 0; f < t->nf; f++)
         if (t->fflag[f] & FF_SING)
             for (int j = 0; j < 3; j++)
@@ -82,18 +462,90 @@ sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint
     for (uint32_t e = 0; e < t->ne; e++) {
         if (nface[e]) {
             t->eflag[e] = (uint8_t)((t->eflag[e] & ~EF_CREASE) | EF_SSURF);
+            t->enm[e] &= (uint8_t)~NM_G1; /* a tagged surface's edge: the tag wins */
             if (nface[e] == 1)
                 t->eflag[e] |= EF_SBND;
         }
         uint8_t vb = ((t->eflag[e] & EF_CREASE) ? VF_SCREASE : 0) |
                      ((t->eflag[e] & EF_SSURF) ? VF_SSURF : 0) |
                      ((t->eflag[e] & EF_SBND) ? VF_SBND : 0);
-        t->vflag[t->ev[e][0]] |= vb;
-        t->vflag[t->ev[e][1]] |= vb;
+        for (int k = 0; k < 2; k++) {
+            uint32_t v = t->ev[e][k];
+            /* a crease made by the default G1 does not override a vertex's own choice */
+            if ((t->enm[e] & NM_G1) && nm_ov(t->vnm[v]) && !(t->eflag[e] & EF_SSURF))
+                continue;
+            t->vflag[v] |= vb;
+        }
     }
+    for (uint32_t v = 0; v < t->nv && g1_default; v++) {
+        if (!nm_type(t->vnm[v]) || nm_ov(t->vnm[v]) || (t->vflag[v] & VF_SING))
+            continue;
+        if (!(t->vflag[v] & VF_S_ANY)) { /* on no crease: a corner */
+            t->vnm[v] |= NM_G1;
+            t->vflag[v] |= VF_SING;
+        } else if (t->vflag[v] & VF_SCREASE) { /* on creases of the default rule */
+            t->vnm[v] |= NM_G1;
+        }
+    }
+
+    /* sides of chosen triangles; then every N2 simplex must see exactly its own pair */
+    if (t->ovmask & OVM_N2T) {
+        memset(nface, 0, (size_t)t->ne + 1);
+        for (uint32_t f = 0; f < t->nf; f++)
+            if (t->fflag[f] & FF_N2SEL)
+                for (int j = 0; j < 3; j++)
+                    if (nface[t->fe[f][j]] < 255)
+                        nface[t->fe[f][j]]++;
+        for (uint32_t e = 0; e < t->ne; e++)
+            if (nface[e])
+                t->eflag[e] |= nface[e] == 1 ? EF_N2SEL | EF_N2BND : EF_N2SEL;
+    }
+    for (size_t i = 0; i < c->nov; i++) {
+        const sd_override *o = &c->ov[i];
+        if (o->rule != SD_RULE_N2)
+            continue;
+        bool edge = o->nverts == 2;
+        uint32_t id = edge ? find_edge(t, &x, o->simplex[0], o->simplex[1]) : o->simplex[0];
+        uint32_t chosen = 0, own = 2;
+        if (o->pair_size == 2) {
+            for (uint32_t k = x.eoff[id]; k < x.eoff[id + 1]; k++)
+                chosen += (t->eflag[x.e[k]] & (EF_CURVE | EF_N2SEL)) == (EF_CURVE | EF_N2SEL);
+        } else if (edge) {
+            chosen = nface[id];
+        } else {
+            for (uint32_t k = x.foff[id]; k < x.foff[id + 1]; k++)
+                chosen += (t->fflag[x.f[k]] & FF_N2SEL) != 0;
+            /* its own petals, counted on a scratch copy of the marks */
+            for (uint32_t k = x.foff[id]; k < x.foff[id + 1]; k++)
+                t->fflag[x.f[k]] = (uint8_t)((t->fflag[x.f[k]] & ~FF_N2SEL) |
+                                             ((t->fflag[x.f[k]] & FF_N2SEL) ? 64 : 0));
+            own = 0;
+            for (int j = 0; j < 2; j++)
+                own += mark_petal(t, &x, id, find_face(t, &x, o->pair[j]), stack);
+            for (uint32_t k = x.foff[id]; k < x.foff[id + 1]; k++)
+                t->fflag[x.f[k]] = (uint8_t)((t->fflag[x.f[k]] & ~(FF_N2SEL | 64)) |
+                                             ((t->fflag[x.f[k]] & 64) ? FF_N2SEL : 0));
+        }
+        if (chosen != own) {
+            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR,
+                         "the pair conflicts with another N2 choice: %u %s at this %s are chosen, "
+                         "its own pair gives %u (a chosen %s touching another N2 simplex must be "
+                         "in that simplex's pair too)", chosen,
+                         o->pair_size == 2 ? "curve segments" : "triangles",
+                         edge ? "edge" : "vertex", own,
+                         o->pair_size == 2 ? "segment" : "triangle");
+            goto out;
+        }
+    }
+    goto out;
+nomem:
+    rc = sd_fail_nomem(err, m);
+out:
     sd_free(m, nface);
+    sd_free(m, stack);
+    vinc_free(m, &x);
     sd_drop_rules(c, l0); /* level 0's rules change; every finer level follows */
-    return SD_OK;
+    return rc;
 }
 
 int sd_level_vertex_singular(const sd_level *lv, uint32_t i)
@@ -104,13 +556,4 @@ int sd_level_vertex_singular(const sd_level *lv, uint32_t i)
 int sd_level_edge_singular(const sd_level *lv, uint32_t e)
 {
     return e < lv->t.ne && sd_need_derived(lv) && (lv->t.eflag[e] & (EF_CREASE | EF_SSURF)) != 0;
-}
-
-sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t n, sd_error *err)
-{
-    (void)c;
-    (void)ov;
-    if (n)
-        return sd_fail(err, SD_ERR_ARG, 0, SD_OV_FIELD_RULE, "overrides are not implemented yet");
-    return SD_OK;
 }

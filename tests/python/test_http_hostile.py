@@ -278,8 +278,11 @@ CASES = [
     C("fill-17-entries", "PUT", "{s}/complex", 422, "/fill", body=V(fill=[{"surface": [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]}] * 17)),
     C("fill-duplicates-posted-tet", "PUT", "{s}/complex", 422, "/fill/0", body=V(fill=[{"surface": [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]}])),
     C("not-implemented-ying-zorin", "PUT", "{s}/rules", 501, "/nonmanifold_surface", body={"nonmanifold_surface": "ying-zorin"}),
-    C("not-implemented-G1-default", "PUT", "{s}/rules", 501, "/nonmanifold_default", body={"nonmanifold_default": "G1"}),
-    C("not-implemented-overrides", "PUT", "{s}/rules", 501, "/overrides", body={"overrides": [{"simplex": [1], "rule": "G1"}]}),
+    C("override-on-manifold-vertex", "PUT", "{s}/rules", 422, "/overrides/0/simplex", body={"overrides": [{"simplex": [0], "rule": "G1"}]}),
+    C("override-on-triangle", "PUT", "{s}/rules", 422, "/overrides/0/simplex", body={"overrides": [{"simplex": [0, 1, 2], "rule": "G1"}]}),
+    C("override-vertex-out-of-range", "PUT", "{s}/rules", 422, "/overrides/0/simplex/0", body={"overrides": [{"simplex": [99], "rule": "G1"}]}),
+    C("override-N1-without-dimension", "PUT", "{s}/rules", 400, "/overrides/0/dimension", body={"overrides": [{"simplex": [1], "rule": "N1"}]}),
+    C("override-pair-on-G1", "PUT", "{s}/rules", 422, "/overrides/0/pair", body={"overrides": [{"simplex": [1], "rule": "G1", "pair": [[0, 1], [1, 2]]}]}),
     C("tags-not-an-edge", "PUT", "{s}/tags", 422, "/singular/1", body={"singular": [[3], [0, 4]]}),
     C("tags-not-a-triangle", "PUT", "{s}/tags", 422, "/singular/0", body={"singular": [[0, 1, 4]]}),
     # --- tags ---

@@ -1,0 +1,313 @@
+"""Non-manifold rules per simplex and by default (000 Sec. 3.5, Figs. 15-17; SPEC Sec. 3).
+
+The configuration of 000 Fig. 17: an octahedron made of 4 tetrahedra around its z diagonal
+and two triangles T1, T2 hanging on two opposite equator edges (type-1 junctions). Expected
+values are derived by hand from the stencils of SPEC Sec. 3 (each derivation is in the test),
+plus the paper's statements checked as relations between complexes:
+  - N1 with dimension 3: "the boundary of the 3-simplex region does not change at all" — the
+    solid subdivides exactly as the octahedron alone (SPEC: as if the other cells were absent);
+  - N1 with dimension 2: the triangles subdivide exactly as T1 and T2 alone;
+  - G1: the singular vertex keeps its position at every level, a G1 edge is a crease;
+  - G2 (default): the junction moves by the 3-simplex stencil with the relieved ring.
+Then N2 at three fins sharing an edge, the default G1, the echo in GET /complex, and every
+error path of the overrides.
+"""
+import numpy as np
+import pytest
+
+from daemon import Daemon, Session
+
+# octahedron: 0 +x, 1 -x, 2 +y, 3 -y, 4 +z, 5 -z; T1 on edge 0-2, T2 on edge 1-3
+OCTA_V = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
+OCTA_T = [[4, 5, 0, 2], [4, 5, 2, 1], [4, 5, 1, 3], [4, 5, 3, 0]]
+FIG17_V = OCTA_V + [[1.5, 1.5, 0], [-1.5, -1.5, 0]]
+FIG17_TRI = [[0, 2, 6], [1, 3, 7]]
+FIG17 = {"vertices": FIG17_V, "simplices": OCTA_T + FIG17_TRI}
+JUNCTION_V = [0, 1, 2, 3]
+JUNCTION_E = [[0, 2], [1, 3]]
+
+
+@pytest.fixture(scope="module")
+def daemon():
+    d = Daemon()
+    yield d
+    assert d.stop() == 0
+
+
+def session(daemon, body, rules=None, tags=None):
+    s = Session(daemon)
+    r = s.put_complex(body)
+    assert r.status_code == 200, r.text
+    if rules is not None:
+        r = s.req("PUT", "/rules", json=rules)
+        assert r.status_code == 200, r.text
+    if tags is not None:
+        r = s.req("PUT", "/tags", json={"singular": tags})
+        assert r.status_code == 200, r.text
+    return s
+
+
+def level(s, L):
+    r = s.level(L, format="json")
+    assert r.status_code == 200, r.text
+    return r.json()
+
+
+def n1(dim):
+    return {"overrides": [{"simplex": [v], "rule": "N1", "dimension": dim} for v in JUNCTION_V] +
+                         [{"simplex": e, "rule": "N1", "dimension": dim} for e in JUNCTION_E]}
+
+
+def part_points(j, kinds):
+    """Positions of the vertices used by cells of the given kinds, as a sorted array."""
+    ids = sorted({i for k in kinds for c in j["cells"][k] for i in c})
+    p = np.array(j["vertices"])[ids]
+    return p[np.lexsort(p.T[::-1])]
+
+
+def test_fig17_level1_by_hand(daemon):
+    """Level-1 positions of junction vertex 0 and junction edge 0-2 under each rule.
+    p0 = (1,0,0); its neighbours: 2, 3 (equator), 4, 5 (poles), 6 (T1's tip (1.5,1.5,0))."""
+    cases = {
+        # N1(3): Loop on the octahedron's boundary, m = 4 (2,3,4,5), Warren c = 3/32:
+        #   (1 - 4*3/32) p0 + 3/32 (p2+p3+p4+p5) = 5/8 p0 + 0 = (0.625, 0, 0).
+        # edge 0-2 on the boundary surface, opposite 4 and 5: 3/8 (p0+p2) + 1/8 (p4+p5).
+        "N1-3": (n1(3), [0.625, 0, 0], [0.375, 0.375, 0]),
+        # N1(2): boundary of T1, B-spline along 2 and 6: (6 p0 + p2 + p6)/8 = (0.9375, 0.3125, 0);
+        # edge 0-2 a boundary edge of T1: midpoint.
+        "N1-2": (n1(2), [0.9375, 0.3125, 0], [0.5, 0.5, 0]),
+        # G1 on the vertices: 0-mask; the edge keeps the default G2 (see below).
+        "G1-vertices": ({"overrides": [{"simplex": [v], "rule": "G1"} for v in JUNCTION_V]},
+                        [1, 0, 0], [0.5, 0.5, 0]),
+        # G1 on the edges: creases; vertex 0 ends one crease (a corner): fixed; edge: midpoint.
+        "G1-edges": ({"overrides": [{"simplex": e, "rule": "G1"} for e in JUNCTION_E]},
+                     [1, 0, 0], [0.5, 0.5, 0]),
+        # G2: 9/16 p0 + 7/(16*5) (p2+p3+p4+p5+p6) = (0.5625 + 7/80*1.5, 7/80*1.5, 0);
+        # edge 0-2: ring = common neighbours {4,5,6}, k = 3: 5/16 (p0+p2) + 1/8 (p4+p5+p6)
+        #   = (5/16 + 3/16, 5/16 + 3/16, 0) = (0.5, 0.5, 0).
+        "G2": ({}, [0.5625 + 7 / 80 * 1.5, 7 / 80 * 1.5, 0], [0.5, 0.5, 0]),
+    }
+    for name, (rules, v0, e02) in cases.items():
+        s = session(daemon, FIG17, rules)
+        j = level(s, 1)
+        p = np.array(j["vertices"])
+        np.testing.assert_allclose(p[0], v0, atol=1e-14, err_msg=name)
+        (mid,) = [i for i, e in enumerate(j["origin"]["edge_of"]) if e and sorted(e) == [0, 2]]
+        np.testing.assert_allclose(p[mid], e02, atol=1e-14, err_msg=name)
+        # the far pole and T1's tip follow their own manifold rules whatever the junction does:
+        # pole 4: Loop on the boundary, 5/8 p4 + 3/32 (p0+p1+p2+p3) = (0, 0, 0.625);
+        # tip 6: boundary of T1, (6 p6 + p0 + p2)/8 = (1.25, 1.25, 0)
+        np.testing.assert_allclose(p[4], [0, 0, 0.625], atol=1e-14, err_msg=name)
+        np.testing.assert_allclose(p[6], [1.25, 1.25, 0], atol=1e-14, err_msg=name)
+
+
+def test_fig17_reported_rules(daemon):
+    expect = {"N1-3": (n1(3), "N1"), "N1-2": (n1(2), "N1"), "G2": ({}, "G2"),
+              "G1": ({"nonmanifold_default": "G1"}, "G1")}
+    for name, (rules, rule) in expect.items():
+        s = session(daemon, FIG17, rules)
+        c = s.req("GET", "/complex").json()
+        for v in JUNCTION_V:
+            assert c["classes"]["vertices"][v]["rule"] == rule, name
+            assert c["classes"]["vertices"][v]["nonmanifold"] == 1
+        junction = [e for e in c["classes"]["edges"] if sorted(e["vertices"]) in JUNCTION_E]
+        assert len(junction) == 2 and all(e["rule"] == rule for e in junction), name
+        assert c["classes"]["vertices"][4]["rule"] == "solid-boundary"
+        assert c["classes"]["vertices"][6]["rule"] == "loop-boundary"
+        # children keep the choice: the edge point of a junction edge at level 1
+        j = level(s, 1)
+        (mid,) = [i for i, e in enumerate(j["origin"]["edge_of"]) if e and sorted(e) == [0, 2]]
+        assert j["rules"][mid] == rule and j["rules"][0] == rule, name
+
+
+def test_fig17c_n1_solid_subdivides_as_if_alone(daemon):
+    """N1 with dimension 3 (Fig. 17c): the solid's points equal those of the octahedron alone."""
+    mixed = session(daemon, FIG17, n1(3))
+    alone = session(daemon, {"vertices": OCTA_V, "simplices": OCTA_T})
+    for L in (1, 2, 3):
+        a = part_points(level(mixed, L), ["tetrahedra", "octahedra"])
+        b = part_points(level(alone, L), ["tetrahedra", "octahedra"])
+        assert a.shape == b.shape
+        np.testing.assert_allclose(a, b, atol=1e-12)
+    # ... which the default G2 does not do (the fins pull the junction)
+    g2 = session(daemon, FIG17)
+    a = part_points(level(g2, 1), ["tetrahedra", "octahedra"])
+    assert np.abs(a - part_points(level(alone, 1), ["tetrahedra", "octahedra"])).max() > 0.05
+
+
+def test_fig17b_n1_triangles_subdivide_as_if_alone(daemon):
+    mixed = session(daemon, FIG17, n1(2))
+    alone = session(daemon, {"vertices": FIG17_V, "simplices": FIG17_TRI})
+    for L in (1, 2, 3):
+        a = part_points(level(mixed, L), ["triangles"])
+        b = part_points(level(alone, L), ["triangles"])
+        assert a.shape == b.shape
+        np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+def test_fig17d_g1_vertex_keeps_its_position(daemon):
+    s = session(daemon, FIG17, {"overrides": [{"simplex": [0], "rule": "G1"}]})
+    for L in (1, 2, 3):
+        j = level(s, L)
+        np.testing.assert_array_equal(j["vertices"][0], FIG17_V[0])   # vertex points keep ids
+        assert j["rules"][0] == "G1"
+    # vertex 2 has no override: it moves (G2)
+    assert np.abs(np.array(level(s, 1)["vertices"][2]) - FIG17_V[2]).max() > 0.05
+
+
+def test_fig17e_g1_edges_are_straight_creases(daemon):
+    s = session(daemon, FIG17, {"overrides": [{"simplex": e, "rule": "G1"} for e in JUNCTION_E]})
+    for L in (1, 2, 3):
+        j = level(s, L)
+        p = np.array(j["vertices"])
+        np.testing.assert_array_equal(p[:4], np.array(FIG17_V[:4], dtype=float))
+        # the ends of each crease are corners (one crease edge each), the 2^L - 1 points
+        # inside each crease polygon follow it
+        assert [j["rules"][v] for v in range(4)] == ["corner"] * 4
+        on = [i for i, r in enumerate(j["rules"]) if r == "G1"]
+        assert len(on) == 2 * (2 ** L - 1)
+        for i in on:                                  # on segment 0-2 or 1-3: |x| + |y| = 1, z = 0
+            assert abs(abs(p[i][0]) + abs(p[i][1]) - 1) < 1e-12 and abs(p[i][2]) < 1e-15
+
+
+def test_g1_default(daemon):
+    """nonmanifold_default G1: every non-manifold edge a crease, the vertices on them follow the
+    creases (here each junction is one edge, so its ends are corners)."""
+    s = session(daemon, FIG17, {"nonmanifold_default": "G1"})
+    c = s.req("GET", "/complex").json()
+    assert c["rules"]["nonmanifold_default"] == "G1"
+    j = level(s, 2)
+    p = np.array(j["vertices"])
+    np.testing.assert_array_equal(p[:4], np.array(FIG17_V[:4], dtype=float))
+    # an explicit G2 takes vertex 0 out of the default: it moves as in test_fig17_level1_by_hand
+    s = session(daemon, FIG17, {"nonmanifold_default": "G1",
+                                "overrides": [{"simplex": [0], "rule": "G2"}]})
+    c = s.req("GET", "/complex").json()
+    assert c["classes"]["vertices"][0]["rule"] == "G2" and c["classes"]["vertices"][2]["rule"] == "G1"
+    assert np.abs(np.array(level(s, 1)["vertices"][0]) - FIG17_V[0]).max() > 0.05
+
+
+# three fins sharing edge 0-1 (a type-2 edge; its ends are type 4)
+FINS_V = [[0, 0, 0], [0, 0, 1], [1, 0, 0.5], [-0.5, 0.8, 0.5], [-0.5, -0.8, 0.5]]
+FINS_T = [[0, 1, 2], [0, 1, 3], [0, 1, 4]]
+FINS = {"vertices": FINS_V, "simplices": FINS_T}
+
+
+def test_n2_edge_and_vertices(daemon):
+    """N2 chooses fins 2 and 3: the edge follows Loop between them, its ends the boundary of the
+    two-triangle surface — exactly what fins [0,1,2] and [0,1,3] give alone."""
+    pair = [[0, 1, 2], [0, 1, 3]]
+    ov = [{"simplex": [0, 1], "rule": "N2", "pair": pair},
+          {"simplex": [0], "rule": "N2", "pair": pair},
+          {"simplex": [1], "rule": "N2", "pair": pair}]
+    s = session(daemon, FINS, {"overrides": ov})
+    c = s.req("GET", "/complex").json()
+    assert c["rules"]["overrides"] == ov
+    assert [c["classes"]["vertices"][v]["rule"] for v in (0, 1)] == ["N2", "N2"]
+    j = level(s, 1)
+    p = np.array(j["vertices"])
+    P = np.array(FINS_V, dtype=float)
+    (mid,) = [i for i, e in enumerate(j["origin"]["edge_of"]) if e and sorted(e) == [0, 1]]
+    np.testing.assert_allclose(p[mid], 3 / 8 * (P[0] + P[1]) + 1 / 8 * (P[2] + P[3]), atol=1e-14)
+    np.testing.assert_allclose(p[0], (6 * P[0] + P[2] + P[3]) / 8, atol=1e-14)
+    np.testing.assert_allclose(p[1], (6 * P[1] + P[2] + P[3]) / 8, atol=1e-14)
+    alone = session(daemon, {"vertices": FINS_V, "simplices": pair})
+    for L in (1, 2, 3):
+        a = level(s, L)
+        b = level(alone, L)
+        # every point of the two chosen fins alone appears in the three-fin complex
+        pa = np.array(a["vertices"])
+        for q in part_points(b, ["triangles"]):
+            assert np.min(np.linalg.norm(pa - q, axis=1)) < 1e-12
+    # the default G2 blends all three fins instead
+    g2 = level(session(daemon, FINS), 1)
+    assert np.abs(np.array(g2["vertices"][mid]) - p[mid]).max() > 1e-3
+
+
+def test_n2_curves(daemon):
+    """Three curves meeting at vertex 0 (type 2): N2 with two of them makes 0 a B-spline point of
+    the chosen pair; without it the junction is a corner."""
+    body = {"vertices": [[0, 0, 0], [1, 0, 0], [-1, 0.5, 0], [0, -1, 1]],
+            "simplices": [[0, 1], [0, 2], [0, 3]]}
+    s = session(daemon, body, {"overrides": [{"simplex": [0], "rule": "N2", "pair": [[0, 1], [2, 0]]}]})
+    p = np.array(level(s, 1)["vertices"])
+    np.testing.assert_allclose(p[0], (6 * np.array([0, 0, 0]) + [1, 0, 0] + [-1, 0.5, 0]) / 8, atol=1e-15)
+    np.testing.assert_array_equal(np.array(level(session(daemon, body), 1)["vertices"][0]), [0, 0, 0])
+
+
+def test_overrides_survive_tags_not_a_new_complex(daemon):
+    s = session(daemon, FIG17, {"overrides": [{"simplex": [0], "rule": "G1"}]})
+    assert s.req("PUT", "/tags", json={"singular": [[4]]}).status_code == 200
+    c = s.req("GET", "/complex").json()
+    assert c["rules"]["overrides"] == [{"simplex": [0], "rule": "G1"}]
+    assert c["classes"]["vertices"][0]["rule"] == "G1"
+    assert s.put_complex(FIG17).status_code == 200
+    c = s.req("GET", "/complex").json()
+    assert c["rules"]["overrides"] == [] and c["classes"]["vertices"][0]["rule"] == "G2"
+
+
+# every error path of the overrides: (body, status, pointer, words in the detail)
+BAD = [
+    ({"overrides": [{"simplex": [4], "rule": "G1"}]}, 422, "/overrides/0/simplex", "manifold"),
+    ({"overrides": [{"simplex": [0, 1, 2], "rule": "G1"}]}, 422, "/overrides/0/simplex", "triangle"),
+    ({"overrides": [{"simplex": [], "rule": "G1"}]}, 422, "/overrides/0/simplex", "vertex or edge"),
+    ({"overrides": [{"simplex": [0, 1], "rule": "G1"}]}, 422, "/overrides/0/simplex", "not an edge"),
+    ({"overrides": [{"simplex": [0, 0], "rule": "G1"}]}, 422, "/overrides/0/simplex", "twice"),
+    ({"overrides": [{"simplex": [8], "rule": "G1"}]}, 422, "/overrides/0/simplex/0", None),
+    ({"overrides": [{"simplex": [-1], "rule": "G1"}]}, 422, "/overrides/0/simplex/0", None),
+    ({"overrides": [{"simplex": [1.0], "rule": "G1"}]}, 400, "/overrides/0/simplex/0", None),
+    ({"overrides": [{"simplex": 1, "rule": "G1"}]}, 400, "/overrides/0/simplex", None),
+    ({"overrides": [{"rule": "G1"}]}, 400, "/overrides/0/simplex", None),
+    ({"overrides": [{"simplex": [0]}]}, 400, "/overrides/0/rule", None),
+    ({"overrides": [{"simplex": [0], "rule": "N3"}]}, 422, "/overrides/0/rule", None),
+    ({"overrides": [{"simplex": [0], "rule": "G1"}, {"simplex": [0], "rule": "G2"}]}, 422,
+     "/overrides/1/simplex", "already"),
+    ({"overrides": [{"simplex": [0], "rule": "N1"}]}, 400, "/overrides/0/dimension", None),
+    ({"overrides": [{"simplex": [0], "rule": "N1", "dimension": 1}]}, 422, "/overrides/0/dimension", "no part of dimension 1"),
+    ({"overrides": [{"simplex": [0], "rule": "N1", "dimension": 4}]}, 422, "/overrides/0/dimension", None),
+    ({"overrides": [{"simplex": [0], "rule": "N1", "dimension": "3"}]}, 400, "/overrides/0/dimension", None),
+    ({"overrides": [{"simplex": [0], "rule": "G1", "dimension": 3}]}, 422, "/overrides/0/dimension", "only N1"),
+    ({"overrides": [{"simplex": [0], "rule": "N2", "pair": [[0, 2, 6], [0, 2, 4]]}]}, 422, "/overrides/0/rule", "type-2"),
+    ({"overrides": [{"simplex": [0], "rule": "N2"}]}, 400, "/overrides/0/pair", None),
+    ({"overrides": [{"simplex": [0], "rule": "G2", "pair": [[0, 1], [0, 2]]}]}, 422, "/overrides/0/pair", "only N2"),
+    ({"overrides": [{"simplex": [0], "rule": "G1", "x": 1}]}, 400, "/overrides/0/x", None),
+    ({"overrides": ["G1"]}, 400, "/overrides/0", None),
+    ({"overrides": {}}, 400, "/overrides", None),
+]
+BAD_FINS = [
+    # N1 at a type-2 edge / type-4 vertex
+    ({"overrides": [{"simplex": [0, 1], "rule": "N1", "dimension": 2}]}, 422, "/overrides/0/rule", "type-1"),
+    ({"overrides": [{"simplex": [0, 1], "rule": "N2", "pair": [[0, 1, 2]]}]}, 422, "/overrides/0/pair", "two simplices"),
+    ({"overrides": [{"simplex": [0, 1], "rule": "N2", "pair": [[0, 1], [0, 1]]}]}, 422, "/overrides/0/pair", "two triangles"),
+    ({"overrides": [{"simplex": [0, 1], "rule": "N2", "pair": [[0, 1, 2], [0, 1]]}]}, 422, "/overrides/0/pair/1", None),
+    ({"overrides": [{"simplex": [0, 1], "rule": "N2", "pair": [[0, 1, 2], [0, 2, 3]]}]}, 422, "/overrides/0/pair/1", "not a triangle"),
+    ({"overrides": [{"simplex": [0, 1], "rule": "N2", "pair": [[0, 1, 2], [0, 1, 2]]}]}, 422, "/overrides/0/pair/1", "same simplex"),
+    ({"overrides": [{"simplex": [0, 1], "rule": "N2", "pair": [[0, 1, 2], [0, 1, 9]]}]}, 422, "/overrides/0/pair/1/2", None),
+    ({"overrides": [{"simplex": [0, 1], "rule": "N2", "pair": "x"}]}, 400, "/overrides/0/pair", None),
+    ({"overrides": [{"simplex": [0, 1], "rule": "N2", "pair": [7, [0, 1, 2]]}]}, 400, "/overrides/0/pair/0", None),
+    # two N2 choices that contradict each other: the edge picks fins 2, 3; vertex 0 picks 3, 4
+    ({"overrides": [{"simplex": [0, 1], "rule": "N2", "pair": [[0, 1, 2], [0, 1, 3]]},
+                    {"simplex": [0], "rule": "N2", "pair": [[0, 1, 3], [0, 1, 4]]}]}, 422, "/overrides/0/pair", "conflicts"),
+]
+
+
+@pytest.mark.parametrize("body,status,pointer,words", BAD + [(b, s, p, w) for b, s, p, w in BAD_FINS])
+def test_override_errors(daemon, body, status, pointer, words):
+    fins = any(x in BAD_FINS for x in [(body, status, pointer, words)])
+    s = session(daemon, FINS if fins else FIG17)
+    r = s.req("PUT", "/rules", json=body)
+    assert r.status_code == status, r.text
+    assert r.headers["Content-Type"].startswith("application/problem+json")
+    p = r.json()
+    assert [e["pointer"] for e in p["errors"]] == [pointer], p
+    if words:
+        assert words in p["detail"], p["detail"]
+    # all-or-nothing: the session is unchanged
+    assert s.req("GET", "/complex").json()["rules"]["overrides"] == []
+    assert r.status_code != 200
+
+
+def test_overrides_need_a_complex(daemon):
+    s = Session(daemon)
+    r = s.req("PUT", "/rules", json={"overrides": [{"simplex": [0], "rule": "G1"}]})
+    assert r.status_code == 409 and r.json()["errors"][0]["pointer"] == "/overrides"
