@@ -311,3 +311,48 @@ def test_overrides_need_a_complex(daemon):
     s = Session(daemon)
     r = s.req("PUT", "/rules", json={"overrides": [{"simplex": [0], "rule": "G1"}]})
     assert r.status_code == 409 and r.json()["errors"][0]["pointer"] == "/overrides"
+
+
+def test_refine_carries_tags(daemon):
+    """POST /refine: children of tagged simplices stay tagged (SPEC Sec. 3). The cube of 6 tets
+    with its 12 edges tagged, refined red at a corner tet to depth 2: the tagged edges still
+    cover exactly the 12 unit edges of the cube, and the corners and creases stay put at level 2
+    of the refined complex."""
+    from test_http_tags import CUBE_V, CUBE_T, CUBE_EDGES, on_cube_edge
+    s = session(daemon, {"vertices": CUBE_V, "simplices": CUBE_T}, tags=CUBE_EDGES)
+    r = s.req("POST", "/refine", json={"select": {"simplices": [CUBE_T[0]]}, "depth": 2,
+                                       "positions": "subdivision"})
+    assert r.status_code == 200, r.text
+    c = s.req("GET", "/complex").json()
+    tagged = c["tags"]["singular"]
+    assert len(tagged) > 12 and all(len(t) == 2 for t in tagged)
+    P = np.array(c["vertices"])
+    total = 0.0
+    for a, b in tagged:
+        assert on_cube_edge(P[a]) and on_cube_edge(P[b]) and on_cube_edge((P[a] + P[b]) / 2)
+        total += np.linalg.norm(P[a] - P[b])
+    assert abs(total - 12) < 1e-12
+    j = level(s, 2)
+    p = np.array(j["vertices"])
+    np.testing.assert_array_equal(p[:8], np.array(CUBE_V, dtype=float))
+    assert all(on_cube_edge(p[i]) for i, r in enumerate(j["rules"]) if r == "curve")
+
+
+def test_refine_carries_triangle_tags_and_overrides(daemon):
+    """A tagged triangle becomes its children (same total area); an N1 junction edge's halves and
+    midpoint keep N1 with the same dimension."""
+    s = session(daemon, FIG17, n1(3), tags=[[1, 2, 4]])
+    r = s.req("POST", "/refine", json={"select": {"sphere": {"center": [0, 0, 0], "radius": 10}},
+                                       "positions": "midpoint"})
+    assert r.status_code == 200, r.text
+    c = s.req("GET", "/complex").json()
+    P = np.array(c["vertices"])
+    tris = c["tags"]["singular"]
+    assert len(tris) == 4 and all(len(t) == 3 for t in tris)
+    area = sum(np.linalg.norm(np.cross(P[b] - P[a], P[t] - P[a])) / 2 for a, b, t in tris)
+    assert abs(area - np.sqrt(3) / 2) < 1e-12          # the face (-1,0,0),(0,1,0),(0,0,1)
+    mid = next(i for i, x in enumerate(P) if np.allclose(x, [0.5, 0.5, 0]))
+    ov = {tuple(o["simplex"]): o for o in c["rules"]["overrides"]}
+    assert ov[(mid,)] == {"simplex": [mid], "rule": "N1", "dimension": 3}
+    assert ov[(0, mid)]["rule"] == "N1" and ov[(2, mid)]["dimension"] == 3
+    assert c["classes"]["vertices"][mid]["rule"] == "N1"
