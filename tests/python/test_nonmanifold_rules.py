@@ -356,3 +356,42 @@ def test_refine_carries_triangle_tags_and_overrides(daemon):
     assert ov[(mid,)] == {"simplex": [mid], "rule": "N1", "dimension": 3}
     assert ov[(0, mid)]["rule"] == "N1" and ov[(2, mid)]["dimension"] == 3
     assert c["classes"]["vertices"][mid]["rule"] == "N1"
+
+
+def test_fig16_type3_vertex_g1_and_g2(daemon):
+    """000 Fig. 16: two solids meeting at one vertex A (type 3). G1 keeps A; G2 (default) moves it
+    by 9/16 A + 7/(16k) sum of its k = 6 neighbours: A = 0, neighbours summing to (0, 0, -1)
+    -> (0, 0, -7/96)."""
+    body = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -2]],
+            "simplices": [[0, 1, 2, 3], [0, 4, 5, 6]]}
+    g2 = session(daemon, body)
+    c = g2.req("GET", "/complex").json()["classes"]["vertices"][0]
+    assert c["nonmanifold"] == 3 and c["rule"] == "G2"
+    np.testing.assert_allclose(level(g2, 1)["vertices"][0], [0, 0, -7 / 96], atol=1e-15)
+    g1 = session(daemon, body, {"overrides": [{"simplex": [0], "rule": "G1"}]})
+    for L in (1, 2, 3):
+        assert level(g1, L)["vertices"][0] == [0, 0, 0]
+
+
+def test_fig15a_curve_meets_solid_g2(daemon):
+    """000 Fig. 15(a): a curve leaving a tetrahedron at vertex v = (0,0,1) (type 1), rule G2:
+    k = 4 neighbours (three tet vertices and the curve's next point (0,0,2)):
+    9/16 (0,0,1) + 7/64 ((1,1,0) + (0,0,2)) = (7/64, 7/64, 9/16 + 14/64)."""
+    body = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 2]],
+            "simplices": [[0, 1, 2, 3], [3, 4]]}
+    s = session(daemon, body)
+    assert s.req("GET", "/complex").json()["classes"]["vertices"][3]["rule"] == "G2"
+    np.testing.assert_allclose(level(s, 1)["vertices"][3], [7 / 64, 7 / 64, 9 / 16 + 14 / 64], atol=1e-15)
+
+
+def test_fig15b_four_surfaces_on_a_line_g2(daemon):
+    """000 Fig. 15(b): four surfaces meeting along edge 0-1 (type 2), rule G2. Edge: its ring is
+    the 4 tips, so 1/4 (a+b) + 1/8 each (SPEC |rho(e)| = 4): 1/4 (0,0,1) + 1/8 (0,-1,2).
+    Vertex 0 (type 4): 5 neighbours, 9/16 * 0 + 7/80 ((0,0,1) + (0,-1,2))."""
+    tips = [[1, 0, 0.5], [-1, 0, 0.5], [0, 1, 0.5], [0, -2, 0.5]]
+    body = {"vertices": [[0, 0, 0], [0, 0, 1]] + tips, "simplices": [[0, 1, k] for k in range(2, 6)]}
+    s = session(daemon, body)
+    j = level(s, 1)
+    (mid,) = [i for i, e in enumerate(j["origin"]["edge_of"]) if e and sorted(e) == [0, 1]]
+    np.testing.assert_allclose(j["vertices"][mid], [0, -0.125, 0.5], atol=1e-15)
+    np.testing.assert_allclose(j["vertices"][0], [0, -7 / 80, 21 / 80], atol=1e-15)
