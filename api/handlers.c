@@ -357,10 +357,10 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
     if (nov && !cur->in)
         return api_fail_at(p, 409, "no-complex", "/overrides",
                            "overrides name simplices of the complex; PUT the complex first");
-    if (nov && nov > (size_t)cur->in->nv + cur->in->ns)
+    if (nov && nov > (size_t)cur->in->nv + 6 * (size_t)cur->in->ns) /* > vertices + edges */
         return api_fail_at(p, 422, "limit-exceeded", "/overrides",
-                           "%zu overrides for a complex of %u vertices: at most one per vertex or "
-                           "edge", nov, cur->in->nv);
+                           "%zu overrides for a complex of %u vertices and %u simplices: at most "
+                           "one per vertex or edge", nov, cur->in->nv, cur->in->ns);
     sd_override *list = calloc(nov + 1, sizeof *list);
     if (!list)
         return api_fail(p, 503, "out-of-memory", "out of memory");
@@ -1717,9 +1717,12 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
     if (!ov || !tags.size || !tags.idx)
         rc = rc ? rc : api_fail(p, 503, "out-of-memory", "out of memory");
     else {
-        memcpy(ov, cur->rules.overrides, nov * sizeof *ov);
-        memcpy(tags.size, cur->tags.size, cur->tags.n);
-        memcpy(tags.idx, cur->tags.idx, ntag_idx * sizeof *tags.idx);
+        if (nov)
+            memcpy(ov, cur->rules.overrides, nov * sizeof *ov);
+        if (cur->tags.n) {
+            memcpy(tags.size, cur->tags.size, cur->tags.n);
+            memcpy(tags.idx, cur->tags.idx, ntag_idx * sizeof *tags.idx);
+        }
         tags.n = cur->tags.n;
     }
     atomic_fetch_add(&in->refs, 1);

@@ -45,20 +45,22 @@ uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v)
         return SD_RULE_CURVE;
     if (fl & VF_SSURF)
         return fl & VF_SBND ? SD_RULE_LOOP_BOUNDARY : SD_RULE_LOOP;
-    switch (nm_ov(nm)) { /* the simplex's own choice (tags.c); vertex_rules settles N1 and N2 */
-    case OV_N1_1:
-        return SD_RULE_CURVE;
-    case OV_N1_2:
-        return SD_RULE_LOOP;
-    case OV_N1_3:
-        return fl & VF_DC ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID;
-    case OV_N2:
-        return fam == FAM1 ? SD_RULE_CURVE : SD_RULE_LOOP;
-    default:
-        break;
+    if (nm) {
+        switch (nm_ov(nm)) { /* the simplex's own choice (tags.c); vertex_rules settles N1, N2 */
+        case OV_N1_1:
+            return SD_RULE_CURVE;
+        case OV_N1_2:
+            return SD_RULE_LOOP;
+        case OV_N1_3:
+            return fl & VF_DC ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID;
+        case OV_N2:
+            return fam == FAM1 ? SD_RULE_CURVE : SD_RULE_LOOP;
+        default:
+            break;
+        }
+        if (nm_type(nm))
+            return nm_type(nm) == 2 && fam == FAM1 ? SD_RULE_CORNER : SD_RULE_G2;
     }
-    if (nm_type(nm))
-        return nm_type(nm) == 2 && fam == FAM1 ? SD_RULE_CORNER : SD_RULE_G2;
     switch (fam) {
     case FAM1:
         return fl & VF_CURVE_END ? SD_RULE_CORNER : SD_RULE_CURVE;
@@ -78,20 +80,22 @@ static uint8_t edge_rule(const sd_topo *t, uint32_t e)
         return SD_RULE_CURVE;
     if (fl & EF_SSURF)
         return SD_RULE_LOOP;
-    switch (nm_ov(t->enm[e])) { /* the edge's own choice (tags.c) */
-    case OV_N1_1:
-        return SD_RULE_CURVE;
-    case OV_N1_2: /* as in C_2 alone: between two triangles, or its boundary */
-        return t->enm[e] & NM_C2B ? SD_RULE_LOOP_BOUNDARY : SD_RULE_LOOP;
-    case OV_N1_3: /* as in C_3 alone */
-        return fl & EF_DC ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID;
-    case OV_N2: /* Loop between the two chosen triangles (opp_task) */
-        return SD_RULE_LOOP;
-    default:
-        break;
+    if (t->enm[e] & (NM_TYPE | NM_OV)) {
+        switch (nm_ov(t->enm[e])) { /* the edge's own choice (tags.c) */
+        case OV_N1_1:
+            return SD_RULE_CURVE;
+        case OV_N1_2: /* as in C_2 alone: between two triangles, or its boundary */
+            return t->enm[e] & NM_C2B ? SD_RULE_LOOP_BOUNDARY : SD_RULE_LOOP;
+        case OV_N1_3: /* as in C_3 alone */
+            return fl & EF_DC ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID;
+        case OV_N2: /* Loop between the two chosen triangles (opp_task) */
+            return SD_RULE_LOOP;
+        default:
+            break;
+        }
+        if (nm_type(t->enm[e]))
+            return SD_RULE_G2;
     }
-    if (nm_type(t->enm[e]))
-        return SD_RULE_G2;
     switch (t->efam[e]) {
     case FAM1:
         return SD_RULE_CURVE;
@@ -112,6 +116,8 @@ sd_rule sd_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r)
     if (t->vflag[v] & (VF_SING | VF_S_ANY)) /* a tag wins over the vertex's choice */
         return (sd_rule)r;
     int ov = nm_ov(nm);
+    if (r == SD_RULE_CORNER) /* the choice's part has no rule here (e.g. N1 1 at a curve end) */
+        return SD_RULE_CORNER;
     return ov >= OV_N1_1 && ov <= OV_N1_3 ? SD_RULE_N1 : ov == OV_N2 ? SD_RULE_N2 : (sd_rule)r;
 }
 
@@ -547,11 +553,14 @@ static void vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cn
     enum { SLOW = 0x80, OVR = 0x40, ON_BND = 0x10 };
     for (uint32_t v = 0; v < nv; v++) {
         uint8_t r = sd_vertex_rule(t, v);
-        int ov = nm_ov(t->vnm[v]);
-        bool own = t->ovmask && ov && ov != OV_G2 && !(t->vflag[v] & (VF_SING | VF_S_ANY));
-        vr[v] = r | (own ? OVR : (r == SD_RULE_G2 || (t->vflag[v] & VF_S_ANY)) ? SLOW : 0);
+        vr[v] = r | ((r == SD_RULE_G2 || (t->vflag[v] & VF_S_ANY)) ? SLOW : 0);
     }
-    if (t->ovmask) { /* N1 / N2 vertices: interior or boundary of the part they follow */
+    if (t->ovmask) { /* vertices with their own N1 / N2 choice and no tag */
+        for (uint32_t v = 0; v < nv; v++) {
+            int ov = nm_ov(t->vnm[v]);
+            if (ov && ov != OV_G2 && !(t->vflag[v] & (VF_SING | VF_S_ANY)))
+                vr[v] = (uint8_t)((vr[v] & 0x0f) | OVR);
+        } /* N1 / N2 vertices: interior or boundary of the part they follow */
         for (uint32_t e = 0; e < ne; e++)
             for (int k = 0; k < 2; k++) {
                 uint32_t v = t->ev[e][k];
@@ -702,7 +711,8 @@ static void opp_task(void *arg)
     for (uint32_t e = 0; e < t->ne; e++) {
         /* an embedded surface's edge takes its opposite vertices from tagged triangles */
         bool ss = t->eflag[e] & EF_SSURF;
-        bool n2 = nm_ov(t->enm[e]) == OV_N2 && !ss && !(t->eflag[e] & EF_CREASE);
+        bool n2 = (t->ovmask & OVM_N2T) && nm_ov(t->enm[e]) == OV_N2 && !ss &&
+                  !(t->eflag[e] & EF_CREASE);
         nopp[e] = er[e] == SD_RULE_LOOP ? (ss ? M_SSURF : n2 ? M_N2 : M_LOOP)
                 : er[e] == SD_RULE_SOLID_BOUNDARY && !ss ? M_SB : 0;
     }

@@ -22,9 +22,10 @@
 #include <stdio.h>
 #include <string.h>
 
-/* vertex -> incident edges and faces of level 0, for lookups of many tags or overrides */
+/* vertex -> incident edges and faces, edge -> faces, of level 0: lookups of many tags or
+ * overrides in time linear in the complex (a lookup scans the smallest list it can) */
 typedef struct vinc {
-    uint32_t *eoff, *e, *foff, *f;
+    uint32_t *eoff, *e, *foff, *f, *efoff, *ef;
 } vinc;
 
 static void vinc_free(sd_mem *m, vinc *x)
@@ -33,6 +34,8 @@ static void vinc_free(sd_mem *m, vinc *x)
     sd_free(m, x->e);
     sd_free(m, x->foff);
     sd_free(m, x->f);
+    sd_free(m, x->efoff);
+    sd_free(m, x->ef);
 }
 
 static bool csr(sd_mem *m, uint32_t nv, uint32_t n, int per, const uint32_t *keys, uint32_t **off,
@@ -55,7 +58,8 @@ static bool vinc_build(sd_mem *m, const sd_topo *t, vinc *x)
 {
     memset(x, 0, sizeof *x);
     if (csr(m, t->nv, t->ne, 2, &t->ev[0][0], &x->eoff, &x->e) &&
-        csr(m, t->nv, t->nf, 3, &t->fv[0][0], &x->foff, &x->f))
+        csr(m, t->nv, t->nf, 3, &t->fv[0][0], &x->foff, &x->f) &&
+        csr(m, t->ne, t->nf, 3, &t->fe[0][0], &x->efoff, &x->ef))
         return true;
     vinc_free(m, x);
     return false;
@@ -63,6 +67,11 @@ static bool vinc_build(sd_mem *m, const sd_topo *t, vinc *x)
 
 static uint32_t find_edge(const sd_topo *t, const vinc *x, uint32_t a, uint32_t b)
 {
+    if (x->eoff[a + 1] - x->eoff[a] > x->eoff[b + 1] - x->eoff[b]) {
+        uint32_t s = a;
+        a = b;
+        b = s;
+    }
     for (uint32_t k = x->eoff[a]; k < x->eoff[a + 1]; k++) {
         uint32_t e = x->e[k];
         if (t->ev[e][0] == b || t->ev[e][1] == b)
@@ -78,9 +87,13 @@ static bool face_has(const sd_topo *t, uint32_t f, uint32_t v)
 
 static uint32_t find_face(const sd_topo *t, const vinc *x, const uint32_t v[3])
 {
-    for (uint32_t k = x->foff[v[0]]; k < x->foff[v[0] + 1]; k++) {
+    int s = 0;
+    for (int i = 1; i < 3; i++)
+        if (x->foff[v[i] + 1] - x->foff[v[i]] < x->foff[v[s] + 1] - x->foff[v[s]])
+            s = i;
+    for (uint32_t k = x->foff[v[s]]; k < x->foff[v[s] + 1]; k++) {
         uint32_t f = x->f[k];
-        if (face_has(t, f, v[1]) && face_has(t, f, v[2]))
+        if (face_has(t, f, v[0]) && face_has(t, f, v[1]) && face_has(t, f, v[2]))
             return f;
     }
     return UINT32_MAX;
@@ -95,7 +108,9 @@ static bool edge_has(const sd_topo *t, uint32_t e, uint32_t v)
  * exactly two of them and in nothing else that is maximal (not NM_C2B) ---------------------- */
 
 /* Mark with FF_N2SEL every maximal triangle of the petal of v holding triangle f0; returns the
- * number of triangles marked now (already marked ones are walked through but not counted). */
+ * number of triangles marked now (already marked ones are walked through but not counted).
+ * Each triangle of the petal is visited once, each of its edges at v looked up in the edge's
+ * own face list. */
 static uint32_t mark_petal(sd_topo *t, const vinc *x, uint32_t v, uint32_t f0, uint32_t *stack)
 {
     uint32_t top = 0, added = 0;
@@ -112,15 +127,12 @@ static uint32_t mark_petal(sd_topo *t, const vinc *x, uint32_t v, uint32_t f0, u
             uint32_t e = t->fe[f][j];
             if (!edge_has(t, e, v) || (t->enm[e] & NM_C2B))
                 continue;
-            /* the other maximal triangle on e */
-            for (uint32_t k = x->foff[v]; k < x->foff[v + 1]; k++) {
-                uint32_t g = x->f[k];
+            for (uint32_t k = x->efoff[e]; k < x->efoff[e + 1]; k++) { /* the other triangle */
+                uint32_t g = x->ef[k];
                 if (g == f || !(t->fflag[g] & FF_MAX) || (t->fflag[g] & SEEN))
                     continue;
-                if (t->fe[g][0] == e || t->fe[g][1] == e || t->fe[g][2] == e) {
-                    t->fflag[g] |= SEEN;
-                    stack[top++] = g;
-                }
+                t->fflag[g] |= SEEN;
+                stack[top++] = g;
             }
         }
     }
@@ -301,11 +313,107 @@ static sd_result check_override(const sd_topo *t, const vinc *x, const sd_overri
     return SD_OK;
 }
 
+/* vertex -> tetrahedra and face -> tetrahedra of level 0, built when an N1 with dimension 3
+ * needs them; scratch for walks over the cells around a simplex */
+typedef struct tinc {
+    uint32_t *voff, *v, *foff, *f, *stack;
+    uint8_t *mark;
+} tinc;
+
+/* N1 with dimension d says "follow the rules of C_d alone"; that only decides the simplex's
+ * rule if C_d is itself manifold there: its d-cells around the simplex are connected through
+ * faces shared by exactly two of them. Otherwise (three fins on an edge, two solids touching at a
+ * vertex) it is a 422 pointing at the dimension. */
+static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, const vinc *x, tinc *ti,
+                                  const sd_override *o, size_t i, uint32_t id, sd_error *err)
+{
+    bool edge = o->nverts == 2;
+    const char *what = edge ? "edge" : "vertex";
+    if (o->dimension == 2) {
+        if (edge) {
+            uint32_t n = 0;
+            for (uint32_t k = x->efoff[id]; k < x->efoff[id + 1]; k++)
+                n += (t->fflag[x->ef[k]] & FF_MAX) != 0;
+            if (n <= 2)
+                return SD_OK;
+            return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
+                           "the surfaces are themselves non-manifold at this edge (%u triangles "
+                           "share it): N1 cannot pick one surface; use N2, G1 or G2", n);
+        }
+        /* one petal holds every maximal triangle around the vertex (marks saved in bit 64) */
+        uint32_t total = 0, first = UINT32_MAX;
+        for (uint32_t k = x->foff[id]; k < x->foff[id + 1]; k++) {
+            uint32_t f = x->f[k];
+            t->fflag[f] = (uint8_t)((t->fflag[f] & ~FF_N2SEL) | ((t->fflag[f] & FF_N2SEL) ? 64 : 0));
+            if (t->fflag[f] & FF_MAX) {
+                total++;
+                first = first == UINT32_MAX ? f : first;
+            }
+        }
+        if (!ti->stack && !(ti->stack = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *ti->stack)))
+            return sd_fail_nomem(err, m);
+        uint32_t got = first == UINT32_MAX ? 0 : mark_petal(t, x, id, first, ti->stack);
+        for (uint32_t k = x->foff[id]; k < x->foff[id + 1]; k++) {
+            uint32_t f = x->f[k];
+            t->fflag[f] = (uint8_t)((t->fflag[f] & ~(FF_N2SEL | 64)) | ((t->fflag[f] & 64) ? FF_N2SEL : 0));
+        }
+        if (got == total)
+            return SD_OK;
+        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
+                       "the surfaces are themselves non-manifold at vertex %u (its %u triangles "
+                       "form more than one fan): N1 cannot pick one surface; use N2, G1 or G2",
+                       id, total);
+    }
+    /* dimension 3: the tetrahedra around the simplex, connected through faces holding it */
+    if (!ti->voff) {
+        if (!csr(m, t->nv, t->ntet, 4, &t->tet[0][0], &ti->voff, &ti->v) ||
+            !csr(m, t->nf, t->ntet, 4, &t->tet_f[0][0], &ti->foff, &ti->f) ||
+            !(ti->mark = sd_calloc(m, (size_t)t->ntet + 1, 1)) ||
+            (!ti->stack && !(ti->stack = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *ti->stack))))
+            return sd_fail_nomem(err, m);
+    }
+    uint32_t a = edge ? t->ev[id][0] : id, b = edge ? t->ev[id][1] : UINT32_MAX;
+    uint32_t total = 0, got = 0, top = 0, bad = 0;
+    for (uint32_t k = ti->voff[a]; k < ti->voff[a + 1]; k++) {
+        const uint32_t *q = t->tet[ti->v[k]];
+        if (!edge || q[0] == b || q[1] == b || q[2] == b || q[3] == b) {
+            total++;
+            if (!top)
+                ti->stack[top++] = ti->v[k], ti->mark[ti->v[k]] = 1;
+        }
+    }
+    while (top) {
+        uint32_t c = ti->stack[--top];
+        got++;
+        for (int j = 0; j < 4; j++) {
+            uint32_t opp = t->tet[c][j], f = t->tet_f[c][j];
+            if (opp == a || opp == b) /* face j is opposite vertex j: it must hold the simplex */
+                continue;
+            if (t->fn3[f] > 2)
+                bad++;
+            for (uint32_t k = ti->foff[f]; k < ti->foff[f + 1]; k++)
+                if (!ti->mark[ti->f[k]]) {
+                    ti->mark[ti->f[k]] = 1;
+                    ti->stack[top++] = ti->f[k];
+                }
+        }
+    }
+    for (uint32_t k = ti->voff[a]; k < ti->voff[a + 1]; k++)
+        ti->mark[ti->v[k]] = 0;
+    if (got == total && !bad)
+        return SD_OK;
+    return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
+                   "the solids are themselves non-manifold at this %s (its tetrahedra do not "
+                   "form one piece joined through faces): N1 cannot pick one solid; use G1 or G2",
+                   what);
+}
+
 sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t n, sd_error *err)
 {
     sd_topo *t = &c->lv[0]->t;
     sd_mem *m = &c->mem;
     vinc x = {0};
+    tinc ti = {0};
     sd_override *copy = sd_alloc(m, (n ? n : 1) * sizeof *copy);
     uint32_t *at = sd_alloc(m, (n ? n : 1) * sizeof *at);
     uint32_t *vseen = NULL, *eseen = NULL;
@@ -335,6 +443,9 @@ sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t 
         }
         *seen = (uint32_t)i;
         copy[i] = ov[i];
+        if (ov[i].rule == SD_RULE_N1 && ov[i].dimension >= 2 &&
+            (rc = n1_part_manifold(m, t, &x, &ti, &ov[i], i, at[i], err)))
+            goto out;
     }
     sd_override *old = c->ov;
     size_t old_n = c->nov;
@@ -354,6 +465,12 @@ out:
     sd_free(m, vseen);
     sd_free(m, eseen);
     vinc_free(m, &x);
+    sd_free(m, ti.voff);
+    sd_free(m, ti.v);
+    sd_free(m, ti.foff);
+    sd_free(m, ti.f);
+    sd_free(m, ti.stack);
+    sd_free(m, ti.mark);
     return rc;
 }
 
@@ -450,6 +567,12 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
             }
     }
 
+    /* ... and a triangle shared by three or more solids an embedded surface (a 2-singularity,
+     * 000 Fig. 17e), so its children, edges inside it included, stay singular at every level */
+    for (uint32_t f = 0; f < t->nf && g1_default; f++)
+        if (t->fn3[f] >= 3 && !(t->fflag[f] & FF_MAX))
+            t->fflag[f] |= FF_SING;
+
     /* derived: surface edges, their boundary, and the vertices on them */
     nface = sd_calloc(m, (size_t)t->ne + 1, 1);
     if (!nface)
@@ -519,12 +642,19 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
             for (uint32_t k = x.foff[id]; k < x.foff[id + 1]; k++)
                 t->fflag[x.f[k]] = (uint8_t)((t->fflag[x.f[k]] & ~FF_N2SEL) |
                                              ((t->fflag[x.f[k]] & FF_N2SEL) ? 64 : 0));
-            own = 0;
-            for (int j = 0; j < 2; j++)
-                own += mark_petal(t, &x, id, find_face(t, &x, o->pair[j]), stack);
+            uint32_t p0 = mark_petal(t, &x, id, find_face(t, &x, o->pair[0]), stack);
+            uint32_t p1 = mark_petal(t, &x, id, find_face(t, &x, o->pair[1]), stack);
+            own = p0 + p1;
             for (uint32_t k = x.foff[id]; k < x.foff[id + 1]; k++)
                 t->fflag[x.f[k]] = (uint8_t)((t->fflag[x.f[k]] & ~(FF_N2SEL | 64)) |
                                              ((t->fflag[x.f[k]] & 64) ? FF_N2SEL : 0));
+            if (!p1) {
+                rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR1,
+                             "both triangles of the pair lie in the same petal (fan of triangles "
+                             "joined by manifold edges) around vertex %u: choose triangles of two "
+                             "different petals", id);
+                goto out;
+            }
         }
         if (chosen != own) {
             rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR,

@@ -29,7 +29,7 @@ JUNCTION_E = [[0, 2], [1, 3]]
 
 @pytest.fixture(scope="module")
 def daemon():
-    d = Daemon()
+    d = Daemon("--max-sessions", "1000")   # one session per configuration, none deleted
     yield d
     assert d.stop() == 0
 
@@ -395,3 +395,62 @@ def test_fig15b_four_surfaces_on_a_line_g2(daemon):
     (mid,) = [i for i, e in enumerate(j["origin"]["edge_of"]) if e and sorted(e) == [0, 1]]
     np.testing.assert_allclose(j["vertices"][mid], [0, -0.125, 0.5], atol=1e-15)
     np.testing.assert_allclose(j["vertices"][0], [0, -7 / 80, 21 / 80], atol=1e-15)
+
+
+# N1 only decides a rule where the chosen part is itself manifold (DECISIONS 23): two solids
+# touching at vertex 0 plus a curve there (vertex 0 is type 1, and type 3 within the solids), and
+# three fins on edge 0-1 plus a curve at vertex 0.
+FIG16_V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -2]]
+FIG16_T = [[0, 1, 2, 3], [0, 4, 5, 6]]
+
+
+@pytest.mark.parametrize("body,override,words", [
+    ({"vertices": FIG16_V + [[5, 5, 5]], "simplices": FIG16_T + [[0, 7]]},
+     {"simplex": [0], "rule": "N1", "dimension": 3}, "solids are themselves non-manifold"),
+    ({"vertices": FINS_V + [[0, 0, -3]], "simplices": FINS_T + [[0, 5]]},
+     {"simplex": [0], "rule": "N1", "dimension": 2}, "more than one fan"),
+])
+def test_n1_needs_a_manifold_part(daemon, body, override, words):
+    s = session(daemon, body)
+    r = s.req("PUT", "/rules", json={"overrides": [override]})
+    assert r.status_code == 422, r.text
+    assert r.json()["errors"][0]["pointer"] == "/overrides/0/dimension"
+    assert words in r.json()["detail"]
+    # the other dimension is fine there: the curve alone makes vertex 0 a curve end (fixed)
+    r = s.req("PUT", "/rules", json={"overrides": [dict(override, dimension=1)]})
+    assert r.status_code == 200, r.text
+    assert level(s, 1)["vertices"][0] == body["vertices"][0]
+    assert s.req("GET", "/complex").json()["classes"]["vertices"][0]["rule"] == "corner"
+
+
+def test_n2_pair_in_one_petal_is_refused(daemon):
+    """A closed fan around vertex 0 plus a fin on edge 0-1: two triangles of the fan are one
+    petal, so they are not a pair of two sheets."""
+    K = 6
+    V = [[0, 0, 0]] + [[np.cos(2 * np.pi * i / K), np.sin(2 * np.pi * i / K), 0] for i in range(K)] \
+        + [[0.5, 0, 1]]
+    T = [[0, 1 + i, 1 + (i + 1) % K] for i in range(K)] + [[0, 1, K + 1]]
+    s = session(daemon, {"vertices": V, "simplices": T})
+    r = s.req("PUT", "/rules", json={"overrides": [{"simplex": [0], "rule": "N2", "pair": [T[0], T[2]]}]})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/overrides/0/pair/1"
+    assert "same petal" in r.json()["detail"]
+    # a triangle of the fan and the fin: two petals, accepted
+    r = s.req("PUT", "/rules", json={"overrides": [{"simplex": [0], "rule": "N2", "pair": [T[0], T[K]]}]})
+    assert r.status_code == 200, r.text
+
+
+def test_g1_default_makes_a_shared_triangle_a_surface(daemon):
+    """Three tetrahedra sharing triangle 0-1-2 (type 2): under the G1 default the triangle is a
+    2-singularity (an embedded surface) and its children stay singular at every level: no point
+    follows G2, and the triangle's points stay in its plane z = 0."""
+    V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, 1], [0.3, 0.3, -1], [-1, -1, 0.2]]
+    T = [[0, 1, 2, 3], [0, 1, 2, 4], [0, 1, 2, 5]]
+    s = session(daemon, {"vertices": V, "simplices": T}, {"nonmanifold_default": "G1"})
+    for L in (1, 2, 3):
+        j = level(s, L)
+        assert "G2" not in j["rules"]
+        p = np.array(j["vertices"])
+        inside = [i for i, r in enumerate(j["rules"]) if r in ("loop", "loop-boundary")]
+        assert inside and all(abs(p[i][2]) < 1e-15 for i in inside)
+    g2 = level(session(daemon, {"vertices": V, "simplices": T}), 2)
+    assert "G2" in g2["rules"]
