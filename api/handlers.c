@@ -347,9 +347,6 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
                            "the default and give N1/N2 in \"overrides\"", nm_rules[nm]);
     r.nonmanifold_default = nm == 1 ? SD_NM_G1 : SD_NM_G2;
     r.nonmanifold_surface = surf == 1 ? SD_NMSURF_YING_ZORIN : SD_NMSURF_CHANG_QIN;
-    if (surf == 1)
-        return api_fail_at(p, 501, "not-implemented", "/nonmanifold_surface",
-                           "the Ying-Zorin rules are not available in this version");
     json_t *ov = json_object_get(body, "overrides");
     if (ov && !json_is_array(ov))
         return api_fail_at(p, 400, "wrong-type", "/overrides", "must be an array of overrides");

@@ -88,10 +88,13 @@ enum {
  * triangles" (a boundary of C_2 for N1 with dimension 2), NM_G1 "singular by rule G1". All are
  * inherited by children (split.c). */
 enum { NM_TYPE = 7, NM_OV_SHIFT = 3, NM_OV = 7 << 3, NM_C2B = 64, NM_G1 = 128 };
-enum { OV_NONE = 0, OV_N1_1 = 1, OV_N1_2 = 2, OV_N1_3 = 3, OV_N2 = 4, OV_G2 = 5 };
+enum { OV_NONE = 0, OV_N1_1 = 1, OV_N1_2 = 2, OV_N1_3 = 3, OV_N2 = 4, OV_G2 = 5,
+       OV_YZS = 6,      /* Ying-Zorin: a non-manifold edge (crease) or a simple singular vertex */
+       OV_YZX = 7 };    /* Ying-Zorin: a complex singular vertex (corner) */
 static inline int nm_type(uint8_t x) { return x & NM_TYPE; }
 static inline int nm_ov(uint8_t x) { return (x & NM_OV) >> NM_OV_SHIFT; }
-enum { OVM_N1 = 1, OVM_N2T = 2, OVM_N2C = 4 }; /* sd_topo.ovmask: which overrides occur */
+enum { OVM_N1 = 1, OVM_N2T = 2, OVM_N2C = 4, OVM_YZ = 8 }; /* sd_topo.ovmask: which overrides
+                                                              * occur; the Ying-Zorin rules */
 enum { FAM0 = 1, FAM1 = 2, FAM2 = 4, FAM3 = 8 };
 
 /* ---- one level's topology and classification ---------------------------------------- */

@@ -53,7 +53,8 @@ sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, co
     c->mem = mem;
     c->opt = o;
     if (sd_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err) ||
-        (o.nonmanifold_default == SD_NM_G1 && sd_apply_singular(c, err))) {
+        ((o.nonmanifold_default == SD_NM_G1 || o.nonmanifold_surface == SD_NMSURF_YING_ZORIN) &&
+         sd_apply_singular(c, err))) {
         sd_complex_free(c);
         return NULL;
     }

@@ -55,6 +55,10 @@ uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v)
             return fl & VF_DC ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID;
         case OV_N2:
             return fam == FAM1 ? SD_RULE_CURVE : SD_RULE_LOOP;
+        case OV_YZS:
+            return SD_RULE_CURVE;
+        case OV_YZX:
+            return SD_RULE_CORNER;
         default:
             break;
         }
@@ -90,6 +94,8 @@ static uint8_t edge_rule(const sd_topo *t, uint32_t e)
             return fl & EF_DC ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID;
         case OV_N2: /* Loop between the two chosen triangles (opp_task) */
             return SD_RULE_LOOP;
+        case OV_YZS: /* a Ying-Zorin crease */
+            return SD_RULE_CURVE;
         default:
             break;
         }
@@ -116,6 +122,10 @@ sd_rule sd_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r)
     if (t->vflag[v] & (VF_SING | VF_S_ANY)) /* a tag wins over the vertex's choice */
         return (sd_rule)r;
     int ov = nm_ov(nm);
+    if (ov == OV_YZX || (ov == OV_YZS && r == SD_RULE_CORNER))
+        return SD_RULE_YZ_CORNER;
+    if (ov == OV_YZS)
+        return SD_RULE_YZ_CREASE;
     if (r == SD_RULE_CORNER) /* the choice's part has no rule here (e.g. N1 1 at a curve end) */
         return SD_RULE_CORNER;
     return ov >= OV_N1_1 && ov <= OV_N1_3 ? SD_RULE_N1 : ov == OV_N2 ? SD_RULE_N2 : (sd_rule)r;
@@ -129,6 +139,11 @@ sd_rule sd_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r)
     if (t->eflag[e] & (EF_CREASE | EF_SSURF))
         return (sd_rule)r;
     int ov = nm_ov(nm);
+    if (ov == OV_YZS)
+        return SD_RULE_YZ_CREASE;
+    if ((t->ovmask & OVM_YZ) && r == SD_RULE_LOOP && !ov &&
+        (nm_ov(t->vnm[t->ev[e][0]]) >= OV_YZS || nm_ov(t->vnm[t->ev[e][1]]) >= OV_YZS))
+        return SD_RULE_YZ_PETAL;
     return ov >= OV_N1_1 && ov <= OV_N1_3 ? SD_RULE_N1 : ov == OV_N2 ? SD_RULE_N2 : (sd_rule)r;
 }
 
@@ -533,6 +548,8 @@ static inline bool ov_take(const sd_topo *t, uint8_t r, uint32_t v, uint32_t e)
         if (t->vfam[v] == FAM1)
             return (fl & (EF_CURVE | EF_N2SEL)) == (EF_CURVE | EF_N2SEL);
         return r == SD_RULE_LOOP ? (fl & EF_N2SEL) != 0 : ov_boundary_edge(t, ov, e);
+    case OV_YZS: /* along the singular edges: boundary or non-manifold ones */
+        return fam == FAM2 && ((fl & EF_BND2) || nm_type(t->enm[e]) == 2);
     default:
         return false;
     }
@@ -571,7 +588,8 @@ static void vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cn
             if (vr[v] & OVR) {
                 int ov = nm_ov(t->vnm[v]);
                 bool bnd = vr[v] & ON_BND;
-                uint8_t r = ov == OV_N1_1 || (ov == OV_N2 && t->vfam[v] == FAM1) ? SD_RULE_CURVE
+                uint8_t r = ov == OV_YZX ? SD_RULE_CORNER
+                          : ov == OV_N1_1 || ov == OV_YZS || (ov == OV_N2 && t->vfam[v] == FAM1) ? SD_RULE_CURVE
                           : ov == OV_N1_3 ? (bnd ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID)
                           : bnd ? SD_RULE_LOOP_BOUNDARY : SD_RULE_LOOP;
                 vr[v] = r | OVR;
@@ -777,6 +795,162 @@ static void erows_task(void *arg)
     }
 }
 
+/* ---- Ying-Zorin petals (003 Sec. 2) --------------------------------------------------------
+ * At a singular vertex v (a Ying-Zorin crease or corner vertex), the maximal triangles around v
+ * fall into petals, joined across non-singular edges (between exactly two triangles, no tag).
+ * A non-singular edge v-w of a petal with k triangles takes the piecewise smooth rule (003
+ * Fig. 4f): (3/4 - g) v + g w + 1/8 (c + d), g = 1/2 - cos(theta)/4, with theta = 2 pi/k for a
+ * dart petal (one singular edge), pi/k for an open petal of a simple vertex, alpha/k for an
+ * open petal of a complex vertex (a convex corner; alpha the angle between the petal's two
+ * singular edges, measured on the level's positions when the rules are built), and the Loop
+ * rule for a closed petal (the fixed-disk rule's first stage). An edge with a singular vertex at
+ * both ends takes the average of the two (003: on the first level). gam[e][i] is g at end i,
+ * or -1. */
+typedef struct yzpair {
+    uint32_t edge, slot; /* slot: index of the face in v's list */
+} yzpair;
+
+static int cmp_yzpair(const void *x, const void *y)
+{
+    const yzpair *a = x, *b = y;
+    return a->edge < b->edge ? -1 : a->edge > b->edge ? 1 : (a->slot > b->slot) - (a->slot < b->slot);
+}
+
+static inline bool yz_singular_edge(const sd_topo *t, uint32_t e)
+{
+    return t->efam[e] != FAM2 || (t->enm[e] & NM_C2B) || (t->eflag[e] & (EF_CREASE | EF_SSURF));
+}
+
+static bool yz_gammas(sd_mem *m, const sd_topo *t, const double *x, double (*gam)[2])
+{
+    const uint32_t nv = t->nv;
+    uint32_t *off = sd_calloc(m, (size_t)nv + 2, sizeof *off), *fl = NULL, *uf = NULL;
+    uint32_t *nsing = NULL, *cnt = NULL, *sing1 = NULL, *sing2 = NULL;
+    yzpair *pr = NULL;
+    bool ok = false;
+    if (!off)
+        return false;
+    for (uint32_t e = 0; e < t->ne; e++)
+        gam[e][0] = gam[e][1] = -1;
+#define YZV(v) (nm_ov(t->vnm[v]) >= OV_YZS && !(t->vflag[v] & (VF_SING | VF_S_ANY)))
+    size_t total = 0;
+    for (uint32_t i = 0; i < t->ntr; i++) {
+        const uint32_t *q = t->fv[sd_tr(t, i)];
+        for (int j = 0; j < 3; j++)
+            if (YZV(q[j])) {
+                off[q[j] + 2]++;
+                total++;
+            }
+    }
+    for (uint32_t v = 0; v < nv; v++)
+        off[v + 2] += off[v + 1];
+    fl = sd_alloc(m, (total + 1) * sizeof *fl);
+    uf = sd_alloc(m, (total + 1) * sizeof *uf);
+    nsing = sd_alloc(m, (total + 1) * sizeof *nsing);
+    cnt = sd_alloc(m, (total + 1) * sizeof *cnt);
+    sing1 = sd_alloc(m, (total + 1) * sizeof *sing1);
+    sing2 = sd_alloc(m, (total + 1) * sizeof *sing2);
+    pr = sd_alloc(m, (2 * total + 1) * sizeof *pr);
+    if (!fl || !uf || !nsing || !cnt || !sing1 || !sing2 || !pr)
+        goto out;
+    for (uint32_t i = 0; i < t->ntr; i++) {
+        uint32_t f = sd_tr(t, i);
+        for (int j = 0; j < 3; j++)
+            if (YZV(t->fv[f][j]))
+                fl[off[t->fv[f][j] + 1]++] = f;
+    }
+    for (uint32_t v = 0; v < nv; v++) {
+        uint32_t b = off[v], n = off[v + 1] - b, np = 0;
+        if (!n)
+            continue;
+        for (uint32_t s = 0; s < n; s++) {
+            uint32_t f = fl[b + s];
+            uf[b + s] = s;
+            for (int j = 0; j < 3; j++) {
+                uint32_t e = t->fe[f][j];
+                if (t->ev[e][0] == v || t->ev[e][1] == v)
+                    pr[np++] = (yzpair){e, s};
+            }
+        }
+        qsort(pr, np, sizeof *pr, cmp_yzpair);
+        for (uint32_t k = 0; k + 1 < np; k++) /* join across non-singular edges */
+            if (pr[k].edge == pr[k + 1].edge && !yz_singular_edge(t, pr[k].edge)) {
+                uint32_t a = pr[k].slot, c = pr[k + 1].slot;
+                while (uf[b + a] != a)
+                    a = uf[b + a];
+                while (uf[b + c] != c)
+                    c = uf[b + c];
+                if (a != c)
+                    uf[b + a] = c;
+            }
+        for (uint32_t s = 0; s < n; s++) {
+            uint32_t r = s;
+            while (uf[b + r] != r)
+                r = uf[b + r];
+            uf[b + s] = r;
+            nsing[b + s] = cnt[b + s] = 0;
+        }
+        for (uint32_t s = 0; s < n; s++)
+            cnt[b + uf[b + s]]++;
+        for (uint32_t k = 0; k < np; k++) { /* distinct singular edges per petal */
+            if (!yz_singular_edge(t, pr[k].edge))
+                continue;
+            uint32_t r = uf[b + pr[k].slot];
+            bool again = false;
+            for (uint32_t q = k; q-- > 0 && pr[q].edge == pr[k].edge;)
+                again |= uf[b + pr[q].slot] == r;
+            if (again)
+                continue;
+            uint32_t e = pr[k].edge, w = t->ev[e][0] == v ? t->ev[e][1] : t->ev[e][0];
+            if (nsing[b + r] == 0)
+                sing1[b + r] = w;
+            else if (nsing[b + r] == 1)
+                sing2[b + r] = w;
+            nsing[b + r]++;
+        }
+        for (uint32_t k = 0; k < np; k++) {
+            uint32_t e = pr[k].edge, r = uf[b + pr[k].slot];
+            if (yz_singular_edge(t, e) || (k && pr[k - 1].edge == e))
+                continue;
+            uint32_t kk = cnt[b + r], ns = nsing[b + r];
+            double theta;
+            if (ns == 0)
+                continue; /* closed petal: the fixed-disk rule's first stage is Loop's */
+            if (ns == 1)
+                theta = 2 * M_PI / kk;
+            else if (ns == 2 && nm_ov(t->vnm[v]) == OV_YZX) {
+                const double *p = x + 3 * (size_t)v, *a = x + 3 * (size_t)sing1[b + r],
+                             *c = x + 3 * (size_t)sing2[b + r];
+                double u[3], w[3], dot = 0, nu = 0, nw = 0;
+                for (int d = 0; d < 3; d++) {
+                    u[d] = a[d] - p[d];
+                    w[d] = c[d] - p[d];
+                    dot += u[d] * w[d];
+                    nu += u[d] * u[d];
+                    nw += w[d] * w[d];
+                }
+                double cs = nu > 0 && nw > 0 ? dot / sqrt(nu * nw) : -1;
+                theta = acos(cs < -1 ? -1 : cs > 1 ? 1 : cs) / kk;
+            } else {
+                theta = M_PI / kk;
+            }
+            gam[e][t->ev[e][0] == v ? 0 : 1] = 0.5 - cos(theta) / 4;
+        }
+    }
+#undef YZV
+    ok = true;
+out:
+    sd_free(m, off);
+    sd_free(m, fl);
+    sd_free(m, uf);
+    sd_free(m, nsing);
+    sd_free(m, cnt);
+    sd_free(m, sing1);
+    sd_free(m, sing2);
+    sd_free(m, pr);
+    return ok;
+}
+
 sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
 {
     sd_mem *m = &cx->mem;
@@ -790,6 +964,7 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     double *wbuf = NULL;
     uint32_t wcap = 64;
     uint8_t *take = NULL;   /* per edge: which end reads the other through it */
+    double (*gam)[2] = NULL; /* Ying-Zorin petal weights per edge end (yz_gammas) */
     sd_pats pats = {0};
     rings sr = {0}, gr = {0};
     sd_result rc = SD_OK;
@@ -831,6 +1006,11 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     if (any_g2e && !g2_rings(m, t, er, &gr))
         goto nomem;
     J.stride = any_opp && !t->ntet && !no && !any_g2e;
+    if (t->ovmask & OVM_YZ) { /* Ying-Zorin petal rules for the edges at singular vertices */
+        gam = sd_alloc(m, ((size_t)ne + 1) * sizeof *gam);
+        if (!gam || !yz_gammas(m, t, lv->ch[0].data, gam))
+            goto nomem;
+    }
 
     /* sizes and weight patterns of the rows: a vertex row is [self, a x |rho|, b x octahedral
      * opposites], an edge row [end, end, ring...]; the common ones are memoized by rule and
@@ -890,8 +1070,26 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             nexp += k;
         const uint8_t *cls = er[e] == SD_RULE_SOLID && scheme == SD_SOLID_AVERAGED
                              ? sr.cls + sr.off[e] : NULL;
-        bool memo = !cls && k < MEMO;
+        bool petal = gam && er[e] == SD_RULE_LOOP && k == 2 && (gam[e][0] >= 0 || gam[e][1] >= 0);
+        bool memo = !cls && k < MEMO && !petal;
         uint32_t id = memo ? ememo[er[e]][k] : UINT32_MAX;
+        if (petal) { /* 003 Fig. 4f from each singular end, averaged where both are */
+            double w0 = 0, w1 = 0;
+            int sides = 0;
+            for (int i = 0; i < 2; i++)
+                if (gam[e][i] >= 0) {
+                    double g = gam[e][i];
+                    w0 += i == 0 ? 0.75 - g : g;
+                    w1 += i == 0 ? g : 0.75 - g;
+                    sides++;
+                }
+            WBUF(4);
+            wbuf[0] = w0 / sides;
+            wbuf[1] = w1 / sides;
+            wbuf[2] = wbuf[3] = 1.0 / 8.0;
+            if ((id = sd_pats_intern(m, &pats, wbuf, 4)) == UINT32_MAX)
+                goto nomem;
+        }
         if (id == UINT32_MAX) {
             double wend = 0.5, wring = 0, wdiag = 0;
             switch (er[e]) {
@@ -981,6 +1179,7 @@ fail:
 out:
     sd_pats_free(m, &pats);
     sd_free(m, take);
+    sd_free(m, gam);
     sd_free(m, wbuf);
     sd_free(m, cnt_a);
     sd_free(m, cnt_b);

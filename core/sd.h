@@ -163,6 +163,11 @@ typedef enum sd_rule {
     SD_RULE_SOLID,            /* box-spline (or averaged) solid */
     SD_RULE_SOLID_BOUNDARY,   /* boundary of a solid: Loop on the boundary surface */
     SD_RULE_N1, SD_RULE_N2, SD_RULE_G1, SD_RULE_G2,
+    SD_RULE_YZ_CREASE,        /* Ying-Zorin (003): a non-manifold edge, or a simple singular
+                               * vertex: cubic B-spline along the singular edges */
+    SD_RULE_YZ_CORNER,        /* ... a complex singular vertex: fixed (convex corner) */
+    SD_RULE_YZ_PETAL,         /* ... an edge of a petal at a singular vertex: the piecewise smooth
+                               * rule of its petal (003 Fig. 4f) */
     SD_RULE_COUNT
 } sd_rule;
 const char *sd_rule_name(sd_rule r);

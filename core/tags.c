@@ -500,7 +500,7 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
     }
     for (uint32_t f = 0; f < t->nf; f++)
         t->fflag[f] &= (uint8_t)~(FF_SING | FF_N2SEL);
-    t->ovmask = 0;
+    t->ovmask = c->opt.nonmanifold_surface == SD_NMSURF_YING_ZORIN ? OVM_YZ : 0;
 
     /* tags */
     for (size_t i = 0; i < c->ntags; i++)
@@ -554,6 +554,33 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
                 t->ovmask |= OVM_N2T;
             }
         }
+    }
+
+    /* Ying-Zorin (003 Sec. 2) where only triangles meet: a non-manifold edge is singular (a
+     * crease); a non-manifold vertex is simple (one flower, exactly two singular edges: boundary
+     * or non-manifold ones) or complex; without a choice or a tag */
+    if (t->ovmask & OVM_YZ) {
+        nface = sd_calloc(m, (size_t)t->nv + 1, 1); /* singular edges per vertex, saturating */
+        if (!nface)
+            goto nomem;
+        for (uint32_t e = 0; e < t->ne; e++) {
+            if (t->efam[e] != FAM2)
+                continue;
+            if (nm_type(t->enm[e]) == 2 && !nm_ov(t->enm[e]) && !(t->enm[e] & NM_G1) &&
+                !(t->eflag[e] & EF_CREASE))
+                t->enm[e] |= OV_YZS << NM_OV_SHIFT;
+            if (nm_type(t->enm[e]) == 2 || (t->eflag[e] & EF_BND2))
+                for (int k = 0; k < 2; k++)
+                    if (nface[t->ev[e][k]] < 255)
+                        nface[t->ev[e][k]]++;
+        }
+        for (uint32_t v = 0; v < t->nv; v++)
+            if (t->vfam[v] == FAM2 && nm_type(t->vnm[v]) && !nm_ov(t->vnm[v]) &&
+                !(t->vnm[v] & NM_G1) && !(t->vflag[v] & VF_SING))
+                t->vnm[v] |= (uint8_t)((nm_type(t->vnm[v]) != 3 && nface[v] == 2 ? OV_YZS : OV_YZX)
+                                       << NM_OV_SHIFT);
+        sd_free(m, nface);
+        nface = NULL;
     }
 
     /* the default rule G1: non-manifold edges without a choice or a tag become creases, then

@@ -90,7 +90,6 @@ CASES = [
     ("rules-unknown-field", "PUT", "/rules", {"smoothness": 1}, None, 400, "/smoothness"),
     ("override-unknown-field", "PUT", "/rules", {"overrides": [{"simplex": [1], "rule": "G1", "x": 1}]}, None, 400, "/overrides/0/x"),
     ("overrides-not-array", "PUT", "/rules", {"overrides": {}}, None, 400, "/overrides"),
-    ("ying-zorin-501", "PUT", "/rules", {"nonmanifold_surface": "ying-zorin"}, None, 501, "/nonmanifold_surface"),
     ("override-manifold-vertex", "PUT", "/rules", {"overrides": [{"simplex": [1], "rule": "G1"}]}, None, 422, "/overrides/0/simplex"),
     ("fill-one-triangle", "PUT", "/complex", cx(fill=[{"surface": [[0, 1, 2]]}]), None, 422, "/fill/0/surface"),
     ("fill-repeated-triangle", "PUT", "/complex", cx(fill=[{"surface": [[0, 2, 1], [0, 1, 3], [0, 3, 2], [0, 1, 2]]}]), None, 422, "/fill/0/surface/3"),

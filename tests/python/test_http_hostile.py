@@ -277,7 +277,6 @@ CASES = [
     C("fill-too-many-tets", "PUT", "{s}/complex", 413, "/fill/0/max_volume", body=V(fill=[{"surface": [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], "max_volume": 1e-12}])),
     C("fill-17-entries", "PUT", "{s}/complex", 422, "/fill", body=V(fill=[{"surface": [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]}] * 17)),
     C("fill-duplicates-posted-tet", "PUT", "{s}/complex", 422, "/fill/0", body=V(fill=[{"surface": [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]}])),
-    C("not-implemented-ying-zorin", "PUT", "{s}/rules", 501, "/nonmanifold_surface", body={"nonmanifold_surface": "ying-zorin"}),
     C("override-on-manifold-vertex", "PUT", "{s}/rules", 422, "/overrides/0/simplex", body={"overrides": [{"simplex": [0], "rule": "G1"}]}),
     C("override-on-triangle", "PUT", "{s}/rules", 422, "/overrides/0/simplex", body={"overrides": [{"simplex": [0, 1, 2], "rule": "G1"}]}),
     C("override-vertex-out-of-range", "PUT", "{s}/rules", 422, "/overrides/0/simplex/0", body={"overrides": [{"simplex": [99], "rule": "G1"}]}),
