@@ -22,6 +22,10 @@ static const char *const seeds[] = {
     "{\"vertices\":[[0,0,0],[1,0,0],[0,1,0],[1,1,0]],\"simplices\":[[0,1,2],[1,3,2],[0,3]]}",
     "{\"solid_scheme\":\"averaged\",\"surface_weights\":\"loop\",\"nonmanifold_default\":\"G2\","
     "\"overrides\":[]}",
+    "{\"nonmanifold_default\":\"G1\",\"nonmanifold_surface\":\"ying-zorin\",\"overrides\":["
+    "{\"simplex\":[1],\"rule\":\"N1\",\"dimension\":3},{\"simplex\":[1,2],\"rule\":\"N1\","
+    "\"dimension\":2},{\"simplex\":[3],\"rule\":\"G1\"},{\"simplex\":[2],\"rule\":\"G2\"},"
+    "{\"simplex\":[1,3],\"rule\":\"N2\",\"pair\":[[1,3,0],[1,3,2]]}]}",
     "{\"singular\":[]}",
     "{\"singular\":[[0],[0,1],[0,1,2]]}",
     "{\"select\":{\"simplices\":[[0,1,2,3]]},\"depth\":2,\"positions\":\"subdivision\"}",
