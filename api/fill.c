@@ -1003,7 +1003,7 @@ static int append(api_input *in, const surface *s, const helper_out *h, api_prob
     if (!xyz || !size || !idx || !st)
         return api_fail(p, 503, "out-of-memory", "out of memory adding TetGen's tetrahedra");
     memcpy(in->xyz + 3 * (size_t)nv0, pts + 3 * (size_t)s->nloc, 3 * (size_t)added * sizeof *pts);
-    double vol = 0;
+    double vol = 0, largest = 0;
     for (size_t t = 0; t < nt; t++) {
         in->size[ns0 + t] = 4;
         for (int i = 0; i < 4; i++) {
@@ -1013,7 +1013,9 @@ static int append(api_input *in, const surface *s, const helper_out *h, api_prob
         const double *q[4];
         for (int i = 0; i < 4; i++)
             q[i] = pts + 3 * (size_t)tets[4 * t + i];
-        vol += fabs(det3(q[1], q[2], q[3], q[0])) / 6;
+        double v = fabs(det3(q[1], q[2], q[3], q[0])) / 6;
+        vol += v;
+        largest = v > largest ? v : largest;
     }
     for (int a = 0; a < in->nattrs; a++) {
         api_attribute *at = &in->attrs[a];
@@ -1026,7 +1028,8 @@ static int append(api_input *in, const surface *s, const helper_out *h, api_prob
     }
     in->nv = nv0 + added;
     in->ns = ns0 + nt;
-    in->fill[in->nfill++] = (api_fill_stats){s->nt, nt, added, nv0, ns0, vol};
+    in->fill[in->nfill++] =
+        (api_fill_stats){s->nt, nt, added, nv0, ns0, vol, largest, s->max_volume};
     return 0;
 }
 
@@ -1130,12 +1133,19 @@ json_t *api_fill_summary(const api_input *in)
     json_t *a = json_array();
     for (uint32_t k = 0; k < in->nfill; k++) {
         const api_fill_stats *f = &in->fill[k];
-        json_array_append_new(a, json_pack("{s:I, s:I, s:I, s:f, s:I, s:I}", "surface_triangles",
-                                           (json_int_t)f->surface_triangles, "tets",
-                                           (json_int_t)f->tets, "added_vertices",
-                                           (json_int_t)f->added_vertices, "volume", f->volume,
-                                           "first_vertex", (json_int_t)f->first_vertex,
-                                           "first_simplex", (json_int_t)f->first_simplex));
+        json_t *o = json_pack("{s:I, s:I, s:I, s:f, s:f, s:I, s:I}", "surface_triangles",
+                              (json_int_t)f->surface_triangles, "tets", (json_int_t)f->tets,
+                              "added_vertices", (json_int_t)f->added_vertices, "volume", f->volume,
+                              "largest_tet_volume", f->largest,
+                              "first_vertex", (json_int_t)f->first_vertex,
+                              "first_simplex", (json_int_t)f->first_simplex);
+        /* the surface is kept (no points on it), so TetGen may not reach max_volume: say so */
+        if (f->max_volume > 0 && f->largest > f->max_volume * (1 + 1e-9))
+            json_object_set_new(o, "warning", json_string(
+                "max_volume is not met: the surface is kept as posted (no points are added on "
+                "it), and TetGen could not split the largest tetrahedra further; refine the "
+                "surface's triangles to get smaller tetrahedra"));
+        json_array_append_new(a, o);
     }
     return a;
 }

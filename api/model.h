@@ -33,6 +33,8 @@ typedef struct api_attribute {
 typedef struct api_fill_stats {
     uint32_t surface_triangles, tets, added_vertices, first_vertex, first_simplex;
     double volume;            /* of the tetrahedra */
+    double largest;           /* volume of the largest tetrahedron */
+    double max_volume;        /* as asked (0: none) */
 } api_fill_stats;
 
 typedef struct api_input {

@@ -2,6 +2,7 @@
 join the complex, with the enclosed volume kept to 1e-9 and the input surface as their boundary;
 bad surfaces are 422 with pointers; TetGen's crashes, deadlines and memory limits never reach the
 daemon."""
+import numpy as np
 import json
 import math
 import os
@@ -99,6 +100,11 @@ def test_fill_keeps_volume_and_surface(daemon, kind, args, switches):
     want = enclosed_volume(v, f)
     assert abs(tets_volume(verts, simp) - want) <= 1e-9 * want
     assert abs(fs["volume"] - want) <= 1e-9 * want
+    # the largest tetrahedron, computed here from the posted-back complex
+    P = np.array(verts, dtype=float)
+    vols = [abs(np.linalg.det(P[t[1:]] - P[t[0]])) / 6 for t in simp]
+    assert abs(fs["largest_tet_volume"] - max(vols)) <= 1e-12 * max(vols)
+    assert ("warning" in fs) == ("max_volume" in switches and max(vols) > switches["max_volume"] * (1 + 1e-9))
     # boundary: the faces used once are exactly the input triangles; the others twice
     fc = face_counts(simp)
     assert {k for k, n in fc.items() if n == 1} == {tuple(sorted(t)) for t in f}
@@ -426,3 +432,19 @@ def test_fill_matches_openapi(daemon):
     r = s.put_complex(body)
     check("Summary", r.json()["summary"])
     check("ComplexOut", s.req("GET", "/complex").json())
+
+
+def test_unmet_max_volume_is_reported(daemon):
+    """One tetrahedron's surface with max_volume 0.01: TetGen adds no points on the kept
+    surface and cannot split the only tetrahedron (volume 1/6), so the summary says so."""
+    v = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    f = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
+    s = Session(daemon)
+    r = s.put_complex({"vertices": v, "fill": [{"surface": f, "max_volume": 0.01}]})
+    assert r.status_code == 200, r.text
+    (fs,) = r.json()["summary"]["fill"]
+    assert fs["tets"] == 1 and abs(fs["largest_tet_volume"] - 1 / 6) < 1e-15
+    assert "max_volume is not met" in fs["warning"]
+    r = s.put_complex({"vertices": v, "fill": [{"surface": f}]})
+    assert "warning" not in r.json()["summary"]["fill"][0]
+    s.delete()
