@@ -329,6 +329,20 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err);
 /* The rule reported for a vertex / edge whose computed rule is r (N1, N2, G1 where they apply) */
 sd_rule sd_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r);
 sd_rule sd_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
+/* yz.c: the fixed-disk rows (003 Sec. 2) of a level built with the Ying-Zorin rules. gam[e][i]
+ * (rules.c, yz_gammas): 003 Fig. 4f's gamma at end i of edge e, SD_YZ_DISK if end i is the
+ * centre of a closed petal, -1 if it is no singular vertex. Every edge with a fixed-disk end
+ * gets er[e] = SD_RULE_YZ_FIXED_DISK and its row: ends[e] the weights of its two ends, then
+ * col/w[off[e] .. off[e+1]) the rest. */
+#define SD_YZ_DISK (-2.0)
+typedef struct sd_yzrows {
+    uint32_t *off, *col, n;
+    double *w;
+    double (*ends)[2];
+} sd_yzrows;
+bool sd_yz_fixed_disks(sd_mem *m, const sd_topo *t, const double (*gam)[2], uint8_t *er,
+                       sd_yzrows *y);
+void sd_yzrows_free(sd_mem *m, sd_yzrows *y);
 /* analysis.c helpers */
 uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b);
 

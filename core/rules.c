@@ -660,6 +660,7 @@ typedef struct rjob {
     uint32_t *cnt_a, *cnt_b, *cur, *col;
     uint32_t (*opp)[2];
     const rings *sr, *gr;
+    const sd_yzrows *yz;             /* fixed-disk rows (yz.c) */
     uint64_t ebase;
     bool stride;                     /* edge rings stay in opp (S.eopp): no solid or G2 rings */
     bool any_g2e[SD_PAR_MAXT], any_opp[SD_PAR_MAXT];   /* per part */
@@ -679,6 +680,8 @@ static inline uint32_t ring_len(const rjob *J, uint32_t e)
         return J->sr->len[e];
     case SD_RULE_G2:
         return J->gr->len[e];
+    case SD_RULE_YZ_FIXED_DISK:
+        return J->yz->off[e + 1] - J->yz->off[e];
     default:
         return 0;
     }
@@ -691,6 +694,8 @@ static inline const uint32_t *ring_of(const rjob *J, uint32_t e)
         return J->opp[e];
     case SD_RULE_SOLID:
         return J->sr->v + J->sr->off[e];
+    case SD_RULE_YZ_FIXED_DISK:
+        return J->yz->col + J->yz->off[e];
     default:
         return J->gr->v + J->gr->off[e];
     }
@@ -803,9 +808,9 @@ static void erows_task(void *arg)
  * dart petal (one singular edge), pi/k for an open petal of a simple vertex, alpha/k for an
  * open petal of a complex vertex (a convex corner; alpha the angle between the petal's two
  * singular edges, measured on the level's positions when the rules are built), and the Loop
- * rule for a closed petal (the fixed-disk rule's first stage). An edge with a singular vertex at
- * both ends takes the average of the two (003: on the first level). gam[e][i] is g at end i,
- * or -1. */
+ * rule for a closed petal followed by the flatness modification (the fixed-disk rule, yz.c). An
+ * edge with a singular vertex at both ends takes the average of the two (003: on the first
+ * level). gam[e][i] is g at end i, SD_YZ_DISK at the centre of a closed petal, or -1. */
 typedef struct yzpair {
     uint32_t edge, slot; /* slot: index of the face in v's list */
 } yzpair;
@@ -914,8 +919,10 @@ static bool yz_gammas(sd_mem *m, const sd_topo *t, const double *x, double (*gam
                 continue;
             uint32_t kk = cnt[b + r], ns = nsing[b + r];
             double theta;
-            if (ns == 0)
-                continue; /* closed petal: the fixed-disk rule's first stage is Loop's */
+            if (ns == 0) { /* closed petal: the fixed-disk rule (yz.c) */
+                gam[e][t->ev[e][0] == v ? 0 : 1] = SD_YZ_DISK;
+                continue;
+            }
             if (ns == 1)
                 theta = 2 * M_PI / kk;
             else if (ns == 2 && nm_ov(t->vnm[v]) == OV_YZX) {
@@ -967,6 +974,7 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     double (*gam)[2] = NULL; /* Ying-Zorin petal weights per edge end (yz_gammas) */
     sd_pats pats = {0};
     rings sr = {0}, gr = {0};
+    sd_yzrows yzr = {0};
     sd_result rc = SD_OK;
     double loopc[64];
     for (uint32_t k = 1; k < 64; k++)
@@ -986,7 +994,7 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         goto nomem;
     uint8_t *vr = lv->vrule, *er = lv->erule;
     rjob J = {.t = t, .scheme = scheme, .vr = vr, .er = er, .take = take, .cnt_a = cnt_a,
-              .cnt_b = cnt_b, .sr = &sr, .gr = &gr};
+              .cnt_b = cnt_b, .sr = &sr, .gr = &gr, .yz = &yzr};
     sd_par(threads, ne, erule_part, &J);
     bool any_g2e = false, any_opp = false;
     for (uint32_t i = 0; i < sd_par_parts(threads, ne); i++) {
@@ -1008,8 +1016,11 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     J.stride = any_opp && !t->ntet && !no && !any_g2e;
     if (t->ovmask & OVM_YZ) { /* Ying-Zorin petal rules for the edges at singular vertices */
         gam = sd_alloc(m, ((size_t)ne + 1) * sizeof *gam);
-        if (!gam || !yz_gammas(m, t, lv->ch[0].data, gam))
+        if (!gam || !yz_gammas(m, t, lv->ch[0].data, gam) ||
+            !sd_yz_fixed_disks(m, t, (const double(*)[2])gam, er, &yzr))
             goto nomem;
+        if (yzr.n) /* fixed-disk rows are wider than two opposite vertices */
+            J.stride = false;
     }
 
     /* sizes and weight patterns of the rows: a vertex row is [self, a x |rho|, b x octahedral
@@ -1071,9 +1082,16 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         const uint8_t *cls = er[e] == SD_RULE_SOLID && scheme == SD_SOLID_AVERAGED
                              ? sr.cls + sr.off[e] : NULL;
         bool petal = gam && er[e] == SD_RULE_LOOP && k == 2 && (gam[e][0] >= 0 || gam[e][1] >= 0);
-        bool memo = !cls && k < MEMO && !petal;
+        bool memo = !cls && k < MEMO && !petal && er[e] != SD_RULE_YZ_FIXED_DISK;
         uint32_t id = memo ? ememo[er[e]][k] : UINT32_MAX;
-        if (petal) { /* 003 Fig. 4f from each singular end, averaged where both are */
+        if (er[e] == SD_RULE_YZ_FIXED_DISK) { /* yz.c */
+            WBUF(2 + k);
+            wbuf[0] = yzr.ends[e][0];
+            wbuf[1] = yzr.ends[e][1];
+            memcpy(wbuf + 2, yzr.w + yzr.off[e], k * sizeof *wbuf);
+            if ((id = sd_pats_intern(m, &pats, wbuf, 2 + k)) == UINT32_MAX)
+                goto nomem;
+        } else if (petal) { /* 003 Fig. 4f from each singular end, averaged where both are */
             double w0 = 0, w1 = 0;
             int sides = 0;
             for (int i = 0; i < 2; i++)
@@ -1187,5 +1205,6 @@ out:
     sd_free(m, nopp);
     rings_free(m, &sr);
     rings_free(m, &gr);
+    sd_yzrows_free(m, &yzr);
     return rc;
 }

@@ -168,6 +168,8 @@ typedef enum sd_rule {
     SD_RULE_YZ_CORNER,        /* ... a complex singular vertex: fixed (convex corner) */
     SD_RULE_YZ_PETAL,         /* ... an edge of a petal at a singular vertex: the piecewise smooth
                                * rule of its petal (003 Fig. 4f) */
+    SD_RULE_YZ_FIXED_DISK,    /* ... an edge of a closed petal at a non-manifold vertex: 003's
+                               * fixed-disk rule (Loop, then the flatness modification) */
     SD_RULE_COUNT
 } sd_rule;
 const char *sd_rule_name(sd_rule r);

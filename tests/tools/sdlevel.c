@@ -19,7 +19,8 @@ static double now(void)
 
 static void usage(void)
 {
-    fprintf(stderr, "usage: sdlevel [-l L] [-w warren|loop] [-s box|averaged] [--classes] "
+    fprintf(stderr, "usage: sdlevel [-l L] [-w warren|loop] [-s box|averaged] [-n chang-qin|ying-zorin] "
+                    "[--classes] "
                     "[--matrix] [--stats] INPUT\n");
     exit(2);
 }
@@ -43,6 +44,12 @@ int main(int argc, char **argv)
             if (!strcmp(s, "averaged"))
                 opt.solid_scheme = SD_SOLID_AVERAGED;
             else if (strcmp(s, "box"))
+                usage();
+        } else if (!strcmp(argv[i], "-n") && i + 1 < argc) {
+            const char *n = argv[++i];
+            if (!strcmp(n, "ying-zorin"))
+                opt.nonmanifold_surface = SD_NMSURF_YING_ZORIN;
+            else if (strcmp(n, "chang-qin"))
                 usage();
         } else if (!strcmp(argv[i], "--classes"))
             classes = 1;
