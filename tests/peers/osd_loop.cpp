@@ -1,13 +1,17 @@
 // osd_loop — the peer: OpenSubdiv's uniform Loop refinement of a triangle mesh, in double
 // precision, for tests and benchmarks of subdivd.
 //
-//   osd_loop [-l L] [--time N] INPUT
+//   osd_loop [-l L] [--time N] [--origins] [--rules] INPUT
 //
 // INPUT is the text format of docs/TEXT_FORMAT.md, restricted to `v x y z` lines and 3-index
 // `s i j k` lines (triangles); anything else is refused with exit status 2.
 //
 // Default output: level L in the format of docs/TEXT_FORMAT.md (`level`, `vertices`, `v x y z`
-// with %.17g, `triangles`, `t i j k`). With --time N: one line
+// with %.17g, `triangles`, `t i j k`). --origins appends to each `v` line where the point comes
+// from in level L-1, as sdlevel does: ` V i` (the child of vertex i) or ` E a b` (of edge a-b).
+// --rules first prints how OpenSubdiv tagged the input (level 0): `vrule i RULE NM` per vertex
+// (RULE smooth, dart, crease or corner; NM 1 if non-manifold) and `erule a b SHARP NM` per edge
+// (SHARP 1 if infinitely sharp). With --time N: one line
 //   osd_loop level=L faces_in=F faces_out=G seconds_best=S seconds_median=M
 // with the best and median CLOCK_MONOTONIC wall time of N complete runs (topology construction
 // and refinement plus position interpolation of every level; reading the file and freeing the
@@ -47,7 +51,7 @@ using namespace OpenSubdiv;
 
 namespace {
 
-const char *const kUsage = "usage: osd_loop [-l L] [--time N] INPUT";
+const char *const kUsage = "usage: osd_loop [-l L] [--time N] [--origins] [--rules] INPUT";
 const int kMaxLevel = 10;  // Far's limit for uniform refinement
 
 // The primvar type Far::PrimvarRefinerReal<double> interpolates.
@@ -205,6 +209,7 @@ double now() {
 
 int main(int argc, char **argv) {
     int level = 2, reps = 0;
+    bool origins = false, rules = false;
     const char *path = nullptr;
     for (int i = 1; i < argc; i++) {
         if (!std::strcmp(argv[i], "-l")) {
@@ -215,6 +220,10 @@ int main(int argc, char **argv) {
             if (i + 1 >= argc)
                 die(kUsage);
             reps = int_arg(argv[++i], "repetition count", 1, 1000000);
+        } else if (!std::strcmp(argv[i], "--origins")) {
+            origins = true;
+        } else if (!std::strcmp(argv[i], "--rules")) {
+            rules = true;
         } else if (argv[i][0] == '-' && argv[i][1]) {
             die(std::string("unknown option ") + argv[i] + "\n" + kUsage);
         } else if (path) {
@@ -250,10 +259,37 @@ int main(int argc, char **argv) {
     Result r;
     run(mesh, level, r);
     Far::TopologyLevel const &fin = r.refiner->GetLevel(level);
+    if (rules) {
+        Far::TopologyLevel const &l0 = r.refiner->GetLevel(0);
+        for (int v = 0; v < l0.GetNumVertices(); v++) {
+            Sdc::Crease::Rule k = l0.GetVertexRule(v);
+            std::printf("vrule %d %s %d\n", v,
+                        k == Sdc::Crease::RULE_SMOOTH ? "smooth" : k == Sdc::Crease::RULE_DART ? "dart"
+                        : k == Sdc::Crease::RULE_CREASE ? "crease" : k == Sdc::Crease::RULE_CORNER ? "corner"
+                        : "unknown", (int)l0.IsVertexNonManifold(v));
+        }
+        for (int e = 0; e < l0.GetNumEdges(); e++) {
+            Far::ConstIndexArray ev = l0.GetEdgeVertices(e);
+            std::printf("erule %d %d %d %d\n", ev[0], ev[1], (int)l0.IsEdgeInfSharp(e),
+                        (int)l0.IsEdgeNonManifold(e));
+        }
+    }
     std::printf("level %d\nvertices %d\n", level, fin.GetNumVertices());
+    // level L's vertices: the children of level L-1's vertices first, then of its edges (see the
+    // notes above; Loop has no face children)
+    int nvp = level > 0 ? r.refiner->GetLevel(level - 1).GetNumVertices() : fin.GetNumVertices();
     for (int i = 0; i < fin.GetNumVertices(); i++) {
         const double *p = r.verts[r.finest + i].p;
-        std::printf("v %.17g %.17g %.17g\n", p[0], p[1], p[2]);
+        std::printf("v %.17g %.17g %.17g", p[0], p[1], p[2]);
+        if (origins && level == 0) {
+            std::printf(" I");
+        } else if (origins && i < nvp) {
+            std::printf(" V %d", i);
+        } else if (origins) {
+            Far::ConstIndexArray ev = r.refiner->GetLevel(level - 1).GetEdgeVertices(i - nvp);
+            std::printf(" E %d %d", ev[0], ev[1]);
+        }
+        std::printf("\n");
     }
     std::printf("triangles %d\n", fin.GetNumFaces());
     for (int f = 0; f < fin.GetNumFaces(); f++) {
