@@ -133,7 +133,7 @@ bool sd_yz_fixed_disks(sd_mem *m, const sd_topo *t, const double (*gam)[2], uint
         return true;
     bool ok = false;
     uint32_t (*efc)[2] = sd_alloc(m, ((size_t)ne + 1) * sizeof *efc), *ring = NULL;
-    uint32_t cap = t->ntr < 1024 ? t->ntr + 1 : 1024;
+    uint32_t cap = t->ntr + 1;
     acc a = {0};
     y->off = sd_calloc(m, (size_t)ne + 1, sizeof *y->off);
     y->ends = sd_alloc(m, ((size_t)ne + 1) * sizeof *y->ends);
