@@ -286,3 +286,24 @@ def test_dart_petal(daemon):
     P = np.array(V)
     np.testing.assert_allclose(got[("e", 0, 2)], (0.75 - g) * P[0] + g * P[2] + (P[1] + P[3]) / 8,
                                atol=1e-14)
+
+
+def test_closed_petals_fixed_disk(daemon):
+    """Two closed surfaces (a tetrahedron's and a closed square pyramid's) touching at vertex 0:
+    two flowers, each one closed petal, so vertex 0 is a complex singular vertex (a corner) and
+    its edges take the fixed-disk rule; 003 App. A's flatness modification with s = 3/4 gives the
+    tetrahedron's edge 0-1 the point 27/32 p0 + 7/32 p1 - 1/32 (p2 + p3) (docs/DECISIONS.md 27)."""
+    V = [[0, 0, 0], [1, 0, .8], [-.5, .9, 1], [-.4, -.8, 1.1],
+         [1, .1, -1], [.1, 1, -1.1], [-1, 0, -.9], [0, -1, -1]]
+    T = [[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]]
+    T += [[0, 4 + i, 4 + (i + 1) % 4] for i in range(4)] + [[4, 7, 6], [4, 6, 5]]
+    (j1, j2), c = ours(daemon, V, T, 2)
+    assert c["classes"]["vertices"][0]["rule"] == "ying-zorin-corner"
+    rules = {tuple(sorted(e["vertices"])): e["rule"] for e in c["classes"]["edges"]}
+    assert all(rules[(0, v)] == "ying-zorin-fixed-disk" for v in range(1, 8))
+    assert rules[(1, 2)] == "loop"
+    P = np.array(V, dtype=float)
+    np.testing.assert_allclose(keyed(j1)[("e", 0, 1)],
+                               27 / 32 * P[0] + 7 / 32 * P[1] - (P[2] + P[3]) / 32, atol=1e-14)
+    for j in (j1, j2):
+        np.testing.assert_array_equal(j["vertices"][0], V[0])
