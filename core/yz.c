@@ -29,6 +29,7 @@
 #include "internal.h"
 #include <assert.h>
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #define SD_YZ_FLAT_S 0.75
@@ -42,35 +43,54 @@ void sd_yzrows_free(sd_mem *m, sd_yzrows *y)
     memset(y, 0, sizeof *y);
 }
 
-/* A small (column, weight) accumulator for one row. */
+/* A (column, weight) accumulator for one row: entries are appended, then merged by column
+ * (acc_merge), so a row costs O(n log n) whatever its petals' sizes. */
+typedef struct entry {
+    uint32_t col;
+    double w;
+} entry;
 typedef struct acc {
-    uint32_t *col;
-    double *w;
+    entry *e;
     uint32_t n, cap;
 } acc;
 
 static bool acc_add(sd_mem *m, acc *a, uint32_t c, double w)
 {
-    for (uint32_t i = 0; i < a->n; i++)
-        if (a->col[i] == c) {
-            a->w[i] += w;
-            return true;
-        }
     if (a->n == a->cap) {
         uint32_t cap = a->cap ? 2 * a->cap : 16;
-        uint32_t *nc = sd_realloc(m, a->col, cap * sizeof *nc);
-        if (!nc)
+        entry *ne = sd_realloc(m, a->e, cap * sizeof *ne);
+        if (!ne)
             return false;
-        a->col = nc;
-        double *nw = sd_realloc(m, a->w, cap * sizeof *nw);
-        if (!nw)
-            return false;
-        a->w = nw;
+        a->e = ne;
         a->cap = cap;
     }
-    a->col[a->n] = c;
-    a->w[a->n++] = w;
+    a->e[a->n++] = (entry){c, w};
     return true;
+}
+
+static int cmp_entry_col(const void *x, const void *y)
+{
+    uint32_t p = ((const entry *)x)->col, q = ((const entry *)y)->col;
+    return p < q ? -1 : p > q;
+}
+
+/* Merge duplicate columns; the first two entries (the edge's ends) stay first. */
+static void acc_merge(acc *a)
+{
+    qsort(a->e + 2, a->n - 2, sizeof *a->e, cmp_entry_col);
+    uint32_t w = 2;
+    for (uint32_t i = 2; i < a->n; i++) {
+        entry x = a->e[i];
+        if (x.col == a->e[0].col)
+            a->e[0].w += x.w;
+        else if (x.col == a->e[1].col)
+            a->e[1].w += x.w;
+        else if (w > 2 && a->e[w - 1].col == x.col)
+            a->e[w - 1].w += x.w;
+        else
+            a->e[w++] = x;
+    }
+    a->n = w;
 }
 
 static inline uint32_t other_end(const sd_topo *t, uint32_t e, uint32_t v)
@@ -185,6 +205,7 @@ bool sd_yz_fixed_disks(sd_mem *m, const sd_topo *t, const double (*gam)[2], uint
                     }
                 }
             }
+            acc_merge(&a);
             if (!fine) { /* not a disk after all: leave the edge to the first stage */
                 if (pass == 0)
                     y->off[e + 1] = UINT32_MAX;
@@ -195,16 +216,16 @@ bool sd_yz_fixed_disks(sd_mem *m, const sd_topo *t, const double (*gam)[2], uint
                 y->off[e + 1] = a.n - 2;
             } else {
                 uint32_t at = y->off[e];
-                y->ends[e][0] = a.w[0];
-                y->ends[e][1] = a.w[1];
+                y->ends[e][0] = a.e[0].w;
+                y->ends[e][1] = a.e[1].w;
                 for (uint32_t i = 2; i < a.n; i++) {
-                    y->col[at] = a.col[i];
-                    y->w[at++] = a.w[i];
+                    y->col[at] = a.e[i].col;
+                    y->w[at++] = a.e[i].w;
                 }
 #ifndef NDEBUG
                 double sum = 0;
                 for (uint32_t i = 0; i < a.n; i++)
-                    sum += a.w[i];
+                    sum += a.e[i].w;
                 assert(fabs(sum - 1) < 1e-12); /* every row of S sums to 1 */
 #endif
             }
@@ -224,8 +245,7 @@ bool sd_yz_fixed_disks(sd_mem *m, const sd_topo *t, const double (*gam)[2], uint
 out:
     sd_free(m, efc);
     sd_free(m, ring);
-    sd_free(m, a.col);
-    sd_free(m, a.w);
+    sd_free(m, a.e);
     if (!ok)
         sd_yzrows_free(m, y);
     return ok;
