@@ -272,3 +272,15 @@ def test_spawn_progress_bar_and_convert(tmp_path):
                         str(tmp_path / "b.vtu")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "a.vtu").read_bytes() == (tmp_path / "b.vtu").read_bytes()
+
+
+def test_fill_warning_is_shown(tmp_path):
+    """A fill whose max_volume TetGen cannot meet (one tetrahedron's surface, kept as posted):
+    the job succeeds and the daemon's warning reaches stderr."""
+    (tmp_path / "t.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
+                                    "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    env = {k: x for k, x in ENV.items() if k != "SUBDIVD"}
+    r = run("refine", tmp_path / "t.obj", "--fill", "--max-volume", "0.01", "--level", 1,
+            "-o", tmp_path / "t.vtu", "--spawn", "-q", env=env)
+    assert r.returncode == 0, r.stderr
+    assert "fill: max_volume is not met" in r.stderr
