@@ -267,7 +267,7 @@ def run_job(client, job, progress, base=pathlib.Path(".")):
         extra = ", filled: " + ", ".join(f"{f['tets']} tets" for f in fills)
     for out, n in results:
         progress.note(f"{name}: level {level} -> {out} ({_size(n)}{extra})")
-    for f in fills:   # e.g. max_volume not met on a coarse surface (docs/SERVICE.md, fill)
+    for f in fills or []:   # e.g. max_volume not met on a coarse surface (docs/SERVICE.md, fill)
         if f.get("warning"):
             print(f"subdiv: {name}: fill: {f['warning']}", file=sys.stderr)
     return results
