@@ -243,12 +243,17 @@ static int build_model(api_input *in, const api_rules *rules, const api_tags *ta
             strncat(ptr, fields[e.field], sizeof ptr - strlen(ptr) - 1);
         return api_fail_at(p, 422, "invalid-override", ptr, "%s", e.message);
     }
-    if (m && tags && tags->n && api_model_set_tags(m, tags, &e)) {
+    bool petal = false;
+    if (m && tags && (tags->n || tags->npet) && api_model_set_tags(m, tags, &e, &petal)) {
         api_model_unref(m);
         if (e.code == SD_ERR_NOMEM)
             return api_fail(p, 503, "out-of-memory", "out of memory");
         char ptr[96];
-        api_ptr_index(ptr, sizeof ptr, "/singular", (size_t)(e.item < 0 ? 0 : e.item));
+        api_ptr_index(ptr, sizeof ptr, petal ? "/petals" : "/singular",
+                      (size_t)(e.item < 0 ? 0 : e.item));
+        static const char *const fields[] = {"/vertex", "/triangle", "/kind"};
+        if (petal && e.field >= 0 && e.field < 3)
+            strncat(ptr, fields[e.field], sizeof ptr - strlen(ptr) - 1);
         return api_fail_at(p, 422, "invalid-tag", ptr, "%s", e.message);
     }
     if (!m) {
@@ -483,22 +488,86 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
     return rc;
 }
 
+/* "petals": [{"vertex", "triangle", "kind"}] (API.md extension, docs/SERVICE.md): the corner
+ * kind of open petals at complex singular vertices (003 Sec. 2). Shapes and ranges here, the
+ * rest (the triangle holds the vertex, the petal is open, ...) in the core. */
+static int parse_petals(json_t *a, uint32_t nv, api_tags *tags, api_problem *p)
+{
+    static const char *const keys[] = {"vertex", "triangle", "kind", NULL};
+    static const char *const kinds[] = {"convex", "concave", "smooth", NULL};
+    if (!json_is_array(a))
+        return api_fail_at(p, 400, "wrong-type", "/petals",
+                           "must be an array of {\"vertex\", \"triangle\", \"kind\"}");
+    size_t n = json_array_size(a), i;
+    tags->pet = malloc((n + 1) * sizeof *tags->pet);
+    if (!tags->pet)
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    json_t *o;
+    char ptr[96], at[112], at2[128];
+    json_array_foreach(a, i, o) {
+        api_ptr_index(ptr, sizeof ptr, "/petals", i);
+        if (!json_is_object(o))
+            return api_fail_at(p, 400, "wrong-type", ptr,
+                               "a petal tag is an object {\"vertex\", \"triangle\", \"kind\"}");
+        if (api_only_keys(o, ptr, keys, p))
+            return p->status;
+        sd_petal_tag *t = &tags->pet[i];
+        long long x;
+        json_t *v = json_object_get(o, "vertex"), *tr = json_object_get(o, "triangle"),
+               *k = json_object_get(o, "kind");
+        for (int f = 0; f < 3; f++)
+            if (!(f == 0 ? v : f == 1 ? tr : k)) {
+                api_ptr_key(at, sizeof at, ptr, keys[f]);
+                return api_fail_at(p, 400, "missing-field", at, "\"%s\" is required", keys[f]);
+            }
+        api_ptr_key(at, sizeof at, ptr, "vertex");
+        if (api_get_int(v, at, 0, (long long)nv - 1, &x, p))
+            return p->status;
+        t->vertex = (uint32_t)x;
+        api_ptr_key(at, sizeof at, ptr, "triangle");
+        if (!json_is_array(tr) || json_array_size(tr) != 3)
+            return api_fail_at(p, json_is_array(tr) ? 422 : 400,
+                               json_is_array(tr) ? "invalid-tag" : "wrong-type", at,
+                               "a triangle is an array of 3 vertex indices");
+        for (size_t j = 0; j < 3; j++) {
+            api_ptr_index(at2, sizeof at2, at, j);
+            if (api_get_int(json_array_get(tr, j), at2, 0, (long long)nv - 1, &x, p))
+                return p->status;
+            t->triangle[j] = (uint32_t)x;
+            for (size_t q = 0; q < j; q++)
+                if (t->triangle[q] == t->triangle[j])
+                    return api_fail_at(p, 422, "invalid-tag", at2, "vertex %lld appears twice", x);
+        }
+        api_ptr_key(at, sizeof at, ptr, "kind");
+        if ((t->kind = api_get_enum(k, at, kinds, p)) < 0)
+            return p->status;
+        tags->npet++;
+    }
+    return 0;
+}
+
 int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                  api_problem *p)
 {
-    static const char *const keys[] = {"singular", NULL};
+    static const char *const keys[] = {"singular", "petals", NULL};
     *out = NULL;
     if (api_only_keys(body, "", keys, p))
         return p->status;
-    json_t *s = json_object_get(body, "singular");
+    json_t *s = json_object_get(body, "singular"), *pe = json_object_get(body, "petals");
+    if (!s && !pe)
+        return api_fail_at(p, 400, "missing-field", "/singular",
+                           "\"singular\" is required (or \"petals\" alone: no singular simplices)");
+    json_t *none = NULL;
     if (!s)
-        return api_fail_at(p, 400, "missing-field", "/singular", "\"singular\" is required");
+        s = none = json_array();
     if (!json_is_array(s))
         return api_fail_at(p, 400, "wrong-type", "/singular",
                            "must be an array of simplices (1 to 3 vertex indices)");
-    if (json_array_size(s) && !cur->in)
-        return api_fail_at(p, 409, "no-complex", "/singular",
+    if ((json_array_size(s) || (pe && (!json_is_array(pe) || json_array_size(pe)))) && !cur->in) {
+        json_decref(none);
+        return api_fail_at(p, 409, "no-complex", json_array_size(s) ? "/singular" : "/petals",
                            "tags name simplices of the complex; PUT the complex first");
+    }
     size_t n = json_array_size(s);
     api_tags tags = {0};
     tags.size = malloc(n + 1);
@@ -537,10 +606,14 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
         off += k;
         tags.n++;
     }
+    if (!rc && pe)
+        rc = parse_petals(pe, cur->in ? cur->in->nv : 0, &tags, p);
     if (!rc) /* the core checks each tag is a vertex, edge or triangle of the complex */
         rc = build_model(cur->in, &cur->rules, &tags, lim, out, p);
     free(tags.size);
     free(tags.idx);
+    free(tags.pet);
+    json_decref(none);
     return rc;
 }
 
@@ -659,6 +732,15 @@ json_t *api_get_complex(api_model *m, api_problem *p)
             json_array_append_new(a, json_integer(m->tags.idx[off + j]));
         json_array_append_new(tj, a);
     }
+    json_t *pj = json_array();
+    for (uint32_t i = 0; i < m->tags.npet; i++) {
+        static const char *const kinds[] = {"convex", "concave", "smooth"};
+        const sd_petal_tag *q = &m->tags.pet[i];
+        json_array_append_new(pj, json_pack("{s:I, s:[I, I, I], s:s}", "vertex",
+                                            (json_int_t)q->vertex, "triangle",
+                                            (json_int_t)q->triangle[0], (json_int_t)q->triangle[1],
+                                            (json_int_t)q->triangle[2], "kind", kinds[q->kind % 3]));
+    }
     json_t *dj = json_array();
     for (uint32_t s = 0; s < in->ns; s++)
         if (in->size[s] == 4)
@@ -687,10 +769,14 @@ json_t *api_get_complex(api_model *m, api_problem *p)
         }
         json_array_append_new(oj, x);
     }
-    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:{s:o}, s:{s:s, s:o, s:s, s:s, s:s}, s:O}",
+    json_t *tags = json_pack("{s:o}", "singular", tj);
+    if (json_array_size(pj)) /* only when given: {"singular"} as PUT otherwise */
+        json_object_set(tags, "petals", pj);
+    json_decref(pj);
+    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:o, s:{s:s, s:o, s:s, s:s, s:s}, s:O}",
                      "vertices", vs, "simplices", ss, "attributes", at, "diagonals", dj,
                      "classes", "vertices", cv,
-                     "edges", ce, "tags", "singular", tj, "rules", "nonmanifold_default",
+                     "edges", ce, "tags", tags, "rules", "nonmanifold_default",
                      nmd[m->rules.nonmanifold_default & 1], "overrides", oj,
                      "solid_scheme", schemes[m->rules.solid_scheme & 1],
                      "surface_weights", weights[m->rules.surface_weights & 1],
@@ -1543,6 +1629,20 @@ static bool step_carry(const step_map *m, api_tags *tags, sd_override **ov, uint
         }
     }
     (void)nidx;
+    nt.pet = malloc((tags->npet + 1) * sizeof *nt.pet);
+    if (!nt.pet) {
+        free(nt.size);
+        free(nt.idx);
+        free(no);
+        return false;
+    }
+    for (uint32_t i = 0; i < tags->npet; i++) { /* the vertex stays; its triangle's child at it */
+        sd_petal_tag q = tags->pet[i];
+        uint32_t ch[4][3];
+        if (step_tri_children(m, q.triangle, &q.vertex, 1, ch))
+            memcpy(q.triangle, ch[0], sizeof ch[0]);
+        nt.pet[nt.npet++] = q;
+    }
     uint32_t nn = 0;
     for (uint32_t i = 0; i < *nov; i++) {
         const sd_override *o = &(*ov)[i];
@@ -1596,6 +1696,7 @@ static bool step_carry(const step_map *m, api_tags *tags, sd_override **ov, uint
     }
     free(tags->size);
     free(tags->idx);
+    free(tags->pet);
     *tags = nt;
     free(*ov);
     *ov = no;
@@ -1621,7 +1722,8 @@ static api_model *model_with(api_input *in, const api_rules *rules, const api_ta
         memmove(ov + bad, ov + bad + 1, (nov - bad - 1) * sizeof *ov);
         nov--;
     }
-    if (tags->n && api_model_set_tags(m, tags, e)) {
+    bool petal;
+    if ((tags->n || tags->npet) && api_model_set_tags(m, tags, e, &petal)) {
         api_model_unref(m);
         return NULL;
     }
@@ -1711,7 +1813,8 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
         ntag_idx += cur->tags.size[i];
     tags.size = malloc(cur->tags.n + 1);
     tags.idx = malloc((ntag_idx + 1) * sizeof *tags.idx);
-    if (!ov || !tags.size || !tags.idx)
+    tags.pet = malloc((cur->tags.npet + 1) * sizeof *tags.pet);
+    if (!ov || !tags.size || !tags.idx || !tags.pet)
         rc = rc ? rc : api_fail(p, 503, "out-of-memory", "out of memory");
     else {
         if (nov)
@@ -1721,6 +1824,9 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
             memcpy(tags.idx, cur->tags.idx, ntag_idx * sizeof *tags.idx);
         }
         tags.n = cur->tags.n;
+        if (cur->tags.npet)
+            memcpy(tags.pet, cur->tags.pet, cur->tags.npet * sizeof *tags.pet);
+        tags.npet = cur->tags.npet;
     }
     atomic_fetch_add(&in->refs, 1);
     uint8_t *marked = NULL;
@@ -1849,6 +1955,7 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
     free(ov);
     free(tags.size);
     free(tags.idx);
+    free(tags.pet);
     api_input_unref(in);
     return rc;
 }

@@ -100,22 +100,36 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
     return m;
 }
 
-int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err)
+int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, bool *petal)
 {
     size_t nidx = 0;
     for (uint32_t i = 0; i < t->n; i++)
         nidx += t->size[i];
+    *petal = false;
     m->tags.size = malloc(t->n + 1);
     m->tags.idx = malloc((nidx + 1) * sizeof *m->tags.idx);
-    if (!m->tags.size || !m->tags.idx) {
+    m->tags.pet = malloc((t->npet + 1) * sizeof *m->tags.pet);
+    if (!m->tags.size || !m->tags.idx || !m->tags.pet) {
         err->code = SD_ERR_NOMEM;
         snprintf(err->message, sizeof err->message, "out of memory");
         return SD_ERR_NOMEM;
     }
-    memcpy(m->tags.size, t->size, t->n);
-    memcpy(m->tags.idx, t->idx, nidx * sizeof *t->idx);
+    if (t->n) {
+        memcpy(m->tags.size, t->size, t->n);
+        memcpy(m->tags.idx, t->idx, nidx * sizeof *t->idx);
+    }
+    if (t->npet)
+        memcpy(m->tags.pet, t->pet, t->npet * sizeof *t->pet);
     m->tags.n = t->n;
-    return m->c ? sd_complex_set_singular(m->c, t->idx, t->size, t->n, err) : 0;
+    m->tags.npet = t->npet;
+    if (!m->c)
+        return 0;
+    int rc = sd_complex_set_singular(m->c, t->idx, t->size, t->n, err);
+    if (!rc && t->npet) {
+        rc = sd_complex_set_petals(m->c, t->pet, t->npet, err);
+        *petal = rc != 0;
+    }
+    return rc;
 }
 
 int api_model_set_overrides(api_model *m, const sd_override *ov, uint32_t n, sd_error *err)
@@ -145,6 +159,7 @@ void api_model_unref(api_model *m)
         return;
     free(m->tags.size);
     free(m->tags.idx);
+    free(m->tags.pet);
     free(m->rules.overrides);
     json_decref(m->summary);
     for (int l = 0; l <= SD_MAX_LEVEL; l++)

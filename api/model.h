@@ -17,6 +17,7 @@
 #include "limits.h"
 #include <pthread.h>
 #include <stdatomic.h>
+#include <stdbool.h>
 #include <stdint.h>
 
 struct json_t;
@@ -62,11 +63,14 @@ typedef struct api_rules {
     sd_override *overrides;
 } api_rules;
 
-/* Singular tags (PUT /tags): n simplices of 1..3 vertex ids, stored consecutively. */
+/* Tags (PUT /tags): n singular simplices of 1..3 vertex ids, stored consecutively, and npet
+ * petal tags (corner kinds of open petals, 003 Sec. 2). */
 typedef struct api_tags {
     uint32_t n;
     uint8_t *size;
     uint32_t *idx;
+    uint32_t npet;
+    sd_petal_tag *pet;
 } api_tags;
 
 typedef struct api_model {
@@ -100,8 +104,9 @@ int api_model_set_overrides(api_model *m, const sd_override *ov, uint32_t n, sd_
 api_model *api_model_ref(api_model *m);
 void api_model_unref(api_model *m);
 
-/* Apply singular tags to a model being built (copies them). SD_ERR_* + err (item = the tag). */
-int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err);
+/* Apply singular and petal tags to a model being built (copies them). SD_ERR_* + err (item = the
+ * tag); *petal says whether the refused tag is a petal tag (field = SD_PT_FIELD_*). */
+int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, bool *petal);
 
 /* Compute level L (under the model's lock) and record the time; NULL + err on failure. The
  * caller holds m->lock. */

@@ -39,7 +39,7 @@ const char *sd_rule_name(sd_rule r)
     static const char *const names[] = {
         "corner", "curve", "loop", "loop-boundary", "solid", "solid-boundary",
         "N1", "N2", "G1", "G2", "ying-zorin-crease", "ying-zorin-corner", "ying-zorin-petal",
-        "ying-zorin-fixed-disk",
+        "ying-zorin-fixed-disk", "ying-zorin-dart", "ying-zorin-concave",
     };
     return (unsigned)r < SD_RULE_COUNT ? names[r] : "unknown";
 }

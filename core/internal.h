@@ -279,6 +279,11 @@ struct sd_level {
     sd_channel ch[SD_MAX_CHANNELS];
 };
 
+typedef struct sd_petal_at {
+    uint32_t v, f;
+    uint8_t kind; /* SD_PETAL_* */
+} sd_petal_at;
+
 struct sd_complex {
     sd_mem mem;
     sd_options opt;
@@ -293,6 +298,10 @@ struct sd_complex {
     uint8_t *tag_k;            /* 1, 2, 3 */
     size_t nov;
     sd_override *ov;
+    /* petal tags (sd_complex_set_petals), one entry per level-0 triangle of each tagged petal,
+     * sorted by (v, f); a face f of level L reads the entry of f >> 2 L */
+    size_t npet;
+    sd_petal_at *pet;
     sd_level *lv[SD_MAX_LEVEL + 1];
 };
 
@@ -329,19 +338,30 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err);
 /* The rule reported for a vertex / edge whose computed rule is r (N1, N2, G1 where they apply) */
 sd_rule sd_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r);
 sd_rule sd_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
-/* yz.c: the fixed-disk rows (003 Sec. 2) of a level built with the Ying-Zorin rules. gam[e][i]
- * (rules.c, yz_gammas): 003 Fig. 4f's gamma at end i of edge e, SD_YZ_DISK if end i is the
- * centre of a closed petal, -1 if it is no singular vertex. Every edge with a fixed-disk end
- * gets er[e] = SD_RULE_YZ_FIXED_DISK and its row: ends[e] the weights of its two ends, then
- * col/w[off[e] .. off[e+1]) the rest. */
-#define SD_YZ_DISK (-2.0)
+/* yz.c: the rows with 003's flatness modification (fixed disk, dart, concave corner) of a level
+ * built with the Ying-Zorin rules. end[e][i] (rules.c, yz_gammas) says how end i of edge e reads
+ * the edge: SD_YZ_NONE (not a singular vertex), SD_YZ_FIRST (003 Fig. 4f with gamma g, first
+ * stage only), SD_YZ_DISK (the centre of a closed petal), SD_YZ_DART (the fixed centre of a dart
+ * petal) or SD_YZ_CONCAVE (the fixed centre of a concave corner petal, theta its angle step).
+ * Every edge with a flattened end gets er[e] = SD_RULE_YZ_FIXED_DISK, _DART or _CONCAVE and its
+ * row: ends[e] the weights of its two ends, then col/w[off[e] .. off[e+1]) the rest. */
+#define SD_YZ_MIN_SIN 0.01 /* a concave corner within ~0.6 degrees of straight is not flattened */
+enum { SD_YZ_NONE, SD_YZ_FIRST, SD_YZ_DISK, SD_YZ_DART, SD_YZ_CONCAVE };
+typedef struct sd_yzend {
+    double g, theta;
+    uint8_t kind;
+} sd_yzend;
+static inline bool sd_yz_flat(uint8_t kind)
+{
+    return kind >= SD_YZ_DISK;
+}
 typedef struct sd_yzrows {
     uint32_t *off, *col, n;
     double *w;
     double (*ends)[2];
 } sd_yzrows;
-bool sd_yz_fixed_disks(sd_mem *m, const sd_topo *t, const double (*gam)[2], uint8_t *er,
-                       sd_yzrows *y);
+bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint8_t *er,
+                     sd_yzrows *y);
 void sd_yzrows_free(sd_mem *m, sd_yzrows *y);
 /* analysis.c helpers */
 uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b);

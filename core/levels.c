@@ -99,6 +99,7 @@ void sd_complex_free(sd_complex *c)
     sd_free(&c->mem, c->tag_at);
     sd_free(&c->mem, c->tag_k);
     sd_free(&c->mem, c->ov);
+    sd_free(&c->mem, c->pet);
     sd_free(&c->mem, c->in_tet);
     sd_free(&c->mem, c->tet_swapped);
     sd_mem m = c->mem;

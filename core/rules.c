@@ -681,6 +681,8 @@ static inline uint32_t ring_len(const rjob *J, uint32_t e)
     case SD_RULE_G2:
         return J->gr->len[e];
     case SD_RULE_YZ_FIXED_DISK:
+    case SD_RULE_YZ_DART:
+    case SD_RULE_YZ_CONCAVE:
         return J->yz->off[e + 1] - J->yz->off[e];
     default:
         return 0;
@@ -695,6 +697,8 @@ static inline const uint32_t *ring_of(const rjob *J, uint32_t e)
     case SD_RULE_SOLID:
         return J->sr->v + J->sr->off[e];
     case SD_RULE_YZ_FIXED_DISK:
+    case SD_RULE_YZ_DART:
+    case SD_RULE_YZ_CONCAVE:
         return J->yz->col + J->yz->off[e];
     default:
         return J->gr->v + J->gr->off[e];
@@ -805,12 +809,13 @@ static void erows_task(void *arg)
  * fall into petals, joined across non-singular edges (between exactly two triangles, no tag).
  * A non-singular edge v-w of a petal with k triangles takes the piecewise smooth rule (003
  * Fig. 4f): (3/4 - g) v + g w + 1/8 (c + d), g = 1/2 - cos(theta)/4, with theta = 2 pi/k for a
- * dart petal (one singular edge), pi/k for an open petal of a simple vertex, alpha/k for an
- * open petal of a complex vertex (a convex corner; alpha the angle between the petal's two
- * singular edges, measured on the level's positions when the rules are built), and the Loop
- * rule for a closed petal followed by the flatness modification (the fixed-disk rule, yz.c). An
- * edge with a singular vertex at both ends takes the average of the two (003: on the first
- * level). gam[e][i] is g at end i, SD_YZ_DISK at the centre of a closed petal, or -1. */
+ * dart petal (one singular edge), pi/k for an open petal of a simple vertex, and for an open
+ * petal of a complex vertex by its tag (sd_complex_set_petals): alpha/k for a convex corner (the
+ * default), (2 pi - alpha)/k for a concave one, pi/k for a smooth one (alpha the angle between
+ * the petal's two singular edges, measured on the level's positions when the rules are built).
+ * A closed petal takes the Loop rule, and closed, dart and concave petals at a complex vertex
+ * (fixed) then the flatness modification (yz.c). An edge with a singular vertex at both ends
+ * takes the average of the two (003: on the first level). */
 typedef struct yzpair {
     uint32_t edge, slot; /* slot: index of the face in v's list */
 } yzpair;
@@ -826,17 +831,36 @@ static inline bool yz_singular_edge(const sd_topo *t, uint32_t e)
     return t->efam[e] != FAM2 || (t->enm[e] & NM_C2B) || (t->eflag[e] & (EF_CREASE | EF_SSURF));
 }
 
-static bool yz_gammas(sd_mem *m, const sd_topo *t, const double *x, double (*gam)[2])
+/* The tag of the petal of v holding face f of level `level` (its level-0 ancestor is f >> 2
+ * per level: a face's children are 4 f + j). */
+static int petal_tag(const sd_complex *cx, int level, uint32_t v, uint32_t f)
+{
+    uint32_t f0 = f >> (2 * level);
+    size_t lo = 0, hi = cx->npet;
+    while (lo < hi) {
+        size_t mid = (lo + hi) / 2;
+        const sd_petal_at *p = &cx->pet[mid];
+        if (p->v < v || (p->v == v && p->f < f0))
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo < cx->npet && cx->pet[lo].v == v && cx->pet[lo].f == f0 ? cx->pet[lo].kind
+                                                                       : SD_PETAL_CONVEX;
+}
+
+static bool yz_gammas(sd_mem *m, const sd_complex *cx, int level, const sd_topo *t,
+                      const double *x, sd_yzend (*gam)[2])
 {
     const uint32_t nv = t->nv;
     uint32_t *off = sd_calloc(m, (size_t)nv + 2, sizeof *off), *fl = NULL, *uf = NULL;
     uint32_t *nsing = NULL, *cnt = NULL, *sing1 = NULL, *sing2 = NULL;
+    uint8_t *pk = NULL;
     yzpair *pr = NULL;
     bool ok = false;
     if (!off)
         return false;
-    for (uint32_t e = 0; e < t->ne; e++)
-        gam[e][0] = gam[e][1] = -1;
+    memset(gam, 0, (size_t)t->ne * sizeof *gam); /* SD_YZ_NONE */
 #define YZV(v) (nm_ov(t->vnm[v]) >= OV_YZS && !(t->vflag[v] & (VF_SING | VF_S_ANY)))
     size_t total = 0;
     for (uint32_t i = 0; i < t->ntr; i++) {
@@ -855,8 +879,9 @@ static bool yz_gammas(sd_mem *m, const sd_topo *t, const double *x, double (*gam
     cnt = sd_alloc(m, (total + 1) * sizeof *cnt);
     sing1 = sd_alloc(m, (total + 1) * sizeof *sing1);
     sing2 = sd_alloc(m, (total + 1) * sizeof *sing2);
+    pk = sd_alloc(m, total + 1);
     pr = sd_alloc(m, (2 * total + 1) * sizeof *pr);
-    if (!fl || !uf || !nsing || !cnt || !sing1 || !sing2 || !pr)
+    if (!fl || !uf || !nsing || !cnt || !sing1 || !sing2 || !pk || !pr)
         goto out;
     for (uint32_t i = 0; i < t->ntr; i++) {
         uint32_t f = sd_tr(t, i);
@@ -894,9 +919,16 @@ static bool yz_gammas(sd_mem *m, const sd_topo *t, const double *x, double (*gam
                 r = uf[b + r];
             uf[b + s] = r;
             nsing[b + s] = cnt[b + s] = 0;
+            pk[b + s] = SD_PETAL_CONVEX;
         }
-        for (uint32_t s = 0; s < n; s++)
+        for (uint32_t s = 0; s < n; s++) {
             cnt[b + uf[b + s]]++;
+            if (cx->npet) {
+                int kind = petal_tag(cx, level, v, fl[b + s]);
+                if (kind != SD_PETAL_CONVEX)
+                    pk[b + uf[b + s]] = (uint8_t)kind;
+            }
+        }
         for (uint32_t k = 0; k < np; k++) { /* distinct singular edges per petal */
             if (!yz_singular_edge(t, pr[k].edge))
                 continue;
@@ -913,19 +945,23 @@ static bool yz_gammas(sd_mem *m, const sd_topo *t, const double *x, double (*gam
                 sing2[b + r] = w;
             nsing[b + r]++;
         }
+        const bool fixed = nm_ov(t->vnm[v]) == OV_YZX; /* a complex vertex: a corner */
         for (uint32_t k = 0; k < np; k++) {
             uint32_t e = pr[k].edge, r = uf[b + pr[k].slot];
             if (yz_singular_edge(t, e) || (k && pr[k - 1].edge == e))
                 continue;
             uint32_t kk = cnt[b + r], ns = nsing[b + r];
+            sd_yzend *end = &gam[e][t->ev[e][0] == v ? 0 : 1];
             double theta;
+            end->kind = SD_YZ_FIRST;
             if (ns == 0) { /* closed petal: the fixed-disk rule (yz.c) */
-                gam[e][t->ev[e][0] == v ? 0 : 1] = SD_YZ_DISK;
-                continue;
-            }
-            if (ns == 1)
+                end->kind = SD_YZ_DISK;
+                theta = M_PI / 3;
+            } else if (ns == 1) { /* dart: flattened where the centre is fixed (yz.c) */
                 theta = 2 * M_PI / kk;
-            else if (ns == 2 && nm_ov(t->vnm[v]) == OV_YZX) {
+                if (fixed)
+                    end->kind = SD_YZ_DART;
+            } else if (ns == 2 && fixed && pk[b + r] != SD_PETAL_SMOOTH) {
                 const double *p = x + 3 * (size_t)v, *a = x + 3 * (size_t)sing1[b + r],
                              *c = x + 3 * (size_t)sing2[b + r];
                 double u[3], w[3], dot = 0, nu = 0, nw = 0;
@@ -937,11 +973,21 @@ static bool yz_gammas(sd_mem *m, const sd_topo *t, const double *x, double (*gam
                     nw += w[d] * w[d];
                 }
                 double cs = nu > 0 && nw > 0 ? dot / sqrt(nu * nw) : -1;
-                theta = acos(cs < -1 ? -1 : cs > 1 ? 1 : cs) / kk;
-            } else {
+                double alpha = acos(cs < -1 ? -1 : cs > 1 ? 1 : cs);
+                if (pk[b + r] == SD_PETAL_CONCAVE) {
+                    theta = (2 * M_PI - alpha) / kk;
+                    /* the flatness modification divides by sin(k theta) = -sin(alpha): with the
+                     * singular edges (nearly) in line it has no tangent plane to flatten to */
+                    if (sin(alpha) > SD_YZ_MIN_SIN && kk >= 2)
+                        end->kind = SD_YZ_CONCAVE;
+                } else {
+                    theta = alpha / kk;
+                }
+            } else { /* an open petal of a simple vertex, or a smooth one */
                 theta = M_PI / kk;
             }
-            gam[e][t->ev[e][0] == v ? 0 : 1] = 0.5 - cos(theta) / 4;
+            end->theta = theta;
+            end->g = 0.5 - cos(theta) / 4;
         }
     }
 #undef YZV
@@ -954,6 +1000,7 @@ out:
     sd_free(m, cnt);
     sd_free(m, sing1);
     sd_free(m, sing2);
+    sd_free(m, pk);
     sd_free(m, pr);
     return ok;
 }
@@ -971,7 +1018,7 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     double *wbuf = NULL;
     uint32_t wcap = 64;
     uint8_t *take = NULL;   /* per edge: which end reads the other through it */
-    double (*gam)[2] = NULL; /* Ying-Zorin petal weights per edge end (yz_gammas) */
+    sd_yzend (*gam)[2] = NULL; /* Ying-Zorin petal rules per edge end (yz_gammas) */
     sd_pats pats = {0};
     rings sr = {0}, gr = {0};
     sd_yzrows yzr = {0};
@@ -1016,10 +1063,10 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     J.stride = any_opp && !t->ntet && !no && !any_g2e;
     if (t->ovmask & OVM_YZ) { /* Ying-Zorin petal rules for the edges at singular vertices */
         gam = sd_alloc(m, ((size_t)ne + 1) * sizeof *gam);
-        if (!gam || !yz_gammas(m, t, lv->ch[0].data, gam) ||
-            !sd_yz_fixed_disks(m, t, (const double(*)[2])gam, er, &yzr))
+        if (!gam || !yz_gammas(m, cx, lv->index, t, lv->ch[0].data, gam) ||
+            !sd_yz_flat_rows(m, t, (const sd_yzend(*)[2])gam, er, &yzr))
             goto nomem;
-        if (yzr.n) /* fixed-disk rows are wider than two opposite vertices */
+        if (yzr.n) /* flattened rows are wider than two opposite vertices */
             J.stride = false;
     }
 
@@ -1081,10 +1128,13 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             nexp += k;
         const uint8_t *cls = er[e] == SD_RULE_SOLID && scheme == SD_SOLID_AVERAGED
                              ? sr.cls + sr.off[e] : NULL;
-        bool petal = gam && er[e] == SD_RULE_LOOP && k == 2 && (gam[e][0] >= 0 || gam[e][1] >= 0);
-        bool memo = !cls && k < MEMO && !petal && er[e] != SD_RULE_YZ_FIXED_DISK;
+        bool petal = gam && er[e] == SD_RULE_LOOP && k == 2 &&
+                     (gam[e][0].kind == SD_YZ_FIRST || gam[e][1].kind == SD_YZ_FIRST);
+        bool flat = er[e] == SD_RULE_YZ_FIXED_DISK || er[e] == SD_RULE_YZ_DART ||
+                    er[e] == SD_RULE_YZ_CONCAVE;
+        bool memo = !cls && k < MEMO && !petal && !flat;
         uint32_t id = memo ? ememo[er[e]][k] : UINT32_MAX;
-        if (er[e] == SD_RULE_YZ_FIXED_DISK) { /* yz.c */
+        if (flat) { /* yz.c */
             WBUF(2 + k);
             wbuf[0] = yzr.ends[e][0];
             wbuf[1] = yzr.ends[e][1];
@@ -1095,8 +1145,8 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             double w0 = 0, w1 = 0;
             int sides = 0;
             for (int i = 0; i < 2; i++)
-                if (gam[e][i] >= 0) {
-                    double g = gam[e][i];
+                if (gam[e][i].kind == SD_YZ_FIRST) {
+                    double g = gam[e][i].g;
                     w0 += i == 0 ? 0.75 - g : g;
                     w1 += i == 0 ? g : 0.75 - g;
                     sides++;

@@ -170,6 +170,10 @@ typedef enum sd_rule {
                                * rule of its petal (003 Fig. 4f) */
     SD_RULE_YZ_FIXED_DISK,    /* ... an edge of a closed petal at a non-manifold vertex: 003's
                                * fixed-disk rule (Loop, then the flatness modification) */
+    SD_RULE_YZ_DART,          /* ... an edge of a dart petal at a complex singular vertex: the
+                               * dart rule, then the flatness modification */
+    SD_RULE_YZ_CONCAVE,       /* ... an edge of a petal tagged a concave corner: its rule, then
+                               * the flatness modification */
     SD_RULE_COUNT
 } sd_rule;
 const char *sd_rule_name(sd_rule r);
@@ -223,6 +227,24 @@ typedef struct sd_override {
 enum { SD_OV_FIELD_SIMPLEX = 0, SD_OV_FIELD_RULE, SD_OV_FIELD_DIMENSION, SD_OV_FIELD_PAIR,
        SD_OV_FIELD_PAIR0, SD_OV_FIELD_PAIR1 };
 sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t n, sd_error *err);
+
+/* Petal tags (003 Sec. 2): which corner an open petal of a complex singular vertex makes under
+ * nonmanifold_surface = ying-zorin. SD_PETAL_CONVEX (the default: theta = alpha/k), CONCAVE
+ * (theta = (2 pi - alpha)/k, then the flatness modification) or SMOOTH (theta = pi/k; petals
+ * sharing both singular edges must all be smooth). A petal is named by its vertex and one of its
+ * triangles. The vertex must be non-manifold where only triangles meet, not simple (one flower,
+ * exactly two boundary or non-manifold edges) and not tagged singular; the petal open (two
+ * singular edges: boundary, non-manifold or tagged); one tag per petal. Errors: SD_ERR_INDEX /
+ * SD_ERR_ARG with item = the tag and field = SD_PT_FIELD_*. Call after the singular tags; the
+ * level-0 triangles of each petal keep the tag, and their children at every level. Replaces
+ * earlier petal tags; drops computed levels >= 1. */
+enum { SD_PETAL_CONVEX, SD_PETAL_CONCAVE, SD_PETAL_SMOOTH };
+typedef struct sd_petal_tag {
+    uint32_t vertex, triangle[3];
+    int kind;
+} sd_petal_tag;
+enum { SD_PT_FIELD_VERTEX = 0, SD_PT_FIELD_TRIANGLE, SD_PT_FIELD_KIND };
+sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *p, size_t n, sd_error *err);
 
 /* Whether vertex i / edge e of a level belongs to the singular complex. */
 int sd_level_vertex_singular(const sd_level *lv, uint32_t i);

@@ -19,6 +19,7 @@
  * bits into rules. Everything is recomputed from the stored tags and overrides on each change.
  */
 #include "internal.h"
+#include <stdlib.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -471,6 +472,210 @@ out:
     sd_free(m, ti.f);
     sd_free(m, ti.stack);
     sd_free(m, ti.mark);
+    return rc;
+}
+
+/* ---- petal tags (003 Sec. 2: convex, concave or smooth corner) ---------------------------- */
+
+/* An edge Ying-Zorin's rules treat as singular (as rules.c, yz_singular_edge): a boundary or
+ * non-manifold edge, a crease or an edge inside an embedded surface. */
+static bool yz_singular(const sd_topo *t, uint32_t e)
+{
+    return t->efam[e] != FAM2 || (t->enm[e] & NM_C2B) || (t->eflag[e] & (EF_CREASE | EF_SSURF));
+}
+
+/* The petal of v holding maximal triangle f0: its triangles (out, returns their number) and its
+ * distinct singular edges at v (sing[0..*ns), at most 2 kept; *ns counts them all). */
+static uint32_t petal_faces(sd_topo *t, const vinc *x, uint32_t v, uint32_t f0, uint32_t *out,
+                            uint32_t sing[2], uint32_t *ns)
+{
+    static const uint8_t SEEN = 128; /* a scratch bit of fflag, cleared before returning */
+    uint32_t top = 0, n = 0;
+    *ns = 0;
+    out[top++] = f0;
+    t->fflag[f0] |= SEEN;
+    while (n < top) {
+        uint32_t f = out[n++];
+        for (int j = 0; j < 3; j++) {
+            uint32_t e = t->fe[f][j];
+            if (!edge_has(t, e, v))
+                continue;
+            if (yz_singular(t, e)) {
+                bool again = false;
+                for (uint32_t q = 0; q < *ns && q < 2; q++)
+                    again |= sing[q] == e;
+                if (!again) {
+                    if (*ns < 2)
+                        sing[*ns] = e;
+                    ++*ns;
+                }
+                continue;
+            }
+            for (uint32_t k = x->efoff[e]; k < x->efoff[e + 1]; k++) {
+                uint32_t g = x->ef[k];
+                if (!(t->fflag[g] & FF_MAX) || (t->fflag[g] & SEEN))
+                    continue;
+                t->fflag[g] |= SEEN;
+                out[top++] = g;
+            }
+        }
+    }
+    for (uint32_t k = x->foff[v]; k < x->foff[v + 1]; k++)
+        t->fflag[x->f[k]] &= (uint8_t)~SEEN;
+    return n;
+}
+
+static int cmp_petal_at(const void *a, const void *b)
+{
+    const sd_petal_at *p = a, *q = b;
+    return p->v != q->v ? (p->v > q->v) - (p->v < q->v) : (p->f > q->f) - (p->f < q->f);
+}
+
+sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n, sd_error *err)
+{
+    sd_topo *t = &c->lv[0]->t;
+    sd_mem *m = &c->mem;
+    sd_result rc = SD_OK;
+    vinc x = {0};
+    uint32_t *faces = NULL, *others = NULL;
+    sd_petal_at *at = NULL;
+    size_t nat = 0, cap = 0;
+    if (n && (!vinc_build(m, t, &x) || !(faces = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *faces)) ||
+              !(others = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *others))))
+        goto nomem;
+    for (size_t i = 0; i < n; i++) {
+        const sd_petal_tag *p = &pt[i];
+        uint32_t v = p->vertex;
+        if (v >= t->nv) {
+            rc = sd_fail(err, SD_ERR_INDEX, (long)i, SD_PT_FIELD_VERTEX,
+                         "petal tag %zu: vertex %u out of range", i, v);
+            goto out;
+        }
+        for (int j = 0; j < 3; j++)
+            if (p->triangle[j] >= t->nv) {
+                rc = sd_fail(err, SD_ERR_INDEX, (long)i, SD_PT_FIELD_TRIANGLE,
+                             "petal tag %zu: vertex %u out of range", i, p->triangle[j]);
+                goto out;
+            }
+        if (p->kind < SD_PETAL_CONVEX || p->kind > SD_PETAL_SMOOTH) {
+            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_KIND,
+                         "petal tag %zu: the kind is convex, concave or smooth", i);
+            goto out;
+        }
+        uint32_t f = find_face(t, &x, p->triangle);
+        if (f == UINT32_MAX || !(t->fflag[f] & FF_MAX)) {
+            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
+                         "petal tag %zu: [%u, %u, %u] is not a surface triangle of the complex "
+                         "(a maximal triangle, not a face of a tetrahedron)", i, p->triangle[0],
+                         p->triangle[1], p->triangle[2]);
+            goto out;
+        }
+        if (!face_has(t, f, v)) {
+            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
+                         "petal tag %zu: the triangle does not hold vertex %u", i, v);
+            goto out;
+        }
+        /* a complex singular vertex of triangles only (003 Sec. 2): non-manifold, and not simple
+         * (one flower with exactly two singular edges: boundary or non-manifold ones) */
+        uint32_t nsing = 0;
+        for (uint32_t k = x.eoff[v]; k < x.eoff[v + 1]; k++) {
+            uint32_t e = x.e[k];
+            nsing += t->efam[e] == FAM2 && (nm_type(t->enm[e]) == 2 || (t->eflag[e] & EF_BND2));
+        }
+        if (t->vfam[v] != FAM2 || !nm_type(t->vnm[v]) ||
+            (nm_type(t->vnm[v]) != 3 && nsing == 2)) {
+            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_VERTEX,
+                         "petal tag %zu: vertex %u is not a complex singular vertex of a "
+                         "triangle mesh (a non-manifold vertex where only triangles meet, not "
+                         "one flower with exactly two singular edges): corner kinds do not "
+                         "apply there", i, v);
+            goto out;
+        }
+        if (t->vflag[v] & VF_SING) {
+            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_VERTEX,
+                         "petal tag %zu: vertex %u is tagged singular (fixed with plain edge "
+                         "rules), so its petals have no corner rule", i, v);
+            goto out;
+        }
+        uint32_t sing[2], ns, nf = petal_faces(t, &x, v, f, faces, sing, &ns);
+        if (ns != 2) {
+            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
+                         "petal tag %zu: the petal of vertex %u holding this triangle is %s (%u "
+                         "singular edges); corner kinds apply to open petals, bounded by two", i,
+                         v, ns == 0 ? "closed" : ns == 1 ? "a dart" : "not a fan", ns);
+            goto out;
+        }
+        for (size_t q = 0; q < nat; q++)
+            if (at[q].v == v)
+                for (uint32_t k = 0; k < nf; k++)
+                    if (at[q].f == faces[k]) {
+                        rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
+                                     "petal tag %zu: another tag already names this petal of "
+                                     "vertex %u", i, v);
+                        goto out;
+                    }
+        if (nat + nf > cap) {
+            size_t nc = cap ? 2 * cap : 64;
+            while (nc < nat + nf)
+                nc *= 2;
+            sd_petal_at *na = sd_realloc(m, at, nc * sizeof *na);
+            if (!na)
+                goto nomem;
+            at = na;
+            cap = nc;
+        }
+        for (uint32_t k = 0; k < nf; k++)
+            at[nat++] = (sd_petal_at){v, faces[k], (uint8_t)p->kind};
+        /* 003: petals sharing both singular edges are both corners or both smooth */
+        if (p->kind == SD_PETAL_SMOOTH) {
+            for (uint32_t k = x.foff[v]; k < x.foff[v + 1]; k++) {
+                uint32_t g = x.f[k], s2[2], ns2;
+                if (!(t->fflag[g] & FF_MAX))
+                    continue;
+                petal_faces(t, &x, v, g, others, s2, &ns2);
+                if (ns2 != 2 || !((s2[0] == sing[0] && s2[1] == sing[1]) ||
+                                  (s2[0] == sing[1] && s2[1] == sing[0])))
+                    continue;
+                bool smooth = false, mine = false;
+                for (uint32_t q = 0; q < nf; q++)
+                    mine |= faces[q] == g;
+                if (mine)
+                    continue;
+                for (size_t j = 0; j < n && !smooth; j++)
+                    if (pt[j].vertex == v && pt[j].kind == SD_PETAL_SMOOTH) {
+                        uint32_t h = find_face(t, &x, pt[j].triangle);
+                        if (h == UINT32_MAX)
+                            continue;
+                        uint32_t s3[2], ns3, n3 = petal_faces(t, &x, v, h, others, s3, &ns3);
+                        for (uint32_t q = 0; q < n3 && !smooth; q++)
+                            smooth |= others[q] == g;
+                    }
+                if (!smooth) {
+                    const uint32_t *gv = t->fv[g];
+                    rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_KIND,
+                                 "petal tag %zu: a smooth petal needs every petal of vertex %u "
+                                 "between the same two singular edges smooth too (003 Sec. 2), "
+                                 "and the one holding [%u, %u, %u] is not tagged smooth", i, v,
+                                 gv[0], gv[1], gv[2]);
+                    goto out;
+                }
+            }
+        }
+    }
+    qsort(at, nat, sizeof *at, cmp_petal_at);
+    sd_free(m, c->pet);
+    c->pet = at;
+    c->npet = nat;
+    at = NULL;
+    sd_drop_rules(c, c->lv[0]); /* level 0's rules change; every finer level follows */
+    goto out;
+nomem:
+    rc = sd_fail_nomem(err, m);
+out:
+    sd_free(m, at);
+    sd_free(m, faces);
+    sd_free(m, others);
+    vinc_free(m, &x);
     return rc;
 }
 

@@ -1,29 +1,47 @@
-/* yz.c — Ying-Zorin's fixed-disk rule (003 Sec. 2 and Appendix A): the edges of a closed petal at
- * a non-manifold vertex.
+/* yz.c — Ying-Zorin's flatness modification (003 Sec. 2 and Appendix A): the edges of closed
+ * petals (the fixed-disk rule), dart petals and concave corner petals at a fixed centre.
  *
- * A closed petal (no singular edge) at a complex singular vertex v is a disk of k triangles
- * around v; v itself is a corner, fixed. Its edge points take two stages (003 Sec. 2):
- *   1. Loop's edge rule inside the petal (theta = pi/3 in Fig. 4f):
- *        E_j = 3/8 v + 3/8 p_j + 1/8 (p_{j-1} + p_{j+1}),   p_0 .. p_{k-1} the petal's ring in order;
- *   2. the flatness modification p <- (1 - s) p + s (a_0 x^0 + a_1 x^1 + a_2 x^2), with the
- *      fixed-disk eigenvectors of Appendix A: a_0 = v (l^0 = the centre), x^1_i = sin(2 pi i/k),
- *      x^2_i = cos(2 pi i/k), l^{1,2}_i = 2/k sin, 2/k cos. For the edge point i this is
- *        (1 - s) E_i + s (v + 2/k sum_j cos(2 pi (i - j)/k) E_j),
- *      and, E_j written out, (cos addition) the row of edge v-p_0:
- *        v:   (1 - s) 3/8 + s
- *        p_j: (1 - s) Loop_j + s 2/k lambda cos(2 pi j/k),   lambda = 3/8 + cos(2 pi/k)/4,
- *      Loop_j = 3/8 at j = 0, 1/8 at j = 1 and k - 1, else 0. The row sums to 1 (sum cos = 0).
- * s (003 leaves it open for this rule): the petal's matrix has eigenvalues 1, 5/8 (the "cone"
- * mode, all ring points alike), lambda_j = 3/8 + cos(2 pi j/k)/4; after the modification the cone
- * and j >= 2 modes are scaled by 1 - s, so lambda_1 is subdominant iff (1 - s) 5/8 < lambda_1,
- * i.e. s > (2 - 2 cos(2 pi/k))/5 (3/5 at k = 3). SD_YZ_FLAT_S = 3/4 satisfies it for every k >= 3
- * (docs/DECISIONS.md 27).
+ * The centre v of such a petal is a complex singular vertex: a corner, fixed. Each edge point of
+ * the petal takes two stages (003 Sec. 2):
+ *   1. 003 Fig. 4f inside the petal, E_j = (3/4 - g) v + g p_j + 1/8 (p_{j-1} + p_{j+1}),
+ *      g = 1/2 - cos(theta)/4, p_0 .. the petal's ring in order; singular edges take their
+ *      midpoint;
+ *   2. the flatness modification p <- (1 - s) p + s (a_0 x^0 + a_1 x^1 + a_2 x^2): the part of the
+ *      petal's new points in the eigenvectors of 1 and the tangent pair is kept, the rest is
+ *      scaled by 1 - s. With v fixed, a_0 x^0 = v and, writing q_j = p_j - v, the first stage is
+ *      E - v = T q.
+ * Closed petal (fixed disk), ring p_0 .. p_{k-1} around v: theta = pi/3 (Loop); App. A's tangent
+ *   pair x^1_i = sin(2 pi i/k), x^2_i = cos(2 pi i/k), l^{1,2} = 2/k sin, 2/k cos, eigenvalue
+ *   lambda = 3/8 + cos(2 pi/k)/4. Row of edge v-p_0:
+ *     v:   (1 - s) 3/8 + s
+ *     p_j: (1 - s) Loop_j + s 2/k lambda cos(2 pi j/k)
+ *   (Loop_j = 3/8 at j = 0, 1/8 at j = 1 and k - 1, else 0). The cone mode (eigenvalue 5/8) and
+ *   the modes j >= 2 are scaled by 1 - s; lambda is subdominant iff (1 - s) 5/8 < lambda, i.e.
+ *   s > (2 - 2 cos(2 pi/k))/5 (3/5 at k = 3).
+ * Dart petal, ring p_0 .. p_{k-1} around v, v-p_0 its singular edge: theta = 2 pi/k. T's
+ *   eigenvalues (derived here; docs/DECISIONS.md 28): 1/2 twice, on x_i = cos(2 pi i/k) and
+ *   sin(2 pi i/k), with left eigenvectors e_0 and 2/k sin(2 pi i/k) (both dual to the pair and
+ *   to the other modes, which vanish at p_0); the other modes are sin(j pi i/k) with eigenvalue
+ *   1/2 + (cos(j pi/k) - cos(2 pi/k))/4, j != 2 — above 1/2 for j = 1, so the pair is not
+ *   subdominant without the modification. Row of edge v-p_i (i >= 1), on q:
+ *     q_j: (1 - s) T_ij + s (1/2 cos(2 pi i/k) [j = 0] + 1/k sin(2 pi i/k) sin(2 pi j/k))
+ *   and v takes the rest of 1; the singular edge's midpoint is left as it is (the projection
+ *   reproduces it: l = e_0). Every kept mode is 1/2 and (1 - s) lambda_1 < 1/2 for s > 1/3.
+ * Concave corner petal, ring p_0 .. p_k, v-p_0 and v-p_k its singular edges, alpha the angle
+ *   between them: theta = (2 pi - alpha)/k. The eigenvalue 1/2 holds x_i = cos(i theta),
+ *   sin(i theta) (any values at p_0, p_k), left eigenvectors e_0 and e_k; the Dirichlet modes
+ *   sin(j pi i/k) have 1/2 + (cos(j pi/k) - cos(theta))/4, above 1/2 for j = 1. The projection
+ *   interpolates the two crease midpoints: P_i - v = (sin((k-i) theta) (E_0 - v) +
+ *   sin(i theta) (E_k - v)) / sin(k theta). Row of edge v-p_i (0 < i < k), on q:
+ *     q_j: (1 - s) T_ij + s / (2 sin(k theta)) (sin((k-i) theta) [j = 0] + sin(i theta) [j = k])
+ *   (1 - s) lambda_1 < 1/2 holds for s > 1/3 at every k (003: s = 1/2 always suffices).
+ * SD_YZ_FLAT_S = 3/4 satisfies all three conditions for every k (docs/DECISIONS.md 27, 28).
  * Where the edge's other end is also singular the petal rules of both ends are averaged (003:
  * "use the average of the conflicting positions"); each end's rule is complete (both stages)
  * before averaging. The other end's rule is 003 Fig. 4f with its gamma (rules.c, yz_gammas), or
- * its own fixed disk.
+ * its own flattened rule.
  *
- * Only levels built with nonmanifold_surface = ying-zorin that have closed petals at singular
+ * Only levels built with nonmanifold_surface = ying-zorin that have such petals at singular
  * vertices come here; the rows are few and built one by one.
  */
 #include "internal.h"
@@ -125,6 +143,56 @@ static uint32_t petal_ring(const sd_topo *t, const uint32_t (*efc)[2], uint32_t 
     }
 }
 
+/* From edge e0 at v into its face f, across the petal's edges (those between two faces of it),
+ * up to the first edge that is not (a singular edge): out[0 .. n) the ring points passed, *last
+ * the singular edge's other end. Returns n, or UINT32_MAX if the walk closes or runs past cap. */
+static uint32_t chain_walk(const sd_topo *t, const uint32_t (*efc)[2], uint32_t v, uint32_t e0,
+                           uint32_t f, uint32_t *out, uint32_t cap, uint32_t *last)
+{
+    uint32_t e = e0, n = 0;
+    for (;;) {
+        uint32_t next = UINT32_MAX;
+        for (int j = 0; j < 3; j++) {
+            uint32_t x = t->fe[f][j];
+            if (x != e && (t->ev[x][0] == v || t->ev[x][1] == v))
+                next = x;
+        }
+        if (next == UINT32_MAX || next == e0 || n == cap)
+            return UINT32_MAX;
+        if (efc[next][1] == UINT32_MAX) {
+            *last = other_end(t, next, v);
+            return n;
+        }
+        out[n++] = other_end(t, next, v);
+        f = efc[next][0] == f ? efc[next][1] : efc[next][0];
+        e = next;
+    }
+}
+
+/* The ring of the dart or open petal at v that holds edge e0: ring[0] and (open) ring[k] the
+ * singular edges' ends, e0 = v-ring[*at]. Returns the petal's number of triangles k, or 0 if
+ * the petal is not of that kind (dart: both walks end at one singular edge; open: at two). */
+static uint32_t chain_ring(const sd_topo *t, const uint32_t (*efc)[2], uint32_t v, uint32_t e0,
+                           bool dart, uint32_t *ring, uint32_t *tmp, uint32_t cap, uint32_t *at)
+{
+    uint32_t la, lb;
+    uint32_t na = chain_walk(t, efc, v, e0, efc[e0][0], tmp, cap, &la);
+    if (na == UINT32_MAX || na + 3 > cap)
+        return 0;
+    ring[0] = la;
+    for (uint32_t j = 0; j < na; j++)
+        ring[1 + j] = tmp[na - 1 - j];
+    ring[na + 1] = other_end(t, e0, v);
+    uint32_t nb = chain_walk(t, efc, v, e0, efc[e0][1], ring + na + 2, cap - na - 3, &lb);
+    if (nb == UINT32_MAX || (la == lb) != dart)
+        return 0;
+    uint32_t k = na + nb + 2;
+    if (!dart)
+        ring[k] = lb;
+    *at = na + 1;
+    return k;
+}
+
 /* Add the fixed-disk row of edge v-ring[0] (petal of k) times `scale` to a. */
 static bool fixed_disk_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32_t k,
                            double scale)
@@ -141,24 +209,60 @@ static bool fixed_disk_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, 
     return true;
 }
 
-bool sd_yz_fixed_disks(sd_mem *m, const sd_topo *t, const double (*gam)[2], uint8_t *er,
-                       sd_yzrows *y)
+/* Add the dart row of edge v-ring[i] (ring p_0 .. p_{k-1}, v-p_0 singular) times `scale`. */
+static bool dart_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32_t k, uint32_t i,
+                     double scale)
+{
+    const double s = SD_YZ_FLAT_S, g = 0.5 - cos(2 * M_PI / k) / 4;
+    const double si = sin(2 * M_PI * i / k), ci = cos(2 * M_PI * i / k);
+    double sum = 0;
+    for (uint32_t j = 0; j < k; j++) {
+        double tij = j == i ? g : (j == (i + 1) % k || j == (i + k - 1) % k) ? 1.0 / 8.0 : 0.0;
+        double w = (1 - s) * tij + s * ((j == 0 ? ci / 2 : 0) + si * sin(2 * M_PI * j / k) / k);
+        sum += w;
+        if (!acc_add(m, a, ring[j], scale * w))
+            return false;
+    }
+    return acc_add(m, a, v, scale * (1 - sum));
+}
+
+/* Add the concave corner row of edge v-ring[i] (ring p_0 .. p_k, singular edges v-p_0, v-p_k,
+ * angle step theta) times `scale`. */
+static bool concave_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32_t k,
+                        uint32_t i, double theta, double scale)
+{
+    const double s = SD_YZ_FLAT_S, g = 0.5 - cos(theta) / 4, d = 2 * sin(k * theta);
+    double sum = 0;
+    for (uint32_t j = 0; j <= k; j++) {
+        double tij = j == i ? g : (j == i + 1 || j + 1 == i) ? 1.0 / 8.0 : 0.0;
+        double w = (1 - s) * tij + s * ((j == 0 ? sin((k - i) * theta) : 0) +
+                                        (j == k ? sin(i * theta) : 0)) / d;
+        sum += w;
+        if (!acc_add(m, a, ring[j], scale * w))
+            return false;
+    }
+    return acc_add(m, a, v, scale * (1 - sum));
+}
+
+bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint8_t *er,
+                     sd_yzrows *y)
 {
     const uint32_t ne = t->ne;
     memset(y, 0, sizeof *y);
     uint32_t nfd = 0;
     for (uint32_t e = 0; e < ne; e++)
-        nfd += gam[e][0] == SD_YZ_DISK || gam[e][1] == SD_YZ_DISK;
+        nfd += sd_yz_flat(end[e][0].kind) || sd_yz_flat(end[e][1].kind);
     if (!nfd)
         return true;
     bool ok = false;
-    uint32_t (*efc)[2] = sd_alloc(m, ((size_t)ne + 1) * sizeof *efc), *ring = NULL;
-    uint32_t cap = t->ntr + 1;
+    uint32_t (*efc)[2] = sd_alloc(m, ((size_t)ne + 1) * sizeof *efc), *ring = NULL, *tmp = NULL;
+    uint32_t cap = t->ntr + 2;
     acc a = {0};
     y->off = sd_calloc(m, (size_t)ne + 1, sizeof *y->off);
     y->ends = sd_alloc(m, ((size_t)ne + 1) * sizeof *y->ends);
     ring = sd_alloc(m, (size_t)cap * sizeof *ring);
-    if (!efc || !y->off || !y->ends || !ring)
+    tmp = sd_alloc(m, (size_t)cap * sizeof *tmp);
+    if (!efc || !y->off || !y->ends || !ring || !tmp)
         goto out;
     for (uint32_t e = 0; e < ne; e++)
         efc[e][0] = efc[e][1] = UINT32_MAX;
@@ -166,7 +270,7 @@ bool sd_yz_fixed_disks(sd_mem *m, const sd_topo *t, const double (*gam)[2], uint
         uint32_t f = sd_tr(t, i);
         for (int j = 0; j < 3; j++) {
             uint32_t e = t->fe[f][j];
-            if (gam[e][0] != SD_YZ_DISK && gam[e][1] != SD_YZ_DISK)
+            if (!sd_yz_flat(end[e][0].kind) && !sd_yz_flat(end[e][1].kind))
                 continue;
             if (efc[e][0] == UINT32_MAX)
                 efc[e][0] = f;
@@ -178,23 +282,42 @@ bool sd_yz_fixed_disks(sd_mem *m, const sd_topo *t, const double (*gam)[2], uint
     for (int pass = 0; pass < 2; pass++) {
         uint32_t row = 0;
         for (uint32_t e = 0; e < ne; e++) {
-            if (gam[e][0] != SD_YZ_DISK && gam[e][1] != SD_YZ_DISK)
+            if (!sd_yz_flat(end[e][0].kind) && !sd_yz_flat(end[e][1].kind))
                 continue;
             uint32_t ends[2] = {t->ev[e][0], t->ev[e][1]};
-            int sides = (gam[e][0] != -1) + (gam[e][1] != -1);
+            int sides = (end[e][0].kind != SD_YZ_NONE) + (end[e][1].kind != SD_YZ_NONE);
+            uint8_t rule = SD_RULE_YZ_CONCAVE;
             a.n = 0;
             if (!acc_add(m, &a, ends[0], 0) || !acc_add(m, &a, ends[1], 0))
                 goto out;
-            bool fine = true;
+            bool fine = efc[e][1] != UINT32_MAX;
             for (int i = 0; i < 2 && fine; i++) {
-                uint32_t v = ends[i], w = ends[1 - i];
-                if (gam[e][i] == SD_YZ_DISK) {
-                    uint32_t k = petal_ring(t, (const uint32_t(*)[2])efc, v, e, ring, cap);
+                uint32_t v = ends[i], w = ends[1 - i], k, at = 0;
+                const sd_yzend *x = &end[e][i];
+                switch (x->kind) {
+                case SD_YZ_DISK:
+                    rule = SD_RULE_YZ_FIXED_DISK;
+                    k = petal_ring(t, (const uint32_t(*)[2])efc, v, e, ring, cap);
                     fine = k >= 3;
                     if (fine && !fixed_disk_row(m, &a, v, ring, k, 1.0 / sides))
                         goto out;
-                } else if (gam[e][i] >= 0) { /* 003 Fig. 4f from this end */
-                    double g = gam[e][i];
+                    break;
+                case SD_YZ_DART:
+                    if (rule != SD_RULE_YZ_FIXED_DISK)
+                        rule = SD_RULE_YZ_DART;
+                    k = chain_ring(t, (const uint32_t(*)[2])efc, v, e, true, ring, tmp, cap, &at);
+                    fine = k >= 3;
+                    if (fine && !dart_row(m, &a, v, ring, k, at, 1.0 / sides))
+                        goto out;
+                    break;
+                case SD_YZ_CONCAVE:
+                    k = chain_ring(t, (const uint32_t(*)[2])efc, v, e, false, ring, tmp, cap, &at);
+                    fine = k >= 2;
+                    if (fine && !concave_row(m, &a, v, ring, k, at, x->theta, 1.0 / sides))
+                        goto out;
+                    break;
+                case SD_YZ_FIRST: { /* 003 Fig. 4f from this end */
+                    double g = x->g;
                     if (!acc_add(m, &a, v, (0.75 - g) / sides) || !acc_add(m, &a, w, g / sides))
                         goto out;
                     for (int h = 0; h < 2; h++) { /* the opposite vertices */
@@ -203,16 +326,20 @@ bool sd_yz_fixed_disks(sd_mem *m, const sd_topo *t, const double (*gam)[2], uint
                         if (!acc_add(m, &a, o, 0.125 / sides))
                             goto out;
                     }
+                    break;
+                }
+                default:
+                    break;
                 }
             }
             acc_merge(&a);
-            if (!fine) { /* not a disk after all: leave the edge to the first stage */
+            if (!fine) { /* not such a petal after all: leave the edge to the first stage */
                 if (pass == 0)
                     y->off[e + 1] = UINT32_MAX;
                 continue;
             }
             if (pass == 0) {
-                er[e] = SD_RULE_YZ_FIXED_DISK;
+                er[e] = rule;
                 y->off[e + 1] = a.n - 2;
             } else {
                 uint32_t at = y->off[e];
@@ -245,6 +372,7 @@ bool sd_yz_fixed_disks(sd_mem *m, const sd_topo *t, const double (*gam)[2], uint
 out:
     sd_free(m, efc);
     sd_free(m, ring);
+    sd_free(m, tmp);
     sd_free(m, a.e);
     if (!ok)
         sd_yzrows_free(m, y);

@@ -20,6 +20,10 @@ static const char *const seeds[] = {
     "\"v\":[[0,1],[1,1],[2,1],[3,1],[4,1],[5,1],[6,1],[7,1]]}}",
     "{\"vertices\":[[0,0,0],[1,0,0],[0,1,0],[0,0,1],[1,1,1]],\"simplices\":[[0,1,2,3],[1,2,3,4]]}",
     "{\"vertices\":[[0,0,0],[1,0,0],[0,1,0],[1,1,0]],\"simplices\":[[0,1,2],[1,3,2],[0,3]]}",
+    /* three fins on a spine: vertex 0 complex singular, with open petals (Ying-Zorin corners) */
+    "{\"vertices\":[[0,0,0],[0,0,1],[0,0,2],[1,0,0],[1,0,1],[1,0,2],[-0.5,0.8,0],[-0.5,0.8,1],"
+    "[-0.5,0.8,2],[-0.5,-0.8,0],[-0.5,-0.8,1],[-0.5,-0.8,2]],\"simplices\":[[0,1,4],[0,4,3],"
+    "[1,2,5],[1,5,4],[0,1,7],[0,7,6],[1,2,8],[1,8,7],[0,1,10],[0,10,9],[1,2,11],[1,11,10]]}",
     "{\"solid_scheme\":\"averaged\",\"surface_weights\":\"loop\",\"nonmanifold_default\":\"G2\","
     "\"overrides\":[]}",
     "{\"nonmanifold_default\":\"G1\",\"nonmanifold_surface\":\"ying-zorin\",\"overrides\":["
@@ -28,6 +32,8 @@ static const char *const seeds[] = {
     "{\"simplex\":[1,3],\"rule\":\"N2\",\"pair\":[[1,3,0],[1,3,2]]}]}",
     "{\"singular\":[]}",
     "{\"singular\":[[0],[0,1],[0,1,2]]}",
+    "{\"singular\":[[2]],\"petals\":[{\"vertex\":0,\"triangle\":[0,4,3],\"kind\":\"concave\"},"
+    "{\"vertex\":0,\"triangle\":[0,1,7],\"kind\":\"smooth\"}]}",
     "{\"select\":{\"simplices\":[[0,1,2,3]]},\"depth\":2,\"positions\":\"subdivision\"}",
     "{\"select\":{\"box\":{\"min\":[0,0,0],\"max\":[1,1,1]}},\"positions\":\"midpoint\"}",
     "{\"select\":{\"sphere\":{\"center\":[0,0,0],\"radius\":0.5}}}",
@@ -169,7 +175,7 @@ int main(int argc, char **argv)
         /* a valid complex first, so tags and overrides have something to refer to */
         if (rnd(2)) {
             api_problem p = {0};
-            const char *valid = seeds[rnd(3)];
+            const char *valid = seeds[rnd(4)];
             json_t *b = api_parse_body(valid, strlen(valid), 0, &p);
             if (b && !api_put_complex(cur, b, &lim, &next, &p)) {
                 api_model_unref(cur);
@@ -177,6 +183,17 @@ int main(int argc, char **argv)
                 next = NULL;
             }
             json_decref(b);
+            if (rnd(2)) { /* and the Ying-Zorin rules, so petal tags take effect */
+                static const char yz[] = "{\"nonmanifold_surface\":\"ying-zorin\"}";
+                api_problem q = {0};
+                b = api_parse_body(yz, sizeof yz - 1, 0, &q);
+                if (b && !api_put_rules(cur, b, &lim, &next, &q)) {
+                    api_model_unref(cur);
+                    cur = next;
+                    next = NULL;
+                }
+                json_decref(b);
+            }
         }
         api_problem p = {0};
         json_t *b = api_parse_body(buf, len, rnd(2), &p);

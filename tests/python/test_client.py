@@ -86,6 +86,23 @@ def test_every_endpoint(client, tmp_path):
         s.info()
 
 
+def test_put_tags_with_petals(client):
+    """Three fins on a spine ending at vertex 0: a complex singular vertex with three open petals;
+    one tagged concave through the client, echoed by GET /complex; a bad kind raises 422."""
+    V = [[0, 0, 0], [0, 0, 1], [1, 0, 0], [1, 0, 1], [-.5, .8, 0], [-.5, .8, 1], [-.5, -.8, 0],
+         [-.5, -.8, 1]]
+    T = [[0, 1, a + 1] for a in (2, 4, 6)] + [[0, a + 1, a] for a in (2, 4, 6)]
+    petal = {"vertex": 0, "triangle": [0, 3, 2], "kind": "concave"}
+    with client.create_session() as s:
+        s.put_complex({"vertices": V, "simplices": T})
+        s.put_rules({"nonmanifold_surface": "ying-zorin"})
+        s.put_tags(petals=[petal])
+        assert s.get_complex()["tags"] == {"singular": [], "petals": [petal]}
+        with pytest.raises(E.Unprocessable) as e:
+            s.put_tags([[1]], petals=[dict(petal, kind="straight")])
+        assert e.value.pointer == "/petals/0/kind"
+
+
 def test_session_context_deletes(client):
     with client.create_session() as s:
         s.put_complex(MIXED)

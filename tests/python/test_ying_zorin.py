@@ -17,10 +17,10 @@ pi/3 (a petal of 3 triangles at a simple vertex). The test asserts both: OpenSub
 where the rules coincide, and the re-implementation's everywhere (OpenSubdiv's plus the predicted
 difference at the petal edges).
 
-Not done: 003's flatness modification at darts, concave corners and the tangent-plane
-constraints of 003 Sec. 3; docs/DECISIONS.md says so. The fixed-disk rule of closed petals (its
-flatness modification included) is checked in tests/core/test_yz.c and test_yz_osd.py; the meshes
-here have no closed petals.
+The flatness modification (003's second stage) is checked elsewhere: the fixed-disk rule of
+closed petals in tests/core/test_yz.c and test_yz_osd.py, darts at complex vertices and concave
+corners (petal tags) in test_yz_flatness.py; the meshes here have neither closed petals nor darts
+at complex vertices. Not offered: the tangent-plane constraints of 003 Sec. 3 (docs/DECISIONS.md).
 """
 import math
 import subprocess

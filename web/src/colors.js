@@ -5,7 +5,7 @@ import * as THREE from 'three';
 // Rule id (as in `_RULE`) -> name, in the daemon's order (core/sd.h sd_rule).
 export const RULE_NAMES = ['corner', 'curve', 'loop', 'loop-boundary', 'solid', 'solid-boundary',
   'N1', 'N2', 'G1', 'G2', 'ying-zorin-crease', 'ying-zorin-corner', 'ying-zorin-petal',
-  'ying-zorin-fixed-disk'];
+  'ying-zorin-fixed-disk', 'ying-zorin-dart', 'ying-zorin-concave'];
 
 // sRGB hex per family; rules the daemon may add later (e.g. "ying-zorin-…") fall back by prefix.
 const RULE_HEX = {

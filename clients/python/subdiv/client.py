@@ -248,10 +248,14 @@ class Session:
         """GET /complex: the complex (with filled tetrahedra), classes, tags, rules, summary."""
         return self._call("GET", "/complex").json()
 
-    def put_tags(self, singular=None, *, body=None, if_match=None):
-        """PUT /tags with {"singular": singular} (or a whole `body`)."""
-        return self._change("PUT", "/tags", body if body is not None else {"singular": singular or []},
-                            if_match, None)
+    def put_tags(self, singular=None, *, petals=None, body=None, if_match=None):
+        """PUT /tags with {"singular": singular, "petals": petals} (or a whole `body`); petals:
+        [{"vertex": v, "triangle": [a, b, c], "kind": "convex" | "concave" | "smooth"}]."""
+        if body is None:
+            body = {"singular": singular or []}
+            if petals is not None:
+                body["petals"] = petals
+        return self._change("PUT", "/tags", body, if_match, None)
 
     def put_rules(self, rules=None, *, if_match=None):
         """PUT /rules: every preference at once (absent fields are the defaults)."""

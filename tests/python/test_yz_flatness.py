@@ -1,0 +1,345 @@
+"""Ying-Zorin (003 Sec. 2): the flatness modification at dart petals and concave corners, and
+the petal tags that choose convex, concave or smooth corners (PUT /tags "petals").
+
+Expected values are computed here from 003's statements alone, numerically, not from the
+closed forms of core/yz.c:
+  * the petal's first-stage subdivision matrix S on (v, p_0, ...): v fixed (a complex singular
+    vertex is a corner), a singular edge's point its midpoint, any other edge 003 Fig. 4f,
+    (3/4 - g) v + g p_i + 1/8 (p_{i-1} + p_{i+1}), g = 1/2 - cos(theta)/4, theta = 2 pi/k at a
+    dart, (2 pi - alpha)/k at a concave corner, alpha/k convex, pi/k smooth;
+  * its eigen-decomposition by numpy (right eigenvectors X, left ones the rows of X^-1);
+  * the modification p <- (1 - s) p + s (a_0 x^0 + a_1 x^1 + a_2 x^2) applied to the new points,
+    keeping the eigenvalue 1 and the eigenvalue-1/2 pair (the tangent plane of the dart chart
+    and of the corner: the characteristic map of the pair is the regular k-gon for a dart and the
+    wedge of angle k theta for a corner; docs/DECISIONS.md 28), s = 3/4.
+The test also checks what the modification is for: after it the petal's matrix has 1, then 1/2
+twice, then only smaller eigenvalues (before it, a larger one: the dart's half-angle mode
+sin(pi i/k), the concave corner's first Dirichlet mode), so the petal is C1 at its centre.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from daemon import Daemon, Session
+
+S_FLAT = 0.75
+
+
+@pytest.fixture(scope="module")
+def daemon():
+    d = Daemon()
+    yield d
+    assert d.stop() == 0
+
+
+def first_stage(k, theta, singular, closed):
+    """003's first stage on (v, p_0 .. p_{n-1}); `singular`: ring indices whose edge is singular;
+    closed: the ring wraps around (dart) or not (open corner petal, p_0 and p_{n-1} singular)."""
+    n = k if closed else k + 1
+    S = np.zeros((n + 1, n + 1))
+    S[0, 0] = 1
+    g = 0.5 - math.cos(theta) / 4
+    for i in range(n):
+        r = i + 1
+        if i in singular:
+            S[r, 0] = S[r, r] = 0.5
+            continue
+        S[r, 0] += 0.75 - g
+        S[r, r] += g
+        for j in (i - 1, i + 1):
+            S[r, (j % n if closed else j) + 1] += 0.125
+    return S
+
+
+def flattened(S, keep=(1.0, 0.5), s=S_FLAT):
+    w, X = np.linalg.eig(S)
+    assert np.linalg.cond(X) < 1e8          # diagonalizable: left eigenvectors are X^-1's rows
+    L = np.linalg.inv(X)
+    kept = [i for i in range(len(w)) if any(abs(w[i] - q) < 1e-9 for q in keep)]
+    P = np.real(X[:, kept] @ L[kept, :])
+    return (1 - s) * S + s * P @ S, w
+
+
+def spectrum(M):
+    return sorted(np.abs(np.linalg.eigvals(M)), reverse=True)
+
+
+def ours(daemon, V, T, L=1, petals=None, singular=()):
+    s = Session(daemon)
+    assert s.put_complex({"vertices": V, "simplices": T}).status_code == 200
+    r = s.req("PUT", "/rules", json={"nonmanifold_surface": "ying-zorin", "surface_weights": "loop"})
+    assert r.status_code == 200, r.text
+    if petals is not None:
+        r = s.req("PUT", "/tags", json={"singular": list(singular), "petals": petals})
+        assert r.status_code == 200, r.text
+    out = [s.level(l, format="json").json() for l in range(1, L + 1)]
+    c = s.req("GET", "/complex").json()
+    s.delete()
+    return out, c
+
+
+def edge_point(j, a, b):
+    """The point of level j on the edge a-b of the level before."""
+    for i, e in enumerate(j["origin"]["edge_of"]):
+        if e and sorted(e) == sorted([a, b]):
+            return np.array(j["vertices"][i])
+    raise KeyError((a, b))
+
+
+def edge_rules(c):
+    return {tuple(sorted(e["vertices"])): e["rule"] for e in c["classes"]["edges"]}
+
+
+# ---- a dart petal at a complex singular vertex ---------------------------------------------
+
+def dart_mesh(k=5):
+    """A fan of k triangles around vertex 0 (ring 1..k, not flat) and two fins on edge 0-1: the
+    edge 0-1 is non-manifold, the fins' edges 0-6 and 0-7 boundary, so vertex 0 has three
+    singular edges (complex) and the fan is a dart petal (one singular edge, 0-1)."""
+    V = [[0, 0, 0]] + [[math.cos(2 * math.pi * i / k), math.sin(2 * math.pi * i / k),
+                        0.3 * math.sin(3.0 * i)] for i in range(k)]
+    V += [[0.6, 0.1, 1], [0.5, -0.2, -1]]
+    T = [[0, 1 + i, 1 + (i + 1) % k] for i in range(k)] + [[0, 1, k + 1], [0, 1, k + 2]]
+    return V, T
+
+
+@pytest.mark.parametrize("k", [3, 4, 5, 7])
+def test_dart_flatness(daemon, k):
+    V, T = dart_mesh(k)
+    (j,), c = ours(daemon, V, T)
+    assert c["classes"]["vertices"][0]["rule"] == "ying-zorin-corner"
+    rules = edge_rules(c)
+    assert rules[(0, 1)] == "ying-zorin-crease"
+    assert all(rules[(0, 1 + i)] == "ying-zorin-dart" for i in range(1, k))
+    ring = list(range(1, k + 1))                          # p_0 = 1: the singular edge 0-1
+    S = first_stage(k, 2 * math.pi / k, {0}, closed=True)
+    before = spectrum(S)
+    lam1 = 0.5 + (math.cos(math.pi / k) - math.cos(2 * math.pi / k)) / 4
+    assert before[1] == pytest.approx(lam1, abs=1e-12) and lam1 > 0.5   # not C1 as it stands
+    M, w = flattened(S)
+    after = spectrum(M)
+    assert after[0] == pytest.approx(1) and after[1] == pytest.approx(0.5, abs=1e-12)
+    assert after[2] == pytest.approx(0.5, abs=1e-12) and after[3] < 0.5 - 1e-3
+    P = np.array(V, dtype=float)[[0] + ring]
+    want = M @ P
+    for i in range(k):
+        np.testing.assert_allclose(edge_point(j, 0, ring[i]), want[i + 1], atol=1e-12,
+                                   err_msg=f"edge 0-{ring[i]}")
+    np.testing.assert_array_equal(j["vertices"][0], V[0])
+    # the crease point is the midpoint: the modification leaves it
+    np.testing.assert_allclose(edge_point(j, 0, 1), (P[0] + P[1]) / 2, atol=1e-15)
+
+
+def test_dart_at_a_simple_vertex_keeps_the_first_stage(daemon):
+    """A fan with one fin on edge 0-1: vertex 0 has two singular edges (0-1 non-manifold, the
+    fin's boundary 0-6) in one flower, a simple vertex moving along the B-spline of its singular
+    edges, so the petal matrix is not closed under the dart's centre (003 assumes all petals of a
+    simple vertex share both edges): the dart rule stays at its first stage (DECISIONS 28)."""
+    k = 5
+    V, T = dart_mesh(k)
+    T = T[:-1]
+    (j,), c = ours(daemon, V, T)
+    assert c["classes"]["vertices"][0]["rule"] == "ying-zorin-crease"
+    assert edge_rules(c)[(0, 3)] == "ying-zorin-petal"
+    g = 0.5 - math.cos(2 * math.pi / k) / 4
+    P = np.array(V, dtype=float)
+    np.testing.assert_allclose(edge_point(j, 0, 3), (0.75 - g) * P[0] + g * P[3] + (P[2] + P[4]) / 8,
+                               atol=1e-14)
+
+
+# ---- open petals at a complex vertex: convex, concave, smooth --------------------------------
+
+def fins_end():
+    """Three fins on a spine 0-1-2 ending at vertex 0 (complex: three singular edges there).
+    Each fin's petal at 0 has k = 2 triangles, bounded by the spine 0-1 and the fin's boundary
+    edge 0-a (a = 3, 6, 9) at 90 degrees; its inner edge is 0-(a+1)."""
+    V = [[0, 0, 0], [0, 0, 1], [0, 0, 2], [1, 0, 0], [1, 0, 1], [1, 0, 2],
+         [-.5, .8, 0], [-.5, .8, 1], [-.5, .8, 2], [-.5, -.8, 0], [-.5, -.8, 1], [-.5, -.8, 2]]
+    T = []
+    for a in (3, 6, 9):
+        T += [[0, 1, a + 1], [0, a + 1, a], [1, 2, a + 2], [1, a + 2, a + 1]]
+    return V, T
+
+
+def corner_expected(P, v, ring, theta, flat):
+    S = first_stage(len(ring) - 1, theta, {0, len(ring) - 1}, closed=False)
+    if not flat:
+        return S @ P[[v] + ring], S
+    M, _ = flattened(S)
+    return M @ P[[v] + ring], M
+
+
+def test_concave_corner_flatness(daemon):
+    V, T = fins_end()
+    petals = [{"vertex": 0, "triangle": [0, 4, 3], "kind": "concave"}]
+    (j1, j2), c = ours(daemon, V, T, L=2, petals=petals)
+    assert c["tags"]["petals"] == petals
+    rules = edge_rules(c)
+    assert rules[(0, 4)] == "ying-zorin-concave"
+    assert rules[(0, 7)] == rules[(0, 10)] == "ying-zorin-petal"     # the others stay convex
+    P = np.array(V, dtype=float)
+    alpha = math.pi / 2
+    theta = (2 * math.pi - alpha) / 2
+    want, M = corner_expected(P, 0, [1, 4, 3], theta, flat=True)
+    S = first_stage(2, theta, {0, 2}, closed=False)
+    assert spectrum(S)[1] > 0.5 + 1e-3                                  # the Dirichlet mode
+    sp = spectrum(M)
+    assert sp[1] == pytest.approx(0.5) and sp[2] == pytest.approx(0.5) and sp[3] < 0.5 - 1e-3
+    np.testing.assert_allclose(edge_point(j1, 0, 4), want[2], atol=1e-12)
+    # a convex fin: theta = alpha/k, first stage only
+    want7, _ = corner_expected(P, 0, [1, 7, 6], alpha / 2, flat=False)
+    np.testing.assert_allclose(edge_point(j1, 0, 7), want7[2], atol=1e-12)
+    # level 2: the tag holds for the children of the petal's triangles; alpha measured again on
+    # level 1 (the crease points are midpoints: still 90 degrees)
+    Q = np.array(j1["vertices"])
+    oe = {tuple(sorted(e)): i for i, e in enumerate(j1["origin"]["edge_of"]) if e}
+    ring = [oe[(0, 1)], oe[(0, 4)], oe[(0, 3)]]
+    want2, _ = corner_expected(Q, 0, ring, theta, flat=True)
+    np.testing.assert_allclose(edge_point(j2, 0, ring[1]), want2[2], atol=1e-12)
+    np.testing.assert_array_equal(j2["vertices"][0], V[0])
+
+
+def test_smooth_petal(daemon):
+    V, T = fins_end()
+    petals = [{"vertex": 0, "triangle": [0, 1, 7], "kind": "smooth"}]
+    (j,), c = ours(daemon, V, T, petals=petals)
+    P = np.array(V, dtype=float)
+    want, _ = corner_expected(P, 0, [1, 7, 6], math.pi / 2, flat=False)   # theta = pi/k
+    np.testing.assert_allclose(edge_point(j, 0, 7), want[2], atol=1e-12)
+    g = 0.5                                                               # cos(pi/2) = 0
+    np.testing.assert_allclose(edge_point(j, 0, 7), 0.25 * P[0] + g * P[7] + (P[1] + P[6]) / 8,
+                               atol=1e-14)
+
+
+def test_convex_tag_is_the_default(daemon):
+    V, T = fins_end()
+    (a,), _ = ours(daemon, V, T)
+    (b,), c = ours(daemon, V, T, petals=[{"vertex": 0, "triangle": [0, 4, 3], "kind": "convex"}])
+    np.testing.assert_array_equal(a["vertices"], b["vertices"])
+
+
+def test_petal_tags_have_no_effect_under_chang_qin(daemon):
+    V, T = fins_end()
+    s = Session(daemon)
+    assert s.put_complex({"vertices": V, "simplices": T}).status_code == 200
+    plain = s.level(1, format="json").json()["vertices"]
+    r = s.req("PUT", "/tags", json={"petals": [{"vertex": 0, "triangle": [0, 4, 3], "kind": "concave"}]})
+    assert r.status_code == 200, r.text
+    assert s.level(1, format="json").json()["vertices"] == plain
+    s.delete()
+
+
+def test_refine_carries_petal_tags(daemon):
+    V, T = fins_end()
+    s = Session(daemon)
+    assert s.put_complex({"vertices": V, "simplices": T}).status_code == 200
+    petals = [{"vertex": 0, "triangle": [0, 4, 3], "kind": "concave"}]
+    assert s.req("PUT", "/tags", json={"singular": [], "petals": petals}).status_code == 200
+    r = s.req("POST", "/refine", json={"select": {"simplices": [[0, 4, 3]]}, "positions": "midpoint"})
+    assert r.status_code == 200, r.text
+    c = s.req("GET", "/complex").json()
+    (p,) = c["tags"]["petals"]
+    assert p["vertex"] == 0 and p["kind"] == "concave" and 0 in p["triangle"]
+    tri = sorted(p["triangle"])
+    assert tri in [sorted(t) for t in c["simplices"]]
+    # the new triangle lies in the tagged fin (x = 1 plane, y = 0)
+    assert all(abs(c["vertices"][i][1]) < 1e-12 and c["vertices"][i][0] >= 0 for i in tri)
+    s.delete()
+
+
+# ---- petals sharing both singular edges: smooth together or not at all --------------------
+
+def three_fans_and_a_triangle():
+    """Three fans between edges 0-1 and 0-2 (so both are non-manifold) and a lone triangle
+    touching vertex 0: two flowers, a complex vertex whose three fan petals share both singular
+    edges."""
+    V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.3], [1, 1, -0.3], [1.2, 0.8, 0.8],
+         [-1, -1, 0], [-1, -0.5, 1]]
+    T = [[0, 1, 3], [0, 3, 2], [0, 1, 4], [0, 4, 2], [0, 1, 5], [0, 5, 2], [0, 6, 7]]
+    return V, T
+
+
+def put_tags(daemon, V, T, body):
+    s = Session(daemon)
+    assert s.put_complex({"vertices": V, "simplices": T}).status_code == 200
+    r = s.req("PUT", "/tags", json=body)
+    s.delete()
+    return r
+
+
+def test_smooth_needs_all_petals_between_the_same_edges(daemon):
+    V, T = three_fans_and_a_triangle()
+    one = {"vertex": 0, "triangle": [0, 1, 3], "kind": "smooth"}
+    r = put_tags(daemon, V, T, {"petals": [one]})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/petals/0/kind", r.text
+    every = [{"vertex": 0, "triangle": t, "kind": "smooth"} for t in ([0, 1, 3], [0, 1, 4], [0, 5, 2])]
+    assert put_tags(daemon, V, T, {"petals": every}).status_code == 200
+    # concave beside convex is allowed (003: "if one is concave, the other can be either")
+    mixed = [{"vertex": 0, "triangle": [0, 1, 3], "kind": "concave"}]
+    assert put_tags(daemon, V, T, {"petals": mixed}).status_code == 200
+
+
+# ---- every error path of "petals" -----------------------------------------------------------
+
+@pytest.mark.parametrize("petal, status, pointer", [
+    ("x", 400, "/petals/0"),
+    ({"vertex": 0, "triangle": [0, 4, 3]}, 400, "/petals/0/kind"),
+    ({"triangle": [0, 4, 3], "kind": "convex"}, 400, "/petals/0/vertex"),
+    ({"vertex": 0, "kind": "convex"}, 400, "/petals/0/triangle"),
+    ({"vertex": 0, "triangle": [0, 4, 3], "kind": "convex", "x": 1}, 400, "/petals/0/x"),
+    ({"vertex": 0, "triangle": [0, 4, 3], "kind": "flat"}, 422, "/petals/0/kind"),
+    ({"vertex": 0, "triangle": [0, 4, 3], "kind": 3}, 400, "/petals/0/kind"),
+    ({"vertex": 99, "triangle": [0, 4, 3], "kind": "convex"}, 422, "/petals/0/vertex"),
+    ({"vertex": "0", "triangle": [0, 4, 3], "kind": "convex"}, 400, "/petals/0/vertex"),
+    ({"vertex": 0, "triangle": [0, 4], "kind": "convex"}, 422, "/petals/0/triangle"),
+    ({"vertex": 0, "triangle": 3, "kind": "convex"}, 400, "/petals/0/triangle"),
+    ({"vertex": 0, "triangle": [0, 4, 99], "kind": "convex"}, 422, "/petals/0/triangle/2"),
+    ({"vertex": 0, "triangle": [0, 4, 4], "kind": "convex"}, 422, "/petals/0/triangle/2"),
+    ({"vertex": 0, "triangle": [0, 4, 5], "kind": "convex"}, 422, "/petals/0/triangle"),  # none
+    ({"vertex": 0, "triangle": [1, 5, 4], "kind": "convex"}, 422, "/petals/0/triangle"),  # not at 0
+    ({"vertex": 4, "triangle": [0, 4, 3], "kind": "concave"}, 422, "/petals/0/vertex"),   # manifold
+    ({"vertex": 1, "triangle": [0, 1, 4], "kind": "concave"}, 422, "/petals/0/vertex"),   # simple
+])
+def test_petal_errors(daemon, petal, status, pointer):
+    V, T = fins_end()
+    r = put_tags(daemon, V, T, {"petals": [petal]})
+    assert r.status_code == status, r.text
+    j = r.json()
+    assert j["errors"][0]["pointer"] == pointer, j
+    assert r.headers["Content-Type"].startswith("application/problem+json")
+
+
+def test_petal_errors_of_the_petal(daemon):
+    V, T = fins_end()
+    good = {"vertex": 0, "triangle": [0, 4, 3], "kind": "concave"}
+    # the same petal twice (its other triangle)
+    r = put_tags(daemon, V, T, {"petals": [good, {"vertex": 0, "triangle": [0, 1, 4], "kind": "smooth"}]})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/petals/1/triangle", r.text
+    # a vertex tagged singular has no corner rule
+    r = put_tags(daemon, V, T, {"singular": [[0]], "petals": [good]})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/petals/0/vertex", r.text
+    # a dart and a closed petal are not open
+    V, T = dart_mesh(5)
+    r = put_tags(daemon, V, T, {"petals": [{"vertex": 0, "triangle": [0, 2, 3], "kind": "concave"}]})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/petals/0/triangle", r.text
+    assert "dart" in r.json()["detail"]
+    V = [[0, 0, 0], [1, 0, .8], [-.5, .9, 1], [-.4, -.8, 1.1],
+         [1, .1, -1], [.1, 1, -1.1], [-1, 0, -.9], [0, -1, -1]]
+    T = [[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]]
+    T += [[0, 4 + i, 4 + (i + 1) % 4] for i in range(4)] + [[4, 7, 6], [4, 6, 5]]
+    r = put_tags(daemon, V, T, {"petals": [{"vertex": 0, "triangle": [0, 1, 2], "kind": "concave"}]})
+    assert r.status_code == 422 and "closed" in r.json()["detail"], r.text
+    # before any complex
+    s = Session(daemon)
+    r = s.req("PUT", "/tags", json={"petals": [good]})
+    assert r.status_code == 409 and r.json()["errors"][0]["pointer"] == "/petals", r.text
+    assert s.req("PUT", "/tags", json={"petals": []}).status_code == 200
+    r = s.req("PUT", "/tags", json={"petals": {}})
+    assert r.status_code in (400, 409)
+    s.delete()
+    # a body with neither member
+    s = Session(daemon)
+    r = s.req("PUT", "/tags", json={})
+    assert r.status_code == 400 and r.json()["errors"][0]["pointer"] == "/singular"
+    s.delete()
