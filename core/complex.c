@@ -388,6 +388,7 @@ void sd_level_free(sd_mem *m, sd_level *lv)
     sd_free(m, lv->tpos);
     sd_free(m, lv->slot);
     sd_free(m, lv->vrule_only);
+    sd_free(m, lv->geo);
     for (int i = 0; i < lv->nch; i++)
         sd_free(m, lv->ch[i].data);
     sd_free(m, lv);

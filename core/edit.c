@@ -9,6 +9,12 @@
  *
  * All-or-nothing: the whole cascade of changes is computed into temporary lists first; only when
  * every allocation has succeeded are they added to the levels' arrays.
+ *
+ * Rules that read positions: Ying-Zorin's corner petals measure the angle alpha between their
+ * singular edges (rules.c marks the points in the level's `geo`). A move of such a point makes
+ * that level's S stale, so the changes are applied down to that level, its rules are built
+ * again from the new positions and the finer levels recomputed (rebuild_from) — the result is
+ * the one a new complex with the moved points would give, at the cost of those levels.
  */
 #include "internal.h"
 #include <math.h>
@@ -77,6 +83,59 @@ static void change_free(sd_mem *m, change *c)
 {
     sd_free(m, c->id);
     sd_free(m, c->d);
+}
+
+/* Add (sign 1) or take back (-1) the changes of levels 0 .. top-1. */
+static void apply(sd_complex *c, int channel, int nc, const change *ch, int top, int sign)
+{
+    for (int l = 0; l < top; l++) {
+        double *p = c->lv[l]->ch[channel].data;
+        for (uint32_t i = 0; i < ch[l].n; i++)
+            for (int k = 0; k < nc; k++)
+                p[(size_t)ch[l].id[i] * nc + k] += sign * ch[l].d[(size_t)i * nc + k];
+    }
+}
+
+/* Level l's positions changed where its rules read them: build its rules again beside the old
+ * ones (kept until the new ones are complete, so a failure leaves the level as it was), then
+ * recompute the finer levels that were computed. Those are plain caches: if recomputing them
+ * runs out of memory they are dropped and computed again on demand, and the edit stands. */
+static sd_result rebuild_from(sd_complex *c, int l, sd_error *err)
+{
+    sd_mem *m = &c->mem;
+    sd_level *lv = c->lv[l];
+    const int nl = c->nlevels;
+    sd_level old = *lv;
+    lv->have_rules = false;
+    lv->vrule = lv->erule = lv->vrule_only = lv->geo = NULL;
+    memset(&lv->S, 0, sizeof lv->S);
+    lv->tcol = lv->trow = lv->tpos = NULL;
+    sd_result r = sd_ensure_rules(c, l, err);
+    if (r) {
+        lv->have_rules = old.have_rules;
+        lv->vrule = old.vrule;
+        lv->erule = old.erule;
+        lv->vrule_only = old.vrule_only;
+        lv->geo = old.geo;
+        lv->S = old.S;
+        lv->tcol = old.tcol;
+        lv->trow = old.trow;
+        lv->tpos = old.tpos;
+        return r;
+    }
+    sd_free(m, old.vrule);
+    sd_free(m, old.erule);
+    sd_free(m, old.vrule_only);
+    sd_free(m, old.geo);
+    sd_csrb_free(m, &old.S);
+    sd_free(m, old.tcol);
+    sd_free(m, old.trow);
+    sd_free(m, old.tpos);
+    sd_drop_levels(c, l + 1);
+    sd_error ignored;
+    if (!sd_complex_level(c, nl - 1, &ignored))
+        sd_drop_levels(c, l + 1);
+    return SD_OK;
 }
 
 sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *idx,
@@ -184,18 +243,26 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
         if (!ok)
             goto nomem;
     }
+    /* the first level whose rules read a moved point's position (Ying-Zorin's alpha): its S is
+     * stale, so the changes stop there and its rules and the finer levels are rebuilt */
+    int stale = nl;
+    for (int l = 0; channel == 0 && l + 1 < nl && stale == nl; l++)
+        for (uint32_t i = 0; c->lv[l]->geo && i < ch[l].n; i++)
+            if (c->lv[l]->geo[ch[l].id[i]]) {
+                stale = l;
+                break;
+            }
+    int top = stale < nl ? stale + 1 : nl;
     /* every change is known: apply them */
-    for (int l = 0; l < nl; l++) {
-        double *p = c->lv[l]->ch[channel].data;
-        for (uint32_t i = 0; i < ch[l].n; i++)
-            for (int k = 0; k < nc; k++)
-                p[(size_t)ch[l].id[i] * nc + k] += ch[l].d[(size_t)i * nc + k];
-        if (counts)
-            counts[l] = ch[l].n;
+    apply(c, channel, nc, ch, top, 1);
+    if (stale < nl && (rc = rebuild_from(c, stale, err))) {
+        apply(c, channel, nc, ch, top, -1); /* out of memory: as it was */
+        goto done;
     }
-    if (counts)
-        for (int l = nl; l <= SD_MAX_LEVEL; l++)
-            counts[l] = 0;
+    if (counts) {
+        for (int l = 0; l <= SD_MAX_LEVEL; l++)
+            counts[l] = l < top ? ch[l].n : l < c->nlevels ? c->lv[l]->t.nv : 0;
+    }
     goto done;
 nomem:
     rc = sd_fail_nomem(err, m);

@@ -274,6 +274,10 @@ struct sd_level {
      * level's point ids to slots in an edit's list of changed points (-1 = unchanged) */
     uint32_t *tcol, *trow, *tpos;
     int32_t *slot;
+    /* per point of this level: 1 where the rules read its position (Ying-Zorin's corner angle
+     * alpha: the corner and the far ends of its petal's singular edges), or NULL if none; an
+     * edit moving such a point rebuilds this level's rules (edit.c) */
+    uint8_t *geo;
     /* channels of this level (channel 0 = positions) */
     int nch;
     sd_channel ch[SD_MAX_CHANNELS];
@@ -320,6 +324,7 @@ sd_result sd_split_edges(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, s
 sd_result sd_split_faces(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
 /* levels.c: forget a level's rules and every finer level */
 void sd_drop_rules(sd_complex *c, sd_level *lv);
+void sd_drop_levels(sd_complex *c, int from); /* levels from.. (they are recomputed on demand) */
 /* rules.c */
 sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
 sd_result sd_ensure_rules(sd_complex *cx, int level, sd_error *err);

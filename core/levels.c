@@ -61,7 +61,7 @@ sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, co
     return c;
 }
 
-static void drop_levels(sd_complex *c, int from)
+void sd_drop_levels(sd_complex *c, int from)
 {
     for (int l = from; l < c->nlevels; l++) {
         sd_level_free(&c->mem, c->lv[l]);
@@ -74,7 +74,7 @@ static void drop_levels(sd_complex *c, int from)
 /* Forget level lv's rules, stencils and edit columns, and every finer level (tags changed). */
 void sd_drop_rules(sd_complex *c, sd_level *lv)
 {
-    drop_levels(c, lv->index + 1);
+    sd_drop_levels(c, lv->index + 1);
     sd_mem *m = &c->mem;
     sd_free(m, lv->vrule);
     sd_free(m, lv->erule);
@@ -84,7 +84,9 @@ void sd_drop_rules(sd_complex *c, sd_level *lv)
     sd_free(m, lv->tpos);
     sd_free(m, lv->slot);
     sd_free(m, lv->vrule_only);
+    sd_free(m, lv->geo);
     lv->vrule_only = NULL;
+    lv->geo = NULL;
     lv->vrule = lv->erule = NULL;
     lv->tcol = lv->trow = lv->tpos = NULL;
     lv->slot = NULL;
@@ -95,7 +97,7 @@ void sd_complex_free(sd_complex *c)
 {
     if (!c)
         return;
-    drop_levels(c, 0);
+    sd_drop_levels(c, 0);
     sd_free(&c->mem, c->tag_at);
     sd_free(&c->mem, c->tag_k);
     sd_free(&c->mem, c->ov);
@@ -117,7 +119,7 @@ sd_result sd_complex_set_diagonal(sd_complex *c, size_t simplex, int pair, sd_er
     if (pair < 0 || pair > 2)
         return sd_fail(err, SD_ERR_ARG, (long)simplex, -1, "diagonal pair must be 0, 1 or 2");
     uint32_t t = c->in_tet[simplex];
-    drop_levels(c, 1);
+    sd_drop_levels(c, 1);
     sd_level *l0 = c->lv[0]; /* level 0's stencils do not depend on diagonals: kept */
     l0->t.tet_d[t] = (uint8_t)map_pair(pair, c->tet_swapped[t]);
     return SD_OK;
@@ -155,7 +157,7 @@ int sd_complex_add_channel(sd_complex *c, const double *data, int ncomp, sd_erro
         return -1;
     }
     memcpy(copy, data, n * sizeof *copy);
-    drop_levels(c, 1);
+    sd_drop_levels(c, 1);
     l0->ch[l0->nch].ncomp = ncomp;
     l0->ch[l0->nch].data = copy;
     return l0->nch++;

@@ -850,7 +850,7 @@ static int petal_tag(const sd_complex *cx, int level, uint32_t v, uint32_t f)
 }
 
 static bool yz_gammas(sd_mem *m, const sd_complex *cx, int level, const sd_topo *t,
-                      const double *x, sd_yzend (*gam)[2])
+                      const double *x, sd_yzend (*gam)[2], uint8_t **geo)
 {
     const uint32_t nv = t->nv;
     uint32_t *off = sd_calloc(m, (size_t)nv + 2, sizeof *off), *fl = NULL, *uf = NULL;
@@ -974,6 +974,9 @@ static bool yz_gammas(sd_mem *m, const sd_complex *cx, int level, const sd_topo 
                 }
                 double cs = nu > 0 && nw > 0 ? dot / sqrt(nu * nw) : -1;
                 double alpha = acos(cs < -1 ? -1 : cs > 1 ? 1 : cs);
+                if (!*geo && !(*geo = sd_calloc(m, nv, 1)))
+                    goto out;
+                (*geo)[v] = (*geo)[sing1[b + r]] = (*geo)[sing2[b + r]] = 1;
                 if (pk[b + r] == SD_PETAL_CONCAVE) {
                     theta = (2 * M_PI - alpha) / kk;
                     /* the flatness modification divides by sin(k theta) = -sin(alpha): with the
@@ -1063,7 +1066,7 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     J.stride = any_opp && !t->ntet && !no && !any_g2e;
     if (t->ovmask & OVM_YZ) { /* Ying-Zorin petal rules for the edges at singular vertices */
         gam = sd_alloc(m, ((size_t)ne + 1) * sizeof *gam);
-        if (!gam || !yz_gammas(m, cx, lv->index, t, lv->ch[0].data, gam) ||
+        if (!gam || !yz_gammas(m, cx, lv->index, t, lv->ch[0].data, gam, &lv->geo) ||
             !sd_yz_flat_rows(m, t, (const sd_yzend(*)[2])gam, er, &yzr))
             goto nomem;
         if (yzr.n) /* flattened rows are wider than two opposite vertices */
@@ -1242,7 +1245,8 @@ nomem:
 fail:
     sd_free(m, lv->vrule);
     sd_free(m, lv->erule);
-    lv->vrule = lv->erule = NULL;
+    sd_free(m, lv->geo);
+    lv->vrule = lv->erule = lv->geo = NULL;
     sd_csrb_free(m, &lv->S);
 out:
     sd_pats_free(m, &pats);

@@ -22,7 +22,8 @@
  * later (a level's rules and stencils, the edges of the finest level, a matrix view) is only
  * added, under the caller's lock; arrays already handed out or read by these accessors are never
  * freed or moved (only sd_complex_free, set_diagonal, add_channel and set_singular drop levels,
- * and edits change channel values in place). The core's own working arrays (faces, per-cell
+ * and edits change channel values in place — or, where they move a point that a level's rules
+ * read, rebuild that level's rules and the finer levels; edits exclude readers anyway). The core's own working arrays (faces, per-cell
  * edge ids) are made and dropped again inside such calls; no accessor reads them.
  * Lazily building accessors: the finest computed level is stored as its cells and points only;
  * sd_level_edges, sd_level_find_edge and sd_level_edge_singular build its edges the first time
@@ -290,7 +291,9 @@ sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err
 /* Set new values of channel `channel` (0 = positions) at n control points: point idx[i] gets
  * values[i*ncomp .. i*ncomp+ncomp-1]. Every computed level is updated through the cached
  * matrices, pushing the changes down level by level (p^{l+1} += S_l dp^l over the rows that use a
- * changed point only), so the cost follows the edited region, not the mesh. All-or-nothing:
+ * changed point only), so the cost follows the edited region, not the mesh. Where a level's
+ * rules read a moved position (Ying-Zorin's corner angle), that level's rules are rebuilt and
+ * the finer computed levels recomputed (counts then holds their full sizes). All-or-nothing:
  * indices, repeated indices and values are checked and all memory is taken before anything
  * changes. counts (optional, SD_MAX_LEVEL+1 entries) receives the points updated per level.
  * Not thread-safe with readers of the same complex: the caller excludes them. */

@@ -1,6 +1,7 @@
 /* test_yz.c — nonmanifold_surface = ying-zorin (003 Sec. 2): classes, stencil weights derived by
  * hand from 003's formulas, and invariants through levels. */
 #include "test.h"
+#include <stdbool.h>
 
 static const sd_options YZ = {.surface_weights = SD_WEIGHTS_LOOP,
                               .nonmanifold_surface = SD_NMSURF_YING_ZORIN};
@@ -293,5 +294,124 @@ TEST(yz_fixed_disk)
         CHECK(fd == 7);
     }
     sd_complex_free(c);
+    mesh_free(&m);
+}
+
+/* Failure injection (counting allocator) for an edit that moves a point a corner's alpha is
+ * measured on: the level's rules are rebuilt. Every allocation that can fail either leaves the
+ * levels exactly as they were (SD_ERR_NOMEM) or gives the levels of a new complex with the moved
+ * point; nothing leaks. */
+typedef struct yzcount {
+    long calls, fail_at;
+    long long bytes;
+} yzcount;
+static void *yz_alloc(size_t n, void *ud)
+{
+    yzcount *c = ud;
+    if (++c->calls == c->fail_at)
+        return NULL;
+    void *p = malloc(n);
+    if (p)
+        c->bytes += (long long)n;
+    return p;
+}
+static void yz_release(void *p, size_t n, void *ud)
+{
+    ((yzcount *)ud)->bytes -= (long long)n;
+    free(p);
+}
+
+/* the positions of levels 0..2 of complex c (sizes in n[]) into one buffer */
+static double *yz_levels(sd_complex *c, size_t *n)
+{
+    sd_error err;
+    size_t total = 0, at = 0;
+    for (int L = 0; L <= 2; L++) {
+        const sd_level *lv = sd_complex_level(c, L, &err);
+        if (!lv)
+            return NULL;
+        total += 3 * (size_t)sd_level_num_vertices(lv);
+    }
+    double *x = malloc(total * sizeof *x);
+    for (int L = 0; x && L <= 2; L++) {
+        const sd_level *lv = sd_complex_level(c, L, &err);
+        int nc;
+        size_t k = 3 * (size_t)sd_level_num_vertices(lv);
+        memcpy(x + at, sd_level_channel(lv, 0, &nc), k * sizeof *x);
+        at += k;
+    }
+    *n = total;
+    return x;
+}
+
+TEST(yz_edit_rebuilds_alpha_rules)
+{
+    mesh m = {0};
+    three_fins(&m);
+    const uint32_t moved = 3; /* fin 0's boundary end at s0: alpha of s0's petal reads it */
+    const double to[3] = {1.3, 0.6, -0.2};
+    sd_error err;
+    /* the reference: a new complex with the moved point */
+    mesh w = m;
+    double *xyz = malloc(3 * m.nv * sizeof *xyz);
+    memcpy(xyz, m.xyz, 3 * m.nv * sizeof *xyz);
+    memcpy(xyz + 3 * moved, to, sizeof to);
+    w.xyz = xyz;
+    sd_complex *ref = mesh_complex(&w, &YZ, &err);
+    CHECK(ref);
+    size_t nref = 0, nbefore = 0;
+    double *want = yz_levels(ref, &nref);
+    CHECK(want);
+    sd_complex *plain = mesh_complex(&m, &YZ, &err);
+    double *before = yz_levels(plain, &nbefore);
+    CHECK(before && nbefore == nref);
+    /* the edit really changes more than the stale matrices would give: level 2 differs from
+     * pushing the move through the old rules by more than rounding */
+    uint64_t counts[SD_MAX_LEVEL + 1];
+    CHECK(sd_complex_edit(plain, 0, 1, &moved, to, counts, &err) == SD_OK);
+    size_t ngot = 0;
+    double *got = yz_levels(plain, &ngot);
+    CHECK(got && ngot == nref);
+    double diff = 0;
+    for (size_t i = 0; i < nref; i++)
+        diff = fmax(diff, fabs(got[i] - want[i]));
+    CHECK(diff < 1e-12);
+    free(got);
+    sd_complex_free(plain);
+    long n = 1;
+    for (;; n++) {
+        yzcount cc = {0, -1, 0};
+        sd_options o = YZ;
+        o.allocator = (sd_allocator){yz_alloc, yz_release, &cc};
+        sd_complex *c = mesh_complex(&m, &o, &err);
+        CHECK(c);
+        size_t nb = 0;
+        double *b = yz_levels(c, &nb);
+        CHECK(b);
+        cc.fail_at = cc.calls + n;
+        sd_result r = sd_complex_edit(c, 0, 1, &moved, to, counts, &err);
+        bool reached = cc.calls >= cc.fail_at;
+        cc.fail_at = -1;
+        size_t na = 0;
+        double *a = yz_levels(c, &na);
+        CHECK(a && na == nref);
+        const double *expect = r == SD_OK ? want : b;
+        CHECK(r == SD_OK || err.code == SD_ERR_NOMEM);
+        double d = 0;
+        for (size_t i = 0; a && i < nref; i++)
+            d = fmax(d, fabs(a[i] - expect[i]));
+        CHECK(d < 1e-12);
+        free(a);
+        free(b);
+        sd_complex_free(c);
+        CHECK(cc.bytes == 0);
+        if (!reached)
+            break; /* the edit made fewer than n allocations: every one has failed once */
+    }
+    CHECK(n > 30); /* the rules of a level and two levels' worth of allocations */
+    free(want);
+    free(before);
+    free(xyz);
+    sd_complex_free(ref);
     mesh_free(&m);
 }

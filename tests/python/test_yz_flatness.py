@@ -343,3 +343,52 @@ def test_petal_errors_of_the_petal(daemon):
     r = s.req("PUT", "/tags", json={})
     assert r.status_code == 400 and r.json()["errors"][0]["pointer"] == "/singular"
     s.delete()
+
+
+# ---- edits move the points alpha is measured on -----------------------------------------------
+
+@pytest.mark.parametrize("moved, kind", [(3, "convex"), (3, "concave"), (0, "convex"), (5, "concave")])
+def test_edit_remeasures_alpha(daemon, moved, kind):
+    """An edit that moves a far end of a corner petal's singular edge (3) or the corner (0)
+    changes alpha: the cached matrix of that level is stale, so the edit rebuilds it. The result
+    equals the level-1 formula with the new angle (numpy, as above) and a new session with the
+    moved points, at every cached level; a point alpha does not read (5) takes the ordinary path."""
+    V, T = fins_end()
+    petals = [{"vertex": 0, "triangle": [0, 4, 3], "kind": kind}]
+    s = Session(daemon)
+    assert s.put_complex({"vertices": V, "simplices": T}).status_code == 200
+    assert s.req("PUT", "/rules", json={"nonmanifold_surface": "ying-zorin",
+                                        "surface_weights": "loop"}).status_code == 200
+    r = s.req("PUT", "/tags", json={"petals": petals})
+    assert r.status_code == 200, r.text
+    for level in range(4):
+        assert s.level(level, format="json").status_code == 200
+    W = [list(p) for p in V]
+    W[moved] = [W[moved][0] + 0.2, W[moved][1] + 0.7, W[moved][2] - 0.1]
+    r = s.req("PATCH", "/control-points", json={"moves": [{"index": moved, "position": W[moved]}]},
+              headers={"If-Match": r.headers["ETag"]})
+    assert r.status_code == 200, r.text
+    up = r.json()["updated_points"]
+    fresh = Session(daemon)
+    assert fresh.put_complex({"vertices": W, "simplices": T}).status_code == 200
+    assert fresh.req("PUT", "/rules", json={"nonmanifold_surface": "ying-zorin",
+                                            "surface_weights": "loop"}).status_code == 200
+    assert fresh.req("PUT", "/tags", json={"petals": petals}).status_code == 200
+    for level in range(4):
+        a = s.level(level, format="json").json()
+        b = fresh.level(level, format="json").json()
+        np.testing.assert_allclose(a["vertices"], b["vertices"], rtol=0, atol=1e-12,
+                                   err_msg=f"level {level}")
+    j1 = s.level(1, format="json").json()
+    P = np.array(W, dtype=float)
+    u, w = P[1] - P[0], P[3] - P[0]
+    alpha = math.acos(np.dot(u, w) / np.linalg.norm(u) / np.linalg.norm(w))
+    theta = (2 * math.pi - alpha) / 2 if kind == "concave" else alpha / 2
+    want, _ = corner_expected(P, 0, [1, 4, 3], theta, flat=kind == "concave")
+    np.testing.assert_allclose(edge_point(j1, 0, 4), want[2], atol=1e-12)
+    if moved != 5:                              # the rebuilt levels count all their points
+        assert up["2"] == len(s.level(2, format="json").json()["vertices"])
+    else:
+        assert up["1"] < len(j1["vertices"])
+    s.delete()
+    fresh.delete()
