@@ -350,10 +350,14 @@ sd_rule sd_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
  * petal) or SD_YZ_CONCAVE (the fixed centre of a concave corner petal, theta its angle step).
  * Every edge with a flattened end gets er[e] = SD_RULE_YZ_FIXED_DISK, _DART or _CONCAVE and its
  * row: ends[e] the weights of its two ends, then col/w[off[e] .. off[e+1]) the rest. */
-#define SD_YZ_MIN_SIN 0.01 /* a concave corner within ~0.6 degrees of straight is not flattened */
+#define SD_YZ_FLAT_S 0.75 /* the flatness modification's s (docs/DECISIONS.md 27, 28) */
+/* A concave corner whose singular edges are nearly in line (sin alpha < SD_YZ_RAMP, ~5.7
+ * degrees) has no well-defined tangent pair: its s fades as (sin alpha / SD_YZ_RAMP)^2, so the
+ * rule is continuous in alpha and tends to the first stage (DECISIONS 28). */
+#define SD_YZ_RAMP 0.1
 enum { SD_YZ_NONE, SD_YZ_FIRST, SD_YZ_DISK, SD_YZ_DART, SD_YZ_CONCAVE };
 typedef struct sd_yzend {
-    double g, theta;
+    double g, theta, s; /* s: the concave corner's flatness parameter */
     uint8_t kind;
 } sd_yzend;
 static inline bool sd_yz_flat(uint8_t kind)

@@ -980,9 +980,13 @@ static bool yz_gammas(sd_mem *m, const sd_complex *cx, int level, const sd_topo 
                 if (pk[b + r] == SD_PETAL_CONCAVE) {
                     theta = (2 * M_PI - alpha) / kk;
                     /* the flatness modification divides by sin(k theta) = -sin(alpha): with the
-                     * singular edges (nearly) in line it has no tangent plane to flatten to */
-                    if (sin(alpha) > SD_YZ_MIN_SIN && kk >= 2)
+                     * singular edges in line it has no tangent plane to flatten to, and near
+                     * that s fades (SD_YZ_RAMP) so the rule stays continuous in alpha */
+                    double q = sin(alpha) / SD_YZ_RAMP, fs = SD_YZ_FLAT_S * (q < 1 ? q * q : 1);
+                    if (fs > 1e-20 && kk >= 2) { /* else (sin alpha < 1e-11) the first stage */
                         end->kind = SD_YZ_CONCAVE;
+                        end->s = fs;
+                    }
                 } else {
                     theta = alpha / kk;
                 }

@@ -600,9 +600,10 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
         uint32_t sing[2], ns, nf = petal_faces(t, &x, v, f, faces, sing, &ns);
         if (ns != 2) {
             rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
-                         "petal tag %zu: the petal of vertex %u holding this triangle is %s (%u "
-                         "singular edges); corner kinds apply to open petals, bounded by two", i,
-                         v, ns == 0 ? "closed" : ns == 1 ? "a dart" : "not a fan", ns);
+                         "petal tag %zu: the petal of vertex %u holding this triangle is %s; "
+                         "corner kinds apply to open petals, bounded by two singular edges", i, v,
+                         ns == 0 ? "closed (no singular edge)"
+                         : ns == 1 ? "a dart (one singular edge)" : "not a fan");
             goto out;
         }
         for (size_t q = 0; q < nat; q++)

@@ -50,7 +50,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define SD_YZ_FLAT_S 0.75
 
 void sd_yzrows_free(sd_mem *m, sd_yzrows *y)
 {
@@ -229,9 +228,9 @@ static bool dart_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32
 /* Add the concave corner row of edge v-ring[i] (ring p_0 .. p_k, singular edges v-p_0, v-p_k,
  * angle step theta) times `scale`. */
 static bool concave_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32_t k,
-                        uint32_t i, double theta, double scale)
+                        uint32_t i, double theta, double s, double scale)
 {
-    const double s = SD_YZ_FLAT_S, g = 0.5 - cos(theta) / 4, d = 2 * sin(k * theta);
+    const double g = 0.5 - cos(theta) / 4, d = 2 * sin(k * theta);
     double sum = 0;
     for (uint32_t j = 0; j <= k; j++) {
         double tij = j == i ? g : (j == i + 1 || j + 1 == i) ? 1.0 / 8.0 : 0.0;
@@ -313,7 +312,7 @@ bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint
                 case SD_YZ_CONCAVE:
                     k = chain_ring(t, (const uint32_t(*)[2])efc, v, e, false, ring, tmp, cap, &at);
                     fine = k >= 2;
-                    if (fine && !concave_row(m, &a, v, ring, k, at, x->theta, 1.0 / sides))
+                    if (fine && !concave_row(m, &a, v, ring, k, at, x->theta, x->s, 1.0 / sides))
                         goto out;
                     break;
                 case SD_YZ_FIRST: { /* 003 Fig. 4f from this end */

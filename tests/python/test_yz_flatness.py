@@ -392,3 +392,49 @@ def test_edit_remeasures_alpha(daemon, moved, kind):
         assert up["1"] < len(j1["vertices"])
     s.delete()
     fresh.delete()
+
+
+# ---- a concave corner whose singular edges are nearly in line ---------------------------------
+
+def straightish(alpha):
+    """One fin of fins_end() with its boundary end 3 turned to the angle alpha from the spine
+    0-1 (in the x-z plane), the other two fins as they are."""
+    V, T = fins_end()
+    V[3] = [math.sin(alpha), 0, math.cos(alpha)]
+    return V, T
+
+
+def concave_point(daemon, alpha):
+    V, T = straightish(alpha)
+    (j,), c = ours(daemon, V, T, petals=[{"vertex": 0, "triangle": [0, 4, 3], "kind": "concave"}])
+    return edge_point(j, 0, 4), edge_rules(c)[(0, 4)], np.array(V, dtype=float)
+
+
+def test_concave_corner_fades_near_straight(daemon):
+    """The modification divides by sin(k theta) = -sin(alpha): near alpha = pi (and 0) it has no
+    tangent pair to flatten to. s fades as 3/4 (sin(alpha)/0.1)^2 there (DECISIONS 28): the rule
+    is continuous in alpha and is the first stage at alpha = pi. Expected values: numpy's
+    eigen-decomposition with that s; continuity: the point moves by O(delta alpha)."""
+    for alpha in (math.pi - 0.05, 0.07, math.pi - 0.2):
+        got, rule, P = concave_point(daemon, alpha)
+        assert rule == "ying-zorin-concave"
+        theta = (2 * math.pi - alpha) / 2
+        s = 0.75 * min(1.0, (math.sin(alpha) / 0.1) ** 2)
+        M, _ = flattened(first_stage(2, theta, {0, 2}, closed=False), s=s)
+        np.testing.assert_allclose(got, (M @ P[[0, 1, 4, 3]])[2], atol=1e-11, err_msg=str(alpha))
+    # at pi: the first stage (theta = pi/2); approaching it, the point converges to that
+    at_pi, rule, P = concave_point(daemon, math.pi)
+    first = first_stage(2, math.pi / 2, {0, 2}, closed=False) @ P[[0, 1, 4, 3]]
+    np.testing.assert_allclose(at_pi, first[2], atol=1e-12)
+    prev = None
+    for d in (1e-2, 1e-3, 1e-4, 1e-5):
+        p, _, _ = concave_point(daemon, math.pi - d)
+        assert np.linalg.norm(p - at_pi) < 50 * d, (d, p, at_pi)
+        if prev is not None:
+            assert np.linalg.norm(p - prev) < 50 * d * 10
+        prev = p
+    # and across the ends of the ramp (sin alpha = 0.1) nothing jumps
+    a = math.pi - math.asin(0.1)
+    p1, _, _ = concave_point(daemon, a - 1e-6)
+    p2, _, _ = concave_point(daemon, a + 1e-6)
+    assert np.linalg.norm(p1 - p2) < 1e-3
