@@ -520,8 +520,8 @@ static uint32_t petal_faces(sd_topo *t, const vinc *x, uint32_t v, uint32_t f0, 
             }
         }
     }
-    for (uint32_t k = x->foff[v]; k < x->foff[v + 1]; k++)
-        t->fflag[x->f[k]] &= (uint8_t)~SEEN;
+    for (uint32_t k = 0; k < n; k++) /* every face marked SEEN was queued */
+        t->fflag[out[k]] &= (uint8_t)~SEEN;
     return n;
 }
 
@@ -531,37 +531,67 @@ static int cmp_petal_at(const void *a, const void *b)
     return p->v != q->v ? (p->v > q->v) - (p->v < q->v) : (p->f > q->f) - (p->f < q->f);
 }
 
+/* The (unordered) pair of singular edges bounding an open petal, as one key. */
+static uint64_t pair_key(const uint32_t s[2])
+{
+    uint32_t a = s[0] < s[1] ? s[0] : s[1], b = s[0] < s[1] ? s[1] : s[0];
+    return (uint64_t)a << 32 | b;
+}
+
+/* A smooth tag: its vertex, index and pair of singular edges. */
+typedef struct smooth_at {
+    uint32_t v, tag;
+    uint64_t key;
+} smooth_at;
+
+static int cmp_smooth_at(const void *a, const void *b)
+{
+    const smooth_at *p = a, *q = b;
+    return p->v != q->v ? (p->v > q->v) - (p->v < q->v) : (p->key > q->key) - (p->key < q->key);
+}
+
+/* Validation in O(tags + triangles at the tagged vertices): each tag's petal is walked once
+ * (a triangle already claimed by an earlier tag is a duplicate, found before the walk), and
+ * the smooth rule walks each vertex with a smooth tag once. */
 sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n, sd_error *err)
 {
     sd_topo *t = &c->lv[0]->t;
     sd_mem *m = &c->mem;
     sd_result rc = SD_OK;
     vinc x = {0};
-    uint32_t *faces = NULL, *others = NULL;
+    uint32_t *faces = NULL, *owner = NULL;
+    uint8_t *ovv = NULL, *walked = NULL;
+    uint64_t *pairs = NULL;
+    smooth_at *sm = NULL;
     sd_petal_at *at = NULL;
     size_t nat = 0, cap = 0;
+    for (size_t i = 0; i < n; i++) { /* ids and kinds first: nothing below reads an unchecked one */
+        const sd_petal_tag *p = &pt[i];
+        if (p->vertex >= t->nv)
+            return sd_fail(err, SD_ERR_INDEX, (long)i, SD_PT_FIELD_VERTEX,
+                           "petal tag %zu: vertex %u out of range", i, p->vertex);
+        for (int j = 0; j < 3; j++)
+            if (p->triangle[j] >= t->nv)
+                return sd_fail(err, SD_ERR_INDEX, (long)i, SD_PT_FIELD_TRIANGLE,
+                               "petal tag %zu: vertex %u out of range", i, p->triangle[j]);
+        if (p->kind < SD_PETAL_CONVEX || p->kind > SD_PETAL_SMOOTH)
+            return sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_KIND,
+                           "petal tag %zu: the kind is convex, concave or smooth", i);
+    }
     if (n && (!vinc_build(m, t, &x) || !(faces = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *faces)) ||
-              !(others = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *others))))
+              !(owner = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *owner)) ||
+              !(ovv = sd_calloc(m, (size_t)t->nv + 1, 1)) ||
+              !(pairs = sd_alloc(m, n * sizeof *pairs))))
         goto nomem;
+    for (uint32_t f = 0; n && f < t->nf; f++)
+        owner[f] = UINT32_MAX;
+    for (size_t k = 0; n && k < c->nov; k++) /* vertices with a rule of their own */
+        if (c->ov[k].nverts == 1 && c->ov[k].simplex[0] < t->nv)
+            ovv[c->ov[k].simplex[0]] = 1;
+    bool any_smooth = false;
     for (size_t i = 0; i < n; i++) {
         const sd_petal_tag *p = &pt[i];
         uint32_t v = p->vertex;
-        if (v >= t->nv) {
-            rc = sd_fail(err, SD_ERR_INDEX, (long)i, SD_PT_FIELD_VERTEX,
-                         "petal tag %zu: vertex %u out of range", i, v);
-            goto out;
-        }
-        for (int j = 0; j < 3; j++)
-            if (p->triangle[j] >= t->nv) {
-                rc = sd_fail(err, SD_ERR_INDEX, (long)i, SD_PT_FIELD_TRIANGLE,
-                             "petal tag %zu: vertex %u out of range", i, p->triangle[j]);
-                goto out;
-            }
-        if (p->kind < SD_PETAL_CONVEX || p->kind > SD_PETAL_SMOOTH) {
-            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_KIND,
-                         "petal tag %zu: the kind is convex, concave or smooth", i);
-            goto out;
-        }
         uint32_t f = find_face(t, &x, p->triangle);
         if (f == UINT32_MAX || !(t->fflag[f] & FF_MAX)) {
             rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
@@ -591,10 +621,20 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
                          "apply there", i, v);
             goto out;
         }
-        if (t->vflag[v] & VF_SING) {
+        /* the same exclusions as the rules (rules.c, YZV): a tag or a rule of its own wins */
+        if (t->vflag[v] & (VF_SING | VF_S_ANY) || ovv[v]) {
             rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_VERTEX,
-                         "petal tag %zu: vertex %u is tagged singular (fixed with plain edge "
-                         "rules), so its petals have no corner rule", i, v);
+                         "petal tag %zu: vertex %u %s, so its petals have no corner rule", i, v,
+                         ovv[v] ? "has a rule of its own (overrides)"
+                         : t->vflag[v] & VF_SING ? "is tagged singular (fixed with plain edge rules)"
+                                                 : "lies on a tagged crease or embedded surface "
+                                                   "(it follows that)");
+            goto out;
+        }
+        if (owner[f] != UINT32_MAX) {
+            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
+                         "petal tag %zu: tag %u already names this petal of vertex %u", i,
+                         owner[f], v);
             goto out;
         }
         uint32_t sing[2], ns, nf = petal_faces(t, &x, v, f, faces, sing, &ns);
@@ -606,15 +646,18 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
                          : ns == 1 ? "a dart (one singular edge)" : "not a fan");
             goto out;
         }
-        for (size_t q = 0; q < nat; q++)
-            if (at[q].v == v)
-                for (uint32_t k = 0; k < nf; k++)
-                    if (at[q].f == faces[k]) {
-                        rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
-                                     "petal tag %zu: another tag already names this petal of "
-                                     "vertex %u", i, v);
-                        goto out;
-                    }
+        for (uint32_t k = 0; k < nf; k++)
+            if (owner[faces[k]] != UINT32_MAX) { /* a triangle of the petal, but not f */
+                rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
+                             "petal tag %zu: tag %u already names this petal of vertex %u", i,
+                             owner[faces[k]], v);
+                goto out;
+            }
+        /* a triangle holds v once, so owner[] marks (v, petal) */
+        for (uint32_t k = 0; k < nf; k++)
+            owner[faces[k]] = (uint32_t)i;
+        pairs[i] = pair_key(sing);
+        any_smooth |= p->kind == SD_PETAL_SMOOTH;
         if (nat + nf > cap) {
             size_t nc = cap ? 2 * cap : 64;
             while (nc < nat + nf)
@@ -627,43 +670,60 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
         }
         for (uint32_t k = 0; k < nf; k++)
             at[nat++] = (sd_petal_at){v, faces[k], (uint8_t)p->kind};
-        /* 003: petals sharing both singular edges are both corners or both smooth */
-        if (p->kind == SD_PETAL_SMOOTH) {
-            for (uint32_t k = x.foff[v]; k < x.foff[v + 1]; k++) {
+    }
+    /* 003: petals sharing both singular edges are both corners or both smooth. The smooth tags
+     * sorted by (vertex, pair); per such vertex, every petal between a smooth tag's two edges
+     * must be tagged smooth (each petal walked once: `walked`, cleared per vertex). */
+    if (any_smooth) {
+        size_t nsm = 0;
+        if (!(sm = sd_alloc(m, n * sizeof *sm)) || !(walked = sd_calloc(m, (size_t)t->nf + 1, 1)))
+            goto nomem;
+        for (size_t i = 0; i < n; i++)
+            if (pt[i].kind == SD_PETAL_SMOOTH)
+                sm[nsm++] = (smooth_at){pt[i].vertex, (uint32_t)i, pairs[i]};
+        qsort(sm, nsm, sizeof *sm, cmp_smooth_at);
+        for (size_t a = 0, b; a < nsm; a = b) {
+            uint32_t v = sm[a].v;
+            for (b = a; b < nsm && sm[b].v == v; b++)
+                ;
+            for (uint32_t k = x.foff[v]; k < x.foff[v + 1] && !rc; k++) {
                 uint32_t g = x.f[k], s2[2], ns2;
-                if (!(t->fflag[g] & FF_MAX))
+                if (!(t->fflag[g] & FF_MAX) || walked[g])
                     continue;
-                petal_faces(t, &x, v, g, others, s2, &ns2);
-                if (ns2 != 2 || !((s2[0] == sing[0] && s2[1] == sing[1]) ||
-                                  (s2[0] == sing[1] && s2[1] == sing[0])))
-                    continue;
-                bool smooth = false, mine = false;
-                for (uint32_t q = 0; q < nf; q++)
-                    mine |= faces[q] == g;
-                if (mine)
-                    continue;
-                for (size_t j = 0; j < n && !smooth; j++)
-                    if (pt[j].vertex == v && pt[j].kind == SD_PETAL_SMOOTH) {
-                        uint32_t h = find_face(t, &x, pt[j].triangle);
-                        if (h == UINT32_MAX)
-                            continue;
-                        uint32_t s3[2], ns3, n3 = petal_faces(t, &x, v, h, others, s3, &ns3);
-                        for (uint32_t q = 0; q < n3 && !smooth; q++)
-                            smooth |= others[q] == g;
-                    }
-                if (!smooth) {
+                uint32_t tag = owner[g];
+                bool tagged = tag != UINT32_MAX && pt[tag].vertex == v;
+                uint64_t key;
+                if (tagged) { /* its key is known; its triangles need no walk */
+                    if (pt[tag].kind == SD_PETAL_SMOOTH)
+                        continue;
+                    key = pairs[tag];
+                    ns2 = 2;
+                } else {
+                    uint32_t ng = petal_faces(t, &x, v, g, faces, s2, &ns2);
+                    for (uint32_t q = 0; q < ng; q++)
+                        walked[faces[q]] = 1;
+                    key = pair_key(s2);
+                }
+                smooth_at want = {v, 0, key};
+                const smooth_at *hit = ns2 == 2 ? bsearch(&want, sm + a, b - a, sizeof *sm,
+                                                          cmp_smooth_at) : NULL;
+                if (hit) {
                     const uint32_t *gv = t->fv[g];
-                    rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_KIND,
-                                 "petal tag %zu: a smooth petal needs every petal of vertex %u "
+                    rc = sd_fail(err, SD_ERR_ARG, (long)hit->tag, SD_PT_FIELD_KIND,
+                                 "petal tag %u: a smooth petal needs every petal of vertex %u "
                                  "between the same two singular edges smooth too (003 Sec. 2), "
-                                 "and the one holding [%u, %u, %u] is not tagged smooth", i, v,
-                                 gv[0], gv[1], gv[2]);
-                    goto out;
+                                 "and the one holding [%u, %u, %u] is not tagged smooth",
+                                 hit->tag, v, gv[0], gv[1], gv[2]);
                 }
             }
+            for (uint32_t k = x.foff[v]; k < x.foff[v + 1]; k++)
+                walked[x.f[k]] = 0;
+            if (rc)
+                goto out;
         }
     }
-    qsort(at, nat, sizeof *at, cmp_petal_at);
+    if (nat)
+        qsort(at, nat, sizeof *at, cmp_petal_at);
     sd_free(m, c->pet);
     c->pet = at;
     c->npet = nat;
@@ -675,7 +735,11 @@ nomem:
 out:
     sd_free(m, at);
     sd_free(m, faces);
-    sd_free(m, others);
+    sd_free(m, owner);
+    sd_free(m, ovv);
+    sd_free(m, pairs);
+    sd_free(m, sm);
+    sd_free(m, walked);
     vinc_free(m, &x);
     return rc;
 }

@@ -332,7 +332,8 @@ bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint
                 }
             }
             acc_merge(&a);
-            if (!fine) { /* not such a petal after all: leave the edge to the first stage */
+            if (!fine) { /* not such a petal after all (not met in practice): the edge keeps the rule
+                          * rules.c gave it without these rows */
                 if (pass == 0)
                     y->off[e + 1] = UINT32_MAX;
                 continue;

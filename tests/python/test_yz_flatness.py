@@ -438,3 +438,96 @@ def test_concave_corner_fades_near_straight(daemon):
     p1, _, _ = concave_point(daemon, a - 1e-6)
     p2, _, _ = concave_point(daemon, a + 1e-6)
     assert np.linalg.norm(p1 - p2) < 1e-3
+
+
+# ---- asymmetric petals, darts away from ring position 0, level 2 --------------------------------
+
+def test_concave_corner_of_three_uneven_triangles(daemon):
+    """A concave-tagged fin of three uneven triangles (k = 3): the two crease ends enter the
+    projection with different weights (sin((k-i) theta) vs sin(i theta)), which a symmetric
+    k = 2 petal cannot tell apart."""
+    V, T = fins_end()
+    T = [t for t in T if t not in ([0, 1, 4], [0, 4, 3])]
+    V += [[0.9, 0.05, 0.6], [1.1, -0.1, 0.25]]                 # 12, 13: inside the fin
+    T += [[0, 1, 12], [0, 12, 13], [0, 13, 3], [1, 4, 12]]
+    petals = [{"vertex": 0, "triangle": [0, 13, 3], "kind": "concave"}]
+    (j1, j2), c = ours(daemon, V, T, L=2, petals=petals)
+    rules = edge_rules(c)
+    assert rules[(0, 12)] == rules[(0, 13)] == "ying-zorin-concave"
+    P = np.array(V, dtype=float)
+    u, w = P[1] - P[0], P[3] - P[0]
+    alpha = math.acos(np.dot(u, w) / np.linalg.norm(u) / np.linalg.norm(w))
+    theta = (2 * math.pi - alpha) / 3
+    want, _ = corner_expected(P, 0, [1, 12, 13, 3], theta, flat=True)
+    np.testing.assert_allclose(edge_point(j1, 0, 12), want[2], atol=1e-12)
+    np.testing.assert_allclose(edge_point(j1, 0, 13), want[3], atol=1e-12)
+    Q = np.array(j1["vertices"])
+    oe = {tuple(sorted(e)): i for i, e in enumerate(j1["origin"]["edge_of"]) if e}
+    ring = [oe[(0, 1)], oe[(0, 12)], oe[(0, 13)], oe[(0, 3)]]
+    want2, _ = corner_expected(Q, 0, ring, theta, flat=True)
+    np.testing.assert_allclose(edge_point(j2, 0, ring[1]), want2[2], atol=1e-12)
+    np.testing.assert_allclose(edge_point(j2, 0, ring[2]), want2[3], atol=1e-12)
+
+
+@pytest.mark.parametrize("s_at", [2, 4])
+def test_dart_with_its_crease_elsewhere_on_the_ring_level_2(daemon, s_at):
+    """dart_mesh with the fins moved to edge 0-s_at: the dart's singular edge is not the ring's
+    first; level 2 is checked on the level-1 points (the dart persists around the corner)."""
+    k = 5
+    V, T = dart_mesh(k)
+    T = T[:k] + [[0, s_at, k + 1], [0, s_at, k + 2]]
+    (j1, j2), c = ours(daemon, V, T, L=2)
+    ring = list(range(s_at, k + 1)) + list(range(1, s_at))        # p_0: the singular edge's end
+    M, _ = flattened(first_stage(k, 2 * math.pi / k, {0}, closed=True))
+    P = np.array(V, dtype=float)
+    want = M @ P[[0] + ring]
+    for i in range(1, k):
+        np.testing.assert_allclose(edge_point(j1, 0, ring[i]), want[i + 1], atol=1e-12)
+    Q = np.array(j1["vertices"])
+    oe = {tuple(sorted(e)): i for i, e in enumerate(j1["origin"]["edge_of"]) if e}
+    ring1 = [oe[(0, r)] for r in ring]
+    want2 = M @ Q[[0] + ring1]
+    for i in range(1, k):
+        np.testing.assert_allclose(edge_point(j2, 0, ring1[i]), want2[i + 1], atol=1e-12)
+
+
+# ---- hostile or ignored petal tags ---------------------------------------------------------------
+
+def test_petal_tags_that_the_rules_would_ignore_are_refused(daemon):
+    V, T = fins_end()
+    good = {"vertex": 0, "triangle": [0, 4, 3], "kind": "concave"}
+    # vertex 0 on a tagged crease (0-7): it follows the crease
+    r = put_tags(daemon, V, T, {"singular": [[0, 7]], "petals": [good]})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/petals/0/vertex", r.text
+    assert "crease" in r.json()["detail"]
+    # a rule of its own at vertex 0
+    s = Session(daemon)
+    assert s.put_complex({"vertices": V, "simplices": T}).status_code == 200
+    assert s.req("PUT", "/rules", json={"nonmanifold_surface": "ying-zorin", "overrides": [
+        {"simplex": [0], "rule": "G2"}]}).status_code == 200
+    r = s.req("PUT", "/tags", json={"petals": [good]})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/petals/0/vertex", r.text
+    assert "overrides" in r.json()["detail"]
+    s.delete()
+
+
+def test_many_smooth_petals_validate_quickly(daemon):
+    """n fans between the non-manifold edges 0-1 and 0-2 (plus a lone triangle, so vertex 0 is
+    complex), all tagged smooth, in reverse order: validation is near-linear in the tags (a walk
+    per petal), so thousands of petals are checked well within a request's time."""
+    n = 3000
+    V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, -1, 0], [-1, -0.5, 1]]
+    T = [[0, 3, 4]]
+    for i in range(n):
+        a = 2 * math.pi * i / n
+        V.append([0.6, 0.6, 0.3 * math.cos(a) + 1e-4 * i])
+        T += [[0, 1, 5 + i], [0, 5 + i, 2]]
+    petals = [{"vertex": 0, "triangle": [0, 1, 5 + i], "kind": "smooth"} for i in reversed(range(n))]
+    s = Session(daemon)
+    assert s.put_complex({"vertices": V, "simplices": T}).status_code == 200
+    r = s.req("PUT", "/tags", json={"petals": petals})
+    assert r.status_code == 200, r.text[:300]
+    # one left untagged: refused, naming a smooth tag's kind
+    r = s.req("PUT", "/tags", json={"petals": petals[:-1]})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"].endswith("/kind"), r.text[:300]
+    s.delete()
