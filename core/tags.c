@@ -560,7 +560,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
     sd_result rc = SD_OK;
     vinc x = {0};
     uint32_t *faces = NULL, *owner = NULL;
-    uint8_t *ovv = NULL, *walked = NULL;
+    uint8_t *tagv = NULL, *walked = NULL;
     uint64_t *pairs = NULL;
     smooth_at *sm = NULL;
     sd_petal_at *at = NULL;
@@ -580,14 +580,26 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
     }
     if (n && (!vinc_build(m, t, &x) || !(faces = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *faces)) ||
               !(owner = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *owner)) ||
-              !(ovv = sd_calloc(m, (size_t)t->nv + 1, 1)) ||
+              !(tagv = sd_calloc(m, (size_t)t->nv + 1, 1)) ||
               !(pairs = sd_alloc(m, n * sizeof *pairs))))
         goto nomem;
     for (uint32_t f = 0; n && f < t->nf; f++)
         owner[f] = UINT32_MAX;
-    for (size_t k = 0; n && k < c->nov; k++) /* vertices with a rule of their own */
-        if (c->ov[k].nverts == 1 && c->ov[k].simplex[0] < t->nv)
-            ovv[c->ov[k].simplex[0]] = 1;
+    /* vertices of the singular tags (1: tagged, 2: on a tagged edge or triangle): they follow
+     * the tags whatever the rule preferences, so a petal tag there would never act. (A rule
+     * choice of the vertex's own, or the G1 default, can also make a tag idle; those come from
+     * PUT /rules and are not refused here: the tag waits, like under chang-qin.) */
+    for (size_t k = 0; n && k < c->ntags; k++) {
+        uint32_t id = c->tag_at[k];
+        if (c->tag_k[k] == 1)
+            tagv[id] = 1;
+        else
+            for (int j = 0; j < c->tag_k[k]; j++) {
+                uint32_t w = c->tag_k[k] == 2 ? t->ev[id][j] : t->fv[id][j];
+                if (!tagv[w])
+                    tagv[w] = 2;
+            }
+    }
     bool any_smooth = false;
     for (size_t i = 0; i < n; i++) {
         const sd_petal_tag *p = &pt[i];
@@ -621,14 +633,12 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
                          "apply there", i, v);
             goto out;
         }
-        /* the same exclusions as the rules (rules.c, YZV): a tag or a rule of its own wins */
-        if (t->vflag[v] & (VF_SING | VF_S_ANY) || ovv[v]) {
+        if (tagv[v]) { /* as rules.c (YZV): the singular tags win */
             rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_VERTEX,
                          "petal tag %zu: vertex %u %s, so its petals have no corner rule", i, v,
-                         ovv[v] ? "has a rule of its own (overrides)"
-                         : t->vflag[v] & VF_SING ? "is tagged singular (fixed with plain edge rules)"
-                                                 : "lies on a tagged crease or embedded surface "
-                                                   "(it follows that)");
+                         tagv[v] == 1 ? "is tagged singular (fixed with plain edge rules)"
+                                     : "lies on a tagged crease or embedded surface (it "
+                                       "follows that)");
             goto out;
         }
         if (owner[f] != UINT32_MAX) {
@@ -736,7 +746,7 @@ out:
     sd_free(m, at);
     sd_free(m, faces);
     sd_free(m, owner);
-    sd_free(m, ovv);
+    sd_free(m, tagv);
     sd_free(m, pairs);
     sd_free(m, sm);
     sd_free(m, walked);

@@ -493,21 +493,28 @@ def test_dart_with_its_crease_elsewhere_on_the_ring_level_2(daemon, s_at):
 
 # ---- hostile or ignored petal tags ---------------------------------------------------------------
 
-def test_petal_tags_that_the_rules_would_ignore_are_refused(daemon):
+def test_petal_tags_at_vertices_the_singular_tags_rule(daemon):
     V, T = fins_end()
     good = {"vertex": 0, "triangle": [0, 4, 3], "kind": "concave"}
     # vertex 0 on a tagged crease (0-7): it follows the crease
     r = put_tags(daemon, V, T, {"singular": [[0, 7]], "petals": [good]})
     assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/petals/0/vertex", r.text
     assert "crease" in r.json()["detail"]
-    # a rule of its own at vertex 0
+    # on a tagged triangle's corner
+    r = put_tags(daemon, V, T, {"singular": [[0, 1, 7]], "petals": [good]})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/petals/0/vertex", r.text
+    # a rule of vertex 0's own (PUT /rules) or the G1 default: the tag is kept and waits (it
+    # acts again when the rule goes), as under chang-qin; a rules change is never refused for it
     s = Session(daemon)
     assert s.put_complex({"vertices": V, "simplices": T}).status_code == 200
-    assert s.req("PUT", "/rules", json={"nonmanifold_surface": "ying-zorin", "overrides": [
-        {"simplex": [0], "rule": "G2"}]}).status_code == 200
-    r = s.req("PUT", "/tags", json={"petals": [good]})
-    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/petals/0/vertex", r.text
-    assert "overrides" in r.json()["detail"]
+    assert s.req("PUT", "/tags", json={"petals": [good]}).status_code == 200
+    for rules in ({"nonmanifold_surface": "ying-zorin", "overrides": [{"simplex": [0], "rule": "G2"}]},
+                  {"nonmanifold_surface": "ying-zorin", "overrides": [{"simplex": [0], "rule": "G1"}]},
+                  {"nonmanifold_default": "G1"},
+                  {"overrides": [{"simplex": [0, 1], "rule": "G1"}]}):
+        r = s.req("PUT", "/rules", json=rules)
+        assert r.status_code == 200, (rules, r.text)
+        assert s.req("GET", "/complex").json()["tags"]["petals"] == [good]
     s.delete()
 
 
