@@ -557,17 +557,12 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
     if (!s && !pe)
         return api_fail_at(p, 400, "missing-field", "/singular",
                            "\"singular\" is required (or \"petals\" alone: no singular simplices)");
-    json_t *none = NULL;
-    if (!s)
-        s = none = json_array();
-    if (!json_is_array(s))
+    if (s && !json_is_array(s)) /* absent: no singular simplices (json_array_* take NULL) */
         return api_fail_at(p, 400, "wrong-type", "/singular",
                            "must be an array of simplices (1 to 3 vertex indices)");
-    if ((json_array_size(s) || (pe && (!json_is_array(pe) || json_array_size(pe)))) && !cur->in) {
-        json_decref(none);
+    if ((json_array_size(s) || (pe && (!json_is_array(pe) || json_array_size(pe)))) && !cur->in)
         return api_fail_at(p, 409, "no-complex", json_array_size(s) ? "/singular" : "/petals",
                            "tags name simplices of the complex; PUT the complex first");
-    }
     size_t n = json_array_size(s);
     api_tags tags = {0};
     tags.size = malloc(n + 1);
@@ -613,7 +608,6 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
     free(tags.size);
     free(tags.idx);
     free(tags.pet);
-    json_decref(none);
     return rc;
 }
 
@@ -1808,26 +1802,11 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
     api_tags tags = {0};
     uint32_t nov = cur->rules.noverrides;
     sd_override *ov = malloc((nov + 1) * sizeof *ov);
-    size_t ntag_idx = 0;
-    for (uint32_t i = 0; i < cur->tags.n; i++)
-        ntag_idx += cur->tags.size[i];
-    tags.size = malloc(cur->tags.n + 1);
-    tags.idx = malloc((ntag_idx + 1) * sizeof *tags.idx);
-    tags.pet = malloc((cur->tags.npet + 1) * sizeof *tags.pet);
-    if (!ov || !tags.size || !tags.idx || !tags.pet)
+    bool copied = api_tags_copy(&tags, &cur->tags);
+    if (!ov || !copied)
         rc = rc ? rc : api_fail(p, 503, "out-of-memory", "out of memory");
-    else {
-        if (nov)
-            memcpy(ov, cur->rules.overrides, nov * sizeof *ov);
-        if (cur->tags.n) {
-            memcpy(tags.size, cur->tags.size, cur->tags.n);
-            memcpy(tags.idx, cur->tags.idx, ntag_idx * sizeof *tags.idx);
-        }
-        tags.n = cur->tags.n;
-        if (cur->tags.npet)
-            memcpy(tags.pet, cur->tags.pet, cur->tags.npet * sizeof *tags.pet);
-        tags.npet = cur->tags.npet;
-    }
+    else if (nov)
+        memcpy(ov, cur->rules.overrides, nov * sizeof *ov);
     atomic_fetch_add(&in->refs, 1);
     uint8_t *marked = NULL;
     for (int step = 0; !rc && step < depth; step++) {

@@ -100,28 +100,40 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
     return m;
 }
 
-int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, bool *petal)
+bool api_tags_copy(api_tags *dst, const api_tags *src)
 {
     size_t nidx = 0;
-    for (uint32_t i = 0; i < t->n; i++)
-        nidx += t->size[i];
+    for (uint32_t i = 0; i < src->n; i++)
+        nidx += src->size[i];
+    api_tags t = {.n = src->n, .npet = src->npet};
+    t.size = malloc(src->n + 1);
+    t.idx = malloc((nidx + 1) * sizeof *t.idx);
+    t.pet = malloc((src->npet + 1) * sizeof *t.pet);
+    if (!t.size || !t.idx || !t.pet) {
+        free(t.size);
+        free(t.idx);
+        free(t.pet);
+        *dst = (api_tags){0};
+        return false;
+    }
+    if (src->n) {
+        memcpy(t.size, src->size, src->n);
+        memcpy(t.idx, src->idx, nidx * sizeof *t.idx);
+    }
+    if (src->npet)
+        memcpy(t.pet, src->pet, src->npet * sizeof *t.pet);
+    *dst = t;
+    return true;
+}
+
+int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, bool *petal)
+{
     *petal = false;
-    m->tags.size = malloc(t->n + 1);
-    m->tags.idx = malloc((nidx + 1) * sizeof *m->tags.idx);
-    m->tags.pet = malloc((t->npet + 1) * sizeof *m->tags.pet);
-    if (!m->tags.size || !m->tags.idx || !m->tags.pet) {
+    if (!api_tags_copy(&m->tags, t)) {
         err->code = SD_ERR_NOMEM;
         snprintf(err->message, sizeof err->message, "out of memory");
         return SD_ERR_NOMEM;
     }
-    if (t->n) {
-        memcpy(m->tags.size, t->size, t->n);
-        memcpy(m->tags.idx, t->idx, nidx * sizeof *t->idx);
-    }
-    if (t->npet)
-        memcpy(m->tags.pet, t->pet, t->npet * sizeof *t->pet);
-    m->tags.n = t->n;
-    m->tags.npet = t->npet;
     if (!m->c)
         return 0;
     int rc = sd_complex_set_singular(m->c, t->idx, t->size, t->n, err);

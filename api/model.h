@@ -107,6 +107,8 @@ void api_model_unref(api_model *m);
 /* Apply singular and petal tags to a model being built (copies them). SD_ERR_* + err (item = the
  * tag); *petal says whether the refused tag is a petal tag (field = SD_PT_FIELD_*). */
 int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, bool *petal);
+/* A deep copy of src into *dst (arrays never NULL); false (dst empty) for lack of memory. */
+bool api_tags_copy(api_tags *dst, const api_tags *src);
 
 /* Compute level L (under the model's lock) and record the time; NULL + err on failure. The
  * caller holds m->lock. */

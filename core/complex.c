@@ -380,15 +380,8 @@ void sd_level_free(sd_mem *m, sd_level *lv)
     if (!lv)
         return;
     sd_topo_free(m, &lv->t);
-    sd_free(m, lv->vrule);
-    sd_free(m, lv->erule);
-    sd_csrb_free(m, &lv->S);
-    sd_free(m, lv->tcol);
-    sd_free(m, lv->trow);
-    sd_free(m, lv->tpos);
+    sd_level_free_rules(m, lv);
     sd_free(m, lv->slot);
-    sd_free(m, lv->vrule_only);
-    sd_free(m, lv->geo);
     for (int i = 0; i < lv->nch; i++)
         sd_free(m, lv->ch[i].data);
     sd_free(m, lv);

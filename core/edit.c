@@ -96,41 +96,39 @@ static void apply(sd_complex *c, int channel, int nc, const change *ch, int top,
     }
 }
 
+/* Move the rules part of level `from` (see sd_level_free_rules) to `to`, leaving none in `from`. */
+static void move_rules(sd_level *to, sd_level *from)
+{
+    to->have_rules = from->have_rules;
+    to->vrule = from->vrule;
+    to->erule = from->erule;
+    to->vrule_only = from->vrule_only;
+    to->geo = from->geo;
+    to->S = from->S;
+    to->tcol = from->tcol;
+    to->trow = from->trow;
+    to->tpos = from->tpos;
+    from->have_rules = false;
+    from->vrule = from->erule = from->vrule_only = from->geo = NULL;
+    memset(&from->S, 0, sizeof from->S);
+    from->tcol = from->trow = from->tpos = NULL;
+}
+
 /* Level l's positions changed where its rules read them: build its rules again beside the old
  * ones (kept until the new ones are complete, so a failure leaves the level as it was), then
  * recompute the finer levels that were computed. Those are plain caches: if recomputing them
  * runs out of memory they are dropped and computed again on demand, and the edit stands. */
 static sd_result rebuild_from(sd_complex *c, int l, sd_error *err)
 {
-    sd_mem *m = &c->mem;
-    sd_level *lv = c->lv[l];
+    sd_level *lv = c->lv[l], old = {0};
     const int nl = c->nlevels;
-    sd_level old = *lv;
-    lv->have_rules = false;
-    lv->vrule = lv->erule = lv->vrule_only = lv->geo = NULL;
-    memset(&lv->S, 0, sizeof lv->S);
-    lv->tcol = lv->trow = lv->tpos = NULL;
+    move_rules(&old, lv);
     sd_result r = sd_ensure_rules(c, l, err);
     if (r) {
-        lv->have_rules = old.have_rules;
-        lv->vrule = old.vrule;
-        lv->erule = old.erule;
-        lv->vrule_only = old.vrule_only;
-        lv->geo = old.geo;
-        lv->S = old.S;
-        lv->tcol = old.tcol;
-        lv->trow = old.trow;
-        lv->tpos = old.tpos;
+        move_rules(lv, &old);
         return r;
     }
-    sd_free(m, old.vrule);
-    sd_free(m, old.erule);
-    sd_free(m, old.vrule_only);
-    sd_free(m, old.geo);
-    sd_csrb_free(m, &old.S);
-    sd_free(m, old.tcol);
-    sd_free(m, old.trow);
-    sd_free(m, old.tpos);
+    sd_level_free_rules(&c->mem, &old);
     sd_drop_levels(c, l + 1);
     sd_error ignored;
     if (!sd_complex_level(c, nl - 1, &ignored))
@@ -202,9 +200,17 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
             ch[0].d[i * nc + k] = values[i * nc + k] - p0[(size_t)idx[i] * nc + k];
     }
     ch[0].n = (uint32_t)n;
-    /* push down: rows of level l+1 that use a changed point of level l */
+    /* push down: rows of level l+1 that use a changed point of level l, up to the first level
+     * whose rules read a moved point's position (Ying-Zorin's alpha, `geo`): its S is stale, so
+     * its rules and the finer levels are rebuilt instead (rebuild_from) */
+    int stale = nl;
     for (int l = 0; l + 1 < nl; l++) {
         sd_level *lv = c->lv[l], *next = c->lv[l + 1];
+        for (uint32_t i = 0; channel == 0 && lv->geo && i < ch[l].n && stale == nl; i++)
+            if (lv->geo[ch[l].id[i]])
+                stale = l;
+        if (stale < nl)
+            break;
         int32_t *slot = next->slot;
         change *in = &ch[l], *out = &ch[l + 1];
         bool ok = true;
@@ -243,15 +249,6 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
         if (!ok)
             goto nomem;
     }
-    /* the first level whose rules read a moved point's position (Ying-Zorin's alpha): its S is
-     * stale, so the changes stop there and its rules and the finer levels are rebuilt */
-    int stale = nl;
-    for (int l = 0; channel == 0 && l + 1 < nl && stale == nl; l++)
-        for (uint32_t i = 0; c->lv[l]->geo && i < ch[l].n; i++)
-            if (c->lv[l]->geo[ch[l].id[i]]) {
-                stale = l;
-                break;
-            }
     int top = stale < nl ? stale + 1 : nl;
     /* every change is known: apply them */
     apply(c, channel, nc, ch, top, 1);

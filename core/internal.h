@@ -324,6 +324,9 @@ sd_result sd_split_edges(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, s
 sd_result sd_split_faces(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
 /* levels.c: forget a level's rules and every finer level */
 void sd_drop_rules(sd_complex *c, sd_level *lv);
+/* Free a level's rules part: rules, stencils S, edit columns, vrule_only, geo (not its points,
+ * cells or scratch map `slot`). */
+void sd_level_free_rules(sd_mem *m, sd_level *lv);
 void sd_drop_levels(sd_complex *c, int from); /* levels from.. (they are recomputed on demand) */
 /* rules.c */
 sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
@@ -357,7 +360,7 @@ sd_rule sd_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
 #define SD_YZ_RAMP 0.1
 enum { SD_YZ_NONE, SD_YZ_FIRST, SD_YZ_DISK, SD_YZ_DART, SD_YZ_CONCAVE };
 typedef struct sd_yzend {
-    double g, theta, s; /* s: the concave corner's flatness parameter */
+    double g, theta, s; /* g of 003 Fig. 4f, its theta, the flatness modification's s */
     uint8_t kind;
 } sd_yzend;
 static inline bool sd_yz_flat(uint8_t kind)

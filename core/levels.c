@@ -71,26 +71,28 @@ void sd_drop_levels(sd_complex *c, int from)
         c->nlevels = from;
 }
 
-/* Forget level lv's rules, stencils and edit columns, and every finer level (tags changed). */
-void sd_drop_rules(sd_complex *c, sd_level *lv)
+void sd_level_free_rules(sd_mem *m, sd_level *lv)
 {
-    sd_drop_levels(c, lv->index + 1);
-    sd_mem *m = &c->mem;
     sd_free(m, lv->vrule);
     sd_free(m, lv->erule);
     sd_csrb_free(m, &lv->S);
     sd_free(m, lv->tcol);
     sd_free(m, lv->trow);
     sd_free(m, lv->tpos);
-    sd_free(m, lv->slot);
     sd_free(m, lv->vrule_only);
     sd_free(m, lv->geo);
-    lv->vrule_only = NULL;
-    lv->geo = NULL;
-    lv->vrule = lv->erule = NULL;
+    lv->vrule = lv->erule = lv->vrule_only = lv->geo = NULL;
     lv->tcol = lv->trow = lv->tpos = NULL;
-    lv->slot = NULL;
     lv->have_rules = false;
+}
+
+/* Forget level lv's rules, stencils and edit columns, and every finer level (tags changed). */
+void sd_drop_rules(sd_complex *c, sd_level *lv)
+{
+    sd_drop_levels(c, lv->index + 1);
+    sd_level_free_rules(&c->mem, lv);
+    sd_free(&c->mem, lv->slot);
+    lv->slot = NULL;
 }
 
 void sd_complex_free(sd_complex *c)

@@ -954,6 +954,7 @@ static bool yz_gammas(sd_mem *m, const sd_complex *cx, int level, const sd_topo 
             sd_yzend *end = &gam[e][t->ev[e][0] == v ? 0 : 1];
             double theta;
             end->kind = SD_YZ_FIRST;
+            end->s = SD_YZ_FLAT_S;
             if (ns == 0) { /* closed petal: the fixed-disk rule (yz.c) */
                 end->kind = SD_YZ_DISK;
                 theta = M_PI / 3;

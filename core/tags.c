@@ -531,6 +531,18 @@ static int cmp_petal_at(const void *a, const void *b)
     return p->v != q->v ? (p->v > q->v) - (p->v < q->v) : (p->f > q->f) - (p->f < q->f);
 }
 
+/* 003's simple/complex split of a non-manifold vertex where only triangles meet: an edge that
+ * counts as singular there (non-manifold or boundary), and whether a vertex of non-manifold
+ * type `type` with `nsing` of them is simple (one flower, exactly two singular edges). */
+static inline bool yz_counts_singular(const sd_topo *t, uint32_t e)
+{
+    return t->efam[e] == FAM2 && (nm_type(t->enm[e]) == 2 || (t->eflag[e] & EF_BND2));
+}
+static inline bool yz_simple(int type, uint32_t nsing)
+{
+    return type != 3 && nsing == 2;
+}
+
 /* The (unordered) pair of singular edges bounding an open petal, as one key. */
 static uint64_t pair_key(const uint32_t s[2])
 {
@@ -620,12 +632,9 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
         /* a complex singular vertex of triangles only (003 Sec. 2): non-manifold, and not simple
          * (one flower with exactly two singular edges: boundary or non-manifold ones) */
         uint32_t nsing = 0;
-        for (uint32_t k = x.eoff[v]; k < x.eoff[v + 1]; k++) {
-            uint32_t e = x.e[k];
-            nsing += t->efam[e] == FAM2 && (nm_type(t->enm[e]) == 2 || (t->eflag[e] & EF_BND2));
-        }
-        if (t->vfam[v] != FAM2 || !nm_type(t->vnm[v]) ||
-            (nm_type(t->vnm[v]) != 3 && nsing == 2)) {
+        for (uint32_t k = x.eoff[v]; k < x.eoff[v + 1]; k++)
+            nsing += yz_counts_singular(t, x.e[k]);
+        if (t->vfam[v] != FAM2 || !nm_type(t->vnm[v]) || yz_simple(nm_type(t->vnm[v]), nsing)) {
             rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_VERTEX,
                          "petal tag %zu: vertex %u is not a complex singular vertex of a "
                          "triangle mesh (a non-manifold vertex where only triangles meet, not "
@@ -849,7 +858,7 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
             if (nm_type(t->enm[e]) == 2 && !nm_ov(t->enm[e]) && !(t->enm[e] & NM_G1) &&
                 !(t->eflag[e] & EF_CREASE))
                 t->enm[e] |= OV_YZS << NM_OV_SHIFT;
-            if (nm_type(t->enm[e]) == 2 || (t->eflag[e] & EF_BND2))
+            if (yz_counts_singular(t, e))
                 for (int k = 0; k < 2; k++)
                     if (nface[t->ev[e][k]] < 255)
                         nface[t->ev[e][k]]++;
@@ -857,7 +866,7 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
         for (uint32_t v = 0; v < t->nv; v++)
             if (t->vfam[v] == FAM2 && nm_type(t->vnm[v]) && !nm_ov(t->vnm[v]) &&
                 !(t->vnm[v] & NM_G1) && !(t->vflag[v] & VF_SING))
-                t->vnm[v] |= (uint8_t)((nm_type(t->vnm[v]) != 3 && nface[v] == 2 ? OV_YZS : OV_YZX)
+                t->vnm[v] |= (uint8_t)((yz_simple(nm_type(t->vnm[v]), nface[v]) ? OV_YZS : OV_YZX)
                                        << NM_OV_SHIFT);
         sd_free(m, nface);
         nface = NULL;

@@ -115,127 +115,92 @@ static inline uint32_t other_end(const sd_topo *t, uint32_t e, uint32_t v)
     return t->ev[e][0] == v ? t->ev[e][1] : t->ev[e][0];
 }
 
-/* The ring of the closed petal at v that holds edge e0, starting at e0: ring[j] = p_j. The
- * faces of each petal edge are efc[e][0..1]. Returns k, or 0 if the walk does not close (not a
- * disk: left to the first stage). */
-static uint32_t petal_ring(const sd_topo *t, const uint32_t (*efc)[2], uint32_t v, uint32_t e0,
-                           uint32_t *ring, uint32_t cap)
-{
-    uint32_t e = e0, f = efc[e0][0], k = 0;
-    ring[k++] = other_end(t, e0, v);
-    for (;;) {
-        uint32_t next = UINT32_MAX;
-        for (int j = 0; j < 3; j++) {
-            uint32_t x = t->fe[f][j];
-            if (x != e && (t->ev[x][0] == v || t->ev[x][1] == v))
-                next = x;
-        }
-        if (next == UINT32_MAX || efc[next][1] == UINT32_MAX)
-            return 0;
-        if (next == e0)
-            return k;
-        if (k == cap)
-            return 0;
-        ring[k++] = other_end(t, next, v);
-        f = efc[next][0] == f ? efc[next][1] : efc[next][0];
-        e = next;
-    }
-}
+enum { WALK_FAIL, WALK_CLOSED, WALK_SINGULAR };
 
-/* From edge e0 at v into its face f, across the petal's edges (those between two faces of it),
- * up to the first edge that is not (a singular edge): out[0 .. n) the ring points passed, *last
- * the singular edge's other end. Returns n, or UINT32_MAX if the walk closes or runs past cap. */
-static uint32_t chain_walk(const sd_topo *t, const uint32_t (*efc)[2], uint32_t v, uint32_t e0,
-                           uint32_t f, uint32_t *out, uint32_t cap, uint32_t *last)
+/* From edge e0 at v into its face f, across the petal's inner edges (two faces in efc): out[0 ..
+ * *n) the ring points passed. Ends back at e0 (WALK_CLOSED) or at an edge with one face, a
+ * singular one (WALK_SINGULAR, *last its other end); WALK_FAIL past cap or off the petal. */
+static int ring_walk(const sd_topo *t, const uint32_t (*efc)[2], uint32_t v, uint32_t e0,
+                     uint32_t f, uint32_t *out, uint32_t cap, uint32_t *n, uint32_t *last)
 {
-    uint32_t e = e0, n = 0;
-    for (;;) {
+    uint32_t e = e0;
+    for (*n = 0;;) {
         uint32_t next = UINT32_MAX;
         for (int j = 0; j < 3; j++) {
             uint32_t x = t->fe[f][j];
             if (x != e && (t->ev[x][0] == v || t->ev[x][1] == v))
                 next = x;
         }
-        if (next == UINT32_MAX || next == e0 || n == cap)
-            return UINT32_MAX;
+        if (next == UINT32_MAX)
+            return WALK_FAIL;
+        if (next == e0)
+            return WALK_CLOSED;
         if (efc[next][1] == UINT32_MAX) {
             *last = other_end(t, next, v);
-            return n;
+            return WALK_SINGULAR;
         }
-        out[n++] = other_end(t, next, v);
+        if (*n == cap)
+            return WALK_FAIL;
+        out[(*n)++] = other_end(t, next, v);
         f = efc[next][0] == f ? efc[next][1] : efc[next][0];
         e = next;
     }
 }
 
-/* The ring of the dart or open petal at v that holds edge e0: ring[0] and (open) ring[k] the
- * singular edges' ends, e0 = v-ring[*at]. Returns the petal's number of triangles k, or 0 if
- * the petal is not of that kind (dart: both walks end at one singular edge; open: at two). */
-static uint32_t chain_ring(const sd_topo *t, const uint32_t (*efc)[2], uint32_t v, uint32_t e0,
-                           bool dart, uint32_t *ring, uint32_t *tmp, uint32_t cap, uint32_t *at)
+/* The ring of the petal of kind `kind` (SD_YZ_DISK, _DART, _CONCAVE) at v that holds the inner
+ * edge e0, in order, e0 = v-ring[*at]: closed p_0 .. p_{k-1} (a disk starts at e0); a dart's and
+ * an open petal's ring start at a singular edge's end, an open one ends at the other's, p_k.
+ * Returns the petal's number of triangles k, or 0 if the petal is not of that kind. */
+static uint32_t petal_ring(const sd_topo *t, const uint32_t (*efc)[2], uint32_t v, uint32_t e0,
+                           uint8_t kind, uint32_t *ring, uint32_t *tmp, uint32_t cap, uint32_t *at)
 {
-    uint32_t la, lb;
-    uint32_t na = chain_walk(t, efc, v, e0, efc[e0][0], tmp, cap, &la);
-    if (na == UINT32_MAX || na + 3 > cap)
+    uint32_t na, nb, la, lb;
+    int wa = ring_walk(t, efc, v, e0, efc[e0][0], tmp, cap, &na, &la);
+    *at = 0;
+    if (kind == SD_YZ_DISK) {
+        if (wa != WALK_CLOSED || na + 1 > cap)
+            return 0;
+        ring[0] = other_end(t, e0, v);
+        memcpy(ring + 1, tmp, na * sizeof *ring);
+        return na + 1;
+    }
+    if (wa != WALK_SINGULAR || na + 3 > cap)
         return 0;
     ring[0] = la;
     for (uint32_t j = 0; j < na; j++)
         ring[1 + j] = tmp[na - 1 - j];
     ring[na + 1] = other_end(t, e0, v);
-    uint32_t nb = chain_walk(t, efc, v, e0, efc[e0][1], ring + na + 2, cap - na - 3, &lb);
-    if (nb == UINT32_MAX || (la == lb) != dart)
+    int wb = ring_walk(t, efc, v, e0, efc[e0][1], ring + na + 2, cap - na - 3, &nb, &lb);
+    if (wb != WALK_SINGULAR || (la == lb) != (kind == SD_YZ_DART))
         return 0;
     uint32_t k = na + nb + 2;
-    if (!dart)
+    if (kind == SD_YZ_CONCAVE)
         ring[k] = lb;
     *at = na + 1;
     return k;
 }
 
-/* Add the fixed-disk row of edge v-ring[0] (petal of k) times `scale` to a. */
-static bool fixed_disk_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32_t k,
-                           double scale)
+/* Add the row of edge v-ring[i] of a flattened petal of k triangles (end x: its kind, g, theta
+ * and s) times `scale` to a: on q = p - v, (1 - s) T_ij + s P_ij, T the first stage (g at i,
+ * 1/8 at i's ring neighbours: cyclic for a disk and a dart, p_0 .. p_k for a concave corner),
+ * P the projection on the kept modes (the header); v takes the rest of 1. */
+static bool flat_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32_t k, uint32_t i,
+                     const sd_yzend *x, double scale)
 {
-    const double s = SD_YZ_FLAT_S, lam = 3.0 / 8.0 + cos(2 * M_PI / k) / 4;
-    if (!acc_add(m, a, v, scale * ((1 - s) * 3.0 / 8.0 + s)))
-        return false;
-    for (uint32_t j = 0; j < k; j++) {
-        double loop = j == 0 ? 3.0 / 8.0 : (j == 1 || j == k - 1) ? 1.0 / 8.0 : 0.0;
-        double w = (1 - s) * loop + s * 2.0 / k * lam * cos(2 * M_PI * j / k);
-        if (!acc_add(m, a, ring[j], scale * w))
-            return false;
-    }
-    return true;
-}
-
-/* Add the dart row of edge v-ring[i] (ring p_0 .. p_{k-1}, v-p_0 singular) times `scale`. */
-static bool dart_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32_t k, uint32_t i,
-                     double scale)
-{
-    const double s = SD_YZ_FLAT_S, g = 0.5 - cos(2 * M_PI / k) / 4;
-    const double si = sin(2 * M_PI * i / k), ci = cos(2 * M_PI * i / k);
+    const bool open = x->kind == SD_YZ_CONCAVE;
+    const double s = x->s, c = 2 * M_PI / k, lam = 3.0 / 8.0 + cos(c) / 4;
+    const double d = 2 * sin(k * x->theta);
     double sum = 0;
-    for (uint32_t j = 0; j < k; j++) {
-        double tij = j == i ? g : (j == (i + 1) % k || j == (i + k - 1) % k) ? 1.0 / 8.0 : 0.0;
-        double w = (1 - s) * tij + s * ((j == 0 ? ci / 2 : 0) + si * sin(2 * M_PI * j / k) / k);
-        sum += w;
-        if (!acc_add(m, a, ring[j], scale * w))
-            return false;
-    }
-    return acc_add(m, a, v, scale * (1 - sum));
-}
-
-/* Add the concave corner row of edge v-ring[i] (ring p_0 .. p_k, singular edges v-p_0, v-p_k,
- * angle step theta) times `scale`. */
-static bool concave_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32_t k,
-                        uint32_t i, double theta, double s, double scale)
-{
-    const double g = 0.5 - cos(theta) / 4, d = 2 * sin(k * theta);
-    double sum = 0;
-    for (uint32_t j = 0; j <= k; j++) {
-        double tij = j == i ? g : (j == i + 1 || j + 1 == i) ? 1.0 / 8.0 : 0.0;
-        double w = (1 - s) * tij + s * ((j == 0 ? sin((k - i) * theta) : 0) +
-                                        (j == k ? sin(i * theta) : 0)) / d;
+    for (uint32_t j = 0; j < (open ? k + 1 : k); j++) {
+        bool nb = open ? j == i + 1 || j + 1 == i : j == (i + 1) % k || j == (i + k - 1) % k;
+        double tij = j == i ? x->g : nb ? 1.0 / 8.0 : 0.0, pij;
+        if (x->kind == SD_YZ_DISK) /* 003 App. A */
+            pij = 2.0 / k * lam * cos(c * ((double)i - j));
+        else if (x->kind == SD_YZ_DART)
+            pij = (j == 0 ? cos(c * i) / 2 : 0) + sin(c * i) * sin(c * j) / k;
+        else
+            pij = ((j == 0 ? sin((k - i) * x->theta) : 0) + (j == k ? sin(i * x->theta) : 0)) / d;
+        double w = (1 - s) * tij + s * pij;
         sum += w;
         if (!acc_add(m, a, ring[j], scale * w))
             return false;
@@ -285,7 +250,7 @@ bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint
                 continue;
             uint32_t ends[2] = {t->ev[e][0], t->ev[e][1]};
             int sides = (end[e][0].kind != SD_YZ_NONE) + (end[e][1].kind != SD_YZ_NONE);
-            uint8_t rule = SD_RULE_YZ_CONCAVE;
+            uint8_t best = SD_YZ_CONCAVE;
             a.n = 0;
             if (!acc_add(m, &a, ends[0], 0) || !acc_add(m, &a, ends[1], 0))
                 goto out;
@@ -295,24 +260,14 @@ bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint
                 const sd_yzend *x = &end[e][i];
                 switch (x->kind) {
                 case SD_YZ_DISK:
-                    rule = SD_RULE_YZ_FIXED_DISK;
-                    k = petal_ring(t, (const uint32_t(*)[2])efc, v, e, ring, cap);
-                    fine = k >= 3;
-                    if (fine && !fixed_disk_row(m, &a, v, ring, k, 1.0 / sides))
-                        goto out;
-                    break;
                 case SD_YZ_DART:
-                    if (rule != SD_RULE_YZ_FIXED_DISK)
-                        rule = SD_RULE_YZ_DART;
-                    k = chain_ring(t, (const uint32_t(*)[2])efc, v, e, true, ring, tmp, cap, &at);
-                    fine = k >= 3;
-                    if (fine && !dart_row(m, &a, v, ring, k, at, 1.0 / sides))
-                        goto out;
-                    break;
                 case SD_YZ_CONCAVE:
-                    k = chain_ring(t, (const uint32_t(*)[2])efc, v, e, false, ring, tmp, cap, &at);
-                    fine = k >= 2;
-                    if (fine && !concave_row(m, &a, v, ring, k, at, x->theta, x->s, 1.0 / sides))
+                    if (x->kind < best) /* the rule named: fixed disk, then dart, then concave */
+                        best = x->kind;
+                    k = petal_ring(t, (const uint32_t(*)[2])efc, v, e, x->kind, ring, tmp, cap,
+                                   &at);
+                    fine = k >= (x->kind == SD_YZ_CONCAVE ? 2u : 3u);
+                    if (fine && !flat_row(m, &a, v, ring, k, at, x, 1.0 / sides))
                         goto out;
                     break;
                 case SD_YZ_FIRST: { /* 003 Fig. 4f from this end */
@@ -339,7 +294,9 @@ bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint
                 continue;
             }
             if (pass == 0) {
-                er[e] = rule;
+                er[e] = best == SD_YZ_DISK   ? SD_RULE_YZ_FIXED_DISK
+                        : best == SD_YZ_DART ? SD_RULE_YZ_DART
+                                             : SD_RULE_YZ_CONCAVE;
                 y->off[e + 1] = a.n - 2;
             } else {
                 uint32_t at = y->off[e];

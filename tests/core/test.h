@@ -77,6 +77,29 @@ static inline sd_complex *mesh_complex(const mesh *m, const sd_options *o, sd_er
     return sd_complex_new(m->xyz, m->nv, m->idx, m->sz, m->ns, o, err);
 }
 
+/* Failure injection through the pluggable allocator: the call numbered fail_at fails (-1:
+ * none); bytes is what is still allocated. sd_options.allocator = TEST_COUNTING(&c). */
+typedef struct counting {
+    long calls, fail_at;
+    long long bytes;
+} counting;
+static inline void *cnt_alloc(size_t n, void *ud)
+{
+    counting *c = ud;
+    if (++c->calls == c->fail_at)
+        return NULL;
+    void *p = malloc(n);
+    if (p)
+        c->bytes += (long long)n;
+    return p;
+}
+static inline void cnt_release(void *p, size_t n, void *ud)
+{
+    ((counting *)ud)->bytes -= (long long)n;
+    free(p);
+}
+#define TEST_COUNTING(c) ((sd_allocator){cnt_alloc, cnt_release, (c)})
+
 /* shapes (shapes.c) */
 void shape_tet(mesh *m);
 void shape_two_tets(mesh *m);

@@ -132,31 +132,10 @@ TEST(errors_memory_limit_keeps_levels)
     mesh_free(&m);
 }
 
-/* Failure injection through the pluggable allocator. */
-typedef struct counting {
-    long calls, fail_at;
-    long long bytes;
-} counting;
-
-static void *cnt_alloc(size_t n, void *ud)
-{
-    counting *c = ud;
-    if (++c->calls == c->fail_at)
-        return NULL;
-    void *p = malloc(n);
-    if (p)
-        c->bytes += (long long)n;
-    return p;
-}
-static void cnt_release(void *p, size_t n, void *ud)
-{
-    ((counting *)ud)->bytes -= (long long)n;
-    free(p);
-}
-
+/* Failure injection through the pluggable allocator (test.h, counting). */
 static int full_run(const mesh *m, counting *cc)
 {
-    sd_options o = {.allocator = {cnt_alloc, cnt_release, cc}};
+    sd_options o = {.allocator = TEST_COUNTING(cc)};
     sd_error err;
     sd_complex *c = mesh_complex(m, &o, &err);
     if (!c)
