@@ -871,16 +871,14 @@ static int add_attr(const api_model *m, out_request *rq, int a)
 }
 
 static int parse_query(const api_model *m, const api_level_query *q, out_request *rq,
-                       out_format *fmt, api_problem *p)
+                       const out_format **fmt, api_problem *p)
 {
     char item[64];
-    *fmt = OUT_GLB;
-    if (q->format) {
-        int f = out_format_parse(q->format);
-        if (f < 0)
-            return api_fail_at(p, 422, "unknown-value", "format",
-                               "format \"%.20s\" is not one of glb, gltf, vtu, vtk, json", q->format);
-        *fmt = (out_format)f;
+    *fmt = &out_formats[0];
+    if (q->format && !(*fmt = out_format_find(q->format))) {
+        char names[128];
+        return api_fail_at(p, 422, "unknown-value", "format", "format \"%.20s\" is not one of %s",
+                           q->format, out_format_list(names, sizeof names, false, ", ", ", "));
     }
     rq->parts = OUT_PART_ALL;
     if (q->parts) {
@@ -961,7 +959,7 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
 }
 
 int api_level_open(api_model *m, int level, const api_level_query *q, const api_limits *lim,
-                   uint64_t version, out_stream **out, out_format *fmt, api_problem *p)
+                   uint64_t version, out_stream **out, const out_format **fmt, api_problem *p)
 {
     *out = NULL;
     if (!m->c)
@@ -976,7 +974,7 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
     sd_error e = {0};
     pthread_mutex_lock(&m->lock);
     if (api_model_level_locked(m, level, &e)) {
-        if (*fmt == OUT_GLB || *fmt == OUT_GLTF)
+        if ((*fmt)->geometry)
             rq.geometry = api_model_geometry_locked(m, level);
         pthread_rwlock_rdlock(&m->data); /* held until api_level_close */
         *out = out_open(&rq, *fmt, &e);
@@ -1011,18 +1009,18 @@ json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_prob
     const sd_level *lv = api_model_level_locked(m, level, &e);
     json_t *bytes = json_object();
     double secs = m->seconds[level];
-    for (int f = 0; lv && f < OUT_FORMAT_COUNT; f++) {
+    for (const out_format *f = out_formats; lv && f->name; f++) {
         out_request rq;
         memset(&rq, 0, sizeof rq);
         rq.complex = m->c;
         rq.level = level;
         rq.parts = OUT_PART_ALL;
         rq.colormap_attr = -1;
-        if (f == OUT_GLB || f == OUT_GLTF)
+        if (f->geometry)
             rq.geometry = api_model_geometry_locked(m, level);
-        out_stream *s = out_open(&rq, (out_format)f, &e);
+        out_stream *s = out_open(&rq, f, &e);
         if (s && out_size(s) != UINT64_MAX)
-            json_object_set_new(bytes, out_format_name((out_format)f), json_integer((json_int_t)out_size(s)));
+            json_object_set_new(bytes, f->name, json_integer((json_int_t)out_size(s)));
         out_close(s);
     }
     pthread_mutex_unlock(&m->lock);

@@ -43,7 +43,7 @@ typedef struct api_level_query {
 /* Checks the query and the limits, computes level L if needed (locking the model), and opens the
  * output stream; the caller keeps a reference on the model until out_close. */
 int api_level_open(api_model *m, int level, const api_level_query *q, const api_limits *lim,
-                   uint64_t version, out_stream **out, out_format *fmt, api_problem *p);
+                   uint64_t version, out_stream **out, const out_format **fmt, api_problem *p);
 /* Close a stream opened by api_level_open (it holds the model's data lock for reading). */
 void api_level_close(api_model *m, out_stream *os);
 

@@ -1,32 +1,51 @@
-/* out.c — the writer interface of out.h: format names, validation, the shared precomputation
- * (cells per part, solid boundary, normals, the plane cross-section) and the pull loop.
+/* out.c — the writer interface of out.h: validation of a request, what every writer starts
+ * from (the level's arrays, cells per part, the slice), the chunk buffer and the pull loop.
  *
- * Precomputed arrays are proportional to the boundary, the slice or the vertex count (normals),
- * never to the output: the output itself is generated chunk by chunk in out_read.
+ * out_open checks everything a writer could refuse before the format's init runs, so a stream
+ * that opens is written to the end; the formats themselves are the table of api/formats.c and
+ * their shared geometry is api/geom.c. The output is generated chunk by chunk in out_read, never
+ * held whole.
  */
 #include "out_internal.h"
+#include <assert.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-static const char *const NAMES[] = {"glb", "gltf", "vtu", "vtk", "json"};
-static const char *const TYPES[] = {"model/gltf-binary", "model/gltf+json",
-                                    "application/vnd.unstructured-grid+xml",
-                                    "application/octet-stream", "application/json"};
-static const char *const EXTS[] = {".glb", ".gltf", ".vtu", ".vtk", ".json"};
-
-int out_format_parse(const char *name)
+int out_nomem(sd_error *err)
 {
-    for (int i = 0; i < OUT_FORMAT_COUNT; i++)
-        if (!strcmp(name, NAMES[i]))
-            return i;
-    return -1;
+    err->code = SD_ERR_NOMEM;
+    snprintf(err->message, sizeof err->message, "out of memory");
+    return SD_ERR_NOMEM;
 }
-const char *out_format_name(out_format f) { return (unsigned)f < OUT_FORMAT_COUNT ? NAMES[f] : "?"; }
-const char *out_content_type(out_format f) { return (unsigned)f < OUT_FORMAT_COUNT ? TYPES[f] : "application/octet-stream"; }
-const char *out_file_extension(out_format f) { return (unsigned)f < OUT_FORMAT_COUNT ? EXTS[f] : ""; }
+
+void *out_state_new(out_stream *s, size_t size, void (*free_state)(void *), int (*produce)(out_stream *))
+{
+    void *st = calloc(1, size);
+    if (st) {
+        s->fmt_state = st;
+        s->fmt_free = free_state;
+        s->produce = produce;
+    }
+    return st;
+}
+
+out_section *out_section_add(out_sections *l, int id, int arg, int ncomp, int width,
+                             uint64_t count)
+{
+    assert(l->n < OUT_MAX_SECTIONS); /* the writers' section counts are bounded by design */
+    out_section *c = &l->s[l->n++];
+    memset(c, 0, sizeof *c);
+    c->id = id;
+    c->arg = arg;
+    c->ncomp = ncomp;
+    c->width = width;
+    c->count = count;
+    c->bytes = count * (uint64_t)ncomp * (uint64_t)width;
+    return c;
+}
 
 void out_put(out_stream *s, const void *p, size_t n)
 {
@@ -75,165 +94,6 @@ void out_viridis(double t, float rgb[3])
     }
 }
 
-/* Octahedron (p,q,a,a2,b,b2) with equator cycle a,b,a2,b2: four tetrahedra around the major
- * diagonal p-q. The order (q,p,...) makes them positive for a positive octahedron (checked by
- * the output tests through their volumes). */
-void out_oct_tet(const uint32_t o[6], int k, uint32_t t[4])
-{
-    static const int eq[4] = {2, 4, 3, 5}; /* a, b, a2, b2 */
-    t[0] = o[1];
-    t[1] = o[0];
-    t[2] = o[eq[k]];
-    t[3] = o[eq[(k + 1) & 3]];
-}
-
-/* ---- the cross-section ------------------------------------------------------------------ */
-
-typedef struct slicer {
-    out_stream *s;
-    double n[3], d;
-    uint32_t cap;
-    bool failed;
-} slicer;
-
-static bool slice_grow(slicer *sl)
-{
-    out_slice *o = &sl->s->slice;
-    if (o->ntri < sl->cap)
-        return true;
-    uint32_t cap = sl->cap ? 2 * sl->cap : 1024;
-    double *xyz = realloc(o->xyz, (size_t)cap * 9 * sizeof *xyz);
-    if (xyz)
-        o->xyz = xyz;
-    uint32_t *cell = realloc(o->cell, (size_t)cap * sizeof *cell);
-    if (cell)
-        o->cell = cell;
-    uint8_t *kind = realloc(o->kind, cap);
-    if (kind)
-        o->kind = kind;
-    if (!xyz || !cell || !kind)
-        return false;
-    for (int a = 0; a < sl->s->rq.nattrs; a++) {
-        int nc = sl->s->rq.attrs[a].ncomp;
-        double *v = realloc(o->attr[a], (size_t)cap * 3 * nc * sizeof *v);
-        if (!v)
-            return false;
-        o->attr[a] = v;
-    }
-    sl->cap = cap;
-    return true;
-}
-
-/* A point on edge a-b at parameter t, written as point `slot` of the current triangle. */
-static void slice_point(slicer *sl, uint32_t a, uint32_t b, double t, int slot)
-{
-    out_stream *s = sl->s;
-    out_slice *o = &s->slice;
-    for (int k = 0; k < 3; k++)
-        o->xyz[9 * (size_t)o->ntri + 3 * slot + k] =
-            s->xyz[3 * (size_t)a + k] + t * (s->xyz[3 * (size_t)b + k] - s->xyz[3 * (size_t)a + k]);
-    for (int i = 0; i < s->rq.nattrs; i++) {
-        int nc = s->rq.attrs[i].ncomp;
-        const double *v = s->attr[i];
-        for (int k = 0; k < nc; k++)
-            o->attr[i][((size_t)o->ntri * 3 + slot) * nc + k] =
-                v[(size_t)a * nc + k] + t * (v[(size_t)b * nc + k] - v[(size_t)a * nc + k]);
-    }
-}
-
-typedef struct cut { uint32_t a, b; double t; } cut;
-
-static void slice_tri(slicer *sl, const cut *c0, const cut *c1, const cut *c2, uint32_t cell,
-                      uint8_t kind)
-{
-    if (!slice_grow(sl)) {
-        sl->failed = true;
-        return;
-    }
-    out_slice *o = &sl->s->slice;
-    const cut *c[3] = {c0, c1, c2};
-    for (int i = 0; i < 3; i++)
-        slice_point(sl, c[i]->a, c[i]->b, c[i]->t, i);
-    double *p = o->xyz + 9 * (size_t)o->ntri, u[3], v[3];
-    for (int k = 0; k < 3; k++) {
-        u[k] = p[3 + k] - p[k];
-        v[k] = p[6 + k] - p[k];
-    }
-    double w[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
-    if (w[0] * sl->n[0] + w[1] * sl->n[1] + w[2] * sl->n[2] < 0) { /* face along +n */
-        double tmp[3];
-        memcpy(tmp, p + 3, sizeof tmp);
-        memcpy(p + 3, p + 6, sizeof tmp);
-        memcpy(p + 6, tmp, sizeof tmp);
-        for (int i = 0; i < sl->s->rq.nattrs; i++) {
-            int nc = sl->s->rq.attrs[i].ncomp;
-            double *q = o->attr[i] + (size_t)o->ntri * 3 * nc;
-            for (int k = 0; k < nc; k++) {
-                double x = q[nc + k];
-                q[nc + k] = q[2 * nc + k];
-                q[2 * nc + k] = x;
-            }
-        }
-    }
-    o->cell[o->ntri] = cell;
-    o->kind[o->ntri] = kind;
-    o->ntri++;
-}
-
-static void slice_tet(slicer *sl, const uint32_t t[4], uint32_t cell, uint8_t kind)
-{
-    const double *x = sl->s->xyz;
-    double f[4];
-    int pos[4], np = 0, neg[4], nn = 0;
-    for (int i = 0; i < 4; i++) {
-        const double *p = x + 3 * (size_t)t[i];
-        f[i] = sl->n[0] * p[0] + sl->n[1] * p[1] + sl->n[2] * p[2] - sl->d;
-        if (f[i] > 0)
-            pos[np++] = i;
-        else
-            neg[nn++] = i;
-    }
-    if (np == 0 || nn == 0)
-        return;
-#define CUT(i, j) ((cut){t[i], t[j], f[i] / (f[i] - f[j])})
-    if (np == 1 || nn == 1) {
-        int lone = np == 1 ? pos[0] : neg[0];
-        int *others = np == 1 ? neg : pos;
-        cut a = CUT(lone, others[0]), b = CUT(lone, others[1]), c = CUT(lone, others[2]);
-        slice_tri(sl, &a, &b, &c, cell, kind);
-    } else {
-        cut ac = CUT(pos[0], neg[0]), ad = CUT(pos[0], neg[1]), bd = CUT(pos[1], neg[1]),
-            bc = CUT(pos[1], neg[0]);
-        slice_tri(sl, &ac, &ad, &bd, cell, kind);
-        slice_tri(sl, &ac, &bd, &bc, cell, kind);
-    }
-#undef CUT
-}
-
-static bool compute_slice(out_stream *s)
-{
-    slicer sl = {.s = s};
-    double len = sqrt(s->rq.slice[0] * s->rq.slice[0] + s->rq.slice[1] * s->rq.slice[1] +
-                      s->rq.slice[2] * s->rq.slice[2]);
-    for (int k = 0; k < 3; k++)
-        sl.n[k] = s->rq.slice[k] / len;
-    sl.d = s->rq.slice[3] / len;
-    uint32_t v[6], t[4];
-    uint32_t nt = sd_level_num_cells(s->lv, SD_CELL_TETRA), no = sd_level_num_cells(s->lv, SD_CELL_OCTA);
-    for (uint32_t i = 0; i < nt && !sl.failed; i++) {
-        sd_level_cell(s->lv, SD_CELL_TETRA, i, v);
-        slice_tet(&sl, v, i, SD_CELL_TETRA);
-    }
-    for (uint32_t i = 0; i < no && !sl.failed; i++) {
-        sd_level_cell(s->lv, SD_CELL_OCTA, i, v);
-        for (int k = 0; k < 4; k++) {
-            out_oct_tet(v, k, t);
-            slice_tet(&sl, t, i, SD_CELL_OCTA);
-        }
-    }
-    return !sl.failed;
-}
-
 /* ---- open / read / close ------------------------------------------------------------------ */
 
 void out_close(out_stream *s)
@@ -245,11 +105,7 @@ void out_close(out_stream *s)
     free(s->buf);
     free(s->own_bnd);
     free(s->own_normals);
-    free(s->slice.xyz);
-    free(s->slice.cell);
-    free(s->slice.kind);
-    for (int a = 0; a < OUT_MAX_ATTRS; a++)
-        free(s->slice.attr[a]);
+    out_slice_free(&s->slice);
     free(s);
 }
 
@@ -284,9 +140,9 @@ static bool valid_name(const char *name)
     return n > 0;
 }
 
-out_stream *out_open(const out_request *rq, out_format f, sd_error *err)
+out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err)
 {
-    if ((unsigned)f >= OUT_FORMAT_COUNT)
+    if (!f || !f->init)
         return fail(NULL, err, SD_ERR_ARG, "format: unknown output format");
     if (rq->parts & ~(unsigned)OUT_PART_ALL)
         return fail(NULL, err, SD_ERR_ARG, "parts: unknown part (mask 0x%x)", rq->parts);
@@ -354,35 +210,12 @@ out_stream *out_open(const out_request *rq, out_format f, sd_error *err)
                                         OUT_PART_SOLIDS, OUT_PART_SOLIDS};
     for (int k = 0; k < 5; k++)
         s->ncells[k] = (s->rq.parts & part_of[k]) ? sd_level_num_cells(s->lv, (sd_cell_kind)k) : 0;
-    bool solids = (s->rq.parts & OUT_PART_SOLIDS) != 0;
-    if (rq->has_slice && solids && !compute_slice(s))
+    if (rq->has_slice && (s->rq.parts & OUT_PART_SOLIDS) && !out_compute_slice(s))
         return fail(s, err, SD_ERR_NOMEM, "out of memory computing the cross-section");
     s->buf = malloc(OUT_BUF_CAP);
     if (!s->buf)
         return fail(s, err, SD_ERR_NOMEM, "out of memory");
-    int rc;
-    switch (f) {
-    case OUT_GLB:
-    case OUT_GLTF:
-        if (solids && rq->geometry) { /* precomputed with every part: reuse what applies */
-            s->nbnd = rq->geometry->nbnd;
-            s->bnd = rq->geometry->bnd;
-            if (s->rq.parts == OUT_PART_ALL)
-                s->normals = rq->geometry->normals;
-        } else if (solids) {
-            s->nbnd = sd_level_solid_boundary(s->lv, NULL);
-            s->bnd = s->own_bnd = malloc(((size_t)s->nbnd * 3 + 1) * sizeof *s->bnd);
-            if (!s->bnd)
-                return fail(s, err, SD_ERR_NOMEM, "out of memory");
-            sd_level_solid_boundary(s->lv, s->own_bnd);
-        }
-        rc = out_gltf_init(s, err);
-        break;
-    case OUT_VTU: rc = out_vtu_init(s, err); break;
-    case OUT_VTK: rc = out_vtk_init(s, err); break;
-    default: rc = out_json_init(s, err); break;
-    }
-    if (rc) {
+    if (f->init(s, err)) {
         out_close(s);
         return NULL;
     }

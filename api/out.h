@@ -23,13 +23,29 @@
 extern "C" {
 #endif
 
-typedef enum out_format { OUT_GLB = 0, OUT_GLTF, OUT_VTU, OUT_VTK, OUT_JSON, OUT_FORMAT_COUNT } out_format;
+typedef struct out_stream out_stream;
 
-/* "glb", "gltf", "vtu", "vtk", "json" <-> enum; -1 if unknown. */
-int out_format_parse(const char *name);
-const char *out_format_name(out_format f);
-const char *out_content_type(out_format f);   /* model/gltf-binary, model/gltf+json, ... */
-const char *out_file_extension(out_format f); /* ".glb", ... */
+/* One output format of a level: a row of the table in api/formats.c, which everything that
+ * names a format reads — the `format=` query, Content-Type, Content-Disposition, the offline
+ * mode's choice by file extension, the stats' sizes and `subdivd --list-formats`. */
+typedef struct out_format {
+    const char *name;        /* "glb": the value of format= */
+    const char *mime;        /* the Content-Type of the stream */
+    const char *extension;   /* ".glb": download names and `subdivd refine -o` */
+    const char *disposition; /* "inline" (viewers open it) or "attachment" (saved) */
+    bool geometry;           /* reads out_request.geometry (the per-level solid boundary, normals) */
+    int (*init)(out_stream *s, sd_error *err); /* the writer (out_internal.h) */
+} out_format;
+
+/* The formats, in table order, ended by a row whose name is NULL. */
+extern const out_format out_formats[];
+/* The format called `name`, or NULL. */
+const out_format *out_format_find(const char *name);
+/* The format whose extension ends `path` ("level.vtu" -> vtu), or NULL. */
+const out_format *out_format_for_path(const char *path);
+/* The formats' names (or extensions) as one list, e.g. "glb, gltf, vtu, vtk or json":
+ * `sep` between names, `last` before the last one. Returns buf. */
+char *out_format_list(char *buf, size_t cap, bool extensions, const char *sep, const char *last);
 
 enum {
     OUT_PART_POINTS = 1,
@@ -77,11 +93,9 @@ typedef struct out_geometry {
 out_geometry *out_geometry_compute(const sd_level *lv);
 void out_geometry_free(out_geometry *g);
 
-typedef struct out_stream out_stream;
-
 /* Validate and prepare. Returns NULL and fills err (code SD_ERR_ARG for a bad request, message
  * naming the offending option) on failure. */
-out_stream *out_open(const out_request *rq, out_format f, sd_error *err);
+out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err);
 /* Total size in bytes if known in advance (GLB, glTF, VTU, VTK), else UINT64_MAX (JSON). */
 uint64_t out_size(const out_stream *s);
 /* Fill up to `cap` bytes of buf; returns the number written (> 0), 0 at the end, -1 on an

@@ -28,20 +28,13 @@ typedef enum { /* in buffer order; the index sections are G_IPT..G_IBD */
     G_SCOLOR
 } gsec_id;
 
-typedef struct gsec {
-    gsec_id id;
-    int attr, ncomp;      /* components per item */
-    int width;            /* bytes per component: 4 float/u32, 2 u16 */
-    uint64_t count;       /* items */
-    uint64_t bytes;       /* unpadded */
-    uint64_t offset;      /* in the buffer */
-    int accessor;
-} gsec;
+/* Sections (out_section): id a gsec_id, arg the attribute, width 4 (float, u32) or 2 (u16),
+ * bytes unpadded, offset in the buffer; section i is accessor i and buffer view i. */
+typedef out_section gsec;
 
 typedef struct gstate {
     bool glb;
-    int nsec;
-    gsec sec[16 + 2 * OUT_MAX_ATTRS];
+    out_sections sec;
     char *json;           /* GLB: the JSON chunk (padded); glTF: everything before the base64 */
     size_t json_len;
     uint64_t bin_len;     /* padded */
@@ -55,79 +48,6 @@ typedef struct gstate {
 } gstate;
 
 static const char B64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-
-/* ---- normals ------------------------------------------------------------------------------ */
-
-static void add_normal(float *acc, const double *x, const uint32_t *t)
-{
-    const double *a = x + 3 * (size_t)t[0], *b = x + 3 * (size_t)t[1], *c = x + 3 * (size_t)t[2];
-    double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-    float n[3] = {(float)(u[1] * v[2] - u[2] * v[1]), (float)(u[2] * v[0] - u[0] * v[2]),
-                  (float)(u[0] * v[1] - u[1] * v[0])};
-    for (int k = 0; k < 3; k++)
-        for (int j = 0; j < 3; j++)
-            acc[3 * (size_t)t[k] + j] += n[j];
-}
-
-/* Area-weighted vertex normals, accumulated in place (float is plenty for a unit direction). */
-float *out_normals(const sd_level *lv, uint32_t ntr, const uint32_t *bnd, uint32_t nbnd)
-{
-    uint32_t nv = sd_level_num_vertices(lv);
-    const double *xyz = sd_level_channel(lv, 0, NULL);
-    float *acc = calloc((size_t)nv * 3 + 1, sizeof *acc);
-    if (!acc)
-        return NULL;
-    uint32_t v[6];
-    for (uint32_t i = 0; i < ntr; i++) {
-        sd_level_cell(lv, SD_CELL_TRIANGLE, i, v);
-        add_normal(acc, xyz, v);
-    }
-    for (uint32_t i = 0; i < nbnd; i++)
-        add_normal(acc, xyz, bnd + 3 * (size_t)i);
-    for (uint32_t i = 0; i < nv; i++) {
-        float *f = acc + 3 * (size_t)i;
-        if (f[0] == 0 && f[1] == 0 && f[2] == 0) { /* on no triangle (most solid vertices) */
-            f[2] = 1;
-            continue;
-        }
-        double len = sqrt((double)f[0] * f[0] + (double)f[1] * f[1] + (double)f[2] * f[2]);
-        if (!(len > 1e-30) || !isfinite(len)) {
-            f[0] = f[1] = 0;
-            f[2] = 1;
-        } else
-            for (int k = 0; k < 3; k++)
-                f[k] = (float)(f[k] / len);
-    }
-    return acc;
-}
-
-out_geometry *out_geometry_compute(const sd_level *lv)
-{
-    out_geometry *g = calloc(1, sizeof *g);
-    if (!g)
-        return NULL;
-    g->nbnd = sd_level_solid_boundary(lv, NULL);
-    g->bnd = malloc(((size_t)g->nbnd * 3 + 1) * sizeof *g->bnd);
-    if (g->bnd) {
-        sd_level_solid_boundary(lv, g->bnd);
-        g->normals = out_normals(lv, sd_level_num_cells(lv, SD_CELL_TRIANGLE), g->bnd, g->nbnd);
-    }
-    if (!g->bnd || !g->normals) {
-        out_geometry_free(g);
-        return NULL;
-    }
-    g->bytes = sizeof *g + (size_t)g->nbnd * 12 + (size_t)sd_level_num_vertices(lv) * 12;
-    return g;
-}
-
-void out_geometry_free(out_geometry *g)
-{
-    if (!g)
-        return;
-    free(g->bnd);
-    free(g->normals);
-    free(g);
-}
 
 /* ---- binary ------------------------------------------------------------------------------- */
 
@@ -152,6 +72,9 @@ static double colormap_t(const out_stream *s, double x)
     return (x - s->rq.colormap_min) / (s->rq.colormap_max - s->rq.colormap_min);
 }
 
+/* The accessor of a section. */
+static int acc(const gstate *g, const gsec *c) { return (int)(c - g->sec.s); }
+
 static void put_item(out_stream *s, gstate *g, const gsec *c, uint64_t i)
 {
     uint32_t v[6];
@@ -162,9 +85,9 @@ static void put_item(out_stream *s, gstate *g, const gsec *c, uint64_t i)
         break;
     case G_NRM: out_put(s, s->normals + 3 * i, 12); break;
     case G_ATTR: {
-        int nc = s->rq.attrs[c->attr].ncomp;
+        int nc = s->rq.attrs[c->arg].ncomp;
         for (int k = 0; k < c->ncomp; k++)
-            put_f(s, s->attr[c->attr][i * nc + k]);
+            put_f(s, s->attr[c->arg][i * nc + k]);
         break;
     }
     case G_RULE: put_f(s, sd_level_vertex_rule(s->lv, (uint32_t)i)); break;
@@ -194,9 +117,9 @@ static void put_item(out_stream *s, gstate *g, const gsec *c, uint64_t i)
         break;
     case G_SNRM: out_put(s, g->nrm_plane, 12); break;
     case G_SATTR: {
-        int nc = s->rq.attrs[c->attr].ncomp;
+        int nc = s->rq.attrs[c->arg].ncomp;
         for (int k = 0; k < c->ncomp; k++)
-            put_f(s, s->slice.attr[c->attr][i * nc + k]);
+            put_f(s, s->slice.attr[c->arg][i * nc + k]);
         break;
     }
     case G_SCOLOR: {
@@ -235,8 +158,8 @@ static uint64_t put_bulk(out_stream *s, const gsec *c, uint64_t i, uint64_t end)
             dst[k++] = (float)sd_level_vertex_rule(s->lv, (uint32_t)i);
         break;
     default: {
-        int nc = s->rq.attrs[c->attr].ncomp;
-        for (const double *x = s->attr[c->attr] + i * nc; i < end; i++, x += nc)
+        int nc = s->rq.attrs[c->arg].ncomp;
+        for (const double *x = s->attr[c->arg] + i * nc; i < end; i++, x += nc)
             for (int j = 0; j < c->ncomp; j++)
                 dst[k++] = (float)x[j];
         break;
@@ -249,8 +172,8 @@ static uint64_t put_bulk(out_stream *s, const gsec *c, uint64_t i, uint64_t end)
 /* Binary bytes into s->buf while there is room; returns 0 when the binary part is complete. */
 static int produce_bin(out_stream *s, gstate *g)
 {
-    while (ROOM(s) && s->section < g->nsec) {
-        const gsec *c = &g->sec[s->section];
+    while (ROOM(s) && s->section < g->sec.n) {
+        const gsec *c = &g->sec.s[s->section];
         uint64_t i = s->item;
         if ((c->id == G_POS || c->id == G_NRM || c->id == G_RULE || c->id == G_ATTR) &&
             s->len % 4 == 0) {
@@ -267,7 +190,7 @@ static int produce_bin(out_stream *s, gstate *g)
         s->section++;
         s->item = 0;
     }
-    return s->section < g->nsec;
+    return s->section < g->sec.n;
 }
 
 static void b64_flush(out_stream *s, gstate *g, const unsigned char *p, size_t n, bool final)
@@ -345,19 +268,6 @@ static int produce(out_stream *s)
 
 /* ---- JSON --------------------------------------------------------------------------------- */
 
-static gsec *add_sec(gstate *g, gsec_id id, int attr, int ncomp, int width, uint64_t count)
-{
-    gsec *c = &g->sec[g->nsec++];
-    memset(c, 0, sizeof *c);
-    c->id = id;
-    c->attr = attr;
-    c->ncomp = ncomp;
-    c->width = width;
-    c->count = count;
-    c->bytes = count * (uint64_t)ncomp * (uint64_t)width;
-    return c;
-}
-
 static void gfree(void *p)
 {
     gstate *g = p;
@@ -366,13 +276,6 @@ static void gfree(void *p)
         free(g->scratch);
     }
     free(g);
-}
-
-static int nomem(sd_error *err)
-{
-    err->code = SD_ERR_NOMEM;
-    snprintf(err->message, sizeof err->message, "out of memory");
-    return SD_ERR_NOMEM;
 }
 
 /* glTF names of the per-vertex attributes: `_RULE` (name[nattrs]) first, then per attribute `_` +
@@ -400,44 +303,44 @@ static void attribute_names(const out_stream *s, gstate *g)
     }
 }
 
-int out_gltf_init(out_stream *s, sd_error *err)
+/* The accessors the JSON part names (NULL: absent). */
+typedef struct layout {
+    const gsec *pos, *nrm, *rule, *col, *prim[4], *spos, *snrm, *scol;
+    int first_attr, first_sattr;   /* accessors of the first `_<NAME>` of the level and slice */
+} layout;
+
+/* The sections in buffer order, their offsets, the attribute names and the slice's normal. */
+static void plan(out_stream *s, gstate *g, layout *L)
 {
-    gstate *g = calloc(1, sizeof *g);
-    if (!g)
-        return nomem(err);
-    s->fmt_state = g;
-    s->fmt_free = gfree;
-    s->produce = produce;
-    g->glb = s->fmt == OUT_GLB;
-    if (!g->glb && !(g->scratch = malloc(OUT_BUF_CAP)))
-        return nomem(err);
     uint32_t ntr = s->ncells[SD_CELL_TRIANGLE], nst = s->slice.ntri;
-    bool tris = ntr || s->nbnd;
-    if (tris && !s->normals) {
-        if (!(s->own_normals = out_normals(s->lv, ntr, s->bnd, s->nbnd)))
-            return nomem(err);
-        s->normals = s->own_normals;
-    }
     int iw = s->nv <= 65535 ? 2 : 4;
-    gsec *pos = add_sec(g, G_POS, 0, 3, 4, s->nv), *nrm = NULL, *col = NULL, *rule;
-    if (tris)
-        nrm = add_sec(g, G_NRM, 0, 3, 4, s->nv);
-    int first_attr = g->nsec;
+    memset(L, 0, sizeof *L);
+    L->pos = out_section_add(&g->sec, G_POS, 0, 3, 4, s->nv);
+    if (ntr || s->nbnd)
+        L->nrm = out_section_add(&g->sec, G_NRM, 0, 3, 4, s->nv);
+    L->first_attr = g->sec.n;
     for (int a = 0; a < s->rq.nattrs; a++)
-        add_sec(g, G_ATTR, a, s->rq.attrs[a].ncomp < 4 ? s->rq.attrs[a].ncomp : 4, 4, s->nv);
-    rule = add_sec(g, G_RULE, 0, 1, 4, s->nv);
+        out_section_add(&g->sec, G_ATTR, a, s->rq.attrs[a].ncomp < 4 ? s->rq.attrs[a].ncomp : 4, 4, s->nv);
+    L->rule = out_section_add(&g->sec, G_RULE, 0, 1, 4, s->nv);
     if (s->rq.colormap_attr >= 0)
-        col = add_sec(g, G_COLOR, 0, 3, 4, s->nv);
-    gsec *ipt = s->ncells[SD_CELL_POINT] ? add_sec(g, G_IPT, 0, 1, iw, s->ncells[SD_CELL_POINT]) : NULL;
-    gsec *iln = s->ncells[SD_CELL_CURVE] ? add_sec(g, G_ILN, 0, 2, iw, s->ncells[SD_CELL_CURVE]) : NULL;
-    gsec *itr = ntr ? add_sec(g, G_ITR, 0, 3, iw, ntr) : NULL;
-    gsec *ibd = s->nbnd ? add_sec(g, G_IBD, 0, 3, iw, s->nbnd) : NULL;
-    gsec *spos = nst ? add_sec(g, G_SPOS, 0, 3, 4, 3ull * nst) : NULL;
-    gsec *snrm = nst ? add_sec(g, G_SNRM, 0, 3, 4, 3ull * nst) : NULL;
-    int first_sattr = g->nsec; /* the slice's own attribute values, interpolated on the cut edges */
+        L->col = out_section_add(&g->sec, G_COLOR, 0, 3, 4, s->nv);
+    if (s->ncells[SD_CELL_POINT])
+        L->prim[0] = out_section_add(&g->sec, G_IPT, 0, 1, iw, s->ncells[SD_CELL_POINT]);
+    if (s->ncells[SD_CELL_CURVE])
+        L->prim[1] = out_section_add(&g->sec, G_ILN, 0, 2, iw, s->ncells[SD_CELL_CURVE]);
+    if (ntr)
+        L->prim[2] = out_section_add(&g->sec, G_ITR, 0, 3, iw, ntr);
+    if (s->nbnd)
+        L->prim[3] = out_section_add(&g->sec, G_IBD, 0, 3, iw, s->nbnd);
+    if (nst) {
+        L->spos = out_section_add(&g->sec, G_SPOS, 0, 3, 4, 3ull * nst);
+        L->snrm = out_section_add(&g->sec, G_SNRM, 0, 3, 4, 3ull * nst);
+    }
+    L->first_sattr = g->sec.n; /* the slice's own attribute values, interpolated on the cut edges */
     for (int a = 0; nst && a < s->rq.nattrs; a++)
-        add_sec(g, G_SATTR, a, s->rq.attrs[a].ncomp < 4 ? s->rq.attrs[a].ncomp : 4, 4, 3ull * nst);
-    gsec *scol = nst && col ? add_sec(g, G_SCOLOR, 0, 3, 4, 3ull * nst) : NULL;
+        out_section_add(&g->sec, G_SATTR, a, s->rq.attrs[a].ncomp < 4 ? s->rq.attrs[a].ncomp : 4, 4, 3ull * nst);
+    if (nst && L->col)
+        L->scol = out_section_add(&g->sec, G_SCOLOR, 0, 3, 4, 3ull * nst);
     attribute_names(s, g);
     if (nst) {
         double l = sqrt(s->rq.slice[0] * s->rq.slice[0] + s->rq.slice[1] * s->rq.slice[1] +
@@ -448,40 +351,35 @@ int out_gltf_init(out_stream *s, sd_error *err)
             g->nrm_plane[k] = (float)(f[k] / fl);
     }
     uint64_t off = 0;
-    for (int i = 0; i < g->nsec; i++) {
-        g->sec[i].offset = off;
-        g->sec[i].accessor = i;
-        off += (g->sec[i].bytes + 3) / 4 * 4;
+    for (int i = 0; i < g->sec.n; i++) {
+        g->sec.s[i].offset = off;
+        off += (g->sec.s[i].bytes + 3) / 4 * 4;
     }
     g->bin_len = off;
+}
 
-    char *text = NULL;
-    size_t n = 0;
-    FILE *f = open_memstream(&text, &n);
-    if (!f)
-        return nomem(err);
-    fprintf(f, "{\"asset\":{\"version\":\"2.0\",\"generator\":\"subdivd\",\"extras\":{\"level\":%d,"
-               "\"version\":%llu}},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],",
-            s->rq.level, (unsigned long long)s->rq.version);
-    /* buffer views and accessors, one each per section */
+/* "bufferViews" and "accessors": one each per section; POSITION's min/max of the float32 values
+ * written. */
+static void json_accessors(FILE *f, const out_stream *s, const gstate *g)
+{
     fprintf(f, "\"bufferViews\":[");
-    for (int i = 0; i < g->nsec; i++) {
-        const gsec *c = &g->sec[i];
+    for (int i = 0; i < g->sec.n; i++) {
+        const gsec *c = &g->sec.s[i];
         bool index = c->id >= G_IPT && c->id <= G_IBD;
         fprintf(f, "%s{\"buffer\":0,\"byteOffset\":%llu,\"byteLength\":%llu,\"target\":%d}",
                 i ? "," : "", (unsigned long long)c->offset, (unsigned long long)c->bytes,
                 index ? 34963 : 34962);
     }
     fprintf(f, "],\"accessors\":[");
-    for (int i = 0; i < g->nsec; i++) {
-        const gsec *c = &g->sec[i];
+    for (int i = 0; i < g->sec.n; i++) {
+        const gsec *c = &g->sec.s[i];
         bool index = c->id >= G_IPT && c->id <= G_IBD;
         static const char *const vt[] = {"", "SCALAR", "VEC2", "VEC3", "VEC4"};
         uint64_t count = index ? c->count * (uint64_t)c->ncomp : c->count;
         fprintf(f, "%s{\"bufferView\":%d,\"componentType\":%d,\"count\":%llu,\"type\":\"%s\"",
                 i ? "," : "", i, index ? (c->width == 2 ? 5123 : 5125) : 5126,
                 (unsigned long long)count, index ? "SCALAR" : vt[c->ncomp]);
-        if (c->id == G_POS || c->id == G_SPOS) { /* min/max of the float32 values written */
+        if (c->id == G_POS || c->id == G_SPOS) {
             float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
             const double *x = c->id == G_POS ? s->xyz : s->slice.xyz;
             for (uint64_t j = 0; j < c->count; j++)
@@ -495,32 +393,36 @@ int out_gltf_init(out_stream *s, sd_error *err)
         }
         fprintf(f, "}");
     }
-    fprintf(f, "],\"materials\":[{\"name\":\"subdivd\",\"pbrMetallicRoughness\":{\"baseColorFactor\":"
-               "[0.8,0.8,0.8,1],\"metallicFactor\":0,\"roughnessFactor\":0.8},\"doubleSided\":true}],");
+    fprintf(f, "],");
+}
+
+/* "meshes" (one primitive per part shown, then the slice's) and "nodes"; the number of
+ * primitives. */
+static int json_meshes(FILE *f, const out_stream *s, const gstate *g, const layout *L)
+{
     int nprim = 0;
     fprintf(f, "\"meshes\":[{\"name\":\"level %d\",\"primitives\":[", s->rq.level);
-    const gsec *prims[4] = {ipt, iln, itr, ibd};
     static const int modes[4] = {0, 1, 4, 4};
     for (int p = 0; p < 4; p++) {
-        if (!prims[p])
+        if (!L->prim[p])
             continue;
-        fprintf(f, "%s{\"attributes\":{\"POSITION\":%d", nprim++ ? "," : "", pos->accessor);
+        fprintf(f, "%s{\"attributes\":{\"POSITION\":%d", nprim++ ? "," : "", acc(g, L->pos));
         if (modes[p] == 4)
-            fprintf(f, ",\"NORMAL\":%d", nrm->accessor);
+            fprintf(f, ",\"NORMAL\":%d", acc(g, L->nrm));
         for (int a = 0; a < s->rq.nattrs; a++)
-            fprintf(f, ",\"%s\":%d", g->name[a], first_attr + a);
-        fprintf(f, ",\"%s\":%d", g->name[s->rq.nattrs], rule->accessor);
-        if (col)
-            fprintf(f, ",\"COLOR_0\":%d", col->accessor);
-        fprintf(f, "},\"indices\":%d,\"mode\":%d,\"material\":0}", prims[p]->accessor, modes[p]);
+            fprintf(f, ",\"%s\":%d", g->name[a], L->first_attr + a);
+        fprintf(f, ",\"%s\":%d", g->name[s->rq.nattrs], acc(g, L->rule));
+        if (L->col)
+            fprintf(f, ",\"COLOR_0\":%d", acc(g, L->col));
+        fprintf(f, "},\"indices\":%d,\"mode\":%d,\"material\":0}", acc(g, L->prim[p]), modes[p]);
     }
-    if (spos) {
+    if (L->spos) {
         fprintf(f, "%s{\"attributes\":{\"POSITION\":%d,\"NORMAL\":%d", nprim++ ? "," : "",
-                spos->accessor, snrm->accessor);
+                acc(g, L->spos), acc(g, L->snrm));
         for (int a = 0; a < s->rq.nattrs; a++)
-            fprintf(f, ",\"%s\":%d", g->name[a], first_sattr + a);
-        if (scol)
-            fprintf(f, ",\"COLOR_0\":%d", scol->accessor);
+            fprintf(f, ",\"%s\":%d", g->name[a], L->first_sattr + a);
+        if (L->scol)
+            fprintf(f, ",\"COLOR_0\":%d", acc(g, L->scol));
         fprintf(f, "},\"mode\":4,\"material\":0}");
     }
     fprintf(f, "]}],");
@@ -528,6 +430,25 @@ int out_gltf_init(out_stream *s, sd_error *err)
         fprintf(f, "\"nodes\":[{\"name\":\"level %d\",\"mesh\":0}],", s->rq.level);
     else /* nothing to draw in the chosen parts: an empty node (a mesh needs a primitive) */
         fprintf(f, "\"nodes\":[{\"name\":\"level %d (empty)\"}],", s->rq.level);
+    return nprim;
+}
+
+/* The JSON part (glTF: up to the base64 data). The text is the C library's (open_memstream):
+ * free it with free(). NULL when out of memory. */
+static char *json_part(const out_stream *s, const gstate *g, const layout *L, size_t *len)
+{
+    char *text = NULL;
+    size_t n = 0;
+    FILE *f = open_memstream(&text, &n);
+    if (!f)
+        return NULL;
+    fprintf(f, "{\"asset\":{\"version\":\"2.0\",\"generator\":\"subdivd\",\"extras\":{\"level\":%d,"
+               "\"version\":%llu}},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],",
+            s->rq.level, (unsigned long long)s->rq.version);
+    json_accessors(f, s, g);
+    fprintf(f, "\"materials\":[{\"name\":\"subdivd\",\"pbrMetallicRoughness\":{\"baseColorFactor\":"
+               "[0.8,0.8,0.8,1],\"metallicFactor\":0,\"roughnessFactor\":0.8},\"doubleSided\":true}],");
+    int nprim = json_meshes(f, s, g, L);
     if (g->glb)
         fprintf(f, "\"buffers\":[{\"byteLength\":%llu}]}", (unsigned long long)g->bin_len);
     else
@@ -535,7 +456,7 @@ int out_gltf_init(out_stream *s, sd_error *err)
                 (unsigned long long)g->bin_len);
     if (fclose(f)) {
         free(text);
-        return nomem(err);
+        return NULL;
     }
     if (!nprim) { /* drop the "meshes" member: a mesh without primitives is invalid */
         char *m = strstr(text, "\"meshes\":[{");
@@ -545,35 +466,61 @@ int out_gltf_init(out_stream *s, sd_error *err)
             n = strlen(text);
         }
     }
-    if (g->glb) { /* 12-byte header + JSON chunk padded with spaces */
-        size_t pad = (4 - n % 4) % 4;
-        char *j = malloc(12 + 8 + n + pad);
-        if (!j) {
-            free(text);
-            return nomem(err);
-        }
+    *len = n;
+    return text;
+}
+
+/* g->json: GLB's 12-byte header and JSON chunk (padded with spaces), or glTF's text; s->size. */
+static int frame(out_stream *s, gstate *g, const char *text, size_t n, sd_error *err)
+{
+    size_t pad = g->glb ? (4 - n % 4) % 4 : 0, head = g->glb ? 20 : 0;
+    if (g->glb && head + n + pad + 8 + g->bin_len > UINT32_MAX) {
+        err->code = SD_ERR_LIMIT;
+        snprintf(err->message, sizeof err->message,
+                 "the level is larger than a GLB file can be (4 GiB); ask for a lower level or "
+                 "fewer parts");
+        return SD_ERR_LIMIT;
+    }
+    char *j = malloc(head + n + pad + 1);
+    if (!j)
+        return out_nomem(err);
+    if (g->glb) {
         uint32_t total = (uint32_t)(12 + 8 + n + pad + 8 + g->bin_len);
         uint32_t hdr[5] = {0x46546C67, 2, total, (uint32_t)(n + pad), 0x4E4F534A};
-        if (12 + 8 + n + pad + 8 + g->bin_len > UINT32_MAX) {
-            free(j);
-            free(text);
-            err->code = SD_ERR_LIMIT;
-            snprintf(err->message, sizeof err->message,
-                     "the level is larger than a GLB file can be (4 GiB); ask for a lower level or "
-                     "fewer parts");
-            return SD_ERR_LIMIT;
-        }
         memcpy(j, hdr, 20);
-        memcpy(j + 20, text, n);
-        memset(j + 20 + n, ' ', pad);
-        free(text);
-        g->json = j;
-        g->json_len = 20 + n + pad;
-        s->size = g->json_len + 8 + g->bin_len;
-    } else {
-        g->json = text;
-        g->json_len = n;
-        s->size = n + (g->bin_len + 2) / 3 * 4 + 4;
     }
+    memcpy(j + head, text, n);
+    memset(j + head + n, ' ', pad);
+    g->json = j;
+    g->json_len = head + n + pad;
+    s->size = g->glb ? g->json_len + 8 + g->bin_len : n + (g->bin_len + 2) / 3 * 4 + 4;
     return 0;
 }
+
+static int init(out_stream *s, bool glb, sd_error *err)
+{
+    gstate *g = out_state_new(s, sizeof *g, gfree, produce);
+    if (!g)
+        return out_nomem(err);
+    g->glb = glb;
+    if (!out_solid_boundary(s) || (!g->glb && !(g->scratch = malloc(OUT_BUF_CAP))))
+        return out_nomem(err);
+    uint32_t ntr = s->ncells[SD_CELL_TRIANGLE];
+    if ((ntr || s->nbnd) && !s->normals) {
+        if (!(s->own_normals = out_normals(s->lv, ntr, s->bnd, s->nbnd)))
+            return out_nomem(err);
+        s->normals = s->own_normals;
+    }
+    layout L;
+    plan(s, g, &L);
+    size_t n;
+    char *text = json_part(s, g, &L, &n);
+    if (!text)
+        return out_nomem(err);
+    int rc = frame(s, g, text, n, err);
+    free(text); /* open_memstream's buffer belongs to the C library */
+    return rc;
+}
+
+int out_glb_init(out_stream *s, sd_error *err) { return init(s, true, err); }
+int out_gltf_init(out_stream *s, sd_error *err) { return init(s, false, err); }

@@ -1,5 +1,6 @@
-/* out_internal.h — what the writers share: the stream object, its chunk buffer and the
- * precomputed geometry (solid boundary, normals, slice), colour map.
+/* out_internal.h — what the writers share: the stream object and its chunk buffer, the section
+ * list every writer describes its output with, and the geometry of api/geom.c (solid boundary,
+ * normals, the slice, octahedra as tetrahedra).
  *
  * Every writer is a generator: `produce` appends the next piece of output (a bounded number of
  * items, so the buffer stays small) to the stream's buffer and returns 1 while there is more.
@@ -24,9 +25,35 @@ typedef struct out_slice {
     uint8_t *kind;         /* SD_CELL_TETRA or SD_CELL_OCTA */
 } out_slice;
 
+/* One run of a writer's output: `count` items of one kind (a glTF accessor, a VTK data array, a
+ * JSON member), produced item by item. Writers fill the fields they use. */
+typedef struct out_section {
+    int id;                /* the writer's kind of section */
+    int arg;               /* an attribute index or a cell kind */
+    int ncomp;             /* components per item */
+    int width;             /* bytes per component of binary data */
+    uint64_t count;        /* items */
+    uint64_t bytes;        /* binary data bytes: count * ncomp * width unless the writer says */
+    uint64_t offset;       /* glTF: where the data starts in the buffer */
+    char head[192];        /* text before the items (JSON's opening, legacy VTK's keyword lines) */
+    const char *tail;      /* text after the items (JSON) */
+} out_section;
+
+#define OUT_MAX_SECTIONS (16 + 2 * OUT_MAX_ATTRS)
+
+/* A writer's sections in output order. */
+typedef struct out_sections {
+    int n;
+    out_section s[OUT_MAX_SECTIONS];
+} out_sections;
+
+/* Append a section (zeroed, then the given fields; bytes = count * ncomp * width). */
+out_section *out_section_add(out_sections *l, int id, int arg, int ncomp, int width,
+                             uint64_t count);
+
 struct out_stream {
     out_request rq;
-    out_format fmt;
+    const out_format *fmt;
     const sd_level *lv;
     uint32_t nv;
     const double *xyz;
@@ -55,20 +82,40 @@ struct out_stream {
 void out_put(out_stream *s, const void *p, size_t n);
 void out_printf(out_stream *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
+/* A writer's zeroed state of `size` bytes, installed as s->fmt_state with the function that frees
+ * it (on out_close) and the generator; NULL when out of memory. */
+void *out_state_new(out_stream *s, size_t size, void (*free_state)(void *), int (*produce)(out_stream *));
+
+/* Fill err with SD_ERR_NOMEM, "out of memory"; returns SD_ERR_NOMEM. */
+int out_nomem(sd_error *err);
+
 /* Viridis colour of t in [0,1] (clamped), linear RGB in [0,1]. */
 void out_viridis(double t, float rgb[3]);
+
+/* ---- geometry (api/geom.c) ---- */
 
 /* The k-th of the 4 tetrahedra an octahedron is written as (split along its major diagonal,
  * positively oriented like the octahedron). */
 void out_oct_tet(const uint32_t oct[6], int k, uint32_t tet[4]);
-
-/* Writers: fill s->size, s->produce (and fmt_state) — 0 or an sd_result with err filled. */
-int out_json_init(out_stream *s, sd_error *err);
-int out_vtu_init(out_stream *s, sd_error *err);
-int out_vtk_init(out_stream *s, sd_error *err);
-int out_gltf_init(out_stream *s, sd_error *err);
 /* Area-weighted unit vertex normals of the level's surface triangles (first ntr) and the given
  * boundary triangles; (0,0,1) where a vertex has none. NULL when out of memory. */
 float *out_normals(const sd_level *lv, uint32_t ntr, const uint32_t *bnd, uint32_t nbnd);
+/* s->bnd, s->nbnd: the outward boundary of the shown solids, and with every part shown
+ * s->normals, borrowed from rq.geometry when given; else the boundary is computed into
+ * s->own_bnd (the normals are left to the writer). false: out of memory. */
+bool out_solid_boundary(out_stream *s);
+/* s->slice: the cross-section of the shown solids by rq.slice. false: out of memory. */
+bool out_compute_slice(out_stream *s);
+/* Free what out_compute_slice allocated. */
+void out_slice_free(out_slice *sl);
+
+/* ---- the writers (one file each), listed in api/formats.c ---- */
+
+/* Fill s->size, s->produce (and fmt_state) — 0 or an sd_result with err filled. */
+int out_glb_init(out_stream *s, sd_error *err);
+int out_gltf_init(out_stream *s, sd_error *err);
+int out_vtu_init(out_stream *s, sd_error *err);
+int out_vtk_init(out_stream *s, sd_error *err);
+int out_json_init(out_stream *s, sd_error *err);
 
 #endif

@@ -1,4 +1,4 @@
-/* out_json.c — the `json` format of API.md, generated section by section.
+/* out_json.c — the `json` format of docs/API.md, generated section by section.
  *
  * {"level","version","vertices":[[x,y,z]…],"cells":{"points","edges","triangles","tetrahedra",
  *  "octahedra"},"attributes":{name:[…]},"rules":[name…],"origin":{"vertex_of","edge_of",
@@ -12,6 +12,7 @@
  */
 #include "out_internal.h"
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -20,18 +21,13 @@
 
 typedef enum { K_VERT, K_CELL, K_ATTR, K_RULE, K_VOF, K_EOF, K_COF, K_SV, K_ST } kind;
 
-typedef struct section {
-    kind k;
-    int arg;              /* cell kind or attribute */
-    uint64_t count;
-    char open[96];
-    const char *close;
-} section;
+/* Sections (out_section): id a kind, arg the cell kind or attribute, head the opening text,
+ * tail the closing one; items are separated by commas. */
+typedef out_section section;
 
 typedef struct jstate {
-    int n;
     bool opened;
-    section sec[16 + OUT_MAX_ATTRS];
+    out_sections sec;
 } jstate;
 
 static void num(out_stream *s, double x)
@@ -56,7 +52,7 @@ static void vec(out_stream *s, const double *x, int n)
 static void item(out_stream *s, const section *c, uint64_t i)
 {
     uint32_t v[6], a, b;
-    switch (c->k) {
+    switch (c->id) {
     case K_VERT: vec(s, s->xyz + 3 * i, 3); break;
     case K_CELL: {
         sd_cell_kind k = (sd_cell_kind)c->arg;
@@ -82,9 +78,9 @@ static void item(out_stream *s, const section *c, uint64_t i)
     case K_EOF:
     case K_COF: {
         sd_origin_kind o = sd_level_origin(s->lv, (uint32_t)i, &a, &b);
-        if (c->k == K_VOF)
+        if (c->id == K_VOF)
             out_printf(s, "%ld", o == SD_ORIGIN_VERTEX || o == SD_ORIGIN_INPUT ? (long)a : -1L);
-        else if (c->k == K_EOF)
+        else if (c->id == K_EOF)
             o == SD_ORIGIN_EDGE ? out_printf(s, "[%u,%u]", a, b) : out_printf(s, "null");
         else
             out_printf(s, "%ld", o == SD_ORIGIN_CELL ? (long)a : -1L);
@@ -101,10 +97,10 @@ static void item(out_stream *s, const section *c, uint64_t i)
 static int produce(out_stream *s)
 {
     jstate *j = s->fmt_state;
-    while (ROOM(s) && s->section < j->n) {
-        section *c = &j->sec[s->section];
+    while (ROOM(s) && s->section < j->sec.n) {
+        section *c = &j->sec.s[s->section];
         if (!j->opened) {
-            out_printf(s, "%s", c->open);
+            out_printf(s, "%s", c->head);
             j->opened = true;
         }
         uint64_t i = s->item;
@@ -116,40 +112,33 @@ static int produce(out_stream *s)
         s->item = i;
         if (i < c->count)
             return 1;
-        out_printf(s, "%s", c->close);
+        out_printf(s, "%s", c->tail);
         s->section++;
         s->item = 0;
         j->opened = false;
     }
-    return s->section < j->n;
+    return s->section < j->sec.n;
 }
 
 static section *add(jstate *j, kind k, int arg, uint64_t count, const char *close, const char *fmt,
                     ...) __attribute__((format(printf, 6, 7)));
-#include <stdarg.h>
 static section *add(jstate *j, kind k, int arg, uint64_t count, const char *close, const char *fmt,
                     ...)
 {
-    section *c = &j->sec[j->n++];
-    c->k = k;
-    c->arg = arg;
-    c->count = count;
-    c->close = close;
+    section *c = out_section_add(&j->sec, k, arg, 0, 0, count);
+    c->tail = close;
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(c->open, sizeof c->open, fmt, ap);
+    vsnprintf(c->head, sizeof c->head, fmt, ap);
     va_end(ap);
     return c;
 }
 
 int out_json_init(out_stream *s, sd_error *err)
 {
-    jstate *j = calloc(1, sizeof *j);
-    if (!j) {
-        err->code = SD_ERR_NOMEM;
-        snprintf(err->message, sizeof err->message, "out of memory");
-        return SD_ERR_NOMEM;
-    }
+    jstate *j = out_state_new(s, sizeof *j, free, produce);
+    if (!j)
+        return out_nomem(err);
     static const char *const cell_names[] = {"points", "edges", "triangles", "tetrahedra", "octahedra"};
     add(j, K_VERT, 0, s->nv, "]", "{\"level\":%d,\"version\":%llu,\"vertices\":[", s->rq.level,
         (unsigned long long)s->rq.version);
@@ -170,9 +159,6 @@ int out_json_init(out_stream *s, sd_error *err)
         add(j, K_ST, 0, s->slice.ntri, "]}", ",\"triangles\":[");
     }
     add(j, K_VERT, 0, 0, "}", "%s", "");
-    s->fmt_state = j;
-    s->fmt_free = free;
     s->size = UINT64_MAX;
-    s->produce = produce;
     return 0;
 }

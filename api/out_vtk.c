@@ -31,23 +31,17 @@ typedef enum {
     A_ATTR, A_RULE, A_DIM, A_KIND, A_SRC, A_POINTS, A_CONN, A_OFFS, A_TYPES, A_FACES, A_FOFFS
 } arr_id;
 
-typedef struct arr {
-    arr_id id;
-    int attr;            /* A_ATTR: which */
-    int ncomp;
-    int width;           /* bytes per component: 8 (Float64), 4 (Int32), 1 (UInt8) */
-    uint64_t count;      /* items (tuples or cells) */
-    uint64_t bytes;      /* data bytes */
-    char head[192];      /* text before the data (XML: none; legacy: the keyword lines) */
-} arr;
+/* Arrays (out_section): id an arr_id, arg the attribute (A_ATTR), width the bytes per component
+ * (8 Float64, 4 Int32, 1 UInt8), count the items (tuples or cells), head the text before the
+ * data (XML: none; legacy: the keyword lines). */
+typedef out_section arr;
 
 typedef struct vstate {
     bool legacy;
     uint64_t npts, ncell, nconn;
     /* cell ranges (start of each block, in cells) */
     uint64_t r_pt, r_cu, r_tr, r_sl, r_tet, r_oct, r_poly, r_end;
-    int narr;
-    arr a[OUT_MAX_ATTRS + 12];
+    out_sections a;
     char *header;        /* XML text before the appended data, or legacy file header */
     size_t header_len;
     int phase;           /* 0 header, 1 arrays, 2 trailer */
@@ -153,10 +147,10 @@ static void put_item(out_stream *s, const vstate *st, const arr *a, uint64_t i)
         const double *x;
         int nc = a->ncomp;
         if (i < s->nv)
-            x = a->id == A_POINTS ? s->xyz + 3 * i : s->attr[a->attr] + i * nc;
+            x = a->id == A_POINTS ? s->xyz + 3 * i : s->attr[a->arg] + i * nc;
         else
             x = a->id == A_POINTS ? s->slice.xyz + 3 * (i - s->nv)
-                                  : s->slice.attr[a->attr] + (i - s->nv) * nc;
+                                  : s->slice.attr[a->arg] + (i - s->nv) * nc;
         for (int k = 0; k < nc; k++)
             put_num(s, st, 8, x[k], 0);
         break;
@@ -208,11 +202,11 @@ static int produce(out_stream *s)
         return 1;
     }
     while (st->phase == 1 && ROOM(s)) {
-        if (s->section == st->narr) {
+        if (s->section == st->a.n) {
             st->phase = 2;
             break;
         }
-        const arr *a = &st->a[s->section];
+        const arr *a = &st->a.s[s->section];
         if (!st->prefix_done) {
             if (st->legacy)
                 out_printf(s, "%s", a->head);
@@ -249,19 +243,6 @@ static void vfree(void *p)
     free(st);
 }
 
-static arr *add_arr(vstate *st, arr_id id, int attr, int ncomp, int width, uint64_t count)
-{
-    arr *a = &st->a[st->narr++];
-    memset(a, 0, sizeof *a);
-    a->id = id;
-    a->attr = attr;
-    a->ncomp = ncomp;
-    a->width = width;
-    a->count = count;
-    a->bytes = count * (uint64_t)ncomp * (uint64_t)width;
-    return a;
-}
-
 static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
 {
     st->legacy = legacy;
@@ -295,18 +276,18 @@ static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
     /* legacy order: POINTS, CELLS, CELL_TYPES, CELL_DATA, POINT_DATA; XML: point data, cell
      * data, points, cells (the order of the XML elements) */
     if (legacy) {
-        a = add_arr(st, A_POINTS, 0, 3, 8, st->npts);
+        a = out_section_add(&st->a, A_POINTS, 0, 3, 8, st->npts);
         snprintf(a->head, sizeof a->head, "POINTS %llu double\n", (unsigned long long)st->npts);
-        a = add_arr(st, A_CONN, 0, 1, 4, st->ncell);
+        a = out_section_add(&st->a, A_CONN, 0, 1, 4, st->ncell);
         a->bytes = 4 * (st->nconn + st->ncell);
         snprintf(a->head, sizeof a->head, "CELLS %llu %llu\n", (unsigned long long)st->ncell,
                  (unsigned long long)(st->nconn + st->ncell));
-        a = add_arr(st, A_TYPES, 0, 1, 4, st->ncell);
+        a = out_section_add(&st->a, A_TYPES, 0, 1, 4, st->ncell);
         snprintf(a->head, sizeof a->head, "CELL_TYPES %llu\n", (unsigned long long)st->ncell);
         static const char *const cnames[] = {"dimension", "kind", "source_cell"};
         static const arr_id cids[] = {A_DIM, A_KIND, A_SRC};
         for (int k = 0; k < 3; k++) {
-            a = add_arr(st, cids[k], 0, 1, 4, st->ncell);
+            a = out_section_add(&st->a, cids[k], 0, 1, 4, st->ncell);
             char first[64] = "";
             if (k == 0) /* the block header comes with the first array */
                 snprintf(first, sizeof first, "CELL_DATA %llu\nFIELD FieldData 3\n",
@@ -316,8 +297,8 @@ static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
         }
         for (int i = 0; i <= s->rq.nattrs; i++) {
             bool rule = i == s->rq.nattrs;
-            a = rule ? add_arr(st, A_RULE, 0, 1, 4, st->npts)
-                     : add_arr(st, A_ATTR, i, s->rq.attrs[i].ncomp, 8, st->npts);
+            a = rule ? out_section_add(&st->a, A_RULE, 0, 1, 4, st->npts)
+                     : out_section_add(&st->a, A_ATTR, i, s->rq.attrs[i].ncomp, 8, st->npts);
             char body[128];
             snprintf(body, sizeof body, "%s %d %llu %s\n", rule ? st->rule_name : s->rq.attrs[i].name,
                      a->ncomp, (unsigned long long)st->npts, rule ? "int" : "double");
@@ -329,21 +310,21 @@ static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
         }
     } else { /* the appended blocks in the reverse order of their XML elements (see the top) */
         if (poly) {
-            add_arr(st, A_FOFFS, 0, 1, 4, st->ncell);
-            add_arr(st, A_FACES, 0, 1, 4, st->r_end - st->r_poly)->bytes =
+            out_section_add(&st->a, A_FOFFS, 0, 1, 4, st->ncell);
+            out_section_add(&st->a, A_FACES, 0, 1, 4, st->r_end - st->r_poly)->bytes =
                 4ull * 33 * (st->r_end - st->r_poly);
         }
-        add_arr(st, A_TYPES, 0, 1, 1, st->ncell);
-        add_arr(st, A_OFFS, 0, 1, 4, st->ncell);
-        a = add_arr(st, A_CONN, 0, 1, 4, st->ncell);
+        out_section_add(&st->a, A_TYPES, 0, 1, 1, st->ncell);
+        out_section_add(&st->a, A_OFFS, 0, 1, 4, st->ncell);
+        a = out_section_add(&st->a, A_CONN, 0, 1, 4, st->ncell);
         a->bytes = 4 * st->nconn;
-        add_arr(st, A_POINTS, 0, 3, 8, st->npts);
-        add_arr(st, A_SRC, 0, 1, 4, st->ncell);
-        add_arr(st, A_KIND, 0, 1, 1, st->ncell);
-        add_arr(st, A_DIM, 0, 1, 1, st->ncell);
-        add_arr(st, A_RULE, 0, 1, 1, st->npts);
+        out_section_add(&st->a, A_POINTS, 0, 3, 8, st->npts);
+        out_section_add(&st->a, A_SRC, 0, 1, 4, st->ncell);
+        out_section_add(&st->a, A_KIND, 0, 1, 1, st->ncell);
+        out_section_add(&st->a, A_DIM, 0, 1, 1, st->ncell);
+        out_section_add(&st->a, A_RULE, 0, 1, 1, st->npts);
         for (int i = s->rq.nattrs - 1; i >= 0; i--)
-            add_arr(st, A_ATTR, i, s->rq.attrs[i].ncomp, 8, st->npts);
+            out_section_add(&st->a, A_ATTR, i, s->rq.attrs[i].ncomp, 8, st->npts);
     }
     return 0;
 }
@@ -353,27 +334,24 @@ static int build_header(out_stream *s, vstate *st, sd_error *err)
     char *text = NULL;
     size_t n = 0;
     FILE *f = open_memstream(&text, &n);
-    if (!f) {
-        err->code = SD_ERR_NOMEM;
-        snprintf(err->message, sizeof err->message, "out of memory");
-        return SD_ERR_NOMEM;
-    }
+    if (!f)
+        return out_nomem(err);
     if (st->legacy) {
         fprintf(f, "# vtk DataFile Version 3.0\nsubdivd level %d version %llu\nBINARY\n"
                    "DATASET UNSTRUCTURED_GRID\n", s->rq.level, (unsigned long long)s->rq.version);
     } else {
         static const char *const tname[] = {[1] = "UInt8", [4] = "Int32", [8] = "Float64"};
         uint64_t off[OUT_MAX_ATTRS + 12];
-        for (int k = 0; k < st->narr; k++)
-            off[k] = k ? off[k - 1] + 8 + st->a[k - 1].bytes : 0;
-        int i = st->narr - 1; /* elements in XML order = blocks from the last */
+        for (int k = 0; k < st->a.n; k++)
+            off[k] = k ? off[k - 1] + 8 + st->a.s[k - 1].bytes : 0;
+        int i = st->a.n - 1; /* elements in XML order = blocks from the last */
         fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" "
                    "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <UnstructuredGrid>\n"
                    "    <Piece NumberOfPoints=\"%llu\" NumberOfCells=\"%llu\">\n      <PointData>\n",
                 (unsigned long long)st->npts, (unsigned long long)st->ncell);
 #define DA(name, extra)                                                                            \
     do {                                                                                           \
-        const arr *a = &st->a[i];                                                                  \
+        const arr *a = &st->a.s[i];                                                                  \
         fprintf(f, "        <DataArray type=\"%s\" Name=\"%s\"%s format=\"appended\" "             \
                    "offset=\"%llu\"/>\n", tname[a->width], name, extra, (unsigned long long)off[i]); \
         i--;                                                                                       \
@@ -404,15 +382,18 @@ static int build_header(out_stream *s, vstate *st, sd_error *err)
     }
     if (fclose(f)) {
         free(text);
-        err->code = SD_ERR_NOMEM;
-        snprintf(err->message, sizeof err->message, "out of memory");
-        return SD_ERR_NOMEM;
+        return out_nomem(err);
     }
-    st->header = text;
+    st->header = malloc(n + 1); /* a copy: open_memstream's buffer belongs to the C library */
+    if (st->header)
+        memcpy(st->header, text, n);
+    free(text);
+    if (!st->header)
+        return out_nomem(err);
     st->header_len = n;
     uint64_t total = n;
-    for (int i = 0; i < st->narr; i++)
-        total += st->legacy ? strlen(st->a[i].head) + st->a[i].bytes + 1 : 8 + st->a[i].bytes;
+    for (int i = 0; i < st->a.n; i++)
+        total += st->legacy ? strlen(st->a.s[i].head) + st->a.s[i].bytes + 1 : 8 + st->a.s[i].bytes;
     if (!st->legacy)
         total += strlen("\n  </AppendedData>\n</VTKFile>\n");
     s->size = total;
@@ -421,19 +402,11 @@ static int build_header(out_stream *s, vstate *st, sd_error *err)
 
 static int init(out_stream *s, bool legacy, sd_error *err)
 {
-    vstate *st = calloc(1, sizeof *st);
-    if (!st) {
-        err->code = SD_ERR_NOMEM;
-        snprintf(err->message, sizeof err->message, "out of memory");
-        return SD_ERR_NOMEM;
-    }
-    s->fmt_state = st;
-    s->fmt_free = vfree;
+    vstate *st = out_state_new(s, sizeof *st, vfree, produce);
+    if (!st)
+        return out_nomem(err);
     int rc = setup(s, st, legacy, err);
-    if (!rc)
-        rc = build_header(s, st, err);
-    s->produce = produce;
-    return rc;
+    return rc ? rc : build_header(s, st, err);
 }
 
 int out_vtu_init(out_stream *s, sd_error *err) { return init(s, false, err); }

@@ -1,6 +1,7 @@
 /* config.c — one table of settings drives defaults, SUBDIVD_* environment variables, flags and
  * the usage text, so the three can never disagree. */
 #include "config.h"
+#include "../api/out.h"
 #include <ctype.h>
 #include <errno.h>
 #include <stdlib.h>
@@ -53,15 +54,16 @@ static const setting S[] = {
 
 void config_usage(FILE *f)
 {
+    char exts[128];
     fprintf(f, "usage: subdivd [options]            run the daemon\n"
                "       subdivd refine INPUT.json --level L [--tags T.json] [--rules R.json]\n"
                "               [--format F] [--parts P] [--slice nx,ny,nz,d] [--attributes A]\n"
                "               [--colormap NAME:min:max] [--octahedra tets|polyhedra]\n"
-               "               -o OUT.glb|.gltf|.vtu|.vtk|.json\n"
-               "       subdivd --list-routes\n"
+               "               -o OUT%s\n"
+               "       subdivd --list-routes | --list-formats\n"
                "       subdivd --healthcheck [URL]   (exit 0 if URL, default "
                "http://127.0.0.1:8080/healthz, answers 200)\n\noptions (each also read from "
-               "SUBDIVD_<NAME>):\n");
+               "SUBDIVD_<NAME>):\n", out_format_list(exts, sizeof exts, true, "|", "|"));
     for (size_t i = 0; i < NS; i++)
         fprintf(f, "  --%-20s %s\n", S[i].flag, S[i].help);
 }

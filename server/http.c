@@ -640,7 +640,7 @@ static void h_get_level(req *r)
                          Q("octahedra")};
 #undef Q
     out_stream *os = NULL;
-    out_format fmt;
+    const out_format *fmt;
     int slot, rc = slot_for_level(r, m, level, &slot, &p);
     if (!rc)
         rc = api_level_open(m, level, &q, &r->srv->cfg.limits, version, &os, &fmt, &p);
@@ -666,11 +666,10 @@ static void h_get_level(req *r)
     uint64_t size = out_size(os);
     struct MHD_Response *resp = MHD_create_response_from_callback(
         size == UINT64_MAX ? MHD_SIZE_UNKNOWN : size, 256 * 1024, stream_read, sc, stream_free);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, out_content_type(fmt));
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, fmt->mime);
     char disp[96];
-    snprintf(disp, sizeof disp, "%s; filename=\"level-%d%s\"",
-             fmt == OUT_VTU || fmt == OUT_VTK ? "attachment" : "inline", level,
-             out_file_extension(fmt));
+    snprintf(disp, sizeof disp, "%s; filename=\"level-%d%s\"", fmt->disposition, level,
+             fmt->extension);
     MHD_add_response_header(resp, "Content-Disposition", disp);
     set_etag(resp, version);
     queue(r, 200, resp);

@@ -129,13 +129,14 @@ static int refine_main(int argc, char **argv)
         return 2;
     }
     if (!q.format) { /* from the output's extension */
-        const char *dot = strrchr(out, '.');
-        if (!dot || out_format_parse(dot + 1) < 0) {
-            fprintf(stderr, "subdivd refine: cannot tell the format from \"%s\"; use "
-                            ".glb, .gltf, .vtu, .vtk or .json, or --format\n", out);
+        const out_format *f = out_format_for_path(out);
+        if (!f) {
+            char names[128];
+            fprintf(stderr, "subdivd refine: cannot tell the format from \"%s\"; use %s, or "
+                    "--format\n", out, out_format_list(names, sizeof names, true, ", ", " or "));
             return 2;
         }
-        q.format = dot + 1;
+        q.format = f->name;
     }
     api_limits lim = api_default_limits();
     api_problem p = {0};
@@ -154,7 +155,7 @@ static int refine_main(int argc, char **argv)
     if (!rc && tags)
         rc = apply_file(&m, tags, api_put_tags, &lim, tags);
     out_stream *os = NULL;
-    out_format fmt;
+    const out_format *fmt;
     if (!rc && api_level_open(m, level, &q, &lim, 1, &os, &fmt, &p))
         rc = report(&p, "the level request");
     if (rc) {
@@ -202,6 +203,11 @@ int main(int argc, char **argv)
         return probe_main(argc > 2 ? argv[2] : NULL);
     if (argc > 1 && !strcmp(argv[1], "--list-routes")) {
         http_list_routes(stdout);
+        return 0;
+    }
+    if (argc > 1 && !strcmp(argv[1], "--list-formats")) { /* the table of api/formats.c */
+        for (const out_format *f = out_formats; f->name; f++)
+            printf("%s %s %s %s\n", f->name, f->mime, f->extension, f->disposition);
         return 0;
     }
     static server srv;

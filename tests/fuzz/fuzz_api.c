@@ -139,7 +139,7 @@ static void drain_levels(api_model *m, const api_limits *lim)
             api_level_query q = {.format = fmts[f], .slice = f & 1 ? "0,0,1,0.3" : NULL};
             api_problem p = {0};
             out_stream *os = NULL;
-            out_format fmt;
+            const out_format *fmt;
             if (api_level_open(m, level, &q, lim, 1, &os, &fmt, &p)) {
                 check_problem(&p, "api_level_open");
                 continue;

@@ -339,6 +339,35 @@ def test_level_headers_etag_and_sizes(daemon):
     assert s.req("GET", "/levels/2", headers={"If-None-Match": '"0"'}).status_code == 200
 
 
+def test_format_table_is_what_everything_reads(daemon):
+    """`subdivd --list-formats` (the table of api/formats.c) is what the daemon serves, what the
+    OpenAPI document lists (the format enum and the level's content types), what the Python client
+    knows, what an unknown format= names and what the offline mode takes as an extension."""
+    out = subprocess.run([str(SUBDIVD), "--list-formats"], check=True, capture_output=True,
+                         text=True).stdout
+    table = [line.split(" ") for line in out.splitlines()]
+    assert table and all(len(row) == 4 for row in table)
+    names = [row[0] for row in table]
+    doc = json.loads((REPO / "api" / "openapi.json").read_text())
+    level = doc["paths"]["/v1/sessions/{id}/levels/{L}"]["get"]
+    param = next(p for p in level["parameters"] if p["name"] == "format")
+    assert param["schema"]["enum"] == names and param["schema"]["default"] == names[0]
+    assert set(level["responses"]["200"]["content"]) == {row[1] for row in table}
+    import sys
+    sys.path.insert(0, str(REPO / "clients" / "python"))
+    from subdiv import client
+    assert list(client.FORMATS) == names
+    s = Session(daemon)
+    assert s.put_complex(TET).status_code == 200
+    for name, mime, ext, disposition in table:
+        r = s.level(1, format=name)
+        assert r.status_code == 200 and r.headers["Content-Type"] == mime
+        assert r.headers["Content-Disposition"] == f'{disposition}; filename="level-1{ext}"'
+        assert ext == "." + name
+    bad = s.level(1, format="obj").json()
+    assert bad["detail"] == 'format "obj" is not one of ' + ", ".join(names)
+
+
 def test_parts_and_attributes_in_json(daemon):
     body = complex_from_text(MIXED)
     body["attributes"] = {"t": [float(i) for i in range(8)]}

@@ -74,7 +74,7 @@ static int check_errors(sd_complex *c)
         return 1;
     const out_request ok = {.complex = c, .level = 1, .colormap_attr = -1, .nattrs = 1,
                             .attrs = {{.name = "t", .channel = ch, .ncomp = 1}}};
-    struct bad { const char *name; out_request rq; int fmt; } cases[32];
+    struct bad { const char *name; out_request rq; const out_format *fmt; } cases[32];
     int n = 0;
 #define CASE(nm, f, ...)                                                                           \
     do {                                                                                           \
@@ -83,37 +83,37 @@ static int check_errors(sd_complex *c)
         __VA_ARGS__;                                                                               \
         (void)r;                                                                                   \
     } while (0)
-    CASE("format", OUT_FORMAT_COUNT);
-    CASE("parts-unknown", OUT_GLB, r->parts = 16);
-    CASE("slice-zero", OUT_GLB, r->has_slice = 1, r->slice[3] = 1);
-    CASE("slice-nan", OUT_VTU, r->has_slice = 1, r->slice[0] = 1, r->slice[1] = NAN);
-    CASE("slice-inf-d", OUT_JSON, r->has_slice = 1, r->slice[2] = 1, r->slice[3] = INFINITY);
-    CASE("colormap-index", OUT_GLB, r->colormap_attr = 1);
-    CASE("colormap-negative", OUT_GLB, r->colormap_attr = -2);
-    CASE("colormap-range", OUT_GLB, r->colormap_attr = 0, r->colormap_min = 1, r->colormap_max = 1);
-    CASE("colormap-nan", OUT_GLB, r->colormap_attr = 0, r->colormap_min = NAN, r->colormap_max = 1);
-    CASE("colormap-inf", OUT_GLTF, r->colormap_attr = 0, r->colormap_max = INFINITY);
-    CASE("level-not-computed", OUT_VTK, r->level = 2);
-    CASE("level-negative", OUT_JSON, r->level = -1);
-    CASE("attributes-name", OUT_VTU, r->attrs[0].name = "a\"b");
-    CASE("attributes-empty-name", OUT_VTU, r->attrs[0].name = "");
-    CASE("attributes-null-name", OUT_VTU, r->attrs[0].name = NULL);
-    CASE("attributes-ncomp", OUT_GLB, r->attrs[0].ncomp = 0);
-    CASE("attributes-channel", OUT_GLB, r->attrs[0].channel = ch + 1);
-    CASE("attributes-ncomp-mismatch", OUT_JSON, r->attrs[0].ncomp = 2);
-    CASE("attributes-duplicate", OUT_JSON, r->nattrs = 2, r->attrs[1] = r->attrs[0]);
-    CASE("attributes-count", OUT_JSON, r->nattrs = OUT_MAX_ATTRS + 1);
-    CASE("no-complex", OUT_JSON, r->complex = NULL);
+    CASE("format", NULL);
+    CASE("parts-unknown", out_format_find("glb"), r->parts = 16);
+    CASE("slice-zero", out_format_find("glb"), r->has_slice = 1, r->slice[3] = 1);
+    CASE("slice-nan", out_format_find("vtu"), r->has_slice = 1, r->slice[0] = 1, r->slice[1] = NAN);
+    CASE("slice-inf-d", out_format_find("json"), r->has_slice = 1, r->slice[2] = 1, r->slice[3] = INFINITY);
+    CASE("colormap-index", out_format_find("glb"), r->colormap_attr = 1);
+    CASE("colormap-negative", out_format_find("glb"), r->colormap_attr = -2);
+    CASE("colormap-range", out_format_find("glb"), r->colormap_attr = 0, r->colormap_min = 1, r->colormap_max = 1);
+    CASE("colormap-nan", out_format_find("glb"), r->colormap_attr = 0, r->colormap_min = NAN, r->colormap_max = 1);
+    CASE("colormap-inf", out_format_find("gltf"), r->colormap_attr = 0, r->colormap_max = INFINITY);
+    CASE("level-not-computed", out_format_find("vtk"), r->level = 2);
+    CASE("level-negative", out_format_find("json"), r->level = -1);
+    CASE("attributes-name", out_format_find("vtu"), r->attrs[0].name = "a\"b");
+    CASE("attributes-empty-name", out_format_find("vtu"), r->attrs[0].name = "");
+    CASE("attributes-null-name", out_format_find("vtu"), r->attrs[0].name = NULL);
+    CASE("attributes-ncomp", out_format_find("glb"), r->attrs[0].ncomp = 0);
+    CASE("attributes-channel", out_format_find("glb"), r->attrs[0].channel = ch + 1);
+    CASE("attributes-ncomp-mismatch", out_format_find("json"), r->attrs[0].ncomp = 2);
+    CASE("attributes-duplicate", out_format_find("json"), r->nattrs = 2, r->attrs[1] = r->attrs[0]);
+    CASE("attributes-count", out_format_find("json"), r->nattrs = OUT_MAX_ATTRS + 1);
+    CASE("no-complex", out_format_find("json"), r->complex = NULL);
 #undef CASE
     int bad = 0;
     for (int i = 0; i < n; i++) {
         sd_error e = {0};
-        out_stream *s = out_open(&cases[i].rq, (out_format)cases[i].fmt, &e);
+        out_stream *s = out_open(&cases[i].rq, cases[i].fmt, &e);
         printf("%s %s %s\n", cases[i].name, s ? "ACCEPTED" : sd_result_name(e.code), s ? "" : e.message);
         bad += s != NULL || e.code != SD_ERR_ARG;
         out_close(s);
     }
-    out_stream *s = out_open(&ok, OUT_GLB, &err); /* and the good request is fine */
+    out_stream *s = out_open(&ok, out_format_find("glb"), &err); /* and the good request is fine */
     printf("ok %s\n", s ? "OK" : err.message);
     bad += s == NULL;
     out_close(s);
@@ -180,8 +180,8 @@ int main(int argc, char **argv)
         else
             usage();
     }
-    int fmt = fmtname ? out_format_parse(fmtname) : -1;
-    if (!path || (!errors && (fmt < 0 || (!outpath && !stats))))
+    const out_format *fmt = fmtname ? out_format_find(fmtname) : NULL;
+    if (!path || (!errors && (!fmt || (!outpath && !stats))))
         usage();
 
     textmesh tm;
@@ -268,7 +268,7 @@ int main(int argc, char **argv)
     if (lv && compute >= 0)
         lv = compute >= level ? sd_complex_level(c, level, &err) : NULL;
     if (!lv && compute >= 0 && compute < level) { /* out_open must refuse an uncomputed level */
-        if ((s = out_open(&rq, (out_format)fmt, &err)))
+        if ((s = out_open(&rq, fmt, &err)))
             fprintf(stderr, "outwrite: out_open accepted level %d with %d computed\n", level,
                     sd_complex_levels_computed(c));
         else
@@ -283,7 +283,7 @@ int main(int argc, char **argv)
         fprintf(stderr, "outwrite: out of memory computing the geometry\n");
         goto done;
     }
-    s = out_open(&rq, (out_format)fmt, &err);
+    s = out_open(&rq, fmt, &err);
     if (!s) {
         fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
         goto done;

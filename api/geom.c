@@ -1,0 +1,274 @@
+/* geom.c — the geometry the writers share, computed before the first byte is written: the
+ * outward boundary of the solids and area-weighted vertex normals (glTF; cached per level through
+ * out_geometry), the cross-section of the solids by a plane (every writer), and an octahedron as
+ * the 4 tetrahedra around its major diagonal (VTK's cells, the slice).
+ *
+ * Arrays here are proportional to the boundary, the slice or the vertex count, never to the
+ * output. The slice cuts each tetrahedron (and each of an octahedron's 4 tetrahedra) by the plane
+ * n.x = d with n made unit: one triangle where one corner is apart, two where two are, each facing
+ * +n, its point data interpolated along the cut edges. Nothing here writes bytes.
+ */
+#include "out_internal.h"
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Octahedron (p,q,a,a2,b,b2) with equator cycle a,b,a2,b2: four tetrahedra around the major
+ * diagonal p-q. The order (q,p,...) makes them positive for a positive octahedron (checked by
+ * the output tests through their volumes). */
+void out_oct_tet(const uint32_t o[6], int k, uint32_t t[4])
+{
+    static const int eq[4] = {2, 4, 3, 5}; /* a, b, a2, b2 */
+    t[0] = o[1];
+    t[1] = o[0];
+    t[2] = o[eq[k]];
+    t[3] = o[eq[(k + 1) & 3]];
+}
+
+/* ---- the cross-section ------------------------------------------------------------------ */
+
+typedef struct slicer {
+    out_stream *s;
+    double n[3], d;
+    uint32_t cap;
+    bool failed;
+} slicer;
+
+static bool slice_grow(slicer *sl)
+{
+    out_slice *o = &sl->s->slice;
+    if (o->ntri < sl->cap)
+        return true;
+    uint32_t cap = sl->cap ? 2 * sl->cap : 1024;
+    double *xyz = realloc(o->xyz, (size_t)cap * 9 * sizeof *xyz);
+    if (xyz)
+        o->xyz = xyz;
+    uint32_t *cell = realloc(o->cell, (size_t)cap * sizeof *cell);
+    if (cell)
+        o->cell = cell;
+    uint8_t *kind = realloc(o->kind, cap);
+    if (kind)
+        o->kind = kind;
+    if (!xyz || !cell || !kind)
+        return false;
+    for (int a = 0; a < sl->s->rq.nattrs; a++) {
+        int nc = sl->s->rq.attrs[a].ncomp;
+        double *v = realloc(o->attr[a], (size_t)cap * 3 * nc * sizeof *v);
+        if (!v)
+            return false;
+        o->attr[a] = v;
+    }
+    sl->cap = cap;
+    return true;
+}
+
+/* A point on edge a-b at parameter t, written as point `slot` of the current triangle. */
+static void slice_point(slicer *sl, uint32_t a, uint32_t b, double t, int slot)
+{
+    out_stream *s = sl->s;
+    out_slice *o = &s->slice;
+    for (int k = 0; k < 3; k++)
+        o->xyz[9 * (size_t)o->ntri + 3 * slot + k] =
+            s->xyz[3 * (size_t)a + k] + t * (s->xyz[3 * (size_t)b + k] - s->xyz[3 * (size_t)a + k]);
+    for (int i = 0; i < s->rq.nattrs; i++) {
+        int nc = s->rq.attrs[i].ncomp;
+        const double *v = s->attr[i];
+        for (int k = 0; k < nc; k++)
+            o->attr[i][((size_t)o->ntri * 3 + slot) * nc + k] =
+                v[(size_t)a * nc + k] + t * (v[(size_t)b * nc + k] - v[(size_t)a * nc + k]);
+    }
+}
+
+typedef struct cut { uint32_t a, b; double t; } cut;
+
+static void slice_tri(slicer *sl, const cut *c0, const cut *c1, const cut *c2, uint32_t cell,
+                      uint8_t kind)
+{
+    if (!slice_grow(sl)) {
+        sl->failed = true;
+        return;
+    }
+    out_slice *o = &sl->s->slice;
+    const cut *c[3] = {c0, c1, c2};
+    for (int i = 0; i < 3; i++)
+        slice_point(sl, c[i]->a, c[i]->b, c[i]->t, i);
+    double *p = o->xyz + 9 * (size_t)o->ntri, u[3], v[3];
+    for (int k = 0; k < 3; k++) {
+        u[k] = p[3 + k] - p[k];
+        v[k] = p[6 + k] - p[k];
+    }
+    double w[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+    if (w[0] * sl->n[0] + w[1] * sl->n[1] + w[2] * sl->n[2] < 0) { /* face along +n */
+        double tmp[3];
+        memcpy(tmp, p + 3, sizeof tmp);
+        memcpy(p + 3, p + 6, sizeof tmp);
+        memcpy(p + 6, tmp, sizeof tmp);
+        for (int i = 0; i < sl->s->rq.nattrs; i++) {
+            int nc = sl->s->rq.attrs[i].ncomp;
+            double *q = o->attr[i] + (size_t)o->ntri * 3 * nc;
+            for (int k = 0; k < nc; k++) {
+                double x = q[nc + k];
+                q[nc + k] = q[2 * nc + k];
+                q[2 * nc + k] = x;
+            }
+        }
+    }
+    o->cell[o->ntri] = cell;
+    o->kind[o->ntri] = kind;
+    o->ntri++;
+}
+
+static void slice_tet(slicer *sl, const uint32_t t[4], uint32_t cell, uint8_t kind)
+{
+    const double *x = sl->s->xyz;
+    double f[4];
+    int pos[4], np = 0, neg[4], nn = 0;
+    for (int i = 0; i < 4; i++) {
+        const double *p = x + 3 * (size_t)t[i];
+        f[i] = sl->n[0] * p[0] + sl->n[1] * p[1] + sl->n[2] * p[2] - sl->d;
+        if (f[i] > 0)
+            pos[np++] = i;
+        else
+            neg[nn++] = i;
+    }
+    if (np == 0 || nn == 0)
+        return;
+#define CUT(i, j) ((cut){t[i], t[j], f[i] / (f[i] - f[j])})
+    if (np == 1 || nn == 1) {
+        int lone = np == 1 ? pos[0] : neg[0];
+        int *others = np == 1 ? neg : pos;
+        cut a = CUT(lone, others[0]), b = CUT(lone, others[1]), c = CUT(lone, others[2]);
+        slice_tri(sl, &a, &b, &c, cell, kind);
+    } else {
+        cut ac = CUT(pos[0], neg[0]), ad = CUT(pos[0], neg[1]), bd = CUT(pos[1], neg[1]),
+            bc = CUT(pos[1], neg[0]);
+        slice_tri(sl, &ac, &ad, &bd, cell, kind);
+        slice_tri(sl, &ac, &bd, &bc, cell, kind);
+    }
+#undef CUT
+}
+
+bool out_compute_slice(out_stream *s)
+{
+    slicer sl = {.s = s};
+    double len = sqrt(s->rq.slice[0] * s->rq.slice[0] + s->rq.slice[1] * s->rq.slice[1] +
+                      s->rq.slice[2] * s->rq.slice[2]);
+    for (int k = 0; k < 3; k++)
+        sl.n[k] = s->rq.slice[k] / len;
+    sl.d = s->rq.slice[3] / len;
+    uint32_t v[6], t[4];
+    uint32_t nt = sd_level_num_cells(s->lv, SD_CELL_TETRA), no = sd_level_num_cells(s->lv, SD_CELL_OCTA);
+    for (uint32_t i = 0; i < nt && !sl.failed; i++) {
+        sd_level_cell(s->lv, SD_CELL_TETRA, i, v);
+        slice_tet(&sl, v, i, SD_CELL_TETRA);
+    }
+    for (uint32_t i = 0; i < no && !sl.failed; i++) {
+        sd_level_cell(s->lv, SD_CELL_OCTA, i, v);
+        for (int k = 0; k < 4; k++) {
+            out_oct_tet(v, k, t);
+            slice_tet(&sl, t, i, SD_CELL_OCTA);
+        }
+    }
+    return !sl.failed;
+}
+
+void out_slice_free(out_slice *sl)
+{
+    free(sl->xyz);
+    free(sl->cell);
+    free(sl->kind);
+    for (int a = 0; a < OUT_MAX_ATTRS; a++)
+        free(sl->attr[a]);
+}
+
+/* ---- solid boundary and normals ----------------------------------------------------------- */
+
+bool out_solid_boundary(out_stream *s)
+{
+    if (!(s->rq.parts & OUT_PART_SOLIDS))
+        return true;
+    if (s->rq.geometry) { /* precomputed with every part: reuse what applies */
+        s->nbnd = s->rq.geometry->nbnd;
+        s->bnd = s->rq.geometry->bnd;
+        if (s->rq.parts == OUT_PART_ALL)
+            s->normals = s->rq.geometry->normals;
+        return true;
+    }
+    s->nbnd = sd_level_solid_boundary(s->lv, NULL);
+    s->bnd = s->own_bnd = malloc(((size_t)s->nbnd * 3 + 1) * sizeof *s->bnd);
+    if (!s->bnd)
+        return false;
+    sd_level_solid_boundary(s->lv, s->own_bnd);
+    return true;
+}
+
+static void add_normal(float *acc, const double *x, const uint32_t *t)
+{
+    const double *a = x + 3 * (size_t)t[0], *b = x + 3 * (size_t)t[1], *c = x + 3 * (size_t)t[2];
+    double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    float n[3] = {(float)(u[1] * v[2] - u[2] * v[1]), (float)(u[2] * v[0] - u[0] * v[2]),
+                  (float)(u[0] * v[1] - u[1] * v[0])};
+    for (int k = 0; k < 3; k++)
+        for (int j = 0; j < 3; j++)
+            acc[3 * (size_t)t[k] + j] += n[j];
+}
+
+/* Area-weighted vertex normals, accumulated in place (float is plenty for a unit direction). */
+float *out_normals(const sd_level *lv, uint32_t ntr, const uint32_t *bnd, uint32_t nbnd)
+{
+    uint32_t nv = sd_level_num_vertices(lv);
+    const double *xyz = sd_level_channel(lv, 0, NULL);
+    float *acc = calloc((size_t)nv * 3 + 1, sizeof *acc);
+    if (!acc)
+        return NULL;
+    uint32_t v[6];
+    for (uint32_t i = 0; i < ntr; i++) {
+        sd_level_cell(lv, SD_CELL_TRIANGLE, i, v);
+        add_normal(acc, xyz, v);
+    }
+    for (uint32_t i = 0; i < nbnd; i++)
+        add_normal(acc, xyz, bnd + 3 * (size_t)i);
+    for (uint32_t i = 0; i < nv; i++) {
+        float *f = acc + 3 * (size_t)i;
+        if (f[0] == 0 && f[1] == 0 && f[2] == 0) { /* on no triangle (most solid vertices) */
+            f[2] = 1;
+            continue;
+        }
+        double len = sqrt((double)f[0] * f[0] + (double)f[1] * f[1] + (double)f[2] * f[2]);
+        if (!(len > 1e-30) || !isfinite(len)) {
+            f[0] = f[1] = 0;
+            f[2] = 1;
+        } else
+            for (int k = 0; k < 3; k++)
+                f[k] = (float)(f[k] / len);
+    }
+    return acc;
+}
+
+out_geometry *out_geometry_compute(const sd_level *lv)
+{
+    out_geometry *g = calloc(1, sizeof *g);
+    if (!g)
+        return NULL;
+    g->nbnd = sd_level_solid_boundary(lv, NULL);
+    g->bnd = malloc(((size_t)g->nbnd * 3 + 1) * sizeof *g->bnd);
+    if (g->bnd) {
+        sd_level_solid_boundary(lv, g->bnd);
+        g->normals = out_normals(lv, sd_level_num_cells(lv, SD_CELL_TRIANGLE), g->bnd, g->nbnd);
+    }
+    if (!g->bnd || !g->normals) {
+        out_geometry_free(g);
+        return NULL;
+    }
+    g->bytes = sizeof *g + (size_t)g->nbnd * 12 + (size_t)sd_level_num_vertices(lv) * 12;
+    return g;
+}
+
+void out_geometry_free(out_geometry *g)
+{
+    if (!g)
+        return;
+    free(g->bnd);
+    free(g->normals);
+    free(g);
+}
