@@ -29,6 +29,14 @@ void api_input_unref(api_input *in)
     free(in);
 }
 
+int api_input_find_attr(const api_input *in, const char *name)
+{
+    for (int a = 0; a < in->nattrs; a++)
+        if (!strcmp(in->attrs[a].name, name))
+            return a;
+    return -1;
+}
+
 void api_model_publish(api_model *m)
 {
     size_t geo = 0;

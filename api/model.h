@@ -94,6 +94,8 @@ typedef struct api_model {
 
 api_input *api_input_new(void);
 void api_input_unref(api_input *in);
+/* The index of the attribute called `name`, or -1. */
+int api_input_find_attr(const api_input *in, const char *name);
 
 /* A new model from an input (borrowed: the model takes its own reference; may be NULL) and
  * rules; builds and classifies the core complex under `max_bytes`. NULL + err on failure. */

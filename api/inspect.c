@@ -1,0 +1,136 @@
+/* inspect.c — the read-only views of the subdivision itself: GET /analysis (the local
+ * subdivision matrix of a vertex or edge neighbourhood and its eigenvalues, 001 Sec. 4.1) and
+ * GET /matrices/{L} (the sparse matrix from level F to level L, streamed by api/out_matrix.c).
+ *
+ * Both take the model's lock only while the core computes; the answers never change the model.
+ * An edge's block lives at level 1, which the analysis computes if needed.
+ */
+#include "handlers.h"
+#include "internal.h"
+#include <ctype.h>
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ---- local analysis ----------------------------------------------------------------------- */
+
+/* A non-negative decimal index below `n` from a query value; -1 + problem otherwise. */
+static long query_index(const char *s, uint32_t n, const char *name, api_problem *p)
+{
+    char *end;
+    errno = 0;
+    long v = s && isdigit((unsigned char)*s) ? strtol(s, &end, 10) : -1;
+    if (v < 0 || *end || errno) {
+        api_fail_at(p, 400, "wrong-type", name, "%s must be a vertex index (a non-negative integer)",
+                    name);
+        return -1;
+    }
+    if ((unsigned long)v >= n) {
+        api_fail_at(p, 422, "out-of-range", name, "vertex %ld out of range (%u vertices)", v, n);
+        return -1;
+    }
+    return v;
+}
+
+json_t *api_analysis(api_model *m, const char *vertex, const char *edge, api_problem *p)
+{
+    if (!m->c) {
+        api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+        return NULL;
+    }
+    if (!vertex == !edge) {
+        api_fail(p, 400, "missing-field", "give exactly one of vertex=i or edge=i,j");
+        return NULL;
+    }
+    long a, b = -1;
+    if (vertex) {
+        if ((a = query_index(vertex, m->in->nv, "vertex", p)) < 0)
+            return NULL;
+    } else {
+        char first[24];
+        const char *comma = strchr(edge, ',');
+        if (!comma || (size_t)(comma - edge) >= sizeof first) {
+            api_fail_at(p, 400, "wrong-type", "edge", "edge is two vertex indices: edge=i,j");
+            return NULL;
+        }
+        snprintf(first, sizeof first, "%.*s", (int)(comma - edge), edge);
+        if ((a = query_index(first, m->in->nv, "edge", p)) < 0 ||
+            (b = query_index(comma + 1, m->in->nv, "edge", p)) < 0)
+            return NULL;
+        if (sd_level_find_edge(m->level0, (uint32_t)a, (uint32_t)b) == UINT32_MAX) {
+            api_fail_at(p, 422, "no-such-edge", "edge", "%ld-%ld is not an edge of the complex", a, b);
+            return NULL;
+        }
+    }
+    sd_analysis an;
+    sd_error e = {0};
+    pthread_mutex_lock(&m->lock);
+    sd_result r = b < 0 ? sd_analyze_vertex(m->c, (uint32_t)a, &an, &e)
+                        : sd_analyze_edge(m->c, (uint32_t)a, (uint32_t)b, &an, &e);
+    pthread_mutex_unlock(&m->lock);
+    if (r) {
+        if (r == SD_ERR_ARG)
+            api_fail_at(p, 422, "not-analysable", b < 0 ? "vertex" : "edge", "%s", e.message);
+        else
+            api_fail_core(p, &e, NULL, NULL);
+        return NULL;
+    }
+    json_t *mat = json_array(), *eig = json_array(), *pts = json_array();
+    for (int i = 0; i < an.size; i++) {
+        json_array_append_new(mat, api_json_doubles(an.matrix + (size_t)i * an.size, (size_t)an.size));
+        /* a real eigenvalue as a number, a complex one as [re, im] */
+        if (fabs(an.eig_im[i]) <= 1e-12 * (1 + fabs(an.eig_re[i])))
+            json_array_append_new(eig, json_real(an.eig_re[i]));
+        else
+            json_array_append_new(eig, json_pack("[f, f]", an.eig_re[i], an.eig_im[i]));
+        json_array_append_new(pts, json_integer(an.points[i]));
+    }
+    json_t *j = json_pack("{s:s, s:i, s:o, s:o, s:{s:i, s:o}, s:b}", "rule",
+                          sd_rule_name(an.rule), "size", an.size, "matrix", mat, "eigenvalues", eig,
+                          "points", "level", an.level, "ids", pts, "closed", an.closed);
+    sd_analysis_free(&an);
+    return j;
+}
+
+
+/* ---- GET /matrices/{L} -------------------------------------------------------------------- */
+
+int api_matrix_open(api_model *m, int level, const char *from, const char *format,
+                    const api_limits *lim, out_stream **out, const char **ctype, api_problem *p)
+{
+    *out = NULL;
+    if (!m->c)
+        return api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+    bool json = false;
+    if (format && !(json = !strcmp(format, "json")) && strcmp(format, "mtx"))
+        return api_fail_at(p, 422, "unknown-value", "format",
+                           "format \"%.20s\" is not one of mtx, json", format);
+    long f = 0;
+    if (from) {
+        char *end;
+        errno = 0;
+        f = isdigit((unsigned char)*from) ? strtol(from, &end, 10) : -1;
+        if (f < 0 || *end || errno)
+            return api_fail_at(p, 400, "wrong-type", "from", "from must be a level number");
+    }
+    if (level < 1 || f >= level)
+        return api_fail_at(p, 422, "out-of-range", "from",
+                           "from (%ld) must be below the level (%d); level 0 has no matrix", f, level);
+    if (api_check_level_limits(m, level, lim, p))
+        return p->status;
+    sd_error e = {0};
+    pthread_mutex_lock(&m->lock);
+    if (api_model_level_locked(m, level, &e))
+        *out = out_matrix_open(m->c, (int)f, level, json, 32 * lim->max_cells, &e);
+    pthread_mutex_unlock(&m->lock);
+    if (!*out)
+        return e.code == SD_ERR_LIMIT
+                   ? api_fail_limit(p, "max_cells", lim->max_cells, 0,
+                                    "%s (the limit is 32 entries per allowed cell); ask for a "
+                                    "closer from-level", e.message)
+                   : api_fail_core(p, &e, NULL, NULL);
+    *ctype = json ? "application/json" : "text/plain; charset=utf-8";
+    return 0;
+}

@@ -1,0 +1,271 @@
+/* levels.c — GET /levels/{L} and GET /levels/{L}/stats (docs/API.md "Levels"): the level query
+ * (format, parts, slice, attributes, colormap, octahedra) into an out_request, the limits checked
+ * before a level is computed, and the stream opened on it.
+ *
+ * A level is computed under the model's lock (api_model_level_locked) and streamed under its data
+ * lock for reading, held from api_level_open to api_level_close, so an edit waits for the streams
+ * in flight. Formats come from the table of api/formats.c; the glTF ones get the per-level cached
+ * geometry. api_estimate_bytes is the over-estimate the session memory limit is checked with.
+ */
+#include "handlers.h"
+#include "internal.h"
+#include <ctype.h>
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ---- levels ------------------------------------------------------------------------------- */
+
+int api_parse_level(const char *s, api_problem *p)
+{
+    char *end;
+    errno = 0;
+    if (!s || !*s || !isdigit((unsigned char)*s))
+        return -(api_fail(p, 400, "bad-level", "the level must be a non-negative integer") != 0);
+    long l = strtol(s, &end, 10);
+    if (*end)
+        return -(api_fail(p, 400, "bad-level", "the level must be a non-negative integer") != 0);
+    if (errno || l > SD_MAX_LEVEL)
+        return -(api_fail(p, 422, "level-out-of-range",
+                          "level %.20s is out of range 0..%d", s, SD_MAX_LEVEL) != 0);
+    return (int)l;
+}
+
+uint64_t api_estimate_bytes(const sd_complex *c, int level)
+{
+    /* Per-entity bytes of the core's arrays (internal.h): topology, classes, rules, one stencil
+     * row per next-level point (~16 entries of 12 bytes) and the positions, summed over the
+     * levels not yet computed. An over-estimate by design: it guards a limit. */
+    uint64_t total = 0;
+    for (int l = sd_complex_levels_computed(c); l <= level; l++) {
+        sd_counts n;
+        sd_complex_counts(c, l, &n);
+        total += n.vertices * (24 + 16 + 200) + n.edges * 24 + n.faces * 26 +
+                 n.tetrahedra * 57 + n.octahedra * 104 + n.curves * 4 + n.triangles * 4 +
+                 n.points * 4;
+    }
+    return total;
+}
+
+int api_check_level_limits(api_model *m, int level, const api_limits *lim, api_problem *p)
+{
+    sd_counts n;
+    sd_complex_counts(m->c, level, &n);
+    uint64_t cells = n.points + n.curves + n.triangles + n.tetrahedra + n.octahedra;
+    if (cells > lim->max_cells)
+        return api_fail_limit(p, "max_cells", lim->max_cells, cells,
+                              "level %d has %llu cells, over the limit of %llu per level; ask for "
+                              "a lower level or refine locally", level, (unsigned long long)cells,
+                              (unsigned long long)lim->max_cells);
+    uint64_t need = atomic_load(&m->memory_bytes) + api_estimate_bytes(m->c, level);
+    if (need > lim->max_session_bytes)
+        return api_fail_limit(p, "max_session_bytes", lim->max_session_bytes, need,
+                              "level %d needs about %llu bytes, over the session limit of %llu; "
+                              "ask for a lower level", level, (unsigned long long)need,
+                              (unsigned long long)lim->max_session_bytes);
+    return 0;
+}
+
+/* Comma-separated list item iteration: copies the next item into buf; returns 0 at the end. */
+static int next_item(const char **s, char *buf, size_t cap)
+{
+    if (!*s || !**s)
+        return 0;
+    const char *e = strchr(*s, ',');
+    size_t n = e ? (size_t)(e - *s) : strlen(*s);
+    snprintf(buf, cap, "%.*s", (int)(n < cap ? n : cap - 1), *s);
+    *s = e ? e + 1 : *s + n;
+    return 1;
+}
+
+static int parse_double(const char *s, double *x)
+{
+    char *end;
+    errno = 0;
+    *x = strtod(s, &end);
+    return *s && !*end && !errno && isfinite(*x);
+}
+
+static int add_attr(const api_model *m, out_request *rq, int a)
+{
+    for (int i = 0; i < rq->nattrs; i++)
+        if (rq->attrs[i].channel == m->channel[a])
+            return i;
+    out_attr *o = &rq->attrs[rq->nattrs];
+    o->name = m->in->attrs[a].name;
+    o->channel = m->channel[a];
+    o->ncomp = m->in->attrs[a].ncomp;
+    return rq->nattrs++;
+}
+
+static int parse_query(const api_model *m, const api_level_query *q, out_request *rq,
+                       const out_format **fmt, api_problem *p)
+{
+    char item[64];
+    *fmt = &out_formats[0];
+    if (q->format && !(*fmt = out_format_find(q->format))) {
+        char names[128];
+        return api_fail_at(p, 422, "unknown-value", "format", "format \"%.20s\" is not one of %s",
+                           q->format, out_format_list(names, sizeof names, false, ", ", ", "));
+    }
+    rq->parts = OUT_PART_ALL;
+    if (q->parts) {
+        static const char *const names[] = {"points", "curves", "surfaces", "solids"};
+        const char *s = q->parts;
+        rq->parts = 0;
+        while (next_item(&s, item, sizeof item)) {
+            int k = 0;
+            while (k < 4 && strcmp(item, names[k]))
+                k++;
+            if (k == 4)
+                return api_fail_at(p, 422, "unknown-value", "parts",
+                                   "part \"%.20s\" is not one of points, curves, surfaces, solids",
+                                   item);
+            rq->parts |= 1u << k;
+        }
+        if (!rq->parts)
+            return api_fail_at(p, 422, "unknown-value", "parts", "parts must name at least one part");
+    }
+    if (q->slice) {
+        const char *s = q->slice;
+        int k = 0;
+        while (next_item(&s, item, sizeof item)) {
+            if (k == 4 || !parse_double(item, &rq->slice[k]))
+                return api_fail_at(p, 422, "bad-slice", "slice",
+                                   "slice is nx,ny,nz,d: four finite numbers");
+            k++;
+        }
+        if (k != 4)
+            return api_fail_at(p, 422, "bad-slice", "slice", "slice is nx,ny,nz,d: four finite numbers");
+        if (rq->slice[0] == 0 && rq->slice[1] == 0 && rq->slice[2] == 0)
+            return api_fail_at(p, 422, "bad-slice", "slice", "the slice normal must not be zero");
+        rq->has_slice = 1;
+    }
+    rq->colormap_attr = -1;
+    const api_input *in = m->in;
+    if (q->attributes) {
+        const char *s = q->attributes;
+        while (next_item(&s, item, sizeof item)) {
+            int a = api_input_find_attr(in, item);
+            if (a < 0)
+                return api_fail_at(p, 422, "unknown-attribute", "attributes",
+                                   "no attribute \"%.40s\" in this complex", item);
+            add_attr(m, rq, a);
+        }
+    } else
+        for (int a = 0; a < in->nattrs; a++)
+            add_attr(m, rq, a);
+    if (q->colormap) {
+        char name[API_MAX_ATTRIBUTE_NAME + 1];
+        const char *c1 = strchr(q->colormap, ':'), *c2 = c1 ? strchr(c1 + 1, ':') : NULL;
+        double lo, hi;
+        char num[40];
+        if (!c1 || !c2 || (size_t)(c1 - q->colormap) > API_MAX_ATTRIBUTE_NAME ||
+            (size_t)(c2 - c1 - 1) >= sizeof num)
+            return api_fail_at(p, 422, "bad-colormap", "colormap", "colormap is NAME:min:max");
+        snprintf(name, sizeof name, "%.*s", (int)(c1 - q->colormap), q->colormap);
+        snprintf(num, sizeof num, "%.*s", (int)(c2 - c1 - 1), c1 + 1);
+        if (!parse_double(num, &lo) || !parse_double(c2 + 1, &hi) || !(lo < hi))
+            return api_fail_at(p, 422, "bad-colormap", "colormap",
+                               "colormap min and max must be finite numbers with min < max");
+        int a = api_input_find_attr(in, name);
+        if (a < 0)
+            return api_fail_at(p, 422, "unknown-attribute", "colormap",
+                               "no attribute \"%.40s\" in this complex", name);
+        rq->colormap_attr = add_attr(m, rq, a);
+        rq->colormap_min = lo;
+        rq->colormap_max = hi;
+    }
+    if (q->octahedra) {
+        if (!strcmp(q->octahedra, "polyhedra"))
+            rq->octahedra_as_polyhedra = 1;
+        else if (strcmp(q->octahedra, "tets"))
+            return api_fail_at(p, 422, "unknown-value", "octahedra",
+                               "octahedra is \"tets\" (4 tetrahedra each) or \"polyhedra\"");
+    }
+    return 0;
+}
+
+int api_level_open(api_model *m, int level, const api_level_query *q, const api_limits *lim,
+                   uint64_t version, out_stream **out, const out_format **fmt, api_problem *p)
+{
+    *out = NULL;
+    if (!m->c)
+        return api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+    out_request rq;
+    memset(&rq, 0, sizeof rq);
+    if (parse_query(m, q, &rq, fmt, p) || api_check_level_limits(m, level, lim, p))
+        return p->status;
+    rq.complex = m->c;
+    rq.level = level;
+    rq.version = version;
+    sd_error e = {0};
+    pthread_mutex_lock(&m->lock);
+    if (api_model_level_locked(m, level, &e)) {
+        if ((*fmt)->geometry)
+            rq.geometry = api_model_geometry_locked(m, level);
+        pthread_rwlock_rdlock(&m->data); /* held until api_level_close */
+        *out = out_open(&rq, *fmt, &e);
+        if (!*out)
+            pthread_rwlock_unlock(&m->data);
+    }
+    pthread_mutex_unlock(&m->lock);
+    if (!*out)
+        return e.code == SD_ERR_ARG ? api_fail(p, 422, "invalid-argument", "%s", e.message)
+                                    : api_fail_core(p, &e, NULL, NULL);
+    return 0;
+}
+
+void api_level_close(api_model *m, out_stream *os)
+{
+    if (!os)
+        return;
+    out_close(os);
+    pthread_rwlock_unlock(&m->data);
+}
+
+json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_problem *p)
+{
+    if (!m->c) {
+        api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+        return NULL;
+    }
+    if (api_check_level_limits(m, level, lim, p))
+        return NULL;
+    sd_error e = {0};
+    pthread_mutex_lock(&m->lock);
+    const sd_level *lv = api_model_level_locked(m, level, &e);
+    json_t *bytes = json_object();
+    double secs = m->seconds[level];
+    for (const out_format *f = out_formats; lv && f->name; f++) {
+        out_request rq;
+        memset(&rq, 0, sizeof rq);
+        rq.complex = m->c;
+        rq.level = level;
+        rq.parts = OUT_PART_ALL;
+        rq.colormap_attr = -1;
+        if (f->geometry)
+            rq.geometry = api_model_geometry_locked(m, level);
+        out_stream *s = out_open(&rq, f, &e);
+        if (s && out_size(s) != UINT64_MAX)
+            json_object_set_new(bytes, f->name, json_integer((json_int_t)out_size(s)));
+        out_close(s);
+    }
+    pthread_mutex_unlock(&m->lock);
+    if (!lv) {
+        json_decref(bytes);
+        api_fail_core(p, &e, NULL, NULL);
+        return NULL;
+    }
+    sd_counts n;
+    sd_complex_counts(m->c, level, &n);
+    return json_pack("{s:i, s:{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:I}, s:o, s:f, s:I}", "level",
+                     level, "counts", "vertices", (json_int_t)n.vertices, "edges",
+                     (json_int_t)n.edges, "faces", (json_int_t)n.faces, "points",
+                     (json_int_t)n.points, "curves", (json_int_t)n.curves, "triangles",
+                     (json_int_t)n.triangles, "tetrahedra", (json_int_t)n.tetrahedra, "octahedra",
+                     (json_int_t)n.octahedra, "bytes", bytes, "seconds", secs, "memory_bytes",
+                     (json_int_t)atomic_load(&m->memory_bytes));
+}

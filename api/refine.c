@@ -1,0 +1,628 @@
+/* refine.c — POST /refine (docs/API.md "Local refinement"): red-green refinement of the control
+ * complex (000 Sec. 4.2) around a selection — simplices by their vertex lists, or the simplices
+ * whose centroid lies in a box or a sphere — `depth` times, the new points at edge midpoints or
+ * where the subdivision rules put them, with the tags and overrides carried to the children.
+ *
+ * Each step runs sd_refine on the working input, places the new points, carries tags and
+ * overrides through a step_map (the split edges and the triangles of the refined complex), and
+ * becomes the next step's input; the result is one new model, built like every change by
+ * api_build_model. api_refine and its step_* helpers, model_with and subdivision_positions are
+ * kept as they were in handlers.c: the core's refactor moves the tag carrying into core/ and
+ * replaces these bodies when the branches merge. They allocate with the C library, as sd_refine
+ * does for the arrays they adopt; what they exchange with the rest of api/ (the input's arrays,
+ * tags, overrides, the selection) is therefore C-library memory too.
+ */
+#include "handlers.h"
+#include "internal.h"
+#include "jsonin.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* The name api_refine's body calls api_build_model by. */
+static int build_model(api_input *in, const api_rules *rules, const api_tags *tags,
+                       const api_limits *lim, api_model **out, api_problem *p)
+{
+    return api_build_model(in, rules, tags, lim, out, p);
+}
+
+/* ---- the selection ------------------------------------------------------------------------ */
+
+typedef struct selection {
+    int kind;                 /* 0 simplices, 1 box, 2 sphere */
+    uint32_t n;               /* simplices: sorted vertex lists, 4 ids each (UINT32_MAX padded) */
+    uint32_t (*keys)[4];
+    double lo[3], hi[3];      /* box */
+    double c[3], r;           /* sphere */
+} selection;
+
+static int cmp_key4(const void *x, const void *y) { return memcmp(x, y, 4 * sizeof(uint32_t)); }
+
+static void sort_key(uint32_t k[4], const uint32_t *v, int n)
+{
+    for (int i = 0; i < 4; i++)
+        k[i] = i < n ? v[i] : UINT32_MAX;
+    for (int i = 1; i < n; i++) /* insertion sort of at most 4 */
+        for (int j = i; j > 0 && k[j - 1] > k[j]; j--) {
+            uint32_t t = k[j];
+            k[j] = k[j - 1];
+            k[j - 1] = t;
+        }
+}
+
+static int parse_point(json_t *v, const char *ptr, double out[3], api_problem *p)
+{
+    if (!json_is_array(v) || json_array_size(v) != 3)
+        return api_fail_at(p, 400, "wrong-type", ptr, "must be an array of 3 numbers");
+    for (int k = 0; k < 3; k++) {
+        char at[96];
+        api_ptr_index(at, sizeof at, ptr, k);
+        if (api_get_number(json_array_get(v, k), at, 1e15, &out[k], p))
+            return p->status;
+    }
+    return 0;
+}
+
+static int parse_selection(json_t *sel, const api_input *in, selection *s, api_problem *p)
+{
+    static const char *const keys[] = {"simplices", "box", "sphere", NULL};
+    if (!json_is_object(sel))
+        return api_fail_at(p, 400, "wrong-type", "/select",
+                           "must be {\"simplices\": […]}, {\"box\": …} or {\"sphere\": …}");
+    if (api_only_keys(sel, "/select", keys, p))
+        return p->status;
+    if (json_object_size(sel) != 1)
+        return api_fail_at(p, 400, "wrong-type", "/select", "give exactly one of simplices, box, sphere");
+    json_t *v;
+    if ((v = json_object_get(sel, "simplices"))) {
+        s->kind = 0;
+        if (!json_is_array(v))
+            return api_fail_at(p, 400, "wrong-type", "/select/simplices", "must be an array of simplices");
+        s->keys = malloc((json_array_size(v) + 1) * sizeof *s->keys);
+        if (!s->keys)
+            return api_fail(p, 503, "out-of-memory", "out of memory");
+        /* every posted simplex, sorted, to find the selected ones */
+        uint32_t (*all)[4] = malloc(((size_t)in->ns + 1) * sizeof *all);
+        if (!all)
+            return api_fail(p, 503, "out-of-memory", "out of memory");
+        for (uint32_t q = 0, off = 0; q < in->ns; off += in->size[q++])
+            sort_key(all[q], in->idx + off, in->size[q]);
+        qsort(all, in->ns, sizeof *all, cmp_key4);
+        size_t i;
+        json_t *x;
+        int rc = 0;
+        json_array_foreach(v, i, x) {
+            char ptr[96], at[96];
+            api_ptr_index(ptr, sizeof ptr, "/select/simplices", i);
+            size_t k = json_is_array(x) ? json_array_size(x) : 0;
+            if (k < 1 || k > 4) {
+                rc = api_fail_at(p, 400, "wrong-type", ptr, "a simplex is an array of 1 to 4 indices");
+                break;
+            }
+            uint32_t ids[4];
+            for (size_t j = 0; j < k && !rc; j++) {
+                long long id;
+                api_ptr_index(at, sizeof at, ptr, j);
+                rc = api_get_int(json_array_get(x, j), at, 0, (long long)in->nv - 1, &id, p);
+                ids[j] = (uint32_t)id;
+            }
+            if (rc)
+                break;
+            sort_key(s->keys[s->n], ids, (int)k);
+            if (!bsearch(s->keys[s->n], all, in->ns, sizeof *all, cmp_key4)) {
+                rc = api_fail_at(p, 422, "no-such-simplex", ptr, "not a simplex of the complex");
+                break;
+            }
+            s->n++;
+        }
+        free(all);
+        if (!rc)
+            qsort(s->keys, s->n, sizeof *s->keys, cmp_key4);
+        return rc;
+    }
+    if ((v = json_object_get(sel, "box"))) {
+        static const char *const bk[] = {"min", "max", NULL};
+        s->kind = 1;
+        if (!json_is_object(v))
+            return api_fail_at(p, 400, "wrong-type", "/select/box", "must be {\"min\", \"max\"}");
+        if (api_only_keys(v, "/select/box", bk, p) ||
+            parse_point(json_object_get(v, "min"), "/select/box/min", s->lo, p) ||
+            parse_point(json_object_get(v, "max"), "/select/box/max", s->hi, p))
+            return p->status;
+        for (int k = 0; k < 3; k++)
+            if (s->lo[k] > s->hi[k])
+                return api_fail_at(p, 422, "out-of-range", "/select/box", "min must not exceed max");
+        return 0;
+    }
+    v = json_object_get(sel, "sphere");
+    static const char *const sk[] = {"center", "radius", NULL};
+    s->kind = 2;
+    if (!json_is_object(v))
+        return api_fail_at(p, 400, "wrong-type", "/select/sphere", "must be {\"center\", \"radius\"}");
+    if (api_only_keys(v, "/select/sphere", sk, p) ||
+        parse_point(json_object_get(v, "center"), "/select/sphere/center", s->c, p))
+        return p->status;
+    json_t *r = json_object_get(v, "radius");
+    if (!r)
+        return api_fail_at(p, 400, "missing-field", "/select/sphere/radius", "\"radius\" is required");
+    if (api_get_number(r, "/select/sphere/radius", 1e15, &s->r, p))
+        return p->status;
+    if (!(s->r > 0))
+        return api_fail_at(p, 422, "out-of-range", "/select/sphere/radius", "radius must be positive");
+    return 0;
+}
+
+/* Does simplex v[0..n) fall in a geometric selection (its centroid inside)? */
+static bool in_region(const selection *s, const double *xyz, const uint32_t *v, int n)
+{
+    double c[3] = {0, 0, 0};
+    for (int i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++)
+            c[k] += xyz[3 * (size_t)v[i] + k] / n;
+    if (s->kind == 1)
+        return c[0] >= s->lo[0] && c[0] <= s->hi[0] && c[1] >= s->lo[1] && c[1] <= s->hi[1] &&
+               c[2] >= s->lo[2] && c[2] <= s->hi[2];
+    double d2 = 0;
+    for (int k = 0; k < 3; k++)
+        d2 += (c[k] - s->c[k]) * (c[k] - s->c[k]);
+    return d2 <= s->r * s->r;
+}
+
+static int cmp_pair(const void *x, const void *y) { return memcmp(x, y, 2 * sizeof(uint32_t)); }
+
+static int cmp_tri(const void *x, const void *y) { return memcmp(x, y, 3 * sizeof(uint32_t)); }
+
+/* What one refinement step did, for carrying tags and rules to the children. */
+typedef struct step_map {
+    uint32_t nold;            /* vertices before the step */
+    size_t nsplit;
+    uint32_t (*split)[3];     /* (a < b, new vertex), sorted */
+    size_t nface;
+    uint32_t (*face)[3];      /* sorted triples of every triangle of the refined complex */
+} step_map;
+
+static void step_map_free(step_map *m)
+{
+    free(m->split);
+    free(m->face);
+}
+
+static bool step_map_build(uint32_t nold, const sd_refinement *r, step_map *m)
+{
+    memset(m, 0, sizeof *m);
+    m->nold = nold;
+    m->nsplit = r->nsplit;
+    size_t nf = 0;
+    for (size_t s = 0; s < r->ns; s++)
+        nf += r->size[s] == 3 ? 1 : r->size[s] == 4 ? 4 : 0;
+    m->split = malloc((r->nsplit + 1) * sizeof *m->split);
+    m->face = malloc((nf + 1) * sizeof *m->face);
+    if (!m->split || !m->face) {
+        step_map_free(m);
+        return false;
+    }
+    for (size_t i = 0; i < r->nsplit; i++) {
+        uint32_t a = r->split[i][0], b = r->split[i][1];
+        m->split[i][0] = a < b ? a : b;
+        m->split[i][1] = a < b ? b : a;
+        m->split[i][2] = (uint32_t)(nold + i);
+    }
+    qsort(m->split, m->nsplit, sizeof *m->split, cmp_pair);
+    size_t off = 0;
+    for (size_t s = 0; s < r->ns; off += r->size[s++]) {
+        const uint32_t *v = r->idx + off;
+        for (int skip = 0; skip < (r->size[s] == 4 ? 4 : r->size[s] == 3 ? 1 : 0); skip++) {
+            uint32_t k[4], n = 0;
+            for (int j = 0; j < r->size[s]; j++)
+                if (r->size[s] == 3 || j != skip)
+                    k[n++] = v[j];
+            sort_key(k, k, 3);
+            memcpy(m->face[m->nface++], k, 3 * sizeof *k);
+        }
+    }
+    qsort(m->face, m->nface, sizeof *m->face, cmp_tri);
+    return true;
+}
+
+/* The new vertex splitting edge a-b, or UINT32_MAX. */
+static uint32_t step_mid(const step_map *m, uint32_t a, uint32_t b)
+{
+    uint32_t k[3] = {a < b ? a : b, a < b ? b : a, 0};
+    uint32_t (*hit)[3] = bsearch(k, m->split, m->nsplit, sizeof *m->split, cmp_pair);
+    return hit ? (*hit)[2] : UINT32_MAX;
+}
+
+static bool step_is_face(const step_map *m, const uint32_t *v)
+{
+    uint32_t k[4];
+    sort_key(k, v, 3);
+    return bsearch(k, m->face, m->nface, sizeof *m->face, cmp_tri) != NULL;
+}
+
+/* The children of triangle t in the refined complex (at most 4), the ones containing all of
+ * `must` (n_must ids) only. Returns their number. */
+static int step_tri_children(const step_map *m, const uint32_t t[3], const uint32_t *must,
+                             int n_must, uint32_t out[4][3])
+{
+    uint32_t pts[6] = {t[0], t[1], t[2]}, np = 3, mid[3];
+    for (int j = 0; j < 3; j++)
+        if ((mid[j] = step_mid(m, t[j], t[(j + 1) % 3])) != UINT32_MAX)
+            pts[np++] = mid[j];
+    int n = 0;
+    for (uint32_t i = 0; i < np; i++)
+        for (uint32_t j = i + 1; j < np; j++)
+            for (uint32_t k = j + 1; k < np && n < 4; k++) {
+                uint32_t c[3] = {pts[i], pts[j], pts[k]};
+                if (!step_is_face(m, c))
+                    continue;
+                bool ok = true;
+                for (int u = 0; u < n_must; u++)
+                    ok &= c[0] == must[u] || c[1] == must[u] || c[2] == must[u];
+                if (ok)
+                    memcpy(out[n++], c, sizeof c);
+            }
+    return n;
+}
+
+/* Carry tags and overrides through one refinement step (children of tagged simplices stay
+ * tagged and keep their rules, SPEC Sec. 3): a vertex stays itself; a split edge becomes its two
+ * halves, and an edge's N1/N2/G2 choice also goes to the vertex splitting it; a triangle becomes
+ * its children; an N2 pair is replaced by the children holding the new simplex. Replaces *tags
+ * and *ov (malloc'ed); false for lack of memory. */
+static bool step_carry(const step_map *m, api_tags *tags, sd_override **ov, uint32_t *nov)
+{
+    size_t nidx = 0;
+    for (uint32_t i = 0; i < tags->n; i++)
+        nidx += tags->size[i];
+    api_tags nt = {0};
+    nt.size = malloc(4 * (size_t)tags->n + 1);
+    nt.idx = malloc((12 * (size_t)tags->n + 1) * sizeof *nt.idx);
+    sd_override *no = malloc((3 * (size_t)*nov + 1) * sizeof *no);
+    if (!nt.size || !nt.idx || !no) {
+        free(nt.size);
+        free(nt.idx);
+        free(no);
+        return false;
+    }
+    size_t off = 0, at = 0;
+    for (uint32_t i = 0; i < tags->n; off += tags->size[i++]) {
+        const uint32_t *v = tags->idx + off;
+        uint32_t mid;
+        if (tags->size[i] == 2 && (mid = step_mid(m, v[0], v[1])) != UINT32_MAX) {
+            for (int h = 0; h < 2; h++) {
+                nt.size[nt.n++] = 2;
+                nt.idx[at++] = v[h];
+                nt.idx[at++] = mid;
+            }
+        } else if (tags->size[i] == 3) {
+            uint32_t ch[4][3];
+            int n = step_tri_children(m, v, NULL, 0, ch);
+            for (int c = 0; c < n; c++) {
+                nt.size[nt.n++] = 3;
+                memcpy(nt.idx + at, ch[c], sizeof ch[c]);
+                at += 3;
+            }
+        } else {
+            nt.size[nt.n++] = tags->size[i];
+            memcpy(nt.idx + at, v, tags->size[i] * sizeof *v);
+            at += tags->size[i];
+        }
+    }
+    (void)nidx;
+    nt.pet = malloc((tags->npet + 1) * sizeof *nt.pet);
+    if (!nt.pet) {
+        free(nt.size);
+        free(nt.idx);
+        free(no);
+        return false;
+    }
+    for (uint32_t i = 0; i < tags->npet; i++) { /* the vertex stays; its triangle's child at it */
+        sd_petal_tag q = tags->pet[i];
+        uint32_t ch[4][3];
+        if (step_tri_children(m, q.triangle, &q.vertex, 1, ch))
+            memcpy(q.triangle, ch[0], sizeof ch[0]);
+        nt.pet[nt.npet++] = q;
+    }
+    uint32_t nn = 0;
+    for (uint32_t i = 0; i < *nov; i++) {
+        const sd_override *o = &(*ov)[i];
+        uint32_t mid = o->nverts == 2 ? step_mid(m, o->simplex[0], o->simplex[1]) : UINT32_MAX;
+        /* the new simplices: the vertex or unsplit edge itself, or both halves and the midpoint */
+        sd_override c[3];
+        int nc = 0;
+        if (mid == UINT32_MAX) {
+            c[nc++] = *o;
+        } else {
+            for (int h = 0; h < 2; h++) {
+                c[nc] = *o;
+                c[nc].simplex[0] = o->simplex[h];
+                c[nc].simplex[1] = mid;
+                nc++;
+            }
+            if (o->rule != SD_RULE_G1) { /* a G1 edge's midpoint lies on its crease */
+                c[nc] = *o;
+                c[nc].nverts = 1;
+                c[nc].simplex[0] = mid;
+                nc++;
+            }
+        }
+        for (int k = 0; k < nc; k++) {
+            if (c[k].rule == SD_RULE_N2) {
+                bool ok = true;
+                for (int j = 0; j < 2 && ok; j++) {
+                    uint32_t *q = c[k].pair[j];
+                    if (c[k].pair_size == 2) { /* a curve segment [x, y] holding the vertex */
+                        uint32_t v = c[k].simplex[0], other = q[0] == v ? q[1] : q[0];
+                        uint32_t qm = step_mid(m, q[0], q[1]);
+                        if (qm != UINT32_MAX) {
+                            q[0] = v;
+                            q[1] = qm;
+                        }
+                        (void)other;
+                    } else {
+                        uint32_t ch[4][3];
+                        int n = step_tri_children(m, q, c[k].simplex, c[k].nverts, ch);
+                        if (n)
+                            memcpy(q, ch[0], sizeof ch[0]);
+                        else
+                            ok = false;
+                    }
+                }
+                if (!ok)
+                    continue;
+            }
+            no[nn++] = c[k];
+        }
+    }
+    free(tags->size);
+    free(tags->idx);
+    free(tags->pet);
+    *tags = nt;
+    free(*ov);
+    *ov = no;
+    *nov = nn;
+    return true;
+}
+
+/* A model of `in` with the rules, tags and overrides, dropping the overrides the refined complex
+ * refuses (an override carried to a simplex whose type no longer fits it). */
+static api_model *model_with(api_input *in, const api_rules *rules, const api_tags *tags,
+                             sd_override *ov, uint32_t nov, const api_limits *lim, sd_error *e)
+{
+    api_model *m = api_model_new(in, rules, lim->max_session_bytes, e);
+    if (!m)
+        return NULL;
+    while (nov && api_model_set_overrides(m, ov, nov, e)) {
+        free(m->rules.overrides);
+        m->rules.overrides = NULL;
+        m->rules.noverrides = 0;
+        if (e->code != SD_ERR_ARG && e->code != SD_ERR_INDEX)
+            break;
+        long bad = e->item < 0 ? 0 : e->item;
+        memmove(ov + bad, ov + bad + 1, (nov - bad - 1) * sizeof *ov);
+        nov--;
+    }
+    bool petal;
+    if ((tags->n || tags->npet) && api_model_set_tags(m, tags, e, &petal)) {
+        api_model_unref(m);
+        return NULL;
+    }
+    return m;
+}
+
+/* Place the new vertices of one refinement step by the subdivision rules: the level-1 edge
+ * points of the complex before the step (positions and attributes alike). */
+static int subdivision_positions(const api_input *in, const api_rules *rules, const api_tags *tags,
+                                 sd_override *ov, uint32_t nov, sd_refinement *r,
+                                 double **attr_new, const api_limits *lim, api_problem *p)
+{
+    sd_error e = {0};
+    api_model *tmp = model_with((api_input *)in, rules, tags, ov, nov, lim, &e);
+    const sd_level *l1 = tmp ? sd_complex_level(tmp->c, 1, &e) : NULL;
+    if (!l1) {
+        api_model_unref(tmp);
+        return api_fail_core(p, &e, "/simplices", "/vertices");
+    }
+    /* sorted (a<b, new id) so each level-1 edge point finds its new vertex */
+    uint32_t (*key)[3] = malloc((r->nsplit + 1) * sizeof *key);
+    if (!key) {
+        api_model_unref(tmp);
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    }
+    for (size_t i = 0; i < r->nsplit; i++) {
+        uint32_t a = r->split[i][0], b = r->split[i][1];
+        key[i][0] = a < b ? a : b;
+        key[i][1] = a < b ? b : a;
+        key[i][2] = (uint32_t)(in->nv + i);
+    }
+    qsort(key, r->nsplit, sizeof *key, cmp_pair);
+    uint32_t n1 = sd_level_num_vertices(l1);
+    const double *x1 = sd_level_channel(l1, 0, NULL);
+    for (uint32_t v = in->nv; v < n1; v++) {
+        uint32_t a, b;
+        if (sd_level_origin(l1, v, &a, &b) != SD_ORIGIN_EDGE)
+            continue;
+        uint32_t k[3] = {a < b ? a : b, a < b ? b : a, 0};
+        uint32_t (*hit)[3] = bsearch(k, key, r->nsplit, sizeof *key, cmp_pair);
+        if (!hit)
+            continue;
+        uint32_t id = (*hit)[2];
+        memcpy(r->xyz + 3 * (size_t)id, x1 + 3 * (size_t)v, 3 * sizeof *x1);
+        for (int t = 0; t < in->nattrs; t++) {
+            int nc = in->attrs[t].ncomp;
+            const double *a1 = sd_level_channel(l1, tmp->channel[t], NULL);
+            memcpy(attr_new[t] + (size_t)id * nc, a1 + (size_t)v * nc, nc * sizeof *a1);
+        }
+    }
+    free(key);
+    api_model_unref(tmp);
+    return 0;
+}
+
+/* Over 150 lines on purpose: kept exactly as it was in handlers.c until the core's refactor of
+ * the tag carrying replaces it (see the top of this file). */
+int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
+               uint64_t *red, uint64_t *green, api_problem *p)
+{
+    static const char *const keys[] = {"select", "depth", "positions", NULL};
+    static const char *const placements[] = {"subdivision", "midpoint", NULL};
+    *out = NULL;
+    *red = *green = 0;
+    if (api_only_keys(body, "", keys, p))
+        return p->status;
+    if (!cur->in)
+        return api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+    json_t *v;
+    long long depth = 1;
+    int place = 0;
+    if ((v = json_object_get(body, "depth")) && api_get_int(v, "/depth", 1, 4, &depth, p))
+        return p->status;
+    if ((v = json_object_get(body, "positions")) &&
+        (place = api_get_enum(v, "/positions", placements, p)) < 0)
+        return p->status;
+    if (!(v = json_object_get(body, "select")))
+        return api_fail_at(p, 400, "missing-field", "/select", "\"select\" is required");
+    selection sel = {0};
+    int rc = parse_selection(v, cur->in, &sel, p);
+    /* the working complex: starts as the posted one, replaced after every step, with its tags
+     * and overrides */
+    api_input *in = cur->in;
+    api_tags tags = {0};
+    uint32_t nov = cur->rules.noverrides;
+    sd_override *ov = malloc((nov + 1) * sizeof *ov);
+    bool copied = api_tags_copy(&tags, &cur->tags);
+    if (!ov || !copied)
+        rc = rc ? rc : api_fail(p, 503, "out-of-memory", "out of memory");
+    else if (nov)
+        memcpy(ov, cur->rules.overrides, nov * sizeof *ov);
+    atomic_fetch_add(&in->refs, 1);
+    uint8_t *marked = NULL;
+    for (int step = 0; !rc && step < depth; step++) {
+        if (step == 0 || sel.kind != 0) { /* later steps of a simplex selection: its children */
+            free(marked);
+            marked = calloc((size_t)in->ns + 1, 1);
+            if (!marked) {
+                rc = api_fail(p, 503, "out-of-memory", "out of memory");
+                break;
+            }
+            for (uint32_t s = 0, off = 0; s < in->ns; off += in->size[s++]) {
+                if (in->size[s] < 2)
+                    continue;
+                if (sel.kind == 0) {
+                    uint32_t k[4];
+                    sort_key(k, in->idx + off, in->size[s]);
+                    marked[s] = bsearch(k, sel.keys, sel.n, sizeof *sel.keys, cmp_key4) != NULL;
+                } else
+                    marked[s] = in_region(&sel, in->xyz, in->idx + off, in->size[s]);
+            }
+        }
+        uint64_t nmarked = 0;
+        for (uint32_t s = 0; s < in->ns; s++)
+            nmarked += marked[s] = marked[s] && in->size[s] >= 2;
+        if (!nmarked)
+            break;
+        sd_refinement r;
+        sd_error e = {0};
+        if (sd_refine(in->xyz, in->nv, in->idx, in->size, in->ns, marked, &r, &e)) {
+            rc = api_fail_core(p, &e, "/select", NULL);
+            break;
+        }
+        if (r.nv > lim->max_vertices || r.ns > lim->max_simplices) {
+            rc = r.nv > lim->max_vertices
+                     ? api_fail_limit(p, "max_vertices", lim->max_vertices, r.nv,
+                                      "the refined complex would have %zu vertices; refine a "
+                                      "smaller region or less deep", r.nv)
+                     : api_fail_limit(p, "max_simplices", lim->max_simplices, r.ns,
+                                      "the refined complex would have %zu simplices; refine a "
+                                      "smaller region or less deep", r.ns);
+            sd_refine_free(&r);
+            break;
+        }
+        *red += r.red;
+        *green += r.green;
+        /* new attribute arrays: old values, then the new points at midpoints */
+        double *attr_new[API_MAX_ATTRIBUTES] = {0};
+        for (int t = 0; t < in->nattrs && !rc; t++) {
+            int nc = in->attrs[t].ncomp;
+            if (!(attr_new[t] = malloc(r.nv * nc * sizeof(double) + 8))) {
+                rc = api_fail(p, 503, "out-of-memory", "out of memory");
+                break;
+            }
+            memcpy(attr_new[t], in->attrs[t].data, (size_t)in->nv * nc * sizeof(double));
+            for (size_t i = 0; i < r.nsplit; i++)
+                for (int k = 0; k < nc; k++)
+                    attr_new[t][(in->nv + i) * nc + k] =
+                        0.5 * (in->attrs[t].data[(size_t)r.split[i][0] * nc + k] +
+                               in->attrs[t].data[(size_t)r.split[i][1] * nc + k]);
+        }
+        /* or where the subdivision rules put them: level-1 edge points of the step's input */
+        if (!rc && place == 0) {
+            sd_override *ovc = malloc((nov + 1) * sizeof *ovc); /* model_with may drop some */
+            if (!ovc)
+                rc = api_fail(p, 503, "out-of-memory", "out of memory");
+            else {
+                memcpy(ovc, ov, nov * sizeof *ov);
+                rc = subdivision_positions(in, &cur->rules, &tags, ovc, nov, &r, attr_new, lim, p);
+                free(ovc);
+            }
+        }
+        if (!rc) { /* the step's tags and overrides, carried to the children */
+            step_map sm;
+            bool built = step_map_build(in->nv, &r, &sm);
+            if (!built || !step_carry(&sm, &tags, &ov, &nov))
+                rc = api_fail(p, 503, "out-of-memory", "out of memory");
+            if (built)
+                step_map_free(&sm);
+        }
+        api_input *nx = rc ? NULL : api_input_new();
+        if (!rc && !nx)
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
+        if (rc) {
+            for (int t = 0; t < in->nattrs; t++)
+                free(attr_new[t]);
+            sd_refine_free(&r);
+            break;
+        }
+        nx->nv = (uint32_t)r.nv; /* the refinement's arrays move into the next input */
+        nx->ns = (uint32_t)r.ns;
+        nx->xyz = r.xyz;
+        nx->idx = r.idx;
+        nx->size = r.size;
+        r.xyz = NULL;
+        r.idx = NULL;
+        r.size = NULL;
+        nx->nattrs = in->nattrs;
+        for (int t = 0; t < in->nattrs; t++) {
+            nx->attrs[t] = in->attrs[t];
+            nx->attrs[t].data = attr_new[t];
+        }
+        uint8_t *next_marked = calloc(r.ns + 1, 1); /* children of selected simplices */
+        if (next_marked)
+            for (size_t i = 0; i < r.ns; i++)
+                next_marked[i] = marked[r.parent[i]];
+        free(marked);
+        marked = next_marked;
+        sd_refine_free(&r);
+        api_input_unref(in);
+        in = nx;
+        if (!marked && step + 1 < depth && sel.kind == 0)
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
+    }
+    free(marked);
+    free(sel.keys);
+    if (!rc) { /* with the carried tags and overrides (those that no longer fit are dropped) */
+        sd_error e = {0};
+        api_model *m = model_with(in, &cur->rules, &tags, ov, nov, lim, &e);
+        api_rules keep = cur->rules;
+        keep.overrides = m ? m->rules.overrides : NULL;
+        keep.noverrides = m ? m->rules.noverrides : 0;
+        rc = build_model(in, &keep, &tags, lim, out, p);
+        api_model_unref(m);
+    }
+    free(ov);
+    free(tags.size);
+    free(tags.idx);
+    free(tags.pet);
+    api_input_unref(in);
+    return rc;
+}

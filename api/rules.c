@@ -1,0 +1,295 @@
+/* rules.c — PUT /rules and PUT /tags (docs/API.md "Tags and rules"): the rule preferences and
+ * per-simplex overrides (000 Sec. 3.5: N1, N2, G1, G2), the singular simplices and the petal tags
+ * of Ying-Zorin's corners (003 Sec. 2).
+ *
+ * Both handlers check shapes, enumerations and index ranges here, with a pointer for every
+ * refusal, and leave to the core what needs the complex (a tag is a simplex of it, a petal is open,
+ * an override fits its simplex), which api_build_model maps back to pointers. The new model keeps
+ * the session's input; only the rules or the tags change.
+ */
+#include "handlers.h"
+#include "internal.h"
+#include "jsonin.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ---- PUT /rules ---------------------------------------------------------------------------- */
+
+static const char *const NM_RULES[] = {"G2", "G1", "N1", "N2", NULL};
+
+/* An N2 override's "pair" at `at`: two curve segments holding the simplex, or two triangles. */
+static int parse_pair(json_t *pr, const char *at, uint32_t nv, sd_override *x, api_problem *p)
+{
+    char at2[160];
+    if (!json_is_array(pr) || json_array_size(pr) != 2)
+        return api_fail_at(p, json_is_array(pr) ? 422 : 400,
+                           json_is_array(pr) ? "invalid-override" : "wrong-type", at,
+                           "a pair is an array of two simplices");
+    for (size_t j = 0; j < 2; j++) {
+        json_t *q = json_array_get(pr, j);
+        api_ptr_index(at2, sizeof at2, at, j);
+        if (!json_is_array(q))
+            return api_fail_at(p, 400, "wrong-type", at2, "a simplex is an array of vertex indices");
+        size_t kq = json_array_size(q);
+        if (kq < 2 || kq > 3 || (j == 1 && (int)kq != x->pair_size))
+            return api_fail_at(p, 422, "invalid-override", at2,
+                               "the pair is two curve segments (2 indices each) or two "
+                               "triangles (3 each)");
+        x->pair_size = (int)kq;
+        for (size_t u = 0; u < kq; u++) {
+            long long id;
+            char at3[192];
+            api_ptr_index(at3, sizeof at3, at2, u);
+            if (api_get_int(json_array_get(q, u), at3, 0, (long long)nv - 1, &id, p))
+                return p->status;
+            x->pair[j][u] = (uint32_t)id;
+        }
+    }
+    return 0;
+}
+
+/* Override i of "overrides" into *x: {"simplex": vertex or edge, "rule", "dimension" (N1 only),
+ * "pair" (N2 only)}. 0 or the problem's status. */
+static int parse_override(json_t *o, size_t i, uint32_t nv, sd_override *x, api_problem *p)
+{
+    static const char *const okeys[] = {"simplex", "rule", "dimension", "pair", NULL};
+    char ptr[96], at[128], at2[160];
+    api_ptr_index(ptr, sizeof ptr, "/overrides", i);
+    if (!json_is_object(o))
+        return api_fail_at(p, 400, "wrong-type", ptr, "an override is an object");
+    if (api_only_keys(o, ptr, okeys, p))
+        return p->status;
+    json_t *sx = json_object_get(o, "simplex"), *ru = json_object_get(o, "rule");
+    json_t *dim = json_object_get(o, "dimension"), *pr = json_object_get(o, "pair");
+    snprintf(at, sizeof at, "%s/simplex", ptr);
+    if (!sx)
+        return api_fail_at(p, 400, "missing-field", at, "\"simplex\" is required");
+    if (!json_is_array(sx))
+        return api_fail_at(p, 400, "wrong-type", at, "a simplex is an array of vertex indices");
+    size_t k = json_array_size(sx);
+    if (k < 1 || k > 2)
+        return api_fail_at(p, 422, "invalid-override", at,
+                           "rules are chosen per vertex or edge (1 or 2 indices), not for %zu "
+                           "vertices: a %s has no point of its own", k,
+                           k == 3 ? "triangle" : k == 4 ? "tetrahedron" : "simplex");
+    for (size_t j = 0; j < k; j++) {
+        long long id;
+        api_ptr_index(at2, sizeof at2, at, j);
+        if (api_get_int(json_array_get(sx, j), at2, 0, (long long)nv - 1, &id, p))
+            return p->status;
+        x->simplex[j] = (uint32_t)id;
+    }
+    x->nverts = (int)k;
+    snprintf(at, sizeof at, "%s/rule", ptr);
+    if (!ru)
+        return api_fail_at(p, 400, "missing-field", at, "\"rule\" is required");
+    int which = api_get_enum(ru, at, NM_RULES, p);
+    if (which < 0)
+        return p->status;
+    static const sd_rule map[] = {SD_RULE_G2, SD_RULE_G1, SD_RULE_N1, SD_RULE_N2};
+    x->rule = map[which];
+    snprintf(at, sizeof at, "%s/dimension", ptr);
+    if (x->rule == SD_RULE_N1 && !dim)
+        return api_fail_at(p, 400, "missing-field", at, "N1 needs the \"dimension\" to follow");
+    if (x->rule != SD_RULE_N1 && dim)
+        return api_fail_at(p, 422, "invalid-override", at, "only N1 takes a dimension");
+    if (dim) {
+        long long d;
+        if (api_get_int(dim, at, 1, 3, &d, p))
+            return p->status;
+        x->dimension = (int)d;
+    }
+    snprintf(at, sizeof at, "%s/pair", ptr);
+    if (x->rule == SD_RULE_N2 && !pr)
+        return api_fail_at(p, 400, "missing-field", at, "N2 needs the \"pair\" of simplices to follow");
+    if (x->rule != SD_RULE_N2 && pr)
+        return api_fail_at(p, 422, "invalid-override", at, "only N2 takes a pair");
+    return pr ? parse_pair(pr, at, nv, x, p) : 0;
+}
+
+int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
+                  api_problem *p)
+{
+    static const char *const keys[] = {"nonmanifold_default", "overrides", "solid_scheme",
+                                       "surface_weights", "nonmanifold_surface", NULL};
+    static const char *const schemes[] = {"box", "averaged", NULL};
+    static const char *const weights[] = {"warren", "loop", NULL};
+    static const char *const surfaces[] = {"chang-qin", "ying-zorin", NULL};
+    *out = NULL;
+    if (api_only_keys(body, "", keys, p))
+        return p->status;
+    api_rules r = {0};
+    json_t *v;
+    int nm = 0, surf = 0;
+    if ((v = json_object_get(body, "solid_scheme")) &&
+        (r.solid_scheme = api_get_enum(v, "/solid_scheme", schemes, p)) < 0)
+        return p->status;
+    if ((v = json_object_get(body, "surface_weights")) &&
+        (r.surface_weights = api_get_enum(v, "/surface_weights", weights, p)) < 0)
+        return p->status;
+    if ((v = json_object_get(body, "nonmanifold_default")) &&
+        (nm = api_get_enum(v, "/nonmanifold_default", NM_RULES, p)) < 0)
+        return p->status;
+    if ((v = json_object_get(body, "nonmanifold_surface")) &&
+        (surf = api_get_enum(v, "/nonmanifold_surface", surfaces, p)) < 0)
+        return p->status;
+    if (nm >= 2)
+        return api_fail_at(p, 422, "invalid-rule", "/nonmanifold_default",
+                           "%s needs a per-simplex choice of dimension or pair; use G1 or G2 as "
+                           "the default and give N1/N2 in \"overrides\"", NM_RULES[nm]);
+    r.nonmanifold_default = nm == 1 ? SD_NM_G1 : SD_NM_G2;
+    r.nonmanifold_surface = surf == 1 ? SD_NMSURF_YING_ZORIN : SD_NMSURF_CHANG_QIN;
+    json_t *ov = json_object_get(body, "overrides");
+    if (ov && !json_is_array(ov))
+        return api_fail_at(p, 400, "wrong-type", "/overrides", "must be an array of overrides");
+    size_t nov = ov ? json_array_size(ov) : 0;
+    if (nov && !cur->in)
+        return api_fail_at(p, 409, "no-complex", "/overrides",
+                           "overrides name simplices of the complex; PUT the complex first");
+    if (nov && nov > (size_t)cur->in->nv + 6 * (size_t)cur->in->ns) /* > vertices + edges */
+        return api_fail_at(p, 422, "limit-exceeded", "/overrides",
+                           "%zu overrides for a complex of %u vertices and %u simplices: at most "
+                           "one per vertex or edge", nov, cur->in->nv, cur->in->ns);
+    sd_override *list = calloc(nov + 1, sizeof *list);
+    if (!list)
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    int rc = 0;
+    size_t i;
+    json_t *o;
+    json_array_foreach(ov, i, o)
+        if ((rc = parse_override(o, i, cur->in->nv, &list[i], p)))
+            break;
+    if (!rc) {
+        r.overrides = list;
+        r.noverrides = (uint32_t)nov;
+        rc = api_build_model(cur->in, &r, &cur->tags, lim, out, p);
+    }
+    free(list);
+    return rc;
+}
+
+/* ---- PUT /tags ----------------------------------------------------------------------------- */
+
+/* "petals": [{"vertex", "triangle", "kind"}] (API.md extension, docs/SERVICE.md): the corner
+ * kind of open petals at complex singular vertices (003 Sec. 2). Shapes and ranges here, the
+ * rest (the triangle holds the vertex, the petal is open, ...) in the core. */
+static int parse_petals(json_t *a, uint32_t nv, api_tags *tags, api_problem *p)
+{
+    static const char *const keys[] = {"vertex", "triangle", "kind", NULL};
+    static const char *const kinds[] = {"convex", "concave", "smooth", NULL};
+    if (!json_is_array(a))
+        return api_fail_at(p, 400, "wrong-type", "/petals",
+                           "must be an array of {\"vertex\", \"triangle\", \"kind\"}");
+    size_t n = json_array_size(a), i;
+    tags->pet = malloc((n + 1) * sizeof *tags->pet);
+    if (!tags->pet)
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    json_t *o;
+    char ptr[96], at[112], at2[128];
+    json_array_foreach(a, i, o) {
+        api_ptr_index(ptr, sizeof ptr, "/petals", i);
+        if (!json_is_object(o))
+            return api_fail_at(p, 400, "wrong-type", ptr,
+                               "a petal tag is an object {\"vertex\", \"triangle\", \"kind\"}");
+        if (api_only_keys(o, ptr, keys, p))
+            return p->status;
+        sd_petal_tag *t = &tags->pet[i];
+        long long x;
+        json_t *v = json_object_get(o, "vertex"), *tr = json_object_get(o, "triangle"),
+               *k = json_object_get(o, "kind");
+        for (int f = 0; f < 3; f++)
+            if (!(f == 0 ? v : f == 1 ? tr : k)) {
+                api_ptr_key(at, sizeof at, ptr, keys[f]);
+                return api_fail_at(p, 400, "missing-field", at, "\"%s\" is required", keys[f]);
+            }
+        api_ptr_key(at, sizeof at, ptr, "vertex");
+        if (api_get_int(v, at, 0, (long long)nv - 1, &x, p))
+            return p->status;
+        t->vertex = (uint32_t)x;
+        api_ptr_key(at, sizeof at, ptr, "triangle");
+        if (!json_is_array(tr) || json_array_size(tr) != 3)
+            return api_fail_at(p, json_is_array(tr) ? 422 : 400,
+                               json_is_array(tr) ? "invalid-tag" : "wrong-type", at,
+                               "a triangle is an array of 3 vertex indices");
+        for (size_t j = 0; j < 3; j++) {
+            api_ptr_index(at2, sizeof at2, at, j);
+            if (api_get_int(json_array_get(tr, j), at2, 0, (long long)nv - 1, &x, p))
+                return p->status;
+            t->triangle[j] = (uint32_t)x;
+            for (size_t q = 0; q < j; q++)
+                if (t->triangle[q] == t->triangle[j])
+                    return api_fail_at(p, 422, "invalid-tag", at2, "vertex %lld appears twice", x);
+        }
+        api_ptr_key(at, sizeof at, ptr, "kind");
+        if ((t->kind = api_get_enum(k, at, kinds, p)) < 0)
+            return p->status;
+        tags->npet++;
+    }
+    return 0;
+}
+
+int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
+                 api_problem *p)
+{
+    static const char *const keys[] = {"singular", "petals", NULL};
+    *out = NULL;
+    if (api_only_keys(body, "", keys, p))
+        return p->status;
+    json_t *s = json_object_get(body, "singular"), *pe = json_object_get(body, "petals");
+    if (!s && !pe)
+        return api_fail_at(p, 400, "missing-field", "/singular",
+                           "\"singular\" is required (or \"petals\" alone: no singular simplices)");
+    if (s && !json_is_array(s)) /* absent: no singular simplices (json_array_* take NULL) */
+        return api_fail_at(p, 400, "wrong-type", "/singular",
+                           "must be an array of simplices (1 to 3 vertex indices)");
+    if ((json_array_size(s) || (pe && (!json_is_array(pe) || json_array_size(pe)))) && !cur->in)
+        return api_fail_at(p, 409, "no-complex", json_array_size(s) ? "/singular" : "/petals",
+                           "tags name simplices of the complex; PUT the complex first");
+    size_t n = json_array_size(s);
+    api_tags tags = {0};
+    tags.size = malloc(n + 1);
+    tags.idx = malloc((3 * n + 1) * sizeof *tags.idx);
+    int rc = !tags.size || !tags.idx ? api_fail(p, 503, "out-of-memory", "out of memory") : 0;
+    size_t i, off = 0;
+    json_t *t;
+    char ptr[96], at[96];
+    json_array_foreach(s, i, t) {
+        if (rc)
+            break;
+        api_ptr_index(ptr, sizeof ptr, "/singular", i);
+        if (!json_is_array(t)) {
+            rc = api_fail_at(p, 400, "wrong-type", ptr, "a tag is an array of 1 to 3 vertex indices");
+            break;
+        }
+        size_t k = json_array_size(t);
+        if (k < 1 || k > 3) {
+            rc = api_fail_at(p, 422, "invalid-tag", ptr,
+                             "a singular simplex is a vertex, an edge or a triangle (1 to 3 "
+                             "indices), not %zu", k);
+            break;
+        }
+        long long seen[3];
+        for (size_t j = 0; j < k && !rc; j++) {
+            api_ptr_index(at, sizeof at, ptr, j);
+            if ((rc = api_get_int(json_array_get(t, j), at, 0, (long long)cur->in->nv - 1,
+                                  &seen[j], p)))
+                break;
+            for (size_t q = 0; q < j && !rc; q++)
+                if (seen[q] == seen[j])
+                    rc = api_fail_at(p, 422, "invalid-tag", at, "vertex %lld appears twice", seen[j]);
+            tags.idx[off + j] = (uint32_t)seen[j];
+        }
+        tags.size[i] = (uint8_t)k;
+        off += k;
+        tags.n++;
+    }
+    if (!rc && pe)
+        rc = parse_petals(pe, cur->in ? cur->in->nv : 0, &tags, p);
+    if (!rc) /* the core checks each tag is a vertex, edge or triangle of the complex */
+        rc = api_build_model(cur->in, &cur->rules, &tags, lim, out, p);
+    free(tags.size);
+    free(tags.idx);
+    free(tags.pet);
+    return rc;
+}
