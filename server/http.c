@@ -1,4 +1,5 @@
-/* http.c — libmicrohttpd glue: routing, bodies, auth, CORS, versions, streaming, logging.
+/* http.c — the libmicrohttpd glue: connection callbacks, the checks made before a body is read,
+ * body collection, responses, streaming, compute slots, one log line per request.
  *
  * Threading: MHD runs one thread per connection (MHD_USE_THREAD_PER_CONNECTION), so a handler
  * may block — on a session's write lock or a model's compute lock — without stalling other
@@ -6,15 +7,16 @@
  * a bounded wait and a 429 + Retry-After when the daemon is saturated, so /healthz, /readyz and
  * /metrics never queue behind work.
  *
- * A request goes: first callback (no body yet) -> route lookup, 404/405/OPTIONS, Content-Length
- * check (413 before reading anything), session and token check (404/401); body callbacks ->
- * append to a buffer capped at max_body_bytes; final callback -> the route's handler, which
- * calls api/ and queues one response. Level responses stream through out_read() from a callback
- * response that holds references on the session's model until the last byte is sent.
+ * A request goes: first callback (no body yet) -> early(): match (route lookup: 404, 405, the
+ * OPTIONS preflight), auth (the session and its bearer token: 404, 401), body (transfer coding,
+ * Content-Length against max_body_bytes before anything is read, a body where none is taken,
+ * Content-Type: 501, 413, 400, 415); body callbacks -> append to a buffer capped at
+ * max_body_bytes; final callback -> the route's handler (routes.c), which calls api/ and queues
+ * one response. Level responses stream through out_read() from a callback response that holds
+ * references on the session's model until the last byte is sent.
  */
-#include "server.h"
+#include "request.h"
 #include "../api/handlers.h"
-#include "../api/jsonin.h"
 #include "metrics.h"
 #include <arpa/inet.h>
 #include <errno.h>
@@ -25,37 +27,6 @@
 #include <string.h>
 #include <strings.h>
 #include <time.h>
-
-typedef struct req req;
-typedef void (*handler_fn)(req *r);
-
-typedef struct route {
-    const char *method;
-    const char *pattern;   /* segments; "{id}" and "{L}" match one segment */
-    handler_fn fn;
-    int session;           /* needs a session ({id}) and its token */
-    int body;              /* takes a JSON body */
-} route;
-
-struct req {
-    server *srv;
-    struct MHD_Connection *conn;
-    const char *method;
-    char path[256];
-    const route *rt;
-    const char *route_name;   /* pattern for metrics and logs */
-    char *body;
-    size_t len, cap;
-    int too_big;
-    double t0;
-    session *s;
-    char seg_id[40];
-    char seg_level[24];
-    int status;
-    atomic_uint_fast64_t bytes;
-    int queued;
-    atomic_int refs;          /* the connection and a streaming response */
-};
 
 /* ---- logging -------------------------------------------------------------------------------- */
 
@@ -111,7 +82,7 @@ static void common_headers(req *r, struct MHD_Response *resp)
     MHD_add_response_header(resp, "X-Content-Type-Options", "nosniff");
 }
 
-static void queue(req *r, int status, struct MHD_Response *resp)
+void http_queue(req *r, int status, struct MHD_Response *resp)
 {
     common_headers(r, resp);
     r->status = status;
@@ -120,7 +91,22 @@ static void queue(req *r, int status, struct MHD_Response *resp)
     MHD_destroy_response(resp);
 }
 
-static struct MHD_Response *buffer_response(const char *ctype, char *text, size_t n)
+struct MHD_Response *http_empty(void)
+{
+    return MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);
+}
+
+struct MHD_Response *http_static_response(const void *data, size_t n)
+{
+    return MHD_create_response_from_buffer(n, (void *)data, MHD_RESPMEM_PERSISTENT);
+}
+
+void http_add_header(struct MHD_Response *resp, const char *name, const char *value)
+{
+    MHD_add_response_header(resp, name, value);
+}
+
+struct MHD_Response *http_buffer_response(const char *ctype, char *text, size_t n)
 {
     struct MHD_Response *resp = MHD_create_response_from_buffer(n, text, MHD_RESPMEM_MUST_FREE);
     if (ctype)
@@ -128,15 +114,14 @@ static struct MHD_Response *buffer_response(const char *ctype, char *text, size_
     return resp;
 }
 
-static void set_etag(struct MHD_Response *resp, uint64_t version)
+void http_set_etag(struct MHD_Response *resp, uint64_t version)
 {
     char etag[32];
     snprintf(etag, sizeof etag, "\"%llu\"", (unsigned long long)version);
     MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
 }
 
-/* Queue a JSON body (steals `body`); version > 0 adds an ETag. */
-static void reply_json(req *r, int status, json_t *body, uint64_t version)
+void http_reply_json(req *r, int status, json_t *body, uint64_t version)
 {
     char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
     json_decref(body);
@@ -147,14 +132,15 @@ static void reply_json(req *r, int status, json_t *body, uint64_t version)
     }
     size_t n = strlen(text);
     atomic_store(&r->bytes, n);
-    struct MHD_Response *resp = buffer_response(
+    struct MHD_Response *resp = http_buffer_response(
         status >= 400 ? "application/problem+json" : "application/json", text, n);
     if (version)
-        set_etag(resp, version);
-    queue(r, status, resp);
+        http_set_etag(resp, version);
+    http_queue(r, status, resp);
 }
 
-static void reply_problem(req *r, const api_problem *p)
+/* The problem+json response of p (with Retry-After and WWW-Authenticate where they apply). */
+static struct MHD_Response *problem_response(req *r, const api_problem *p)
 {
     json_t *j = api_problem_json(p);
     char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
@@ -163,7 +149,7 @@ static void reply_problem(req *r, const api_problem *p)
         text = strdup("{\"status\":500}");
     size_t n = strlen(text);
     atomic_store(&r->bytes, n);
-    struct MHD_Response *resp = buffer_response("application/problem+json", text, n);
+    struct MHD_Response *resp = http_buffer_response("application/problem+json", text, n);
     if (p->retry_after) {
         char ra[16];
         snprintf(ra, sizeof ra, "%d", p->retry_after);
@@ -171,23 +157,27 @@ static void reply_problem(req *r, const api_problem *p)
     }
     if (p->status == 401)
         MHD_add_response_header(resp, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"subdivd\"");
-    queue(r, p->status ? p->status : 500, resp);
+    return resp;
 }
 
-/* A JSON answer that carries the session version (member and ETag), or the problem if none. */
-static void reply_versioned(req *r, json_t *j, uint64_t version, const api_problem *p)
+void http_reply_problem(req *r, const api_problem *p)
+{
+    http_queue(r, p->status ? p->status : 500, problem_response(r, p));
+}
+
+void http_reply_versioned(req *r, json_t *j, uint64_t version, const api_problem *p)
 {
     if (!j) {
-        reply_problem(r, p);
+        http_reply_problem(r, p);
         return;
     }
     json_object_set_new(j, "version", json_integer((json_int_t)version));
-    reply_json(r, 200, j, version);
+    http_reply_json(r, 200, j, version);
 }
 
-static void fail(req *r, int status, const char *slug, const char *fmt, ...)
+void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
-static void fail(req *r, int status, const char *slug, const char *fmt, ...)
+void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
 {
     api_problem p = {0};
     va_list ap;
@@ -196,12 +186,12 @@ static void fail(req *r, int status, const char *slug, const char *fmt, ...)
     vsnprintf(detail, sizeof detail, fmt, ap);
     va_end(ap);
     api_fail(&p, status, slug, "%s", detail);
-    reply_problem(r, &p);
+    http_reply_problem(r, &p);
 }
 
 /* ---- compute slots ---------------------------------------------------------------------- */
 
-static int take_slot(req *r, api_problem *p)
+int http_take_slot(req *r, api_problem *p)
 {
     struct timespec until;
     clock_gettime(CLOCK_REALTIME, &until);
@@ -221,333 +211,60 @@ static int take_slot(req *r, api_problem *p)
     return 0;
 }
 
-static void give_slot(req *r)
+void http_give_slot(req *r)
 {
     if (r->s)
         atomic_store(&r->s->busy_level, -1);
     sem_post(&r->srv->compute);
 }
 
-/* ---- handlers: service ------------------------------------------------------------------- */
 
-static void h_healthz(req *r) { reply_json(r, 200, json_pack("{s:s}", "status", "ok"), 0); }
+/* ---- reading the request ------------------------------------------------------------------ */
 
-static void h_readyz(req *r)
+const char *http_header(req *r, const char *name)
 {
-    if (atomic_load(&r->srv->draining)) {
-        api_problem p = {0};
-        p.retry_after = 5;
-        api_fail(&p, 503, "not-ready", "the daemon is starting or shutting down");
-        reply_problem(r, &p);
-        return;
-    }
-    reply_json(r, 200, json_pack("{s:s}", "status", "ready"), 0);
+    return MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND, name);
 }
 
-typedef struct gauges {
-    uint64_t cells, bytes;
-} gauges;
-
-static void add_gauges(session *s, void *ud)
+const char *http_arg(req *r, const char *key)
 {
-    gauges *g = ud;
-    api_model *m = session_model(s, NULL);
-    if (m->c) {
-        int n = atomic_load(&m->levels_cached);
-        for (int l = 0; l < n; l++) {
-            sd_counts c;
-            sd_complex_counts(m->c, l, &c);
-            g->cells += c.points + c.curves + c.triangles + c.tetrahedra + c.octahedra;
-        }
-        g->bytes += atomic_load(&m->memory_bytes);
-    }
-    api_model_unref(m);
+    return MHD_lookup_connection_value(r->conn, MHD_GET_ARGUMENT_KIND, key);
 }
 
-static void h_metrics(req *r)
+typedef struct qcheck {
+    const char *const *allowed;
+    const char *bad;
+} qcheck;
+
+static enum MHD_Result q_iter(void *cls, enum MHD_ValueKind kind, const char *key, const char *value)
 {
-    char *text = NULL;
-    size_t n = 0;
-    FILE *f = open_memstream(&text, &n);
-    if (!f) {
-        fail(r, 500, "internal", "could not render metrics");
-        return;
-    }
-    gauges g = {0};
-    store_foreach(r->srv->st, add_gauges, &g);
-    metrics_write(f, store_count(r->srv->st), g.cells, g.bytes);
-    fclose(f);
-    atomic_store(&r->bytes, n);
-    queue(r, 200, buffer_response("text/plain; version=0.0.4; charset=utf-8", text, n));
+    (void)kind;
+    (void)value;
+    qcheck *q = cls;
+    for (const char *const *a = q->allowed; *a; a++)
+        if (!strcmp(*a, key))
+            return MHD_YES;
+    q->bad = key;
+    return MHD_NO;
 }
 
-static void h_asset(req *r)
+int http_query_only(req *r, const char *const *allowed)
 {
-    const asset *a = asset_find(r->path);
-    if (!a) {
-        fail(r, 404, "not-found", "no resource at %.100s", r->path);
-        return;
-    }
-    /* The web front end's bundles have content-hashed names and are immutable; index.html and
-     * the OpenAPI document are revalidated (no-cache) against the ETag: 304 while unchanged. */
-    const char *inm = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
-                                                  MHD_HTTP_HEADER_IF_NONE_MATCH);
-    int fresh = inm && (strstr(inm, a->etag) || !strcmp(inm, "*"));
-    struct MHD_Response *resp =
-        fresh ? MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT)
-              : MHD_create_response_from_buffer(a->size, (void *)a->data, MHD_RESPMEM_PERSISTENT);
-    if (!fresh)
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, a->content_type);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, a->cache_control);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, a->etag);
-    atomic_store(&r->bytes, fresh ? 0 : a->size);
-    queue(r, fresh ? 304 : 200, resp);
-}
-
-/* ---- handlers: sessions ------------------------------------------------------------------ */
-
-static json_t *parse_body(req *r, int empty_ok, api_problem *p)
-{
-    return api_parse_body(r->body ? r->body : "", r->len, empty_ok, p);
-}
-
-static void iso_time(char *buf, size_t cap, time_t t)
-{
-    struct tm tm;
-    gmtime_r(&t, &tm);
-    strftime(buf, cap, "%Y-%m-%dT%H:%M:%SZ", &tm);
-}
-
-static void h_create_session(req *r)
-{
+    qcheck q = {allowed, NULL};
+    MHD_get_connection_values(r->conn, MHD_GET_ARGUMENT_KIND, q_iter, &q);
+    if (!q.bad)
+        return 0;
+    char list[160] = "";
+    for (const char *const *a = allowed; *a; a++)
+        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", a == allowed ? "" : ", ", *a);
     api_problem p = {0};
-    json_t *b = parse_body(r, 1, &p);
-    static const char *const keys[] = {"ttl_s", NULL};
-    long long ttl = r->srv->cfg.ttl_s;
-    json_t *t;
-    if (!b || api_only_keys(b, "", keys, &p) ||
-        ((t = json_object_get(b, "ttl_s")) && api_get_int(t, "/ttl_s", 1, API_MAX_TTL_S, &ttl, &p))) {
-        json_decref(b);
-        reply_problem(r, &p);
-        return;
-    }
-    json_decref(b);
-    session *s = store_create(r->srv->st, (int)ttl);
-    if (!s) {
-        p.retry_after = 60;
-        api_fail(&p, 429, "too-many-sessions",
-                 "the daemon holds its maximum of %d sessions; delete unused sessions or wait for "
-                 "idle ones to expire", r->srv->cfg.max_sessions);
-        reply_problem(r, &p);
-        return;
-    }
-    char exp[32], loc[64];
-    iso_time(exp, sizeof exp, session_expires_at(s));
-    snprintf(loc, sizeof loc, "/v1/sessions/%s", s->id);
-    json_t *j = json_pack("{s:s, s:s, s:s, s:I}", "id", s->id, "token", s->token, "expires_at",
-                          exp, "ttl_s", (json_int_t)ttl);
-    session_unref(s);
-    char *text = json_dumps(j, JSON_COMPACT);
-    json_decref(j);
-    size_t n = strlen(text);
-    atomic_store(&r->bytes, n);
-    struct MHD_Response *resp = buffer_response("application/json", text, n);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_LOCATION, loc);
-    queue(r, 201, resp);
+    api_fail_at(&p, 400, "unknown-parameter", q.bad, "unknown query parameter \"%.40s\" (allowed: %s)",
+                q.bad, *allowed ? list : "none");
+    http_reply_problem(r, &p);
+    return 1;
 }
 
-static void h_get_session(req *r)
-{
-    uint64_t version;
-    api_model *m = session_model(r->s, &version);
-    char exp[32];
-    iso_time(exp, sizeof exp, session_expires_at(r->s));
-    json_t *progress = json_null();
-    int busy = atomic_load(&r->s->busy_level);
-    if (busy >= 0)
-        progress = json_pack("{s:s, s:i, s:f}", "state", "computing", "level", busy, "seconds",
-                             mono_now() - atomic_load(&r->s->busy_since));
-    json_t *summary = m->summary ? json_incref(m->summary) : json_object();
-    json_t *j = json_pack("{s:s, s:I, s:i, s:I, s:o, s:s, s:o}", "id", r->s->id, "version",
-                          (json_int_t)version, "levels_cached", atomic_load(&m->levels_cached),
-                          "memory_bytes", (json_int_t)atomic_load(&m->memory_bytes), "summary",
-                          summary, "expires_at", exp, "progress", progress);
-    api_model_unref(m);
-    reply_json(r, 200, j, version);
-}
-
-static void h_delete_session(req *r)
-{
-    store_remove(r->srv->st, r->s);
-    queue(r, 204, MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT));
-}
-
-/* If-Match on a change: absent is fine (except where a route requires it), "*" matches any
- * version, otherwise one of the listed strong tags must equal the current version. */
-static int if_match_ok(req *r, uint64_t version)
-{
-    const char *h = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND, MHD_HTTP_HEADER_IF_MATCH);
-    if (!h)
-        return 1;
-    char want[32];
-    snprintf(want, sizeof want, "\"%llu\"", (unsigned long long)version);
-    for (const char *s = h; *s;) {
-        while (*s == ' ' || *s == ',')
-            s++;
-        if (*s == '*')
-            return 1;
-        size_t n = strcspn(s, ",");
-        while (n && s[n - 1] == ' ')
-            n--;
-        if (n == strlen(want) && !strncmp(s, want, n))
-            return 1;
-        s += strcspn(s, ",");
-    }
-    return 0;
-}
-
-/* A change builds the session's next model from the current one and may add members to the
- * answer (the summary, what was refined). */
-typedef int (*change_op)(const api_model *cur, json_t *body, const api_limits *lim,
-                         api_model **next, json_t *answer, api_problem *p);
-
-/* PUT complex / tags / rules, POST refine: parse, check If-Match, build the new model in a
- * compute slot, publish. The session's write lock makes concurrent changes of one session
- * sequential. */
-static void change(req *r, change_op op)
-{
-    api_problem p = {0};
-    json_t *b = parse_body(r, 0, &p);
-    if (!b) {
-        reply_problem(r, &p);
-        return;
-    }
-    pthread_mutex_lock(&r->s->write);
-    uint64_t version;
-    api_model *cur = session_model(r->s, &version), *next = NULL;
-    json_t *answer = json_object();
-    int rc;
-    if (!if_match_ok(r, version))
-        rc = api_fail(&p, 412, "stale-version",
-                      "If-Match does not match the current version \"%llu\"; GET the session "
-                      "again", (unsigned long long)version);
-    else if (!(rc = take_slot(r, &p))) {
-        rc = op(cur, b, &r->srv->cfg.limits, &next, answer, &p);
-        give_slot(r);
-    }
-    json_decref(b);
-    api_model_unref(cur);
-    if (rc) {
-        pthread_mutex_unlock(&r->s->write);
-        json_decref(answer);
-        reply_problem(r, &p);
-        return;
-    }
-    version = session_publish(r->s, next);
-    pthread_mutex_unlock(&r->s->write);
-    json_object_set_new(answer, "version", json_integer((json_int_t)version));
-    reply_json(r, 200, answer, version);
-}
-
-static int op_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
-                      json_t *answer, api_problem *p)
-{
-    int rc = api_put_complex(cur, body, lim, next, p);
-    if (!rc && (*next)->summary)
-        json_object_set(answer, "summary", (*next)->summary);
-    return rc;
-}
-
-static int op_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
-                   json_t *answer, api_problem *p)
-{
-    (void)answer;
-    return api_put_tags(cur, body, lim, next, p);
-}
-
-static int op_rules(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
-                    json_t *answer, api_problem *p)
-{
-    (void)answer;
-    return api_put_rules(cur, body, lim, next, p);
-}
-
-static int op_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
-                     json_t *answer, api_problem *p)
-{
-    uint64_t red, green;
-    int rc = api_refine(cur, body, lim, next, &red, &green, p);
-    if (!rc) {
-        if ((*next)->summary)
-            json_object_set(answer, "summary", (*next)->summary);
-        json_object_set_new(answer, "refined", json_pack("{s:I, s:I}", "red", (json_int_t)red,
-                                                         "green", (json_int_t)green));
-    }
-    return rc;
-}
-
-static void h_put_complex(req *r) { change(r, op_complex); }
-static void h_put_tags(req *r) { change(r, op_tags); }
-static void h_put_rules(req *r) { change(r, op_rules); }
-static void h_refine(req *r) { change(r, op_refine); }
-
-/* PATCH control-points: If-Match is required (428 without, 412 when stale); the model is changed
- * in place under its data lock, so the edit waits for that session's streams in flight. */
-static void h_edit(req *r)
-{
-    api_problem p = {0};
-    if (!MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND, MHD_HTTP_HEADER_IF_MATCH)) {
-        api_fail(&p, 428, "precondition-required",
-                 "send If-Match: \"<version>\" (the session's ETag) with an edit");
-        reply_problem(r, &p);
-        return;
-    }
-    json_t *b = parse_body(r, 0, &p);
-    if (!b) {
-        reply_problem(r, &p);
-        return;
-    }
-    pthread_mutex_lock(&r->s->write);
-    uint64_t version;
-    api_model *m = session_model(r->s, &version);
-    uint64_t counts[SD_MAX_LEVEL + 1];
-    int levels = 0, rc;
-    if (!if_match_ok(r, version))
-        rc = api_fail(&p, 412, "stale-version",
-                      "If-Match does not match the current version \"%llu\"; GET the session "
-                      "again", (unsigned long long)version);
-    else
-        rc = api_edit(m, b, counts, &levels, &p);
-    if (!rc)
-        version = session_bump(r->s);
-    pthread_mutex_unlock(&r->s->write);
-    json_decref(b);
-    api_model_unref(m);
-    if (rc) {
-        reply_problem(r, &p);
-        return;
-    }
-    json_t *up = json_object();
-    for (int l = 0; l < levels; l++) {
-        char key[8];
-        snprintf(key, sizeof key, "%d", l);
-        json_object_set_new(up, key, json_integer((json_int_t)counts[l]));
-    }
-    reply_json(r, 200, json_pack("{s:I, s:o}", "version", (json_int_t)version, "updated_points", up),
-               version);
-}
-
-static void h_get_complex(req *r)
-{
-    uint64_t version;
-    api_model *m = session_model(r->s, &version);
-    api_problem p = {0};
-    json_t *j = api_get_complex(m, &p);
-    api_model_unref(m);
-    reply_versioned(r, j, version, &p);
-}
-
-/* ---- handlers: levels ------------------------------------------------------------------- */
+/* ---- streaming ------------------------------------------------------------------------------ */
 
 typedef struct stream_ctx {
     req *r;
@@ -581,405 +298,170 @@ static void stream_free(void *cls)
     free(sc);
 }
 
-static int query_only(req *r, const char *const *allowed);
 
-static int if_none_match_hit(req *r, uint64_t version)
+void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uint64_t size,
+                       const char *ctype, const char *disposition, uint64_t version)
 {
-    const char *h =
-        MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND, MHD_HTTP_HEADER_IF_NONE_MATCH);
-    char want[32];
-    snprintf(want, sizeof want, "\"%llu\"", (unsigned long long)version);
-    return h && (strstr(h, want) || !strcmp(h, "*"));
-}
-
-/* The query check and level of a /levels/{L} request; -1 when a problem was answered. */
-static int level_of(req *r, const char *const *keys)
-{
-    if (query_only(r, keys))
-        return -1;
-    api_problem p = {0};
-    int level = api_parse_level(r->seg_level, &p);
-    if (level < 0)
-        reply_problem(r, &p);
-    return level;
-}
-
-/* Take a compute slot when level L of m still has to be computed (*slot says whether one was
- * taken; give it back with give_slot). Non-zero with a problem when none came free in time. */
-static int slot_for_level(req *r, api_model *m, int level, int *slot, api_problem *p)
-{
-    *slot = 0;
-    if (!m->c || atomic_load(&m->levels_cached) > level)
-        return 0;
-    if (take_slot(r, p))
-        return -1;
-    *slot = 1;
-    atomic_store(&r->s->busy_level, level);
-    return 0;
-}
-
-static void h_get_level(req *r)
-{
-    static const char *const keys[] = {"format", "parts", "slice", "attributes", "colormap",
-                                       "octahedra", NULL};
-    int level = level_of(r, keys);
-    if (level < 0)
-        return;
-    api_problem p = {0};
-    uint64_t version;
-    api_model *m = session_model(r->s, &version);
-    if (m->c && if_none_match_hit(r, version)) {
-        api_model_unref(m);
-        struct MHD_Response *resp = MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);
-        set_etag(resp, version);
-        queue(r, 304, resp);
-        return;
-    }
-#define Q(k) MHD_lookup_connection_value(r->conn, MHD_GET_ARGUMENT_KIND, k)
-    api_level_query q = {Q("format"), Q("parts"), Q("slice"), Q("attributes"), Q("colormap"),
-                         Q("octahedra")};
-#undef Q
-    out_stream *os = NULL;
-    const out_format *fmt;
-    int slot, rc = slot_for_level(r, m, level, &slot, &p);
-    if (!rc)
-        rc = api_level_open(m, level, &q, &r->srv->cfg.limits, version, &os, &fmt, &p);
-    if (slot)
-        give_slot(r);
-    if (rc) {
-        api_model_unref(m);
-        reply_problem(r, &p);
-        return;
-    }
     stream_ctx *sc = malloc(sizeof *sc);
     if (!sc) {
-        api_level_close(m, os);
+        if (level_data)
+            api_level_close(m, os);
+        else
+            out_close(os);
         api_model_unref(m);
-        fail(r, 503, "out-of-memory", "out of memory");
+        http_fail(r, 503, "out-of-memory", "out of memory");
         return;
     }
-    sc->r = r;
-    sc->m = m;
-    sc->os = os;
-    sc->level_data = 1;
+    *sc = (stream_ctx){r, m, os, level_data};
     atomic_fetch_add(&r->refs, 1);
-    uint64_t size = out_size(os);
     struct MHD_Response *resp = MHD_create_response_from_callback(
         size == UINT64_MAX ? MHD_SIZE_UNKNOWN : size, 256 * 1024, stream_read, sc, stream_free);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, fmt->mime);
-    char disp[96];
-    snprintf(disp, sizeof disp, "%s; filename=\"level-%d%s\"", fmt->disposition, level,
-             fmt->extension);
-    MHD_add_response_header(resp, "Content-Disposition", disp);
-    set_etag(resp, version);
-    queue(r, 200, resp);
-}
-
-static void h_level_stats(req *r)
-{
-    static const char *const keys[] = {NULL};
-    int level = level_of(r, keys);
-    if (level < 0)
-        return;
-    api_problem p = {0};
-    uint64_t version;
-    api_model *m = session_model(r->s, &version);
-    int slot, rc = slot_for_level(r, m, level, &slot, &p);
-    json_t *j = rc ? NULL : api_level_stats(m, level, &r->srv->cfg.limits, &p);
-    if (slot)
-        give_slot(r);
-    api_model_unref(m);
-    reply_versioned(r, j, version, &p);
-}
-
-static void h_matrix(req *r)
-{
-    static const char *const keys[] = {"from", "format", NULL};
-    int level = level_of(r, keys);
-    if (level < 0)
-        return;
-    uint64_t version;
-    api_model *m = session_model(r->s, &version);
-    api_problem p = {0};
-    out_stream *os = NULL;
-    const char *ctype = NULL;
-    const char *from = MHD_lookup_connection_value(r->conn, MHD_GET_ARGUMENT_KIND, "from");
-    const char *fmt = MHD_lookup_connection_value(r->conn, MHD_GET_ARGUMENT_KIND, "format");
-    int slot, rc = slot_for_level(r, m, level, &slot, &p);
-    if (!rc)
-        rc = api_matrix_open(m, level, from, fmt, &r->srv->cfg.limits, &os, &ctype, &p);
-    if (slot)
-        give_slot(r);
-    stream_ctx *sc = rc ? NULL : malloc(sizeof *sc);
-    if (!sc) {
-        out_close(os);
-        api_model_unref(m);
-        if (!rc)
-            api_fail(&p, 503, "out-of-memory", "out of memory");
-        reply_problem(r, &p);
+    if (!resp) {
+        stream_free(sc);
+        http_fail(r, 503, "out-of-memory", "out of memory");
         return;
     }
-    *sc = (stream_ctx){r, m, os, 0};
-    atomic_fetch_add(&r->refs, 1);
-    struct MHD_Response *resp =
-        MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 256 * 1024, stream_read, sc, stream_free);
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
-    char disp[96];
-    snprintf(disp, sizeof disp, "attachment; filename=\"S_%s_%d.%s\"", from ? from : "0", level,
-             fmt && !strcmp(fmt, "json") ? "json" : "mtx");
-    MHD_add_response_header(resp, "Content-Disposition", disp);
-    set_etag(resp, version);
-    queue(r, 200, resp);
+    MHD_add_response_header(resp, "Content-Disposition", disposition);
+    http_set_etag(resp, version);
+    http_queue(r, 200, resp);
 }
 
-static void h_analysis(req *r)
+/* ---- before the body: match, auth, body -------------------------------------------------- */
+
+/* The CORS preflight of a known resource: 204 with the allowed methods and headers. */
+static void preflight(req *r, const char *allow)
 {
-    static const char *const keys[] = {"vertex", "edge", NULL};
-    if (query_only(r, keys))
-        return;
-    uint64_t version;
-    api_model *m = session_model(r->s, &version);
-    api_problem p = {0};
-    int slot, rc = slot_for_level(r, m, 1, &slot, &p); /* an edge's block lives at level 1 */
-    json_t *j = rc ? NULL
-                   : api_analysis(m,
-                                  MHD_lookup_connection_value(r->conn, MHD_GET_ARGUMENT_KIND, "vertex"),
-                                  MHD_lookup_connection_value(r->conn, MHD_GET_ARGUMENT_KIND, "edge"), &p);
-    if (slot)
-        give_slot(r);
-    api_model_unref(m);
-    reply_versioned(r, j, version, &p);
+    r->route_name = "preflight";
+    struct MHD_Response *resp = http_empty();
+    char methods[160];
+    snprintf(methods, sizeof methods, "%s, OPTIONS", allow);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_ALLOW, methods);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_METHODS, methods);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_HEADERS,
+                            "Authorization, Content-Type, If-Match, If-None-Match");
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_MAX_AGE, "600");
+    http_queue(r, 204, resp);
 }
 
-/* ---- routing ---------------------------------------------------------------------------- */
-
-static const route ROUTES[] = {
-    {"POST", "/v1/sessions", h_create_session, 0, 1},
-    {"GET", "/v1/sessions/{id}", h_get_session, 1, 0},
-    {"DELETE", "/v1/sessions/{id}", h_delete_session, 1, 0},
-    {"PUT", "/v1/sessions/{id}/complex", h_put_complex, 1, 1},
-    {"GET", "/v1/sessions/{id}/complex", h_get_complex, 1, 0},
-    {"PATCH", "/v1/sessions/{id}/control-points", h_edit, 1, 1},
-    {"POST", "/v1/sessions/{id}/refine", h_refine, 1, 1},
-    {"PUT", "/v1/sessions/{id}/tags", h_put_tags, 1, 1},
-    {"PUT", "/v1/sessions/{id}/rules", h_put_rules, 1, 1},
-    {"GET", "/v1/sessions/{id}/levels/{L}", h_get_level, 1, 0},
-    {"GET", "/v1/sessions/{id}/levels/{L}/stats", h_level_stats, 1, 0},
-    {"GET", "/v1/sessions/{id}/analysis", h_analysis, 1, 0},
-    {"GET", "/v1/sessions/{id}/matrices/{L}", h_matrix, 1, 0},
-    {"GET", "/healthz", h_healthz, 0, 0},
-    {"GET", "/livez", h_healthz, 0, 0},
-    {"GET", "/readyz", h_readyz, 0, 0},
-    {"GET", "/metrics", h_metrics, 0, 0},
-    {"GET", "/v1/openapi.json", h_asset, 0, 0},
-};
-#define NROUTES (sizeof ROUTES / sizeof *ROUTES)
-
-void http_list_routes(FILE *f)
+/* 405 naming the allowed methods in the Allow header. */
+static void method_not_allowed(req *r, const api_problem *p, const char *allow)
 {
-    for (size_t i = 0; i < NROUTES; i++)
-        fprintf(f, "%s %s\n", ROUTES[i].method, ROUTES[i].pattern);
+    struct MHD_Response *resp = problem_response(r, p);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_ALLOW, allow);
+    http_queue(r, 405, resp);
 }
 
-/* Match `path` against a pattern; captures {id} and {L}. */
-static int match(const char *pattern, const char *path, req *r)
-{
-    const char *p = pattern, *s = path;
-    while (*p && *s) {
-        if (*p == '{') {
-            const char *pe = strchr(p, '}');
-            size_t n = strcspn(s, "/");
-            if (n == 0)
-                return 0;
-            char *dst = p[1] == 'i' ? r->seg_id : r->seg_level;
-            size_t cap = p[1] == 'i' ? sizeof r->seg_id : sizeof r->seg_level;
-            if (n >= cap)
-                return 0;
-            memcpy(dst, s, n);
-            dst[n] = 0;
-            p = pe + 1;
-            s += n;
-            continue;
-        }
-        if (*p != *s)
-            return 0;
-        p++;
-        s++;
-    }
-    return !*p && !*s;
-}
-
-static int query_only(req *r, const char *const *allowed);
-
-typedef struct qcheck {
-    const char *const *allowed;
-    const char *bad;
-} qcheck;
-
-static enum MHD_Result q_iter(void *cls, enum MHD_ValueKind kind, const char *key, const char *value)
-{
-    (void)kind;
-    (void)value;
-    qcheck *q = cls;
-    for (const char *const *a = q->allowed; *a; a++)
-        if (!strcmp(*a, key))
-            return MHD_YES;
-    q->bad = key;
-    return MHD_NO;
-}
-
-static int query_only(req *r, const char *const *allowed)
-{
-    qcheck q = {allowed, NULL};
-    MHD_get_connection_values(r->conn, MHD_GET_ARGUMENT_KIND, q_iter, &q);
-    if (!q.bad)
-        return 0;
-    char list[160] = "";
-    for (const char *const *a = allowed; *a; a++)
-        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", a == allowed ? "" : ", ", *a);
-    api_problem p = {0};
-    api_fail_at(&p, 400, "unknown-parameter", q.bad, "unknown query parameter \"%.40s\" (allowed: %s)",
-                q.bad, *allowed ? list : "none");
-    reply_problem(r, &p);
-    return 1;
-}
-
-static int methods_for(const char *path, req *r, char *allow, size_t cap)
-{
-    int n = 0;
-    allow[0] = 0;
-    for (size_t i = 0; i < NROUTES; i++)
-        if (match(ROUTES[i].pattern, path, r)) {
-            snprintf(allow + strlen(allow), cap - strlen(allow), "%s%s", n ? ", " : "",
-                     ROUTES[i].method);
-            n++;
-            if (!strcmp(ROUTES[i].method, "GET")) {
-                snprintf(allow + strlen(allow), cap - strlen(allow), ", HEAD");
-            }
-        }
-    return n;
-}
-
-static int is_static_path(const char *path)
-{
-    return !strncmp(path, "/v1/", 4) ? 0 : asset_find(path) != NULL;
-}
-
-/* Route lookup and every check that needs no body. Returns 1 when a response was queued. */
-static int early(req *r)
+/* The route of the request (r->rt, its segments, r->route_name), or the answer that there is
+ * none: 404 for an unknown or too long path, 405 for a method the resource does not take, 204 for
+ * an OPTIONS preflight. 1 when a response was queued. */
+static int early_match(req *r, const char *url)
 {
     const char *m = r->method;
+    if (strlen(url) >= sizeof r->path) {
+        http_fail(r, 404, "not-found", "the path is too long");
+        return 1;
+    }
     char allow[128];
-    int known = methods_for(r->path, r, allow, sizeof allow);
-    if (!known && is_static_path(r->path)) {
-        static const route asset_route = {"GET", "static", h_asset, 0, 0};
+    int known = route_methods(r->path, r, allow, sizeof allow);
+    if (!known && route_is_static(r->path)) {
+        r->route_name = "static";
         if (strcmp(m, "GET") && strcmp(m, "HEAD") && strcmp(m, "OPTIONS")) {
             api_problem p = {0};
             api_fail(&p, 405, "method-not-allowed", "%s is not allowed on %.100s", m, r->path);
-            json_t *j = api_problem_json(&p);
-            char *text = json_dumps(j, JSON_COMPACT);
-            json_decref(j);
-            struct MHD_Response *resp = buffer_response("application/problem+json", text, strlen(text));
-            MHD_add_response_header(resp, MHD_HTTP_HEADER_ALLOW, "GET, HEAD");
-            r->route_name = "static";
-            queue(r, 405, resp);
+            method_not_allowed(r, &p, "GET, HEAD");
             return 1;
         }
-        r->rt = &asset_route;
-        r->route_name = "static";
+        r->rt = route_static();
         strcpy(allow, "GET, HEAD");
         known = 1;
     }
     if (!known) {
         r->route_name = "unknown";
-        fail(r, 404, "not-found", "no resource at %.100s", r->path);
+        http_fail(r, 404, "not-found", "no resource at %.100s", r->path);
         return 1;
     }
     if (!strcmp(m, "OPTIONS")) {
-        r->route_name = "preflight";
-        struct MHD_Response *resp = MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);
-        char methods[160];
-        snprintf(methods, sizeof methods, "%s, OPTIONS", allow);
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_ALLOW, methods);
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_METHODS, methods);
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_HEADERS,
-                                "Authorization, Content-Type, If-Match, If-None-Match");
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_MAX_AGE, "600");
-        queue(r, 204, resp);
+        preflight(r, allow);
         return 1;
     }
+    if (!r->rt)
+        r->rt = route_find(m, r->path, r);
     if (!r->rt) {
-        const char *want = !strcmp(m, "HEAD") ? "GET" : m;
-        for (size_t i = 0; i < NROUTES && !r->rt; i++)
-            if (!strcmp(ROUTES[i].method, want) && match(ROUTES[i].pattern, r->path, r))
-                r->rt = &ROUTES[i];
-    }
-    if (!r->rt) {
-        r->route_name = "unknown";
-        for (size_t i = 0; i < NROUTES; i++)
-            if (match(ROUTES[i].pattern, r->path, r))
-                r->route_name = ROUTES[i].pattern;
+        r->route_name = route_name_of(r->path, r);
         api_problem p = {0};
         api_fail(&p, 405, "method-not-allowed", "%s is not allowed on %.100s (allowed: %s)", m,
                  r->path, allow);
-        json_t *j = api_problem_json(&p);
-        char *text = json_dumps(j, JSON_COMPACT);
-        json_decref(j);
-        struct MHD_Response *resp = buffer_response("application/problem+json", text, strlen(text));
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_ALLOW, allow);
-        atomic_store(&r->bytes, strlen(text));
-        queue(r, 405, resp);
+        method_not_allowed(r, &p, allow);
         return 1;
     }
     if (r->rt->pattern[0] == '/')
         r->route_name = r->rt->pattern;
-    match(r->rt->pattern, r->path, r); /* re-capture the segments of the chosen route */
-    /* who is asking comes first: a client without the session's token learns nothing else */
-    if (r->rt->session) {
-        r->s = store_get(r->srv->st, r->seg_id);
-        if (!r->s) {
-            fail(r, 404, "no-session", "no session %.40s (it may have expired or been deleted)",
-                 r->seg_id);
-            return 1;
-        }
-        if (!r->srv->cfg.no_auth) {
-            const char *h = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
-                                                        MHD_HTTP_HEADER_AUTHORIZATION);
-            /* credentials = auth-scheme 1*SP token68 (RFC 9110 11.4): the scheme is
-             * case-insensitive, and trailing whitespace is not part of the field value */
-            const char *tok = NULL;
-            char tbuf[128];
-            if (h && !strncasecmp(h, "Bearer ", 7)) {
-                const char *t = h + 7;
-                while (*t == ' ')
-                    t++;
-                size_t n = strlen(t);
-                while (n && (t[n - 1] == ' ' || t[n - 1] == '\t'))
-                    n--;
-                if (n < sizeof tbuf) {
-                    memcpy(tbuf, t, n);
-                    tbuf[n] = 0;
-                    tok = tbuf;
-                }
-            }
-            if (!session_token_ok(r->s, tok)) {
-                api_problem p = {0};
-                api_fail(&p, 401, "unauthorized",
-                         h ? "the bearer token does not match this session"
-                           : "send the session's token as \"Authorization: Bearer <token>\"");
-                reply_problem(r, &p);
-                return 1;
-            }
-        }
+    route_match(r->rt->pattern, r->path, r); /* re-capture the segments of the chosen route */
+    return 0;
+}
+
+/* The token of an Authorization header, into buf; NULL unless it is "Bearer <token>" that fits.
+ * credentials = auth-scheme 1*SP token68 (RFC 9110 11.4): the scheme is case-insensitive, and
+ * trailing whitespace is not part of the field value. */
+static const char *bearer_token(const char *h, char *buf, size_t cap)
+{
+    if (!h || strncasecmp(h, "Bearer ", 7))
+        return NULL;
+    const char *t = h + 7;
+    while (*t == ' ')
+        t++;
+    size_t n = strlen(t);
+    while (n && (t[n - 1] == ' ' || t[n - 1] == '\t'))
+        n--;
+    if (n >= cap)
+        return NULL;
+    memcpy(buf, t, n);
+    buf[n] = 0;
+    return buf;
+}
+
+/* Who is asking comes first: a client without the session's token learns nothing else. The
+ * session of a session route (r->s; 404 when there is none) and its bearer token (401). 1 when a
+ * response was queued. */
+static int early_auth(req *r)
+{
+    if (!r->rt->session)
+        return 0;
+    r->s = store_get(r->srv->st, r->seg_id);
+    if (!r->s) {
+        http_fail(r, 404, "no-session", "no session %.40s (it may have expired or been deleted)",
+                  r->seg_id);
+        return 1;
     }
+    if (r->srv->cfg.no_auth)
+        return 0;
+    const char *h = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
+                                                MHD_HTTP_HEADER_AUTHORIZATION);
+    char tbuf[128];
+    if (session_token_ok(r->s, bearer_token(h, tbuf, sizeof tbuf)))
+        return 0;
+    api_problem p = {0};
+    api_fail(&p, 401, "unauthorized",
+             h ? "the bearer token does not match this session"
+               : "send the session's token as \"Authorization: Bearer <token>\"");
+    http_reply_problem(r, &p);
+    return 1;
+}
+
+/* What can be said of the body before reading it: a transfer coding MHD can frame (501), a
+ * Content-Length within max_body_bytes (413, before anything is allocated), no body where the
+ * route takes none (400), JSON where it takes one (415). 1 when a response was queued. */
+static int early_body(req *r)
+{
     /* MHD frames a body only by Content-Length or chunked; any other transfer coding would have
      * it read until the client closes (RFC 9112 6.1: 501 for a coding we do not understand) */
     const char *te0 = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
                                                   MHD_HTTP_HEADER_TRANSFER_ENCODING);
     if (te0 && strcasecmp(te0, "chunked")) {
-        fail(r, 501, "unsupported-transfer-encoding",
-             "Transfer-Encoding \"%.40s\" is not supported; send the body with Content-Length or "
-             "chunked", te0);
+        http_fail(r, 501, "unsupported-transfer-encoding",
+                  "Transfer-Encoding \"%.40s\" is not supported; send the body with Content-Length "
+                  "or chunked", te0);
         return 1;
     }
     const char *cl = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
@@ -995,11 +477,12 @@ static int early(req *r)
                            "the body of %s bytes exceeds the limit of %zu bytes; send a smaller "
                            "complex or raise --max-body-bytes", cl,
                            r->srv->cfg.limits.max_body_bytes);
-            reply_problem(r, &p);
+            http_reply_problem(r, &p);
             return 1;
         }
         if (n > 0 && !r->rt->body) {
-            fail(r, 400, "unexpected-body", "%s %s takes no request body", m, r->rt->pattern);
+            http_fail(r, 400, "unexpected-body", "%s %s takes no request body", r->method,
+                      r->rt->pattern);
             return 1;
         }
     }
@@ -1008,15 +491,19 @@ static int early(req *r)
                                                      MHD_HTTP_HEADER_CONTENT_TYPE);
         int json = ct && !strncasecmp(ct, "application/json", 16) &&
                    (ct[16] == 0 || ct[16] == ';' || ct[16] == ' ');
-        const char *te = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
-                                                     MHD_HTTP_HEADER_TRANSFER_ENCODING);
-        if (!json && (cl || te)) {
-            fail(r, 415, "unsupported-media-type",
-                 "send the body as application/json (got %.60s)", ct ? ct : "no Content-Type");
+        if (!json && (cl || te0)) {
+            http_fail(r, 415, "unsupported-media-type",
+                      "send the body as application/json (got %.60s)", ct ? ct : "no Content-Type");
             return 1;
         }
     }
     return 0;
+}
+
+/* Every check that needs no body, in order. Returns 1 when a response was queued. */
+static int early(req *r, const char *url)
+{
+    return early_match(r, url) || early_auth(r) || early_body(r);
 }
 
 static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const char *url,
@@ -1038,11 +525,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
         r->route_name = "unknown";
         snprintf(r->path, sizeof r->path, "%s", url);
         *con_cls = r;
-        if (strlen(url) >= sizeof r->path) {
-            fail(r, 404, "not-found", "the path is too long");
-            return MHD_YES;
-        }
-        early(r);
+        early(r, url);
         return MHD_YES;
     }
     if (r->queued) { /* answered early: swallow any body */
@@ -1079,16 +562,16 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
                        srv->cfg.limits.max_body_bytes + 1,
                        "the body exceeds the limit of %zu bytes; send a smaller complex or raise "
                        "--max-body-bytes", srv->cfg.limits.max_body_bytes);
-        reply_problem(r, &p);
+        http_reply_problem(r, &p);
         return MHD_YES;
     }
     if (r->len && !r->rt->body) {
-        fail(r, 400, "unexpected-body", "%s %s takes no request body", method, r->rt->pattern);
+        http_fail(r, 400, "unexpected-body", "%s %s takes no request body", method, r->rt->pattern);
         return MHD_YES;
     }
     r->rt->fn(r);
     if (!r->queued)
-        fail(r, 500, "internal", "the handler produced no response");
+        http_fail(r, 500, "internal", "the handler produced no response");
     return MHD_YES;
 }
 
@@ -1167,3 +650,4 @@ void http_stop(server *srv)
         srv->mhd = NULL;
     }
 }
+

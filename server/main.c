@@ -89,93 +89,83 @@ static int apply_file(api_model **m, const char *path, change_fn_t fn, const api
     return 0;
 }
 
-static int refine_main(int argc, char **argv)
+/* The command line of `subdivd refine`. */
+typedef struct refine_args {
+    const char *input, *out, *tags, *rules, *level;
+    api_level_query q;        /* --format (else from -o's extension), --parts, ... */
+} refine_args;
+
+/* 0, or the exit code after saying what is wrong. */
+static int parse_refine_args(int argc, char **argv, refine_args *a)
 {
-    const char *input = NULL, *out = NULL, *tags = NULL, *rules = NULL, *level_s = NULL;
-    api_level_query q = {0};
+    memset(a, 0, sizeof *a);
     for (int i = 2; i < argc; i++) {
-        const char *a = argv[i];
-        const char **dst = !strcmp(a, "--level") || !strcmp(a, "-l") ? &level_s
-                           : !strcmp(a, "-o") || !strcmp(a, "--output") ? &out
-                           : !strcmp(a, "--tags") ? &tags
-                           : !strcmp(a, "--rules") ? &rules
-                           : !strcmp(a, "--format") ? &q.format
-                           : !strcmp(a, "--parts") ? &q.parts
-                           : !strcmp(a, "--slice") ? &q.slice
-                           : !strcmp(a, "--attributes") ? &q.attributes
-                           : !strcmp(a, "--colormap") ? &q.colormap
-                           : !strcmp(a, "--octahedra") ? &q.octahedra
+        const char *o = argv[i];
+        const char **dst = !strcmp(o, "--level") || !strcmp(o, "-l") ? &a->level
+                           : !strcmp(o, "-o") || !strcmp(o, "--output") ? &a->out
+                           : !strcmp(o, "--tags") ? &a->tags
+                           : !strcmp(o, "--rules") ? &a->rules
+                           : !strcmp(o, "--format") ? &a->q.format
+                           : !strcmp(o, "--parts") ? &a->q.parts
+                           : !strcmp(o, "--slice") ? &a->q.slice
+                           : !strcmp(o, "--attributes") ? &a->q.attributes
+                           : !strcmp(o, "--colormap") ? &a->q.colormap
+                           : !strcmp(o, "--octahedra") ? &a->q.octahedra
                                                        : NULL;
         if (dst) {
             if (i + 1 >= argc) {
-                fprintf(stderr, "subdivd refine: %s needs a value\n", a);
+                fprintf(stderr, "subdivd refine: %s needs a value\n", o);
                 return 2;
             }
             *dst = argv[++i];
-        } else if (a[0] == '-' && a[1]) {
-            fprintf(stderr, "subdivd refine: unknown option %s\n", a);
+        } else if (o[0] == '-' && o[1]) {
+            fprintf(stderr, "subdivd refine: unknown option %s\n", o);
             config_usage(stderr);
             return 2;
-        } else if (!input)
-            input = a;
+        } else if (!a->input)
+            a->input = o;
         else {
-            fprintf(stderr, "subdivd refine: unexpected argument %s\n", a);
+            fprintf(stderr, "subdivd refine: unexpected argument %s\n", o);
             return 2;
         }
     }
-    if (!input || !out || !level_s) {
+    if (!a->input || !a->out || !a->level) {
         fprintf(stderr, "subdivd refine: INPUT.json, --level L and -o OUT are required\n");
         config_usage(stderr);
         return 2;
     }
-    if (!q.format) { /* from the output's extension */
-        const out_format *f = out_format_for_path(out);
+    if (!a->q.format) { /* from the output's extension (the table of api/formats.c) */
+        const out_format *f = out_format_for_path(a->out);
         if (!f) {
             char names[128];
             fprintf(stderr, "subdivd refine: cannot tell the format from \"%s\"; use %s, or "
-                    "--format\n", out, out_format_list(names, sizeof names, true, ", ", " or "));
+                    "--format\n", a->out, out_format_list(names, sizeof names, true, ", ", " or "));
             return 2;
         }
-        q.format = f->name;
+        a->q.format = f->name;
     }
-    api_limits lim = api_default_limits();
-    api_problem p = {0};
-    int level = api_parse_level(level_s, &p);
-    if (level < 0)
-        return report(&p, "--level");
-    sd_error e = {0};
-    api_model *m = api_model_new(NULL, NULL, 0, &e);
-    if (!m)
-        return 3;
-    int rc = 0;
-    if (rules)
-        rc = apply_file(&m, rules, api_put_rules, &lim, rules);
-    if (!rc)
-        rc = apply_file(&m, input, api_put_complex, &lim, input);
-    if (!rc && tags)
-        rc = apply_file(&m, tags, api_put_tags, &lim, tags);
-    out_stream *os = NULL;
-    const out_format *fmt;
-    if (!rc && api_level_open(m, level, &q, &lim, 1, &os, &fmt, &p))
-        rc = report(&p, "the level request");
-    if (rc) {
-        api_model_unref(m);
-        return rc;
-    }
+    return 0;
+}
+
+/* Drain the stream into `out` through OUT.part, renamed at the end: nothing half-written is
+ * left behind. 0, 2 (I/O) or 3 (the writer failed); *total = bytes written. */
+static int write_stream(out_stream *os, const char *out, uint64_t *total)
+{
     char tmp[4096];
     snprintf(tmp, sizeof tmp, "%s.part", out);
     FILE *f = fopen(tmp, "wb");
+    int rc = 0;
     if (!f) {
         fprintf(stderr, "subdivd refine: cannot write %s: %s\n", tmp, strerror(errno));
         rc = 2;
     }
     static char buf[1 << 16];
-    uint64_t total = 0;
     ssize_t n;
+    *total = 0;
     while (!rc && (n = out_read(os, buf, sizeof buf)) > 0) {
         if (fwrite(buf, 1, (size_t)n, f) != (size_t)n)
             rc = 2;
-        total += (uint64_t)n;
+        *total += (uint64_t)n;
     }
     if (!rc && n < 0)
         rc = 3;
@@ -184,9 +174,43 @@ static int refine_main(int argc, char **argv)
     if (!rc && rename(tmp, out))
         rc = 2;
     if (rc && f)
-        unlink(tmp); /* nothing half-written is left behind */
-    else if (!rc)
-        fprintf(stderr, "subdivd refine: level %d -> %s (%llu bytes, %.3f s)\n", level, out,
+        unlink(tmp);
+    return rc;
+}
+
+static int refine_main(int argc, char **argv)
+{
+    refine_args a;
+    int rc = parse_refine_args(argc, argv, &a);
+    if (rc)
+        return rc;
+    api_limits lim = api_default_limits();
+    api_problem p = {0};
+    int level = api_parse_level(a.level, &p);
+    if (level < 0)
+        return report(&p, "--level");
+    sd_error e = {0};
+    api_model *m = api_model_new(NULL, NULL, 0, &e);
+    if (!m)
+        return 3;
+    if (a.rules)
+        rc = apply_file(&m, a.rules, api_put_rules, &lim, a.rules);
+    if (!rc)
+        rc = apply_file(&m, a.input, api_put_complex, &lim, a.input);
+    if (!rc && a.tags)
+        rc = apply_file(&m, a.tags, api_put_tags, &lim, a.tags);
+    out_stream *os = NULL;
+    const out_format *fmt;
+    if (!rc && api_level_open(m, level, &a.q, &lim, 1, &os, &fmt, &p))
+        rc = report(&p, "the level request");
+    if (rc) {
+        api_model_unref(m);
+        return rc;
+    }
+    uint64_t total;
+    rc = write_stream(os, a.out, &total);
+    if (!rc)
+        fprintf(stderr, "subdivd refine: level %d -> %s (%llu bytes, %.3f s)\n", level, a.out,
                 (unsigned long long)total, m->seconds[level]);
     api_level_close(m, os);
     api_model_unref(m);
@@ -202,7 +226,7 @@ int main(int argc, char **argv)
     if (argc > 1 && !strcmp(argv[1], "--healthcheck")) /* Docker HEALTHCHECK: no curl needed */
         return probe_main(argc > 2 ? argv[2] : NULL);
     if (argc > 1 && !strcmp(argv[1], "--list-routes")) {
-        http_list_routes(stdout);
+        route_list(stdout);
         return 0;
     }
     if (argc > 1 && !strcmp(argv[1], "--list-formats")) { /* the table of api/formats.c */

@@ -19,8 +19,9 @@ typedef struct server {
 /* Start listening (0) or print why not (-1). */
 int http_start(server *srv);
 void http_stop(server *srv);
-/* The route templates the server answers, one per line ("METHOD /path"), for --list-routes. */
-void http_list_routes(FILE *f);
+/* The route templates the server answers (routes.c), one per line ("METHOD /path"), for
+ * --list-routes. */
+void route_list(FILE *f);
 
 void log_line(const server *srv, int level, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 

@@ -1,0 +1,105 @@
+/* request.h — one HTTP request as the two halves of server/ see it: http.c (the libmicrohttpd
+ * glue: connection callbacks, the checks before the body, body collection, responses, streaming,
+ * compute slots) and routes.c (the route table and each route's handler: request -> api/ call ->
+ * response). Only http.c includes libmicrohttpd; a handler reads headers and query arguments and
+ * answers through the functions below.
+ *
+ * Every handler queues exactly one response (http.c answers 500 for one that does not). Replies
+ * that take a problem turn it into application/problem+json with its status; JSON replies steal
+ * the json_t they are given.
+ */
+#ifndef SUBDIVD_REQUEST_H
+#define SUBDIVD_REQUEST_H
+
+#include "server.h"
+#include "../api/out.h"
+#include "../api/problem.h"
+#include <stdatomic.h>
+#include <stdint.h>
+
+struct MHD_Connection;
+struct MHD_Response;
+
+typedef struct req req;
+typedef void (*handler_fn)(req *r);
+
+/* One row of the route table (routes.c). */
+typedef struct route {
+    const char *method;
+    const char *pattern;   /* segments; "{id}" and "{L}" match one segment */
+    handler_fn fn;
+    int session;           /* needs a session ({id}) and its token */
+    int body;              /* takes a JSON body */
+} route;
+
+struct req {
+    server *srv;
+    struct MHD_Connection *conn;
+    const char *method;
+    char path[256];
+    const route *rt;
+    const char *route_name;   /* pattern for metrics and logs */
+    char *body;
+    size_t len, cap;
+    int too_big;
+    double t0;
+    session *s;
+    char seg_id[40];
+    char seg_level[24];
+    int status;
+    atomic_uint_fast64_t bytes;
+    int queued;
+    atomic_int refs;          /* the connection and a streaming response */
+};
+
+/* ---- routes.c ---- */
+
+/* Match `path` against a route pattern; captures {id} and {L} into r. */
+int route_match(const char *pattern, const char *path, req *r);
+/* The route for method (HEAD as GET) and path, with its segments captured; NULL if none. */
+const route *route_find(const char *method, const char *path, req *r);
+/* The methods allowed on path ("GET, HEAD, PUT"); their number (0: no such resource). */
+int route_methods(const char *path, req *r, char *allow, size_t cap);
+/* The pattern of the last route matching path, or "unknown" (a 405's metrics label). */
+const char *route_name_of(const char *path, req *r);
+/* A static asset of the web front end (not under /v1/), served by the route below. */
+int route_is_static(const char *path);
+const route *route_static(void);
+
+/* ---- http.c: reading the request ---- */
+
+const char *http_header(req *r, const char *name);   /* NULL when absent */
+const char *http_arg(req *r, const char *key);       /* a query argument, NULL when absent */
+/* Refuse query parameters not in `allowed` (NULL-terminated): answers 400 and returns 1. */
+int http_query_only(req *r, const char *const *allowed);
+
+/* ---- http.c: answering ---- */
+
+struct MHD_Response *http_empty(void);
+struct MHD_Response *http_static_response(const void *data, size_t n);
+/* A response owning `text` (freed with the response). */
+struct MHD_Response *http_buffer_response(const char *ctype, char *text, size_t n);
+void http_add_header(struct MHD_Response *resp, const char *name, const char *value);
+void http_set_etag(struct MHD_Response *resp, uint64_t version);
+/* Queue resp with the common headers (CORS, nosniff) and destroy our reference. */
+void http_queue(req *r, int status, struct MHD_Response *resp);
+/* A JSON body (steals `body`); version > 0 adds an ETag. */
+void http_reply_json(req *r, int status, json_t *body, uint64_t version);
+void http_reply_problem(req *r, const api_problem *p);
+/* A JSON answer that carries the session version (member and ETag), or the problem if none. */
+void http_reply_versioned(req *r, json_t *j, uint64_t version, const api_problem *p);
+void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+/* 200 with a stream (size or UINT64_MAX: chunked) that holds m and r until its last byte, then
+ * closes os (with api_level_close when level_data: it holds the model's data lock). On failure
+ * everything is released and a 503 queued. */
+void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uint64_t size,
+                       const char *ctype, const char *disposition, uint64_t version);
+
+/* ---- http.c: compute slots ---- */
+
+/* Take one of cfg.threads compute slots, waiting at most queue_timeout_s; -1 + a 429 problem. */
+int http_take_slot(req *r, api_problem *p);
+void http_give_slot(req *r);
+
+#endif

@@ -1,0 +1,598 @@
+/* routes.c — the daemon's route table and each route's handler: the thin glue from a request to
+ * an api/ call and back to one response (docs/API.md is the contract, api/openapi.json its
+ * description; a test compares that document with `subdivd --list-routes`).
+ *
+ * A handler runs after http.c has matched the route, checked the session and its token and
+ * collected the body. Changes of a session (PUT complex, tags, rules, POST refine) go through
+ * change(): parse, If-Match, build the next model in a compute slot, publish it under the
+ * session's write lock, so concurrent changes of one session are sequential and a refused one
+ * leaves it as it was. Reads take the current model by reference and never block a change. A
+ * handler computes a level only inside a compute slot (slot_for_level), so /healthz, /readyz and
+ * /metrics never queue behind work. Nothing here includes libmicrohttpd (see request.h).
+ */
+#include "request.h"
+#include "../api/handlers.h"
+#include "../api/jsonin.h"
+#include "metrics.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+/* ---- handlers: service ------------------------------------------------------------------- */
+
+static void h_healthz(req *r) { http_reply_json(r, 200, json_pack("{s:s}", "status", "ok"), 0); }
+
+static void h_readyz(req *r)
+{
+    if (atomic_load(&r->srv->draining)) {
+        api_problem p = {0};
+        p.retry_after = 5;
+        api_fail(&p, 503, "not-ready", "the daemon is starting or shutting down");
+        http_reply_problem(r, &p);
+        return;
+    }
+    http_reply_json(r, 200, json_pack("{s:s}", "status", "ready"), 0);
+}
+
+typedef struct gauges {
+    uint64_t cells, bytes;
+} gauges;
+
+static void add_gauges(session *s, void *ud)
+{
+    gauges *g = ud;
+    api_model *m = session_model(s, NULL);
+    if (m->c) {
+        int n = atomic_load(&m->levels_cached);
+        for (int l = 0; l < n; l++) {
+            sd_counts c;
+            sd_complex_counts(m->c, l, &c);
+            g->cells += c.points + c.curves + c.triangles + c.tetrahedra + c.octahedra;
+        }
+        g->bytes += atomic_load(&m->memory_bytes);
+    }
+    api_model_unref(m);
+}
+
+static void h_metrics(req *r)
+{
+    char *text = NULL;
+    size_t n = 0;
+    FILE *f = open_memstream(&text, &n);
+    if (!f) {
+        http_fail(r, 500, "internal", "could not render metrics");
+        return;
+    }
+    gauges g = {0};
+    store_foreach(r->srv->st, add_gauges, &g);
+    metrics_write(f, store_count(r->srv->st), g.cells, g.bytes);
+    fclose(f);
+    atomic_store(&r->bytes, n);
+    http_queue(r, 200, http_buffer_response("text/plain; version=0.0.4; charset=utf-8", text, n));
+}
+
+static void h_asset(req *r)
+{
+    const asset *a = asset_find(r->path);
+    if (!a) {
+        http_fail(r, 404, "not-found", "no resource at %.100s", r->path);
+        return;
+    }
+    /* The web front end's bundles have content-hashed names and are immutable; index.html and
+     * the OpenAPI document are revalidated (no-cache) against the ETag: 304 while unchanged. */
+    const char *inm = http_header(r, "If-None-Match");
+    int fresh = inm && (strstr(inm, a->etag) || !strcmp(inm, "*"));
+    struct MHD_Response *resp =
+        fresh ? http_empty()
+              : http_static_response(a->data, a->size);
+    if (!fresh)
+        http_add_header(resp, "Content-Type", a->content_type);
+    http_add_header(resp, "Cache-Control", a->cache_control);
+    http_add_header(resp, "ETag", a->etag);
+    atomic_store(&r->bytes, fresh ? 0 : a->size);
+    http_queue(r, fresh ? 304 : 200, resp);
+}
+
+/* ---- handlers: sessions ------------------------------------------------------------------ */
+
+static json_t *parse_body(req *r, int empty_ok, api_problem *p)
+{
+    return api_parse_body(r->body ? r->body : "", r->len, empty_ok, p);
+}
+
+/* The JSON body of a change, or NULL once its problem is answered. */
+static json_t *body_or_answer(req *r)
+{
+    api_problem p = {0};
+    json_t *b = parse_body(r, 0, &p);
+    if (!b)
+        http_reply_problem(r, &p);
+    return b;
+}
+
+static void iso_time(char *buf, size_t cap, time_t t)
+{
+    struct tm tm;
+    gmtime_r(&t, &tm);
+    strftime(buf, cap, "%Y-%m-%dT%H:%M:%SZ", &tm);
+}
+
+static void h_create_session(req *r)
+{
+    api_problem p = {0};
+    json_t *b = parse_body(r, 1, &p);
+    static const char *const keys[] = {"ttl_s", NULL};
+    long long ttl = r->srv->cfg.ttl_s;
+    json_t *t;
+    if (!b || api_only_keys(b, "", keys, &p) ||
+        ((t = json_object_get(b, "ttl_s")) && api_get_int(t, "/ttl_s", 1, API_MAX_TTL_S, &ttl, &p))) {
+        json_decref(b);
+        http_reply_problem(r, &p);
+        return;
+    }
+    json_decref(b);
+    session *s = store_create(r->srv->st, (int)ttl);
+    if (!s) {
+        p.retry_after = 60;
+        api_fail(&p, 429, "too-many-sessions",
+                 "the daemon holds its maximum of %d sessions; delete unused sessions or wait for "
+                 "idle ones to expire", r->srv->cfg.max_sessions);
+        http_reply_problem(r, &p);
+        return;
+    }
+    char exp[32], loc[64];
+    iso_time(exp, sizeof exp, session_expires_at(s));
+    snprintf(loc, sizeof loc, "/v1/sessions/%s", s->id);
+    json_t *j = json_pack("{s:s, s:s, s:s, s:I}", "id", s->id, "token", s->token, "expires_at",
+                          exp, "ttl_s", (json_int_t)ttl);
+    session_unref(s);
+    char *text = json_dumps(j, JSON_COMPACT);
+    json_decref(j);
+    size_t n = strlen(text);
+    atomic_store(&r->bytes, n);
+    struct MHD_Response *resp = http_buffer_response("application/json", text, n);
+    http_add_header(resp, "Location", loc);
+    http_queue(r, 201, resp);
+}
+
+static void h_get_session(req *r)
+{
+    uint64_t version;
+    api_model *m = session_model(r->s, &version);
+    char exp[32];
+    iso_time(exp, sizeof exp, session_expires_at(r->s));
+    json_t *progress = json_null();
+    int busy = atomic_load(&r->s->busy_level);
+    if (busy >= 0)
+        progress = json_pack("{s:s, s:i, s:f}", "state", "computing", "level", busy, "seconds",
+                             mono_now() - atomic_load(&r->s->busy_since));
+    json_t *summary = m->summary ? json_incref(m->summary) : json_object();
+    json_t *j = json_pack("{s:s, s:I, s:i, s:I, s:o, s:s, s:o}", "id", r->s->id, "version",
+                          (json_int_t)version, "levels_cached", atomic_load(&m->levels_cached),
+                          "memory_bytes", (json_int_t)atomic_load(&m->memory_bytes), "summary",
+                          summary, "expires_at", exp, "progress", progress);
+    api_model_unref(m);
+    http_reply_json(r, 200, j, version);
+}
+
+static void h_delete_session(req *r)
+{
+    store_remove(r->srv->st, r->s);
+    http_queue(r, 204, http_empty());
+}
+
+/* If-Match on a change: absent is fine (except where a route requires it), "*" matches any
+ * version, otherwise one of the listed strong tags must equal the current version. */
+static int if_match_ok(req *r, uint64_t version)
+{
+    const char *h = http_header(r, "If-Match");
+    if (!h)
+        return 1;
+    char want[32];
+    snprintf(want, sizeof want, "\"%llu\"", (unsigned long long)version);
+    for (const char *s = h; *s;) {
+        while (*s == ' ' || *s == ',')
+            s++;
+        if (*s == '*')
+            return 1;
+        size_t n = strcspn(s, ",");
+        while (n && s[n - 1] == ' ')
+            n--;
+        if (n == strlen(want) && !strncmp(s, want, n))
+            return 1;
+        s += strcspn(s, ",");
+    }
+    return 0;
+}
+
+/* 0 when If-Match allows a change of this version, else the status of a 412 problem. */
+static int if_match(req *r, uint64_t version, api_problem *p)
+{
+    if (if_match_ok(r, version))
+        return 0;
+    return api_fail(p, 412, "stale-version",
+                    "If-Match does not match the current version \"%llu\"; GET the session "
+                    "again", (unsigned long long)version);
+}
+
+/* A change builds the session's next model from the current one and may add members to the
+ * answer (the summary, what was refined). */
+typedef int (*change_op)(const api_model *cur, json_t *body, const api_limits *lim,
+                         api_model **next, json_t *answer, api_problem *p);
+
+/* PUT complex / tags / rules, POST refine: parse, check If-Match, build the new model in a
+ * compute slot, publish. The session's write lock makes concurrent changes of one session
+ * sequential. */
+static void change(req *r, change_op op)
+{
+    api_problem p = {0};
+    json_t *b = body_or_answer(r);
+    if (!b)
+        return;
+    pthread_mutex_lock(&r->s->write);
+    uint64_t version;
+    api_model *cur = session_model(r->s, &version), *next = NULL;
+    json_t *answer = json_object();
+    int rc;
+    if (!(rc = if_match(r, version, &p)) && !(rc = http_take_slot(r, &p))) {
+        rc = op(cur, b, &r->srv->cfg.limits, &next, answer, &p);
+        http_give_slot(r);
+    }
+    json_decref(b);
+    api_model_unref(cur);
+    if (rc) {
+        pthread_mutex_unlock(&r->s->write);
+        json_decref(answer);
+        http_reply_problem(r, &p);
+        return;
+    }
+    version = session_publish(r->s, next);
+    pthread_mutex_unlock(&r->s->write);
+    json_object_set_new(answer, "version", json_integer((json_int_t)version));
+    http_reply_json(r, 200, answer, version);
+}
+
+static int op_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
+                      json_t *answer, api_problem *p)
+{
+    int rc = api_put_complex(cur, body, lim, next, p);
+    if (!rc && (*next)->summary)
+        json_object_set(answer, "summary", (*next)->summary);
+    return rc;
+}
+
+static int op_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
+                   json_t *answer, api_problem *p)
+{
+    (void)answer;
+    return api_put_tags(cur, body, lim, next, p);
+}
+
+static int op_rules(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
+                    json_t *answer, api_problem *p)
+{
+    (void)answer;
+    return api_put_rules(cur, body, lim, next, p);
+}
+
+static int op_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
+                     json_t *answer, api_problem *p)
+{
+    uint64_t red, green;
+    int rc = api_refine(cur, body, lim, next, &red, &green, p);
+    if (!rc) {
+        if ((*next)->summary)
+            json_object_set(answer, "summary", (*next)->summary);
+        json_object_set_new(answer, "refined", json_pack("{s:I, s:I}", "red", (json_int_t)red,
+                                                         "green", (json_int_t)green));
+    }
+    return rc;
+}
+
+static void h_put_complex(req *r) { change(r, op_complex); }
+static void h_put_tags(req *r) { change(r, op_tags); }
+static void h_put_rules(req *r) { change(r, op_rules); }
+static void h_refine(req *r) { change(r, op_refine); }
+
+/* PATCH control-points: If-Match is required (428 without, 412 when stale); the model is changed
+ * in place under its data lock, so the edit waits for that session's streams in flight. */
+static void h_edit(req *r)
+{
+    api_problem p = {0};
+    if (!http_header(r, "If-Match")) {
+        api_fail(&p, 428, "precondition-required",
+                 "send If-Match: \"<version>\" (the session's ETag) with an edit");
+        http_reply_problem(r, &p);
+        return;
+    }
+    json_t *b = body_or_answer(r);
+    if (!b)
+        return;
+    pthread_mutex_lock(&r->s->write);
+    uint64_t version;
+    api_model *m = session_model(r->s, &version);
+    uint64_t counts[SD_MAX_LEVEL + 1];
+    int levels = 0, rc;
+    if (!(rc = if_match(r, version, &p)))
+        rc = api_edit(m, b, counts, &levels, &p);
+    if (!rc)
+        version = session_bump(r->s);
+    pthread_mutex_unlock(&r->s->write);
+    json_decref(b);
+    api_model_unref(m);
+    if (rc) {
+        http_reply_problem(r, &p);
+        return;
+    }
+    json_t *up = json_object();
+    for (int l = 0; l < levels; l++) {
+        char key[8];
+        snprintf(key, sizeof key, "%d", l);
+        json_object_set_new(up, key, json_integer((json_int_t)counts[l]));
+    }
+    http_reply_json(r, 200, json_pack("{s:I, s:o}", "version", (json_int_t)version, "updated_points",
+                                      up), version);
+}
+
+static void h_get_complex(req *r)
+{
+    uint64_t version;
+    api_model *m = session_model(r->s, &version);
+    api_problem p = {0};
+    json_t *j = api_get_complex(m, &p);
+    api_model_unref(m);
+    http_reply_versioned(r, j, version, &p);
+}
+
+
+/* ---- handlers: levels ------------------------------------------------------------------- */
+
+static int if_none_match_hit(req *r, uint64_t version)
+{
+    const char *h =
+        http_header(r, "If-None-Match");
+    char want[32];
+    snprintf(want, sizeof want, "\"%llu\"", (unsigned long long)version);
+    return h && (strstr(h, want) || !strcmp(h, "*"));
+}
+
+/* The query check and level of a /levels/{L} request; -1 when a problem was answered. */
+static int level_of(req *r, const char *const *keys)
+{
+    if (http_query_only(r, keys))
+        return -1;
+    api_problem p = {0};
+    int level = api_parse_level(r->seg_level, &p);
+    if (level < 0)
+        http_reply_problem(r, &p);
+    return level;
+}
+
+/* The handlers of /levels/{L}, /levels/{L}/stats and /matrices/{L}: called with the level
+ * and the session's model (a reference they own) once the query and the level are checked. */
+typedef void (*level_fn)(req *r, api_model *m, int level, uint64_t version);
+
+static void with_level(req *r, const char *const *keys, level_fn fn)
+{
+    int level = level_of(r, keys);
+    if (level < 0)
+        return;
+    uint64_t version;
+    api_model *m = session_model(r->s, &version);
+    fn(r, m, level, version);
+}
+
+/* Take a compute slot when level L of m still has to be computed (*slot says whether one was
+ * taken; give it back with give_slot). Non-zero with a problem when none came free in time. */
+static int slot_for_level(req *r, api_model *m, int level, int *slot, api_problem *p)
+{
+    *slot = 0;
+    if (!m->c || atomic_load(&m->levels_cached) > level)
+        return 0;
+    if (http_take_slot(r, p))
+        return -1;
+    *slot = 1;
+    atomic_store(&r->s->busy_level, level);
+    return 0;
+}
+
+/* After opening a stream: give back the compute slot, and when the open failed (rc), drop the
+ * model and answer the problem. Returns rc. */
+static int stream_refused(req *r, api_model *m, int slot, int rc, const api_problem *p)
+{
+    if (slot)
+        http_give_slot(r);
+    if (rc) {
+        api_model_unref(m);
+        http_reply_problem(r, p);
+    }
+    return rc;
+}
+
+static const char *const LEVEL_KEYS[] = {"format", "parts", "slice", "attributes", "colormap",
+                                         "octahedra", NULL};
+
+static void get_level(req *r, api_model *m, int level, uint64_t version)
+{
+    api_problem p = {0};
+    if (m->c && if_none_match_hit(r, version)) {
+        api_model_unref(m);
+        struct MHD_Response *resp = http_empty();
+        http_set_etag(resp, version);
+        http_queue(r, 304, resp);
+        return;
+    }
+#define Q(k) http_arg(r, k)
+    api_level_query q = {Q("format"), Q("parts"), Q("slice"), Q("attributes"), Q("colormap"),
+                         Q("octahedra")};
+#undef Q
+    out_stream *os = NULL;
+    const out_format *fmt;
+    int slot, rc = slot_for_level(r, m, level, &slot, &p);
+    if (!rc)
+        rc = api_level_open(m, level, &q, &r->srv->cfg.limits, version, &os, &fmt, &p);
+    if (stream_refused(r, m, slot, rc, &p))
+        return;
+    char disp[96];
+    snprintf(disp, sizeof disp, "%s; filename=\"level-%d%s\"", fmt->disposition, level,
+             fmt->extension);
+    http_reply_stream(r, m, os, 1, out_size(os), fmt->mime, disp, version);
+}
+
+static void h_get_level(req *r) { with_level(r, LEVEL_KEYS, get_level); }
+
+static const char *const STATS_KEYS[] = {NULL};
+
+static void level_stats(req *r, api_model *m, int level, uint64_t version)
+{
+    api_problem p = {0};
+    int slot, rc = slot_for_level(r, m, level, &slot, &p);
+    json_t *j = rc ? NULL : api_level_stats(m, level, &r->srv->cfg.limits, &p);
+    if (slot)
+        http_give_slot(r);
+    api_model_unref(m);
+    http_reply_versioned(r, j, version, &p);
+}
+
+static void h_level_stats(req *r) { with_level(r, STATS_KEYS, level_stats); }
+
+static const char *const MATRIX_KEYS[] = {"from", "format", NULL};
+
+static void matrix(req *r, api_model *m, int level, uint64_t version)
+{
+    api_problem p = {0};
+    out_stream *os = NULL;
+    const char *ctype = NULL;
+    const char *from = http_arg(r, "from");
+    const char *fmt = http_arg(r, "format");
+    int slot, rc = slot_for_level(r, m, level, &slot, &p);
+    if (!rc)
+        rc = api_matrix_open(m, level, from, fmt, &r->srv->cfg.limits, &os, &ctype, &p);
+    if (stream_refused(r, m, slot, rc, &p))
+        return;
+    char disp[96];
+    snprintf(disp, sizeof disp, "attachment; filename=\"S_%s_%d.%s\"", from ? from : "0", level,
+             fmt && !strcmp(fmt, "json") ? "json" : "mtx");
+    http_reply_stream(r, m, os, 0, UINT64_MAX, ctype, disp, version);
+}
+
+static void h_matrix(req *r) { with_level(r, MATRIX_KEYS, matrix); }
+
+static void h_analysis(req *r)
+{
+    static const char *const keys[] = {"vertex", "edge", NULL};
+    if (http_query_only(r, keys))
+        return;
+    uint64_t version;
+    api_model *m = session_model(r->s, &version);
+    api_problem p = {0};
+    int slot, rc = slot_for_level(r, m, 1, &slot, &p); /* an edge's block lives at level 1 */
+    json_t *j = rc ? NULL : api_analysis(m, http_arg(r, "vertex"), http_arg(r, "edge"), &p);
+    if (slot)
+        http_give_slot(r);
+    api_model_unref(m);
+    http_reply_versioned(r, j, version, &p);
+}
+
+/* ---- routing ---------------------------------------------------------------------------- */
+
+static const route ROUTES[] = {
+    {"POST", "/v1/sessions", h_create_session, 0, 1},
+    {"GET", "/v1/sessions/{id}", h_get_session, 1, 0},
+    {"DELETE", "/v1/sessions/{id}", h_delete_session, 1, 0},
+    {"PUT", "/v1/sessions/{id}/complex", h_put_complex, 1, 1},
+    {"GET", "/v1/sessions/{id}/complex", h_get_complex, 1, 0},
+    {"PATCH", "/v1/sessions/{id}/control-points", h_edit, 1, 1},
+    {"POST", "/v1/sessions/{id}/refine", h_refine, 1, 1},
+    {"PUT", "/v1/sessions/{id}/tags", h_put_tags, 1, 1},
+    {"PUT", "/v1/sessions/{id}/rules", h_put_rules, 1, 1},
+    {"GET", "/v1/sessions/{id}/levels/{L}", h_get_level, 1, 0},
+    {"GET", "/v1/sessions/{id}/levels/{L}/stats", h_level_stats, 1, 0},
+    {"GET", "/v1/sessions/{id}/analysis", h_analysis, 1, 0},
+    {"GET", "/v1/sessions/{id}/matrices/{L}", h_matrix, 1, 0},
+    {"GET", "/healthz", h_healthz, 0, 0},
+    {"GET", "/livez", h_healthz, 0, 0},
+    {"GET", "/readyz", h_readyz, 0, 0},
+    {"GET", "/metrics", h_metrics, 0, 0},
+    {"GET", "/v1/openapi.json", h_asset, 0, 0},
+};
+#define NROUTES (sizeof ROUTES / sizeof *ROUTES)
+
+void route_list(FILE *f)
+{
+    for (size_t i = 0; i < NROUTES; i++)
+        fprintf(f, "%s %s\n", ROUTES[i].method, ROUTES[i].pattern);
+}
+
+int route_match(const char *pattern, const char *path, req *r)
+{
+    const char *p = pattern, *s = path;
+    while (*p && *s) {
+        if (*p == '{') {
+            const char *pe = strchr(p, '}');
+            size_t n = strcspn(s, "/");
+            if (n == 0)
+                return 0;
+            char *dst = p[1] == 'i' ? r->seg_id : r->seg_level;
+            size_t cap = p[1] == 'i' ? sizeof r->seg_id : sizeof r->seg_level;
+            if (n >= cap)
+                return 0;
+            memcpy(dst, s, n);
+            dst[n] = 0;
+            p = pe + 1;
+            s += n;
+            continue;
+        }
+        if (*p != *s)
+            return 0;
+        p++;
+        s++;
+    }
+    return !*p && !*s;
+}
+
+int route_methods(const char *path, req *r, char *allow, size_t cap)
+{
+    int n = 0;
+    allow[0] = 0;
+    for (size_t i = 0; i < NROUTES; i++)
+        if (route_match(ROUTES[i].pattern, path, r)) {
+            snprintf(allow + strlen(allow), cap - strlen(allow), "%s%s", n ? ", " : "",
+                     ROUTES[i].method);
+            n++;
+            if (!strcmp(ROUTES[i].method, "GET")) {
+                snprintf(allow + strlen(allow), cap - strlen(allow), ", HEAD");
+            }
+        }
+    return n;
+}
+
+const route *route_find(const char *method, const char *path, req *r)
+{
+    const char *want = !strcmp(method, "HEAD") ? "GET" : method;
+    for (size_t i = 0; i < NROUTES; i++)
+        if (!strcmp(ROUTES[i].method, want) && route_match(ROUTES[i].pattern, path, r))
+            return &ROUTES[i];
+    return NULL;
+}
+
+const char *route_name_of(const char *path, req *r)
+{
+    const char *name = "unknown";
+    for (size_t i = 0; i < NROUTES; i++)
+        if (route_match(ROUTES[i].pattern, path, r))
+            name = ROUTES[i].pattern;
+    return name;
+}
+
+int route_is_static(const char *path)
+{
+    return !strncmp(path, "/v1/", 4) ? 0 : asset_find(path) != NULL;
+}
+
+const route *route_static(void)
+{
+    static const route asset_route = {"GET", "static", h_asset, 0, 0};
+    return &asset_route;
+}
