@@ -20,8 +20,9 @@ $(B)/%.o: %.c $(wildcard core/*.h)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c $< -o $@
 
+# Archives are written afresh: `ar r` alone keeps the members of deleted sources.
 $(CORE_LIB): $(CORE_OBJ)
-	ar rcs $@ $^
+	rm -f $@ && ar rcs $@ $^
 
 # api/: JSON mapping and output writers (no HTTP)
 API_SRC := $(wildcard api/*.c)
@@ -31,7 +32,7 @@ $(B)/api/%.o: api/%.c $(wildcard api/*.h) $(wildcard core/*.h)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c $< -o $@
 $(API_LIB): $(API_OBJ)
-	ar rcs $@ $^
+	rm -f $@ && ar rcs $@ $^
 
 $(B)/sdlevel: tests/tools/sdlevel.c tests/tools/textmesh.c tests/tools/textmesh.h $(CORE_LIB)
 	$(CC) $(CFLAGS) tests/tools/sdlevel.c tests/tools/textmesh.c $(CORE_LIB) $(LDLIBS) -o $@
@@ -65,6 +66,7 @@ $(B)/subdivd: $(SRV_OBJ) $(API_LIB) $(CORE_LIB)
 -include tests/peers/Makefile.inc
 -include tests/tools/Makefile.inc
 -include tests/fuzz/Makefile.inc
+-include tests/api/Makefile.inc
 -include tetgen/Makefile.inc
 -include clients/python/Makefile.inc
 all: $(API_LIB) $(B)/subdivd $(EXTRA_ALL)
@@ -88,7 +90,7 @@ test: deps
 sanitize: deps
 	$(MAKE) clean-build B=build-asan
 	$(MAKE) all B=build-asan CFLAGS="-O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all" LDLIBS="$(LDLIBS) -fsanitize=address,undefined"
-	SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core SUBDIVD=build-asan/subdivd FUZZ_API=build-asan/fuzz_api sh tests/run_all.sh
+	SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core SUBDIVD=build-asan/subdivd FUZZ_API=build-asan/fuzz_api API_FAULTS=build-asan/api_faults sh tests/run_all.sh
 
 clean-build:
 	rm -rf $(B)

@@ -10,6 +10,7 @@
  * classes of level 0, which is immutable once built and so read without the model's lock.
  */
 #include "handlers.h"
+#include "mem.h"
 #include "fill.h"
 #include "internal.h"
 #include "jsonin.h"
@@ -29,7 +30,7 @@ static int parse_vertices(json_t *v, const api_limits *lim, api_input *in, api_p
         return api_fail_limit(p, "max_vertices", lim->max_vertices, n,
                               "%zu vertices exceed the limit of %u; split the model or raise "
                               "--max-vertices", n, lim->max_vertices);
-    in->xyz = malloc((n ? n : 1) * 3 * sizeof *in->xyz);
+    in->xyz = api_plain_malloc((n ? n : 1) * 3 * sizeof *in->xyz);
     if (!in->xyz)
         return api_fail(p, 503, "out-of-memory", "out of memory reading %zu vertices", n);
     in->nv = (uint32_t)n;
@@ -77,8 +78,8 @@ static int parse_simplices(json_t *v, const api_limits *lim, api_input *in, api_
                                "triangle, tetrahedron)", i, k);
         total += k;
     }
-    in->size = malloc(n ? n : 1);
-    in->idx = malloc((total ? total : 1) * sizeof *in->idx);
+    in->size = api_plain_malloc(n ? n : 1);
+    in->idx = api_plain_malloc((total ? total : 1) * sizeof *in->idx);
     if (!in->size || !in->idx)
         return api_fail(p, 503, "out-of-memory", "out of memory reading %zu simplices", n);
     in->ns = (uint32_t)n;
@@ -148,7 +149,7 @@ static int parse_attributes(json_t *v, api_input *in, api_problem *p)
             return api_fail_at(p, 422, "wrong-length", at,
                                "a vector value has 1 to 16 components, not %d", t->ncomp);
         }
-        t->data = malloc((in->nv ? in->nv : 1) * (size_t)t->ncomp * sizeof *t->data);
+        t->data = api_plain_malloc((in->nv ? in->nv : 1) * (size_t)t->ncomp * sizeof *t->data);
         if (!t->data)
             return api_fail(p, 503, "out-of-memory", "out of memory reading attribute %s", name);
         in->nattrs++;
@@ -190,8 +191,8 @@ static int parse_diagonals(json_t *v, api_input *in, api_problem *p)
     if (n > in->ns)
         return api_fail_at(p, 422, "repeated-index", "/diagonals",
                            "%zu choices for %u simplices: some tetrahedron is listed twice", n, in->ns);
-    in->diag = malloc((n ? n : 1) * sizeof *in->diag);
-    uint8_t *seen = calloc((size_t)in->ns + 1, 1);
+    in->diag = api_malloc((n ? n : 1) * sizeof *in->diag);
+    uint8_t *seen = api_calloc((size_t)in->ns + 1, 1);
     int rc = 0;
     if (!in->diag || !seen)
         rc = api_fail(p, 503, "out-of-memory", "out of memory");
@@ -222,7 +223,7 @@ static int parse_diagonals(json_t *v, api_input *in, api_problem *p)
         in->diag[i][1] = (uint32_t)k;
         in->ndiag++;
     }
-    free(seen);
+    api_free(seen);
     return rc;
 }
 

@@ -8,6 +8,7 @@
  * channel. The posted input follows the edit, so later rule changes rebuild from the new values.
  */
 #include "handlers.h"
+#include "mem.h"
 #include "internal.h"
 #include "jsonin.h"
 #include <stdio.h>
@@ -35,9 +36,9 @@ static int parse_edit_entries(json_t *arr, const char *base, const char *vkey, i
     if (n > nv)
         return api_fail_at(p, 422, "repeated-index", base,
                            "%zu entries for %u control points: some point is listed twice", n, nv);
-    e->idx = malloc((n ? n : 1) * sizeof *e->idx);
-    e->val = malloc((n ? n : 1) * ncomp * sizeof *e->val);
-    e->old = malloc((n ? n : 1) * ncomp * sizeof *e->old);
+    e->idx = api_malloc((n ? n : 1) * sizeof *e->idx);
+    e->val = api_malloc((n ? n : 1) * ncomp * sizeof *e->val);
+    e->old = api_malloc((n ? n : 1) * ncomp * sizeof *e->old);
     if (!e->idx || !e->val || !e->old)
         return api_fail(p, 503, "out-of-memory", "out of memory");
     e->ncomp = ncomp;
@@ -97,9 +98,9 @@ static int parse_edit_entries(json_t *arr, const char *base, const char *vkey, i
 static void edit_parts_free(edit_part *parts, int n)
 {
     for (int i = 0; i < n; i++) {
-        free(parts[i].idx);
-        free(parts[i].val);
-        free(parts[i].old);
+        api_free(parts[i].idx);
+        api_free(parts[i].val);
+        api_free(parts[i].old);
     }
 }
 
@@ -114,7 +115,7 @@ int api_edit(api_model *m, json_t *body, uint64_t *counts, int *levels, api_prob
     edit_part parts[1 + API_MAX_ATTRIBUTES];
     memset(parts, 0, sizeof parts);
     int np = 0, rc = 0;
-    int32_t *seen = malloc(((size_t)in->nv + 1) * sizeof *seen);
+    int32_t *seen = api_malloc(((size_t)in->nv + 1) * sizeof *seen);
     if (!seen)
         return api_fail(p, 503, "out-of-memory", "out of memory");
     for (uint32_t i = 0; i < in->nv; i++)
@@ -142,7 +143,7 @@ int api_edit(api_model *m, json_t *body, uint64_t *counts, int *levels, api_prob
                                          &parts[np++], seen, p)))
                 break;
         }
-    free(seen);
+    api_free(seen);
     if (!rc && !mv && !at)
         rc = api_fail(p, 400, "missing-field", "give \"moves\" and/or \"attributes\"");
     if (rc) {

@@ -11,6 +11,7 @@
  * body, like parsing it; the offline mode needs it too.
  */
 #include "fill_internal.h"
+#include "mem.h"
 #include "jsonin.h"
 #include <limits.h>
 #include <math.h>
@@ -52,7 +53,7 @@ static int parse_entry(json_t *e, size_t k, const api_input *in, const api_limit
         return api_fail_at(p, 422, "invalid-surface", sp,
                            "%zu triangles cannot close a surface; a closed surface has at least 4", n);
     s->nt = (uint32_t)n;
-    s->tri = malloc(3 * n * sizeof *s->tri);
+    s->tri = api_malloc(3 * n * sizeof *s->tri);
     if (!s->tri)
         return api_fail(p, 503, "out-of-memory", "out of memory reading the surface");
     for (size_t j = 0; j < n; j++) {
@@ -111,7 +112,7 @@ static int harmonic(api_attribute *a, uint32_t nv0, const surface *s, uint32_t n
     uint32_t m = np - s->nloc; /* unknowns: local ids nloc.. */
     if (!m)
         return 0;
-    uint32_t *rp = calloc((size_t)m + 1, sizeof *rp), *col = NULL;
+    uint32_t *rp = api_calloc((size_t)m + 1, sizeof *rp), *col = NULL;
     double *x = NULL;
     int rc = -1;
     if (!rp)
@@ -122,12 +123,12 @@ static int harmonic(api_attribute *a, uint32_t nv0, const surface *s, uint32_t n
                 rp[tets[4 * t + i] - s->nloc + 1] += 3;
     for (uint32_t i = 0; i < m; i++)
         rp[i + 1] += rp[i];
-    col = malloc(((size_t)rp[m] + 1) * sizeof *col);
-    uint32_t *fillp = malloc(((size_t)m + 1) * sizeof *fillp);
-    double *b = malloc(((size_t)m + 1) * sizeof *b), *r = malloc(((size_t)m + 1) * sizeof *r),
-           *z = malloc(((size_t)m + 1) * sizeof *z), *pv = malloc(((size_t)m + 1) * sizeof *pv),
-           *q = malloc(((size_t)m + 1) * sizeof *q);
-    x = malloc(((size_t)m + 1) * sizeof *x);
+    col = api_malloc(((size_t)rp[m] + 1) * sizeof *col);
+    uint32_t *fillp = api_malloc(((size_t)m + 1) * sizeof *fillp);
+    double *b = api_malloc(((size_t)m + 1) * sizeof *b), *r = api_malloc(((size_t)m + 1) * sizeof *r),
+           *z = api_malloc(((size_t)m + 1) * sizeof *z), *pv = api_malloc(((size_t)m + 1) * sizeof *pv),
+           *q = api_malloc(((size_t)m + 1) * sizeof *q);
+    x = api_malloc(((size_t)m + 1) * sizeof *x);
     if (!col || !fillp || !b || !r || !z || !pv || !q || !x)
         goto out;
     memcpy(fillp, rp, (size_t)m * sizeof *fillp);
@@ -188,15 +189,15 @@ static int harmonic(api_attribute *a, uint32_t nv0, const surface *s, uint32_t n
     }
     rc = 0;
 out:
-    free(rp);
-    free(col);
-    free(fillp);
-    free(b);
-    free(r);
-    free(z);
-    free(pv);
-    free(q);
-    free(x);
+    api_free(rp);
+    api_free(col);
+    api_free(fillp);
+    api_free(b);
+    api_free(r);
+    api_free(z);
+    api_free(pv);
+    api_free(q);
+    api_free(x);
     return rc;
 }
 
@@ -209,16 +210,16 @@ static int append(api_input *in, const surface *s, const helper_out *h, api_prob
     size_t nidx = 0;
     for (uint32_t i = 0; i < in->ns; i++)
         nidx += in->size[i];
-    double *xyz = realloc(in->xyz, 3 * ((size_t)nv0 + added + 1) * sizeof *xyz);
+    double *xyz = api_plain_realloc(in->xyz, 3 * ((size_t)nv0 + added + 1) * sizeof *xyz);
     if (xyz)
         in->xyz = xyz;
-    uint8_t *size = realloc(in->size, (size_t)ns0 + nt + 1);
+    uint8_t *size = api_plain_realloc(in->size, (size_t)ns0 + nt + 1);
     if (size)
         in->size = size;
-    uint32_t *idx = realloc(in->idx, (nidx + 4 * (size_t)nt + 1) * sizeof *idx);
+    uint32_t *idx = api_plain_realloc(in->idx, (nidx + 4 * (size_t)nt + 1) * sizeof *idx);
     if (idx)
         in->idx = idx;
-    api_fill_stats *st = realloc(in->fill, (in->nfill + 1) * sizeof *st);
+    api_fill_stats *st = api_realloc(in->fill, (in->nfill + 1) * sizeof *st);
     if (st)
         in->fill = st;
     if (!xyz || !size || !idx || !st)
@@ -240,7 +241,7 @@ static int append(api_input *in, const surface *s, const helper_out *h, api_prob
     }
     for (int a = 0; a < in->nattrs; a++) {
         api_attribute *at = &in->attrs[a];
-        double *d = realloc(at->data, ((size_t)nv0 + added + 1) * at->ncomp * sizeof *d);
+        double *d = api_plain_realloc(at->data, ((size_t)nv0 + added + 1) * at->ncomp * sizeof *d);
         if (!d)
             return api_fail(p, 503, "out-of-memory", "out of memory extending attribute %s", at->name);
         at->data = d;
@@ -267,7 +268,7 @@ int api_fill(json_t *fill, api_input *in, const api_limits *lim, api_problem *p)
                            "request (one surface may have several components)", n,
                            API_MAX_FILL_SURFACES);
     /* parse and check every entry before any process is started */
-    surface *s = calloc(n ? n : 1, sizeof *s);
+    surface *s = api_calloc(n ? n : 1, sizeof *s);
     if (!s)
         return api_fail(p, 503, "out-of-memory", "out of memory");
     int rc = 0;
@@ -312,11 +313,11 @@ int api_fill(json_t *fill, api_input *in, const api_limits *lim, api_problem *p)
                                                           sizeof(double)), h.rep.n2, k, p);
         if (!rc)
             rc = append(in, &s[k], &h, p);
-        free(h.payload);
+        api_free(h.payload);
     }
     for (size_t k = 0; k < n; k++)
         api_fill_surface_free(&s[k]);
-    free(s);
+    api_free(s);
     return rc;
 }
 

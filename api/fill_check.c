@@ -11,6 +11,7 @@
  * promise, the request was fine). Tolerances are relative to the bounding box's diagonal.
  */
 #include "fill_internal.h"
+#include "mem.h"
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -77,10 +78,10 @@ int api_fill_cmp_u32x3(const void *x, const void *y) { return memcmp(x, y, 3 * s
 
 void api_fill_surface_free(surface *s)
 {
-    free(s->tri);
-    free(s->ltri);
-    free(s->glob);
-    free(s->xyz);
+    api_free(s->tri);
+    api_free(s->ltri);
+    api_free(s->glob);
+    api_free(s->xyz);
 }
 
 /* The surface's numbering and extent, shared by the checks. */
@@ -105,8 +106,8 @@ static int number(surface *s, const api_input *in, uint32_t *map, uint32_t *firs
     for (uint32_t g = 0; g < in->nv; g++)
         if (map[g] != UINT32_MAX)
             map[g] = s->nloc++;
-    s->glob = malloc((size_t)s->nloc * sizeof *s->glob);
-    s->xyz = malloc(3 * (size_t)s->nloc * sizeof *s->xyz);
+    s->glob = api_malloc((size_t)s->nloc * sizeof *s->glob);
+    s->xyz = api_malloc(3 * (size_t)s->nloc * sizeof *s->xyz);
     if (!s->glob || !s->xyz)
         return api_fail(p, 503, "out-of-memory", "out of memory checking the surface");
     for (int c = 0; c < 3; c++)
@@ -251,9 +252,9 @@ static int check_orientable(surface *s, size_t k, const edge_rec *er, const exte
     char ptr[96];
     uint32_t nt = s->nt;
     size_t ne = 3 * (size_t)nt;
-    uint32_t *nb = malloc(3 * (size_t)nt * sizeof *nb), *queue = malloc((size_t)nt * sizeof *queue);
-    uint8_t *deg = calloc(nt, 1), *flip = malloc(3 * (size_t)nt), *orient = malloc(nt);
-    double *cvol = calloc(nt, sizeof *cvol);
+    uint32_t *nb = api_malloc(3 * (size_t)nt * sizeof *nb), *queue = api_malloc((size_t)nt * sizeof *queue);
+    uint8_t *deg = api_calloc(nt, 1), *flip = api_malloc(3 * (size_t)nt), *orient = api_malloc(nt);
+    double *cvol = api_calloc(nt, sizeof *cvol);
     int rc = 0;
     if (!nb || !queue || !deg || !flip || !orient || !cvol) {
         rc = api_fail(p, 503, "out-of-memory", "out of memory checking the surface");
@@ -306,12 +307,12 @@ static int check_orientable(surface *s, size_t k, const edge_rec *er, const exte
         rc = api_fail_at(p, 422, "invalid-surface", ptr, "the surface encloses no volume");
     }
 out:
-    free(nb);
-    free(queue);
-    free(deg);
-    free(flip);
-    free(orient);
-    free(cvol);
+    api_free(nb);
+    api_free(queue);
+    api_free(deg);
+    api_free(flip);
+    api_free(orient);
+    api_free(cvol);
     return rc;
 }
 
@@ -321,7 +322,7 @@ static int check_coincident(const surface *s, size_t k, const uint32_t *first, c
                             api_problem *p)
 {
     char ptr[96];
-    uint32_t *ord = malloc((size_t)s->nloc * sizeof *ord);
+    uint32_t *ord = api_malloc((size_t)s->nloc * sizeof *ord);
     if (!ord)
         return api_fail(p, 503, "out-of-memory", "out of memory checking the surface");
     for (uint32_t i = 0; i < s->nloc; i++)
@@ -348,18 +349,18 @@ static int check_coincident(const surface *s, size_t k, const uint32_t *first, c
                                  "points", ga, gb, d);
             }
         }
-    free(ord);
+    api_free(ord);
     return rc;
 }
 
 int api_fill_check_surface(surface *s, size_t k, const api_input *in, api_problem *p)
 {
     uint32_t nt = s->nt;
-    uint32_t *map = malloc(((size_t)in->nv + 1) * sizeof *map);
-    uint32_t *first = malloc(((size_t)in->nv + 1) * sizeof *first);
-    s->ltri = malloc(3 * (size_t)nt * sizeof *s->ltri);
-    edge_rec *er = malloc(3 * (size_t)nt * sizeof *er);
-    tri_key *tk = malloc((size_t)nt * sizeof *tk);
+    uint32_t *map = api_malloc(((size_t)in->nv + 1) * sizeof *map);
+    uint32_t *first = api_malloc(((size_t)in->nv + 1) * sizeof *first);
+    s->ltri = api_malloc(3 * (size_t)nt * sizeof *s->ltri);
+    edge_rec *er = api_malloc(3 * (size_t)nt * sizeof *er);
+    tri_key *tk = api_malloc((size_t)nt * sizeof *tk);
     extent x;
     int rc;
     if (!map || !first || !s->ltri || !er || !tk)
@@ -368,10 +369,10 @@ int api_fill_check_surface(surface *s, size_t k, const api_input *in, api_proble
              !(rc = check_degenerate(s, k, &x, p)) && !(rc = check_repeated(s, k, tk, p)) &&
              !(rc = check_closed(s, k, er, p)) && !(rc = check_orientable(s, k, er, &x, p)))
         rc = check_coincident(s, k, first, &x, p);
-    free(map);
-    free(first);
-    free(er);
-    free(tk);
+    api_free(map);
+    api_free(first);
+    api_free(er);
+    api_free(tk);
     return rc;
 }
 
@@ -381,8 +382,8 @@ int api_fill_check_boundary(const surface *s, const uint32_t *tets, uint32_t nt4
                             api_problem *p)
 {
     static const int F[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
-    uint32_t *faces = malloc(12 * (size_t)nt4 * sizeof *faces);
-    uint32_t *sf = malloc(3 * (size_t)s->nt * sizeof *sf);
+    uint32_t *faces = api_malloc(12 * (size_t)nt4 * sizeof *faces);
+    uint32_t *sf = api_malloc(3 * (size_t)s->nt * sizeof *sf);
     int rc = 0;
     if (!faces || !sf) {
         rc = api_fail(p, 503, "out-of-memory", "out of memory checking TetGen's result");
@@ -424,7 +425,7 @@ int api_fill_check_boundary(const surface *s, const uint32_t *tets, uint32_t nt4
         i = e;
     }
 out:
-    free(faces);
-    free(sf);
+    api_free(faces);
+    api_free(sf);
     return rc;
 }

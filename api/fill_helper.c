@@ -18,6 +18,7 @@
  *   cannot start, bad reply        -> 500
  */
 #include "fill_internal.h"
+#include "mem.h"
 #include <errno.h>
 #include <fcntl.h>
 #include <limits.h>
@@ -106,7 +107,7 @@ static int size_payload(helper_out *h)
     } else if (r->status > SDTG_BAD_REQUEST)
         return h->protocol = 1, -1;
     h->payload_len = (size_t)n;
-    h->payload = malloc(n ? n : 1);
+    h->payload = api_malloc(n ? n : 1);
     return h->payload ? 0 : (h->too_big = 3, -1);
 }
 
@@ -115,7 +116,7 @@ static unsigned char *request(const surface *s, size_t *len)
 {
     sdtg_request rq = {SDTG_REQUEST_MAGIC, s->nloc, s->nt, 0, s->max_volume, s->min_ratio};
     *len = sizeof rq + 3 * (size_t)s->nloc * sizeof(double) + 3 * (size_t)s->nt * sizeof(uint32_t);
-    unsigned char *req = malloc(*len);
+    unsigned char *req = api_malloc(*len);
     if (!req)
         return NULL;
     memcpy(req, &rq, sizeof rq);
@@ -301,12 +302,12 @@ int api_fill_run_helper(const api_limits *lim, const surface *s, helper_out *h, 
     pid_t pid;
     int fd[3];
     if (spawn(lim, &pid, fd, why, cap)) {
-        free(req);
+        api_free(req);
         return -1;
     }
     double deadline = now_s() + (lim->fill_seconds ? lim->fill_seconds : API_DEFAULT_FILL_SECONDS);
     pump(h, fd, req, len, deadline);
-    free(req);
+    api_free(req);
     reap(h, pid, deadline);
     return 0;
 }
@@ -388,7 +389,7 @@ int api_fill_judge(const helper_out *h, const surface *s, size_t k, const api_li
                            tetgen_code_text(r->n1), r->n1, tail[0] ? ": " : "", tail);
     if (r->status == SDTG_INTERSECT) {
         /* name the triangles: look each reported vertex triple up among the surface's */
-        uint32_t *keys = malloc(4 * (size_t)s->nt * sizeof *keys);
+        uint32_t *keys = api_malloc(4 * (size_t)s->nt * sizeof *keys);
         if (!keys)
             return api_fail(p, 503, "out-of-memory", "out of memory");
         for (uint32_t j = 0; j < s->nt; j++) {
@@ -416,7 +417,7 @@ int api_fill_judge(const helper_out *h, const surface *s, size_t k, const api_li
         }
         if (!p->nerrors)
             api_add_error(p, ptr, "%s", p->detail);
-        free(keys);
+        api_free(keys);
         return 422;
     }
     /* SDTG_OK: the input points come back first and unchanged, indices are in range */

@@ -9,6 +9,7 @@
  * +n, its point data interpolated along the cut edges. Nothing here writes bytes.
  */
 #include "out_internal.h"
+#include "mem.h"
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -40,20 +41,20 @@ static bool slice_grow(slicer *sl)
     if (o->ntri < sl->cap)
         return true;
     uint32_t cap = sl->cap ? 2 * sl->cap : 1024;
-    double *xyz = realloc(o->xyz, (size_t)cap * 9 * sizeof *xyz);
+    double *xyz = api_realloc(o->xyz, (size_t)cap * 9 * sizeof *xyz);
     if (xyz)
         o->xyz = xyz;
-    uint32_t *cell = realloc(o->cell, (size_t)cap * sizeof *cell);
+    uint32_t *cell = api_realloc(o->cell, (size_t)cap * sizeof *cell);
     if (cell)
         o->cell = cell;
-    uint8_t *kind = realloc(o->kind, cap);
+    uint8_t *kind = api_realloc(o->kind, cap);
     if (kind)
         o->kind = kind;
     if (!xyz || !cell || !kind)
         return false;
     for (int a = 0; a < sl->s->rq.nattrs; a++) {
         int nc = sl->s->rq.attrs[a].ncomp;
-        double *v = realloc(o->attr[a], (size_t)cap * 3 * nc * sizeof *v);
+        double *v = api_realloc(o->attr[a], (size_t)cap * 3 * nc * sizeof *v);
         if (!v)
             return false;
         o->attr[a] = v;
@@ -174,11 +175,11 @@ bool out_compute_slice(out_stream *s)
 
 void out_slice_free(out_slice *sl)
 {
-    free(sl->xyz);
-    free(sl->cell);
-    free(sl->kind);
+    api_free(sl->xyz);
+    api_free(sl->cell);
+    api_free(sl->kind);
     for (int a = 0; a < OUT_MAX_ATTRS; a++)
-        free(sl->attr[a]);
+        api_free(sl->attr[a]);
 }
 
 /* ---- solid boundary and normals ----------------------------------------------------------- */
@@ -195,7 +196,7 @@ bool out_solid_boundary(out_stream *s)
         return true;
     }
     s->nbnd = sd_level_solid_boundary(s->lv, NULL);
-    s->bnd = s->own_bnd = malloc(((size_t)s->nbnd * 3 + 1) * sizeof *s->bnd);
+    s->bnd = s->own_bnd = api_malloc(((size_t)s->nbnd * 3 + 1) * sizeof *s->bnd);
     if (!s->bnd)
         return false;
     sd_level_solid_boundary(s->lv, s->own_bnd);
@@ -218,7 +219,7 @@ float *out_normals(const sd_level *lv, uint32_t ntr, const uint32_t *bnd, uint32
 {
     uint32_t nv = sd_level_num_vertices(lv);
     const double *xyz = sd_level_channel(lv, 0, NULL);
-    float *acc = calloc((size_t)nv * 3 + 1, sizeof *acc);
+    float *acc = api_calloc((size_t)nv * 3 + 1, sizeof *acc);
     if (!acc)
         return NULL;
     uint32_t v[6];
@@ -247,11 +248,11 @@ float *out_normals(const sd_level *lv, uint32_t ntr, const uint32_t *bnd, uint32
 
 out_geometry *out_geometry_compute(const sd_level *lv)
 {
-    out_geometry *g = calloc(1, sizeof *g);
+    out_geometry *g = api_calloc(1, sizeof *g);
     if (!g)
         return NULL;
     g->nbnd = sd_level_solid_boundary(lv, NULL);
-    g->bnd = malloc(((size_t)g->nbnd * 3 + 1) * sizeof *g->bnd);
+    g->bnd = api_malloc(((size_t)g->nbnd * 3 + 1) * sizeof *g->bnd);
     if (g->bnd) {
         sd_level_solid_boundary(lv, g->bnd);
         g->normals = out_normals(lv, sd_level_num_cells(lv, SD_CELL_TRIANGLE), g->bnd, g->nbnd);
@@ -268,7 +269,7 @@ void out_geometry_free(out_geometry *g)
 {
     if (!g)
         return;
-    free(g->bnd);
-    free(g->normals);
-    free(g);
+    api_free(g->bnd);
+    api_free(g->normals);
+    api_free(g);
 }

@@ -1,6 +1,7 @@
 /* jsonin.c — parsing request bodies with jansson and checked field access (see jsonin.h). */
 #include "jsonin.h"
 #include "limits.h"
+#include "mem.h"
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -36,7 +37,16 @@ json_t *api_parse_body(const char *buf, size_t len, int empty_ok, api_problem *p
         return NULL;
     }
     json_error_t e;
+    uint64_t refused = api_mem_refused_here();
     json_t *j = json_loadb(buf, len, JSON_REJECT_DUPLICATES, &e);
+    /* jansson reports a failed allocation as whatever it was parsing then, and its lexer drops
+     * the character it could not store and goes on: a document parsed while an allocation was
+     * refused is not the one that was sent, even when json_loadb returns one */
+    if (api_mem_refused_here() != refused) {
+        json_decref(j);
+        api_fail(p, 503, "out-of-memory", "out of memory reading the body; retry later");
+        return NULL;
+    }
     if (!j) {
         const char *what = json_error_code(&e) == json_error_numeric_overflow ? "number too large"
                            : json_error_code(&e) == json_error_duplicate_key ? "duplicate key"

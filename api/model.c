@@ -1,5 +1,6 @@
 /* model.c — building, sharing and freeing session models (see model.h). */
 #include "model.h"
+#include "mem.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -9,7 +10,7 @@
 
 api_input *api_input_new(void)
 {
-    api_input *in = calloc(1, sizeof *in);
+    api_input *in = api_calloc(1, sizeof *in);
     if (in)
         atomic_init(&in->refs, 1);
     return in;
@@ -19,14 +20,14 @@ void api_input_unref(api_input *in)
 {
     if (!in || atomic_fetch_sub(&in->refs, 1) != 1)
         return;
-    free(in->xyz);
-    free(in->size);
-    free(in->idx);
+    api_plain_free(in->xyz);
+    api_plain_free(in->size);
+    api_plain_free(in->idx);
     for (int a = 0; a < in->nattrs; a++)
-        free(in->attrs[a].data);
-    free(in->diag);
-    free(in->fill);
-    free(in);
+        api_plain_free(in->attrs[a].data);
+    api_free(in->diag);
+    api_free(in->fill);
+    api_free(in);
 }
 
 int api_input_find_attr(const api_input *in, const char *name)
@@ -60,7 +61,7 @@ const struct out_geometry *api_model_geometry_locked(api_model *m, int level)
 
 api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_bytes, sd_error *err)
 {
-    api_model *m = calloc(1, sizeof *m);
+    api_model *m = api_calloc(1, sizeof *m);
     if (!m) {
         err->code = SD_ERR_NOMEM;
         snprintf(err->message, sizeof err->message, "out of memory");
@@ -114,13 +115,13 @@ bool api_tags_copy(api_tags *dst, const api_tags *src)
     for (uint32_t i = 0; i < src->n; i++)
         nidx += src->size[i];
     api_tags t = {.n = src->n, .npet = src->npet};
-    t.size = malloc(src->n + 1);
-    t.idx = malloc((nidx + 1) * sizeof *t.idx);
-    t.pet = malloc((src->npet + 1) * sizeof *t.pet);
+    t.size = api_plain_malloc(src->n + 1);
+    t.idx = api_plain_malloc((nidx + 1) * sizeof *t.idx);
+    t.pet = api_plain_malloc((src->npet + 1) * sizeof *t.pet);
     if (!t.size || !t.idx || !t.pet) {
-        free(t.size);
-        free(t.idx);
-        free(t.pet);
+        api_plain_free(t.size);
+        api_plain_free(t.idx);
+        api_plain_free(t.pet);
         *dst = (api_tags){0};
         return false;
     }
@@ -156,7 +157,7 @@ int api_model_set_overrides(api_model *m, const sd_override *ov, uint32_t n, sd_
 {
     if (!n)
         return 0;
-    m->rules.overrides = malloc(n * sizeof *ov);
+    m->rules.overrides = api_plain_malloc(n * sizeof *ov);
     if (!m->rules.overrides) {
         err->code = SD_ERR_NOMEM;
         snprintf(err->message, sizeof err->message, "out of memory");
@@ -177,10 +178,10 @@ void api_model_unref(api_model *m)
 {
     if (!m || atomic_fetch_sub(&m->refs, 1) != 1)
         return;
-    free(m->tags.size);
-    free(m->tags.idx);
-    free(m->tags.pet);
-    free(m->rules.overrides);
+    api_plain_free(m->tags.size);
+    api_plain_free(m->tags.idx);
+    api_plain_free(m->tags.pet);
+    api_plain_free(m->rules.overrides);
     json_decref(m->summary);
     for (int l = 0; l <= SD_MAX_LEVEL; l++)
         out_geometry_free(m->geometry[l]);
@@ -188,7 +189,7 @@ void api_model_unref(api_model *m)
     api_input_unref(m->in);
     pthread_mutex_destroy(&m->lock);
     pthread_rwlock_destroy(&m->data);
-    free(m);
+    api_free(m);
 }
 
 const sd_level *api_model_level_locked(api_model *m, int level, sd_error *err)

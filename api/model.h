@@ -9,6 +9,11 @@
  *
  * The posted input (coordinates, simplices, attributes) is shared between successive models of a
  * session through its own reference count, since tags and rules changes do not copy it.
+ *
+ * Memory (api/mem.h): the structs, diagonals, fill statistics and caches are api_malloc blocks;
+ * the arrays of api_input (xyz, size, idx, attribute data), of api_tags and the overrides of
+ * api_rules are C-library blocks (api_plain_*), since sd_refine hands over C-library arrays and
+ * the refine bodies of api/refine.c release these with free().
  */
 #ifndef SUBDIVD_MODEL_H
 #define SUBDIVD_MODEL_H

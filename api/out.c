@@ -7,6 +7,7 @@
  * held whole.
  */
 #include "out_internal.h"
+#include "mem.h"
 #include <assert.h>
 #include <math.h>
 #include <stdarg.h>
@@ -23,7 +24,7 @@ int out_nomem(sd_error *err)
 
 void *out_state_new(out_stream *s, size_t size, void (*free_state)(void *), int (*produce)(out_stream *))
 {
-    void *st = calloc(1, size);
+    void *st = api_calloc(1, size);
     if (st) {
         s->fmt_state = st;
         s->fmt_free = free_state;
@@ -102,11 +103,11 @@ void out_close(out_stream *s)
         return;
     if (s->fmt_free)
         s->fmt_free(s->fmt_state);
-    free(s->buf);
-    free(s->own_bnd);
-    free(s->own_normals);
+    api_free(s->buf);
+    api_free(s->own_bnd);
+    api_free(s->own_normals);
     out_slice_free(&s->slice);
-    free(s);
+    api_free(s);
 }
 
 static out_stream *fail(out_stream *s, sd_error *err, sd_result code, const char *fmt, ...)
@@ -180,7 +181,7 @@ out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err)
     if (rq->level < 0 || rq->level >= computed)
         return fail(NULL, err, SD_ERR_ARG, "level: %d has not been computed (%d levels are)",
                     rq->level, computed);
-    out_stream *s = calloc(1, sizeof *s);
+    out_stream *s = api_calloc(1, sizeof *s);
     if (!s)
         return fail(NULL, err, SD_ERR_NOMEM, "out of memory");
     s->rq = *rq;
@@ -212,7 +213,7 @@ out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err)
         s->ncells[k] = (s->rq.parts & part_of[k]) ? sd_level_num_cells(s->lv, (sd_cell_kind)k) : 0;
     if (rq->has_slice && (s->rq.parts & OUT_PART_SOLIDS) && !out_compute_slice(s))
         return fail(s, err, SD_ERR_NOMEM, "out of memory computing the cross-section");
-    s->buf = malloc(OUT_BUF_CAP);
+    s->buf = api_malloc(OUT_BUF_CAP);
     if (!s->buf)
         return fail(s, err, SD_ERR_NOMEM, "out of memory");
     if (f->init(s, err)) {

@@ -17,6 +17,7 @@
  * section. Sizes are exact in advance (Content-Length).
  */
 #include "out_internal.h"
+#include "mem.h"
 #include <ctype.h>
 #include <math.h>
 #include <stdio.h>
@@ -272,10 +273,10 @@ static void gfree(void *p)
 {
     gstate *g = p;
     if (g) {
-        free(g->json);
-        free(g->scratch);
+        api_free(g->json);
+        api_free(g->scratch);
     }
-    free(g);
+    api_free(g);
 }
 
 /* glTF names of the per-vertex attributes: `_RULE` (name[nattrs]) first, then per attribute `_` +
@@ -434,7 +435,7 @@ static int json_meshes(FILE *f, const out_stream *s, const gstate *g, const layo
 }
 
 /* The JSON part (glTF: up to the base64 data). The text is the C library's (open_memstream):
- * free it with free(). NULL when out of memory. */
+ * free it with api_free(). NULL when out of memory. */
 static char *json_part(const out_stream *s, const gstate *g, const layout *L, size_t *len)
 {
     char *text = NULL;
@@ -455,7 +456,7 @@ static char *json_part(const out_stream *s, const gstate *g, const layout *L, si
         fprintf(f, "\"buffers\":[{\"byteLength\":%llu,\"uri\":\"data:application/octet-stream;base64,",
                 (unsigned long long)g->bin_len);
     if (fclose(f)) {
-        free(text);
+        free(text); /* open_memstream's buffer belongs to the C library */
         return NULL;
     }
     if (!nprim) { /* drop the "meshes" member: a mesh without primitives is invalid */
@@ -481,7 +482,7 @@ static int frame(out_stream *s, gstate *g, const char *text, size_t n, sd_error 
                  "fewer parts");
         return SD_ERR_LIMIT;
     }
-    char *j = malloc(head + n + pad + 1);
+    char *j = api_malloc(head + n + pad + 1);
     if (!j)
         return out_nomem(err);
     if (g->glb) {
@@ -503,7 +504,7 @@ static int init(out_stream *s, bool glb, sd_error *err)
     if (!g)
         return out_nomem(err);
     g->glb = glb;
-    if (!out_solid_boundary(s) || (!g->glb && !(g->scratch = malloc(OUT_BUF_CAP))))
+    if (!out_solid_boundary(s) || (!g->glb && !(g->scratch = api_malloc(OUT_BUF_CAP))))
         return out_nomem(err);
     uint32_t ntr = s->ncells[SD_CELL_TRIANGLE];
     if ((ntr || s->nbnd) && !s->normals) {

@@ -11,6 +11,7 @@
  * commas, and a closing string; the generator resumes inside a section at any item.
  */
 #include "out_internal.h"
+#include "mem.h"
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -136,7 +137,7 @@ static section *add(jstate *j, kind k, int arg, uint64_t count, const char *clos
 
 int out_json_init(out_stream *s, sd_error *err)
 {
-    jstate *j = out_state_new(s, sizeof *j, free, produce);
+    jstate *j = out_state_new(s, sizeof *j, api_free, produce);
     if (!j)
         return out_nomem(err);
     static const char *const cell_names[] = {"points", "edges", "triangles", "tetrahedra", "octahedra"};

@@ -8,6 +8,7 @@
  * then rebuilds each row as it writes it. Columns are written in increasing order.
  */
 #include "out_internal.h"
+#include "mem.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -149,12 +150,12 @@ static void mfree(void *p)
     if (!m)
         return;
     for (int l = 0; l <= SD_MAX_LEVEL; l++) {
-        free(m->a[l].val);
-        free(m->a[l].on);
-        free(m->a[l].touched);
+        api_free(m->a[l].val);
+        api_free(m->a[l].on);
+        api_free(m->a[l].touched);
     }
-    free(m->rowptr);
-    free(m);
+    api_free(m->rowptr);
+    api_free(m);
 }
 
 static out_stream *fail(out_stream *s, sd_error *err, sd_result code, const char *msg)
@@ -171,10 +172,10 @@ out_stream *out_matrix_open(sd_complex *c, int from, int to, bool json, uint64_t
 {
     if (from < 0 || to <= from || to >= sd_complex_levels_computed(c))
         return fail(NULL, err, SD_ERR_ARG, "from must be below the level, and the level computed");
-    out_stream *s = calloc(1, sizeof *s);
-    mstate *m = calloc(1, sizeof *m);
+    out_stream *s = api_calloc(1, sizeof *s);
+    mstate *m = api_calloc(1, sizeof *m);
     if (!s || !m) {
-        free(m);
+        api_free(m);
         return fail(s, err, SD_ERR_NOMEM, "out of memory");
     }
     s->fmt_state = m;
@@ -192,16 +193,16 @@ out_stream *out_matrix_open(sd_complex *c, int from, int to, bool json, uint64_t
         }
     for (int l = from; l < to; l++) {
         uint32_t n = m->S[l].ncols;
-        m->a[l].val = calloc((size_t)n + 1, sizeof *m->a[l].val);
-        m->a[l].on = calloc((size_t)n + 1, 1);
-        m->a[l].touched = malloc(((size_t)n + 1) * sizeof *m->a[l].touched);
+        m->a[l].val = api_calloc((size_t)n + 1, sizeof *m->a[l].val);
+        m->a[l].on = api_calloc((size_t)n + 1, 1);
+        m->a[l].touched = api_malloc(((size_t)n + 1) * sizeof *m->a[l].touched);
         if (!m->a[l].val || !m->a[l].on || !m->a[l].touched)
             return fail(s, err, SD_ERR_NOMEM, "out of memory");
     }
     m->nrows = m->S[to - 1].nrows;
     m->ncols = m->S[from].ncols;
-    m->rowptr = malloc(((size_t)m->nrows + 1) * sizeof *m->rowptr);
-    s->buf = malloc(OUT_BUF_CAP);
+    m->rowptr = api_malloc(((size_t)m->nrows + 1) * sizeof *m->rowptr);
+    s->buf = api_malloc(OUT_BUF_CAP);
     if (!m->rowptr || !s->buf)
         return fail(s, err, SD_ERR_NOMEM, "out of memory");
     m->rowptr[0] = 0;

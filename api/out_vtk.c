@@ -20,6 +20,7 @@
  * looks for always comes before every rewritten one.
  */
 #include "out_internal.h"
+#include "mem.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -239,8 +240,8 @@ static void vfree(void *p)
 {
     vstate *st = p;
     if (st)
-        free(st->header);
-    free(st);
+        api_free(st->header);
+    api_free(st);
 }
 
 static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
@@ -381,13 +382,13 @@ static int build_header(out_stream *s, vstate *st, sd_error *err)
                    "  <AppendedData encoding=\"raw\">\n   _");
     }
     if (fclose(f)) {
-        free(text);
+        free(text); /* open_memstream's buffer belongs to the C library */
         return out_nomem(err);
     }
-    st->header = malloc(n + 1); /* a copy: open_memstream's buffer belongs to the C library */
+    st->header = api_malloc(n + 1); /* a copy: open_memstream's buffer belongs to the C library */
     if (st->header)
         memcpy(st->header, text, n);
-    free(text);
+    free(text); /* open_memstream's buffer belongs to the C library */
     if (!st->header)
         return out_nomem(err);
     st->header_len = n;

@@ -13,6 +13,7 @@
  * tags, overrides, the selection) is therefore C-library memory too.
  */
 #include "handlers.h"
+#include "mem.h"
 #include "internal.h"
 #include "jsonin.h"
 #include <stdio.h>
@@ -78,11 +79,11 @@ static int parse_selection(json_t *sel, const api_input *in, selection *s, api_p
         s->kind = 0;
         if (!json_is_array(v))
             return api_fail_at(p, 400, "wrong-type", "/select/simplices", "must be an array of simplices");
-        s->keys = malloc((json_array_size(v) + 1) * sizeof *s->keys);
+        s->keys = api_plain_malloc((json_array_size(v) + 1) * sizeof *s->keys);
         if (!s->keys)
             return api_fail(p, 503, "out-of-memory", "out of memory");
         /* every posted simplex, sorted, to find the selected ones */
-        uint32_t (*all)[4] = malloc(((size_t)in->ns + 1) * sizeof *all);
+        uint32_t (*all)[4] = api_malloc(((size_t)in->ns + 1) * sizeof *all);
         if (!all)
             return api_fail(p, 503, "out-of-memory", "out of memory");
         for (uint32_t q = 0, off = 0; q < in->ns; off += in->size[q++])
@@ -115,7 +116,7 @@ static int parse_selection(json_t *sel, const api_input *in, selection *s, api_p
             }
             s->n++;
         }
-        free(all);
+        api_free(all);
         if (!rc)
             qsort(s->keys, s->n, sizeof *s->keys, cmp_key4);
         return rc;

@@ -8,6 +8,7 @@
  * the session's input; only the rules or the tags change.
  */
 #include "handlers.h"
+#include "mem.h"
 #include "internal.h"
 #include "jsonin.h"
 #include <stdio.h>
@@ -151,7 +152,7 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
         return api_fail_at(p, 422, "limit-exceeded", "/overrides",
                            "%zu overrides for a complex of %u vertices and %u simplices: at most "
                            "one per vertex or edge", nov, cur->in->nv, cur->in->ns);
-    sd_override *list = calloc(nov + 1, sizeof *list);
+    sd_override *list = api_calloc(nov + 1, sizeof *list);
     if (!list)
         return api_fail(p, 503, "out-of-memory", "out of memory");
     int rc = 0;
@@ -165,7 +166,7 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
         r.noverrides = (uint32_t)nov;
         rc = api_build_model(cur->in, &r, &cur->tags, lim, out, p);
     }
-    free(list);
+    api_free(list);
     return rc;
 }
 
@@ -182,7 +183,7 @@ static int parse_petals(json_t *a, uint32_t nv, api_tags *tags, api_problem *p)
         return api_fail_at(p, 400, "wrong-type", "/petals",
                            "must be an array of {\"vertex\", \"triangle\", \"kind\"}");
     size_t n = json_array_size(a), i;
-    tags->pet = malloc((n + 1) * sizeof *tags->pet);
+    tags->pet = api_plain_malloc((n + 1) * sizeof *tags->pet);
     if (!tags->pet)
         return api_fail(p, 503, "out-of-memory", "out of memory");
     json_t *o;
@@ -248,8 +249,8 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
                            "tags name simplices of the complex; PUT the complex first");
     size_t n = json_array_size(s);
     api_tags tags = {0};
-    tags.size = malloc(n + 1);
-    tags.idx = malloc((3 * n + 1) * sizeof *tags.idx);
+    tags.size = api_plain_malloc(n + 1);
+    tags.idx = api_plain_malloc((3 * n + 1) * sizeof *tags.idx);
     int rc = !tags.size || !tags.idx ? api_fail(p, 503, "out-of-memory", "out of memory") : 0;
     size_t i, off = 0;
     json_t *t;
@@ -288,8 +289,8 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
         rc = parse_petals(pe, cur->in ? cur->in->nv : 0, &tags, p);
     if (!rc) /* the core checks each tag is a vertex, edge or triangle of the complex */
         rc = api_build_model(cur->in, &cur->rules, &tags, lim, out, p);
-    free(tags.size);
-    free(tags.idx);
-    free(tags.pet);
+    api_plain_free(tags.size);
+    api_plain_free(tags.idx);
+    api_plain_free(tags.pet);
     return rc;
 }

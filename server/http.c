@@ -16,6 +16,7 @@
  * references on the session's model until the last byte is sent.
  */
 #include "request.h"
+#include "../api/mem.h"
 #include "../api/handlers.h"
 #include "metrics.h"
 #include <arpa/inet.h>
@@ -65,8 +66,8 @@ static void req_unref(req *r)
     if (atomic_fetch_sub(&r->refs, 1) != 1)
         return;
     session_unref(r->s);
-    free(r->body);
-    free(r);
+    api_free(r->body);
+    api_free(r);
 }
 
 /* ---- responses ------------------------------------------------------------------------------ */
@@ -108,7 +109,11 @@ void http_add_header(struct MHD_Response *resp, const char *name, const char *va
 
 struct MHD_Response *http_buffer_response(const char *ctype, char *text, size_t n)
 {
-    struct MHD_Response *resp = MHD_create_response_from_buffer(n, text, MHD_RESPMEM_MUST_FREE);
+    struct MHD_Response *resp = MHD_create_response_from_buffer_with_free_callback(n, text, api_free);
+    if (!resp) {
+        api_free(text);
+        return NULL;
+    }
     if (ctype)
         MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
     return resp;
@@ -126,7 +131,7 @@ void http_reply_json(req *r, int status, json_t *body, uint64_t version)
     char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
     json_decref(body);
     if (!text) {
-        text = strdup("{\"type\":\"/errors/internal\",\"title\":\"Internal Server Error\","
+        text = api_strdup("{\"type\":\"/errors/internal\",\"title\":\"Internal Server Error\","
                       "\"status\":500,\"detail\":\"could not render the response\"}");
         status = 500;
     }
@@ -146,7 +151,7 @@ static struct MHD_Response *problem_response(req *r, const api_problem *p)
     char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
     json_decref(j);
     if (!text)
-        text = strdup("{\"status\":500}");
+        text = api_strdup("{\"status\":500}");
     size_t n = strlen(text);
     atomic_store(&r->bytes, n);
     struct MHD_Response *resp = http_buffer_response("application/problem+json", text, n);
@@ -295,14 +300,14 @@ static void stream_free(void *cls)
         out_close(sc->os);
     api_model_unref(sc->m);
     req_unref(sc->r);
-    free(sc);
+    api_free(sc);
 }
 
 
 void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uint64_t size,
                        const char *ctype, const char *disposition, uint64_t version)
 {
-    stream_ctx *sc = malloc(sizeof *sc);
+    stream_ctx *sc = api_malloc(sizeof *sc);
     if (!sc) {
         if (level_data)
             api_level_close(m, os);
@@ -506,17 +511,15 @@ static int early(req *r, const char *url)
     return early_match(r, url) || early_auth(r) || early_body(r);
 }
 
-static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const char *url,
-                                  const char *method, const char *version,
-                                  const char *upload_data, size_t *upload_size, void **con_cls)
+static enum MHD_Result serve(server *srv, req *r, struct MHD_Connection *conn, const char *url,
+                             const char *method, const char *upload_data, size_t *upload_size,
+                             void **con_cls)
 {
-    (void)version;
-    server *srv = cls;
-    req *r = *con_cls;
     if (!r) {
-        r = calloc(1, sizeof *r);
+        r = api_calloc(1, sizeof *r);
         if (!r)
             return MHD_NO;
+        api_mem_meter_set(&r->mem);
         atomic_init(&r->refs, 1);
         r->srv = srv;
         r->conn = conn;
@@ -543,7 +546,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
             size_t cap = r->cap ? r->cap : 4096;
             while (cap < r->len + n + 1)
                 cap *= 2;
-            char *b = realloc(r->body, cap);
+            char *b = api_realloc(r->body, cap);
             if (!b) {
                 r->too_big = 1;
                 return MHD_YES;
@@ -575,6 +578,20 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
     return MHD_YES;
 }
 
+/* Every callback of a request runs with the request's memory meter set (api/mem.h): what the
+ * request allocates on its connection's thread, from the body to the response. */
+static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const char *url,
+                                  const char *method, const char *version,
+                                  const char *upload_data, size_t *upload_size, void **con_cls)
+{
+    (void)version;
+    req *r = *con_cls;
+    api_mem_meter *prev = api_mem_meter_set(r ? &r->mem : NULL);
+    enum MHD_Result res = serve(cls, r, conn, url, method, upload_data, upload_size, con_cls);
+    api_mem_meter_set(prev);
+    return res;
+}
+
 static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
                          enum MHD_RequestTerminationCode code)
 {
@@ -590,6 +607,8 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
                  (unsigned long long)atomic_load(&r->bytes), ms,
                  code == MHD_REQUEST_TERMINATED_COMPLETED_OK ? "" : " (cut short)");
     }
+    log_line(srv, LOG_DEBUG, "%s %s: at most %lld bytes held by the request", r->method, r->path,
+             (long long)r->mem.peak);
     *con_cls = NULL;
     req_unref(r);
 }

@@ -5,6 +5,7 @@
  * writer into a file — same validation, same errors (printed as problem+json), same bytes.
  */
 #include "../api/handlers.h"
+#include "../api/mem.h"
 #include "../api/jsonin.h"
 #include "metrics.h"
 #include "probe.h"
@@ -29,18 +30,18 @@ static char *read_file(const char *path, size_t max, size_t *len)
         return NULL;
     }
     size_t cap = 1 << 16, n = 0;
-    char *b = malloc(cap);
+    char *b = api_malloc(cap);
     while (b) {
         if (n == cap) {
             if (cap > max) {
                 fprintf(stderr, "subdivd: %s is larger than --max-body-bytes (%zu)\n", path, max);
-                free(b);
+                api_free(b);
                 fclose(f);
                 return NULL;
             }
-            char *nb = realloc(b, cap * 2);
+            char *nb = api_realloc(b, cap * 2);
             if (!nb) {
-                free(b);
+                api_free(b);
                 b = NULL;
                 break;
             }
@@ -62,7 +63,7 @@ static int report(const api_problem *p, const char *what)
     json_t *j = api_problem_json(p);
     char *t = json_dumps(j, JSON_INDENT(2));
     fprintf(stderr, "subdivd: %s refused (%d):\n%s\n", what, p->status, t ? t : "");
-    free(t);
+    api_free(t);
     json_decref(j);
     return p->status == 413 || p->status == 422 || p->status == 400 ? 1 : 3;
 }
@@ -77,7 +78,7 @@ static int apply_file(api_model **m, const char *path, change_fn_t fn, const api
         return 2;
     api_problem p = {0};
     json_t *b = api_parse_body(buf, len, 0, &p);
-    free(buf);
+    api_free(buf);
     api_model *next = NULL;
     if (b)
         fn(*m, b, lim, &next, &p);

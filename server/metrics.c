@@ -47,7 +47,8 @@ void metrics_request(const char *route, const char *method, int status, double s
 
 void metrics_bytes(uint64_t n) { atomic_fetch_add(&M.bytes, n); }
 
-void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t session_bytes)
+void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t session_bytes,
+                   uint64_t api_bytes)
 {
     pthread_mutex_lock(&M.mu);
     fprintf(f, "# HELP subdivd_requests_total HTTP requests by route template, method and status.\n"
@@ -76,6 +77,10 @@ void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t sessio
     fprintf(f, "# HELP subdivd_session_memory_bytes Core memory held by all sessions.\n"
                "# TYPE subdivd_session_memory_bytes gauge\nsubdivd_session_memory_bytes %llu\n",
             (unsigned long long)session_bytes);
+    fprintf(f, "# HELP subdivd_api_bytes Memory held by api/ and server/ (requests, parsed bodies, "
+               "models, output streams; api/mem.h).\n"
+               "# TYPE subdivd_api_bytes gauge\nsubdivd_api_bytes %llu\n",
+            (unsigned long long)api_bytes);
     fprintf(f, "# HELP subdivd_streamed_bytes_total Body bytes of streamed level responses.\n"
                "# TYPE subdivd_streamed_bytes_total counter\nsubdivd_streamed_bytes_total %llu\n",
             (unsigned long long)atomic_load(&M.bytes));

@@ -2,7 +2,7 @@
  *
  * Requests are counted by route template (not raw path, so the label set stays small), method
  * and status; one latency histogram covers all requests. Gauges (sessions, cached cells, session
- * memory) are sampled when /metrics is scraped.
+ * memory of the core, bytes held by api/ and server/) are sampled when /metrics is scraped.
  */
 #ifndef SUBDIVD_METRICS_H
 #define SUBDIVD_METRICS_H
@@ -13,7 +13,8 @@
 void metrics_init(void);
 void metrics_request(const char *route, const char *method, int status, double seconds);
 void metrics_bytes(uint64_t n);
-/* Write every metric; the gauges are passed in. */
-void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t session_bytes);
+/* Write every metric; the gauges are passed in (api_bytes: api_mem_in_use(), api/mem.h). */
+void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t session_bytes,
+                   uint64_t api_bytes);
 
 #endif

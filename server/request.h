@@ -12,6 +12,7 @@
 #define SUBDIVD_REQUEST_H
 
 #include "server.h"
+#include "../api/mem.h"
 #include "../api/out.h"
 #include "../api/problem.h"
 #include <stdatomic.h>
@@ -50,6 +51,7 @@ struct req {
     atomic_uint_fast64_t bytes;
     int queued;
     atomic_int refs;          /* the connection and a streaming response */
+    api_mem_meter mem;        /* what the request's callbacks allocate (api/mem.h) */
 };
 
 /* ---- routes.c ---- */
@@ -77,7 +79,7 @@ int http_query_only(req *r, const char *const *allowed);
 
 struct MHD_Response *http_empty(void);
 struct MHD_Response *http_static_response(const void *data, size_t n);
-/* A response owning `text` (freed with the response). */
+/* A response owning `text`, an api_malloc block (api/mem.h) freed with the response. */
 struct MHD_Response *http_buffer_response(const char *ctype, char *text, size_t n);
 void http_add_header(struct MHD_Response *resp, const char *name, const char *value);
 void http_set_etag(struct MHD_Response *resp, uint64_t version);

@@ -13,6 +13,7 @@
 #include "request.h"
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
+#include "../api/mem.h"
 #include "metrics.h"
 #include <stdio.h>
 #include <stdlib.h>
@@ -66,10 +67,16 @@ static void h_metrics(req *r)
     }
     gauges g = {0};
     store_foreach(r->srv->st, add_gauges, &g);
-    metrics_write(f, store_count(r->srv->st), g.cells, g.bytes);
+    metrics_write(f, store_count(r->srv->st), g.cells, g.bytes, api_mem_in_use());
     fclose(f);
+    char *body = api_memdup(text, n);
+    free(text); /* open_memstream's buffer belongs to the C library */
+    if (!body) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
     atomic_store(&r->bytes, n);
-    http_queue(r, 200, http_buffer_response("text/plain; version=0.0.4; charset=utf-8", text, n));
+    http_queue(r, 200, http_buffer_response("text/plain; version=0.0.4; charset=utf-8", body, n));
 }
 
 static void h_asset(req *r)
@@ -147,8 +154,12 @@ static void h_create_session(req *r)
     json_t *j = json_pack("{s:s, s:s, s:s, s:I}", "id", s->id, "token", s->token, "expires_at",
                           exp, "ttl_s", (json_int_t)ttl);
     session_unref(s);
-    char *text = json_dumps(j, JSON_COMPACT);
+    char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
     json_decref(j);
+    if (!text) { /* the session stays; an idle one expires */
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
     size_t n = strlen(text);
     atomic_store(&r->bytes, n);
     struct MHD_Response *resp = http_buffer_response("application/json", text, n);

@@ -1,5 +1,6 @@
 /* sessions.c — session ids, tokens, the store and expiry (see sessions.h). */
 #include "sessions.h"
+#include "../api/mem.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -32,13 +33,13 @@ static int random_bytes(unsigned char *b, size_t n)
 
 store *store_new(int max_sessions)
 {
-    store *st = calloc(1, sizeof *st);
+    store *st = api_calloc(1, sizeof *st);
     if (!st)
         return NULL;
     st->cap = max_sessions;
-    st->s = calloc((size_t)max_sessions, sizeof *st->s);
+    st->s = api_calloc((size_t)max_sessions, sizeof *st->s);
     if (!st->s) {
-        free(st);
+        api_free(st);
         return NULL;
     }
     pthread_mutex_init(&st->mu, NULL);
@@ -52,8 +53,8 @@ void store_free(store *st)
     for (int i = 0; i < st->n; i++)
         session_unref(st->s[i]);
     pthread_mutex_destroy(&st->mu);
-    free(st->s);
-    free(st);
+    api_free(st->s);
+    api_free(st);
 }
 
 session *store_create(store *st, int ttl_s)
@@ -61,13 +62,13 @@ session *store_create(store *st, int ttl_s)
     unsigned char rid[16], rtok[32];
     if (random_bytes(rid, sizeof rid) || random_bytes(rtok, sizeof rtok))
         return NULL;
-    session *s = calloc(1, sizeof *s);
+    session *s = api_calloc(1, sizeof *s);
     if (!s)
         return NULL;
     sd_error e;
     s->model = api_model_new(NULL, NULL, 0, &e);
     if (!s->model) {
-        free(s);
+        api_free(s);
         return NULL;
     }
     for (int i = 0; i < 16; i++)
@@ -182,7 +183,7 @@ void session_unref(session *s)
     pthread_mutex_destroy(&s->mu);
     pthread_mutex_destroy(&s->write);
     explicit_bzero(s->token, sizeof s->token);
-    free(s);
+    api_free(s);
 }
 
 api_model *session_model(session *s, uint64_t *version)

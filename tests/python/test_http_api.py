@@ -58,6 +58,7 @@ def test_metrics_exposition(daemon):
     for name, kind in [("subdivd_requests_total", "counter"),
                        ("subdivd_request_duration_seconds", "histogram"),
                        ("subdivd_sessions", "gauge"), ("subdivd_cached_cells", "gauge"),
+                       ("subdivd_api_bytes", "gauge"),
                        ("subdivd_streamed_bytes_total", "counter")]:
         assert f"# TYPE {name} {kind}" in text
     assert re.search(r'subdivd_requests_total\{route="/healthz",method="GET",status="200"\} [1-9]', text)
@@ -66,6 +67,23 @@ def test_metrics_exposition(daemon):
     assert buckets == sorted(buckets), "histogram buckets must be cumulative"
     count = int(re.search(r"subdivd_request_duration_seconds_count (\d+)", text).group(1))
     assert buckets[-1] == count and re.search(r'le="\+Inf"', text)
+
+
+def test_metrics_api_bytes_follow_sessions(daemon):
+    """subdivd_api_bytes counts what api/ and server/ hold (api/mem.h): a session with a complex
+    and a cached glTF level holds some, and deleting it gives them back."""
+    def api_bytes():
+        text = requests.get(daemon.url + "/metrics").text
+        return int(re.search(r"^subdivd_api_bytes (\d+)$", text, re.M).group(1))
+    before = api_bytes()
+    assert before > 0
+    s = Session(daemon)
+    assert s.put_complex(complex_from_text(MIXED)).status_code == 200
+    assert s.level(2).status_code == 200
+    held = api_bytes()
+    assert held > before
+    assert s.delete().status_code == 204
+    assert api_bytes() < held
 
 
 def test_openapi_matches_routes(daemon):

@@ -1,0 +1,171 @@
+/* mem.c — the allocation wrapper of api/ and server/ (see mem.h for the contract).
+ *
+ * Each api_* block is the C library's block of n + HDR bytes with n stored in front, so api_free
+ * knows what to subtract; HDR is 16 so the caller's pointer keeps malloc's alignment. The global
+ * count is one relaxed atomic add per call (the daemon's threads share it; nothing orders
+ * against it). The per-thread meter is a thread-local pointer, so metering costs nothing on
+ * threads that set none. The failure hook is one relaxed load while it is off.
+ *
+ * jansson is pointed at api_malloc/api_free by a constructor, before main and so before any
+ * json_t exists: every binary that links api/ (the daemon, the offline mode, the tests) frees
+ * jansson's strings with api_free, and none can mix the two allocators by forgetting a call.
+ * This file and the api_plain_* functions are the only callers of malloc, realloc and free in
+ * api/ and server/, besides the refine bodies and open_memstream's buffers that mem.h names.
+ */
+#include "mem.h"
+#include <jansson.h>
+#include <stdatomic.h>
+#include <stdbool.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define HDR 16
+
+static atomic_size_t in_use;
+static _Thread_local api_mem_meter *meter;
+static _Atomic uint64_t fail_in;      /* allocations until the next injected failure; 0: off */
+static _Atomic uint64_t fail_every;
+static _Atomic uint64_t failures;
+static _Thread_local uint64_t refused_here; /* allocations refused on this thread */
+
+/* Whether this allocation is the one the test hook fails. */
+static bool injected(void)
+{
+    uint64_t n = atomic_load_explicit(&fail_in, memory_order_relaxed);
+    if (!n)
+        return false;
+    if (n > 1) {
+        atomic_fetch_sub_explicit(&fail_in, 1, memory_order_relaxed);
+        return false;
+    }
+    atomic_store_explicit(&fail_in, atomic_load(&fail_every), memory_order_relaxed);
+    atomic_fetch_add(&failures, 1);
+    return true;
+}
+
+/* Charge n bytes to this thread's meter; false when its limit refuses them. */
+static bool charge(size_t n)
+{
+    api_mem_meter *m = meter;
+    if (!m)
+        return true;
+    if (m->limit && m->net + (int64_t)n > (int64_t)m->limit) {
+        m->refused++;
+        return false;
+    }
+    m->net += (int64_t)n;
+    if (m->net > m->peak)
+        m->peak = m->net;
+    return true;
+}
+
+static void credit(size_t n)
+{
+    if (meter)
+        meter->net -= (int64_t)n;
+}
+
+void *api_malloc(size_t n)
+{
+    if (n > SIZE_MAX - HDR || injected() || !charge(n + HDR)) {
+        refused_here++;
+        return NULL;
+    }
+    unsigned char *b = malloc(n + HDR);
+    if (!b) {
+        credit(n + HDR);
+        refused_here++;
+        return NULL;
+    }
+    memcpy(b, &n, sizeof n);
+    atomic_fetch_add_explicit(&in_use, n + HDR, memory_order_relaxed);
+    return b + HDR;
+}
+
+void *api_calloc(size_t n, size_t size)
+{
+    if (size && n > SIZE_MAX / size) {
+        refused_here++;
+        return NULL;
+    }
+    void *p = api_malloc(n * size);
+    if (p)
+        memset(p, 0, n * size);
+    return p;
+}
+
+void api_free(void *p)
+{
+    if (!p)
+        return;
+    unsigned char *b = (unsigned char *)p - HDR;
+    size_t n;
+    memcpy(&n, b, sizeof n);
+    atomic_fetch_sub_explicit(&in_use, n + HDR, memory_order_relaxed);
+    credit(n + HDR);
+    free(b);
+}
+
+void *api_realloc(void *p, size_t n)
+{
+    if (!p)
+        return api_malloc(n);
+    size_t old;
+    memcpy(&old, (unsigned char *)p - HDR, sizeof old);
+    void *q = api_malloc(n);
+    if (!q)
+        return NULL;
+    memcpy(q, p, old < n ? old : n);
+    api_free(p);
+    return q;
+}
+
+void *api_memdup(const void *p, size_t n)
+{
+    void *q = api_malloc(n ? n : 1);
+    if (q && n)
+        memcpy(q, p, n);
+    return q;
+}
+
+char *api_strdup(const char *s)
+{
+    return api_memdup(s, strlen(s) + 1);
+}
+
+/* The result of a C-library allocation, counted as refused when NULL. */
+static void *plain(void *p)
+{
+    if (!p)
+        refused_here++;
+    return p;
+}
+
+void *api_plain_malloc(size_t n) { return plain(injected() ? NULL : malloc(n)); }
+void *api_plain_calloc(size_t n, size_t size) { return plain(injected() ? NULL : calloc(n, size)); }
+void *api_plain_realloc(void *p, size_t n) { return plain(injected() ? NULL : realloc(p, n)); }
+void api_plain_free(void *p) { free(p); }
+
+size_t api_mem_in_use(void) { return atomic_load_explicit(&in_use, memory_order_relaxed); }
+
+api_mem_meter *api_mem_meter_set(api_mem_meter *m)
+{
+    api_mem_meter *old = meter;
+    meter = m;
+    return old;
+}
+
+void api_mem_fail_at(uint64_t nth, uint64_t every)
+{
+    atomic_store(&fail_every, every);
+    atomic_store(&fail_in, nth);
+}
+
+uint64_t api_mem_failures(void) { return atomic_load(&failures); }
+
+uint64_t api_mem_refused_here(void) { return refused_here; }
+
+__attribute__((constructor)) static void install_jansson_allocator(void)
+{
+    json_set_alloc_funcs(api_malloc, api_free);
+}

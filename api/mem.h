@@ -1,0 +1,70 @@
+/* mem.h — the one allocation wrapper of api/ and server/ (the core has its own, core/alloc.c).
+ *
+ * Every block api/ and server/ allocate goes through api_malloc and its siblings, and so does
+ * jansson (json_set_alloc_funcs, installed before main): a 16-byte header keeps each block's
+ * size, so frees are counted too. What it gives:
+ *   - api_mem_in_use(): the bytes of live blocks, headers included (exported on /metrics as
+ *     subdivd_api_bytes);
+ *   - a per-thread meter (api_mem_meter_set): what one thread — one request, the daemon being
+ *     one thread per connection — allocates while it is set, with an optional limit past which
+ *     its allocations fail: the hook for a per-request memory budget;
+ *   - a test hook (api_mem_fail_at) that fails the Nth allocation from now, and every Kth after,
+ *     so tests can walk the failure paths of every api/ entry point (tests/api/faults.c).
+ * A failed allocation returns NULL like malloc; callers answer 503 out-of-memory and leave the
+ * session as it was.
+ *
+ * Ownership: free a block with the family that allocated it. api_free releases api_malloc,
+ * api_calloc, api_realloc, api_strdup and api_memdup blocks and everything jansson hands out
+ * (json_dumps strings). The api_plain_* functions allocate from the C library itself (uncounted,
+ * though the test hook still fails them) for blocks that change hands with code that releases
+ * them with free(): sd_refine's results, adopted into an api_input, and the refine bodies of
+ * api/refine.c, kept as they were for the merge with the core's refactor, which allocate with
+ * malloc and free the input's arrays, tags and overrides they work on. So the arrays of an
+ * api_input (xyz, size, idx, attribute data), of api_tags and the overrides of api_rules are
+ * plain blocks (model.h). The other C-library blocks are open_memstream's buffers (the C library
+ * owns them; their text is copied or freed at once, each place says which).
+ */
+#ifndef SUBDIVD_API_MEM_H
+#define SUBDIVD_API_MEM_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+void *api_malloc(size_t n);
+void *api_calloc(size_t n, size_t size);
+void *api_realloc(void *p, size_t n);   /* NULL: p is left as it was */
+void api_free(void *p);
+char *api_strdup(const char *s);
+void *api_memdup(const void *p, size_t n);
+
+/* C-library blocks (see above): free() or api_plain_free releases them. */
+void *api_plain_malloc(size_t n);
+void *api_plain_calloc(size_t n, size_t size);
+void *api_plain_realloc(void *p, size_t n);
+void api_plain_free(void *p);
+
+/* Bytes of live api_* blocks (jansson's included), headers included. */
+size_t api_mem_in_use(void);
+
+/* What one thread allocated and freed while the meter was set (bytes, headers included). */
+typedef struct api_mem_meter {
+    int64_t net;        /* allocated minus freed: can go below 0 when older blocks are freed */
+    int64_t peak;       /* the largest `net` seen */
+    uint64_t limit;     /* > 0: an allocation that would take `net` above it fails */
+    uint64_t refused;   /* allocations the limit refused */
+} api_mem_meter;
+
+/* Set this thread's meter (NULL: none); returns the one it replaces. */
+api_mem_meter *api_mem_meter_set(api_mem_meter *m);
+
+/* Allocations refused on this thread so far (out of memory, a meter's limit, the test hook):
+ * compare before and after a library call that does not say why it failed (json_loadb). */
+uint64_t api_mem_refused_here(void);
+
+/* Test hook: the nth allocation from now fails (1: the next one), and then every `every`-th
+ * one (0: only that one); nth = 0 turns it off. Counts api_* and api_plain_* calls of every
+ * thread. Returns nothing; api_mem_failures() counts the failures injected so far. */
+void api_mem_fail_at(uint64_t nth, uint64_t every);
+uint64_t api_mem_failures(void);
+
+#endif

@@ -1,0 +1,242 @@
+/* faults — every allocation of the api/ request path failed in turn (api_mem_fail_at, api/mem.h).
+ *
+ * One scenario runs the entry points a session goes through — parse a body, PUT complex, rules and
+ * tags, open and drain level 1 in every format (with a slice in some), stats, GET complex, an edit,
+ * an analysis, a matrix, a refinement — and frees everything. It runs first with no failure, to
+ * count, then once for each n with the nth allocation failing, then with every kth failing for a
+ * few k. The inputs are valid, so a call may only succeed or refuse with a 5xx problem (a json_t
+ * answer may instead be NULL with no problem: the transport answers that with a 500); after each
+ * run the bytes in use must be back where they started (api_mem_in_use: a leak of a counted
+ * block fails here, under any build; make sanitize adds ASan's leak check for the rest). A last
+ * check: a per-thread meter with a limit refuses a body's parse with a 503.
+ * usage: api_faults [MAX_N]   (0 or absent: every n up to the scenario's allocation count)
+ * Prints one line "api_faults: N runs, F failures injected, no leaks" and exits 0, else 1.
+ */
+#include "../../api/handlers.h"
+#include "../../api/jsonin.h"
+#include "../../api/mem.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char COMPLEX[] =
+    "{\"vertices\":[[0,0,0],[1,0,0],[0,1,0],[0,0,1],[1,1,0],[0,0,2],[0.5,0,3],[3,3,3]],"
+    "\"simplices\":[[0,1,2,3],[1,2,4],[3,5],[5,6],[7]],\"attributes\":{\"h\":[0,0,0,1,0,2,3,3],"
+    "\"v\":[[0,1],[1,1],[2,1],[3,1],[4,1],[5,1],[6,1],[7,1]]}}";
+static const char RULES[] = "{\"solid_scheme\":\"averaged\",\"overrides\":[{\"simplex\":[1],"
+                            "\"rule\":\"G1\"},{\"simplex\":[1,2],\"rule\":\"N1\",\"dimension\":2}]}";
+static const char RULES0[] = "{\"solid_scheme\":\"averaged\",\"nonmanifold_default\":\"G1\"}";
+static const char TAGS[] = "{\"singular\":[[5],[1,4]]}";
+static const char EDIT[] = "{\"moves\":[{\"index\":1,\"position\":[1,0.1,0]}],\"attributes\":"
+                           "{\"h\":[{\"index\":2,\"value\":5}]}}";
+static const char REFINE[] = "{\"select\":{\"simplices\":[[0,1,2,3]]},\"depth\":1}";
+
+static int bad, oks;   /* failed checks; calls that succeeded in this run */
+static uint64_t run_n; /* the failing allocation of this run, for messages */
+
+/* A refusal of a valid request: only a 5xx problem may say why. */
+static void refused(const api_problem *p, const char *what)
+{
+    if (p->status >= 500 && p->status <= 599 && p->detail[0])
+        return;
+    fprintf(stderr, "api_faults: n=%llu: %s refused with status %d (%s)\n",
+            (unsigned long long)run_n, what, p->status, p->detail);
+    bad++;
+}
+
+static json_t *body(const char *text, api_problem *p)
+{
+    json_t *b = api_parse_body(text, strlen(text), 0, p);
+    if (!b)
+        refused(p, "api_parse_body");
+    return b;
+}
+
+/* A change handler from *m; *m becomes the new model on success. */
+static void change(api_model **m, const char *text, change_fn_t fn, const char *what)
+{
+    api_problem p = {0};
+    api_limits lim = api_default_limits();
+    json_t *b = body(text, &p);
+    api_model *next = NULL;
+    if (b && fn(*m, b, &lim, &next, &p))
+        refused(&p, what);
+    json_decref(b);
+    if (next) {
+        oks++;
+        api_model_unref(*m);
+        *m = next;
+    }
+}
+
+static void drain(out_stream *os)
+{
+    static char buf[8192];
+    while (out_read(os, buf, sizeof buf) > 0)
+        ;
+}
+
+static void levels(api_model *m)
+{
+    api_limits lim = api_default_limits();
+    for (const out_format *f = out_formats; f->name; f++) {
+        api_level_query q = {.format = f->name, .slice = f == out_formats ? "0,0,1,0.3" : NULL};
+        api_problem p = {0};
+        out_stream *os = NULL;
+        const out_format *fmt;
+        if (api_level_open(m, 1, &q, &lim, 1, &os, &fmt, &p)) {
+            refused(&p, "api_level_open");
+            continue;
+        }
+        drain(os);
+        api_level_close(m, os);
+        oks++;
+    }
+    api_problem p = {0};
+    json_t *j = api_level_stats(m, 1, &lim, &p);
+    if (!j && p.status)
+        refused(&p, "api_level_stats");
+    oks += j != NULL;
+    json_decref(j);
+}
+
+static void views(api_model *m)
+{
+    api_limits lim = api_default_limits();
+    api_problem p = {0};
+    json_t *j = api_get_complex(m, &p);
+    if (!j && p.status)
+        refused(&p, "api_get_complex");
+    oks += j != NULL;
+    json_decref(j);
+    memset(&p, 0, sizeof p);
+    if (!(j = api_analysis(m, "0", NULL, &p)) && p.status)
+        refused(&p, "api_analysis");
+    oks += j != NULL;
+    json_decref(j);
+    memset(&p, 0, sizeof p);
+    out_stream *os = NULL;
+    const char *ctype;
+    if (api_matrix_open(m, 1, "0", "json", &lim, &os, &ctype, &p))
+        refused(&p, "api_matrix_open");
+    else {
+        drain(os);
+        out_close(os);
+        oks++;
+    }
+}
+
+static void edit_and_refine(api_model **m)
+{
+    api_problem p = {0};
+    json_t *b = body(EDIT, &p);
+    uint64_t counts[SD_MAX_LEVEL + 1], red, green;
+    int nlev;
+    if (b && api_edit(*m, b, counts, &nlev, &p))
+        refused(&p, "api_edit");
+    else if (b)
+        oks++;
+    json_decref(b);
+    memset(&p, 0, sizeof p);
+    api_limits lim = api_default_limits();
+    api_model *next = NULL;
+    if ((b = body(REFINE, &p)) && api_refine(*m, b, &lim, &next, &red, &green, &p))
+        refused(&p, "api_refine");
+    json_decref(b);
+    if (next) {
+        oks++;
+        api_model_unref(*m);
+        *m = next;
+    }
+}
+
+static void scenario(void)
+{
+    sd_error e = {0};
+    api_model *m = api_model_new(NULL, NULL, 0, &e);
+    if (!m)
+        return;
+    change(&m, RULES0, api_put_rules, "api_put_rules (no complex)");
+    change(&m, COMPLEX, api_put_complex, "api_put_complex");
+    if (m->c) {
+        change(&m, RULES, api_put_rules, "api_put_rules");
+        change(&m, TAGS, api_put_tags, "api_put_tags");
+        levels(m);
+        views(m);
+        edit_and_refine(&m);
+    }
+    api_model_unref(m);
+}
+
+/* One run failing the nth allocation, then every `every`-th; checks the bytes came back. */
+static void run(uint64_t n, uint64_t every)
+{
+    size_t before = api_mem_in_use();
+    run_n = n;
+    api_mem_fail_at(n, every);
+    scenario();
+    api_mem_fail_at(0, 0);
+    if (api_mem_in_use() != before) {
+        fprintf(stderr, "api_faults: n=%llu every=%llu: %zu bytes not freed\n",
+                (unsigned long long)n, (unsigned long long)every, api_mem_in_use() - before);
+        bad++;
+    }
+}
+
+/* A meter's limit refuses what would take the thread past it. */
+static void meter_limit(void)
+{
+    api_mem_meter meter = {.limit = 4096}, *prev = api_mem_meter_set(&meter);
+    api_problem p = {0};
+    json_t *b = api_parse_body(COMPLEX, strlen(COMPLEX), 0, &p);
+    api_mem_meter_set(prev);
+    if (b || p.status != 503 || !meter.refused || meter.peak > 4096) {
+        fprintf(stderr, "api_faults: a 4096-byte meter let the body through (status %d, peak %lld)\n",
+                p.status, (long long)meter.peak);
+        bad++;
+    }
+    json_decref(b);
+    meter = (api_mem_meter){0};
+    prev = api_mem_meter_set(&meter);
+    b = api_parse_body(COMPLEX, strlen(COMPLEX), 0, &p);
+    json_decref(b);
+    api_mem_meter_set(prev);
+    if (!b || meter.net != 0 || meter.peak <= 0) {
+        fprintf(stderr, "api_faults: the meter saw net %lld, peak %lld for a parse and its free\n",
+                (long long)meter.net, (long long)meter.peak);
+        bad++;
+    }
+}
+
+int main(int argc, char **argv)
+{
+    uint64_t max = argc > 1 ? strtoull(argv[1], NULL, 10) : 0, runs = 0;
+    int want = 4 + 1 + 3 + 2; /* changes, stats, views, edit and refine; and a level per format */
+    for (const out_format *f = out_formats; f->name; f++)
+        want++;
+    run(0, 0); /* the scenario must pass as it is */
+    runs++;
+    if (oks != want) {
+        fprintf(stderr, "api_faults: without failures %d calls succeeded, not %d\n", oks, want);
+        bad++;
+    }
+    for (uint64_t n = 1; !max || n <= max; n++) {
+        uint64_t injected = api_mem_failures();
+        run(n, 0);
+        runs++;
+        if (api_mem_failures() == injected) /* n is past the scenario's last allocation */
+            break;
+    }
+    static const uint64_t every[] = {3, 7, 31};
+    for (size_t k = 0; k < sizeof every / sizeof *every; k++)
+        for (uint64_t n = 1; n <= every[k]; n++, runs++)
+            run(n, every[k]);
+    meter_limit();
+    if (bad) {
+        fprintf(stderr, "api_faults: %d checks failed\n", bad);
+        return 1;
+    }
+    printf("api_faults: %llu runs, %llu failures injected, no leaks\n", (unsigned long long)runs,
+           (unsigned long long)api_mem_failures());
+    return 0;
+}
