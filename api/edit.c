@@ -1,6 +1,6 @@
 /* edit.c — PATCH /control-points (docs/API.md "Control-point edits"): moves and attribute values
  * of control points pushed through the cached subdivision matrices into every computed level
- * (004 Sec. 4: the matrix is built once per topology and applied many times).
+ * (004 Sec. 4.1: the matrix is built once per topology and applied many times).
  *
  * All-or-nothing: every entry is checked (index range, repeats, value shapes) before anything
  * changes; then the edit runs under the model's compute lock and its data write lock (so it waits

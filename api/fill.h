@@ -1,5 +1,5 @@
 /* fill.h — the "fill" member of PUT /complex: TetGen tetrahedralizes closed triangle surfaces and
- * the tetrahedra join the complex (SPEC Sec. 7).
+ * the tetrahedra join the complex (docs/API.md "Control complex", docs/SERVICE.md "Fill").
  *
  * Each entry {"surface": [[i,j,k]...], "max_volume": v, "min_ratio": r} names triangles by indices
  * into the posted vertices. The surface is checked first (closed, consistently orientable, no

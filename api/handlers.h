@@ -1,8 +1,10 @@
 /* handlers.h — the v1 endpoints as functions of (model, parsed request) -> (new model, JSON).
  *
- * No HTTP here: the transport (server/http.c, or the offline `subdivd refine`) parses the body
- * with api_parse_body, picks the handler from its route table, and maps the returned status and
- * api_problem to a response. Handlers that change a session return a NEW model (the current one
+ * No HTTP here: the transport (server/routes.c, or the offline `subdivd refine` of server/main.c)
+ * parses the body with api_parse_body, picks the handler from its route table, and maps the
+ * returned status and api_problem to a response. One file per resource defines them:
+ * complex.c, rules.c (rules and tags), levels.c, edit.c, inspect.c (analysis, matrices) and
+ * refine.c; what those share is internal.h. Handlers that change a session return a NEW model (the current one
  * is never modified) which the caller publishes with the next version number; on any failure
  * nothing is returned and the session stays as it was (all-or-nothing).
  */
@@ -19,7 +21,7 @@
 typedef int (*change_fn_t)(const api_model *cur, json_t *body, const api_limits *lim,
                            api_model **out, api_problem *p);
 
-/* PUT /complex: the body of API.md. Keeps the current rule choices. On success *out is the new
+/* PUT /complex: the body of docs/API.md. Keeps the current rule choices. On success *out is the new
  * model and the function returns 0; else the problem's status. */
 int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                     api_problem *p);

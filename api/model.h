@@ -58,7 +58,7 @@ typedef struct api_input {
     api_fill_stats *fill;
 } api_input;
 
-/* The rule preferences of PUT /rules (API.md); zero = the default. */
+/* The rule preferences of PUT /rules (docs/API.md); zero = the default. */
 typedef struct api_rules {
     int solid_scheme;         /* SD_SOLID_* */
     int surface_weights;      /* SD_WEIGHTS_* */
@@ -90,7 +90,7 @@ typedef struct api_model {
     const sd_level *level0;   /* level 0 with its rules built (read without the lock) */
     int channel[API_MAX_ATTRIBUTES]; /* core channel id of each attribute */
     double seconds[SD_MAX_LEVEL + 1]; /* time spent computing each level (under lock) */
-    struct json_t *summary;   /* level-0 summary (API.md PUT /complex), read-only once built */
+    struct json_t *summary;   /* level-0 summary (docs/API.md PUT /complex), read-only once built */
     struct out_geometry *geometry[SD_MAX_LEVEL + 1]; /* glTF geometry per level, built under lock */
     /* published figures, readable without the lock */
     atomic_int levels_cached;

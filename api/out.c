@@ -128,7 +128,7 @@ static out_stream *fail(out_stream *s, sd_error *err, sd_result code, const char
 }
 
 /* Attribute names go verbatim into JSON keys, XML attributes and VTK keyword lines: keep them
- * to characters that need no escaping anywhere (the API's rule for names, api/handlers.c). */
+ * to characters that need no escaping anywhere (the API's rule for names, api/complex.c). */
 static bool valid_name(const char *name)
 {
     size_t n = 0;

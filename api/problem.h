@@ -21,7 +21,7 @@ typedef struct api_field_error {
 
 typedef struct api_problem {
     int status;             /* 0 = no problem */
-    const char *slug;       /* type is "/errors/<slug>" (see docs/ERRORS.md) */
+    const char *slug;       /* type is "/errors/<slug>" (the slugs: docs/SERVICE.md "Errors") */
     char detail[320];
     int nerrors;
     api_field_error errors[API_MAX_FIELD_ERRORS];

@@ -7,7 +7,7 @@
  * overrides through a step_map (the split edges and the triangles of the refined complex), and
  * becomes the next step's input; the result is one new model, built like every change by
  * api_build_model. api_refine and its step_* helpers, model_with and subdivision_positions are
- * kept as they were in handlers.c: the core's refactor moves the tag carrying into core/ and
+ * kept as they were in the former api/handlers.c: the core's refactor moves the tag carrying into core/ and
  * replaces these bodies when the branches merge. They allocate with the C library, as sd_refine
  * does for the arrays they adopt; what they exchange with the rest of api/ (the input's arrays,
  * tags, overrides, the selection) is therefore C-library memory too.
@@ -266,7 +266,7 @@ static int step_tri_children(const step_map *m, const uint32_t t[3], const uint3
 }
 
 /* Carry tags and overrides through one refinement step (children of tagged simplices stay
- * tagged and keep their rules, SPEC Sec. 3): a vertex stays itself; a split edge becomes its two
+ * tagged and keep their rules, docs/RULES.md "Conventions"): a vertex stays itself; a split edge becomes its two
  * halves, and an edge's N1/N2/G2 choice also goes to the vertex splitting it; a triangle becomes
  * its children; an N2 pair is replaced by the children holding the new simplex. Replaces *tags
  * and *ov (malloc'ed); false for lack of memory. */
@@ -460,7 +460,7 @@ static int subdivision_positions(const api_input *in, const api_rules *rules, co
     return 0;
 }
 
-/* Over 150 lines on purpose: kept exactly as it was in handlers.c until the core's refactor of
+/* Over 150 lines on purpose: kept exactly as it was in api/handlers.c until the core's refactor of
  * the tag carrying replaces it (see the top of this file). */
 int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                uint64_t *red, uint64_t *green, api_problem *p)

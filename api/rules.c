@@ -172,7 +172,7 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
 
 /* ---- PUT /tags ----------------------------------------------------------------------------- */
 
-/* "petals": [{"vertex", "triangle", "kind"}] (API.md extension, docs/SERVICE.md): the corner
+/* "petals": [{"vertex", "triangle", "kind"}] (docs/API.md, docs/SERVICE.md "Tags"): the corner
  * kind of open petals at complex singular vertices (003 Sec. 2). Shapes and ranges here, the
  * rest (the triangle holds the vertex, the petal is open, ...) in the core. */
 static int parse_petals(json_t *a, uint32_t nv, api_tags *tags, api_problem *p)

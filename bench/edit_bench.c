@@ -1,5 +1,5 @@
 /* edit_bench — cost of one control-point edit propagated to level L through the cached matrices
- * (SPEC Sec. 5, issue goal: <= 2 ms median on one core, independent of mesh size within 2x).
+ * (docs/API.md "Control-point edits", issue goal: <= 2 ms median on one core, independent of mesh size within 2x).
  * usage: edit_bench MESH.txt LEVEL [EDITS]  — prints cells, memory and the median/p90 edit time
  * of EDITS single-point edits at random control points. */
 #define _POSIX_C_SOURCE 200809L

@@ -1,6 +1,6 @@
-/* test_analysis.c — local subdivision matrices against 001 Appendix B (SPEC Sec. 5 "Analysis").
+/* test_analysis.c — local subdivision matrices against 001 Appendix B (docs/API.md "Matrices and analysis").
  * Expected matrices are the printed Appendix B entries; expected eigenvalues the closed forms
- * (with SPEC Sec. 3.1's errata for B.1's list and B.2's 11th value). */
+ * (with docs/RULES.md "Conventions"'s errata for B.1's list and B.2's 11th value). */
 #include "test.h"
 
 /* Matrix of `a` re-ordered to the points `order` (level ids): out[i][j] = a(order[i], order[j]). */
@@ -76,7 +76,7 @@ static void b2_order(sd_complex *c, int k, uint32_t *order)
 
 /* B.2: the valence-4 edge with skew diagonals ([m(p0,c_i), m(p2,c_i+1)], 001 Fig. 23 first row):
  * L = the top-left 11x11 block of S_e; eigenvalues as printed, the 11th being (45-sqrt 985)/160
- * (SPEC Sec. 3.1). Pair 1 of tet (p0,p2,c_i,c_i+1) is the edges p0-c_i | p2-c_i+1. */
+ * (docs/RULES.md "Conventions"). Pair 1 of tet (p0,p2,c_i,c_i+1) is the edges p0-c_i | p2-c_i+1. */
 TEST(analysis_appendix_b2_edge_skew)
 {
     mesh m = {0};
@@ -120,15 +120,15 @@ TEST(analysis_appendix_b2_edge_skew)
 }
 
 /* The same edge with every diagonal pointing at it ([m(p0,p2), m(c_i,c_i+1)], pair 0).
- * Counting major diagonals in the valence (001 Def. 3.3, SPEC Sec. 3.1), the midpoint is then a
+ * Counting major diagonals in the valence (001 Def. 3.3, docs/RULES.md "Conventions"), the midpoint is then a
  * REGULAR octet-truss vertex: 10 edges + 4 diagonals = 14, every edge ring 4 or 6, and the 4
  * diagonal rows are octahedron cell points. Its block must therefore carry the regular box
  * spline's spectrum: 1, 1/2 (x3, linear), 1/4 (x6, quadratic) from polynomial reproduction.
- * SPEC Sec. 5 quotes 001 B.2's {1, 1/2, 1/2, 1/2, (25+sqrt 385)/160, ...}: that 5th value comes
+ * The product brief quotes 001 B.2's {1, 1/2, 1/2, 1/2, (25+sqrt 385)/160, ...}: that 5th value comes
  * from the printed S'_e, whose row 0 gives the midpoint valence 10 (7/160), i.e. leaves its
  * diagonal partners out of the vertex rule while its edge rows count them — inconsistent with
  * Def. 3.3 (evaluating the printed matrix reproduces 0.27888...). We follow Def. 3.3; the first
- * four values agree with SPEC (lambda_1 = 1/2). See docs/DECISIONS.md. */
+ * four values agree with the brief (lambda_1 = 1/2). See docs/DECISIONS.md. */
 TEST(analysis_appendix_b2_edge_toward)
 {
     mesh m = {0};

@@ -70,7 +70,7 @@ TEST(classify_type2_three_fins)
     mesh_free(&m);
 }
 
-/* Type 2 in C_1: three curves at a vertex — fixed (SPEC Sec. 3.1). */
+/* Type 2 in C_1: three curves at a vertex — fixed (docs/RULES.md "Conventions"). */
 TEST(classify_curve_junction)
 {
     mesh m = {0};
@@ -182,7 +182,7 @@ TEST(classify_boundary)
     mesh_free(&t);
 }
 
-/* Listed faces of listed simplices are absorbed, as in API.md's example. */
+/* Listed faces of listed simplices are absorbed, as in docs/API.md's example. */
 TEST(classify_absorbed_faces)
 {
     mesh m = {0};

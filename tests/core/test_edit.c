@@ -1,6 +1,6 @@
-/* Edits through the cached matrices (SPEC Sec. 5): after random edits every computed level equals
- * a recomputation from the edited control points to 1e-12; refused edits change nothing; a
- * one-point edit touches a bounded neighbourhood. */
+/* Edits through the cached matrices (docs/API.md "Control-point edits", 004 Sec. 4.1): after
+ * random edits every computed level equals a recomputation from the edited control points to
+ * 1e-12; refused edits change nothing; a one-point edit touches a bounded neighbourhood. */
 #include "test.h"
 
 static uint64_t rng = 12345;

@@ -1,4 +1,4 @@
-/* test_levels.c — uniform subdivision: cell counts per level (the split table of SPEC Sec. 2,
+/* test_levels.c — uniform subdivision: cell counts per level (the split table of docs/RULES.md "Splitting",
  * counted here from the cells themselves), stencil rows summing to 1, the octet-truss invariants
  * (|rho| = 14, |rho(e)| in {4,6}), rule formulas from the papers, and affine invariance. */
 #include "test.h"
@@ -51,7 +51,7 @@ static void check_counts(const mesh *m, int levels)
     uint64_t Tr = sd_level_num_cells(l0, SD_CELL_TRIANGLE), T = sd_level_num_cells(l0, SD_CELL_TETRA);
     uint64_t O = 0, V = sd_level_num_vertices(l0), E = count_edges(l0);
     for (int L = 1; L <= levels; L++) {
-        /* SPEC Sec. 2: edge -> 2, triangle -> 4, tet -> 4 tets + octahedron, octahedron -> 6 + 8 */
+        /* docs/RULES.md "Splitting": edge -> 2, triangle -> 4, tet -> 4 tets + octahedron, octahedron -> 6 + 8 */
         uint64_t V2 = V + E + O, T2 = 4 * T + 8 * O, O2 = T + 6 * O;
         const sd_level *lv = sd_complex_level(c, L, NULL);
         CHECK(lv);
@@ -123,7 +123,7 @@ TEST(levels_rows_sum_to_one)
         mesh_free(&ms[i]);
 }
 
-/* SPEC Sec. 2: after 3 levels of one tetrahedron, and of two sharing a face, every interior
+/* docs/RULES.md "Splitting": after 3 levels of one tetrahedron, and of two sharing a face, every interior
  * vertex has |rho| = 14 and every interior edge |rho(e)| in {4, 6}. */
 static void check_octet(const mesh *m)
 {

@@ -1,4 +1,4 @@
-/* Singular tags (000 Sec. 4.1, SPEC Sec. 3): creases follow the cubic B-spline of the crease
+/* Singular tags (000 Sec. 4.1, docs/RULES.md): creases follow the cubic B-spline of the crease
  * polygon ((6x + a + b)/8, midpoints), tagged corners stay fixed, and an embedded surface inside
  * a solid stays a surface (a plane stays the plane) through three levels. */
 #include "test.h"

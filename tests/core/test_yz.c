@@ -76,7 +76,7 @@ TEST(yz_three_fins_classes)
     CHECK(erule(c, 0, 0, 1) == SD_RULE_YZ_CREASE);
     CHECK(erule(c, 0, 1, 2) == SD_RULE_YZ_CREASE);
     for (uint32_t f = 3; f < 12; f += 3) {
-        CHECK(vrule(c, 0, f) == SD_RULE_LOOP_BOUNDARY);   /* plain boundary: SPEC's B-spline */
+        CHECK(vrule(c, 0, f) == SD_RULE_LOOP_BOUNDARY);   /* plain boundary: the B-spline */
         CHECK(erule(c, 0, 1, f + 1) == SD_RULE_YZ_PETAL);
         CHECK(erule(c, 0, 0, f + 1) == SD_RULE_YZ_PETAL);
         CHECK(erule(c, 0, f, f + 1) == SD_RULE_LOOP_BOUNDARY);
@@ -153,7 +153,7 @@ TEST(yz_petal_weights)
     mesh_free(&m);
 }
 
-/* The cubic B-spline subdivision of an open polygon with fixed ends (SPEC Sec. 3, 1-simplex). */
+/* The cubic B-spline subdivision of an open polygon with fixed ends (docs/RULES.md `curve`). */
 static int bspline_step(const double *p, int n, double *q)
 {
     for (int i = 0; i < n; i++) {

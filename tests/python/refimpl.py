@@ -1,6 +1,6 @@
 """Reference implementation of ONE level of solid subdivision of a tetrahedral mesh.
 
-This is a test oracle, written directly from SPEC.md Sec. 1-3 and the solid-subdivision
+This is a test oracle, written directly from docs/RULES.md (rules, splitting, conventions) and the solid-subdivision
 paper (seeds/001, Chang & Qin, "Spline-based solid subdivision schemes over arbitrary
 tetrahedral meshes"), independently of `core/`.  It favours being obviously right over being
 fast: plain dicts and loops, meshes of a few thousand tetrahedra at most.
@@ -8,30 +8,30 @@ fast: plain dicts and loops, meshes of a few thousand tetrahedra at most.
 Scope: a pure tetrahedral control mesh (level 0, so no octahedra and no major diagonals are
 involved in any vertex or edge rule) that is a 3-manifold with boundary.  Anything else
 (non-manifold faces, edges or vertices, lower-dimensional simplices, unused vertices) is
-refused with `NotManifoldError`; the non-manifold rules of SPEC Sec. 3 are out of scope.
+refused with `NotManifoldError`; the non-manifold rules (000 Sec. 3.5) are out of scope.
 
-Rules (SPEC Sec. 3, "3-simplex"; 001 Sec. 3.4-3.6):
+Rules (docs/RULES.md `solid`; 001 Sec. 3.4-3.6):
 
-* boundary face: a triangle that is a face of exactly one tetrahedron (SPEC Sec. 1).  A vertex
+* boundary face: a triangle that is a face of exactly one tetrahedron (docs/RULES.md "Classification").  A vertex
   or edge is on the boundary iff it is a vertex / an edge of a boundary face.  An edge whose two
   ends lie on the boundary but which is no edge of a boundary face (a chord) is interior.
 * interior vertex x, k = |rho(x)|, rho(x) = every vertex joined to x by an edge (boundary
-  neighbours included, SPEC Sec. 3 / 001 Appendix B.1):
+  neighbours included, docs/RULES.md / 001 Appendix B.1):
       9/16 x + 7/(16k) sum rho(x)                                   (001 eq. 3.7; 3.3 at k=14)
 * interior edge [a, b], rho(e) = the other vertices of the tetrahedra containing the edge
   (the k vertices around it, 001 Fig. 17), k = |rho(e)|:
       k == 6: 10/32 (a+b) + 2/32 each                              (001 eq. 3.4)
-      k == 4:  8/32 (a+b) + 4/32 each                              (001 eq. 3.5; SPEC 3.1)
+      k == 4:  8/32 (a+b) + 4/32 each                              (001 eq. 3.5; docs/RULES.md "Conventions")
       else:    5/16 (a+b) + 3/(8k) each                            (001 eq. 3.8)
-* boundary vertex (2-simplex rules on the boundary surface, SPEC Sec. 3; 001 Sec. 3.6,
+* boundary vertex (2-simplex rules on the boundary surface, docs/RULES.md; 001 Sec. 3.6,
   Fig. 14), m = number of neighbours along edges of boundary faces:
       (1 - m c) x + c sum(those neighbours),
-      c = 3/16 if m == 3 else 3/(8m)                       ("warren", SPEC Sec. 3 default)
+      c = 3/16 if m == 3 else 3/(8m)                       ("warren", the default of docs/API.md)
       c = (1/m) (5/8 - (3/8 + cos(2 pi/m)/4)^2)            ("loop", 001 Fig. 14b)
 * boundary edge [a, b] with opposite vertices c, d of its two boundary faces:
       3/8 (a+b) + 1/8 (c+d)                                         (001 Fig. 14a; Loop)
 
-Splitting (SPEC Sec. 2): every tetrahedron becomes 4 corner tetrahedra and 1 octahedron, so
+Splitting (docs/RULES.md "Splitting"): every tetrahedron becomes 4 corner tetrahedra and 1 octahedron, so
 level 1 has V + E vertices, 4T tetrahedra and T octahedra.
 """
 
@@ -122,7 +122,7 @@ def analyse(tets, nverts=None):
         unused = sorted(set(range(nverts)) - set(vertices))
         raise NotManifoldError(f"vertices {unused[:10]} belong to no tetrahedron")
 
-    # A face of 3+ tetrahedra is non-manifold (type 2, SPEC Sec. 1).
+    # A face of 3+ tetrahedra is non-manifold (type 2, docs/RULES.md "Classification").
     for f, ts in face_tets.items():
         if len(ts) > 2:
             raise NotManifoldError(f"face {f} is shared by {len(ts)} tetrahedra")
@@ -149,7 +149,7 @@ def analyse(tets, nverts=None):
 
     # Vertex manifoldness: the tetrahedra around a vertex are connected through faces that
     # contain it, and around a boundary vertex the boundary faces form one umbrella (a single
-    # cycle of link edges).  Either failure is a type-3 pinch (SPEC Sec. 1).
+    # cycle of link edges).  Either failure is a type-3 pinch (docs/RULES.md "Classification").
     vert_bfaces = defaultdict(list)
     for f in boundary_faces:
         for v in f:
@@ -202,7 +202,7 @@ def analyse(tets, nverts=None):
 
 
 def loop_weight(m, weights="warren"):
-    """Weight c of each of the m surface neighbours of a surface vertex (SPEC Sec. 3)."""
+    """Weight c of each of the m surface neighbours of a surface vertex (docs/RULES.md `loop`)."""
     if m < 3:
         raise NotManifoldError(f"surface vertex with {m} neighbours")
     if weights == "warren":
@@ -226,7 +226,7 @@ def level1_stencils(tets, weights="warren", nverts=None, mesh=None):
     for v in mesh["vertices"]:
         row = defaultdict(float)
         if v in mesh["boundary_verts"]:
-            # 2-simplex rule on the boundary surface (SPEC Sec. 3; 001 Sec. 3.6, Fig. 14b)
+            # 2-simplex rule on the boundary surface (docs/RULES.md; 001 Sec. 3.6, Fig. 14b)
             nb = mesh["boundary_nbrs"][v]
             c = loop_weight(len(nb), weights)
             row[v] += 1.0 - len(nb) * c
@@ -258,7 +258,7 @@ def level1_stencils(tets, weights="warren", nverts=None, mesh=None):
             k = len(ring)
             if k == 6:  # 001 eq. 3.4
                 wa, wr = 10.0 / 32.0, 2.0 / 32.0
-            elif k == 4:  # 001 eq. 3.5 (SPEC 3.1: not the generic 5/16, 3/32)
+            elif k == 4:  # 001 eq. 3.5 (docs/RULES.md "Conventions": not the generic 5/16, 3/32)
                 wa, wr = 8.0 / 32.0, 4.0 / 32.0
             else:  # 001 eq. 3.8
                 wa, wr = 5.0 / 16.0, 3.0 / (8.0 * k)
@@ -279,7 +279,7 @@ def apply_stencil(row, verts):
 
 
 def level1_counts(tets):
-    """Expected level-1 element counts of a pure tetrahedral level 0 (SPEC Sec. 2)."""
+    """Expected level-1 element counts of a pure tetrahedral level 0 (docs/RULES.md "Splitting")."""
     tets = [tuple(t) for t in tets]
     nv = len({v for t in tets for v in t})
     ne = len({_edge(a, b) for t in tets for a, b in combinations(t, 2)})

@@ -1,4 +1,4 @@
-"""Black-box tests of every v1 endpoint (API.md) against the real daemon on loopback.
+"""Black-box tests of every v1 endpoint (docs/API.md) against the real daemon on loopback.
 
 Expected values come from the papers' split table, from the independent text tool `sdlevel`
 (a separate client of core/ with its own output path), or from counting in Python — never from

@@ -1,4 +1,4 @@
-"""Sessions are isolated under load (SPEC.md section 8).
+"""Sessions are isolated under load (docs/SERVICE.md "Threads and isolation").
 
 - 16 sessions driven by 16 threads at once (each with its own connection pool) get, for every
   request of a mixed script (create, rules, complex, levels 0..2 as json/glb/vtu, stats, refused

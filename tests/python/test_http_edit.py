@@ -1,4 +1,4 @@
-"""PATCH /control-points (SPEC Sec. 5): edits pushed through the cached matrices equal a full
+"""PATCH /control-points (docs/API.md "Control-point edits"): edits pushed through the cached matrices equal a full
 recomputation from the edited control complex; If-Match is required; a refused edit leaves the
 session byte-identical."""
 import copy

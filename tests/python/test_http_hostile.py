@@ -1,5 +1,5 @@
-"""A catalogue of malformed and hostile requests against the real daemon (API.md "Errors",
-SPEC.md section 8).
+"""A catalogue of malformed and hostile requests against the real daemon (docs/API.md "Errors",
+docs/SERVICE.md "Errors").
 
 One table drives one parametrized test. Each entry is a request — sent with requests, or as raw
 bytes over a socket for what requests cannot send (invalid UTF-8, chunked uploads, bad

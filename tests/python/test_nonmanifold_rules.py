@@ -1,11 +1,11 @@
-"""Non-manifold rules per simplex and by default (000 Sec. 3.5, Figs. 15-17; SPEC Sec. 3).
+"""Non-manifold rules per simplex and by default (000 Sec. 3.5, Figs. 15-17; docs/RULES.md, docs/SERVICE.md "Rules").
 
 The configuration of 000 Fig. 17: an octahedron made of 4 tetrahedra around its z diagonal
 and two triangles T1, T2 hanging on two opposite equator edges (type-1 junctions). Expected
-values are derived by hand from the stencils of SPEC Sec. 3 (each derivation is in the test),
+values are derived by hand from the stencils of docs/RULES.md (each derivation is in the test),
 plus the paper's statements checked as relations between complexes:
   - N1 with dimension 3: "the boundary of the 3-simplex region does not change at all" — the
-    solid subdivides exactly as the octahedron alone (SPEC: as if the other cells were absent);
+    solid subdivides exactly as the octahedron alone (000 Fig. 17c: as if the other cells were absent);
   - N1 with dimension 2: the triangles subdivide exactly as T1 and T2 alone;
   - G1: the singular vertex keeps its position at every level, a G1 edge is a crease;
   - G2 (default): the junction moves by the 3-simplex stencil with the relieved ring.
@@ -314,7 +314,7 @@ def test_overrides_need_a_complex(daemon):
 
 
 def test_refine_carries_tags(daemon):
-    """POST /refine: children of tagged simplices stay tagged (SPEC Sec. 3). The cube of 6 tets
+    """POST /refine: children of tagged simplices stay tagged (docs/RULES.md "Conventions"). The cube of 6 tets
     with its 12 edges tagged, refined red at a corner tet to depth 2: the tagged edges still
     cover exactly the 12 unit edges of the cube, and the corners and creases stay put at level 2
     of the refined complex."""
@@ -386,7 +386,7 @@ def test_fig15a_curve_meets_solid_g2(daemon):
 
 def test_fig15b_four_surfaces_on_a_line_g2(daemon):
     """000 Fig. 15(b): four surfaces meeting along edge 0-1 (type 2), rule G2. Edge: its ring is
-    the 4 tips, so 1/4 (a+b) + 1/8 each (SPEC |rho(e)| = 4): 1/4 (0,0,1) + 1/8 (0,-1,2).
+    the 4 tips, so 1/4 (a+b) + 1/8 each (docs/RULES.md: |rho(e)| = 4): 1/4 (0,0,1) + 1/8 (0,-1,2).
     Vertex 0 (type 4): 5 neighbours, 9/16 * 0 + 7/80 ((0,0,1) + (0,-1,2))."""
     tips = [[1, 0, 0.5], [-1, 0, 0.5], [0, 1, 0.5], [0, -2, 0.5]]
     body = {"vertices": [[0, 0, 0], [0, 0, 1]] + tips, "simplices": [[0, 1, k] for k in range(2, 6)]}

@@ -105,7 +105,7 @@ def affine(p, k):
 
 def oct_tets(o):
     """The 4 tetrahedra around the major diagonal p-q of octahedra (p,q,a,a2,b,b2): around the
-    equator cycle a, b, a2, b2 (API.md; docs/OUTPUTS.md)."""
+    equator cycle a, b, a2, b2 (docs/API.md; docs/OUTPUTS.md)."""
     eq = [2, 4, 3, 5]
     return [o[:, [0, 1, eq[k], eq[(k + 1) % 4]]] for k in range(4)]
 

@@ -392,7 +392,7 @@ def test_sdlevel_counts_and_cells(case, weights):
     def E(a, b):
         return ("E", min(a, b), max(a, b))
 
-    # SPEC Sec. 2: each tetrahedron -> 4 corner tetrahedra + 1 octahedron on its edge points.
+    # docs/RULES.md "Splitting": each tetrahedron -> 4 corner tetrahedra + 1 octahedron on its edge points.
     want_tets, want_octs = set(), set()
     for t in ref["mesh"]["tets"]:
         for v in t:

@@ -1,4 +1,4 @@
-"""The subdivd HTTP client: one method per endpoint of the v1 API (docs/SERVICE.md, API.md).
+"""The subdivd HTTP client: one method per endpoint of the v1 API (docs/API.md, docs/SERVICE.md).
 
     from subdiv import Client
     c = Client("http://127.0.0.1:8080")
@@ -324,7 +324,7 @@ class Session:
                 os.unlink(f"{out}.part")
 
     def level_json(self, level, **options):
-        """The level as the JSON of API.md (vertices, cells, attributes, rules, origin)."""
+        """The level as the JSON of docs/API.md (vertices, cells, attributes, rules, origin)."""
         return json.loads(self.level(level, format="json", **options))
 
     def level_stats(self, level):

@@ -1,4 +1,4 @@
-"""Mesh files -> PUT /complex bodies (SPEC Sec. 7: clients read mesh files, the daemon takes JSON).
+"""Mesh files -> PUT /complex bodies (clients read mesh files, the daemon takes JSON: docs/API.md).
 
 Formats: OBJ, OFF, STL, Gmsh .msh (2.2 and 4.1, ASCII or binary), VTK legacy .vtk, VTK XML .vtu,
 TetGen .node/.ele, all read with meshio (Debian python3-meshio); plus .json, a PUT /complex body
