@@ -1,4 +1,11 @@
-/* jsonin.c — parsing request bodies with jansson and checked field access (see jsonin.h). */
+/* jsonin.c — parsing request bodies with jansson and checked field access (see jsonin.h).
+ *
+ * A body is an object without duplicate keys, nested at most API_MAX_JSON_DEPTH deep (checked
+ * after jansson's parse, which allows 2048); everything else is the getters' business, each of
+ * which fills the problem with the pointer of the field it refused. Nothing here allocates but
+ * jansson, whose allocations go through api/mem.h: a parse during which one was refused is a 503,
+ * never a 400, and never a document (jansson's lexer drops what it cannot store).
+ */
 #include "jsonin.h"
 #include "limits.h"
 #include "mem.h"

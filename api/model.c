@@ -1,4 +1,11 @@
-/* model.c — building, sharing and freeing session models (see model.h). */
+/* model.c — building, sharing and freeing session models (see model.h).
+ *
+ * A model is built whole, then published and never changed but for the core's lazily computed
+ * levels (under `lock`) and an edit's positions (under the `data` write lock). References: the
+ * session holds one, every request and stream in flight one each; the input is shared between
+ * the successive models of a session by its own count. Which arrays are C-library blocks and
+ * which are api_malloc ones is in model.h; api_model_unref frees each with its own family.
+ */
 #include "model.h"
 #include "mem.h"
 #include <stdio.h>

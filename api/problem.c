@@ -1,4 +1,10 @@
-/* problem.c — filling api_problem and rendering it as problem+json (RFC 9457). */
+/* problem.c — filling api_problem and rendering it as problem+json (RFC 9457).
+ *
+ * Filling never allocates (fixed-size buffers, at most API_MAX_FIELD_ERRORS pointers), so a
+ * handler can report running out of memory; only api_problem_json builds JSON, and may return
+ * NULL, which the transport answers with a bare 500. The core's result codes map to statuses in
+ * one place, api_fail_core: NOMEM 503, LIMIT 413, ARG 422, the rest 422 with a pointer.
+ */
 #include "problem.h"
 #include <stdarg.h>
 #include <stdio.h>

@@ -1,4 +1,10 @@
-/* metrics.c — request counters, latency histogram and streamed bytes (see metrics.h). */
+/* metrics.c — request counters, latency histogram and streamed bytes (see metrics.h).
+ *
+ * One process-wide table under a mutex (held for a few comparisons per request); the series
+ * are keyed by pointers to static strings (route templates, interned methods), at most
+ * MAX_SERIES of them — a new series beyond that is not counted. The gauges are not kept here:
+ * the caller samples them when /metrics is scraped.
+ */
 #include "metrics.h"
 #include <pthread.h>
 #include <stdatomic.h>

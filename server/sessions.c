@@ -1,4 +1,10 @@
-/* sessions.c — session ids, tokens, the store and expiry (see sessions.h). */
+/* sessions.c — session ids, tokens, the store and expiry (see sessions.h).
+ *
+ * Ids and tokens come from getrandom(); the store is a fixed array of at most max_sessions,
+ * searched linearly under its mutex (tens of sessions, held for microseconds). A session leaves
+ * the store on DELETE or expiry but lives until its last reference goes, so requests and
+ * streams in flight keep a valid session and model. Tokens are compared in constant time.
+ */
 #include "sessions.h"
 #include "../api/mem.h"
 #include <stdio.h>

@@ -120,104 +120,187 @@ static int check_errors(sd_complex *c)
     return bad ? 1 : 0;
 }
 
-int main(int argc, char **argv)
-{
-    const char *path = NULL, *outpath = NULL, *fmtname = NULL, *parts = NULL, *slice = NULL,
-               *cmap = NULL;
+/* The command line. */
+typedef struct opts {
+    const char *path, *outpath, *fmtname, *parts, *slice, *cmap;
     const char *xname[OUT_MAX_ATTRS];
-    int xcomp[OUT_MAX_ATTRS], nx = 0, level = 1, compute = -1, poly = 0, stats = 0,
-        use_geometry = 0, errors = 0;
-    size_t chunk = 65536;
-    unsigned long long version = 1;
+    int xcomp[OUT_MAX_ATTRS], nx, level, compute, poly, stats, use_geometry, errors;
+    size_t chunk;
+    unsigned long long version;
+} opts;
+
+static void parse_args(int argc, char **argv, opts *o)
+{
+    *o = (opts){.level = 1, .compute = -1, .chunk = 65536, .version = 1};
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         bool more = i + 1 < argc;
         if (!strcmp(a, "-l") && more)
-            level = atoi(argv[++i]);
+            o->level = atoi(argv[++i]);
         else if (!strcmp(a, "-f") && more)
-            fmtname = argv[++i];
+            o->fmtname = argv[++i];
         else if (!strcmp(a, "-o") && more)
-            outpath = argv[++i];
+            o->outpath = argv[++i];
         else if (!strcmp(a, "--parts") && more)
-            parts = argv[++i];
+            o->parts = argv[++i];
         else if (!strcmp(a, "--slice") && more)
-            slice = argv[++i];
+            o->slice = argv[++i];
         else if (!strcmp(a, "--colormap") && more)
-            cmap = argv[++i];
+            o->cmap = argv[++i];
         else if (!strcmp(a, "--chunk") && more) {
             long n = atol(argv[++i]);
             if (n < 1)
                 usage();
-            chunk = (size_t)n;
+            o->chunk = (size_t)n;
         } else if (!strcmp(a, "--version") && more)
-            version = strtoull(argv[++i], NULL, 10);
+            o->version = strtoull(argv[++i], NULL, 10);
         else if (!strcmp(a, "--xattr") && more) {
-            if (nx == OUT_MAX_ATTRS)
+            if (o->nx == OUT_MAX_ATTRS)
                 usage();
             char *spec = argv[++i], *colon = strchr(spec, ':');
-            xcomp[nx] = 1;
+            o->xcomp[o->nx] = 1;
             if (colon) {
                 *colon = 0;
-                xcomp[nx] = atoi(colon + 1);
+                o->xcomp[o->nx] = atoi(colon + 1);
             }
-            if (!*spec || xcomp[nx] < 1 || xcomp[nx] > 16)
+            if (!*spec || o->xcomp[o->nx] < 1 || o->xcomp[o->nx] > 16)
                 usage();
-            xname[nx++] = spec;
+            o->xname[o->nx++] = spec;
         } else if (!strcmp(a, "--compute") && more)
-            compute = atoi(argv[++i]);
+            o->compute = atoi(argv[++i]);
         else if (!strcmp(a, "--check-errors"))
-            errors = 1;
+            o->errors = 1;
         else if (!strcmp(a, "--polyhedra"))
-            poly = 1;
+            o->poly = 1;
         else if (!strcmp(a, "--stats"))
-            stats = 1;
+            o->stats = 1;
         else if (!strcmp(a, "--geometry"))
-            use_geometry = 1;
+            o->use_geometry = 1;
         else if (a[0] == '-' && a[1])
             usage();
-        else if (!path)
-            path = a;
+        else if (!o->path)
+            o->path = a;
         else
             usage();
     }
-    const out_format *fmt = fmtname ? out_format_find(fmtname) : NULL;
-    if (!path || (!errors && (!fmt || (!outpath && !stats))))
-        usage();
+}
 
-    textmesh tm;
+/* The complex of a text-format mesh with its diagonal lines applied; NULL after saying why
+ * (*rc: the exit code; tm is freed then). */
+static sd_complex *load(const char *path, textmesh *tm, int *rc)
+{
     char msg[512];
-    if (textmesh_read(path, &tm, msg, sizeof msg)) {
+    if (textmesh_read(path, tm, msg, sizeof msg)) {
         fprintf(stderr, "outwrite: %s\n", msg);
-        return 2;
+        *rc = 2;
+        return NULL;
     }
     sd_error err = {0};
-    sd_complex *c = sd_complex_new(tm.xyz, tm.nv, tm.idx, tm.size, tm.ns, NULL, &err);
+    sd_complex *c = sd_complex_new(tm->xyz, tm->nv, tm->idx, tm->size, tm->ns, NULL, &err);
     if (!c) {
         fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
-        textmesh_free(&tm);
-        return 1;
+        textmesh_free(tm);
+        *rc = 1;
+        return NULL;
     }
-    for (size_t i = 0; i < tm.ndiag; i++) { /* `d t k`: t counts tetrahedra in input order */
-        long *d = tm.diag + 2 * i, seen = -1;
+    for (size_t i = 0; i < tm->ndiag; i++) { /* `d t k`: t counts tetrahedra in input order */
+        long *d = tm->diag + 2 * i, seen = -1;
         size_t s;
-        for (s = 0; s < tm.ns; s++)
-            if (tm.size[s] == 4 && ++seen == d[0])
+        for (s = 0; s < tm->ns; s++)
+            if (tm->size[s] == 4 && ++seen == d[0])
                 break;
-        if (s == tm.ns || sd_complex_set_diagonal(c, s, (int)d[1], &err)) {
+        if (s == tm->ns || sd_complex_set_diagonal(c, s, (int)d[1], &err)) {
             fprintf(stderr, "outwrite: bad diagonal line 'd %ld %ld'\n", d[0], d[1]);
             sd_complex_free(c);
-            textmesh_free(&tm);
-            return 2;
+            textmesh_free(tm);
+            *rc = 2;
+            return NULL;
         }
     }
+    return c;
+}
+
+/* Pull the whole stream in chunks of `chunk` bytes into outpath (or nowhere), checking the
+ * reader's promises: no chunk larger than asked, the end stays the end, out_size() is exact
+ * when known. 0, 1 (a broken promise) or 2 (I/O); *total = the bytes read. */
+static int drain(out_stream *s, const char *outpath, size_t chunk, uint64_t *total)
+{
+    FILE *f = NULL;
+    char *buf = NULL;
+    int rc = 1;
+    if (outpath && !(f = fopen(outpath, "wb"))) {
+        fprintf(stderr, "outwrite: %s: %s\n", outpath, strerror(errno));
+        return 2;
+    }
+    if (!(buf = malloc(chunk)))
+        goto done;
+    ssize_t n;
+    while ((n = out_read(s, buf, chunk)) > 0) {
+        if ((size_t)n > chunk) {
+            fprintf(stderr, "outwrite: out_read returned %zd > %zu bytes\n", n, chunk);
+            goto done;
+        }
+        if (f && fwrite(buf, 1, (size_t)n, f) != (size_t)n) {
+            fprintf(stderr, "outwrite: %s: %s\n", outpath, strerror(errno));
+            rc = 2;
+            goto done;
+        }
+        *total += (uint64_t)n;
+    }
+    if (n < 0) {
+        fprintf(stderr, "outwrite: the writer failed after %llu bytes\n", (unsigned long long)*total);
+        goto done;
+    }
+    if (out_read(s, buf, chunk) != 0) { /* the end stays the end */
+        fprintf(stderr, "outwrite: bytes after the end of the stream\n");
+        goto done;
+    }
+    if (out_size(s) != UINT64_MAX && out_size(s) != *total) {
+        fprintf(stderr, "outwrite: out_size %llu but %llu bytes written\n",
+                (unsigned long long)out_size(s), (unsigned long long)*total);
+        goto done;
+    }
+    FILE *closing = f;
+    f = NULL;
+    if (closing && fclose(closing)) {
+        fprintf(stderr, "outwrite: %s: %s\n", outpath, strerror(errno));
+        rc = 2;
+        goto done;
+    }
+    rc = 0;
+done:
+    if (f)
+        fclose(f);
+    free(buf);
+    return rc;
+}
+
+int main(int argc, char **argv)
+{
+    opts o;
+    parse_args(argc, argv, &o);
+    const char *path = o.path, *outpath = o.outpath, *parts = o.parts, *slice = o.slice,
+               *cmap = o.cmap;
+    const char *const *xname = o.xname;
+    const int *xcomp = o.xcomp;
+    int nx = o.nx, level = o.level, compute = o.compute, poly = o.poly, stats = o.stats,
+        use_geometry = o.use_geometry, errors = o.errors;
+    size_t chunk = o.chunk;
+    unsigned long long version = o.version;
+    const out_format *fmt = o.fmtname ? out_format_find(o.fmtname) : NULL;
+    if (!path || (!errors && (!fmt || (!outpath && !stats))))
+        usage();
+    textmesh tm;
+    int rc = 1;
+    sd_complex *c = load(path, &tm, &rc);
+    if (!c)
+        return rc;
+    sd_error err = {0};
 
     /* from here on every exit goes through `done`, which frees everything (clean under LSan) */
     out_geometry *geo = NULL;
     out_stream *s = NULL;
-    FILE *f = NULL;
-    char *buf = NULL;
     const sd_level *lv = NULL;
-    int rc = 1;
     if (errors) {
         rc = check_errors(c);
         goto done;
@@ -288,47 +371,9 @@ int main(int argc, char **argv)
         fprintf(stderr, "outwrite: %s: %s\n", sd_result_name(err.code), err.message);
         goto done;
     }
-    if (outpath && !(f = fopen(outpath, "wb"))) {
-        fprintf(stderr, "outwrite: %s: %s\n", outpath, strerror(errno));
-        rc = 2;
-        goto done;
-    }
-    if (!(buf = malloc(chunk)))
-        goto done;
     uint64_t total = 0;
-    ssize_t n;
-    while ((n = out_read(s, buf, chunk)) > 0) {
-        if ((size_t)n > chunk) {
-            fprintf(stderr, "outwrite: out_read returned %zd > %zu bytes\n", n, chunk);
-            goto done;
-        }
-        if (f && fwrite(buf, 1, (size_t)n, f) != (size_t)n) {
-            fprintf(stderr, "outwrite: %s: %s\n", outpath, strerror(errno));
-            rc = 2;
-            goto done;
-        }
-        total += (uint64_t)n;
-    }
-    if (n < 0) {
-        fprintf(stderr, "outwrite: the writer failed after %llu bytes\n", (unsigned long long)total);
+    if ((rc = drain(s, outpath, chunk, &total)))
         goto done;
-    }
-    if (out_read(s, buf, chunk) != 0) { /* the end stays the end */
-        fprintf(stderr, "outwrite: bytes after the end of the stream\n");
-        goto done;
-    }
-    if (out_size(s) != UINT64_MAX && out_size(s) != total) {
-        fprintf(stderr, "outwrite: out_size %llu but %llu bytes written\n",
-                (unsigned long long)out_size(s), (unsigned long long)total);
-        goto done;
-    }
-    FILE *closing = f;
-    f = NULL;
-    if (closing && fclose(closing)) {
-        fprintf(stderr, "outwrite: %s: %s\n", outpath, strerror(errno));
-        rc = 2;
-        goto done;
-    }
     if (stats) {
         static const char *const kinds[] = {"points", "edges", "triangles", "tetrahedra", "octahedra"};
         printf("level %d vertices %u", level, sd_level_num_vertices(lv));
@@ -339,9 +384,6 @@ int main(int argc, char **argv)
     }
     rc = 0;
 done:
-    if (f)
-        fclose(f);
-    free(buf);
     out_close(s);
     out_geometry_free(geo);
     sd_complex_free(c);
