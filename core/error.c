@@ -1,4 +1,4 @@
-/* error.c — filling the caller's sd_error, and the names of result codes and rules. */
+/* error.c — filling the caller's sd_error, and the names of result codes. */
 #include "internal.h"
 #include <stdarg.h>
 #include <stdio.h>
@@ -32,14 +32,4 @@ const char *sd_result_name(sd_result r)
         "repeated-vertex", "duplicate-simplex", "degenerate-simplex", "argument",
     };
     return (unsigned)r < sizeof names / sizeof *names ? names[r] : "unknown";
-}
-
-const char *sd_rule_name(sd_rule r)
-{
-    static const char *const names[] = {
-        "corner", "curve", "loop", "loop-boundary", "solid", "solid-boundary",
-        "N1", "N2", "G1", "G2", "ying-zorin-crease", "ying-zorin-corner", "ying-zorin-petal",
-        "ying-zorin-fixed-disk", "ying-zorin-dart", "ying-zorin-concave",
-    };
-    return (unsigned)r < SD_RULE_COUNT ? names[r] : "unknown";
 }

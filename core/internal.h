@@ -336,6 +336,9 @@ sd_result sd_ensure_rules(sd_complex *cx, int level, sd_error *err);
 sd_result sd_ensure_derived(sd_complex *cx, int level, sd_error *err);
 /* The same from a const accessor of the level (see sd.h on locking); false if it failed. */
 bool sd_need_derived(const sd_level *lv);
+/* Whether a vertex (edge false) or edge whose computed rule is `rule` and whose rho / ring has k
+ * entries is extraordinary (rule_table.h). */
+bool sd_rule_extraordinary(uint8_t rule, uint32_t k, bool edge);
 /* The rule of vertex v from the level's classification alone (no stencils needed). */
 uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v);
 /* The rules vertices actually follow (corners where the neighbourhood does not fit the

@@ -382,19 +382,6 @@ uint32_t sd_level_find_edge(const sd_level *lv, uint32_t a, uint32_t b)
     return sd_need_derived(lv) ? sd_topo_find_edge(&lv->t, a, b) : UINT32_MAX;
 }
 
-static bool extraordinary(uint8_t rule, uint32_t k, bool edge)
-{
-    switch (rule) {
-    case SD_RULE_LOOP:
-    case SD_RULE_SOLID_BOUNDARY:
-        return !edge && k != 6;
-    case SD_RULE_SOLID:
-        return edge ? (k != 4 && k != 6) : k != 14;
-    default:
-        return false;
-    }
-}
-
 static sd_result class_of(sd_complex *c, int level, sd_error *err, sd_level **out)
 {
     sd_error local;
@@ -418,7 +405,7 @@ sd_result sd_level_vertex_class(const sd_level *lv, uint32_t i, sd_class *o)
     o->nonmanifold = (uint8_t)nm_type(t->vnm[i]);
     o->rule = lv->vrule[i];
     o->valence = sd_csrb_len(&lv->S, i) - 1;
-    o->extraordinary = extraordinary(o->rule, o->valence, false);
+    o->extraordinary = sd_rule_extraordinary(o->rule, o->valence, false);
     o->rule = (uint8_t)sd_reported_vertex_rule(t, i, lv->vrule[i]);
     return SD_OK;
 }
@@ -433,7 +420,7 @@ sd_result sd_level_edge_class(const sd_level *lv, uint32_t e, sd_class *o)
     o->nonmanifold = (uint8_t)nm_type(t->enm[e]);
     o->rule = lv->erule[e];
     o->valence = sd_csrb_len(&lv->S, t->nv + e) - 2;
-    o->extraordinary = extraordinary(o->rule, o->valence, true);
+    o->extraordinary = sd_rule_extraordinary(o->rule, o->valence, true);
     o->rule = (uint8_t)sd_reported_edge_rule(t, e, lv->erule[e]);
     return SD_OK;
 }

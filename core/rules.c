@@ -33,6 +33,25 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* The names and regular sizes of the rules (rule_table.h). */
+#define RULE_NAME(id, name, ...) [id] = name,
+static const char *const rule_names[SD_RULE_COUNT] = {SD_RULE_TABLE(RULE_NAME)};
+#undef RULE_NAME
+#define RULE_REGULAR(id, name, vregular, eregular) [id] = {vregular, eregular},
+static const uint32_t rule_regular[SD_RULE_COUNT][2] = {SD_RULE_TABLE(RULE_REGULAR)};
+#undef RULE_REGULAR
+
+const char *sd_rule_name(sd_rule r)
+{
+    return (unsigned)r < SD_RULE_COUNT ? rule_names[r] : "unknown";
+}
+
+bool sd_rule_extraordinary(uint8_t rule, uint32_t k, bool edge)
+{
+    uint32_t regular = rule < SD_RULE_COUNT ? rule_regular[rule][edge] : 0;
+    return regular && !(k < 32 && (regular >> k & 1));
+}
+
 uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v)
 {
     uint8_t fam = t->vfam[v], nm = t->vnm[v], fl = t->vflag[v];

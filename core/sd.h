@@ -36,6 +36,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "rule_table.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -156,25 +158,12 @@ sd_origin_kind sd_level_origin(const sd_level *lv, uint32_t i, uint32_t *a, uint
 
 /* ---- classification and rules (000 Sec. 2, SPEC Sec. 1 and 3) ----------------------------- */
 
+/* The rules, numbered in the order of the table in rule_table.h (docs/RULES.md says which paper
+ * equation each implements). */
 typedef enum sd_rule {
-    SD_RULE_CORNER = 0,       /* fixed: 0-mask */
-    SD_RULE_CURVE,            /* cubic B-spline */
-    SD_RULE_LOOP,             /* Loop surface */
-    SD_RULE_LOOP_BOUNDARY,    /* boundary of a surface: cubic B-spline along it */
-    SD_RULE_SOLID,            /* box-spline (or averaged) solid */
-    SD_RULE_SOLID_BOUNDARY,   /* boundary of a solid: Loop on the boundary surface */
-    SD_RULE_N1, SD_RULE_N2, SD_RULE_G1, SD_RULE_G2,
-    SD_RULE_YZ_CREASE,        /* Ying-Zorin (003): a non-manifold edge, or a simple singular
-                               * vertex: cubic B-spline along the singular edges */
-    SD_RULE_YZ_CORNER,        /* ... a complex singular vertex: fixed (convex corner) */
-    SD_RULE_YZ_PETAL,         /* ... an edge of a petal at a singular vertex: the piecewise smooth
-                               * rule of its petal (003 Fig. 4f) */
-    SD_RULE_YZ_FIXED_DISK,    /* ... an edge of a closed petal at a non-manifold vertex: 003's
-                               * fixed-disk rule (Loop, then the flatness modification) */
-    SD_RULE_YZ_DART,          /* ... an edge of a dart petal at a complex singular vertex: the
-                               * dart rule, then the flatness modification */
-    SD_RULE_YZ_CONCAVE,       /* ... an edge of a petal tagged a concave corner: its rule, then
-                               * the flatness modification */
+#define SD_RULE_ENUM_(id, ...) id,
+    SD_RULE_TABLE(SD_RULE_ENUM_)
+#undef SD_RULE_ENUM_
     SD_RULE_COUNT
 } sd_rule;
 const char *sd_rule_name(sd_rule r);
