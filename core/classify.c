@@ -25,28 +25,28 @@ typedef struct inc {
 static bool inc_build(sd_mem *m, inc *x, uint32_t n, uint32_t nitems, int per,
                       const uint32_t *keys /* nitems*per keys */)
 {
-    x->off = sd_calloc(m, (size_t)n + 1, sizeof *x->off);
-    x->item = sd_alloc(m, ((size_t)nitems * per + 1) * sizeof *x->item);
+    x->off = sdi_calloc(m, (size_t)n + 1, sizeof *x->off);
+    x->item = sdi_alloc(m, ((size_t)nitems * per + 1) * sizeof *x->item);
     if (!x->off || !x->item)
         return false;
     for (size_t i = 0; i < (size_t)nitems * per; i++)
         x->off[keys[i] + 1]++;
     for (uint32_t i = 0; i < n; i++)
         x->off[i + 1] += x->off[i];
-    uint32_t *pos = sd_alloc(m, ((size_t)n + 1) * sizeof *pos);
+    uint32_t *pos = sdi_alloc(m, ((size_t)n + 1) * sizeof *pos);
     if (!pos)
         return false;
     memcpy(pos, x->off, ((size_t)n + 1) * sizeof *pos);
     for (size_t i = 0; i < (size_t)nitems * per; i++)
         x->item[pos[keys[i]]++] = (uint32_t)(i / per);
-    sd_free(m, pos);
+    sdi_free(m, pos);
     return true;
 }
 
 static void inc_free(sd_mem *m, inc *x)
 {
-    sd_free(m, x->off);
-    sd_free(m, x->item);
+    sdi_free(m, x->off);
+    sdi_free(m, x->item);
 }
 
 /* Union-find over the link's nodes, numbered locally through `loc` (stamped per query). */
@@ -90,17 +90,17 @@ static void uf_begin(linkuf *u)
     u->n = 0;
 }
 
-sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
+sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
 {
     uint32_t nv = t->nv, ne = t->ne;
-    t->vfam = sd_calloc(m, nv, 1);
-    t->vflag = sd_calloc(m, nv, 1);
-    t->vnm = sd_calloc(m, nv, 1);
-    t->efam = sd_calloc(m, ne ? ne : 1, 1);
-    t->eflag = sd_calloc(m, ne ? ne : 1, 1);
-    t->enm = sd_calloc(m, ne ? ne : 1, 1);
-    uint32_t *cdeg = sd_calloc(m, nv, sizeof *cdeg);
-    uint32_t *n2 = sd_calloc(m, ne ? ne : 1, sizeof *n2);
+    t->vfam = sdi_calloc(m, nv, 1);
+    t->vflag = sdi_calloc(m, nv, 1);
+    t->vnm = sdi_calloc(m, nv, 1);
+    t->efam = sdi_calloc(m, ne ? ne : 1, 1);
+    t->eflag = sdi_calloc(m, ne ? ne : 1, 1);
+    t->enm = sdi_calloc(m, ne ? ne : 1, 1);
+    uint32_t *cdeg = sdi_calloc(m, nv, sizeof *cdeg);
+    uint32_t *n2 = sdi_calloc(m, ne ? ne : 1, sizeof *n2);
     inc vt = {0}, vtri = {0}, et = {0};
     linkuf u = {0};
     uint32_t *trv = NULL, *tetv = NULL;
@@ -186,8 +186,8 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
                     t->vnm[t->ev[e][k]] = 4;
 
     /* type 3: link components (002 Sec. 5.2) */
-    trv = sd_alloc(m, ((size_t)t->ntr * 3 + 1) * sizeof *trv);
-    tetv = sd_alloc(m, ((size_t)t->ntet * 6 + 1) * sizeof *tetv);
+    trv = sdi_alloc(m, ((size_t)t->ntr * 3 + 1) * sizeof *trv);
+    tetv = sdi_alloc(m, ((size_t)t->ntet * 6 + 1) * sizeof *tetv);
     if (!trv || !tetv)
         goto nomem;
     for (uint32_t i = 0; i < t->ntr; i++)
@@ -196,9 +196,9 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
         !inc_build(m, &vt, nv, t->ntet, 4, &t->tet[0][0]) ||
         !inc_build(m, &et, ne, t->ntet, 6, &t->tet_e[0][0]))
         goto nomem;
-    u.loc = sd_alloc(m, (size_t)nv * sizeof *u.loc);
-    u.stamp = sd_calloc(m, nv, sizeof *u.stamp);
-    u.parent = sd_alloc(m, (size_t)nv * sizeof *u.parent);
+    u.loc = sdi_alloc(m, (size_t)nv * sizeof *u.loc);
+    u.stamp = sdi_calloc(m, nv, sizeof *u.stamp);
+    u.parent = sdi_alloc(m, (size_t)nv * sizeof *u.parent);
     if (!u.loc || !u.stamp || !u.parent)
         goto nomem;
 
@@ -251,18 +251,18 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
 
     goto out;
 nomem:
-    rc = sd_fail_nomem(err, m);
+    rc = sdi_fail_nomem(err, m);
 out:
-    sd_free(m, cdeg);
-    sd_free(m, n2);
-    sd_free(m, trv);
-    sd_free(m, tetv);
+    sdi_free(m, cdeg);
+    sdi_free(m, n2);
+    sdi_free(m, trv);
+    sdi_free(m, tetv);
     inc_free(m, &vt);
     inc_free(m, &vtri);
     inc_free(m, &et);
-    sd_free(m, u.loc);
-    sd_free(m, u.stamp);
-    sd_free(m, u.parent);
+    sdi_free(m, u.loc);
+    sdi_free(m, u.stamp);
+    sdi_free(m, u.parent);
     return rc;
 }
 
@@ -270,7 +270,7 @@ out:
  * has exactly one edge in every face: the one not touching vertex i). */
 static uint32_t pair_edge_in_face(const sd_topo *t, uint32_t c, int pair, int i)
 {
-    int k = (SD_TET_E[pair][0] == i || SD_TET_E[pair][1] == i) ? 5 - pair : pair;
+    int k = (SDI_TET_E[pair][0] == i || SDI_TET_E[pair][1] == i) ? 5 - pair : pair;
     return t->tet_e[c][k];
 }
 
@@ -282,18 +282,18 @@ static uint32_t pair_edge_in_face(const sd_topo *t, uint32_t c, int pair, int i)
  * diagonals meet at its midpoint. (Reading Algorithm 2's "c.edges - s" literally, i.e. avoiding
  * the neighbours' edges, makes every shared face improper: after 3 levels of two tetrahedra the
  * shared face then carries interior edges with |rho(e)| = 5; with this rule all are 4 or 6.) */
-sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err)
+sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err)
 {
     if (t->ntet == 0)
         return SD_OK;
     inc ft = {0};
-    uint32_t *queue = sd_alloc(m, (size_t)t->ntet * sizeof *queue);
-    uint8_t *state = sd_calloc(m, t->ntet, 1); /* 0 new, 1 queued, 2 visited */
+    uint32_t *queue = sdi_alloc(m, (size_t)t->ntet * sizeof *queue);
+    uint8_t *state = sdi_calloc(m, t->ntet, 1); /* 0 new, 1 queued, 2 visited */
     if (!queue || !state || !inc_build(m, &ft, t->nf, t->ntet, 4, &t->tet_f[0][0])) {
-        sd_free(m, queue);
-        sd_free(m, state);
+        sdi_free(m, queue);
+        sdi_free(m, state);
         inc_free(m, &ft);
-        return sd_fail_nomem(err, m);
+        return sdi_fail_nomem(err, m);
     }
     for (uint32_t start = 0; start < t->ntet; start++) {
         if (state[start])
@@ -333,8 +333,8 @@ sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err)
             state[c] = 2;
         }
     }
-    sd_free(m, queue);
-    sd_free(m, state);
+    sdi_free(m, queue);
+    sdi_free(m, state);
     inc_free(m, &ft);
     return SD_OK;
 }

@@ -18,11 +18,11 @@
 #define SD_MAX_COORD 1e15
 #define SD_DEGENERATE_TOL 1e-12
 
-const uint8_t SD_TET_E[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
-const uint8_t SD_TET_F[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
-const uint8_t SD_OCT_E[12][2] = {{0, 2}, {0, 4}, {0, 3}, {0, 5}, {1, 2}, {1, 4},
+const uint8_t SDI_TET_E[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
+const uint8_t SDI_TET_F[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+const uint8_t SDI_OCT_E[12][2] = {{0, 2}, {0, 4}, {0, 3}, {0, 5}, {1, 2}, {1, 4},
                                  {1, 3}, {1, 5}, {2, 4}, {4, 3}, {3, 5}, {5, 2}};
-const uint8_t SD_OCT_F[8][3] = {{0, 2, 4}, {0, 4, 3}, {0, 3, 5}, {0, 5, 2},
+const uint8_t SDI_OCT_F[8][3] = {{0, 2, 4}, {0, 4, 3}, {0, 3, 5}, {0, 5, 2},
                                 {1, 4, 2}, {1, 3, 4}, {1, 5, 3}, {1, 2, 5}};
 
 static void sub3(double *o, const double *a, const double *b)
@@ -86,17 +86,17 @@ static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint3
                           const uint8_t *size, uint32_t ns, sd_error *err)
 {
     if (nv == 0)
-        return sd_fail(err, SD_ERR_EMPTY, -1, -1, "the complex has no vertices");
+        return sdi_fail(err, SD_ERR_EMPTY, -1, -1, "the complex has no vertices");
     if (ns == 0)
-        return sd_fail(err, SD_ERR_EMPTY, -1, -1, "the complex has no simplices");
+        return sdi_fail(err, SD_ERR_EMPTY, -1, -1, "the complex has no simplices");
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (uint32_t v = 0; v < nv; v++)
         for (int k = 0; k < 3; k++) {
             double x = xyz[3 * (size_t)v + k];
             if (!isfinite(x))
-                return sd_fail(err, SD_ERR_VALUE, v, k, "vertex %u: coordinate %d is not finite", v, k);
+                return sdi_fail(err, SD_ERR_VALUE, v, k, "vertex %u: coordinate %d is not finite", v, k);
             if (fabs(x) > SD_MAX_COORD)
-                return sd_fail(err, SD_ERR_VALUE, v, k,
+                return sdi_fail(err, SD_ERR_VALUE, v, k,
                                "vertex %u: coordinate %d = %g exceeds the allowed magnitude %g", v, k,
                                x, SD_MAX_COORD);
             lo[k] = fmin(lo[k], x);
@@ -110,52 +110,52 @@ static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint3
     for (uint32_t s = 0; s < ns; s++) {
         int n = size[s];
         if (n < 1 || n > 4)
-            return sd_fail(err, SD_ERR_ARITY, s, -1,
+            return sdi_fail(err, SD_ERR_ARITY, s, -1,
                            "simplex %u has %d vertices; a simplex has 1 to 4 (point, edge, "
                            "triangle, tetrahedron)", s, n);
         const uint32_t *t = idx + off;
         for (int i = 0; i < n; i++) {
             if (t[i] >= nv)
-                return sd_fail(err, SD_ERR_INDEX, s, i,
+                return sdi_fail(err, SD_ERR_INDEX, s, i,
                                "simplex %u: vertex index %u out of range (%u vertices)", s, t[i], nv);
             for (int j = 0; j < i; j++)
                 if (t[j] == t[i])
-                    return sd_fail(err, SD_ERR_REPEATED, s, i,
+                    return sdi_fail(err, SD_ERR_REPEATED, s, i,
                                    "simplex %u: vertex %u appears twice", s, t[i]);
         }
         if (degenerate(xyz, t, n, diag))
-            return sd_fail(err, SD_ERR_DEGENERATE, s, -1,
+            return sdi_fail(err, SD_ERR_DEGENERATE, s, -1,
                            "simplex %u: degenerate %s (zero or near-zero %s)", s, kind_name[n],
                            n == 2 ? "length" : n == 3 ? "area" : "volume");
         off += n;
     }
 
     sd_hash h;
-    if (!sd_hash_init(m, &h, ns))
-        return sd_fail_nomem(err, m);
+    if (!sdi_hash_init(m, &h, ns))
+        return sdi_fail_nomem(err, m);
     off = 0;
     for (uint32_t s = 0; s < ns; s++) {
         uint32_t k[4];
-        sd_key(k, idx + off, size[s]);
-        uint32_t prev = sd_hash_get_or_put(&h, k, s);
+        sdi_key(k, idx + off, size[s]);
+        uint32_t prev = sdi_hash_get_or_put(&h, k, s);
         if (prev != UINT32_MAX) {
-            sd_hash_free(m, &h);
-            return sd_fail(err, SD_ERR_DUPLICATE, s, -1,
+            sdi_hash_free(m, &h);
+            return sdi_fail(err, SD_ERR_DUPLICATE, s, -1,
                            "simplex %u repeats simplex %u (same vertices)", s, prev);
         }
         off += size[s];
     }
-    sd_hash_free(m, &h);
+    sdi_hash_free(m, &h);
     return SD_OK;
 }
 
-void sd_topo_free_faces(sd_mem *m, sd_topo *t)
+void sdi_topo_free_faces(sd_mem *m, sd_topo *t)
 {
     if (t->fv != t->trv) /* fv may be the triangles' own array (tr_ident) */
-        sd_free(m, t->fv);
+        sdi_free(m, t->fv);
     void *arrays[] = {t->fe, t->cu, t->tr, t->tet_e, t->tet_f, t->oct_e, t->oct_f, t->fn3, t->fflag};
     for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
-        sd_free(m, arrays[i]);
+        sdi_free(m, arrays[i]);
     t->fv = t->fe = NULL;
     t->cu = t->tr = NULL;
     t->tet_e = NULL;
@@ -166,32 +166,32 @@ void sd_topo_free_faces(sd_mem *m, sd_topo *t)
     t->faces = false;
 }
 
-void sd_topo_free_edges(sd_mem *m, sd_topo *t)
+void sdi_topo_free_edges(sd_mem *m, sd_topo *t)
 {
     void *arrays[] = {t->ev, t->efam, t->eflag, t->enm};
     for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
-        sd_free(m, arrays[i]);
+        sdi_free(m, arrays[i]);
     t->ev = NULL;
     t->efam = t->eflag = t->enm = NULL;
     t->derived = false;
 }
 
-void sd_topo_free(sd_mem *m, sd_topo *t)
+void sdi_topo_free(sd_mem *m, sd_topo *t)
 {
-    sd_topo_free_faces(m, t);
-    sd_topo_free_edges(m, t);
+    sdi_topo_free_faces(m, t);
+    sdi_topo_free_edges(m, t);
     void *arrays[] = {t->pt, t->cuv, t->trv, t->tet, t->tet_d, t->tet_b, t->oct, t->oct_b,
                       t->vfam, t->vflag, t->vnm};
     for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
-        sd_free(m, arrays[i]);
+        sdi_free(m, arrays[i]);
     memset(t, 0, sizeof *t);
 }
 
 static uint32_t edge_id(sd_hash *h, sd_topo *t, uint32_t a, uint32_t b)
 {
     uint32_t ids[2] = {a, b}, k[4];
-    sd_key(k, ids, 2);
-    uint32_t e = sd_hash_get_or_put(h, k, t->ne);
+    sdi_key(k, ids, 2);
+    uint32_t e = sdi_hash_get_or_put(h, k, t->ne);
     if (e != UINT32_MAX)
         return e;
     t->ev[t->ne][0] = a;
@@ -203,8 +203,8 @@ static uint32_t edge_id(sd_hash *h, sd_topo *t, uint32_t a, uint32_t b)
 static uint32_t face_id(sd_hash *h, sd_topo *t, const uint32_t v[3], bool *isnew)
 {
     uint32_t k[4];
-    sd_key(k, v, 3);
-    uint32_t f = sd_hash_get_or_put(h, k, t->nf);
+    sdi_key(k, v, 3);
+    uint32_t f = sdi_hash_get_or_put(h, k, t->nf);
     *isnew = f == UINT32_MAX;
     if (!*isnew)
         return f;
@@ -212,7 +212,7 @@ static uint32_t face_id(sd_hash *h, sd_topo *t, const uint32_t v[3], bool *isnew
     return t->nf++;
 }
 
-sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
+sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
                           const uint8_t *size, uint32_t ns, sd_error *err)
 {
     sd_mem *m = &c->mem;
@@ -226,34 +226,34 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
     size_t emax = 6 * count[4] + 3 * count[3] + count[2];
     size_t fmax = 4 * count[4] + count[3];
     if (emax >= UINT32_MAX || fmax >= UINT32_MAX)
-        return sd_fail(err, SD_ERR_LIMIT, -1, -1, "too many simplices for 32-bit ids");
+        return sdi_fail(err, SD_ERR_LIMIT, -1, -1, "too many simplices for 32-bit ids");
 
-    sd_level *lv = sd_calloc(m, 1, sizeof *lv);
+    sd_level *lv = sdi_calloc(m, 1, sizeof *lv);
     if (!lv)
-        return sd_fail_nomem(err, m);
+        return sdi_fail_nomem(err, m);
     sd_topo *t = &lv->t;
     sd_hash he = {0}, hf = {0};
     uint8_t *used = NULL;
     t->nv = nv;
-    t->ev = sd_alloc(m, (emax ? emax : 1) * sizeof *t->ev);
-    t->fv = sd_alloc(m, (fmax ? fmax : 1) * sizeof *t->fv);
-    t->fe = sd_alloc(m, (fmax ? fmax : 1) * sizeof *t->fe);
-    t->fflag = sd_calloc(m, fmax ? fmax : 1, 1);
-    t->fn3 = sd_calloc(m, fmax ? fmax : 1, 1);
-    t->pt = sd_alloc(m, (count[1] + 1) * sizeof *t->pt);
-    t->cu = sd_alloc(m, (count[2] + 1) * sizeof *t->cu);
-    t->tr = sd_alloc(m, (count[3] + 1) * sizeof *t->tr);
-    t->tet = sd_alloc(m, (count[4] + 1) * sizeof *t->tet);
-    t->tet_e = sd_alloc(m, (count[4] + 1) * sizeof *t->tet_e);
-    t->tet_f = sd_alloc(m, (count[4] + 1) * sizeof *t->tet_f);
-    t->tet_d = sd_calloc(m, count[4] + 1, 1);
-    t->tet_b = sd_calloc(m, count[4] + 1, 1);
-    c->in_tet = sd_alloc(m, (size_t)ns * sizeof *c->in_tet);
-    c->tet_swapped = sd_calloc(m, count[4] + 1, 1);
-    used = sd_calloc(m, nv, 1);
+    t->ev = sdi_alloc(m, (emax ? emax : 1) * sizeof *t->ev);
+    t->fv = sdi_alloc(m, (fmax ? fmax : 1) * sizeof *t->fv);
+    t->fe = sdi_alloc(m, (fmax ? fmax : 1) * sizeof *t->fe);
+    t->fflag = sdi_calloc(m, fmax ? fmax : 1, 1);
+    t->fn3 = sdi_calloc(m, fmax ? fmax : 1, 1);
+    t->pt = sdi_alloc(m, (count[1] + 1) * sizeof *t->pt);
+    t->cu = sdi_alloc(m, (count[2] + 1) * sizeof *t->cu);
+    t->tr = sdi_alloc(m, (count[3] + 1) * sizeof *t->tr);
+    t->tet = sdi_alloc(m, (count[4] + 1) * sizeof *t->tet);
+    t->tet_e = sdi_alloc(m, (count[4] + 1) * sizeof *t->tet_e);
+    t->tet_f = sdi_alloc(m, (count[4] + 1) * sizeof *t->tet_f);
+    t->tet_d = sdi_calloc(m, count[4] + 1, 1);
+    t->tet_b = sdi_calloc(m, count[4] + 1, 1);
+    c->in_tet = sdi_alloc(m, (size_t)ns * sizeof *c->in_tet);
+    c->tet_swapped = sdi_calloc(m, count[4] + 1, 1);
+    used = sdi_calloc(m, nv, 1);
     if (!t->ev || !t->fv || !t->fe || !t->fflag || !t->fn3 || !t->pt || !t->cu || !t->tr ||
         !t->tet || !t->tet_e || !t->tet_f || !t->tet_d || !t->tet_b || !c->in_tet || !c->tet_swapped ||
-        !used || !sd_hash_init(m, &he, emax) || !sd_hash_init(m, &hf, fmax))
+        !used || !sdi_hash_init(m, &he, emax) || !sdi_hash_init(m, &hf, fmax))
         goto nomem;
     c->nin = ns;
 
@@ -272,9 +272,9 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
                 c->tet_swapped[t->ntet] = 1;
             }
             for (int k = 0; k < 6; k++)
-                t->tet_e[t->ntet][k] = edge_id(&he, t, q[SD_TET_E[k][0]], q[SD_TET_E[k][1]]);
+                t->tet_e[t->ntet][k] = edge_id(&he, t, q[SDI_TET_E[k][0]], q[SDI_TET_E[k][1]]);
             for (int i = 0; i < 4; i++) {
-                uint32_t fv[3] = {q[SD_TET_F[i][0]], q[SD_TET_F[i][1]], q[SD_TET_F[i][2]]};
+                uint32_t fv[3] = {q[SDI_TET_F[i][0]], q[SDI_TET_F[i][1]], q[SDI_TET_F[i][2]]};
                 bool isnew;
                 uint32_t f = face_id(&hf, t, fv, &isnew);
                 t->tet_f[t->ntet][i] = f;
@@ -332,18 +332,18 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
     for (uint32_t f = 0; f < t->nf; f++)
         for (int j = 0; j < 3; j++) {
             uint32_t ids[2] = {t->fv[f][j], t->fv[f][(j + 1) % 3]}, k[4];
-            sd_key(k, ids, 2);
-            t->fe[f][j] = sd_hash_get(&he, k);
+            sdi_key(k, ids, 2);
+            t->fe[f][j] = sdi_hash_get(&he, k);
         }
-    sd_hash_free(m, &he);
-    sd_hash_free(m, &hf);
-    sd_free(m, used);
+    sdi_hash_free(m, &he);
+    sdi_hash_free(m, &hf);
+    sdi_free(m, used);
     used = NULL;
 
     /* channel 0: positions */
     lv->nch = 1;
     lv->ch[0].ncomp = 3;
-    lv->ch[0].data = sd_alloc(m, (size_t)nv * 3 * sizeof(double));
+    lv->ch[0].data = sdi_alloc(m, (size_t)nv * 3 * sizeof(double));
     if (!lv->ch[0].data)
         goto nomem;
     memcpy(lv->ch[0].data, xyz, (size_t)nv * 3 * sizeof(double));
@@ -355,10 +355,10 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
         t->tr_ident = t->tr[i] == i;
     c->lv[0] = lv;
     c->nlevels = 1;
-    if ((r = sd_classify_level0(m, t, err)) || (r = sd_choose_diagonals(m, t, err))) {
+    if ((r = sdi_classify_level0(m, t, err)) || (r = sdi_choose_diagonals(m, t, err))) {
         c->lv[0] = NULL;
         c->nlevels = 0;
-        sd_level_free(m, lv);
+        sdi_level_free(m, lv);
         return r;
     }
     for (uint32_t q = 0; q < t->ntet; q++) /* the solids' boundary faces, as later levels inherit */
@@ -368,21 +368,21 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
     return SD_OK;
 
 nomem:
-    sd_hash_free(m, &he);
-    sd_hash_free(m, &hf);
-    sd_free(m, used);
-    sd_level_free(m, lv);
-    return sd_fail_nomem(err, m);
+    sdi_hash_free(m, &he);
+    sdi_hash_free(m, &hf);
+    sdi_free(m, used);
+    sdi_level_free(m, lv);
+    return sdi_fail_nomem(err, m);
 }
 
-void sd_level_free(sd_mem *m, sd_level *lv)
+void sdi_level_free(sd_mem *m, sd_level *lv)
 {
     if (!lv)
         return;
-    sd_topo_free(m, &lv->t);
-    sd_level_free_rules(m, lv);
-    sd_free(m, lv->slot);
+    sdi_topo_free(m, &lv->t);
+    sdi_level_free_rules(m, lv);
+    sdi_free(m, lv->slot);
     for (int i = 0; i < lv->nch; i++)
-        sd_free(m, lv->ch[i].data);
-    sd_free(m, lv);
+        sdi_free(m, lv->ch[i].data);
+    sdi_free(m, lv);
 }

@@ -3,7 +3,7 @@
 #include <stdarg.h>
 #include <stdio.h>
 
-sd_result sd_fail(sd_error *err, sd_result code, long item, int field, const char *fmt, ...)
+sd_result sdi_fail(sd_error *err, sd_result code, long item, int field, const char *fmt, ...)
 {
     if (err) {
         err->code = code;
@@ -17,12 +17,12 @@ sd_result sd_fail(sd_error *err, sd_result code, long item, int field, const cha
     return code;
 }
 
-sd_result sd_fail_nomem(sd_error *err, const sd_mem *m)
+sd_result sdi_fail_nomem(sd_error *err, const sd_mem *m)
 {
     if (m->failed_limit)
-        return sd_fail(err, SD_ERR_LIMIT, -1, -1,
+        return sdi_fail(err, SD_ERR_LIMIT, -1, -1,
                        "memory limit of %zu bytes reached (%zu in use)", m->limit, m->used);
-    return sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory (%zu bytes in use)", m->used);
+    return sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory (%zu bytes in use)", m->used);
 }
 
 const char *sd_result_name(sd_result r)

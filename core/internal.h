@@ -11,6 +11,11 @@
  *   octahedron o[0..5] = p, q, a, a2, b, b2 (three opposite pairs, the major diagonal p-q first);
  *     equator cycle a, b, a2, b2; edges OCT_E; faces OCT_F (outward for positive orientation).
  *   face f: fv[f][0..2], fe[f][j] = edge (fv[j], fv[j+1]).
+ *
+ * Names: functions shared between the core's files are sdi_* (constant tables SDI_*), file-local
+ * ones static; only sd.h's sd_* functions are the library's API (tests/python/test_exports.py
+ * checks the global symbols of libsubdiv.a). The internal types keep the sd_ prefix of the
+ * structures they describe (sd_topo, sd_mem, ...); none of them is in sd.h.
  */
 #ifndef SD_INTERNAL_H
 #define SD_INTERNAL_H
@@ -18,10 +23,10 @@
 #include "sd.h"
 #include <stdbool.h>
 
-extern const uint8_t SD_TET_E[6][2];
-extern const uint8_t SD_TET_F[4][3];
-extern const uint8_t SD_OCT_E[12][2];
-extern const uint8_t SD_OCT_F[8][3];
+extern const uint8_t SDI_TET_E[6][2];
+extern const uint8_t SDI_TET_F[4][3];
+extern const uint8_t SDI_OCT_E[12][2];
+extern const uint8_t SDI_OCT_F[8][3];
 
 /* ---- memory (alloc.c) ------------------------------------------------------------------- */
 typedef struct sd_mem {
@@ -30,29 +35,29 @@ typedef struct sd_mem {
     bool failed_limit;
 } sd_mem;
 
-void sd_mem_init(sd_mem *m, const sd_allocator *a, size_t limit);
-void *sd_alloc(sd_mem *m, size_t n);                 /* NULL on failure or over the limit */
-void *sd_calloc(sd_mem *m, size_t n, size_t size);   /* zeroed, overflow-checked */
-void *sd_realloc(sd_mem *m, void *p, size_t n);
-void sd_free(sd_mem *m, void *p);
+void sdi_mem_init(sd_mem *m, const sd_allocator *a, size_t limit);
+void *sdi_alloc(sd_mem *m, size_t n);                 /* NULL on failure or over the limit */
+void *sdi_calloc(sd_mem *m, size_t n, size_t size);   /* zeroed, overflow-checked */
+void *sdi_realloc(sd_mem *m, void *p, size_t n);
+void sdi_free(sd_mem *m, void *p);
 
 /* ---- parallel regions (par.c) ------------------------------------------------------------ */
 #define SD_PAR_MIN 65536   /* items of work below which a region runs serially */
 #define SD_PAR_MAXT 64     /* parts at most */
 typedef void (*sd_part_fn)(void *arg, uint32_t part, uint32_t nparts);
 /* How many parts a region of `work` items is split into with `threads` threads (1 = serial). */
-uint32_t sd_par_parts(int threads, uint64_t work);
+uint32_t sdi_par_parts(int threads, uint64_t work);
 /* fn(arg, i, n) for every part i of n; part 0 in the calling thread. */
-void sd_par(int threads, uint64_t work, sd_part_fn fn, void *arg);
+void sdi_par(int threads, uint64_t work, sd_part_fn fn, void *arg);
 /* f0(a0) and f1(a1) at once (one after the other if serial). */
-void sd_par2(int threads, uint64_t work, void (*f0)(void *), void *a0, void (*f1)(void *), void *a1);
+void sdi_par2(int threads, uint64_t work, void (*f0)(void *), void *a0, void (*f1)(void *), void *a1);
 /* Part `part` of nparts of [0, n): [*lo, *hi). */
-void sd_range(uint64_t n, uint32_t part, uint32_t nparts, uint64_t *lo, uint64_t *hi);
+void sdi_range(uint64_t n, uint32_t part, uint32_t nparts, uint64_t *lo, uint64_t *hi);
 
 /* ---- errors (error.c) ------------------------------------------------------------------- */
-sd_result sd_fail(sd_error *err, sd_result code, long item, int field, const char *fmt, ...)
+sd_result sdi_fail(sd_error *err, sd_result code, long item, int field, const char *fmt, ...)
     __attribute__((format(printf, 5, 6)));
-sd_result sd_fail_nomem(sd_error *err, const sd_mem *m);
+sd_result sdi_fail_nomem(sd_error *err, const sd_mem *m);
 
 /* ---- flags ------------------------------------------------------------------------------ */
 enum {
@@ -143,11 +148,11 @@ typedef struct sd_topo {
     uint8_t *fn3, *fflag;      /* fn3: number of 3-cells on the face (saturating) */
 } sd_topo;
 
-static inline uint32_t sd_tr(const sd_topo *t, uint32_t i) { return t->tr ? t->tr[i] : i; }
+static inline uint32_t sdi_tr(const sd_topo *t, uint32_t i) { return t->tr ? t->tr[i] : i; }
 
-void sd_topo_free(sd_mem *m, sd_topo *t);
-void sd_topo_free_edges(sd_mem *m, sd_topo *t);
-void sd_topo_free_faces(sd_mem *m, sd_topo *t);
+void sdi_topo_free(sd_mem *m, sd_topo *t);
+void sdi_topo_free_edges(sd_mem *m, sd_topo *t);
+void sdi_topo_free_faces(sd_mem *m, sd_topo *t);
 
 /* ---- subdivision matrices (csr.c) ------------------------------------------------------ */
 /* S_l: rows [vertex rows | edge rows | octahedron rows]; per row a weight-pattern id and the
@@ -178,53 +183,53 @@ typedef struct sd_pats {
     uint32_t n, capn, capw, hcap;
 } sd_pats;
 
-/* Allocates the pattern ids and kchk; the caller sets every row's pattern (sd_csrb_set_pat) and
+/* Allocates the pattern ids and kchk; the caller sets every row's pattern (sdi_csrb_set_pat) and
  * kchk, allocates and fills col (nexp) and calls finish. */
-bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nvr, uint32_t ner, uint32_t nor, uint32_t ncols,
+bool sdi_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nvr, uint32_t ner, uint32_t nor, uint32_t ncols,
                   const uint32_t (*ev)[2], const uint32_t (*oct)[6]);
-void sd_csrb_free(sd_mem *m, sd_csrb *b);
-uint32_t sd_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len); /* UINT32_MAX: no memory */
-void sd_pats_free(sd_mem *m, sd_pats *p);
+void sdi_csrb_free(sd_mem *m, sd_csrb *b);
+uint32_t sdi_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len); /* UINT32_MAX: no memory */
+void sdi_pats_free(sd_mem *m, sd_pats *p);
 /* Copy the patterns into b (the caller frees p); nnz: the number of entries. */
-bool sd_csrb_finish(sd_mem *m, sd_csrb *b, sd_pats *p, size_t nnz);
+bool sdi_csrb_finish(sd_mem *m, sd_csrb *b, sd_pats *p, size_t nnz);
 
-static inline uint32_t sd_csrb_pat(const sd_csrb *s, uint32_t r)
+static inline uint32_t sdi_csrb_pat(const sd_csrb *s, uint32_t r)
 {
     return s->pw == 1 ? ((const uint8_t *)s->pat)[r]
          : s->pw == 2 ? ((const uint16_t *)s->pat)[r] : ((const uint32_t *)s->pat)[r];
 }
 /* Row r's pattern id; ids are stored in 1 byte until one needs 2 or 4 (then all are widened). */
-bool sd_csrb_set_pat_slow(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id);
-static inline bool sd_csrb_set_pat(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id)
+bool sdi_csrb_set_pat_slow(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id);
+static inline bool sdi_csrb_set_pat(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id)
 {
     if (b->pw == 1 && id < 256) {
         ((uint8_t *)b->pat)[r] = (uint8_t)id;
         return true;
     }
-    return sd_csrb_set_pat_slow(m, b, r, id);
+    return sdi_csrb_set_pat_slow(m, b, r, id);
 }
 /* Entries of row r, and how many of them are implicit. */
-static inline uint32_t sd_csrb_len(const sd_csrb *s, uint32_t r)
+static inline uint32_t sdi_csrb_len(const sd_csrb *s, uint32_t r)
 {
-    uint32_t q = sd_csrb_pat(s, r);
+    uint32_t q = sdi_csrb_pat(s, r);
     return s->woff[q + 1] - s->woff[q];
 }
-static inline uint32_t sd_csrb_nimp(const sd_csrb *s, uint32_t r)
+static inline uint32_t sdi_csrb_nimp(const sd_csrb *s, uint32_t r)
 {
     return r < s->nvr ? 1 : r < s->nvr + s->ner ? 2 : 6;
 }
 /* Entries of row r kept in col. */
-static inline uint32_t sd_csrb_nexp(const sd_csrb *s, uint32_t r)
+static inline uint32_t sdi_csrb_nexp(const sd_csrb *s, uint32_t r)
 {
     if (s->eopp && r >= s->nvr && r < s->nvr + s->ner)
         return 0;
-    return sd_csrb_len(s, r) - sd_csrb_nimp(s, r);
+    return sdi_csrb_len(s, r) - sdi_csrb_nimp(s, r);
 }
-/* Row r, whose explicit columns start at col[*k]: its columns into cols (sd_csrb_len of them);
+/* Row r, whose explicit columns start at col[*k]: its columns into cols (sdi_csrb_len of them);
  * returns its weights and moves *k past the row. */
-static inline const double *sd_csrb_row(const sd_csrb *s, uint32_t r, size_t *k, uint32_t *cols)
+static inline const double *sdi_csrb_row(const sd_csrb *s, uint32_t r, size_t *k, uint32_t *cols)
 {
-    uint32_t q = sd_csrb_pat(s, r), n = s->woff[q + 1] - s->woff[q], i = 0;
+    uint32_t q = sdi_csrb_pat(s, r), n = s->woff[q + 1] - s->woff[q], i = 0;
     if (r < s->nvr)
         cols[i++] = r;
     else if (r < s->nvr + s->ner) {
@@ -243,12 +248,12 @@ static inline const double *sd_csrb_row(const sd_csrb *s, uint32_t r, size_t *k,
     return s->wt + s->woff[q];
 }
 /* The start in col of every row (nrows + 1), for random access; the caller frees it. */
-size_t *sd_csrb_starts(sd_mem *m, const sd_csrb *b);
+size_t *sdi_csrb_starts(sd_mem *m, const sd_csrb *b);
 /* Make the public CSR view (kept with the matrix); false for lack of memory. */
-bool sd_csrb_view(sd_mem *m, sd_csrb *b);
+bool sdi_csrb_view(sd_mem *m, sd_csrb *b);
 #define SD_CHK 65536u
 /* out[r*nc + k] = sum_j S[r][j] in[j*nc + k], rows in parallel parts (same bytes for any number) */
-void sd_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads);
+void sdi_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads);
 
 /* ---- levels and the complex -------------------------------------------------------------- */
 typedef struct sd_channel {
@@ -310,45 +315,45 @@ struct sd_complex {
 };
 
 /* complex.c */
-sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
+sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
                           const uint8_t *size, uint32_t ns, sd_error *err);
-void sd_level_free(sd_mem *m, sd_level *lv);
+void sdi_level_free(sd_mem *m, sd_level *lv);
 /* classify.c */
-sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err);
-sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err);
+sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sd_error *err);
+sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err);
 /* split.c: child topology and inherited classification of the next level, part by part (see
  * sd_topo); each needs the parent's edges and faces (cells: and the child's nothing; faces: the
  * child's edges) */
-sd_result sd_split_cells(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
-sd_result sd_split_edges(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
-sd_result sd_split_faces(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
+sd_result sdi_split_cells(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
+sd_result sdi_split_edges(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
+sd_result sdi_split_faces(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
 /* levels.c: forget a level's rules and every finer level */
-void sd_drop_rules(sd_complex *c, sd_level *lv);
+void sdi_drop_rules(sd_complex *c, sd_level *lv);
 /* Free a level's rules part: rules, stencils S, edit columns, vrule_only, geo (not its points,
  * cells or scratch map `slot`). */
-void sd_level_free_rules(sd_mem *m, sd_level *lv);
-void sd_drop_levels(sd_complex *c, int from); /* levels from.. (they are recomputed on demand) */
+void sdi_level_free_rules(sd_mem *m, sd_level *lv);
+void sdi_drop_levels(sd_complex *c, int from); /* levels from.. (they are recomputed on demand) */
 /* rules.c */
-sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
-sd_result sd_ensure_rules(sd_complex *cx, int level, sd_error *err);
+sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
+sd_result sdi_ensure_rules(sd_complex *cx, int level, sd_error *err);
 /* levels.c: build level `level`'s edges if they are not yet (under the caller's lock; faces
  * made on the way are dropped again) */
-sd_result sd_ensure_derived(sd_complex *cx, int level, sd_error *err);
+sd_result sdi_ensure_derived(sd_complex *cx, int level, sd_error *err);
 /* The same from a const accessor of the level (see sd.h on locking); false if it failed. */
-bool sd_need_derived(const sd_level *lv);
+bool sdi_need_derived(const sd_level *lv);
 /* Whether a vertex (edge false) or edge whose computed rule is `rule` and whose rho / ring has k
  * entries is extraordinary (rule_table.h). */
-bool sd_rule_extraordinary(uint8_t rule, uint32_t k, bool edge);
+bool sdi_rule_extraordinary(uint8_t rule, uint32_t k, bool edge);
 /* The rule of vertex v from the level's classification alone (no stencils needed). */
-uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v);
+uint8_t sdi_vertex_rule(const sd_topo *t, uint32_t v);
 /* The rules vertices actually follow (corners where the neighbourhood does not fit the
  * classification), without building stencils: nv entries into vr. */
-sd_result sd_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr);
+sd_result sdi_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr);
 /* tags.c: (re)apply tags, overrides and the default non-manifold rule to level 0's flags */
-sd_result sd_apply_singular(sd_complex *c, sd_error *err);
+sd_result sdi_apply_singular(sd_complex *c, sd_error *err);
 /* The rule reported for a vertex / edge whose computed rule is r (N1, N2, G1 where they apply) */
-sd_rule sd_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r);
-sd_rule sd_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
+sd_rule sdi_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r);
+sd_rule sdi_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
 /* yz.c: the rows with 003's flatness modification (fixed disk, dart, concave corner) of a level
  * built with the Ying-Zorin rules. end[e][i] (rules.c, yz_gammas) says how end i of edge e reads
  * the edge: SD_YZ_NONE (not a singular vertex), SD_YZ_FIRST (003 Fig. 4f with gamma g, first
@@ -366,7 +371,7 @@ typedef struct sd_yzend {
     double g, theta, s; /* g of 003 Fig. 4f, its theta, the flatness modification's s */
     uint8_t kind;
 } sd_yzend;
-static inline bool sd_yz_flat(uint8_t kind)
+static inline bool sdi_yz_flat(uint8_t kind)
 {
     return kind >= SD_YZ_DISK;
 }
@@ -375,10 +380,10 @@ typedef struct sd_yzrows {
     double *w;
     double (*ends)[2];
 } sd_yzrows;
-bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint8_t *er,
+bool sdi_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint8_t *er,
                      sd_yzrows *y);
-void sd_yzrows_free(sd_mem *m, sd_yzrows *y);
+void sdi_yzrows_free(sd_mem *m, sd_yzrows *y);
 /* analysis.c helpers */
-uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b);
+uint32_t sdi_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b);
 
 #endif

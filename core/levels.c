@@ -19,79 +19,79 @@ sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, co
     if (err)
         memset(err, 0, sizeof *err);
     if (o.surface_weights != SD_WEIGHTS_WARREN && o.surface_weights != SD_WEIGHTS_LOOP) {
-        sd_fail(err, SD_ERR_ARG, -1, -1, "unknown surface_weights %d", o.surface_weights);
+        sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown surface_weights %d", o.surface_weights);
         return NULL;
     }
     if (o.nonmanifold_default != SD_NM_G2 && o.nonmanifold_default != SD_NM_G1) {
-        sd_fail(err, SD_ERR_ARG, -1, -1, "unknown nonmanifold_default %d", o.nonmanifold_default);
+        sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown nonmanifold_default %d", o.nonmanifold_default);
         return NULL;
     }
     if (o.nonmanifold_surface != SD_NMSURF_CHANG_QIN && o.nonmanifold_surface != SD_NMSURF_YING_ZORIN) {
-        sd_fail(err, SD_ERR_ARG, -1, -1, "unknown nonmanifold_surface %d", o.nonmanifold_surface);
+        sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown nonmanifold_surface %d", o.nonmanifold_surface);
         return NULL;
     }
     if (o.solid_scheme != SD_SOLID_BOX && o.solid_scheme != SD_SOLID_AVERAGED) {
-        sd_fail(err, SD_ERR_ARG, -1, -1, "unknown solid_scheme %d", o.solid_scheme);
+        sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown solid_scheme %d", o.solid_scheme);
         return NULL;
     }
     if (nv >= UINT32_MAX || ns >= UINT32_MAX) {
-        sd_fail(err, SD_ERR_LIMIT, -1, -1, "too many vertices or simplices for 32-bit ids");
+        sdi_fail(err, SD_ERR_LIMIT, -1, -1, "too many vertices or simplices for 32-bit ids");
         return NULL;
     }
     if ((nv && !xyz) || (ns && (!idx || !size))) {
-        sd_fail(err, SD_ERR_ARG, -1, -1, "missing input array");
+        sdi_fail(err, SD_ERR_ARG, -1, -1, "missing input array");
         return NULL;
     }
     sd_mem mem;
-    sd_mem_init(&mem, &o.allocator, o.max_bytes);
-    sd_complex *c = sd_alloc(&mem, sizeof *c);
+    sdi_mem_init(&mem, &o.allocator, o.max_bytes);
+    sd_complex *c = sdi_alloc(&mem, sizeof *c);
     if (!c) {
-        sd_fail_nomem(err, &mem);
+        sdi_fail_nomem(err, &mem);
         return NULL;
     }
     memset(c, 0, sizeof *c);
     c->mem = mem;
     c->opt = o;
-    if (sd_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err) ||
+    if (sdi_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err) ||
         ((o.nonmanifold_default == SD_NM_G1 || o.nonmanifold_surface == SD_NMSURF_YING_ZORIN) &&
-         sd_apply_singular(c, err))) {
+         sdi_apply_singular(c, err))) {
         sd_complex_free(c);
         return NULL;
     }
     return c;
 }
 
-void sd_drop_levels(sd_complex *c, int from)
+void sdi_drop_levels(sd_complex *c, int from)
 {
     for (int l = from; l < c->nlevels; l++) {
-        sd_level_free(&c->mem, c->lv[l]);
+        sdi_level_free(&c->mem, c->lv[l]);
         c->lv[l] = NULL;
     }
     if (c->nlevels > from)
         c->nlevels = from;
 }
 
-void sd_level_free_rules(sd_mem *m, sd_level *lv)
+void sdi_level_free_rules(sd_mem *m, sd_level *lv)
 {
-    sd_free(m, lv->vrule);
-    sd_free(m, lv->erule);
-    sd_csrb_free(m, &lv->S);
-    sd_free(m, lv->tcol);
-    sd_free(m, lv->trow);
-    sd_free(m, lv->tpos);
-    sd_free(m, lv->vrule_only);
-    sd_free(m, lv->geo);
+    sdi_free(m, lv->vrule);
+    sdi_free(m, lv->erule);
+    sdi_csrb_free(m, &lv->S);
+    sdi_free(m, lv->tcol);
+    sdi_free(m, lv->trow);
+    sdi_free(m, lv->tpos);
+    sdi_free(m, lv->vrule_only);
+    sdi_free(m, lv->geo);
     lv->vrule = lv->erule = lv->vrule_only = lv->geo = NULL;
     lv->tcol = lv->trow = lv->tpos = NULL;
     lv->have_rules = false;
 }
 
 /* Forget level lv's rules, stencils and edit columns, and every finer level (tags changed). */
-void sd_drop_rules(sd_complex *c, sd_level *lv)
+void sdi_drop_rules(sd_complex *c, sd_level *lv)
 {
-    sd_drop_levels(c, lv->index + 1);
-    sd_level_free_rules(&c->mem, lv);
-    sd_free(&c->mem, lv->slot);
+    sdi_drop_levels(c, lv->index + 1);
+    sdi_level_free_rules(&c->mem, lv);
+    sdi_free(&c->mem, lv->slot);
     lv->slot = NULL;
 }
 
@@ -99,15 +99,15 @@ void sd_complex_free(sd_complex *c)
 {
     if (!c)
         return;
-    sd_drop_levels(c, 0);
-    sd_free(&c->mem, c->tag_at);
-    sd_free(&c->mem, c->tag_k);
-    sd_free(&c->mem, c->ov);
-    sd_free(&c->mem, c->pet);
-    sd_free(&c->mem, c->in_tet);
-    sd_free(&c->mem, c->tet_swapped);
+    sdi_drop_levels(c, 0);
+    sdi_free(&c->mem, c->tag_at);
+    sdi_free(&c->mem, c->tag_k);
+    sdi_free(&c->mem, c->ov);
+    sdi_free(&c->mem, c->pet);
+    sdi_free(&c->mem, c->in_tet);
+    sdi_free(&c->mem, c->tet_swapped);
     sd_mem m = c->mem;
-    sd_free(&m, c);
+    sdi_free(&m, c);
 }
 
 /* Map a pair index in the input's vertex order to the stored (possibly reoriented) order:
@@ -117,11 +117,11 @@ static int map_pair(int pair, bool swapped) { return swapped && pair ? 3 - pair 
 sd_result sd_complex_set_diagonal(sd_complex *c, size_t simplex, int pair, sd_error *err)
 {
     if (simplex >= c->nin || c->in_tet[simplex] == UINT32_MAX)
-        return sd_fail(err, SD_ERR_ARG, (long)simplex, -1, "simplex %zu is not a tetrahedron", simplex);
+        return sdi_fail(err, SD_ERR_ARG, (long)simplex, -1, "simplex %zu is not a tetrahedron", simplex);
     if (pair < 0 || pair > 2)
-        return sd_fail(err, SD_ERR_ARG, (long)simplex, -1, "diagonal pair must be 0, 1 or 2");
+        return sdi_fail(err, SD_ERR_ARG, (long)simplex, -1, "diagonal pair must be 0, 1 or 2");
     uint32_t t = c->in_tet[simplex];
-    sd_drop_levels(c, 1);
+    sdi_drop_levels(c, 1);
     sd_level *l0 = c->lv[0]; /* level 0's stencils do not depend on diagonals: kept */
     l0->t.tet_d[t] = (uint8_t)map_pair(pair, c->tet_swapped[t]);
     return SD_OK;
@@ -139,27 +139,27 @@ int sd_complex_add_channel(sd_complex *c, const double *data, int ncomp, sd_erro
 {
     sd_level *l0 = c->lv[0];
     if (ncomp < 1 || ncomp > 16) {
-        sd_fail(err, SD_ERR_ARG, -1, -1, "a channel has 1 to 16 components, not %d", ncomp);
+        sdi_fail(err, SD_ERR_ARG, -1, -1, "a channel has 1 to 16 components, not %d", ncomp);
         return -1;
     }
     if (l0->nch >= SD_MAX_CHANNELS) {
-        sd_fail(err, SD_ERR_LIMIT, -1, -1, "at most %d channels", SD_MAX_CHANNELS - 1);
+        sdi_fail(err, SD_ERR_LIMIT, -1, -1, "at most %d channels", SD_MAX_CHANNELS - 1);
         return -1;
     }
     size_t n = (size_t)l0->t.nv * ncomp;
     for (size_t i = 0; i < n; i++)
         if (!isfinite(data[i])) {
-            sd_fail(err, SD_ERR_VALUE, (long)(i / ncomp), (int)(i % ncomp),
+            sdi_fail(err, SD_ERR_VALUE, (long)(i / ncomp), (int)(i % ncomp),
                     "vertex %zu: channel value %zu is not finite", i / ncomp, i % ncomp);
             return -1;
         }
-    double *copy = sd_alloc(&c->mem, n * sizeof *copy);
+    double *copy = sdi_alloc(&c->mem, n * sizeof *copy);
     if (!copy) {
-        sd_fail_nomem(err, &c->mem);
+        sdi_fail_nomem(err, &c->mem);
         return -1;
     }
     memcpy(copy, data, n * sizeof *copy);
-    sd_drop_levels(c, 1);
+    sdi_drop_levels(c, 1);
     l0->ch[l0->nch].ncomp = ncomp;
     l0->ch[l0->nch].data = copy;
     return l0->nch++;
@@ -191,7 +191,7 @@ static sd_result ensure_edges(sd_complex *c, int l, sd_error *err)
     if (lv->t.derived)
         return SD_OK;
     sd_result r = ensure_faces(c, l - 1, err);
-    return r ? r : sd_split_edges(&c->mem, lv->parent, &lv->t, c->opt.threads, err);
+    return r ? r : sdi_split_edges(&c->mem, lv->parent, &lv->t, c->opt.threads, err);
 }
 
 static sd_result ensure_faces(sd_complex *c, int l, sd_error *err)
@@ -202,14 +202,14 @@ static sd_result ensure_faces(sd_complex *c, int l, sd_error *err)
     sd_result r = ensure_edges(c, l, err);
     if (!r)
         r = ensure_faces(c, l - 1, err);
-    return r ? r : sd_split_faces(&c->mem, lv->parent, &lv->t, c->opt.threads, err);
+    return r ? r : sdi_split_faces(&c->mem, lv->parent, &lv->t, c->opt.threads, err);
 }
 
 /* Faces are only needed while rules or the next level are made: drop them at levels >= 1. */
 static void drop_faces(sd_complex *c)
 {
     for (int l = 1; l < c->nlevels; l++)
-        sd_topo_free_faces(&c->mem, &c->lv[l]->t);
+        sdi_topo_free_faces(&c->mem, &c->lv[l]->t);
 }
 
 static sd_result rules_keep_faces(sd_complex *c, int level, sd_error *err)
@@ -218,17 +218,17 @@ static sd_result rules_keep_faces(sd_complex *c, int level, sd_error *err)
     if (lv->have_rules)
         return SD_OK;
     sd_result r = ensure_faces(c, level, err);
-    return r ? r : sd_build_rules(c, lv, err);
+    return r ? r : sdi_build_rules(c, lv, err);
 }
 
-sd_result sd_ensure_derived(sd_complex *c, int level, sd_error *err)
+sd_result sdi_ensure_derived(sd_complex *c, int level, sd_error *err)
 {
     sd_result r = ensure_edges(c, level, err);
     drop_faces(c);
     return r;
 }
 
-sd_result sd_ensure_rules(sd_complex *c, int level, sd_error *err)
+sd_result sdi_ensure_rules(sd_complex *c, int level, sd_error *err)
 {
     sd_result r = rules_keep_faces(c, level, err);
     drop_faces(c);
@@ -245,28 +245,28 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
         r = ensure_faces(c, l, err); /* the rules may have been built before, the faces dropped */
     if (r)
         return r;
-    sd_level *lv = sd_calloc(m, 1, sizeof *lv);
+    sd_level *lv = sdi_calloc(m, 1, sizeof *lv);
     if (!lv)
-        return sd_fail_nomem(err, m);
+        return sdi_fail_nomem(err, m);
     lv->index = l + 1;
     lv->parent_nv = p->t.nv;
     lv->parent_ne = p->t.ne;
     lv->cx = c;
     lv->parent = &p->t;
-    if ((r = sd_split_cells(m, &p->t, &lv->t, c->opt.threads, err))) {
-        sd_free(m, lv);
+    if ((r = sdi_split_cells(m, &p->t, &lv->t, c->opt.threads, err))) {
+        sdi_free(m, lv);
         return r;
     }
     lv->nch = p->nch;
     for (int i = 0; i < p->nch; i++) {
         int nc = p->ch[i].ncomp;
         lv->ch[i].ncomp = nc;
-        lv->ch[i].data = sd_alloc(m, (size_t)lv->t.nv * nc * sizeof(double));
+        lv->ch[i].data = sdi_alloc(m, (size_t)lv->t.nv * nc * sizeof(double));
         if (!lv->ch[i].data) {
-            sd_level_free(m, lv);
-            return sd_fail_nomem(err, m);
+            sdi_level_free(m, lv);
+            return sdi_fail_nomem(err, m);
         }
-        sd_csr_apply(&p->S, p->ch[i].data, lv->ch[i].data, nc, c->opt.threads);
+        sdi_csr_apply(&p->S, p->ch[i].data, lv->ch[i].data, nc, c->opt.threads);
     }
     c->lv[l + 1] = lv;
     c->nlevels = l + 2;
@@ -276,7 +276,7 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
 const sd_level *sd_complex_level(sd_complex *c, int level, sd_error *err)
 {
     if (level < 0 || level > SD_MAX_LEVEL) {
-        sd_fail(err, SD_ERR_ARG, level, -1, "level %d out of range 0..%d", level, SD_MAX_LEVEL);
+        sdi_fail(err, SD_ERR_ARG, level, -1, "level %d out of range 0..%d", level, SD_MAX_LEVEL);
         return NULL;
     }
     while (c->nlevels <= level)
@@ -333,14 +333,14 @@ void sd_level_cell(const sd_level *lv, sd_cell_kind k, uint32_t i, uint32_t *v)
 
 /* Accessors of the derived topology build it the first time (under the caller's lock, see
  * sd.h); false if that failed. */
-bool sd_need_derived(const sd_level *lv)
+bool sdi_need_derived(const sd_level *lv)
 {
-    return lv->t.derived || sd_ensure_derived(lv->cx, lv->index, NULL) == SD_OK;
+    return lv->t.derived || sdi_ensure_derived(lv->cx, lv->index, NULL) == SD_OK;
 }
 
 const uint32_t *sd_level_edges(const sd_level *lv, uint32_t *n)
 {
-    if (!sd_need_derived(lv)) {
+    if (!sdi_need_derived(lv)) {
         *n = 0;
         return NULL;
     }
@@ -369,7 +369,7 @@ sd_origin_kind sd_level_origin(const sd_level *lv, uint32_t i, uint32_t *a, uint
     return SD_ORIGIN_CELL;
 }
 
-uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b)
+uint32_t sdi_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b)
 {
     for (uint32_t e = 0; e < t->ne; e++)
         if ((t->ev[e][0] == a && t->ev[e][1] == b) || (t->ev[e][0] == b && t->ev[e][1] == a))
@@ -379,7 +379,7 @@ uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b)
 
 uint32_t sd_level_find_edge(const sd_level *lv, uint32_t a, uint32_t b)
 {
-    return sd_need_derived(lv) ? sd_topo_find_edge(&lv->t, a, b) : UINT32_MAX;
+    return sdi_need_derived(lv) ? sdi_topo_find_edge(&lv->t, a, b) : UINT32_MAX;
 }
 
 static sd_result class_of(sd_complex *c, int level, sd_error *err, sd_level **out)
@@ -390,7 +390,7 @@ static sd_result class_of(sd_complex *c, int level, sd_error *err, sd_level **ou
     *out = NULL;
     if (!sd_complex_level(c, level, err))
         return err->code;
-    sd_result r = sd_ensure_rules(c, level, err);
+    sd_result r = sdi_ensure_rules(c, level, err);
     *out = c->lv[level];
     return r;
 }
@@ -404,9 +404,9 @@ sd_result sd_level_vertex_class(const sd_level *lv, uint32_t i, sd_class *o)
     o->boundary = (t->vflag[i] & VF_DC) != 0;
     o->nonmanifold = (uint8_t)nm_type(t->vnm[i]);
     o->rule = lv->vrule[i];
-    o->valence = sd_csrb_len(&lv->S, i) - 1;
-    o->extraordinary = sd_rule_extraordinary(o->rule, o->valence, false);
-    o->rule = (uint8_t)sd_reported_vertex_rule(t, i, lv->vrule[i]);
+    o->valence = sdi_csrb_len(&lv->S, i) - 1;
+    o->extraordinary = sdi_rule_extraordinary(o->rule, o->valence, false);
+    o->rule = (uint8_t)sdi_reported_vertex_rule(t, i, lv->vrule[i]);
     return SD_OK;
 }
 
@@ -419,9 +419,9 @@ sd_result sd_level_edge_class(const sd_level *lv, uint32_t e, sd_class *o)
     o->boundary = (t->eflag[e] & EF_DC) != 0;
     o->nonmanifold = (uint8_t)nm_type(t->enm[e]);
     o->rule = lv->erule[e];
-    o->valence = sd_csrb_len(&lv->S, t->nv + e) - 2;
-    o->extraordinary = sd_rule_extraordinary(o->rule, o->valence, true);
-    o->rule = (uint8_t)sd_reported_edge_rule(t, e, lv->erule[e]);
+    o->valence = sdi_csrb_len(&lv->S, t->nv + e) - 2;
+    o->extraordinary = sdi_rule_extraordinary(o->rule, o->valence, true);
+    o->rule = (uint8_t)sdi_reported_edge_rule(t, e, lv->erule[e]);
     return SD_OK;
 }
 
@@ -432,7 +432,7 @@ sd_result sd_complex_vertex_class(sd_complex *c, int level, uint32_t i, sd_class
     if (r)
         return r;
     if (i >= lv->t.nv)
-        return sd_fail(err, SD_ERR_ARG, i, -1, "vertex %u out of range (%u vertices)", i, lv->t.nv);
+        return sdi_fail(err, SD_ERR_ARG, i, -1, "vertex %u out of range (%u vertices)", i, lv->t.nv);
     return sd_level_vertex_class(lv, i, o);
 }
 
@@ -443,7 +443,7 @@ sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *
     if (r)
         return r;
     if (e >= lv->t.ne)
-        return sd_fail(err, SD_ERR_ARG, e, -1, "edge %u out of range (%u edges)", e, lv->t.ne);
+        return sdi_fail(err, SD_ERR_ARG, e, -1, "edge %u out of range (%u edges)", e, lv->t.ne);
     return sd_level_edge_class(lv, e, o);
 }
 
@@ -452,11 +452,11 @@ sd_rule sd_level_vertex_rule(const sd_level *lv, uint32_t i)
     /* vrule_only first: once set it never changes, while a later computation of the next level
      * may build vrule (same values) concurrently with a reader of this one */
     if (lv->vrule_only)
-        return sd_reported_vertex_rule(&lv->t, i, lv->vrule_only[i]);
+        return sdi_reported_vertex_rule(&lv->t, i, lv->vrule_only[i]);
     if (lv->have_rules)
-        return sd_reported_vertex_rule(&lv->t, i, lv->vrule[i]);
+        return sdi_reported_vertex_rule(&lv->t, i, lv->vrule[i]);
     /* the classification's (see sd.h) */
-    return sd_reported_vertex_rule(&lv->t, i, sd_vertex_rule(&lv->t, i));
+    return sdi_reported_vertex_rule(&lv->t, i, sdi_vertex_rule(&lv->t, i));
 }
 
 sd_result sd_complex_prepare_vertex_rules(sd_complex *c, int level, sd_error *err)
@@ -467,13 +467,13 @@ sd_result sd_complex_prepare_vertex_rules(sd_complex *c, int level, sd_error *er
     sd_level *lv = c->lv[level];
     if (lv->have_rules || lv->vrule_only)
         return SD_OK;
-    sd_result r = sd_ensure_derived(c, level, err);
+    sd_result r = sdi_ensure_derived(c, level, err);
     if (r)
         return r;
-    uint8_t *vr = sd_alloc(&c->mem, (size_t)lv->t.nv + 1);
-    if (!vr || sd_vertex_rules_only(&c->mem, &lv->t, c->opt.solid_scheme, vr)) {
-        sd_free(&c->mem, vr);
-        return sd_fail_nomem(err, &c->mem);
+    uint8_t *vr = sdi_alloc(&c->mem, (size_t)lv->t.nv + 1);
+    if (!vr || sdi_vertex_rules_only(&c->mem, &lv->t, c->opt.solid_scheme, vr)) {
+        sdi_free(&c->mem, vr);
+        return sdi_fail_nomem(err, &c->mem);
     }
     lv->vrule_only = vr;
     return SD_OK;
@@ -494,14 +494,14 @@ uint32_t sd_level_solid_boundary(const sd_level *lv, uint32_t *tri)
         for (int i = 0; t->tet_b[c] && i < 4; i++)
             if (t->tet_b[c] >> i & 1) {
                 for (int k = 0; k < 3; k++)
-                    tri[3 * n + k] = t->tet[c][SD_TET_F[i][k]];
+                    tri[3 * n + k] = t->tet[c][SDI_TET_F[i][k]];
                 n++;
             }
     for (uint32_t c = 0; c < t->noct; c++)
         for (int i = 0; t->oct_b[c] && i < 8; i++)
             if (t->oct_b[c] >> i & 1) {
                 for (int k = 0; k < 3; k++)
-                    tri[3 * n + k] = t->oct[c][SD_OCT_F[i][k]];
+                    tri[3 * n + k] = t->oct[c][SDI_OCT_F[i][k]];
                 n++;
             }
     return n;
@@ -514,12 +514,12 @@ sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err
         err = &local;
     if (!sd_complex_level(c, level, err))
         return err->code;
-    sd_result r = sd_ensure_rules(c, level, err);
+    sd_result r = sdi_ensure_rules(c, level, err);
     if (r)
         return r;
     sd_csrb *s = &c->lv[level]->S;
-    if (!sd_csrb_view(&c->mem, s)) /* the plain CSR view, made once and kept */
-        return sd_fail_nomem(err, &c->mem);
+    if (!sdi_csrb_view(&c->mem, s)) /* the plain CSR view, made once and kept */
+        return sdi_fail_nomem(err, &c->mem);
     out->nrows = s->nrows;
     out->ncols = s->ncols;
     out->rowptr = s->vrowptr;

@@ -19,7 +19,7 @@
 #include <string.h>
 
 static const uint8_t TRI_E[3][2] = {{0, 1}, {1, 2}, {2, 0}};
-/* SD_TET_E order: 01 02 03 12 13 23 */
+/* SDI_TET_E order: 01 02 03 12 13 23 */
 static const uint8_t TE[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
 /* the three edges of the face opposite vertex i, as indices into TE */
 static const uint8_t FACE_EDGES[4][3] = {{3, 4, 5}, {1, 2, 5}, {0, 2, 4}, {0, 1, 3}};
@@ -36,8 +36,8 @@ typedef struct ref {
 static uint32_t edge_of(ref *r, uint32_t a, uint32_t b)
 {
     uint32_t ab[2] = {a, b}, k[4];
-    sd_key(k, ab, 2);
-    uint32_t got = sd_hash_get_or_put(&r->h, k, r->ne);
+    sdi_key(k, ab, 2);
+    uint32_t got = sdi_hash_get_or_put(&r->h, k, r->ne);
     return got == UINT32_MAX ? r->ne++ : got;
 }
 
@@ -74,23 +74,23 @@ sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uin
 {
     memset(out, 0, sizeof *out);
     sd_mem mem;
-    sd_mem_init(&mem, NULL, 0);
+    sdi_mem_init(&mem, NULL, 0);
     ref r = {.m = &mem};
     sd_result rc = SD_OK;
     size_t nidx = 0;
     for (size_t s = 0; s < ns; s++) {
         if (size[s] < 1 || size[s] > 4)
-            return sd_fail(err, SD_ERR_ARITY, (long)s, -1, "simplex %zu has %d vertices", s, size[s]);
+            return sdi_fail(err, SD_ERR_ARITY, (long)s, -1, "simplex %zu has %d vertices", s, size[s]);
         nidx += size[s];
     }
-    if (!sd_hash_init(&mem, &r.h, 6 * ns + 16))
-        return sd_fail_nomem(err, &mem);
+    if (!sdi_hash_init(&mem, &r.h, 6 * ns + 16))
+        return sdi_fail_nomem(err, &mem);
     r.eids = malloc((6 * ns + 1) * sizeof *r.eids);
     r.split = calloc(6 * ns + 1, 1);
     r.mid = malloc((6 * ns + 1) * sizeof *r.mid);
     uint8_t *red = calloc(ns + 1, 1);
     if (!r.eids || !r.split || !r.mid || !red) {
-        rc = sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
+        rc = sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
         goto done;
     }
     /* edge ids of every simplex */
@@ -147,7 +147,7 @@ sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uin
     out->size = malloc(8 * ns + 1);
     out->parent = malloc((8 * ns + 1) * sizeof *out->parent);
     if (!out->xyz || !out->split || !out->idx || !out->size || !out->parent) {
-        rc = sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
+        rc = sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
         goto done;
     }
     memcpy(out->xyz, xyz, nv * 3 * sizeof *xyz);
@@ -256,7 +256,7 @@ done:
     free(r.split);
     free(r.mid);
     free(red);
-    sd_hash_free(&mem, &r.h);
+    sdi_hash_free(&mem, &r.h);
     if (rc)
         sd_refine_free(out);
     return rc;

@@ -46,13 +46,13 @@ const char *sd_rule_name(sd_rule r)
     return (unsigned)r < SD_RULE_COUNT ? rule_names[r] : "unknown";
 }
 
-bool sd_rule_extraordinary(uint8_t rule, uint32_t k, bool edge)
+bool sdi_rule_extraordinary(uint8_t rule, uint32_t k, bool edge)
 {
     uint32_t regular = rule < SD_RULE_COUNT ? rule_regular[rule][edge] : 0;
     return regular && !(k < 32 && (regular >> k & 1));
 }
 
-uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v)
+uint8_t sdi_vertex_rule(const sd_topo *t, uint32_t v)
 {
     uint8_t fam = t->vfam[v], nm = t->vnm[v], fl = t->vflag[v];
     /* singular tags first (SPEC Sec. 3 priority): corner; crease (B-spline along the creases);
@@ -133,7 +133,7 @@ static uint8_t edge_rule(const sd_topo *t, uint32_t e)
     }
 }
 
-sd_rule sd_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r)
+sd_rule sdi_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r)
 {
     uint8_t nm = t->vnm[v];
     if (nm & NM_G1)
@@ -150,7 +150,7 @@ sd_rule sd_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r)
     return ov >= OV_N1_1 && ov <= OV_N1_3 ? SD_RULE_N1 : ov == OV_N2 ? SD_RULE_N2 : (sd_rule)r;
 }
 
-sd_rule sd_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r)
+sd_rule sdi_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r)
 {
     uint8_t nm = t->enm[e];
     if (nm & NM_G1)
@@ -289,10 +289,10 @@ typedef struct rings {
 
 static void rings_free(sd_mem *m, rings *r)
 {
-    sd_free(m, r->off);
-    sd_free(m, r->v);
-    sd_free(m, r->cls);
-    sd_free(m, r->len);
+    sdi_free(m, r->off);
+    sdi_free(m, r->v);
+    sdi_free(m, r->cls);
+    sdi_free(m, r->len);
 }
 
 static int cmp_u32(const void *x, const void *y)
@@ -319,7 +319,7 @@ static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
     ring_sort_job *J = arg;
     rings *R = J->R;
     uint64_t lo, hi;
-    sd_range(J->ne, part, nparts, &lo, &hi);
+    sdi_range(J->ne, part, nparts, &lo, &hi);
     uint64_t buf[256];
     for (uint32_t e = (uint32_t)lo; e < (uint32_t)hi; e++) {
         uint32_t b = R->off[e], n = R->off[e + 1] - b, w = 0;
@@ -358,8 +358,8 @@ static bool solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int s
                         rings *R)
 {
     uint32_t ne = t->ne;
-    R->off = sd_calloc(m, (size_t)ne + 1, sizeof *R->off);
-    R->len = sd_calloc(m, ne ? ne : 1, sizeof *R->len);
+    R->off = sdi_calloc(m, (size_t)ne + 1, sizeof *R->off);
+    R->len = sdi_calloc(m, ne ? ne : 1, sizeof *R->len);
     if (!R->off || !R->len)
         return false;
     bool avg = scheme == SD_SOLID_AVERAGED;
@@ -375,11 +375,11 @@ static bool solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int s
     for (uint32_t e = 0; e < ne; e++)
         R->off[e + 1] += R->off[e];
     size_t total = R->off[ne];
-    R->v = sd_alloc(m, (total + 1) * sizeof *R->v);
-    R->cls = sd_alloc(m, total + 1);
-    uint32_t *cur = sd_alloc(m, ((size_t)ne + 1) * sizeof *cur);
+    R->v = sdi_alloc(m, (total + 1) * sizeof *R->v);
+    R->cls = sdi_alloc(m, total + 1);
+    uint32_t *cur = sdi_alloc(m, ((size_t)ne + 1) * sizeof *cur);
     if (!R->v || !R->cls || !cur) {
-        sd_free(m, cur);
+        sdi_free(m, cur);
         return false;
     }
     memcpy(cur, R->off, (size_t)ne * sizeof *cur);
@@ -394,8 +394,8 @@ static bool solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int s
             if (erule[e] != SD_RULE_SOLID)
                 continue;
             /* the two vertices not on edge k: those of the opposite edge 5-k */
-            PUSH(e, t->tet[c][SD_TET_E[5 - k][0]], 0);
-            PUSH(e, t->tet[c][SD_TET_E[5 - k][1]], 0);
+            PUSH(e, t->tet[c][SDI_TET_E[5 - k][0]], 0);
+            PUSH(e, t->tet[c][SDI_TET_E[5 - k][1]], 0);
         }
     for (uint32_t o = 0; o < t->noct; o++)
         for (int k = 0; k < 12; k++) {
@@ -403,7 +403,7 @@ static bool solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int s
             if (erule[e] != SD_RULE_SOLID)
                 continue;
             const uint32_t *q = t->oct[o];
-            int i = SD_OCT_E[k][0], j = SD_OCT_E[k][1];
+            int i = SDI_OCT_E[k][0], j = SDI_OCT_E[k][1];
             if (avg) {
                 /* faces of the octahedron on the edge: the two common neighbours;
                  * through the octahedron's diagonals: the opposites of both ends */
@@ -428,10 +428,10 @@ static bool solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int s
             }
         }
 #undef PUSH
-    sd_free(m, cur);
+    sdi_free(m, cur);
     /* sort and deduplicate each edge's list (as (vertex, class) pairs), edges in parallel */
     ring_sort_job J = {R, ne, true};
-    sd_par(threads, R->off[ne], ring_sort_part, &J);
+    sdi_par(threads, R->off[ne], ring_sort_part, &J);
     return J.ok;
 }
 
@@ -439,9 +439,9 @@ static bool solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int s
 static bool g2_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, rings *R)
 {
     uint32_t nv = t->nv, ne = t->ne;
-    uint32_t *off = sd_calloc(m, (size_t)nv + 1, sizeof *off), *adj = NULL, *cur = NULL;
-    R->off = sd_calloc(m, (size_t)ne + 1, sizeof *R->off);
-    R->len = sd_calloc(m, ne ? ne : 1, sizeof *R->len);
+    uint32_t *off = sdi_calloc(m, (size_t)nv + 1, sizeof *off), *adj = NULL, *cur = NULL;
+    R->off = sdi_calloc(m, (size_t)ne + 1, sizeof *R->off);
+    R->len = sdi_calloc(m, ne ? ne : 1, sizeof *R->len);
     if (!off || !R->off || !R->len)
         goto fail;
     for (uint32_t e = 0; e < ne; e++) {
@@ -454,8 +454,8 @@ static bool g2_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, rings *R
     }
     for (uint32_t v = 0; v < nv; v++)
         off[v + 1] += off[v];
-    adj = sd_alloc(m, ((size_t)off[nv] + 1) * sizeof *adj);
-    cur = sd_alloc(m, ((size_t)nv + 1) * sizeof *cur);
+    adj = sdi_alloc(m, ((size_t)off[nv] + 1) * sizeof *adj);
+    cur = sdi_alloc(m, ((size_t)nv + 1) * sizeof *cur);
     if (!adj || !cur)
         goto fail;
     memcpy(cur, off, (size_t)nv * sizeof *cur);
@@ -501,20 +501,20 @@ static bool g2_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, rings *R
         if (pass == 0) {
             for (uint32_t e = 0; e < ne; e++)
                 R->off[e + 1] += R->off[e];
-            R->v = sd_alloc(m, ((size_t)R->off[ne] + 1) * sizeof *R->v);
-            R->cls = sd_calloc(m, (size_t)R->off[ne] + 1, 1);
+            R->v = sdi_alloc(m, ((size_t)R->off[ne] + 1) * sizeof *R->v);
+            R->cls = sdi_calloc(m, (size_t)R->off[ne] + 1, 1);
             if (!R->v || !R->cls)
                 goto fail;
         }
     }
-    sd_free(m, off);
-    sd_free(m, adj);
-    sd_free(m, cur);
+    sdi_free(m, off);
+    sdi_free(m, adj);
+    sdi_free(m, cur);
     return true;
 fail:
-    sd_free(m, off);
-    sd_free(m, adj);
-    sd_free(m, cur);
+    sdi_free(m, off);
+    sdi_free(m, adj);
+    sdi_free(m, cur);
     return false;
 }
 
@@ -588,7 +588,7 @@ static void vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cn
      * N1/N2 choice); ON_BND: such a vertex has an edge of its part's boundary */
     enum { SLOW = 0x80, OVR = 0x40, ON_BND = 0x10 };
     for (uint32_t v = 0; v < nv; v++) {
-        uint8_t r = sd_vertex_rule(t, v);
+        uint8_t r = sdi_vertex_rule(t, v);
         vr[v] = r | ((r == SD_RULE_G2 || (t->vflag[v] & VF_S_ANY)) ? SLOW : 0);
     }
     if (t->ovmask) { /* vertices with their own N1 / N2 choice and no tag */
@@ -660,17 +660,17 @@ static void vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cn
     }
 }
 
-sd_result sd_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr)
+sd_result sdi_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr)
 {
-    uint32_t *a = sd_calloc(m, (size_t)t->nv + 1, sizeof *a), *b = sd_calloc(m, (size_t)t->nv + 1, sizeof *b);
+    uint32_t *a = sdi_calloc(m, (size_t)t->nv + 1, sizeof *a), *b = sdi_calloc(m, (size_t)t->nv + 1, sizeof *b);
     if (a && b)
         vertex_rules(t, scheme, vr, a, b, NULL);
-    sd_free(m, a);
-    sd_free(m, b);
+    sdi_free(m, a);
+    sdi_free(m, b);
     return a && b ? SD_OK : SD_ERR_NOMEM;
 }
 
-/* The state shared by the steps of sd_build_rules that may run in parallel (each writes only its
+/* The state shared by the steps of sdi_build_rules that may run in parallel (each writes only its
  * own arrays or its own rows of col). */
 typedef struct rjob {
     const sd_topo *t;
@@ -728,7 +728,7 @@ static void erule_part(void *arg, uint32_t part, uint32_t nparts)
 {
     rjob *J = arg;
     uint64_t lo, hi;
-    sd_range(J->t->ne, part, nparts, &lo, &hi);
+    sdi_range(J->t->ne, part, nparts, &lo, &hi);
     bool g2 = false, op = false;
     for (uint32_t e = (uint32_t)lo; e < (uint32_t)hi; e++) {
         uint8_t r = J->er[e] = edge_rule(J->t, e);
@@ -872,7 +872,7 @@ static bool yz_gammas(sd_mem *m, const sd_complex *cx, int level, const sd_topo 
                       const double *x, sd_yzend (*gam)[2], uint8_t **geo)
 {
     const uint32_t nv = t->nv;
-    uint32_t *off = sd_calloc(m, (size_t)nv + 2, sizeof *off), *fl = NULL, *uf = NULL;
+    uint32_t *off = sdi_calloc(m, (size_t)nv + 2, sizeof *off), *fl = NULL, *uf = NULL;
     uint32_t *nsing = NULL, *cnt = NULL, *sing1 = NULL, *sing2 = NULL;
     uint8_t *pk = NULL;
     yzpair *pr = NULL;
@@ -883,7 +883,7 @@ static bool yz_gammas(sd_mem *m, const sd_complex *cx, int level, const sd_topo 
 #define YZV(v) (nm_ov(t->vnm[v]) >= OV_YZS && !(t->vflag[v] & (VF_SING | VF_S_ANY)))
     size_t total = 0;
     for (uint32_t i = 0; i < t->ntr; i++) {
-        const uint32_t *q = t->fv[sd_tr(t, i)];
+        const uint32_t *q = t->fv[sdi_tr(t, i)];
         for (int j = 0; j < 3; j++)
             if (YZV(q[j])) {
                 off[q[j] + 2]++;
@@ -892,18 +892,18 @@ static bool yz_gammas(sd_mem *m, const sd_complex *cx, int level, const sd_topo 
     }
     for (uint32_t v = 0; v < nv; v++)
         off[v + 2] += off[v + 1];
-    fl = sd_alloc(m, (total + 1) * sizeof *fl);
-    uf = sd_alloc(m, (total + 1) * sizeof *uf);
-    nsing = sd_alloc(m, (total + 1) * sizeof *nsing);
-    cnt = sd_alloc(m, (total + 1) * sizeof *cnt);
-    sing1 = sd_alloc(m, (total + 1) * sizeof *sing1);
-    sing2 = sd_alloc(m, (total + 1) * sizeof *sing2);
-    pk = sd_alloc(m, total + 1);
-    pr = sd_alloc(m, (2 * total + 1) * sizeof *pr);
+    fl = sdi_alloc(m, (total + 1) * sizeof *fl);
+    uf = sdi_alloc(m, (total + 1) * sizeof *uf);
+    nsing = sdi_alloc(m, (total + 1) * sizeof *nsing);
+    cnt = sdi_alloc(m, (total + 1) * sizeof *cnt);
+    sing1 = sdi_alloc(m, (total + 1) * sizeof *sing1);
+    sing2 = sdi_alloc(m, (total + 1) * sizeof *sing2);
+    pk = sdi_alloc(m, total + 1);
+    pr = sdi_alloc(m, (2 * total + 1) * sizeof *pr);
     if (!fl || !uf || !nsing || !cnt || !sing1 || !sing2 || !pk || !pr)
         goto out;
     for (uint32_t i = 0; i < t->ntr; i++) {
-        uint32_t f = sd_tr(t, i);
+        uint32_t f = sdi_tr(t, i);
         for (int j = 0; j < 3; j++)
             if (YZV(t->fv[f][j]))
                 fl[off[t->fv[f][j] + 1]++] = f;
@@ -994,7 +994,7 @@ static bool yz_gammas(sd_mem *m, const sd_complex *cx, int level, const sd_topo 
                 }
                 double cs = nu > 0 && nw > 0 ? dot / sqrt(nu * nw) : -1;
                 double alpha = acos(cs < -1 ? -1 : cs > 1 ? 1 : cs);
-                if (!*geo && !(*geo = sd_calloc(m, nv, 1)))
+                if (!*geo && !(*geo = sdi_calloc(m, nv, 1)))
                     goto out;
                 (*geo)[v] = (*geo)[sing1[b + r]] = (*geo)[sing2[b + r]] = 1;
                 if (pk[b + r] == SD_PETAL_CONCAVE) {
@@ -1020,19 +1020,19 @@ static bool yz_gammas(sd_mem *m, const sd_complex *cx, int level, const sd_topo 
 #undef YZV
     ok = true;
 out:
-    sd_free(m, off);
-    sd_free(m, fl);
-    sd_free(m, uf);
-    sd_free(m, nsing);
-    sd_free(m, cnt);
-    sd_free(m, sing1);
-    sd_free(m, sing2);
-    sd_free(m, pk);
-    sd_free(m, pr);
+    sdi_free(m, off);
+    sdi_free(m, fl);
+    sdi_free(m, uf);
+    sdi_free(m, nsing);
+    sdi_free(m, cnt);
+    sdi_free(m, sing1);
+    sdi_free(m, sing2);
+    sdi_free(m, pk);
+    sdi_free(m, pr);
     return ok;
 }
 
-sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
+sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
 {
     sd_mem *m = &cx->mem;
     const sd_topo *t = &lv->t;
@@ -1057,41 +1057,41 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
 
     uint64_t nrows = (uint64_t)nv + ne + no;
     if (nrows >= UINT32_MAX)
-        return sd_fail(err, SD_ERR_LIMIT, -1, -1, "too many points for 32-bit ids");
-    lv->vrule = sd_alloc(m, (size_t)nv + 1);
-    lv->erule = sd_alloc(m, (size_t)ne + 1);
-    cnt_a = sd_calloc(m, nv, sizeof *cnt_a);
+        return sdi_fail(err, SD_ERR_LIMIT, -1, -1, "too many points for 32-bit ids");
+    lv->vrule = sdi_alloc(m, (size_t)nv + 1);
+    lv->erule = sdi_alloc(m, (size_t)ne + 1);
+    cnt_a = sdi_calloc(m, nv, sizeof *cnt_a);
     if (scheme == SD_SOLID_AVERAGED && (t->ntet || no))
-        cnt_b = sd_calloc(m, nv, sizeof *cnt_b);
-    take = sd_alloc(m, (size_t)ne + 1);
+        cnt_b = sdi_calloc(m, nv, sizeof *cnt_b);
+    take = sdi_alloc(m, (size_t)ne + 1);
     if (!lv->vrule || !lv->erule || !cnt_a || (!cnt_b && scheme == SD_SOLID_AVERAGED && (t->ntet || no)) || !take)
         goto nomem;
     uint8_t *vr = lv->vrule, *er = lv->erule;
     rjob J = {.t = t, .scheme = scheme, .vr = vr, .er = er, .take = take, .cnt_a = cnt_a,
               .cnt_b = cnt_b, .sr = &sr, .gr = &gr, .yz = &yzr};
-    sd_par(threads, ne, erule_part, &J);
+    sdi_par(threads, ne, erule_part, &J);
     bool any_g2e = false, any_opp = false;
-    for (uint32_t i = 0; i < sd_par_parts(threads, ne); i++) {
+    for (uint32_t i = 0; i < sdi_par_parts(threads, ne); i++) {
         any_g2e |= J.any_g2e[i];
         any_opp |= J.any_opp[i];
     }
     if (any_opp) {
-        J.opp = opp = sd_alloc(m, (size_t)ne * sizeof *opp);
-        J.nopp = nopp = sd_alloc(m, (size_t)ne + 1);
+        J.opp = opp = sdi_alloc(m, (size_t)ne * sizeof *opp);
+        J.nopp = nopp = sdi_alloc(m, (size_t)ne + 1);
         if (!opp || !nopp)
             goto nomem;
     }
     /* vertex rules and rho sizes, and the edges' opposite vertices, at once */
-    sd_par2(threads, nv + (uint64_t)ne, vrules_task, &J, opp_task, &J);
+    sdi_par2(threads, nv + (uint64_t)ne, vrules_task, &J, opp_task, &J);
     if ((t->ntet || no) && !solid_rings(m, t, er, scheme, threads, &sr))
         goto nomem;
     if (any_g2e && !g2_rings(m, t, er, &gr))
         goto nomem;
     J.stride = any_opp && !t->ntet && !no && !any_g2e;
     if (t->ovmask & OVM_YZ) { /* Ying-Zorin petal rules for the edges at singular vertices */
-        gam = sd_alloc(m, ((size_t)ne + 1) * sizeof *gam);
+        gam = sdi_alloc(m, ((size_t)ne + 1) * sizeof *gam);
         if (!gam || !yz_gammas(m, cx, lv->index, t, lv->ch[0].data, gam, &lv->geo) ||
-            !sd_yz_flat_rows(m, t, (const sd_yzend(*)[2])gam, er, &yzr))
+            !sdi_yz_flat_rows(m, t, (const sd_yzend(*)[2])gam, er, &yzr))
             goto nomem;
         if (yzr.n) /* flattened rows are wider than two opposite vertices */
             J.stride = false;
@@ -1101,13 +1101,13 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
      * opposites], an edge row [end, end, ring...]; the common ones are memoized by rule and
      * size. cur[v] (in cnt_a's place): where v's rho goes in col. */
     cur = cnt_a;
-    wbuf = sd_alloc(m, (size_t)wcap * sizeof *wbuf);
-    if (!wbuf || !sd_csrb_init(m, &lv->S, nv, ne, no, nv, t->ev, t->oct))
+    wbuf = sdi_alloc(m, (size_t)wcap * sizeof *wbuf);
+    if (!wbuf || !sdi_csrb_init(m, &lv->S, nv, ne, no, nv, t->ev, t->oct))
         goto nomem;
 #define WBUF(n)                                                                                    \
     do {                                                                                           \
         if ((n) > wcap) {                                                                          \
-            double *w_ = sd_realloc(m, wbuf, (size_t)(n) * sizeof *wbuf);                          \
+            double *w_ = sdi_realloc(m, wbuf, (size_t)(n) * sizeof *wbuf);                          \
             if (!w_)                                                                               \
                 goto nomem;                                                                        \
             wbuf = w_;                                                                             \
@@ -1137,12 +1137,12 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
                 wbuf[1 + i] = w.a;
             for (uint32_t i = 0; i < nb; i++)
                 wbuf[1 + na + i] = w.b;
-            if ((id = sd_pats_intern(m, &pats, wbuf, 1 + na + nb)) == UINT32_MAX)
+            if ((id = sdi_pats_intern(m, &pats, wbuf, 1 + na + nb)) == UINT32_MAX)
                 goto nomem;
             if (memo)
                 vmemo[vr[v]][na] = id;
         }
-        if (!sd_csrb_set_pat(m, &lv->S, v, id))
+        if (!sdi_csrb_set_pat(m, &lv->S, v, id))
             goto nomem;
     }
     J.ebase = nexp;
@@ -1166,7 +1166,7 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             wbuf[0] = yzr.ends[e][0];
             wbuf[1] = yzr.ends[e][1];
             memcpy(wbuf + 2, yzr.w + yzr.off[e], k * sizeof *wbuf);
-            if ((id = sd_pats_intern(m, &pats, wbuf, 2 + k)) == UINT32_MAX)
+            if ((id = sdi_pats_intern(m, &pats, wbuf, 2 + k)) == UINT32_MAX)
                 goto nomem;
         } else if (petal) { /* 003 Fig. 4f from each singular end, averaged where both are */
             double w0 = 0, w1 = 0;
@@ -1182,7 +1182,7 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             wbuf[0] = w0 / sides;
             wbuf[1] = w1 / sides;
             wbuf[2] = wbuf[3] = 1.0 / 8.0;
-            if ((id = sd_pats_intern(m, &pats, wbuf, 4)) == UINT32_MAX)
+            if ((id = sdi_pats_intern(m, &pats, wbuf, 4)) == UINT32_MAX)
                 goto nomem;
         }
         if (id == UINT32_MAX) {
@@ -1219,12 +1219,12 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
             wbuf[0] = wbuf[1] = wend;
             for (uint32_t i = 0; i < k; i++)
                 wbuf[2 + i] = cls && cls[i] ? wdiag : wring;
-            if ((id = sd_pats_intern(m, &pats, wbuf, 2 + k)) == UINT32_MAX)
+            if ((id = sdi_pats_intern(m, &pats, wbuf, 2 + k)) == UINT32_MAX)
                 goto nomem;
             if (memo)
                 ememo[er[e]][k] = id;
         }
-        if (!sd_csrb_set_pat(m, &lv->S, nv + e, id))
+        if (!sdi_csrb_set_pat(m, &lv->S, nv + e, id))
             goto nomem;
     }
     /* cell points of octahedra (all implicit): box 1/4 on the diagonal, 1/8 on the rest;
@@ -1236,53 +1236,53 @@ sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     if (no) {
         for (int i = 0; i < 6; i++)
             wbuf[i] = scheme == SD_SOLID_AVERAGED ? 1.0 / 6.0 : (i < 2 ? 0.25 : 0.125);
-        uint32_t id = sd_pats_intern(m, &pats, wbuf, 6);
+        uint32_t id = sdi_pats_intern(m, &pats, wbuf, 6);
         if (id == UINT32_MAX)
             goto nomem;
         for (uint32_t o = 0; o < no; o++)
-            if (!sd_csrb_set_pat(m, &lv->S, nv + ne + o, id))
+            if (!sdi_csrb_set_pat(m, &lv->S, nv + ne + o, id))
                 goto nomem;
     }
 #undef WBUF
     uint64_t nnz = (nexp - (J.stride ? 0 : nring)) + nring + nv + 2ull * ne + 6ull * no;
     if (nnz >= UINT32_MAX) {
-        rc = sd_fail(err, SD_ERR_LIMIT, -1, -1, "subdivision matrix too large for 32-bit offsets");
+        rc = sdi_fail(err, SD_ERR_LIMIT, -1, -1, "subdivision matrix too large for 32-bit offsets");
         goto fail;
     }
     lv->S.nexp = nexp;
-    J.col = lv->S.col = sd_alloc(m, (nexp + 1) * sizeof *lv->S.col);
+    J.col = lv->S.col = sdi_alloc(m, (nexp + 1) * sizeof *lv->S.col);
     J.cur = cur;
-    if (!lv->S.col || !sd_csrb_finish(m, &lv->S, &pats, nnz))
+    if (!lv->S.col || !sdi_csrb_finish(m, &lv->S, &pats, nnz))
         goto nomem;
     if (J.stride) { /* the opposite vertices are the edge rows' explicit columns as they are */
         lv->S.eopp = opp;
         opp = NULL;
     }
     /* the columns: vertex rows and edge rows at once */
-    sd_par2(threads, nexp, vrows_task, &J, erows_task, &J);
+    sdi_par2(threads, nexp, vrows_task, &J, erows_task, &J);
 
     lv->have_rules = true;
     goto out;
 
 nomem:
-    rc = sd_fail_nomem(err, m);
+    rc = sdi_fail_nomem(err, m);
 fail:
-    sd_free(m, lv->vrule);
-    sd_free(m, lv->erule);
-    sd_free(m, lv->geo);
+    sdi_free(m, lv->vrule);
+    sdi_free(m, lv->erule);
+    sdi_free(m, lv->geo);
     lv->vrule = lv->erule = lv->geo = NULL;
-    sd_csrb_free(m, &lv->S);
+    sdi_csrb_free(m, &lv->S);
 out:
-    sd_pats_free(m, &pats);
-    sd_free(m, take);
-    sd_free(m, gam);
-    sd_free(m, wbuf);
-    sd_free(m, cnt_a);
-    sd_free(m, cnt_b);
-    sd_free(m, opp);
-    sd_free(m, nopp);
+    sdi_pats_free(m, &pats);
+    sdi_free(m, take);
+    sdi_free(m, gam);
+    sdi_free(m, wbuf);
+    sdi_free(m, cnt_a);
+    sdi_free(m, cnt_b);
+    sdi_free(m, opp);
+    sdi_free(m, nopp);
     rings_free(m, &sr);
     rings_free(m, &gr);
-    sd_yzrows_free(m, &yzr);
+    sdi_yzrows_free(m, &yzr);
     return rc;
 }

@@ -31,19 +31,19 @@ typedef struct vinc {
 
 static void vinc_free(sd_mem *m, vinc *x)
 {
-    sd_free(m, x->eoff);
-    sd_free(m, x->e);
-    sd_free(m, x->foff);
-    sd_free(m, x->f);
-    sd_free(m, x->efoff);
-    sd_free(m, x->ef);
+    sdi_free(m, x->eoff);
+    sdi_free(m, x->e);
+    sdi_free(m, x->foff);
+    sdi_free(m, x->f);
+    sdi_free(m, x->efoff);
+    sdi_free(m, x->ef);
 }
 
 static bool csr(sd_mem *m, uint32_t nv, uint32_t n, int per, const uint32_t *keys, uint32_t **off,
                 uint32_t **item)
 {
-    *off = sd_calloc(m, (size_t)nv + 2, sizeof **off);
-    *item = sd_alloc(m, ((size_t)n * per + 1) * sizeof **item);
+    *off = sdi_calloc(m, (size_t)nv + 2, sizeof **off);
+    *item = sdi_alloc(m, ((size_t)n * per + 1) * sizeof **item);
     if (!*off || !*item)
         return false;
     for (size_t i = 0; i < (size_t)n * per; i++)
@@ -150,13 +150,13 @@ sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint
     sd_topo *t = &c->lv[0]->t;
     sd_mem *m = &c->mem;
     /* validate and locate every tag first: all-or-nothing */
-    uint32_t *where = sd_alloc(m, (n ? n : 1) * sizeof *where);
-    uint8_t *kind = sd_alloc(m, n ? n : 1);
+    uint32_t *where = sdi_alloc(m, (n ? n : 1) * sizeof *where);
+    uint8_t *kind = sdi_alloc(m, n ? n : 1);
     vinc x = {0};
     if (!where || !kind || (n && !vinc_build(m, t, &x))) {
-        sd_free(m, where);
-        sd_free(m, kind);
-        return sd_fail_nomem(err, m);
+        sdi_free(m, where);
+        sdi_free(m, kind);
+        return sdi_fail_nomem(err, m);
     }
     size_t off = 0;
     sd_result rc = SD_OK;
@@ -164,26 +164,26 @@ sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint
         const uint32_t *v = idx + off;
         int k = size[i];
         if (k < 1 || k > 3) {
-            rc = sd_fail(err, SD_ERR_ARITY, (long)i, -1,
+            rc = sdi_fail(err, SD_ERR_ARITY, (long)i, -1,
                          "tag %zu has %d vertices: a vertex, an edge or a triangle", i, k);
             break;
         }
         for (int j = 0; j < k && !rc; j++)
             if (v[j] >= t->nv)
-                rc = sd_fail(err, SD_ERR_INDEX, (long)i, j, "tag %zu: vertex %u out of range", i,
+                rc = sdi_fail(err, SD_ERR_INDEX, (long)i, j, "tag %zu: vertex %u out of range", i,
                              v[j]);
         if (rc)
             break;
         kind[i] = (uint8_t)k;
         where[i] = k == 1 ? v[0] : k == 2 ? find_edge(t, &x, v[0], v[1]) : find_face(t, &x, v);
         if (where[i] == UINT32_MAX)
-            rc = sd_fail(err, SD_ERR_ARG, (long)i, -1, "tag %zu is not %s of the complex", i,
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, -1, "tag %zu is not %s of the complex", i,
                          k == 2 ? "an edge" : "a triangle");
     }
     vinc_free(m, &x);
     if (rc) {
-        sd_free(m, where);
-        sd_free(m, kind);
+        sdi_free(m, where);
+        sdi_free(m, kind);
         return rc;
     }
     uint32_t *old_at = c->tag_at;
@@ -192,18 +192,18 @@ sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint
     c->tag_at = where;
     c->tag_k = kind;
     c->ntags = n;
-    if ((rc = sd_apply_singular(c, err))) { /* only for lack of memory: put the old ones back */
+    if ((rc = sdi_apply_singular(c, err))) { /* only for lack of memory: put the old ones back */
         c->tag_at = old_at;
         c->tag_k = old_k;
         c->ntags = old_n;
         sd_error ignore;
-        sd_apply_singular(c, &ignore);
-        sd_free(m, where);
-        sd_free(m, kind);
+        sdi_apply_singular(c, &ignore);
+        sdi_free(m, where);
+        sdi_free(m, kind);
         return rc;
     }
-    sd_free(m, old_at);
-    sd_free(m, old_k);
+    sdi_free(m, old_at);
+    sdi_free(m, old_k);
     return SD_OK;
 }
 
@@ -215,19 +215,19 @@ static sd_result check_override(const sd_topo *t, const vinc *x, const sd_overri
 {
     const uint32_t *s = o->simplex;
     if (o->nverts < 1 || o->nverts > 2)
-        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
+        return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
                        "rules are chosen per vertex or edge, not for a simplex of %d vertices",
                        o->nverts);
     for (int j = 0; j < o->nverts; j++)
         if (s[j] >= t->nv)
-            return sd_fail(err, SD_ERR_INDEX, (long)i, SD_OV_FIELD_SIMPLEX,
+            return sdi_fail(err, SD_ERR_INDEX, (long)i, SD_OV_FIELD_SIMPLEX,
                            "vertex %u out of range (%u vertices)", s[j], t->nv);
     bool edge = o->nverts == 2;
     if (edge && s[0] == s[1])
-        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX, "vertex %u appears twice", s[0]);
+        return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX, "vertex %u appears twice", s[0]);
     uint32_t id = edge ? find_edge(t, x, s[0], s[1]) : s[0];
     if (id == UINT32_MAX)
-        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
+        return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
                        "[%u, %u] is not an edge of the complex", s[0], s[1]);
     *at = id;
     char name[40];
@@ -239,15 +239,15 @@ static sd_result check_override(const sd_topo *t, const vinc *x, const sd_overri
     int type = nm_type(edge ? t->enm[id] : t->vnm[id]);
     if (o->rule != SD_RULE_N1 && o->rule != SD_RULE_N2 && o->rule != SD_RULE_G1 &&
         o->rule != SD_RULE_G2)
-        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
+        return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
                        "the rule of a simplex is N1, N2, G1 or G2");
     if (!type)
-        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
+        return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
                        "%s is manifold: non-manifold rules are for non-manifold simplices (tag "
                        "it singular to make it a corner or a crease)", name);
     if (o->rule == SD_RULE_N1) {
         if (type != 1)
-            return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
+            return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
                            "N1 is for type-1 simplices, where parts of different dimensions "
                            "meet; %s is of type %d (use %s, G1 or G2)", name, type,
                            type == 2 || type == 4 ? "N2" : "G2");
@@ -257,7 +257,7 @@ static sd_result check_override(const sd_topo *t, const vinc *x, const sd_overri
             for (int k = 1; k <= 3; k++)
                 if ((fam >> k) & 1)
                     p += snprintf(p, (size_t)(dims + sizeof dims - p), "%s%d", p == dims ? "" : ", ", k);
-            return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
+            return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
                            "%s has no part of dimension %d (its parts: %s)", name, d, dims);
         }
         return SD_OK;
@@ -265,22 +265,22 @@ static sd_result check_override(const sd_topo *t, const vinc *x, const sd_overri
     if (o->rule != SD_RULE_N2)
         return SD_OK;
     if (type != 2 && type != 4)
-        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
+        return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
                        "N2 is for type-2 simplices (three or more parts of one dimension sharing "
                        "it) and their faces; %s is of type %d (use %s, G1 or G2)", name, type,
                        type == 1 ? "N1" : "G2");
     bool curves = fam == FAM1;
     if (!curves && !(fam & FAM2))
-        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
+        return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
                        "N2 at %s would choose a pair of tetrahedra: only pairs of curve segments "
                        "or triangles are supported (use G1 or G2)", name);
     if (edge && nm_type(t->enm[id]) != 2)
-        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
+        return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
                        "N2 at an edge chooses two of the triangles sharing it; %s is of type %d",
                        name, type);
     int want = curves ? 2 : 3;
     if (o->pair_size != want)
-        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR,
+        return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR,
                        "the pair at %s is two %s (%d vertex ids each)", name,
                        curves ? "curve segments" : "triangles", want);
     uint32_t got[2];
@@ -288,13 +288,13 @@ static sd_result check_override(const sd_topo *t, const vinc *x, const sd_overri
         const uint32_t *q = o->pair[j];
         for (int u = 0; u < want; u++)
             if (q[u] >= t->nv)
-                return sd_fail(err, SD_ERR_INDEX, (long)i, SD_OV_FIELD_PAIR0 + j,
+                return sdi_fail(err, SD_ERR_INDEX, (long)i, SD_OV_FIELD_PAIR0 + j,
                                "vertex %u out of range (%u vertices)", q[u], t->nv);
         got[j] = curves ? find_edge(t, x, q[0], q[1]) : find_face(t, x, q);
         bool ok = got[j] != UINT32_MAX &&
                   (curves ? (t->eflag[got[j]] & EF_CURVE) != 0 : (t->fflag[got[j]] & FF_MAX) != 0);
         if (!ok)
-            return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR0 + j,
+            return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR0 + j,
                            "pair %d is not a %s of the complex", j,
                            curves ? "curve segment" : "triangle (a maximal one, not a face of a tetrahedron)");
         bool contains = true;
@@ -305,11 +305,11 @@ static sd_result check_override(const sd_topo *t, const vinc *x, const sd_overri
             contains &= in;
         }
         if (!contains)
-            return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR0 + j,
+            return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR0 + j,
                            "pair %d does not contain %s", j, name);
     }
     if (got[0] == got[1])
-        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR1,
+        return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR1,
                        "the pair names the same simplex twice");
     return SD_OK;
 }
@@ -337,7 +337,7 @@ static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, const vinc *x, tinc *ti
                 n += (t->fflag[x->ef[k]] & FF_MAX) != 0;
             if (n <= 2)
                 return SD_OK;
-            return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
+            return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
                            "the surfaces are themselves non-manifold at this edge (%u triangles "
                            "share it): N1 cannot pick one surface; use N2, G1 or G2", n);
         }
@@ -351,8 +351,8 @@ static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, const vinc *x, tinc *ti
                 first = first == UINT32_MAX ? f : first;
             }
         }
-        if (!ti->stack && !(ti->stack = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *ti->stack)))
-            return sd_fail_nomem(err, m);
+        if (!ti->stack && !(ti->stack = sdi_alloc(m, ((size_t)t->nf + 1) * sizeof *ti->stack)))
+            return sdi_fail_nomem(err, m);
         uint32_t got = first == UINT32_MAX ? 0 : mark_petal(t, x, id, first, ti->stack);
         for (uint32_t k = x->foff[id]; k < x->foff[id + 1]; k++) {
             uint32_t f = x->f[k];
@@ -360,7 +360,7 @@ static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, const vinc *x, tinc *ti
         }
         if (got == total)
             return SD_OK;
-        return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
+        return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
                        "the surfaces are themselves non-manifold at vertex %u (its %u triangles "
                        "form more than one fan): N1 cannot pick one surface; use N2, G1 or G2",
                        id, total);
@@ -369,9 +369,9 @@ static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, const vinc *x, tinc *ti
     if (!ti->voff) {
         if (!csr(m, t->nv, t->ntet, 4, &t->tet[0][0], &ti->voff, &ti->v) ||
             !csr(m, t->nf, t->ntet, 4, &t->tet_f[0][0], &ti->foff, &ti->f) ||
-            !(ti->mark = sd_calloc(m, (size_t)t->ntet + 1, 1)) ||
-            (!ti->stack && !(ti->stack = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *ti->stack))))
-            return sd_fail_nomem(err, m);
+            !(ti->mark = sdi_calloc(m, (size_t)t->ntet + 1, 1)) ||
+            (!ti->stack && !(ti->stack = sdi_alloc(m, ((size_t)t->nf + 1) * sizeof *ti->stack))))
+            return sdi_fail_nomem(err, m);
     }
     uint32_t a = edge ? t->ev[id][0] : id, b = edge ? t->ev[id][1] : UINT32_MAX;
     uint32_t total = 0, got = 0, top = 0, bad = 0;
@@ -403,7 +403,7 @@ static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, const vinc *x, tinc *ti
         ti->mark[ti->v[k]] = 0;
     if (got == total && !bad)
         return SD_OK;
-    return sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
+    return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
                    "the solids are themselves non-manifold at this %s (its tetrahedra do not "
                    "form one piece joined through faces): N1 cannot pick one solid; use G1 or G2",
                    what);
@@ -415,19 +415,19 @@ sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t 
     sd_mem *m = &c->mem;
     vinc x = {0};
     tinc ti = {0};
-    sd_override *copy = sd_alloc(m, (n ? n : 1) * sizeof *copy);
-    uint32_t *at = sd_alloc(m, (n ? n : 1) * sizeof *at);
+    sd_override *copy = sdi_alloc(m, (n ? n : 1) * sizeof *copy);
+    uint32_t *at = sdi_alloc(m, (n ? n : 1) * sizeof *at);
     uint32_t *vseen = NULL, *eseen = NULL;
     sd_result rc = SD_OK;
     if (!copy || !at || (n && !vinc_build(m, t, &x))) {
-        rc = sd_fail_nomem(err, m);
+        rc = sdi_fail_nomem(err, m);
         goto out;
     }
     if (n) {
-        vseen = sd_alloc(m, ((size_t)t->nv + 1) * sizeof *vseen);
-        eseen = sd_alloc(m, ((size_t)t->ne + 1) * sizeof *eseen);
+        vseen = sdi_alloc(m, ((size_t)t->nv + 1) * sizeof *vseen);
+        eseen = sdi_alloc(m, ((size_t)t->ne + 1) * sizeof *eseen);
         if (!vseen || !eseen) {
-            rc = sd_fail_nomem(err, m);
+            rc = sdi_fail_nomem(err, m);
             goto out;
         }
         memset(vseen, 0xff, ((size_t)t->nv + 1) * sizeof *vseen);
@@ -438,7 +438,7 @@ sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t 
             goto out;
         uint32_t *seen = ov[i].nverts == 2 ? &eseen[at[i]] : &vseen[at[i]];
         if (*seen != UINT32_MAX) {
-            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
                          "this simplex already has a rule (override %u)", *seen);
             goto out;
         }
@@ -452,26 +452,26 @@ sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t 
     size_t old_n = c->nov;
     c->ov = copy;
     c->nov = n;
-    if ((rc = sd_apply_singular(c, err))) { /* a conflict between pairs: put the old ones back */
+    if ((rc = sdi_apply_singular(c, err))) { /* a conflict between pairs: put the old ones back */
         c->ov = old;
         c->nov = old_n;
         sd_error ignore;
-        sd_apply_singular(c, &ignore);
+        sdi_apply_singular(c, &ignore);
         goto out;
     }
     copy = old;
 out:
-    sd_free(m, copy);
-    sd_free(m, at);
-    sd_free(m, vseen);
-    sd_free(m, eseen);
+    sdi_free(m, copy);
+    sdi_free(m, at);
+    sdi_free(m, vseen);
+    sdi_free(m, eseen);
     vinc_free(m, &x);
-    sd_free(m, ti.voff);
-    sd_free(m, ti.v);
-    sd_free(m, ti.foff);
-    sd_free(m, ti.f);
-    sd_free(m, ti.stack);
-    sd_free(m, ti.mark);
+    sdi_free(m, ti.voff);
+    sdi_free(m, ti.v);
+    sdi_free(m, ti.foff);
+    sdi_free(m, ti.f);
+    sdi_free(m, ti.stack);
+    sdi_free(m, ti.mark);
     return rc;
 }
 
@@ -580,20 +580,20 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
     for (size_t i = 0; i < n; i++) { /* ids and kinds first: nothing below reads an unchecked one */
         const sd_petal_tag *p = &pt[i];
         if (p->vertex >= t->nv)
-            return sd_fail(err, SD_ERR_INDEX, (long)i, SD_PT_FIELD_VERTEX,
+            return sdi_fail(err, SD_ERR_INDEX, (long)i, SD_PT_FIELD_VERTEX,
                            "petal tag %zu: vertex %u out of range", i, p->vertex);
         for (int j = 0; j < 3; j++)
             if (p->triangle[j] >= t->nv)
-                return sd_fail(err, SD_ERR_INDEX, (long)i, SD_PT_FIELD_TRIANGLE,
+                return sdi_fail(err, SD_ERR_INDEX, (long)i, SD_PT_FIELD_TRIANGLE,
                                "petal tag %zu: vertex %u out of range", i, p->triangle[j]);
         if (p->kind < SD_PETAL_CONVEX || p->kind > SD_PETAL_SMOOTH)
-            return sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_KIND,
+            return sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_KIND,
                            "petal tag %zu: the kind is convex, concave or smooth", i);
     }
-    if (n && (!vinc_build(m, t, &x) || !(faces = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *faces)) ||
-              !(owner = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *owner)) ||
-              !(tagv = sd_calloc(m, (size_t)t->nv + 1, 1)) ||
-              !(pairs = sd_alloc(m, n * sizeof *pairs))))
+    if (n && (!vinc_build(m, t, &x) || !(faces = sdi_alloc(m, ((size_t)t->nf + 1) * sizeof *faces)) ||
+              !(owner = sdi_alloc(m, ((size_t)t->nf + 1) * sizeof *owner)) ||
+              !(tagv = sdi_calloc(m, (size_t)t->nv + 1, 1)) ||
+              !(pairs = sdi_alloc(m, n * sizeof *pairs))))
         goto nomem;
     for (uint32_t f = 0; n && f < t->nf; f++)
         owner[f] = UINT32_MAX;
@@ -618,14 +618,14 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
         uint32_t v = p->vertex;
         uint32_t f = find_face(t, &x, p->triangle);
         if (f == UINT32_MAX || !(t->fflag[f] & FF_MAX)) {
-            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
                          "petal tag %zu: [%u, %u, %u] is not a surface triangle of the complex "
                          "(a maximal triangle, not a face of a tetrahedron)", i, p->triangle[0],
                          p->triangle[1], p->triangle[2]);
             goto out;
         }
         if (!face_has(t, f, v)) {
-            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
                          "petal tag %zu: the triangle does not hold vertex %u", i, v);
             goto out;
         }
@@ -635,7 +635,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
         for (uint32_t k = x.eoff[v]; k < x.eoff[v + 1]; k++)
             nsing += yz_counts_singular(t, x.e[k]);
         if (t->vfam[v] != FAM2 || !nm_type(t->vnm[v]) || yz_simple(nm_type(t->vnm[v]), nsing)) {
-            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_VERTEX,
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_VERTEX,
                          "petal tag %zu: vertex %u is not a complex singular vertex of a "
                          "triangle mesh (a non-manifold vertex where only triangles meet, not "
                          "one flower with exactly two singular edges): corner kinds do not "
@@ -643,7 +643,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
             goto out;
         }
         if (tagv[v]) { /* as rules.c (YZV): the singular tags win */
-            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_VERTEX,
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_VERTEX,
                          "petal tag %zu: vertex %u %s, so its petals have no corner rule", i, v,
                          tagv[v] == 1 ? "is tagged singular (fixed with plain edge rules)"
                                      : "lies on a tagged crease or embedded surface (it "
@@ -651,14 +651,14 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
             goto out;
         }
         if (owner[f] != UINT32_MAX) {
-            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
                          "petal tag %zu: tag %u already names this petal of vertex %u", i,
                          owner[f], v);
             goto out;
         }
         uint32_t sing[2], ns, nf = petal_faces(t, &x, v, f, faces, sing, &ns);
         if (ns != 2) {
-            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
                          "petal tag %zu: the petal of vertex %u holding this triangle is %s; "
                          "corner kinds apply to open petals, bounded by two singular edges", i, v,
                          ns == 0 ? "closed (no singular edge)"
@@ -667,7 +667,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
         }
         for (uint32_t k = 0; k < nf; k++)
             if (owner[faces[k]] != UINT32_MAX) { /* a triangle of the petal, but not f */
-                rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
+                rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
                              "petal tag %zu: tag %u already names this petal of vertex %u", i,
                              owner[faces[k]], v);
                 goto out;
@@ -681,7 +681,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
             size_t nc = cap ? 2 * cap : 64;
             while (nc < nat + nf)
                 nc *= 2;
-            sd_petal_at *na = sd_realloc(m, at, nc * sizeof *na);
+            sd_petal_at *na = sdi_realloc(m, at, nc * sizeof *na);
             if (!na)
                 goto nomem;
             at = na;
@@ -695,7 +695,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
      * must be tagged smooth (each petal walked once: `walked`, cleared per vertex). */
     if (any_smooth) {
         size_t nsm = 0;
-        if (!(sm = sd_alloc(m, n * sizeof *sm)) || !(walked = sd_calloc(m, (size_t)t->nf + 1, 1)))
+        if (!(sm = sdi_alloc(m, n * sizeof *sm)) || !(walked = sdi_calloc(m, (size_t)t->nf + 1, 1)))
             goto nomem;
         for (size_t i = 0; i < n; i++)
             if (pt[i].kind == SD_PETAL_SMOOTH)
@@ -728,7 +728,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
                                                           cmp_smooth_at) : NULL;
                 if (hit) {
                     const uint32_t *gv = t->fv[g];
-                    rc = sd_fail(err, SD_ERR_ARG, (long)hit->tag, SD_PT_FIELD_KIND,
+                    rc = sdi_fail(err, SD_ERR_ARG, (long)hit->tag, SD_PT_FIELD_KIND,
                                  "petal tag %u: a smooth petal needs every petal of vertex %u "
                                  "between the same two singular edges smooth too (003 Sec. 2), "
                                  "and the one holding [%u, %u, %u] is not tagged smooth",
@@ -743,29 +743,29 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
     }
     if (nat)
         qsort(at, nat, sizeof *at, cmp_petal_at);
-    sd_free(m, c->pet);
+    sdi_free(m, c->pet);
     c->pet = at;
     c->npet = nat;
     at = NULL;
-    sd_drop_rules(c, c->lv[0]); /* level 0's rules change; every finer level follows */
+    sdi_drop_rules(c, c->lv[0]); /* level 0's rules change; every finer level follows */
     goto out;
 nomem:
-    rc = sd_fail_nomem(err, m);
+    rc = sdi_fail_nomem(err, m);
 out:
-    sd_free(m, at);
-    sd_free(m, faces);
-    sd_free(m, owner);
-    sd_free(m, tagv);
-    sd_free(m, pairs);
-    sd_free(m, sm);
-    sd_free(m, walked);
+    sdi_free(m, at);
+    sdi_free(m, faces);
+    sdi_free(m, owner);
+    sdi_free(m, tagv);
+    sdi_free(m, pairs);
+    sdi_free(m, sm);
+    sdi_free(m, walked);
     vinc_free(m, &x);
     return rc;
 }
 
 /* ---- applying tags and rules to level 0 --------------------------------------------------- */
 
-sd_result sd_apply_singular(sd_complex *c, sd_error *err)
+sd_result sdi_apply_singular(sd_complex *c, sd_error *err)
 {
     sd_level *l0 = c->lv[0];
     sd_topo *t = &l0->t;
@@ -802,7 +802,7 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
 
     /* per-simplex rules */
     if (c->nov) {
-        stack = sd_alloc(m, ((size_t)t->nf + 1) * sizeof *stack);
+        stack = sdi_alloc(m, ((size_t)t->nf + 1) * sizeof *stack);
         if (!stack)
             goto nomem;
     }
@@ -849,7 +849,7 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
      * crease); a non-manifold vertex is simple (one flower, exactly two singular edges: boundary
      * or non-manifold ones) or complex; without a choice or a tag */
     if (t->ovmask & OVM_YZ) {
-        nface = sd_calloc(m, (size_t)t->nv + 1, 1); /* singular edges per vertex, saturating */
+        nface = sdi_calloc(m, (size_t)t->nv + 1, 1); /* singular edges per vertex, saturating */
         if (!nface)
             goto nomem;
         for (uint32_t e = 0; e < t->ne; e++) {
@@ -868,7 +868,7 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
                 !(t->vnm[v] & NM_G1) && !(t->vflag[v] & VF_SING))
                 t->vnm[v] |= (uint8_t)((yz_simple(nm_type(t->vnm[v]), nface[v]) ? OV_YZS : OV_YZX)
                                        << NM_OV_SHIFT);
-        sd_free(m, nface);
+        sdi_free(m, nface);
         nface = NULL;
     }
 
@@ -890,7 +890,7 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
             t->fflag[f] |= FF_SING;
 
     /* derived: surface edges, their boundary, and the vertices on them */
-    nface = sd_calloc(m, (size_t)t->ne + 1, 1);
+    nface = sdi_calloc(m, (size_t)t->ne + 1, 1);
     if (!nface)
         goto nomem;
     for (uint32_t f = 0; f < t->nf; f++)
@@ -965,7 +965,7 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
                 t->fflag[x.f[k]] = (uint8_t)((t->fflag[x.f[k]] & ~(FF_N2SEL | 64)) |
                                              ((t->fflag[x.f[k]] & 64) ? FF_N2SEL : 0));
             if (!p1) {
-                rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR1,
+                rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR1,
                              "both triangles of the pair lie in the same petal (fan of triangles "
                              "joined by manifold edges) around vertex %u: choose triangles of two "
                              "different petals", id);
@@ -973,7 +973,7 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
             }
         }
         if (chosen != own) {
-            rc = sd_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR,
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR,
                          "the pair conflicts with another N2 choice: %u %s at this %s are chosen, "
                          "its own pair gives %u (a chosen %s touching another N2 simplex must be "
                          "in that simplex's pair too)", chosen,
@@ -985,12 +985,12 @@ sd_result sd_apply_singular(sd_complex *c, sd_error *err)
     }
     goto out;
 nomem:
-    rc = sd_fail_nomem(err, m);
+    rc = sdi_fail_nomem(err, m);
 out:
-    sd_free(m, nface);
-    sd_free(m, stack);
+    sdi_free(m, nface);
+    sdi_free(m, stack);
     vinc_free(m, &x);
-    sd_drop_rules(c, l0); /* level 0's rules change; every finer level follows */
+    sdi_drop_rules(c, l0); /* level 0's rules change; every finer level follows */
     return rc;
 }
 
@@ -1001,5 +1001,5 @@ int sd_level_vertex_singular(const sd_level *lv, uint32_t i)
 
 int sd_level_edge_singular(const sd_level *lv, uint32_t e)
 {
-    return e < lv->t.ne && sd_need_derived(lv) && (lv->t.eflag[e] & (EF_CREASE | EF_SSURF)) != 0;
+    return e < lv->t.ne && sdi_need_derived(lv) && (lv->t.eflag[e] & (EF_CREASE | EF_SSURF)) != 0;
 }

@@ -51,12 +51,12 @@
 #include <string.h>
 
 
-void sd_yzrows_free(sd_mem *m, sd_yzrows *y)
+void sdi_yzrows_free(sd_mem *m, sd_yzrows *y)
 {
-    sd_free(m, y->off);
-    sd_free(m, y->col);
-    sd_free(m, y->w);
-    sd_free(m, y->ends);
+    sdi_free(m, y->off);
+    sdi_free(m, y->col);
+    sdi_free(m, y->w);
+    sdi_free(m, y->ends);
     memset(y, 0, sizeof *y);
 }
 
@@ -75,7 +75,7 @@ static bool acc_add(sd_mem *m, acc *a, uint32_t c, double w)
 {
     if (a->n == a->cap) {
         uint32_t cap = a->cap ? 2 * a->cap : 16;
-        entry *ne = sd_realloc(m, a->e, cap * sizeof *ne);
+        entry *ne = sdi_realloc(m, a->e, cap * sizeof *ne);
         if (!ne)
             return false;
         a->e = ne;
@@ -208,33 +208,33 @@ static bool flat_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32
     return acc_add(m, a, v, scale * (1 - sum));
 }
 
-bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint8_t *er,
+bool sdi_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint8_t *er,
                      sd_yzrows *y)
 {
     const uint32_t ne = t->ne;
     memset(y, 0, sizeof *y);
     uint32_t nfd = 0;
     for (uint32_t e = 0; e < ne; e++)
-        nfd += sd_yz_flat(end[e][0].kind) || sd_yz_flat(end[e][1].kind);
+        nfd += sdi_yz_flat(end[e][0].kind) || sdi_yz_flat(end[e][1].kind);
     if (!nfd)
         return true;
     bool ok = false;
-    uint32_t (*efc)[2] = sd_alloc(m, ((size_t)ne + 1) * sizeof *efc), *ring = NULL, *tmp = NULL;
+    uint32_t (*efc)[2] = sdi_alloc(m, ((size_t)ne + 1) * sizeof *efc), *ring = NULL, *tmp = NULL;
     uint32_t cap = t->ntr + 2;
     acc a = {0};
-    y->off = sd_calloc(m, (size_t)ne + 1, sizeof *y->off);
-    y->ends = sd_alloc(m, ((size_t)ne + 1) * sizeof *y->ends);
-    ring = sd_alloc(m, (size_t)cap * sizeof *ring);
-    tmp = sd_alloc(m, (size_t)cap * sizeof *tmp);
+    y->off = sdi_calloc(m, (size_t)ne + 1, sizeof *y->off);
+    y->ends = sdi_alloc(m, ((size_t)ne + 1) * sizeof *y->ends);
+    ring = sdi_alloc(m, (size_t)cap * sizeof *ring);
+    tmp = sdi_alloc(m, (size_t)cap * sizeof *tmp);
     if (!efc || !y->off || !y->ends || !ring || !tmp)
         goto out;
     for (uint32_t e = 0; e < ne; e++)
         efc[e][0] = efc[e][1] = UINT32_MAX;
     for (uint32_t i = 0; i < t->ntr; i++) {
-        uint32_t f = sd_tr(t, i);
+        uint32_t f = sdi_tr(t, i);
         for (int j = 0; j < 3; j++) {
             uint32_t e = t->fe[f][j];
-            if (!sd_yz_flat(end[e][0].kind) && !sd_yz_flat(end[e][1].kind))
+            if (!sdi_yz_flat(end[e][0].kind) && !sdi_yz_flat(end[e][1].kind))
                 continue;
             if (efc[e][0] == UINT32_MAX)
                 efc[e][0] = f;
@@ -246,7 +246,7 @@ bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint
     for (int pass = 0; pass < 2; pass++) {
         uint32_t row = 0;
         for (uint32_t e = 0; e < ne; e++) {
-            if (!sd_yz_flat(end[e][0].kind) && !sd_yz_flat(end[e][1].kind))
+            if (!sdi_yz_flat(end[e][0].kind) && !sdi_yz_flat(end[e][1].kind))
                 continue;
             uint32_t ends[2] = {t->ev[e][0], t->ev[e][1]};
             int sides = (end[e][0].kind != SD_YZ_NONE) + (end[e][1].kind != SD_YZ_NONE);
@@ -318,8 +318,8 @@ bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint
         if (pass == 0) {
             for (uint32_t e = 0; e < ne; e++)
                 y->off[e + 1] = (y->off[e + 1] == UINT32_MAX ? 0 : y->off[e + 1]) + y->off[e];
-            y->col = sd_alloc(m, ((size_t)y->off[ne] + 1) * sizeof *y->col);
-            y->w = sd_alloc(m, ((size_t)y->off[ne] + 1) * sizeof *y->w);
+            y->col = sdi_alloc(m, ((size_t)y->off[ne] + 1) * sizeof *y->col);
+            y->w = sdi_alloc(m, ((size_t)y->off[ne] + 1) * sizeof *y->w);
             if (!y->col || !y->w)
                 goto out;
         }
@@ -327,11 +327,11 @@ bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint
     }
     ok = true;
 out:
-    sd_free(m, efc);
-    sd_free(m, ring);
-    sd_free(m, tmp);
-    sd_free(m, a.e);
+    sdi_free(m, efc);
+    sdi_free(m, ring);
+    sdi_free(m, tmp);
+    sdi_free(m, a.e);
     if (!ok)
-        sd_yzrows_free(m, y);
+        sdi_yzrows_free(m, y);
     return ok;
 }
