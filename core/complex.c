@@ -149,44 +149,6 @@ static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint3
     return SD_OK;
 }
 
-void sdi_topo_free_faces(sd_mem *m, sd_topo *t)
-{
-    if (t->fv != t->trv) /* fv may be the triangles' own array (tr_ident) */
-        sdi_free(m, t->fv);
-    void *arrays[] = {t->fe, t->cu, t->tr, t->tet_e, t->tet_f, t->oct_e, t->oct_f, t->fn3, t->fflag};
-    for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
-        sdi_free(m, arrays[i]);
-    t->fv = t->fe = NULL;
-    t->cu = t->tr = NULL;
-    t->tet_e = NULL;
-    t->tet_f = NULL;
-    t->oct_e = NULL;
-    t->oct_f = NULL;
-    t->fn3 = t->fflag = NULL;
-    t->faces = false;
-}
-
-void sdi_topo_free_edges(sd_mem *m, sd_topo *t)
-{
-    void *arrays[] = {t->ev, t->efam, t->eflag, t->enm};
-    for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
-        sdi_free(m, arrays[i]);
-    t->ev = NULL;
-    t->efam = t->eflag = t->enm = NULL;
-    t->derived = false;
-}
-
-void sdi_topo_free(sd_mem *m, sd_topo *t)
-{
-    sdi_topo_free_faces(m, t);
-    sdi_topo_free_edges(m, t);
-    void *arrays[] = {t->pt, t->cuv, t->trv, t->tet, t->tet_d, t->tet_b, t->oct, t->oct_b,
-                      t->vfam, t->vflag, t->vnm};
-    for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
-        sdi_free(m, arrays[i]);
-    memset(t, 0, sizeof *t);
-}
-
 static uint32_t edge_id(sd_hash *h, sd_topo *t, uint32_t a, uint32_t b)
 {
     uint32_t ids[2] = {a, b}, k[4];
@@ -355,7 +317,12 @@ sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const 
         t->tr_ident = t->tr[i] == i;
     c->lv[0] = lv;
     c->nlevels = 1;
-    if ((r = sdi_classify_level0(m, t, err)) || (r = sdi_choose_diagonals(m, t, err))) {
+    sdi_rels R = {.t = t};
+    r = sdi_classify_level0(m, t, &R, err);
+    if (!r)
+        r = sdi_choose_diagonals(m, t, &R, err);
+    sdi_rels_free(m, &R);
+    if (r) {
         c->lv[0] = NULL;
         c->nlevels = 0;
         sdi_level_free(m, lv);

@@ -102,6 +102,21 @@ enum { OVM_N1 = 1, OVM_N2T = 2, OVM_N2C = 4, OVM_YZ = 8 }; /* sd_topo.ovmask: wh
                                                               * occur; the Ying-Zorin rules */
 enum { FAM0 = 1, FAM1 = 2, FAM2 = 4, FAM3 = 8 };
 
+/* ---- incidence relations (topo.c) ---------------------------------------------------------- */
+/* A relation from keys to items in CSR form: key k's items are item[off[k] .. off[k+1]), in
+ * increasing order. */
+typedef struct sdi_rel {
+    uint32_t *off, *item;
+} sdi_rel;
+/* Invert the map item i -> keys[i * stride + 0 .. per) (keys < nkeys). false: no memory. */
+bool sdi_rel_build(sd_mem *m, sdi_rel *r, uint32_t nkeys, uint32_t nitems, int stride, int per,
+                   const uint32_t *keys);
+void sdi_rel_free(sd_mem *m, sdi_rel *r);
+/* The relations of a level: vertex -> edges, vertex -> faces, edge -> faces, vertex / edge /
+ * face -> tetrahedra, vertex -> octahedra whose major diagonal ends there. */
+enum { SDI_VE, SDI_VF, SDI_EF, SDI_VT, SDI_ET, SDI_FT, SDI_VD, SDI_NREL };
+#define SDI_REL(k) (1u << (k))
+
 /* ---- one level's topology and classification ---------------------------------------- */
 /* Three parts, built at different times (split.c, levels.c):
  *   cells    counts, cell vertices, tet diagonals, boundary masks, vertex classes: all that the
@@ -150,9 +165,27 @@ typedef struct sd_topo {
 
 static inline uint32_t sdi_tr(const sd_topo *t, uint32_t i) { return t->tr ? t->tr[i] : i; }
 
+/* topo.c: freeing the parts (the faces part takes the relations with it) */
 void sdi_topo_free(sd_mem *m, sd_topo *t);
 void sdi_topo_free_edges(sd_mem *m, sd_topo *t);
 void sdi_topo_free_faces(sd_mem *m, sd_topo *t);
+/* The incidence relations of one level, held by the call that needs them (on its stack, passed
+ * down to whoever reads them: sdi_rels R = {.t = t}) and freed by it before it returns. */
+typedef struct sdi_rels {
+    const sd_topo *t;
+    sdi_rel r[SDI_NREL];
+} sdi_rels;
+/* Build the relations SDI_REL(k) in `which` that R does not hold yet (VF, EF, FT need t's faces
+ * part, VE its edges); false for lack of memory (those built stay until sdi_rels_free). */
+bool sdi_rels_need(sd_mem *m, sdi_rels *R, unsigned which);
+void sdi_rels_free(sd_mem *m, sdi_rels *R);
+/* Lookups through the relations: the edge a-b (needs VE), the face with the three vertices v
+ * (needs VF), or UINT32_MAX; whether face f has vertex v. */
+uint32_t sdi_rels_edge(const sdi_rels *R, uint32_t a, uint32_t b);
+uint32_t sdi_rels_face(const sdi_rels *R, const uint32_t v[3]);
+bool sdi_face_has(const sd_topo *t, uint32_t f, uint32_t v);
+/* The edge a-b by a scan of the edges (no relation needed), or UINT32_MAX. */
+uint32_t sdi_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b);
 
 /* ---- subdivision matrices (csr.c) ------------------------------------------------------ */
 /* S_l: rows [vertex rows | edge rows | octahedron rows]; per row a weight-pattern id and the
@@ -319,8 +352,9 @@ sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const 
                           const uint8_t *size, uint32_t ns, sd_error *err);
 void sdi_level_free(sd_mem *m, sd_level *lv);
 /* classify.c */
-sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sd_error *err);
-sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err);
+/* R: the level's relations (classify.c builds what it reads) */
+sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err);
+sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err);
 /* split.c: child topology and inherited classification of the next level, part by part (see
  * sd_topo); each needs the parent's edges and faces (cells: and the child's nothing; faces: the
  * child's edges) */
@@ -350,7 +384,8 @@ uint8_t sdi_vertex_rule(const sd_topo *t, uint32_t v);
  * classification), without building stencils: nv entries into vr. */
 sd_result sdi_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr);
 /* tags.c: (re)apply tags, overrides and the default non-manifold rule to level 0's flags */
-sd_result sdi_apply_singular(sd_complex *c, sd_error *err);
+/* R: level 0's relations, held by the caller (built here as needed). */
+sd_result sdi_apply_singular(sd_complex *c, sdi_rels *R, sd_error *err);
 /* The rule reported for a vertex / edge whose computed rule is r (N1, N2, G1 where they apply) */
 sd_rule sdi_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r);
 sd_rule sdi_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
@@ -383,7 +418,5 @@ typedef struct sd_yzrows {
 bool sdi_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint8_t *er,
                      sd_yzrows *y);
 void sdi_yzrows_free(sd_mem *m, sd_yzrows *y);
-/* analysis.c helpers */
-uint32_t sdi_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b);
 
 #endif

@@ -52,11 +52,18 @@ sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, co
     memset(c, 0, sizeof *c);
     c->mem = mem;
     c->opt = o;
-    if (sdi_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err) ||
-        ((o.nonmanifold_default == SD_NM_G1 || o.nonmanifold_surface == SD_NMSURF_YING_ZORIN) &&
-         sdi_apply_singular(c, err))) {
+    if (sdi_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err)) {
         sd_complex_free(c);
         return NULL;
+    }
+    if (o.nonmanifold_default == SD_NM_G1 || o.nonmanifold_surface == SD_NMSURF_YING_ZORIN) {
+        sdi_rels R = {.t = &c->lv[0]->t};
+        sd_result r = sdi_apply_singular(c, &R, err);
+        sdi_rels_free(&c->mem, &R);
+        if (r) {
+            sd_complex_free(c);
+            return NULL;
+        }
     }
     return c;
 }
@@ -367,14 +374,6 @@ sd_origin_kind sd_level_origin(const sd_level *lv, uint32_t i, uint32_t *a, uint
     }
     *a = i - lv->parent_nv - lv->parent_ne;
     return SD_ORIGIN_CELL;
-}
-
-uint32_t sdi_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b)
-{
-    for (uint32_t e = 0; e < t->ne; e++)
-        if ((t->ev[e][0] == a && t->ev[e][1] == b) || (t->ev[e][0] == b && t->ev[e][1] == a))
-            return e;
-    return UINT32_MAX;
 }
 
 uint32_t sd_level_find_edge(const sd_level *lv, uint32_t a, uint32_t b)

@@ -23,82 +23,9 @@
 #include <stdio.h>
 #include <string.h>
 
-/* vertex -> incident edges and faces, edge -> faces, of level 0: lookups of many tags or
- * overrides in time linear in the complex (a lookup scans the smallest list it can) */
-typedef struct vinc {
-    uint32_t *eoff, *e, *foff, *f, *efoff, *ef;
-} vinc;
-
-static void vinc_free(sd_mem *m, vinc *x)
-{
-    sdi_free(m, x->eoff);
-    sdi_free(m, x->e);
-    sdi_free(m, x->foff);
-    sdi_free(m, x->f);
-    sdi_free(m, x->efoff);
-    sdi_free(m, x->ef);
-}
-
-static bool csr(sd_mem *m, uint32_t nv, uint32_t n, int per, const uint32_t *keys, uint32_t **off,
-                uint32_t **item)
-{
-    *off = sdi_calloc(m, (size_t)nv + 2, sizeof **off);
-    *item = sdi_alloc(m, ((size_t)n * per + 1) * sizeof **item);
-    if (!*off || !*item)
-        return false;
-    for (size_t i = 0; i < (size_t)n * per; i++)
-        (*off)[keys[i] + 2]++;
-    for (uint32_t v = 0; v < nv; v++)
-        (*off)[v + 2] += (*off)[v + 1];
-    for (size_t i = 0; i < (size_t)n * per; i++)
-        (*item)[(*off)[keys[i] + 1]++] = (uint32_t)(i / per);
-    return true;
-}
-
-static bool vinc_build(sd_mem *m, const sd_topo *t, vinc *x)
-{
-    memset(x, 0, sizeof *x);
-    if (csr(m, t->nv, t->ne, 2, &t->ev[0][0], &x->eoff, &x->e) &&
-        csr(m, t->nv, t->nf, 3, &t->fv[0][0], &x->foff, &x->f) &&
-        csr(m, t->ne, t->nf, 3, &t->fe[0][0], &x->efoff, &x->ef))
-        return true;
-    vinc_free(m, x);
-    return false;
-}
-
-static uint32_t find_edge(const sd_topo *t, const vinc *x, uint32_t a, uint32_t b)
-{
-    if (x->eoff[a + 1] - x->eoff[a] > x->eoff[b + 1] - x->eoff[b]) {
-        uint32_t s = a;
-        a = b;
-        b = s;
-    }
-    for (uint32_t k = x->eoff[a]; k < x->eoff[a + 1]; k++) {
-        uint32_t e = x->e[k];
-        if (t->ev[e][0] == b || t->ev[e][1] == b)
-            return e;
-    }
-    return UINT32_MAX;
-}
-
-static bool face_has(const sd_topo *t, uint32_t f, uint32_t v)
-{
-    return t->fv[f][0] == v || t->fv[f][1] == v || t->fv[f][2] == v;
-}
-
-static uint32_t find_face(const sd_topo *t, const vinc *x, const uint32_t v[3])
-{
-    int s = 0;
-    for (int i = 1; i < 3; i++)
-        if (x->foff[v[i] + 1] - x->foff[v[i]] < x->foff[v[s] + 1] - x->foff[v[s]])
-            s = i;
-    for (uint32_t k = x->foff[v[s]]; k < x->foff[v[s] + 1]; k++) {
-        uint32_t f = x->f[k];
-        if (face_has(t, f, v[0]) && face_has(t, f, v[1]) && face_has(t, f, v[2]))
-            return f;
-    }
-    return UINT32_MAX;
-}
+/* Level 0's relations (topo.c) the lookups below use: a tag or override is found in time
+ * linear in the complex (a lookup scans the smallest list it can). */
+#define TAG_RELS (SDI_REL(SDI_VE) | SDI_REL(SDI_VF) | SDI_REL(SDI_EF))
 
 static bool edge_has(const sd_topo *t, uint32_t e, uint32_t v)
 {
@@ -112,8 +39,9 @@ static bool edge_has(const sd_topo *t, uint32_t e, uint32_t v)
  * number of triangles marked now (already marked ones are walked through but not counted).
  * Each triangle of the petal is visited once, each of its edges at v looked up in the edge's
  * own face list. */
-static uint32_t mark_petal(sd_topo *t, const vinc *x, uint32_t v, uint32_t f0, uint32_t *stack)
+static uint32_t mark_petal(sd_topo *t, const sdi_rels *R, uint32_t v, uint32_t f0, uint32_t *stack)
 {
+    const sdi_rel *vf = &R->r[SDI_VF], *ef = &R->r[SDI_EF];
     uint32_t top = 0, added = 0;
     static const uint8_t SEEN = 128; /* a scratch bit of fflag, cleared before returning */
     stack[top++] = f0;
@@ -128,8 +56,8 @@ static uint32_t mark_petal(sd_topo *t, const vinc *x, uint32_t v, uint32_t f0, u
             uint32_t e = t->fe[f][j];
             if (!edge_has(t, e, v) || (t->enm[e] & NM_C2B))
                 continue;
-            for (uint32_t k = x->efoff[e]; k < x->efoff[e + 1]; k++) { /* the other triangle */
-                uint32_t g = x->ef[k];
+            for (uint32_t k = ef->off[e]; k < ef->off[e + 1]; k++) { /* the other triangle */
+                uint32_t g = ef->item[k];
                 if (g == f || !(t->fflag[g] & FF_MAX) || (t->fflag[g] & SEEN))
                     continue;
                 t->fflag[g] |= SEEN;
@@ -137,8 +65,8 @@ static uint32_t mark_petal(sd_topo *t, const vinc *x, uint32_t v, uint32_t f0, u
             }
         }
     }
-    for (uint32_t k = x->foff[v]; k < x->foff[v + 1]; k++)
-        t->fflag[x->f[k]] &= (uint8_t)~SEEN;
+    for (uint32_t k = vf->off[v]; k < vf->off[v + 1]; k++)
+        t->fflag[vf->item[k]] &= (uint8_t)~SEEN;
     return added;
 }
 
@@ -152,8 +80,9 @@ sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint
     /* validate and locate every tag first: all-or-nothing */
     uint32_t *where = sdi_alloc(m, (n ? n : 1) * sizeof *where);
     uint8_t *kind = sdi_alloc(m, n ? n : 1);
-    vinc x = {0};
-    if (!where || !kind || (n && !vinc_build(m, t, &x))) {
+    sdi_rels rels = {.t = t}, *R = &rels;
+    if (!where || !kind || (n && !sdi_rels_need(m, R, TAG_RELS))) {
+        sdi_rels_free(m, R);
         sdi_free(m, where);
         sdi_free(m, kind);
         return sdi_fail_nomem(err, m);
@@ -175,13 +104,13 @@ sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint
         if (rc)
             break;
         kind[i] = (uint8_t)k;
-        where[i] = k == 1 ? v[0] : k == 2 ? find_edge(t, &x, v[0], v[1]) : find_face(t, &x, v);
+        where[i] = k == 1 ? v[0] : k == 2 ? sdi_rels_edge(R, v[0], v[1]) : sdi_rels_face(R, v);
         if (where[i] == UINT32_MAX)
             rc = sdi_fail(err, SD_ERR_ARG, (long)i, -1, "tag %zu is not %s of the complex", i,
                          k == 2 ? "an edge" : "a triangle");
     }
-    vinc_free(m, &x);
     if (rc) {
+        sdi_rels_free(m, R);
         sdi_free(m, where);
         sdi_free(m, kind);
         return rc;
@@ -192,16 +121,18 @@ sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint
     c->tag_at = where;
     c->tag_k = kind;
     c->ntags = n;
-    if ((rc = sdi_apply_singular(c, err))) { /* only for lack of memory: put the old ones back */
+    if ((rc = sdi_apply_singular(c, R, err))) { /* only for lack of memory: put the old ones back */
         c->tag_at = old_at;
         c->tag_k = old_k;
         c->ntags = old_n;
         sd_error ignore;
-        sdi_apply_singular(c, &ignore);
+        sdi_apply_singular(c, R, &ignore);
+        sdi_rels_free(m, R);
         sdi_free(m, where);
         sdi_free(m, kind);
         return rc;
     }
+    sdi_rels_free(m, R);
     sdi_free(m, old_at);
     sdi_free(m, old_k);
     return SD_OK;
@@ -210,9 +141,10 @@ sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint
 /* ---- per-simplex rules -------------------------------------------------------------------- */
 
 /* Check one override against level 0 (t) and find its simplex; item i. */
-static sd_result check_override(const sd_topo *t, const vinc *x, const sd_override *o, size_t i,
+static sd_result check_override(const sdi_rels *R, const sd_override *o, size_t i,
                                 uint32_t *at, sd_error *err)
 {
+    const sd_topo *t = R->t;
     const uint32_t *s = o->simplex;
     if (o->nverts < 1 || o->nverts > 2)
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
@@ -225,7 +157,7 @@ static sd_result check_override(const sd_topo *t, const vinc *x, const sd_overri
     bool edge = o->nverts == 2;
     if (edge && s[0] == s[1])
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX, "vertex %u appears twice", s[0]);
-    uint32_t id = edge ? find_edge(t, x, s[0], s[1]) : s[0];
+    uint32_t id = edge ? sdi_rels_edge(R, s[0], s[1]) : s[0];
     if (id == UINT32_MAX)
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_SIMPLEX,
                        "[%u, %u] is not an edge of the complex", s[0], s[1]);
@@ -290,7 +222,7 @@ static sd_result check_override(const sd_topo *t, const vinc *x, const sd_overri
             if (q[u] >= t->nv)
                 return sdi_fail(err, SD_ERR_INDEX, (long)i, SD_OV_FIELD_PAIR0 + j,
                                "vertex %u out of range (%u vertices)", q[u], t->nv);
-        got[j] = curves ? find_edge(t, x, q[0], q[1]) : find_face(t, x, q);
+        got[j] = curves ? sdi_rels_edge(R, q[0], q[1]) : sdi_rels_face(R, q);
         bool ok = got[j] != UINT32_MAX &&
                   (curves ? (t->eflag[got[j]] & EF_CURVE) != 0 : (t->fflag[got[j]] & FF_MAX) != 0);
         if (!ok)
@@ -314,10 +246,10 @@ static sd_result check_override(const sd_topo *t, const vinc *x, const sd_overri
     return SD_OK;
 }
 
-/* vertex -> tetrahedra and face -> tetrahedra of level 0, built when an N1 with dimension 3
- * needs them; scratch for walks over the cells around a simplex */
+/* Scratch for walks over the cells around a simplex (with the relations vertex -> tetrahedra
+ * and face -> tetrahedra, built when an N1 with dimension 3 needs them). */
 typedef struct tinc {
-    uint32_t *voff, *v, *foff, *f, *stack;
+    uint32_t *stack;
     uint8_t *mark;
 } tinc;
 
@@ -325,16 +257,17 @@ typedef struct tinc {
  * rule if C_d is itself manifold there: its d-cells around the simplex are connected through
  * faces shared by exactly two of them. Otherwise (three fins on an edge, two solids touching at a
  * vertex) it is a 422 pointing at the dimension. */
-static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, const vinc *x, tinc *ti,
+static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, sdi_rels *R, tinc *ti,
                                   const sd_override *o, size_t i, uint32_t id, sd_error *err)
 {
     bool edge = o->nverts == 2;
     const char *what = edge ? "edge" : "vertex";
+    const sdi_rel *vf = &R->r[SDI_VF], *ef = &R->r[SDI_EF];
     if (o->dimension == 2) {
         if (edge) {
             uint32_t n = 0;
-            for (uint32_t k = x->efoff[id]; k < x->efoff[id + 1]; k++)
-                n += (t->fflag[x->ef[k]] & FF_MAX) != 0;
+            for (uint32_t k = ef->off[id]; k < ef->off[id + 1]; k++)
+                n += (t->fflag[ef->item[k]] & FF_MAX) != 0;
             if (n <= 2)
                 return SD_OK;
             return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
@@ -343,8 +276,8 @@ static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, const vinc *x, tinc *ti
         }
         /* one petal holds every maximal triangle around the vertex (marks saved in bit 64) */
         uint32_t total = 0, first = UINT32_MAX;
-        for (uint32_t k = x->foff[id]; k < x->foff[id + 1]; k++) {
-            uint32_t f = x->f[k];
+        for (uint32_t k = vf->off[id]; k < vf->off[id + 1]; k++) {
+            uint32_t f = vf->item[k];
             t->fflag[f] = (uint8_t)((t->fflag[f] & ~FF_N2SEL) | ((t->fflag[f] & FF_N2SEL) ? 64 : 0));
             if (t->fflag[f] & FF_MAX) {
                 total++;
@@ -353,9 +286,9 @@ static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, const vinc *x, tinc *ti
         }
         if (!ti->stack && !(ti->stack = sdi_alloc(m, ((size_t)t->nf + 1) * sizeof *ti->stack)))
             return sdi_fail_nomem(err, m);
-        uint32_t got = first == UINT32_MAX ? 0 : mark_petal(t, x, id, first, ti->stack);
-        for (uint32_t k = x->foff[id]; k < x->foff[id + 1]; k++) {
-            uint32_t f = x->f[k];
+        uint32_t got = first == UINT32_MAX ? 0 : mark_petal(t, R, id, first, ti->stack);
+        for (uint32_t k = vf->off[id]; k < vf->off[id + 1]; k++) {
+            uint32_t f = vf->item[k];
             t->fflag[f] = (uint8_t)((t->fflag[f] & ~(FF_N2SEL | 64)) | ((t->fflag[f] & 64) ? FF_N2SEL : 0));
         }
         if (got == total)
@@ -366,21 +299,19 @@ static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, const vinc *x, tinc *ti
                        id, total);
     }
     /* dimension 3: the tetrahedra around the simplex, connected through faces holding it */
-    if (!ti->voff) {
-        if (!csr(m, t->nv, t->ntet, 4, &t->tet[0][0], &ti->voff, &ti->v) ||
-            !csr(m, t->nf, t->ntet, 4, &t->tet_f[0][0], &ti->foff, &ti->f) ||
-            !(ti->mark = sdi_calloc(m, (size_t)t->ntet + 1, 1)) ||
-            (!ti->stack && !(ti->stack = sdi_alloc(m, ((size_t)t->nf + 1) * sizeof *ti->stack))))
-            return sdi_fail_nomem(err, m);
-    }
+    if (!sdi_rels_need(m, R, SDI_REL(SDI_VT) | SDI_REL(SDI_FT)) ||
+        (!ti->mark && !(ti->mark = sdi_calloc(m, (size_t)t->ntet + 1, 1))) ||
+        (!ti->stack && !(ti->stack = sdi_alloc(m, ((size_t)t->nf + 1) * sizeof *ti->stack))))
+        return sdi_fail_nomem(err, m);
+    const sdi_rel *vt = &R->r[SDI_VT], *ft = &R->r[SDI_FT];
     uint32_t a = edge ? t->ev[id][0] : id, b = edge ? t->ev[id][1] : UINT32_MAX;
     uint32_t total = 0, got = 0, top = 0, bad = 0;
-    for (uint32_t k = ti->voff[a]; k < ti->voff[a + 1]; k++) {
-        const uint32_t *q = t->tet[ti->v[k]];
+    for (uint32_t k = vt->off[a]; k < vt->off[a + 1]; k++) {
+        const uint32_t *q = t->tet[vt->item[k]];
         if (!edge || q[0] == b || q[1] == b || q[2] == b || q[3] == b) {
             total++;
             if (!top)
-                ti->stack[top++] = ti->v[k], ti->mark[ti->v[k]] = 1;
+                ti->stack[top++] = vt->item[k], ti->mark[vt->item[k]] = 1;
         }
     }
     while (top) {
@@ -392,15 +323,15 @@ static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, const vinc *x, tinc *ti
                 continue;
             if (t->fn3[f] > 2)
                 bad++;
-            for (uint32_t k = ti->foff[f]; k < ti->foff[f + 1]; k++)
-                if (!ti->mark[ti->f[k]]) {
-                    ti->mark[ti->f[k]] = 1;
-                    ti->stack[top++] = ti->f[k];
+            for (uint32_t k = ft->off[f]; k < ft->off[f + 1]; k++)
+                if (!ti->mark[ft->item[k]]) {
+                    ti->mark[ft->item[k]] = 1;
+                    ti->stack[top++] = ft->item[k];
                 }
         }
     }
-    for (uint32_t k = ti->voff[a]; k < ti->voff[a + 1]; k++)
-        ti->mark[ti->v[k]] = 0;
+    for (uint32_t k = vt->off[a]; k < vt->off[a + 1]; k++)
+        ti->mark[vt->item[k]] = 0;
     if (got == total && !bad)
         return SD_OK;
     return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_DIMENSION,
@@ -413,13 +344,13 @@ sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t 
 {
     sd_topo *t = &c->lv[0]->t;
     sd_mem *m = &c->mem;
-    vinc x = {0};
     tinc ti = {0};
+    sdi_rels R = {.t = t};
     sd_override *copy = sdi_alloc(m, (n ? n : 1) * sizeof *copy);
     uint32_t *at = sdi_alloc(m, (n ? n : 1) * sizeof *at);
     uint32_t *vseen = NULL, *eseen = NULL;
     sd_result rc = SD_OK;
-    if (!copy || !at || (n && !vinc_build(m, t, &x))) {
+    if (!copy || !at || (n && !sdi_rels_need(m, &R, TAG_RELS))) {
         rc = sdi_fail_nomem(err, m);
         goto out;
     }
@@ -434,7 +365,7 @@ sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t 
         memset(eseen, 0xff, ((size_t)t->ne + 1) * sizeof *eseen);
     }
     for (size_t i = 0; i < n; i++) {
-        if ((rc = check_override(t, &x, &ov[i], i, &at[i], err)))
+        if ((rc = check_override(&R, &ov[i], i, &at[i], err)))
             goto out;
         uint32_t *seen = ov[i].nverts == 2 ? &eseen[at[i]] : &vseen[at[i]];
         if (*seen != UINT32_MAX) {
@@ -445,18 +376,18 @@ sd_result sd_complex_set_overrides(sd_complex *c, const sd_override *ov, size_t 
         *seen = (uint32_t)i;
         copy[i] = ov[i];
         if (ov[i].rule == SD_RULE_N1 && ov[i].dimension >= 2 &&
-            (rc = n1_part_manifold(m, t, &x, &ti, &ov[i], i, at[i], err)))
+            (rc = n1_part_manifold(m, t, &R, &ti, &ov[i], i, at[i], err)))
             goto out;
     }
     sd_override *old = c->ov;
     size_t old_n = c->nov;
     c->ov = copy;
     c->nov = n;
-    if ((rc = sdi_apply_singular(c, err))) { /* a conflict between pairs: put the old ones back */
+    if ((rc = sdi_apply_singular(c, &R, err))) { /* a conflict between pairs: put the old ones back */
         c->ov = old;
         c->nov = old_n;
         sd_error ignore;
-        sdi_apply_singular(c, &ignore);
+        sdi_apply_singular(c, &R, &ignore);
         goto out;
     }
     copy = old;
@@ -465,11 +396,7 @@ out:
     sdi_free(m, at);
     sdi_free(m, vseen);
     sdi_free(m, eseen);
-    vinc_free(m, &x);
-    sdi_free(m, ti.voff);
-    sdi_free(m, ti.v);
-    sdi_free(m, ti.foff);
-    sdi_free(m, ti.f);
+    sdi_rels_free(m, &R);
     sdi_free(m, ti.stack);
     sdi_free(m, ti.mark);
     return rc;
@@ -486,10 +413,11 @@ static bool yz_singular(const sd_topo *t, uint32_t e)
 
 /* The petal of v holding maximal triangle f0: its triangles (out, returns their number) and its
  * distinct singular edges at v (sing[0..*ns), at most 2 kept; *ns counts them all). */
-static uint32_t petal_faces(sd_topo *t, const vinc *x, uint32_t v, uint32_t f0, uint32_t *out,
+static uint32_t petal_faces(sd_topo *t, const sdi_rels *R, uint32_t v, uint32_t f0, uint32_t *out,
                             uint32_t sing[2], uint32_t *ns)
 {
     static const uint8_t SEEN = 128; /* a scratch bit of fflag, cleared before returning */
+    const sdi_rel *ef = &R->r[SDI_EF];
     uint32_t top = 0, n = 0;
     *ns = 0;
     out[top++] = f0;
@@ -511,8 +439,8 @@ static uint32_t petal_faces(sd_topo *t, const vinc *x, uint32_t v, uint32_t f0, 
                 }
                 continue;
             }
-            for (uint32_t k = x->efoff[e]; k < x->efoff[e + 1]; k++) {
-                uint32_t g = x->ef[k];
+            for (uint32_t k = ef->off[e]; k < ef->off[e + 1]; k++) {
+                uint32_t g = ef->item[k];
                 if (!(t->fflag[g] & FF_MAX) || (t->fflag[g] & SEEN))
                     continue;
                 t->fflag[g] |= SEEN;
@@ -570,7 +498,8 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
     sd_topo *t = &c->lv[0]->t;
     sd_mem *m = &c->mem;
     sd_result rc = SD_OK;
-    vinc x = {0};
+    sdi_rels rels = {.t = t}, *R = &rels;
+    const sdi_rel *ve = &R->r[SDI_VE], *vf = &R->r[SDI_VF];
     uint32_t *faces = NULL, *owner = NULL;
     uint8_t *tagv = NULL, *walked = NULL;
     uint64_t *pairs = NULL;
@@ -590,7 +519,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
             return sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_KIND,
                            "petal tag %zu: the kind is convex, concave or smooth", i);
     }
-    if (n && (!vinc_build(m, t, &x) || !(faces = sdi_alloc(m, ((size_t)t->nf + 1) * sizeof *faces)) ||
+    if (n && (!sdi_rels_need(m, R, TAG_RELS) || !(faces = sdi_alloc(m, ((size_t)t->nf + 1) * sizeof *faces)) ||
               !(owner = sdi_alloc(m, ((size_t)t->nf + 1) * sizeof *owner)) ||
               !(tagv = sdi_calloc(m, (size_t)t->nv + 1, 1)) ||
               !(pairs = sdi_alloc(m, n * sizeof *pairs))))
@@ -616,7 +545,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
     for (size_t i = 0; i < n; i++) {
         const sd_petal_tag *p = &pt[i];
         uint32_t v = p->vertex;
-        uint32_t f = find_face(t, &x, p->triangle);
+        uint32_t f = sdi_rels_face(R, p->triangle);
         if (f == UINT32_MAX || !(t->fflag[f] & FF_MAX)) {
             rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
                          "petal tag %zu: [%u, %u, %u] is not a surface triangle of the complex "
@@ -624,7 +553,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
                          p->triangle[1], p->triangle[2]);
             goto out;
         }
-        if (!face_has(t, f, v)) {
+        if (!sdi_face_has(t, f, v)) {
             rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
                          "petal tag %zu: the triangle does not hold vertex %u", i, v);
             goto out;
@@ -632,8 +561,8 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
         /* a complex singular vertex of triangles only (003 Sec. 2): non-manifold, and not simple
          * (one flower with exactly two singular edges: boundary or non-manifold ones) */
         uint32_t nsing = 0;
-        for (uint32_t k = x.eoff[v]; k < x.eoff[v + 1]; k++)
-            nsing += yz_counts_singular(t, x.e[k]);
+        for (uint32_t k = ve->off[v]; k < ve->off[v + 1]; k++)
+            nsing += yz_counts_singular(t, ve->item[k]);
         if (t->vfam[v] != FAM2 || !nm_type(t->vnm[v]) || yz_simple(nm_type(t->vnm[v]), nsing)) {
             rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_VERTEX,
                          "petal tag %zu: vertex %u is not a complex singular vertex of a "
@@ -656,7 +585,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
                          owner[f], v);
             goto out;
         }
-        uint32_t sing[2], ns, nf = petal_faces(t, &x, v, f, faces, sing, &ns);
+        uint32_t sing[2], ns, nf = petal_faces(t, R, v, f, faces, sing, &ns);
         if (ns != 2) {
             rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_PT_FIELD_TRIANGLE,
                          "petal tag %zu: the petal of vertex %u holding this triangle is %s; "
@@ -705,8 +634,8 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
             uint32_t v = sm[a].v;
             for (b = a; b < nsm && sm[b].v == v; b++)
                 ;
-            for (uint32_t k = x.foff[v]; k < x.foff[v + 1] && !rc; k++) {
-                uint32_t g = x.f[k], s2[2], ns2;
+            for (uint32_t k = vf->off[v]; k < vf->off[v + 1] && !rc; k++) {
+                uint32_t g = vf->item[k], s2[2], ns2;
                 if (!(t->fflag[g] & FF_MAX) || walked[g])
                     continue;
                 uint32_t tag = owner[g];
@@ -718,7 +647,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
                     key = pairs[tag];
                     ns2 = 2;
                 } else {
-                    uint32_t ng = petal_faces(t, &x, v, g, faces, s2, &ns2);
+                    uint32_t ng = petal_faces(t, R, v, g, faces, s2, &ns2);
                     for (uint32_t q = 0; q < ng; q++)
                         walked[faces[q]] = 1;
                     key = pair_key(s2);
@@ -735,8 +664,8 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
                                  hit->tag, v, gv[0], gv[1], gv[2]);
                 }
             }
-            for (uint32_t k = x.foff[v]; k < x.foff[v + 1]; k++)
-                walked[x.f[k]] = 0;
+            for (uint32_t k = vf->off[v]; k < vf->off[v + 1]; k++)
+                walked[vf->item[k]] = 0;
             if (rc)
                 goto out;
         }
@@ -759,23 +688,23 @@ out:
     sdi_free(m, pairs);
     sdi_free(m, sm);
     sdi_free(m, walked);
-    vinc_free(m, &x);
+    sdi_rels_free(m, R);
     return rc;
 }
 
 /* ---- applying tags and rules to level 0 --------------------------------------------------- */
 
-sd_result sdi_apply_singular(sd_complex *c, sd_error *err)
+sd_result sdi_apply_singular(sd_complex *c, sdi_rels *R, sd_error *err)
 {
     sd_level *l0 = c->lv[0];
     sd_topo *t = &l0->t;
     sd_mem *m = &c->mem;
     bool g1_default = c->opt.nonmanifold_default == SD_NM_G1;
-    vinc x = {0};
+    const sdi_rel *ve = &R->r[SDI_VE], *vf = &R->r[SDI_VF];
     uint8_t *nface = NULL;
     uint32_t *stack = NULL;
     sd_result rc = SD_OK;
-    if (c->nov && !vinc_build(m, t, &x))
+    if (c->nov && !sdi_rels_need(m, R, TAG_RELS))
         goto nomem;
 
     /* clear */
@@ -809,7 +738,7 @@ sd_result sdi_apply_singular(sd_complex *c, sd_error *err)
     for (size_t i = 0; i < c->nov; i++) {
         const sd_override *o = &c->ov[i];
         bool edge = o->nverts == 2;
-        uint32_t id = edge ? find_edge(t, &x, o->simplex[0], o->simplex[1]) : o->simplex[0];
+        uint32_t id = edge ? sdi_rels_edge(R, o->simplex[0], o->simplex[1]) : o->simplex[0];
         uint8_t *nm = edge ? &t->enm[id] : &t->vnm[id];
         switch (o->rule) {
         case SD_RULE_G1:
@@ -830,15 +759,15 @@ sd_result sdi_apply_singular(sd_complex *c, sd_error *err)
             *nm |= OV_N2 << NM_OV_SHIFT;
             if (o->pair_size == 2) {
                 for (int j = 0; j < 2; j++)
-                    t->eflag[find_edge(t, &x, o->pair[j][0], o->pair[j][1])] |= EF_N2SEL;
+                    t->eflag[sdi_rels_edge(R, o->pair[j][0], o->pair[j][1])] |= EF_N2SEL;
                 t->ovmask |= OVM_N2C;
             } else {
                 for (int j = 0; j < 2; j++) {
-                    uint32_t f = find_face(t, &x, o->pair[j]);
+                    uint32_t f = sdi_rels_face(R, o->pair[j]);
                     if (edge)
                         t->fflag[f] |= FF_N2SEL;
                     else
-                        mark_petal(t, &x, id, f, stack);
+                        mark_petal(t, R, id, f, stack);
                 }
                 t->ovmask |= OVM_N2T;
             }
@@ -944,26 +873,26 @@ sd_result sdi_apply_singular(sd_complex *c, sd_error *err)
         if (o->rule != SD_RULE_N2)
             continue;
         bool edge = o->nverts == 2;
-        uint32_t id = edge ? find_edge(t, &x, o->simplex[0], o->simplex[1]) : o->simplex[0];
+        uint32_t id = edge ? sdi_rels_edge(R, o->simplex[0], o->simplex[1]) : o->simplex[0];
         uint32_t chosen = 0, own = 2;
         if (o->pair_size == 2) {
-            for (uint32_t k = x.eoff[id]; k < x.eoff[id + 1]; k++)
-                chosen += (t->eflag[x.e[k]] & (EF_CURVE | EF_N2SEL)) == (EF_CURVE | EF_N2SEL);
+            for (uint32_t k = ve->off[id]; k < ve->off[id + 1]; k++)
+                chosen += (t->eflag[ve->item[k]] & (EF_CURVE | EF_N2SEL)) == (EF_CURVE | EF_N2SEL);
         } else if (edge) {
             chosen = nface[id];
         } else {
-            for (uint32_t k = x.foff[id]; k < x.foff[id + 1]; k++)
-                chosen += (t->fflag[x.f[k]] & FF_N2SEL) != 0;
+            for (uint32_t k = vf->off[id]; k < vf->off[id + 1]; k++)
+                chosen += (t->fflag[vf->item[k]] & FF_N2SEL) != 0;
             /* its own petals, counted on a scratch copy of the marks */
-            for (uint32_t k = x.foff[id]; k < x.foff[id + 1]; k++)
-                t->fflag[x.f[k]] = (uint8_t)((t->fflag[x.f[k]] & ~FF_N2SEL) |
-                                             ((t->fflag[x.f[k]] & FF_N2SEL) ? 64 : 0));
-            uint32_t p0 = mark_petal(t, &x, id, find_face(t, &x, o->pair[0]), stack);
-            uint32_t p1 = mark_petal(t, &x, id, find_face(t, &x, o->pair[1]), stack);
+            for (uint32_t k = vf->off[id]; k < vf->off[id + 1]; k++)
+                t->fflag[vf->item[k]] = (uint8_t)((t->fflag[vf->item[k]] & ~FF_N2SEL) |
+                                             ((t->fflag[vf->item[k]] & FF_N2SEL) ? 64 : 0));
+            uint32_t p0 = mark_petal(t, R, id, sdi_rels_face(R, o->pair[0]), stack);
+            uint32_t p1 = mark_petal(t, R, id, sdi_rels_face(R, o->pair[1]), stack);
             own = p0 + p1;
-            for (uint32_t k = x.foff[id]; k < x.foff[id + 1]; k++)
-                t->fflag[x.f[k]] = (uint8_t)((t->fflag[x.f[k]] & ~(FF_N2SEL | 64)) |
-                                             ((t->fflag[x.f[k]] & 64) ? FF_N2SEL : 0));
+            for (uint32_t k = vf->off[id]; k < vf->off[id + 1]; k++)
+                t->fflag[vf->item[k]] = (uint8_t)((t->fflag[vf->item[k]] & ~(FF_N2SEL | 64)) |
+                                             ((t->fflag[vf->item[k]] & 64) ? FF_N2SEL : 0));
             if (!p1) {
                 rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_PAIR1,
                              "both triangles of the pair lie in the same petal (fan of triangles "
@@ -989,7 +918,6 @@ nomem:
 out:
     sdi_free(m, nface);
     sdi_free(m, stack);
-    vinc_free(m, &x);
     sdi_drop_rules(c, l0); /* level 0's rules change; every finer level follows */
     return rc;
 }
