@@ -389,6 +389,37 @@ sd_result sdi_apply_singular(sd_complex *c, sdi_rels *R, sd_error *err);
 /* The rule reported for a vertex / edge whose computed rule is r (N1, N2, G1 where they apply) */
 sd_rule sdi_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r);
 sd_rule sdi_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
+/* An edge Ying-Zorin's rules treat as singular (003 Sec. 2): a boundary or non-manifold edge of
+ * the surfaces, one also in another part, a crease or an edge of an embedded surface. */
+static inline bool sdi_yz_singular_edge(const sd_topo *t, uint32_t e)
+{
+    return t->efam[e] != FAM2 || (t->enm[e] & NM_C2B) || (t->eflag[e] & (EF_CREASE | EF_SSURF));
+}
+/* petals.c: walking the petals of a vertex (see there). */
+enum { SDI_PETAL_FAN, SDI_PETAL_YZ };
+/* The maximal triangles of edge e (needs the relation edge -> faces): their number, the first two
+ * (in increasing id) into two. */
+uint32_t sdi_max_faces(const sd_topo *t, const sdi_rel *ef, uint32_t e, uint32_t two[2]);
+/* One way round v: from edge e0 into its maximal triangle f, out through f's other edge at v and
+ * across it while it joins, appending each edge crossed and the triangle entered to w (at most
+ * cap; edges only if w->edge is set). Returns the edge it stopped at: e0 again (the petal is
+ * closed, if e0 joins) or one that does not join; UINT32_MAX past cap. */
+typedef struct sdi_walk {
+    uint32_t *face, *edge;
+    uint32_t n, cap;
+} sdi_walk;
+uint32_t sdi_petal_walk(const sd_topo *t, const sdi_rel *ef, int mode, uint32_t v, uint32_t e0,
+                        uint32_t f, sdi_walk *w);
+/* The petal of v holding maximal triangle f0: its triangles (f0 first, then each way round in
+ * order), its inner edges at v and the distinct edges at v that end it (0: closed, 1: a dart, 2:
+ * open). face and inner are the caller's, cap entries each (the triangles at v, + 2; inner may be
+ * NULL). false past cap or where f0 does not hold v. */
+typedef struct sdi_petal {
+    uint32_t *face, *inner, cap;
+    uint32_t nf, ninner, nsing, sing[2];
+} sdi_petal;
+bool sdi_petal_of(const sd_topo *t, const sdi_rel *ef, int mode, uint32_t v, uint32_t f0,
+                  sdi_petal *p);
 /* yz.c: the rows with 003's flatness modification (fixed disk, dart, concave corner) of a level
  * built with the Ying-Zorin rules. end[e][i] (rules.c, yz_gammas) says how end i of edge e reads
  * the edge: SD_YZ_NONE (not a singular vertex), SD_YZ_FIRST (003 Fig. 4f with gamma g, first
@@ -415,8 +446,8 @@ typedef struct sd_yzrows {
     double *w;
     double (*ends)[2];
 } sd_yzrows;
-bool sdi_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint8_t *er,
-                     sd_yzrows *y);
+bool sdi_yz_flat_rows(sd_mem *m, const sd_topo *t, const sdi_rel *ef, const sd_yzend (*end)[2],
+                      uint8_t *er, sd_yzrows *y);
 void sdi_yzrows_free(sd_mem *m, sd_yzrows *y);
 
 #endif

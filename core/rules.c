@@ -835,21 +835,6 @@ static void erows_task(void *arg)
  * A closed petal takes the Loop rule, and closed, dart and concave petals at a complex vertex
  * (fixed) then the flatness modification (yz.c). An edge with a singular vertex at both ends
  * takes the average of the two (003: on the first level). */
-typedef struct yzpair {
-    uint32_t edge, slot; /* slot: index of the face in v's list */
-} yzpair;
-
-static int cmp_yzpair(const void *x, const void *y)
-{
-    const yzpair *a = x, *b = y;
-    return a->edge < b->edge ? -1 : a->edge > b->edge ? 1 : (a->slot > b->slot) - (a->slot < b->slot);
-}
-
-static inline bool yz_singular_edge(const sd_topo *t, uint32_t e)
-{
-    return t->efam[e] != FAM2 || (t->enm[e] & NM_C2B) || (t->eflag[e] & (EF_CREASE | EF_SSURF));
-}
-
 /* The tag of the petal of v holding face f of level `level` (its level-0 ancestor is f >> 2
  * per level: a face's children are 4 f + j). */
 static int petal_tag(const sd_complex *cx, int level, uint32_t v, uint32_t f)
@@ -868,167 +853,127 @@ static int petal_tag(const sd_complex *cx, int level, uint32_t v, uint32_t f)
                                                                        : SD_PETAL_CONVEX;
 }
 
-static bool yz_gammas(sd_mem *m, const sd_complex *cx, int level, const sd_topo *t,
-                      const double *x, sd_yzend (*gam)[2], uint8_t **geo)
+/* A vertex that takes Ying-Zorin's petal rules: a crease or corner vertex of the Ying-Zorin
+ * rules without a tag (tags win: the vertex follows them). */
+static inline bool yz_vertex(const sd_topo *t, uint32_t v)
 {
-    const uint32_t nv = t->nv;
-    uint32_t *off = sdi_calloc(m, (size_t)nv + 2, sizeof *off), *fl = NULL, *uf = NULL;
-    uint32_t *nsing = NULL, *cnt = NULL, *sing1 = NULL, *sing2 = NULL;
-    uint8_t *pk = NULL;
-    yzpair *pr = NULL;
+    return nm_ov(t->vnm[v]) >= OV_YZS && !(t->vflag[v] & (VF_SING | VF_S_ANY));
+}
+
+/* The angle between the singular edges v-a and v-c (0 to pi), from the level's positions x. */
+static double petal_angle(const double *x, uint32_t v, uint32_t a, uint32_t c)
+{
+    const double *p = x + 3 * (size_t)v, *pa = x + 3 * (size_t)a, *pc = x + 3 * (size_t)c;
+    double u[3], w[3], dot = 0, nu = 0, nw = 0;
+    for (int d = 0; d < 3; d++) {
+        u[d] = pa[d] - p[d];
+        w[d] = pc[d] - p[d];
+        dot += u[d] * w[d];
+        nu += u[d] * u[d];
+        nw += w[d] * w[d];
+    }
+    double cs = nu > 0 && nw > 0 ? dot / sqrt(nu * nw) : -1;
+    return acos(cs < -1 ? -1 : cs > 1 ? 1 : cs);
+}
+
+/* The rule at v of the inner edges of v's petal p (kind: its tag): 003 Fig. 4f's theta and g, and
+ * whether the flatness modification follows (yz.c). Marks in *geo the points whose positions it
+ * read (false: no memory for geo). */
+static bool yz_petal_end(sd_mem *m, const sd_topo *t, const double *x, uint32_t v,
+                         const sdi_petal *p, int kind, uint8_t **geo, sd_yzend *end)
+{
+    const bool fixed = nm_ov(t->vnm[v]) == OV_YZX; /* a complex vertex: a corner */
+    const uint32_t kk = p->nf, ns = p->nsing;
+    double theta;
+    end->kind = SD_YZ_FIRST;
+    end->s = SD_YZ_FLAT_S;
+    if (ns == 0) { /* closed petal: the fixed-disk rule (yz.c) */
+        end->kind = SD_YZ_DISK;
+        theta = M_PI / 3;
+    } else if (ns == 1) { /* dart: flattened where the centre is fixed (yz.c) */
+        theta = 2 * M_PI / kk;
+        if (fixed)
+            end->kind = SD_YZ_DART;
+    } else if (ns == 2 && fixed && kind != SD_PETAL_SMOOTH) {
+        uint32_t a = t->ev[p->sing[0]][0] == v ? t->ev[p->sing[0]][1] : t->ev[p->sing[0]][0];
+        uint32_t c = t->ev[p->sing[1]][0] == v ? t->ev[p->sing[1]][1] : t->ev[p->sing[1]][0];
+        double alpha = petal_angle(x, v, a, c);
+        if (!*geo && !(*geo = sdi_calloc(m, t->nv, 1)))
+            return false;
+        (*geo)[v] = (*geo)[a] = (*geo)[c] = 1;
+        if (kind == SD_PETAL_CONCAVE) {
+            theta = (2 * M_PI - alpha) / kk;
+            /* the flatness modification divides by sin(k theta) = -sin(alpha): with the
+             * singular edges in line it has no tangent plane to flatten to, and near
+             * that s fades (SD_YZ_RAMP) so the rule stays continuous in alpha */
+            double q = sin(alpha) / SD_YZ_RAMP, fs = SD_YZ_FLAT_S * (q < 1 ? q * q : 1);
+            if (fs > 1e-20 && kk >= 2) { /* else (sin alpha < 1e-11) the first stage */
+                end->kind = SD_YZ_CONCAVE;
+                end->s = fs;
+            }
+        } else {
+            theta = alpha / kk;
+        }
+    } else { /* an open petal of a simple vertex, or a smooth one */
+        theta = M_PI / kk;
+    }
+    end->theta = theta;
+    end->g = 0.5 - cos(theta) / 4;
+    return true;
+}
+
+/* The Ying-Zorin rule of each end of every edge (gam[e][i], SD_YZ_NONE where end i is not a
+ * singular vertex): each petal of each singular vertex walked once (petals.c), its tag that of
+ * its last triangle tagged otherwise than convex. */
+static bool yz_gammas(sd_mem *m, const sd_complex *cx, int level, const sd_topo *t,
+                      const sdi_rels *R, const double *x, sd_yzend (*gam)[2], uint8_t **geo)
+{
+    const sdi_rel *vf = &R->r[SDI_VF], *ef = &R->r[SDI_EF];
+    const uint32_t cap = t->nf + 2;
+    uint32_t *face = sdi_alloc(m, (size_t)cap * sizeof *face);
+    uint32_t *inner = sdi_alloc(m, (size_t)cap * sizeof *inner);
+    uint8_t *done = sdi_calloc(m, (size_t)t->nf + 1, 1); /* faces of v already in a petal */
     bool ok = false;
-    if (!off)
-        return false;
     memset(gam, 0, (size_t)t->ne * sizeof *gam); /* SD_YZ_NONE */
-#define YZV(v) (nm_ov(t->vnm[v]) >= OV_YZS && !(t->vflag[v] & (VF_SING | VF_S_ANY)))
-    size_t total = 0;
-    for (uint32_t i = 0; i < t->ntr; i++) {
-        const uint32_t *q = t->fv[sdi_tr(t, i)];
-        for (int j = 0; j < 3; j++)
-            if (YZV(q[j])) {
-                off[q[j] + 2]++;
-                total++;
-            }
-    }
-    for (uint32_t v = 0; v < nv; v++)
-        off[v + 2] += off[v + 1];
-    fl = sdi_alloc(m, (total + 1) * sizeof *fl);
-    uf = sdi_alloc(m, (total + 1) * sizeof *uf);
-    nsing = sdi_alloc(m, (total + 1) * sizeof *nsing);
-    cnt = sdi_alloc(m, (total + 1) * sizeof *cnt);
-    sing1 = sdi_alloc(m, (total + 1) * sizeof *sing1);
-    sing2 = sdi_alloc(m, (total + 1) * sizeof *sing2);
-    pk = sdi_alloc(m, total + 1);
-    pr = sdi_alloc(m, (2 * total + 1) * sizeof *pr);
-    if (!fl || !uf || !nsing || !cnt || !sing1 || !sing2 || !pk || !pr)
+    if (!face || !inner || !done)
         goto out;
-    for (uint32_t i = 0; i < t->ntr; i++) {
-        uint32_t f = sdi_tr(t, i);
-        for (int j = 0; j < 3; j++)
-            if (YZV(t->fv[f][j]))
-                fl[off[t->fv[f][j] + 1]++] = f;
-    }
-    for (uint32_t v = 0; v < nv; v++) {
-        uint32_t b = off[v], n = off[v + 1] - b, np = 0;
-        if (!n)
+    for (uint32_t v = 0; v < t->nv; v++) {
+        if (!yz_vertex(t, v))
             continue;
-        for (uint32_t s = 0; s < n; s++) {
-            uint32_t f = fl[b + s];
-            uf[b + s] = s;
-            for (int j = 0; j < 3; j++) {
-                uint32_t e = t->fe[f][j];
-                if (t->ev[e][0] == v || t->ev[e][1] == v)
-                    pr[np++] = (yzpair){e, s};
-            }
-        }
-        qsort(pr, np, sizeof *pr, cmp_yzpair);
-        for (uint32_t k = 0; k + 1 < np; k++) /* join across non-singular edges */
-            if (pr[k].edge == pr[k + 1].edge && !yz_singular_edge(t, pr[k].edge)) {
-                uint32_t a = pr[k].slot, c = pr[k + 1].slot;
-                while (uf[b + a] != a)
-                    a = uf[b + a];
-                while (uf[b + c] != c)
-                    c = uf[b + c];
-                if (a != c)
-                    uf[b + a] = c;
-            }
-        for (uint32_t s = 0; s < n; s++) {
-            uint32_t r = s;
-            while (uf[b + r] != r)
-                r = uf[b + r];
-            uf[b + s] = r;
-            nsing[b + s] = cnt[b + s] = 0;
-            pk[b + s] = SD_PETAL_CONVEX;
-        }
-        for (uint32_t s = 0; s < n; s++) {
-            cnt[b + uf[b + s]]++;
-            if (cx->npet) {
-                int kind = petal_tag(cx, level, v, fl[b + s]);
-                if (kind != SD_PETAL_CONVEX)
-                    pk[b + uf[b + s]] = (uint8_t)kind;
-            }
-        }
-        for (uint32_t k = 0; k < np; k++) { /* distinct singular edges per petal */
-            if (!yz_singular_edge(t, pr[k].edge))
+        for (uint32_t k = vf->off[v]; k < vf->off[v + 1]; k++) {
+            uint32_t f = vf->item[k];
+            if (!(t->fflag[f] & FF_MAX) || done[f])
                 continue;
-            uint32_t r = uf[b + pr[k].slot];
-            bool again = false;
-            for (uint32_t q = k; q-- > 0 && pr[q].edge == pr[k].edge;)
-                again |= uf[b + pr[q].slot] == r;
-            if (again)
+            sdi_petal p = {.face = face, .inner = inner, .cap = cap};
+            done[f] = 1;
+            if (!sdi_petal_of(t, ef, SDI_PETAL_YZ, v, f, &p))
                 continue;
-            uint32_t e = pr[k].edge, w = t->ev[e][0] == v ? t->ev[e][1] : t->ev[e][0];
-            if (nsing[b + r] == 0)
-                sing1[b + r] = w;
-            else if (nsing[b + r] == 1)
-                sing2[b + r] = w;
-            nsing[b + r]++;
-        }
-        const bool fixed = nm_ov(t->vnm[v]) == OV_YZX; /* a complex vertex: a corner */
-        for (uint32_t k = 0; k < np; k++) {
-            uint32_t e = pr[k].edge, r = uf[b + pr[k].slot];
-            if (yz_singular_edge(t, e) || (k && pr[k - 1].edge == e))
-                continue;
-            uint32_t kk = cnt[b + r], ns = nsing[b + r];
-            sd_yzend *end = &gam[e][t->ev[e][0] == v ? 0 : 1];
-            double theta;
-            end->kind = SD_YZ_FIRST;
-            end->s = SD_YZ_FLAT_S;
-            if (ns == 0) { /* closed petal: the fixed-disk rule (yz.c) */
-                end->kind = SD_YZ_DISK;
-                theta = M_PI / 3;
-            } else if (ns == 1) { /* dart: flattened where the centre is fixed (yz.c) */
-                theta = 2 * M_PI / kk;
-                if (fixed)
-                    end->kind = SD_YZ_DART;
-            } else if (ns == 2 && fixed && pk[b + r] != SD_PETAL_SMOOTH) {
-                const double *p = x + 3 * (size_t)v, *a = x + 3 * (size_t)sing1[b + r],
-                             *c = x + 3 * (size_t)sing2[b + r];
-                double u[3], w[3], dot = 0, nu = 0, nw = 0;
-                for (int d = 0; d < 3; d++) {
-                    u[d] = a[d] - p[d];
-                    w[d] = c[d] - p[d];
-                    dot += u[d] * w[d];
-                    nu += u[d] * u[d];
-                    nw += w[d] * w[d];
+            int kind = SD_PETAL_CONVEX;
+            uint32_t last = 0;
+            for (uint32_t i = 0; i < p.nf; i++) {
+                done[p.face[i]] = 1;
+                int pk = cx->npet ? petal_tag(cx, level, v, p.face[i]) : SD_PETAL_CONVEX;
+                if (pk != SD_PETAL_CONVEX && p.face[i] >= last) {
+                    kind = pk;
+                    last = p.face[i];
                 }
-                double cs = nu > 0 && nw > 0 ? dot / sqrt(nu * nw) : -1;
-                double alpha = acos(cs < -1 ? -1 : cs > 1 ? 1 : cs);
-                if (!*geo && !(*geo = sdi_calloc(m, nv, 1)))
-                    goto out;
-                (*geo)[v] = (*geo)[sing1[b + r]] = (*geo)[sing2[b + r]] = 1;
-                if (pk[b + r] == SD_PETAL_CONCAVE) {
-                    theta = (2 * M_PI - alpha) / kk;
-                    /* the flatness modification divides by sin(k theta) = -sin(alpha): with the
-                     * singular edges in line it has no tangent plane to flatten to, and near
-                     * that s fades (SD_YZ_RAMP) so the rule stays continuous in alpha */
-                    double q = sin(alpha) / SD_YZ_RAMP, fs = SD_YZ_FLAT_S * (q < 1 ? q * q : 1);
-                    if (fs > 1e-20 && kk >= 2) { /* else (sin alpha < 1e-11) the first stage */
-                        end->kind = SD_YZ_CONCAVE;
-                        end->s = fs;
-                    }
-                } else {
-                    theta = alpha / kk;
-                }
-            } else { /* an open petal of a simple vertex, or a smooth one */
-                theta = M_PI / kk;
             }
-            end->theta = theta;
-            end->g = 0.5 - cos(theta) / 4;
+            sd_yzend end;
+            if (p.ninner && !yz_petal_end(m, t, x, v, &p, kind, geo, &end))
+                goto out;
+            for (uint32_t i = 0; i < p.ninner; i++) {
+                uint32_t e = p.inner[i];
+                gam[e][t->ev[e][0] == v ? 0 : 1] = end;
+            }
         }
+        for (uint32_t k = vf->off[v]; k < vf->off[v + 1]; k++)
+            done[vf->item[k]] = 0;
     }
-#undef YZV
     ok = true;
 out:
-    sdi_free(m, off);
-    sdi_free(m, fl);
-    sdi_free(m, uf);
-    sdi_free(m, nsing);
-    sdi_free(m, cnt);
-    sdi_free(m, sing1);
-    sdi_free(m, sing2);
-    sdi_free(m, pk);
-    sdi_free(m, pr);
+    sdi_free(m, face);
+    sdi_free(m, inner);
+    sdi_free(m, done);
     return ok;
 }
 
@@ -1049,6 +994,7 @@ sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     sd_pats pats = {0};
     rings sr = {0}, gr = {0};
     sd_yzrows yzr = {0};
+    sdi_rels R = {.t = t};
     sd_result rc = SD_OK;
     double loopc[64];
     for (uint32_t k = 1; k < 64; k++)
@@ -1090,8 +1036,9 @@ sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     J.stride = any_opp && !t->ntet && !no && !any_g2e;
     if (t->ovmask & OVM_YZ) { /* Ying-Zorin petal rules for the edges at singular vertices */
         gam = sdi_alloc(m, ((size_t)ne + 1) * sizeof *gam);
-        if (!gam || !yz_gammas(m, cx, lv->index, t, lv->ch[0].data, gam, &lv->geo) ||
-            !sdi_yz_flat_rows(m, t, (const sd_yzend(*)[2])gam, er, &yzr))
+        if (!gam || !sdi_rels_need(m, &R, SDI_REL(SDI_VF) | SDI_REL(SDI_EF)) ||
+            !yz_gammas(m, cx, lv->index, t, &R, lv->ch[0].data, gam, &lv->geo) ||
+            !sdi_yz_flat_rows(m, t, &R.r[SDI_EF], (const sd_yzend(*)[2])gam, er, &yzr))
             goto nomem;
         if (yzr.n) /* flattened rows are wider than two opposite vertices */
             J.stride = false;
@@ -1284,5 +1231,6 @@ out:
     rings_free(m, &sr);
     rings_free(m, &gr);
     sdi_yzrows_free(m, &yzr);
+    sdi_rels_free(m, &R);
     return rc;
 }

@@ -27,46 +27,20 @@
  * linear in the complex (a lookup scans the smallest list it can). */
 #define TAG_RELS (SDI_REL(SDI_VE) | SDI_REL(SDI_VF) | SDI_REL(SDI_EF))
 
-static bool edge_has(const sd_topo *t, uint32_t e, uint32_t v)
+/* Mark with FF_N2SEL every maximal triangle of the fan of v (petals.c: SDI_PETAL_FAN) holding
+ * triangle f0; returns the number of triangles marked now (already marked ones are not counted).
+ * buf: room for the triangles at v and 2 more. */
+static uint32_t mark_petal(sd_topo *t, const sdi_rels *R, uint32_t v, uint32_t f0, uint32_t *buf,
+                           uint32_t cap)
 {
-    return t->ev[e][0] == v || t->ev[e][1] == v;
-}
-
-/* ---- the petals of a vertex: its maximal triangles, joined across edges that lie between
- * exactly two of them and in nothing else that is maximal (not NM_C2B) ---------------------- */
-
-/* Mark with FF_N2SEL every maximal triangle of the petal of v holding triangle f0; returns the
- * number of triangles marked now (already marked ones are walked through but not counted).
- * Each triangle of the petal is visited once, each of its edges at v looked up in the edge's
- * own face list. */
-static uint32_t mark_petal(sd_topo *t, const sdi_rels *R, uint32_t v, uint32_t f0, uint32_t *stack)
-{
-    const sdi_rel *vf = &R->r[SDI_VF], *ef = &R->r[SDI_EF];
-    uint32_t top = 0, added = 0;
-    static const uint8_t SEEN = 128; /* a scratch bit of fflag, cleared before returning */
-    stack[top++] = f0;
-    t->fflag[f0] |= SEEN;
-    while (top) {
-        uint32_t f = stack[--top];
-        if (!(t->fflag[f] & FF_N2SEL)) {
-            t->fflag[f] |= FF_N2SEL;
+    sdi_petal p = {.face = buf, .cap = cap};
+    sdi_petal_of(t, &R->r[SDI_EF], SDI_PETAL_FAN, v, f0, &p);
+    uint32_t added = 0;
+    for (uint32_t k = 0; k < p.nf; k++)
+        if (!(t->fflag[p.face[k]] & FF_N2SEL)) {
+            t->fflag[p.face[k]] |= FF_N2SEL;
             added++;
         }
-        for (int j = 0; j < 3; j++) {
-            uint32_t e = t->fe[f][j];
-            if (!edge_has(t, e, v) || (t->enm[e] & NM_C2B))
-                continue;
-            for (uint32_t k = ef->off[e]; k < ef->off[e + 1]; k++) { /* the other triangle */
-                uint32_t g = ef->item[k];
-                if (g == f || !(t->fflag[g] & FF_MAX) || (t->fflag[g] & SEEN))
-                    continue;
-                t->fflag[g] |= SEEN;
-                stack[top++] = g;
-            }
-        }
-    }
-    for (uint32_t k = vf->off[v]; k < vf->off[v + 1]; k++)
-        t->fflag[vf->item[k]] &= (uint8_t)~SEEN;
     return added;
 }
 
@@ -286,7 +260,7 @@ static sd_result n1_part_manifold(sd_mem *m, sd_topo *t, sdi_rels *R, tinc *ti,
         }
         if (!ti->stack && !(ti->stack = sdi_alloc(m, ((size_t)t->nf + 1) * sizeof *ti->stack)))
             return sdi_fail_nomem(err, m);
-        uint32_t got = first == UINT32_MAX ? 0 : mark_petal(t, R, id, first, ti->stack);
+        uint32_t got = first == UINT32_MAX ? 0 : mark_petal(t, R, id, first, ti->stack, t->nf + 1);
         for (uint32_t k = vf->off[id]; k < vf->off[id + 1]; k++) {
             uint32_t f = vf->item[k];
             t->fflag[f] = (uint8_t)((t->fflag[f] & ~(FF_N2SEL | 64)) | ((t->fflag[f] & 64) ? FF_N2SEL : 0));
@@ -404,53 +378,17 @@ out:
 
 /* ---- petal tags (003 Sec. 2: convex, concave or smooth corner) ---------------------------- */
 
-/* An edge Ying-Zorin's rules treat as singular (as rules.c, yz_singular_edge): a boundary or
- * non-manifold edge, a crease or an edge inside an embedded surface. */
-static bool yz_singular(const sd_topo *t, uint32_t e)
+/* The petal of v (petals.c: SDI_PETAL_YZ) holding maximal triangle f0: its triangles (out,
+ * returns their number; room for nf + 1) and its distinct singular edges at v (sing, *ns). */
+static uint32_t petal_faces(const sd_topo *t, const sdi_rels *R, uint32_t v, uint32_t f0,
+                            uint32_t *out, uint32_t sing[2], uint32_t *ns)
 {
-    return t->efam[e] != FAM2 || (t->enm[e] & NM_C2B) || (t->eflag[e] & (EF_CREASE | EF_SSURF));
-}
-
-/* The petal of v holding maximal triangle f0: its triangles (out, returns their number) and its
- * distinct singular edges at v (sing[0..*ns), at most 2 kept; *ns counts them all). */
-static uint32_t petal_faces(sd_topo *t, const sdi_rels *R, uint32_t v, uint32_t f0, uint32_t *out,
-                            uint32_t sing[2], uint32_t *ns)
-{
-    static const uint8_t SEEN = 128; /* a scratch bit of fflag, cleared before returning */
-    const sdi_rel *ef = &R->r[SDI_EF];
-    uint32_t top = 0, n = 0;
-    *ns = 0;
-    out[top++] = f0;
-    t->fflag[f0] |= SEEN;
-    while (n < top) {
-        uint32_t f = out[n++];
-        for (int j = 0; j < 3; j++) {
-            uint32_t e = t->fe[f][j];
-            if (!edge_has(t, e, v))
-                continue;
-            if (yz_singular(t, e)) {
-                bool again = false;
-                for (uint32_t q = 0; q < *ns && q < 2; q++)
-                    again |= sing[q] == e;
-                if (!again) {
-                    if (*ns < 2)
-                        sing[*ns] = e;
-                    ++*ns;
-                }
-                continue;
-            }
-            for (uint32_t k = ef->off[e]; k < ef->off[e + 1]; k++) {
-                uint32_t g = ef->item[k];
-                if (!(t->fflag[g] & FF_MAX) || (t->fflag[g] & SEEN))
-                    continue;
-                t->fflag[g] |= SEEN;
-                out[top++] = g;
-            }
-        }
-    }
-    for (uint32_t k = 0; k < n; k++) /* every face marked SEEN was queued */
-        t->fflag[out[k]] &= (uint8_t)~SEEN;
-    return n;
+    sdi_petal p = {.face = out, .cap = t->nf + 1};
+    sdi_petal_of(t, &R->r[SDI_EF], SDI_PETAL_YZ, v, f0, &p);
+    sing[0] = p.sing[0];
+    sing[1] = p.sing[1];
+    *ns = p.nsing;
+    return p.nf;
 }
 
 static int cmp_petal_at(const void *a, const void *b)
@@ -767,7 +705,7 @@ sd_result sdi_apply_singular(sd_complex *c, sdi_rels *R, sd_error *err)
                     if (edge)
                         t->fflag[f] |= FF_N2SEL;
                     else
-                        mark_petal(t, R, id, f, stack);
+                        mark_petal(t, R, id, f, stack, t->nf + 1);
                 }
                 t->ovmask |= OVM_N2T;
             }
@@ -887,8 +825,8 @@ sd_result sdi_apply_singular(sd_complex *c, sdi_rels *R, sd_error *err)
             for (uint32_t k = vf->off[id]; k < vf->off[id + 1]; k++)
                 t->fflag[vf->item[k]] = (uint8_t)((t->fflag[vf->item[k]] & ~FF_N2SEL) |
                                              ((t->fflag[vf->item[k]] & FF_N2SEL) ? 64 : 0));
-            uint32_t p0 = mark_petal(t, R, id, sdi_rels_face(R, o->pair[0]), stack);
-            uint32_t p1 = mark_petal(t, R, id, sdi_rels_face(R, o->pair[1]), stack);
+            uint32_t p0 = mark_petal(t, R, id, sdi_rels_face(R, o->pair[0]), stack, t->nf + 1);
+            uint32_t p1 = mark_petal(t, R, id, sdi_rels_face(R, o->pair[1]), stack, t->nf + 1);
             own = p0 + p1;
             for (uint32_t k = vf->off[id]; k < vf->off[id + 1]; k++)
                 t->fflag[vf->item[k]] = (uint8_t)((t->fflag[vf->item[k]] & ~(FF_N2SEL | 64)) |
