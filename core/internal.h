@@ -347,50 +347,75 @@ struct sd_complex {
     sd_level *lv[SD_MAX_LEVEL + 1];
 };
 
-/* complex.c */
+/* ---- complex.c: level 0 ------------------------------------------------------------------ */
 sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
-                          const uint8_t *size, uint32_t ns, sd_error *err);
+                           const uint8_t *size, uint32_t ns, sd_error *err);
 void sdi_level_free(sd_mem *m, sd_level *lv);
-/* classify.c */
-/* R: the level's relations (classify.c builds what it reads) */
+
+/* ---- classify.c: classes of level 0 (R: its relations, built as needed) -------------------- */
 sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err);
 sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err);
-/* split.c: child topology and inherited classification of the next level, part by part (see
- * sd_topo); each needs the parent's edges and faces (cells: and the child's nothing; faces: the
- * child's edges) */
+
+/* ---- split.c: child topology and inherited classification of the next level, part by part
+ * (see sd_topo); each needs the parent's edges and faces (cells: and the child's nothing; faces:
+ * the child's edges) */
 sd_result sdi_split_cells(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
 sd_result sdi_split_edges(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
 sd_result sdi_split_faces(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
-/* levels.c: forget a level's rules and every finer level */
+
+/* ---- levels.c: the hierarchy --------------------------------------------------------------- */
+/* Forget a level's rules and every finer level. */
 void sdi_drop_rules(sd_complex *c, sd_level *lv);
 /* Free a level's rules part: rules, stencils S, edit columns, vrule_only, geo (not its points,
  * cells or scratch map `slot`). */
 void sdi_level_free_rules(sd_mem *m, sd_level *lv);
 void sdi_drop_levels(sd_complex *c, int from); /* levels from.. (they are recomputed on demand) */
-/* rules.c */
-sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
+/* Build level `level`'s rules and stencils if they are not yet (faces made on the way are
+ * dropped again). */
 sd_result sdi_ensure_rules(sd_complex *cx, int level, sd_error *err);
-/* levels.c: build level `level`'s edges if they are not yet (under the caller's lock; faces
- * made on the way are dropped again) */
+/* Build level `level`'s edges if they are not yet (under the caller's lock; faces made on the way
+ * are dropped again). */
 sd_result sdi_ensure_derived(sd_complex *cx, int level, sd_error *err);
 /* The same from a const accessor of the level (see sd.h on locking); false if it failed. */
 bool sdi_need_derived(const sd_level *lv);
+
+/* ---- tags.c: the singular complex and the per-simplex rules on level 0 ---------------------- */
+/* (Re)apply tags, overrides and the default non-manifold rule to level 0's flags. R: level 0's
+ * relations, held by the caller (built here as needed). */
+sd_result sdi_apply_singular(sd_complex *c, sdi_rels *R, sd_error *err);
+
+/* ---- rules.c: one rule per vertex and edge ------------------------------------------------- */
+/* The rule table's columns (rule_table.h) as numbers: rho and ring kinds per rule. */
+enum { SDI_RHO_NONE, SDI_RHO_CURVE, SDI_RHO_SURFACE, SDI_RHO_SURFACE_BOUNDARY, SDI_RHO_SOLID,
+       SDI_RHO_SOLID_BOUNDARY, SDI_RHO_G2 };
+enum { SDI_RING_NONE, SDI_RING_OPPOSITE, SDI_RING_BOUNDARY_OPPOSITE, SDI_RING_SOLID, SDI_RING_G2,
+       SDI_RING_FLAT };
+extern const uint8_t SDI_RULE_RHO[SD_RULE_COUNT], SDI_RULE_RING[SD_RULE_COUNT];
 /* Whether a vertex (edge false) or edge whose computed rule is `rule` and whose rho / ring has k
  * entries is extraordinary (rule_table.h). */
 bool sdi_rule_extraordinary(uint8_t rule, uint32_t k, bool edge);
 /* The rule of vertex v from the level's classification alone (no stencils needed). */
 uint8_t sdi_vertex_rule(const sd_topo *t, uint32_t v);
-/* The rules vertices actually follow (corners where the neighbourhood does not fit the
- * classification), without building stencils: nv entries into vr. */
+/* The rule of every edge into er, in parallel parts; whether any edge's ring is G2's, and whether
+ * any is the opposite vertices of its faces. */
+void sdi_edge_rules(const sd_topo *t, int threads, uint8_t *er, bool *any_g2, bool *any_opp);
+/* The rule of every vertex and the sizes of its rho (cnt_a: edge and diagonal neighbours, cnt_b:
+ * the averaged scheme's octahedral opposites, NULL for the box scheme; zeroed by the caller): the
+ * classification's rule, turned into a corner where its neighbourhood does not fit it (a curve or
+ * surface boundary point with other than 2 neighbours, any rule with none). If `take` is not
+ * NULL, take[e] gets bit 0 if ev[e][0] reads ev[e][1] through e, bit 1 for the converse. */
+void sdi_vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b,
+                      uint8_t *take);
+/* The same without rho: nv entries into vr (no stencils needed). */
 sd_result sdi_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr);
-/* tags.c: (re)apply tags, overrides and the default non-manifold rule to level 0's flags */
-/* R: level 0's relations, held by the caller (built here as needed). */
-sd_result sdi_apply_singular(sd_complex *c, sdi_rels *R, sd_error *err);
-/* The rule reported for a vertex / edge whose computed rule is r (N1, N2, G1 where they apply) */
+/* The rule reported for a vertex / edge whose computed rule is r (N1, N2, G1, Ying-Zorin's where
+ * they apply). */
 sd_rule sdi_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r);
 sd_rule sdi_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
-/* An edge Ying-Zorin's rules treat as singular (003 Sec. 2): a boundary or non-manifold edge of
- * the surfaces, one also in another part, a crease or an edge of an embedded surface. */
+
+/* ---- Ying-Zorin (003 Sec. 2): petals.c, rules.c (sdi_yz_rules), yz.c ------------------------ */
+/* An edge Ying-Zorin's rules treat as singular: a boundary or non-manifold edge of the surfaces,
+ * one also in another part, a crease or an edge of an embedded surface. */
 static inline bool sdi_yz_singular_edge(const sd_topo *t, uint32_t e)
 {
     return t->efam[e] != FAM2 || (t->enm[e] & NM_C2B) || (t->eflag[e] & (EF_CREASE | EF_SSURF));
@@ -420,13 +445,10 @@ typedef struct sdi_petal {
 } sdi_petal;
 bool sdi_petal_of(const sd_topo *t, const sdi_rel *ef, int mode, uint32_t v, uint32_t f0,
                   sdi_petal *p);
-/* yz.c: the rows with 003's flatness modification (fixed disk, dart, concave corner) of a level
- * built with the Ying-Zorin rules. end[e][i] (rules.c, yz_gammas) says how end i of edge e reads
- * the edge: SD_YZ_NONE (not a singular vertex), SD_YZ_FIRST (003 Fig. 4f with gamma g, first
- * stage only), SD_YZ_DISK (the centre of a closed petal), SD_YZ_DART (the fixed centre of a dart
- * petal) or SD_YZ_CONCAVE (the fixed centre of a concave corner petal, theta its angle step).
- * Every edge with a flattened end gets er[e] = SD_RULE_YZ_FIXED_DISK, _DART or _CONCAVE and its
- * row: ends[e] the weights of its two ends, then col/w[off[e] .. off[e+1]) the rest. */
+/* How end i of edge e reads the edge under the Ying-Zorin rules (end[e][i], rules.c):
+ * SD_YZ_NONE (not a singular vertex), SD_YZ_FIRST (003 Fig. 4f with gamma g, first stage only),
+ * SD_YZ_DISK (the centre of a closed petal), SD_YZ_DART (the fixed centre of a dart petal) or
+ * SD_YZ_CONCAVE (the fixed centre of a concave corner petal, theta its angle step). */
 #define SD_YZ_FLAT_S 0.75 /* the flatness modification's s (docs/DECISIONS.md 27, 28) */
 /* A concave corner whose singular edges are nearly in line (sin alpha < SD_YZ_RAMP, ~5.7
  * degrees) has no well-defined tangent pair: its s fades as (sin alpha / SD_YZ_RAMP)^2, so the
@@ -441,6 +463,14 @@ static inline bool sdi_yz_flat(uint8_t kind)
 {
     return kind >= SD_YZ_DISK;
 }
+/* rules.c: the Ying-Zorin rule of both ends of every edge of level `level` (t, its relations
+ * vertex -> faces and edge -> faces in R, positions x); *geo (allocated if need be) marks the
+ * points whose positions they read. false: no memory. */
+bool sdi_yz_rules(sd_mem *m, const sd_complex *cx, int level, const sd_topo *t, const sdi_rels *R,
+                  const double *x, sd_yzend (*gam)[2], uint8_t **geo);
+/* yz.c: the rows with 003's flatness modification (fixed disk, dart, concave corner). Every edge
+ * with a flattened end gets er[e] = SD_RULE_YZ_FIXED_DISK, _DART or _CONCAVE and its row: ends[e]
+ * the weights of its two ends, then col/w[off[e] .. off[e+1]) the rest. */
 typedef struct sd_yzrows {
     uint32_t *off, *col, n;
     double *w;
@@ -449,5 +479,77 @@ typedef struct sd_yzrows {
 bool sdi_yz_flat_rows(sd_mem *m, const sd_topo *t, const sdi_rel *ef, const sd_yzend (*end)[2],
                       uint8_t *er, sd_yzrows *y);
 void sdi_yzrows_free(sd_mem *m, sd_yzrows *y);
+
+/* ---- rings.c: rho(x) and the rings of edges -------------------------------------------------- */
+/* Flags in a vertex's rule while rho is counted: the rule itself is vr & SDI_VR_RULE. */
+enum { SDI_VR_RULE = 0x1f, SDI_VR_BND = 0x20, SDI_VR_OWN = 0x40, SDI_VR_SLOW = 0x80 };
+/* The sizes of every vertex's rho (see sdi_vertex_rules) for the rules in vr, flagged: SLOW, rho
+ * decided per neighbour (G2, singular vertices); OWN, by the simplex's own choice. Clears the
+ * flags. */
+void sdi_vertex_rho(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b,
+                    uint8_t *take);
+/* rho itself: vertex v's neighbours into col from cur[v] on (cur advances), in the order counted:
+ * through edges (in edge order), then major diagonals, then octahedral opposites. */
+void sdi_vertex_rho_cols(const sd_topo *t, int scheme, const uint8_t *vr, const uint8_t *take,
+                         uint32_t *cur, uint32_t *col);
+/* N1 / N2 (tags.c): is e, at a vertex with choice ov, on the boundary of the part it follows? */
+bool sdi_ov_boundary_edge(const sd_topo *t, int ov, uint32_t e);
+/* The opposite vertices of the edges whose ring is OPPOSITE or BOUNDARY_OPPOSITE (rules er):
+ * opp[e], and in nopp[e] how many faces were seen (bits 0-1, saturating at 3; 2 makes a ring). */
+void sdi_edge_opposites(const sd_topo *t, const uint8_t *er, uint32_t (*opp)[2], uint8_t *nopp);
+/* Per-edge variable-size rings (solid and G2 edges), CSR; class 0 = ring/face, 1 = diagonal. */
+typedef struct sdi_rings {
+    uint32_t *off, *v;
+    uint8_t *cls;
+    uint32_t *len; /* after dedup */
+} sdi_rings;
+bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int scheme, int threads,
+                     sdi_rings *R);
+/* (needs the relations vertex -> edges and -> diagonals: built into rel) */
+bool sdi_g2_rings(sd_mem *m, sdi_rels *rel, const uint8_t *erule, sdi_rings *R);
+void sdi_rings_free(sd_mem *m, sdi_rings *r);
+
+/* ---- masks.c: the weights of the rules ------------------------------------------------------ */
+/* A vertex mask: the centre, each of rho (class A), each octahedral opposite (class B). */
+typedef struct sdi_vmask {
+    double self, a, b;
+} sdi_vmask;
+/* An edge mask: the two ends, each ring point, each diagonal-class ring point (averaged). */
+typedef struct sdi_emask {
+    double end[2], ring, diag;
+} sdi_emask;
+#define SDI_LOOP_CACHE 64
+/* What a mask sees: sizes and options (loopc: Loop weights by valence below SDI_LOOP_CACHE). */
+typedef struct sdi_vnb {
+    uint32_t na, nb;
+    int weights, scheme;
+    const double *loopc;
+} sdi_vnb;
+typedef struct sdi_enb {
+    uint32_t k;
+    const uint8_t *cls; /* the ring's classes (averaged solid scheme), or NULL */
+} sdi_enb;
+/* The masks of rule r (rule_table.h). */
+sdi_vmask sdi_vertex_mask(uint8_t rule, const sdi_vnb *n);
+sdi_emask sdi_edge_mask(uint8_t rule, const sdi_enb *n);
+/* Loop's weight c of a vertex of valence m: Warren's or Loop's beta(m) / m (SD_WEIGHTS_*). */
+double sdi_loop_weight(int weights, uint32_t m);
+/* The octahedron cell point's weight of its vertex i (0, 1: the major diagonal). */
+double sdi_mask_cell(int scheme, int i);
+/* 003 Fig. 4f from the centre v of a petal: v, the far end w, each opposite vertex; gamma of
+ * the petal's angle step theta. */
+typedef struct sdi_yzmask {
+    double centre, far, opposite;
+} sdi_yzmask;
+sdi_yzmask sdi_mask_yz_petal(double g);
+double sdi_mask_yz_gamma(double theta);
+/* The row of an edge with 003 Fig. 4f at its singular ends (averaged where both are). */
+sdi_emask sdi_mask_yz_petal_edge(const sd_yzend end[2]);
+/* The flattened row's weight (yz.c) of ring point j in the row of edge v-ring[i] of a petal of k
+ * triangles whose centre reads it as x (on q = p - v: the centre takes the rest of 1). */
+double sdi_mask_yz_flat(const sd_yzend *x, uint32_t k, uint32_t i, uint32_t j);
+
+/* ---- stencil.c: S_l from the rules, rings and masks ------------------------------------------ */
+sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
 
 #endif

@@ -178,19 +178,9 @@ static bool flat_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32
                      const sd_yzend *x, double scale)
 {
     const bool open = x->kind == SD_YZ_CONCAVE;
-    const double s = x->s, c = 2 * M_PI / k, lam = 3.0 / 8.0 + cos(c) / 4;
-    const double d = 2 * sin(k * x->theta);
     double sum = 0;
     for (uint32_t j = 0; j < (open ? k + 1 : k); j++) {
-        bool nb = open ? j == i + 1 || j + 1 == i : j == (i + 1) % k || j == (i + k - 1) % k;
-        double tij = j == i ? x->g : nb ? 1.0 / 8.0 : 0.0, pij;
-        if (x->kind == SD_YZ_DISK) /* 003 App. A */
-            pij = 2.0 / k * lam * cos(c * ((double)i - j));
-        else if (x->kind == SD_YZ_DART)
-            pij = (j == 0 ? cos(c * i) / 2 : 0) + sin(c * i) * sin(c * j) / k;
-        else
-            pij = ((j == 0 ? sin((k - i) * x->theta) : 0) + (j == k ? sin(i * x->theta) : 0)) / d;
-        double w = (1 - s) * tij + s * pij;
+        double w = sdi_mask_yz_flat(x, k, i, j); /* masks.c */
         sum += w;
         if (!acc_add(m, a, ring[j], scale * w))
             return false;
@@ -248,13 +238,13 @@ bool sdi_yz_flat_rows(sd_mem *m, const sd_topo *t, const sdi_rel *ef, const sd_y
                         goto out;
                     break;
                 case SD_YZ_FIRST: { /* 003 Fig. 4f from this end */
-                    double g = x->g;
-                    if (!acc_add(m, &a, v, (0.75 - g) / sides) || !acc_add(m, &a, w, g / sides))
+                    sdi_yzmask y = sdi_mask_yz_petal(x->g);
+                    if (!acc_add(m, &a, v, y.centre / sides) || !acc_add(m, &a, w, y.far / sides))
                         goto out;
                     for (int h = 0; h < 2; h++) { /* the opposite vertices */
                         const uint32_t *q = t->fv[two[h]];
                         uint32_t o = q[0] != v && q[0] != w ? q[0] : q[1] != v && q[1] != w ? q[1] : q[2];
-                        if (!acc_add(m, &a, o, 0.125 / sides))
+                        if (!acc_add(m, &a, o, y.opposite / sides))
                             goto out;
                     }
                     break;
