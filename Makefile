@@ -21,6 +21,7 @@ $(B)/%.o: %.c $(wildcard core/*.h)
 	$(CC) $(CFLAGS) -c $< -o $@
 
 $(CORE_LIB): $(CORE_OBJ)
+	rm -f $@
 	ar rcs $@ $^
 
 # api/: JSON mapping and output writers (no HTTP)

@@ -379,10 +379,18 @@ sd_result sdi_ensure_derived(sd_complex *cx, int level, sd_error *err);
 /* The same from a const accessor of the level (see sd.h on locking); false if it failed. */
 bool sdi_need_derived(const sd_level *lv);
 
-/* ---- tags.c: the singular complex and the per-simplex rules on level 0 ---------------------- */
-/* (Re)apply tags, overrides and the default non-manifold rule to level 0's flags. R: level 0's
+/* ---- singular.c, overrides.c: tags, per-simplex rules and defaults on level 0 --------------- */
+/* The relations their lookups use (a tag or override is found in time linear in the complex). */
+#define SDI_TAG_RELS (SDI_REL(SDI_VE) | SDI_REL(SDI_VF) | SDI_REL(SDI_EF))
+/* (Re)apply tags, overrides and the default non-manifold rules to level 0's flags. R: level 0's
  * relations, held by the caller (built here as needed). */
 sd_result sdi_apply_singular(sd_complex *c, sdi_rels *R, sd_error *err);
+/* overrides.c, called by sdi_apply_singular: mark the overrides' bits (stack: nf + 1 ids of
+ * scratch), and, once the other bits are applied, the sides of N2 triangles and the check that
+ * every N2 simplex sees exactly its own pair (nface: ne + 1 bytes of scratch). */
+void sdi_overrides_mark(sd_complex *c, const sdi_rels *R, uint32_t *stack);
+sd_result sdi_overrides_check(sd_complex *c, const sdi_rels *R, uint8_t *nface, uint32_t *stack,
+                              sd_error *err);
 
 /* ---- rules.c: one rule per vertex and edge ------------------------------------------------- */
 /* The rule table's columns (rule_table.h) as numbers: rho and ring kinds per rule. */
@@ -419,6 +427,17 @@ sd_rule sdi_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
 static inline bool sdi_yz_singular_edge(const sd_topo *t, uint32_t e)
 {
     return t->efam[e] != FAM2 || (t->enm[e] & NM_C2B) || (t->eflag[e] & (EF_CREASE | EF_SSURF));
+}
+/* 003's simple/complex split of a non-manifold vertex where only triangles meet: an edge that
+ * counts as singular there (non-manifold or boundary), and whether a vertex of non-manifold type
+ * `type` with `nsing` of them is simple (one flower, exactly two singular edges). */
+static inline bool sdi_yz_counts_singular(const sd_topo *t, uint32_t e)
+{
+    return t->efam[e] == FAM2 && (nm_type(t->enm[e]) == 2 || (t->eflag[e] & EF_BND2));
+}
+static inline bool sdi_yz_simple(int type, uint32_t nsing)
+{
+    return type != 3 && nsing == 2;
 }
 /* petals.c: walking the petals of a vertex (see there). */
 enum { SDI_PETAL_FAN, SDI_PETAL_YZ };
