@@ -122,6 +122,10 @@ void sd_complex_counts(const sd_complex *c, int level, sd_counts *out);
 
 /* Memory in use by the complex (all levels, matrices, channels), in bytes. */
 size_t sd_complex_memory(const sd_complex *c);
+/* The bytes computing the levels up to `level` would add: the core's arrays per entity, summed
+ * over the levels not computed yet (from sd_complex_counts, without computing anything). An
+ * over-estimate by design, to check a memory limit before asking for a level. */
+uint64_t sd_complex_estimate_bytes(const sd_complex *c, int level);
 int sd_complex_levels_computed(const sd_complex *c);
 
 /* ---- levels ------------------------------------------------------------------------------ */
@@ -310,6 +314,31 @@ typedef struct sd_refinement {
 sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
                     size_t ns, const uint8_t *marked, sd_refinement *out, sd_error *err);
 void sd_refine_free(sd_refinement *r);
+
+/* The tags and per-simplex rules of a complex, in the forms sd_complex_set_singular (idx, size,
+ * ntags), sd_complex_set_petals and sd_complex_set_overrides take. */
+typedef struct sd_tag_set {
+    uint32_t *idx;
+    uint8_t *size;
+    size_t ntags;
+    sd_petal_tag *petals;
+    size_t npetals;
+    sd_override *overrides;
+    size_t noverrides;
+} sd_tag_set;
+
+/* Carry `in`, given for the complex that refinement r was made from, to the refined complex:
+ * children of tagged simplices stay tagged and keep their rules (SPEC Sec. 3). A vertex stays
+ * itself; a split edge becomes its two halves, and its N1 / N2 / G2 choice also goes to the
+ * vertex splitting it; a triangle becomes its children; a petal tag keeps its vertex and names
+ * the child of its triangle there; an N2 pair is replaced by the children holding the new
+ * simplex (a choice whose triangle has none is dropped). Whether a carried override still fits
+ * the refined complex is sd_complex_set_overrides's to say. Fills *out with new arrays (the C
+ * library's allocator, as sd_refine's; free with sd_tag_set_free); SD_ERR_NOMEM leaves it
+ * empty. `in` is not changed. */
+sd_result sd_refine_carry(const sd_refinement *r, const sd_tag_set *in, sd_tag_set *out,
+                          sd_error *err);
+void sd_tag_set_free(sd_tag_set *t);
 
 /* ---- local analysis (001 Sec. 4.1, Appendix B) ------------------------------------------- */
 
