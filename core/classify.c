@@ -58,23 +58,10 @@ static void uf_begin(linkuf *u)
     u->n = 0;
 }
 
-sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err)
+/* Families (Algorithm 2): C_k of every vertex and edge; cdeg: curve segments per vertex, n2:
+ * maximal triangles per edge. */
+static void families(sd_topo *t, uint32_t *cdeg, uint32_t *n2)
 {
-    uint32_t nv = t->nv, ne = t->ne;
-    t->vfam = sdi_calloc(m, nv, 1);
-    t->vflag = sdi_calloc(m, nv, 1);
-    t->vnm = sdi_calloc(m, nv, 1);
-    t->efam = sdi_calloc(m, ne ? ne : 1, 1);
-    t->eflag = sdi_calloc(m, ne ? ne : 1, 1);
-    t->enm = sdi_calloc(m, ne ? ne : 1, 1);
-    uint32_t *cdeg = sdi_calloc(m, nv, sizeof *cdeg);
-    uint32_t *n2 = sdi_calloc(m, ne ? ne : 1, sizeof *n2);
-    linkuf u = {0};
-    sd_result rc = SD_OK;
-    if (!t->vfam || !t->vflag || !t->vnm || !t->efam || !t->eflag || !t->enm || !cdeg || !n2)
-        goto nomem;
-
-    /* families (Algorithm 2) */
     for (uint32_t i = 0; i < t->npt; i++)
         t->vfam[t->pt[i]] |= FAM0;
     for (uint32_t i = 0; i < t->ncu; i++) {
@@ -100,8 +87,12 @@ sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err)
         for (int k = 0; k < 4; k++)
             t->vfam[t->tet[i][k]] |= FAM3;
     }
+}
 
-    /* boundary simplices and dC (Algorithm 3) */
+/* Boundary simplices and dC (Algorithm 3). */
+static void boundary(sd_topo *t, const uint32_t *cdeg, const uint32_t *n2)
+{
+    const uint32_t nv = t->nv, ne = t->ne;
     for (uint32_t f = 0; f < t->nf; f++)
         if (!(t->fflag[f] & FF_MAX) && t->fn3[f] == 1) {
             t->fflag[f] |= FF_BND3;
@@ -119,8 +110,12 @@ sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err)
     for (uint32_t v = 0; v < nv; v++)
         if (t->vfam[v] == FAM1 && cdeg[v] == 1)
             t->vflag[v] |= VF_CURVE_END | VF_DC;
+}
 
-    /* types 1 and 2 */
+/* Non-manifold types 1, 2 and 4 (000 Sec. 2.4), and NM_C2B. */
+static void types_1_2_4(sd_topo *t, const uint32_t *cdeg, const uint32_t *n2)
+{
+    const uint32_t nv = t->nv, ne = t->ne;
     for (uint32_t v = 0; v < nv; v++) {
         if (popcount4(t->vfam[v]) >= 2)
             t->vnm[v] = 1;
@@ -150,16 +145,23 @@ sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err)
             for (int k = 0; k < 2; k++)
                 if (t->vnm[t->ev[e][k]] == 0)
                     t->vnm[t->ev[e][k]] = 4;
+}
 
-    /* type 3: link components (002 Sec. 5.2) */
+/* Type 3: a simplex of C_k alone whose link has 2+ connected components (002 Sec. 5.2). false:
+ * no memory. */
+static bool type_3(sd_mem *m, sd_topo *t, sdi_rels *R)
+{
+    const uint32_t nv = t->nv, ne = t->ne;
+    linkuf u = {0};
+    bool ok = false;
     if (!sdi_rels_need(m, R, SDI_REL(SDI_VF) | SDI_REL(SDI_VT) | SDI_REL(SDI_ET)))
-        goto nomem;
+        goto out;
     const sdi_rel *vf = &R->r[SDI_VF], *vt = &R->r[SDI_VT], *et = &R->r[SDI_ET];
     u.loc = sdi_alloc(m, (size_t)nv * sizeof *u.loc);
     u.stamp = sdi_calloc(m, nv, sizeof *u.stamp);
     u.parent = sdi_alloc(m, (size_t)nv * sizeof *u.parent);
     if (!u.loc || !u.stamp || !u.parent)
-        goto nomem;
+        goto out;
 
     for (uint32_t e = 0; e < ne; e++) {
         if (t->efam[e] != FAM3 || nm_type(t->enm[e]))
@@ -209,16 +211,37 @@ sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err)
         if (uf_components(&u) > 1)
             t->vnm[v] = 3;
     }
-
-    goto out;
-nomem:
-    rc = sdi_fail_nomem(err, m);
+    ok = true;
 out:
-    sdi_free(m, cdeg);
-    sdi_free(m, n2);
     sdi_free(m, u.loc);
     sdi_free(m, u.stamp);
     sdi_free(m, u.parent);
+    return ok;
+}
+
+sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err)
+{
+    uint32_t nv = t->nv, ne = t->ne;
+    t->vfam = sdi_calloc(m, nv, 1);
+    t->vflag = sdi_calloc(m, nv, 1);
+    t->vnm = sdi_calloc(m, nv, 1);
+    t->efam = sdi_calloc(m, ne ? ne : 1, 1);
+    t->eflag = sdi_calloc(m, ne ? ne : 1, 1);
+    t->enm = sdi_calloc(m, ne ? ne : 1, 1);
+    uint32_t *cdeg = sdi_calloc(m, nv, sizeof *cdeg);
+    uint32_t *n2 = sdi_calloc(m, ne ? ne : 1, sizeof *n2);
+    sd_result rc = SD_OK;
+    if (!t->vfam || !t->vflag || !t->vnm || !t->efam || !t->eflag || !t->enm || !cdeg || !n2) {
+        rc = sdi_fail_nomem(err, m);
+    } else {
+        families(t, cdeg, n2);
+        boundary(t, cdeg, n2);
+        types_1_2_4(t, cdeg, n2);
+        if (!type_3(m, t, R))
+            rc = sdi_fail_nomem(err, m);
+    }
+    sdi_free(m, cdeg);
+    sdi_free(m, n2);
     return rc;
 }
 

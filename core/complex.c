@@ -10,6 +10,13 @@
  * tetrahedron's edge and face ids, and which listed simplices are really maximal — a listed
  * simplex that is a face of another listed one is absorbed. Tetrahedra are reoriented to positive
  * volume (slots 2 and 3 swapped) so that every later cell is positively oriented too.
+ *
+ * The complex object lives here too: sd_complex_new (options checked, level 0 built, the default
+ * non-manifold rules applied) and sd_complex_free, and what changes the whole complex or asks
+ * about it without computing levels: diagonals, channels, the sizes of any level from the split
+ * table (sd_complex_counts, so callers can enforce limits before allocating), the memory in use
+ * and the estimate of what levels not computed yet would add. A change that invalidates levels
+ * drops them (levels.c); they are recomputed on demand.
  */
 #include "hash.h"
 #include <math.h>
@@ -174,6 +181,92 @@ static uint32_t face_id(sd_hash *h, sd_topo *t, const uint32_t v[3], bool *isnew
     return t->nf++;
 }
 
+/* The input's simplices into level 0 (arrays allocated for them): tetrahedra first, so that
+ * faces of tets are known before triangles are looked at, then triangles, curve segments and
+ * points, each absorbed when it is a face of one before; then every face's edge ids. used: per
+ * vertex, scratch (zeroed). */
+static void add_simplices(sd_complex *c, sd_topo *t, sd_hash *he, sd_hash *hf, const double *xyz,
+                          const uint32_t *idx, const uint8_t *size, uint32_t ns, uint8_t *used)
+{
+    size_t off = 0;
+    /* pass 1: tetrahedra */
+    for (uint32_t s = 0; s < ns; s++) {
+        c->in_tet[s] = UINT32_MAX;
+        if (size[s] == 4) {
+            uint32_t *q = t->tet[t->ntet];
+            memcpy(q, idx + off, 4 * sizeof *q);
+            if (tet_vol6(xyz, q) < 0) {
+                uint32_t tmp = q[2];
+                q[2] = q[3];
+                q[3] = tmp;
+                c->tet_swapped[t->ntet] = 1;
+            }
+            for (int k = 0; k < 6; k++)
+                t->tet_e[t->ntet][k] = edge_id(he, t, q[SDI_TET_E[k][0]], q[SDI_TET_E[k][1]]);
+            for (int i = 0; i < 4; i++) {
+                uint32_t fv[3] = {q[SDI_TET_F[i][0]], q[SDI_TET_F[i][1]], q[SDI_TET_F[i][2]]};
+                bool isnew;
+                uint32_t f = face_id(hf, t, fv, &isnew);
+                t->tet_f[t->ntet][i] = f;
+                if (t->fn3[f] < 255)
+                    t->fn3[f]++;
+            }
+            for (int i = 0; i < 4; i++)
+                used[q[i]] = 1;
+            c->in_tet[s] = t->ntet++;
+        }
+        off += size[s];
+    }
+    /* pass 2: triangles; a triangle that is a tet face is absorbed */
+    off = 0;
+    for (uint32_t s = 0; s < ns; s++) {
+        if (size[s] == 3) {
+            const uint32_t *q = idx + off;
+            bool isnew;
+            uint32_t f = face_id(hf, t, q, &isnew);
+            if (isnew) {
+                t->fflag[f] |= FF_MAX;
+                t->tr[t->ntr++] = f;
+                for (int k = 0; k < 3; k++)
+                    edge_id(he, t, q[k], q[(k + 1) % 3]);
+                for (int i = 0; i < 3; i++)
+                    used[q[i]] = 1;
+            }
+        }
+        off += size[s];
+    }
+    /* pass 3: curve segments; one that is an edge of a triangle or tet is absorbed */
+    off = 0;
+    for (uint32_t s = 0; s < ns; s++) {
+        if (size[s] == 2) {
+            const uint32_t *q = idx + off;
+            uint32_t before = t->ne;
+            uint32_t e = edge_id(he, t, q[0], q[1]);
+            if (e == before) {
+                t->cu[t->ncu++] = e;
+                used[q[0]] = used[q[1]] = 1;
+            }
+        }
+        off += size[s];
+    }
+    /* pass 4: isolated points; a vertex of anything else is absorbed */
+    off = 0;
+    for (uint32_t s = 0; s < ns; s++) {
+        if (size[s] == 1 && !used[idx[off]]) {
+            used[idx[off]] = 2;
+            t->pt[t->npt++] = idx[off];
+        }
+        off += size[s];
+    }
+    /* face -> edge ids */
+    for (uint32_t f = 0; f < t->nf; f++)
+        for (int j = 0; j < 3; j++) {
+            uint32_t ids[2] = {t->fv[f][j], t->fv[f][(j + 1) % 3]}, k[4];
+            sdi_key(k, ids, 2);
+            t->fe[f][j] = sdi_hash_get(he, k);
+        }
+}
+
 sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
                           const uint8_t *size, uint32_t ns, sd_error *err)
 {
@@ -219,84 +312,7 @@ sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const 
         goto nomem;
     c->nin = ns;
 
-    /* offsets of each simplex */
-    size_t off = 0;
-    /* pass 1: tetrahedra, so that faces of tets are known before triangles are looked at */
-    for (uint32_t s = 0; s < ns; s++) {
-        c->in_tet[s] = UINT32_MAX;
-        if (size[s] == 4) {
-            uint32_t *q = t->tet[t->ntet];
-            memcpy(q, idx + off, 4 * sizeof *q);
-            if (tet_vol6(xyz, q) < 0) {
-                uint32_t tmp = q[2];
-                q[2] = q[3];
-                q[3] = tmp;
-                c->tet_swapped[t->ntet] = 1;
-            }
-            for (int k = 0; k < 6; k++)
-                t->tet_e[t->ntet][k] = edge_id(&he, t, q[SDI_TET_E[k][0]], q[SDI_TET_E[k][1]]);
-            for (int i = 0; i < 4; i++) {
-                uint32_t fv[3] = {q[SDI_TET_F[i][0]], q[SDI_TET_F[i][1]], q[SDI_TET_F[i][2]]};
-                bool isnew;
-                uint32_t f = face_id(&hf, t, fv, &isnew);
-                t->tet_f[t->ntet][i] = f;
-                if (t->fn3[f] < 255)
-                    t->fn3[f]++;
-            }
-            for (int i = 0; i < 4; i++)
-                used[q[i]] = 1;
-            c->in_tet[s] = t->ntet++;
-        }
-        off += size[s];
-    }
-    /* pass 2: triangles; a triangle that is a tet face is absorbed */
-    off = 0;
-    for (uint32_t s = 0; s < ns; s++) {
-        if (size[s] == 3) {
-            const uint32_t *q = idx + off;
-            bool isnew;
-            uint32_t f = face_id(&hf, t, q, &isnew);
-            if (isnew) {
-                t->fflag[f] |= FF_MAX;
-                t->tr[t->ntr++] = f;
-                for (int k = 0; k < 3; k++)
-                    edge_id(&he, t, q[k], q[(k + 1) % 3]);
-                for (int i = 0; i < 3; i++)
-                    used[q[i]] = 1;
-            }
-        }
-        off += size[s];
-    }
-    /* pass 3: curve segments; one that is an edge of a triangle or tet is absorbed */
-    off = 0;
-    for (uint32_t s = 0; s < ns; s++) {
-        if (size[s] == 2) {
-            const uint32_t *q = idx + off;
-            uint32_t before = t->ne;
-            uint32_t e = edge_id(&he, t, q[0], q[1]);
-            if (e == before) {
-                t->cu[t->ncu++] = e;
-                used[q[0]] = used[q[1]] = 1;
-            }
-        }
-        off += size[s];
-    }
-    /* pass 4: isolated points; a vertex of anything else is absorbed */
-    off = 0;
-    for (uint32_t s = 0; s < ns; s++) {
-        if (size[s] == 1 && !used[idx[off]]) {
-            used[idx[off]] = 2;
-            t->pt[t->npt++] = idx[off];
-        }
-        off += size[s];
-    }
-    /* face -> edge ids */
-    for (uint32_t f = 0; f < t->nf; f++)
-        for (int j = 0; j < 3; j++) {
-            uint32_t ids[2] = {t->fv[f][j], t->fv[f][(j + 1) % 3]}, k[4];
-            sdi_key(k, ids, 2);
-            t->fe[f][j] = sdi_hash_get(&he, k);
-        }
+    add_simplices(c, t, &he, &hf, xyz, idx, size, ns, used);
     sdi_hash_free(m, &he);
     sdi_hash_free(m, &hf);
     sdi_free(m, used);
@@ -342,14 +358,190 @@ nomem:
     return sdi_fail_nomem(err, m);
 }
 
-void sdi_level_free(sd_mem *m, sd_level *lv)
+//END
+
+/* ---- the complex's lifecycle and whole-complex queries ---------------------------------- */
+
+/* The options' enumerations: each is 0 (the default) or 1. */
+static sd_result check_options(const sd_options *o, sd_error *err)
 {
-    if (!lv)
-        return;
-    sdi_topo_free(m, &lv->t);
-    sdi_level_free_rules(m, lv);
-    sdi_free(m, lv->slot);
-    for (int i = 0; i < lv->nch; i++)
-        sdi_free(m, lv->ch[i].data);
-    sdi_free(m, lv);
+    const struct {
+        const char *name;
+        int value;
+    } f[] = {{"surface_weights", o->surface_weights},         /* SD_WEIGHTS_* */
+             {"nonmanifold_default", o->nonmanifold_default}, /* SD_NM_* */
+             {"nonmanifold_surface", o->nonmanifold_surface}, /* SD_NMSURF_* */
+             {"solid_scheme", o->solid_scheme}};              /* SD_SOLID_* */
+    for (size_t i = 0; i < sizeof f / sizeof *f; i++)
+        if (f[i].value != 0 && f[i].value != 1)
+            return sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown %s %d", f[i].name, f[i].value);
+    return SD_OK;
 }
+
+sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
+                           size_t ns, const sd_options *opt, sd_error *err)
+{
+    sd_options o = {0};
+    if (opt)
+        o = *opt;
+    if (err)
+        memset(err, 0, sizeof *err);
+    if (check_options(&o, err))
+        return NULL;
+    if (nv >= UINT32_MAX || ns >= UINT32_MAX) {
+        sdi_fail(err, SD_ERR_LIMIT, -1, -1, "too many vertices or simplices for 32-bit ids");
+        return NULL;
+    }
+    if ((nv && !xyz) || (ns && (!idx || !size))) {
+        sdi_fail(err, SD_ERR_ARG, -1, -1, "missing input array");
+        return NULL;
+    }
+    sd_mem mem;
+    sdi_mem_init(&mem, &o.allocator, o.max_bytes);
+    sd_complex *c = sdi_alloc(&mem, sizeof *c);
+    if (!c) {
+        sdi_fail_nomem(err, &mem);
+        return NULL;
+    }
+    memset(c, 0, sizeof *c);
+    c->mem = mem;
+    c->opt = o;
+    if (sdi_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err)) {
+        sd_complex_free(c);
+        return NULL;
+    }
+    if (o.nonmanifold_default == SD_NM_G1 || o.nonmanifold_surface == SD_NMSURF_YING_ZORIN) {
+        sdi_rels R = {.t = &c->lv[0]->t};
+        sd_result r = sdi_apply_singular(c, &R, err);
+        sdi_rels_free(&c->mem, &R);
+        if (r) {
+            sd_complex_free(c);
+            return NULL;
+        }
+    }
+    return c;
+}
+
+void sd_complex_free(sd_complex *c)
+{
+    if (!c)
+        return;
+    sdi_drop_levels(c, 0);
+    sdi_free(&c->mem, c->tag_at);
+    sdi_free(&c->mem, c->tag_k);
+    sdi_free(&c->mem, c->ov);
+    sdi_free(&c->mem, c->pet);
+    sdi_free(&c->mem, c->in_tet);
+    sdi_free(&c->mem, c->tet_swapped);
+    sd_mem m = c->mem;
+    sdi_free(&m, c);
+}
+
+/* Map a pair index in the input's vertex order to the stored (possibly reoriented) order:
+ * swapping slots 2 and 3 exchanges pairs 1 (02|13) and 2 (03|12). */
+static int map_pair(int pair, bool swapped) { return swapped && pair ? 3 - pair : pair; }
+
+sd_result sd_complex_set_diagonal(sd_complex *c, size_t simplex, int pair, sd_error *err)
+{
+    if (simplex >= c->nin || c->in_tet[simplex] == UINT32_MAX)
+        return sdi_fail(err, SD_ERR_ARG, (long)simplex, -1, "simplex %zu is not a tetrahedron", simplex);
+    if (pair < 0 || pair > 2)
+        return sdi_fail(err, SD_ERR_ARG, (long)simplex, -1, "diagonal pair must be 0, 1 or 2");
+    uint32_t t = c->in_tet[simplex];
+    sdi_drop_levels(c, 1);
+    sd_level *l0 = c->lv[0]; /* level 0's stencils do not depend on diagonals: kept */
+    l0->t.tet_d[t] = (uint8_t)map_pair(pair, c->tet_swapped[t]);
+    return SD_OK;
+}
+
+int sd_complex_diagonal(const sd_complex *c, size_t simplex)
+{
+    if (simplex >= c->nin || c->in_tet[simplex] == UINT32_MAX)
+        return -1;
+    uint32_t t = c->in_tet[simplex];
+    return map_pair(c->lv[0]->t.tet_d[t], c->tet_swapped[t]);
+}
+
+int sd_complex_add_channel(sd_complex *c, const double *data, int ncomp, sd_error *err)
+{
+    sd_level *l0 = c->lv[0];
+    if (ncomp < 1 || ncomp > 16) {
+        sdi_fail(err, SD_ERR_ARG, -1, -1, "a channel has 1 to 16 components, not %d", ncomp);
+        return -1;
+    }
+    if (l0->nch >= SD_MAX_CHANNELS) {
+        sdi_fail(err, SD_ERR_LIMIT, -1, -1, "at most %d channels", SD_MAX_CHANNELS - 1);
+        return -1;
+    }
+    size_t n = (size_t)l0->t.nv * ncomp;
+    for (size_t i = 0; i < n; i++)
+        if (!isfinite(data[i])) {
+            sdi_fail(err, SD_ERR_VALUE, (long)(i / ncomp), (int)(i % ncomp),
+                    "vertex %zu: channel value %zu is not finite", i / ncomp, i % ncomp);
+            return -1;
+        }
+    double *copy = sdi_alloc(&c->mem, n * sizeof *copy);
+    if (!copy) {
+        sdi_fail_nomem(err, &c->mem);
+        return -1;
+    }
+    memcpy(copy, data, n * sizeof *copy);
+    sdi_drop_levels(c, 1);
+    l0->ch[l0->nch].ncomp = ncomp;
+    l0->ch[l0->nch].data = copy;
+    return l0->nch++;
+}
+
+void sd_complex_counts(const sd_complex *c, int level, sd_counts *o)
+{
+    const sd_topo *t = &c->lv[0]->t;
+    uint64_t V = t->nv, E = t->ne, F = t->nf, P = t->npt, Cu = t->ncu, Tr = t->ntr, T = t->ntet, O = t->noct;
+    for (int l = 0; l < level; l++) {
+        uint64_t V2 = V + E + O, E2 = 2 * E + 3 * F + 12 * O, F2 = 4 * F + 4 * T + 24 * O;
+        uint64_t T2 = 4 * T + 8 * O, O2 = T + 6 * O;
+        V = V2, E = E2, F = F2, T = T2, O = O2, Cu *= 2, Tr *= 4;
+    }
+    o->vertices = V, o->edges = E, o->faces = F, o->points = P, o->curves = Cu;
+    o->triangles = Tr, o->tetrahedra = T, o->octahedra = O;
+}
+
+size_t sd_complex_memory(const sd_complex *c) { return c->mem.used; }
+
+/* Bytes per entity of a computed level (internal.h's arrays). Faces, cells and cell ids are their
+ * arrays' sizes; a vertex is its positions, ~16 stencil entries of 12 bytes with their pattern
+ * (200) and 16 bytes of classes, rules and scratch, an edge 24 bytes of ends, classes, rule and
+ * ring. The figures are the ones limits have always been checked with (asserted here, so a
+ * change of the arrays shows). */
+#define EST_POS (3 * sizeof(double))
+#define EST_VERTEX (EST_POS + 200 + 16)
+#define EST_EDGE 24
+#define EST_FACE (sizeof(uint32_t[3]) + sizeof(uint32_t[3]) + 2) /* fv, fe, fn3, fflag */
+#define EST_TET (sizeof(uint32_t[4]) + sizeof(uint32_t[6]) + sizeof(uint32_t[4]) + 1) /* tet, tet_e, tet_f, tet_d */
+#define EST_OCT (sizeof(uint32_t[6]) + sizeof(uint32_t[12]) + sizeof(uint32_t[8])) /* oct, oct_e, oct_f */
+#define EST_CELL_ID sizeof(uint32_t) /* pt, cu, tr */
+_Static_assert(sizeof ((sd_topo *)0)->fv[0] + sizeof ((sd_topo *)0)->fe[0] +
+                   sizeof ((sd_topo *)0)->fn3[0] + sizeof ((sd_topo *)0)->fflag[0] == EST_FACE,
+               "face arrays");
+_Static_assert(sizeof ((sd_topo *)0)->tet[0] + sizeof ((sd_topo *)0)->tet_e[0] +
+                   sizeof ((sd_topo *)0)->tet_f[0] + sizeof ((sd_topo *)0)->tet_d[0] == EST_TET,
+               "tetrahedron arrays");
+_Static_assert(sizeof ((sd_topo *)0)->oct[0] + sizeof ((sd_topo *)0)->oct_e[0] +
+                   sizeof ((sd_topo *)0)->oct_f[0] == EST_OCT,
+               "octahedron arrays");
+_Static_assert(EST_VERTEX == 240 && EST_FACE == 26 && EST_TET == 57 && EST_OCT == 104 &&
+                   EST_CELL_ID == 4,
+               "the estimate's figures");
+
+uint64_t sd_complex_estimate_bytes(const sd_complex *c, int level)
+{
+    uint64_t total = 0;
+    for (int l = sd_complex_levels_computed(c); l <= level; l++) {
+        sd_counts n;
+        sd_complex_counts(c, l, &n);
+        total += n.vertices * EST_VERTEX + n.edges * EST_EDGE + n.faces * EST_FACE +
+                 n.tetrahedra * EST_TET + n.octahedra * EST_OCT +
+                 (n.curves + n.triangles + n.points) * EST_CELL_ID;
+    }
+    return total;
+}
+int sd_complex_levels_computed(const sd_complex *c) { return c->nlevels; }

@@ -350,7 +350,6 @@ struct sd_complex {
 /* ---- complex.c: level 0 ------------------------------------------------------------------ */
 sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
                            const uint8_t *size, uint32_t ns, sd_error *err);
-void sdi_level_free(sd_mem *m, sd_level *lv);
 
 /* ---- classify.c: classes of level 0 (R: its relations, built as needed) -------------------- */
 sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err);
@@ -364,6 +363,7 @@ sd_result sdi_split_edges(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, 
 sd_result sdi_split_faces(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
 
 /* ---- levels.c: the hierarchy --------------------------------------------------------------- */
+void sdi_level_free(sd_mem *m, sd_level *lv);
 /* Forget a level's rules and every finer level. */
 void sdi_drop_rules(sd_complex *c, sd_level *lv);
 /* Free a level's rules part: rules, stencils S, edit columns, vrule_only, geo (not its points,

@@ -1,71 +1,30 @@
-/* levels.c — the subdivision hierarchy of a complex and the public accessors.
+/* levels.c — the subdivision hierarchy of a complex: a level's lifecycle and the public
+ * accessors of levels.
  *
  * Levels are computed one from the previous, on demand, and kept: level l+1's topology comes from
- * sd_split (topology only), its points from S_l (rules.c) applied to every channel of level l.
- * A failed step leaves the hierarchy as it was (all-or-nothing per level).
- * sd_complex_counts gives the exact size of any level from the split table without computing it,
- * so callers can enforce limits before allocating.
+ * the split (split.c, topology only), its points from S_l (stencil.c) applied to every channel of
+ * level l. A failed step leaves the hierarchy as it was (all-or-nothing per level). A level is
+ * freed whole (sdi_level_free), or just its rules part (sdi_level_free_rules: what a change of
+ * tags or a moved corner makes stale), or with every finer one (sdi_drop_levels).
+ *
+ * The parts of a level's topology (sd_topo, internal.h) are built when needed, in the order
+ * edges, then faces (each needs the parent's faces); faces are dropped again at levels >= 1 once
+ * the rules and the next split are made, so the lock-free readers of sd.h only ever meet arrays
+ * that stay.
  */
 #include "internal.h"
-#include <math.h>
 #include <string.h>
 
-sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
-                           size_t ns, const sd_options *opt, sd_error *err)
+void sdi_level_free(sd_mem *m, sd_level *lv)
 {
-    sd_options o = {0};
-    if (opt)
-        o = *opt;
-    if (err)
-        memset(err, 0, sizeof *err);
-    if (o.surface_weights != SD_WEIGHTS_WARREN && o.surface_weights != SD_WEIGHTS_LOOP) {
-        sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown surface_weights %d", o.surface_weights);
-        return NULL;
-    }
-    if (o.nonmanifold_default != SD_NM_G2 && o.nonmanifold_default != SD_NM_G1) {
-        sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown nonmanifold_default %d", o.nonmanifold_default);
-        return NULL;
-    }
-    if (o.nonmanifold_surface != SD_NMSURF_CHANG_QIN && o.nonmanifold_surface != SD_NMSURF_YING_ZORIN) {
-        sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown nonmanifold_surface %d", o.nonmanifold_surface);
-        return NULL;
-    }
-    if (o.solid_scheme != SD_SOLID_BOX && o.solid_scheme != SD_SOLID_AVERAGED) {
-        sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown solid_scheme %d", o.solid_scheme);
-        return NULL;
-    }
-    if (nv >= UINT32_MAX || ns >= UINT32_MAX) {
-        sdi_fail(err, SD_ERR_LIMIT, -1, -1, "too many vertices or simplices for 32-bit ids");
-        return NULL;
-    }
-    if ((nv && !xyz) || (ns && (!idx || !size))) {
-        sdi_fail(err, SD_ERR_ARG, -1, -1, "missing input array");
-        return NULL;
-    }
-    sd_mem mem;
-    sdi_mem_init(&mem, &o.allocator, o.max_bytes);
-    sd_complex *c = sdi_alloc(&mem, sizeof *c);
-    if (!c) {
-        sdi_fail_nomem(err, &mem);
-        return NULL;
-    }
-    memset(c, 0, sizeof *c);
-    c->mem = mem;
-    c->opt = o;
-    if (sdi_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err)) {
-        sd_complex_free(c);
-        return NULL;
-    }
-    if (o.nonmanifold_default == SD_NM_G1 || o.nonmanifold_surface == SD_NMSURF_YING_ZORIN) {
-        sdi_rels R = {.t = &c->lv[0]->t};
-        sd_result r = sdi_apply_singular(c, &R, err);
-        sdi_rels_free(&c->mem, &R);
-        if (r) {
-            sd_complex_free(c);
-            return NULL;
-        }
-    }
-    return c;
+    if (!lv)
+        return;
+    sdi_topo_free(m, &lv->t);
+    sdi_level_free_rules(m, lv);
+    sdi_free(m, lv->slot);
+    for (int i = 0; i < lv->nch; i++)
+        sdi_free(m, lv->ch[i].data);
+    sdi_free(m, lv);
 }
 
 void sdi_drop_levels(sd_complex *c, int from)
@@ -101,130 +60,6 @@ void sdi_drop_rules(sd_complex *c, sd_level *lv)
     sdi_free(&c->mem, lv->slot);
     lv->slot = NULL;
 }
-
-void sd_complex_free(sd_complex *c)
-{
-    if (!c)
-        return;
-    sdi_drop_levels(c, 0);
-    sdi_free(&c->mem, c->tag_at);
-    sdi_free(&c->mem, c->tag_k);
-    sdi_free(&c->mem, c->ov);
-    sdi_free(&c->mem, c->pet);
-    sdi_free(&c->mem, c->in_tet);
-    sdi_free(&c->mem, c->tet_swapped);
-    sd_mem m = c->mem;
-    sdi_free(&m, c);
-}
-
-/* Map a pair index in the input's vertex order to the stored (possibly reoriented) order:
- * swapping slots 2 and 3 exchanges pairs 1 (02|13) and 2 (03|12). */
-static int map_pair(int pair, bool swapped) { return swapped && pair ? 3 - pair : pair; }
-
-sd_result sd_complex_set_diagonal(sd_complex *c, size_t simplex, int pair, sd_error *err)
-{
-    if (simplex >= c->nin || c->in_tet[simplex] == UINT32_MAX)
-        return sdi_fail(err, SD_ERR_ARG, (long)simplex, -1, "simplex %zu is not a tetrahedron", simplex);
-    if (pair < 0 || pair > 2)
-        return sdi_fail(err, SD_ERR_ARG, (long)simplex, -1, "diagonal pair must be 0, 1 or 2");
-    uint32_t t = c->in_tet[simplex];
-    sdi_drop_levels(c, 1);
-    sd_level *l0 = c->lv[0]; /* level 0's stencils do not depend on diagonals: kept */
-    l0->t.tet_d[t] = (uint8_t)map_pair(pair, c->tet_swapped[t]);
-    return SD_OK;
-}
-
-int sd_complex_diagonal(const sd_complex *c, size_t simplex)
-{
-    if (simplex >= c->nin || c->in_tet[simplex] == UINT32_MAX)
-        return -1;
-    uint32_t t = c->in_tet[simplex];
-    return map_pair(c->lv[0]->t.tet_d[t], c->tet_swapped[t]);
-}
-
-int sd_complex_add_channel(sd_complex *c, const double *data, int ncomp, sd_error *err)
-{
-    sd_level *l0 = c->lv[0];
-    if (ncomp < 1 || ncomp > 16) {
-        sdi_fail(err, SD_ERR_ARG, -1, -1, "a channel has 1 to 16 components, not %d", ncomp);
-        return -1;
-    }
-    if (l0->nch >= SD_MAX_CHANNELS) {
-        sdi_fail(err, SD_ERR_LIMIT, -1, -1, "at most %d channels", SD_MAX_CHANNELS - 1);
-        return -1;
-    }
-    size_t n = (size_t)l0->t.nv * ncomp;
-    for (size_t i = 0; i < n; i++)
-        if (!isfinite(data[i])) {
-            sdi_fail(err, SD_ERR_VALUE, (long)(i / ncomp), (int)(i % ncomp),
-                    "vertex %zu: channel value %zu is not finite", i / ncomp, i % ncomp);
-            return -1;
-        }
-    double *copy = sdi_alloc(&c->mem, n * sizeof *copy);
-    if (!copy) {
-        sdi_fail_nomem(err, &c->mem);
-        return -1;
-    }
-    memcpy(copy, data, n * sizeof *copy);
-    sdi_drop_levels(c, 1);
-    l0->ch[l0->nch].ncomp = ncomp;
-    l0->ch[l0->nch].data = copy;
-    return l0->nch++;
-}
-
-void sd_complex_counts(const sd_complex *c, int level, sd_counts *o)
-{
-    const sd_topo *t = &c->lv[0]->t;
-    uint64_t V = t->nv, E = t->ne, F = t->nf, P = t->npt, Cu = t->ncu, Tr = t->ntr, T = t->ntet, O = t->noct;
-    for (int l = 0; l < level; l++) {
-        uint64_t V2 = V + E + O, E2 = 2 * E + 3 * F + 12 * O, F2 = 4 * F + 4 * T + 24 * O;
-        uint64_t T2 = 4 * T + 8 * O, O2 = T + 6 * O;
-        V = V2, E = E2, F = F2, T = T2, O = O2, Cu *= 2, Tr *= 4;
-    }
-    o->vertices = V, o->edges = E, o->faces = F, o->points = P, o->curves = Cu;
-    o->triangles = Tr, o->tetrahedra = T, o->octahedra = O;
-}
-
-size_t sd_complex_memory(const sd_complex *c) { return c->mem.used; }
-
-/* Bytes per entity of a computed level (internal.h's arrays). Faces, cells and cell ids are their
- * arrays' sizes; a vertex is its positions, ~16 stencil entries of 12 bytes with their pattern
- * (200) and 16 bytes of classes, rules and scratch, an edge 24 bytes of ends, classes, rule and
- * ring. The figures are the ones limits have always been checked with (asserted here, so a
- * change of the arrays shows). */
-#define EST_POS (3 * sizeof(double))
-#define EST_VERTEX (EST_POS + 200 + 16)
-#define EST_EDGE 24
-#define EST_FACE (sizeof(uint32_t[3]) + sizeof(uint32_t[3]) + 2) /* fv, fe, fn3, fflag */
-#define EST_TET (sizeof(uint32_t[4]) + sizeof(uint32_t[6]) + sizeof(uint32_t[4]) + 1) /* tet, tet_e, tet_f, tet_d */
-#define EST_OCT (sizeof(uint32_t[6]) + sizeof(uint32_t[12]) + sizeof(uint32_t[8])) /* oct, oct_e, oct_f */
-#define EST_CELL_ID sizeof(uint32_t) /* pt, cu, tr */
-_Static_assert(sizeof ((sd_topo *)0)->fv[0] + sizeof ((sd_topo *)0)->fe[0] +
-                   sizeof ((sd_topo *)0)->fn3[0] + sizeof ((sd_topo *)0)->fflag[0] == EST_FACE,
-               "face arrays");
-_Static_assert(sizeof ((sd_topo *)0)->tet[0] + sizeof ((sd_topo *)0)->tet_e[0] +
-                   sizeof ((sd_topo *)0)->tet_f[0] + sizeof ((sd_topo *)0)->tet_d[0] == EST_TET,
-               "tetrahedron arrays");
-_Static_assert(sizeof ((sd_topo *)0)->oct[0] + sizeof ((sd_topo *)0)->oct_e[0] +
-                   sizeof ((sd_topo *)0)->oct_f[0] == EST_OCT,
-               "octahedron arrays");
-_Static_assert(EST_VERTEX == 240 && EST_FACE == 26 && EST_TET == 57 && EST_OCT == 104 &&
-                   EST_CELL_ID == 4,
-               "the estimate's figures");
-
-uint64_t sd_complex_estimate_bytes(const sd_complex *c, int level)
-{
-    uint64_t total = 0;
-    for (int l = sd_complex_levels_computed(c); l <= level; l++) {
-        sd_counts n;
-        sd_complex_counts(c, l, &n);
-        total += n.vertices * EST_VERTEX + n.edges * EST_EDGE + n.faces * EST_FACE +
-                 n.tetrahedra * EST_TET + n.octahedra * EST_OCT +
-                 (n.curves + n.triangles + n.points) * EST_CELL_ID;
-    }
-    return total;
-}
-int sd_complex_levels_computed(const sd_complex *c) { return c->nlevels; }
 
 /* The parts of a level's topology (see sd_topo): edges need the parent's faces; faces need the
  * level's edges and the parent's faces; level 0 has all of them. */
