@@ -233,15 +233,10 @@ void sdi_vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a
     }
     sdi_vertex_rho(t, scheme, vr, cnt_a, cnt_b, take); /* rho sizes; the flags go */
     for (uint32_t v = 0; v < nv; v++) {
-        bool degenerate = false;
-        switch (vr[v]) {
-        case SD_RULE_CURVE:
-        case SD_RULE_LOOP_BOUNDARY:
-            degenerate = cnt_a[v] != 2;
-            break;
-        default:
-            degenerate = vr[v] != SD_RULE_CORNER && cnt_a[v] == 0;
-        }
+        uint8_t rho = SDI_RULE_RHO[vr[v]];
+        bool degenerate = rho == SDI_RHO_CURVE || rho == SDI_RHO_SURFACE_BOUNDARY
+                          ? cnt_a[v] != 2 /* a point of a curve: two neighbours on it */
+                          : vr[v] != SD_RULE_CORNER && cnt_a[v] == 0;
         if (degenerate || vr[v] == SD_RULE_CORNER) {
             vr[v] = SD_RULE_CORNER;
             cnt_a[v] = 0;
