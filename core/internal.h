@@ -5,11 +5,22 @@
  * (split.c) number the next level's edges and faces directly from the parent's — no hashing after
  * level 0 — and lets classification be inherited entity by entity (classify.c).
  *
+ * The core in layers, in OpenSubdiv's shape: a level's topology (topo.c: its parts and incidence
+ * relations; split.c: the next level's; classify.c: level 0's classes) — Vtr; the rules (rules.c
+ * chooses, rings.c finds the neighbours, petals.c walks petals, masks.c weighs, yz.c the
+ * Ying-Zorin rows) — Sdc; the stencils they make (stencil.c assembles S_l, csr.c stores and
+ * applies it) — Far. Above them the complex and its levels (complex.c, levels.c), its tags and
+ * rules (singular.c, overrides.c), edits, analysis and refinement (edit.c, analysis.c, refine.c,
+ * carry.c). Calls go down the layers; a level's lifecycle is levels.c's, the complex's complex.c's.
+ * sd_complex_memory counts every allocation, these structures included: growing sd_level or
+ * sd_complex changes the memory the daemon reports (the golden stats compare it).
+ *
  * Local numbering (used everywhere):
- *   tetrahedron t[0..3]: edges TET_E, face i opposite vertex i (TET_F, outward for positive
- *     volume); diagonal pair k = (edge k, edge 5-k).
+ *   tetrahedron t[0..3]: edges SDI_TET_E, face i opposite vertex i (SDI_TET_F, outward for
+ *     positive volume); diagonal pair k = (edge k, edge 5-k).
  *   octahedron o[0..5] = p, q, a, a2, b, b2 (three opposite pairs, the major diagonal p-q first);
- *     equator cycle a, b, a2, b2; edges OCT_E; faces OCT_F (outward for positive orientation).
+ *     equator cycle a, b, a2, b2; edges SDI_OCT_E; faces SDI_OCT_F (outward for positive
+ *     orientation).
  *   face f: fv[f][0..2], fe[f][j] = edge (fv[j], fv[j+1]).
  *
  * Names: functions shared between the core's files are sdi_* (constant tables SDI_*), file-local
@@ -63,7 +74,7 @@ sd_result sdi_fail_nomem(sd_error *err, const sd_mem *m);
 enum {
     VF_DC = 1,          /* vertex in the boundary complex dC */
     VF_CURVE_END = 2,   /* boundary simplex of C_1 (end of a curve) */
-    /* the singular complex S of tags (000 Sec. 4.1), inherited by children (tags.c) */
+    /* the singular complex S of tags (000 Sec. 4.1), inherited by children (singular.c) */
     VF_SING = 4,        /* tagged vertex: a corner */
     VF_SCREASE = 8,     /* on a crease (a tagged edge that is not a side of a tagged triangle) */
     VF_SSURF = 16,      /* on an embedded surface (a tagged triangle) */
@@ -88,7 +99,7 @@ enum {
     EF_N2BND = 128,     /* ... of exactly one chosen triangle */
     FF_N2SEL = 8,       /* a maximal triangle chosen by an N2 pair (or in a chosen petal) */
 };
-/* vnm / enm pack the non-manifold type (bits 0-2) with the per-simplex rule (tags.c):
+/* vnm / enm pack the non-manifold type (bits 0-2) with the per-simplex rule (overrides.c):
  * bits 3-5 an override code, NM_C2B (edges) "in C_2 but not between exactly 2 maximal
  * triangles" (a boundary of C_2 for N1 with dimension 2), NM_G1 "singular by rule G1". All are
  * inherited by children (split.c). */
@@ -135,7 +146,7 @@ typedef struct sd_topo {
     uint32_t npt, ncu, ntr, ntet, noct;
     bool derived;              /* the edges part is built */
     bool faces;                /* the faces part is built */
-    uint8_t ovmask;            /* OVM_*: per-simplex rules occur (tags.c; same at every level) */
+    uint8_t ovmask;            /* OVM_*: per-simplex rules occur (singular.c; same at every level) */
     bool tr_ident;             /* every face is a maximal triangle and face i is triangle i: at
                                 * levels >= 1, tr is not stored and fv is trv */
     /* cells */
@@ -302,7 +313,8 @@ struct sd_level {
     sd_complex *cx;                  /* the owner (lazy parts are built with its allocator) */
     const sd_topo *parent;           /* level index-1's topology, or NULL */
     sd_topo t;
-    /* rules and stencils (rules.c), built lazily: they define S mapping this level to the next */
+    /* rules and stencils (rules.c, stencil.c), built lazily: they define S mapping this level to
+     * the next */
     bool have_rules;
     uint8_t *vrule, *erule;   /* the |rho| / |ring| a rule uses is its row's length in S - 1 / - 2 */
     uint8_t *vrule_only;      /* the vertex rules alone, for outputs of a level without stencils */
@@ -334,7 +346,7 @@ struct sd_complex {
     uint32_t *in_tet;          /* input simplex -> tetrahedron id (or UINT32_MAX) */
     uint8_t *tet_swapped;      /* level-0 tet reoriented (slots 2,3 swapped) */
     int nlevels;               /* computed levels */
-    /* the singular tags and per-simplex rules as given (tags.c re-applies both to level 0) */
+    /* the singular tags and per-simplex rules as given (singular.c re-applies both to level 0) */
     size_t ntags;
     uint32_t *tag_at;          /* vertex, edge or face id of level 0 */
     uint8_t *tag_k;            /* 1, 2, 3 */
@@ -511,7 +523,7 @@ void sdi_vertex_rho(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, 
  * through edges (in edge order), then major diagonals, then octahedral opposites. */
 void sdi_vertex_rho_cols(const sd_topo *t, int scheme, const uint8_t *vr, const uint8_t *take,
                          uint32_t *cur, uint32_t *col);
-/* N1 / N2 (tags.c): is e, at a vertex with choice ov, on the boundary of the part it follows? */
+/* N1 / N2 (overrides.c): is e, at a vertex with choice ov, on the boundary of the part it follows? */
 bool sdi_ov_boundary_edge(const sd_topo *t, int ov, uint32_t e);
 /* The opposite vertices of the edges whose ring is OPPOSITE or BOUNDARY_OPPOSITE (rules er):
  * opp[e], and in nopp[e] how many faces were seen (bits 0-1, saturating at 3; 2 makes a ring). */

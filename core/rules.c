@@ -1,6 +1,6 @@
 /* rules.c — one rule per vertex and edge of a level (SPEC Sec. 3; docs/RULES.md).
  *
- * Priority: singular tags (000 Sec. 4.1) > the simplex's own choice (N1, N2, G1, G2; tags.c) > the
+ * Priority: singular tags (000 Sec. 4.1) > the simplex's own choice (N1, N2, G1, G2; overrides.c) > the
  * default non-manifold rule (G2, or G1 as tags; Ying-Zorin's where only triangles meet) >
  * boundary > interior:
  *   isolated point, curve end, junction of 3+ curves   corner
@@ -62,7 +62,7 @@ uint8_t sdi_vertex_rule(const sd_topo *t, uint32_t v)
     if (fl & VF_SSURF)
         return fl & VF_SBND ? SD_RULE_LOOP_BOUNDARY : SD_RULE_LOOP;
     if (nm) {
-        switch (nm_ov(nm)) { /* the simplex's own choice (tags.c); vertex_rules settles N1, N2 */
+        switch (nm_ov(nm)) { /* the simplex's own choice (overrides.c); sdi_vertex_rules settles N1, N2 */
         case OV_N1_1:
             return SD_RULE_CURVE;
         case OV_N1_2:
@@ -101,14 +101,14 @@ static uint8_t edge_rule(const sd_topo *t, uint32_t e)
     if (fl & EF_SSURF)
         return SD_RULE_LOOP;
     if (t->enm[e] & (NM_TYPE | NM_OV)) {
-        switch (nm_ov(t->enm[e])) { /* the edge's own choice (tags.c) */
+        switch (nm_ov(t->enm[e])) { /* the edge's own choice (overrides.c) */
         case OV_N1_1:
             return SD_RULE_CURVE;
         case OV_N1_2: /* as in C_2 alone: between two triangles, or its boundary */
             return t->enm[e] & NM_C2B ? SD_RULE_LOOP_BOUNDARY : SD_RULE_LOOP;
         case OV_N1_3: /* as in C_3 alone */
             return fl & EF_DC ? SD_RULE_SOLID_BOUNDARY : SD_RULE_SOLID;
-        case OV_N2: /* Loop between the two chosen triangles (opp_task) */
+        case OV_N2: /* Loop between the two chosen triangles (rings.c, sdi_edge_opposites) */
             return SD_RULE_LOOP;
         case OV_YZS: /* a Ying-Zorin crease */
             return SD_RULE_CURVE;

@@ -38,7 +38,7 @@
  * SD_YZ_FLAT_S = 3/4 satisfies all three conditions for every k (docs/DECISIONS.md 27, 28).
  * Where the edge's other end is also singular the petal rules of both ends are averaged (003:
  * "use the average of the conflicting positions"); each end's rule is complete (both stages)
- * before averaging. The other end's rule is 003 Fig. 4f with its gamma (rules.c, yz_gammas), or
+ * before averaging. The other end's rule is 003 Fig. 4f with its gamma (rules.c, sdi_yz_rules), or
  * its own flattened rule.
  *
  * Only levels built with nonmanifold_surface = ying-zorin that have such petals at singular
