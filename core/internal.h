@@ -176,7 +176,7 @@ typedef struct sd_topo {
 
 static inline uint32_t sdi_tr(const sd_topo *t, uint32_t i) { return t->tr ? t->tr[i] : i; }
 
-/* topo.c: freeing the parts (the faces part takes the relations with it) */
+/* topo.c: freeing the parts (all of them, the edges part, the faces part) */
 void sdi_topo_free(sd_mem *m, sd_topo *t);
 void sdi_topo_free_edges(sd_mem *m, sd_topo *t);
 void sdi_topo_free_faces(sd_mem *m, sd_topo *t);

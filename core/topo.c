@@ -5,9 +5,10 @@
  * freed here: the faces part alone (sdi_topo_free_faces, dropped at levels >= 1 once the rules
  * and the next split are made), the edges part, or all of it.
  *
- * The incidence relations — vertex -> edges, vertex -> faces, edge -> faces, and vertex, edge and
- * face -> tetrahedra — are the one place the core inverts its entity -> vertex / edge / face
- * tables. They are a call's scratch, not the level's state: the call that needs them holds an
+ * The incidence relations — vertex -> edges, vertex -> faces, edge -> faces, vertex, edge and face
+ * -> tetrahedra, vertex -> the octahedra whose major diagonal ends there — are the one place the
+ * core inverts its entity -> vertex / edge / face tables (edit.c keeps S_l by columns too, but
+ * that is a matrix's transpose, built once per level and kept for edits). They are a call's scratch, not the level's state: the call that needs them holds an
  * sdi_rels for the level, asks sdi_rels_need for the relations it reads (built once, then shared
  * by everything the call does at that level: classification and the first diagonals, tags,
  * overrides and the default rules, the G2 and Ying-Zorin rings), passes it down and frees it
