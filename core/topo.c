@@ -51,37 +51,26 @@ void sdi_rel_free(sd_mem *m, sdi_rel *r)
 bool sdi_rels_need(sd_mem *m, sdi_rels *R, unsigned which)
 {
     const sd_topo *t = R->t;
-    for (int k = 0; k < SDI_NREL; k++) {
-        sdi_rel *r = &R->r[k];
-        if (!(which & 1u << k) || r->off)
-            continue;
-        bool ok;
-        switch (k) {
-        case SDI_VE:
-            ok = sdi_rel_build(m, r, t->nv, t->ne, 2, 2, &t->ev[0][0]);
-            break;
-        case SDI_VF:
-            ok = sdi_rel_build(m, r, t->nv, t->nf, 3, 3, &t->fv[0][0]);
-            break;
-        case SDI_EF:
-            ok = sdi_rel_build(m, r, t->ne, t->nf, 3, 3, &t->fe[0][0]);
-            break;
-        case SDI_VT:
-            ok = sdi_rel_build(m, r, t->nv, t->ntet, 4, 4, &t->tet[0][0]);
-            break;
-        case SDI_ET:
-            ok = sdi_rel_build(m, r, t->ne, t->ntet, 6, 6, &t->tet_e[0][0]);
-            break;
-        case SDI_FT:
-            ok = sdi_rel_build(m, r, t->nf, t->ntet, 4, 4, &t->tet_f[0][0]);
-            break;
-        default: /* SDI_VD: the ends of the octahedra's major diagonals */
-            ok = sdi_rel_build(m, r, t->nv, t->noct, 6, 2, &t->oct[0][0]);
-            break;
-        }
-        if (!ok)
+    /* each relation inverts an array of `per` keys every `stride` ids (casts: no arithmetic on
+     * an array that may be absent, e.g. level 0's octahedra) */
+    const struct {
+        uint32_t nkeys, nitems;
+        int stride, per;
+        const uint32_t *keys;
+    } spec[SDI_NREL] = {
+        [SDI_VE] = {t->nv, t->ne, 2, 2, (const uint32_t *)t->ev},
+        [SDI_VF] = {t->nv, t->nf, 3, 3, (const uint32_t *)t->fv},
+        [SDI_EF] = {t->ne, t->nf, 3, 3, (const uint32_t *)t->fe},
+        [SDI_VT] = {t->nv, t->ntet, 4, 4, (const uint32_t *)t->tet},
+        [SDI_ET] = {t->ne, t->ntet, 6, 6, (const uint32_t *)t->tet_e},
+        [SDI_FT] = {t->nf, t->ntet, 4, 4, (const uint32_t *)t->tet_f},
+        [SDI_VD] = {t->nv, t->noct, 6, 2, (const uint32_t *)t->oct}, /* the diagonal's ends */
+    };
+    for (int k = 0; k < SDI_NREL; k++)
+        if ((which & 1u << k) && !R->r[k].off &&
+            !sdi_rel_build(m, &R->r[k], spec[k].nkeys, spec[k].nitems, spec[k].stride,
+                           spec[k].per, spec[k].keys))
             return false;
-    }
     return true;
 }
 
