@@ -1658,15 +1658,9 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
             if (sd_refine_carry(&r, &was, &now, &e)) {
                 rc = api_fail(p, 503, "out-of-memory", "out of memory");
             } else {
-                free(tags.size);
-                free(tags.idx);
-                free(tags.pet);
-                free(ov);
-                tags.idx = now.idx;
-                tags.size = now.size;
-                tags.n = (uint32_t)now.ntags;
-                tags.pet = now.petals;
-                tags.npet = (uint32_t)now.npetals;
+                sd_tag_set_free(&was); /* malloc'ed, as the carried ones */
+                tags = (api_tags){.n = (uint32_t)now.ntags, .size = now.size, .idx = now.idx,
+                                  .npet = (uint32_t)now.npetals, .pet = now.petals};
                 ov = now.overrides;
                 nov = (uint32_t)now.noverrides;
             }
