@@ -35,18 +35,7 @@ int api_parse_level(const char *s, api_problem *p)
 
 uint64_t api_estimate_bytes(const sd_complex *c, int level)
 {
-    /* Per-entity bytes of the core's arrays (internal.h): topology, classes, rules, one stencil
-     * row per next-level point (~16 entries of 12 bytes) and the positions, summed over the
-     * levels not yet computed. An over-estimate by design: it guards a limit. */
-    uint64_t total = 0;
-    for (int l = sd_complex_levels_computed(c); l <= level; l++) {
-        sd_counts n;
-        sd_complex_counts(c, l, &n);
-        total += n.vertices * (24 + 16 + 200) + n.edges * 24 + n.faces * 26 +
-                 n.tetrahedra * 57 + n.octahedra * 104 + n.curves * 4 + n.triangles * 4 +
-                 n.points * 4;
-    }
-    return total;
+    return sd_complex_estimate_bytes(c, level); /* the core's per-entity sizes */
 }
 
 int api_check_level_limits(api_model *m, int level, const api_limits *lim, api_problem *p)

@@ -4,13 +4,11 @@
  * where the subdivision rules put them, with the tags and overrides carried to the children.
  *
  * Each step runs sd_refine on the working input, places the new points, carries tags and
- * overrides through a step_map (the split edges and the triangles of the refined complex), and
- * becomes the next step's input; the result is one new model, built like every change by
- * api_build_model. api_refine and its step_* helpers, model_with and subdivision_positions are
- * kept as they were in the former api/handlers.c: the core's refactor moves the tag carrying into core/ and
- * replaces these bodies when the branches merge. They allocate with the C library, as sd_refine
- * does for the arrays they adopt; what they exchange with the rest of api/ (the input's arrays,
- * tags, overrides, the selection) is therefore C-library memory too.
+ * overrides to the children (sd_refine_carry, core/carry.c), and becomes the next step's input;
+ * the result is one new model, built like every change by api_build_model. These functions
+ * allocate with the C library, as sd_refine and sd_refine_carry do for the arrays they hand
+ * over; what they exchange with the rest of api/ (the input's arrays, tags, overrides, the
+ * selection) is therefore C-library memory too.
  */
 #include "handlers.h"
 #include "mem.h"
@@ -171,222 +169,6 @@ static bool in_region(const selection *s, const double *xyz, const uint32_t *v, 
 
 static int cmp_pair(const void *x, const void *y) { return memcmp(x, y, 2 * sizeof(uint32_t)); }
 
-static int cmp_tri(const void *x, const void *y) { return memcmp(x, y, 3 * sizeof(uint32_t)); }
-
-/* What one refinement step did, for carrying tags and rules to the children. */
-typedef struct step_map {
-    uint32_t nold;            /* vertices before the step */
-    size_t nsplit;
-    uint32_t (*split)[3];     /* (a < b, new vertex), sorted */
-    size_t nface;
-    uint32_t (*face)[3];      /* sorted triples of every triangle of the refined complex */
-} step_map;
-
-static void step_map_free(step_map *m)
-{
-    free(m->split);
-    free(m->face);
-}
-
-static bool step_map_build(uint32_t nold, const sd_refinement *r, step_map *m)
-{
-    memset(m, 0, sizeof *m);
-    m->nold = nold;
-    m->nsplit = r->nsplit;
-    size_t nf = 0;
-    for (size_t s = 0; s < r->ns; s++)
-        nf += r->size[s] == 3 ? 1 : r->size[s] == 4 ? 4 : 0;
-    m->split = malloc((r->nsplit + 1) * sizeof *m->split);
-    m->face = malloc((nf + 1) * sizeof *m->face);
-    if (!m->split || !m->face) {
-        step_map_free(m);
-        return false;
-    }
-    for (size_t i = 0; i < r->nsplit; i++) {
-        uint32_t a = r->split[i][0], b = r->split[i][1];
-        m->split[i][0] = a < b ? a : b;
-        m->split[i][1] = a < b ? b : a;
-        m->split[i][2] = (uint32_t)(nold + i);
-    }
-    qsort(m->split, m->nsplit, sizeof *m->split, cmp_pair);
-    size_t off = 0;
-    for (size_t s = 0; s < r->ns; off += r->size[s++]) {
-        const uint32_t *v = r->idx + off;
-        for (int skip = 0; skip < (r->size[s] == 4 ? 4 : r->size[s] == 3 ? 1 : 0); skip++) {
-            uint32_t k[4], n = 0;
-            for (int j = 0; j < r->size[s]; j++)
-                if (r->size[s] == 3 || j != skip)
-                    k[n++] = v[j];
-            sort_key(k, k, 3);
-            memcpy(m->face[m->nface++], k, 3 * sizeof *k);
-        }
-    }
-    qsort(m->face, m->nface, sizeof *m->face, cmp_tri);
-    return true;
-}
-
-/* The new vertex splitting edge a-b, or UINT32_MAX. */
-static uint32_t step_mid(const step_map *m, uint32_t a, uint32_t b)
-{
-    uint32_t k[3] = {a < b ? a : b, a < b ? b : a, 0};
-    uint32_t (*hit)[3] = bsearch(k, m->split, m->nsplit, sizeof *m->split, cmp_pair);
-    return hit ? (*hit)[2] : UINT32_MAX;
-}
-
-static bool step_is_face(const step_map *m, const uint32_t *v)
-{
-    uint32_t k[4];
-    sort_key(k, v, 3);
-    return bsearch(k, m->face, m->nface, sizeof *m->face, cmp_tri) != NULL;
-}
-
-/* The children of triangle t in the refined complex (at most 4), the ones containing all of
- * `must` (n_must ids) only. Returns their number. */
-static int step_tri_children(const step_map *m, const uint32_t t[3], const uint32_t *must,
-                             int n_must, uint32_t out[4][3])
-{
-    uint32_t pts[6] = {t[0], t[1], t[2]}, np = 3, mid[3];
-    for (int j = 0; j < 3; j++)
-        if ((mid[j] = step_mid(m, t[j], t[(j + 1) % 3])) != UINT32_MAX)
-            pts[np++] = mid[j];
-    int n = 0;
-    for (uint32_t i = 0; i < np; i++)
-        for (uint32_t j = i + 1; j < np; j++)
-            for (uint32_t k = j + 1; k < np && n < 4; k++) {
-                uint32_t c[3] = {pts[i], pts[j], pts[k]};
-                if (!step_is_face(m, c))
-                    continue;
-                bool ok = true;
-                for (int u = 0; u < n_must; u++)
-                    ok &= c[0] == must[u] || c[1] == must[u] || c[2] == must[u];
-                if (ok)
-                    memcpy(out[n++], c, sizeof c);
-            }
-    return n;
-}
-
-/* Carry tags and overrides through one refinement step (children of tagged simplices stay
- * tagged and keep their rules, docs/RULES.md "Conventions"): a vertex stays itself; a split edge becomes its two
- * halves, and an edge's N1/N2/G2 choice also goes to the vertex splitting it; a triangle becomes
- * its children; an N2 pair is replaced by the children holding the new simplex. Replaces *tags
- * and *ov (malloc'ed); false for lack of memory. */
-static bool step_carry(const step_map *m, api_tags *tags, sd_override **ov, uint32_t *nov)
-{
-    size_t nidx = 0;
-    for (uint32_t i = 0; i < tags->n; i++)
-        nidx += tags->size[i];
-    api_tags nt = {0};
-    nt.size = malloc(4 * (size_t)tags->n + 1);
-    nt.idx = malloc((12 * (size_t)tags->n + 1) * sizeof *nt.idx);
-    sd_override *no = malloc((3 * (size_t)*nov + 1) * sizeof *no);
-    if (!nt.size || !nt.idx || !no) {
-        free(nt.size);
-        free(nt.idx);
-        free(no);
-        return false;
-    }
-    size_t off = 0, at = 0;
-    for (uint32_t i = 0; i < tags->n; off += tags->size[i++]) {
-        const uint32_t *v = tags->idx + off;
-        uint32_t mid;
-        if (tags->size[i] == 2 && (mid = step_mid(m, v[0], v[1])) != UINT32_MAX) {
-            for (int h = 0; h < 2; h++) {
-                nt.size[nt.n++] = 2;
-                nt.idx[at++] = v[h];
-                nt.idx[at++] = mid;
-            }
-        } else if (tags->size[i] == 3) {
-            uint32_t ch[4][3];
-            int n = step_tri_children(m, v, NULL, 0, ch);
-            for (int c = 0; c < n; c++) {
-                nt.size[nt.n++] = 3;
-                memcpy(nt.idx + at, ch[c], sizeof ch[c]);
-                at += 3;
-            }
-        } else {
-            nt.size[nt.n++] = tags->size[i];
-            memcpy(nt.idx + at, v, tags->size[i] * sizeof *v);
-            at += tags->size[i];
-        }
-    }
-    (void)nidx;
-    nt.pet = malloc((tags->npet + 1) * sizeof *nt.pet);
-    if (!nt.pet) {
-        free(nt.size);
-        free(nt.idx);
-        free(no);
-        return false;
-    }
-    for (uint32_t i = 0; i < tags->npet; i++) { /* the vertex stays; its triangle's child at it */
-        sd_petal_tag q = tags->pet[i];
-        uint32_t ch[4][3];
-        if (step_tri_children(m, q.triangle, &q.vertex, 1, ch))
-            memcpy(q.triangle, ch[0], sizeof ch[0]);
-        nt.pet[nt.npet++] = q;
-    }
-    uint32_t nn = 0;
-    for (uint32_t i = 0; i < *nov; i++) {
-        const sd_override *o = &(*ov)[i];
-        uint32_t mid = o->nverts == 2 ? step_mid(m, o->simplex[0], o->simplex[1]) : UINT32_MAX;
-        /* the new simplices: the vertex or unsplit edge itself, or both halves and the midpoint */
-        sd_override c[3];
-        int nc = 0;
-        if (mid == UINT32_MAX) {
-            c[nc++] = *o;
-        } else {
-            for (int h = 0; h < 2; h++) {
-                c[nc] = *o;
-                c[nc].simplex[0] = o->simplex[h];
-                c[nc].simplex[1] = mid;
-                nc++;
-            }
-            if (o->rule != SD_RULE_G1) { /* a G1 edge's midpoint lies on its crease */
-                c[nc] = *o;
-                c[nc].nverts = 1;
-                c[nc].simplex[0] = mid;
-                nc++;
-            }
-        }
-        for (int k = 0; k < nc; k++) {
-            if (c[k].rule == SD_RULE_N2) {
-                bool ok = true;
-                for (int j = 0; j < 2 && ok; j++) {
-                    uint32_t *q = c[k].pair[j];
-                    if (c[k].pair_size == 2) { /* a curve segment [x, y] holding the vertex */
-                        uint32_t v = c[k].simplex[0], other = q[0] == v ? q[1] : q[0];
-                        uint32_t qm = step_mid(m, q[0], q[1]);
-                        if (qm != UINT32_MAX) {
-                            q[0] = v;
-                            q[1] = qm;
-                        }
-                        (void)other;
-                    } else {
-                        uint32_t ch[4][3];
-                        int n = step_tri_children(m, q, c[k].simplex, c[k].nverts, ch);
-                        if (n)
-                            memcpy(q, ch[0], sizeof ch[0]);
-                        else
-                            ok = false;
-                    }
-                }
-                if (!ok)
-                    continue;
-            }
-            no[nn++] = c[k];
-        }
-    }
-    free(tags->size);
-    free(tags->idx);
-    free(tags->pet);
-    *tags = nt;
-    free(*ov);
-    *ov = no;
-    *nov = nn;
-    return true;
-}
-
-/* A model of `in` with the rules, tags and overrides, dropping the overrides the refined complex
- * refuses (an override carried to a simplex whose type no longer fits it). */
 static api_model *model_with(api_input *in, const api_rules *rules, const api_tags *tags,
                              sd_override *ov, uint32_t nov, const api_limits *lim, sd_error *e)
 {
@@ -460,8 +242,71 @@ static int subdivision_positions(const api_input *in, const api_rules *rules, co
     return 0;
 }
 
-/* Over 150 lines on purpose: kept exactly as it was in api/handlers.c until the core's refactor of
- * the tag carrying replaces it (see the top of this file). */
+/* Which simplices of `in` (of 2 or more vertices) the selection takes: ns + 1 flags (calloc'ed),
+ * or NULL for lack of memory. */
+static uint8_t *mark_selection(const selection *sel, const api_input *in)
+{
+    uint8_t *marked = calloc((size_t)in->ns + 1, 1);
+    if (!marked)
+        return NULL;
+    for (uint32_t s = 0, off = 0; s < in->ns; off += in->size[s++]) {
+        if (in->size[s] < 2)
+            continue;
+        if (sel->kind == 0) {
+            uint32_t k[4];
+            sort_key(k, in->idx + off, in->size[s]);
+            marked[s] = bsearch(k, sel->keys, sel->n, sizeof *sel->keys, cmp_key4) != NULL;
+        } else
+            marked[s] = in_region(sel, in->xyz, in->idx + off, in->size[s]);
+    }
+    return marked;
+}
+
+/* The attributes after a step: the old values, then the new points' at their edges' midpoints
+ * (malloc'ed into out[0 .. in->nattrs)); false (nothing allocated) for lack of memory. */
+static bool midpoint_attributes(const api_input *in, const sd_refinement *r,
+                                double *out[API_MAX_ATTRIBUTES])
+{
+    for (int t = 0; t < in->nattrs; t++) {
+        int nc = in->attrs[t].ncomp;
+        if (!(out[t] = malloc(r->nv * nc * sizeof(double) + 8))) {
+            for (int u = 0; u < t; u++) {
+                free(out[u]);
+                out[u] = NULL;
+            }
+            return false;
+        }
+        memcpy(out[t], in->attrs[t].data, (size_t)in->nv * nc * sizeof(double));
+        for (size_t i = 0; i < r->nsplit; i++)
+            for (int k = 0; k < nc; k++)
+                out[t][(in->nv + i) * nc + k] =
+                    0.5 * (in->attrs[t].data[(size_t)r->split[i][0] * nc + k] +
+                           in->attrs[t].data[(size_t)r->split[i][1] * nc + k]);
+    }
+    return true;
+}
+
+/* The refinement's arrays and the step's attributes move into the next input nx. */
+static void adopt_step(api_input *nx, const api_input *in, sd_refinement *r,
+                       double *attr_new[API_MAX_ATTRIBUTES])
+{
+    nx->nv = (uint32_t)r->nv;
+    nx->ns = (uint32_t)r->ns;
+    nx->xyz = r->xyz;
+    nx->idx = r->idx;
+    nx->size = r->size;
+    r->xyz = NULL;
+    r->idx = NULL;
+    r->size = NULL;
+    nx->nattrs = in->nattrs;
+    for (int t = 0; t < in->nattrs; t++) {
+        nx->attrs[t] = in->attrs[t];
+        nx->attrs[t].data = attr_new[t];
+    }
+}
+
+/* POST /refine: `depth` steps of sd_refine on the working input, each with its new points placed,
+ * its attributes and its tags and overrides carried; then one model from the result. */
 int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                uint64_t *red, uint64_t *green, api_problem *p)
 {
@@ -501,20 +346,9 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
     for (int step = 0; !rc && step < depth; step++) {
         if (step == 0 || sel.kind != 0) { /* later steps of a simplex selection: its children */
             free(marked);
-            marked = calloc((size_t)in->ns + 1, 1);
-            if (!marked) {
+            if (!(marked = mark_selection(&sel, in))) {
                 rc = api_fail(p, 503, "out-of-memory", "out of memory");
                 break;
-            }
-            for (uint32_t s = 0, off = 0; s < in->ns; off += in->size[s++]) {
-                if (in->size[s] < 2)
-                    continue;
-                if (sel.kind == 0) {
-                    uint32_t k[4];
-                    sort_key(k, in->idx + off, in->size[s]);
-                    marked[s] = bsearch(k, sel.keys, sel.n, sizeof *sel.keys, cmp_key4) != NULL;
-                } else
-                    marked[s] = in_region(&sel, in->xyz, in->idx + off, in->size[s]);
             }
         }
         uint64_t nmarked = 0;
@@ -543,19 +377,8 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
         *green += r.green;
         /* new attribute arrays: old values, then the new points at midpoints */
         double *attr_new[API_MAX_ATTRIBUTES] = {0};
-        for (int t = 0; t < in->nattrs && !rc; t++) {
-            int nc = in->attrs[t].ncomp;
-            if (!(attr_new[t] = malloc(r.nv * nc * sizeof(double) + 8))) {
-                rc = api_fail(p, 503, "out-of-memory", "out of memory");
-                break;
-            }
-            memcpy(attr_new[t], in->attrs[t].data, (size_t)in->nv * nc * sizeof(double));
-            for (size_t i = 0; i < r.nsplit; i++)
-                for (int k = 0; k < nc; k++)
-                    attr_new[t][(in->nv + i) * nc + k] =
-                        0.5 * (in->attrs[t].data[(size_t)r.split[i][0] * nc + k] +
-                               in->attrs[t].data[(size_t)r.split[i][1] * nc + k]);
-        }
+        if (!midpoint_attributes(in, &r, attr_new))
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
         /* or where the subdivision rules put them: level-1 edge points of the step's input */
         if (!rc && place == 0) {
             sd_override *ovc = malloc((nov + 1) * sizeof *ovc); /* model_with may drop some */
@@ -567,13 +390,17 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
                 free(ovc);
             }
         }
-        if (!rc) { /* the step's tags and overrides, carried to the children */
-            step_map sm;
-            bool built = step_map_build(in->nv, &r, &sm);
-            if (!built || !step_carry(&sm, &tags, &ov, &nov))
+        if (!rc) { /* the step's tags and overrides, carried to the children (core) */
+            sd_tag_set was = {tags.idx, tags.size, tags.n, tags.pet, tags.npet, ov, nov}, now;
+            if (sd_refine_carry(&r, &was, &now, &e)) {
                 rc = api_fail(p, 503, "out-of-memory", "out of memory");
-            if (built)
-                step_map_free(&sm);
+            } else {
+                sd_tag_set_free(&was); /* malloc'ed, as the carried ones */
+                tags = (api_tags){.n = (uint32_t)now.ntags, .size = now.size, .idx = now.idx,
+                                  .npet = (uint32_t)now.npetals, .pet = now.petals};
+                ov = now.overrides;
+                nov = (uint32_t)now.noverrides;
+            }
         }
         api_input *nx = rc ? NULL : api_input_new();
         if (!rc && !nx)
@@ -584,19 +411,7 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
             sd_refine_free(&r);
             break;
         }
-        nx->nv = (uint32_t)r.nv; /* the refinement's arrays move into the next input */
-        nx->ns = (uint32_t)r.ns;
-        nx->xyz = r.xyz;
-        nx->idx = r.idx;
-        nx->size = r.size;
-        r.xyz = NULL;
-        r.idx = NULL;
-        r.size = NULL;
-        nx->nattrs = in->nattrs;
-        for (int t = 0; t < in->nattrs; t++) {
-            nx->attrs[t] = in->attrs[t];
-            nx->attrs[t].data = attr_new[t];
-        }
+        adopt_step(nx, in, &r, attr_new);
         uint8_t *next_marked = calloc(r.ns + 1, 1); /* children of selected simplices */
         if (next_marked)
             for (size_t i = 0; i < r.ns; i++)

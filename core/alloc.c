@@ -12,7 +12,7 @@
 
 #define HDR 16
 
-void sd_mem_init(sd_mem *m, const sd_allocator *a, size_t limit)
+void sdi_mem_init(sd_mem *m, const sd_allocator *a, size_t limit)
 {
     memset(m, 0, sizeof *m);
     if (a)
@@ -33,7 +33,7 @@ static void raw_free(sd_mem *m, void *p, size_t n)
         free(p);
 }
 
-void *sd_alloc(sd_mem *m, size_t n)
+void *sdi_alloc(sd_mem *m, size_t n)
 {
     if (n > SIZE_MAX - HDR)
         return NULL;
@@ -49,17 +49,17 @@ void *sd_alloc(sd_mem *m, size_t n)
     return p + HDR;
 }
 
-void *sd_calloc(sd_mem *m, size_t n, size_t size)
+void *sdi_calloc(sd_mem *m, size_t n, size_t size)
 {
     if (size && n > SIZE_MAX / size)
         return NULL;
-    void *p = sd_alloc(m, n * size);
+    void *p = sdi_alloc(m, n * size);
     if (p)
         memset(p, 0, n * size);
     return p;
 }
 
-void sd_free(sd_mem *m, void *p)
+void sdi_free(sd_mem *m, void *p)
 {
     if (!p)
         return;
@@ -70,16 +70,16 @@ void sd_free(sd_mem *m, void *p)
     raw_free(m, b, n + HDR);
 }
 
-void *sd_realloc(sd_mem *m, void *p, size_t n)
+void *sdi_realloc(sd_mem *m, void *p, size_t n)
 {
     if (!p)
-        return sd_alloc(m, n);
+        return sdi_alloc(m, n);
     size_t old;
     memcpy(&old, (unsigned char *)p - HDR, sizeof old);
-    void *q = sd_alloc(m, n);
+    void *q = sdi_alloc(m, n);
     if (!q)
         return NULL;
     memcpy(q, p, old < n ? old : n);
-    sd_free(m, p);
+    sdi_free(m, p);
     return q;
 }

@@ -35,21 +35,21 @@ static uint32_t find_diag_oct(const sd_topo *t, uint32_t a, uint32_t b)
 
 static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out, sd_error *err)
 {
-    sd_result r = sd_ensure_rules(c, level, err);
+    sd_result r = sdi_ensure_rules(c, level, err);
     if (r)
         return r;
     const sd_level *lv = c->lv[level];
     const sd_topo *t = &lv->t;
     const sd_csrb *S = &lv->S;
-    size_t *start = sd_csrb_starts(&c->mem, S); /* rows of S by id (a temporary table) */
+    size_t *start = sdi_csrb_starts(&c->mem, S); /* rows of S by id (a temporary table) */
     uint32_t *vcols = start ? malloc(2 * ((size_t)S->maxlen + 1) * sizeof *vcols) : NULL;
     if (!vcols) {
-        sd_free(&c->mem, start);
-        return sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
+        sdi_free(&c->mem, start);
+        return sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
     }
-    uint32_t *pcols = vcols + S->maxlen + 1, vn = sd_csrb_len(S, v);
+    uint32_t *pcols = vcols + S->maxlen + 1, vn = sdi_csrb_len(S, v);
     size_t k0 = start[v];
-    sd_csrb_row(S, v, &k0, vcols);
+    sdi_csrb_row(S, v, &k0, vcols);
     int n = 1;
     for (uint32_t k = 0; k < vn; k++)
         n += vcols[k] != v;
@@ -67,9 +67,9 @@ static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out,
         free(rows);
         free(a);
         free(vcols);
-        sd_free(&c->mem, start);
+        sdi_free(&c->mem, start);
         sd_analysis_free(out);
-        return sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
+        return sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
     }
     out->points[0] = v;
     rows[0] = v;
@@ -79,7 +79,7 @@ static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out,
         if (x == v)
             continue;
         out->points[i] = x;
-        uint32_t e = sd_topo_find_edge(t, v, x);
+        uint32_t e = sdi_topo_find_edge(t, v, x);
         if (e != UINT32_MAX) {
             rows[i] = t->nv + e;
         } else {
@@ -95,8 +95,8 @@ static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out,
             continue;
         }
         size_t k = start[rows[p]];
-        uint32_t pn = sd_csrb_len(S, rows[p]);
-        const double *w = sd_csrb_row(S, rows[p], &k, pcols);
+        uint32_t pn = sdi_csrb_len(S, rows[p]);
+        const double *w = sdi_csrb_row(S, rows[p], &k, pcols);
         for (uint32_t j = 0; j < pn; j++) {
             int q = 0;
             while (q < n && out->points[q] != pcols[j])
@@ -109,19 +109,19 @@ static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out,
     }
     free(rows);
     free(vcols);
-    sd_free(&c->mem, start);
+    sdi_free(&c->mem, start);
     memcpy(a, out->matrix, (size_t)n * n * sizeof *a);
     lapack_int info = LAPACKE_dgeev(LAPACK_ROW_MAJOR, 'N', 'N', n, a, n, out->eig_re, out->eig_im,
                                     NULL, 1, NULL, 1);
     free(a);
     if (info != 0) {
         sd_analysis_free(out);
-        return sd_fail(err, SD_ERR_ARG, -1, -1, "eigenvalue computation did not converge (%d)", (int)info);
+        return sdi_fail(err, SD_ERR_ARG, -1, -1, "eigenvalue computation did not converge (%d)", (int)info);
     }
     double *pairs = malloc((size_t)n * 2 * sizeof *pairs);
     if (!pairs) {
         sd_analysis_free(out);
-        return sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
+        return sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
     }
     for (int p = 0; p < n; p++) {
         pairs[2 * p] = out->eig_re[p];
@@ -139,16 +139,16 @@ static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out,
 sd_result sd_analyze_vertex(sd_complex *c, uint32_t v, sd_analysis *out, sd_error *err)
 {
     if (v >= c->lv[0]->t.nv)
-        return sd_fail(err, SD_ERR_ARG, v, -1, "vertex %u out of range (%u vertices)", v, c->lv[0]->t.nv);
+        return sdi_fail(err, SD_ERR_ARG, v, -1, "vertex %u out of range (%u vertices)", v, c->lv[0]->t.nv);
     return analyze(c, 0, v, out, err);
 }
 
 sd_result sd_analyze_edge(sd_complex *c, uint32_t a, uint32_t b, sd_analysis *out, sd_error *err)
 {
     const sd_topo *t0 = &c->lv[0]->t;
-    uint32_t e = a < t0->nv && b < t0->nv ? sd_topo_find_edge(t0, a, b) : UINT32_MAX;
+    uint32_t e = a < t0->nv && b < t0->nv ? sdi_topo_find_edge(t0, a, b) : UINT32_MAX;
     if (e == UINT32_MAX)
-        return sd_fail(err, SD_ERR_ARG, a, -1, "%u-%u is not an edge of the complex", a, b);
+        return sdi_fail(err, SD_ERR_ARG, a, -1, "%u-%u is not an edge of the complex", a, b);
     sd_error local;
     if (!err)
         err = &local;

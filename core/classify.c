@@ -17,38 +17,6 @@
 
 static int popcount4(uint8_t f) { return (f & 1) + (f >> 1 & 1) + (f >> 2 & 1) + (f >> 3 & 1); }
 
-/* A vertex -> incident items table in CSR form. */
-typedef struct inc {
-    uint32_t *off, *item;
-} inc;
-
-static bool inc_build(sd_mem *m, inc *x, uint32_t n, uint32_t nitems, int per,
-                      const uint32_t *keys /* nitems*per keys */)
-{
-    x->off = sd_calloc(m, (size_t)n + 1, sizeof *x->off);
-    x->item = sd_alloc(m, ((size_t)nitems * per + 1) * sizeof *x->item);
-    if (!x->off || !x->item)
-        return false;
-    for (size_t i = 0; i < (size_t)nitems * per; i++)
-        x->off[keys[i] + 1]++;
-    for (uint32_t i = 0; i < n; i++)
-        x->off[i + 1] += x->off[i];
-    uint32_t *pos = sd_alloc(m, ((size_t)n + 1) * sizeof *pos);
-    if (!pos)
-        return false;
-    memcpy(pos, x->off, ((size_t)n + 1) * sizeof *pos);
-    for (size_t i = 0; i < (size_t)nitems * per; i++)
-        x->item[pos[keys[i]]++] = (uint32_t)(i / per);
-    sd_free(m, pos);
-    return true;
-}
-
-static void inc_free(sd_mem *m, inc *x)
-{
-    sd_free(m, x->off);
-    sd_free(m, x->item);
-}
-
 /* Union-find over the link's nodes, numbered locally through `loc` (stamped per query). */
 typedef struct linkuf {
     uint32_t *loc, *stamp, *parent, n, cur;
@@ -90,25 +58,10 @@ static void uf_begin(linkuf *u)
     u->n = 0;
 }
 
-sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
+/* Families (Algorithm 2): C_k of every vertex and edge; cdeg: curve segments per vertex, n2:
+ * maximal triangles per edge. */
+static void families(sd_topo *t, uint32_t *cdeg, uint32_t *n2)
 {
-    uint32_t nv = t->nv, ne = t->ne;
-    t->vfam = sd_calloc(m, nv, 1);
-    t->vflag = sd_calloc(m, nv, 1);
-    t->vnm = sd_calloc(m, nv, 1);
-    t->efam = sd_calloc(m, ne ? ne : 1, 1);
-    t->eflag = sd_calloc(m, ne ? ne : 1, 1);
-    t->enm = sd_calloc(m, ne ? ne : 1, 1);
-    uint32_t *cdeg = sd_calloc(m, nv, sizeof *cdeg);
-    uint32_t *n2 = sd_calloc(m, ne ? ne : 1, sizeof *n2);
-    inc vt = {0}, vtri = {0}, et = {0};
-    linkuf u = {0};
-    uint32_t *trv = NULL, *tetv = NULL;
-    sd_result rc = SD_OK;
-    if (!t->vfam || !t->vflag || !t->vnm || !t->efam || !t->eflag || !t->enm || !cdeg || !n2)
-        goto nomem;
-
-    /* families (Algorithm 2) */
     for (uint32_t i = 0; i < t->npt; i++)
         t->vfam[t->pt[i]] |= FAM0;
     for (uint32_t i = 0; i < t->ncu; i++) {
@@ -134,8 +87,12 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
         for (int k = 0; k < 4; k++)
             t->vfam[t->tet[i][k]] |= FAM3;
     }
+}
 
-    /* boundary simplices and dC (Algorithm 3) */
+/* Boundary simplices and dC (Algorithm 3). */
+static void boundary(sd_topo *t, const uint32_t *cdeg, const uint32_t *n2)
+{
+    const uint32_t nv = t->nv, ne = t->ne;
     for (uint32_t f = 0; f < t->nf; f++)
         if (!(t->fflag[f] & FF_MAX) && t->fn3[f] == 1) {
             t->fflag[f] |= FF_BND3;
@@ -153,8 +110,12 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
     for (uint32_t v = 0; v < nv; v++)
         if (t->vfam[v] == FAM1 && cdeg[v] == 1)
             t->vflag[v] |= VF_CURVE_END | VF_DC;
+}
 
-    /* types 1 and 2 */
+/* Non-manifold types 1, 2 and 4 (000 Sec. 2.4), and NM_C2B. */
+static void types_1_2_4(sd_topo *t, const uint32_t *cdeg, const uint32_t *n2)
+{
+    const uint32_t nv = t->nv, ne = t->ne;
     for (uint32_t v = 0; v < nv; v++) {
         if (popcount4(t->vfam[v]) >= 2)
             t->vnm[v] = 1;
@@ -184,30 +145,30 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
             for (int k = 0; k < 2; k++)
                 if (t->vnm[t->ev[e][k]] == 0)
                     t->vnm[t->ev[e][k]] = 4;
+}
 
-    /* type 3: link components (002 Sec. 5.2) */
-    trv = sd_alloc(m, ((size_t)t->ntr * 3 + 1) * sizeof *trv);
-    tetv = sd_alloc(m, ((size_t)t->ntet * 6 + 1) * sizeof *tetv);
-    if (!trv || !tetv)
-        goto nomem;
-    for (uint32_t i = 0; i < t->ntr; i++)
-        memcpy(trv + 3 * (size_t)i, t->fv[t->tr[i]], 3 * sizeof *trv);
-    if (!inc_build(m, &vtri, nv, t->ntr, 3, trv) ||
-        !inc_build(m, &vt, nv, t->ntet, 4, &t->tet[0][0]) ||
-        !inc_build(m, &et, ne, t->ntet, 6, &t->tet_e[0][0]))
-        goto nomem;
-    u.loc = sd_alloc(m, (size_t)nv * sizeof *u.loc);
-    u.stamp = sd_calloc(m, nv, sizeof *u.stamp);
-    u.parent = sd_alloc(m, (size_t)nv * sizeof *u.parent);
+/* Type 3: a simplex of C_k alone whose link has 2+ connected components (002 Sec. 5.2). false:
+ * no memory. */
+static bool type_3(sd_mem *m, sd_topo *t, sdi_rels *R)
+{
+    const uint32_t nv = t->nv, ne = t->ne;
+    linkuf u = {0};
+    bool ok = false;
+    if (!sdi_rels_need(m, R, SDI_REL(SDI_VF) | SDI_REL(SDI_VT) | SDI_REL(SDI_ET)))
+        goto out;
+    const sdi_rel *vf = &R->r[SDI_VF], *vt = &R->r[SDI_VT], *et = &R->r[SDI_ET];
+    u.loc = sdi_alloc(m, (size_t)nv * sizeof *u.loc);
+    u.stamp = sdi_calloc(m, nv, sizeof *u.stamp);
+    u.parent = sdi_alloc(m, (size_t)nv * sizeof *u.parent);
     if (!u.loc || !u.stamp || !u.parent)
-        goto nomem;
+        goto out;
 
     for (uint32_t e = 0; e < ne; e++) {
         if (t->efam[e] != FAM3 || nm_type(t->enm[e]))
             continue;
         uf_begin(&u);
-        for (uint32_t k = et.off[e]; k < et.off[e + 1]; k++) {
-            const uint32_t *q = t->tet[et.item[k]];
+        for (uint32_t k = et->off[e]; k < et->off[e + 1]; k++) {
+            const uint32_t *q = t->tet[et->item[k]];
             uint32_t o[2], n = 0;
             for (int i = 0; i < 4; i++)
                 if (q[i] != t->ev[e][0] && q[i] != t->ev[e][1])
@@ -226,8 +187,8 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
             continue;
         uf_begin(&u);
         if (t->vfam[v] == FAM3) {
-            for (uint32_t k = vt.off[v]; k < vt.off[v + 1]; k++) {
-                const uint32_t *q = t->tet[vt.item[k]];
+            for (uint32_t k = vt->off[v]; k < vt->off[v + 1]; k++) {
+                const uint32_t *q = t->tet[vt->item[k]];
                 uint32_t o[3], n = 0;
                 for (int i = 0; i < 4; i++)
                     if (q[i] != v)
@@ -236,8 +197,10 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
                 uf_union(&u, o[1], o[2]);
             }
         } else {
-            for (uint32_t k = vtri.off[v]; k < vtri.off[v + 1]; k++) {
-                const uint32_t *q = t->fv[t->tr[vtri.item[k]]];
+            for (uint32_t k = vf->off[v]; k < vf->off[v + 1]; k++) {
+                if (!(t->fflag[vf->item[k]] & FF_MAX)) /* the maximal triangles at v */
+                    continue;
+                const uint32_t *q = t->fv[vf->item[k]];
                 uint32_t o[2], n = 0;
                 for (int i = 0; i < 3; i++)
                     if (q[i] != v)
@@ -248,21 +211,37 @@ sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err)
         if (uf_components(&u) > 1)
             t->vnm[v] = 3;
     }
-
-    goto out;
-nomem:
-    rc = sd_fail_nomem(err, m);
+    ok = true;
 out:
-    sd_free(m, cdeg);
-    sd_free(m, n2);
-    sd_free(m, trv);
-    sd_free(m, tetv);
-    inc_free(m, &vt);
-    inc_free(m, &vtri);
-    inc_free(m, &et);
-    sd_free(m, u.loc);
-    sd_free(m, u.stamp);
-    sd_free(m, u.parent);
+    sdi_free(m, u.loc);
+    sdi_free(m, u.stamp);
+    sdi_free(m, u.parent);
+    return ok;
+}
+
+sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err)
+{
+    uint32_t nv = t->nv, ne = t->ne;
+    t->vfam = sdi_calloc(m, nv, 1);
+    t->vflag = sdi_calloc(m, nv, 1);
+    t->vnm = sdi_calloc(m, nv, 1);
+    t->efam = sdi_calloc(m, ne ? ne : 1, 1);
+    t->eflag = sdi_calloc(m, ne ? ne : 1, 1);
+    t->enm = sdi_calloc(m, ne ? ne : 1, 1);
+    uint32_t *cdeg = sdi_calloc(m, nv, sizeof *cdeg);
+    uint32_t *n2 = sdi_calloc(m, ne ? ne : 1, sizeof *n2);
+    sd_result rc = SD_OK;
+    if (!t->vfam || !t->vflag || !t->vnm || !t->efam || !t->eflag || !t->enm || !cdeg || !n2) {
+        rc = sdi_fail_nomem(err, m);
+    } else {
+        families(t, cdeg, n2);
+        boundary(t, cdeg, n2);
+        types_1_2_4(t, cdeg, n2);
+        if (!type_3(m, t, R))
+            rc = sdi_fail_nomem(err, m);
+    }
+    sdi_free(m, cdeg);
+    sdi_free(m, n2);
     return rc;
 }
 
@@ -270,7 +249,7 @@ out:
  * has exactly one edge in every face: the one not touching vertex i). */
 static uint32_t pair_edge_in_face(const sd_topo *t, uint32_t c, int pair, int i)
 {
-    int k = (SD_TET_E[pair][0] == i || SD_TET_E[pair][1] == i) ? 5 - pair : pair;
+    int k = (SDI_TET_E[pair][0] == i || SDI_TET_E[pair][1] == i) ? 5 - pair : pair;
     return t->tet_e[c][k];
 }
 
@@ -282,19 +261,18 @@ static uint32_t pair_edge_in_face(const sd_topo *t, uint32_t c, int pair, int i)
  * diagonals meet at its midpoint. (Reading Algorithm 2's "c.edges - s" literally, i.e. avoiding
  * the neighbours' edges, makes every shared face improper: after 3 levels of two tetrahedra the
  * shared face then carries interior edges with |rho(e)| = 5; with this rule all are 4 or 6.) */
-sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err)
+sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err)
 {
     if (t->ntet == 0)
         return SD_OK;
-    inc ft = {0};
-    uint32_t *queue = sd_alloc(m, (size_t)t->ntet * sizeof *queue);
-    uint8_t *state = sd_calloc(m, t->ntet, 1); /* 0 new, 1 queued, 2 visited */
-    if (!queue || !state || !inc_build(m, &ft, t->nf, t->ntet, 4, &t->tet_f[0][0])) {
-        sd_free(m, queue);
-        sd_free(m, state);
-        inc_free(m, &ft);
-        return sd_fail_nomem(err, m);
+    uint32_t *queue = sdi_alloc(m, (size_t)t->ntet * sizeof *queue);
+    uint8_t *state = sdi_calloc(m, t->ntet, 1); /* 0 new, 1 queued, 2 visited */
+    if (!queue || !state || !sdi_rels_need(m, R, SDI_REL(SDI_FT))) {
+        sdi_free(m, queue);
+        sdi_free(m, state);
+        return sdi_fail_nomem(err, m);
     }
+    const sdi_rel *ft = &R->r[SDI_FT];
     for (uint32_t start = 0; start < t->ntet; start++) {
         if (state[start])
             continue;
@@ -306,8 +284,8 @@ sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err)
             int conflicts[3] = {0, 0, 0};
             for (int i = 0; i < 4; i++) {
                 uint32_t f = t->tet_f[c][i];
-                for (uint32_t k = ft.off[f]; k < ft.off[f + 1]; k++) {
-                    uint32_t d = ft.item[k];
+                for (uint32_t k = ft->off[f]; k < ft->off[f + 1]; k++) {
+                    uint32_t d = ft->item[k];
                     if (d == c)
                         continue;
                     if (state[d] == 0) {
@@ -333,8 +311,7 @@ sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err)
             state[c] = 2;
         }
     }
-    sd_free(m, queue);
-    sd_free(m, state);
-    inc_free(m, &ft);
+    sdi_free(m, queue);
+    sdi_free(m, state);
     return SD_OK;
 }

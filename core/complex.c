@@ -10,6 +10,13 @@
  * tetrahedron's edge and face ids, and which listed simplices are really maximal — a listed
  * simplex that is a face of another listed one is absorbed. Tetrahedra are reoriented to positive
  * volume (slots 2 and 3 swapped) so that every later cell is positively oriented too.
+ *
+ * The complex object lives here too: sd_complex_new (options checked, level 0 built, the default
+ * non-manifold rules applied) and sd_complex_free, and what changes the whole complex or asks
+ * about it without computing levels: diagonals, channels, the sizes of any level from the split
+ * table (sd_complex_counts, so callers can enforce limits before allocating), the memory in use
+ * and the estimate of what levels not computed yet would add. A change that invalidates levels
+ * drops them (levels.c); they are recomputed on demand.
  */
 #include "hash.h"
 #include <math.h>
@@ -18,11 +25,11 @@
 #define SD_MAX_COORD 1e15
 #define SD_DEGENERATE_TOL 1e-12
 
-const uint8_t SD_TET_E[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
-const uint8_t SD_TET_F[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
-const uint8_t SD_OCT_E[12][2] = {{0, 2}, {0, 4}, {0, 3}, {0, 5}, {1, 2}, {1, 4},
+const uint8_t SDI_TET_E[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
+const uint8_t SDI_TET_F[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+const uint8_t SDI_OCT_E[12][2] = {{0, 2}, {0, 4}, {0, 3}, {0, 5}, {1, 2}, {1, 4},
                                  {1, 3}, {1, 5}, {2, 4}, {4, 3}, {3, 5}, {5, 2}};
-const uint8_t SD_OCT_F[8][3] = {{0, 2, 4}, {0, 4, 3}, {0, 3, 5}, {0, 5, 2},
+const uint8_t SDI_OCT_F[8][3] = {{0, 2, 4}, {0, 4, 3}, {0, 3, 5}, {0, 5, 2},
                                 {1, 4, 2}, {1, 3, 4}, {1, 5, 3}, {1, 2, 5}};
 
 static void sub3(double *o, const double *a, const double *b)
@@ -86,17 +93,17 @@ static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint3
                           const uint8_t *size, uint32_t ns, sd_error *err)
 {
     if (nv == 0)
-        return sd_fail(err, SD_ERR_EMPTY, -1, -1, "the complex has no vertices");
+        return sdi_fail(err, SD_ERR_EMPTY, -1, -1, "the complex has no vertices");
     if (ns == 0)
-        return sd_fail(err, SD_ERR_EMPTY, -1, -1, "the complex has no simplices");
+        return sdi_fail(err, SD_ERR_EMPTY, -1, -1, "the complex has no simplices");
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (uint32_t v = 0; v < nv; v++)
         for (int k = 0; k < 3; k++) {
             double x = xyz[3 * (size_t)v + k];
             if (!isfinite(x))
-                return sd_fail(err, SD_ERR_VALUE, v, k, "vertex %u: coordinate %d is not finite", v, k);
+                return sdi_fail(err, SD_ERR_VALUE, v, k, "vertex %u: coordinate %d is not finite", v, k);
             if (fabs(x) > SD_MAX_COORD)
-                return sd_fail(err, SD_ERR_VALUE, v, k,
+                return sdi_fail(err, SD_ERR_VALUE, v, k,
                                "vertex %u: coordinate %d = %g exceeds the allowed magnitude %g", v, k,
                                x, SD_MAX_COORD);
             lo[k] = fmin(lo[k], x);
@@ -110,88 +117,50 @@ static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint3
     for (uint32_t s = 0; s < ns; s++) {
         int n = size[s];
         if (n < 1 || n > 4)
-            return sd_fail(err, SD_ERR_ARITY, s, -1,
+            return sdi_fail(err, SD_ERR_ARITY, s, -1,
                            "simplex %u has %d vertices; a simplex has 1 to 4 (point, edge, "
                            "triangle, tetrahedron)", s, n);
         const uint32_t *t = idx + off;
         for (int i = 0; i < n; i++) {
             if (t[i] >= nv)
-                return sd_fail(err, SD_ERR_INDEX, s, i,
+                return sdi_fail(err, SD_ERR_INDEX, s, i,
                                "simplex %u: vertex index %u out of range (%u vertices)", s, t[i], nv);
             for (int j = 0; j < i; j++)
                 if (t[j] == t[i])
-                    return sd_fail(err, SD_ERR_REPEATED, s, i,
+                    return sdi_fail(err, SD_ERR_REPEATED, s, i,
                                    "simplex %u: vertex %u appears twice", s, t[i]);
         }
         if (degenerate(xyz, t, n, diag))
-            return sd_fail(err, SD_ERR_DEGENERATE, s, -1,
+            return sdi_fail(err, SD_ERR_DEGENERATE, s, -1,
                            "simplex %u: degenerate %s (zero or near-zero %s)", s, kind_name[n],
                            n == 2 ? "length" : n == 3 ? "area" : "volume");
         off += n;
     }
 
     sd_hash h;
-    if (!sd_hash_init(m, &h, ns))
-        return sd_fail_nomem(err, m);
+    if (!sdi_hash_init(m, &h, ns))
+        return sdi_fail_nomem(err, m);
     off = 0;
     for (uint32_t s = 0; s < ns; s++) {
         uint32_t k[4];
-        sd_key(k, idx + off, size[s]);
-        uint32_t prev = sd_hash_get_or_put(&h, k, s);
+        sdi_key(k, idx + off, size[s]);
+        uint32_t prev = sdi_hash_get_or_put(&h, k, s);
         if (prev != UINT32_MAX) {
-            sd_hash_free(m, &h);
-            return sd_fail(err, SD_ERR_DUPLICATE, s, -1,
+            sdi_hash_free(m, &h);
+            return sdi_fail(err, SD_ERR_DUPLICATE, s, -1,
                            "simplex %u repeats simplex %u (same vertices)", s, prev);
         }
         off += size[s];
     }
-    sd_hash_free(m, &h);
+    sdi_hash_free(m, &h);
     return SD_OK;
-}
-
-void sd_topo_free_faces(sd_mem *m, sd_topo *t)
-{
-    if (t->fv != t->trv) /* fv may be the triangles' own array (tr_ident) */
-        sd_free(m, t->fv);
-    void *arrays[] = {t->fe, t->cu, t->tr, t->tet_e, t->tet_f, t->oct_e, t->oct_f, t->fn3, t->fflag};
-    for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
-        sd_free(m, arrays[i]);
-    t->fv = t->fe = NULL;
-    t->cu = t->tr = NULL;
-    t->tet_e = NULL;
-    t->tet_f = NULL;
-    t->oct_e = NULL;
-    t->oct_f = NULL;
-    t->fn3 = t->fflag = NULL;
-    t->faces = false;
-}
-
-void sd_topo_free_edges(sd_mem *m, sd_topo *t)
-{
-    void *arrays[] = {t->ev, t->efam, t->eflag, t->enm};
-    for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
-        sd_free(m, arrays[i]);
-    t->ev = NULL;
-    t->efam = t->eflag = t->enm = NULL;
-    t->derived = false;
-}
-
-void sd_topo_free(sd_mem *m, sd_topo *t)
-{
-    sd_topo_free_faces(m, t);
-    sd_topo_free_edges(m, t);
-    void *arrays[] = {t->pt, t->cuv, t->trv, t->tet, t->tet_d, t->tet_b, t->oct, t->oct_b,
-                      t->vfam, t->vflag, t->vnm};
-    for (size_t i = 0; i < sizeof arrays / sizeof *arrays; i++)
-        sd_free(m, arrays[i]);
-    memset(t, 0, sizeof *t);
 }
 
 static uint32_t edge_id(sd_hash *h, sd_topo *t, uint32_t a, uint32_t b)
 {
     uint32_t ids[2] = {a, b}, k[4];
-    sd_key(k, ids, 2);
-    uint32_t e = sd_hash_get_or_put(h, k, t->ne);
+    sdi_key(k, ids, 2);
+    uint32_t e = sdi_hash_get_or_put(h, k, t->ne);
     if (e != UINT32_MAX)
         return e;
     t->ev[t->ne][0] = a;
@@ -203,8 +172,8 @@ static uint32_t edge_id(sd_hash *h, sd_topo *t, uint32_t a, uint32_t b)
 static uint32_t face_id(sd_hash *h, sd_topo *t, const uint32_t v[3], bool *isnew)
 {
     uint32_t k[4];
-    sd_key(k, v, 3);
-    uint32_t f = sd_hash_get_or_put(h, k, t->nf);
+    sdi_key(k, v, 3);
+    uint32_t f = sdi_hash_get_or_put(h, k, t->nf);
     *isnew = f == UINT32_MAX;
     if (!*isnew)
         return f;
@@ -212,54 +181,15 @@ static uint32_t face_id(sd_hash *h, sd_topo *t, const uint32_t v[3], bool *isnew
     return t->nf++;
 }
 
-sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
-                          const uint8_t *size, uint32_t ns, sd_error *err)
+/* The input's simplices into level 0 (arrays allocated for them): tetrahedra first, so that
+ * faces of tets are known before triangles are looked at, then triangles, curve segments and
+ * points, each absorbed when it is a face of one before; then every face's edge ids. used: per
+ * vertex, scratch (zeroed). */
+static void add_simplices(sd_complex *c, sd_topo *t, sd_hash *he, sd_hash *hf, const double *xyz,
+                          const uint32_t *idx, const uint8_t *size, uint32_t ns, uint8_t *used)
 {
-    sd_mem *m = &c->mem;
-    sd_result r = validate(m, xyz, nv, idx, size, ns, err);
-    if (r)
-        return r;
-
-    size_t count[5] = {0};
-    for (uint32_t s = 0; s < ns; s++)
-        count[size[s]]++;
-    size_t emax = 6 * count[4] + 3 * count[3] + count[2];
-    size_t fmax = 4 * count[4] + count[3];
-    if (emax >= UINT32_MAX || fmax >= UINT32_MAX)
-        return sd_fail(err, SD_ERR_LIMIT, -1, -1, "too many simplices for 32-bit ids");
-
-    sd_level *lv = sd_calloc(m, 1, sizeof *lv);
-    if (!lv)
-        return sd_fail_nomem(err, m);
-    sd_topo *t = &lv->t;
-    sd_hash he = {0}, hf = {0};
-    uint8_t *used = NULL;
-    t->nv = nv;
-    t->ev = sd_alloc(m, (emax ? emax : 1) * sizeof *t->ev);
-    t->fv = sd_alloc(m, (fmax ? fmax : 1) * sizeof *t->fv);
-    t->fe = sd_alloc(m, (fmax ? fmax : 1) * sizeof *t->fe);
-    t->fflag = sd_calloc(m, fmax ? fmax : 1, 1);
-    t->fn3 = sd_calloc(m, fmax ? fmax : 1, 1);
-    t->pt = sd_alloc(m, (count[1] + 1) * sizeof *t->pt);
-    t->cu = sd_alloc(m, (count[2] + 1) * sizeof *t->cu);
-    t->tr = sd_alloc(m, (count[3] + 1) * sizeof *t->tr);
-    t->tet = sd_alloc(m, (count[4] + 1) * sizeof *t->tet);
-    t->tet_e = sd_alloc(m, (count[4] + 1) * sizeof *t->tet_e);
-    t->tet_f = sd_alloc(m, (count[4] + 1) * sizeof *t->tet_f);
-    t->tet_d = sd_calloc(m, count[4] + 1, 1);
-    t->tet_b = sd_calloc(m, count[4] + 1, 1);
-    c->in_tet = sd_alloc(m, (size_t)ns * sizeof *c->in_tet);
-    c->tet_swapped = sd_calloc(m, count[4] + 1, 1);
-    used = sd_calloc(m, nv, 1);
-    if (!t->ev || !t->fv || !t->fe || !t->fflag || !t->fn3 || !t->pt || !t->cu || !t->tr ||
-        !t->tet || !t->tet_e || !t->tet_f || !t->tet_d || !t->tet_b || !c->in_tet || !c->tet_swapped ||
-        !used || !sd_hash_init(m, &he, emax) || !sd_hash_init(m, &hf, fmax))
-        goto nomem;
-    c->nin = ns;
-
-    /* offsets of each simplex */
     size_t off = 0;
-    /* pass 1: tetrahedra, so that faces of tets are known before triangles are looked at */
+    /* pass 1: tetrahedra */
     for (uint32_t s = 0; s < ns; s++) {
         c->in_tet[s] = UINT32_MAX;
         if (size[s] == 4) {
@@ -272,11 +202,11 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
                 c->tet_swapped[t->ntet] = 1;
             }
             for (int k = 0; k < 6; k++)
-                t->tet_e[t->ntet][k] = edge_id(&he, t, q[SD_TET_E[k][0]], q[SD_TET_E[k][1]]);
+                t->tet_e[t->ntet][k] = edge_id(he, t, q[SDI_TET_E[k][0]], q[SDI_TET_E[k][1]]);
             for (int i = 0; i < 4; i++) {
-                uint32_t fv[3] = {q[SD_TET_F[i][0]], q[SD_TET_F[i][1]], q[SD_TET_F[i][2]]};
+                uint32_t fv[3] = {q[SDI_TET_F[i][0]], q[SDI_TET_F[i][1]], q[SDI_TET_F[i][2]]};
                 bool isnew;
-                uint32_t f = face_id(&hf, t, fv, &isnew);
+                uint32_t f = face_id(hf, t, fv, &isnew);
                 t->tet_f[t->ntet][i] = f;
                 if (t->fn3[f] < 255)
                     t->fn3[f]++;
@@ -293,12 +223,12 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
         if (size[s] == 3) {
             const uint32_t *q = idx + off;
             bool isnew;
-            uint32_t f = face_id(&hf, t, q, &isnew);
+            uint32_t f = face_id(hf, t, q, &isnew);
             if (isnew) {
                 t->fflag[f] |= FF_MAX;
                 t->tr[t->ntr++] = f;
                 for (int k = 0; k < 3; k++)
-                    edge_id(&he, t, q[k], q[(k + 1) % 3]);
+                    edge_id(he, t, q[k], q[(k + 1) % 3]);
                 for (int i = 0; i < 3; i++)
                     used[q[i]] = 1;
             }
@@ -311,7 +241,7 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
         if (size[s] == 2) {
             const uint32_t *q = idx + off;
             uint32_t before = t->ne;
-            uint32_t e = edge_id(&he, t, q[0], q[1]);
+            uint32_t e = edge_id(he, t, q[0], q[1]);
             if (e == before) {
                 t->cu[t->ncu++] = e;
                 used[q[0]] = used[q[1]] = 1;
@@ -332,18 +262,66 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
     for (uint32_t f = 0; f < t->nf; f++)
         for (int j = 0; j < 3; j++) {
             uint32_t ids[2] = {t->fv[f][j], t->fv[f][(j + 1) % 3]}, k[4];
-            sd_key(k, ids, 2);
-            t->fe[f][j] = sd_hash_get(&he, k);
+            sdi_key(k, ids, 2);
+            t->fe[f][j] = sdi_hash_get(he, k);
         }
-    sd_hash_free(m, &he);
-    sd_hash_free(m, &hf);
-    sd_free(m, used);
+}
+
+sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
+                          const uint8_t *size, uint32_t ns, sd_error *err)
+{
+    sd_mem *m = &c->mem;
+    sd_result r = validate(m, xyz, nv, idx, size, ns, err);
+    if (r)
+        return r;
+
+    size_t count[5] = {0};
+    for (uint32_t s = 0; s < ns; s++)
+        count[size[s]]++;
+    size_t emax = 6 * count[4] + 3 * count[3] + count[2];
+    size_t fmax = 4 * count[4] + count[3];
+    if (emax >= UINT32_MAX || fmax >= UINT32_MAX)
+        return sdi_fail(err, SD_ERR_LIMIT, -1, -1, "too many simplices for 32-bit ids");
+
+    sd_level *lv = sdi_calloc(m, 1, sizeof *lv);
+    if (!lv)
+        return sdi_fail_nomem(err, m);
+    sd_topo *t = &lv->t;
+    sd_hash he = {0}, hf = {0};
+    uint8_t *used = NULL;
+    t->nv = nv;
+    t->ev = sdi_alloc(m, (emax ? emax : 1) * sizeof *t->ev);
+    t->fv = sdi_alloc(m, (fmax ? fmax : 1) * sizeof *t->fv);
+    t->fe = sdi_alloc(m, (fmax ? fmax : 1) * sizeof *t->fe);
+    t->fflag = sdi_calloc(m, fmax ? fmax : 1, 1);
+    t->fn3 = sdi_calloc(m, fmax ? fmax : 1, 1);
+    t->pt = sdi_alloc(m, (count[1] + 1) * sizeof *t->pt);
+    t->cu = sdi_alloc(m, (count[2] + 1) * sizeof *t->cu);
+    t->tr = sdi_alloc(m, (count[3] + 1) * sizeof *t->tr);
+    t->tet = sdi_alloc(m, (count[4] + 1) * sizeof *t->tet);
+    t->tet_e = sdi_alloc(m, (count[4] + 1) * sizeof *t->tet_e);
+    t->tet_f = sdi_alloc(m, (count[4] + 1) * sizeof *t->tet_f);
+    t->tet_d = sdi_calloc(m, count[4] + 1, 1);
+    t->tet_b = sdi_calloc(m, count[4] + 1, 1);
+    c->in_tet = sdi_alloc(m, (size_t)ns * sizeof *c->in_tet);
+    c->tet_swapped = sdi_calloc(m, count[4] + 1, 1);
+    used = sdi_calloc(m, nv, 1);
+    if (!t->ev || !t->fv || !t->fe || !t->fflag || !t->fn3 || !t->pt || !t->cu || !t->tr ||
+        !t->tet || !t->tet_e || !t->tet_f || !t->tet_d || !t->tet_b || !c->in_tet || !c->tet_swapped ||
+        !used || !sdi_hash_init(m, &he, emax) || !sdi_hash_init(m, &hf, fmax))
+        goto nomem;
+    c->nin = ns;
+
+    add_simplices(c, t, &he, &hf, xyz, idx, size, ns, used);
+    sdi_hash_free(m, &he);
+    sdi_hash_free(m, &hf);
+    sdi_free(m, used);
     used = NULL;
 
     /* channel 0: positions */
     lv->nch = 1;
     lv->ch[0].ncomp = 3;
-    lv->ch[0].data = sd_alloc(m, (size_t)nv * 3 * sizeof(double));
+    lv->ch[0].data = sdi_alloc(m, (size_t)nv * 3 * sizeof(double));
     if (!lv->ch[0].data)
         goto nomem;
     memcpy(lv->ch[0].data, xyz, (size_t)nv * 3 * sizeof(double));
@@ -355,10 +333,15 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
         t->tr_ident = t->tr[i] == i;
     c->lv[0] = lv;
     c->nlevels = 1;
-    if ((r = sd_classify_level0(m, t, err)) || (r = sd_choose_diagonals(m, t, err))) {
+    sdi_rels R = {.t = t};
+    r = sdi_classify_level0(m, t, &R, err);
+    if (!r)
+        r = sdi_choose_diagonals(m, t, &R, err);
+    sdi_rels_free(m, &R);
+    if (r) {
         c->lv[0] = NULL;
         c->nlevels = 0;
-        sd_level_free(m, lv);
+        sdi_level_free(m, lv);
         return r;
     }
     for (uint32_t q = 0; q < t->ntet; q++) /* the solids' boundary faces, as later levels inherit */
@@ -368,21 +351,197 @@ sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const u
     return SD_OK;
 
 nomem:
-    sd_hash_free(m, &he);
-    sd_hash_free(m, &hf);
-    sd_free(m, used);
-    sd_level_free(m, lv);
-    return sd_fail_nomem(err, m);
+    sdi_hash_free(m, &he);
+    sdi_hash_free(m, &hf);
+    sdi_free(m, used);
+    sdi_level_free(m, lv);
+    return sdi_fail_nomem(err, m);
 }
 
-void sd_level_free(sd_mem *m, sd_level *lv)
+//END
+
+/* ---- the complex's lifecycle and whole-complex queries ---------------------------------- */
+
+/* The options' enumerations: each is 0 (the default) or 1. */
+static sd_result check_options(const sd_options *o, sd_error *err)
 {
-    if (!lv)
-        return;
-    sd_topo_free(m, &lv->t);
-    sd_level_free_rules(m, lv);
-    sd_free(m, lv->slot);
-    for (int i = 0; i < lv->nch; i++)
-        sd_free(m, lv->ch[i].data);
-    sd_free(m, lv);
+    const struct {
+        const char *name;
+        int value;
+    } f[] = {{"surface_weights", o->surface_weights},         /* SD_WEIGHTS_* */
+             {"nonmanifold_default", o->nonmanifold_default}, /* SD_NM_* */
+             {"nonmanifold_surface", o->nonmanifold_surface}, /* SD_NMSURF_* */
+             {"solid_scheme", o->solid_scheme}};              /* SD_SOLID_* */
+    for (size_t i = 0; i < sizeof f / sizeof *f; i++)
+        if (f[i].value != 0 && f[i].value != 1)
+            return sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown %s %d", f[i].name, f[i].value);
+    return SD_OK;
 }
+
+sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
+                           size_t ns, const sd_options *opt, sd_error *err)
+{
+    sd_options o = {0};
+    if (opt)
+        o = *opt;
+    if (err)
+        memset(err, 0, sizeof *err);
+    if (check_options(&o, err))
+        return NULL;
+    if (nv >= UINT32_MAX || ns >= UINT32_MAX) {
+        sdi_fail(err, SD_ERR_LIMIT, -1, -1, "too many vertices or simplices for 32-bit ids");
+        return NULL;
+    }
+    if ((nv && !xyz) || (ns && (!idx || !size))) {
+        sdi_fail(err, SD_ERR_ARG, -1, -1, "missing input array");
+        return NULL;
+    }
+    sd_mem mem;
+    sdi_mem_init(&mem, &o.allocator, o.max_bytes);
+    sd_complex *c = sdi_alloc(&mem, sizeof *c);
+    if (!c) {
+        sdi_fail_nomem(err, &mem);
+        return NULL;
+    }
+    memset(c, 0, sizeof *c);
+    c->mem = mem;
+    c->opt = o;
+    if (sdi_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err)) {
+        sd_complex_free(c);
+        return NULL;
+    }
+    if (o.nonmanifold_default == SD_NM_G1 || o.nonmanifold_surface == SD_NMSURF_YING_ZORIN) {
+        sdi_rels R = {.t = &c->lv[0]->t};
+        sd_result r = sdi_apply_singular(c, &R, err);
+        sdi_rels_free(&c->mem, &R);
+        if (r) {
+            sd_complex_free(c);
+            return NULL;
+        }
+    }
+    return c;
+}
+
+void sd_complex_free(sd_complex *c)
+{
+    if (!c)
+        return;
+    sdi_drop_levels(c, 0);
+    sdi_free(&c->mem, c->tag_at);
+    sdi_free(&c->mem, c->tag_k);
+    sdi_free(&c->mem, c->ov);
+    sdi_free(&c->mem, c->pet);
+    sdi_free(&c->mem, c->in_tet);
+    sdi_free(&c->mem, c->tet_swapped);
+    sd_mem m = c->mem;
+    sdi_free(&m, c);
+}
+
+/* Map a pair index in the input's vertex order to the stored (possibly reoriented) order:
+ * swapping slots 2 and 3 exchanges pairs 1 (02|13) and 2 (03|12). */
+static int map_pair(int pair, bool swapped) { return swapped && pair ? 3 - pair : pair; }
+
+sd_result sd_complex_set_diagonal(sd_complex *c, size_t simplex, int pair, sd_error *err)
+{
+    if (simplex >= c->nin || c->in_tet[simplex] == UINT32_MAX)
+        return sdi_fail(err, SD_ERR_ARG, (long)simplex, -1, "simplex %zu is not a tetrahedron", simplex);
+    if (pair < 0 || pair > 2)
+        return sdi_fail(err, SD_ERR_ARG, (long)simplex, -1, "diagonal pair must be 0, 1 or 2");
+    uint32_t t = c->in_tet[simplex];
+    sdi_drop_levels(c, 1);
+    sd_level *l0 = c->lv[0]; /* level 0's stencils do not depend on diagonals: kept */
+    l0->t.tet_d[t] = (uint8_t)map_pair(pair, c->tet_swapped[t]);
+    return SD_OK;
+}
+
+int sd_complex_diagonal(const sd_complex *c, size_t simplex)
+{
+    if (simplex >= c->nin || c->in_tet[simplex] == UINT32_MAX)
+        return -1;
+    uint32_t t = c->in_tet[simplex];
+    return map_pair(c->lv[0]->t.tet_d[t], c->tet_swapped[t]);
+}
+
+int sd_complex_add_channel(sd_complex *c, const double *data, int ncomp, sd_error *err)
+{
+    sd_level *l0 = c->lv[0];
+    if (ncomp < 1 || ncomp > 16) {
+        sdi_fail(err, SD_ERR_ARG, -1, -1, "a channel has 1 to 16 components, not %d", ncomp);
+        return -1;
+    }
+    if (l0->nch >= SD_MAX_CHANNELS) {
+        sdi_fail(err, SD_ERR_LIMIT, -1, -1, "at most %d channels", SD_MAX_CHANNELS - 1);
+        return -1;
+    }
+    size_t n = (size_t)l0->t.nv * ncomp;
+    for (size_t i = 0; i < n; i++)
+        if (!isfinite(data[i])) {
+            sdi_fail(err, SD_ERR_VALUE, (long)(i / ncomp), (int)(i % ncomp),
+                    "vertex %zu: channel value %zu is not finite", i / ncomp, i % ncomp);
+            return -1;
+        }
+    double *copy = sdi_alloc(&c->mem, n * sizeof *copy);
+    if (!copy) {
+        sdi_fail_nomem(err, &c->mem);
+        return -1;
+    }
+    memcpy(copy, data, n * sizeof *copy);
+    sdi_drop_levels(c, 1);
+    l0->ch[l0->nch].ncomp = ncomp;
+    l0->ch[l0->nch].data = copy;
+    return l0->nch++;
+}
+
+void sd_complex_counts(const sd_complex *c, int level, sd_counts *o)
+{
+    const sd_topo *t = &c->lv[0]->t;
+    uint64_t V = t->nv, E = t->ne, F = t->nf, P = t->npt, Cu = t->ncu, Tr = t->ntr, T = t->ntet, O = t->noct;
+    for (int l = 0; l < level; l++) {
+        uint64_t V2 = V + E + O, E2 = 2 * E + 3 * F + 12 * O, F2 = 4 * F + 4 * T + 24 * O;
+        uint64_t T2 = 4 * T + 8 * O, O2 = T + 6 * O;
+        V = V2, E = E2, F = F2, T = T2, O = O2, Cu *= 2, Tr *= 4;
+    }
+    o->vertices = V, o->edges = E, o->faces = F, o->points = P, o->curves = Cu;
+    o->triangles = Tr, o->tetrahedra = T, o->octahedra = O;
+}
+
+size_t sd_complex_memory(const sd_complex *c) { return c->mem.used; }
+
+/* Bytes per entity of a computed level (internal.h's arrays). Faces, cells and cell ids are their
+ * arrays' sizes; a vertex is its positions, ~16 stencil entries of 12 bytes with their pattern
+ * (200) and 16 bytes of classes, rules and scratch, an edge 24 bytes of ends, classes, rule and
+ * ring. The figures are the ones limits have always been checked with (asserted here, so a
+ * change of the arrays shows). */
+#define EST_POS (3 * sizeof(double))
+#define EST_VERTEX (EST_POS + 200 + 16)
+#define EST_EDGE 24
+#define EST_FACE (sizeof(uint32_t[3]) + sizeof(uint32_t[3]) + 2) /* fv, fe, fn3, fflag */
+#define EST_TET (sizeof(uint32_t[4]) + sizeof(uint32_t[6]) + sizeof(uint32_t[4]) + 1) /* tet, tet_e, tet_f, tet_d */
+#define EST_OCT (sizeof(uint32_t[6]) + sizeof(uint32_t[12]) + sizeof(uint32_t[8])) /* oct, oct_e, oct_f */
+#define EST_CELL_ID sizeof(uint32_t) /* pt, cu, tr */
+_Static_assert(sizeof ((sd_topo *)0)->fv[0] + sizeof ((sd_topo *)0)->fe[0] +
+                   sizeof ((sd_topo *)0)->fn3[0] + sizeof ((sd_topo *)0)->fflag[0] == EST_FACE,
+               "face arrays");
+_Static_assert(sizeof ((sd_topo *)0)->tet[0] + sizeof ((sd_topo *)0)->tet_e[0] +
+                   sizeof ((sd_topo *)0)->tet_f[0] + sizeof ((sd_topo *)0)->tet_d[0] == EST_TET,
+               "tetrahedron arrays");
+_Static_assert(sizeof ((sd_topo *)0)->oct[0] + sizeof ((sd_topo *)0)->oct_e[0] +
+                   sizeof ((sd_topo *)0)->oct_f[0] == EST_OCT,
+               "octahedron arrays");
+_Static_assert(EST_VERTEX == 240 && EST_FACE == 26 && EST_TET == 57 && EST_OCT == 104 &&
+                   EST_CELL_ID == 4,
+               "the estimate's figures");
+
+uint64_t sd_complex_estimate_bytes(const sd_complex *c, int level)
+{
+    uint64_t total = 0;
+    for (int l = sd_complex_levels_computed(c); l <= level; l++) {
+        sd_counts n;
+        sd_complex_counts(c, l, &n);
+        total += n.vertices * EST_VERTEX + n.edges * EST_EDGE + n.faces * EST_FACE +
+                 n.tetrahedra * EST_TET + n.octahedra * EST_OCT +
+                 (n.curves + n.triangles + n.points) * EST_CELL_ID;
+    }
+    return total;
+}
+int sd_complex_levels_computed(const sd_complex *c) { return c->nlevels; }

@@ -17,7 +17,7 @@
 #include "internal.h"
 #include <string.h>
 
-bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nvr, uint32_t ner, uint32_t nor, uint32_t ncols,
+bool sdi_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nvr, uint32_t ner, uint32_t nor, uint32_t ncols,
                   const uint32_t (*ev)[2], const uint32_t (*oct)[6])
 {
     memset(b, 0, sizeof *b);
@@ -28,26 +28,26 @@ bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nvr, uint32_t ner, uint32_t no
     b->ev = ev;
     b->oct = oct;
     b->pw = 1;
-    b->pat = sd_alloc(m, (size_t)b->nrows + 1);
-    b->kchk = sd_alloc(m, ((size_t)b->nrows / SD_CHK + 2) * sizeof *b->kchk);
+    b->pat = sdi_alloc(m, (size_t)b->nrows + 1);
+    b->kchk = sdi_alloc(m, ((size_t)b->nrows / SD_CHK + 2) * sizeof *b->kchk);
     return b->pat && b->kchk;
 }
 
-bool sd_csrb_set_pat_slow(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id)
+bool sdi_csrb_set_pat_slow(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id)
 {
     uint8_t pw = id < 256 ? 1 : id < 65536 ? 2 : 4;
     if (pw > b->pw) { /* widen the ids set so far */
-        void *np = sd_alloc(m, ((size_t)b->nrows + 1) * pw);
+        void *np = sdi_alloc(m, ((size_t)b->nrows + 1) * pw);
         if (!np)
             return false;
         for (uint32_t i = 0; i < b->nrows; i++) {
-            uint32_t q = sd_csrb_pat(b, i);
+            uint32_t q = sdi_csrb_pat(b, i);
             if (pw == 2)
                 ((uint16_t *)np)[i] = (uint16_t)q;
             else
                 ((uint32_t *)np)[i] = q;
         }
-        sd_free(m, b->pat);
+        sdi_free(m, b->pat);
         b->pat = np;
         b->pw = pw;
     }
@@ -60,17 +60,17 @@ bool sd_csrb_set_pat_slow(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id)
     return true;
 }
 
-void sd_csrb_free(sd_mem *m, sd_csrb *b)
+void sdi_csrb_free(sd_mem *m, sd_csrb *b)
 {
-    sd_free(m, b->col);
-    sd_free(m, b->eopp);
-    sd_free(m, b->pat);
-    sd_free(m, b->wt);
-    sd_free(m, b->woff);
-    sd_free(m, b->vrowptr);
-    sd_free(m, b->vcol);
-    sd_free(m, b->vval);
-    sd_free(m, b->kchk);
+    sdi_free(m, b->col);
+    sdi_free(m, b->eopp);
+    sdi_free(m, b->pat);
+    sdi_free(m, b->wt);
+    sdi_free(m, b->woff);
+    sdi_free(m, b->vrowptr);
+    sdi_free(m, b->vcol);
+    sdi_free(m, b->vval);
+    sdi_free(m, b->kchk);
     memset(b, 0, sizeof *b);
 }
 
@@ -96,7 +96,7 @@ static bool pat_equal(const sd_pats *p, uint32_t id, const double *w, uint32_t l
 
 static bool pat_rehash(sd_mem *m, sd_pats *p, uint32_t cap)
 {
-    uint32_t *slot = sd_alloc(m, (size_t)cap * sizeof *slot);
+    uint32_t *slot = sdi_alloc(m, (size_t)cap * sizeof *slot);
     if (!slot)
         return false;
     for (uint32_t i = 0; i < cap; i++)
@@ -107,13 +107,13 @@ static bool pat_rehash(sd_mem *m, sd_pats *p, uint32_t cap)
             i = (i + 1) & (cap - 1);
         slot[i] = id;
     }
-    sd_free(m, p->slot);
+    sdi_free(m, p->slot);
     p->slot = slot;
     p->hcap = cap;
     return true;
 }
 
-uint32_t sd_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len)
+uint32_t sdi_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len)
 {
     if (2 * (p->n + 1) > p->hcap && !pat_rehash(m, p, p->hcap ? 2 * p->hcap : 64))
         return UINT32_MAX;
@@ -123,7 +123,7 @@ uint32_t sd_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len)
             return p->slot[i];
     if (p->n + 2 > p->capn) {
         uint32_t cap = p->capn ? 2 * p->capn : 64;
-        uint32_t *off = sd_realloc(m, p->off, (size_t)cap * sizeof *off);
+        uint32_t *off = sdi_realloc(m, p->off, (size_t)cap * sizeof *off);
         if (!off)
             return UINT32_MAX;
         p->off = off;
@@ -136,7 +136,7 @@ uint32_t sd_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len)
         uint32_t cap = p->capw ? p->capw : 256;
         while (cap < at + len)
             cap *= 2;
-        double *nw = sd_realloc(m, p->w, (size_t)cap * sizeof *nw);
+        double *nw = sdi_realloc(m, p->w, (size_t)cap * sizeof *nw);
         if (!nw)
             return UINT32_MAX;
         p->w = nw;
@@ -148,19 +148,19 @@ uint32_t sd_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len)
     return p->n++;
 }
 
-void sd_pats_free(sd_mem *m, sd_pats *p)
+void sdi_pats_free(sd_mem *m, sd_pats *p)
 {
-    sd_free(m, p->w);
-    sd_free(m, p->off);
-    sd_free(m, p->slot);
+    sdi_free(m, p->w);
+    sdi_free(m, p->off);
+    sdi_free(m, p->slot);
     memset(p, 0, sizeof *p);
 }
 
-bool sd_csrb_finish(sd_mem *m, sd_csrb *b, sd_pats *p, size_t nnz)
+bool sdi_csrb_finish(sd_mem *m, sd_csrb *b, sd_pats *p, size_t nnz)
 {
     uint32_t nw = p->n ? p->off[p->n] : 0;
-    b->wt = sd_alloc(m, ((size_t)nw + 1) * sizeof *b->wt);
-    b->woff = sd_alloc(m, ((size_t)p->n + 1) * sizeof *b->woff);
+    b->wt = sdi_alloc(m, ((size_t)nw + 1) * sizeof *b->wt);
+    b->woff = sdi_alloc(m, ((size_t)p->n + 1) * sizeof *b->woff);
     if (!b->wt || !b->woff)
         return false;
     b->npat = p->n;
@@ -179,37 +179,37 @@ bool sd_csrb_finish(sd_mem *m, sd_csrb *b, sd_pats *p, size_t nnz)
 
 /* ---- use ------------------------------------------------------------------------------------ */
 
-size_t *sd_csrb_starts(sd_mem *m, const sd_csrb *b)
+size_t *sdi_csrb_starts(sd_mem *m, const sd_csrb *b)
 {
-    size_t *s = sd_alloc(m, ((size_t)b->nrows + 1) * sizeof *s), k = 0;
+    size_t *s = sdi_alloc(m, ((size_t)b->nrows + 1) * sizeof *s), k = 0;
     if (!s)
         return NULL;
     for (uint32_t r = 0; r < b->nrows; r++) {
         s[r] = k;
-        k += sd_csrb_nexp(b, r);
+        k += sdi_csrb_nexp(b, r);
     }
     s[b->nrows] = k;
     return s;
 }
 
-bool sd_csrb_view(sd_mem *m, sd_csrb *b)
+bool sdi_csrb_view(sd_mem *m, sd_csrb *b)
 {
     if (b->vval)
         return true;
-    uint32_t *rp = sd_alloc(m, ((size_t)b->nrows + 1) * sizeof *rp);
-    uint32_t *col = sd_alloc(m, (b->nnz + 1) * sizeof *col);
-    double *val = sd_alloc(m, (b->nnz + 1) * sizeof *val);
+    uint32_t *rp = sdi_alloc(m, ((size_t)b->nrows + 1) * sizeof *rp);
+    uint32_t *col = sdi_alloc(m, (b->nnz + 1) * sizeof *col);
+    double *val = sdi_alloc(m, (b->nnz + 1) * sizeof *val);
     if (!rp || !col || !val) {
-        sd_free(m, rp);
-        sd_free(m, col);
-        sd_free(m, val);
+        sdi_free(m, rp);
+        sdi_free(m, col);
+        sdi_free(m, val);
         return false;
     }
     size_t k = 0, at = 0;
     for (uint32_t r = 0; r < b->nrows; r++) {
         rp[r] = (uint32_t)at;
-        uint32_t n = sd_csrb_len(b, r);
-        const double *w = sd_csrb_row(b, r, &k, col + at);
+        uint32_t n = sdi_csrb_len(b, r);
+        const double *w = sdi_csrb_row(b, r, &k, col + at);
         memcpy(val + at, w, n * sizeof *val);
         at += n;
     }
@@ -251,7 +251,7 @@ bool sd_csrb_view(sd_mem *m, sd_csrb *b)
 
 #define APPLYN(base, lo, hi, imp, IMP, EXP)                                                        \
     for (uint32_t r = (lo); r < (hi); r++) {                                                       \
-        uint32_t q = sd_csrb_pat(s, r), n = woff[q + 1] - woff[q];                                 \
+        uint32_t q = sdi_csrb_pat(s, r), n = woff[q + 1] - woff[q];                                 \
         const double *w = wt + woff[q];                                                            \
         double *o = out + (size_t)nc * r;                                                          \
         for (int j = 0; j < nc; j++)                                                               \
@@ -296,7 +296,7 @@ static void apply_part(void *arg, uint32_t part, uint32_t nparts)
 #define EOPP (s->eopp ? s->eopp[r - b1] : NOEXP)
     /* whole chunks of SD_CHK rows, whose first explicit column kchk gives */
     uint64_t c0, c1, nchunks = ((uint64_t)s->nrows + SD_CHK - 1) / SD_CHK;
-    sd_range(nchunks, part, nparts, &c0, &c1);
+    sdi_range(nchunks, part, nparts, &c0, &c1);
     uint32_t rlo = (uint32_t)(c0 * SD_CHK), rhi = (uint32_t)MINU(c1 * SD_CHK, (uint64_t)s->nrows);
     if (rlo >= rhi)
         return;
@@ -313,8 +313,8 @@ static void apply_part(void *arg, uint32_t part, uint32_t nparts)
 #undef EOPP
 }
 
-void sd_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads)
+void sdi_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads)
 {
     ajob J = {s, in, out, nc};
-    sd_par(threads, s->nnz, apply_part, &J);
+    sdi_par(threads, s->nnz, apply_part, &J);
 }

@@ -25,25 +25,25 @@ static bool build_columns(sd_mem *m, sd_level *lv)
 {
     const sd_csrb *S = &lv->S;
     uint32_t nc = S->ncols;
-    uint32_t *col = sd_calloc(m, (size_t)nc + 1, sizeof *col);
-    uint32_t *row = sd_alloc(m, (S->nnz ? S->nnz : 1) * sizeof *row);
-    uint32_t *pos = sd_alloc(m, (S->nnz ? S->nnz : 1) * sizeof *pos);
-    uint32_t *cols = sd_alloc(m, ((size_t)S->maxlen + 1) * sizeof *cols);
+    uint32_t *col = sdi_calloc(m, (size_t)nc + 1, sizeof *col);
+    uint32_t *row = sdi_alloc(m, (S->nnz ? S->nnz : 1) * sizeof *row);
+    uint32_t *pos = sdi_alloc(m, (S->nnz ? S->nnz : 1) * sizeof *pos);
+    uint32_t *cols = sdi_alloc(m, ((size_t)S->maxlen + 1) * sizeof *cols);
     /* the level may have been the finest at an earlier edit: its scratch map exists already */
-    int32_t *slot = lv->slot ? lv->slot : sd_alloc(m, ((size_t)nc + 1) * sizeof *slot);
+    int32_t *slot = lv->slot ? lv->slot : sdi_alloc(m, ((size_t)nc + 1) * sizeof *slot);
     if (!col || !row || !pos || !cols || !slot) {
-        sd_free(m, col);
-        sd_free(m, row);
-        sd_free(m, pos);
-        sd_free(m, cols);
+        sdi_free(m, col);
+        sdi_free(m, row);
+        sdi_free(m, pos);
+        sdi_free(m, cols);
         if (slot != lv->slot)
-            sd_free(m, slot);
+            sdi_free(m, slot);
         return false;
     }
     size_t k = 0;
     for (uint32_t r = 0; r < S->nrows; r++) {
-        uint32_t n = sd_csrb_len(S, r);
-        sd_csrb_row(S, r, &k, cols);
+        uint32_t n = sdi_csrb_len(S, r);
+        sdi_csrb_row(S, r, &k, cols);
         for (uint32_t i = 0; i < n; i++)
             col[cols[i] + 1]++;
     }
@@ -51,15 +51,15 @@ static bool build_columns(sd_mem *m, sd_level *lv)
         col[j + 1] += col[j];
     k = 0;
     for (uint32_t r = 0; r < S->nrows; r++) {
-        uint32_t n = sd_csrb_len(S, r);
-        uint32_t w = (uint32_t)(sd_csrb_row(S, r, &k, cols) - S->wt);
+        uint32_t n = sdi_csrb_len(S, r);
+        uint32_t w = (uint32_t)(sdi_csrb_row(S, r, &k, cols) - S->wt);
         for (uint32_t i = 0; i < n; i++) {
             uint32_t at = col[cols[i]]++;
             row[at] = r;
             pos[at] = w + i;
         }
     }
-    sd_free(m, cols);
+    sdi_free(m, cols);
     for (uint32_t j = nc; j > 0; j--) /* shift back: col[j] is the start of column j again */
         col[j] = col[j - 1];
     col[0] = 0;
@@ -81,8 +81,8 @@ typedef struct change {
 
 static void change_free(sd_mem *m, change *c)
 {
-    sd_free(m, c->id);
-    sd_free(m, c->d);
+    sdi_free(m, c->id);
+    sdi_free(m, c->d);
 }
 
 /* Add (sign 1) or take back (-1) the changes of levels 0 .. top-1. */
@@ -96,7 +96,7 @@ static void apply(sd_complex *c, int channel, int nc, const change *ch, int top,
     }
 }
 
-/* Move the rules part of level `from` (see sd_level_free_rules) to `to`, leaving none in `from`. */
+/* Move the rules part of level `from` (see sdi_level_free_rules) to `to`, leaving none in `from`. */
 static void move_rules(sd_level *to, sd_level *from)
 {
     to->have_rules = from->have_rules;
@@ -123,16 +123,16 @@ static sd_result rebuild_from(sd_complex *c, int l, sd_error *err)
     sd_level *lv = c->lv[l], old = {0};
     const int nl = c->nlevels;
     move_rules(&old, lv);
-    sd_result r = sd_ensure_rules(c, l, err);
+    sd_result r = sdi_ensure_rules(c, l, err);
     if (r) {
         move_rules(lv, &old);
         return r;
     }
-    sd_level_free_rules(&c->mem, &old);
-    sd_drop_levels(c, l + 1);
+    sdi_level_free_rules(&c->mem, &old);
+    sdi_drop_levels(c, l + 1);
     sd_error ignored;
     if (!sd_complex_level(c, nl - 1, &ignored))
-        sd_drop_levels(c, l + 1);
+        sdi_drop_levels(c, l + 1);
     return SD_OK;
 }
 
@@ -142,28 +142,28 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
     sd_mem *m = &c->mem;
     sd_level *l0 = c->lv[0];
     if (channel < 0 || channel >= l0->nch)
-        return sd_fail(err, SD_ERR_ARG, -1, -1, "no channel %d", channel);
+        return sdi_fail(err, SD_ERR_ARG, -1, -1, "no channel %d", channel);
     const int nc = l0->ch[channel].ncomp;
     const uint32_t nv = l0->t.nv;
     for (size_t i = 0; i < n; i++) {
         if (idx[i] >= nv)
-            return sd_fail(err, SD_ERR_INDEX, (long)i, -1, "point %u out of range (%u points)",
+            return sdi_fail(err, SD_ERR_INDEX, (long)i, -1, "point %u out of range (%u points)",
                            idx[i], nv);
         for (int k = 0; k < nc; k++) {
             double x = values[i * nc + k];
             if (!isfinite(x) || (channel == 0 && fabs(x) > 1e15))
-                return sd_fail(err, SD_ERR_VALUE, (long)i, k, "point %u: value %d is not finite "
+                return sdi_fail(err, SD_ERR_VALUE, (long)i, k, "point %u: value %d is not finite "
                                "or too large", idx[i], k);
         }
     }
     int nl = c->nlevels;
     for (int l = 0; l + 1 < nl; l++) /* every level that feeds a computed one has its S */
         if (!c->lv[l]->tcol && !build_columns(m, c->lv[l]))
-            return sd_fail_nomem(err, m);
+            return sdi_fail_nomem(err, m);
     sd_level *fin = c->lv[nl - 1];
     if (!fin->slot) { /* the finest level needs only the scratch map, kept like the others */
-        if (!(fin->slot = sd_alloc(m, ((size_t)fin->t.nv + 1) * sizeof *fin->slot)))
-            return sd_fail_nomem(err, m);
+        if (!(fin->slot = sdi_alloc(m, ((size_t)fin->t.nv + 1) * sizeof *fin->slot)))
+            return sdi_fail_nomem(err, m);
         for (uint32_t v = 0; v < fin->t.nv; v++)
             fin->slot[v] = -1;
     }
@@ -172,7 +172,7 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
             if (l0->slot[idx[i]] != -1 || (l0->slot[idx[i]] = (int32_t)i, false)) {
                 for (size_t j = 0; j < i; j++)
                     l0->slot[idx[j]] = -1;
-                return sd_fail(err, SD_ERR_REPEATED, (long)i, -1, "point %u is edited twice",
+                return sdi_fail(err, SD_ERR_REPEATED, (long)i, -1, "point %u is edited twice",
                                idx[i]);
             }
     if (l0->slot)
@@ -182,15 +182,15 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
         for (size_t i = 0; i < n; i++)
             for (size_t j = 0; j < i; j++)
                 if (idx[j] == idx[i])
-                    return sd_fail(err, SD_ERR_REPEATED, (long)i, -1, "point %u is edited twice",
+                    return sdi_fail(err, SD_ERR_REPEATED, (long)i, -1, "point %u is edited twice",
                                    idx[i]);
 
     change ch[SD_MAX_LEVEL + 1];
     memset(ch, 0, sizeof ch);
     sd_result rc = SD_OK;
     /* level 0: the deltas themselves */
-    ch[0].id = sd_alloc(m, (n ? n : 1) * sizeof *ch[0].id);
-    ch[0].d = sd_alloc(m, (n ? n : 1) * nc * sizeof *ch[0].d);
+    ch[0].id = sdi_alloc(m, (n ? n : 1) * sizeof *ch[0].id);
+    ch[0].d = sdi_alloc(m, (n ? n : 1) * nc * sizeof *ch[0].d);
     if (!ch[0].id || !ch[0].d)
         goto nomem;
     const double *p0 = l0->ch[channel].data;
@@ -222,10 +222,10 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
                 if (slot[r] < 0) {
                     if (out->n == out->cap) {
                         uint32_t cap = out->cap ? 2 * out->cap : 64;
-                        uint32_t *id = sd_realloc(m, out->id, (size_t)cap * sizeof *id);
+                        uint32_t *id = sdi_realloc(m, out->id, (size_t)cap * sizeof *id);
                         if (id)
                             out->id = id;
-                        double *d = sd_realloc(m, out->d, (size_t)cap * nc * sizeof *d);
+                        double *d = sdi_realloc(m, out->d, (size_t)cap * nc * sizeof *d);
                         if (d)
                             out->d = d;
                         if (!id || !d) {
@@ -262,7 +262,7 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
     }
     goto done;
 nomem:
-    rc = sd_fail_nomem(err, m);
+    rc = sdi_fail_nomem(err, m);
 done:
     for (int l = 0; l <= SD_MAX_LEVEL; l++)
         change_free(m, &ch[l]);

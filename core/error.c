@@ -1,9 +1,9 @@
-/* error.c — filling the caller's sd_error, and the names of result codes and rules. */
+/* error.c — filling the caller's sd_error, and the names of result codes. */
 #include "internal.h"
 #include <stdarg.h>
 #include <stdio.h>
 
-sd_result sd_fail(sd_error *err, sd_result code, long item, int field, const char *fmt, ...)
+sd_result sdi_fail(sd_error *err, sd_result code, long item, int field, const char *fmt, ...)
 {
     if (err) {
         err->code = code;
@@ -17,12 +17,12 @@ sd_result sd_fail(sd_error *err, sd_result code, long item, int field, const cha
     return code;
 }
 
-sd_result sd_fail_nomem(sd_error *err, const sd_mem *m)
+sd_result sdi_fail_nomem(sd_error *err, const sd_mem *m)
 {
     if (m->failed_limit)
-        return sd_fail(err, SD_ERR_LIMIT, -1, -1,
+        return sdi_fail(err, SD_ERR_LIMIT, -1, -1,
                        "memory limit of %zu bytes reached (%zu in use)", m->limit, m->used);
-    return sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory (%zu bytes in use)", m->used);
+    return sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory (%zu bytes in use)", m->used);
 }
 
 const char *sd_result_name(sd_result r)
@@ -32,14 +32,4 @@ const char *sd_result_name(sd_result r)
         "repeated-vertex", "duplicate-simplex", "degenerate-simplex", "argument",
     };
     return (unsigned)r < sizeof names / sizeof *names ? names[r] : "unknown";
-}
-
-const char *sd_rule_name(sd_rule r)
-{
-    static const char *const names[] = {
-        "corner", "curve", "loop", "loop-boundary", "solid", "solid-boundary",
-        "N1", "N2", "G1", "G2", "ying-zorin-crease", "ying-zorin-corner", "ying-zorin-petal",
-        "ying-zorin-fixed-disk", "ying-zorin-dart", "ying-zorin-concave",
-    };
-    return (unsigned)r < SD_RULE_COUNT ? names[r] : "unknown";
 }

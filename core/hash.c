@@ -2,27 +2,27 @@
 #include "hash.h"
 #include <string.h>
 
-bool sd_hash_init(sd_mem *m, sd_hash *h, size_t expected)
+bool sdi_hash_init(sd_mem *m, sd_hash *h, size_t expected)
 {
     size_t cap = 16;
     while (cap < 2 * expected + 16)
         cap <<= 1;
     h->cap = cap;
     h->n = 0;
-    h->key = sd_alloc(m, cap * sizeof *h->key);
-    h->val = sd_alloc(m, cap * sizeof *h->val);
+    h->key = sdi_alloc(m, cap * sizeof *h->key);
+    h->val = sdi_alloc(m, cap * sizeof *h->val);
     if (!h->key || !h->val) {
-        sd_hash_free(m, h);
+        sdi_hash_free(m, h);
         return false;
     }
     memset(h->key, 0xff, cap * sizeof *h->key);
     return true;
 }
 
-void sd_hash_free(sd_mem *m, sd_hash *h)
+void sdi_hash_free(sd_mem *m, sd_hash *h)
 {
-    sd_free(m, h->key);
-    sd_free(m, h->val);
+    sdi_free(m, h->key);
+    sdi_free(m, h->val);
     h->key = NULL;
     h->val = NULL;
 }
@@ -37,7 +37,7 @@ static size_t hash4(const uint32_t k[4])
     return (size_t)x;
 }
 
-uint32_t sd_hash_get_or_put(sd_hash *h, const uint32_t k[4], uint32_t v)
+uint32_t sdi_hash_get_or_put(sd_hash *h, const uint32_t k[4], uint32_t v)
 {
     size_t i = hash4(k) & (h->cap - 1);
     for (;;) {
@@ -54,7 +54,7 @@ uint32_t sd_hash_get_or_put(sd_hash *h, const uint32_t k[4], uint32_t v)
     }
 }
 
-uint32_t sd_hash_get(const sd_hash *h, const uint32_t k[4])
+uint32_t sdi_hash_get(const sd_hash *h, const uint32_t k[4])
 {
     size_t i = hash4(k) & (h->cap - 1);
     for (;;) {
@@ -67,7 +67,7 @@ uint32_t sd_hash_get(const sd_hash *h, const uint32_t k[4])
     }
 }
 
-void sd_key(uint32_t k[4], const uint32_t *ids, int n)
+void sdi_key(uint32_t k[4], const uint32_t *ids, int n)
 {
     for (int i = 0; i < 4; i++)
         k[i] = i < n ? ids[i] : UINT32_MAX;

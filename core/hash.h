@@ -11,12 +11,12 @@ typedef struct sd_hash {
     uint32_t *val;
 } sd_hash;
 
-bool sd_hash_init(sd_mem *m, sd_hash *h, size_t expected);
-void sd_hash_free(sd_mem *m, sd_hash *h);
+bool sdi_hash_init(sd_mem *m, sd_hash *h, size_t expected);
+void sdi_hash_free(sd_mem *m, sd_hash *h);
 /* Look up key k (sorted, unused slots UINT32_MAX). If absent, insert it with value `v` and
  * return UINT32_MAX; if present return its value. */
-uint32_t sd_hash_get_or_put(sd_hash *h, const uint32_t k[4], uint32_t v);
-uint32_t sd_hash_get(const sd_hash *h, const uint32_t k[4]);
+uint32_t sdi_hash_get_or_put(sd_hash *h, const uint32_t k[4], uint32_t v);
+uint32_t sdi_hash_get(const sd_hash *h, const uint32_t k[4]);
 /* Sort n (<= 4) ids into k, padding with UINT32_MAX. */
-void sd_key(uint32_t k[4], const uint32_t *ids, int n);
+void sdi_key(uint32_t k[4], const uint32_t *ids, int n);
 #endif

@@ -5,12 +5,28 @@
  * (split.c) number the next level's edges and faces directly from the parent's — no hashing after
  * level 0 — and lets classification be inherited entity by entity (classify.c).
  *
+ * The core in layers, in OpenSubdiv's shape: a level's topology (topo.c: its parts and incidence
+ * relations; split.c: the next level's; classify.c: level 0's classes) — Vtr; the rules (rules.c
+ * chooses, rings.c finds the neighbours, petals.c walks petals, masks.c weighs, yz.c the
+ * Ying-Zorin rows) — Sdc; the stencils they make (stencil.c assembles S_l, csr.c stores and
+ * applies it) — Far. Above them the complex and its levels (complex.c, levels.c), its tags and
+ * rules (singular.c, overrides.c), edits, analysis and refinement (edit.c, analysis.c, refine.c,
+ * carry.c). Calls go down the layers; a level's lifecycle is levels.c's, the complex's complex.c's.
+ * sd_complex_memory counts every allocation, these structures included: growing sd_level or
+ * sd_complex changes the memory the daemon reports (the golden stats compare it).
+ *
  * Local numbering (used everywhere):
- *   tetrahedron t[0..3]: edges TET_E, face i opposite vertex i (TET_F, outward for positive
- *     volume); diagonal pair k = (edge k, edge 5-k).
+ *   tetrahedron t[0..3]: edges SDI_TET_E, face i opposite vertex i (SDI_TET_F, outward for
+ *     positive volume); diagonal pair k = (edge k, edge 5-k).
  *   octahedron o[0..5] = p, q, a, a2, b, b2 (three opposite pairs, the major diagonal p-q first);
- *     equator cycle a, b, a2, b2; edges OCT_E; faces OCT_F (outward for positive orientation).
+ *     equator cycle a, b, a2, b2; edges SDI_OCT_E; faces SDI_OCT_F (outward for positive
+ *     orientation).
  *   face f: fv[f][0..2], fe[f][j] = edge (fv[j], fv[j+1]).
+ *
+ * Names: functions shared between the core's files are sdi_* (constant tables SDI_*), file-local
+ * ones static; only sd.h's sd_* functions are the library's API (tests/python/test_exports.py
+ * checks the global symbols of libsubdiv.a). The internal types keep the sd_ prefix of the
+ * structures they describe (sd_topo, sd_mem, ...); none of them is in sd.h.
  */
 #ifndef SD_INTERNAL_H
 #define SD_INTERNAL_H
@@ -18,10 +34,10 @@
 #include "sd.h"
 #include <stdbool.h>
 
-extern const uint8_t SD_TET_E[6][2];
-extern const uint8_t SD_TET_F[4][3];
-extern const uint8_t SD_OCT_E[12][2];
-extern const uint8_t SD_OCT_F[8][3];
+extern const uint8_t SDI_TET_E[6][2];
+extern const uint8_t SDI_TET_F[4][3];
+extern const uint8_t SDI_OCT_E[12][2];
+extern const uint8_t SDI_OCT_F[8][3];
 
 /* ---- memory (alloc.c) ------------------------------------------------------------------- */
 typedef struct sd_mem {
@@ -30,35 +46,35 @@ typedef struct sd_mem {
     bool failed_limit;
 } sd_mem;
 
-void sd_mem_init(sd_mem *m, const sd_allocator *a, size_t limit);
-void *sd_alloc(sd_mem *m, size_t n);                 /* NULL on failure or over the limit */
-void *sd_calloc(sd_mem *m, size_t n, size_t size);   /* zeroed, overflow-checked */
-void *sd_realloc(sd_mem *m, void *p, size_t n);
-void sd_free(sd_mem *m, void *p);
+void sdi_mem_init(sd_mem *m, const sd_allocator *a, size_t limit);
+void *sdi_alloc(sd_mem *m, size_t n);                 /* NULL on failure or over the limit */
+void *sdi_calloc(sd_mem *m, size_t n, size_t size);   /* zeroed, overflow-checked */
+void *sdi_realloc(sd_mem *m, void *p, size_t n);
+void sdi_free(sd_mem *m, void *p);
 
 /* ---- parallel regions (par.c) ------------------------------------------------------------ */
 #define SD_PAR_MIN 65536   /* items of work below which a region runs serially */
 #define SD_PAR_MAXT 64     /* parts at most */
 typedef void (*sd_part_fn)(void *arg, uint32_t part, uint32_t nparts);
 /* How many parts a region of `work` items is split into with `threads` threads (1 = serial). */
-uint32_t sd_par_parts(int threads, uint64_t work);
+uint32_t sdi_par_parts(int threads, uint64_t work);
 /* fn(arg, i, n) for every part i of n; part 0 in the calling thread. */
-void sd_par(int threads, uint64_t work, sd_part_fn fn, void *arg);
+void sdi_par(int threads, uint64_t work, sd_part_fn fn, void *arg);
 /* f0(a0) and f1(a1) at once (one after the other if serial). */
-void sd_par2(int threads, uint64_t work, void (*f0)(void *), void *a0, void (*f1)(void *), void *a1);
+void sdi_par2(int threads, uint64_t work, void (*f0)(void *), void *a0, void (*f1)(void *), void *a1);
 /* Part `part` of nparts of [0, n): [*lo, *hi). */
-void sd_range(uint64_t n, uint32_t part, uint32_t nparts, uint64_t *lo, uint64_t *hi);
+void sdi_range(uint64_t n, uint32_t part, uint32_t nparts, uint64_t *lo, uint64_t *hi);
 
 /* ---- errors (error.c) ------------------------------------------------------------------- */
-sd_result sd_fail(sd_error *err, sd_result code, long item, int field, const char *fmt, ...)
+sd_result sdi_fail(sd_error *err, sd_result code, long item, int field, const char *fmt, ...)
     __attribute__((format(printf, 5, 6)));
-sd_result sd_fail_nomem(sd_error *err, const sd_mem *m);
+sd_result sdi_fail_nomem(sd_error *err, const sd_mem *m);
 
 /* ---- flags ------------------------------------------------------------------------------ */
 enum {
     VF_DC = 1,          /* vertex in the boundary complex dC */
     VF_CURVE_END = 2,   /* boundary simplex of C_1 (end of a curve) */
-    /* the singular complex S of tags (000 Sec. 4.1), inherited by children (tags.c) */
+    /* the singular complex S of tags (000 Sec. 4.1), inherited by children (singular.c) */
     VF_SING = 4,        /* tagged vertex: a corner */
     VF_SCREASE = 8,     /* on a crease (a tagged edge that is not a side of a tagged triangle) */
     VF_SSURF = 16,      /* on an embedded surface (a tagged triangle) */
@@ -83,7 +99,7 @@ enum {
     EF_N2BND = 128,     /* ... of exactly one chosen triangle */
     FF_N2SEL = 8,       /* a maximal triangle chosen by an N2 pair (or in a chosen petal) */
 };
-/* vnm / enm pack the non-manifold type (bits 0-2) with the per-simplex rule (tags.c):
+/* vnm / enm pack the non-manifold type (bits 0-2) with the per-simplex rule (overrides.c):
  * bits 3-5 an override code, NM_C2B (edges) "in C_2 but not between exactly 2 maximal
  * triangles" (a boundary of C_2 for N1 with dimension 2), NM_G1 "singular by rule G1". All are
  * inherited by children (split.c). */
@@ -96,6 +112,21 @@ static inline int nm_ov(uint8_t x) { return (x & NM_OV) >> NM_OV_SHIFT; }
 enum { OVM_N1 = 1, OVM_N2T = 2, OVM_N2C = 4, OVM_YZ = 8 }; /* sd_topo.ovmask: which overrides
                                                               * occur; the Ying-Zorin rules */
 enum { FAM0 = 1, FAM1 = 2, FAM2 = 4, FAM3 = 8 };
+
+/* ---- incidence relations (topo.c) ---------------------------------------------------------- */
+/* A relation from keys to items in CSR form: key k's items are item[off[k] .. off[k+1]), in
+ * increasing order. */
+typedef struct sdi_rel {
+    uint32_t *off, *item;
+} sdi_rel;
+/* Invert the map item i -> keys[i * stride + 0 .. per) (keys < nkeys). false: no memory. */
+bool sdi_rel_build(sd_mem *m, sdi_rel *r, uint32_t nkeys, uint32_t nitems, int stride, int per,
+                   const uint32_t *keys);
+void sdi_rel_free(sd_mem *m, sdi_rel *r);
+/* The relations of a level: vertex -> edges, vertex -> faces, edge -> faces, vertex / edge /
+ * face -> tetrahedra, vertex -> octahedra whose major diagonal ends there. */
+enum { SDI_VE, SDI_VF, SDI_EF, SDI_VT, SDI_ET, SDI_FT, SDI_VD, SDI_NREL };
+#define SDI_REL(k) (1u << (k))
 
 /* ---- one level's topology and classification ---------------------------------------- */
 /* Three parts, built at different times (split.c, levels.c):
@@ -115,7 +146,7 @@ typedef struct sd_topo {
     uint32_t npt, ncu, ntr, ntet, noct;
     bool derived;              /* the edges part is built */
     bool faces;                /* the faces part is built */
-    uint8_t ovmask;            /* OVM_*: per-simplex rules occur (tags.c; same at every level) */
+    uint8_t ovmask;            /* OVM_*: per-simplex rules occur (singular.c; same at every level) */
     bool tr_ident;             /* every face is a maximal triangle and face i is triangle i: at
                                 * levels >= 1, tr is not stored and fv is trv */
     /* cells */
@@ -143,11 +174,29 @@ typedef struct sd_topo {
     uint8_t *fn3, *fflag;      /* fn3: number of 3-cells on the face (saturating) */
 } sd_topo;
 
-static inline uint32_t sd_tr(const sd_topo *t, uint32_t i) { return t->tr ? t->tr[i] : i; }
+static inline uint32_t sdi_tr(const sd_topo *t, uint32_t i) { return t->tr ? t->tr[i] : i; }
 
-void sd_topo_free(sd_mem *m, sd_topo *t);
-void sd_topo_free_edges(sd_mem *m, sd_topo *t);
-void sd_topo_free_faces(sd_mem *m, sd_topo *t);
+/* topo.c: freeing the parts (all of them, the edges part, the faces part) */
+void sdi_topo_free(sd_mem *m, sd_topo *t);
+void sdi_topo_free_edges(sd_mem *m, sd_topo *t);
+void sdi_topo_free_faces(sd_mem *m, sd_topo *t);
+/* The incidence relations of one level, held by the call that needs them (on its stack, passed
+ * down to whoever reads them: sdi_rels R = {.t = t}) and freed by it before it returns. */
+typedef struct sdi_rels {
+    const sd_topo *t;
+    sdi_rel r[SDI_NREL];
+} sdi_rels;
+/* Build the relations SDI_REL(k) in `which` that R does not hold yet (VF, EF, FT need t's faces
+ * part, VE its edges); false for lack of memory (those built stay until sdi_rels_free). */
+bool sdi_rels_need(sd_mem *m, sdi_rels *R, unsigned which);
+void sdi_rels_free(sd_mem *m, sdi_rels *R);
+/* Lookups through the relations: the edge a-b (needs VE), the face with the three vertices v
+ * (needs VF), or UINT32_MAX; whether face f has vertex v. */
+uint32_t sdi_rels_edge(const sdi_rels *R, uint32_t a, uint32_t b);
+uint32_t sdi_rels_face(const sdi_rels *R, const uint32_t v[3]);
+bool sdi_face_has(const sd_topo *t, uint32_t f, uint32_t v);
+/* The edge a-b by a scan of the edges (no relation needed), or UINT32_MAX. */
+uint32_t sdi_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b);
 
 /* ---- subdivision matrices (csr.c) ------------------------------------------------------ */
 /* S_l: rows [vertex rows | edge rows | octahedron rows]; per row a weight-pattern id and the
@@ -178,53 +227,53 @@ typedef struct sd_pats {
     uint32_t n, capn, capw, hcap;
 } sd_pats;
 
-/* Allocates the pattern ids and kchk; the caller sets every row's pattern (sd_csrb_set_pat) and
+/* Allocates the pattern ids and kchk; the caller sets every row's pattern (sdi_csrb_set_pat) and
  * kchk, allocates and fills col (nexp) and calls finish. */
-bool sd_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nvr, uint32_t ner, uint32_t nor, uint32_t ncols,
+bool sdi_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nvr, uint32_t ner, uint32_t nor, uint32_t ncols,
                   const uint32_t (*ev)[2], const uint32_t (*oct)[6]);
-void sd_csrb_free(sd_mem *m, sd_csrb *b);
-uint32_t sd_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len); /* UINT32_MAX: no memory */
-void sd_pats_free(sd_mem *m, sd_pats *p);
+void sdi_csrb_free(sd_mem *m, sd_csrb *b);
+uint32_t sdi_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len); /* UINT32_MAX: no memory */
+void sdi_pats_free(sd_mem *m, sd_pats *p);
 /* Copy the patterns into b (the caller frees p); nnz: the number of entries. */
-bool sd_csrb_finish(sd_mem *m, sd_csrb *b, sd_pats *p, size_t nnz);
+bool sdi_csrb_finish(sd_mem *m, sd_csrb *b, sd_pats *p, size_t nnz);
 
-static inline uint32_t sd_csrb_pat(const sd_csrb *s, uint32_t r)
+static inline uint32_t sdi_csrb_pat(const sd_csrb *s, uint32_t r)
 {
     return s->pw == 1 ? ((const uint8_t *)s->pat)[r]
          : s->pw == 2 ? ((const uint16_t *)s->pat)[r] : ((const uint32_t *)s->pat)[r];
 }
 /* Row r's pattern id; ids are stored in 1 byte until one needs 2 or 4 (then all are widened). */
-bool sd_csrb_set_pat_slow(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id);
-static inline bool sd_csrb_set_pat(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id)
+bool sdi_csrb_set_pat_slow(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id);
+static inline bool sdi_csrb_set_pat(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id)
 {
     if (b->pw == 1 && id < 256) {
         ((uint8_t *)b->pat)[r] = (uint8_t)id;
         return true;
     }
-    return sd_csrb_set_pat_slow(m, b, r, id);
+    return sdi_csrb_set_pat_slow(m, b, r, id);
 }
 /* Entries of row r, and how many of them are implicit. */
-static inline uint32_t sd_csrb_len(const sd_csrb *s, uint32_t r)
+static inline uint32_t sdi_csrb_len(const sd_csrb *s, uint32_t r)
 {
-    uint32_t q = sd_csrb_pat(s, r);
+    uint32_t q = sdi_csrb_pat(s, r);
     return s->woff[q + 1] - s->woff[q];
 }
-static inline uint32_t sd_csrb_nimp(const sd_csrb *s, uint32_t r)
+static inline uint32_t sdi_csrb_nimp(const sd_csrb *s, uint32_t r)
 {
     return r < s->nvr ? 1 : r < s->nvr + s->ner ? 2 : 6;
 }
 /* Entries of row r kept in col. */
-static inline uint32_t sd_csrb_nexp(const sd_csrb *s, uint32_t r)
+static inline uint32_t sdi_csrb_nexp(const sd_csrb *s, uint32_t r)
 {
     if (s->eopp && r >= s->nvr && r < s->nvr + s->ner)
         return 0;
-    return sd_csrb_len(s, r) - sd_csrb_nimp(s, r);
+    return sdi_csrb_len(s, r) - sdi_csrb_nimp(s, r);
 }
-/* Row r, whose explicit columns start at col[*k]: its columns into cols (sd_csrb_len of them);
+/* Row r, whose explicit columns start at col[*k]: its columns into cols (sdi_csrb_len of them);
  * returns its weights and moves *k past the row. */
-static inline const double *sd_csrb_row(const sd_csrb *s, uint32_t r, size_t *k, uint32_t *cols)
+static inline const double *sdi_csrb_row(const sd_csrb *s, uint32_t r, size_t *k, uint32_t *cols)
 {
-    uint32_t q = sd_csrb_pat(s, r), n = s->woff[q + 1] - s->woff[q], i = 0;
+    uint32_t q = sdi_csrb_pat(s, r), n = s->woff[q + 1] - s->woff[q], i = 0;
     if (r < s->nvr)
         cols[i++] = r;
     else if (r < s->nvr + s->ner) {
@@ -243,12 +292,12 @@ static inline const double *sd_csrb_row(const sd_csrb *s, uint32_t r, size_t *k,
     return s->wt + s->woff[q];
 }
 /* The start in col of every row (nrows + 1), for random access; the caller frees it. */
-size_t *sd_csrb_starts(sd_mem *m, const sd_csrb *b);
+size_t *sdi_csrb_starts(sd_mem *m, const sd_csrb *b);
 /* Make the public CSR view (kept with the matrix); false for lack of memory. */
-bool sd_csrb_view(sd_mem *m, sd_csrb *b);
+bool sdi_csrb_view(sd_mem *m, sd_csrb *b);
 #define SD_CHK 65536u
 /* out[r*nc + k] = sum_j S[r][j] in[j*nc + k], rows in parallel parts (same bytes for any number) */
-void sd_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads);
+void sdi_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads);
 
 /* ---- levels and the complex -------------------------------------------------------------- */
 typedef struct sd_channel {
@@ -264,7 +313,8 @@ struct sd_level {
     sd_complex *cx;                  /* the owner (lazy parts are built with its allocator) */
     const sd_topo *parent;           /* level index-1's topology, or NULL */
     sd_topo t;
-    /* rules and stencils (rules.c), built lazily: they define S mapping this level to the next */
+    /* rules and stencils (rules.c, stencil.c), built lazily: they define S mapping this level to
+     * the next */
     bool have_rules;
     uint8_t *vrule, *erule;   /* the |rho| / |ring| a rule uses is its row's length in S - 1 / - 2 */
     uint8_t *vrule_only;      /* the vertex rules alone, for outputs of a level without stencils */
@@ -296,7 +346,7 @@ struct sd_complex {
     uint32_t *in_tet;          /* input simplex -> tetrahedron id (or UINT32_MAX) */
     uint8_t *tet_swapped;      /* level-0 tet reoriented (slots 2,3 swapped) */
     int nlevels;               /* computed levels */
-    /* the singular tags and per-simplex rules as given (tags.c re-applies both to level 0) */
+    /* the singular tags and per-simplex rules as given (singular.c re-applies both to level 0) */
     size_t ntags;
     uint32_t *tag_at;          /* vertex, edge or face id of level 0 */
     uint8_t *tag_k;            /* 1, 2, 3 */
@@ -309,50 +359,127 @@ struct sd_complex {
     sd_level *lv[SD_MAX_LEVEL + 1];
 };
 
-/* complex.c */
-sd_result sd_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
-                          const uint8_t *size, uint32_t ns, sd_error *err);
-void sd_level_free(sd_mem *m, sd_level *lv);
-/* classify.c */
-sd_result sd_classify_level0(sd_mem *m, sd_topo *t, sd_error *err);
-sd_result sd_choose_diagonals(sd_mem *m, sd_topo *t, sd_error *err);
-/* split.c: child topology and inherited classification of the next level, part by part (see
- * sd_topo); each needs the parent's edges and faces (cells: and the child's nothing; faces: the
- * child's edges) */
-sd_result sd_split_cells(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
-sd_result sd_split_edges(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
-sd_result sd_split_faces(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
-/* levels.c: forget a level's rules and every finer level */
-void sd_drop_rules(sd_complex *c, sd_level *lv);
+/* ---- complex.c: level 0 ------------------------------------------------------------------ */
+sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
+                           const uint8_t *size, uint32_t ns, sd_error *err);
+
+/* ---- classify.c: classes of level 0 (R: its relations, built as needed) -------------------- */
+sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err);
+sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err);
+
+/* ---- split.c: child topology and inherited classification of the next level, part by part
+ * (see sd_topo); each needs the parent's edges and faces (cells: and the child's nothing; faces:
+ * the child's edges) */
+sd_result sdi_split_cells(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
+sd_result sdi_split_edges(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
+sd_result sdi_split_faces(sd_mem *m, const sd_topo *p, sd_topo *c, int threads, sd_error *err);
+
+/* ---- levels.c: the hierarchy --------------------------------------------------------------- */
+void sdi_level_free(sd_mem *m, sd_level *lv);
+/* Forget a level's rules and every finer level. */
+void sdi_drop_rules(sd_complex *c, sd_level *lv);
 /* Free a level's rules part: rules, stencils S, edit columns, vrule_only, geo (not its points,
  * cells or scratch map `slot`). */
-void sd_level_free_rules(sd_mem *m, sd_level *lv);
-void sd_drop_levels(sd_complex *c, int from); /* levels from.. (they are recomputed on demand) */
-/* rules.c */
-sd_result sd_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
-sd_result sd_ensure_rules(sd_complex *cx, int level, sd_error *err);
-/* levels.c: build level `level`'s edges if they are not yet (under the caller's lock; faces
- * made on the way are dropped again) */
-sd_result sd_ensure_derived(sd_complex *cx, int level, sd_error *err);
+void sdi_level_free_rules(sd_mem *m, sd_level *lv);
+void sdi_drop_levels(sd_complex *c, int from); /* levels from.. (they are recomputed on demand) */
+/* Build level `level`'s rules and stencils if they are not yet (faces made on the way are
+ * dropped again). */
+sd_result sdi_ensure_rules(sd_complex *cx, int level, sd_error *err);
+/* Build level `level`'s edges if they are not yet (under the caller's lock; faces made on the way
+ * are dropped again). */
+sd_result sdi_ensure_derived(sd_complex *cx, int level, sd_error *err);
 /* The same from a const accessor of the level (see sd.h on locking); false if it failed. */
-bool sd_need_derived(const sd_level *lv);
+bool sdi_need_derived(const sd_level *lv);
+
+/* ---- singular.c, overrides.c: tags, per-simplex rules and defaults on level 0 --------------- */
+/* The relations their lookups use (a tag or override is found in time linear in the complex). */
+#define SDI_TAG_RELS (SDI_REL(SDI_VE) | SDI_REL(SDI_VF) | SDI_REL(SDI_EF))
+/* (Re)apply tags, overrides and the default non-manifold rules to level 0's flags. R: level 0's
+ * relations, held by the caller (built here as needed). */
+sd_result sdi_apply_singular(sd_complex *c, sdi_rels *R, sd_error *err);
+/* overrides.c, called by sdi_apply_singular: mark the overrides' bits (stack: nf + 1 ids of
+ * scratch), and, once the other bits are applied, the sides of N2 triangles and the check that
+ * every N2 simplex sees exactly its own pair (nface: ne + 1 bytes of scratch). */
+void sdi_overrides_mark(sd_complex *c, const sdi_rels *R, uint32_t *stack);
+sd_result sdi_overrides_check(sd_complex *c, const sdi_rels *R, uint8_t *nface, uint32_t *stack,
+                              sd_error *err);
+
+/* ---- rules.c: one rule per vertex and edge ------------------------------------------------- */
+/* The rule table's columns (rule_table.h) as numbers: rho and ring kinds per rule. */
+enum { SDI_RHO_NONE, SDI_RHO_CURVE, SDI_RHO_SURFACE, SDI_RHO_SURFACE_BOUNDARY, SDI_RHO_SOLID,
+       SDI_RHO_SOLID_BOUNDARY, SDI_RHO_G2 };
+enum { SDI_RING_NONE, SDI_RING_OPPOSITE, SDI_RING_BOUNDARY_OPPOSITE, SDI_RING_SOLID, SDI_RING_G2,
+       SDI_RING_FLAT };
+extern const uint8_t SDI_RULE_RHO[SD_RULE_COUNT], SDI_RULE_RING[SD_RULE_COUNT];
+/* Whether a vertex (edge false) or edge whose computed rule is `rule` and whose rho / ring has k
+ * entries is extraordinary (rule_table.h). */
+bool sdi_rule_extraordinary(uint8_t rule, uint32_t k, bool edge);
 /* The rule of vertex v from the level's classification alone (no stencils needed). */
-uint8_t sd_vertex_rule(const sd_topo *t, uint32_t v);
-/* The rules vertices actually follow (corners where the neighbourhood does not fit the
- * classification), without building stencils: nv entries into vr. */
-sd_result sd_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr);
-/* tags.c: (re)apply tags, overrides and the default non-manifold rule to level 0's flags */
-sd_result sd_apply_singular(sd_complex *c, sd_error *err);
-/* The rule reported for a vertex / edge whose computed rule is r (N1, N2, G1 where they apply) */
-sd_rule sd_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r);
-sd_rule sd_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
-/* yz.c: the rows with 003's flatness modification (fixed disk, dart, concave corner) of a level
- * built with the Ying-Zorin rules. end[e][i] (rules.c, yz_gammas) says how end i of edge e reads
- * the edge: SD_YZ_NONE (not a singular vertex), SD_YZ_FIRST (003 Fig. 4f with gamma g, first
- * stage only), SD_YZ_DISK (the centre of a closed petal), SD_YZ_DART (the fixed centre of a dart
- * petal) or SD_YZ_CONCAVE (the fixed centre of a concave corner petal, theta its angle step).
- * Every edge with a flattened end gets er[e] = SD_RULE_YZ_FIXED_DISK, _DART or _CONCAVE and its
- * row: ends[e] the weights of its two ends, then col/w[off[e] .. off[e+1]) the rest. */
+uint8_t sdi_vertex_rule(const sd_topo *t, uint32_t v);
+/* The rule of every edge into er, in parallel parts; whether any edge's ring is G2's, and whether
+ * any is the opposite vertices of its faces. */
+void sdi_edge_rules(const sd_topo *t, int threads, uint8_t *er, bool *any_g2, bool *any_opp);
+/* The rule of every vertex and the sizes of its rho (cnt_a: edge and diagonal neighbours, cnt_b:
+ * the averaged scheme's octahedral opposites, NULL for the box scheme; zeroed by the caller): the
+ * classification's rule, turned into a corner where its neighbourhood does not fit it (a curve or
+ * surface boundary point with other than 2 neighbours, any rule with none). If `take` is not
+ * NULL, take[e] gets bit 0 if ev[e][0] reads ev[e][1] through e, bit 1 for the converse. */
+void sdi_vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b,
+                      uint8_t *take);
+/* The same without rho: nv entries into vr (no stencils needed). */
+sd_result sdi_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr);
+/* The rule reported for a vertex / edge whose computed rule is r (N1, N2, G1, Ying-Zorin's where
+ * they apply). */
+sd_rule sdi_reported_vertex_rule(const sd_topo *t, uint32_t v, uint8_t r);
+sd_rule sdi_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r);
+
+/* ---- Ying-Zorin (003 Sec. 2): petals.c, rules.c (sdi_yz_rules), yz.c ------------------------ */
+/* An edge Ying-Zorin's rules treat as singular: a boundary or non-manifold edge of the surfaces,
+ * one also in another part, a crease or an edge of an embedded surface. */
+static inline bool sdi_yz_singular_edge(const sd_topo *t, uint32_t e)
+{
+    return t->efam[e] != FAM2 || (t->enm[e] & NM_C2B) || (t->eflag[e] & (EF_CREASE | EF_SSURF));
+}
+/* 003's simple/complex split of a non-manifold vertex where only triangles meet: an edge that
+ * counts as singular there (non-manifold or boundary), and whether a vertex of non-manifold type
+ * `type` with `nsing` of them is simple (one flower, exactly two singular edges). */
+static inline bool sdi_yz_counts_singular(const sd_topo *t, uint32_t e)
+{
+    return t->efam[e] == FAM2 && (nm_type(t->enm[e]) == 2 || (t->eflag[e] & EF_BND2));
+}
+static inline bool sdi_yz_simple(int type, uint32_t nsing)
+{
+    return type != 3 && nsing == 2;
+}
+/* petals.c: walking the petals of a vertex (see there). */
+enum { SDI_PETAL_FAN, SDI_PETAL_YZ };
+/* The maximal triangles of edge e (needs the relation edge -> faces): their number, the first two
+ * (in increasing id) into two. */
+uint32_t sdi_max_faces(const sd_topo *t, const sdi_rel *ef, uint32_t e, uint32_t two[2]);
+/* One way round v: from edge e0 into its maximal triangle f, out through f's other edge at v and
+ * across it while it joins, appending each edge crossed and the triangle entered to w (at most
+ * cap; edges only if w->edge is set). Returns the edge it stopped at: e0 again (the petal is
+ * closed, if e0 joins) or one that does not join; UINT32_MAX past cap. */
+typedef struct sdi_walk {
+    uint32_t *face, *edge;
+    uint32_t n, cap;
+} sdi_walk;
+uint32_t sdi_petal_walk(const sd_topo *t, const sdi_rel *ef, int mode, uint32_t v, uint32_t e0,
+                        uint32_t f, sdi_walk *w);
+/* The petal of v holding maximal triangle f0: its triangles (f0 first, then each way round in
+ * order), its inner edges at v and the distinct edges at v that end it (0: closed, 1: a dart, 2:
+ * open). face and inner are the caller's, cap entries each (the triangles at v, + 2; inner may be
+ * NULL). false past cap or where f0 does not hold v. */
+typedef struct sdi_petal {
+    uint32_t *face, *inner, cap;
+    uint32_t nf, ninner, nsing, sing[2];
+} sdi_petal;
+bool sdi_petal_of(const sd_topo *t, const sdi_rel *ef, int mode, uint32_t v, uint32_t f0,
+                  sdi_petal *p);
+/* How end i of edge e reads the edge under the Ying-Zorin rules (end[e][i], rules.c):
+ * SD_YZ_NONE (not a singular vertex), SD_YZ_FIRST (003 Fig. 4f with gamma g, first stage only),
+ * SD_YZ_DISK (the centre of a closed petal), SD_YZ_DART (the fixed centre of a dart petal) or
+ * SD_YZ_CONCAVE (the fixed centre of a concave corner petal, theta its angle step). */
 #define SD_YZ_FLAT_S 0.75 /* the flatness modification's s (docs/DECISIONS.md 27, 28) */
 /* A concave corner whose singular edges are nearly in line (sin alpha < SD_YZ_RAMP, ~5.7
  * degrees) has no well-defined tangent pair: its s fades as (sin alpha / SD_YZ_RAMP)^2, so the
@@ -363,19 +490,97 @@ typedef struct sd_yzend {
     double g, theta, s; /* g of 003 Fig. 4f, its theta, the flatness modification's s */
     uint8_t kind;
 } sd_yzend;
-static inline bool sd_yz_flat(uint8_t kind)
+static inline bool sdi_yz_flat(uint8_t kind)
 {
     return kind >= SD_YZ_DISK;
 }
+/* rules.c: the Ying-Zorin rule of both ends of every edge of level `level` (t, its relations
+ * vertex -> faces and edge -> faces in R, positions x); *geo (allocated if need be) marks the
+ * points whose positions they read. false: no memory. */
+bool sdi_yz_rules(sd_mem *m, const sd_complex *cx, int level, const sd_topo *t, const sdi_rels *R,
+                  const double *x, sd_yzend (*gam)[2], uint8_t **geo);
+/* yz.c: the rows with 003's flatness modification (fixed disk, dart, concave corner). Every edge
+ * with a flattened end gets er[e] = SD_RULE_YZ_FIXED_DISK, _DART or _CONCAVE and its row: ends[e]
+ * the weights of its two ends, then col/w[off[e] .. off[e+1]) the rest. */
 typedef struct sd_yzrows {
     uint32_t *off, *col, n;
     double *w;
     double (*ends)[2];
 } sd_yzrows;
-bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint8_t *er,
-                     sd_yzrows *y);
-void sd_yzrows_free(sd_mem *m, sd_yzrows *y);
-/* analysis.c helpers */
-uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b);
+bool sdi_yz_flat_rows(sd_mem *m, const sd_topo *t, const sdi_rel *ef, const sd_yzend (*end)[2],
+                      uint8_t *er, sd_yzrows *y);
+void sdi_yzrows_free(sd_mem *m, sd_yzrows *y);
+
+/* ---- rings.c: rho(x) and the rings of edges -------------------------------------------------- */
+/* Flags in a vertex's rule while rho is counted: the rule itself is vr & SDI_VR_RULE. */
+enum { SDI_VR_RULE = 0x1f, SDI_VR_BND = 0x20, SDI_VR_OWN = 0x40, SDI_VR_SLOW = 0x80 };
+/* The sizes of every vertex's rho (see sdi_vertex_rules) for the rules in vr, flagged: SLOW, rho
+ * decided per neighbour (G2, singular vertices); OWN, by the simplex's own choice. Clears the
+ * flags. */
+void sdi_vertex_rho(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b,
+                    uint8_t *take);
+/* rho itself: vertex v's neighbours into col from cur[v] on (cur advances), in the order counted:
+ * through edges (in edge order), then major diagonals, then octahedral opposites. */
+void sdi_vertex_rho_cols(const sd_topo *t, int scheme, const uint8_t *vr, const uint8_t *take,
+                         uint32_t *cur, uint32_t *col);
+/* N1 / N2 (overrides.c): is e, at a vertex with choice ov, on the boundary of the part it follows? */
+bool sdi_ov_boundary_edge(const sd_topo *t, int ov, uint32_t e);
+/* The opposite vertices of the edges whose ring is OPPOSITE or BOUNDARY_OPPOSITE (rules er):
+ * opp[e], and in nopp[e] how many faces were seen (bits 0-1, saturating at 3; 2 makes a ring). */
+void sdi_edge_opposites(const sd_topo *t, const uint8_t *er, uint32_t (*opp)[2], uint8_t *nopp);
+/* Per-edge variable-size rings (solid and G2 edges), CSR; class 0 = ring/face, 1 = diagonal. */
+typedef struct sdi_rings {
+    uint32_t *off, *v;
+    uint8_t *cls;
+    uint32_t *len; /* after dedup */
+} sdi_rings;
+bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int scheme, int threads,
+                     sdi_rings *R);
+/* (needs the relations vertex -> edges and -> diagonals: built into rel) */
+bool sdi_g2_rings(sd_mem *m, sdi_rels *rel, const uint8_t *erule, sdi_rings *R);
+void sdi_rings_free(sd_mem *m, sdi_rings *r);
+
+/* ---- masks.c: the weights of the rules ------------------------------------------------------ */
+/* A vertex mask: the centre, each of rho (class A), each octahedral opposite (class B). */
+typedef struct sdi_vmask {
+    double self, a, b;
+} sdi_vmask;
+/* An edge mask: the two ends, each ring point, each diagonal-class ring point (averaged). */
+typedef struct sdi_emask {
+    double end[2], ring, diag;
+} sdi_emask;
+#define SDI_LOOP_CACHE 64
+/* What a mask sees: sizes and options (loopc: Loop weights by valence below SDI_LOOP_CACHE). */
+typedef struct sdi_vnb {
+    uint32_t na, nb;
+    int weights, scheme;
+    const double *loopc;
+} sdi_vnb;
+typedef struct sdi_enb {
+    uint32_t k;
+    const uint8_t *cls; /* the ring's classes (averaged solid scheme), or NULL */
+} sdi_enb;
+/* The masks of rule r (rule_table.h). */
+sdi_vmask sdi_vertex_mask(uint8_t rule, const sdi_vnb *n);
+sdi_emask sdi_edge_mask(uint8_t rule, const sdi_enb *n);
+/* Loop's weight c of a vertex of valence m: Warren's or Loop's beta(m) / m (SD_WEIGHTS_*). */
+double sdi_loop_weight(int weights, uint32_t m);
+/* The octahedron cell point's weight of its vertex i (0, 1: the major diagonal). */
+double sdi_mask_cell(int scheme, int i);
+/* 003 Fig. 4f from the centre v of a petal: v, the far end w, each opposite vertex; gamma of
+ * the petal's angle step theta. */
+typedef struct sdi_yzmask {
+    double centre, far, opposite;
+} sdi_yzmask;
+sdi_yzmask sdi_mask_yz_petal(double g);
+double sdi_mask_yz_gamma(double theta);
+/* The row of an edge with 003 Fig. 4f at its singular ends (averaged where both are). */
+sdi_emask sdi_mask_yz_petal_edge(const sd_yzend end[2]);
+/* The flattened row's weight (yz.c) of ring point j in the row of edge v-ring[i] of a petal of k
+ * triangles whose centre reads it as x (on q = p - v: the centre takes the rest of 1). */
+double sdi_mask_yz_flat(const sd_yzend *x, uint32_t k, uint32_t i, uint32_t j);
+
+/* ---- stencil.c: S_l from the rules, rings and masks ------------------------------------------ */
+sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);
 
 #endif

@@ -1,185 +1,65 @@
-/* levels.c — the subdivision hierarchy of a complex and the public accessors.
+/* levels.c — the subdivision hierarchy of a complex: a level's lifecycle and the public
+ * accessors of levels.
  *
  * Levels are computed one from the previous, on demand, and kept: level l+1's topology comes from
- * sd_split (topology only), its points from S_l (rules.c) applied to every channel of level l.
- * A failed step leaves the hierarchy as it was (all-or-nothing per level).
- * sd_complex_counts gives the exact size of any level from the split table without computing it,
- * so callers can enforce limits before allocating.
+ * the split (split.c, topology only), its points from S_l (stencil.c) applied to every channel of
+ * level l. A failed step leaves the hierarchy as it was (all-or-nothing per level). A level is
+ * freed whole (sdi_level_free), or just its rules part (sdi_level_free_rules: what a change of
+ * tags or a moved corner makes stale), or with every finer one (sdi_drop_levels).
+ *
+ * The parts of a level's topology (sd_topo, internal.h) are built when needed, in the order
+ * edges, then faces (each needs the parent's faces); faces are dropped again at levels >= 1 once
+ * the rules and the next split are made, so the lock-free readers of sd.h only ever meet arrays
+ * that stay.
  */
 #include "internal.h"
-#include <math.h>
 #include <string.h>
 
-sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
-                           size_t ns, const sd_options *opt, sd_error *err)
+void sdi_level_free(sd_mem *m, sd_level *lv)
 {
-    sd_options o = {0};
-    if (opt)
-        o = *opt;
-    if (err)
-        memset(err, 0, sizeof *err);
-    if (o.surface_weights != SD_WEIGHTS_WARREN && o.surface_weights != SD_WEIGHTS_LOOP) {
-        sd_fail(err, SD_ERR_ARG, -1, -1, "unknown surface_weights %d", o.surface_weights);
-        return NULL;
-    }
-    if (o.nonmanifold_default != SD_NM_G2 && o.nonmanifold_default != SD_NM_G1) {
-        sd_fail(err, SD_ERR_ARG, -1, -1, "unknown nonmanifold_default %d", o.nonmanifold_default);
-        return NULL;
-    }
-    if (o.nonmanifold_surface != SD_NMSURF_CHANG_QIN && o.nonmanifold_surface != SD_NMSURF_YING_ZORIN) {
-        sd_fail(err, SD_ERR_ARG, -1, -1, "unknown nonmanifold_surface %d", o.nonmanifold_surface);
-        return NULL;
-    }
-    if (o.solid_scheme != SD_SOLID_BOX && o.solid_scheme != SD_SOLID_AVERAGED) {
-        sd_fail(err, SD_ERR_ARG, -1, -1, "unknown solid_scheme %d", o.solid_scheme);
-        return NULL;
-    }
-    if (nv >= UINT32_MAX || ns >= UINT32_MAX) {
-        sd_fail(err, SD_ERR_LIMIT, -1, -1, "too many vertices or simplices for 32-bit ids");
-        return NULL;
-    }
-    if ((nv && !xyz) || (ns && (!idx || !size))) {
-        sd_fail(err, SD_ERR_ARG, -1, -1, "missing input array");
-        return NULL;
-    }
-    sd_mem mem;
-    sd_mem_init(&mem, &o.allocator, o.max_bytes);
-    sd_complex *c = sd_alloc(&mem, sizeof *c);
-    if (!c) {
-        sd_fail_nomem(err, &mem);
-        return NULL;
-    }
-    memset(c, 0, sizeof *c);
-    c->mem = mem;
-    c->opt = o;
-    if (sd_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err) ||
-        ((o.nonmanifold_default == SD_NM_G1 || o.nonmanifold_surface == SD_NMSURF_YING_ZORIN) &&
-         sd_apply_singular(c, err))) {
-        sd_complex_free(c);
-        return NULL;
-    }
-    return c;
+    if (!lv)
+        return;
+    sdi_topo_free(m, &lv->t);
+    sdi_level_free_rules(m, lv);
+    sdi_free(m, lv->slot);
+    for (int i = 0; i < lv->nch; i++)
+        sdi_free(m, lv->ch[i].data);
+    sdi_free(m, lv);
 }
 
-void sd_drop_levels(sd_complex *c, int from)
+void sdi_drop_levels(sd_complex *c, int from)
 {
     for (int l = from; l < c->nlevels; l++) {
-        sd_level_free(&c->mem, c->lv[l]);
+        sdi_level_free(&c->mem, c->lv[l]);
         c->lv[l] = NULL;
     }
     if (c->nlevels > from)
         c->nlevels = from;
 }
 
-void sd_level_free_rules(sd_mem *m, sd_level *lv)
+void sdi_level_free_rules(sd_mem *m, sd_level *lv)
 {
-    sd_free(m, lv->vrule);
-    sd_free(m, lv->erule);
-    sd_csrb_free(m, &lv->S);
-    sd_free(m, lv->tcol);
-    sd_free(m, lv->trow);
-    sd_free(m, lv->tpos);
-    sd_free(m, lv->vrule_only);
-    sd_free(m, lv->geo);
+    sdi_free(m, lv->vrule);
+    sdi_free(m, lv->erule);
+    sdi_csrb_free(m, &lv->S);
+    sdi_free(m, lv->tcol);
+    sdi_free(m, lv->trow);
+    sdi_free(m, lv->tpos);
+    sdi_free(m, lv->vrule_only);
+    sdi_free(m, lv->geo);
     lv->vrule = lv->erule = lv->vrule_only = lv->geo = NULL;
     lv->tcol = lv->trow = lv->tpos = NULL;
     lv->have_rules = false;
 }
 
 /* Forget level lv's rules, stencils and edit columns, and every finer level (tags changed). */
-void sd_drop_rules(sd_complex *c, sd_level *lv)
+void sdi_drop_rules(sd_complex *c, sd_level *lv)
 {
-    sd_drop_levels(c, lv->index + 1);
-    sd_level_free_rules(&c->mem, lv);
-    sd_free(&c->mem, lv->slot);
+    sdi_drop_levels(c, lv->index + 1);
+    sdi_level_free_rules(&c->mem, lv);
+    sdi_free(&c->mem, lv->slot);
     lv->slot = NULL;
 }
-
-void sd_complex_free(sd_complex *c)
-{
-    if (!c)
-        return;
-    sd_drop_levels(c, 0);
-    sd_free(&c->mem, c->tag_at);
-    sd_free(&c->mem, c->tag_k);
-    sd_free(&c->mem, c->ov);
-    sd_free(&c->mem, c->pet);
-    sd_free(&c->mem, c->in_tet);
-    sd_free(&c->mem, c->tet_swapped);
-    sd_mem m = c->mem;
-    sd_free(&m, c);
-}
-
-/* Map a pair index in the input's vertex order to the stored (possibly reoriented) order:
- * swapping slots 2 and 3 exchanges pairs 1 (02|13) and 2 (03|12). */
-static int map_pair(int pair, bool swapped) { return swapped && pair ? 3 - pair : pair; }
-
-sd_result sd_complex_set_diagonal(sd_complex *c, size_t simplex, int pair, sd_error *err)
-{
-    if (simplex >= c->nin || c->in_tet[simplex] == UINT32_MAX)
-        return sd_fail(err, SD_ERR_ARG, (long)simplex, -1, "simplex %zu is not a tetrahedron", simplex);
-    if (pair < 0 || pair > 2)
-        return sd_fail(err, SD_ERR_ARG, (long)simplex, -1, "diagonal pair must be 0, 1 or 2");
-    uint32_t t = c->in_tet[simplex];
-    sd_drop_levels(c, 1);
-    sd_level *l0 = c->lv[0]; /* level 0's stencils do not depend on diagonals: kept */
-    l0->t.tet_d[t] = (uint8_t)map_pair(pair, c->tet_swapped[t]);
-    return SD_OK;
-}
-
-int sd_complex_diagonal(const sd_complex *c, size_t simplex)
-{
-    if (simplex >= c->nin || c->in_tet[simplex] == UINT32_MAX)
-        return -1;
-    uint32_t t = c->in_tet[simplex];
-    return map_pair(c->lv[0]->t.tet_d[t], c->tet_swapped[t]);
-}
-
-int sd_complex_add_channel(sd_complex *c, const double *data, int ncomp, sd_error *err)
-{
-    sd_level *l0 = c->lv[0];
-    if (ncomp < 1 || ncomp > 16) {
-        sd_fail(err, SD_ERR_ARG, -1, -1, "a channel has 1 to 16 components, not %d", ncomp);
-        return -1;
-    }
-    if (l0->nch >= SD_MAX_CHANNELS) {
-        sd_fail(err, SD_ERR_LIMIT, -1, -1, "at most %d channels", SD_MAX_CHANNELS - 1);
-        return -1;
-    }
-    size_t n = (size_t)l0->t.nv * ncomp;
-    for (size_t i = 0; i < n; i++)
-        if (!isfinite(data[i])) {
-            sd_fail(err, SD_ERR_VALUE, (long)(i / ncomp), (int)(i % ncomp),
-                    "vertex %zu: channel value %zu is not finite", i / ncomp, i % ncomp);
-            return -1;
-        }
-    double *copy = sd_alloc(&c->mem, n * sizeof *copy);
-    if (!copy) {
-        sd_fail_nomem(err, &c->mem);
-        return -1;
-    }
-    memcpy(copy, data, n * sizeof *copy);
-    sd_drop_levels(c, 1);
-    l0->ch[l0->nch].ncomp = ncomp;
-    l0->ch[l0->nch].data = copy;
-    return l0->nch++;
-}
-
-void sd_complex_counts(const sd_complex *c, int level, sd_counts *o)
-{
-    const sd_topo *t = &c->lv[0]->t;
-    uint64_t V = t->nv, E = t->ne, F = t->nf, P = t->npt, Cu = t->ncu, Tr = t->ntr, T = t->ntet, O = t->noct;
-    for (int l = 0; l < level; l++) {
-        uint64_t V2 = V + E + O, E2 = 2 * E + 3 * F + 12 * O, F2 = 4 * F + 4 * T + 24 * O;
-        uint64_t T2 = 4 * T + 8 * O, O2 = T + 6 * O;
-        V = V2, E = E2, F = F2, T = T2, O = O2, Cu *= 2, Tr *= 4;
-    }
-    o->vertices = V, o->edges = E, o->faces = F, o->points = P, o->curves = Cu;
-    o->triangles = Tr, o->tetrahedra = T, o->octahedra = O;
-}
-
-size_t sd_complex_memory(const sd_complex *c) { return c->mem.used; }
-int sd_complex_levels_computed(const sd_complex *c) { return c->nlevels; }
 
 /* The parts of a level's topology (see sd_topo): edges need the parent's faces; faces need the
  * level's edges and the parent's faces; level 0 has all of them. */
@@ -191,7 +71,7 @@ static sd_result ensure_edges(sd_complex *c, int l, sd_error *err)
     if (lv->t.derived)
         return SD_OK;
     sd_result r = ensure_faces(c, l - 1, err);
-    return r ? r : sd_split_edges(&c->mem, lv->parent, &lv->t, c->opt.threads, err);
+    return r ? r : sdi_split_edges(&c->mem, lv->parent, &lv->t, c->opt.threads, err);
 }
 
 static sd_result ensure_faces(sd_complex *c, int l, sd_error *err)
@@ -202,14 +82,14 @@ static sd_result ensure_faces(sd_complex *c, int l, sd_error *err)
     sd_result r = ensure_edges(c, l, err);
     if (!r)
         r = ensure_faces(c, l - 1, err);
-    return r ? r : sd_split_faces(&c->mem, lv->parent, &lv->t, c->opt.threads, err);
+    return r ? r : sdi_split_faces(&c->mem, lv->parent, &lv->t, c->opt.threads, err);
 }
 
 /* Faces are only needed while rules or the next level are made: drop them at levels >= 1. */
 static void drop_faces(sd_complex *c)
 {
     for (int l = 1; l < c->nlevels; l++)
-        sd_topo_free_faces(&c->mem, &c->lv[l]->t);
+        sdi_topo_free_faces(&c->mem, &c->lv[l]->t);
 }
 
 static sd_result rules_keep_faces(sd_complex *c, int level, sd_error *err)
@@ -218,17 +98,17 @@ static sd_result rules_keep_faces(sd_complex *c, int level, sd_error *err)
     if (lv->have_rules)
         return SD_OK;
     sd_result r = ensure_faces(c, level, err);
-    return r ? r : sd_build_rules(c, lv, err);
+    return r ? r : sdi_build_rules(c, lv, err);
 }
 
-sd_result sd_ensure_derived(sd_complex *c, int level, sd_error *err)
+sd_result sdi_ensure_derived(sd_complex *c, int level, sd_error *err)
 {
     sd_result r = ensure_edges(c, level, err);
     drop_faces(c);
     return r;
 }
 
-sd_result sd_ensure_rules(sd_complex *c, int level, sd_error *err)
+sd_result sdi_ensure_rules(sd_complex *c, int level, sd_error *err)
 {
     sd_result r = rules_keep_faces(c, level, err);
     drop_faces(c);
@@ -245,28 +125,28 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
         r = ensure_faces(c, l, err); /* the rules may have been built before, the faces dropped */
     if (r)
         return r;
-    sd_level *lv = sd_calloc(m, 1, sizeof *lv);
+    sd_level *lv = sdi_calloc(m, 1, sizeof *lv);
     if (!lv)
-        return sd_fail_nomem(err, m);
+        return sdi_fail_nomem(err, m);
     lv->index = l + 1;
     lv->parent_nv = p->t.nv;
     lv->parent_ne = p->t.ne;
     lv->cx = c;
     lv->parent = &p->t;
-    if ((r = sd_split_cells(m, &p->t, &lv->t, c->opt.threads, err))) {
-        sd_free(m, lv);
+    if ((r = sdi_split_cells(m, &p->t, &lv->t, c->opt.threads, err))) {
+        sdi_free(m, lv);
         return r;
     }
     lv->nch = p->nch;
     for (int i = 0; i < p->nch; i++) {
         int nc = p->ch[i].ncomp;
         lv->ch[i].ncomp = nc;
-        lv->ch[i].data = sd_alloc(m, (size_t)lv->t.nv * nc * sizeof(double));
+        lv->ch[i].data = sdi_alloc(m, (size_t)lv->t.nv * nc * sizeof(double));
         if (!lv->ch[i].data) {
-            sd_level_free(m, lv);
-            return sd_fail_nomem(err, m);
+            sdi_level_free(m, lv);
+            return sdi_fail_nomem(err, m);
         }
-        sd_csr_apply(&p->S, p->ch[i].data, lv->ch[i].data, nc, c->opt.threads);
+        sdi_csr_apply(&p->S, p->ch[i].data, lv->ch[i].data, nc, c->opt.threads);
     }
     c->lv[l + 1] = lv;
     c->nlevels = l + 2;
@@ -276,7 +156,7 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
 const sd_level *sd_complex_level(sd_complex *c, int level, sd_error *err)
 {
     if (level < 0 || level > SD_MAX_LEVEL) {
-        sd_fail(err, SD_ERR_ARG, level, -1, "level %d out of range 0..%d", level, SD_MAX_LEVEL);
+        sdi_fail(err, SD_ERR_ARG, level, -1, "level %d out of range 0..%d", level, SD_MAX_LEVEL);
         return NULL;
     }
     while (c->nlevels <= level)
@@ -333,14 +213,14 @@ void sd_level_cell(const sd_level *lv, sd_cell_kind k, uint32_t i, uint32_t *v)
 
 /* Accessors of the derived topology build it the first time (under the caller's lock, see
  * sd.h); false if that failed. */
-bool sd_need_derived(const sd_level *lv)
+bool sdi_need_derived(const sd_level *lv)
 {
-    return lv->t.derived || sd_ensure_derived(lv->cx, lv->index, NULL) == SD_OK;
+    return lv->t.derived || sdi_ensure_derived(lv->cx, lv->index, NULL) == SD_OK;
 }
 
 const uint32_t *sd_level_edges(const sd_level *lv, uint32_t *n)
 {
-    if (!sd_need_derived(lv)) {
+    if (!sdi_need_derived(lv)) {
         *n = 0;
         return NULL;
     }
@@ -369,30 +249,9 @@ sd_origin_kind sd_level_origin(const sd_level *lv, uint32_t i, uint32_t *a, uint
     return SD_ORIGIN_CELL;
 }
 
-uint32_t sd_topo_find_edge(const sd_topo *t, uint32_t a, uint32_t b)
-{
-    for (uint32_t e = 0; e < t->ne; e++)
-        if ((t->ev[e][0] == a && t->ev[e][1] == b) || (t->ev[e][0] == b && t->ev[e][1] == a))
-            return e;
-    return UINT32_MAX;
-}
-
 uint32_t sd_level_find_edge(const sd_level *lv, uint32_t a, uint32_t b)
 {
-    return sd_need_derived(lv) ? sd_topo_find_edge(&lv->t, a, b) : UINT32_MAX;
-}
-
-static bool extraordinary(uint8_t rule, uint32_t k, bool edge)
-{
-    switch (rule) {
-    case SD_RULE_LOOP:
-    case SD_RULE_SOLID_BOUNDARY:
-        return !edge && k != 6;
-    case SD_RULE_SOLID:
-        return edge ? (k != 4 && k != 6) : k != 14;
-    default:
-        return false;
-    }
+    return sdi_need_derived(lv) ? sdi_topo_find_edge(&lv->t, a, b) : UINT32_MAX;
 }
 
 static sd_result class_of(sd_complex *c, int level, sd_error *err, sd_level **out)
@@ -403,7 +262,7 @@ static sd_result class_of(sd_complex *c, int level, sd_error *err, sd_level **ou
     *out = NULL;
     if (!sd_complex_level(c, level, err))
         return err->code;
-    sd_result r = sd_ensure_rules(c, level, err);
+    sd_result r = sdi_ensure_rules(c, level, err);
     *out = c->lv[level];
     return r;
 }
@@ -417,9 +276,9 @@ sd_result sd_level_vertex_class(const sd_level *lv, uint32_t i, sd_class *o)
     o->boundary = (t->vflag[i] & VF_DC) != 0;
     o->nonmanifold = (uint8_t)nm_type(t->vnm[i]);
     o->rule = lv->vrule[i];
-    o->valence = sd_csrb_len(&lv->S, i) - 1;
-    o->extraordinary = extraordinary(o->rule, o->valence, false);
-    o->rule = (uint8_t)sd_reported_vertex_rule(t, i, lv->vrule[i]);
+    o->valence = sdi_csrb_len(&lv->S, i) - 1;
+    o->extraordinary = sdi_rule_extraordinary(o->rule, o->valence, false);
+    o->rule = (uint8_t)sdi_reported_vertex_rule(t, i, lv->vrule[i]);
     return SD_OK;
 }
 
@@ -432,9 +291,9 @@ sd_result sd_level_edge_class(const sd_level *lv, uint32_t e, sd_class *o)
     o->boundary = (t->eflag[e] & EF_DC) != 0;
     o->nonmanifold = (uint8_t)nm_type(t->enm[e]);
     o->rule = lv->erule[e];
-    o->valence = sd_csrb_len(&lv->S, t->nv + e) - 2;
-    o->extraordinary = extraordinary(o->rule, o->valence, true);
-    o->rule = (uint8_t)sd_reported_edge_rule(t, e, lv->erule[e]);
+    o->valence = sdi_csrb_len(&lv->S, t->nv + e) - 2;
+    o->extraordinary = sdi_rule_extraordinary(o->rule, o->valence, true);
+    o->rule = (uint8_t)sdi_reported_edge_rule(t, e, lv->erule[e]);
     return SD_OK;
 }
 
@@ -445,7 +304,7 @@ sd_result sd_complex_vertex_class(sd_complex *c, int level, uint32_t i, sd_class
     if (r)
         return r;
     if (i >= lv->t.nv)
-        return sd_fail(err, SD_ERR_ARG, i, -1, "vertex %u out of range (%u vertices)", i, lv->t.nv);
+        return sdi_fail(err, SD_ERR_ARG, i, -1, "vertex %u out of range (%u vertices)", i, lv->t.nv);
     return sd_level_vertex_class(lv, i, o);
 }
 
@@ -456,7 +315,7 @@ sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *
     if (r)
         return r;
     if (e >= lv->t.ne)
-        return sd_fail(err, SD_ERR_ARG, e, -1, "edge %u out of range (%u edges)", e, lv->t.ne);
+        return sdi_fail(err, SD_ERR_ARG, e, -1, "edge %u out of range (%u edges)", e, lv->t.ne);
     return sd_level_edge_class(lv, e, o);
 }
 
@@ -465,11 +324,11 @@ sd_rule sd_level_vertex_rule(const sd_level *lv, uint32_t i)
     /* vrule_only first: once set it never changes, while a later computation of the next level
      * may build vrule (same values) concurrently with a reader of this one */
     if (lv->vrule_only)
-        return sd_reported_vertex_rule(&lv->t, i, lv->vrule_only[i]);
+        return sdi_reported_vertex_rule(&lv->t, i, lv->vrule_only[i]);
     if (lv->have_rules)
-        return sd_reported_vertex_rule(&lv->t, i, lv->vrule[i]);
+        return sdi_reported_vertex_rule(&lv->t, i, lv->vrule[i]);
     /* the classification's (see sd.h) */
-    return sd_reported_vertex_rule(&lv->t, i, sd_vertex_rule(&lv->t, i));
+    return sdi_reported_vertex_rule(&lv->t, i, sdi_vertex_rule(&lv->t, i));
 }
 
 sd_result sd_complex_prepare_vertex_rules(sd_complex *c, int level, sd_error *err)
@@ -480,13 +339,13 @@ sd_result sd_complex_prepare_vertex_rules(sd_complex *c, int level, sd_error *er
     sd_level *lv = c->lv[level];
     if (lv->have_rules || lv->vrule_only)
         return SD_OK;
-    sd_result r = sd_ensure_derived(c, level, err);
+    sd_result r = sdi_ensure_derived(c, level, err);
     if (r)
         return r;
-    uint8_t *vr = sd_alloc(&c->mem, (size_t)lv->t.nv + 1);
-    if (!vr || sd_vertex_rules_only(&c->mem, &lv->t, c->opt.solid_scheme, vr)) {
-        sd_free(&c->mem, vr);
-        return sd_fail_nomem(err, &c->mem);
+    uint8_t *vr = sdi_alloc(&c->mem, (size_t)lv->t.nv + 1);
+    if (!vr || sdi_vertex_rules_only(&c->mem, &lv->t, c->opt.solid_scheme, vr)) {
+        sdi_free(&c->mem, vr);
+        return sdi_fail_nomem(err, &c->mem);
     }
     lv->vrule_only = vr;
     return SD_OK;
@@ -507,14 +366,14 @@ uint32_t sd_level_solid_boundary(const sd_level *lv, uint32_t *tri)
         for (int i = 0; t->tet_b[c] && i < 4; i++)
             if (t->tet_b[c] >> i & 1) {
                 for (int k = 0; k < 3; k++)
-                    tri[3 * n + k] = t->tet[c][SD_TET_F[i][k]];
+                    tri[3 * n + k] = t->tet[c][SDI_TET_F[i][k]];
                 n++;
             }
     for (uint32_t c = 0; c < t->noct; c++)
         for (int i = 0; t->oct_b[c] && i < 8; i++)
             if (t->oct_b[c] >> i & 1) {
                 for (int k = 0; k < 3; k++)
-                    tri[3 * n + k] = t->oct[c][SD_OCT_F[i][k]];
+                    tri[3 * n + k] = t->oct[c][SDI_OCT_F[i][k]];
                 n++;
             }
     return n;
@@ -527,12 +386,12 @@ sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err
         err = &local;
     if (!sd_complex_level(c, level, err))
         return err->code;
-    sd_result r = sd_ensure_rules(c, level, err);
+    sd_result r = sdi_ensure_rules(c, level, err);
     if (r)
         return r;
     sd_csrb *s = &c->lv[level]->S;
-    if (!sd_csrb_view(&c->mem, s)) /* the plain CSR view, made once and kept */
-        return sd_fail_nomem(err, &c->mem);
+    if (!sdi_csrb_view(&c->mem, s)) /* the plain CSR view, made once and kept */
+        return sdi_fail_nomem(err, &c->mem);
     out->nrows = s->nrows;
     out->ncols = s->ncols;
     out->rowptr = s->vrowptr;

@@ -23,7 +23,7 @@ static void *run_job(void *p)
     return NULL;
 }
 
-uint32_t sd_par_parts(int threads, uint64_t work)
+uint32_t sdi_par_parts(int threads, uint64_t work)
 {
     if (threads <= 1 || work < SD_PAR_MIN)
         return 1;
@@ -31,10 +31,10 @@ uint32_t sd_par_parts(int threads, uint64_t work)
     return (uint32_t)(n < t ? n : t);
 }
 
-void sd_par(int threads, uint64_t work, sd_part_fn fn, void *arg)
+void sdi_par(int threads, uint64_t work, sd_part_fn fn, void *arg)
 {
     enum { MAXT = SD_PAR_MAXT };
-    uint32_t n = sd_par_parts(threads, work);
+    uint32_t n = sdi_par_parts(threads, work);
     job jobs[MAXT];
     pthread_t tid[MAXT];
     bool started[MAXT] = {false};
@@ -66,13 +66,13 @@ static void run_two(void *p, uint32_t part, uint32_t n)
     }
 }
 
-void sd_par2(int threads, uint64_t work, void (*f0)(void *), void *a0, void (*f1)(void *), void *a1)
+void sdi_par2(int threads, uint64_t work, void (*f0)(void *), void *a0, void (*f1)(void *), void *a1)
 {
     two t = {{f0, f1}, {a0, a1}};
-    sd_par(threads > 2 ? 2 : threads, work, run_two, &t);
+    sdi_par(threads > 2 ? 2 : threads, work, run_two, &t);
 }
 
-void sd_range(uint64_t n, uint32_t part, uint32_t nparts, uint64_t *lo, uint64_t *hi)
+void sdi_range(uint64_t n, uint32_t part, uint32_t nparts, uint64_t *lo, uint64_t *hi)
 {
     *lo = n * part / nparts;
     *hi = n * (part + 1) / nparts;

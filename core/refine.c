@@ -19,7 +19,7 @@
 #include <string.h>
 
 static const uint8_t TRI_E[3][2] = {{0, 1}, {1, 2}, {2, 0}};
-/* SD_TET_E order: 01 02 03 12 13 23 */
+/* SDI_TET_E order: 01 02 03 12 13 23 */
 static const uint8_t TE[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
 /* the three edges of the face opposite vertex i, as indices into TE */
 static const uint8_t FACE_EDGES[4][3] = {{3, 4, 5}, {1, 2, 5}, {0, 2, 4}, {0, 1, 3}};
@@ -36,8 +36,8 @@ typedef struct ref {
 static uint32_t edge_of(ref *r, uint32_t a, uint32_t b)
 {
     uint32_t ab[2] = {a, b}, k[4];
-    sd_key(k, ab, 2);
-    uint32_t got = sd_hash_get_or_put(&r->h, k, r->ne);
+    sdi_key(k, ab, 2);
+    uint32_t got = sdi_hash_get_or_put(&r->h, k, r->ne);
     return got == UINT32_MAX ? r->ne++ : got;
 }
 
@@ -69,51 +69,35 @@ static int tet_pattern(const uint8_t *s, int *face)
     return -1; /* no green pattern: red */
 }
 
-sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
-                    size_t ns, const uint8_t *marked, sd_refinement *out, sd_error *err)
+static const int NEDGES[5] = {0, 0, 1, 3, 6};
+
+/* The edge ids of every simplex (6 slots each), in r->eids. */
+static void edge_ids(ref *r, const uint32_t *idx, const uint8_t *size, size_t ns)
 {
-    memset(out, 0, sizeof *out);
-    sd_mem mem;
-    sd_mem_init(&mem, NULL, 0);
-    ref r = {.m = &mem};
-    sd_result rc = SD_OK;
-    size_t nidx = 0;
-    for (size_t s = 0; s < ns; s++) {
-        if (size[s] < 1 || size[s] > 4)
-            return sd_fail(err, SD_ERR_ARITY, (long)s, -1, "simplex %zu has %d vertices", s, size[s]);
-        nidx += size[s];
-    }
-    if (!sd_hash_init(&mem, &r.h, 6 * ns + 16))
-        return sd_fail_nomem(err, &mem);
-    r.eids = malloc((6 * ns + 1) * sizeof *r.eids);
-    r.split = calloc(6 * ns + 1, 1);
-    r.mid = malloc((6 * ns + 1) * sizeof *r.mid);
-    uint8_t *red = calloc(ns + 1, 1);
-    if (!r.eids || !r.split || !r.mid || !red) {
-        rc = sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
-        goto done;
-    }
-    /* edge ids of every simplex */
     for (size_t s = 0, off = 0; s < ns; off += size[s++]) {
         const uint32_t *v = idx + off;
         int k = size[s];
         if (k == 2)
-            r.eids[6 * s] = edge_of(&r, v[0], v[1]);
+            r->eids[6 * s] = edge_of(r, v[0], v[1]);
         else if (k == 3)
             for (int e = 0; e < 3; e++)
-                r.eids[6 * s + e] = edge_of(&r, v[TRI_E[e][0]], v[TRI_E[e][1]]);
+                r->eids[6 * s + e] = edge_of(r, v[TRI_E[e][0]], v[TRI_E[e][1]]);
         else if (k == 4)
             for (int e = 0; e < 6; e++)
-                r.eids[6 * s + e] = edge_of(&r, v[TE[e][0]], v[TE[e][1]]);
+                r->eids[6 * s + e] = edge_of(r, v[TE[e][0]], v[TE[e][1]]);
     }
-    static const int nedges[5] = {0, 0, 1, 3, 6};
+}
+
+/* The marked simplices red with all their edges split, then the closure: upgrade to red every
+ * triangle or tetrahedron whose split edges fit no green pattern, until nothing changes. */
+static void closure(ref *r, const uint8_t *size, size_t ns, const uint8_t *marked, uint8_t *red)
+{
     for (size_t s = 0; s < ns; s++)
         if (marked[s] && size[s] >= 2) {
             red[s] = 1;
-            for (int e = 0; e < nedges[size[s]]; e++)
-                r.split[r.eids[6 * s + e]] = 1;
+            for (int e = 0; e < NEDGES[size[s]]; e++)
+                r->split[r->eids[6 * s + e]] = 1;
         }
-    /* closure */
     for (bool changed = true; changed;) {
         changed = false;
         for (size_t s = 0; s < ns; s++) {
@@ -121,142 +105,198 @@ sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uin
             if (k < 3 || red[s])
                 continue;
             uint8_t st[6];
-            for (int e = 0; e < nedges[k]; e++)
-                n += st[e] = r.split[r.eids[6 * s + e]];
+            for (int e = 0; e < NEDGES[k]; e++)
+                n += st[e] = r->split[r->eids[6 * s + e]];
             bool upgrade = k == 3 ? n == 2 || n == 3 : tet_pattern(st, &face) < 0 || n == 6;
             if (upgrade) {
                 red[s] = 1;
-                for (int e = 0; e < nedges[k]; e++)
-                    if (!r.split[r.eids[6 * s + e]]) {
-                        r.split[r.eids[6 * s + e]] = 1;
+                for (int e = 0; e < NEDGES[k]; e++)
+                    if (!r->split[r->eids[6 * s + e]]) {
+                        r->split[r->eids[6 * s + e]] = 1;
                         changed = true;
                     }
             }
         }
     }
-    /* new vertices */
+}
+
+/* One new vertex per split edge, after the old ones, at its midpoint; out's arrays allocated
+ * (at most 8 children of 4 ids per simplex). false: no memory. */
+static bool new_vertices(ref *r, const double *xyz, size_t nv, size_t ns, sd_refinement *out)
+{
     uint32_t nsplit = 0;
-    for (uint32_t e = 0; e < r.ne; e++)
-        if (r.split[e])
-            r.mid[e] = (uint32_t)nv + nsplit++;
+    for (uint32_t e = 0; e < r->ne; e++)
+        if (r->split[e])
+            r->mid[e] = (uint32_t)nv + nsplit++;
     out->nv = nv + nsplit;
     out->xyz = malloc(out->nv * 3 * sizeof *out->xyz);
     out->split = malloc(((size_t)nsplit + 1) * sizeof *out->split);
-    /* at most 8 children of 4 ids per simplex */
     out->idx = malloc((32 * ns + 1) * sizeof *out->idx);
     out->size = malloc(8 * ns + 1);
     out->parent = malloc((8 * ns + 1) * sizeof *out->parent);
-    if (!out->xyz || !out->split || !out->idx || !out->size || !out->parent) {
-        rc = sd_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
-        goto done;
-    }
+    if (!out->xyz || !out->split || !out->idx || !out->size || !out->parent)
+        return false;
     memcpy(out->xyz, xyz, nv * 3 * sizeof *xyz);
-    for (size_t i = 0; i < r.h.cap; i++) { /* every split edge: its ends and midpoint */
-        uint32_t e = r.h.val[i];
-        if (r.h.key[i][0] == UINT32_MAX || !r.split[e])
+    for (size_t i = 0; i < r->h.cap; i++) { /* every split edge: its ends and midpoint */
+        uint32_t e = r->h.val[i];
+        if (r->h.key[i][0] == UINT32_MAX || !r->split[e])
             continue;
-        uint32_t a = r.h.key[i][0], b = r.h.key[i][1], m = r.mid[e];
+        uint32_t a = r->h.key[i][0], b = r->h.key[i][1], m = r->mid[e];
         out->split[m - nv][0] = a;
         out->split[m - nv][1] = b;
         for (int q = 0; q < 3; q++)
             out->xyz[3 * (size_t)m + q] = 0.5 * (xyz[3 * (size_t)a + q] + xyz[3 * (size_t)b + q]);
     }
     out->nsplit = nsplit;
-    size_t on = 0, oi = 0;
-#define EMIT(n, ...)                                                                               \
-    do {                                                                                           \
-        const uint32_t t_[] = {__VA_ARGS__};                                                       \
-        memcpy(out->idx + oi, t_, (n) * sizeof *t_);                                               \
-        oi += (n);                                                                                 \
-        out->parent[on] = (uint32_t)s;                                                             \
-        out->size[on++] = (n);                                                                     \
-    } while (0)
+    return true;
+}
+
+/* Appending the new simplices of one input simplex. */
+typedef struct emitter {
+    sd_refinement *out;
+    size_t oi;
+    uint32_t parent;
+} emitter;
+
+static void put(emitter *E, int n, const uint32_t *v)
+{
+    sd_refinement *o = E->out;
+    memcpy(o->idx + E->oi, v, n * sizeof *v);
+    E->oi += n;
+    o->parent[o->ns] = E->parent;
+    o->size[o->ns++] = (uint8_t)n;
+}
+#define EMIT(n, ...) put(E, (n), (const uint32_t[]){__VA_ARGS__})
+
+/* A triangle with n split edges (st): green (one) or red. */
+static void split_triangle(emitter *E, const uint32_t *v, const uint32_t *M, const uint8_t *st, int n)
+{
+    if (n == 1) {
+        int e = st[0] ? 0 : st[1] ? 1 : 2;
+        uint32_t a = v[TRI_E[e][0]], b = v[TRI_E[e][1]], c = v[3 - TRI_E[e][0] - TRI_E[e][1]];
+        EMIT(3, a, M[e], c);
+        EMIT(3, M[e], b, c);
+        E->out->green++;
+        return;
+    }
+    EMIT(3, v[0], M[0], M[2]);
+    EMIT(3, M[0], v[1], M[1]);
+    EMIT(3, M[2], M[1], v[2]);
+    EMIT(3, M[0], M[1], M[2]);
+    E->out->red++;
+}
+
+/* A tetrahedron with n split edges (st): Green-I, Green-III or red. */
+static void split_tetra(emitter *E, const uint32_t *v, const uint32_t *M, const uint8_t *st, int n)
+{
+    int face = -1;
+    if (tet_pattern(st, &face) == 1) {
+        int e = 0;
+        while (!st[e])
+            e++;
+        uint32_t a = v[TE[e][0]], b = v[TE[e][1]], c = UINT32_MAX, d = UINT32_MAX;
+        for (int i = 0; i < 4; i++)
+            if (i != TE[e][0] && i != TE[e][1])
+                *(c == UINT32_MAX ? &c : &d) = v[i];
+        EMIT(4, a, M[e], c, d);
+        EMIT(4, M[e], b, c, d);
+        E->out->green++;
+    } else if (n == 3) { /* Green-III: face opposite vertex `face` */
+        uint32_t apex = v[face], f[3], fm[3];
+        int j = 0;
+        for (int i = 0; i < 4; i++)
+            if (i != face)
+                f[j++] = v[i];
+        for (int i = 0; i < 3; i++) { /* the midpoint of f[i]-f[i+1] */
+            uint32_t x = f[i], y = f[(i + 1) % 3];
+            for (int e = 0; e < 6; e++)
+                if ((v[TE[e][0]] == x && v[TE[e][1]] == y) || (v[TE[e][0]] == y && v[TE[e][1]] == x))
+                    fm[i] = M[e];
+        }
+        EMIT(4, f[0], fm[0], fm[2], apex);
+        EMIT(4, fm[0], f[1], fm[1], apex);
+        EMIT(4, fm[2], fm[1], f[2], apex);
+        EMIT(4, fm[0], fm[1], fm[2], apex);
+        E->out->green++;
+    } else { /* red: 4 corners + the octahedron around the diagonal m01-m23 */
+        uint32_t m01 = M[0], m02 = M[1], m03 = M[2], m12 = M[3], m13 = M[4], m23 = M[5];
+        EMIT(4, v[0], m01, m02, m03);
+        EMIT(4, m01, v[1], m12, m13);
+        EMIT(4, m02, m12, v[2], m23);
+        EMIT(4, m03, m13, m23, v[3]);
+        const uint32_t eq[4] = {m02, m03, m13, m12}; /* the equator around m01-m23, a cycle */
+        for (int i = 0; i < 4; i++)
+            EMIT(4, m01, m23, eq[i], eq[(i + 1) % 4]);
+        E->out->red++;
+    }
+}
+
+/* Every input simplex: kept as it is, or its children. */
+static void emit_children(const ref *r, const uint32_t *idx, const uint8_t *size, size_t ns,
+                          const uint8_t *red, sd_refinement *out)
+{
+    emitter E = {out, 0, 0};
+    out->ns = 0;
     for (size_t s = 0, off = 0; s < ns; off += size[s++]) {
         const uint32_t *v = idx + off;
-        int k = size[s];
-        const uint32_t *E = r.eids + 6 * s;
-        int n = 0, face = -1;
+        int k = size[s], n = 0;
+        uint32_t M[6]; /* the midpoints of the simplex's split edges */
         uint8_t st[6] = {0};
-        for (int e = 0; k >= 2 && e < nedges[k]; e++)
-            n += st[e] = r.split[E[e]];
-        if (n == 0) {
-            memcpy(out->idx + oi, v, k * sizeof *v);
-            oi += k;
-            out->parent[on] = (uint32_t)s;
-            out->size[on++] = (uint8_t)k;
-            continue;
+        for (int e = 0; k >= 2 && e < NEDGES[k]; e++) {
+            n += st[e] = r->split[r->eids[6 * s + e]];
+            M[e] = st[e] ? r->mid[r->eids[6 * s + e]] : UINT32_MAX;
         }
-        if (k == 2) {
-            uint32_t m = r.mid[E[0]];
-            EMIT(2, v[0], m);
-            EMIT(2, m, v[1]);
+        E.parent = (uint32_t)s;
+        if (n == 0) {
+            put(&E, k, v);
+        } else if (k == 2) {
+            put(&E, 2, (const uint32_t[]){v[0], M[0]});
+            put(&E, 2, (const uint32_t[]){M[0], v[1]});
             out->red += red[s];
             out->green += !red[s];
-        } else if (k == 3 && n == 1) {
-            int e = st[0] ? 0 : st[1] ? 1 : 2;
-            uint32_t a = v[TRI_E[e][0]], b = v[TRI_E[e][1]], c = v[3 - TRI_E[e][0] - TRI_E[e][1]];
-            uint32_t m = r.mid[E[e]];
-            EMIT(3, a, m, c);
-            EMIT(3, m, b, c);
-            out->green++;
         } else if (k == 3) {
-            uint32_t m01 = r.mid[E[0]], m12 = r.mid[E[1]], m20 = r.mid[E[2]];
-            EMIT(3, v[0], m01, m20);
-            EMIT(3, m01, v[1], m12);
-            EMIT(3, m20, m12, v[2]);
-            EMIT(3, m01, m12, m20);
-            out->red++;
-        } else if (tet_pattern(st, &face) == 1) {
-            int e = 0;
-            while (!st[e])
-                e++;
-            uint32_t a = v[TE[e][0]], b = v[TE[e][1]], c = UINT32_MAX, d = UINT32_MAX;
-            for (int i = 0; i < 4; i++)
-                if (i != TE[e][0] && i != TE[e][1])
-                    *(c == UINT32_MAX ? &c : &d) = v[i];
-            uint32_t m = r.mid[E[e]];
-            EMIT(4, a, m, c, d);
-            EMIT(4, m, b, c, d);
-            out->green++;
-        } else if (n == 3) { /* Green-III: face opposite vertex `face` */
-            uint32_t apex = v[face], f[3], fm[3];
-            int j = 0;
-            for (int i = 0; i < 4; i++)
-                if (i != face)
-                    f[j++] = v[i];
-            /* the midpoint of f[i]-f[i+1] */
-            for (int i = 0; i < 3; i++) {
-                uint32_t x = f[i], y = f[(i + 1) % 3];
-                for (int e = 0; e < 6; e++)
-                    if ((v[TE[e][0]] == x && v[TE[e][1]] == y) || (v[TE[e][0]] == y && v[TE[e][1]] == x))
-                        fm[i] = r.mid[E[e]];
-            }
-            EMIT(4, f[0], fm[0], fm[2], apex);
-            EMIT(4, fm[0], f[1], fm[1], apex);
-            EMIT(4, fm[2], fm[1], f[2], apex);
-            EMIT(4, fm[0], fm[1], fm[2], apex);
-            out->green++;
-        } else { /* red: 4 corners + the octahedron around the diagonal m01-m23 */
-            uint32_t m01 = r.mid[E[0]], m02 = r.mid[E[1]], m03 = r.mid[E[2]], m12 = r.mid[E[3]],
-                     m13 = r.mid[E[4]], m23 = r.mid[E[5]];
-            EMIT(4, v[0], m01, m02, m03);
-            EMIT(4, m01, v[1], m12, m13);
-            EMIT(4, m02, m12, v[2], m23);
-            EMIT(4, m03, m13, m23, v[3]);
-            const uint32_t eq[4] = {m02, m03, m13, m12}; /* the equator around m01-m23, a cycle */
-            for (int i = 0; i < 4; i++)
-                EMIT(4, m01, m23, eq[i], eq[(i + 1) % 4]);
-            out->red++;
+            split_triangle(&E, v, M, st, n);
+        } else {
+            split_tetra(&E, v, M, st, n);
         }
     }
+}
 #undef EMIT
-    out->ns = on;
+
+sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
+                    size_t ns, const uint8_t *marked, sd_refinement *out, sd_error *err)
+{
+    memset(out, 0, sizeof *out);
+    sd_mem mem;
+    sdi_mem_init(&mem, NULL, 0);
+    ref r = {.m = &mem};
+    sd_result rc = SD_OK;
+    for (size_t s = 0; s < ns; s++)
+        if (size[s] < 1 || size[s] > 4)
+            return sdi_fail(err, SD_ERR_ARITY, (long)s, -1, "simplex %zu has %d vertices", s, size[s]);
+    if (!sdi_hash_init(&mem, &r.h, 6 * ns + 16))
+        return sdi_fail_nomem(err, &mem);
+    r.eids = malloc((6 * ns + 1) * sizeof *r.eids);
+    r.split = calloc(6 * ns + 1, 1);
+    r.mid = malloc((6 * ns + 1) * sizeof *r.mid);
+    uint8_t *red = calloc(ns + 1, 1);
+    if (!r.eids || !r.split || !r.mid || !red) {
+        rc = sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
+        goto done;
+    }
+    edge_ids(&r, idx, size, ns);
+    closure(&r, size, ns, marked, red);
+    if (!new_vertices(&r, xyz, nv, ns, out)) {
+        rc = sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
+        goto done;
+    }
+    emit_children(&r, idx, size, ns, red, out);
 done:
     free(r.eids);
     free(r.split);
     free(r.mid);
     free(red);
-    sd_hash_free(&mem, &r.h);
+    sdi_hash_free(&mem, &r.h);
     if (rc)
         sd_refine_free(out);
     return rc;

@@ -36,6 +36,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "rule_table.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -120,6 +122,10 @@ void sd_complex_counts(const sd_complex *c, int level, sd_counts *out);
 
 /* Memory in use by the complex (all levels, matrices, channels), in bytes. */
 size_t sd_complex_memory(const sd_complex *c);
+/* The bytes computing the levels up to `level` would add: the core's arrays per entity, summed
+ * over the levels not computed yet (from sd_complex_counts, without computing anything). An
+ * over-estimate by design, to check a memory limit before asking for a level. */
+uint64_t sd_complex_estimate_bytes(const sd_complex *c, int level);
 int sd_complex_levels_computed(const sd_complex *c);
 
 /* ---- levels ------------------------------------------------------------------------------ */
@@ -156,25 +162,12 @@ sd_origin_kind sd_level_origin(const sd_level *lv, uint32_t i, uint32_t *a, uint
 
 /* ---- classification and rules (000 Sec. 2, SPEC Sec. 1 and 3) ----------------------------- */
 
+/* The rules, numbered in the order of the table in rule_table.h (docs/RULES.md says which paper
+ * equation each implements). */
 typedef enum sd_rule {
-    SD_RULE_CORNER = 0,       /* fixed: 0-mask */
-    SD_RULE_CURVE,            /* cubic B-spline */
-    SD_RULE_LOOP,             /* Loop surface */
-    SD_RULE_LOOP_BOUNDARY,    /* boundary of a surface: cubic B-spline along it */
-    SD_RULE_SOLID,            /* box-spline (or averaged) solid */
-    SD_RULE_SOLID_BOUNDARY,   /* boundary of a solid: Loop on the boundary surface */
-    SD_RULE_N1, SD_RULE_N2, SD_RULE_G1, SD_RULE_G2,
-    SD_RULE_YZ_CREASE,        /* Ying-Zorin (003): a non-manifold edge, or a simple singular
-                               * vertex: cubic B-spline along the singular edges */
-    SD_RULE_YZ_CORNER,        /* ... a complex singular vertex: fixed (convex corner) */
-    SD_RULE_YZ_PETAL,         /* ... an edge of a petal at a singular vertex: the piecewise smooth
-                               * rule of its petal (003 Fig. 4f) */
-    SD_RULE_YZ_FIXED_DISK,    /* ... an edge of a closed petal at a non-manifold vertex: 003's
-                               * fixed-disk rule (Loop, then the flatness modification) */
-    SD_RULE_YZ_DART,          /* ... an edge of a dart petal at a complex singular vertex: the
-                               * dart rule, then the flatness modification */
-    SD_RULE_YZ_CONCAVE,       /* ... an edge of a petal tagged a concave corner: its rule, then
-                               * the flatness modification */
+#define SD_RULE_ENUM_(id, ...) id,
+    SD_RULE_TABLE(SD_RULE_ENUM_)
+#undef SD_RULE_ENUM_
     SD_RULE_COUNT
 } sd_rule;
 const char *sd_rule_name(sd_rule r);
@@ -321,6 +314,31 @@ typedef struct sd_refinement {
 sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
                     size_t ns, const uint8_t *marked, sd_refinement *out, sd_error *err);
 void sd_refine_free(sd_refinement *r);
+
+/* The tags and per-simplex rules of a complex, in the forms sd_complex_set_singular (idx, size,
+ * ntags), sd_complex_set_petals and sd_complex_set_overrides take. */
+typedef struct sd_tag_set {
+    uint32_t *idx;
+    uint8_t *size;
+    size_t ntags;
+    sd_petal_tag *petals;
+    size_t npetals;
+    sd_override *overrides;
+    size_t noverrides;
+} sd_tag_set;
+
+/* Carry `in`, given for the complex that refinement r was made from, to the refined complex:
+ * children of tagged simplices stay tagged and keep their rules (SPEC Sec. 3). A vertex stays
+ * itself; a split edge becomes its two halves, and its N1 / N2 / G2 choice also goes to the
+ * vertex splitting it; a triangle becomes its children; a petal tag keeps its vertex and names
+ * the child of its triangle there; an N2 pair is replaced by the children holding the new
+ * simplex (a choice whose triangle has none is dropped). Whether a carried override still fits
+ * the refined complex is sd_complex_set_overrides's to say. Fills *out with new arrays (the C
+ * library's allocator, as sd_refine's; free with sd_tag_set_free); SD_ERR_NOMEM leaves it
+ * empty. `in` is not changed. */
+sd_result sd_refine_carry(const sd_refinement *r, const sd_tag_set *in, sd_tag_set *out,
+                          sd_error *err);
+void sd_tag_set_free(sd_tag_set *t);
 
 /* ---- local analysis (001 Sec. 4.1, Appendix B) ------------------------------------------- */
 

@@ -20,10 +20,10 @@
  * Every child is oriented like its parent (checked on reference coordinates when the templates
  * are built).
  *
- * In three parts (see sd_topo in internal.h): sd_split_cells makes the child's cells, vertex
+ * In three parts (see sd_topo in internal.h): sdi_split_cells makes the child's cells, vertex
  * classes and boundary masks (which faces of a cell are on the solids' boundary: the children of a
- * boundary face are, faces inside a parent cell are not); sd_split_edges its edges and their
- * classes, sd_split_faces its faces, per-cell edge and face ids and face classes — both only when
+ * boundary face are, faces inside a parent cell are not); sdi_split_edges its edges and their
+ * classes, sdi_split_faces its faces, per-cell edge and face ids and face classes — both only when
  * the child's rules, its own children or an edge accessor need them. They walk the parent's cells
  * with the same templates, so they agree on every child's number.
  *
@@ -217,8 +217,8 @@ static void tm_add(tmpl *T, const double (*ref)[3], int kind, const int *v, int 
             c->diag = (uint8_t)(3 - diag); /* slots 2,3 swapped: pairs 1 and 2 trade places */
     }
     assert(orient(T, ref, c) > 0);
-    const uint8_t (*E)[2] = kind == 4 ? SD_TET_E : SD_OCT_E;
-    const uint8_t (*F)[3] = kind == 4 ? SD_TET_F : SD_OCT_F;
+    const uint8_t (*E)[2] = kind == 4 ? SDI_TET_E : SDI_OCT_E;
+    const uint8_t (*F)[3] = kind == 4 ? SDI_TET_F : SDI_OCT_F;
     for (int k = 0; k < (kind == 4 ? 6 : 12); k++)
         c->e[k] = tm_edge_ref(T, c->v[E[k][0]], c->v[E[k][1]]);
     for (int k = 0; k < (kind == 4 ? 4 : 8); k++)
@@ -241,8 +241,8 @@ static void tm_tet(tmpl *T, int d)
     T->n = 4;
     T->ne = 6;
     T->nfc = 4;
-    T->pe = SD_TET_E;
-    T->pf = SD_TET_F;
+    T->pe = SDI_TET_E;
+    T->pf = SDI_TET_F;
     for (int i = 0; i < 4; i++) { /* corner tetrahedra: scaled copies, same pair */
         int v[4];
         for (int s = 0; s < 4; s++)
@@ -265,8 +265,8 @@ static void tm_oct(tmpl *T)
     T->n = 6;
     T->ne = 12;
     T->nfc = 8;
-    T->pe = SD_OCT_E;
-    T->pf = SD_OCT_F;
+    T->pe = SDI_OCT_E;
+    T->pf = SDI_OCT_F;
     const int C = 18;
 #define E(i, j) ledge(T, i, j)
     /* corner octahedra; slots (p,q,a,a2,b,b2), diagonal first (SPEC Sec. 3.1) */
@@ -281,7 +281,7 @@ static void tm_oct(tmpl *T)
         tm_add(T, ref, 6, corners[i], 0);
     /* face tetrahedra over (P,U,W), pair 0 = ([m(P,U), m(P,W)], [m(U,W), cell point]) */
     for (int f = 0; f < 8; f++) {
-        int P = SD_OCT_F[f][0], U = SD_OCT_F[f][1], W = SD_OCT_F[f][2];
+        int P = SDI_OCT_F[f][0], U = SDI_OCT_F[f][1], W = SDI_OCT_F[f][2];
         int v[4] = {E(P, U), E(P, W), E(U, W), C};
         tm_add(T, ref, 4, v, 0);
     }
@@ -420,7 +420,7 @@ typedef struct sjob {
 
 #define RANGE(n, i0, i1)                                                                           \
     uint64_t i0##_, i1##_;                                                                         \
-    sd_range((n), part, nparts, &i0##_, &i1##_);                                                   \
+    sdi_range((n), part, nparts, &i0##_, &i1##_);                                                   \
     const uint32_t i0 = (uint32_t)i0##_, i1 = (uint32_t)i1##_
 
 static uint64_t split_work(const sd_topo *P)
@@ -461,7 +461,7 @@ static void cells_part(void *arg, uint32_t part, uint32_t nparts)
     {
         RANGE(P->ntr, i0, i1);
         for (uint32_t i = i0; i < i1; i++) { /* the children of face f, as fv[4f..4f+3] below */
-            uint32_t f = sd_tr(P, i);
+            uint32_t f = sdi_tr(P, i);
             const uint32_t *x = P->fv[f], *fe = P->fe[f];
             uint32_t(*c)[3] = C->trv + 4 * (size_t)i;
             for (int j = 0; j < 3; j++) {
@@ -489,7 +489,7 @@ static void cells_part(void *arg, uint32_t part, uint32_t nparts)
     }
 }
 
-sd_result sd_split_cells(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, sd_error *err)
+sd_result sdi_split_cells(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, sd_error *err)
 {
     uint64_t nv = (uint64_t)P->nv + P->ne + P->noct;
     uint64_t ne = 2ull * P->ne + 3ull * P->nf + 12ull * P->noct;
@@ -497,7 +497,7 @@ sd_result sd_split_cells(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, s
     uint64_t ntet = 4ull * P->ntet + 8ull * P->noct, noct = (uint64_t)P->ntet + 6ull * P->noct;
     if (nv >= UINT32_MAX || ne >= UINT32_MAX || nf >= UINT32_MAX || ntet >= UINT32_MAX ||
         noct >= UINT32_MAX || 4ull * P->ntr >= UINT32_MAX)
-        return sd_fail(err, SD_ERR_LIMIT, -1, -1,
+        return sdi_fail(err, SD_ERR_LIMIT, -1, -1,
                        "the next level would exceed 32-bit ids (%llu edges, %llu faces)",
                        (unsigned long long)ne, (unsigned long long)nf);
     memset(C, 0, sizeof *C);
@@ -511,12 +511,12 @@ sd_result sd_split_cells(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, s
     C->noct = (uint32_t)noct;
     C->tr_ident = P->tr_ident && C->nf == C->ntr;
     C->ovmask = P->ovmask;
-#define A(f, n) (C->f = sd_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
+#define A(f, n) (C->f = sdi_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
     if (!A(pt, C->npt) || !A(cuv, C->ncu) || !A(trv, C->ntr) || !A(tet, ntet) ||
         !A(tet_d, ntet) || !A(tet_b, ntet) || !A(oct, noct) || !A(oct_b, noct) ||
         !A(vfam, nv) || !A(vflag, nv) || !A(vnm, nv)) {
-        sd_topo_free(m, C);
-        return sd_fail_nomem(err, m);
+        sdi_topo_free(m, C);
+        return sdi_fail_nomem(err, m);
     }
 #undef A
     /* lower-dimensional cells: few */
@@ -531,7 +531,7 @@ sd_result sd_split_cells(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, s
     sjob J = {.P = P, .C = C};
     if (P->ntet || P->noct)
         templates(J.tt, &J.to);
-    sd_par(threads, split_work(P), cells_part, &J);
+    sdi_par(threads, split_work(P), cells_part, &J);
     return SD_OK;
 }
 
@@ -589,17 +589,17 @@ static void edges_part(void *arg, uint32_t part, uint32_t nparts)
     }
 }
 
-sd_result sd_split_edges(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, sd_error *err)
+sd_result sdi_split_edges(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, sd_error *err)
 {
     const uint32_t ne = C->ne;
-#define A(f, n) (C->f = sd_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
+#define A(f, n) (C->f = sdi_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
     if (!A(ev, ne) || !A(efam, ne) || !A(eflag, ne) || !A(enm, ne)) {
-        sd_topo_free_edges(m, C);
-        return sd_fail_nomem(err, m);
+        sdi_topo_free_edges(m, C);
+        return sdi_fail_nomem(err, m);
     }
 #undef A
     sjob J = {.P = P, .C = C};
-    sd_par(threads, split_work(P), edges_part, &J);
+    sdi_par(threads, split_work(P), edges_part, &J);
     C->derived = true;
     return SD_OK;
 }
@@ -644,7 +644,7 @@ static void faces_part(void *arg, uint32_t part, uint32_t nparts)
         RANGE(P->ntr, i0, i1);
         for (uint32_t i = i0; i < i1; i++)
             for (uint32_t j = 0; j < 4; j++)
-                C->tr[4 * i + j] = 4 * sd_tr(P, i) + j;
+                C->tr[4 * i + j] = 4 * sdi_tr(P, i) + j;
     }
     {   /* solid cells */
         RANGE(P->ntet, t0, t1);
@@ -662,17 +662,17 @@ static void faces_part(void *arg, uint32_t part, uint32_t nparts)
     }
 }
 
-sd_result sd_split_faces(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, sd_error *err)
+sd_result sdi_split_faces(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, sd_error *err)
 {
     const uint32_t nf = C->nf, ntet = C->ntet, noct = C->noct;
     /* a pure surface whose face i is triangle i: the faces' vertices are the triangles' */
     bool alias = C->tr_ident && C->trv;
-#define A(f, n) (C->f = sd_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
+#define A(f, n) (C->f = sdi_alloc(m, ((size_t)(n) + 1) * sizeof *C->f))
     if ((alias ? !(C->fv = C->trv) : !A(fv, nf)) || !A(fe, nf) || !A(cu, C->ncu) ||
         (!C->tr_ident && !A(tr, C->ntr)) || !A(tet_e, ntet) || !A(tet_f, ntet) ||
         !A(oct_e, noct) || !A(oct_f, noct) || !A(fn3, nf) || !A(fflag, nf)) {
-        sd_topo_free_faces(m, C);
-        return sd_fail_nomem(err, m);
+        sdi_topo_free_faces(m, C);
+        return sdi_fail_nomem(err, m);
     }
 #undef A
     for (uint32_t i = 0; i < P->ncu; i++) { /* curves as edge ids: few */
@@ -682,7 +682,7 @@ sd_result sd_split_faces(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, s
     sjob J = {.P = P, .C = C, .alias = alias};
     if (P->ntet || P->noct)
         templates(J.tt, &J.to);
-    sd_par(threads, split_work(P), faces_part, &J);
+    sdi_par(threads, split_work(P), faces_part, &J);
     C->faces = true;
     return SD_OK;
 }

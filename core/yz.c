@@ -38,7 +38,7 @@
  * SD_YZ_FLAT_S = 3/4 satisfies all three conditions for every k (docs/DECISIONS.md 27, 28).
  * Where the edge's other end is also singular the petal rules of both ends are averaged (003:
  * "use the average of the conflicting positions"); each end's rule is complete (both stages)
- * before averaging. The other end's rule is 003 Fig. 4f with its gamma (rules.c, yz_gammas), or
+ * before averaging. The other end's rule is 003 Fig. 4f with its gamma (rules.c, sdi_yz_rules), or
  * its own flattened rule.
  *
  * Only levels built with nonmanifold_surface = ying-zorin that have such petals at singular
@@ -51,12 +51,12 @@
 #include <string.h>
 
 
-void sd_yzrows_free(sd_mem *m, sd_yzrows *y)
+void sdi_yzrows_free(sd_mem *m, sd_yzrows *y)
 {
-    sd_free(m, y->off);
-    sd_free(m, y->col);
-    sd_free(m, y->w);
-    sd_free(m, y->ends);
+    sdi_free(m, y->off);
+    sdi_free(m, y->col);
+    sdi_free(m, y->w);
+    sdi_free(m, y->ends);
     memset(y, 0, sizeof *y);
 }
 
@@ -75,7 +75,7 @@ static bool acc_add(sd_mem *m, acc *a, uint32_t c, double w)
 {
     if (a->n == a->cap) {
         uint32_t cap = a->cap ? 2 * a->cap : 16;
-        entry *ne = sd_realloc(m, a->e, cap * sizeof *ne);
+        entry *ne = sdi_realloc(m, a->e, cap * sizeof *ne);
         if (!ne)
             return false;
         a->e = ne;
@@ -117,45 +117,35 @@ static inline uint32_t other_end(const sd_topo *t, uint32_t e, uint32_t v)
 
 enum { WALK_FAIL, WALK_CLOSED, WALK_SINGULAR };
 
-/* From edge e0 at v into its face f, across the petal's inner edges (two faces in efc): out[0 ..
- * *n) the ring points passed. Ends back at e0 (WALK_CLOSED) or at an edge with one face, a
- * singular one (WALK_SINGULAR, *last its other end); WALK_FAIL past cap or off the petal. */
-static int ring_walk(const sd_topo *t, const uint32_t (*efc)[2], uint32_t v, uint32_t e0,
-                     uint32_t f, uint32_t *out, uint32_t cap, uint32_t *n, uint32_t *last)
+/* From edge e0 at v into its face f, across the petal's inner edges (petals.c): out[0 .. *n)
+ * the ring points passed (faces: scratch for the triangles entered). Ends back at e0
+ * (WALK_CLOSED) or at a singular edge (WALK_SINGULAR, *last its other end); WALK_FAIL past cap. */
+static int ring_walk(const sd_topo *t, const sdi_rel *ef, uint32_t v, uint32_t e0, uint32_t f,
+                     uint32_t *out, uint32_t *faces, uint32_t cap, uint32_t *n, uint32_t *last)
 {
-    uint32_t e = e0;
-    for (*n = 0;;) {
-        uint32_t next = UINT32_MAX;
-        for (int j = 0; j < 3; j++) {
-            uint32_t x = t->fe[f][j];
-            if (x != e && (t->ev[x][0] == v || t->ev[x][1] == v))
-                next = x;
-        }
-        if (next == UINT32_MAX)
-            return WALK_FAIL;
-        if (next == e0)
-            return WALK_CLOSED;
-        if (efc[next][1] == UINT32_MAX) {
-            *last = other_end(t, next, v);
-            return WALK_SINGULAR;
-        }
-        if (*n == cap)
-            return WALK_FAIL;
-        out[(*n)++] = other_end(t, next, v);
-        f = efc[next][0] == f ? efc[next][1] : efc[next][0];
-        e = next;
-    }
+    sdi_walk w = {faces, out, 0, cap};
+    uint32_t end = sdi_petal_walk(t, ef, SDI_PETAL_YZ, v, e0, f, &w);
+    *n = w.n;
+    for (uint32_t i = 0; i < w.n; i++) /* the edges crossed, as their other ends */
+        out[i] = other_end(t, out[i], v);
+    if (end == UINT32_MAX)
+        return WALK_FAIL;
+    if (end == e0)
+        return WALK_CLOSED;
+    *last = other_end(t, end, v);
+    return WALK_SINGULAR;
 }
 
 /* The ring of the petal of kind `kind` (SD_YZ_DISK, _DART, _CONCAVE) at v that holds the inner
  * edge e0, in order, e0 = v-ring[*at]: closed p_0 .. p_{k-1} (a disk starts at e0); a dart's and
  * an open petal's ring start at a singular edge's end, an open one ends at the other's, p_k.
  * Returns the petal's number of triangles k, or 0 if the petal is not of that kind. */
-static uint32_t petal_ring(const sd_topo *t, const uint32_t (*efc)[2], uint32_t v, uint32_t e0,
-                           uint8_t kind, uint32_t *ring, uint32_t *tmp, uint32_t cap, uint32_t *at)
+static uint32_t petal_ring(const sd_topo *t, const sdi_rel *ef, uint32_t v, uint32_t e0,
+                           const uint32_t two[2], uint8_t kind, uint32_t *ring, uint32_t *tmp,
+                           uint32_t *faces, uint32_t cap, uint32_t *at)
 {
     uint32_t na, nb, la, lb;
-    int wa = ring_walk(t, efc, v, e0, efc[e0][0], tmp, cap, &na, &la);
+    int wa = ring_walk(t, ef, v, e0, two[0], tmp, faces, cap, &na, &la);
     *at = 0;
     if (kind == SD_YZ_DISK) {
         if (wa != WALK_CLOSED || na + 1 > cap)
@@ -170,7 +160,7 @@ static uint32_t petal_ring(const sd_topo *t, const uint32_t (*efc)[2], uint32_t 
     for (uint32_t j = 0; j < na; j++)
         ring[1 + j] = tmp[na - 1 - j];
     ring[na + 1] = other_end(t, e0, v);
-    int wb = ring_walk(t, efc, v, e0, efc[e0][1], ring + na + 2, cap - na - 3, &nb, &lb);
+    int wb = ring_walk(t, ef, v, e0, two[1], ring + na + 2, faces, cap - na - 3, &nb, &lb);
     if (wb != WALK_SINGULAR || (la == lb) != (kind == SD_YZ_DART))
         return 0;
     uint32_t k = na + nb + 2;
@@ -188,19 +178,9 @@ static bool flat_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32
                      const sd_yzend *x, double scale)
 {
     const bool open = x->kind == SD_YZ_CONCAVE;
-    const double s = x->s, c = 2 * M_PI / k, lam = 3.0 / 8.0 + cos(c) / 4;
-    const double d = 2 * sin(k * x->theta);
     double sum = 0;
     for (uint32_t j = 0; j < (open ? k + 1 : k); j++) {
-        bool nb = open ? j == i + 1 || j + 1 == i : j == (i + 1) % k || j == (i + k - 1) % k;
-        double tij = j == i ? x->g : nb ? 1.0 / 8.0 : 0.0, pij;
-        if (x->kind == SD_YZ_DISK) /* 003 App. A */
-            pij = 2.0 / k * lam * cos(c * ((double)i - j));
-        else if (x->kind == SD_YZ_DART)
-            pij = (j == 0 ? cos(c * i) / 2 : 0) + sin(c * i) * sin(c * j) / k;
-        else
-            pij = ((j == 0 ? sin((k - i) * x->theta) : 0) + (j == k ? sin(i * x->theta) : 0)) / d;
-        double w = (1 - s) * tij + s * pij;
+        double w = sdi_mask_yz_flat(x, k, i, j); /* masks.c */
         sum += w;
         if (!acc_add(m, a, ring[j], scale * w))
             return false;
@@ -208,45 +188,32 @@ static bool flat_row(sd_mem *m, acc *a, uint32_t v, const uint32_t *ring, uint32
     return acc_add(m, a, v, scale * (1 - sum));
 }
 
-bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint8_t *er,
-                     sd_yzrows *y)
+bool sdi_yz_flat_rows(sd_mem *m, const sd_topo *t, const sdi_rel *ef, const sd_yzend (*end)[2],
+                      uint8_t *er, sd_yzrows *y)
 {
     const uint32_t ne = t->ne;
     memset(y, 0, sizeof *y);
     uint32_t nfd = 0;
     for (uint32_t e = 0; e < ne; e++)
-        nfd += sd_yz_flat(end[e][0].kind) || sd_yz_flat(end[e][1].kind);
+        nfd += sdi_yz_flat(end[e][0].kind) || sdi_yz_flat(end[e][1].kind);
     if (!nfd)
         return true;
     bool ok = false;
-    uint32_t (*efc)[2] = sd_alloc(m, ((size_t)ne + 1) * sizeof *efc), *ring = NULL, *tmp = NULL;
+    uint32_t *ring = NULL, *tmp = NULL, *faces = NULL;
     uint32_t cap = t->ntr + 2;
     acc a = {0};
-    y->off = sd_calloc(m, (size_t)ne + 1, sizeof *y->off);
-    y->ends = sd_alloc(m, ((size_t)ne + 1) * sizeof *y->ends);
-    ring = sd_alloc(m, (size_t)cap * sizeof *ring);
-    tmp = sd_alloc(m, (size_t)cap * sizeof *tmp);
-    if (!efc || !y->off || !y->ends || !ring || !tmp)
+    y->off = sdi_calloc(m, (size_t)ne + 1, sizeof *y->off);
+    y->ends = sdi_alloc(m, ((size_t)ne + 1) * sizeof *y->ends);
+    ring = sdi_alloc(m, (size_t)cap * sizeof *ring);
+    tmp = sdi_alloc(m, (size_t)cap * sizeof *tmp);
+    faces = sdi_alloc(m, (size_t)cap * sizeof *faces);
+    if (!y->off || !y->ends || !ring || !tmp || !faces)
         goto out;
-    for (uint32_t e = 0; e < ne; e++)
-        efc[e][0] = efc[e][1] = UINT32_MAX;
-    for (uint32_t i = 0; i < t->ntr; i++) {
-        uint32_t f = sd_tr(t, i);
-        for (int j = 0; j < 3; j++) {
-            uint32_t e = t->fe[f][j];
-            if (!sd_yz_flat(end[e][0].kind) && !sd_yz_flat(end[e][1].kind))
-                continue;
-            if (efc[e][0] == UINT32_MAX)
-                efc[e][0] = f;
-            else
-                efc[e][1] = f;
-        }
-    }
     /* two passes: count the ring columns of each row, then fill them */
     for (int pass = 0; pass < 2; pass++) {
         uint32_t row = 0;
         for (uint32_t e = 0; e < ne; e++) {
-            if (!sd_yz_flat(end[e][0].kind) && !sd_yz_flat(end[e][1].kind))
+            if (!sdi_yz_flat(end[e][0].kind) && !sdi_yz_flat(end[e][1].kind))
                 continue;
             uint32_t ends[2] = {t->ev[e][0], t->ev[e][1]};
             int sides = (end[e][0].kind != SD_YZ_NONE) + (end[e][1].kind != SD_YZ_NONE);
@@ -254,7 +221,8 @@ bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint
             a.n = 0;
             if (!acc_add(m, &a, ends[0], 0) || !acc_add(m, &a, ends[1], 0))
                 goto out;
-            bool fine = efc[e][1] != UINT32_MAX;
+            uint32_t two[2]; /* e's two triangles */
+            bool fine = sdi_max_faces(t, ef, e, two) >= 2;
             for (int i = 0; i < 2 && fine; i++) {
                 uint32_t v = ends[i], w = ends[1 - i], k, at = 0;
                 const sd_yzend *x = &end[e][i];
@@ -264,20 +232,19 @@ bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint
                 case SD_YZ_CONCAVE:
                     if (x->kind < best) /* the rule named: fixed disk, then dart, then concave */
                         best = x->kind;
-                    k = petal_ring(t, (const uint32_t(*)[2])efc, v, e, x->kind, ring, tmp, cap,
-                                   &at);
+                    k = petal_ring(t, ef, v, e, two, x->kind, ring, tmp, faces, cap, &at);
                     fine = k >= (x->kind == SD_YZ_CONCAVE ? 2u : 3u);
                     if (fine && !flat_row(m, &a, v, ring, k, at, x, 1.0 / sides))
                         goto out;
                     break;
                 case SD_YZ_FIRST: { /* 003 Fig. 4f from this end */
-                    double g = x->g;
-                    if (!acc_add(m, &a, v, (0.75 - g) / sides) || !acc_add(m, &a, w, g / sides))
+                    sdi_yzmask y = sdi_mask_yz_petal(x->g);
+                    if (!acc_add(m, &a, v, y.centre / sides) || !acc_add(m, &a, w, y.far / sides))
                         goto out;
                     for (int h = 0; h < 2; h++) { /* the opposite vertices */
-                        const uint32_t *q = t->fv[efc[e][h]];
+                        const uint32_t *q = t->fv[two[h]];
                         uint32_t o = q[0] != v && q[0] != w ? q[0] : q[1] != v && q[1] != w ? q[1] : q[2];
-                        if (!acc_add(m, &a, o, 0.125 / sides))
+                        if (!acc_add(m, &a, o, y.opposite / sides))
                             goto out;
                     }
                     break;
@@ -318,8 +285,8 @@ bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint
         if (pass == 0) {
             for (uint32_t e = 0; e < ne; e++)
                 y->off[e + 1] = (y->off[e + 1] == UINT32_MAX ? 0 : y->off[e + 1]) + y->off[e];
-            y->col = sd_alloc(m, ((size_t)y->off[ne] + 1) * sizeof *y->col);
-            y->w = sd_alloc(m, ((size_t)y->off[ne] + 1) * sizeof *y->w);
+            y->col = sdi_alloc(m, ((size_t)y->off[ne] + 1) * sizeof *y->col);
+            y->w = sdi_alloc(m, ((size_t)y->off[ne] + 1) * sizeof *y->w);
             if (!y->col || !y->w)
                 goto out;
         }
@@ -327,11 +294,11 @@ bool sd_yz_flat_rows(sd_mem *m, const sd_topo *t, const sd_yzend (*end)[2], uint
     }
     ok = true;
 out:
-    sd_free(m, efc);
-    sd_free(m, ring);
-    sd_free(m, tmp);
-    sd_free(m, a.e);
+    sdi_free(m, faces);
+    sdi_free(m, ring);
+    sdi_free(m, tmp);
+    sdi_free(m, a.e);
     if (!ok)
-        sd_yzrows_free(m, y);
+        sdi_yzrows_free(m, y);
     return ok;
 }

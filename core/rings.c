@@ -1,0 +1,432 @@
+/* rings.c — who the neighbours are: rho(x) of a vertex and the ring of an edge (SPEC Sec. 3),
+ * read from a level's topology for the rules rules.c chose.
+ *
+ * rho(x) is filtered to the vertex's rule by the edges it is read through (000 Algorithm 5 line
+ * 3; rule_table.h's rho column): a curve vertex reads curve edges, a surface-boundary vertex the
+ * boundary edges, a solid-boundary vertex the edges of boundary faces, an interior solid vertex
+ * every solid edge and, in the box scheme, its octahedra's major diagonals (001 Def. 3.3); the
+ * averaged scheme adds its octahedral opposites as a second class (001 App. A). A singular vertex
+ * reads the singular complex only (000 Sec. 4.1), a vertex with its own N1 / N2 choice its part
+ * (000 Sec. 3.5; DECISIONS 23-24), a G2 vertex every edge and diagonal but, where it lies on dC,
+ * not the points strictly inside a solid (the relieved ring, 000 Fig. 14; DECISIONS 5).
+ *
+ * The ring of an edge (rule_table.h's ring column): the far vertices of its two triangles (Loop),
+ * of its two faces on the solids' boundary (solid boundary), rho(e) of the solid — the other
+ * vertices of the cells containing it, an octahedron counted as the 4 tetrahedra around its major
+ * diagonal (box) or its faces' and diagonals' (averaged) — and, for G2, the common neighbours of
+ * its ends with the same relief. Counting and filling go over the edges and cells in id order,
+ * so the order of rho in a row is fixed: the golden outputs depend on it.
+ */
+#include "internal.h"
+#include <stdlib.h>
+#include <string.h>
+
+/* ---- rho(x) ------------------------------------------------------------------------------ */
+
+/* G2's relieved ring: keep neighbour n of a junction c unless c lies on dC (or outside solids)
+ * and n is strictly inside a solid. `inside` tells whether the centre is strictly inside. */
+static inline bool strictly_inside(const sd_topo *t, uint32_t v)
+{
+    return t->vfam[v] == FAM3 && !(t->vflag[v] & VF_DC);
+}
+static inline bool g2_keep(const sd_topo *t, bool centre_inside, uint32_t n)
+{
+    return centre_inside || !strictly_inside(t, n);
+}
+
+/* The rho kinds (SDI_RHO_*, as bits) that read through an edge of family `fam` and flags `fl`;
+ * G2's and the singular vertices' are decided per neighbour (via_edge). */
+static inline unsigned edge_kinds(uint8_t fam, uint8_t fl)
+{
+    unsigned m = 0;
+    if (fl & EF_CURVE)
+        m |= 1u << SDI_RHO_CURVE;
+    if (fam & FAM2)
+        m |= 1u << SDI_RHO_SURFACE;
+    if (fl & EF_BND2)
+        m |= 1u << SDI_RHO_SURFACE_BOUNDARY;
+    if (fam & FAM3) {
+        m |= 1u << SDI_RHO_SOLID;
+        if (fl & EF_DC)
+            m |= 1u << SDI_RHO_SOLID_BOUNDARY;
+    }
+    return m;
+}
+
+/* Does neighbour n, reached from centre c (rule r) through edge e, belong to c's rho? */
+static inline bool via_edge(const sd_topo *t, uint8_t r, uint32_t c, uint32_t n, uint32_t e)
+{
+    if (t->vflag[c] & VF_S_ANY) /* a singular vertex sees only the singular complex */
+        return r == SD_RULE_CURVE ? (t->eflag[e] & EF_CREASE) != 0
+               : r == SD_RULE_LOOP ? (t->eflag[e] & EF_SSURF) != 0
+               : r == SD_RULE_LOOP_BOUNDARY && (t->eflag[e] & EF_SBND);
+    if (SDI_RULE_RHO[r] == SDI_RHO_G2)
+        return g2_keep(t, strictly_inside(t, c), n);
+    return (edge_kinds(t->efam[e], t->eflag[e]) >> SDI_RULE_RHO[r]) & 1u;
+}
+/* ... and through an octahedron's major diagonal c-n? */
+static inline bool via_diag(const sd_topo *t, uint8_t r, int scheme, uint32_t c, uint32_t n)
+{
+    if (r == SD_RULE_SOLID)
+        return scheme == SD_SOLID_BOX;
+    if (r == SD_RULE_G2)
+        return g2_keep(t, strictly_inside(t, c), n);
+    return false;
+}
+
+bool sdi_ov_boundary_edge(const sd_topo *t, int ov, uint32_t e)
+{
+    switch (ov) {
+    case OV_N1_2:
+        return (t->efam[e] & FAM2) && (t->enm[e] & NM_C2B);
+    case OV_N1_3:
+        return (t->efam[e] & FAM3) && (t->eflag[e] & EF_DC);
+    case OV_N2:
+        return (t->eflag[e] & EF_N2BND) != 0;
+    default:
+        return false;
+    }
+}
+/* Does a vertex with its own choice (N1, N2, a Ying-Zorin crease), following rule r, read its
+ * neighbour through e? */
+static inline bool ov_take(const sd_topo *t, uint8_t r, uint32_t v, uint32_t e)
+{
+    int ov = nm_ov(t->vnm[v]);
+    uint8_t fam = t->efam[e], fl = t->eflag[e];
+    switch (ov) {
+    case OV_N1_1:
+        return fl & EF_CURVE;
+    case OV_N1_2:
+        return r == SD_RULE_LOOP ? (fam & FAM2) != 0 : sdi_ov_boundary_edge(t, ov, e);
+    case OV_N1_3:
+        return r == SD_RULE_SOLID ? (fam & FAM3) != 0 : sdi_ov_boundary_edge(t, ov, e);
+    case OV_N2:
+        if (t->vfam[v] == FAM1)
+            return (fl & (EF_CURVE | EF_N2SEL)) == (EF_CURVE | EF_N2SEL);
+        return r == SD_RULE_LOOP ? (fl & EF_N2SEL) != 0 : sdi_ov_boundary_edge(t, ov, e);
+    case OV_YZS: /* along the singular edges: boundary or non-manifold ones */
+        return fam == FAM2 && ((fl & EF_BND2) || nm_type(t->enm[e]) == 2);
+    default:
+        return false;
+    }
+}
+
+void sdi_vertex_rho(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b,
+                    uint8_t *take)
+{
+    const uint32_t nv = t->nv, ne = t->ne, no = t->noct;
+    for (uint32_t e = 0; e < ne; e++) {
+        uint32_t a = t->ev[e][0], b = t->ev[e][1];
+        unsigned m = edge_kinds(t->efam[e], t->eflag[e]);
+        uint8_t ra = vr[a], rb = vr[b];
+        unsigned ta = ra & SDI_VR_OWN ? ov_take(t, ra & SDI_VR_RULE, a, e)
+                    : ra & SDI_VR_SLOW ? via_edge(t, ra & SDI_VR_RULE, a, b, e)
+                    : (m >> SDI_RULE_RHO[ra]) & 1u;
+        unsigned tb = rb & SDI_VR_OWN ? ov_take(t, rb & SDI_VR_RULE, b, e)
+                    : rb & SDI_VR_SLOW ? via_edge(t, rb & SDI_VR_RULE, b, a, e)
+                    : (m >> SDI_RULE_RHO[rb]) & 1u;
+        cnt_a[a] += ta;
+        cnt_a[b] += tb;
+        if (take)
+            take[e] = (uint8_t)(ta | tb << 1);
+    }
+    for (uint32_t v = 0; v < nv; v++)
+        vr[v] &= SDI_VR_RULE;
+    for (uint32_t o = 0; o < no; o++) {
+        uint32_t p = t->oct[o][0], q = t->oct[o][1];
+        if (via_diag(t, vr[p], scheme, p, q))
+            cnt_a[p]++;
+        if (via_diag(t, vr[q], scheme, q, p))
+            cnt_a[q]++;
+        if (scheme == SD_SOLID_AVERAGED)
+            for (int i = 0; i < 6; i++)
+                if (vr[t->oct[o][i]] == SD_RULE_SOLID)
+                    cnt_b[t->oct[o][i]]++;
+    }
+}
+
+void sdi_vertex_rho_cols(const sd_topo *t, int scheme, const uint8_t *vr, const uint8_t *take,
+                         uint32_t *cur, uint32_t *col)
+{
+    for (uint32_t e = 0; e < t->ne; e++) {
+        uint32_t a = t->ev[e][0], b = t->ev[e][1];
+        if ((take[e] & 1) && vr[a] != SD_RULE_CORNER)
+            col[cur[a]++] = b;
+        if ((take[e] & 2) && vr[b] != SD_RULE_CORNER)
+            col[cur[b]++] = a;
+    }
+    for (uint32_t o = 0; o < t->noct; o++) {
+        const uint32_t *q = t->oct[o];
+        for (int i = 0; i < 2; i++)
+            if (vr[q[i]] != SD_RULE_CORNER && via_diag(t, vr[q[i]], scheme, q[i], q[i ^ 1]))
+                col[cur[q[i]]++] = q[i ^ 1];
+        if (scheme == SD_SOLID_AVERAGED)
+            for (int i = 0; i < 6; i++)
+                if (vr[q[i]] == SD_RULE_SOLID)
+                    col[cur[q[i]]++] = q[i ^ 1];
+    }
+}
+
+/* ---- rings of edges ---------------------------------------------------------------------- */
+
+enum { M_SSURF = 4, M_LOOP = 8, M_SB = 16, M_N2 = 32 }; /* which faces give an edge its opposite
+                                                          * vertices */
+
+void sdi_edge_opposites(const sd_topo *t, const uint8_t *er, uint32_t (*opp)[2], uint8_t *nopp)
+{
+    for (uint32_t e = 0; e < t->ne; e++) {
+        /* an embedded surface's edge takes its opposite vertices from tagged triangles */
+        bool ss = t->eflag[e] & EF_SSURF;
+        bool n2 = (t->ovmask & OVM_N2T) && nm_ov(t->enm[e]) == OV_N2 && !ss &&
+                  !(t->eflag[e] & EF_CREASE);
+        uint8_t ring = SDI_RULE_RING[er[e]];
+        nopp[e] = ring == SDI_RING_OPPOSITE ? (ss ? M_SSURF : n2 ? M_N2 : M_LOOP)
+                : ring == SDI_RING_BOUNDARY_OPPOSITE && !ss ? M_SB : 0;
+    }
+    for (uint32_t f = 0; f < t->nf; f++) {
+        uint8_t ff = t->fflag[f];
+        if (!(ff & (FF_MAX | FF_BND3 | FF_SING)))
+            continue;
+        unsigned want = (ff & FF_SING ? M_SSURF : 0) | (ff & FF_MAX ? M_LOOP : M_SB) |
+                        (ff & FF_N2SEL ? M_N2 : 0);
+        for (int j = 0; j < 3; j++) {
+            uint32_t e = t->fe[f][j];
+            unsigned n = nopp[e];
+            if (!(n & want))
+                continue;
+            if ((n & 3) < 2)
+                opp[e][n & 3] = t->fv[f][(j + 2) % 3];
+            if ((n & 3) < 3)
+                nopp[e] = (uint8_t)(n + 1);
+        }
+    }
+}
+
+/* Equator neighbours in an octahedron: cycle a(2), b(4), a2(3), b2(5). */
+static const uint8_t OCT_EQ_NB[6][2] = {{0, 0}, {0, 0}, {5, 4}, {4, 5}, {2, 3}, {3, 2}};
+
+void sdi_rings_free(sd_mem *m, sdi_rings *r)
+{
+    sdi_free(m, r->off);
+    sdi_free(m, r->v);
+    sdi_free(m, r->cls);
+    sdi_free(m, r->len);
+}
+
+static int cmp_u32(const void *x, const void *y)
+{
+    uint32_t a = *(const uint32_t *)x, b = *(const uint32_t *)y;
+    return a < b ? -1 : a > b;
+}
+
+static int cmp_entry(const void *x, const void *y)
+{
+    uint64_t a = *(const uint64_t *)x, b = *(const uint64_t *)y;
+    return a < b ? -1 : a > b;
+}
+
+/* rho(e) of solid edges: the candidates from the cells, then sorted and deduplicated per edge. */
+typedef struct ring_sort_job {
+    sdi_rings *R;
+    uint32_t ne;
+    volatile bool ok;
+} ring_sort_job;
+
+static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    ring_sort_job *J = arg;
+    sdi_rings *R = J->R;
+    uint64_t lo, hi;
+    sdi_range(J->ne, part, nparts, &lo, &hi);
+    uint64_t buf[256];
+    for (uint32_t e = (uint32_t)lo; e < (uint32_t)hi; e++) {
+        uint32_t b = R->off[e], n = R->off[e + 1] - b, w = 0;
+        if (n == 0)
+            continue;
+        uint64_t *s = n <= 256 ? buf : malloc(n * sizeof *s);
+        if (!s) {
+            J->ok = false;
+            return;
+        }
+        for (uint32_t i = 0; i < n; i++)
+            s[i] = (uint64_t)R->v[b + i] << 1 | R->cls[b + i];
+        if (n <= 32) /* the usual few candidates: insertion sort */
+            for (uint32_t i = 1; i < n; i++) {
+                uint64_t x = s[i];
+                uint32_t j = i;
+                for (; j > 0 && s[j - 1] > x; j--)
+                    s[j] = s[j - 1];
+                s[j] = x;
+            }
+        else
+            qsort(s, n, sizeof *s, cmp_entry);
+        for (uint32_t i = 0; i < n; i++)
+            if (i == 0 || s[i] != s[i - 1]) {
+                R->v[b + w] = (uint32_t)(s[i] >> 1);
+                R->cls[b + w] = (uint8_t)(s[i] & 1);
+                w++;
+            }
+        R->len[e] = w;
+        if (s != buf)
+            free(s);
+    }
+}
+
+bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int scheme, int threads,
+                     sdi_rings *R)
+{
+    uint32_t ne = t->ne;
+    R->off = sdi_calloc(m, (size_t)ne + 1, sizeof *R->off);
+    R->len = sdi_calloc(m, ne ? ne : 1, sizeof *R->len);
+    if (!R->off || !R->len)
+        return false;
+    bool avg = scheme == SD_SOLID_AVERAGED;
+    /* count */
+    for (uint32_t c = 0; c < t->ntet; c++)
+        for (int k = 0; k < 6; k++)
+            if (SDI_RULE_RING[erule[t->tet_e[c][k]]] == SDI_RING_SOLID)
+                R->off[t->tet_e[c][k] + 1] += 2;
+    for (uint32_t o = 0; o < t->noct; o++)
+        for (int k = 0; k < 12; k++)
+            if (SDI_RULE_RING[erule[t->oct_e[o][k]]] == SDI_RING_SOLID)
+                R->off[t->oct_e[o][k] + 1] += avg ? 4 : (k < 8 ? 3 : 2);
+    for (uint32_t e = 0; e < ne; e++)
+        R->off[e + 1] += R->off[e];
+    size_t total = R->off[ne];
+    R->v = sdi_alloc(m, (total + 1) * sizeof *R->v);
+    R->cls = sdi_alloc(m, total + 1);
+    uint32_t *cur = sdi_alloc(m, ((size_t)ne + 1) * sizeof *cur);
+    if (!R->v || !R->cls || !cur) {
+        sdi_free(m, cur);
+        return false;
+    }
+    memcpy(cur, R->off, (size_t)ne * sizeof *cur);
+#define PUSH(e, x, c)                                                                        \
+    do {                                                                                     \
+        R->v[cur[e]] = (x);                                                                  \
+        R->cls[cur[e]++] = (c);                                                              \
+    } while (0)
+    for (uint32_t c = 0; c < t->ntet; c++)
+        for (int k = 0; k < 6; k++) {
+            uint32_t e = t->tet_e[c][k];
+            if (SDI_RULE_RING[erule[e]] != SDI_RING_SOLID)
+                continue;
+            /* the two vertices not on edge k: those of the opposite edge 5-k */
+            PUSH(e, t->tet[c][SDI_TET_E[5 - k][0]], 0);
+            PUSH(e, t->tet[c][SDI_TET_E[5 - k][1]], 0);
+        }
+    for (uint32_t o = 0; o < t->noct; o++)
+        for (int k = 0; k < 12; k++) {
+            uint32_t e = t->oct_e[o][k];
+            if (SDI_RULE_RING[erule[e]] != SDI_RING_SOLID)
+                continue;
+            const uint32_t *q = t->oct[o];
+            int i = SDI_OCT_E[k][0], j = SDI_OCT_E[k][1];
+            if (avg) {
+                /* faces of the octahedron on the edge: the two common neighbours;
+                 * through the octahedron's diagonals: the opposites of both ends */
+                int com[2], nc = 0;
+                for (int w = 0; w < 6 && nc < 2; w++)
+                    if (w != i && w != j && w != (i ^ 1) && w != (j ^ 1))
+                        com[nc++] = w;
+                PUSH(e, q[com[0]], 0);
+                PUSH(e, q[com[1]], 0);
+                PUSH(e, q[i ^ 1], 1);
+                PUSH(e, q[j ^ 1], 1);
+            } else if (k < 8) {
+                /* [P, x] with P on the diagonal: tets (p,q,x,prev), (p,q,x,next) */
+                int P = i, x = j;
+                PUSH(e, q[P ^ 1], 0);
+                PUSH(e, q[OCT_EQ_NB[x][0]], 0);
+                PUSH(e, q[OCT_EQ_NB[x][1]], 0);
+            } else {
+                /* an equator edge lies in one of the 4 tets: (p,q,x,y) */
+                PUSH(e, q[0], 0);
+                PUSH(e, q[1], 0);
+            }
+        }
+#undef PUSH
+    sdi_free(m, cur);
+    /* sort and deduplicate each edge's list (as (vertex, class) pairs), edges in parallel */
+    ring_sort_job J = {R, ne, true};
+    sdi_par(threads, R->off[ne], ring_sort_part, &J);
+    return J.ok;
+}
+
+/* Rings of G2 edges: the common neighbours (edges and diagonals) of both ends, filtered. The
+ * neighbours of each vertex come from the relations vertex -> edges and vertex -> diagonals,
+ * sorted, and each edge's ends are merged. */
+bool sdi_g2_rings(sd_mem *m, sdi_rels *rel, const uint8_t *erule, sdi_rings *R)
+{
+    const sd_topo *t = rel->t;
+    uint32_t nv = t->nv, ne = t->ne;
+    uint32_t *off = NULL, *adj = NULL;
+    R->off = sdi_calloc(m, (size_t)ne + 1, sizeof *R->off);
+    R->len = sdi_calloc(m, ne ? ne : 1, sizeof *R->len);
+    if (!R->off || !R->len || !sdi_rels_need(m, rel, SDI_REL(SDI_VE) | SDI_REL(SDI_VD)))
+        goto fail;
+    const sdi_rel *ve = &rel->r[SDI_VE], *vd = &rel->r[SDI_VD];
+    off = sdi_alloc(m, ((size_t)nv + 1) * sizeof *off);
+    adj = sdi_alloc(m, ((size_t)ve->off[nv] + vd->off[nv] + 1) * sizeof *adj);
+    if (!off || !adj)
+        goto fail;
+    for (uint32_t v = 0, n = 0; v <= nv; v++) {
+        off[v] = n;
+        if (v == nv)
+            break;
+        for (uint32_t k = ve->off[v]; k < ve->off[v + 1]; k++) {
+            const uint32_t *q = t->ev[ve->item[k]];
+            adj[n++] = q[0] == v ? q[1] : q[0];
+        }
+        for (uint32_t k = vd->off[v]; k < vd->off[v + 1]; k++) {
+            const uint32_t *q = t->oct[vd->item[k]];
+            adj[n++] = q[0] == v ? q[1] : q[0];
+        }
+        qsort(adj + off[v], n - off[v], sizeof *adj, cmp_u32);
+    }
+    /* count, then fill, the common neighbours of each G2 edge */
+    for (int pass = 0; pass < 2; pass++) {
+        for (uint32_t e = 0; e < ne; e++) {
+            if (SDI_RULE_RING[erule[e]] != SDI_RING_G2)
+                continue;
+            uint32_t a = t->ev[e][0], b = t->ev[e][1], n = 0;
+            bool inside = (t->efam[e] == FAM3) && !(t->eflag[e] & EF_DC);
+            uint32_t i = off[a], j = off[b];
+            while (i < off[a + 1] && j < off[b + 1]) {
+                if (adj[i] < adj[j])
+                    i++;
+                else if (adj[i] > adj[j])
+                    j++;
+                else {
+                    uint32_t x = adj[i];
+                    if ((i == off[a] || adj[i - 1] != x) && x != a && x != b && g2_keep(t, inside, x)) {
+                        if (pass)
+                            R->v[R->off[e] + n] = x;
+                        n++;
+                    }
+                    i++;
+                    j++;
+                }
+            }
+            if (pass == 0)
+                R->off[e + 1] = n;
+            else
+                R->len[e] = n;
+        }
+        if (pass == 0) {
+            for (uint32_t e = 0; e < ne; e++)
+                R->off[e + 1] += R->off[e];
+            R->v = sdi_alloc(m, ((size_t)R->off[ne] + 1) * sizeof *R->v);
+            R->cls = sdi_calloc(m, (size_t)R->off[ne] + 1, 1);
+            if (!R->v || !R->cls)
+                goto fail;
+        }
+    }
+    sdi_free(m, off);
+    sdi_free(m, adj);
+    return true;
+fail:
+    sdi_free(m, off);
+    sdi_free(m, adj);
+    return false;
+}

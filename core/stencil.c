@@ -1,0 +1,375 @@
+/* stencil.c — assembling S_l, the matrix from a level's points to the next level's, from the
+ * rules (rules.c), the neighbourhoods (rings.c) and the masks (masks.c).
+ *
+ * One builder for every rule family (OpenSubdiv's Far stencil tables in spirit): per row a
+ * weight pattern and the columns that are not implicit (csr.c). The steps:
+ *   1. rules: every edge's (in parallel parts), then every vertex's with the sizes of its rho
+ *      beside the edges' opposite vertices (both at once), then the rings of solid and G2 edges
+ *      and the Ying-Zorin rules and rows of the edges at singular vertices (yz.c);
+ *   2. patterns: each row's weights from its rule's mask, interned (the same weights bit for bit
+ *      are one pattern) and memoized by rule and size, so a level costs a few mask evaluations;
+ *   3. columns: vertex rows (rho in edge order, then diagonals and opposites) and edge rows (the
+ *      ring) filled at once into their places, counted in step 2.
+ * Where every edge row's ring is two opposite vertices (a pure surface, no G2 or flattened rows)
+ * those are kept as they are (S.eopp) instead of being copied. No adjacency list is built for
+ * the common cases, so the memory is the matrix itself. Every row sums to 1 (tests/core).
+ *
+ * The rules and stencils of a level are built all-or-nothing: on failure the level has neither.
+ */
+#include "internal.h"
+#include <string.h>
+
+/* The state of one build, shared by the steps that may run in parallel (each writes only its own
+ * arrays or its own rows of col). */
+typedef struct build {
+    sd_mem *m;
+    const sd_topo *t;
+    int weights, scheme, threads;
+    uint8_t *vr, *er;                /* the level's rules (vrule, erule) */
+    uint8_t *take;                   /* per edge: which end reads the other through it */
+    uint32_t *cnt_a, *cnt_b;         /* rho sizes (rings.c); cnt_a then becomes cur */
+    uint32_t (*opp)[2];              /* opposite vertices of edges (rings.c) */
+    uint8_t *nopp;
+    sd_yzend (*gam)[2];              /* Ying-Zorin rules per edge end (rules.c) */
+    sdi_rings sr, gr;                /* rings of solid and G2 edges */
+    sd_yzrows yz;                    /* flattened Ying-Zorin rows (yz.c) */
+    sdi_rels rel;                    /* the level's incidence relations, if a ring needs them */
+    bool stride;                     /* edge rings stay in opp (S.eopp): no solid or G2 rings */
+    sd_pats pats;
+    double *wbuf;                    /* one row's weights */
+    uint32_t wcap;
+    uint64_t nexp, nring, ebase;     /* explicit columns; ring entries; where edge rows start */
+    uint32_t *cur, *col;             /* where each vertex's rho goes in col; col */
+    double loopc[SDI_LOOP_CACHE];    /* Loop weights by valence */
+} build;
+
+/* The explicit columns of edge e's row: its ring. */
+static inline uint32_t ring_len(const build *B, uint32_t e)
+{
+    switch (SDI_RULE_RING[B->er[e]]) {
+    case SDI_RING_OPPOSITE:
+    case SDI_RING_BOUNDARY_OPPOSITE:
+        return (B->nopp[e] & 3) == 2 ? 2u : 0u;
+    case SDI_RING_SOLID:
+        return B->sr.len[e];
+    case SDI_RING_G2:
+        return B->gr.len[e];
+    case SDI_RING_FLAT:
+        return B->yz.off[e + 1] - B->yz.off[e];
+    default:
+        return 0;
+    }
+}
+static inline const uint32_t *ring_of(const build *B, uint32_t e)
+{
+    switch (SDI_RULE_RING[B->er[e]]) {
+    case SDI_RING_OPPOSITE:
+    case SDI_RING_BOUNDARY_OPPOSITE:
+        return B->opp[e];
+    case SDI_RING_SOLID:
+        return B->sr.v + B->sr.off[e];
+    case SDI_RING_FLAT:
+        return B->yz.col + B->yz.off[e];
+    default:
+        return B->gr.v + B->gr.off[e];
+    }
+}
+
+/* ---- 1. rules and neighbourhoods ---------------------------------------------------------- */
+
+static void vrules_task(void *arg)
+{
+    build *B = arg;
+    sdi_vertex_rules(B->t, B->scheme, B->vr, B->cnt_a, B->cnt_b, B->take);
+}
+
+static void opp_task(void *arg)
+{
+    build *B = arg;
+    if (B->nopp)
+        sdi_edge_opposites(B->t, B->er, B->opp, B->nopp);
+}
+
+static bool choose(build *B, sd_complex *cx, sd_level *lv)
+{
+    sd_mem *m = B->m;
+    const sd_topo *t = B->t;
+    const uint32_t nv = t->nv, ne = t->ne;
+    const bool solids = t->ntet || t->noct;
+    B->vr = lv->vrule = sdi_alloc(m, (size_t)nv + 1);
+    B->er = lv->erule = sdi_alloc(m, (size_t)ne + 1);
+    B->cnt_a = sdi_calloc(m, nv, sizeof *B->cnt_a);
+    if (B->scheme == SD_SOLID_AVERAGED && solids)
+        B->cnt_b = sdi_calloc(m, nv, sizeof *B->cnt_b);
+    B->take = sdi_alloc(m, (size_t)ne + 1);
+    if (!B->vr || !B->er || !B->cnt_a || (!B->cnt_b && B->scheme == SD_SOLID_AVERAGED && solids) ||
+        !B->take)
+        return false;
+    bool any_g2e, any_opp;
+    sdi_edge_rules(t, B->threads, B->er, &any_g2e, &any_opp);
+    if (any_opp) {
+        B->opp = sdi_alloc(m, (size_t)ne * sizeof *B->opp);
+        B->nopp = sdi_alloc(m, (size_t)ne + 1);
+        if (!B->opp || !B->nopp)
+            return false;
+    }
+    /* vertex rules and rho sizes, and the edges' opposite vertices, at once */
+    sdi_par2(B->threads, nv + (uint64_t)ne, vrules_task, B, opp_task, B);
+    if (solids && !sdi_solid_rings(m, t, B->er, B->scheme, B->threads, &B->sr))
+        return false;
+    if (any_g2e && !sdi_g2_rings(m, &B->rel, B->er, &B->gr))
+        return false;
+    B->stride = any_opp && !solids && !any_g2e;
+    if (t->ovmask & OVM_YZ) { /* Ying-Zorin petal rules for the edges at singular vertices */
+        B->gam = sdi_alloc(m, ((size_t)ne + 1) * sizeof *B->gam);
+        if (!B->gam || !sdi_rels_need(m, &B->rel, SDI_REL(SDI_VF) | SDI_REL(SDI_EF)) ||
+            !sdi_yz_rules(m, cx, lv->index, t, &B->rel, lv->ch[0].data, B->gam, &lv->geo) ||
+            !sdi_yz_flat_rows(m, t, &B->rel.r[SDI_EF], (const sd_yzend(*)[2])B->gam, B->er, &B->yz))
+            return false;
+        if (B->yz.n) /* flattened rows are wider than two opposite vertices */
+            B->stride = false;
+    }
+    return true;
+}
+
+/* ---- 2. patterns ------------------------------------------------------------------------- */
+
+enum { MEMO = 64 }; /* rows memoized by rule and size up to this size */
+
+/* Room for a row of n weights. */
+static bool wbuf_fit(build *B, uint32_t n)
+{
+    if (n <= B->wcap)
+        return true;
+    double *w = sdi_realloc(B->m, B->wbuf, (size_t)n * sizeof *w);
+    if (!w)
+        return false;
+    B->wbuf = w;
+    B->wcap = n;
+    return true;
+}
+
+/* A vertex row is [self, a x |rho|, b x octahedral opposites]; cur[v]: where v's rho goes. */
+static bool vertex_patterns(build *B, sd_csrb *S)
+{
+    const uint32_t nv = B->t->nv;
+    const uint32_t *cnt_b = B->cnt_b;
+    uint32_t *cnt_a = B->cnt_a, *cur = B->cnt_a;
+    uint32_t vmemo[SD_RULE_COUNT][MEMO];
+    memset(vmemo, 0xff, sizeof vmemo);
+    uint64_t nexp = 0;
+    for (uint32_t v = 0; v < nv; v++) {
+        uint8_t r = B->vr[v];
+        uint32_t na = cnt_a[v], nb = cnt_b ? cnt_b[v] : 0, id = UINT32_MAX;
+        if (v % SD_CHK == 0)
+            S->kchk[v / SD_CHK] = nexp;
+        cur[v] = (uint32_t)nexp;
+        nexp += na + nb;
+        bool memo = nb == 0 && na < MEMO;
+        if (memo)
+            id = vmemo[r][na];
+        if (id == UINT32_MAX) {
+            sdi_vnb nbh = {na, nb, B->weights, B->scheme, B->loopc};
+            sdi_vmask w = sdi_vertex_mask(r, &nbh);
+            if (!wbuf_fit(B, 1 + na + nb))
+                return false;
+            double *wbuf = B->wbuf;
+            wbuf[0] = w.self;
+            for (uint32_t i = 0; i < na; i++)
+                wbuf[1 + i] = w.a;
+            for (uint32_t i = 0; i < nb; i++)
+                wbuf[1 + na + i] = w.b;
+            if ((id = sdi_pats_intern(B->m, &B->pats, wbuf, 1 + na + nb)) == UINT32_MAX)
+                return false;
+            if (memo)
+                vmemo[r][na] = id;
+        }
+        if (!sdi_csrb_set_pat(B->m, S, v, id))
+            return false;
+    }
+    B->nexp = nexp;
+    return true;
+}
+
+/* The pattern of an edge row that is not its rule's mask over its ring: a flattened row (yz.c)
+ * or 003 Fig. 4f from its singular ends (masks.c); UINT32_MAX: no memory. */
+static uint32_t yz_pattern(build *B, uint32_t e, uint32_t k, bool flat)
+{
+    double *wbuf;
+    if (flat) {
+        if (!wbuf_fit(B, 2 + k))
+            return UINT32_MAX;
+        wbuf = B->wbuf;
+        wbuf[0] = B->yz.ends[e][0];
+        wbuf[1] = B->yz.ends[e][1];
+        memcpy(wbuf + 2, B->yz.w + B->yz.off[e], k * sizeof *wbuf);
+        return sdi_pats_intern(B->m, &B->pats, wbuf, 2 + k);
+    }
+    sdi_emask w = sdi_mask_yz_petal_edge(B->gam[e]);
+    if (!wbuf_fit(B, 4))
+        return UINT32_MAX;
+    wbuf = B->wbuf;
+    wbuf[0] = w.end[0];
+    wbuf[1] = w.end[1];
+    wbuf[2] = wbuf[3] = w.ring;
+    return sdi_pats_intern(B->m, &B->pats, wbuf, 4);
+}
+
+/* An edge row is [end, end, ring...]. */
+static bool edge_patterns(build *B, sd_csrb *S)
+{
+    const uint32_t nv = B->t->nv, ne = B->t->ne;
+    const uint8_t *er = B->er;
+    uint32_t ememo[SD_RULE_COUNT][MEMO];
+    memset(ememo, 0xff, sizeof ememo);
+    uint64_t nexp = B->nexp, nring = 0;
+    B->ebase = nexp;
+    for (uint32_t e = 0; e < ne; e++) {
+        uint32_t k = ring_len(B, e), r = nv + e;
+        if (r % SD_CHK == 0)
+            S->kchk[r / SD_CHK] = nexp;
+        nring += k;
+        if (!B->stride)
+            nexp += k;
+        uint8_t ring = SDI_RULE_RING[er[e]];
+        const uint8_t *cls = ring == SDI_RING_SOLID && B->scheme == SD_SOLID_AVERAGED
+                             ? B->sr.cls + B->sr.off[e] : NULL;
+        bool petal = B->gam && er[e] == SD_RULE_LOOP && k == 2 &&
+                     (B->gam[e][0].kind == SD_YZ_FIRST || B->gam[e][1].kind == SD_YZ_FIRST);
+        bool flat = ring == SDI_RING_FLAT;
+        bool memo = !cls && k < MEMO && !petal && !flat;
+        uint32_t id = memo ? ememo[er[e]][k] : UINT32_MAX;
+        if ((flat || petal) && (id = yz_pattern(B, e, k, flat)) == UINT32_MAX)
+            return false;
+        if (id == UINT32_MAX) {
+            sdi_enb nbh = {k, cls};
+            sdi_emask w = sdi_edge_mask(er[e], &nbh);
+            if (!wbuf_fit(B, 2 + k))
+                return false;
+            double *wbuf = B->wbuf;
+            wbuf[0] = w.end[0];
+            wbuf[1] = w.end[1];
+            for (uint32_t i = 0; i < k; i++)
+                wbuf[2 + i] = cls && cls[i] ? w.diag : w.ring;
+            if ((id = sdi_pats_intern(B->m, &B->pats, wbuf, 2 + k)) == UINT32_MAX)
+                return false;
+            if (memo)
+                ememo[er[e]][k] = id;
+        }
+        if (!sdi_csrb_set_pat(B->m, S, nv + e, id))
+            return false;
+    }
+    B->nexp = nexp;
+    B->nring = nring;
+    return true;
+}
+
+/* Cell points of octahedra: all their columns implicit. */
+static bool cell_patterns(build *B, sd_csrb *S)
+{
+    const sd_topo *t = B->t;
+    const uint64_t first = (uint64_t)t->nv + t->ne, nrows = first + t->noct;
+    for (uint64_t r = first; r < nrows; r++)
+        if (r % SD_CHK == 0)
+            S->kchk[r / SD_CHK] = B->nexp;
+    S->kchk[(nrows + SD_CHK - 1) / SD_CHK] = B->nexp;
+    if (!t->noct)
+        return true;
+    for (int i = 0; i < 6; i++)
+        B->wbuf[i] = sdi_mask_cell(B->scheme, i);
+    uint32_t id = sdi_pats_intern(B->m, &B->pats, B->wbuf, 6);
+    if (id == UINT32_MAX)
+        return false;
+    for (uint32_t o = 0; o < t->noct; o++)
+        if (!sdi_csrb_set_pat(B->m, S, (uint32_t)first + o, id))
+            return false;
+    return true;
+}
+
+/* ---- 3. columns -------------------------------------------------------------------------- */
+
+static void vrows_task(void *arg)
+{
+    build *B = arg;
+    sdi_vertex_rho_cols(B->t, B->scheme, B->vr, B->take, B->cur, B->col);
+}
+
+static void erows_task(void *arg)
+{
+    build *B = arg;
+    if (B->stride)
+        return;
+    uint64_t at = B->ebase;
+    for (uint32_t e = 0; e < B->t->ne; e++) {
+        uint32_t k = ring_len(B, e);
+        if (k) {
+            memcpy(B->col + at, ring_of(B, e), k * sizeof *B->col);
+            at += k;
+        }
+    }
+}
+
+sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
+{
+    sd_mem *m = &cx->mem;
+    const sd_topo *t = &lv->t;
+    const uint32_t nv = t->nv, ne = t->ne, no = t->noct;
+    build B = {.m = m, .t = t, .weights = cx->opt.surface_weights, .scheme = cx->opt.solid_scheme,
+               .threads = cx->opt.threads, .rel = {.t = t}, .wcap = 64};
+    sd_result rc = SD_OK;
+    for (uint32_t k = 1; k < SDI_LOOP_CACHE; k++)
+        B.loopc[k] = sdi_loop_weight(B.weights, k);
+    B.loopc[0] = 0;
+
+    uint64_t nrows = (uint64_t)nv + ne + no;
+    if (nrows >= UINT32_MAX)
+        return sdi_fail(err, SD_ERR_LIMIT, -1, -1, "too many points for 32-bit ids");
+    if (!choose(&B, cx, lv))
+        goto nomem;
+    B.wbuf = sdi_alloc(m, (size_t)B.wcap * sizeof *B.wbuf);
+    if (!B.wbuf || !sdi_csrb_init(m, &lv->S, nv, ne, no, nv, t->ev, t->oct) ||
+        !vertex_patterns(&B, &lv->S) || !edge_patterns(&B, &lv->S) || !cell_patterns(&B, &lv->S))
+        goto nomem;
+    B.cur = B.cnt_a;
+    uint64_t nnz = (B.nexp - (B.stride ? 0 : B.nring)) + B.nring + nv + 2ull * ne + 6ull * no;
+    if (nnz >= UINT32_MAX) {
+        rc = sdi_fail(err, SD_ERR_LIMIT, -1, -1, "subdivision matrix too large for 32-bit offsets");
+        goto fail;
+    }
+    lv->S.nexp = B.nexp;
+    B.col = lv->S.col = sdi_alloc(m, (B.nexp + 1) * sizeof *lv->S.col);
+    if (!lv->S.col || !sdi_csrb_finish(m, &lv->S, &B.pats, nnz))
+        goto nomem;
+    if (B.stride) { /* the opposite vertices are the edge rows' explicit columns as they are */
+        lv->S.eopp = B.opp;
+        B.opp = NULL;
+    }
+    /* the columns: vertex rows and edge rows at once */
+    sdi_par2(B.threads, B.nexp, vrows_task, &B, erows_task, &B);
+
+    lv->have_rules = true;
+    goto out;
+
+nomem:
+    rc = sdi_fail_nomem(err, m);
+fail:
+    sdi_free(m, lv->vrule);
+    sdi_free(m, lv->erule);
+    sdi_free(m, lv->geo);
+    lv->vrule = lv->erule = lv->geo = NULL;
+    sdi_csrb_free(m, &lv->S);
+out:
+    sdi_pats_free(m, &B.pats);
+    sdi_free(m, B.take);
+    sdi_free(m, B.gam);
+    sdi_free(m, B.wbuf);
+    sdi_free(m, B.cnt_a);
+    sdi_free(m, B.cnt_b);
+    sdi_free(m, B.opp);
+    sdi_free(m, B.nopp);
+    sdi_rings_free(m, &B.sr);
+    sdi_rings_free(m, &B.gr);
+    sdi_yzrows_free(m, &B.yz);
+    sdi_rels_free(m, &B.rel);
+    return rc;
+}
