@@ -1,6 +1,6 @@
 /* carry.c — the tags and per-simplex rules of a complex carried through one refinement step
- * (sd_refine), so that the children of tagged simplices stay tagged and keep their rules (SPEC
- * Sec. 3, 000 Sec. 4.2).
+ * (sd_refine), so that the children of tagged simplices stay tagged and keep their rules (000 Sec. 4.2;
+ * docs/RULES.md "Priority").
  *
  * What a step did is read off the refinement alone: the new vertex splitting each edge (the
  * refinement's `split`, new vertices numbered after the old ones) and the triangles of the

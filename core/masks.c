@@ -18,7 +18,7 @@
 
 /* ---- vertex masks ---------------------------------------------------------------------- */
 
-/* The 0-mask: the vertex stays (000 Sec. 4.1; SPEC 3.1: curve ends, junctions, corners). */
+/* The 0-mask: the vertex stays (000 Sec. 4.1; docs/RULES.md "Fixed points": curve ends, junctions, corners). */
 static sdi_vmask vmask_fixed(const sdi_vnb *n)
 {
     (void)n;
@@ -34,7 +34,7 @@ static sdi_vmask vmask_bspline(const sdi_vnb *n)
 
 double sdi_loop_weight(int weights, uint32_t m)
 {
-    if (weights == SD_WEIGHTS_LOOP) { /* Loop 1987's beta(m) / m (SPEC Sec. 3) */
+    if (weights == SD_WEIGHTS_LOOP) { /* Loop 1987's beta(m) / m (docs/RULES.md) */
         double x = 3.0 / 8.0 + cos(2 * M_PI / m) / 4;
         return (5.0 / 8.0 - x * x) / m;
     }
@@ -62,7 +62,7 @@ static sdi_vmask vmask_box(const sdi_vnb *n)
     return box_vertex(n->na);
 }
 
-/* The solid's vertex rule: the box spline, or the averaged scheme (001 App. A, SPEC 3.1):
+/* The solid's vertex rule: the box spline, or the averaged scheme (001 App. A; docs/RULES.md "Averaged scheme"):
  * 9/16 x + 7/16 (3 sum edge neighbours + sum octahedral opposites) / (3 n_e + n_o). */
 static sdi_vmask vmask_solid(const sdi_vnb *n)
 {
@@ -102,7 +102,7 @@ static sdi_emask box_edge(uint32_t k)
     return (sdi_emask){{end, end}, 3.0 / (8.0 * k), 0};
 }
 
-/* The solid's edge rule: the box spline, or the averaged scheme (001 App. A, SPEC 3.1):
+/* The solid's edge rule: the box spline, or the averaged scheme (001 App. A; docs/RULES.md "Averaged scheme"):
  * 7/24 (a + b) + 5/12 (4 sum face-ring + sum diagonal-ring) / (4 n_f + n_d). */
 static sdi_emask emask_solid(const sdi_enb *n)
 {

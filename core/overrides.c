@@ -1,4 +1,4 @@
-/* overrides.c — the per-simplex non-manifold rules (000 Sec. 3.5, SPEC Sec. 3; DECISIONS 23-25):
+/* overrides.c — the per-simplex non-manifold rules (000 Sec. 3.5; docs/RULES.md; DECISIONS 23-25):
  * checking them against level 0 and marking their bits.
  *
  * G1 is a singularity — a vertex becomes a corner, an edge a crease, exactly as a tag, marked

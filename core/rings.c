@@ -1,4 +1,4 @@
-/* rings.c — who the neighbours are: rho(x) of a vertex and the ring of an edge (SPEC Sec. 3),
+/* rings.c — who the neighbours are: rho(x) of a vertex and the ring of an edge (docs/RULES.md),
  * read from a level's topology for the rules rules.c chose.
  *
  * rho(x) is filtered to the vertex's rule by the edges it is read through (000 Algorithm 5 line

@@ -1,4 +1,4 @@
-/* rules.c — one rule per vertex and edge of a level (SPEC Sec. 3; docs/RULES.md).
+/* rules.c — one rule per vertex and edge of a level (docs/RULES.md).
  *
  * Priority: singular tags (000 Sec. 4.1) > the simplex's own choice (N1, N2, G1, G2; overrides.c) > the
  * default non-manifold rule (G2, or G1 as tags; Ying-Zorin's where only triangles meet) >
@@ -52,7 +52,7 @@ bool sdi_rule_extraordinary(uint8_t rule, uint32_t k, bool edge)
 uint8_t sdi_vertex_rule(const sd_topo *t, uint32_t v)
 {
     uint8_t fam = t->vfam[v], nm = t->vnm[v], fl = t->vflag[v];
-    /* singular tags first (SPEC Sec. 3 priority): corner; crease (B-spline along the creases);
+    /* singular tags first (docs/RULES.md "Priority"): corner; crease (B-spline along the creases);
      * embedded surface (Loop over the tagged triangles, B-spline along its boundary). A vertex
      * where creases meet a surface is a corner. */
     if (fl & VF_SING || (fl & VF_S_ANY) == VF_S_ANY)

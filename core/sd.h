@@ -74,7 +74,7 @@ typedef struct sd_allocator {
     void *ud;
 } sd_allocator;
 
-enum { SD_WEIGHTS_WARREN = 0, SD_WEIGHTS_LOOP = 1 };   /* Loop vertex weights, SPEC Sec. 3 */
+enum { SD_WEIGHTS_WARREN = 0, SD_WEIGHTS_LOOP = 1 };   /* Loop vertex weights, docs/RULES.md */
 enum { SD_SOLID_BOX = 0, SD_SOLID_AVERAGED = 1 };      /* solid scheme, 001 Sec. 3 / App. A */
 enum { SD_NM_G2 = 0, SD_NM_G1 = 1 };                   /* default non-manifold rule, 000 Sec. 3.5 */
 enum { SD_NMSURF_CHANG_QIN = 0, SD_NMSURF_YING_ZORIN = 1 }; /* pure-triangle non-manifold regions */
@@ -160,7 +160,7 @@ const uint32_t *sd_level_edges(const sd_level *lv, uint32_t *n);
 typedef enum { SD_ORIGIN_INPUT = 0, SD_ORIGIN_VERTEX, SD_ORIGIN_EDGE, SD_ORIGIN_CELL } sd_origin_kind;
 sd_origin_kind sd_level_origin(const sd_level *lv, uint32_t i, uint32_t *a, uint32_t *b);
 
-/* ---- classification and rules (000 Sec. 2, SPEC Sec. 1 and 3) ----------------------------- */
+/* ---- classification and rules (000 Sec. 2, docs/RULES.md) ----------------------------- */
 
 /* The rules, numbered in the order of the table in rule_table.h (docs/RULES.md says which paper
  * equation each implements). */
@@ -192,7 +192,7 @@ sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *
  * stay tagged at every level; drops computed levels >= 1. idx/size as for sd_complex_new. */
 sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint8_t *size,
                                   size_t n, sd_error *err);
-/* Per-simplex non-manifold rules (000 Sec. 3.5, SPEC Sec. 3), for non-manifold vertices and
+/* Per-simplex non-manifold rules (000 Sec. 3.5; docs/RULES.md), for non-manifold vertices and
  * edges of level 0; their descendants at every level keep them:
  *   SD_RULE_N1  (type 1) the rules of dimension `dimension` alone: the simplex follows the rule it
  *               has in C_dimension (the complex of the maximal simplices of that dimension), so
@@ -279,7 +279,7 @@ typedef struct sd_csr {
  * are materialized on the first call and kept (counted by sd_complex_memory). */
 sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err);
 
-/* ---- edits (SPEC Sec. 5) ------------------------------------------------------------------ */
+/* ---- edits (004 Sec. 4.1; docs/API.md "Control-point edits") ------------------------------------------------------------------ */
 
 /* Set new values of channel `channel` (0 = positions) at n control points: point idx[i] gets
  * values[i*ncomp .. i*ncomp+ncomp-1]. Every computed level is updated through the cached
@@ -328,7 +328,7 @@ typedef struct sd_tag_set {
 } sd_tag_set;
 
 /* Carry `in`, given for the complex that refinement r was made from, to the refined complex:
- * children of tagged simplices stay tagged and keep their rules (SPEC Sec. 3). A vertex stays
+ * children of tagged simplices stay tagged and keep their rules (docs/RULES.md "Priority"). A vertex stays
  * itself; a split edge becomes its two halves, and its N1 / N2 / G2 choice also goes to the
  * vertex splitting it; a triangle becomes its children; a petal tag keeps its vertex and names
  * the child of its triangle there; an N2 pair is replaced by the children holding the new

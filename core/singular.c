@@ -13,7 +13,7 @@
  * preference makes, where only triangles meet, non-manifold edges creases and non-manifold
  * vertices simple (one flower, two singular edges) or complex (003 Sec. 2; DECISIONS 26).
  *
- * Priority (SPEC Sec. 3): tag > the simplex's own choice > the default rule. rules.c turns the
+ * Priority (docs/RULES.md "Conventions"): tag > the simplex's own choice > the default rule. rules.c turns the
  * bits into rules. Everything is recomputed from the stored tags and overrides on each change
  * (sdi_apply_singular), and the changed level 0 drops its rules and the finer levels.
  */

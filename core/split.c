@@ -1,4 +1,4 @@
-/* split.c — the topology of one level (SPEC Sec. 2; 000 Algorithm 6; 001 Algorithm 1).
+/* split.c — the topology of one level (docs/RULES.md "Splitting"; 000 Algorithm 6; 001 Algorithm 1).
  *
  *   edge        -> 2 edges at the edge point
  *   triangle    -> 4 triangles
@@ -12,7 +12,7 @@
  * says for every child cell which parent entity each of its vertices, edges and faces comes from;
  * the split then only maps local references to global ids.
  *
- * Diagonals (SPEC Sec. 3.1): a tetrahedron with pair (e_k, e_5-k) gives its octahedron the
+ * Diagonals (docs/RULES.md "Diagonal inheritance"): a tetrahedron with pair (e_k, e_5-k) gives its octahedron the
  * diagonal joining those edges' points; corner tetrahedra keep the parent's pair (they are
  * scaled copies). An octahedron with diagonal (p,q) gives its corner octahedra diagonals parallel
  * to it — [vertex point, cell point] at p and q, [m(v,p), m(v,q)] at an equator vertex v — and its
@@ -269,7 +269,7 @@ static void tm_oct(tmpl *T)
     T->pf = SDI_OCT_F;
     const int C = 18;
 #define E(i, j) ledge(T, i, j)
-    /* corner octahedra; slots (p,q,a,a2,b,b2), diagonal first (SPEC Sec. 3.1) */
+    /* corner octahedra; slots (p,q,a,a2,b,b2), diagonal first (docs/RULES.md "Diagonal inheritance") */
     int c0[6] = {0, C, E(0, 2), E(0, 3), E(0, 4), E(0, 5)};
     int c1[6] = {1, C, E(1, 2), E(1, 3), E(1, 4), E(1, 5)};
     int c2[6] = {E(2, 0), E(2, 1), 2, C, E(2, 4), E(2, 5)};
