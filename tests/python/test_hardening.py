@@ -1,0 +1,674 @@
+"""Hostile clients must not take the daemon down or push it out of memory (issue 14).
+
+Attackers connect from other loopback addresses (127.0.0.2 and up) than the well-behaved client
+(127.0.0.1), so per-client limits apply to them only; every load here is bounded in time and
+count and stays on loopback. Each test failed on the daemon before the hardening change."""
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import threading
+import time
+
+import pytest
+import requests
+
+from daemon import Daemon, Session
+
+CUBE_V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]]
+CUBE_S = [[0, 1, 2, 3], [1, 2, 3, 4]]
+
+
+def raw_socket(d, src="127.0.0.2", timeout=5.0):
+    """A TCP connection to the daemon from loopback address `src`."""
+    host, port = d.url.split("//")[1].split(":")
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.settimeout(timeout)
+    s.bind((src, 0))
+    s.connect((host, int(port)))
+    return s
+
+
+def closed_by_peer(s, within):
+    """True if the daemon closes (or resets) the socket within `within` seconds."""
+    s.settimeout(0.2)
+    end = time.time() + within
+    while time.time() < end:
+        try:
+            if s.recv(65536) == b"":
+                return True
+        except socket.timeout:
+            continue
+        except OSError:
+            return True
+    return False
+
+
+def timed_get(url, **kw):
+    t = time.time()
+    r = requests.get(url, timeout=10, **kw)
+    return r, time.time() - t
+
+
+class Slowloris:
+    """`n` sockets from addresses 127.0.0.2.. that send request headers one byte at a time
+    (and reconnect when the daemon closes them), until stop()."""
+
+    def __init__(self, d, n, per_address, first=2):
+        self.d, self.n, self.per, self.first = d, n, per_address, first
+        self.stop_ev = threading.Event()
+        self.socks = []
+        for i in range(n):
+            self.socks.append(self._open(i))
+        self.t = threading.Thread(target=self._run, daemon=True)
+        self.t.start()
+
+    def _open(self, i):
+        src = f"127.0.0.{self.first + i // self.per}"
+        try:
+            s = raw_socket(self.d, src, timeout=1)
+            s.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n")
+            s.setblocking(False)
+            return s
+        except OSError:
+            return None
+
+    def _run(self):
+        while not self.stop_ev.wait(0.5):
+            for i, s in enumerate(self.socks):
+                try:
+                    if s is None:
+                        raise OSError
+                    s.send(b"X")
+                except (OSError, BlockingIOError):
+                    if s is not None:
+                        s.close()
+                    self.socks[i] = self._open(i)
+
+    def stop(self):
+        self.stop_ev.set()
+        self.t.join(5)
+        for s in self.socks:
+            if s is not None:
+                s.close()
+
+
+# ---- availability: connection slots ----------------------------------------------------------
+
+def test_slowloris_and_idle_sockets_do_not_lock_out_health_or_sessions():
+    """64 slots: 48 slowloris sockets and 16 idle keep-alive sockets from other addresses. Health
+    checks and an authenticated client keep getting answers."""
+    d = Daemon("--max-connections", "64", "--max-connections-per-client", "16",
+               "--header-timeout", "4")
+    try:
+        s = Session(d)
+        assert s.put_complex({"vertices": CUBE_V, "simplices": CUBE_S}).status_code == 200
+        idle = []
+        for i in range(16):
+            k = raw_socket(d, "127.0.0.6")
+            k.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")
+            assert b"200" in k.recv(4096).split(b"\r\n")[0]
+            idle.append(k)
+        loris = Slowloris(d, 48, 16)
+        try:
+            worst = 0.0
+            for _ in range(8):
+                r, dt = timed_get(d.url + "/healthz")
+                assert r.status_code == 200
+                r2 = s.req("GET", "")
+                assert r2.status_code == 200
+                worst = max(worst, dt)
+                time.sleep(0.5)
+            assert worst < 3.0, worst
+        finally:
+            loris.stop()
+            for k in idle:
+                k.close()
+    finally:
+        assert d.stop() == 0
+
+
+def test_header_deadline_closes_a_trickling_socket():
+    d = Daemon("--header-timeout", "2")
+    try:
+        k = raw_socket(d)
+        k.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n")
+        t0 = time.time()
+        closed = False
+        while time.time() - t0 < 8:
+            try:
+                k.send(b"X")
+            except OSError:
+                closed = True
+                break
+            if closed_by_peer(k, 0.5):
+                closed = True
+                break
+        assert closed and time.time() - t0 < 5, "a socket that never finishes its headers must be closed"
+        k.close()
+    finally:
+        d.stop()
+
+
+def test_body_deadline_closes_a_trickling_upload():
+    d = Daemon("--header-timeout", "2", "--body-min-rate", "100000")
+    try:
+        s = Session(d)
+        k = raw_socket(d)
+        k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
+                   f"Authorization: Bearer {s.token}\r\nContent-Type: application/json\r\n"
+                   "Content-Length: 1000000\r\n\r\n").encode())
+        t0 = time.time()
+        closed = False
+        while time.time() - t0 < 12:
+            try:
+                k.send(b" ")
+            except OSError:
+                closed = True
+                break
+            if closed_by_peer(k, 0.5):
+                closed = True
+                break
+        # 1 MB at >= 100 kB/s: about 2 s + 10 s, then closed
+        assert closed and time.time() - t0 < 12
+        k.close()
+    finally:
+        d.stop()
+
+
+def test_per_client_connection_cap():
+    d = Daemon("--max-connections-per-client", "4")
+    try:
+        socks = [raw_socket(d, "127.0.0.3") for _ in range(4)]
+        extra = raw_socket(d, "127.0.0.3")
+        assert closed_by_peer(extra, 2), "a fifth connection from one address must be refused"
+        assert requests.get(d.url + "/healthz", timeout=5).status_code == 200  # 127.0.0.1
+        for k in socks + [extra]:
+            k.close()
+    finally:
+        d.stop()
+
+
+# ---- availability: the session table ---------------------------------------------------------
+
+def test_ttl_is_capped():
+    d = Daemon("--max-ttl", "3600")
+    try:
+        r = requests.post(d.url + "/v1/sessions", json={"ttl_s": 604800}, timeout=5)
+        assert r.status_code == 201, r.text
+        assert r.json()["ttl_s"] == 3600
+    finally:
+        d.stop()
+
+
+def test_empty_sessions_are_evicted_before_refusing():
+    """Unauthenticated clients filling the table with empty long-lived sessions lock nobody out."""
+    d = Daemon("--max-sessions", "8", "--session-rate", "1000")
+    try:
+        src = requests.Session()
+        for _ in range(8):
+            assert src.post(d.url + "/v1/sessions", json={"ttl_s": 86400}).status_code == 201
+        s = Session(d)   # the ninth: an empty one went
+        assert s.put_complex({"vertices": CUBE_V, "simplices": CUBE_S}).status_code == 200
+    finally:
+        d.stop()
+
+
+def test_full_table_gives_a_true_retry_after():
+    d = Daemon("--max-sessions", "2", "--session-rate", "1000")
+    try:
+        for _ in range(2):
+            s = Session(d, ttl_s=3)
+            assert s.put_complex({"vertices": CUBE_V, "simplices": CUBE_S}).status_code == 200
+        r = requests.post(d.url + "/v1/sessions", json={}, timeout=5)
+        assert r.status_code in (429, 503)
+        ra = int(r.headers["Retry-After"])
+        assert 1 <= ra <= 4, ra
+        time.sleep(ra + 1.5)
+        assert requests.post(d.url + "/v1/sessions", json={}, timeout=5).status_code == 201
+    finally:
+        d.stop()
+
+
+def test_session_creation_is_rate_limited_per_client():
+    d = Daemon("--session-rate", "5")
+    try:
+        host, port = d.url.split("//")[1].split(":")
+        codes, ra = [], None
+        for _ in range(8):
+            k = raw_socket(d, "127.0.0.4")
+            k.sendall(b"POST /v1/sessions HTTP/1.1\r\nHost: x\r\nContent-Length: 0\r\n"
+                      b"Connection: close\r\n\r\n")
+            head = b""
+            while b"\r\n\r\n" not in head:
+                chunk = k.recv(4096)
+                if not chunk:
+                    break
+                head += chunk
+            codes.append(int(head.split(b" ")[1]))
+            m = re.search(rb"Retry-After: (\d+)", head, re.I)
+            if m:
+                ra = int(m.group(1))
+            k.close()
+        assert codes[:5] == [201] * 5 and set(codes[5:]) == {429}, codes
+        assert ra is not None and 1 <= ra <= 60
+        # another client is not affected
+        assert requests.post(d.url + "/v1/sessions", json={}, timeout=5).status_code == 201
+    finally:
+        d.stop()
+
+
+# ---- memory outside the limits ---------------------------------------------------------------
+
+def peak_reset(d):
+    with open(f"/proc/{d.proc.pid}/clear_refs", "w") as f:
+        f.write("5")
+
+
+def peak_rss(d):
+    for line in open(f"/proc/{d.proc.pid}/status"):
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) * 1024
+    return 0
+
+
+def big_complex_text(nv, bad_last=False):
+    """A PUT /complex body of nv vertices on a grid and nv-3 triangles (a strip); with bad_last,
+    the last index is out of range, so the body is parsed in full and then refused."""
+    pts = ",".join(f"[{i % 1000}.125,{i // 1000}.375,{(i * i) % 97}.5]" for i in range(nv))
+    tris = [f"[{i},{i + 1},{i + 2}]" for i in range(nv - 2)]
+    if bad_last:
+        tris[-1] = f"[{nv - 3},{nv - 2},{nv + 5}]"
+    return '{"vertices":[' + pts + '],"simplices":[' + ",".join(tris) + "]}"
+
+
+def test_parsing_a_large_body_costs_a_small_multiple_of_its_size():
+    d = Daemon("--max-body-bytes", str(200 << 20))
+    try:
+        s = Session(d)
+        body = big_complex_text(1_200_000, bad_last=True).encode()
+        assert len(body) > 40e6
+        base = d.rss_bytes()
+        peak_reset(d)
+        r = s.req("PUT", "/complex", data=body, headers={"Content-Type": "application/json"})
+        assert r.status_code == 422 and "/simplices/" in r.text
+        grew = peak_rss(d) - base
+        assert grew < 4 * len(body), f"parse peak {grew / len(body):.1f}x the body"
+    finally:
+        d.stop()
+
+
+def test_memory_budget_refuses_instead_of_growing_and_rss_returns():
+    d = Daemon("--max-body-bytes", str(200 << 20), "--max-memory", str(600 << 20))
+    try:
+        body = big_complex_text(1_000_000, bad_last=True).encode()
+        base = d.rss_bytes()
+        sessions = [Session(d) for _ in range(4)]
+        codes = []
+
+        def put(s):
+            codes.append(s.req("PUT", "/complex", data=body,
+                               headers={"Content-Type": "application/json"}).status_code)
+        peak_reset(d)
+        ts = [threading.Thread(target=put, args=(s,)) for s in sessions]
+        for t in ts:
+            t.start()
+        for t in ts:
+            t.join()
+        assert set(codes) <= {422, 503}, codes
+        assert peak_rss(d) < base + (600 << 20) + len(body) * 4 + (100 << 20)
+        time.sleep(1.5)
+        assert d.rss_bytes() < base * 1.1 + (50 << 20), (d.rss_bytes(), base)
+    finally:
+        d.stop()
+
+
+def test_chunked_body_over_the_limit_is_refused_early():
+    d = Daemon("--max-body-bytes", str(1 << 20))
+    try:
+        s = Session(d)
+        k = raw_socket(d, "127.0.0.1", timeout=10)
+        k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
+                   f"Authorization: Bearer {s.token}\r\nContent-Type: application/json\r\n"
+                   "Transfer-Encoding: chunked\r\n\r\n").encode())
+        chunk = b"%x\r\n" % 65536 + b" " * 65536 + b"\r\n"
+        sent = 0
+        answer = b""
+        k.settimeout(0.01)
+        t0 = time.time()
+        while sent < (300 << 20) and time.time() - t0 < 20:
+            try:
+                k.sendall(chunk)
+                sent += 65536
+            except OSError:
+                break
+            try:
+                got = k.recv(4096)
+                if got == b"" or got:
+                    answer += got
+                    break
+            except socket.timeout:
+                pass
+        assert sent < (16 << 20), f"{sent} bytes were read before the refusal"
+        k.settimeout(2)
+        try:
+            while b"\r\n" not in answer:
+                got = k.recv(4096)
+                if not got:
+                    break
+                answer += got
+        except OSError:
+            pass
+        assert answer.startswith(b"HTTP/1.1 413"), answer[:80]
+        k.close()
+    finally:
+        d.stop()
+
+
+def test_get_complex_of_a_large_complex_streams_in_bounded_memory():
+    d = Daemon("--max-body-bytes", str(200 << 20))
+    try:
+        s = Session(d)
+        n = 1_000_000
+        body = big_complex_text(n).encode()
+        assert s.req("PUT", "/complex", data=body,
+                     headers={"Content-Type": "application/json"}).status_code == 200
+        base = d.rss_bytes()
+        peak_reset(d)
+        t0 = time.time()
+        r = s.req("GET", "/complex", stream=True)
+        assert r.status_code == 200
+        size = 0
+        for c in r.iter_content(1 << 20):
+            size += len(c)
+        dt = time.time() - t0
+        assert size > 40e6
+        assert peak_rss(d) - base < 200 << 20, (peak_rss(d) - base) / 1e6
+        assert dt < 15, dt
+    finally:
+        d.stop()
+
+
+# ---- one session must not stall the others ---------------------------------------------------
+
+def block_mesh(n):
+    out = subprocess.run(["/usr/bin/python3", os.path.join(os.path.dirname(__file__), "..", "..",
+                                                            "bench", "make_mesh.py"), "cubes", str(n)],
+                         check=True, capture_output=True, text=True).stdout
+    V, S = [], []
+    for line in out.splitlines():
+        t = line.split()
+        if t and t[0] == "v":
+            V.append([float(x) for x in t[1:4]])
+        elif t and t[0] == "s":
+            S.append([int(x) for x in t[1:]])
+    return {"vertices": V, "simplices": S}
+
+
+def test_unread_stream_does_not_block_edits():
+    d = Daemon()
+    try:
+        s = Session(d)
+        assert s.put_complex(block_mesh(6)).status_code == 200
+        assert s.level(3, format="vtu").status_code == 200      # computed
+        k = raw_socket(d, "127.0.0.1")
+        k.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        k.sendall((f"GET /v1/sessions/{s.id}/levels/3?format=vtu HTTP/1.1\r\nHost: x\r\n"
+                   f"Authorization: Bearer {s.token}\r\n\r\n").encode())
+        k.recv(100)          # the stream has begun; nothing more is read
+        time.sleep(0.5)
+        v = s.req("GET", "").json()["version"]
+        t0 = time.time()
+        r = s.req("PATCH", "/control-points", json={"moves": [{"index": 0, "position": [0.1, 0, 0]}]},
+                  headers={"If-Match": f'"{v}"'})
+        assert r.status_code == 200
+        assert time.time() - t0 < 2.0, "an edit waited for a stream that is not being read"
+        # other reads of the same session are not blocked either
+        r, dt = timed_get(s.base + "/levels/1/stats", headers=s.auth)
+        assert r.status_code == 200 and dt < 2.0
+        k.close()
+    finally:
+        d.stop()
+
+
+def test_compute_slots_are_fair_across_sessions():
+    """Session A asks for four heavy uncomputed levels at once; session B's small request gets a
+    slot before A's queued ones."""
+    d = Daemon("--threads", "2")
+    try:
+        a = [Session(d) for _ in range(4)]
+        body = block_mesh(8)
+        for s in a:
+            assert s.put_complex(body).status_code == 200
+        b = Session(d)
+        assert b.put_complex({"vertices": CUBE_V, "simplices": CUBE_S}).status_code == 200
+        t0 = time.time()
+        done = {}
+
+        def heavy(i, s):
+            s.level(3, format="vtu")
+            done[i] = time.time() - t0
+        # one client drives all four heavy sessions (same address): a second round of requests
+        ts = [threading.Thread(target=heavy, args=(i, s)) for i, s in enumerate(a)]
+        for t in ts:
+            t.start()
+        time.sleep(0.3)
+        r = b.level(2, format="json")
+        tb = time.time() - t0
+        for t in ts:
+            t.join()
+        assert r.status_code == 200
+        assert tb < max(done.values()), (tb, done)
+    finally:
+        d.stop()
+
+
+def test_a_killed_daemon_leaves_no_tetgen_helper():
+    from test_fill import surface  # noqa: E402  (a closed surface)
+    d = Daemon("--fill-timeout", "30")
+    try:
+        s = Session(d)
+        V, T = surface("icosphere", 3)
+        threading.Thread(target=lambda: s.put_complex(
+            {"vertices": V, "simplices": [], "fill": [{"surface": T, "max_volume": 1e-5}]}),
+            daemon=True).start()
+        helper = None
+        for _ in range(50):
+            out = subprocess.run(["pgrep", "-P", str(d.proc.pid)], capture_output=True, text=True)
+            if out.stdout.strip():
+                helper = int(out.stdout.split()[0])
+                break
+            time.sleep(0.1)
+        assert helper, "the fill did not start a helper"
+        os.kill(d.proc.pid, signal.SIGKILL)
+        d.proc.wait()
+        for _ in range(30):
+            if not os.path.exists(f"/proc/{helper}") or \
+                    "State:\tZ" in open(f"/proc/{helper}/status").read():
+                break
+            time.sleep(0.1)
+        else:
+            os.kill(helper, signal.SIGKILL)
+            pytest.fail("the TetGen helper outlived the daemon")
+    finally:
+        d.stop()
+
+
+def test_fill_total_time_is_bounded():
+    from test_fill import surface  # noqa: E402
+    d = Daemon("--fill-timeout", "4")
+    try:
+        s = Session(d)
+        V, T = surface("icosphere", 3)
+        nv = len(V)
+        verts, fill = [], []
+        for k in range(4):    # 4 disjoint spheres, each about 2.5 s to fill
+            verts += [[x + 3 * k, y, z] for x, y, z in V]
+            fill.append({"surface": [[a + k * nv, b + k * nv, c + k * nv] for a, b, c in T],
+                         "max_volume": 3e-5})
+        t0 = time.time()
+        r = s.put_complex({"vertices": verts, "simplices": [], "fill": fill})
+        assert time.time() - t0 < 7, time.time() - t0
+        assert r.status_code in (422, 503), r.text
+    finally:
+        d.stop()
+
+
+# ---- consistency and input -------------------------------------------------------------------
+
+def test_level_version_is_the_version_of_its_content():
+    """PATCHes move point 0 to x = version while GETs stream level 0: every answer's ETag and
+    body version match the position it carries."""
+    d = Daemon()
+    try:
+        s = Session(d)
+        assert s.put_complex(block_mesh(4)).status_code == 200
+        assert s.level(0, format="json").status_code == 200
+        stop = threading.Event()
+        bad = []
+
+        def editor():
+            while not stop.is_set():
+                v = int(s.req("GET", "").json()["version"])
+                s.req("PATCH", "/control-points", json={"moves": [{"index": 0, "position": [v + 1, 0, 0]}]},
+                      headers={"If-Match": f'"{v}"'})
+
+        def reader():
+            http = requests.Session()
+            while not stop.is_set():
+                r = http.get(s.base + "/levels/0", params={"format": "json"}, headers=s.auth, timeout=10)
+                j = r.json()
+                etag = int(r.headers["ETag"].strip('"'))
+                x = j["vertices"][0][0]
+                if etag != j["version"] or (etag > 1 and x != etag):
+                    bad.append((etag, j["version"], x))
+        ts = [threading.Thread(target=editor)] + [threading.Thread(target=reader) for _ in range(2)]
+        for t in ts:
+            t.start()
+        time.sleep(4)
+        stop.set()
+        for t in ts:
+            t.join()
+        assert not bad, bad[:5]
+    finally:
+        d.stop()
+
+
+@pytest.fixture(scope="module")
+def daemon():
+    d = Daemon()
+    yield d
+    assert d.stop() == 0
+
+
+def new_session(daemon, body=None):
+    s = Session(daemon)
+    assert s.put_complex(body or {"vertices": CUBE_V, "simplices": CUBE_S}).status_code == 200
+    return s
+
+
+def patch(s, moves):
+    v = s.req("GET", "").json()["version"]
+    return s.req("PATCH", "/control-points", json={"moves": moves}, headers={"If-Match": f'"{v}"'})
+
+
+def test_patch_refuses_a_degenerate_simplex_and_allows_inversion(daemon):
+    s = new_session(daemon)
+    r = patch(s, [{"index": 4, "position": [0.5, 0.5, 0.5]}, {"index": 3, "position": [0, 0, 0.001]},
+                  {"index": 1, "position": [0, 1, 0]}])      # vertex 1 onto vertex 2
+    assert r.status_code == 422, r.text
+    assert any(e["pointer"].startswith("/moves/2") for e in r.json()["errors"]), r.text
+    assert patch(s, [{"index": 3, "position": [0, 0, -1]}]).status_code == 200   # inverted: fine
+    for path in ("/tags", "/rules"):
+        assert s.req("PUT", path, json={}).status_code == 200
+
+
+def test_if_match_and_if_none_match_parse_entity_tags(daemon):
+    s = new_session(daemon)
+    mv = {"moves": [{"index": 0, "position": [0.01, 0, 0]}]}
+    assert s.req("PATCH", "/control-points", json=mv, headers={"If-Match": "**"}).status_code == 412
+    assert s.req("PATCH", "/control-points", json=mv, headers={"If-Match": "*"}).status_code == 200
+    v = s.req("GET", "").json()["version"]
+    assert v < 10
+    r = s.level(0, format="json")
+    etag = r.headers["ETag"]
+    wrong = f'"{v}1"'            # contains the version as a substring
+    assert s.req("GET", "/levels/0", params={"format": "json"},
+                 headers={"If-None-Match": wrong}).status_code == 200
+    assert s.req("GET", "/levels/0", params={"format": "json"},
+                 headers={"If-None-Match": f'"x", {etag}'}).status_code == 304
+
+
+def test_nul_bytes_in_path_or_query_are_refused(daemon):
+    s = new_session(daemon)
+    assert requests.get(daemon.url + "/v1/openapi.json%00.html", timeout=5).status_code == 400
+    assert s.req("GET", "/levels/0?format=json%00x").status_code == 400
+
+
+def test_control_characters_are_escaped_in_logs(daemon):
+    requests.get(daemon.url + "/v1/x%0a2026-01-01T00:00:00.000Z error forged", timeout=5)
+    time.sleep(0.3)
+    assert not any(l.startswith("2026-01-01T00:00:00.000Z error forged") for l in daemon.log_lines)
+    assert any("\\n" in l or "%0a" in l.lower() for l in daemon.log_lines if "forged" in l)
+
+
+def test_many_query_parameters_get_400(daemon):
+    s = new_session(daemon)
+    q = "&".join(["format=json"] * 1000)
+    r = s.req("GET", "/levels/0?" + q)
+    assert r.status_code == 400, r.status_code
+
+
+def test_long_path_gets_414(daemon):
+    r = requests.get(daemon.url + "/v1/" + "a" * 300, timeout=5)
+    assert r.status_code == 414
+
+
+def test_subnormal_slice_numbers_are_finite(daemon):
+    s = new_session(daemon)
+    r = s.level(1, format="json", slice="1e-320,0,1,0.2")
+    assert r.status_code == 200, r.text
+
+
+def test_attributes_beyond_1e15_are_refused(daemon):
+    s = Session(daemon)
+    r = s.put_complex({"vertices": CUBE_V, "simplices": CUBE_S,
+                       "attributes": {"t": [0, 1, 2, 3e15, 4]}})
+    assert r.status_code == 422
+    assert r.json()["errors"][0]["pointer"] == "/attributes/t/3"
+
+
+def test_unknown_query_parameters_get_400(daemon):
+    s = new_session(daemon)
+    assert s.req("GET", "/complex?bogus=1").status_code == 400
+    v = s.req("GET", "").json()["version"]
+    r = s.req("PATCH", "/control-points?bogus=1", json={"moves": [{"index": 0, "position": [0, 0, 0]}]},
+              headers={"If-Match": f'"{v}"'})
+    assert r.status_code == 400
+
+
+def test_level_memory_estimate_is_close_to_the_real_cost():
+    """The estimate refuses only what would not fit: a level that costs X fits a session limit
+    of 1.5 X, and the estimate is within a factor 2 of what the level takes."""
+    d = Daemon()
+    body = block_mesh(6)
+    try:
+        s = Session(d)
+        assert s.put_complex(body).status_code == 200
+        before = s.req("GET", "").json()["memory_bytes"]
+        assert s.level(3, format="json", parts="points").status_code == 200
+        cost = s.req("GET", "").json()["memory_bytes"]
+        st = s.req("GET", "/levels/3/stats").json()
+        est = st.get("estimated_bytes")
+        assert est is not None and 0.5 * (cost - before) <= est <= 2 * (cost - before), (est, cost - before)
+    finally:
+        d.stop()
+    d = Daemon("--max-session-bytes", str(int(cost * 1.5)))
+    try:
+        s = Session(d)
+        assert s.put_complex(body).status_code == 200
+        assert s.level(3, format="json", parts="points").status_code == 200
+    finally:
+        d.stop()
