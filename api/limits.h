@@ -25,6 +25,8 @@
 #define API_DEFAULT_FILL_SECONDS        60            /* wall deadline of one TetGen run */
 #define API_DEFAULT_FILL_MEMORY_BYTES   (2ull << 30)  /* address space of the TetGen helper */
 #define API_MAX_FILL_SURFACES           16            /* entries of "fill" in one request */
+#define API_MAX_PATH_BYTES              256           /* a request's decoded path (414 beyond) */
+#define API_MAX_QUERY_PARAMS            64            /* parameters of a request's query (400) */
 
 typedef struct api_limits {
     size_t max_body_bytes;

@@ -7,13 +7,16 @@
  * a bounded wait and a 429 + Retry-After when the daemon is saturated, so /healthz, /readyz and
  * /metrics never queue behind work.
  *
- * A request goes: first callback (no body yet) -> early(): match (route lookup: 404, 405, the
- * OPTIONS preflight), auth (the session and its bearer token: 404, 401), body (transfer coding,
+ * A request goes: the request line -> on_uri() creates it and takes its query away from
+ * libmicrohttpd; first callback (no body yet) -> early(): target (414 for a long path, 400 for a
+ * NUL byte or too many query parameters), match (route lookup: 404, 405, the OPTIONS preflight),
+ * auth (the session and its bearer token: 404, 401), body (transfer coding,
  * Content-Length against max_body_bytes before anything is read, a body where none is taken,
  * Content-Type: 501, 413, 400, 415); body callbacks -> append to a buffer capped at
- * max_body_bytes; final callback -> the route's handler (routes.c), which calls api/ and queues
- * one response. Level responses stream through out_read() from a callback response that holds
- * references on the session's model until the last byte is sent.
+ * max_body_bytes; final callback -> the query parameters the route takes (400 for others), then
+ * the route's handler (routes.c), which calls api/ and queues one response. Level responses
+ * stream through out_read() from a callback response that holds references on the session's
+ * model until the last byte is sent.
  */
 #include "request.h"
 #include "../api/mem.h"
@@ -42,7 +45,7 @@ void log_line(const server *srv, int level, const char *fmt, ...)
     struct tm tm;
     gmtime_r(&now.tv_sec, &tm);
     strftime(ts, sizeof ts, "%Y-%m-%dT%H:%M:%S", &tm);
-    char msg[1024];
+    char msg[2048];
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(msg, sizeof msg, fmt, ap);
@@ -67,6 +70,7 @@ static void req_unref(req *r)
         return;
     session_unref(r->s);
     api_free(r->body);
+    api_free(r->query);
     api_free(r);
 }
 
@@ -231,42 +235,49 @@ const char *http_header(req *r, const char *name)
     return MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND, name);
 }
 
+/* The query is the daemon's own (on_uri below): parsed into r->params at the first call. */
 const char *http_arg(req *r, const char *key)
 {
-    return MHD_lookup_connection_value(r->conn, MHD_GET_ARGUMENT_KIND, key);
+    for (size_t i = 0; i < r->nparams; i++)
+        if (!strcmp(r->params[i].key, key))
+            return r->params[i].value;
+    return NULL;
 }
 
-typedef struct qcheck {
-    const char *const *allowed;
-    const char *bad;
-} qcheck;
-
-static enum MHD_Result q_iter(void *cls, enum MHD_ValueKind kind, const char *key, const char *value)
+/* Refuse a query parameter the route does not take (route.query), or one given twice: 400
+ * with its name as the pointer (escaped as in logs: the problem is JSON, a name any bytes).
+ * 1 when answered. */
+static int query_refused(req *r, const char *const *allowed)
 {
-    (void)kind;
-    (void)value;
-    qcheck *q = cls;
-    for (const char *const *a = q->allowed; *a; a++)
-        if (!strcmp(*a, key))
-            return MHD_YES;
-    q->bad = key;
-    return MHD_NO;
-}
-
-int http_query_only(req *r, const char *const *allowed)
-{
-    qcheck q = {allowed, NULL};
-    MHD_get_connection_values(r->conn, MHD_GET_ARGUMENT_KIND, q_iter, &q);
-    if (!q.bad)
+    if (allowed && allowed[0] && !strcmp(allowed[0], "*"))
         return 0;
-    char list[160] = "";
-    for (const char *const *a = allowed; *a; a++)
-        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", a == allowed ? "" : ", ", *a);
-    api_problem p = {0};
-    api_fail_at(&p, 400, "unknown-parameter", q.bad, "unknown query parameter \"%.40s\" (allowed: %s)",
-                q.bad, *allowed ? list : "none");
-    http_reply_problem(r, &p);
-    return 1;
+    for (size_t i = 0; i < r->nparams; i++) {
+        int ok = 0;
+        for (const char *const *a = allowed; !ok && a && *a; a++)
+            ok = !strcmp(*a, r->params[i].key);
+        char key[64];
+        parse_log_escape(key, sizeof key, r->params[i].key);
+        api_problem p = {0};
+        if (!ok) {
+            char list[160] = "";
+            for (const char *const *a = allowed; a && *a; a++)
+                snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s",
+                         a == allowed ? "" : ", ", *a);
+            api_fail_at(&p, 400, "unknown-parameter", key,
+                        "unknown query parameter \"%.40s\" (allowed: %s)", key,
+                        list[0] ? list : "none");
+            http_reply_problem(r, &p);
+            return 1;
+        }
+        for (size_t j = 0; j < i; j++)
+            if (!strcmp(r->params[j].key, r->params[i].key)) {
+                api_fail_at(&p, 400, "repeated-parameter", key,
+                            "the query parameter \"%.40s\" is given more than once", key);
+                http_reply_problem(r, &p);
+                return 1;
+            }
+    }
+    return 0;
 }
 
 /* ---- streaming ------------------------------------------------------------------------------ */
@@ -357,16 +368,42 @@ static void method_not_allowed(req *r, const api_problem *p, const char *allow)
     http_queue(r, 405, resp);
 }
 
-/* The route of the request (r->rt, its segments, r->route_name), or the answer that there is
- * none: 404 for an unknown or too long path, 405 for a method the resource does not take, 204 for
- * an OPTIONS preflight. 1 when a response was queued. */
-static int early_match(req *r, const char *url)
+/* What is wrong with the request target itself: a path of API_MAX_PATH_BYTES or more (414), a
+ * NUL byte decoded in the path or the query (400: a C string would end there, and the request
+ * mean something else than it says), more than API_MAX_QUERY_PARAMS query parameters (400).
+ * Splits the query into r->params. 1 when a response was queued. */
+static int early_target(req *r, const char *url)
 {
-    const char *m = r->method;
     if (strlen(url) >= sizeof r->path) {
-        http_fail(r, 404, "not-found", "the path is too long");
+        http_fail(r, 414, "uri-too-long", "the path has %zu bytes; at most %zu are taken",
+                  strlen(url), sizeof r->path - 1);
         return 1;
     }
+    if (r->oom) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return 1;
+    }
+    int rc = r->query ? parse_query(r->query, r->params, API_MAX_QUERY_PARAMS, &r->nparams)
+                      : PARSE_QUERY_OK;
+    if (rc == PARSE_QUERY_NUL) {
+        http_fail(r, 400, "bad-uri", "the %s holds an encoded NUL byte (%%00)",
+                  rc == PARSE_QUERY_NUL ? "query" : "path");
+        return 1;
+    }
+    if (rc == PARSE_QUERY_TOO_MANY) {
+        http_fail(r, 400, "too-many-parameters", "the query has more than %d parameters",
+                  API_MAX_QUERY_PARAMS);
+        return 1;
+    }
+    return 0;
+}
+
+/* The route of the request (r->rt, its segments, r->route_name), or the answer that there is
+ * none: 404 for an unknown path, 405 for a method the resource does not take, 204 for an OPTIONS
+ * preflight. 1 when a response was queued. */
+static int early_match(req *r)
+{
+    const char *m = r->method;
     char allow[128];
     int known = route_methods(r->path, r, allow, sizeof allow);
     if (!known && route_is_static(r->path)) {
@@ -406,26 +443,6 @@ static int early_match(req *r, const char *url)
     return 0;
 }
 
-/* The token of an Authorization header, into buf; NULL unless it is "Bearer <token>" that fits.
- * credentials = auth-scheme 1*SP token68 (RFC 9110 11.4): the scheme is case-insensitive, and
- * trailing whitespace is not part of the field value. */
-static const char *bearer_token(const char *h, char *buf, size_t cap)
-{
-    if (!h || strncasecmp(h, "Bearer ", 7))
-        return NULL;
-    const char *t = h + 7;
-    while (*t == ' ')
-        t++;
-    size_t n = strlen(t);
-    while (n && (t[n - 1] == ' ' || t[n - 1] == '\t'))
-        n--;
-    if (n >= cap)
-        return NULL;
-    memcpy(buf, t, n);
-    buf[n] = 0;
-    return buf;
-}
-
 /* Who is asking comes first: a client without the session's token learns nothing else. The
  * session of a session route (r->s; 404 when there is none) and its bearer token (401). 1 when a
  * response was queued. */
@@ -444,7 +461,7 @@ static int early_auth(req *r)
     const char *h = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
                                                 MHD_HTTP_HEADER_AUTHORIZATION);
     char tbuf[128];
-    if (session_token_ok(r->s, bearer_token(h, tbuf, sizeof tbuf)))
+    if (session_token_ok(r->s, parse_bearer(h, tbuf, sizeof tbuf)))
         return 0;
     api_problem p = {0};
     api_fail(&p, 401, "unauthorized",
@@ -508,26 +525,50 @@ static int early_body(req *r)
 /* Every check that needs no body, in order. Returns 1 when a response was queued. */
 static int early(req *r, const char *url)
 {
-    return early_match(r, url) || early_auth(r) || early_body(r);
+    return early_target(r, url) || early_match(r) || early_auth(r) || early_body(r);
 }
 
-static enum MHD_Result serve(server *srv, req *r, struct MHD_Connection *conn, const char *url,
-                             const char *method, const char *upload_data, size_t *upload_size,
-                             void **con_cls)
+/* MHD_OPTION_URI_LOG_CALLBACK: libmicrohttpd calls it with the raw request target before it
+ * parses the target, and makes its answer the request's context (*con_cls). The request is
+ * created here so that its query is the daemon's own: copied, then cut off at the '?' for
+ * libmicrohttpd, which therefore parses no query arguments. (0.9.75 finds the '?' before this
+ * call and parses what follows it after; every argument takes a header record from the
+ * connection's memory pool, which ~700 short ones exhaust: it then closes the connection
+ * without an answer. The target lies in its read buffer, writable, which it cuts up itself.)
+ * early_target splits the copy, with a bound on the count and NUL bytes refused. NULL (out of
+ * memory) makes the first access-handler call close the connection. */
+static void *on_uri(void *cls, const char *uri, struct MHD_Connection *conn)
 {
-    if (!r) {
-        r = api_calloc(1, sizeof *r);
-        if (!r)
-            return MHD_NO;
-        api_mem_meter_set(&r->mem);
+    char *q = uri ? strchr((char *)uri, '?') : NULL;
+    req *r = api_calloc(1, sizeof *r);
+    if (r) {
         atomic_init(&r->refs, 1);
-        r->srv = srv;
+        r->srv = cls;
         r->conn = conn;
-        r->method = intern_method(method);
         r->t0 = mono_now();
+        r->method = "OTHER";
         r->route_name = "unknown";
+        if (q) {
+            api_mem_meter *prev = api_mem_meter_set(&r->mem);
+            r->query = api_strdup(q + 1);
+            r->oom = !r->query;
+            api_mem_meter_set(prev);
+        }
+    }
+    if (q)
+        q[1] = 0;
+    return r;
+}
+
+static enum MHD_Result serve(server *srv, req *r, const char *url, const char *method,
+                             const char *upload_data, size_t *upload_size)
+{
+    if (!r)
+        return MHD_NO;
+    if (!r->started) { /* the first call: headers complete, no body read yet */
+        r->started = 1;
+        r->method = intern_method(method);
         snprintf(r->path, sizeof r->path, "%s", url);
-        *con_cls = r;
         early(r, url);
         return MHD_YES;
     }
@@ -572,6 +613,8 @@ static enum MHD_Result serve(server *srv, req *r, struct MHD_Connection *conn, c
         http_fail(r, 400, "unexpected-body", "%s %s takes no request body", method, r->rt->pattern);
         return MHD_YES;
     }
+    if (query_refused(r, r->rt->query))
+        return MHD_YES;
     r->rt->fn(r);
     if (!r->queued)
         http_fail(r, 500, "internal", "the handler produced no response");
@@ -587,7 +630,8 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
     (void)version;
     req *r = *con_cls;
     api_mem_meter *prev = api_mem_meter_set(r ? &r->mem : NULL);
-    enum MHD_Result res = serve(cls, r, conn, url, method, upload_data, upload_size, con_cls);
+    (void)conn;
+    enum MHD_Result res = serve(cls, r, url, method, upload_data, upload_size);
     api_mem_meter_set(prev);
     return res;
 }
@@ -601,13 +645,15 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
     if (!r)
         return;
     double ms = (mono_now() - r->t0) * 1e3;
+    char path[4 * sizeof r->path]; /* the path only: queries will carry tokens */
+    parse_log_escape(path, sizeof path, r->path);
     if (r->queued) {
         metrics_request(r->route_name, r->method, r->status, ms / 1e3);
-        log_line(srv, LOG_INFO, "%s %s %d %lluB %.2fms%s", r->method, r->path, r->status,
+        log_line(srv, LOG_INFO, "%s %s %d %lluB %.2fms%s", r->method, path, r->status,
                  (unsigned long long)atomic_load(&r->bytes), ms,
                  code == MHD_REQUEST_TERMINATED_COMPLETED_OK ? "" : " (cut short)");
     }
-    log_line(srv, LOG_DEBUG, "%s %s: at most %lld bytes held by the request", r->method, r->path,
+    log_line(srv, LOG_DEBUG, "%s %s: at most %lld bytes held by the request", r->method, path,
              (long long)r->mem.peak);
     *con_cls = NULL;
     req_unref(r);
@@ -646,7 +692,8 @@ int http_start(server *srv)
     srv->mhd = MHD_start_daemon(
         flags, (uint16_t)srv->cfg.port, NULL, NULL, on_request, srv, MHD_OPTION_EXTERNAL_LOGGER,
         mhd_log, srv, MHD_OPTION_SOCK_ADDR, &ss,
-        MHD_OPTION_NOTIFY_COMPLETED, on_completed, srv, MHD_OPTION_CONNECTION_LIMIT,
+        MHD_OPTION_NOTIFY_COMPLETED, on_completed, srv, MHD_OPTION_URI_LOG_CALLBACK, on_uri, srv,
+        MHD_OPTION_CONNECTION_LIMIT,
         (unsigned)srv->cfg.max_connections, MHD_OPTION_CONNECTION_TIMEOUT,
         (unsigned)srv->cfg.connection_timeout_s, MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)64 * 1024, MHD_OPTION_END);
     if (!srv->mhd) {

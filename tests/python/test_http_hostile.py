@@ -390,7 +390,7 @@ CASES = [
     C("path-traversal-under-api", "GET", "/v1/sessions/../../../etc/passwd", 404, raw=R("GET", "/v1/sessions/../../../etc/passwd")),
     C("path-traversal-encoded", "GET", "/%2e%2e/%2e%2e/etc/passwd", 404, raw=R("GET", "/%2e%2e/%2e%2e/etc/passwd")),
     C("path-traversal-static", "GET", "/web/../../../etc/passwd", 404, raw=R("GET", "/web/../../../etc/passwd")),
-    C("url-2000-bytes", "GET", "/v1/" + "a" * 2000, 404),
+    C("url-2000-bytes", "GET", "/v1/" + "a" * 2000, 414),
     C("url-100000-bytes", "GET", "/v1/...", 414, problem=False, raw=R("GET", "/v1/" + "a" * 100000)),
     # --- methods (405 + Allow) ---
     C("method-post-complex", "POST", "{s}/complex", 405, body=VICTIM, allow="PUT, GET, HEAD"),
