@@ -24,8 +24,17 @@ static const setting S[] = {
     {"port", T_INT, OFF(port), 0, 65535, "TCP port (default 8080; 0 picks a free one)"},
     {"threads", T_INT, OFF(threads), 1, 256, "concurrent computations (default: CPU count)"},
     {"max-connections", T_INT, OFF(max_connections), 1, 100000, "open connections (default 256)"},
+    {"max-connections-per-client", T_INT, OFF(max_connections_per_client), 0, 100000,
+     "open connections of one client address (default 32; 0: no cap)"},
+    {"connection-reserve", T_INT, OFF(connection_reserve), 0, 100000,
+     "connections kept free: beyond max minus this, waiting ones are evicted (default 16, "
+     "at most half of --max-connections)"},
     {"connection-timeout", T_INT, OFF(connection_timeout_s), 1, 86400,
-     "idle connection timeout in seconds (default 30)"},
+     "idle timeout of a kept-alive connection in seconds (default 30)"},
+    {"header-timeout", T_INT, OFF(header_timeout_s), 1, 3600,
+     "seconds a new connection has to send its request headers (default 10)"},
+    {"body-min-rate", T_INT, OFF(body_min_rate), 0, 1 << 30,
+     "bytes/s a request body must average after --header-timeout (default 65536; 0: any)"},
     {"queue-timeout", T_INT, OFF(queue_timeout_s), 0, 3600,
      "seconds a computation waits for a free thread before 429 (default 30)"},
     {"max-sessions", T_INT, OFF(max_sessions), 1, 1000000, "live sessions (default 64)"},
@@ -65,7 +74,7 @@ void config_usage(FILE *f)
                "http://127.0.0.1:8080/healthz, answers 200)\n\noptions (each also read from "
                "SUBDIVD_<NAME>):\n", out_format_list(exts, sizeof exts, true, "|", "|"));
     for (size_t i = 0; i < NS; i++)
-        fprintf(f, "  --%-20s %s\n", S[i].flag, S[i].help);
+        fprintf(f, "  --%-27s %s\n", S[i].flag, S[i].help);
 }
 
 static int set(config *c, const setting *s, const char *v, const char *from)
@@ -119,7 +128,11 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     long n = sysconf(_SC_NPROCESSORS_ONLN);
     c->threads = n > 0 ? (int)n : 2;
     c->max_connections = 256;
+    c->max_connections_per_client = 32;
+    c->connection_reserve = 16;
     c->connection_timeout_s = 30;
+    c->header_timeout_s = 10;
+    c->body_min_rate = 65536;
     c->queue_timeout_s = 30;
     c->max_sessions = API_DEFAULT_MAX_SESSIONS;
     c->ttl_s = API_DEFAULT_TTL_S;
@@ -174,5 +187,7 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
         if (set(c, &S[i], v, "--"))
             return 1;
     }
+    if (c->connection_reserve > c->max_connections / 2)
+        c->connection_reserve = c->max_connections / 2;
     return 0;
 }

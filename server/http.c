@@ -21,6 +21,7 @@
 #include "request.h"
 #include "../api/mem.h"
 #include "../api/handlers.h"
+#include "guard.h"
 #include "metrics.h"
 #include <arpa/inet.h>
 #include <errno.h>
@@ -385,9 +386,10 @@ static int early_target(req *r, const char *url)
     }
     int rc = r->query ? parse_query(r->query, r->params, API_MAX_QUERY_PARAMS, &r->nparams)
                       : PARSE_QUERY_OK;
-    if (rc == PARSE_QUERY_NUL) {
+    int nul_path = guard_request_had_nul(r->gk); /* noted by guard_unescape */
+    if (nul_path || rc == PARSE_QUERY_NUL) {
         http_fail(r, 400, "bad-uri", "the %s holds an encoded NUL byte (%%00)",
-                  rc == PARSE_QUERY_NUL ? "query" : "path");
+                  nul_path ? "path" : "query");
         return 1;
     }
     if (rc == PARSE_QUERY_TOO_MANY) {
@@ -522,6 +524,15 @@ static int early_body(req *r)
     return 0;
 }
 
+/* The body the request announces: Content-Length, UINT64_MAX when chunked, 0 for none. */
+static uint64_t body_announced(req *r)
+{
+    const char *cl = http_header(r, MHD_HTTP_HEADER_CONTENT_LENGTH);
+    if (cl)
+        return strtoull(cl, NULL, 10);
+    return http_header(r, MHD_HTTP_HEADER_TRANSFER_ENCODING) ? UINT64_MAX : 0;
+}
+
 /* Every check that needs no body, in order. Returns 1 when a response was queued. */
 static int early(req *r, const char *url)
 {
@@ -569,9 +580,14 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
         r->started = 1;
         r->method = intern_method(method);
         snprintf(r->path, sizeof r->path, "%s", url);
-        early(r, url);
+        r->gk = guard_conn_of(r->conn);
+        /* an answer queued now makes libmicrohttpd discard any body and close */
+        int answered = early(r, url);
+        guard_request_begin(srv->guard, r->gk, answered ? 0 : body_announced(r));
         return MHD_YES;
     }
+    if (*upload_size)
+        guard_body_progress(srv->guard, r->gk, *upload_size);
     if (r->queued) { /* answered early: swallow any body */
         *upload_size = 0;
         return MHD_YES;
@@ -600,6 +616,7 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
         r->body[r->len] = 0;
         return MHD_YES;
     }
+    guard_request_work(srv->guard, r->gk); /* the body is complete */
     if (r->too_big) {
         api_problem p = {0};
         api_fail_limit(&p, "max_body_bytes", srv->cfg.limits.max_body_bytes,
@@ -644,6 +661,7 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
     req *r = *con_cls;
     if (!r)
         return;
+    guard_request_done(srv->guard, r->gk);
     double ms = (mono_now() - r->t0) * 1e3;
     char path[4 * sizeof r->path]; /* the path only: queries will carry tokens */
     parse_log_escape(path, sizeof path, r->path);
@@ -659,15 +677,27 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
     req_unref(r);
 }
 
+/* libmicrohttpd's messages, as warnings — except those about clients that went away or were
+ * turned away (closed mid-request, by the guard or themselves; over a connection limit), which
+ * a flood of hostile connections would otherwise turn into a flood of log lines: those are
+ * debug, and counted on /metrics. */
 static void mhd_log(void *cls, const char *fmt, va_list ap)
 {
+    static const char *const routine[] = {"Connection socket is closed",
+                                          "Connection was closed by remote side",
+                                          "Server reached connection limit",
+                                          "Socket has been disconnected"};
     server *srv = cls;
     char msg[512];
     vsnprintf(msg, sizeof msg, fmt, ap);
     size_t n = strlen(msg);
     while (n && msg[n - 1] == '\n')
         msg[--n] = 0;
-    log_line(srv, LOG_WARN, "http: %s", msg);
+    int level = LOG_WARN;
+    for (size_t i = 0; i < sizeof routine / sizeof *routine; i++)
+        if (!strncmp(msg, routine[i], strlen(routine[i])))
+            level = LOG_DEBUG;
+    log_line(srv, level, "http: %s", msg);
 }
 
 int http_start(server *srv)
@@ -689,14 +719,27 @@ int http_start(server *srv)
         if (inet_pton(AF_INET, srv->cfg.listen, &a->sin_addr) != 1)
             goto bad_addr;
     }
+    const config *c = &srv->cfg;
+    guard_config gc = {(unsigned)c->max_connections, (unsigned)c->connection_reserve,
+                       c->header_timeout_s, c->connection_timeout_s, c->body_min_rate};
+    srv->guard = guard_new(&gc);
+    if (!srv->guard) {
+        log_line(srv, LOG_ERROR, "cannot start the connection guard: out of memory");
+        return -1;
+    }
+    /* 0 for PER_IP_CONNECTION_LIMIT is no limit, as is 0 for --max-connections-per-client */
     srv->mhd = MHD_start_daemon(
-        flags, (uint16_t)srv->cfg.port, NULL, NULL, on_request, srv, MHD_OPTION_EXTERNAL_LOGGER,
-        mhd_log, srv, MHD_OPTION_SOCK_ADDR, &ss,
+        flags, (uint16_t)c->port, guard_accept, srv->guard, on_request, srv,
+        MHD_OPTION_EXTERNAL_LOGGER, mhd_log, srv, MHD_OPTION_SOCK_ADDR, &ss,
         MHD_OPTION_NOTIFY_COMPLETED, on_completed, srv, MHD_OPTION_URI_LOG_CALLBACK, on_uri, srv,
-        MHD_OPTION_CONNECTION_LIMIT,
-        (unsigned)srv->cfg.max_connections, MHD_OPTION_CONNECTION_TIMEOUT,
-        (unsigned)srv->cfg.connection_timeout_s, MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)64 * 1024, MHD_OPTION_END);
+        MHD_OPTION_NOTIFY_CONNECTION, guard_notify, srv->guard, MHD_OPTION_UNESCAPE_CALLBACK,
+        guard_unescape, srv->guard, MHD_OPTION_CONNECTION_LIMIT, (unsigned)c->max_connections,
+        MHD_OPTION_PER_IP_CONNECTION_LIMIT, (unsigned)c->max_connections_per_client,
+        MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)c->connection_timeout_s,
+        MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)64 * 1024, MHD_OPTION_END);
     if (!srv->mhd) {
+        guard_free(srv->guard);
+        srv->guard = NULL;
         log_line(srv, LOG_ERROR, "cannot listen on %s port %d: %s", srv->cfg.listen, srv->cfg.port,
                  strerror(errno));
         return -1;
@@ -715,5 +758,15 @@ void http_stop(server *srv)
         MHD_stop_daemon(srv->mhd);
         srv->mhd = NULL;
     }
+    guard_free(srv->guard); /* after MHD: every connection has gone */
+    srv->guard = NULL;
+}
+
+void http_write_connection_metrics(server *srv, FILE *f)
+{
+    guard_stats gs = {0};
+    if (srv->guard)
+        guard_get_stats(srv->guard, &gs);
+    metrics_write_connections(f, &gs);
 }
 

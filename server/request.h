@@ -22,6 +22,7 @@
 
 struct MHD_Connection;
 struct MHD_Response;
+struct guard_conn;
 
 typedef struct req req;
 typedef void (*handler_fn)(req *r);
@@ -40,6 +41,7 @@ typedef struct route {
 struct req {
     server *srv;
     struct MHD_Connection *conn;
+    struct guard_conn *gk;            /* the connection's record in the guard (or NULL) */
     const char *method;
     char path[API_MAX_PATH_BYTES];   /* decoded, without the query; longer is a 414 */
     char *query;                      /* the raw query (api_malloc), decoded into params */

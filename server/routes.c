@@ -69,6 +69,7 @@ static void h_metrics(req *r)
     gauges g = {0};
     store_foreach(r->srv->st, add_gauges, &g);
     metrics_write(f, store_count(r->srv->st), g.cells, g.bytes, api_mem_in_use());
+    http_write_connection_metrics(r->srv, f);
     fclose(f);
     char *body = api_memdup(text, n);
     free(text); /* open_memstream's buffer belongs to the C library */
