@@ -26,6 +26,8 @@
 #include <arpa/inet.h>
 #include <errno.h>
 #include <microhttpd.h>
+#include <poll.h>
+#include <sys/socket.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -77,15 +79,30 @@ static void req_unref(req *r)
 
 /* ---- responses ------------------------------------------------------------------------------ */
 
-static void common_headers(req *r, struct MHD_Response *resp)
+typedef struct header {
+    const char *name, *value;
+} header;
+
+/* The headers every answer carries (CORS, nosniff): their number, at most 4. */
+static int common_header_list(const req *r, header out[4])
 {
     const char *origin = r->srv->cfg.cors_origin;
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, origin);
+    int n = 0;
+    out[n++] = (header){MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, origin};
     if (strcmp(origin, "*"))
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_VARY, "Origin");
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_EXPOSE_HEADERS,
-                            "ETag, Location, Retry-After, Content-Disposition");
-    MHD_add_response_header(resp, "X-Content-Type-Options", "nosniff");
+        out[n++] = (header){MHD_HTTP_HEADER_VARY, "Origin"};
+    out[n++] = (header){MHD_HTTP_HEADER_ACCESS_CONTROL_EXPOSE_HEADERS,
+                        "ETag, Location, Retry-After, Content-Disposition"};
+    out[n++] = (header){"X-Content-Type-Options", "nosniff"};
+    return n;
+}
+
+static void common_headers(req *r, struct MHD_Response *resp)
+{
+    header h[4];
+    int n = common_header_list(r, h);
+    for (int i = 0; i < n; i++)
+        MHD_add_response_header(resp, h[i].name, h[i].value);
 }
 
 void http_queue(req *r, int status, struct MHD_Response *resp)
@@ -344,6 +361,98 @@ void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uin
     http_queue(r, 200, resp);
 }
 
+/* ---- a chunked body over the limit ------------------------------------------------------- */
+
+/* Write all n bytes to the socket before `deadline` (monotonic seconds); 0 or -1. */
+static int send_all(int fd, const char *b, size_t n, double deadline)
+{
+    while (n) {
+        ssize_t w = send(fd, b, n, MSG_NOSIGNAL | MSG_DONTWAIT);
+        if (w > 0) {
+            b += w;
+            n -= (size_t)w;
+            continue;
+        }
+        if (w < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)
+            return -1;
+        double left = deadline - mono_now();
+        struct pollfd pf = {fd, POLLOUT, 0};
+        if (left <= 0 || poll(&pf, 1, (int)(left * 1000) + 1) < 0)
+            return -1;
+    }
+    return 0;
+}
+
+/* Read and drop what the client still sends, until it closes, `max` bytes or `deadline`. */
+static void drain(int fd, size_t max, double deadline)
+{
+    char buf[1 << 16];
+    size_t got = 0;
+    while (got < max) {
+        double left = deadline - mono_now();
+        struct pollfd pf = {fd, POLLIN, 0};
+        if (left <= 0 || poll(&pf, 1, (int)(left * 1000) + 1) <= 0)
+            return;
+        ssize_t r = recv(fd, buf, sizeof buf, MSG_DONTWAIT);
+        if (r == 0 || (r < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR))
+            return;
+        if (r > 0)
+            got += (size_t)r;
+    }
+}
+
+/* A chunked body has just passed max_body_bytes: answer 413 now rather than read the rest.
+ * libmicrohttpd 0.9.75 cannot queue a response while upload data is pending (MHD_queue_response
+ * fails outside HEADERS_PROCESSED and FULL_REQ_RECEIVED), so the whole answer, with
+ * "Connection: close", is written to the socket here: this connection's thread is inside our
+ * callback, so libmicrohttpd is not writing (and the daemon speaks plain HTTP: no TLS layer to
+ * bypass). Then our side is shut for writing and what the client still sends is read and
+ * dropped for at most 1 s and 4 MiB, so the client reads the answer before the connection goes
+ * (closing with unread data sends a reset, which can destroy an answer not yet read). MHD_NO then
+ * makes libmicrohttpd close the connection; the request is logged as a 413 like any other. */
+static enum MHD_Result refuse_body_now(req *r)
+{
+    size_t max = r->srv->cfg.limits.max_body_bytes;
+    api_problem p = {0};
+    api_fail_limit(&p, "max_body_bytes", max, max + 1,
+                   "the body exceeds the limit of %zu bytes; send a smaller complex or raise "
+                   "--max-body-bytes", max);
+    json_t *j = api_problem_json(&p);
+    char *body = j ? json_dumps(j, JSON_COMPACT) : NULL;
+    json_decref(j);
+    const char *text = body ? body : "{\"status\":413}";
+    char date[64], head[1024];
+    time_t now = time(NULL);
+    struct tm tm;
+    gmtime_r(&now, &tm);
+    strftime(date, sizeof date, "%a, %d %b %Y %H:%M:%S GMT", &tm);
+    int n = snprintf(head, sizeof head, "HTTP/1.1 413 %s\r\nDate: %s\r\nConnection: close\r\n"
+                     "Content-Type: application/problem+json\r\nContent-Length: %zu\r\n",
+                     api_status_title(413), date, strlen(text));
+    header h[4];
+    int nh = common_header_list(r, h);
+    for (int i = 0; i < nh && n > 0 && (size_t)n < sizeof head; i++)
+        n += snprintf(head + n, sizeof head - (size_t)n, "%s: %s\r\n", h[i].name, h[i].value);
+    if (n > 0 && (size_t)n < sizeof head - 2)
+        n += snprintf(head + n, sizeof head - (size_t)n, "\r\n");
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(r->conn, MHD_CONNECTION_INFO_CONNECTION_FD);
+    if (ci && n > 0 && (size_t)n < sizeof head) {
+        int fd = ci->connect_fd;
+        double deadline = mono_now() + 1.0;
+        if (!send_all(fd, head, (size_t)n, deadline) && !send_all(fd, text, strlen(text), deadline)) {
+            shutdown(fd, SHUT_WR);
+            drain(fd, (size_t)4 << 20, deadline);
+        }
+    }
+    atomic_store(&r->bytes, strlen(text));
+    r->status = 413;
+    r->queued = 1;
+    r->answered_raw = 1;
+    api_free(body);
+    return MHD_NO;
+}
+
 /* ---- before the body: match, auth, body -------------------------------------------------- */
 
 /* The CORS preflight of a known resource: 204 with the allowed methods and headers. */
@@ -574,8 +683,10 @@ static void *on_uri(void *cls, const char *uri, struct MHD_Connection *conn)
 static enum MHD_Result serve(server *srv, req *r, const char *url, const char *method,
                              const char *upload_data, size_t *upload_size)
 {
-    if (!r)
+    if (!r) {
+        log_line(srv, LOG_WARN, "out of memory for a request: its connection is closed");
         return MHD_NO;
+    }
     if (!r->started) { /* the first call: headers complete, no body read yet */
         r->started = 1;
         r->method = intern_method(method);
@@ -595,10 +706,10 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
     if (*upload_size) {
         size_t n = *upload_size;
         *upload_size = 0;
-        if (r->too_big || r->len + n > srv->cfg.limits.max_body_bytes) {
-            r->too_big = 1;
+        if (r->len + n > srv->cfg.limits.max_body_bytes) /* chunked: Content-Length was checked */
+            return refuse_body_now(r);
+        if (r->too_big)
             return MHD_YES;
-        }
         if (r->len + n + 1 > r->cap) {
             size_t cap = r->cap ? r->cap : 4096;
             while (cap < r->len + n + 1)
@@ -619,10 +730,9 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
     guard_request_work(srv->guard, r->gk); /* the body is complete */
     if (r->too_big) {
         api_problem p = {0};
-        api_fail_limit(&p, "max_body_bytes", srv->cfg.limits.max_body_bytes,
-                       srv->cfg.limits.max_body_bytes + 1,
-                       "the body exceeds the limit of %zu bytes; send a smaller complex or raise "
-                       "--max-body-bytes", srv->cfg.limits.max_body_bytes);
+        p.retry_after = 5;
+        api_fail(&p, 503, "out-of-memory", "out of memory while reading the body of %zu bytes; "
+                 "retry later", r->len);
         http_reply_problem(r, &p);
         return MHD_YES;
     }
@@ -669,7 +779,8 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
         metrics_request(r->route_name, r->method, r->status, ms / 1e3);
         log_line(srv, LOG_INFO, "%s %s %d %lluB %.2fms%s", r->method, path, r->status,
                  (unsigned long long)atomic_load(&r->bytes), ms,
-                 code == MHD_REQUEST_TERMINATED_COMPLETED_OK ? "" : " (cut short)");
+                 code == MHD_REQUEST_TERMINATED_COMPLETED_OK || r->answered_raw ? ""
+                                                                    : " (cut short)");
     }
     log_line(srv, LOG_DEBUG, "%s %s: at most %lld bytes held by the request", r->method, path,
              (long long)r->mem.peak);
@@ -680,13 +791,15 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
 /* libmicrohttpd's messages, as warnings — except those about clients that went away or were
  * turned away (closed mid-request, by the guard or themselves; over a connection limit), which
  * a flood of hostile connections would otherwise turn into a flood of log lines: those are
- * debug, and counted on /metrics. */
+ * debug, and counted on /metrics (or logged as requests). */
 static void mhd_log(void *cls, const char *fmt, va_list ap)
 {
     static const char *const routine[] = {"Connection socket is closed",
                                           "Connection was closed by remote side",
                                           "Server reached connection limit",
-                                          "Socket has been disconnected"};
+                                          "Socket has been disconnected",
+                                          /* our MHD_NO: refuse_body_now, or out of memory */
+                                          "Application reported internal error"};
     server *srv = cls;
     char msg[512];
     vsnprintf(msg, sizeof msg, fmt, ap);

@@ -53,7 +53,8 @@ struct req {
     const char *route_name;   /* pattern for metrics and logs */
     char *body;
     size_t len, cap;
-    int too_big;
+    int too_big;              /* the body could not be kept (out of memory): refused at its end */
+    int answered_raw;         /* answered on the socket itself (a chunked body over the limit) */
     double t0;
     session *s;
     char seg_id[40];
