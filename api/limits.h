@@ -18,7 +18,10 @@
 #define API_DEFAULT_MAX_SESSION_BYTES   (4ull << 30)  /* core memory of one session */
 #define API_DEFAULT_MAX_SESSIONS        64
 #define API_DEFAULT_TTL_S               3600
-#define API_MAX_TTL_S                   (7 * 24 * 3600)
+#define API_DEFAULT_MAX_TTL_S           86400         /* a larger ttl_s is granted as this */
+#define API_MAX_TTL_S                   (7 * 24 * 3600) /* the largest ttl_s accepted (422) */
+#define API_DEFAULT_SESSION_RATE        30            /* sessions per client and minute */
+#define API_RATE_CLIENTS                4096          /* clients the session rate remembers */
 #define API_MAX_JSON_DEPTH              16
 #define API_MAX_ATTRIBUTES              16
 #define API_MAX_ATTRIBUTE_NAME          48

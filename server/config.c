@@ -39,6 +39,10 @@ static const setting S[] = {
      "seconds a computation waits for a free thread before 429 (default 30)"},
     {"max-sessions", T_INT, OFF(max_sessions), 1, 1000000, "live sessions (default 64)"},
     {"ttl", T_INT, OFF(ttl_s), 1, API_MAX_TTL_S, "default session idle TTL in seconds (3600)"},
+    {"max-ttl", T_INT, OFF(max_ttl_s), 1, API_MAX_TTL_S,
+     "largest session TTL granted, seconds (default 86400; a larger ttl_s is clamped)"},
+    {"session-rate", T_INT, OFF(session_rate), 1, 1000000,
+     "sessions one client address may create per minute, in bursts of as many (default 30)"},
     {"max-body-bytes", T_SIZE, OFF(limits.max_body_bytes), 1, 1LL << 40,
      "request body bytes (default 64 MiB)"},
     {"max-vertices", T_U32, OFF(limits.max_vertices), 1, 0xfffffffeLL,
@@ -136,6 +140,8 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     c->queue_timeout_s = 30;
     c->max_sessions = API_DEFAULT_MAX_SESSIONS;
     c->ttl_s = API_DEFAULT_TTL_S;
+    c->max_ttl_s = API_DEFAULT_MAX_TTL_S;
+    c->session_rate = API_DEFAULT_SESSION_RATE;
     c->log_level = LOG_INFO;
     strcpy(c->cors_origin, "*");
     c->limits = api_default_limits();
@@ -189,5 +195,7 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     }
     if (c->connection_reserve > c->max_connections / 2)
         c->connection_reserve = c->max_connections / 2;
+    if (c->ttl_s > c->max_ttl_s)
+        c->ttl_s = c->max_ttl_s;
     return 0;
 }

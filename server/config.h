@@ -18,8 +18,10 @@ typedef struct config {
     int header_timeout_s;     /* a new connection's request headers */
     int body_min_rate;        /* bytes/s a request body must average after header_timeout_s */
     int queue_timeout_s;      /* how long a computation waits for a slot before 429 */
-    int max_sessions;
+    int max_sessions;         /* resident sessions */
     int ttl_s;                /* default session idle TTL */
+    int max_ttl_s;            /* a larger ttl_s asked for is granted as this */
+    int session_rate;         /* sessions one client may create per minute (burst as many) */
     int no_auth;
     int log_level;
     char cors_origin[256];    /* "*" or one origin */

@@ -253,6 +253,13 @@ const char *http_header(req *r, const char *name)
     return MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND, name);
 }
 
+const struct sockaddr *http_client_address(req *r)
+{
+    const union MHD_ConnectionInfo *i =
+        MHD_get_connection_info(r->conn, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
+    return i ? i->client_addr : NULL;
+}
+
 /* The query is the daemon's own (on_uri below): parsed into r->params at the first call. */
 const char *http_arg(req *r, const char *key)
 {

@@ -84,6 +84,7 @@ const route *route_static(void);
 
 const char *http_header(req *r, const char *name);   /* NULL when absent */
 const char *http_arg(req *r, const char *key);       /* a query argument, NULL when absent */
+const struct sockaddr *http_client_address(req *r); /* NULL when unknown */
 
 /* ---- http.c: answering ---- */
 

@@ -16,6 +16,7 @@
 #include "../api/mem.h"
 #include "metrics.h"
 #include "parse.h"
+#include "rate.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -126,9 +127,23 @@ static void iso_time(char *buf, size_t cap, time_t t)
     strftime(buf, cap, "%Y-%m-%dT%H:%M:%SZ", &tm);
 }
 
+/* POST /v1/sessions: anyone may ask, so each client address has a rate (--session-rate, 429
+ * with the seconds until its next token), the TTL is capped (--max-ttl: the answer says what
+ * was granted), and a full table first lets an empty idle session go (sessions.c); otherwise
+ * 429 with the seconds until the soonest expiry. */
 static void h_create_session(req *r)
 {
     api_problem p = {0};
+    rate_key key = rate_key_of(http_client_address(r));
+    int wait = rate_take(r->srv->session_rate, &key, mono_now());
+    if (wait) {
+        p.retry_after = wait;
+        api_fail(&p, 429, "session-rate",
+                 "this client may create %d sessions a minute; retry in %d s", r->srv->cfg.session_rate,
+                 wait);
+        http_reply_problem(r, &p);
+        return;
+    }
     json_t *b = parse_body(r, 1, &p);
     static const char *const keys[] = {"ttl_s", NULL};
     long long ttl = r->srv->cfg.ttl_s;
@@ -140,12 +155,22 @@ static void h_create_session(req *r)
         return;
     }
     json_decref(b);
-    session *s = store_create(r->srv->st, (int)ttl);
+    if (ttl > r->srv->cfg.max_ttl_s)
+        ttl = r->srv->cfg.max_ttl_s;
+    store_admission adm;
+    session *s = store_create(r->srv->st, (int)ttl, &adm);
+    if (adm.evicted)
+        log_line(r->srv, LOG_INFO, "the session table was full: an empty idle session went");
+    if (!s && !adm.retry_after_s) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
     if (!s) {
-        p.retry_after = 60;
+        p.retry_after = adm.retry_after_s;
         api_fail(&p, 429, "too-many-sessions",
-                 "the daemon holds its maximum of %d sessions; delete unused sessions or wait for "
-                 "idle ones to expire", r->srv->cfg.max_sessions);
+                 "the daemon holds its maximum of %d sessions, each with a complex or in use; "
+                 "delete unused sessions, or retry in %d s when the first expires",
+                 r->srv->cfg.max_sessions, adm.retry_after_s);
         http_reply_problem(r, &p);
         return;
     }

@@ -10,6 +10,7 @@
 typedef struct server {
     config cfg;
     store *st;
+    struct rate *session_rate; /* session creations per client (rate.h) */
     sem_t compute;            /* cfg.threads slots for computations */
     atomic_int draining;      /* /readyz answers 503 while starting or stopping */
     struct MHD_Daemon *mhd;
