@@ -54,7 +54,7 @@ static const setting S[] = {
     {"max-session-bytes", T_U64, OFF(limits.max_session_bytes), 1 << 20, 1LL << 50,
      "core memory per session (default 4 GiB)"},
     {"fill-timeout", T_U32, OFF(limits.fill_seconds), 1, 86400,
-     "seconds one TetGen fill may take, wall and CPU (default 60)"},
+     "seconds the TetGen fill of one request may take, all its entries together (default 60)"},
     {"fill-memory", T_U64, OFF(limits.fill_memory_bytes), 64LL << 20, 1LL << 46,
      "address space of the TetGen helper in bytes (default 2 GiB)"},
     {"tetgen", T_STR, OFF(limits.tetgen_helper), 0, 0,
