@@ -10,9 +10,10 @@
  *
  * Built two ways: with clang's libFuzzer (-DSD_LIBFUZZER, `make fuzz`) and as a plain program
  * (gcc, `make test`) that runs the seeds below and N deterministic mutations of them:
- *     fuzz_packed [ITERATIONS [SEED]]
+ *     fuzz_packed [ITERATIONS [SEED]] | --write-seeds DIR
  */
 #include "../../api/packed.h"
+#include "seeds.h"
 #include <jansson.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -197,6 +198,9 @@ static uint32_t rnd(uint32_t n)
 
 int main(int argc, char **argv)
 {
+    int rc;
+    if (fuzz_write_seeds(argc, argv, seeds, NSEEDS, &rc))
+        return rc;
     long iters = argc > 1 ? atol(argv[1]) : 20000;
     rng = argc > 2 ? strtoull(argv[2], NULL, 10) | 1 : 88172645463325252ull;
     char buf[4096];
