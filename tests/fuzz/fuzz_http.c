@@ -20,7 +20,7 @@
  *     fuzz_http [ITERATIONS [SEED]] | --write-seeds DIR
  */
 #include "../../server/parse.h"
-#include "seeds.h"
+#include "plain.h"
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -223,58 +223,20 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t n)
 static const char *const tokens[] = {"Bearer ", "W/", "\"", ",", "*", " ", "\t", "&", "=", "%",
                                      "%00", "%2f", "+", "/", "{id}", "{L}", "{", "}", "\n",
                                      "\x80", "\\", "7"};
-static uint64_t rng;
-static uint32_t rnd(uint32_t n)
-{
-    rng ^= rng << 13;
-    rng ^= rng >> 7;
-    rng ^= rng << 17;
-    return n ? (uint32_t)(rng % n) : 0;
-}
-
 int main(int argc, char **argv)
 {
-    int rc;
-    if (fuzz_write_seeds(argc, argv, seeds, NSEEDS, &rc))
+    long iters = 50000;
+    int rc = fuzz_plain_args(argc, argv, seeds, NSEEDS, &iters);
+    if (rc >= 0)
         return rc;
-    long iters = argc > 1 ? atol(argv[1]) : 50000;
-    rng = argc > 2 ? strtoull(argv[2], NULL, 10) | 1 : 88172645463325252ull;
     static char buf[MAX_INPUT];
     for (size_t i = 0; i < NSEEDS; i++)
         check((const uint8_t *)seeds[i], strlen(seeds[i]));
     for (long it = 0; it < iters; it++) {
-        const char *seed = seeds[rnd(NSEEDS)];
+        const char *seed = seeds[fuzz_rnd(NSEEDS)];
         size_t n = strlen(seed);
         memcpy(buf, seed, n);
-        for (int m = 1 + (int)rnd(4); m > 0; m--) {
-            size_t at = rnd((uint32_t)n + 1);
-            switch (rnd(4)) {
-            case 0: { /* insert a token */
-                const char *t = tokens[rnd(sizeof tokens / sizeof *tokens)];
-                size_t k = strlen(t);
-                if (n + k < sizeof buf) {
-                    memmove(buf + at + k, buf + at, n - at);
-                    memcpy(buf + at, t, k);
-                    n += k;
-                }
-                break;
-            }
-            case 1: { /* delete a few bytes */
-                size_t k = 1 + rnd(4);
-                if (at + k <= n) {
-                    memmove(buf + at, buf + at + k, n - at - k);
-                    n -= k;
-                }
-                break;
-            }
-            case 2: /* replace a byte by any byte */
-                if (at < n)
-                    buf[at] = (char)rnd(256);
-                break;
-            default: /* truncate */
-                n = at;
-            }
-        }
+        n = fuzz_mutate(buf, n, sizeof buf, 4, tokens, sizeof tokens / sizeof *tokens, NULL);
         check((const uint8_t *)buf, n);
     }
     printf("fuzz_http: %zu seeds and %ld mutations, every promise of server/parse.h kept\n",
