@@ -73,7 +73,7 @@ void guard_request_done(guard *g, guard_conn *k);
 /* A NUL byte was decoded in this request's path or query. */
 int guard_request_had_nul(const guard_conn *k);
 
-/* Figures for /metrics and /readyz. */
+/* Figures for /metrics. */
 typedef struct guard_stats {
     unsigned open, waiting, receiving, working;
     uint64_t evicted, header_timeouts, body_timeouts, idle_timeouts;
