@@ -296,6 +296,7 @@ int api_fill(json_t *fill, api_input *in, const api_limits *lim, api_problem *p)
             api_add_error(p, at, "%s", p->detail);
         }
     }
+    double deadline = api_fill_deadline(lim); /* one for all entries */
     for (size_t k = 0; k < n && !rc; k++) {
         helper_out h = {0};
         h.nloc = s[k].nloc;
@@ -303,7 +304,7 @@ int api_fill(json_t *fill, api_input *in, const api_limits *lim, api_problem *p)
         h.room_vertices = lim->max_vertices > in->nv ? lim->max_vertices - in->nv : 0;
         h.room_simplices = lim->max_simplices > in->ns ? lim->max_simplices - in->ns : 0;
         char why[PATH_MAX + 128];
-        if (api_fill_run_helper(lim, &s[k], &h, why, sizeof why))
+        if (api_fill_run_helper(lim, &s[k], deadline, &h, why, sizeof why))
             rc = api_fail(p, 500, "fill-failed", "%s; install subdivd-tetgen beside subdivd or "
                           "name it with --tetgen", why);
         if (!rc)

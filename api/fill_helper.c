@@ -9,6 +9,12 @@
  * deadline; SIGKILL and waitpid for that child only. The reply's size is checked against the
  * limits from its header before the payload is allocated.
  *
+ * The deadline is the whole fill's: every entry of one request shares --fill-timeout (the
+ * caller passes one absolute deadline; each helper's CPU limit is what is left of it). The
+ * helper dies with the daemon (PR_SET_PDEATHSIG, tetgen/helper.c, told our pid with --parent):
+ * Linux delivers that when the spawning *thread* ends, so one thread spawns, pumps and reaps the
+ * helper, as api_fill_run_helper does — it must never hand a running helper to another thread.
+ *
  * How the helper's end maps to answers:
  *   reply OK                      -> 0: the tetrahedra, checked by fill_check.c (500 if bad)
  *   reply INTERSECT               -> 422 naming the triangles TetGen -d found intersecting
@@ -41,6 +47,11 @@ static double now_s(void)
     struct timespec t;
     clock_gettime(CLOCK_MONOTONIC, &t);
     return (double)t.tv_sec + t.tv_nsec * 1e-9;
+}
+
+double api_fill_deadline(const api_limits *lim)
+{
+    return now_s() + (lim->fill_seconds ? lim->fill_seconds : API_DEFAULT_FILL_SECONDS);
 }
 
 static void helper_path(const api_limits *lim, char *buf, size_t cap, int *search)
@@ -128,14 +139,16 @@ static unsigned char *request(const surface *s, size_t *len)
 
 /* Start the helper on a request socket and two pipes; fd[0..2] get our ends of its stdin,
  * stdout and stderr. 0, or -1 with `why`. */
-static int spawn(const api_limits *lim, pid_t *pid, int fd[3], char *why, size_t cap)
+static int spawn(const api_limits *lim, double deadline, pid_t *pid, int fd[3], char *why,
+                 size_t cap)
 {
-    char path[PATH_MAX], mem[32], cpu[32];
+    char path[PATH_MAX], mem[32], cpu[32], parent[32];
     int search;
     helper_path(lim, path, sizeof path, &search);
     snprintf(mem, sizeof mem, "%llu", (unsigned long long)lim->fill_memory_bytes);
-    snprintf(cpu, sizeof cpu, "%u", lim->fill_seconds ? lim->fill_seconds : API_DEFAULT_FILL_SECONDS);
-    char *argv[] = {path, "--max-bytes", mem, "--cpu-seconds", cpu, NULL};
+    snprintf(cpu, sizeof cpu, "%.0f", fmax(1, ceil(deadline - now_s())));
+    snprintf(parent, sizeof parent, "%ld", (long)getpid());
+    char *argv[] = {path, "--max-bytes", mem, "--cpu-seconds", cpu, "--parent", parent, NULL};
     int sv[2] = {-1, -1}, po[2] = {-1, -1}, pe[2] = {-1, -1};
     if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv) || pipe2(po, O_CLOEXEC) ||
         pipe2(pe, O_CLOEXEC)) {
@@ -290,9 +303,13 @@ static void reap(helper_out *h, pid_t pid, double deadline)
     }
 }
 
-int api_fill_run_helper(const api_limits *lim, const surface *s, helper_out *h, char *why,
-                        size_t cap)
+int api_fill_run_helper(const api_limits *lim, const surface *s, double deadline, helper_out *h,
+                        char *why, size_t cap)
 {
+    if (now_s() >= deadline) { /* the entries before this one took the fill's time */
+        h->timed_out = 1;
+        return 0;
+    }
     size_t len;
     unsigned char *req = request(s, &len);
     if (!req) {
@@ -301,11 +318,10 @@ int api_fill_run_helper(const api_limits *lim, const surface *s, helper_out *h, 
     }
     pid_t pid;
     int fd[3];
-    if (spawn(lim, &pid, fd, why, cap)) {
+    if (spawn(lim, deadline, &pid, fd, why, cap)) {
         api_free(req);
         return -1;
     }
-    double deadline = now_s() + (lim->fill_seconds ? lim->fill_seconds : API_DEFAULT_FILL_SECONDS);
     pump(h, fd, req, len, deadline);
     api_free(req);
     reap(h, pid, deadline);
@@ -361,8 +377,9 @@ int api_fill_judge(const helper_out *h, const surface *s, size_t k, const api_li
     int sig = WIFSIGNALED(h->wstatus) ? WTERMSIG(h->wstatus) : 0;
     if (h->timed_out || sig == SIGXCPU || (sig == SIGKILL && !h->hdr_got))
         return api_fail_limit(p, "fill_seconds", secs, secs + 1,
-                              "TetGen did not finish within %u s; ask for fewer tetrahedra (a "
-                              "larger max_volume or min_ratio) or raise --fill-timeout", secs);
+                              "TetGen did not finish within %u s (the time of all fill entries "
+                              "together); ask for fewer tetrahedra (a larger max_volume or "
+                              "min_ratio) or raise --fill-timeout", secs);
     if (sig)
         return api_fail_at(p, 422, "invalid-surface", ptr,
                            "TetGen crashed on this surface (signal %d, %s). Debian's TetGen 1.5 "

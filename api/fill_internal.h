@@ -50,11 +50,15 @@ int api_fill_check_surface(surface *s, size_t k, const api_input *in, api_proble
 int api_fill_check_boundary(const surface *s, const uint32_t *tets, uint32_t nt4, size_t k,
                             api_problem *p);
 
+/* fill_helper.c: the deadline of a fill starting now (monotonic seconds): --fill-timeout for all
+ * of its entries together. */
+double api_fill_deadline(const api_limits *lim);
 /* fill_helper.c: spawn the helper, send the request, collect the reply and stderr until both
- * close or the deadline passes, then reap the child. 0, or -1 with `why` when it could not be
- * started. h->nloc, ntri, room_* are set by the caller. */
-int api_fill_run_helper(const api_limits *lim, const surface *s, helper_out *h, char *why,
-                        size_t cap);
+ * close or `deadline` passes (h->timed_out, without a helper if it has passed already), then
+ * reap the child. 0, or -1 with `why` when it could not be started. h->nloc, ntri, room_* are
+ * set by the caller. */
+int api_fill_run_helper(const api_limits *lim, const surface *s, double deadline, helper_out *h,
+                        char *why, size_t cap);
 /* fill_helper.c: the helper's end as a problem, or 0 when its tetrahedra can be checked. */
 int api_fill_judge(const helper_out *h, const surface *s, size_t k, const api_limits *lim,
                    api_problem *p);

@@ -18,13 +18,18 @@
 #define API_DEFAULT_MAX_SESSION_BYTES   (4ull << 30)  /* core memory of one session */
 #define API_DEFAULT_MAX_SESSIONS        64
 #define API_DEFAULT_TTL_S               3600
-#define API_MAX_TTL_S                   (7 * 24 * 3600)
+#define API_DEFAULT_MAX_TTL_S           86400         /* a larger ttl_s is granted as this */
+#define API_MAX_TTL_S                   (7 * 24 * 3600) /* the largest ttl_s accepted (422) */
+#define API_DEFAULT_SESSION_RATE        30            /* sessions per client and minute */
+#define API_RATE_CLIENTS                4096          /* clients the session rate remembers */
 #define API_MAX_JSON_DEPTH              16
 #define API_MAX_ATTRIBUTES              16
 #define API_MAX_ATTRIBUTE_NAME          48
-#define API_DEFAULT_FILL_SECONDS        60            /* wall deadline of one TetGen run */
+#define API_DEFAULT_FILL_SECONDS        60            /* wall deadline of one request's fill */
 #define API_DEFAULT_FILL_MEMORY_BYTES   (2ull << 30)  /* address space of the TetGen helper */
 #define API_MAX_FILL_SURFACES           16            /* entries of "fill" in one request */
+#define API_MAX_PATH_BYTES              256           /* a request's decoded path (414 beyond) */
+#define API_MAX_QUERY_PARAMS            64            /* parameters of a request's query (400) */
 
 typedef struct api_limits {
     size_t max_body_bytes;
@@ -33,7 +38,8 @@ typedef struct api_limits {
     uint64_t max_cells;
     uint64_t max_session_bytes;
     /* TetGen fill (api/fill.c): limits of the helper process, and where it is */
-    uint32_t fill_seconds;        /* wall deadline of one fill; also its CPU-time limit */
+    uint32_t fill_seconds;        /* wall deadline of one request's fill, all entries together;
+                                     each helper's CPU-time limit is what is left of it */
     uint64_t fill_memory_bytes;   /* RLIMIT_AS of the helper */
     char tetgen_helper[256];      /* "" = subdivd-tetgen beside the running binary, else on PATH */
 } api_limits;

@@ -125,19 +125,36 @@ const char *api_status_title(int status)
     }
 }
 
+/* A JSON string of s, which may quote what a client sent (a path, a header, a key cut at a
+ * fixed length): bytes that are not valid UTF-8 become '?' instead of failing the whole
+ * problem. */
+static json_t *text(const char *s)
+{
+    json_t *j = json_string(s);
+    if (j)
+        return j;
+    char buf[sizeof ((api_problem *)0)->detail];
+    size_t n = 0;
+    for (; *s && n + 1 < sizeof buf; s++)
+        buf[n++] = (unsigned char)*s < 0x80 ? *s : '?';
+    buf[n] = 0;
+    return json_string(buf);
+}
+
 json_t *api_problem_json(const api_problem *p)
 {
     char type[96];
     snprintf(type, sizeof type, "/errors/%s", p->slug ? p->slug : "error");
-    json_t *o = json_pack("{s:s, s:s, s:i, s:s}", "type", type, "title",
-                          api_status_title(p->status), "status", p->status, "detail", p->detail);
+    json_t *o = json_pack("{s:s, s:s, s:i, s:o}", "type", type, "title",
+                          api_status_title(p->status), "status", p->status, "detail",
+                          text(p->detail));
     if (!o)
         return NULL;
     if (p->nerrors) {
         json_t *a = json_array();
         for (int i = 0; i < p->nerrors; i++)
-            json_array_append_new(a, json_pack("{s:s, s:s}", "pointer", p->errors[i].pointer,
-                                               "message", p->errors[i].message));
+            json_array_append_new(a, json_pack("{s:o, s:o}", "pointer", text(p->errors[i].pointer),
+                                               "message", text(p->errors[i].message)));
         json_object_set_new(o, "errors", a);
     }
     if (p->has_limit) {

@@ -24,12 +24,25 @@ static const setting S[] = {
     {"port", T_INT, OFF(port), 0, 65535, "TCP port (default 8080; 0 picks a free one)"},
     {"threads", T_INT, OFF(threads), 1, 256, "concurrent computations (default: CPU count)"},
     {"max-connections", T_INT, OFF(max_connections), 1, 100000, "open connections (default 256)"},
+    {"max-connections-per-client", T_INT, OFF(max_connections_per_client), 0, 100000,
+     "open connections of one client address (default 32; 0: no cap)"},
+    {"connection-reserve", T_INT, OFF(connection_reserve), 0, 100000,
+     "connections kept free: beyond max minus this, waiting ones are evicted (default 16, "
+     "at most half of --max-connections)"},
     {"connection-timeout", T_INT, OFF(connection_timeout_s), 1, 86400,
-     "idle connection timeout in seconds (default 30)"},
+     "idle timeout of a kept-alive connection in seconds (default 30)"},
+    {"header-timeout", T_INT, OFF(header_timeout_s), 1, 3600,
+     "seconds a new connection has to send its request headers (default 10)"},
+    {"body-min-rate", T_INT, OFF(body_min_rate), 0, 1 << 30,
+     "bytes/s a request body must average after --header-timeout (default 65536; 0: any)"},
     {"queue-timeout", T_INT, OFF(queue_timeout_s), 0, 3600,
      "seconds a computation waits for a free thread before 429 (default 30)"},
     {"max-sessions", T_INT, OFF(max_sessions), 1, 1000000, "live sessions (default 64)"},
     {"ttl", T_INT, OFF(ttl_s), 1, API_MAX_TTL_S, "default session idle TTL in seconds (3600)"},
+    {"max-ttl", T_INT, OFF(max_ttl_s), 1, API_MAX_TTL_S,
+     "largest session TTL granted, seconds (default 86400; a larger ttl_s is clamped)"},
+    {"session-rate", T_INT, OFF(session_rate), 1, 1000000,
+     "sessions one client address may create per minute, in bursts of as many (default 30)"},
     {"max-body-bytes", T_SIZE, OFF(limits.max_body_bytes), 1, 1LL << 40,
      "request body bytes (default 64 MiB)"},
     {"max-vertices", T_U32, OFF(limits.max_vertices), 1, 0xfffffffeLL,
@@ -41,7 +54,7 @@ static const setting S[] = {
     {"max-session-bytes", T_U64, OFF(limits.max_session_bytes), 1 << 20, 1LL << 50,
      "core memory per session (default 4 GiB)"},
     {"fill-timeout", T_U32, OFF(limits.fill_seconds), 1, 86400,
-     "seconds one TetGen fill may take, wall and CPU (default 60)"},
+     "seconds the TetGen fill of one request may take, all its entries together (default 60)"},
     {"fill-memory", T_U64, OFF(limits.fill_memory_bytes), 64LL << 20, 1LL << 46,
      "address space of the TetGen helper in bytes (default 2 GiB)"},
     {"tetgen", T_STR, OFF(limits.tetgen_helper), 0, 0,
@@ -65,7 +78,7 @@ void config_usage(FILE *f)
                "http://127.0.0.1:8080/healthz, answers 200)\n\noptions (each also read from "
                "SUBDIVD_<NAME>):\n", out_format_list(exts, sizeof exts, true, "|", "|"));
     for (size_t i = 0; i < NS; i++)
-        fprintf(f, "  --%-20s %s\n", S[i].flag, S[i].help);
+        fprintf(f, "  --%-27s %s\n", S[i].flag, S[i].help);
 }
 
 static int set(config *c, const setting *s, const char *v, const char *from)
@@ -119,10 +132,16 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     long n = sysconf(_SC_NPROCESSORS_ONLN);
     c->threads = n > 0 ? (int)n : 2;
     c->max_connections = 256;
+    c->max_connections_per_client = 32;
+    c->connection_reserve = 16;
     c->connection_timeout_s = 30;
+    c->header_timeout_s = 10;
+    c->body_min_rate = 65536;
     c->queue_timeout_s = 30;
     c->max_sessions = API_DEFAULT_MAX_SESSIONS;
     c->ttl_s = API_DEFAULT_TTL_S;
+    c->max_ttl_s = API_DEFAULT_MAX_TTL_S;
+    c->session_rate = API_DEFAULT_SESSION_RATE;
     c->log_level = LOG_INFO;
     strcpy(c->cors_origin, "*");
     c->limits = api_default_limits();
@@ -174,5 +193,9 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
         if (set(c, &S[i], v, "--"))
             return 1;
     }
+    if (c->connection_reserve > c->max_connections / 2)
+        c->connection_reserve = c->max_connections / 2;
+    if (c->ttl_s > c->max_ttl_s)
+        c->ttl_s = c->max_ttl_s;
     return 0;
 }

@@ -12,10 +12,16 @@ typedef struct config {
     int port;                 /* default 8080; 0 = any free port (printed at start) */
     int threads;              /* concurrent computations (default: CPU count) */
     int max_connections;
-    int connection_timeout_s;
+    int max_connections_per_client; /* per client address (0: no cap) */
+    int connection_reserve;   /* slots kept free: beyond max - reserve the guard evicts */
+    int connection_timeout_s; /* idle kept-alive connections */
+    int header_timeout_s;     /* a new connection's request headers */
+    int body_min_rate;        /* bytes/s a request body must average after header_timeout_s */
     int queue_timeout_s;      /* how long a computation waits for a slot before 429 */
-    int max_sessions;
+    int max_sessions;         /* resident sessions */
     int ttl_s;                /* default session idle TTL */
+    int max_ttl_s;            /* a larger ttl_s asked for is granted as this */
+    int session_rate;         /* sessions one client may create per minute (burst as many) */
     int no_auth;
     int log_level;
     char cors_origin[256];    /* "*" or one origin */

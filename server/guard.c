@@ -3,8 +3,11 @@
  * Records live in one doubly linked list under `mu`; a record is created by MHD's STARTED
  * notification and unlinked by CLOSED, which MHD sends before it closes the socket — so a
  * shutdown(2) done under `mu` always hits the connection it was meant for, never a reused
- * descriptor. Per-address counts are found by a scan of the list (at most max_connections
- * records): only the accept callback and eviction need them.
+ * descriptor. Per-address counts are needed only to choose whom to evict: one pass over the
+ * list counts them in a small open-addressing table (twice the connection limit, slots
+ * invalidated by a generation number rather than cleared), so eviction stays linear in the
+ * number of connections. Records and the table come from the C library, not api/mem.h: the
+ * guard has to keep working when the budget of api/ is spent.
  */
 #include "guard.h"
 #include <netinet/in.h>
@@ -29,8 +32,18 @@ struct guard_conn {
     uint64_t body_len, body_got;
 };
 
+/* One address's count in victim()'s scratch table; a slot is empty unless gen is current. */
+typedef struct addr_count {
+    uint8_t addr[16];
+    uint8_t v6;
+    unsigned gen, n;
+} addr_count;
+
 struct guard {
     guard_config cfg;
+    addr_count *counts;
+    size_t ncounts;        /* a power of two, at least twice max_connections */
+    unsigned gen;
     pthread_mutex_t mu;
     pthread_cond_t cv;
     pthread_t reaper;
@@ -59,12 +72,27 @@ static void addr_key(const struct sockaddr *sa, uint8_t out[16], uint8_t *v6)
     }
 }
 
-static unsigned count_addr(const guard *g, const uint8_t a[16], uint8_t v6)
+/* The scratch slot of k's address (found or taken), NULL if the table is full. Caller holds
+ * mu. */
+static addr_count *addr_slot(guard *g, const guard_conn *k)
 {
-    unsigned n = 0;
-    for (const guard_conn *k = g->head; k; k = k->next)
-        n += !k->closing && k->family_v6 == v6 && !memcmp(k->addr, a, 16);
-    return n;
+    uint64_t h = 1469598103934665603ull; /* FNV-1a */
+    for (int i = 0; i < 16; i++)
+        h = (h ^ k->addr[i]) * 1099511628211ull;
+    h = (h ^ k->family_v6) * 1099511628211ull;
+    for (size_t i = 0; i < g->ncounts; i++) {
+        addr_count *c = &g->counts[(h + i) & (g->ncounts - 1)];
+        if (c->gen != g->gen) {
+            memcpy(c->addr, k->addr, 16);
+            c->v6 = k->family_v6;
+            c->gen = g->gen;
+            c->n = 0;
+            return c;
+        }
+        if (c->v6 == k->family_v6 && !memcmp(c->addr, k->addr, 16))
+            return c;
+    }
+    return NULL;
 }
 
 static bool pressure(const guard *g)
@@ -83,12 +111,22 @@ static void close_conn(guard_conn *k)
  * first, then the one that has waited longest. Caller holds mu. */
 static guard_conn *victim(guard *g)
 {
+    if (++g->gen == 0) { /* wrapped: old slots could look current */
+        memset(g->counts, 0, g->ncounts * sizeof *g->counts);
+        g->gen = 1;
+    }
+    for (guard_conn *k = g->head; k; k = k->next) {
+        addr_count *c = k->closing ? NULL : addr_slot(g, k);
+        if (c)
+            c->n++;
+    }
     guard_conn *best = NULL;
     unsigned best_n = 0;
     for (guard_conn *k = g->head; k; k = k->next) {
         if (k->closing || (k->phase != PH_WAIT_NEW && k->phase != PH_WAIT_IDLE))
             continue;
-        unsigned n = count_addr(g, k->addr, k->family_v6);
+        addr_count *c = addr_slot(g, k);
+        unsigned n = c ? c->n : 1;
         if (!best || n > best_n || (n == best_n && k->since < best->since)) {
             best = k;
             best_n = n;
@@ -277,6 +315,14 @@ guard *guard_new(const guard_config *cfg)
     if (!g)
         return NULL;
     g->cfg = *cfg;
+    g->ncounts = 16;
+    while (g->ncounts < 2 * (size_t)cfg->max_connections)
+        g->ncounts *= 2;
+    g->counts = calloc(g->ncounts, sizeof *g->counts);
+    if (!g->counts) {
+        free(g);
+        return NULL;
+    }
     pthread_mutex_init(&g->mu, NULL);
     pthread_condattr_t ca;
     pthread_condattr_init(&ca);
@@ -286,6 +332,7 @@ guard *guard_new(const guard_config *cfg)
     if (pthread_create(&g->reaper, NULL, reaper_main, g)) {
         pthread_cond_destroy(&g->cv);
         pthread_mutex_destroy(&g->mu);
+        free(g->counts);
         free(g);
         return NULL;
     }
@@ -305,6 +352,7 @@ void guard_free(guard *g)
         pthread_join(g->reaper, NULL);
     pthread_cond_destroy(&g->cv);
     pthread_mutex_destroy(&g->mu);
+    free(g->counts);
     free(g);
 }
 

@@ -20,7 +20,12 @@
  * /healthz and authenticated clients get through. A connection is closed by shutdown(2) on its
  * socket from the guard's reaper thread (or the accept callback); MHD then sees the end of the
  * stream and cleans up as for any client that went away. All of it runs under one mutex; the
- * table is as large as MHD's connection limit, so its scans are short.
+ * table is as large as MHD's connection limit, and each scan is linear in it.
+ *
+ * The per-address cap is MHD's own (MHD_OPTION_PER_IP_CONNECTION_LIMIT), applied before the
+ * accept callback. Eviction must happen before MHD's connection limit is reached: a connection
+ * arriving at the limit is closed by MHD without calling the accept callback — hence the
+ * reserve.
  */
 #ifndef SUBDIVD_GUARD_H
 #define SUBDIVD_GUARD_H
@@ -33,7 +38,6 @@
 typedef struct guard_config {
     unsigned max_connections;     /* MHD's connection limit */
     unsigned reserve;             /* slots kept free for eviction under pressure */
-    unsigned per_client;          /* connections per client address (0 = no cap) */
     double header_timeout_s;      /* a new connection's request headers */
     double idle_timeout_s;        /* a kept-alive connection between requests */
     double body_min_rate;         /* bytes/s a body must average (0 = no minimum) */
@@ -69,7 +73,7 @@ void guard_request_done(guard *g, guard_conn *k);
 /* A NUL byte was decoded in this request's path or query. */
 int guard_request_had_nul(const guard_conn *k);
 
-/* Figures for /metrics and /readyz. */
+/* Figures for /metrics. */
 typedef struct guard_stats {
     unsigned open, waiting, receiving, working;
     uint64_t evicted, header_timeouts, body_timeouts, idle_timeouts;

@@ -7,21 +7,27 @@
  * a bounded wait and a 429 + Retry-After when the daemon is saturated, so /healthz, /readyz and
  * /metrics never queue behind work.
  *
- * A request goes: first callback (no body yet) -> early(): match (route lookup: 404, 405, the
- * OPTIONS preflight), auth (the session and its bearer token: 404, 401), body (transfer coding,
+ * A request goes: the request line -> on_uri() creates it and takes its query away from
+ * libmicrohttpd; first callback (no body yet) -> early(): target (414 for a long path, 400 for a
+ * NUL byte or too many query parameters), match (route lookup: 404, 405, the OPTIONS preflight),
+ * auth (the session and its bearer token: 404, 401), body (transfer coding,
  * Content-Length against max_body_bytes before anything is read, a body where none is taken,
  * Content-Type: 501, 413, 400, 415); body callbacks -> append to a buffer capped at
- * max_body_bytes; final callback -> the route's handler (routes.c), which calls api/ and queues
- * one response. Level responses stream through out_read() from a callback response that holds
- * references on the session's model until the last byte is sent.
+ * max_body_bytes; final callback -> the query parameters the route takes (400 for others), then
+ * the route's handler (routes.c), which calls api/ and queues one response. Level responses
+ * stream through out_read() from a callback response that holds references on the session's
+ * model until the last byte is sent.
  */
 #include "request.h"
 #include "../api/mem.h"
 #include "../api/handlers.h"
+#include "guard.h"
 #include "metrics.h"
 #include <arpa/inet.h>
 #include <errno.h>
 #include <microhttpd.h>
+#include <poll.h>
+#include <sys/socket.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -42,7 +48,7 @@ void log_line(const server *srv, int level, const char *fmt, ...)
     struct tm tm;
     gmtime_r(&now.tv_sec, &tm);
     strftime(ts, sizeof ts, "%Y-%m-%dT%H:%M:%S", &tm);
-    char msg[1024];
+    char msg[2048];
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(msg, sizeof msg, fmt, ap);
@@ -67,20 +73,36 @@ static void req_unref(req *r)
         return;
     session_unref(r->s);
     api_free(r->body);
+    api_free(r->query);
     api_free(r);
 }
 
 /* ---- responses ------------------------------------------------------------------------------ */
 
-static void common_headers(req *r, struct MHD_Response *resp)
+typedef struct header {
+    const char *name, *value;
+} header;
+
+/* The headers every answer carries (CORS, nosniff): their number, at most 4. */
+static int common_header_list(const req *r, header out[4])
 {
     const char *origin = r->srv->cfg.cors_origin;
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, origin);
+    int n = 0;
+    out[n++] = (header){MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, origin};
     if (strcmp(origin, "*"))
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_VARY, "Origin");
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_EXPOSE_HEADERS,
-                            "ETag, Location, Retry-After, Content-Disposition");
-    MHD_add_response_header(resp, "X-Content-Type-Options", "nosniff");
+        out[n++] = (header){MHD_HTTP_HEADER_VARY, "Origin"};
+    out[n++] = (header){MHD_HTTP_HEADER_ACCESS_CONTROL_EXPOSE_HEADERS,
+                        "ETag, Location, Retry-After, Content-Disposition"};
+    out[n++] = (header){"X-Content-Type-Options", "nosniff"};
+    return n;
+}
+
+static void common_headers(req *r, struct MHD_Response *resp)
+{
+    header h[4];
+    int n = common_header_list(r, h);
+    for (int i = 0; i < n; i++)
+        MHD_add_response_header(resp, h[i].name, h[i].value);
 }
 
 void http_queue(req *r, int status, struct MHD_Response *resp)
@@ -231,42 +253,56 @@ const char *http_header(req *r, const char *name)
     return MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND, name);
 }
 
+const struct sockaddr *http_client_address(req *r)
+{
+    const union MHD_ConnectionInfo *i =
+        MHD_get_connection_info(r->conn, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
+    return i ? i->client_addr : NULL;
+}
+
+/* The query is the daemon's own (on_uri below): parsed into r->params at the first call. */
 const char *http_arg(req *r, const char *key)
 {
-    return MHD_lookup_connection_value(r->conn, MHD_GET_ARGUMENT_KIND, key);
+    for (size_t i = 0; i < r->nparams; i++)
+        if (!strcmp(r->params[i].key, key))
+            return r->params[i].value;
+    return NULL;
 }
 
-typedef struct qcheck {
-    const char *const *allowed;
-    const char *bad;
-} qcheck;
-
-static enum MHD_Result q_iter(void *cls, enum MHD_ValueKind kind, const char *key, const char *value)
+/* Refuse a query parameter the route does not take (route.query), or one given twice: 400
+ * with its name as the pointer (escaped as in logs: the problem is JSON, a name any bytes).
+ * 1 when answered. */
+static int query_refused(req *r, const char *const *allowed)
 {
-    (void)kind;
-    (void)value;
-    qcheck *q = cls;
-    for (const char *const *a = q->allowed; *a; a++)
-        if (!strcmp(*a, key))
-            return MHD_YES;
-    q->bad = key;
-    return MHD_NO;
-}
-
-int http_query_only(req *r, const char *const *allowed)
-{
-    qcheck q = {allowed, NULL};
-    MHD_get_connection_values(r->conn, MHD_GET_ARGUMENT_KIND, q_iter, &q);
-    if (!q.bad)
+    if (allowed && allowed[0] && !strcmp(allowed[0], "*"))
         return 0;
-    char list[160] = "";
-    for (const char *const *a = allowed; *a; a++)
-        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", a == allowed ? "" : ", ", *a);
-    api_problem p = {0};
-    api_fail_at(&p, 400, "unknown-parameter", q.bad, "unknown query parameter \"%.40s\" (allowed: %s)",
-                q.bad, *allowed ? list : "none");
-    http_reply_problem(r, &p);
-    return 1;
+    for (size_t i = 0; i < r->nparams; i++) {
+        int ok = 0;
+        for (const char *const *a = allowed; !ok && a && *a; a++)
+            ok = !strcmp(*a, r->params[i].key);
+        char key[64];
+        parse_log_escape(key, sizeof key, r->params[i].key);
+        api_problem p = {0};
+        if (!ok) {
+            char list[160] = "";
+            for (const char *const *a = allowed; a && *a; a++)
+                snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s",
+                         a == allowed ? "" : ", ", *a);
+            api_fail_at(&p, 400, "unknown-parameter", key,
+                        "unknown query parameter \"%.40s\" (allowed: %s)", key,
+                        list[0] ? list : "none");
+            http_reply_problem(r, &p);
+            return 1;
+        }
+        for (size_t j = 0; j < i; j++)
+            if (!strcmp(r->params[j].key, r->params[i].key)) {
+                api_fail_at(&p, 400, "repeated-parameter", key,
+                            "the query parameter \"%.40s\" is given more than once", key);
+                http_reply_problem(r, &p);
+                return 1;
+            }
+    }
+    return 0;
 }
 
 /* ---- streaming ------------------------------------------------------------------------------ */
@@ -332,6 +368,98 @@ void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uin
     http_queue(r, 200, resp);
 }
 
+/* ---- a chunked body over the limit ------------------------------------------------------- */
+
+/* Write all n bytes to the socket before `deadline` (monotonic seconds); 0 or -1. */
+static int send_all(int fd, const char *b, size_t n, double deadline)
+{
+    while (n) {
+        ssize_t w = send(fd, b, n, MSG_NOSIGNAL | MSG_DONTWAIT);
+        if (w > 0) {
+            b += w;
+            n -= (size_t)w;
+            continue;
+        }
+        if (w < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)
+            return -1;
+        double left = deadline - mono_now();
+        struct pollfd pf = {fd, POLLOUT, 0};
+        if (left <= 0 || poll(&pf, 1, (int)(left * 1000) + 1) < 0)
+            return -1;
+    }
+    return 0;
+}
+
+/* Read and drop what the client still sends, until it closes, `max` bytes or `deadline`. */
+static void drain(int fd, size_t max, double deadline)
+{
+    char buf[1 << 16];
+    size_t got = 0;
+    while (got < max) {
+        double left = deadline - mono_now();
+        struct pollfd pf = {fd, POLLIN, 0};
+        if (left <= 0 || poll(&pf, 1, (int)(left * 1000) + 1) <= 0)
+            return;
+        ssize_t r = recv(fd, buf, sizeof buf, MSG_DONTWAIT);
+        if (r == 0 || (r < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR))
+            return;
+        if (r > 0)
+            got += (size_t)r;
+    }
+}
+
+/* A chunked body has just passed max_body_bytes: answer 413 now rather than read the rest.
+ * libmicrohttpd 0.9.75 cannot queue a response while upload data is pending (MHD_queue_response
+ * fails outside HEADERS_PROCESSED and FULL_REQ_RECEIVED), so the whole answer, with
+ * "Connection: close", is written to the socket here: this connection's thread is inside our
+ * callback, so libmicrohttpd is not writing (and the daemon speaks plain HTTP: no TLS layer to
+ * bypass). Then our side is shut for writing and what the client still sends is read and
+ * dropped for at most 1 s and 4 MiB, so the client reads the answer before the connection goes
+ * (closing with unread data sends a reset, which can destroy an answer not yet read). MHD_NO then
+ * makes libmicrohttpd close the connection; the request is logged as a 413 like any other. */
+static enum MHD_Result refuse_body_now(req *r)
+{
+    size_t max = r->srv->cfg.limits.max_body_bytes;
+    api_problem p = {0};
+    api_fail_limit(&p, "max_body_bytes", max, max + 1,
+                   "the body exceeds the limit of %zu bytes; send a smaller complex or raise "
+                   "--max-body-bytes", max);
+    json_t *j = api_problem_json(&p);
+    char *body = j ? json_dumps(j, JSON_COMPACT) : NULL;
+    json_decref(j);
+    const char *text = body ? body : "{\"status\":413}";
+    char date[64], head[1024];
+    time_t now = time(NULL);
+    struct tm tm;
+    gmtime_r(&now, &tm);
+    strftime(date, sizeof date, "%a, %d %b %Y %H:%M:%S GMT", &tm);
+    int n = snprintf(head, sizeof head, "HTTP/1.1 413 %s\r\nDate: %s\r\nConnection: close\r\n"
+                     "Content-Type: application/problem+json\r\nContent-Length: %zu\r\n",
+                     api_status_title(413), date, strlen(text));
+    header h[4];
+    int nh = common_header_list(r, h);
+    for (int i = 0; i < nh && n > 0 && (size_t)n < sizeof head; i++)
+        n += snprintf(head + n, sizeof head - (size_t)n, "%s: %s\r\n", h[i].name, h[i].value);
+    if (n > 0 && (size_t)n < sizeof head - 2)
+        n += snprintf(head + n, sizeof head - (size_t)n, "\r\n");
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(r->conn, MHD_CONNECTION_INFO_CONNECTION_FD);
+    if (ci && n > 0 && (size_t)n < sizeof head) {
+        int fd = ci->connect_fd;
+        double deadline = mono_now() + 1.0;
+        if (!send_all(fd, head, (size_t)n, deadline) && !send_all(fd, text, strlen(text), deadline)) {
+            shutdown(fd, SHUT_WR);
+            drain(fd, (size_t)4 << 20, deadline);
+        }
+    }
+    atomic_store(&r->bytes, strlen(text));
+    r->status = 413;
+    r->queued = 1;
+    r->answered_raw = 1;
+    api_free(body);
+    return MHD_NO;
+}
+
 /* ---- before the body: match, auth, body -------------------------------------------------- */
 
 /* The CORS preflight of a known resource: 204 with the allowed methods and headers. */
@@ -357,16 +485,43 @@ static void method_not_allowed(req *r, const api_problem *p, const char *allow)
     http_queue(r, 405, resp);
 }
 
-/* The route of the request (r->rt, its segments, r->route_name), or the answer that there is
- * none: 404 for an unknown or too long path, 405 for a method the resource does not take, 204 for
- * an OPTIONS preflight. 1 when a response was queued. */
-static int early_match(req *r, const char *url)
+/* What is wrong with the request target itself: a path of API_MAX_PATH_BYTES or more (414), a
+ * NUL byte decoded in the path or the query (400: a C string would end there, and the request
+ * mean something else than it says), more than API_MAX_QUERY_PARAMS query parameters (400).
+ * Splits the query into r->params. 1 when a response was queued. */
+static int early_target(req *r, const char *url)
 {
-    const char *m = r->method;
     if (strlen(url) >= sizeof r->path) {
-        http_fail(r, 404, "not-found", "the path is too long");
+        http_fail(r, 414, "uri-too-long", "the path has %zu bytes; at most %zu are taken",
+                  strlen(url), sizeof r->path - 1);
         return 1;
     }
+    if (r->oom) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return 1;
+    }
+    int rc = r->query ? parse_query(r->query, r->params, API_MAX_QUERY_PARAMS, &r->nparams)
+                      : PARSE_QUERY_OK;
+    int nul_path = guard_request_had_nul(r->gk); /* noted by guard_unescape */
+    if (nul_path || rc == PARSE_QUERY_NUL) {
+        http_fail(r, 400, "bad-uri", "the %s holds an encoded NUL byte (%%00)",
+                  nul_path ? "path" : "query");
+        return 1;
+    }
+    if (rc == PARSE_QUERY_TOO_MANY) {
+        http_fail(r, 400, "too-many-parameters", "the query has more than %d parameters",
+                  API_MAX_QUERY_PARAMS);
+        return 1;
+    }
+    return 0;
+}
+
+/* The route of the request (r->rt, its segments, r->route_name), or the answer that there is
+ * none: 404 for an unknown path, 405 for a method the resource does not take, 204 for an OPTIONS
+ * preflight. 1 when a response was queued. */
+static int early_match(req *r)
+{
+    const char *m = r->method;
     char allow[128];
     int known = route_methods(r->path, r, allow, sizeof allow);
     if (!known && route_is_static(r->path)) {
@@ -406,26 +561,6 @@ static int early_match(req *r, const char *url)
     return 0;
 }
 
-/* The token of an Authorization header, into buf; NULL unless it is "Bearer <token>" that fits.
- * credentials = auth-scheme 1*SP token68 (RFC 9110 11.4): the scheme is case-insensitive, and
- * trailing whitespace is not part of the field value. */
-static const char *bearer_token(const char *h, char *buf, size_t cap)
-{
-    if (!h || strncasecmp(h, "Bearer ", 7))
-        return NULL;
-    const char *t = h + 7;
-    while (*t == ' ')
-        t++;
-    size_t n = strlen(t);
-    while (n && (t[n - 1] == ' ' || t[n - 1] == '\t'))
-        n--;
-    if (n >= cap)
-        return NULL;
-    memcpy(buf, t, n);
-    buf[n] = 0;
-    return buf;
-}
-
 /* Who is asking comes first: a client without the session's token learns nothing else. The
  * session of a session route (r->s; 404 when there is none) and its bearer token (401). 1 when a
  * response was queued. */
@@ -444,7 +579,7 @@ static int early_auth(req *r)
     const char *h = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
                                                 MHD_HTTP_HEADER_AUTHORIZATION);
     char tbuf[128];
-    if (session_token_ok(r->s, bearer_token(h, tbuf, sizeof tbuf)))
+    if (session_token_ok(r->s, parse_bearer(h, tbuf, sizeof tbuf)))
         return 0;
     api_problem p = {0};
     api_fail(&p, 401, "unauthorized",
@@ -505,32 +640,72 @@ static int early_body(req *r)
     return 0;
 }
 
+/* The body the request announces: Content-Length, UINT64_MAX when chunked, 0 for none. */
+static uint64_t body_announced(req *r)
+{
+    const char *cl = http_header(r, MHD_HTTP_HEADER_CONTENT_LENGTH);
+    if (cl)
+        return strtoull(cl, NULL, 10);
+    return http_header(r, MHD_HTTP_HEADER_TRANSFER_ENCODING) ? UINT64_MAX : 0;
+}
+
 /* Every check that needs no body, in order. Returns 1 when a response was queued. */
 static int early(req *r, const char *url)
 {
-    return early_match(r, url) || early_auth(r) || early_body(r);
+    return early_target(r, url) || early_match(r) || early_auth(r) || early_body(r);
 }
 
-static enum MHD_Result serve(server *srv, req *r, struct MHD_Connection *conn, const char *url,
-                             const char *method, const char *upload_data, size_t *upload_size,
-                             void **con_cls)
+/* MHD_OPTION_URI_LOG_CALLBACK: libmicrohttpd calls it with the raw request target before it
+ * parses the target, and makes its answer the request's context (*con_cls). The request is
+ * created here so that its query is the daemon's own: copied, then cut off at the '?' for
+ * libmicrohttpd, which therefore parses no query arguments. (0.9.75 finds the '?' before this
+ * call and parses what follows it after; every argument takes a header record from the
+ * connection's memory pool, which ~700 short ones exhaust: it then closes the connection
+ * without an answer. The target lies in its read buffer, writable, which it cuts up itself.)
+ * early_target splits the copy, with a bound on the count and NUL bytes refused. NULL (out of
+ * memory) makes the first access-handler call close the connection. */
+static void *on_uri(void *cls, const char *uri, struct MHD_Connection *conn)
+{
+    char *q = uri ? strchr((char *)uri, '?') : NULL;
+    req *r = api_calloc(1, sizeof *r);
+    if (r) {
+        atomic_init(&r->refs, 1);
+        r->srv = cls;
+        r->conn = conn;
+        r->t0 = mono_now();
+        r->method = "OTHER";
+        r->route_name = "unknown";
+        if (q) {
+            api_mem_meter *prev = api_mem_meter_set(&r->mem);
+            r->query = api_strdup(q + 1);
+            r->oom = !r->query;
+            api_mem_meter_set(prev);
+        }
+    }
+    if (q)
+        q[1] = 0;
+    return r;
+}
+
+static enum MHD_Result serve(server *srv, req *r, const char *url, const char *method,
+                             const char *upload_data, size_t *upload_size)
 {
     if (!r) {
-        r = api_calloc(1, sizeof *r);
-        if (!r)
-            return MHD_NO;
-        api_mem_meter_set(&r->mem);
-        atomic_init(&r->refs, 1);
-        r->srv = srv;
-        r->conn = conn;
+        log_line(srv, LOG_WARN, "out of memory for a request: its connection is closed");
+        return MHD_NO;
+    }
+    if (!r->started) { /* the first call: headers complete, no body read yet */
+        r->started = 1;
         r->method = intern_method(method);
-        r->t0 = mono_now();
-        r->route_name = "unknown";
         snprintf(r->path, sizeof r->path, "%s", url);
-        *con_cls = r;
-        early(r, url);
+        r->gk = guard_conn_of(r->conn);
+        /* an answer queued now makes libmicrohttpd discard any body and close */
+        int answered = early(r, url);
+        guard_request_begin(srv->guard, r->gk, answered ? 0 : body_announced(r));
         return MHD_YES;
     }
+    if (*upload_size)
+        guard_body_progress(srv->guard, r->gk, *upload_size);
     if (r->queued) { /* answered early: swallow any body */
         *upload_size = 0;
         return MHD_YES;
@@ -538,10 +713,10 @@ static enum MHD_Result serve(server *srv, req *r, struct MHD_Connection *conn, c
     if (*upload_size) {
         size_t n = *upload_size;
         *upload_size = 0;
-        if (r->too_big || r->len + n > srv->cfg.limits.max_body_bytes) {
-            r->too_big = 1;
+        if (r->len + n > srv->cfg.limits.max_body_bytes) /* chunked: Content-Length was checked */
+            return refuse_body_now(r);
+        if (r->too_big)
             return MHD_YES;
-        }
         if (r->len + n + 1 > r->cap) {
             size_t cap = r->cap ? r->cap : 4096;
             while (cap < r->len + n + 1)
@@ -559,12 +734,12 @@ static enum MHD_Result serve(server *srv, req *r, struct MHD_Connection *conn, c
         r->body[r->len] = 0;
         return MHD_YES;
     }
+    guard_request_work(srv->guard, r->gk); /* the body is complete */
     if (r->too_big) {
         api_problem p = {0};
-        api_fail_limit(&p, "max_body_bytes", srv->cfg.limits.max_body_bytes,
-                       srv->cfg.limits.max_body_bytes + 1,
-                       "the body exceeds the limit of %zu bytes; send a smaller complex or raise "
-                       "--max-body-bytes", srv->cfg.limits.max_body_bytes);
+        p.retry_after = 5;
+        api_fail(&p, 503, "out-of-memory", "out of memory while reading the body of %zu bytes; "
+                 "retry later", r->len);
         http_reply_problem(r, &p);
         return MHD_YES;
     }
@@ -572,6 +747,8 @@ static enum MHD_Result serve(server *srv, req *r, struct MHD_Connection *conn, c
         http_fail(r, 400, "unexpected-body", "%s %s takes no request body", method, r->rt->pattern);
         return MHD_YES;
     }
+    if (query_refused(r, r->rt->query))
+        return MHD_YES;
     r->rt->fn(r);
     if (!r->queued)
         http_fail(r, 500, "internal", "the handler produced no response");
@@ -587,7 +764,8 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
     (void)version;
     req *r = *con_cls;
     api_mem_meter *prev = api_mem_meter_set(r ? &r->mem : NULL);
-    enum MHD_Result res = serve(cls, r, conn, url, method, upload_data, upload_size, con_cls);
+    (void)conn;
+    enum MHD_Result res = serve(cls, r, url, method, upload_data, upload_size);
     api_mem_meter_set(prev);
     return res;
 }
@@ -600,28 +778,46 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
     req *r = *con_cls;
     if (!r)
         return;
+    guard_request_done(srv->guard, r->gk);
     double ms = (mono_now() - r->t0) * 1e3;
+    char path[4 * sizeof r->path]; /* the path only: queries will carry tokens */
+    parse_log_escape(path, sizeof path, r->path);
     if (r->queued) {
         metrics_request(r->route_name, r->method, r->status, ms / 1e3);
-        log_line(srv, LOG_INFO, "%s %s %d %lluB %.2fms%s", r->method, r->path, r->status,
+        log_line(srv, LOG_INFO, "%s %s %d %lluB %.2fms%s", r->method, path, r->status,
                  (unsigned long long)atomic_load(&r->bytes), ms,
-                 code == MHD_REQUEST_TERMINATED_COMPLETED_OK ? "" : " (cut short)");
+                 code == MHD_REQUEST_TERMINATED_COMPLETED_OK || r->answered_raw ? ""
+                                                                    : " (cut short)");
     }
-    log_line(srv, LOG_DEBUG, "%s %s: at most %lld bytes held by the request", r->method, r->path,
+    log_line(srv, LOG_DEBUG, "%s %s: at most %lld bytes held by the request", r->method, path,
              (long long)r->mem.peak);
     *con_cls = NULL;
     req_unref(r);
 }
 
+/* libmicrohttpd's messages, as warnings — except those about clients that went away or were
+ * turned away (closed mid-request, by the guard or themselves; over a connection limit), which
+ * a flood of hostile connections would otherwise turn into a flood of log lines: those are
+ * debug, and counted on /metrics (or logged as requests). */
 static void mhd_log(void *cls, const char *fmt, va_list ap)
 {
+    static const char *const routine[] = {"Connection socket is closed",
+                                          "Connection was closed by remote side",
+                                          "Server reached connection limit",
+                                          "Socket has been disconnected",
+                                          /* our MHD_NO: refuse_body_now, or out of memory */
+                                          "Application reported internal error"};
     server *srv = cls;
     char msg[512];
     vsnprintf(msg, sizeof msg, fmt, ap);
     size_t n = strlen(msg);
     while (n && msg[n - 1] == '\n')
         msg[--n] = 0;
-    log_line(srv, LOG_WARN, "http: %s", msg);
+    int level = LOG_WARN;
+    for (size_t i = 0; i < sizeof routine / sizeof *routine; i++)
+        if (!strncmp(msg, routine[i], strlen(routine[i])))
+            level = LOG_DEBUG;
+    log_line(srv, level, "http: %s", msg);
 }
 
 int http_start(server *srv)
@@ -643,13 +839,27 @@ int http_start(server *srv)
         if (inet_pton(AF_INET, srv->cfg.listen, &a->sin_addr) != 1)
             goto bad_addr;
     }
+    const config *c = &srv->cfg;
+    guard_config gc = {(unsigned)c->max_connections, (unsigned)c->connection_reserve,
+                       c->header_timeout_s, c->connection_timeout_s, c->body_min_rate};
+    srv->guard = guard_new(&gc);
+    if (!srv->guard) {
+        log_line(srv, LOG_ERROR, "cannot start the connection guard: out of memory");
+        return -1;
+    }
+    /* 0 for PER_IP_CONNECTION_LIMIT is no limit, as is 0 for --max-connections-per-client */
     srv->mhd = MHD_start_daemon(
-        flags, (uint16_t)srv->cfg.port, NULL, NULL, on_request, srv, MHD_OPTION_EXTERNAL_LOGGER,
-        mhd_log, srv, MHD_OPTION_SOCK_ADDR, &ss,
-        MHD_OPTION_NOTIFY_COMPLETED, on_completed, srv, MHD_OPTION_CONNECTION_LIMIT,
-        (unsigned)srv->cfg.max_connections, MHD_OPTION_CONNECTION_TIMEOUT,
-        (unsigned)srv->cfg.connection_timeout_s, MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)64 * 1024, MHD_OPTION_END);
+        flags, (uint16_t)c->port, guard_accept, srv->guard, on_request, srv,
+        MHD_OPTION_EXTERNAL_LOGGER, mhd_log, srv, MHD_OPTION_SOCK_ADDR, &ss,
+        MHD_OPTION_NOTIFY_COMPLETED, on_completed, srv, MHD_OPTION_URI_LOG_CALLBACK, on_uri, srv,
+        MHD_OPTION_NOTIFY_CONNECTION, guard_notify, srv->guard, MHD_OPTION_UNESCAPE_CALLBACK,
+        guard_unescape, srv->guard, MHD_OPTION_CONNECTION_LIMIT, (unsigned)c->max_connections,
+        MHD_OPTION_PER_IP_CONNECTION_LIMIT, (unsigned)c->max_connections_per_client,
+        MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)c->connection_timeout_s,
+        MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)64 * 1024, MHD_OPTION_END);
     if (!srv->mhd) {
+        guard_free(srv->guard);
+        srv->guard = NULL;
         log_line(srv, LOG_ERROR, "cannot listen on %s port %d: %s", srv->cfg.listen, srv->cfg.port,
                  strerror(errno));
         return -1;
@@ -668,5 +878,15 @@ void http_stop(server *srv)
         MHD_stop_daemon(srv->mhd);
         srv->mhd = NULL;
     }
+    guard_free(srv->guard); /* after MHD: every connection has gone */
+    srv->guard = NULL;
+}
+
+void http_write_connection_metrics(server *srv, FILE *f)
+{
+    guard_stats gs = {0};
+    if (srv->guard)
+        guard_get_stats(srv->guard, &gs);
+    metrics_write_connections(f, &gs);
 }
 

@@ -9,6 +9,7 @@
 #include "../api/jsonin.h"
 #include "metrics.h"
 #include "probe.h"
+#include "rate.h"
 #include "server.h"
 #include <errno.h>
 #include <signal.h>
@@ -240,7 +241,8 @@ int main(int argc, char **argv)
     if (config_load(&srv.cfg, argc, argv, 1, &code))
         return code;
     srv.st = store_new(srv.cfg.max_sessions);
-    if (!srv.st || sem_init(&srv.compute, 0, (unsigned)srv.cfg.threads)) {
+    srv.session_rate = rate_new(srv.cfg.session_rate, srv.cfg.session_rate, API_RATE_CLIENTS);
+    if (!srv.st || !srv.session_rate || sem_init(&srv.compute, 0, (unsigned)srv.cfg.threads)) {
         fprintf(stderr, "subdivd: out of memory\n");
         return 1;
     }
@@ -272,6 +274,7 @@ int main(int argc, char **argv)
     log_line(&srv, LOG_INFO, "shutting down");
     http_stop(&srv);
     store_free(srv.st);
+    rate_free(srv.session_rate);
     sem_destroy(&srv.compute);
     log_line(&srv, LOG_INFO, "stopped");
     return 0;

@@ -6,6 +6,7 @@
  * the caller samples them when /metrics is scraped.
  */
 #include "metrics.h"
+#include "guard.h"
 #include <pthread.h>
 #include <stdatomic.h>
 #include <string.h>
@@ -90,4 +91,24 @@ void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t sessio
     fprintf(f, "# HELP subdivd_streamed_bytes_total Body bytes of streamed level responses.\n"
                "# TYPE subdivd_streamed_bytes_total counter\nsubdivd_streamed_bytes_total %llu\n",
             (unsigned long long)atomic_load(&M.bytes));
+}
+
+void metrics_write_connections(FILE *f, const guard_stats *s)
+{
+    fprintf(f, "# HELP subdivd_connections Open connections by phase: waiting for a request's "
+               "headers, receiving its body, handled or answered.\n"
+               "# TYPE subdivd_connections gauge\n"
+               "subdivd_connections{phase=\"waiting\"} %u\n"
+               "subdivd_connections{phase=\"receiving\"} %u\n"
+               "subdivd_connections{phase=\"working\"} %u\n",
+            s->waiting, s->receiving, s->working);
+    fprintf(f, "# HELP subdivd_connections_closed_total Connections the guard closed: evicted under "
+               "pressure, or past the header, body-rate or idle deadline.\n"
+               "# TYPE subdivd_connections_closed_total counter\n"
+               "subdivd_connections_closed_total{reason=\"evicted\"} %llu\n"
+               "subdivd_connections_closed_total{reason=\"header_timeout\"} %llu\n"
+               "subdivd_connections_closed_total{reason=\"body_timeout\"} %llu\n"
+               "subdivd_connections_closed_total{reason=\"idle_timeout\"} %llu\n",
+            (unsigned long long)s->evicted, (unsigned long long)s->header_timeouts,
+            (unsigned long long)s->body_timeouts, (unsigned long long)s->idle_timeouts);
 }

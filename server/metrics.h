@@ -16,5 +16,8 @@ void metrics_bytes(uint64_t n);
 /* Write every metric; the gauges are passed in (api_bytes: api_mem_in_use(), api/mem.h). */
 void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t session_bytes,
                    uint64_t api_bytes);
+/* The connection guard's gauges and counters (guard.h). */
+struct guard_stats;
+void metrics_write_connections(FILE *f, const struct guard_stats *s);
 
 #endif

@@ -12,6 +12,8 @@
 #define SUBDIVD_REQUEST_H
 
 #include "server.h"
+#include "parse.h"
+#include "../api/limits.h"
 #include "../api/mem.h"
 #include "../api/out.h"
 #include "../api/problem.h"
@@ -20,6 +22,7 @@
 
 struct MHD_Connection;
 struct MHD_Response;
+struct guard_conn;
 
 typedef struct req req;
 typedef void (*handler_fn)(req *r);
@@ -31,18 +34,27 @@ typedef struct route {
     handler_fn fn;
     int session;           /* needs a session ({id}) and its token */
     int body;              /* takes a JSON body */
+    const char *const *query; /* the query parameters it takes, NULL-terminated ({"*", NULL}:
+                                 any); NULL: none (http.c answers 400 for others) */
 } route;
 
 struct req {
     server *srv;
     struct MHD_Connection *conn;
+    struct guard_conn *gk;            /* the connection's record in the guard (or NULL) */
     const char *method;
-    char path[256];
+    char path[API_MAX_PATH_BYTES];   /* decoded, without the query; longer is a 414 */
+    char *query;                      /* the raw query (api_malloc), decoded into params */
+    parse_param params[API_MAX_QUERY_PARAMS];
+    size_t nparams;
+    int started;                      /* the first access-handler call has been made */
+    int oom;                          /* the query could not be kept: 503 */
     const route *rt;
     const char *route_name;   /* pattern for metrics and logs */
     char *body;
     size_t len, cap;
-    int too_big;
+    int too_big;              /* the body could not be kept (out of memory): refused at its end */
+    int answered_raw;         /* answered on the socket itself (a chunked body over the limit) */
     double t0;
     session *s;
     char seg_id[40];
@@ -72,8 +84,7 @@ const route *route_static(void);
 
 const char *http_header(req *r, const char *name);   /* NULL when absent */
 const char *http_arg(req *r, const char *key);       /* a query argument, NULL when absent */
-/* Refuse query parameters not in `allowed` (NULL-terminated): answers 400 and returns 1. */
-int http_query_only(req *r, const char *const *allowed);
+const struct sockaddr *http_client_address(req *r); /* NULL when unknown */
 
 /* ---- http.c: answering ---- */
 

@@ -2,8 +2,8 @@
  * an api/ call and back to one response (docs/API.md is the contract, api/openapi.json its
  * description; a test compares that document with `subdivd --list-routes`).
  *
- * A handler runs after http.c has matched the route, checked the session and its token and
- * collected the body. Changes of a session (PUT complex, tags, rules, POST refine) go through
+ * A handler runs after http.c has matched the route, checked the session and its token,
+ * collected the body and refused query parameters the route's row does not list. Changes of a session (PUT complex, tags, rules, POST refine) go through
  * change(): parse, If-Match, build the next model in a compute slot, publish it under the
  * session's write lock, so concurrent changes of one session are sequential and a refused one
  * leaves it as it was. Reads take the current model by reference and never block a change. A
@@ -15,6 +15,8 @@
 #include "../api/jsonin.h"
 #include "../api/mem.h"
 #include "metrics.h"
+#include "parse.h"
+#include "rate.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -68,6 +70,7 @@ static void h_metrics(req *r)
     gauges g = {0};
     store_foreach(r->srv->st, add_gauges, &g);
     metrics_write(f, store_count(r->srv->st), g.cells, g.bytes, api_mem_in_use());
+    http_write_connection_metrics(r->srv, f);
     fclose(f);
     char *body = api_memdup(text, n);
     free(text); /* open_memstream's buffer belongs to the C library */
@@ -88,8 +91,7 @@ static void h_asset(req *r)
     }
     /* The web front end's bundles have content-hashed names and are immutable; index.html and
      * the OpenAPI document are revalidated (no-cache) against the ETag: 304 while unchanged. */
-    const char *inm = http_header(r, "If-None-Match");
-    int fresh = inm && (strstr(inm, a->etag) || !strcmp(inm, "*"));
+    int fresh = parse_etag_match(http_header(r, "If-None-Match"), a->etag, 1);
     struct MHD_Response *resp =
         fresh ? http_empty()
               : http_static_response(a->data, a->size);
@@ -125,9 +127,23 @@ static void iso_time(char *buf, size_t cap, time_t t)
     strftime(buf, cap, "%Y-%m-%dT%H:%M:%SZ", &tm);
 }
 
+/* POST /v1/sessions: anyone may ask, so each client address has a rate (--session-rate, 429
+ * with the seconds until its next token), the TTL is capped (--max-ttl: the answer says what
+ * was granted), and a full table first lets an empty idle session go (sessions.c); otherwise
+ * 429 with the seconds until the soonest expiry. */
 static void h_create_session(req *r)
 {
     api_problem p = {0};
+    rate_key key = rate_key_of(http_client_address(r));
+    int wait = rate_take(r->srv->session_rate, &key, mono_now());
+    if (wait) {
+        p.retry_after = wait;
+        api_fail(&p, 429, "session-rate",
+                 "this client may create %d sessions a minute; retry in %d s", r->srv->cfg.session_rate,
+                 wait);
+        http_reply_problem(r, &p);
+        return;
+    }
     json_t *b = parse_body(r, 1, &p);
     static const char *const keys[] = {"ttl_s", NULL};
     long long ttl = r->srv->cfg.ttl_s;
@@ -139,12 +155,22 @@ static void h_create_session(req *r)
         return;
     }
     json_decref(b);
-    session *s = store_create(r->srv->st, (int)ttl);
+    if (ttl > r->srv->cfg.max_ttl_s)
+        ttl = r->srv->cfg.max_ttl_s;
+    store_admission adm;
+    session *s = store_create(r->srv->st, (int)ttl, &adm);
+    if (adm.evicted)
+        log_line(r->srv, LOG_INFO, "the session table was full: an empty idle session went");
+    if (!s && !adm.retry_after_s) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
     if (!s) {
-        p.retry_after = 60;
+        p.retry_after = adm.retry_after_s;
         api_fail(&p, 429, "too-many-sessions",
-                 "the daemon holds its maximum of %d sessions; delete unused sessions or wait for "
-                 "idle ones to expire", r->srv->cfg.max_sessions);
+                 "the daemon holds its maximum of %d sessions, each with a complex or in use; "
+                 "delete unused sessions, or retry in %d s when the first expires",
+                 r->srv->cfg.max_sessions, adm.retry_after_s);
         http_reply_problem(r, &p);
         return;
     }
@@ -193,28 +219,21 @@ static void h_delete_session(req *r)
     http_queue(r, 204, http_empty());
 }
 
+/* The entity tag of a session version, as sent in ETag. */
+static void version_etag(char *buf, size_t cap, uint64_t version)
+{
+    snprintf(buf, cap, "\"%llu\"", (unsigned long long)version);
+}
+
 /* If-Match on a change: absent is fine (except where a route requires it), "*" matches any
- * version, otherwise one of the listed strong tags must equal the current version. */
+ * version, otherwise one of the listed entity tags must equal the current version's, compared
+ * strongly (parse_etag_match: a weak or malformed tag matches nothing). */
 static int if_match_ok(req *r, uint64_t version)
 {
     const char *h = http_header(r, "If-Match");
-    if (!h)
-        return 1;
     char want[32];
-    snprintf(want, sizeof want, "\"%llu\"", (unsigned long long)version);
-    for (const char *s = h; *s;) {
-        while (*s == ' ' || *s == ',')
-            s++;
-        if (*s == '*')
-            return 1;
-        size_t n = strcspn(s, ",");
-        while (n && s[n - 1] == ' ')
-            n--;
-        if (n == strlen(want) && !strncmp(s, want, n))
-            return 1;
-        s += strcspn(s, ",");
-    }
-    return 0;
+    version_etag(want, sizeof want, version);
+    return !h || parse_etag_match(h, want, 0);
 }
 
 /* 0 when If-Match allows a change of this version, else the status of a 412 problem. */
@@ -359,20 +378,17 @@ static void h_get_complex(req *r)
 
 /* ---- handlers: levels ------------------------------------------------------------------- */
 
+/* If-None-Match on a read: "*" or one of the listed entity tags, compared weakly. */
 static int if_none_match_hit(req *r, uint64_t version)
 {
-    const char *h =
-        http_header(r, "If-None-Match");
     char want[32];
-    snprintf(want, sizeof want, "\"%llu\"", (unsigned long long)version);
-    return h && (strstr(h, want) || !strcmp(h, "*"));
+    version_etag(want, sizeof want, version);
+    return parse_etag_match(http_header(r, "If-None-Match"), want, 1);
 }
 
-/* The query check and level of a /levels/{L} request; -1 when a problem was answered. */
-static int level_of(req *r, const char *const *keys)
+/* The level of a /levels/{L} or /matrices/{L} request; -1 when a problem was answered. */
+static int level_of(req *r)
 {
-    if (http_query_only(r, keys))
-        return -1;
     api_problem p = {0};
     int level = api_parse_level(r->seg_level, &p);
     if (level < 0)
@@ -384,9 +400,9 @@ static int level_of(req *r, const char *const *keys)
  * and the session's model (a reference they own) once the query and the level are checked. */
 typedef void (*level_fn)(req *r, api_model *m, int level, uint64_t version);
 
-static void with_level(req *r, const char *const *keys, level_fn fn)
+static void with_level(req *r, level_fn fn)
 {
-    int level = level_of(r, keys);
+    int level = level_of(r);
     if (level < 0)
         return;
     uint64_t version;
@@ -451,9 +467,7 @@ static void get_level(req *r, api_model *m, int level, uint64_t version)
     http_reply_stream(r, m, os, 1, out_size(os), fmt->mime, disp, version);
 }
 
-static void h_get_level(req *r) { with_level(r, LEVEL_KEYS, get_level); }
-
-static const char *const STATS_KEYS[] = {NULL};
+static void h_get_level(req *r) { with_level(r, get_level); }
 
 static void level_stats(req *r, api_model *m, int level, uint64_t version)
 {
@@ -466,7 +480,7 @@ static void level_stats(req *r, api_model *m, int level, uint64_t version)
     http_reply_versioned(r, j, version, &p);
 }
 
-static void h_level_stats(req *r) { with_level(r, STATS_KEYS, level_stats); }
+static void h_level_stats(req *r) { with_level(r, level_stats); }
 
 static const char *const MATRIX_KEYS[] = {"from", "format", NULL};
 
@@ -488,13 +502,12 @@ static void matrix(req *r, api_model *m, int level, uint64_t version)
     http_reply_stream(r, m, os, 0, UINT64_MAX, ctype, disp, version);
 }
 
-static void h_matrix(req *r) { with_level(r, MATRIX_KEYS, matrix); }
+static void h_matrix(req *r) { with_level(r, matrix); }
+
+static const char *const ANALYSIS_KEYS[] = {"vertex", "edge", NULL};
 
 static void h_analysis(req *r)
 {
-    static const char *const keys[] = {"vertex", "edge", NULL};
-    if (http_query_only(r, keys))
-        return;
     uint64_t version;
     api_model *m = session_model(r->s, &version);
     api_problem p = {0};
@@ -509,24 +522,24 @@ static void h_analysis(req *r)
 /* ---- routing ---------------------------------------------------------------------------- */
 
 static const route ROUTES[] = {
-    {"POST", "/v1/sessions", h_create_session, 0, 1},
-    {"GET", "/v1/sessions/{id}", h_get_session, 1, 0},
-    {"DELETE", "/v1/sessions/{id}", h_delete_session, 1, 0},
-    {"PUT", "/v1/sessions/{id}/complex", h_put_complex, 1, 1},
-    {"GET", "/v1/sessions/{id}/complex", h_get_complex, 1, 0},
-    {"PATCH", "/v1/sessions/{id}/control-points", h_edit, 1, 1},
-    {"POST", "/v1/sessions/{id}/refine", h_refine, 1, 1},
-    {"PUT", "/v1/sessions/{id}/tags", h_put_tags, 1, 1},
-    {"PUT", "/v1/sessions/{id}/rules", h_put_rules, 1, 1},
-    {"GET", "/v1/sessions/{id}/levels/{L}", h_get_level, 1, 0},
-    {"GET", "/v1/sessions/{id}/levels/{L}/stats", h_level_stats, 1, 0},
-    {"GET", "/v1/sessions/{id}/analysis", h_analysis, 1, 0},
-    {"GET", "/v1/sessions/{id}/matrices/{L}", h_matrix, 1, 0},
-    {"GET", "/healthz", h_healthz, 0, 0},
-    {"GET", "/livez", h_healthz, 0, 0},
-    {"GET", "/readyz", h_readyz, 0, 0},
-    {"GET", "/metrics", h_metrics, 0, 0},
-    {"GET", "/v1/openapi.json", h_asset, 0, 0},
+    {"POST", "/v1/sessions", h_create_session, 0, 1, NULL},
+    {"GET", "/v1/sessions/{id}", h_get_session, 1, 0, NULL},
+    {"DELETE", "/v1/sessions/{id}", h_delete_session, 1, 0, NULL},
+    {"PUT", "/v1/sessions/{id}/complex", h_put_complex, 1, 1, NULL},
+    {"GET", "/v1/sessions/{id}/complex", h_get_complex, 1, 0, NULL},
+    {"PATCH", "/v1/sessions/{id}/control-points", h_edit, 1, 1, NULL},
+    {"POST", "/v1/sessions/{id}/refine", h_refine, 1, 1, NULL},
+    {"PUT", "/v1/sessions/{id}/tags", h_put_tags, 1, 1, NULL},
+    {"PUT", "/v1/sessions/{id}/rules", h_put_rules, 1, 1, NULL},
+    {"GET", "/v1/sessions/{id}/levels/{L}", h_get_level, 1, 0, LEVEL_KEYS},
+    {"GET", "/v1/sessions/{id}/levels/{L}/stats", h_level_stats, 1, 0, NULL},
+    {"GET", "/v1/sessions/{id}/analysis", h_analysis, 1, 0, ANALYSIS_KEYS},
+    {"GET", "/v1/sessions/{id}/matrices/{L}", h_matrix, 1, 0, MATRIX_KEYS},
+    {"GET", "/healthz", h_healthz, 0, 0, NULL},
+    {"GET", "/livez", h_healthz, 0, 0, NULL},
+    {"GET", "/readyz", h_readyz, 0, 0, NULL},
+    {"GET", "/metrics", h_metrics, 0, 0, NULL},
+    {"GET", "/v1/openapi.json", h_asset, 0, 0, NULL},
 };
 #define NROUTES (sizeof ROUTES / sizeof *ROUTES)
 
@@ -538,29 +551,8 @@ void route_list(FILE *f)
 
 int route_match(const char *pattern, const char *path, req *r)
 {
-    const char *p = pattern, *s = path;
-    while (*p && *s) {
-        if (*p == '{') {
-            const char *pe = strchr(p, '}');
-            size_t n = strcspn(s, "/");
-            if (n == 0)
-                return 0;
-            char *dst = p[1] == 'i' ? r->seg_id : r->seg_level;
-            size_t cap = p[1] == 'i' ? sizeof r->seg_id : sizeof r->seg_level;
-            if (n >= cap)
-                return 0;
-            memcpy(dst, s, n);
-            dst[n] = 0;
-            p = pe + 1;
-            s += n;
-            continue;
-        }
-        if (*p != *s)
-            return 0;
-        p++;
-        s++;
-    }
-    return !*p && !*s;
+    return parse_route(pattern, path, r->seg_id, sizeof r->seg_id, r->seg_level,
+                       sizeof r->seg_level);
 }
 
 int route_methods(const char *path, req *r, char *allow, size_t cap)
@@ -604,6 +596,7 @@ int route_is_static(const char *path)
 
 const route *route_static(void)
 {
-    static const route asset_route = {"GET", "static", h_asset, 0, 0};
+    static const char *const any[] = {"*", NULL}; /* a page's links may carry queries */
+    static const route asset_route = {"GET", "static", h_asset, 0, 0, any};
     return &asset_route;
 }

@@ -10,15 +10,19 @@
 typedef struct server {
     config cfg;
     store *st;
+    struct rate *session_rate; /* session creations per client (rate.h) */
     sem_t compute;            /* cfg.threads slots for computations */
     atomic_int draining;      /* /readyz answers 503 while starting or stopping */
     struct MHD_Daemon *mhd;
+    struct guard *guard;      /* connection slots: deadlines, eviction (guard.h) */
     int port;                 /* the bound port */
 } server;
 
 /* Start listening (0) or print why not (-1). */
 int http_start(server *srv);
 void http_stop(server *srv);
+/* The connection guard's figures in Prometheus text (for /metrics). */
+void http_write_connection_metrics(server *srv, FILE *f);
 /* The route templates the server answers (routes.c), one per line ("METHOD /path"), for
  * --list-routes. */
 void route_list(FILE *f);

@@ -1,12 +1,16 @@
 /* sessions.c — session ids, tokens, the store and expiry (see sessions.h).
  *
- * Ids and tokens come from getrandom(); the store is a fixed array of at most max_sessions,
- * searched linearly under its mutex (tens of sessions, held for microseconds). A session leaves
- * the store on DELETE or expiry but lives until its last reference goes, so requests and
- * streams in flight keep a valid session and model. Tokens are compared in constant time.
+ * Ids and tokens come from getrandom(); the store is a fixed array of at most max_sessions
+ * resident sessions, searched linearly under its mutex (tens of sessions, held for
+ * microseconds). A session leaves the store on DELETE, expiry or eviction but lives until its
+ * last reference goes, so requests and streams in flight keep a valid session and model. A full
+ * table makes room from sessions that hold nothing: expired ones, then empty idle ones (an
+ * unauthenticated client can create sessions, so empty ones must not lock the table). Tokens are
+ * compared in constant time.
  */
 #include "sessions.h"
 #include "../api/mem.h"
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -63,8 +67,67 @@ void store_free(store *st)
     api_free(st);
 }
 
-session *store_create(store *st, int ttl_s)
+static int remove_at(store *st, int i);
+
+/* Remove the sessions idle past their TTL (none computing). Caller holds st->mu. */
+static int expire_locked(store *st, double now)
 {
+    int gone = 0;
+    for (int i = 0; i < st->n;) {
+        session *s = st->s[i];
+        pthread_mutex_lock(&s->mu);
+        int idle = now - s->last_used > s->ttl_s && atomic_load(&s->busy_level) < 0;
+        pthread_mutex_unlock(&s->mu);
+        if (idle)
+            gone += remove_at(st, i);
+        else
+            i++;
+    }
+    return gone;
+}
+
+/* Remove the least recently used session that never received a complex and that nobody else
+ * holds (no request or stream in flight: store_get takes its reference under st->mu, which the
+ * caller holds). 1 if one went. */
+static int evict_empty_locked(store *st)
+{
+    int best = -1;
+    double best_used = 0;
+    for (int i = 0; i < st->n; i++) {
+        session *s = st->s[i];
+        if (atomic_load(&s->refs) != 1 || atomic_load(&s->busy_level) >= 0)
+            continue;
+        pthread_mutex_lock(&s->mu);
+        int empty = !s->model->c;
+        double used = s->last_used;
+        pthread_mutex_unlock(&s->mu);
+        if (empty && (best < 0 || used < best_used)) {
+            best = i;
+            best_used = used;
+        }
+    }
+    return best >= 0 ? remove_at(st, best) : 0;
+}
+
+/* Seconds until the soonest expiry of a resident session (>= 1). Caller holds st->mu. */
+static int soonest_expiry_locked(store *st, double now)
+{
+    double soonest = -1;
+    for (int i = 0; i < st->n; i++) {
+        session *s = st->s[i];
+        pthread_mutex_lock(&s->mu);
+        double left = s->ttl_s - (now - s->last_used);
+        pthread_mutex_unlock(&s->mu);
+        if (soonest < 0 || left < soonest)
+            soonest = left;
+    }
+    double c = ceil(soonest);
+    return c < 1 ? 1 : c > 1e9 ? 1000000000 : (int)c;
+}
+
+session *store_create(store *st, int ttl_s, store_admission *a)
+{
+    memset(a, 0, sizeof *a);
     unsigned char rid[16], rtok[32];
     if (random_bytes(rid, sizeof rid) || random_bytes(rtok, sizeof rtok))
         return NULL;
@@ -97,7 +160,13 @@ session *store_create(store *st, int ttl_s)
     s->created = time(NULL);
     atomic_init(&s->busy_level, -1);
     pthread_mutex_lock(&st->mu);
+    double now = mono_now();
+    if (st->n >= st->cap)
+        expire_locked(st, now);
+    if (st->n >= st->cap)
+        a->evicted = evict_empty_locked(st);
     if (st->n >= st->cap) {
+        a->retry_after_s = soonest_expiry_locked(st, now);
         pthread_mutex_unlock(&st->mu);
         atomic_store(&s->refs, 1);
         session_unref(s);
@@ -149,18 +218,8 @@ int store_remove(store *st, session *s)
 
 int store_expire(store *st, double now)
 {
-    int gone = 0;
     pthread_mutex_lock(&st->mu);
-    for (int i = 0; i < st->n;) {
-        session *s = st->s[i];
-        pthread_mutex_lock(&s->mu);
-        int idle = now - s->last_used > s->ttl_s && atomic_load(&s->busy_level) < 0;
-        pthread_mutex_unlock(&s->mu);
-        if (idle)
-            gone += remove_at(st, i);
-        else
-            i++;
-    }
+    int gone = expire_locked(st, now);
     pthread_mutex_unlock(&st->mu);
     return gone;
 }

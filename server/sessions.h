@@ -39,8 +39,17 @@ typedef struct store store;
 store *store_new(int max_sessions);
 void store_free(store *st);
 
-/* Create a session (new reference). NULL when the store is full. */
-session *store_create(store *st, int ttl_s);
+/* What store_create did to find room, or why there was none. */
+typedef struct store_admission {
+    int evicted;              /* an empty idle session went to make room */
+    int retry_after_s;        /* refused, the table full: seconds until the soonest expiry (>= 1) */
+} store_admission;
+
+/* Create a session (new reference). When the table is full, sessions past their TTL go first,
+ * then the least recently used idle session that never received a complex (none with a request
+ * or a stream in flight: the store holds its only reference); NULL when none can go (or out of
+ * memory: then retry_after_s is 0). */
+session *store_create(store *st, int ttl_s, store_admission *a);
 /* The live session with this id (new reference) or NULL. Touches its idle clock. */
 session *store_get(store *st, const char *id);
 /* Remove from the store (the session lives on until its last reference goes). 0 if absent. */

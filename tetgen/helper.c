@@ -5,8 +5,15 @@
  * fill, writes one request on its stdin and reads one reply from its stdout (tetgen/protocol.h),
  * under a wall deadline; this program sets its own memory and CPU limits first:
  *
- *     subdivd-tetgen [--max-bytes N] [--cpu-seconds S]     (the protocol on stdin/stdout)
+ *     subdivd-tetgen [--max-bytes N] [--cpu-seconds S] [--parent PID]   (the protocol on stdio)
  *     subdivd-tetgen --selftest                             (fills a cube, prints a line)
+ *
+ * The helper dies with the daemon: first thing, it asks the kernel for SIGKILL when its parent
+ * goes (prctl PR_SET_PDEATHSIG — posix_spawn cannot set it for the child), then checks that its
+ * parent is still the daemon that named itself with --parent, since the daemon may have died
+ * before the request was made. Linux sends that signal when the *thread* that spawned the
+ * helper ends, not only the process: the daemon spawns and reaps it on one thread
+ * (api/fill_helper.c), which lives until then.
  *
  * Steps: read the request; TetGen -d (self-intersection check, which reports instead of
  * crashing); then TetGen -pYz[q][a] (tetrahedralize, keeping the surface triangles as they are).
@@ -20,7 +27,9 @@
 #include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <signal.h>
 #include <string.h>
+#include <sys/prctl.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -99,7 +108,8 @@ static int selftest(void)
 
 int main(int argc, char **argv)
 {
-    unsigned long long max_bytes = 0, cpu = 0;
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    unsigned long long max_bytes = 0, cpu = 0, parent = 0;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--selftest"))
             return selftest();
@@ -107,12 +117,17 @@ int main(int argc, char **argv)
             max_bytes = strtoull(argv[++i], NULL, 10);
         else if (i + 1 < argc && !strcmp(argv[i], "--cpu-seconds"))
             cpu = strtoull(argv[++i], NULL, 10);
+        else if (i + 1 < argc && !strcmp(argv[i], "--parent"))
+            parent = strtoull(argv[++i], NULL, 10);
         else {
-            fprintf(stderr, "usage: subdivd-tetgen [--max-bytes N] [--cpu-seconds S] | --selftest\n"
+            fprintf(stderr, "usage: subdivd-tetgen [--max-bytes N] [--cpu-seconds S] [--parent PID]"
+                            " | --selftest\n"
                             "(spawned by subdivd for TetGen fill; speaks tetgen/protocol.h)\n");
             return 2;
         }
     }
+    if (parent && (unsigned long long)getppid() != parent)
+        return 2; /* the daemon died before PR_SET_PDEATHSIG took hold */
     if (max_bytes)
         set_limit(RLIMIT_AS, max_bytes, max_bytes);
     if (cpu) /* SIGXCPU at the soft limit, SIGKILL one second later */

@@ -1,8 +1,11 @@
 #!/bin/sh
-# Installs the Debian packages of tools/packages.txt that are missing (needs root or sudo).
+# Installs the Debian packages of tools/packages.txt that are missing (needs root or sudo), and
+# the npm packages of the tests and the web front end. With a list as argument
+# (tools/deps.sh tools/packages-fuzz.txt) only that list's Debian packages.
 set -eu
 cd "$(dirname "$0")/.."
-pkgs=$(grep -v '^#' tools/packages.txt | tr '\n' ' ')
+list=${1:-tools/packages.txt}
+pkgs=$(grep -v '^#' "$list" | tr '\n' ' ')
 missing=""
 for p in $pkgs; do
     # node and npm may come from another distribution of Node.js (e.g. nodesource, which bundles
@@ -17,6 +20,7 @@ if [ -n "$missing" ]; then
     $SUDO apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing
 fi
+[ "$list" = tools/packages.txt ] || exit 0
 # npm tools of the tests (tests/tools/package.json: the Khronos glTF validator)
 if [ ! -d tests/tools/node_modules/gltf-validator ]; then
     (cd tests/tools && npm install --no-audit --no-fund --loglevel=error)

@@ -6,10 +6,15 @@
  * then opens and drains level 0-2 in every format. It asserts nothing about the answers but
  * that each call returns either a model or a problem with a 4xx/5xx status and a detail; the
  * point is to run under ASan/UBSan (make sanitize) where any memory error aborts.
- * usage: fuzz_api [ITERATIONS [SEED]]
+ * Built two ways, as tests/fuzz/fuzz_packed.c: with libFuzzer (-DSD_LIBFUZZER, `make fuzz`: each
+ * input is one body, the handler's choices follow from a hash of it) and as this plain mutation
+ * program (`make test`, make sanitize).
+ * usage: fuzz_api [ITERATIONS [SEED]] | --write-seeds DIR
  */
 #include "../../api/handlers.h"
 #include "../../api/jsonin.h"
+#include "plain.h"
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -46,32 +51,26 @@ static const char *const seeds[] = {
     "\"max_volume\":0.5}]}",
 };
 #define NSEEDS (sizeof seeds / sizeof *seeds)
+#ifndef SD_LIBFUZZER
 static const char *const tokens[] = {"[", "]", "{", "}", ",", ":", "\"", "0", "-1", "1e308",
                                      "4294967296", "null", "true", "1.5", "\"x\"", "[]", "{}",
                                      "99999999999999999999", "[0,0,0]", "[0,1,2,3,4]"};
+#endif
 
-static uint64_t rng;
-static uint32_t rnd(uint32_t n)
-{
-    rng ^= rng << 13;
-    rng ^= rng >> 7;
-    rng ^= rng << 17;
-    return n ? (uint32_t)(rng % n) : 0;
-}
-
+#ifndef SD_LIBFUZZER
 static size_t mutate(char *buf, size_t len, size_t cap)
 {
-    int steps = (int)rnd(3);
+    int steps = (int)fuzz_rnd(3);
     for (int s = 0; s < steps; s++) {
-        switch (rnd(6)) {
+        switch (fuzz_rnd(6)) {
         case 5: { /* replace one number (a run of digits) by a token: keeps the shape */
-            size_t at = rnd((uint32_t)len + 1);
+            size_t at = fuzz_rnd((uint32_t)len + 1);
             while (at < len && !(buf[at] >= '0' && buf[at] <= '9'))
                 at++;
             size_t end = at;
             while (end < len && ((buf[end] >= '0' && buf[end] <= '9') || buf[end] == '.'))
                 end++;
-            const char *t = tokens[rnd(sizeof tokens / sizeof *tokens)];
+            const char *t = tokens[fuzz_rnd(sizeof tokens / sizeof *tokens)];
             size_t n = strlen(t);
             if (at < len && len - (end - at) + n < cap) {
                 memmove(buf + at + n, buf + end, len - end);
@@ -82,11 +81,11 @@ static size_t mutate(char *buf, size_t len, size_t cap)
         }
         case 0: /* flip a byte */
             if (len)
-                buf[rnd((uint32_t)len)] ^= (char)(1 + rnd(255));
+                buf[fuzz_rnd((uint32_t)len)] ^= (char)(1 + fuzz_rnd(255));
             break;
         case 1: { /* insert a token */
-            const char *t = tokens[rnd(sizeof tokens / sizeof *tokens)];
-            size_t n = strlen(t), at = rnd((uint32_t)len + 1);
+            const char *t = tokens[fuzz_rnd(sizeof tokens / sizeof *tokens)];
+            size_t n = strlen(t), at = fuzz_rnd((uint32_t)len + 1);
             if (len + n < cap) {
                 memmove(buf + at + n, buf + at, len - at);
                 memcpy(buf + at, t, n);
@@ -97,7 +96,7 @@ static size_t mutate(char *buf, size_t len, size_t cap)
         case 2: { /* delete a run */
             if (!len)
                 break;
-            size_t at = rnd((uint32_t)len), n = 1 + rnd(8);
+            size_t at = fuzz_rnd((uint32_t)len), n = 1 + fuzz_rnd(8);
             if (at + n > len)
                 n = len - at;
             memmove(buf + at, buf + at + n, len - at - n);
@@ -105,11 +104,11 @@ static size_t mutate(char *buf, size_t len, size_t cap)
             break;
         }
         case 3: /* truncate */
-            len = rnd((uint32_t)len + 1);
+            len = fuzz_rnd((uint32_t)len + 1);
             break;
         default: { /* splice the tail of another seed */
-            const char *o = seeds[rnd(NSEEDS)];
-            size_t ol = strlen(o), from = rnd((uint32_t)ol), at = rnd((uint32_t)len + 1);
+            const char *o = seeds[fuzz_rnd(NSEEDS)];
+            size_t ol = strlen(o), from = fuzz_rnd((uint32_t)ol), at = fuzz_rnd((uint32_t)len + 1);
             size_t n = ol - from;
             if (at + n < cap) {
                 memcpy(buf + at, o + from, n);
@@ -121,6 +120,7 @@ static size_t mutate(char *buf, size_t len, size_t cap)
     }
     return len;
 }
+#endif
 
 static void check_problem(const api_problem *p, const char *what)
 {
@@ -150,89 +150,119 @@ static void drain_levels(api_model *m, const api_limits *lim)
         }
 }
 
-int main(int argc, char **argv)
+/* One body through parsing, a change handler (on an empty model or one with a valid complex)
+ * and, when accepted, every writer; 1 when it was accepted. */
+static int one(const char *buf, size_t len, const api_limits *lim)
 {
-    long iters = argc > 1 ? atol(argv[1]) : 2000;
-    rng = argc > 2 ? strtoull(argv[2], NULL, 10) : 88172645463325252ull;
-    if (!rng)
-        rng = 1;
-    api_limits lim = api_default_limits();
-    lim.max_vertices = 64;
-    lim.max_simplices = 64;
-    lim.max_cells = 20000;
-    lim.max_session_bytes = 64u << 20;
-    static char buf[8192];
-    long accepted = 0;
-    for (long i = 0; i < iters; i++) {
-        const char *seed = seeds[rnd(NSEEDS)];
-        size_t len = strlen(seed);
-        memcpy(buf, seed, len);
-        len = mutate(buf, len, sizeof buf);
-        sd_error e;
-        api_model *cur = api_model_new(NULL, NULL, 0, &e), *next = NULL;
-        if (!cur)
-            return 1;
-        /* a valid complex first, so tags and overrides have something to refer to */
-        if (rnd(2)) {
-            api_problem p = {0};
-            const char *valid = seeds[rnd(4)];
-            json_t *b = api_parse_body(valid, strlen(valid), 0, &p);
-            if (b && !api_put_complex(cur, b, &lim, &next, &p)) {
+    int accepted = 0;
+    sd_error e;
+    api_model *cur = api_model_new(NULL, NULL, 0, &e), *next = NULL;
+    if (!cur)
+        return 0;
+    /* a valid complex first, so tags and overrides have something to refer to */
+    if (fuzz_rnd(2)) {
+        api_problem p = {0};
+        const char *valid = seeds[fuzz_rnd(4)];
+        json_t *b = api_parse_body(valid, strlen(valid), 0, &p);
+        if (b && !api_put_complex(cur, b, lim, &next, &p)) {
+            api_model_unref(cur);
+            cur = next;
+            next = NULL;
+        }
+        json_decref(b);
+        if (fuzz_rnd(2)) { /* and the Ying-Zorin rules, so petal tags take effect */
+            static const char yz[] = "{\"nonmanifold_surface\":\"ying-zorin\"}";
+            api_problem q = {0};
+            b = api_parse_body(yz, sizeof yz - 1, 0, &q);
+            if (b && !api_put_rules(cur, b, lim, &next, &q)) {
                 api_model_unref(cur);
                 cur = next;
                 next = NULL;
             }
             json_decref(b);
-            if (rnd(2)) { /* and the Ying-Zorin rules, so petal tags take effect */
-                static const char yz[] = "{\"nonmanifold_surface\":\"ying-zorin\"}";
-                api_problem q = {0};
-                b = api_parse_body(yz, sizeof yz - 1, 0, &q);
-                if (b && !api_put_rules(cur, b, &lim, &next, &q)) {
-                    api_model_unref(cur);
-                    cur = next;
-                    next = NULL;
-                }
-                json_decref(b);
-            }
         }
-        api_problem p = {0};
-        json_t *b = api_parse_body(buf, len, rnd(2), &p);
-        if (!b) {
-            check_problem(&p, "api_parse_body");
-        } else {
-            change_fn_t fns[] = {api_put_complex, api_put_rules, api_put_tags};
-            int which = (int)rnd(5);
-            uint64_t red, green, counts[SD_MAX_LEVEL + 1];
-            int levels;
-            if (which == 3) { /* refinement: a new model like the changes */
-                if (api_refine(cur, b, &lim, &next, &red, &green, &p))
-                    check_problem(&p, "api_refine");
-                else {
-                    accepted++;
-                    api_model_unref(cur);
-                    cur = next;
-                }
-            } else if (which == 4) { /* an edit changes the model in place */
-                if (api_edit(cur, b, counts, &levels, &p))
-                    check_problem(&p, "api_edit");
-                else
-                    accepted++;
-            } else if (fns[which](cur, b, &lim, &next, &p))
-                check_problem(&p, "a change handler");
+    }
+    api_problem p = {0};
+    json_t *b = api_parse_body(buf, len, fuzz_rnd(2), &p);
+    if (!b) {
+        check_problem(&p, "api_parse_body");
+    } else {
+        change_fn_t fns[] = {api_put_complex, api_put_rules, api_put_tags};
+        int which = (int)fuzz_rnd(5);
+        uint64_t red, green, counts[SD_MAX_LEVEL + 1];
+        int levels;
+        if (which == 3) { /* refinement: a new model like the changes */
+            if (api_refine(cur, b, lim, &next, &red, &green, &p))
+                check_problem(&p, "api_refine");
             else {
-                accepted++;
+                accepted = 1;
                 api_model_unref(cur);
                 cur = next;
-                if (cur->c)
-                    drain_levels(cur, &lim);
-                api_problem gp = {0};
-                json_t *g = api_get_complex(cur, &gp);
-                json_decref(g);
             }
-            json_decref(b);
+        } else if (which == 4) { /* an edit changes the model in place */
+            if (api_edit(cur, b, counts, &levels, &p))
+                check_problem(&p, "api_edit");
+            else
+                accepted = 1;
+        } else if (fns[which](cur, b, lim, &next, &p))
+            check_problem(&p, "a change handler");
+        else {
+            accepted = 1;
+            api_model_unref(cur);
+            cur = next;
+            if (cur->c)
+                drain_levels(cur, lim);
+            api_problem gp = {0};
+            json_t *g = api_get_complex(cur, &gp);
+            json_decref(g);
         }
-        api_model_unref(cur);
+        json_decref(b);
+    }
+    api_model_unref(cur);
+    return accepted;
+}
+
+static api_limits small_limits(void)
+{
+    api_limits lim = api_default_limits();
+    lim.max_vertices = 64;
+    lim.max_simplices = 64;
+    lim.max_cells = 20000;
+    lim.max_session_bytes = 64u << 20;
+    return lim;
+}
+
+#ifdef SD_LIBFUZZER
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t n)
+{
+    static api_limits lim;
+    if (!lim.max_vertices)
+        lim = small_limits();
+    fuzz_rng = 1469598103934665603ull; /* the choices of one() follow from the input */
+    for (size_t i = 0; i < n; i++)
+        fuzz_rng = (fuzz_rng ^ data[i]) * 1099511628211ull;
+    fuzz_rng |= 1;
+    one((const char *)data, n, &lim);
+    return 0;
+}
+#else
+int main(int argc, char **argv)
+{
+    long iters = 2000;
+    int rc = fuzz_plain_args(argc, argv, seeds, NSEEDS, &iters);
+    if (rc >= 0)
+        return rc;
+    api_limits lim = small_limits();
+    static char buf[8192];
+    long accepted = 0;
+    for (long i = 0; i < iters; i++) {
+        const char *seed = seeds[fuzz_rnd(NSEEDS)];
+        size_t len = strlen(seed);
+        memcpy(buf, seed, len);
+        len = mutate(buf, len, sizeof buf);
+        accepted += one(buf, len, &lim);
     }
     printf("fuzz_api: %ld inputs, %ld accepted, no memory errors\n", iters, accepted);
     return 0;
 }
+#endif

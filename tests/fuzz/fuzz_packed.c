@@ -10,9 +10,10 @@
  *
  * Built two ways: with clang's libFuzzer (-DSD_LIBFUZZER, `make fuzz`) and as a plain program
  * (gcc, `make test`) that runs the seeds below and N deterministic mutations of them:
- *     fuzz_packed [ITERATIONS [SEED]]
+ *     fuzz_packed [ITERATIONS [SEED]] | --write-seeds DIR
  */
 #include "../../api/packed.h"
+#include "plain.h"
 #include <jansson.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -186,60 +187,24 @@ static const char *const seeds[] = {
 static const char *const tokens[] = {"[", "]", "{", "}", ",", ":", "\"", "0", "-", "-0", "1e308",
                                      "1e309", "4294967296", "99999999999999999999", "null",
                                      "1.5", ".5", "1.", "e5", "\n", " ", "\\u0041", "[]", "[0,0,0]"};
-static uint64_t rng;
-static uint32_t rnd(uint32_t n)
-{
-    rng ^= rng << 13;
-    rng ^= rng >> 7;
-    rng ^= rng << 17;
-    return n ? (uint32_t)(rng % n) : 0;
-}
-
 int main(int argc, char **argv)
 {
-    long iters = argc > 1 ? atol(argv[1]) : 20000;
-    rng = argc > 2 ? strtoull(argv[2], NULL, 10) | 1 : 88172645463325252ull;
+    long iters = 20000;
+    int rc = fuzz_plain_args(argc, argv, seeds, NSEEDS, &iters);
+    if (rc >= 0)
+        return rc;
     char buf[4096];
     for (size_t s = 0; s < NSEEDS; s++) {
         check((const uint8_t *)seeds[s], strlen(seeds[s]), 1);
         check((const uint8_t *)seeds[s], strlen(seeds[s]), 16);
     }
     for (long it = 0; it < iters; it++) {
-        const char *seed = seeds[rnd(NSEEDS)];
+        const char *seed = seeds[fuzz_rnd(NSEEDS)];
         size_t n = strlen(seed);
         memcpy(buf, seed, n);
-        for (int m = 1 + (int)rnd(3); m > 0; m--) {
-            size_t at = rnd((uint32_t)n + 1);
-            switch (rnd(4)) {
-            case 0: /* insert a token */
-            {
-                const char *t = tokens[rnd(sizeof tokens / sizeof *tokens)];
-                size_t k = strlen(t);
-                if (n + k < sizeof buf) {
-                    memmove(buf + at + k, buf + at, n - at);
-                    memcpy(buf + at, t, k);
-                    n += k;
-                }
-                break;
-            }
-            case 1: /* delete a few bytes */
-            {
-                size_t k = 1 + rnd(4);
-                if (at + k <= n) {
-                    memmove(buf + at, buf + at + k, n - at - k);
-                    n -= k;
-                }
-                break;
-            }
-            case 2: /* replace a byte */
-                if (at < n)
-                    buf[at] = "0123456789-+.eE[],{}\" \n"[rnd(23)];
-                break;
-            default: /* truncate */
-                n = at;
-            }
-        }
-        check((const uint8_t *)buf, n, rnd(2) ? 1 : 1 + rnd(32));
+        n = fuzz_mutate(buf, n, sizeof buf, 3, tokens, sizeof tokens / sizeof *tokens,
+                        "0123456789-+.eE[],{}\" \n");
+        check((const uint8_t *)buf, n, fuzz_rnd(2) ? 1 : 1 + fuzz_rnd(32));
     }
     printf("fuzz_packed: %zu seeds and %ld mutations agree with jansson (%ld packed)\n", NSEEDS,
            iters, packed_inputs);

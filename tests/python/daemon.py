@@ -1,6 +1,10 @@
 """Start the real subdivd on a free loopback port and talk to it (the HTTP suites' harness).
 
-SUBDIVD may point at another build of the daemon (make sanitize uses the ASan one)."""
+SUBDIVD may point at another build of the daemon (make sanitize uses the ASan one).
+
+The suites create many sessions quickly, all from 127.0.0.1, so a Daemon passes
+`--session-rate 1000000` unless its flags set --session-rate themselves (the hardening tests of
+the per-client rate do)."""
 import os
 import pathlib
 import re
@@ -22,6 +26,8 @@ class Daemon:
         self.log_lines = []
         e = dict(os.environ)
         e.update(env or {})
+        if not any(str(f).startswith("--session-rate") for f in flags):
+            flags = ("--session-rate", "1000000", *flags)
         self.proc = subprocess.Popen([str(SUBDIVD), "--port", "0", "--log-level", "info", *flags],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                      env=e)

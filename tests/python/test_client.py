@@ -171,10 +171,11 @@ def test_limit_and_busy_and_server_errors(tmp_path):
         with pytest.raises(E.ContentTooLarge) as ei:
             s.put_complex({"vertices": [[i, 0, 0] for i in range(11)], "simplices": [[0]]})
         assert (ei.value.limit_name, ei.value.limit, ei.value.requested) == ("max_vertices", 10, 11)
+        tet = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
+        s.put_complex({"vertices": tet, "simplices": [[0, 1, 2, 3]]})  # else it is evictable
         with pytest.raises(E.TooManyRequests) as ei:
             c.create_session()
         assert ei.value.retry_after > 0 and ei.value.slug == "too-many-sessions"
-        tet = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
         with pytest.raises(E.ServerError) as ei:
             s.put_complex({"vertices": tet, "fill": [{"surface": [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]}]})
         assert ei.value.status == 500 and ei.value.slug == "fill-failed"

@@ -342,7 +342,6 @@ CASES = [
     # the token is checked before anything else about the request: no limits leak to strangers
     C("auth-before-body-limit", "PUT", "{s}/complex", 401, on="small", auth=False,
       body=b" " * 29998 + b"{}"),
-    C("limit-sessions", "POST", "/v1/sessions", 429, on="small", body={}),
     # --- media types and bodies ---
     C("content-type-text-plain", "PUT", "{s}/complex", 415, body=VICTIM_BYTES, headers={"Content-Type": "text/plain"}),
     C("content-type-missing", "PUT", "{s}/complex", 415, body=VICTIM_BYTES, headers={"Content-Type": None}),
@@ -390,7 +389,7 @@ CASES = [
     C("path-traversal-under-api", "GET", "/v1/sessions/../../../etc/passwd", 404, raw=R("GET", "/v1/sessions/../../../etc/passwd")),
     C("path-traversal-encoded", "GET", "/%2e%2e/%2e%2e/etc/passwd", 404, raw=R("GET", "/%2e%2e/%2e%2e/etc/passwd")),
     C("path-traversal-static", "GET", "/web/../../../etc/passwd", 404, raw=R("GET", "/web/../../../etc/passwd")),
-    C("url-2000-bytes", "GET", "/v1/" + "a" * 2000, 404),
+    C("url-2000-bytes", "GET", "/v1/" + "a" * 2000, 414),
     C("url-100000-bytes", "GET", "/v1/...", 414, problem=False, raw=R("GET", "/v1/" + "a" * 100000)),
     # --- methods (405 + Allow) ---
     C("method-post-complex", "POST", "{s}/complex", 405, body=VICTIM, allow="PUT, GET, HEAD"),
@@ -543,8 +542,16 @@ def test_after_catalogue(main_env, small_env):
         assert env.victim.req("GET", "/complex").content == env.victim_complex
         assert env.version(env.victim) == env.ctx["version"]
         assert not [l for l in env.d.log_lines if " error " in l], env.d.log_lines
-    # the small daemon still holds its three sessions and refuses a fourth
-    assert requests.post(small_env.d.url + "/v1/sessions", json={}).status_code == 429
+    # the small daemon holds its three sessions: a fourth makes room by letting the empty one go
+    # (it never received a complex); with a complex in every resident session, the next is 429
+    d = small_env.d
+    fourth = Session(d)
+    assert small_env.empty.req("GET").status_code == 404
+    assert fourth.put_complex(VICTIM).status_code == 200
+    r = requests.post(d.url + "/v1/sessions", json={})
+    check_problem(Resp(r.status_code, r.headers, r.content), 429)
+    assert int(r.headers["Retry-After"]) >= 1
+    assert small_env.bystander_state() == small_env.snapshot
 
 
 LOG = re.compile(r"^\d{4}-\d\d-\d\dT[\d:.]+Z info (\S+) (\S+) (\d{3}) \d+B [\d.]+ms$")
