@@ -2,7 +2,7 @@
 CC      ?= cc
 CXX     ?= g++
 CFLAGS  ?= -O2 -g
-CFLAGS  += -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -fPIC
+override CFLAGS += -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -fPIC
 LDLIBS  += -llapacke -llapack -lm
 API_LIBS := $(shell pkg-config --libs jansson 2>/dev/null || echo -ljansson)
 SRV_LIBS := $(shell pkg-config --libs libmicrohttpd 2>/dev/null || echo -lmicrohttpd) -lpthread

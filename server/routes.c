@@ -357,7 +357,7 @@ static void h_edit(req *r)
     }
     json_t *up = json_object();
     for (int l = 0; l < levels; l++) {
-        char key[8];
+        char key[12];
         snprintf(key, sizeof key, "%d", l);
         json_object_set_new(up, key, json_integer((json_int_t)counts[l]));
     }
