@@ -220,59 +220,90 @@ bool sdi_csrb_view(sd_mem *m, sd_csrb *b)
     return true;
 }
 
-/* Rows [lo, hi) of the block that starts at row `base` and whose first `imp` columns are
- * implicit (IMP: row r - base, entry i), for pattern ids of type T; k: the cursor into col.
- * The entries are summed in row order, as the public view lists them. */
-#define APPLY3(T, base, lo, hi, imp, IMP, EXP)                                                     \
-    for (uint32_t r = (lo); r < (hi); r++) {                                                       \
-        uint32_t q = ((const T *)s->pat)[r], n = woff[q + 1] - woff[q];                            \
-        const double *w = wt + woff[q];                                                            \
-        double x = 0, y = 0, z = 0;                                                                \
-        uint32_t i = 0;                                                                            \
-        for (; i < (imp) && i < n; i++) {                                                          \
-            const double *p = in + 3 * (size_t)(IMP);                                              \
-            x += w[i] * p[0];                                                                      \
-            y += w[i] * p[1];                                                                      \
-            z += w[i] * p[2];                                                                      \
-        }                                                                                          \
-        const uint32_t *c = (EXP) ? (EXP) : col + k;                                               \
-        for (uint32_t j = 0; i < n; i++, j++) {                                                    \
-            const double *p = in + 3 * (size_t)c[j];                                               \
-            x += w[i] * p[0];                                                                      \
-            y += w[i] * p[1];                                                                      \
-            z += w[i] * p[2];                                                                      \
-        }                                                                                          \
-        if (!(EXP))                                                                                \
-            k += n - (n < (imp) ? n : (imp));                                                      \
-        out[3 * (size_t)r] = x;                                                                    \
-        out[3 * (size_t)r + 1] = y;                                                                \
-        out[3 * (size_t)r + 2] = z;                                                                \
-    }
+/* ---- one row: the only place a row of S is summed ------------------------------------------- */
 
-#define APPLYN(base, lo, hi, imp, IMP, EXP)                                                        \
-    for (uint32_t r = (lo); r < (hi); r++) {                                                       \
-        uint32_t q = sdi_csrb_pat(s, r), n = woff[q + 1] - woff[q];                                 \
-        const double *w = wt + woff[q];                                                            \
-        double *o = out + (size_t)nc * r;                                                          \
-        for (int j = 0; j < nc; j++)                                                               \
-            o[j] = 0;                                                                              \
-        for (uint32_t i = 0; i < n; i++) {                                                         \
-            const double *p = in + (size_t)nc * (i < (imp) ? (IMP) : (EXP) ? (EXP)[i - (imp)] : col[k++]); \
-            for (int j = 0; j < nc; j++)                                                           \
-                o[j] += w[i] * p[j];                                                               \
-        }                                                                                          \
+/* out = sum_i w[i] p(c_i) over the row's n entries, its nimp implicit columns imp[] first, then
+ * its explicit ones exp[], in that order from 0 — the order the public view lists them. p(c) is
+ * in + nc c, or, where slot is not NULL and slot[c] >= 0, alt + nc slot[c] (an edit's new value
+ * of a point it has not written yet). The level build (sdi_csr_apply) and edits
+ * (sdi_csrb_eval) both sum through this function, so a recomputed point gets exactly the bits a
+ * fresh build gives it. Inlined into each caller with its constants (nc = 3, slot = NULL). */
+static inline __attribute__((always_inline)) void
+row_sum(const double *w, uint32_t n, uint32_t nimp, const uint32_t *imp, const uint32_t *exp,
+        const double *in, const int32_t *slot, const double *alt, int nc, double *out)
+{
+#define SRC(c) (slot && slot[c] >= 0 ? alt + (size_t)nc * (uint32_t)slot[c] : in + (size_t)nc * (c))
+    const uint32_t ni = nimp < n ? nimp : n;
+    uint32_t i = 0;
+    if (nc == 3) {
+        double x = 0, y = 0, z = 0;
+        for (; i < ni; i++) {
+            const double *p = SRC(imp[i]);
+            x += w[i] * p[0];
+            y += w[i] * p[1];
+            z += w[i] * p[2];
+        }
+        for (const uint32_t *e = exp; i < n; i++, e++) {
+            const double *p = SRC(*e);
+            x += w[i] * p[0];
+            y += w[i] * p[1];
+            z += w[i] * p[2];
+        }
+        out[0] = x;
+        out[1] = y;
+        out[2] = z;
+        return;
     }
+    double acc[16];
+    for (int j = 0; j < nc; j++)
+        acc[j] = 0;
+    for (; i < n; i++) {
+        const double *p = SRC(i < ni ? imp[i] : exp[i - ni]);
+        for (int j = 0; j < nc; j++)
+            acc[j] += w[i] * p[j];
+    }
+    for (int j = 0; j < nc; j++)
+        out[j] = acc[j];
+#undef SRC
+}
 
-#define MAXU(a, b) ((a) > (b) ? (a) : (b))
+static inline uint32_t pat_of(const sd_csrb *s, int pw, uint32_t r)
+{
+    return pw == 1 ? ((const uint8_t *)s->pat)[r]
+         : pw == 2 ? ((const uint16_t *)s->pat)[r] : ((const uint32_t *)s->pat)[r];
+}
+
+/* Rows [lo, hi) of block `blk` (0 vertex rows, 1 edge rows, 2 octahedron rows; see the top of
+ * this file for their implicit columns), pattern ids of pw bytes; *k: the cursor into col. */
+static inline __attribute__((always_inline)) void
+apply_block(const sd_csrb *s, int pw, int blk, uint32_t lo, uint32_t hi, size_t *k,
+            const double *in, double *out, int nc)
+{
+    const uint32_t b1 = s->nvr, b2 = s->nvr + s->ner;
+    for (uint32_t r = lo; r < hi; r++) {
+        uint32_t q = pat_of(s, pw, r), n = s->woff[q + 1] - s->woff[q], self = r;
+        const uint32_t *imp = blk == 0 ? &self : blk == 1 ? s->ev[r - b1] : s->oct[r - b2];
+        const uint32_t nimp = blk == 0 ? 1 : blk == 1 ? 2 : 6;
+        const bool opp = blk == 1 && s->eopp;
+        row_sum(s->wt + s->woff[q], n, nimp, imp, opp ? s->eopp[r - b1] : s->col + *k, in, NULL,
+                NULL, nc, out + (size_t)nc * r);
+        if (!opp)
+            *k += n > nimp ? n - nimp : 0;
+    }
+}
+
 #define MINU(a, b) ((a) < (b) ? (a) : (b))
-/* The three blocks of rows (vertex, edge, octahedron) clipped to [rlo, rhi). */
-#define BLOCKS(APPLY, ...)                                                                         \
-    do {                                                                                           \
-        uint32_t b1 = s->nvr, b2 = s->nvr + s->ner;                                                \
-        APPLY(__VA_ARGS__ 0, rlo, MINU(rhi, b1), 1, r, NOEXP)                                      \
-        APPLY(__VA_ARGS__ b1, MAXU(rlo, b1), MINU(rhi, b2), 2, ev[r - b1][i], EOPP)                \
-        APPLY(__VA_ARGS__ b2, MAXU(rlo, b2), rhi, 6, oct[r - b2][i], NOEXP)                        \
-    } while (0)
+#define MAXU(a, b) ((a) > (b) ? (a) : (b))
+
+static inline __attribute__((always_inline)) void
+apply_rows(const sd_csrb *s, int pw, uint32_t rlo, uint32_t rhi, size_t k, const double *in,
+           double *out, int nc)
+{
+    const uint32_t b1 = s->nvr, b2 = s->nvr + s->ner;
+    apply_block(s, pw, 0, rlo, MINU(rhi, b1), &k, in, out, nc);
+    apply_block(s, pw, 1, MAXU(rlo, b1), MINU(rhi, b2), &k, in, out, nc);
+    apply_block(s, pw, 2, MAXU(rlo, b2), rhi, &k, in, out, nc);
+}
 
 typedef struct ajob {
     const sd_csrb *s;
@@ -285,15 +316,6 @@ static void apply_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const ajob *J = arg;
     const sd_csrb *s = J->s;
-    const double *in = J->in;
-    double *out = J->out;
-    const int nc = J->nc;
-    const uint32_t *col = s->col, *woff = s->woff;
-    const uint32_t(*ev)[2] = s->ev;
-    const uint32_t(*oct)[6] = s->oct;
-    const double *wt = s->wt;
-    const uint32_t *const NOEXP = NULL; /* explicit columns in col */
-#define EOPP (s->eopp ? s->eopp[r - b1] : NOEXP)
     /* whole chunks of SD_CHK rows, whose first explicit column kchk gives */
     uint64_t c0, c1, nchunks = ((uint64_t)s->nrows + SD_CHK - 1) / SD_CHK;
     sdi_range(nchunks, part, nparts, &c0, &c1);
@@ -301,16 +323,15 @@ static void apply_part(void *arg, uint32_t part, uint32_t nparts)
     if (rlo >= rhi)
         return;
     size_t k = s->kchk[c0];
-    if (nc == 3) {
+    if (J->nc == 3) {
         switch (s->pw) {
-        case 1: BLOCKS(APPLY3, uint8_t,); break;
-        case 2: BLOCKS(APPLY3, uint16_t,); break;
-        default: BLOCKS(APPLY3, uint32_t,); break;
+        case 1: apply_rows(s, 1, rlo, rhi, k, J->in, J->out, 3); break;
+        case 2: apply_rows(s, 2, rlo, rhi, k, J->in, J->out, 3); break;
+        default: apply_rows(s, 4, rlo, rhi, k, J->in, J->out, 3); break;
         }
     } else {
-        BLOCKS(APPLYN, );
+        apply_rows(s, s->pw, rlo, rhi, k, J->in, J->out, J->nc);
     }
-#undef EOPP
 }
 
 void sdi_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads)
