@@ -10,9 +10,12 @@
  * Pattern p is the row's weights, one per entry in that order: wt[woff[p] .. woff[p+1]), so its
  * length is the row's length. Patterns are interned (same weights bit for bit -> same id).
  * For a 12^3-cube solid that is ~2.8 bytes per non-zero instead of 16 (CSR with doubles).
- * Rows are walked in order (apply, edits' column index) with a cursor into col; random access
- * goes through a table of row starts made for the occasion. The public CSR view of
- * sd_complex_matrix (rowptr, col, val) is materialized on demand and kept with the matrix.
+ * Rows are walked in order (apply, the column index) with a cursor into col; random access goes
+ * through a table of row starts made for the occasion, or, for edits, through the checkpoints
+ * of the column index (below). Every row is summed by one function, row_sum, whether by the level
+ * build (sdi_csr_apply) or by an edit recomputing a point (sdi_csrb_eval): the two cannot give
+ * different bits. The public CSR view of sd_complex_matrix (rowptr, col, val) is materialized on
+ * demand and kept with the matrix.
  */
 #include "internal.h"
 #include <string.h>
@@ -71,6 +74,10 @@ void sdi_csrb_free(sd_mem *m, sd_csrb *b)
     sdi_free(m, b->vcol);
     sdi_free(m, b->vval);
     sdi_free(m, b->kchk);
+    sdi_free(m, b->ub);
+    sdi_free(m, b->ubase);
+    sdi_free(m, b->urel);
+    sdi_free(m, b->rchk);
     memset(b, 0, sizeof *b);
 }
 
@@ -338,4 +345,138 @@ void sdi_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int 
 {
     ajob J = {s, in, out, nc};
     sdi_par(threads, s->nnz, apply_part, &J);
+}
+
+/* ---- by columns: the rows that use each column (edits) --------------------------------------- */
+
+/* An edit recomputes the rows that read a changed point, so it needs S by columns: for column j
+ * (a point of this level), the rows (next-level points) that use it. Built with the next level
+ * (levels.c), so an edit never waits for it. Rows come in increasing order, so each column's list
+ * is kept as varint deltas: the first row as zigzag(r - j) (a point's own vertex row is among the
+ * first, so this is small), then r - previous. That takes 1.2-1.8 bytes per entry on the meshes
+ * of bench/ instead of 4 (docs/DECISIONS.md). Column j's bytes are
+ * ub[ubase[j >> SDI_UBLK] + urel[j] .. same for j + 1). rchk gives the start in col of every
+ * SD_RCHK-th row, so sdi_csrb_eval reaches any row after at most SD_RCHK - 1 row lengths. */
+
+static inline uint32_t vlen(uint64_t v)
+{
+    uint32_t n = 1;
+    while (v >= 128) {
+        v >>= 7;
+        n++;
+    }
+    return n;
+}
+
+static inline uint64_t zigzag(int64_t d) { return ((uint64_t)d << 1) ^ (uint64_t)(d >> 63); }
+
+/* The code of row r in column c's list, whose previous row is last (UINT32_MAX: none yet). */
+static inline uint64_t ucode(uint32_t r, uint32_t c, uint32_t last)
+{
+    return last == UINT32_MAX ? zigzag((int64_t)r - (int64_t)c) : (uint64_t)(r - last);
+}
+
+sd_result sdi_csrb_index(sd_mem *m, sd_csrb *s, sd_error *err)
+{
+    if (s->ub)
+        return SD_OK;
+    const uint32_t nc = s->ncols, nr = s->nrows, nblk = (nc >> SDI_UBLK) + 1;
+    uint32_t *last = sdi_alloc(m, ((size_t)nc + 1) * sizeof *last);
+    uint32_t *cur = sdi_calloc(m, (size_t)nc + 1, sizeof *cur);
+    uint32_t *cols = sdi_alloc(m, ((size_t)s->maxlen + 1) * sizeof *cols);
+    uint32_t *rchk = sdi_alloc(m, ((size_t)nr / SD_RCHK + 1) * sizeof *rchk);
+    uint64_t *ubase = sdi_alloc(m, (size_t)nblk * sizeof *ubase);
+    uint32_t *urel = sdi_alloc(m, ((size_t)nc + 1) * sizeof *urel);
+    uint8_t *ub = NULL;
+    sd_result rc = SD_OK;
+    if (!last || !cur || !cols || !rchk || !ubase || !urel)
+        goto nomem;
+    /* pass 1: the bytes of each column's list (in cur), and the row starts */
+    for (uint32_t j = 0; j < nc; j++)
+        last[j] = UINT32_MAX;
+    size_t k = 0;
+    for (uint32_t r = 0; r < nr; r++) {
+        if (r % SD_RCHK == 0)
+            rchk[r / SD_RCHK] = (uint32_t)k; /* k < nnz < 2^32 (stencil.c) */
+        uint32_t n = sdi_csrb_len(s, r);
+        sdi_csrb_row(s, r, &k, cols);
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t c = cols[i];
+            cur[c] += vlen(ucode(r, c, last[c]));
+            last[c] = r;
+        }
+    }
+    uint64_t total = 0;
+    for (uint32_t j = 0; j <= nc; j++) {
+        if ((j & ((1u << SDI_UBLK) - 1)) == 0)
+            ubase[j >> SDI_UBLK] = total;
+        uint64_t rel = total - ubase[j >> SDI_UBLK];
+        if (rel > UINT32_MAX) {
+            rc = sdi_fail(err, SD_ERR_LIMIT, -1, -1, "subdivision matrix too large to index by columns");
+            goto out;
+        }
+        urel[j] = (uint32_t)rel;
+        total += j < nc ? cur[j] : 0;
+    }
+    if (!(ub = sdi_alloc(m, total ? total : 1)))
+        goto nomem;
+    /* pass 2: the codes, each column's written at its cursor (cur: relative to its block) */
+    for (uint32_t j = 0; j < nc; j++) {
+        last[j] = UINT32_MAX;
+        cur[j] = urel[j];
+    }
+    k = 0;
+    for (uint32_t r = 0; r < nr; r++) {
+        uint32_t n = sdi_csrb_len(s, r);
+        sdi_csrb_row(s, r, &k, cols);
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t c = cols[i];
+            uint64_t v = ucode(r, c, last[c]);
+            uint8_t *p = ub + ubase[c >> SDI_UBLK] + cur[c];
+            uint32_t len = 0;
+            while (v >= 128) {
+                p[len++] = (uint8_t)(v | 128);
+                v >>= 7;
+            }
+            p[len++] = (uint8_t)v;
+            cur[c] += len;
+            last[c] = r;
+        }
+    }
+    s->ub = ub;
+    s->ubase = ubase;
+    s->urel = urel;
+    s->rchk = rchk;
+    ub = NULL;
+    ubase = NULL;
+    urel = NULL;
+    rchk = NULL;
+    goto out;
+nomem:
+    rc = sdi_fail_nomem(err, m);
+out:
+    sdi_free(m, ub);
+    sdi_free(m, ubase);
+    sdi_free(m, urel);
+    sdi_free(m, rchk);
+    sdi_free(m, last);
+    sdi_free(m, cur);
+    sdi_free(m, cols);
+    return rc;
+}
+
+void sdi_csrb_eval(const sd_csrb *s, uint32_t r, const double *in, const int32_t *slot,
+                   const double *alt, int nc, double *out)
+{
+    uint32_t r0 = r - r % SD_RCHK;
+    size_t k = s->rchk[r0 / SD_RCHK];
+    for (; r0 < r; r0++)
+        k += sdi_csrb_nexp(s, r0);
+    const uint32_t b1 = s->nvr, b2 = s->nvr + s->ner;
+    uint32_t q = sdi_csrb_pat(s, r), n = s->woff[q + 1] - s->woff[q], self = r;
+    const int blk = r < b1 ? 0 : r < b2 ? 1 : 2;
+    const uint32_t *imp = blk == 0 ? &self : blk == 1 ? s->ev[r - b1] : s->oct[r - b2];
+    const uint32_t nimp = blk == 0 ? 1 : blk == 1 ? 2 : 6;
+    const uint32_t *exp = blk == 1 && s->eopp ? s->eopp[r - b1] : s->col + k;
+    row_sum(s->wt + s->woff[q], n, nimp, imp, exp, in, slot, alt, nc, out);
 }
