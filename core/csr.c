@@ -240,6 +240,7 @@ row_sum(const double *w, uint32_t n, uint32_t nimp, const uint32_t *imp, const u
         const double *in, const int32_t *slot, const double *alt, int nc, double *out)
 {
 #define SRC(c) (slot && slot[c] >= 0 ? alt + (size_t)nc * (uint32_t)slot[c] : in + (size_t)nc * (c))
+    /* (slot is a constant NULL or not in each copy: the test is folded away) */
     const uint32_t ni = nimp < n ? nimp : n;
     uint32_t i = 0;
     if (nc == 3) {
@@ -466,17 +467,29 @@ out:
 }
 
 void sdi_csrb_eval(const sd_csrb *s, uint32_t r, const double *in, const int32_t *slot,
-                   const double *alt, int nc, double *out)
+                   const double *alt, int nc, double *out, sdi_rowpos *at)
 {
+    /* row r's explicit columns: from its checkpoint, or from the row before (rows in order) */
     uint32_t r0 = r - r % SD_RCHK;
     size_t k = s->rchk[r0 / SD_RCHK];
+    if (at && at->r >= r0 && at->r <= r) {
+        r0 = at->r;
+        k = at->k;
+    }
     for (; r0 < r; r0++)
         k += sdi_csrb_nexp(s, r0);
+    if (at) {
+        at->r = r;
+        at->k = k;
+    }
     const uint32_t b1 = s->nvr, b2 = s->nvr + s->ner;
     uint32_t q = sdi_csrb_pat(s, r), n = s->woff[q + 1] - s->woff[q], self = r;
     const int blk = r < b1 ? 0 : r < b2 ? 1 : 2;
     const uint32_t *imp = blk == 0 ? &self : blk == 1 ? s->ev[r - b1] : s->oct[r - b2];
     const uint32_t nimp = blk == 0 ? 1 : blk == 1 ? 2 : 6;
     const uint32_t *exp = blk == 1 && s->eopp ? s->eopp[r - b1] : s->col + k;
-    row_sum(s->wt + s->woff[q], n, nimp, imp, exp, in, slot, alt, nc, out);
+    if (slot) /* two copies of row_sum: with the edit's new values, and without */
+        row_sum(s->wt + s->woff[q], n, nimp, imp, exp, in, slot, alt, nc, out);
+    else
+        row_sum(s->wt + s->woff[q], n, nimp, imp, exp, in, NULL, NULL, nc, out);
 }

@@ -345,11 +345,28 @@ static inline bool sdi_users_next(sdi_users *u, uint32_t *r)
     return true;
 }
 /* Row r of S on `in` as sdi_csr_apply sums it, bit for bit, except that a column c with slot
- * not NULL and slot[c] >= 0 reads alt + nc slot[c] (an edit's new value); needs the index. */
+ * not NULL and slot[c] >= 0 reads alt + nc slot[c] (an edit's new value); needs the index. `at`
+ * (optional, {UINT32_MAX} at first) remembers where the last row started, so rows taken in
+ * increasing order are found without going back to their checkpoint. */
+typedef struct sdi_rowpos {
+    uint32_t r;
+    size_t k;
+} sdi_rowpos;
 void sdi_csrb_eval(const sd_csrb *s, uint32_t r, const double *in, const int32_t *slot,
-                   const double *alt, int nc, double *out);
+                   const double *alt, int nc, double *out, sdi_rowpos *at);
 
 /* ---- levels and the complex -------------------------------------------------------------- */
+/* An edit's recomputed points of one level (edit.c): kept between edits so that an edit's lists
+ * cost no allocation once they have grown; clean (mark all 0) between edits. */
+typedef struct sdi_escratch {
+    uint64_t *mark;            /* a bit per point (the finest level's set; others use slot) */
+    uint32_t cap;              /* entries of id and chg */
+    size_t dcap;               /* doubles of nv and ov */
+    uint32_t *id;
+    double *nv, *ov;           /* new and old values */
+    uint8_t *chg;
+} sdi_escratch;
+void sdi_escratch_free(sd_mem *m, sdi_escratch *s);
 typedef struct sd_channel {
     int ncomp;
     double *data;
@@ -371,9 +388,9 @@ struct sd_level {
     sd_csrb S;
     /* edits' scratch (edit.c), made by the first edit and kept: a map from this level's points to
      * their entries in an edit's list of recomputed points (-1 = none; levels with a finer
-     * computed level), or a bit per point (the finest level); clean between edits */
+     * computed level), and the list itself (sdi_escratch) */
     int32_t *slot;
-    uint64_t *mark;
+    struct sdi_escratch *es;
     /* per point of this level: 1 where the rules read its position (Ying-Zorin's corner angle
      * alpha: the corner and the far ends of its petal's singular edges), or NULL if none; an
      * edit moving such a point rebuilds this level's rules (edit.c) */

@@ -22,7 +22,7 @@ void sdi_level_free(sd_mem *m, sd_level *lv)
     sdi_topo_free(m, &lv->t);
     sdi_level_free_rules(m, lv);
     sdi_free(m, lv->slot);
-    sdi_free(m, lv->mark);
+    sdi_escratch_free(m, lv->es);
     for (int i = 0; i < lv->nch; i++)
         sdi_free(m, lv->ch[i].data);
     sdi_free(m, lv);
@@ -56,9 +56,9 @@ void sdi_drop_rules(sd_complex *c, sd_level *lv)
     sdi_drop_levels(c, lv->index + 1);
     sdi_level_free_rules(&c->mem, lv);
     sdi_free(&c->mem, lv->slot);
-    sdi_free(&c->mem, lv->mark);
+    sdi_escratch_free(&c->mem, lv->es);
     lv->slot = NULL;
-    lv->mark = NULL;
+    lv->es = NULL;
 }
 
 /* The parts of a level's topology (see sd_topo): edges need the parent's faces; faces need the

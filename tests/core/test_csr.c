@@ -26,11 +26,12 @@ static int index_matches(sd_complex *c, int L)
                 ok = at < cnt[j] && rows[at++] == r;
             ok = ok && at == cnt[j];
         }
+        sdi_rowpos at = {UINT32_MAX, 0}; /* rows in order for channel 1, from checkpoints else */
         for (uint32_t r = 0; ok && r < S->nrows; r++)
             for (int ch = 0; ok && ch < c->lv[l]->nch; ch++) {
                 int nc = c->lv[l]->ch[ch].ncomp;
                 double x[16];
-                sdi_csrb_eval(S, r, c->lv[l]->ch[ch].data, NULL, NULL, nc, x);
+                sdi_csrb_eval(S, r, c->lv[l]->ch[ch].data, NULL, NULL, nc, x, ch ? &at : NULL);
                 ok = !memcmp(x, c->lv[l + 1]->ch[ch].data + (size_t)r * nc, nc * sizeof *x);
             }
         free(cnt);
