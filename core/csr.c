@@ -377,36 +377,65 @@ static inline uint64_t ucode(uint32_t r, uint32_t c, uint32_t last)
     return last == UINT32_MAX ? zigzag((int64_t)r - (int64_t)c) : (uint64_t)(r - last);
 }
 
+/* Per column while the index is made: the last row seen, and the bytes so far (pass 1) or where
+ * the next code goes relative to the column's block (pass 2); one entry, so one cache line. */
+typedef struct ucol {
+    uint32_t last, at;
+} ucol;
+
+/* Pass 1 (ub = NULL) counts each column's bytes; pass 2 writes the codes (column c's block at
+ * ubase[c >> SDI_UBLK]). Rows in order. */
+static void index_pass(const sd_csrb *s, ucol *u, uint8_t *ub, const uint64_t *ubase, uint32_t *rchk)
+{
+    const uint32_t b1 = s->nvr, b2 = s->nvr + s->ner;
+    size_t k = 0;
+    for (uint32_t r = 0; r < s->nrows; r++) {
+        if (rchk && r % SD_RCHK == 0)
+            rchk[r / SD_RCHK] = (uint32_t)k; /* k < nnz < 2^32 (stencil.c) */
+        uint32_t n = sdi_csrb_len(s, r), self = r;
+        const uint32_t *imp = r < b1 ? &self : r < b2 ? s->ev[r - b1] : s->oct[r - b2];
+        const uint32_t nimp = r < b1 ? 1 : r < b2 ? 2 : 6;
+        const bool opp = r >= b1 && r < b2 && s->eopp;
+        const uint32_t *exp = opp ? s->eopp[r - b1] : s->col + k;
+        for (uint32_t i = 0; i < n; i++) {
+            const uint32_t c = i < nimp ? imp[i] : exp[i - nimp];
+            ucol *x = &u[c];
+            uint64_t v = ucode(r, c, x->last);
+            x->last = r;
+            if (!ub) {
+                x->at += vlen(v);
+                continue;
+            }
+            uint8_t *p = ub + ubase[c >> SDI_UBLK] + x->at;
+            uint32_t len = 0;
+            while (v >= 128) {
+                p[len++] = (uint8_t)(v | 128);
+                v >>= 7;
+            }
+            p[len++] = (uint8_t)v;
+            x->at += len;
+        }
+        if (!opp)
+            k += n > nimp ? n - nimp : 0;
+    }
+}
+
 sd_result sdi_csrb_index(sd_mem *m, sd_csrb *s, sd_error *err)
 {
     if (s->ub)
         return SD_OK;
     const uint32_t nc = s->ncols, nr = s->nrows, nblk = (nc >> SDI_UBLK) + 1;
-    uint32_t *last = sdi_alloc(m, ((size_t)nc + 1) * sizeof *last);
-    uint32_t *cur = sdi_calloc(m, (size_t)nc + 1, sizeof *cur);
-    uint32_t *cols = sdi_alloc(m, ((size_t)s->maxlen + 1) * sizeof *cols);
+    ucol *u = sdi_alloc(m, ((size_t)nc + 1) * sizeof *u);
     uint32_t *rchk = sdi_alloc(m, ((size_t)nr / SD_RCHK + 1) * sizeof *rchk);
     uint64_t *ubase = sdi_alloc(m, (size_t)nblk * sizeof *ubase);
     uint32_t *urel = sdi_alloc(m, ((size_t)nc + 1) * sizeof *urel);
     uint8_t *ub = NULL;
     sd_result rc = SD_OK;
-    if (!last || !cur || !cols || !rchk || !ubase || !urel)
+    if (!u || !rchk || !ubase || !urel)
         goto nomem;
-    /* pass 1: the bytes of each column's list (in cur), and the row starts */
     for (uint32_t j = 0; j < nc; j++)
-        last[j] = UINT32_MAX;
-    size_t k = 0;
-    for (uint32_t r = 0; r < nr; r++) {
-        if (r % SD_RCHK == 0)
-            rchk[r / SD_RCHK] = (uint32_t)k; /* k < nnz < 2^32 (stencil.c) */
-        uint32_t n = sdi_csrb_len(s, r);
-        sdi_csrb_row(s, r, &k, cols);
-        for (uint32_t i = 0; i < n; i++) {
-            uint32_t c = cols[i];
-            cur[c] += vlen(ucode(r, c, last[c]));
-            last[c] = r;
-        }
-    }
+        u[j] = (ucol){UINT32_MAX, 0};
+    index_pass(s, u, NULL, NULL, rchk); /* each column's bytes, and the row checkpoints */
     uint64_t total = 0;
     for (uint32_t j = 0; j <= nc; j++) {
         if ((j & ((1u << SDI_UBLK) - 1)) == 0)
@@ -417,33 +446,13 @@ sd_result sdi_csrb_index(sd_mem *m, sd_csrb *s, sd_error *err)
             goto out;
         }
         urel[j] = (uint32_t)rel;
-        total += j < nc ? cur[j] : 0;
+        total += j < nc ? u[j].at : 0;
     }
     if (!(ub = sdi_alloc(m, total ? total : 1)))
         goto nomem;
-    /* pass 2: the codes, each column's written at its cursor (cur: relative to its block) */
-    for (uint32_t j = 0; j < nc; j++) {
-        last[j] = UINT32_MAX;
-        cur[j] = urel[j];
-    }
-    k = 0;
-    for (uint32_t r = 0; r < nr; r++) {
-        uint32_t n = sdi_csrb_len(s, r);
-        sdi_csrb_row(s, r, &k, cols);
-        for (uint32_t i = 0; i < n; i++) {
-            uint32_t c = cols[i];
-            uint64_t v = ucode(r, c, last[c]);
-            uint8_t *p = ub + ubase[c >> SDI_UBLK] + cur[c];
-            uint32_t len = 0;
-            while (v >= 128) {
-                p[len++] = (uint8_t)(v | 128);
-                v >>= 7;
-            }
-            p[len++] = (uint8_t)v;
-            cur[c] += len;
-            last[c] = r;
-        }
-    }
+    for (uint32_t j = 0; j < nc; j++)
+        u[j] = (ucol){UINT32_MAX, urel[j]};
+    index_pass(s, u, ub, ubase, NULL);
     s->ub = ub;
     s->ubase = ubase;
     s->urel = urel;
@@ -460,9 +469,7 @@ out:
     sdi_free(m, ubase);
     sdi_free(m, urel);
     sdi_free(m, rchk);
-    sdi_free(m, last);
-    sdi_free(m, cur);
-    sdi_free(m, cols);
+    sdi_free(m, u);
     return rc;
 }
 
