@@ -473,6 +473,17 @@ out:
     return rc;
 }
 
+void sdi_csrb_prefetch(const sd_csrb *s, uint32_t r, int stage)
+{
+    if (stage == 0) { /* what locates the row */
+        __builtin_prefetch(&s->rchk[r / SD_RCHK]);
+        __builtin_prefetch((const uint8_t *)s->pat + (size_t)r * s->pw);
+        if (r >= s->nvr && r < s->nvr + s->ner)
+            __builtin_prefetch(s->eopp ? s->eopp[r - s->nvr] : s->ev[r - s->nvr]);
+    } else /* its explicit columns, near its checkpoint's */
+        __builtin_prefetch(s->col + s->rchk[r / SD_RCHK]);
+}
+
 void sdi_csrb_eval(const sd_csrb *s, uint32_t r, const double *in, const int32_t *slot,
                    const double *alt, int nc, double *out, sdi_rowpos *at)
 {

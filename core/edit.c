@@ -307,8 +307,13 @@ static sd_result gather(edit *E, int l, sd_error *err)
     if (l > 0) {
         const pset *up = &E->set[l - 1];
         const sd_csrb *S = &c->lv[l - 1]->S;
+        const uint32_t *ids = up->s->id;
         for (uint32_t i = 0; i < up->n; i++) {
-            sdi_users u = sdi_csrb_users(S, up->s->id[i]);
+            if (i + 16 < up->n) /* in order too: ask for the lists ahead */
+                __builtin_prefetch(&S->urel[ids[i + 16]]);
+            if (i + 8 < up->n)
+                __builtin_prefetch(S->ub + S->ubase[ids[i + 8] >> SDI_UBLK] + S->urel[ids[i + 8]]);
+            sdi_users u = sdi_csrb_users(S, ids[i]);
             for (uint32_t r; sdi_users_next(&u, &r);)
                 if (!add_point(E, l, r))
                     return sdi_fail_nomem(err, E->m);
@@ -328,6 +333,14 @@ static sd_result gather(edit *E, int l, sd_error *err)
     sdi_rowpos at = {UINT32_MAX, 0};
     for (uint32_t e = 0; e < s->n; e++) {
         const uint32_t r = L->id[e];
+        if (l > 0) { /* the points come in order: ask for the rows a few points ahead */
+            if (e + 16 < s->n) {
+                sdi_csrb_prefetch(&c->lv[l - 1]->S, L->id[e + 16], 0);
+                __builtin_prefetch(cur + (size_t)L->id[e + 16] * nc);
+            }
+            if (e + 8 < s->n)
+                sdi_csrb_prefetch(&c->lv[l - 1]->S, L->id[e + 8], 1);
+        }
         double *nv = L->nv + (size_t)e * nc;
         const op *o = e < s->nops ? &s->ops[e] : NULL;
         copy_nc(L->ov + (size_t)e * nc, cur + (size_t)r * nc, nc);

@@ -354,6 +354,9 @@ typedef struct sdi_rowpos {
 } sdi_rowpos;
 void sdi_csrb_eval(const sd_csrb *s, uint32_t r, const double *in, const int32_t *slot,
                    const double *alt, int nc, double *out, sdi_rowpos *at);
+/* Ask for row r's data ahead of sdi_csrb_eval: stage 0 what locates it, stage 1 (after stage 0
+ * has had time) its columns. */
+void sdi_csrb_prefetch(const sd_csrb *s, uint32_t r, int stage);
 
 /* ---- levels and the complex -------------------------------------------------------------- */
 /* An edit's recomputed points of one level (edit.c): kept between edits so that an edit's lists
