@@ -639,51 +639,54 @@ static sd_result check_point(const sd_complex *c, size_t i, int level, int lo, u
     return SD_OK;
 }
 
-sd_result sd_complex_move(sd_complex *c, int channel, size_t n, const sd_vertex_at *at,
-                          const double *values, sd_edit_report *rep, sd_error *err)
+/* Check a call's points (at[i], or control points idx[i]) and values, and make its ops of `kind`
+ * with room for `extra` more; the caller frees *ops. */
+static sd_result make_ops(sd_complex *c, int channel, size_t n, const sd_vertex_at *at,
+                          const uint32_t *idx, const double *values, uint32_t kind, size_t extra,
+                          op **ops, sd_error *err)
 {
-    sd_error local;
-    if (!err)
-        err = &local;
+    *ops = NULL;
     sd_result r = check_channel(c, channel, err);
     if (r)
         return r;
     const int nc = c->lv[0]->ch[channel].ncomp;
+    const bool offsets = kind == OP_OFFSET;
     for (size_t i = 0; i < n; i++)
-        if ((r = check_point(c, i, at[i].level, 0, at[i].index, values + i * nc, nc, channel == 0,
-                             err)))
+        if ((r = check_point(c, i, at ? at[i].level : 0, offsets, at ? at[i].index : idx[i],
+                             values + i * nc, nc, offsets || channel == 0, err)))
             return r;
-    op *ops = sdi_alloc(&c->mem, (n ? n : 1) * sizeof *ops);
-    if (!ops)
+    if (!(*ops = sdi_alloc(&c->mem, (n + extra ? n + extra : 1) * sizeof **ops)))
         return sdi_fail_nomem(err, &c->mem);
     for (size_t i = 0; i < n; i++)
-        ops[i] = (op){(uint32_t)at[i].level, at[i].index, OP_MOVE, (uint32_t)i, UINT32_MAX};
-    r = run(c, channel, ops, n, values, rep, NULL, err);
+        (*ops)[i] = (op){at ? (uint32_t)at[i].level : 0, at ? at[i].index : idx[i], kind,
+                         (uint32_t)i, UINT32_MAX};
+    return SD_OK;
+}
+
+/* Moves to at[i] (or control points idx[i]); rep and counts optional. */
+static sd_result moves(sd_complex *c, int channel, size_t n, const sd_vertex_at *at,
+                       const uint32_t *idx, const double *values, sd_edit_report *rep,
+                       uint64_t *counts, sd_error *err)
+{
+    sd_error local;
+    op *ops;
+    sd_result r = make_ops(c, channel, n, at, idx, values, OP_MOVE, 0, &ops, err ? err : &local);
+    if (!r)
+        r = run(c, channel, ops, n, values, rep, counts, err ? err : &local);
     sdi_free(&c->mem, ops);
     return r;
+}
+
+sd_result sd_complex_move(sd_complex *c, int channel, size_t n, const sd_vertex_at *at,
+                          const double *values, sd_edit_report *rep, sd_error *err)
+{
+    return moves(c, channel, n, at, NULL, values, rep, NULL, err);
 }
 
 sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *idx,
                           const double *values, uint64_t *counts, sd_error *err)
 {
-    sd_error local;
-    if (!err)
-        err = &local;
-    sd_result r = check_channel(c, channel, err);
-    if (r)
-        return r;
-    const int nc = c->lv[0]->ch[channel].ncomp;
-    for (size_t i = 0; i < n; i++)
-        if ((r = check_point(c, i, 0, 0, idx[i], values + i * nc, nc, channel == 0, err)))
-            return r;
-    op *ops = sdi_alloc(&c->mem, (n ? n : 1) * sizeof *ops);
-    if (!ops)
-        return sdi_fail_nomem(err, &c->mem);
-    for (size_t i = 0; i < n; i++)
-        ops[i] = (op){0, idx[i], OP_MOVE, (uint32_t)i, UINT32_MAX};
-    r = run(c, channel, ops, n, values, NULL, counts, err);
-    sdi_free(&c->mem, ops);
-    return r;
+    return moves(c, channel, n, NULL, idx, values, NULL, counts, err);
 }
 
 sd_result sd_complex_set_details(sd_complex *c, int channel, size_t n, const sd_vertex_at *at,
@@ -692,22 +695,16 @@ sd_result sd_complex_set_details(sd_complex *c, int channel, size_t n, const sd_
     sd_error local;
     if (!err)
         err = &local;
-    sd_result r = check_channel(c, channel, err);
-    if (r)
-        return r;
-    const int nc = c->lv[0]->ch[channel].ncomp;
-    for (size_t i = 0; i < n; i++)
-        if ((r = check_point(c, i, at[i].level, 1, at[i].index, offsets + i * nc, nc, true, err)))
-            return r;
-    /* the given offsets, and a clear for each offset held now (dropped where one is given) */
-    size_t nold = 0;
+    size_t nold = 0; /* room for their clears */
     for (int l = 1; l <= SD_MAX_LEVEL; l++)
         nold += sd_complex_details(c, channel, l, NULL, NULL);
-    op *ops = sdi_alloc(&c->mem, (n + nold ? n + nold : 1) * sizeof *ops);
-    if (!ops)
-        return sdi_fail_nomem(err, &c->mem);
-    for (size_t i = 0; i < n; i++)
-        ops[i] = (op){(uint32_t)at[i].level, at[i].index, OP_OFFSET, (uint32_t)i, UINT32_MAX};
+    op *ops;
+    sd_result r = make_ops(c, channel, n, at, NULL, offsets, OP_OFFSET, nold, &ops, err);
+    if (r) {
+        sdi_free(&c->mem, ops);
+        return r;
+    }
+    /* the given offsets, and a clear for each offset held now (dropped where one is given) */
     size_t k = n;
     if ((r = sort_ops(ops, n, err))) { /* a point given twice, before the clears join */
         sdi_free(&c->mem, ops);
