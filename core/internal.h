@@ -10,8 +10,8 @@
  * chooses, rings.c finds the neighbours, petals.c walks petals, masks.c weighs, yz.c the
  * Ying-Zorin rows) — Sdc; the stencils they make (stencil.c assembles S_l, csr.c stores and
  * applies it) — Far. Above them the complex and its levels (complex.c, levels.c), its tags and
- * rules (singular.c, overrides.c), edits, analysis and refinement (edit.c, analysis.c, refine.c,
- * carry.c). Calls go down the layers; a level's lifecycle is levels.c's, the complex's complex.c's.
+ * rules (singular.c, overrides.c), edits and their detail offsets, analysis and refinement
+ * (edit.c, details.c, analysis.c, refine.c, carry.c). Calls go down the layers; a level's lifecycle is levels.c's, the complex's complex.c's.
  * sd_complex_memory counts every allocation, these structures included: growing sd_level or
  * sd_complex changes the memory the daemon reports (the golden stats compare it).
  *

@@ -23,7 +23,8 @@
  * added, under the caller's lock; arrays already handed out or read by these accessors are never
  * freed or moved (only sd_complex_free, set_diagonal, add_channel and set_singular drop levels,
  * and edits change channel values in place — or, where they move a point that a level's rules
- * read, rebuild that level's rules and the finer levels; edits exclude readers anyway). The core's own working arrays (faces, per-cell
+ * read, rebuild that level's rules and the finer levels; moves at finer levels compute missing
+ * levels first; edits exclude readers anyway). The core's own working arrays (faces, per-cell
  * edge ids) are made and dropped again inside such calls; no accessor reads them.
  * Lazily building accessors: the finest computed level is stored as its cells and points only;
  * sd_level_edges, sd_level_find_edge and sd_level_edge_singular build its edges the first time
