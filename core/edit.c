@@ -9,14 +9,16 @@
  * rows that read a point come from S's column index (csr.c), built with each level, so the first
  * edit costs what later ones do; its cost follows the edited region, not the mesh.
  *
- * One engine (sdi_edit below) serves every kind of change: a move of a control point (level 0),
+ * One engine (run, below) serves every kind of change: a move of a control point (level 0),
  * a move at level l >= 1, which stores the offset d = position - (S_{l-1} p^{l-1}) at that point
  * (computed after the coarser moves of the same call, so the point ends at the position), and an
  * offset set or cleared directly (sd_complex_set_details). The changes are taken level by level,
  * coarse to fine: level l's recomputed points are its moved points and the rows of S_{l-1} that
- * read a recomputed point of level l-1 — each point once, gathered through the level's scratch
- * map (`slot`, kept between edits and left clean); their new values go into lists, and a row
- * reads the new value of a point it uses from the list, so nothing is written yet.
+ * read a recomputed point of level l-1 — each point once, through the level's scratch (`slot`
+ * or a bitmap, and the lists, kept between edits so that they cost no allocation, left clean),
+ * then taken in increasing order so that the rows and points are read in order; their new values
+ * go into the lists, and a row reads the new value of a point it uses from the list, so nothing
+ * is written yet.
  *
  * All-or-nothing: the lists and the new offset lists are complete before anything is written;
  * only then are they copied into the levels. A failure (no memory, an offset out of range) leaves
