@@ -427,6 +427,7 @@ void sd_complex_free(sd_complex *c)
     if (!c)
         return;
     sdi_drop_levels(c, 0);
+    sdi_det_drop(c, 0);
     sdi_free(&c->mem, c->tag_at);
     sdi_free(&c->mem, c->tag_k);
     sdi_free(&c->mem, c->ov);
@@ -450,7 +451,13 @@ sd_result sd_complex_set_diagonal(sd_complex *c, size_t simplex, int pair, sd_er
     uint32_t t = c->in_tet[simplex];
     sdi_drop_levels(c, 1);
     sd_level *l0 = c->lv[0]; /* level 0's stencils do not depend on diagonals: kept */
-    l0->t.tet_d[t] = (uint8_t)map_pair(pair, c->tet_swapped[t]);
+    uint8_t d = (uint8_t)map_pair(pair, c->tet_swapped[t]);
+    /* the octahedra of level 1 split along the new diagonal: the points of levels 1 and 2 keep
+     * their numbers (vertex, edge and cell points of coarser entities that do not depend on it),
+     * those of levels 3 and finer do not, so their offsets would name other points */
+    if (l0->t.tet_d[t] != d)
+        sdi_det_drop(c, 3);
+    l0->t.tet_d[t] = d;
     return SD_OK;
 }
 

@@ -10,8 +10,8 @@
  * chooses, rings.c finds the neighbours, petals.c walks petals, masks.c weighs, yz.c the
  * Ying-Zorin rows) — Sdc; the stencils they make (stencil.c assembles S_l, csr.c stores and
  * applies it) — Far. Above them the complex and its levels (complex.c, levels.c), its tags and
- * rules (singular.c, overrides.c), edits, analysis and refinement (edit.c, analysis.c, refine.c,
- * carry.c). Calls go down the layers; a level's lifecycle is levels.c's, the complex's complex.c's.
+ * rules (singular.c, overrides.c), edits and their detail offsets, analysis and refinement
+ * (edit.c, details.c, analysis.c, refine.c, carry.c). Calls go down the layers; a level's lifecycle is levels.c's, the complex's complex.c's.
  * sd_complex_memory counts every allocation, these structures included: growing sd_level or
  * sd_complex changes the memory the daemon reports (the golden stats compare it).
  *
@@ -218,6 +218,12 @@ typedef struct sd_csrb {
     size_t *kchk;                     /* col position of rows 0, SD_CHK, 2 SD_CHK, ... */
     uint32_t *vrowptr, *vcol;         /* the public CSR view, or NULL */
     double *vval;
+    /* by columns, for edits (sdi_csrb_index, built with the next level): column j's rows,
+     * varint-coded, at ub[ubase[j >> SDI_UBLK] + urel[j] ..) up to the same for j + 1; rchk the
+     * col position of rows 0, SD_RCHK, 2 SD_RCHK, ... */
+    uint8_t *ub;
+    uint64_t *ubase;
+    uint32_t *urel, *rchk;
 } sd_csrb;
 
 /* Interning of weight patterns while a matrix is built. */
@@ -299,7 +305,71 @@ bool sdi_csrb_view(sd_mem *m, sd_csrb *b);
 /* out[r*nc + k] = sum_j S[r][j] in[j*nc + k], rows in parallel parts (same bytes for any number) */
 void sdi_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads);
 
+/* S by columns (csr.c): build the index (no-op if built; SD_ERR_NOMEM, or SD_ERR_LIMIT past its
+ * 32-bit offsets), then walk the rows that use column j in increasing order:
+ *     sdi_users u = sdi_csrb_users(S, j); for (uint32_t r; sdi_users_next(&u, &r);) ...
+ * (a row that lists j twice comes twice). */
+#define SDI_UBLK 16
+#define SD_RCHK 8u
+sd_result sdi_csrb_index(sd_mem *m, sd_csrb *s, sd_error *err);
+typedef struct sdi_users {
+    const uint8_t *p, *end;
+    uint32_t j, r;
+    bool first;
+} sdi_users;
+static inline sdi_users sdi_csrb_users(const sd_csrb *s, uint32_t j)
+{
+    const uint8_t *b = s->ub;
+    sdi_users u = {b + s->ubase[j >> SDI_UBLK] + s->urel[j],
+                   b + s->ubase[(j + 1) >> SDI_UBLK] + s->urel[j + 1], j, 0, true};
+    return u;
+}
+static inline bool sdi_users_next(sdi_users *u, uint32_t *r)
+{
+    if (u->p == u->end)
+        return false;
+    uint64_t v = 0;
+    unsigned sh = 0;
+    uint8_t b;
+    do {
+        b = *u->p++;
+        v |= (uint64_t)(b & 127) << sh;
+        sh += 7;
+    } while (b & 128);
+    if (u->first) { /* zigzag(r - j) */
+        u->first = false;
+        u->r = (uint32_t)((int64_t)u->j + (int64_t)((v >> 1) ^ (0 - (v & 1))));
+    } else
+        u->r += (uint32_t)v;
+    *r = u->r;
+    return true;
+}
+/* Row r of S on `in` as sdi_csr_apply sums it, bit for bit, except that a column c with slot
+ * not NULL and slot[c] >= 0 reads alt + nc slot[c] (an edit's new value); needs the index. `at`
+ * (optional, {UINT32_MAX} at first) remembers where the last row started, so rows taken in
+ * increasing order are found without going back to their checkpoint. */
+typedef struct sdi_rowpos {
+    uint32_t r;
+    size_t k;
+} sdi_rowpos;
+void sdi_csrb_eval(const sd_csrb *s, uint32_t r, const double *in, const int32_t *slot,
+                   const double *alt, int nc, double *out, sdi_rowpos *at);
+/* Ask for row r's data ahead of sdi_csrb_eval: stage 0 what locates it, stage 1 (after stage 0
+ * has had time) its columns. */
+void sdi_csrb_prefetch(const sd_csrb *s, uint32_t r, int stage);
+
 /* ---- levels and the complex -------------------------------------------------------------- */
+/* An edit's recomputed points of one level (edit.c): kept between edits so that an edit's lists
+ * cost no allocation once they have grown; clean (mark all 0) between edits. */
+typedef struct sdi_escratch {
+    uint64_t *mark;            /* a bit per point (the finest level's set; others use slot) */
+    uint32_t cap;              /* entries of id and chg */
+    size_t dcap;               /* doubles of nv and ov */
+    uint32_t *id;
+    double *nv, *ov;           /* new and old values */
+    uint8_t *chg;
+} sdi_escratch;
+void sdi_escratch_free(sd_mem *m, sdi_escratch *s);
 typedef struct sd_channel {
     int ncomp;
     double *data;
@@ -319,11 +389,11 @@ struct sd_level {
     uint8_t *vrule, *erule;   /* the |rho| / |ring| a rule uses is its row's length in S - 1 / - 2 */
     uint8_t *vrule_only;      /* the vertex rules alone, for outputs of a level without stencils */
     sd_csrb S;
-    /* for edits (edit.c), built on the first edit: S by columns (for each point of this level, the
-     * next level's rows that use it and the entry's position in S), and a scratch map from this
-     * level's point ids to slots in an edit's list of changed points (-1 = unchanged) */
-    uint32_t *tcol, *trow, *tpos;
+    /* edits' scratch (edit.c), made by the first edit and kept: a map from this level's points to
+     * their entries in an edit's list of recomputed points (-1 = none; levels with a finer
+     * computed level), and the list itself (sdi_escratch) */
     int32_t *slot;
+    struct sdi_escratch *es;
     /* per point of this level: 1 where the rules read its position (Ying-Zorin's corner angle
      * alpha: the corner and the far ends of its petal's singular edges), or NULL if none; an
      * edit moving such a point rebuilds this level's rules (edit.c) */
@@ -357,7 +427,32 @@ struct sd_complex {
     size_t npet;
     sd_petal_at *pet;
     sd_level *lv[SD_MAX_LEVEL + 1];
+    /* detail offsets (details.c): SD_MAX_CHANNELS x (SD_MAX_LEVEL + 1) lists, NULL until the
+     * first offset is stored */
+    struct sdi_dlist *det;
 };
+
+/* ---- details.c: detail offsets ------------------------------------------------------------- */
+/* The offsets of one channel at one level: n points, ascending idx, ncomp values each. A level
+ * l >= 1 is built as S_{l-1} p^{l-1}, then each listed point gets its offset added. */
+typedef struct sdi_dlist {
+    uint32_t n;
+    uint32_t *idx;
+    double *d;
+} sdi_dlist;
+#define SD_MAX_OFFSET 1e15
+/* The list of (channel, level), or NULL when it holds none. */
+const sdi_dlist *sdi_det(const sd_complex *c, int channel, int level);
+/* The offset of point i in L, or NULL. */
+const double *sdi_det_find(const sdi_dlist *L, uint32_t i, int nc);
+/* data (nc per point, a channel of level `level` just computed) += its offsets. */
+void sdi_det_add(const sd_complex *c, int channel, int level, double *data, int nc);
+/* Make the table of lists (false: no memory), then swap the list of (channel, level) with *L. */
+bool sdi_det_ready(sd_complex *c);
+void sdi_det_swap(sd_complex *c, int channel, int level, sdi_dlist *L);
+void sdi_dlist_free(sd_mem *m, sdi_dlist *L);
+/* Drop the offsets of levels >= from (every channel), or all and the table (from = 0). */
+void sdi_det_drop(sd_complex *c, int from);
 
 /* ---- complex.c: level 0 ------------------------------------------------------------------ */
 sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,

@@ -22,6 +22,7 @@ void sdi_level_free(sd_mem *m, sd_level *lv)
     sdi_topo_free(m, &lv->t);
     sdi_level_free_rules(m, lv);
     sdi_free(m, lv->slot);
+    sdi_escratch_free(m, lv->es);
     for (int i = 0; i < lv->nch; i++)
         sdi_free(m, lv->ch[i].data);
     sdi_free(m, lv);
@@ -42,23 +43,22 @@ void sdi_level_free_rules(sd_mem *m, sd_level *lv)
     sdi_free(m, lv->vrule);
     sdi_free(m, lv->erule);
     sdi_csrb_free(m, &lv->S);
-    sdi_free(m, lv->tcol);
-    sdi_free(m, lv->trow);
-    sdi_free(m, lv->tpos);
     sdi_free(m, lv->vrule_only);
     sdi_free(m, lv->geo);
     lv->vrule = lv->erule = lv->vrule_only = lv->geo = NULL;
-    lv->tcol = lv->trow = lv->tpos = NULL;
     lv->have_rules = false;
 }
 
-/* Forget level lv's rules, stencils and edit columns, and every finer level (tags changed). */
+/* Forget level lv's rules and stencils (with their column index), edits' scratch and every
+ * finer level (tags changed). */
 void sdi_drop_rules(sd_complex *c, sd_level *lv)
 {
     sdi_drop_levels(c, lv->index + 1);
     sdi_level_free_rules(&c->mem, lv);
     sdi_free(&c->mem, lv->slot);
+    sdi_escratch_free(&c->mem, lv->es);
     lv->slot = NULL;
+    lv->es = NULL;
 }
 
 /* The parts of a level's topology (see sd_topo): edges need the parent's faces; faces need the
@@ -115,7 +115,8 @@ sd_result sdi_ensure_rules(sd_complex *c, int level, sd_error *err)
     return r;
 }
 
-/* Compute level l+1 from level l. */
+/* Compute level l+1 from level l: its topology, then every channel as S_l p^l plus the channel's
+ * detail offsets at level l+1 (details.c), and S_l's column index for later edits (csr.c). */
 static sd_result next_level(sd_complex *c, int l, sd_error *err)
 {
     sd_mem *m = &c->mem;
@@ -123,6 +124,8 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
     sd_result r = rules_keep_faces(c, l, err);
     if (!r)
         r = ensure_faces(c, l, err); /* the rules may have been built before, the faces dropped */
+    if (!r)
+        r = sdi_csrb_index(m, &p->S, err); /* kept with S, so it may exist from before */
     if (r)
         return r;
     sd_level *lv = sdi_calloc(m, 1, sizeof *lv);
@@ -147,6 +150,7 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
             return sdi_fail_nomem(err, m);
         }
         sdi_csr_apply(&p->S, p->ch[i].data, lv->ch[i].data, nc, c->opt.threads);
+        sdi_det_add(c, i, l + 1, lv->ch[i].data, nc);
     }
     c->lv[l + 1] = lv;
     c->nlevels = l + 2;

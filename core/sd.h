@@ -23,7 +23,8 @@
  * added, under the caller's lock; arrays already handed out or read by these accessors are never
  * freed or moved (only sd_complex_free, set_diagonal, add_channel and set_singular drop levels,
  * and edits change channel values in place — or, where they move a point that a level's rules
- * read, rebuild that level's rules and the finer levels; edits exclude readers anyway). The core's own working arrays (faces, per-cell
+ * read, rebuild that level's rules and the finer levels; moves at finer levels compute missing
+ * levels first; edits exclude readers anyway). The core's own working arrays (faces, per-cell
  * edge ids) are made and dropped again inside such calls; no accessor reads them.
  * Lazily building accessors: the finest computed level is stored as its cells and points only;
  * sd_level_edges, sd_level_find_edge and sd_level_edge_singular build its edges the first time
@@ -104,7 +105,9 @@ void sd_complex_free(sd_complex *c);
 
 /* Force the major diagonal of the tetrahedron given as input simplex `simplex` to its
  * opposite-edge pair `pair` (0: edges 01|23, 1: 02|13, 2: 03|12 in the input's vertex order),
- * overriding 001 Algorithm 2's choice. Drops computed levels >= 1. */
+ * overriding 001 Algorithm 2's choice. Drops computed levels >= 1 and, if the pair changes, the
+ * detail offsets of levels >= 3 (the new split renumbers those levels' points; levels 1 and 2
+ * keep theirs). */
 sd_result sd_complex_set_diagonal(sd_complex *c, size_t simplex, int pair, sd_error *err);
 /* The diagonal pair in use for input simplex `simplex` (a tetrahedron), or -1. */
 int sd_complex_diagonal(const sd_complex *c, size_t simplex);
@@ -279,19 +282,77 @@ typedef struct sd_csr {
  * are materialized on the first call and kept (counted by sd_complex_memory). */
 sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err);
 
-/* ---- edits (004 Sec. 4.1; docs/API.md "Control-point edits") ------------------------------------------------------------------ */
+/* ---- edits and detail offsets (004 Sec. 4.1 and 5.2; docs/API.md "Control-point edits") -- */
 
-/* Set new values of channel `channel` (0 = positions) at n control points: point idx[i] gets
- * values[i*ncomp .. i*ncomp+ncomp-1]. Every computed level is updated through the cached
- * matrices, pushing the changes down level by level (p^{l+1} += S_l dp^l over the rows that use a
- * changed point only), so the cost follows the edited region, not the mesh. Where a level's
- * rules read a moved position (Ying-Zorin's corner angle), that level's rules are rebuilt and
- * the finer computed levels recomputed (counts then holds their full sizes). All-or-nothing:
- * indices, repeated indices and values are checked and all memory is taken before anything
- * changes. counts (optional, SD_MAX_LEVEL+1 entries) receives the points updated per level.
- * Not thread-safe with readers of the same complex: the caller excludes them. */
+/* A point of a level: vertex `index` of level `level` (0 = a control point). */
+typedef struct sd_vertex_at {
+    int level;
+    uint32_t index;
+} sd_vertex_at;
+
+/* What an edit did (sd_complex_move, sd_complex_set_details); optional, zero it first. */
+typedef struct sd_edit_report {
+    /* in, optional: called once for each level where points changed, with the indices of the
+     * points whose values changed bit for bit (each once, in no particular order) — in the edited
+     * channel, or, on a level the edit recomputed whole (rules that read a moved position, see
+     * sd_complex_move), in any channel. Called when the edit is complete, before the call
+     * returns; it may read the complex but not change it, and idx is valid during the call only.
+     * Levels the call computed for its moves report changes against their values before them. */
+    void (*changed)(void *ud, int level, const uint32_t *idx, size_t n);
+    void *ud;
+    /* out, per level (0 beyond the computed levels): the points recomputed (the edited points
+     * and, level by level, every point whose row of S reads a recomputed one; all points of a
+     * level recomputed whole) and, of those, the points that changed */
+    uint64_t recomputed[SD_MAX_LEVEL + 1];
+    uint64_t nchanged[SD_MAX_LEVEL + 1];
+} sd_edit_report;
+
+/* Move points of channel `channel` (0 = positions): point at[i] gets values[i*ncomp ..
+ * i*ncomp+ncomp-1]. A control point (level 0) takes the value. A point of level l >= 1 becomes a
+ * detail offset (004 Sec. 5.2): d = value - (S_{l-1} p^{l-1}) at that point is stored, and from
+ * then on the point is S_{l-1} p^{l-1} + d at every build of its level and after every edit, so
+ * an edit at a coarser level moves it and keeps its offset (sd_complex_details lists them).
+ * Levels are computed first up to the highest level named. Moves are applied coarse to fine: a
+ * level-l offset is taken after the coarser moves of the same call, so the point ends at its
+ * value: to the last bit whenever the value is within a factor 2 of the point's subdivided
+ * position (componentwise), otherwise within rounding.
+ * Every computed level is then updated by recomputation, level by level: each point whose row of
+ * S reads a changed point is summed again from its whole row, in the order the level build sums
+ * it, plus its offset — so every level is the bytes a new complex built from the edited control
+ * points with the same offsets has, and the cost follows the edited region, not the mesh. Where a
+ * level's rules read a moved position (Ying-Zorin's corner angle), that level's rules are built
+ * again and the finer computed levels recomputed whole.
+ * Errors (item = the move, field = the component or -1): SD_ERR_ARG (no such channel, a level
+ * outside 0..SD_MAX_LEVEL), SD_ERR_INDEX (index not below the level's vertex count,
+ * sd_complex_counts), SD_ERR_VALUE (a value not finite, a position or an offset beyond 1e15 in
+ * magnitude), SD_ERR_REPEATED (a point named twice), SD_ERR_NOMEM, SD_ERR_LIMIT. All-or-nothing:
+ * on failure the complex is as it was, levels the call computed dropped again. rep: see
+ * sd_edit_report. Not thread-safe with readers of the same complex: the caller excludes them. */
+sd_result sd_complex_move(sd_complex *c, int channel, size_t n, const sd_vertex_at *at,
+                          const double *values, sd_edit_report *rep, sd_error *err);
+
+/* sd_complex_move with control points only: point idx[i] (level 0) gets values[i*ncomp ..].
+ * counts (optional, SD_MAX_LEVEL+1 entries) receives the points recomputed per level
+ * (sd_edit_report.recomputed). */
 sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *idx,
                           const double *values, uint64_t *counts, sd_error *err);
+
+/* The detail offsets of channel `channel` at level `level` (1..SD_MAX_LEVEL): returns their number
+ * and, if not NULL, points *idx (ascending indices) and *offsets (ncomp doubles each) at them —
+ * borrowed, valid until the next call that changes the complex. Offsets belong to the complex,
+ * not to its levels: a level dropped and computed again (tags, rules, a new channel) is built
+ * with them, and a level not computed yet keeps them. sd_complex_set_diagonal drops those of
+ * levels >= 3, whose points it renumbers. 0 for a bad channel or level. */
+size_t sd_complex_details(const sd_complex *c, int channel, int level, const uint32_t **idx,
+                          const double **offsets);
+
+/* Replace every detail offset of channel `channel` (all levels) by the n given: point at[i]
+ * (level >= 1) gets offsets[i*ncomp ..] (as sd_complex_details lists them, e.g. to restore a
+ * stored session). Validated like sd_complex_move (levels 1..SD_MAX_LEVEL; offsets finite and at
+ * most 1e15 in magnitude; no point twice); computed levels are updated as by an edit (rep as
+ * there), levels not computed only keep the offsets. All-or-nothing. */
+sd_result sd_complex_set_details(sd_complex *c, int channel, size_t n, const sd_vertex_at *at,
+                                 const double *offsets, sd_edit_report *rep, sd_error *err);
 
 /* ---- local red-green refinement (000 Sec. 4.2) ------------------------------------------ */
 

@@ -105,3 +105,36 @@ void shape_cube_tets(mesh *m, int n)
                 }
 #undef ID
 }
+
+void shape_three_fins(mesh *m)
+{
+    for (int z = 0; z < 3; z++)
+        mesh_v(m, 0.05 * z * z, 0, z);
+    for (int i = 0; i < 3; i++) {
+        double a = 2 * M_PI * i / 3 + 0.1 * i;
+        for (int z = 0; z < 3; z++)
+            mesh_v(m, cos(a) * (1 + 0.1 * z), sin(a) * (1 + 0.1 * z), z + 0.05 * i);
+        uint32_t f = 3 + 3 * (uint32_t)i;
+        mesh_s(m, 3, 0u, 1u, f + 1);
+        mesh_s(m, 3, 0u, f + 1, f);
+        mesh_s(m, 3, 1u, 2u, f + 1);
+        mesh_s(m, 3, 2u, f + 2, f + 1);
+    }
+}
+
+void shape_curves(mesh *m)
+{
+    for (int i = 0; i < 6; i++) /* a polyline 0..5 */
+        mesh_v(m, i, 0.3 * sin(i), 0.1 * i * i);
+    for (uint32_t i = 0; i < 5; i++)
+        mesh_s(m, 2, i, i + 1);
+    for (int i = 0; i < 3; i++) /* a branch 6..8 from 2: a junction of three */
+        mesh_v(m, 2 + 0.2 * i, 1 + i, 0.5 * i);
+    mesh_s(m, 2, 2u, 6u);
+    mesh_s(m, 2, 6u, 7u);
+    mesh_s(m, 2, 7u, 8u);
+    for (int i = 0; i < 5; i++) /* a closed loop 9..13 */
+        mesh_v(m, 10 + cos(2 * M_PI * i / 5), sin(2 * M_PI * i / 5), 0.2 * i);
+    for (uint32_t i = 0; i < 5; i++)
+        mesh_s(m, 2, 9 + i, 9 + (i + 1) % 5);
+}

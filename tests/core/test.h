@@ -109,4 +109,9 @@ void shape_bipyramid(mesh *m);          /* centre 0, pole 1, equator 2,3,4, pole
 void shape_edge_star(mesh *m, int k);   /* k tets around edge 0-1, ring 2..k+1 */
 void shape_mixed(mesh *m);              /* tet + fin triangle + curve + point */
 void shape_cube_tets(mesh *m, int n);   /* n^3 cubes, 6 tets each */
+/* three fins on a spine s0 s1 s2 (z axis): fin i has vertices f0 f1 f2 (one column at angle
+ * 2 pi i/3 + tilt) and triangles (s0,s1,f1), (s0,f1,f0), (s1,s2,f1), (s2,f2,f1): at s1 each fin is
+ * a petal of 2 triangles with the non-singular edge s1-f1. Vertex ids: s = 0..2, fin i: 3+3i.. */
+void shape_three_fins(mesh *m);
+void shape_curves(mesh *m);             /* a polyline with a branch (a junction) and a loop */
 #endif

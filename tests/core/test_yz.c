@@ -6,24 +6,7 @@
 static const sd_options YZ = {.surface_weights = SD_WEIGHTS_LOOP,
                               .nonmanifold_surface = SD_NMSURF_YING_ZORIN};
 
-/* Three fins on a spine s0 s1 s2 (z axis): fin i has vertices f0 f1 f2 (one column at angle
- * 2 pi i/3 + tilt) and triangles (s0,s1,f1), (s0,f1,f0), (s1,s2,f1), (s2,f2,f1): at s1 each fin is
- * a petal of 2 triangles with the non-singular edge s1-f1. Vertex ids: s = 0..2, fin i: 3+3i.. */
-static void three_fins(mesh *m)
-{
-    for (int z = 0; z < 3; z++)
-        mesh_v(m, 0.05 * z * z, 0, z);
-    for (int i = 0; i < 3; i++) {
-        double a = 2 * M_PI * i / 3 + 0.1 * i;
-        for (int z = 0; z < 3; z++)
-            mesh_v(m, cos(a) * (1 + 0.1 * z), sin(a) * (1 + 0.1 * z), z + 0.05 * i);
-        uint32_t f = 3 + 3 * (uint32_t)i;
-        mesh_s(m, 3, 0u, 1u, f + 1);
-        mesh_s(m, 3, 0u, f + 1, f);
-        mesh_s(m, 3, 1u, 2u, f + 1);
-        mesh_s(m, 3, 2u, f + 2, f + 1);
-    }
-}
+static void three_fins(mesh *m) { shape_three_fins(m); }
 
 static uint8_t vrule(sd_complex *c, int L, uint32_t v)
 {
