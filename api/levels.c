@@ -11,6 +11,7 @@
 #include "internal.h"
 #include <ctype.h>
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -69,12 +70,14 @@ static int next_item(const char **s, char *buf, size_t cap)
     return 1;
 }
 
+/* A finite number; strtod's ERANGE on underflow (1e-320: a subnormal or 0) is not an error,
+ * only overflow is (C11 7.22.1.3: HUGE_VAL then). */
 static int parse_double(const char *s, double *x)
 {
     char *end;
     errno = 0;
     *x = strtod(s, &end);
-    return *s && !*end && !errno && isfinite(*x);
+    return *s && !*end && (!errno || (errno == ERANGE && fabs(*x) <= DBL_MIN)) && isfinite(*x);
 }
 
 static int add_attr(const api_model *m, out_request *rq, int a)
