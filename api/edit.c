@@ -74,7 +74,7 @@ static int parse_edit_entries(json_t *arr, const char *base, const char *vkey, i
             break;
         }
         if (ncomp == 1 && json_is_number(x)) {
-            rc = api_get_number(x, at, 1e15, &e->val[i], p);
+            rc = api_get_number(x, at, API_MAX_VALUE, &e->val[i], p);
             continue;
         }
         if (!json_is_array(x) || json_array_size(x) != (size_t)ncomp) {
@@ -85,7 +85,7 @@ static int parse_edit_entries(json_t *arr, const char *base, const char *vkey, i
         for (int k = 0; k < ncomp && !rc; k++) {
             char ck[96];
             api_ptr_index(ck, sizeof ck, at, k);
-            rc = api_get_number(json_array_get(x, k), ck, 1e15, &e->val[i * ncomp + k], p);
+            rc = api_get_number(json_array_get(x, k), ck, API_MAX_VALUE, &e->val[i * ncomp + k], p);
         }
     }
     for (size_t j = 0; j < i; j++) /* leave `seen` clean for the next list */

@@ -14,6 +14,7 @@
 #include "limits.h"
 #include "model.h"
 #include "out.h"
+#include "packed.h"
 #include "problem.h"
 #include <jansson.h>
 
@@ -25,6 +26,12 @@ typedef int (*change_fn_t)(const api_model *cur, json_t *body, const api_limits 
  * model and the function returns 0; else the problem's status. */
 int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                     api_problem *p);
+/* The same with the big arrays of the body packed beside the tree (api/packed.h; packs may be
+ * NULL): the answers are those of the unpacked body. api_complex_packed lists the JSON pointers
+ * to pack (NULL-terminated patterns for api_parse_body_packed). */
+int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *packs,
+                           const api_limits *lim, api_model **out, api_problem *p);
+extern const char *const api_complex_packed[];
 /* PUT /rules: replaces every rule preference (absent fields = defaults). */
 int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                   api_problem *p);

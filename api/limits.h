@@ -25,6 +25,8 @@
 #define API_DEFAULT_FILL_SECONDS        60            /* wall deadline of one TetGen run */
 #define API_DEFAULT_FILL_MEMORY_BYTES   (2ull << 30)  /* address space of the TetGen helper */
 #define API_MAX_FILL_SURFACES           16            /* entries of "fill" in one request */
+#define API_PACK_MIN_BYTES              4096          /* body arrays packed beside the tree (packed.h) */
+#define API_MAX_VALUE                   1e15          /* magnitude of coordinates and attribute values */
 
 typedef struct api_limits {
     size_t max_body_bytes;

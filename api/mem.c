@@ -106,18 +106,34 @@ void api_free(void *p)
     free(b);
 }
 
+/* The C library's realloc on the whole block (header included), so a growing buffer is moved
+ * by mremap rather than copied once it is mmapped; the meter is charged the growth first. */
 void *api_realloc(void *p, size_t n)
 {
     if (!p)
         return api_malloc(n);
+    unsigned char *b = (unsigned char *)p - HDR;
     size_t old;
-    memcpy(&old, (unsigned char *)p - HDR, sizeof old);
-    void *q = api_malloc(n);
-    if (!q)
+    memcpy(&old, b, sizeof old);
+    if (n > SIZE_MAX - HDR || injected() || (n > old && !charge(n - old))) {
+        refused_here++;
         return NULL;
-    memcpy(q, p, old < n ? old : n);
-    api_free(p);
-    return q;
+    }
+    unsigned char *q = realloc(b, n + HDR);
+    if (!q) {
+        if (n > old)
+            credit(n - old);
+        refused_here++;
+        return NULL;
+    }
+    if (n < old)
+        credit(old - n);
+    memcpy(q, &n, sizeof n);
+    if (n > old)
+        atomic_fetch_add_explicit(&in_use, n - old, memory_order_relaxed);
+    else
+        atomic_fetch_sub_explicit(&in_use, old - n, memory_order_relaxed);
+    return q + HDR;
 }
 
 void *api_memdup(const void *p, size_t n)

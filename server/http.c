@@ -454,6 +454,21 @@ static int early_auth(req *r)
     return 1;
 }
 
+/* The whole buffer of a body whose Content-Length is known, taken before it is read: one block
+ * of the exact size (no doubling), and a body that does not fit the memory budget is refused
+ * before a byte of it arrives. 1 when a response was queued. */
+static int reserve_body(req *r, size_t n)
+{
+    r->body = api_malloc(n + 1);
+    if (!r->body) {
+        http_fail(r, 503, "out-of-memory", "no memory for a body of %zu bytes; retry later", n);
+        return 1;
+    }
+    r->cap = n + 1;
+    r->body[0] = 0;
+    return 0;
+}
+
 /* What can be said of the body before reading it: a transfer coding MHD can frame (501), a
  * Content-Length within max_body_bytes (413, before anything is allocated), no body where the
  * route takes none (400), JSON where it takes one (415). 1 when a response was queued. */
@@ -490,6 +505,8 @@ static int early_body(req *r)
                       r->rt->pattern);
             return 1;
         }
+        if (n > 0 && reserve_body(r, (size_t)n))
+            return 1;
     }
     if (r->rt->body && (cl ? strcmp(cl, "0") : 1)) {
         const char *ct = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,

@@ -77,12 +77,19 @@ static int apply_file(api_model **m, const char *path, change_fn_t fn, const api
     if (!buf)
         return 2;
     api_problem p = {0};
-    json_t *b = api_parse_body(buf, len, 0, &p);
+    api_packs packs = {0};
+    int big = fn == api_put_complex; /* its big arrays packed, as the daemon reads them */
+    json_t *b = big ? api_parse_body_packed(buf, len, 0, api_complex_packed, API_PACK_MIN_BYTES,
+                                            &packs, &p)
+                    : api_parse_body(buf, len, 0, &p);
     api_free(buf);
     api_model *next = NULL;
-    if (b)
+    if (b && big)
+        api_put_complex_packed(*m, b, &packs, lim, &next, &p);
+    else if (b)
         fn(*m, b, lim, &next, &p);
     json_decref(b);
+    api_packs_free(&packs);
     if (!next)
         return report(&p, what);
     api_model_unref(*m);

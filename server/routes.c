@@ -108,11 +108,21 @@ static json_t *parse_body(req *r, int empty_ok, api_problem *p)
     return api_parse_body(r->body ? r->body : "", r->len, empty_ok, p);
 }
 
-/* The JSON body of a change, or NULL once its problem is answered. */
-static json_t *body_or_answer(req *r)
+/* The JSON body of a change, or NULL once its problem is answered. With `packed` (patterns of
+ * api/packed.h) the big arrays are packed into *packs instead of the tree. The body's text is
+ * freed once parsed: nothing reads it afterwards, and a large one is the biggest block of the
+ * request. */
+static json_t *body_or_answer(req *r, const char *const *packed, api_packs *packs)
 {
     api_problem p = {0};
-    json_t *b = parse_body(r, 0, &p);
+    json_t *b;
+    if (packed && r->body)
+        b = api_parse_body_packed(r->body, r->len, 0, packed, API_PACK_MIN_BYTES, packs, &p);
+    else
+        b = parse_body(r, 0, &p);
+    api_free(r->body);
+    r->body = NULL;
+    r->len = r->cap = 0;
     if (!b)
         http_reply_problem(r, &p);
     return b;
@@ -229,16 +239,17 @@ static int if_match(req *r, uint64_t version, api_problem *p)
 
 /* A change builds the session's next model from the current one and may add members to the
  * answer (the summary, what was refined). */
-typedef int (*change_op)(const api_model *cur, json_t *body, const api_limits *lim,
-                         api_model **next, json_t *answer, api_problem *p);
+typedef int (*change_op)(const api_model *cur, json_t *body, const api_packs *packs,
+                         const api_limits *lim, api_model **next, json_t *answer, api_problem *p);
 
 /* PUT complex / tags / rules, POST refine: parse, check If-Match, build the new model in a
  * compute slot, publish. The session's write lock makes concurrent changes of one session
  * sequential. */
-static void change(req *r, change_op op)
+static void change(req *r, change_op op, const char *const *packed)
 {
     api_problem p = {0};
-    json_t *b = body_or_answer(r);
+    api_packs packs = {0};
+    json_t *b = body_or_answer(r, packed, &packs);
     if (!b)
         return;
     pthread_mutex_lock(&r->s->write);
@@ -247,10 +258,11 @@ static void change(req *r, change_op op)
     json_t *answer = json_object();
     int rc;
     if (!(rc = if_match(r, version, &p)) && !(rc = http_take_slot(r, &p))) {
-        rc = op(cur, b, &r->srv->cfg.limits, &next, answer, &p);
+        rc = op(cur, b, &packs, &r->srv->cfg.limits, &next, answer, &p);
         http_give_slot(r);
     }
     json_decref(b);
+    api_packs_free(&packs);
     api_model_unref(cur);
     if (rc) {
         pthread_mutex_unlock(&r->s->write);
@@ -264,32 +276,39 @@ static void change(req *r, change_op op)
     http_reply_json(r, 200, answer, version);
 }
 
-static int op_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
+static int op_complex(const api_model *cur, json_t *body, const api_packs *packs,
+                      const api_limits *lim, api_model **next,
                       json_t *answer, api_problem *p)
 {
-    int rc = api_put_complex(cur, body, lim, next, p);
+    int rc = api_put_complex_packed(cur, body, packs, lim, next, p);
     if (!rc && (*next)->summary)
         json_object_set(answer, "summary", (*next)->summary);
     return rc;
 }
 
-static int op_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
+static int op_tags(const api_model *cur, json_t *body, const api_packs *packs,
+                      const api_limits *lim, api_model **next,
                    json_t *answer, api_problem *p)
 {
     (void)answer;
+    (void)packs;
     return api_put_tags(cur, body, lim, next, p);
 }
 
-static int op_rules(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
+static int op_rules(const api_model *cur, json_t *body, const api_packs *packs,
+                      const api_limits *lim, api_model **next,
                     json_t *answer, api_problem *p)
 {
     (void)answer;
+    (void)packs;
     return api_put_rules(cur, body, lim, next, p);
 }
 
-static int op_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
+static int op_refine(const api_model *cur, json_t *body, const api_packs *packs,
+                      const api_limits *lim, api_model **next,
                      json_t *answer, api_problem *p)
 {
+    (void)packs;
     uint64_t red, green;
     int rc = api_refine(cur, body, lim, next, &red, &green, p);
     if (!rc) {
@@ -301,10 +320,10 @@ static int op_refine(const api_model *cur, json_t *body, const api_limits *lim, 
     return rc;
 }
 
-static void h_put_complex(req *r) { change(r, op_complex); }
-static void h_put_tags(req *r) { change(r, op_tags); }
-static void h_put_rules(req *r) { change(r, op_rules); }
-static void h_refine(req *r) { change(r, op_refine); }
+static void h_put_complex(req *r) { change(r, op_complex, api_complex_packed); }
+static void h_put_tags(req *r) { change(r, op_tags, NULL); }
+static void h_put_rules(req *r) { change(r, op_rules, NULL); }
+static void h_refine(req *r) { change(r, op_refine, NULL); }
 
 /* PATCH control-points: If-Match is required (428 without, 412 when stale); the model is changed
  * in place under its data lock, so the edit waits for that session's streams in flight. */
@@ -317,7 +336,7 @@ static void h_edit(req *r)
         http_reply_problem(r, &p);
         return;
     }
-    json_t *b = body_or_answer(r);
+    json_t *b = body_or_answer(r, NULL, NULL);
     if (!b)
         return;
     pthread_mutex_lock(&r->s->write);
