@@ -35,7 +35,8 @@ static int parse_vertices(json_t *v, const api_packs *packs, const api_limits *l
         return api_fail_limit(p, "max_vertices", lim->max_vertices, n,
                               "%zu vertices exceed the limit of %u; split the model or raise "
                               "--max-vertices", n, lim->max_vertices);
-    in->xyz = api_plain_malloc((n ? n : 1) * 3 * sizeof *in->xyz);
+    size_t bytes = (n ? n : 1) * 3 * sizeof *in->xyz;
+    in->xyz = api_input_reserve(in, bytes) ? api_plain_malloc(bytes) : NULL;
     if (!in->xyz)
         return api_fail(p, 503, "out-of-memory", "out of memory reading %zu vertices", n);
     in->nv = (uint32_t)n;
@@ -85,8 +86,11 @@ static int parse_simplices(json_t *v, const api_packs *packs, const api_limits *
                                "triangle, tetrahedron)", i, k);
         total += k;
     }
-    in->size = api_plain_malloc(n ? n : 1);
-    in->idx = api_plain_malloc((total ? total : 1) * sizeof *in->idx);
+    size_t bytes = (n ? n : 1) + (total ? total : 1) * sizeof *in->idx;
+    if (api_input_reserve(in, bytes)) {
+        in->size = api_plain_malloc(n ? n : 1);
+        in->idx = api_plain_malloc((total ? total : 1) * sizeof *in->idx);
+    }
     if (!in->size || !in->idx)
         return api_fail(p, 503, "out-of-memory", "out of memory reading %zu simplices", n);
     in->ns = (uint32_t)n;
@@ -171,7 +175,8 @@ static int parse_attributes(json_t *v, const api_packs *packs, api_input *in, ap
             return api_fail_at(p, 422, "wrong-length", at,
                                "a vector value has 1 to 16 components, not %d", t->ncomp);
         }
-        t->data = api_plain_malloc((in->nv ? in->nv : 1) * (size_t)t->ncomp * sizeof *t->data);
+        size_t bytes = (in->nv ? in->nv : 1) * (size_t)t->ncomp * sizeof *t->data;
+        t->data = api_input_reserve(in, bytes) ? api_plain_malloc(bytes) : NULL;
         if (!t->data)
             return api_fail(p, 503, "out-of-memory", "out of memory reading attribute %s", name);
         in->nattrs++;

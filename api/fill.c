@@ -252,6 +252,8 @@ static int append(api_input *in, const surface *s, const helper_out *h, api_prob
     }
     in->nv = nv0 + added;
     in->ns = ns0 + nt;
+    if (!api_input_account(in)) /* the grown arrays count against the memory budget */
+        return api_fail(p, 503, "out-of-memory", "out of memory adding TetGen's tetrahedra");
     in->fill[in->nfill++] =
         (api_fill_stats){s->nt, nt, added, nv0, ns0, vol, largest, s->max_volume};
     return 0;

@@ -23,10 +23,30 @@ api_input *api_input_new(void)
     return in;
 }
 
+bool api_input_reserve(api_input *in, size_t n)
+{
+    if (!api_mem_reserve(n))
+        return false;
+    in->reserved += n;
+    return true;
+}
+
+bool api_input_account(api_input *in)
+{
+    size_t nidx = 0;
+    for (uint32_t s = 0; s < in->ns; s++)
+        nidx += in->size[s];
+    size_t n = 3 * sizeof(double) * (size_t)in->nv + in->ns + nidx * sizeof(uint32_t);
+    for (int a = 0; a < in->nattrs; a++)
+        n += sizeof(double) * (size_t)in->nv * (size_t)in->attrs[a].ncomp;
+    return n <= in->reserved || api_input_reserve(in, n - in->reserved);
+}
+
 void api_input_unref(api_input *in)
 {
     if (!in || atomic_fetch_sub(&in->refs, 1) != 1)
         return;
+    api_mem_unreserve(in->reserved);
     api_plain_free(in->xyz);
     api_plain_free(in->size);
     api_plain_free(in->idx);
@@ -90,7 +110,8 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
                           .solid_scheme = m->rules.solid_scheme,
                           .nonmanifold_default = m->rules.nonmanifold_default,
                           .nonmanifold_surface = m->rules.nonmanifold_surface,
-                          .max_bytes = (size_t)max_bytes};
+                          .max_bytes = (size_t)max_bytes,
+                          .allocator = api_mem_core_allocator()};
         m->c = sd_complex_new(in->xyz, in->nv, in->idx, in->size, in->ns, &opt, err);
         if (!m->c) {
             api_model_unref(m);

@@ -13,7 +13,9 @@
  * Memory (api/mem.h): the structs, diagonals, fill statistics and caches are api_malloc blocks;
  * the arrays of api_input (xyz, size, idx, attribute data), of api_tags and the overrides of
  * api_rules are C-library blocks (api_plain_*), since sd_refine hands over C-library arrays and
- * the refine bodies of api/refine.c release these with free().
+ * the refine bodies of api/refine.c release these with free(). The input's arrays are counted
+ * against the memory budget through its `reserved` bytes, and the core complex allocates with
+ * api_mem_core_allocator (api/mem.h): one budget bounds sessions and requests alike.
  */
 #ifndef SUBDIVD_MODEL_H
 #define SUBDIVD_MODEL_H
@@ -56,6 +58,8 @@ typedef struct api_input {
     uint32_t (*diag)[2];      /* (simplex index, pair 0..2) */
     uint32_t nfill;           /* "fill" entries run; their tets and points are in the arrays above */
     api_fill_stats *fill;
+    size_t reserved;          /* bytes of the C-library arrays above counted against the memory
+                               * budget (api_input_reserve; given back by the last unref) */
 } api_input;
 
 /* The rule preferences of PUT /rules (docs/API.md); zero = the default. */
@@ -99,6 +103,12 @@ typedef struct api_model {
 
 api_input *api_input_new(void);
 void api_input_unref(api_input *in);
+/* Count n more bytes of the input's C-library arrays against the memory budget (api/mem.h),
+ * before allocating them; false when they do not fit. */
+bool api_input_reserve(api_input *in, size_t n);
+/* Reserve whatever the input's arrays hold beyond in->reserved (for arrays adopted from
+ * elsewhere: sd_refine's); false when it does not fit. */
+bool api_input_account(api_input *in);
 /* The index of the attribute called `name`, or -1. */
 int api_input_find_attr(const api_input *in, const char *name);
 

@@ -21,6 +21,7 @@
 #include "metrics.h"
 #include <arpa/inet.h>
 #include <errno.h>
+#include <malloc.h>
 #include <microhttpd.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -61,13 +62,23 @@ static const char *intern_method(const char *m)
     return "OTHER";
 }
 
+/* A request that took or gave back this much (its body, parse, levels, a model it freed) is
+ * followed by malloc_trim: what glibc keeps in its heaps below the mmap threshold goes back to
+ * the system, so the resident size follows what the daemon holds. */
+#define TRIM_AFTER_BYTES (32u << 20)
+
 static void req_unref(req *r)
 {
     if (atomic_fetch_sub(&r->refs, 1) != 1)
         return;
+    api_mem_meter *prev = api_mem_meter_set(&r->mem);
     session_unref(r->s);
     api_free(r->body);
+    api_mem_meter_set(prev);
+    int trim = r->mem.moved > TRIM_AFTER_BYTES;
     api_free(r);
+    if (trim)
+        malloc_trim(0);
 }
 
 /* ---- responses ------------------------------------------------------------------------------ */
@@ -130,31 +141,57 @@ void http_reply_json(req *r, int status, json_t *body, uint64_t version)
 {
     char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
     json_decref(body);
-    if (!text) {
-        text = api_strdup("{\"type\":\"/errors/internal\",\"title\":\"Internal Server Error\","
-                      "\"status\":500,\"detail\":\"could not render the response\"}");
+    struct MHD_Response *resp;
+    if (!text) { /* a static body: nothing left to allocate it from */
+        static const char unrendered[] =
+            "{\"type\":\"/errors/internal\",\"title\":\"Internal Server Error\","
+            "\"status\":500,\"detail\":\"could not render the response\"}";
         status = 500;
+        resp = http_static_response(unrendered, sizeof unrendered - 1);
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "application/problem+json");
+        atomic_store(&r->bytes, sizeof unrendered - 1);
+    } else {
+        size_t n = strlen(text);
+        atomic_store(&r->bytes, n);
+        resp = http_buffer_response(status >= 400 ? "application/problem+json" : "application/json",
+                                    text, n);
     }
-    size_t n = strlen(text);
-    atomic_store(&r->bytes, n);
-    struct MHD_Response *resp = http_buffer_response(
-        status >= 400 ? "application/problem+json" : "application/json", text, n);
     if (version)
         http_set_etag(resp, version);
     http_queue(r, status, resp);
 }
 
-/* The problem+json response of p (with Retry-After and WWW-Authenticate where they apply). */
-static struct MHD_Response *problem_response(req *r, const api_problem *p)
+/* Memory the budget refused during the request (api/mem.h) is not the machine's: the request
+ * may succeed once others give some back, so say so (memory-budget, with Retry-After). */
+static const api_problem *budget_problem(req *r, const api_problem *p, api_problem *q)
 {
+    if (p->status != 503 || !p->slug || strcmp(p->slug, "out-of-memory") || !r->mem.over_budget)
+        return p;
+    api_fail(q, 503, "memory-budget", "the daemon's memory budget (--max-memory, %zu bytes) is in "
+             "use by other requests and sessions; retry later (%s)", api_mem_budget(), p->detail);
+    q->retry_after = 2;
+    return q;
+}
+
+/* The problem+json response of p (with Retry-After and WWW-Authenticate where they apply). */
+static struct MHD_Response *problem_response(req *r, const api_problem *p0)
+{
+    api_problem q = {0};
+    const api_problem *p = budget_problem(r, p0, &q);
     json_t *j = api_problem_json(p);
     char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
     json_decref(j);
-    if (!text)
-        text = api_strdup("{\"status\":500}");
-    size_t n = strlen(text);
-    atomic_store(&r->bytes, n);
-    struct MHD_Response *resp = http_buffer_response("application/problem+json", text, n);
+    struct MHD_Response *resp;
+    if (!text) { /* out of memory: the status alone, from static memory */
+        static const char bare[] = "{\"status\":503}";
+        resp = http_static_response(bare, sizeof bare - 1);
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "application/problem+json");
+        atomic_store(&r->bytes, sizeof bare - 1);
+    } else {
+        size_t n = strlen(text);
+        atomic_store(&r->bytes, n);
+        resp = http_buffer_response("application/problem+json", text, n);
+    }
     if (p->retry_after) {
         char ra[16];
         snprintf(ra, sizeof ra, "%d", p->retry_after);
@@ -564,7 +601,8 @@ static enum MHD_Result serve(server *srv, req *r, struct MHD_Connection *conn, c
             while (cap < r->len + n + 1)
                 cap *= 2;
             char *b = api_realloc(r->body, cap);
-            if (!b) {
+            if (!b) { /* discard the rest, answer 503 at the end */
+                r->no_memory = 1;
                 r->too_big = 1;
                 return MHD_YES;
             }
@@ -574,6 +612,10 @@ static enum MHD_Result serve(server *srv, req *r, struct MHD_Connection *conn, c
         memcpy(r->body + r->len, upload_data, n);
         r->len += n;
         r->body[r->len] = 0;
+        return MHD_YES;
+    }
+    if (r->no_memory) {
+        http_fail(r, 503, "out-of-memory", "no memory for the body; retry later");
         return MHD_YES;
     }
     if (r->too_big) {

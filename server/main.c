@@ -11,6 +11,7 @@
 #include "probe.h"
 #include "server.h"
 #include <errno.h>
+#include <malloc.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -246,6 +247,11 @@ int main(int argc, char **argv)
     int code;
     if (config_load(&srv.cfg, argc, argv, 1, &code))
         return code;
+    /* Big blocks (bodies, parsed arrays, levels, output buffers) are mmapped and go back to the
+     * system when freed: a fixed threshold turns off glibc's dynamic one, which rises to 32 MiB
+     * after the first big free and then keeps such blocks in the heap for good. */
+    mallopt(M_MMAP_THRESHOLD, 256 * 1024);
+    api_mem_set_budget((size_t)srv.cfg.max_memory);
     srv.st = store_new(srv.cfg.max_sessions);
     if (!srv.st || sem_init(&srv.compute, 0, (unsigned)srv.cfg.threads)) {
         fprintf(stderr, "subdivd: out of memory\n");
@@ -266,14 +272,18 @@ int main(int argc, char **argv)
            srv.cfg.threads, srv.cfg.no_auth ? ", no auth" : "");
     fflush(stdout);
     log_line(&srv, LOG_INFO, "listening on %s:%d, limits: body %zu B, %u vertices, %llu cells/level, "
-             "%llu B/session, %d sessions", srv.cfg.listen, srv.port, srv.cfg.limits.max_body_bytes,
-             srv.cfg.limits.max_vertices, (unsigned long long)srv.cfg.limits.max_cells,
-             (unsigned long long)srv.cfg.limits.max_session_bytes, srv.cfg.max_sessions);
+             "%llu B/session, %d sessions, memory budget %llu B", srv.cfg.listen, srv.port,
+             srv.cfg.limits.max_body_bytes, srv.cfg.limits.max_vertices,
+             (unsigned long long)srv.cfg.limits.max_cells,
+             (unsigned long long)srv.cfg.limits.max_session_bytes, srv.cfg.max_sessions,
+             (unsigned long long)srv.cfg.max_memory);
     while (!stop_requested) {
         usleep(200 * 1000);
         int gone = store_expire(srv.st, mono_now());
-        if (gone)
+        if (gone) {
             log_line(&srv, LOG_INFO, "expired %d idle session(s)", gone);
+            malloc_trim(0); /* what their models held goes back to the system */
+        }
     }
     atomic_store(&srv.draining, 1);
     log_line(&srv, LOG_INFO, "shutting down");

@@ -91,3 +91,17 @@ void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t sessio
                "# TYPE subdivd_streamed_bytes_total counter\nsubdivd_streamed_bytes_total %llu\n",
             (unsigned long long)atomic_load(&M.bytes));
 }
+
+void metrics_write_budget(FILE *f, uint64_t budget, uint64_t used, uint64_t refusals)
+{
+    fprintf(f, "# HELP subdivd_memory_budget_bytes The memory budget of the daemon (--max-memory).\n"
+               "# TYPE subdivd_memory_budget_bytes gauge\nsubdivd_memory_budget_bytes %llu\n",
+            (unsigned long long)budget);
+    fprintf(f, "# HELP subdivd_memory_used_bytes Memory counted against the budget: api/ and "
+               "server/ blocks, core blocks of every complex, input arrays.\n"
+               "# TYPE subdivd_memory_used_bytes gauge\nsubdivd_memory_used_bytes %llu\n",
+            (unsigned long long)used);
+    fprintf(f, "# HELP subdivd_memory_refusals_total Allocations the memory budget refused.\n"
+               "# TYPE subdivd_memory_refusals_total counter\nsubdivd_memory_refusals_total %llu\n",
+            (unsigned long long)refusals);
+}

@@ -16,5 +16,8 @@ void metrics_bytes(uint64_t n);
 /* Write every metric; the gauges are passed in (api_bytes: api_mem_in_use(), api/mem.h). */
 void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t session_bytes,
                    uint64_t api_bytes);
+/* The memory budget (--max-memory, api/mem.h): its size, what is counted against it, and the
+ * allocations it refused. */
+void metrics_write_budget(FILE *f, uint64_t budget, uint64_t used, uint64_t refusals);
 
 #endif

@@ -43,6 +43,7 @@ struct req {
     char *body;
     size_t len, cap;
     int too_big;
+    int no_memory;            /* the body did not fit in memory (answered 503) */
     double t0;
     session *s;
     char seg_id[40];

@@ -24,16 +24,27 @@
 
 static void h_healthz(req *r) { http_reply_json(r, 200, json_pack("{s:s}", "status", "ok"), 0); }
 
+/* Ready unless starting, stopping or with its memory budget spent (then a load balancer sends
+ * new work elsewhere until requests and sessions give some back); the budget in both answers. */
 static void h_readyz(req *r)
 {
+    size_t budget = api_mem_budget(), used = api_mem_budget_used();
+    api_problem p = {0};
     if (atomic_load(&r->srv->draining)) {
-        api_problem p = {0};
         p.retry_after = 5;
         api_fail(&p, 503, "not-ready", "the daemon is starting or shutting down");
+    } else if (budget && used >= budget) {
+        p.retry_after = 5;
+        api_fail(&p, 503, "memory-budget", "the memory budget is in use: %zu of %zu bytes "
+                 "(--max-memory)", used, budget);
+    }
+    if (p.status) {
         http_reply_problem(r, &p);
         return;
     }
-    http_reply_json(r, 200, json_pack("{s:s}", "status", "ready"), 0);
+    http_reply_json(r, 200, json_pack("{s:s, s:{s:I, s:I}}", "status", "ready", "memory",
+                                      "budget_bytes", (json_int_t)budget, "used_bytes",
+                                      (json_int_t)used), 0);
 }
 
 typedef struct gauges {
@@ -68,6 +79,7 @@ static void h_metrics(req *r)
     gauges g = {0};
     store_foreach(r->srv->st, add_gauges, &g);
     metrics_write(f, store_count(r->srv->st), g.cells, g.bytes, api_mem_in_use());
+    metrics_write_budget(f, api_mem_budget(), api_mem_budget_used(), api_mem_budget_refusals());
     fclose(f);
     char *body = api_memdup(text, n);
     free(text); /* open_memstream's buffer belongs to the C library */

@@ -171,7 +171,7 @@ static void scenario(void)
 /* One run failing the nth allocation, then every `every`-th; checks the bytes came back. */
 static void run(uint64_t n, uint64_t every)
 {
-    size_t before = api_mem_in_use();
+    size_t before = api_mem_in_use(), counted = api_mem_budget_used();
     run_n = n;
     api_mem_fail_at(n, every);
     scenario();
@@ -180,6 +180,29 @@ static void run(uint64_t n, uint64_t every)
         fprintf(stderr, "api_faults: n=%llu every=%llu: %zu bytes not freed\n",
                 (unsigned long long)n, (unsigned long long)every, api_mem_in_use() - before);
         bad++;
+    }
+    if (api_mem_budget_used() != counted) { /* core blocks and input reservations too */
+        fprintf(stderr, "api_faults: n=%llu every=%llu: %zd bytes left counted in the budget\n",
+                (unsigned long long)n, (unsigned long long)every,
+                (ssize_t)(api_mem_budget_used() - counted));
+        bad++;
+    }
+}
+
+/* Budgets from nothing up: whatever the scenario cannot get is refused cleanly (a 5xx problem,
+ * counted as over budget), and everything counted is given back. */
+static void budgets(void)
+{
+    for (size_t b = 1; b <= (64u << 20); b *= 4) {
+        api_mem_meter meter = {0}, *prev = api_mem_meter_set(&meter);
+        api_mem_set_budget(b);
+        run(0, 0);
+        api_mem_set_budget(0);
+        api_mem_meter_set(prev);
+        if (b < (1u << 16) && !meter.over_budget) {
+            fprintf(stderr, "api_faults: a budget of %zu bytes refused nothing\n", b);
+            bad++;
+        }
     }
 }
 
@@ -232,6 +255,7 @@ int main(int argc, char **argv)
         for (uint64_t n = 1; n <= every[k]; n++, runs++)
             run(n, every[k]);
     meter_limit();
+    budgets();
     if (bad) {
         fprintf(stderr, "api_faults: %d checks failed\n", bad);
         return 1;
