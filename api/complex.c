@@ -13,6 +13,7 @@
 #include "mem.h"
 #include "fill.h"
 #include "internal.h"
+#include "complex_stream.h"
 #include "jsonin.h"
 #include "rows.h"
 #include <math.h>
@@ -426,6 +427,65 @@ json_t *api_json_doubles(const double *x, size_t n)
     return a;
 }
 
+/* The "tags" member of GET /complex: {"singular": [...]} and "petals" when there are any. */
+static json_t *tags_json(const api_model *m)
+{
+    json_t *tj = json_array();
+    for (uint32_t i = 0, off = 0; i < m->tags.n; off += m->tags.size[i++]) {
+        json_t *a = json_array();
+        for (int j = 0; j < m->tags.size[i]; j++)
+            json_array_append_new(a, json_integer(m->tags.idx[off + j]));
+        json_array_append_new(tj, a);
+    }
+    json_t *pj = json_array();
+    for (uint32_t i = 0; i < m->tags.npet; i++) {
+        static const char *const kinds[] = {"convex", "concave", "smooth"};
+        const sd_petal_tag *q = &m->tags.pet[i];
+        json_array_append_new(pj, json_pack("{s:I, s:[I, I, I], s:s}", "vertex",
+                                            (json_int_t)q->vertex, "triangle",
+                                            (json_int_t)q->triangle[0], (json_int_t)q->triangle[1],
+                                            (json_int_t)q->triangle[2], "kind", kinds[q->kind % 3]));
+    }
+    json_t *tags = json_pack("{s:o}", "singular", tj);
+    if (json_array_size(pj)) /* only when given: {"singular"} as PUT otherwise */
+        json_object_set(tags, "petals", pj);
+    json_decref(pj);
+    return tags;
+}
+
+/* The "rules" member of GET /complex: the preferences and overrides as last put. */
+static json_t *rules_json(const api_model *m)
+{
+    static const char *const schemes[] = {"box", "averaged"}, *const weights[] = {"warren", "loop"};
+    static const char *const nmd[] = {"G2", "G1"}, *const surfs[] = {"chang-qin", "ying-zorin"};
+    json_t *oj = json_array();
+    for (uint32_t i = 0; i < m->rules.noverrides; i++) {
+        const sd_override *o = &m->rules.overrides[i];
+        json_t *sx = json_array();
+        for (int j = 0; j < o->nverts; j++)
+            json_array_append_new(sx, json_integer(o->simplex[j]));
+        json_t *x = json_pack("{s:o, s:s}", "simplex", sx, "rule", sd_rule_name(o->rule));
+        if (o->rule == SD_RULE_N1)
+            json_object_set_new(x, "dimension", json_integer(o->dimension));
+        if (o->rule == SD_RULE_N2) {
+            json_t *pr = json_array();
+            for (int j = 0; j < 2; j++) {
+                json_t *q = json_array();
+                for (int u = 0; u < o->pair_size; u++)
+                    json_array_append_new(q, json_integer(o->pair[j][u]));
+                json_array_append_new(pr, q);
+            }
+            json_object_set_new(x, "pair", pr);
+        }
+        json_array_append_new(oj, x);
+    }
+    return json_pack("{s:s, s:o, s:s, s:s, s:s}", "nonmanifold_default",
+                     nmd[m->rules.nonmanifold_default & 1], "overrides", oj, "solid_scheme",
+                     schemes[m->rules.solid_scheme & 1], "surface_weights",
+                     weights[m->rules.surface_weights & 1], "nonmanifold_surface",
+                     surfs[m->rules.nonmanifold_surface & 1]);
+}
+
 json_t *api_get_complex(api_model *m, api_problem *p)
 {
     const api_input *in = m->in;
@@ -468,61 +528,37 @@ json_t *api_get_complex(api_model *m, api_problem *p)
                                                          (json_int_t)ev[2 * i + 1]));
             json_array_append_new(ce, o);
         }
-    json_t *tj = json_array();
-    for (uint32_t i = 0, off = 0; i < m->tags.n; off += m->tags.size[i++]) {
-        json_t *a = json_array();
-        for (int j = 0; j < m->tags.size[i]; j++)
-            json_array_append_new(a, json_integer(m->tags.idx[off + j]));
-        json_array_append_new(tj, a);
-    }
-    json_t *pj = json_array();
-    for (uint32_t i = 0; i < m->tags.npet; i++) {
-        static const char *const kinds[] = {"convex", "concave", "smooth"};
-        const sd_petal_tag *q = &m->tags.pet[i];
-        json_array_append_new(pj, json_pack("{s:I, s:[I, I, I], s:s}", "vertex",
-                                            (json_int_t)q->vertex, "triangle",
-                                            (json_int_t)q->triangle[0], (json_int_t)q->triangle[1],
-                                            (json_int_t)q->triangle[2], "kind", kinds[q->kind % 3]));
-    }
     json_t *dj = json_array();
     for (uint32_t s = 0; s < in->ns; s++)
         if (in->size[s] == 4)
             json_array_append_new(dj, json_pack("[I, i]", (json_int_t)s, sd_complex_diagonal(m->c, s)));
     pthread_rwlock_unlock(&m->data);
-    static const char *const schemes[] = {"box", "averaged"}, *const weights[] = {"warren", "loop"};
-    static const char *const nmd[] = {"G2", "G1"}, *const surfs[] = {"chang-qin", "ying-zorin"};
-    json_t *oj = json_array();
-    for (uint32_t i = 0; i < m->rules.noverrides; i++) {
-        const sd_override *o = &m->rules.overrides[i];
-        json_t *sx = json_array();
-        for (int j = 0; j < o->nverts; j++)
-            json_array_append_new(sx, json_integer(o->simplex[j]));
-        json_t *x = json_pack("{s:o, s:s}", "simplex", sx, "rule", sd_rule_name(o->rule));
-        if (o->rule == SD_RULE_N1)
-            json_object_set_new(x, "dimension", json_integer(o->dimension));
-        if (o->rule == SD_RULE_N2) {
-            json_t *pr = json_array();
-            for (int j = 0; j < 2; j++) {
-                json_t *q = json_array();
-                for (int u = 0; u < o->pair_size; u++)
-                    json_array_append_new(q, json_integer(o->pair[j][u]));
-                json_array_append_new(pr, q);
-            }
-            json_object_set_new(x, "pair", pr);
-        }
-        json_array_append_new(oj, x);
+    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:o, s:o, s:O}", "vertices", vs,
+                     "simplices", ss, "attributes", at, "diagonals", dj, "classes", "vertices", cv,
+                     "edges", ce, "tags", tags_json(m), "rules", rules_json(m), "summary",
+                     m->summary);
+}
+
+api_cstream *api_get_complex_stream(api_model *m, uint64_t *version, api_problem *p)
+{
+    if (!m->in) {
+        api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+        return NULL;
     }
-    json_t *tags = json_pack("{s:o}", "singular", tj);
-    if (json_array_size(pj)) /* only when given: {"singular"} as PUT otherwise */
-        json_object_set(tags, "petals", pj);
-    json_decref(pj);
-    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:o, s:{s:s, s:o, s:s, s:s, s:s}, s:O}",
-                     "vertices", vs, "simplices", ss, "attributes", at, "diagonals", dj,
-                     "classes", "vertices", cv,
-                     "edges", ce, "tags", tags, "rules", "nonmanifold_default",
-                     nmd[m->rules.nonmanifold_default & 1], "overrides", oj,
-                     "solid_scheme", schemes[m->rules.solid_scheme & 1],
-                     "surface_weights", weights[m->rules.surface_weights & 1],
-                     "nonmanifold_surface", surfs[m->rules.nonmanifold_surface & 1],
-                     "summary", m->summary);
+    /* under the lock edits take: the copied points and attributes and the version agree */
+    pthread_rwlock_rdlock(&m->data);
+    *version = atomic_load(&m->version);
+    json_t *t = json_pack("{s:o, s:o, s:O, s:I}", "tags", tags_json(m), "rules", rules_json(m),
+                          "summary", m->summary, "version", (json_int_t)*version);
+    char *text = t ? json_dumps(t, JSON_COMPACT) : NULL; /* {"tags":…,"version":N} */
+    json_decref(t);
+    api_cstream *s = NULL;
+    if (text) {
+        text[0] = ','; /* it continues the document after "classes" */
+        s = api_cstream_new(m, text, strlen(text));
+    }
+    pthread_rwlock_unlock(&m->data);
+    if (!s)
+        api_fail(p, 503, "out-of-memory", "out of memory opening the complex's stream");
+    return s;
 }

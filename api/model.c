@@ -42,6 +42,50 @@ bool api_input_account(api_input *in)
     return n <= in->reserved || api_input_reserve(in, n - in->reserved);
 }
 
+api_input *api_input_copy(const api_input *in)
+{
+    api_input *c = api_input_new();
+    if (!c)
+        return NULL;
+    size_t nidx = 0;
+    for (uint32_t s = 0; s < in->ns; s++)
+        nidx += in->size[s];
+    c->nv = in->nv;
+    c->ns = in->ns;
+    c->nattrs = in->nattrs;
+    c->ndiag = in->ndiag;
+    c->nfill = in->nfill;
+    size_t bytes = 3 * sizeof(double) * (size_t)in->nv + in->ns + nidx * sizeof(uint32_t);
+    for (int a = 0; a < in->nattrs; a++)
+        bytes += sizeof(double) * (size_t)in->nv * (size_t)in->attrs[a].ncomp;
+    bool ok = api_input_reserve(c, bytes);
+    size_t nxyz = 3 * sizeof(double) * ((size_t)in->nv + 1);
+    if (ok && (c->xyz = api_plain_malloc(nxyz)))
+        memcpy(c->xyz, in->xyz, 3 * sizeof(double) * (size_t)in->nv);
+    if (ok && (c->size = api_plain_malloc((size_t)in->ns + 1)))
+        memcpy(c->size, in->size, in->ns);
+    if (ok && (c->idx = api_plain_malloc((nidx + 1) * sizeof *c->idx)))
+        memcpy(c->idx, in->idx, nidx * sizeof *c->idx);
+    ok = ok && c->xyz && c->size && c->idx;
+    for (int a = 0; a < in->nattrs; a++) {
+        c->attrs[a] = in->attrs[a];
+        size_t n = sizeof(double) * (size_t)in->nv * (size_t)in->attrs[a].ncomp;
+        c->attrs[a].data = ok ? api_plain_malloc(n + 1) : NULL;
+        if (c->attrs[a].data)
+            memcpy(c->attrs[a].data, in->attrs[a].data, n);
+        ok = ok && c->attrs[a].data;
+    }
+    if (ok && in->ndiag)
+        ok = (c->diag = api_memdup(in->diag, in->ndiag * sizeof *in->diag)) != NULL;
+    if (ok && in->nfill)
+        ok = (c->fill = api_memdup(in->fill, in->nfill * sizeof *in->fill)) != NULL;
+    if (!ok) {
+        api_input_unref(c);
+        return NULL;
+    }
+    return c;
+}
+
 void api_input_unref(api_input *in)
 {
     if (!in || atomic_fetch_sub(&in->refs, 1) != 1)
@@ -74,7 +118,7 @@ void api_model_publish(api_model *m)
     atomic_store(&m->memory_bytes, (m->c ? sd_complex_memory(m->c) : 0) + geo);
 }
 
-const struct out_geometry *api_model_geometry_locked(api_model *m, int level)
+struct out_geometry *api_model_geometry_locked(api_model *m, int level)
 {
     if (!m->geometry[level]) {
         sd_error e;

@@ -84,9 +84,11 @@ typedef struct api_tags {
 
 typedef struct api_model {
     atomic_int refs;
-    pthread_mutex_t lock;     /* serialises computation on `c` (and edits) */
-    pthread_rwlock_t data;    /* readers of level data (streams, GET /complex) vs edits, which
-                               * change positions and attributes in place */
+    pthread_mutex_t lock;     /* serialises computation on `c`, edits, and the snapshots that
+                               * level streams take when they open */
+    pthread_rwlock_t data;    /* readers of the input that do not take `lock` (GET /complex
+                               * copies positions and attributes) vs edits, which change
+                               * positions and attributes in place */
     api_input *in;            /* NULL: no complex posted yet */
     api_rules rules;
     api_tags tags;            /* owned copy */
@@ -99,10 +101,16 @@ typedef struct api_model {
     /* published figures, readable without the lock */
     atomic_int levels_cached;
     atomic_size_t memory_bytes;
+    /* the session version of the model's content: set when the model is published and by
+     * every edit (under both locks), so a reader that copies what edits change reads, with
+     * the same lock held, the version of what it copied (a response's ETag is its content's) */
+    _Atomic uint64_t version;
 } api_model;
 
 api_input *api_input_new(void);
 void api_input_unref(api_input *in);
+/* A deep copy of an input (a new one, reference 1), its arrays reserved; NULL without memory. */
+api_input *api_input_copy(const api_input *in);
 /* Count n more bytes of the input's C-library arrays against the memory budget (api/mem.h),
  * before allocating them; false when they do not fit. */
 bool api_input_reserve(api_input *in, size_t n);
@@ -136,6 +144,6 @@ void api_model_publish(api_model *m);
 
 /* The glTF geometry (solid boundary, normals) of a computed level, built once (NULL if out of
  * memory — writers then compute their own). The caller holds m->lock. */
-const struct out_geometry *api_model_geometry_locked(api_model *m, int level);
+struct out_geometry *api_model_geometry_locked(api_model *m, int level);
 
 #endif

@@ -136,9 +136,14 @@ static sd_result rebuild_from(sd_complex *c, int l, sd_error *err)
     return SD_OK;
 }
 
-sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *idx,
-                          const double *values, uint64_t *counts, sd_error *err)
+/* The edit; with `in_place`, one that would rebuild a level stops before changing anything and
+ * says which level in *rebuild (-1: applied through the matrices). */
+static sd_result edit(sd_complex *c, int channel, size_t n, const uint32_t *idx,
+                      const double *values, bool in_place, uint64_t *counts, int *rebuild,
+                      sd_error *err)
 {
+    if (rebuild)
+        *rebuild = -1;
     sd_mem *m = &c->mem;
     sd_level *l0 = c->lv[0];
     if (channel < 0 || channel >= l0->nch)
@@ -250,15 +255,19 @@ sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *
             goto nomem;
     }
     int top = stale < nl ? stale + 1 : nl;
+    if (counts) {
+        for (int l = 0; l <= SD_MAX_LEVEL; l++)
+            counts[l] = l < top ? ch[l].n : l < c->nlevels ? c->lv[l]->t.nv : 0;
+    }
+    if (in_place && stale < nl) { /* the caller rebuilds instead */
+        *rebuild = stale;
+        goto done;
+    }
     /* every change is known: apply them */
     apply(c, channel, nc, ch, top, 1);
     if (stale < nl && (rc = rebuild_from(c, stale, err))) {
         apply(c, channel, nc, ch, top, -1); /* out of memory: as it was */
         goto done;
-    }
-    if (counts) {
-        for (int l = 0; l <= SD_MAX_LEVEL; l++)
-            counts[l] = l < top ? ch[l].n : l < c->nlevels ? c->lv[l]->t.nv : 0;
     }
     goto done;
 nomem:
@@ -267,4 +276,17 @@ done:
     for (int l = 0; l <= SD_MAX_LEVEL; l++)
         change_free(m, &ch[l]);
     return rc;
+}
+
+sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *idx,
+                          const double *values, uint64_t *counts, sd_error *err)
+{
+    return edit(c, channel, n, idx, values, false, counts, NULL, err);
+}
+
+sd_result sd_complex_edit_in_place(sd_complex *c, int channel, size_t n, const uint32_t *idx,
+                                   const double *values, uint64_t *counts, int *rebuild,
+                                   sd_error *err)
+{
+    return edit(c, channel, n, idx, values, true, counts, rebuild, err);
 }

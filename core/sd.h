@@ -292,6 +292,15 @@ sd_result sd_complex_matrix(sd_complex *c, int level, sd_csr *out, sd_error *err
  * Not thread-safe with readers of the same complex: the caller excludes them. */
 sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *idx,
                           const double *values, uint64_t *counts, sd_error *err);
+/* sd_complex_edit for callers whose readers keep reading a level's topology and rules without
+ * a lock (the daemon's streams): an edit that would rebuild a level's rules changes nothing and
+ * sets *rebuild to that level (counts then says what sd_complex_edit would have updated: the
+ * full sizes of the finer levels) — the caller builds a new complex from the edited input
+ * instead; any other edit is applied through the matrices, *rebuild = -1. So no array a reader
+ * holds is ever freed or moved, and only channel values change. */
+sd_result sd_complex_edit_in_place(sd_complex *c, int channel, size_t n, const uint32_t *idx,
+                                   const double *values, uint64_t *counts, int *rebuild,
+                                   sd_error *err);
 
 /* ---- local red-green refinement (000 Sec. 4.2) ------------------------------------------ */
 

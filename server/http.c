@@ -311,15 +311,14 @@ int http_query_only(req *r, const char *const *allowed)
 typedef struct stream_ctx {
     req *r;
     api_model *m;
-    out_stream *os;
-    int level_data;   /* a level stream: holds the model's data lock (api_level_close) */
+    http_source src;
 } stream_ctx;
 
 static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
 {
     (void)pos;
     stream_ctx *sc = cls;
-    ssize_t n = out_read(sc->os, buf, max);
+    ssize_t n = sc->src.read(sc->src.ctx, buf, max);
     if (n > 0) {
         atomic_fetch_add(&sc->r->bytes, (uint64_t)n);
         metrics_bytes((uint64_t)n);
@@ -328,33 +327,31 @@ static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
     return n == 0 ? MHD_CONTENT_READER_END_OF_STREAM : MHD_CONTENT_READER_END_WITH_ERROR;
 }
 
+/* The end of a stream: its source, the model and the request go, counted on the request's
+ * meter (a snapshot given back is memory moved: see req_unref). */
 static void stream_free(void *cls)
 {
     stream_ctx *sc = cls;
-    if (sc->level_data)
-        api_level_close(sc->m, sc->os);
-    else
-        out_close(sc->os);
+    req *r = sc->r;
+    api_mem_meter *prev = api_mem_meter_set(&r->mem);
+    sc->src.close(sc->src.ctx);
     api_model_unref(sc->m);
-    req_unref(sc->r);
     api_free(sc);
+    api_mem_meter_set(prev);
+    req_unref(r);
 }
 
-
-void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uint64_t size,
-                       const char *ctype, const char *disposition, uint64_t version)
+void http_reply_stream(req *r, api_model *m, http_source src, uint64_t size, const char *ctype,
+                       const char *disposition, uint64_t version)
 {
     stream_ctx *sc = api_malloc(sizeof *sc);
     if (!sc) {
-        if (level_data)
-            api_level_close(m, os);
-        else
-            out_close(os);
+        src.close(src.ctx);
         api_model_unref(m);
         http_fail(r, 503, "out-of-memory", "out of memory");
         return;
     }
-    *sc = (stream_ctx){r, m, os, level_data};
+    *sc = (stream_ctx){r, m, src};
     atomic_fetch_add(&r->refs, 1);
     struct MHD_Response *resp = MHD_create_response_from_callback(
         size == UINT64_MAX ? MHD_SIZE_UNKNOWN : size, 256 * 1024, stream_read, sc, stream_free);
@@ -364,7 +361,8 @@ void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uin
         return;
     }
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
-    MHD_add_response_header(resp, "Content-Disposition", disposition);
+    if (disposition)
+        MHD_add_response_header(resp, "Content-Disposition", disposition);
     http_set_etag(resp, version);
     http_queue(r, 200, resp);
 }

@@ -210,7 +210,9 @@ static int refine_main(int argc, char **argv)
         rc = apply_file(&m, a.tags, api_put_tags, &lim, a.tags);
     out_stream *os = NULL;
     const out_format *fmt;
-    if (!rc && api_level_open(m, level, &a.q, &lim, 1, &os, &fmt, &p))
+    uint64_t version;
+    atomic_store(&m->version, 1); /* the version a session's first complex has */
+    if (!rc && api_level_open(m, level, &a.q, &lim, NULL, &os, &fmt, &version, &p))
         rc = report(&p, "the level request");
     if (rc) {
         api_model_unref(m);
@@ -221,7 +223,7 @@ static int refine_main(int argc, char **argv)
     if (!rc)
         fprintf(stderr, "subdivd refine: level %d -> %s (%llu bytes, %.3f s)\n", level, a.out,
                 (unsigned long long)total, m->seconds[level]);
-    api_level_close(m, os);
+    out_close(os);
     api_model_unref(m);
     return rc;
 }

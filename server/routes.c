@@ -11,6 +11,7 @@
  * /metrics never queue behind work. Nothing here includes libmicrohttpd (see request.h).
  */
 #include "request.h"
+#include "../api/complex_stream.h"
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
 #include "../api/mem.h"
@@ -249,6 +250,25 @@ static int if_match(req *r, uint64_t version, api_problem *p)
                     "again", (unsigned long long)version);
 }
 
+/* The compute slots of the daemon as api/ takes them (api_slot): only once the model's lock is
+ * held, and shown as the session's progress while held. */
+static int slot_take(void *ud, int level, api_problem *p)
+{
+    req *r = ud;
+    if (http_take_slot(r, p))
+        return p->status;
+    atomic_store(&r->s->busy_level, level);
+    return 0;
+}
+
+static void slot_give(void *ud) { http_give_slot(ud); }
+
+static api_slot slot_of(req *r)
+{
+    api_slot s = {slot_take, slot_give, r};
+    return s;
+}
+
 /* A change builds the session's next model from the current one and may add members to the
  * answer (the summary, what was refined). */
 typedef int (*change_op)(const api_model *cur, json_t *body, const api_packs *packs,
@@ -338,7 +358,8 @@ static void h_put_rules(req *r) { change(r, op_rules, NULL); }
 static void h_refine(req *r) { change(r, op_refine, NULL); }
 
 /* PATCH control-points: If-Match is required (428 without, 412 when stale); the model is changed
- * in place under its data lock, so the edit waits for that session's streams in flight. */
+ * in place (streams in flight read their own snapshots), or replaced by a new one where the
+ * edit moves what a level's rules read (api_edit). */
 static void h_edit(req *r)
 {
     api_problem p = {0};
@@ -353,13 +374,16 @@ static void h_edit(req *r)
         return;
     pthread_mutex_lock(&r->s->write);
     uint64_t version;
-    api_model *m = session_model(r->s, &version);
+    api_model *m = session_model(r->s, &version), *rebuilt = NULL;
     uint64_t counts[SD_MAX_LEVEL + 1];
     int levels = 0, rc;
+    api_slot slot = slot_of(r);
+    /* changes are sequential (the write lock): the edit's version is the next one */
     if (!(rc = if_match(r, version, &p)))
-        rc = api_edit(m, b, counts, &levels, &p);
+        rc = api_edit(m, b, version + 1, &r->srv->cfg.limits, &slot, counts, &levels, &rebuilt,
+                      &p);
     if (!rc)
-        version = session_bump(r->s);
+        version = rebuilt ? session_publish(r->s, rebuilt) : session_bump(r->s);
     pthread_mutex_unlock(&r->s->write);
     json_decref(b);
     api_model_unref(m);
@@ -377,14 +401,28 @@ static void h_edit(req *r)
                                       up), version);
 }
 
+static ssize_t cstream_read(void *ctx, char *buf, size_t max)
+{
+    return (ssize_t)api_cstream_read(ctx, buf, max);
+}
+
+static void cstream_close(void *ctx) { api_cstream_free(ctx); }
+
+/* GET /complex streams (chunked): a complex of a million points is some 60 MB of JSON, which a
+ * jansson tree would hold many times over. */
 static void h_get_complex(req *r)
 {
     uint64_t version;
-    api_model *m = session_model(r->s, &version);
+    api_model *m = session_model(r->s, NULL);
     api_problem p = {0};
-    json_t *j = api_get_complex(m, &p);
-    api_model_unref(m);
-    http_reply_versioned(r, j, version, &p);
+    api_cstream *cs = api_get_complex_stream(m, &version, &p);
+    if (!cs) {
+        api_model_unref(m);
+        http_reply_problem(r, &p);
+        return;
+    }
+    http_source src = {cs, cstream_read, cstream_close};
+    http_reply_stream(r, m, src, UINT64_MAX, "application/json", NULL, version);
 }
 
 
@@ -411,53 +449,42 @@ static int level_of(req *r, const char *const *keys)
     return level;
 }
 
-/* The handlers of /levels/{L}, /levels/{L}/stats and /matrices/{L}: called with the level
- * and the session's model (a reference they own) once the query and the level are checked. */
-typedef void (*level_fn)(req *r, api_model *m, int level, uint64_t version);
+/* The handlers of /levels/{L}, /levels/{L}/stats and /matrices/{L}: called with the level and
+ * the session's model (a reference they own) once the query and the level are checked. */
+typedef void (*level_fn)(req *r, api_model *m, int level);
 
 static void with_level(req *r, const char *const *keys, level_fn fn)
 {
     int level = level_of(r, keys);
     if (level < 0)
         return;
-    uint64_t version;
-    api_model *m = session_model(r->s, &version);
-    fn(r, m, level, version);
+    fn(r, session_model(r->s, NULL), level);
 }
 
-/* Take a compute slot when level L of m still has to be computed (*slot says whether one was
- * taken; give it back with give_slot). Non-zero with a problem when none came free in time. */
-static int slot_for_level(req *r, api_model *m, int level, int *slot, api_problem *p)
+/* A stream of the writers of api/out.h as the source of a response. */
+static ssize_t out_source_read(void *ctx, char *buf, size_t max) { return out_read(ctx, buf, max); }
+static void out_source_close(void *ctx) { out_close(ctx); }
+
+static http_source out_source(out_stream *os)
 {
-    *slot = 0;
-    if (!m->c || atomic_load(&m->levels_cached) > level)
-        return 0;
-    if (http_take_slot(r, p))
-        return -1;
-    *slot = 1;
-    atomic_store(&r->s->busy_level, level);
-    return 0;
+    http_source src = {os, out_source_read, out_source_close};
+    return src;
 }
 
-/* After opening a stream: give back the compute slot, and when the open failed (rc), drop the
- * model and answer the problem. Returns rc. */
-static int stream_refused(req *r, api_model *m, int slot, int rc, const api_problem *p)
+/* A refused stream: drop the model and answer the problem. */
+static void stream_refused(req *r, api_model *m, const api_problem *p)
 {
-    if (slot)
-        http_give_slot(r);
-    if (rc) {
-        api_model_unref(m);
-        http_reply_problem(r, p);
-    }
-    return rc;
+    api_model_unref(m);
+    http_reply_problem(r, p);
 }
 
 static const char *const LEVEL_KEYS[] = {"format", "parts", "slice", "attributes", "colormap",
                                          "octahedra", NULL};
 
-static void get_level(req *r, api_model *m, int level, uint64_t version)
+static void get_level(req *r, api_model *m, int level)
 {
     api_problem p = {0};
+    uint64_t version = atomic_load(&m->version);
     if (m->c && if_none_match_hit(r, version)) {
         api_model_unref(m);
         struct MHD_Response *resp = http_empty();
@@ -471,28 +498,27 @@ static void get_level(req *r, api_model *m, int level, uint64_t version)
 #undef Q
     out_stream *os = NULL;
     const out_format *fmt;
-    int slot, rc = slot_for_level(r, m, level, &slot, &p);
-    if (!rc)
-        rc = api_level_open(m, level, &q, &r->srv->cfg.limits, version, &os, &fmt, &p);
-    if (stream_refused(r, m, slot, rc, &p))
+    api_slot slot = slot_of(r);
+    if (api_level_open(m, level, &q, &r->srv->cfg.limits, &slot, &os, &fmt, &version, &p)) {
+        stream_refused(r, m, &p);
         return;
+    }
     char disp[96];
     snprintf(disp, sizeof disp, "%s; filename=\"level-%d%s\"", fmt->disposition, level,
              fmt->extension);
-    http_reply_stream(r, m, os, 1, out_size(os), fmt->mime, disp, version);
+    http_reply_stream(r, m, out_source(os), out_size(os), fmt->mime, disp, version);
 }
 
 static void h_get_level(req *r) { with_level(r, LEVEL_KEYS, get_level); }
 
 static const char *const STATS_KEYS[] = {NULL};
 
-static void level_stats(req *r, api_model *m, int level, uint64_t version)
+static void level_stats(req *r, api_model *m, int level)
 {
     api_problem p = {0};
-    int slot, rc = slot_for_level(r, m, level, &slot, &p);
-    json_t *j = rc ? NULL : api_level_stats(m, level, &r->srv->cfg.limits, &p);
-    if (slot)
-        http_give_slot(r);
+    api_slot slot = slot_of(r);
+    json_t *j = api_level_stats(m, level, &r->srv->cfg.limits, &slot, &p);
+    uint64_t version = atomic_load(&m->version);
     api_model_unref(m);
     http_reply_versioned(r, j, version, &p);
 }
@@ -501,22 +527,22 @@ static void h_level_stats(req *r) { with_level(r, STATS_KEYS, level_stats); }
 
 static const char *const MATRIX_KEYS[] = {"from", "format", NULL};
 
-static void matrix(req *r, api_model *m, int level, uint64_t version)
+static void matrix(req *r, api_model *m, int level)
 {
     api_problem p = {0};
     out_stream *os = NULL;
     const char *ctype = NULL;
     const char *from = http_arg(r, "from");
     const char *fmt = http_arg(r, "format");
-    int slot, rc = slot_for_level(r, m, level, &slot, &p);
-    if (!rc)
-        rc = api_matrix_open(m, level, from, fmt, &r->srv->cfg.limits, &os, &ctype, &p);
-    if (stream_refused(r, m, slot, rc, &p))
+    api_slot slot = slot_of(r);
+    if (api_matrix_open(m, level, from, fmt, &r->srv->cfg.limits, &slot, &os, &ctype, &p)) {
+        stream_refused(r, m, &p);
         return;
+    }
     char disp[96];
     snprintf(disp, sizeof disp, "attachment; filename=\"S_%s_%d.%s\"", from ? from : "0", level,
              fmt && !strcmp(fmt, "json") ? "json" : "mtx");
-    http_reply_stream(r, m, os, 0, UINT64_MAX, ctype, disp, version);
+    http_reply_stream(r, m, out_source(os), UINT64_MAX, ctype, disp, atomic_load(&m->version));
 }
 
 static void h_matrix(req *r) { with_level(r, MATRIX_KEYS, matrix); }
@@ -526,13 +552,11 @@ static void h_analysis(req *r)
     static const char *const keys[] = {"vertex", "edge", NULL};
     if (http_query_only(r, keys))
         return;
-    uint64_t version;
-    api_model *m = session_model(r->s, &version);
+    api_model *m = session_model(r->s, NULL);
     api_problem p = {0};
-    int slot, rc = slot_for_level(r, m, 1, &slot, &p); /* an edge's block lives at level 1 */
-    json_t *j = rc ? NULL : api_analysis(m, http_arg(r, "vertex"), http_arg(r, "edge"), &p);
-    if (slot)
-        http_give_slot(r);
+    api_slot slot = slot_of(r);
+    json_t *j = api_analysis(m, http_arg(r, "vertex"), http_arg(r, "edge"), &slot, &p);
+    uint64_t version = atomic_load(&m->version);
     api_model_unref(m);
     http_reply_versioned(r, j, version, &p);
 }

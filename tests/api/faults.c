@@ -84,16 +84,17 @@ static void levels(api_model *m)
         api_problem p = {0};
         out_stream *os = NULL;
         const out_format *fmt;
-        if (api_level_open(m, 1, &q, &lim, 1, &os, &fmt, &p)) {
+        uint64_t version;
+        if (api_level_open(m, 1, &q, &lim, NULL, &os, &fmt, &version, &p)) {
             refused(&p, "api_level_open");
             continue;
         }
         drain(os);
-        api_level_close(m, os);
+        out_close(os);
         oks++;
     }
     api_problem p = {0};
-    json_t *j = api_level_stats(m, 1, &lim, &p);
+    json_t *j = api_level_stats(m, 1, &lim, NULL, &p);
     if (!j && p.status)
         refused(&p, "api_level_stats");
     oks += j != NULL;
@@ -110,14 +111,14 @@ static void views(api_model *m)
     oks += j != NULL;
     json_decref(j);
     memset(&p, 0, sizeof p);
-    if (!(j = api_analysis(m, "0", NULL, &p)) && p.status)
+    if (!(j = api_analysis(m, "0", NULL, NULL, &p)) && p.status)
         refused(&p, "api_analysis");
     oks += j != NULL;
     json_decref(j);
     memset(&p, 0, sizeof p);
     out_stream *os = NULL;
     const char *ctype;
-    if (api_matrix_open(m, 1, "0", "json", &lim, &os, &ctype, &p))
+    if (api_matrix_open(m, 1, "0", "json", &lim, NULL, &os, &ctype, &p))
         refused(&p, "api_matrix_open");
     else {
         drain(os);
@@ -132,13 +133,18 @@ static void edit_and_refine(api_model **m)
     json_t *b = body(EDIT, &p);
     uint64_t counts[SD_MAX_LEVEL + 1], red, green;
     int nlev;
-    if (b && api_edit(*m, b, counts, &nlev, &p))
+    api_limits lim = api_default_limits();
+    api_model *rebuilt = NULL;
+    if (b && api_edit(*m, b, 2, &lim, NULL, counts, &nlev, &rebuilt, &p))
         refused(&p, "api_edit");
     else if (b)
         oks++;
+    if (rebuilt) {
+        api_model_unref(*m);
+        *m = rebuilt;
+    }
     json_decref(b);
     memset(&p, 0, sizeof p);
-    api_limits lim = api_default_limits();
     api_model *next = NULL;
     if ((b = body(REFINE, &p)) && api_refine(*m, b, &lim, &next, &red, &green, &p))
         refused(&p, "api_refine");
