@@ -3,17 +3,20 @@
  *
  * Threading: MHD runs one thread per connection (MHD_USE_THREAD_PER_CONNECTION), so a handler
  * may block — on a session's write lock or a model's compute lock — without stalling other
- * connections. Computations additionally take one of `threads` compute slots (a semaphore), with
- * a bounded wait and a 429 + Retry-After when the daemon is saturated, so /healthz, /readyz and
- * /metrics never queue behind work.
+ * connections. Computations additionally take one of `threads` compute slots (server/slots.c:
+ * handed to the waiter whose session holds the fewest, and taken only once the model's lock is
+ * held, so a request waiting for its own session's computation holds none), with a bounded wait
+ * and a 429 + Retry-After when the daemon is saturated, so /healthz, /readyz and /metrics never
+ * queue behind work.
  *
  * A request goes: first callback (no body yet) -> early(): match (route lookup: 404, 405, the
  * OPTIONS preflight), auth (the session and its bearer token: 404, 401), body (transfer coding,
  * Content-Length against max_body_bytes before anything is read, a body where none is taken,
  * Content-Type: 501, 413, 400, 415); body callbacks -> append to a buffer capped at
  * max_body_bytes; final callback -> the route's handler (routes.c), which calls api/ and queues
- * one response. Level responses stream through out_read() from a callback response that holds
- * references on the session's model until the last byte is sent.
+ * one response. Level responses and GET /complex stream from a callback response (a source:
+ * out_read, api_cstream_read) that holds references on the session's model until the last byte
+ * is sent, and no lock: the source copied what edits change when it opened.
  */
 #include "request.h"
 #include "../api/mem.h"
@@ -235,12 +238,7 @@ void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
 
 int http_take_slot(req *r, api_problem *p)
 {
-    struct timespec until;
-    clock_gettime(CLOCK_REALTIME, &until);
-    until.tv_sec += r->srv->cfg.queue_timeout_s;
-    while (sem_timedwait(&r->srv->compute, &until)) {
-        if (errno == EINTR)
-            continue;
+    if (slots_take(r->srv->compute, r->s, r->srv->cfg.queue_timeout_s)) {
         p->retry_after = 5;
         api_fail(p, 429, "busy", "all %d compute threads are busy; retry in a few seconds",
                  r->srv->cfg.threads);
@@ -257,7 +255,7 @@ void http_give_slot(req *r)
 {
     if (r->s)
         atomic_store(&r->s->busy_level, -1);
-    sem_post(&r->srv->compute);
+    slots_give(r->srv->compute, r->s);
 }
 
 

@@ -255,7 +255,8 @@ int main(int argc, char **argv)
     mallopt(M_MMAP_THRESHOLD, 256 * 1024);
     api_mem_set_budget((size_t)srv.cfg.max_memory);
     srv.st = store_new(srv.cfg.max_sessions);
-    if (!srv.st || sem_init(&srv.compute, 0, (unsigned)srv.cfg.threads)) {
+    srv.compute = slots_new(srv.cfg.threads);
+    if (!srv.st || !srv.compute) {
         fprintf(stderr, "subdivd: out of memory\n");
         return 1;
     }
@@ -291,7 +292,7 @@ int main(int argc, char **argv)
     log_line(&srv, LOG_INFO, "shutting down");
     http_stop(&srv);
     store_free(srv.st);
-    sem_destroy(&srv.compute);
+    slots_free(srv.compute);
     log_line(&srv, LOG_INFO, "stopped");
     return 0;
 }

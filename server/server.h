@@ -4,13 +4,13 @@
 
 #include "config.h"
 #include "sessions.h"
-#include <semaphore.h>
+#include "slots.h"
 #include <stdatomic.h>
 
 typedef struct server {
     config cfg;
     store *st;
-    sem_t compute;            /* cfg.threads slots for computations */
+    slots *compute;           /* cfg.threads slots for computations, fair between sessions */
     atomic_int draining;      /* /readyz answers 503 while starting or stopping */
     struct MHD_Daemon *mhd;
     int port;                 /* the bound port */
