@@ -199,7 +199,16 @@ int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim
         counts[l] = 0;
     sd_error e = {0};
     int done = 0, rebuild = -1;
-    for (; done < np && rebuild < 0; done++) {
+    /* no simplex at a moved point may become degenerate (PUT /complex's test; inverted is fine) */
+    if (np && parts[0].attr < 0 && sd_complex_check_moves(m->c, parts[0].n, parts[0].idx,
+                                                         parts[0].val, &e)) {
+        char at[64];
+        snprintf(at, sizeof at, "/moves/%ld/position", e.item < 0 ? 0 : e.item);
+        rc = e.code == SD_ERR_DEGENERATE ? api_fail_at(p, 422, "invalid-complex", at, "%s", e.message)
+                                         : api_fail_core(p, &e, NULL, NULL);
+        done = np; /* nothing to apply */
+    }
+    for (; !rc && done < np && rebuild < 0; done++) {
         edit_part *q = &parts[done];
         const double *cur = sd_level_channel(sd_complex_level(m->c, 0, &e), q->channel, NULL);
         for (size_t i = 0; i < q->n; i++)
@@ -210,7 +219,9 @@ int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim
         for (int l = 0; l <= SD_MAX_LEVEL; l++)
             counts[l] = c[l] > counts[l] ? c[l] : counts[l];
     }
-    if (rebuild >= 0) {
+    if (rc) {
+        /* refused before anything changed */
+    } else if (rebuild >= 0) {
         /* a level's rules read a moved position (Ying-Zorin's corner angle): nothing changed
          * (moves are the first part, the only one that can need this); the edit becomes a new
          * model below, and this one stays as it is for whoever reads it */

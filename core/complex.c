@@ -57,9 +57,10 @@ static double tet_vol6(const double *xyz, const uint32_t *t)
     return dot3(n, d);
 }
 
-/* Is simplex `s` (k+1 vertices) degenerate? Longest edge L: an edge shorter than tol*bbox, a
- * triangle of area < tol*L^2, a tetrahedron of volume < tol*L^3 are. */
-static bool degenerate(const double *xyz, const uint32_t *s, int n, double diag)
+/* Is simplex `s` (n vertices) degenerate? Longest edge L: an edge shorter than tol*bbox, a
+ * triangle of area < tol*L^2, a tetrahedron of volume < tol*L^3 are (orientation does not
+ * matter). The one test of input and edits (core/edit.c). */
+bool sdi_simplex_degenerate(const double *xyz, const uint32_t *s, int n, double diag)
 {
     if (n < 2)
         return false;
@@ -130,7 +131,7 @@ static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint3
                     return sdi_fail(err, SD_ERR_REPEATED, s, i,
                                    "simplex %u: vertex %u appears twice", s, t[i]);
         }
-        if (degenerate(xyz, t, n, diag))
+        if (sdi_simplex_degenerate(xyz, t, n, diag))
             return sdi_fail(err, SD_ERR_DEGENERATE, s, -1,
                            "simplex %u: degenerate %s (zero or near-zero %s)", s, kind_name[n],
                            n == 2 ? "length" : n == 3 ? "area" : "volume");

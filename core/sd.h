@@ -302,6 +302,17 @@ sd_result sd_complex_edit_in_place(sd_complex *c, int channel, size_t n, const u
                                    const double *values, uint64_t *counts, int *rebuild,
                                    sd_error *err);
 
+/* Check a move of control points before sd_complex_edit: point idx[i] to xyz[3i..3i+2]. Every
+ * maximal simplex (edge, triangle, tetrahedron) of the control complex that holds a moved
+ * point must stay non-degenerate by sd_complex_new's test and tolerance (no edge shorter than
+ * 1e-12 of the moved complex's bounding-box diagonal, no area or volume below 1e-12 of its
+ * longest edge squared or cubed); orientation does not count, so an inverted tetrahedron is
+ * fine. Simplices without a moved point are not looked at (a move that grows the bounding box
+ * does not make their edges short: their shape did not change). SD_ERR_DEGENERATE with item =
+ * the index i of the latest move among the refused simplex's points. Changes nothing. */
+sd_result sd_complex_check_moves(sd_complex *c, size_t n, const uint32_t *idx, const double *xyz,
+                                 sd_error *err);
+
 /* ---- local red-green refinement (000 Sec. 4.2) ------------------------------------------ */
 
 typedef struct sd_refinement {

@@ -136,3 +136,26 @@ TEST(edit_then_deeper_level)
     sd_complex_free(c);
     mesh_free(&m);
 }
+
+/* sd_complex_check_moves: a move that makes a simplex at a moved point degenerate (PUT's test)
+ * is refused, naming the latest move among its points; an inverted tetrahedron is not. */
+TEST(edit_check_moves_degenerate)
+{
+    mesh m = {0};
+    shape_two_tets(&m); /* (0,0,0) (1,0,0) (0,1,0) (0,0,1), (0.6,0.7,0.8); [0,1,2,3] [1,2,3,4] */
+    sd_complex *c = mesh_complex(&m, NULL, NULL);
+    CHECK(c);
+    sd_error e;
+    uint32_t idx[2] = {3, 1};
+    double onto[6] = {0, 0, 0.5, 0, 1, 0};                 /* 1 onto 2: a zero edge */
+    CHECK(sd_complex_check_moves(c, 2, idx, onto, &e) == SD_ERR_DEGENERATE && e.item == 1);
+    double flat[3] = {0.5, 0.5, 0};                        /* 3 into the plane of 0, 1, 2 */
+    CHECK(sd_complex_check_moves(c, 1, idx, flat, &e) == SD_ERR_DEGENERATE && e.item == 0);
+    double inverted[3] = {0, 0, -0.5};                     /* [0,1,2,3] turned inside out */
+    CHECK(sd_complex_check_moves(c, 1, idx, inverted, &e) == SD_OK);
+    double tiny[3] = {0, 0, 1e-13};                        /* volume 1e-13/6 < 1e-12 L^3 */
+    CHECK(sd_complex_check_moves(c, 1, idx, tiny, &e) == SD_ERR_DEGENERATE);
+    CHECK(same_levels(c, &m, 1, NULL, 0)); /* nothing changed */
+    sd_complex_free(c);
+    mesh_free(&m);
+}
