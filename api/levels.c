@@ -8,7 +8,7 @@
  * on the cached glTF geometry, with the version of that content; it then holds no lock while
  * the client reads, and an edit never waits for it (the level's topology and rules, which the
  * writers also read, stay as they are while the model lives: api/edit.c). Formats come from the table of api/formats.c; the glTF ones get the per-level cached
- * geometry. api_estimate_bytes is the over-estimate the session memory limit is checked with.
+ * geometry. api_estimate_bytes is the core's estimate the session memory limit is checked with.
  */
 #include "handlers.h"
 #include "internal.h"
@@ -227,6 +227,7 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
             rq.geometry = api_model_geometry_locked(m, level);
         rq.version = atomic_load(&m->version);
         *out = out_open(&rq, *fmt, &e);
+        api_model_publish(m); /* the writer may have built the level's vertex rules */
     }
     pthread_mutex_unlock(&m->lock);
     if (!*out)
@@ -264,6 +265,7 @@ json_t *api_level_stats(api_model *m, int level, const api_limits *lim, const ap
             json_object_set_new(bytes, f->name, json_integer((json_int_t)out_size(s)));
         out_close(s);
     }
+    api_model_publish(m); /* the writers may have built the level's vertex rules */
     pthread_mutex_unlock(&m->lock);
     if (!lv) {
         json_decref(bytes);
@@ -272,11 +274,15 @@ json_t *api_level_stats(api_model *m, int level, const api_limits *lim, const ap
     }
     sd_counts n;
     sd_complex_counts(m->c, level, &n);
-    return json_pack("{s:i, s:{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:I}, s:o, s:f, s:I}", "level",
+    uint64_t est = 0; /* what levels 1..L take by the estimate the limits are checked with */
+    for (int l = 1; l <= level; l++)
+        est += sd_complex_estimate_level_bytes(m->c, l);
+    return json_pack("{s:i, s:{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:I}, s:o, s:f, s:I, s:I}", "level",
                      level, "counts", "vertices", (json_int_t)n.vertices, "edges",
                      (json_int_t)n.edges, "faces", (json_int_t)n.faces, "points",
                      (json_int_t)n.points, "curves", (json_int_t)n.curves, "triangles",
                      (json_int_t)n.triangles, "tetrahedra", (json_int_t)n.tetrahedra, "octahedra",
                      (json_int_t)n.octahedra, "bytes", bytes, "seconds", secs, "memory_bytes",
-                     (json_int_t)atomic_load(&m->memory_bytes));
+                     (json_int_t)atomic_load(&m->memory_bytes), "estimated_bytes",
+                     (json_int_t)est);
 }

@@ -122,10 +122,14 @@ void sd_complex_counts(const sd_complex *c, int level, sd_counts *out);
 
 /* Memory in use by the complex (all levels, matrices, channels), in bytes. */
 size_t sd_complex_memory(const sd_complex *c);
-/* The bytes computing the levels up to `level` would add: the core's arrays per entity, summed
- * over the levels not computed yet (from sd_complex_counts, without computing anything). An
- * over-estimate by design, to check a memory limit before asking for a level. */
+/* The bytes computing the levels up to `level` would add: the core's measured cost per entity
+ * (core/complex.c), summed over the levels not computed yet (from sd_complex_counts, without
+ * computing anything), to check a memory limit before asking for a level. Within 30% of what
+ * the levels take once computed, for solids, surfaces, curves and mixed complexes alike. */
 uint64_t sd_complex_estimate_bytes(const sd_complex *c, int level);
+/* The same for level `level` alone (what computing it from level - 1 adds; 0 for level 0),
+ * computed or not. */
+uint64_t sd_complex_estimate_level_bytes(const sd_complex *c, int level);
 int sd_complex_levels_computed(const sd_complex *c);
 
 /* ---- levels ------------------------------------------------------------------------------ */
