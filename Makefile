@@ -13,7 +13,7 @@ CORE_SRC := $(wildcard core/*.c)
 CORE_OBJ := $(patsubst %.c,$(B)/%.o,$(CORE_SRC))
 CORE_LIB := $(B)/libsubdiv.a
 
-.PHONY: all test bench sanitize run deps clean clean-build
+.PHONY: all test bench soak sanitize run deps clean clean-build
 all: $(CORE_LIB) $(B)/sdlevel $(B)/test_core
 
 $(B)/%.o: %.c $(wildcard core/*.h)
