@@ -38,6 +38,10 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
 /* PUT /tags: validates the singular simplices against the complex. */
 int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                  api_problem *p);
+/* The same with "singular" packed beside the tree (api_tags_packed: the patterns). */
+int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *packs,
+                        const api_limits *lim, api_model **out, api_problem *p);
+extern const char *const api_tags_packed[];
 
 /* The summary of a model's complex (new reference; {} without a complex). */
 json_t *api_summary(const api_model *m);

@@ -79,14 +79,18 @@ static int apply_file(api_model **m, const char *path, change_fn_t fn, const api
         return 2;
     api_problem p = {0};
     api_packs packs = {0};
-    int big = fn == api_put_complex; /* its big arrays packed, as the daemon reads them */
-    json_t *b = big ? api_parse_body_packed(buf, len, 0, api_complex_packed, API_PACK_MIN_BYTES,
-                                            &packs, &p)
-                    : api_parse_body(buf, len, 0, &p);
+    /* the big arrays of a complex or of tags packed, as the daemon reads them */
+    const char *const *packed = fn == api_put_complex ? api_complex_packed
+                                : fn == api_put_tags  ? api_tags_packed
+                                                      : NULL;
+    json_t *b = packed ? api_parse_body_packed(buf, len, 0, packed, API_PACK_MIN_BYTES, &packs, &p)
+                       : api_parse_body(buf, len, 0, &p);
     api_free(buf);
     api_model *next = NULL;
-    if (b && big)
+    if (b && fn == api_put_complex)
         api_put_complex_packed(*m, b, &packs, lim, &next, &p);
+    else if (b && fn == api_put_tags)
+        api_put_tags_packed(*m, b, &packs, lim, &next, &p);
     else if (b)
         fn(*m, b, lim, &next, &p);
     json_decref(b);

@@ -309,8 +309,7 @@ static void change(req *r, change_op op, const char *const *packed)
 }
 
 static int op_complex(const api_model *cur, json_t *body, const api_packs *packs,
-                      const api_limits *lim, api_model **next,
-                      json_t *answer, api_problem *p)
+                      const api_limits *lim, api_model **next, json_t *answer, api_problem *p)
 {
     int rc = api_put_complex_packed(cur, body, packs, lim, next, p);
     if (!rc && (*next)->summary)
@@ -319,17 +318,14 @@ static int op_complex(const api_model *cur, json_t *body, const api_packs *packs
 }
 
 static int op_tags(const api_model *cur, json_t *body, const api_packs *packs,
-                      const api_limits *lim, api_model **next,
-                   json_t *answer, api_problem *p)
+                   const api_limits *lim, api_model **next, json_t *answer, api_problem *p)
 {
     (void)answer;
-    (void)packs;
-    return api_put_tags(cur, body, lim, next, p);
+    return api_put_tags_packed(cur, body, packs, lim, next, p);
 }
 
 static int op_rules(const api_model *cur, json_t *body, const api_packs *packs,
-                      const api_limits *lim, api_model **next,
-                    json_t *answer, api_problem *p)
+                    const api_limits *lim, api_model **next, json_t *answer, api_problem *p)
 {
     (void)answer;
     (void)packs;
@@ -337,8 +333,7 @@ static int op_rules(const api_model *cur, json_t *body, const api_packs *packs,
 }
 
 static int op_refine(const api_model *cur, json_t *body, const api_packs *packs,
-                      const api_limits *lim, api_model **next,
-                     json_t *answer, api_problem *p)
+                     const api_limits *lim, api_model **next, json_t *answer, api_problem *p)
 {
     (void)packs;
     uint64_t red, green;
@@ -353,7 +348,7 @@ static int op_refine(const api_model *cur, json_t *body, const api_packs *packs,
 }
 
 static void h_put_complex(req *r) { change(r, op_complex, api_complex_packed); }
-static void h_put_tags(req *r) { change(r, op_tags, NULL); }
+static void h_put_tags(req *r) { change(r, op_tags, api_tags_packed); }
 static void h_put_rules(req *r) { change(r, op_rules, NULL); }
 static void h_refine(req *r) { change(r, op_refine, NULL); }
 

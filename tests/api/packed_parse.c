@@ -1,11 +1,12 @@
-/* packed_parse — PUT /complex read packed against read from the tree, differentially.
+/* packed_parse — PUT /complex (or, with the argument "tags", PUT /tags on a fixed complex) read
+ * packed against read from the tree, differentially.
  *
- * Reads request bodies from stdin, one per line (JSON, "\n" escaped as JSON does). Each is given
- * to api_put_complex twice: parsed by jansson as it is, and parsed with its big arrays packed
+ * Reads request bodies from stdin, one per line (each a JSON string). Each is given to the
+ * handler twice: parsed by jansson as it is, and parsed with its big arrays packed
  * (api_parse_body_packed with every array packed, however small: min_bytes 1). Both must give
- * the same status, slug, detail and field errors, or both a model with the same input arrays
- * and summary. Prints "packed_parse: N bodies, P packed arrays, D differ" and exits 1 on any
- * difference (tests/python/test_packed_parse.py feeds it the error catalogue and mutations).
+ * the same status, slug, detail and field errors, or both a model with the same input arrays,
+ * tags and summary. Prints "packed_parse: N bodies, P packed arrays, D differ" and exits 1 on
+ * any difference (tests/python/test_packed_parse.py feeds it the error catalogue and mutations).
  */
 #include "../../api/handlers.h"
 #include "../../api/jsonin.h"
@@ -20,6 +21,8 @@ typedef struct outcome {
     char *summary;
 } outcome;
 
+static int tags_mode;
+
 static void run(const char *body, size_t len, int packed, const api_model *cur,
                 const api_limits *lim, outcome *o, int *npacked)
 {
@@ -28,11 +31,14 @@ static void run(const char *body, size_t len, int packed, const api_model *cur,
     memcpy(buf, body, len);
     buf[len] = 0;
     api_packs packs = {0};
-    json_t *b = packed ? api_parse_body_packed(buf, len, 0, api_complex_packed, 1, &packs, &o->p)
+    const char *const *pat = tags_mode ? api_tags_packed : api_complex_packed;
+    json_t *b = packed ? api_parse_body_packed(buf, len, 0, pat, 1, &packs, &o->p)
                        : api_parse_body(buf, len, 0, &o->p);
     api_free(buf);
     *npacked += packs.n;
-    if (b && !api_put_complex_packed(cur, b, packed ? &packs : NULL, lim, &o->m, &o->p))
+    const api_packs *pk = packed ? &packs : NULL;
+    if (b && !(tags_mode ? api_put_tags_packed(cur, b, pk, lim, &o->m, &o->p)
+                         : api_put_complex_packed(cur, b, pk, lim, &o->m, &o->p)))
         o->summary = json_dumps(o->m->summary, JSON_SORT_KEYS | JSON_COMPACT);
     json_decref(b);
     api_packs_free(&packs);
@@ -62,8 +68,15 @@ static int same(const outcome *a, const outcome *b)
 {
     if (!!a->m != !!b->m)
         return 0;
-    if (a->m)
-        return !strcmp(a->summary, b->summary) && same_input(a->m->in, b->m->in);
+    if (a->m) {
+        const api_tags *x = &a->m->tags, *y = &b->m->tags;
+        size_t nidx = 0;
+        for (uint32_t i = 0; i < x->n; i++)
+            nidx += x->size[i];
+        return !strcmp(a->summary, b->summary) && same_input(a->m->in, b->m->in) &&
+               x->n == y->n && !memcmp(x->size, y->size, x->n) &&
+               !memcmp(x->idx, y->idx, nidx * sizeof *x->idx);
+    }
     if (a->p.status != b->p.status || strcmp(a->p.slug, b->p.slug) ||
         strcmp(a->p.detail, b->p.detail) || a->p.nerrors != b->p.nerrors)
         return 0;
@@ -80,13 +93,32 @@ static void done(outcome *o)
     api_free(o->summary);
 }
 
-int main(void)
+/* The complex PUT /tags bodies name: a fan of triangles, a tetrahedron on one of them, a curve. */
+static const char FAN[] =
+    "{\"vertices\": [[0,0,0],[1,0,0],[0.5,0.9,0],[-0.5,0.9,0],[-1,0,0],[-0.5,-0.9,0],"
+    "[0.5,-0.9,0],[0.3,0.3,1],[2,0,0],[3,0.2,0]],"
+    "\"simplices\": [[0,1,2],[0,2,3],[0,3,4],[0,4,5],[0,5,6],[0,6,1],[0,1,2,7],[1,8],[8,9]]}";
+
+int main(int argc, char **argv)
 {
     api_limits lim = api_default_limits();
     lim.max_vertices = 100000;
     lim.max_simplices = 100000;
     sd_error e;
     api_model *cur = api_model_new(NULL, NULL, 0, &e);
+    tags_mode = argc > 1 && !strcmp(argv[1], "tags");
+    if (tags_mode) {
+        api_problem p = {0};
+        json_t *b = api_parse_body(FAN, strlen(FAN), 0, &p);
+        api_model *m = NULL;
+        if (!b || api_put_complex(cur, b, &lim, &m, &p)) {
+            fprintf(stderr, "packed_parse: the tags' complex was refused: %s\n", p.detail);
+            return 2;
+        }
+        json_decref(b);
+        api_model_unref(cur);
+        cur = m;
+    }
     size_t cap = 0;
     char *line = NULL;
     ssize_t n;

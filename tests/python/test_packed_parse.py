@@ -1,4 +1,4 @@
-"""The big arrays of a PUT /complex body read packed (api/packed.c, api/rows.c) give the answers
+"""The big arrays of a PUT /complex or PUT /tags body read packed (api/packed.c, api/rows.c) give the answers
 they give read from jansson's tree: the packer against jansson (tests/fuzz/fuzz_packed.c) and
 the parsers on both (tests/api/packed_parse.c) over the error catalogue's bodies, valid complexes
 and their mutations. Under make sanitize they are the ASan builds."""
@@ -68,3 +68,23 @@ def test_parsers_answer_the_same_packed_or_not():
     last = r.stdout.strip().splitlines()[-1]
     assert last.endswith("0 differ"), last
     assert int(last.split()[3]) > 300, "most bodies should have arrays to pack"
+
+
+def test_tags_answer_the_same_packed_or_not():
+    """PUT /tags's "singular" on the complex of tests/api/packed_parse.c (a fan of 6 triangles
+    around 0 with a tetrahedron and a curve): the catalogue's tag bodies, valid ones and
+    mutations."""
+    rnd = random.Random(5)
+    bodies = [json.dumps(b) for (_, m, path, b, _, _, _) in CASES if m == "PUT" and path == "/tags"]
+    valid = [{"singular": [[0], [0, 1], [1, 2], [0, 1, 2], [8, 9], [8]]},
+             {"singular": [[0, 2], [0, 3], [0, 4]], "petals": []},
+             {"singular": [[i, i + 1] for i in range(1, 6)] + [[6, 1]]}]
+    for b in valid:
+        bodies.append(json.dumps(b))
+        bodies += list(mutations(b, rnd, 120))
+    stdin = "".join(json.dumps(b) + "\n" for b in bodies)
+    r = subprocess.run([PARSE, "tags"], input=stdin, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-4000:] + r.stderr[-2000:]
+    last = r.stdout.strip().splitlines()[-1]
+    assert last.endswith("0 differ"), last
+    assert int(last.split()[3]) > 150, "most bodies should have an array to pack"
