@@ -21,7 +21,6 @@ import collections
 import json
 import os
 import random
-import socket
 import sys
 import threading
 import time
@@ -32,6 +31,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "tests", "python"))
 import requests  # noqa: E402
 
 from daemon import Daemon, Session  # noqa: E402
+from test_hardening import raw_socket  # noqa: E402  (a socket from a given loopback address)
 
 SECONDS = float(os.environ.get("SOAK_SECONDS", "600"))
 SESSIONS = int(os.environ.get("SOAK_SESSIONS", "16"))
@@ -125,15 +125,6 @@ def well_behaved(d, body, stop, st, sessions):
             time.sleep(0.1)
 
 
-def connect(d, src, timeout=2):
-    host, port = d.url.split("//")[1].split(":")
-    k = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    k.settimeout(timeout)
-    k.bind((src, 0))
-    k.connect((host, int(port)))
-    return k
-
-
 def address(i):
     return f"127.0.0.{2 + i // PER_ADDRESS}"
 
@@ -145,7 +136,7 @@ def slowloris(d, stop, st, base):
         for i in range(SLOWLORIS):
             try:
                 if socks[i] is None:
-                    socks[i] = connect(d, address(base + i))
+                    socks[i] = raw_socket(d, address(base + i))
                     socks[i].sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n")
                     socks[i].setblocking(False)
                     st.bad("slowloris opened")
@@ -169,7 +160,7 @@ def idle(d, stop, st, base):
         for i in range(IDLE):
             try:
                 if socks[i] is None:
-                    k = connect(d, address(base + i))
+                    k = raw_socket(d, address(base + i))
                     k.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")
                     k.recv(4096)
                     k.setblocking(False)
@@ -196,7 +187,7 @@ def oversize(d, stop, st, base, token_session):
             f"Content-Length: {8 * MAX_BODY}\r\nConnection: close\r\n\r\n").encode()
     while not stop.wait(0.2):
         try:
-            k = connect(d, address(base), timeout=5)
+            k = raw_socket(d, address(base), timeout=5)
             k.sendall(head)
             try:
                 k.sendall(b" " * 65536)
@@ -213,7 +204,7 @@ def garbage(d, stop, st, base):
     rnd = random.Random(base)
     while not stop.wait(0.2):
         try:
-            k = connect(d, address(base), timeout=5)
+            k = raw_socket(d, address(base), timeout=5)
             k.sendall(bytes(rnd.randrange(256) for _ in range(rnd.randrange(1, 4096))) + b"\r\n\r\n")
             answer = k.recv(64)
             k.close()

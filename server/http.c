@@ -140,25 +140,32 @@ void http_set_etag(struct MHD_Response *resp, uint64_t version)
     MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
 }
 
+/* A response owning `text` (an api_malloc block, counted in r->bytes) of type ctype; without
+ * text, for lack of memory to render it, the static problem `fallback` instead. */
+static struct MHD_Response *text_response(req *r, const char *ctype, char *text,
+                                          const char *fallback)
+{
+    if (!text) { /* nothing left to allocate a body from */
+        struct MHD_Response *resp = http_static_response(fallback, strlen(fallback));
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "application/problem+json");
+        atomic_store(&r->bytes, strlen(fallback));
+        return resp;
+    }
+    size_t n = strlen(text);
+    atomic_store(&r->bytes, n);
+    return http_buffer_response(ctype, text, n);
+}
+
 void http_reply_json(req *r, int status, json_t *body, uint64_t version)
 {
     char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
     json_decref(body);
-    struct MHD_Response *resp;
-    if (!text) { /* a static body: nothing left to allocate it from */
-        static const char unrendered[] =
-            "{\"type\":\"/errors/internal\",\"title\":\"Internal Server Error\","
-            "\"status\":500,\"detail\":\"could not render the response\"}";
+    if (!text)
         status = 500;
-        resp = http_static_response(unrendered, sizeof unrendered - 1);
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "application/problem+json");
-        atomic_store(&r->bytes, sizeof unrendered - 1);
-    } else {
-        size_t n = strlen(text);
-        atomic_store(&r->bytes, n);
-        resp = http_buffer_response(status >= 400 ? "application/problem+json" : "application/json",
-                                    text, n);
-    }
+    struct MHD_Response *resp = text_response(
+        r, status >= 400 ? "application/problem+json" : "application/json", text,
+        "{\"type\":\"/errors/internal\",\"title\":\"Internal Server Error\",\"status\":500,"
+        "\"detail\":\"could not render the response\"}");
     if (version)
         http_set_etag(resp, version);
     http_queue(r, status, resp);
@@ -184,17 +191,8 @@ static struct MHD_Response *problem_response(req *r, const api_problem *p0)
     json_t *j = api_problem_json(p);
     char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
     json_decref(j);
-    struct MHD_Response *resp;
-    if (!text) { /* out of memory: the status alone, from static memory */
-        static const char bare[] = "{\"status\":503}";
-        resp = http_static_response(bare, sizeof bare - 1);
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "application/problem+json");
-        atomic_store(&r->bytes, sizeof bare - 1);
-    } else {
-        size_t n = strlen(text);
-        atomic_store(&r->bytes, n);
-        resp = http_buffer_response("application/problem+json", text, n);
-    }
+    struct MHD_Response *resp = text_response(r, "application/problem+json", text,
+                                              "{\"status\":503}");
     if (p->retry_after) {
         char ra[16];
         snprintf(ra, sizeof ra, "%d", p->retry_after);
