@@ -1,8 +1,9 @@
 /* complex_stream.c — GET /complex as a stream: the same bytes as json_dumps(JSON_COMPACT) of
  * the whole document, without the document.
  *
- * A complex of a million points is some 60 MB of JSON; as a jansson tree it took 1.4 GB and 25 s
- * per request. Here the big arrays (vertices, simplices, attributes, diagonals, the classes of
+ * A complex of a million points is some 60 MB of JSON points and simplices, and several hundred
+ * MB with the classes of its vertices and edges; as a jansson tree it took 1.4 GB and 25 s per
+ * request. Here the big arrays (vertices, simplices, attributes, diagonals, the classes of
  * vertices and edges) are written element by element into a 64 KiB buffer as the client reads,
  * and only the small members (tags, rules, summary) go through jansson, as a prepared text.
  * Positions and attributes are copied when the stream opens (edits change them in place), so
