@@ -251,6 +251,7 @@ out_geometry *out_geometry_compute(const sd_level *lv)
     out_geometry *g = api_calloc(1, sizeof *g);
     if (!g)
         return NULL;
+    atomic_init(&g->refs, 1);
     g->nbnd = sd_level_solid_boundary(lv, NULL);
     g->bnd = api_malloc(((size_t)g->nbnd * 3 + 1) * sizeof *g->bnd);
     if (g->bnd) {
@@ -265,9 +266,16 @@ out_geometry *out_geometry_compute(const sd_level *lv)
     return g;
 }
 
+out_geometry *out_geometry_ref(out_geometry *g)
+{
+    if (g)
+        atomic_fetch_add(&g->refs, 1);
+    return g;
+}
+
 void out_geometry_free(out_geometry *g)
 {
-    if (!g)
+    if (!g || atomic_fetch_sub(&g->refs, 1) != 1)
         return;
     api_free(g->bnd);
     api_free(g->normals);
