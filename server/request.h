@@ -87,7 +87,7 @@ const char *http_header(req *r, const char *name);   /* NULL when absent */
 const char *http_arg(req *r, const char *key);       /* a query argument, NULL when absent */
 const struct sockaddr *http_client_address(req *r); /* NULL when unknown */
 
-/* ---- http.c: answering ---- */
+/* ---- reply.c: answering ---- */
 
 struct MHD_Response *http_empty(void);
 struct MHD_Response *http_static_response(const void *data, size_t n);
@@ -117,6 +117,20 @@ typedef struct http_source {
  * queued. */
 void http_reply_stream(req *r, api_model *m, http_source src, uint64_t size, const char *ctype,
                        const char *disposition, uint64_t version);
+
+/* The headers every answer carries (CORS, nosniff): their number, at most 4 — for answers
+ * written on the socket itself (a chunked body over the limit, http.c). */
+typedef struct http_header_pair {
+    const char *name, *value;
+} http_header_pair;
+int http_common_header_list(const req *r, http_header_pair out[4]);
+/* The problem+json response of p (a refusal of the memory budget gets its Retry-After). */
+struct MHD_Response *http_problem_response(req *r, const api_problem *p);
+
+/* ---- http.c: a request's end ---- */
+
+/* Drop a reference on r; the last frees it (and trims the heap after a big request). */
+void http_req_unref(req *r);
 
 /* ---- http.c: compute slots ---- */
 
