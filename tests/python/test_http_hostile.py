@@ -585,7 +585,9 @@ def test_one_log_line_per_request(main_env):
         m = LOG.match(line)
         assert m, line
         got.append((m.group(1), m.group(2), int(m.group(3))))
-    assert got == expected
+    # a line is written when its response has been sent, which can come after the client's next
+    # request on another connection has been answered: one line each, in any order
+    assert sorted(got) == sorted(expected)
 
 
 def raw_auth(env, value):
