@@ -531,6 +531,8 @@ static sd_result run(sd_complex *c, int ch, op *ops, size_t n, const double *val
                      sd_edit_report *rep, uint64_t *counts, sd_error *err)
 {
     sd_mem *m = &c->mem;
+    if (rep)
+        rep->rules_rebuilt = -1;
     sd_result rc = sort_ops(ops, n, err);
     if (rc)
         return rc;
@@ -578,6 +580,8 @@ static sd_result run(sd_complex *c, int ch, op *ops, size_t n, const double *val
         swap_lists(&E);
     }
     /* done: report */
+    if (rep)
+        rep->rules_rebuilt = stale;
     for (int l = 0; l <= SD_MAX_LEVEL; l++) {
         uint64_t rec = l <= last ? E.set[l].n : l < c->nlevels ? c->lv[l]->t.nv : 0, chg = 0;
         uint32_t *ids = l <= last ? E.set[l].s->id : diff[l];

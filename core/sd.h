@@ -305,6 +305,11 @@ typedef struct sd_edit_report {
      * level recomputed whole) and, of those, the points that changed */
     uint64_t recomputed[SD_MAX_LEVEL + 1];
     uint64_t nchanged[SD_MAX_LEVEL + 1];
+    /* out: the coarsest level whose rules the edit built again because they read a moved
+     * position (see sd_complex_move: its finer levels were recomputed whole), or -1 — what reads
+     * more of a level than its channel values (its rules, the rule of each vertex) may have
+     * changed there too */
+    int rules_rebuilt;
 } sd_edit_report;
 
 /* Move points of channel `channel` (0 = positions): point at[i] gets values[i*ncomp ..

@@ -259,6 +259,7 @@ static void random_edits(bool levels)
             attr[i] = urand();
         sd_complex *c = mesh_complex(&m, o, NULL);
         CHECK(c && sd_complex_add_channel(c, attr, 2, NULL) == 1 && sd_complex_level(c, L, NULL));
+        int rebuilt = 0; /* calls that said they built rules again (Ying-Zorin only) */
         for (int round = 0; round < rounds; round++) {
             bool check = round % 3 == 0; /* the report against a before/after comparison */
             copy before;
@@ -270,8 +271,15 @@ static void random_edits(bool levels)
                 rep.changed = on_changed;
                 rep.ud = &s;
             }
-            CHECK(random_call(c, &m, L, levels, check || round % 2 ? &rep : NULL) == SD_OK);
+            rep.rules_rebuilt = -2;
+            bool reported = check || round % 2;
+            CHECK(random_call(c, &m, L, levels, reported ? &rep : NULL) == SD_OK);
             CHECK(sd_complex_levels_computed(c) == L + 1);
+            if (reported) {
+                CHECK(rep.rules_rebuilt >= -1 && rep.rules_rebuilt <= L);
+                CHECK(rep.rules_rebuilt == -1 || o == &YZ);
+                rebuilt += rep.rules_rebuilt >= 0;
+            }
             if (check) {
                 bool ok = report_matches(&s, &rep, &before, c);
                 drop(&before);
@@ -286,6 +294,7 @@ static void random_edits(bool levels)
                 CHECK(same);
             }
         }
+        CHECK(o != &YZ || rebuilt > 0);
         sd_complex_free(c);
         free(attr);
         mesh_free(&m);
