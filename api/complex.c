@@ -10,6 +10,7 @@
  * classes of level 0, which is immutable once built and so read without the model's lock.
  */
 #include "handlers.h"
+#include "details.h"
 #include "mem.h"
 #include "fill.h"
 #include "internal.h"
@@ -285,7 +286,7 @@ int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, a
                     api_problem *p)
 {
     static const char *const keys[] = {"vertices", "simplices", "attributes", "diagonals",
-                                       "fill", NULL};
+                                       "fill", "details", NULL};
     *out = NULL;
     if (api_only_keys(body, "", keys, p))
         return p->status;
@@ -317,6 +318,11 @@ int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, a
     keep.overrides = NULL;
     if (!rc && (rc = api_build_model(in, &keep, NULL, lim, out, p)) && in->nfill)
         api_fill_blame(in, nv_posted, ns_posted, p);
+    json_t *dt = json_object_get(body, "details");
+    if (!rc && dt && (rc = api_details_put(*out, dt, p))) { /* offsets of the new complex */
+        api_model_unref(*out);
+        *out = NULL;
+    }
     api_input_unref(in);
     return rc;
 }
@@ -450,6 +456,7 @@ json_t *api_get_complex(api_model *m, api_problem *p)
     for (uint32_t s = 0; s < in->ns; s++)
         if (in->size[s] == 4)
             json_array_append_new(dj, json_pack("[I, i]", (json_int_t)s, sd_complex_diagonal(m->c, s)));
+    json_t *details = api_details_count(m) ? api_details_json(m) : NULL; /* edits change them */
     pthread_rwlock_unlock(&m->data);
     static const char *const schemes[] = {"box", "averaged"}, *const weights[] = {"warren", "loop"};
     static const char *const nmd[] = {"G2", "G1"}, *const surfs[] = {"chang-qin", "ying-zorin"};
@@ -478,7 +485,7 @@ json_t *api_get_complex(api_model *m, api_problem *p)
     if (json_array_size(pj)) /* only when given: {"singular"} as PUT otherwise */
         json_object_set(tags, "petals", pj);
     json_decref(pj);
-    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:o, s:{s:s, s:o, s:s, s:s, s:s}, s:O}",
+    json_t *j = json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:o, s:{s:s, s:o, s:s, s:s, s:s}, s:O}",
                      "vertices", vs, "simplices", ss, "attributes", at, "diagonals", dj,
                      "classes", "vertices", cv,
                      "edges", ce, "tags", tags, "rules", "nonmanifold_default",
@@ -487,4 +494,8 @@ json_t *api_get_complex(api_model *m, api_problem *p)
                      "surface_weights", weights[m->rules.surface_weights & 1],
                      "nonmanifold_surface", surfs[m->rules.nonmanifold_surface & 1],
                      "summary", m->summary);
+    if (j && details) /* beside tags and rules; only when there are any */
+        json_object_set(j, "details", details);
+    json_decref(details);
+    return j;
 }

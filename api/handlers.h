@@ -49,10 +49,14 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
 /* Close a stream opened by api_level_open (it holds the model's data lock for reading). */
 void api_level_close(api_model *m, out_stream *os);
 
-/* PATCH /control-points: moves and attribute values of control points, applied to every cached
- * level through the matrices (in place, so it waits for the streams in flight). Validates all
- * first. counts[l] = points updated at level l; *levels = levels updated. 0 or the status. */
-int api_edit(api_model *m, json_t *body, uint64_t *counts, int *levels, api_problem *p);
+/* PATCH /control-points: moves and attribute values of control points, and moves of points of
+ * finer levels ("level": l, stored as detail offsets; missing levels are computed, within lim),
+ * applied to every cached level through the matrices (in place, so it waits for the streams in
+ * flight). Validates all first. `version` is the one the edit will have (the session's + 1): the
+ * changed points are stamped with it (api/delta.h) and the model takes it. counts[l] = points
+ * updated at level l; *levels = levels computed now. 0 or the status. */
+int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim,
+             uint64_t *counts, int *levels, api_problem *p);
 
 /* GET /levels/{L}/stats (new reference). */
 json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_problem *p);

@@ -92,9 +92,13 @@ typedef struct api_model {
     double seconds[SD_MAX_LEVEL + 1]; /* time spent computing each level (under lock) */
     struct json_t *summary;   /* level-0 summary (docs/API.md PUT /complex), read-only once built */
     struct out_geometry *geometry[SD_MAX_LEVEL + 1]; /* glTF geometry per level, built under lock */
+    struct api_delta *delta;  /* what edits changed in the computed levels (api/delta.h), under lock */
     /* published figures, readable without the lock */
     atomic_int levels_cached;
     atomic_size_t memory_bytes;
+    /* the session version of the model's content: set when the model is published and by
+     * every edit (under both locks) */
+    _Atomic uint64_t version;
 } api_model;
 
 api_input *api_input_new(void);

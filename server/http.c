@@ -21,6 +21,7 @@
 #include "request.h"
 #include "../api/mem.h"
 #include "../api/handlers.h"
+#include "events.h"
 #include "guard.h"
 #include "metrics.h"
 #include <arpa/inet.h>
@@ -92,7 +93,8 @@ static int common_header_list(const req *r, header out[4])
     if (strcmp(origin, "*"))
         out[n++] = (header){MHD_HTTP_HEADER_VARY, "Origin"};
     out[n++] = (header){MHD_HTTP_HEADER_ACCESS_CONTROL_EXPOSE_HEADERS,
-                        "ETag, Location, Retry-After, Content-Disposition"};
+                        "ETag, Location, Retry-After, Content-Disposition, "
+                        "X-Attribute-Components"};
     out[n++] = (header){"X-Content-Type-Options", "nosniff"};
     return n;
 }
@@ -368,6 +370,57 @@ void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uin
     http_queue(r, 200, resp);
 }
 
+/* ---- event streams ---------------------------------------------------------------------- */
+
+typedef struct events_ctx {
+    req *r;
+    struct ev_listener *l;
+} events_ctx;
+
+/* Blocks in the connection's own thread until there is something to send (DECISIONS 33). */
+static ssize_t events_read(void *cls, uint64_t pos, char *buf, size_t max)
+{
+    (void)pos;
+    events_ctx *ec = cls;
+    ssize_t n = ev_read(ec->l, buf, max, ec->r->srv->cfg.sse_heartbeat_s);
+    if (n <= 0)
+        return MHD_CONTENT_READER_END_OF_STREAM;
+    atomic_fetch_add(&ec->r->bytes, (uint64_t)n);
+    metrics_bytes((uint64_t)n);
+    return n;
+}
+
+static void events_free(void *cls)
+{
+    events_ctx *ec = cls;
+    ev_unlisten(ec->l);
+    req_unref(ec->r);
+    api_free(ec);
+}
+
+void http_reply_events(req *r, struct ev_listener *l)
+{
+    events_ctx *ec = api_malloc(sizeof *ec);
+    struct MHD_Response *resp = NULL;
+    if (ec) {
+        *ec = (events_ctx){r, l};
+        atomic_fetch_add(&r->refs, 1);
+        resp = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 4096, events_read, ec,
+                                                 events_free);
+        if (!resp)
+            events_free(ec);
+    } else
+        ev_unlisten(l);
+    if (!resp) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "text/event-stream");
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
+    MHD_add_response_header(resp, "X-Accel-Buffering", "no");
+    http_queue(r, 200, resp);
+}
+
 /* ---- a chunked body over the limit ------------------------------------------------------- */
 
 /* Write all n bytes to the socket before `deadline` (monotonic seconds); 0 or -1. */
@@ -581,10 +634,16 @@ static int early_auth(req *r)
     char tbuf[128];
     if (session_token_ok(r->s, parse_bearer(h, tbuf, sizeof tbuf)))
         return 0;
+    int token_query = 0; /* the route lists access_token among its query parameters */
+    for (const char *const *a = r->rt->query; a && *a; a++)
+        token_query |= !strcmp(*a, "access_token");
+    const char *q = token_query && !h ? http_arg(r, "access_token") : NULL;
+    if (q && session_token_ok(r->s, q))
+        return 0;
     api_problem p = {0};
     api_fail(&p, 401, "unauthorized",
-             h ? "the bearer token does not match this session"
-               : "send the session's token as \"Authorization: Bearer <token>\"");
+             h || q ? "the bearer token does not match this session"
+                    : "send the session's token as \"Authorization: Bearer <token>\"");
     http_reply_problem(r, &p);
     return 1;
 }
@@ -874,6 +933,7 @@ bad_addr:
 
 void http_stop(server *srv)
 {
+    ev_stop_all(); /* event streams end, so their connection threads can be joined */
     if (srv->mhd) {
         MHD_stop_daemon(srv->mhd);
         srv->mhd = NULL;

@@ -19,5 +19,7 @@ void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t sessio
 /* The connection guard's gauges and counters (guard.h). */
 struct guard_stats;
 void metrics_write_connections(FILE *f, const struct guard_stats *s);
+/* The event streams (events.h: ev_stats). */
+void metrics_write_events(FILE *f, unsigned listeners, uint64_t dropped);
 
 #endif
