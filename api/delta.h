@@ -45,9 +45,8 @@ void api_delta_begin_edit(api_model *m);
 /* Zero rep and set its callback to stamp, for this call, the points that changed (and, for
  * positions, to update the cached normals around them). */
 void api_delta_report(api_delta_edit *de, sd_edit_report *rep);
-/* After a successful edit (m->version still the old one): rules_rebuilt as the core reported it
- * for the positions (>= 0: no delta reaches back across this edit). */
-void api_delta_end_edit(api_model *m, uint64_t version, int rules_rebuilt);
+/* After a successful edit (m->version still the old one). */
+void api_delta_end_edit(api_model *m);
 
 /* The query of GET /levels/{L}/delta (NULL = absent). */
 typedef struct api_delta_query {

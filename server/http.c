@@ -3,9 +3,11 @@
  *
  * Threading: MHD runs one thread per connection (MHD_USE_THREAD_PER_CONNECTION), so a handler
  * may block — on a session's write lock or a model's compute lock — without stalling other
- * connections. Computations additionally take one of `threads` compute slots (a semaphore), with
- * a bounded wait and a 429 + Retry-After when the daemon is saturated, so /healthz, /readyz and
- * /metrics never queue behind work.
+ * connections. Computations additionally take one of `threads` compute slots (server/slots.c:
+ * handed to the waiter whose session holds the fewest, and taken only once the model's lock is
+ * held, so a request waiting for its own session's computation holds none), with a bounded wait
+ * and a 429 + Retry-After when the daemon is saturated, so /healthz, /readyz and /metrics never
+ * queue behind work.
  *
  * A request goes: the request line -> on_uri() creates it and takes its query away from
  * libmicrohttpd; first callback (no body yet) -> early(): target (414 for a long path, 400 for a
@@ -14,9 +16,10 @@
  * Content-Length against max_body_bytes before anything is read, a body where none is taken,
  * Content-Type: 501, 413, 400, 415); body callbacks -> append to a buffer capped at
  * max_body_bytes; final callback -> the query parameters the route takes (400 for others), then
- * the route's handler (routes.c), which calls api/ and queues one response. Level responses
- * stream through out_read() from a callback response that holds references on the session's
- * model until the last byte is sent.
+ * the route's handler (routes.c), which calls api/ and queues one response. Level responses and
+ * GET /complex stream from a callback response (a source: out_read, api_cstream_read) that holds
+ * references on the session's model until the last byte is sent, and no lock: the source copied
+ * what edits change when it opened.
  */
 #include "request.h"
 #include "../api/mem.h"
@@ -26,6 +29,7 @@
 #include "metrics.h"
 #include <arpa/inet.h>
 #include <errno.h>
+#include <malloc.h>
 #include <microhttpd.h>
 #include <poll.h>
 #include <sys/socket.h>
@@ -68,14 +72,24 @@ static const char *intern_method(const char *m)
     return "OTHER";
 }
 
+/* A request that took or gave back this much (its body, parse, levels, a model it freed) is
+ * followed by malloc_trim: what glibc keeps in its heaps below the mmap threshold goes back to
+ * the system, so the resident size follows what the daemon holds. */
+#define TRIM_AFTER_BYTES (32u << 20)
+
 static void req_unref(req *r)
 {
     if (atomic_fetch_sub(&r->refs, 1) != 1)
         return;
+    api_mem_meter *prev = api_mem_meter_set(&r->mem);
     session_unref(r->s);
     api_free(r->body);
     api_free(r->query);
+    api_mem_meter_set(prev);
+    int trim = r->mem.moved > TRIM_AFTER_BYTES;
     api_free(r);
+    if (trim)
+        malloc_trim(0);
 }
 
 /* ---- responses ------------------------------------------------------------------------------ */
@@ -150,35 +164,59 @@ void http_set_etag(struct MHD_Response *resp, uint64_t version)
     MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
 }
 
+/* A response owning `text` (an api_malloc block, counted in r->bytes) of type ctype; without
+ * text, for lack of memory to render it, the static problem `fallback` instead. */
+static struct MHD_Response *text_response(req *r, const char *ctype, char *text,
+                                          const char *fallback)
+{
+    if (!text) { /* nothing left to allocate a body from */
+        struct MHD_Response *resp = http_static_response(fallback, strlen(fallback));
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "application/problem+json");
+        atomic_store(&r->bytes, strlen(fallback));
+        return resp;
+    }
+    size_t n = strlen(text);
+    atomic_store(&r->bytes, n);
+    return http_buffer_response(ctype, text, n);
+}
+
 void http_reply_json(req *r, int status, json_t *body, uint64_t version)
 {
     char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
     json_decref(body);
-    if (!text) {
-        text = api_strdup("{\"type\":\"/errors/internal\",\"title\":\"Internal Server Error\","
-                      "\"status\":500,\"detail\":\"could not render the response\"}");
+    if (!text)
         status = 500;
-    }
-    size_t n = strlen(text);
-    atomic_store(&r->bytes, n);
-    struct MHD_Response *resp = http_buffer_response(
-        status >= 400 ? "application/problem+json" : "application/json", text, n);
+    struct MHD_Response *resp = text_response(
+        r, status >= 400 ? "application/problem+json" : "application/json", text,
+        "{\"type\":\"/errors/internal\",\"title\":\"Internal Server Error\",\"status\":500,"
+        "\"detail\":\"could not render the response\"}");
     if (version)
         http_set_etag(resp, version);
     http_queue(r, status, resp);
 }
 
-/* The problem+json response of p (with Retry-After and WWW-Authenticate where they apply). */
-static struct MHD_Response *problem_response(req *r, const api_problem *p)
+/* Memory the budget refused during the request (api/mem.h) is not the machine's: the request
+ * may succeed once others give some back, so say so (memory-budget, with Retry-After). */
+static const api_problem *budget_problem(req *r, const api_problem *p, api_problem *q)
 {
+    if (p->status != 503 || !p->slug || strcmp(p->slug, "out-of-memory") || !r->mem.over_budget)
+        return p;
+    api_fail(q, 503, "memory-budget", "the daemon's memory budget (--max-memory, %zu bytes) is in "
+             "use by other requests and sessions; retry later (%s)", api_mem_budget(), p->detail);
+    q->retry_after = 2;
+    return q;
+}
+
+/* The problem+json response of p (with Retry-After and WWW-Authenticate where they apply). */
+static struct MHD_Response *problem_response(req *r, const api_problem *p0)
+{
+    api_problem q = {0};
+    const api_problem *p = budget_problem(r, p0, &q);
     json_t *j = api_problem_json(p);
     char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
     json_decref(j);
-    if (!text)
-        text = api_strdup("{\"status\":500}");
-    size_t n = strlen(text);
-    atomic_store(&r->bytes, n);
-    struct MHD_Response *resp = http_buffer_response("application/problem+json", text, n);
+    struct MHD_Response *resp = text_response(r, "application/problem+json", text,
+                                              "{\"status\":503}");
     if (p->retry_after) {
         char ra[16];
         snprintf(ra, sizeof ra, "%d", p->retry_after);
@@ -222,12 +260,7 @@ void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
 
 int http_take_slot(req *r, api_problem *p)
 {
-    struct timespec until;
-    clock_gettime(CLOCK_REALTIME, &until);
-    until.tv_sec += r->srv->cfg.queue_timeout_s;
-    while (sem_timedwait(&r->srv->compute, &until)) {
-        if (errno == EINTR)
-            continue;
+    if (slots_take(r->srv->compute, r->s, r->srv->cfg.queue_timeout_s)) {
         p->retry_after = 5;
         api_fail(p, 429, "busy", "all %d compute threads are busy; retry in a few seconds",
                  r->srv->cfg.threads);
@@ -244,7 +277,7 @@ void http_give_slot(req *r)
 {
     if (r->s)
         atomic_store(&r->s->busy_level, -1);
-    sem_post(&r->srv->compute);
+    slots_give(r->srv->compute, r->s);
 }
 
 
@@ -312,15 +345,14 @@ static int query_refused(req *r, const char *const *allowed)
 typedef struct stream_ctx {
     req *r;
     api_model *m;
-    out_stream *os;
-    int level_data;   /* a level stream: holds the model's data lock (api_level_close) */
+    http_source src;
 } stream_ctx;
 
 static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
 {
     (void)pos;
     stream_ctx *sc = cls;
-    ssize_t n = out_read(sc->os, buf, max);
+    ssize_t n = sc->src.read(sc->src.ctx, buf, max);
     if (n > 0) {
         atomic_fetch_add(&sc->r->bytes, (uint64_t)n);
         metrics_bytes((uint64_t)n);
@@ -329,33 +361,31 @@ static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
     return n == 0 ? MHD_CONTENT_READER_END_OF_STREAM : MHD_CONTENT_READER_END_WITH_ERROR;
 }
 
+/* The end of a stream: its source, the model and the request go, counted on the request's
+ * meter (a snapshot given back is memory moved: see req_unref). */
 static void stream_free(void *cls)
 {
     stream_ctx *sc = cls;
-    if (sc->level_data)
-        api_level_close(sc->m, sc->os);
-    else
-        out_close(sc->os);
+    req *r = sc->r;
+    api_mem_meter *prev = api_mem_meter_set(&r->mem);
+    sc->src.close(sc->src.ctx);
     api_model_unref(sc->m);
-    req_unref(sc->r);
     api_free(sc);
+    api_mem_meter_set(prev);
+    req_unref(r);
 }
 
-
-void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uint64_t size,
-                       const char *ctype, const char *disposition, uint64_t version)
+void http_reply_stream(req *r, api_model *m, http_source src, uint64_t size, const char *ctype,
+                       const char *disposition, uint64_t version)
 {
     stream_ctx *sc = api_malloc(sizeof *sc);
     if (!sc) {
-        if (level_data)
-            api_level_close(m, os);
-        else
-            out_close(os);
+        src.close(src.ctx);
         api_model_unref(m);
         http_fail(r, 503, "out-of-memory", "out of memory");
         return;
     }
-    *sc = (stream_ctx){r, m, os, level_data};
+    *sc = (stream_ctx){r, m, src};
     atomic_fetch_add(&r->refs, 1);
     struct MHD_Response *resp = MHD_create_response_from_callback(
         size == UINT64_MAX ? MHD_SIZE_UNKNOWN : size, 256 * 1024, stream_read, sc, stream_free);
@@ -365,7 +395,8 @@ void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uin
         return;
     }
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
-    MHD_add_response_header(resp, "Content-Disposition", disposition);
+    if (disposition)
+        MHD_add_response_header(resp, "Content-Disposition", disposition);
     http_set_etag(resp, version);
     http_queue(r, 200, resp);
 }
@@ -648,6 +679,21 @@ static int early_auth(req *r)
     return 1;
 }
 
+/* The whole buffer of a body whose Content-Length is known, taken before it is read: one block
+ * of the exact size (no doubling), and a body that does not fit the memory budget is refused
+ * before a byte of it arrives. 1 when a response was queued. */
+static int reserve_body(req *r, size_t n)
+{
+    r->body = api_malloc(n + 1);
+    if (!r->body) {
+        http_fail(r, 503, "out-of-memory", "no memory for a body of %zu bytes; retry later", n);
+        return 1;
+    }
+    r->cap = n + 1;
+    r->body[0] = 0;
+    return 0;
+}
+
 /* What can be said of the body before reading it: a transfer coding MHD can frame (501), a
  * Content-Length within max_body_bytes (413, before anything is allocated), no body where the
  * route takes none (400), JSON where it takes one (415). 1 when a response was queued. */
@@ -684,6 +730,8 @@ static int early_body(req *r)
                       r->rt->pattern);
             return 1;
         }
+        if (n > 0 && reserve_body(r, (size_t)n))
+            return 1;
     }
     if (r->rt->body && (cl ? strcmp(cl, "0") : 1)) {
         const char *ct = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
@@ -781,7 +829,7 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
             while (cap < r->len + n + 1)
                 cap *= 2;
             char *b = api_realloc(r->body, cap);
-            if (!b) {
+            if (!b) { /* discard the rest, answer 503 at the end */
                 r->too_big = 1;
                 return MHD_YES;
             }

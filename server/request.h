@@ -19,6 +19,7 @@
 #include "../api/problem.h"
 #include <stdatomic.h>
 #include <stdint.h>
+#include <sys/types.h>
 
 struct MHD_Connection;
 struct MHD_Response;
@@ -105,11 +106,19 @@ void http_reply_problem(req *r, const api_problem *p);
 void http_reply_versioned(req *r, json_t *j, uint64_t version, const api_problem *p);
 void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
-/* 200 with a stream (size or UINT64_MAX: chunked) that holds m and r until its last byte, then
- * closes os (with api_level_close when level_data: it holds the model's data lock). On failure
- * everything is released and a 503 queued. */
-void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uint64_t size,
-                       const char *ctype, const char *disposition, uint64_t version);
+/* What a streamed response reads: `read` fills up to max bytes of buf (0 at the end, -1 on a
+ * failure, which cuts the response short); `close` frees ctx. */
+typedef struct http_source {
+    void *ctx;
+    ssize_t (*read)(void *ctx, char *buf, size_t max);
+    void (*close)(void *ctx);
+} http_source;
+
+/* 200 with a stream (size or UINT64_MAX: chunked; disposition may be NULL) that holds m and r
+ * until its last byte, then closes the source. On failure everything is released and a 503
+ * queued. */
+void http_reply_stream(req *r, api_model *m, http_source src, uint64_t size, const char *ctype,
+                       const char *disposition, uint64_t version);
 
 /* 200 with a text/event-stream of listener l (server/events.h), read in this connection's
  * thread until the stream ends (heartbeats every cfg.sse_heartbeat_s); ev_unlisten when the

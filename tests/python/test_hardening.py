@@ -581,9 +581,12 @@ def test_patch_refuses_a_degenerate_simplex_and_allows_inversion(daemon):
                   {"index": 1, "position": [0, 1, 0]}])      # vertex 1 onto vertex 2
     assert r.status_code == 422, r.text
     assert any(e["pointer"].startswith("/moves/2") for e in r.json()["errors"]), r.text
-    assert patch(s, [{"index": 3, "position": [0, 0, -1]}]).status_code == 200   # inverted: fine
-    for path in ("/tags", "/rules"):
-        assert s.req("PUT", path, json={}).status_code == 200
+    # tetrahedron [0,1,2,3] inverted: fine (z = -1 would put 3 on the plane of 1, 2, 4 and make
+    # tetrahedron [1,2,3,4] flat, which is refused)
+    assert patch(s, [{"index": 3, "position": [0, 0, -0.5]}]).status_code == 200
+    assert patch(s, [{"index": 3, "position": [0, 0, -1]}]).status_code == 422
+    for path, body in (("/tags", {"singular": []}), ("/rules", {})):   # rebuilt from the edit
+        assert s.req("PUT", path, json=body).status_code == 200
 
 
 def test_if_match_and_if_none_match_parse_entity_tags(daemon):
