@@ -446,6 +446,13 @@ void http_reply_events(req *r, struct ev_listener *l)
         http_fail(r, 503, "out-of-memory", "out of memory");
         return;
     }
+    /* what the kernel holds for a client that does not read is bounded too (the hub's buffer
+     * is the rest), so such a listener is found out and dropped after some 100 KiB of events */
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(r->conn, MHD_CONNECTION_INFO_CONNECTION_FD);
+    int sndbuf = EV_SOCKET_BYTES;
+    if (ci)
+        setsockopt(ci->connect_fd, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "text/event-stream");
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
     MHD_add_response_header(resp, "X-Accel-Buffering", "no");
