@@ -16,10 +16,8 @@
  * Content-Length against max_body_bytes before anything is read, a body where none is taken,
  * Content-Type: 501, 413, 400, 415); body callbacks -> append to a buffer capped at
  * max_body_bytes; final callback -> the query parameters the route takes (400 for others), then
- * the route's handler (routes.c), which calls api/ and queues one response. Level responses and
- * GET /complex stream from a callback response (a source: out_read, api_cstream_read) that holds
- * references on the session's model until the last byte is sent, and no lock: the source copied
- * what edits change when it opened.
+ * the route's handler (routes.c), which calls api/ and queues one response. Streamed responses
+ * (levels, GET /complex, event streams) are server/stream.c.
  */
 #include "request.h"
 #include "../api/mem.h"
@@ -77,7 +75,7 @@ static const char *intern_method(const char *m)
  * the system, so the resident size follows what the daemon holds. */
 #define TRIM_AFTER_BYTES (32u << 20)
 
-static void req_unref(req *r)
+void http_req_unref(req *r)
 {
     if (atomic_fetch_sub(&r->refs, 1) != 1)
         return;
@@ -338,125 +336,6 @@ static int query_refused(req *r, const char *const *allowed)
             }
     }
     return 0;
-}
-
-/* ---- streaming ------------------------------------------------------------------------------ */
-
-typedef struct stream_ctx {
-    req *r;
-    api_model *m;
-    http_source src;
-} stream_ctx;
-
-static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
-{
-    (void)pos;
-    stream_ctx *sc = cls;
-    ssize_t n = sc->src.read(sc->src.ctx, buf, max);
-    if (n > 0) {
-        atomic_fetch_add(&sc->r->bytes, (uint64_t)n);
-        metrics_bytes((uint64_t)n);
-        return n;
-    }
-    return n == 0 ? MHD_CONTENT_READER_END_OF_STREAM : MHD_CONTENT_READER_END_WITH_ERROR;
-}
-
-/* The end of a stream: its source, the model and the request go, counted on the request's
- * meter (a snapshot given back is memory moved: see req_unref). */
-static void stream_free(void *cls)
-{
-    stream_ctx *sc = cls;
-    req *r = sc->r;
-    api_mem_meter *prev = api_mem_meter_set(&r->mem);
-    sc->src.close(sc->src.ctx);
-    api_model_unref(sc->m);
-    api_free(sc);
-    api_mem_meter_set(prev);
-    req_unref(r);
-}
-
-void http_reply_stream(req *r, api_model *m, http_source src, uint64_t size, const char *ctype,
-                       const char *disposition, uint64_t version)
-{
-    stream_ctx *sc = api_malloc(sizeof *sc);
-    if (!sc) {
-        src.close(src.ctx);
-        api_model_unref(m);
-        http_fail(r, 503, "out-of-memory", "out of memory");
-        return;
-    }
-    *sc = (stream_ctx){r, m, src};
-    atomic_fetch_add(&r->refs, 1);
-    struct MHD_Response *resp = MHD_create_response_from_callback(
-        size == UINT64_MAX ? MHD_SIZE_UNKNOWN : size, 256 * 1024, stream_read, sc, stream_free);
-    if (!resp) {
-        stream_free(sc);
-        http_fail(r, 503, "out-of-memory", "out of memory");
-        return;
-    }
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
-    if (disposition)
-        MHD_add_response_header(resp, "Content-Disposition", disposition);
-    http_set_etag(resp, version);
-    http_queue(r, 200, resp);
-}
-
-/* ---- event streams ---------------------------------------------------------------------- */
-
-typedef struct events_ctx {
-    req *r;
-    struct ev_listener *l;
-} events_ctx;
-
-/* Blocks in the connection's own thread until there is something to send (DECISIONS 33). */
-static ssize_t events_read(void *cls, uint64_t pos, char *buf, size_t max)
-{
-    (void)pos;
-    events_ctx *ec = cls;
-    ssize_t n = ev_read(ec->l, buf, max, ec->r->srv->cfg.sse_heartbeat_s);
-    if (n <= 0)
-        return MHD_CONTENT_READER_END_OF_STREAM;
-    atomic_fetch_add(&ec->r->bytes, (uint64_t)n);
-    metrics_bytes((uint64_t)n);
-    return n;
-}
-
-static void events_free(void *cls)
-{
-    events_ctx *ec = cls;
-    ev_unlisten(ec->l);
-    req_unref(ec->r);
-    api_free(ec);
-}
-
-void http_reply_events(req *r, struct ev_listener *l)
-{
-    events_ctx *ec = api_malloc(sizeof *ec);
-    struct MHD_Response *resp = NULL;
-    if (ec) {
-        *ec = (events_ctx){r, l};
-        atomic_fetch_add(&r->refs, 1);
-        resp = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 4096, events_read, ec,
-                                                 events_free);
-        if (!resp)
-            events_free(ec);
-    } else
-        ev_unlisten(l);
-    if (!resp) {
-        http_fail(r, 503, "out-of-memory", "out of memory");
-        return;
-    }
-    /* what the kernel holds for a client that does not read is bounded too (the hub's buffer
-     * is the rest), so such a listener is found out and dropped after some 100 KiB of events */
-    const union MHD_ConnectionInfo *ci =
-        MHD_get_connection_info(r->conn, MHD_CONNECTION_INFO_CONNECTION_FD);
-    int sndbuf = EV_SOCKET_BYTES;
-    if (ci)
-        setsockopt(ci->connect_fd, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "text/event-stream");
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
-    MHD_add_response_header(resp, "X-Accel-Buffering", "no");
-    http_queue(r, 200, resp);
 }
 
 /* ---- a chunked body over the limit ------------------------------------------------------- */
@@ -906,7 +785,7 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
     log_line(srv, LOG_DEBUG, "%s %s: at most %lld bytes held by the request", r->method, path,
              (long long)r->mem.peak);
     *con_cls = NULL;
-    req_unref(r);
+    http_req_unref(r);
 }
 
 /* libmicrohttpd's messages, as warnings — except those about clients that went away or were

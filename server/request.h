@@ -106,6 +106,11 @@ void http_reply_problem(req *r, const api_problem *p);
 void http_reply_versioned(req *r, json_t *j, uint64_t version, const api_problem *p);
 void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
+/* Drop a reference on a request (the last frees it, and trims the heap after a large one). */
+void http_req_unref(req *r);
+
+/* ---- stream.c: streamed responses ---- */
+
 /* What a streamed response reads: `read` fills up to max bytes of buf (0 at the end, -1 on a
  * failure, which cuts the response short); `close` frees ctx. */
 typedef struct http_source {
