@@ -12,11 +12,12 @@
  * vertex, its drawn triangles in out_normals' order (surface triangles, then the boundary), built
  * once per level with the glTF geometry. An edit recomputes the cached normal of each of those
  * vertices with out_triangle_normal and out_normal_unit, summed in that order, so the normals
- * equal out_normals' of the edited level bit for bit (docs/DECISIONS.md 34).
+ * equal out_normals' of the edited level bit for bit (docs/DECISIONS.md 36). A geometry a stream
+ * holds a reference on is never written: the model's cache becomes a copy first.
  *
  * Costs (docs/SERVICE.md "Live edits"): 4 bytes per point of a level where a position changed,
  * 4 more per attribute changed there, and with the glTF geometry 4 bytes per vertex plus 12 per
- * drawn triangle for the incidence; a delta scans its level's stamps (4 bytes per point) and
+ * drawn triangle for the incidence (and a copy of the normals while a stream holds them); a delta scans its level's stamps (4 bytes per point) and
  * walks the triangles at the moved points. Stamps are 32-bit: a model past version 2^32 - 1
  * answers 410 (refetch) rather than wrap.
  */
