@@ -126,12 +126,8 @@ void metrics_write_connections(FILE *f, const guard_stats *s)
 
 void metrics_write_events(FILE *f, unsigned listeners, uint64_t dropped)
 {
-    fprintf(f, "# HELP subdivd_event_listeners Open event streams (GET /v1/sessions/{id}/events).\n"
-               "# TYPE subdivd_event_listeners gauge\n"
-               "subdivd_event_listeners %u\n"
-               "# HELP subdivd_event_listeners_dropped_total Event streams ended because their "
-               "client did not read (its buffer filled).\n"
-               "# TYPE subdivd_event_listeners_dropped_total counter\n"
-               "subdivd_event_listeners_dropped_total %llu\n",
-            listeners, (unsigned long long)dropped);
+    sample(f, "subdivd_event_listeners", "gauge",
+           "Open event streams (GET /v1/sessions/{id}/events).", listeners);
+    sample(f, "subdivd_event_listeners_dropped_total", "counter",
+           "Event streams ended because their client did not read (its buffer filled).", dropped);
 }

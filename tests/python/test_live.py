@@ -586,3 +586,72 @@ def test_fine_moves_validated_all_or_nothing(daemon):
         assert r.json()["errors"][0]["pointer"] == ptr, r.text
     assert s.req("GET", "/complex").json() == before and version_of(s) == v
     s.delete()
+
+
+def test_a_download_in_flight_keeps_its_normals(daemon):
+    """Edits update the cached normals copy-on-write: a glTF stream opened before an edit, read
+    slowly across it, is the glTF of its moment byte for byte; one opened after is the edited one.
+    Level 4 as embedded glTF, so that its positions alone (before the normals) outgrow what the
+    kernel and libmicrohttpd buffer for a client that has read 4 KiB (~4.5 MB)."""
+    body = complex_from_text(CUBE)
+    s = new_session(daemon, body)
+    before = s.level(4, format="gltf").content
+    v = version_of(s)
+    host, port = s.d.url.rsplit("/", 1)[1].split(":")
+    k = socket.socket()
+    k.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    k.connect((host, int(port)))
+    k.sendall(f"GET /v1/sessions/{s.id}/levels/4?format=gltf HTTP/1.1\r\nHost: x\r\n"
+              f"Connection: close\r\nAuthorization: Bearer {s.token}\r\n\r\n".encode())
+    got = k.recv(4096)
+    time.sleep(0.3)
+    for j in range(3):                         # edits while the stream waits for the client
+        patch(s, {"moves": [{"index": 5 + 9 * j, "position": moved(body["vertices"][5 + 9 * j], j, 0.004)}]})
+    k.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)   # now read at full speed
+    while True:
+        b = k.recv(1 << 20)
+        if not b:
+            break
+        got += b
+    k.close()
+    head, _, text = got.partition(b"\r\n\r\n")
+    assert b" 200 " in head.split(b"\r\n")[0] and f'ETag: "{v}"'.encode() in head
+    assert text == before
+    after = s.level(4, format="gltf")
+    assert after.headers["ETag"] == f'"{v + 3}"' and after.content != before
+    s.delete()
+
+
+def test_a_rebuilding_edit_keeps_offsets_and_finer_moves(daemon):
+    """An edit that moves a point a Ying-Zorin corner's angle is measured on becomes a new model:
+    it carries the session's offsets and applies the edit's finer moves; its levels equal a fresh
+    session's with the same control points and offsets."""
+    V = [[0, 0, 0], [0, 0, 1], [0, 0, 2], [1, 0, 0], [1, 0, 1], [1, 0, 2],
+         [-.5, .8, 0], [-.5, .8, 1], [-.5, .8, 2], [-.5, -.8, 0], [-.5, -.8, 1], [-.5, -.8, 2]]
+    T = []
+    for a in (3, 6, 9):
+        T += [[0, 1, a + 1], [0, a + 1, a], [1, 2, a + 2], [1, a + 2, a + 1]]
+    rules = {"nonmanifold_surface": "ying-zorin"}
+    tags = {"petals": [{"vertex": 0, "triangle": [0, 4, 3], "kind": "convex"}]}
+    s = new_session(daemon, {"vertices": V, "simplices": T})
+    assert s.req("PUT", "/rules", json=rules).status_code == 200
+    assert s.req("PUT", "/tags", json=tags).status_code == 200
+    p2 = level_xyz(s, 2)
+    patch(s, {"moves": [{"index": 7, "level": 2, "position": list(p2[7] + 0.01)}]})
+    p1 = level_xyz(s, 1)
+    target = list(p1[4] + [0.02, 0, -0.01])
+    W = [list(v) for v in V]
+    W[3] = [1.2, 0.7, -0.1]
+    patch(s, {"moves": [{"index": 3, "position": W[3]}, {"index": 4, "level": 1, "position": target}]})
+    got1, got2 = level_xyz(s, 1), level_xyz(s, 2)
+    np.testing.assert_array_equal(got1[4], target)
+    c = s.req("GET", "/complex").json()
+    assert sorted((e["level"], e["index"]) for e in c["details"]) == [(1, 4), (2, 7)]
+    assert c["vertices"][3] == W[3]
+    fresh = new_session(daemon, {"vertices": W, "simplices": T, "details": c["details"]})
+    assert fresh.req("PUT", "/rules", json=rules).status_code == 200
+    assert fresh.req("PUT", "/tags", json=tags).status_code == 200
+    np.testing.assert_array_equal(level_xyz(fresh, 1), got1)
+    np.testing.assert_array_equal(level_xyz(fresh, 2), got2)
+    s.delete()
+    fresh.delete()
