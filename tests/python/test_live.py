@@ -655,3 +655,12 @@ def test_a_rebuilding_edit_keeps_offsets_and_finer_moves(daemon):
     np.testing.assert_array_equal(level_xyz(fresh, 2), got2)
     s.delete()
     fresh.delete()
+
+
+def test_events_deleted_on_expiry(daemon):
+    s = Session(daemon, ttl_s=1)
+    li = Listener(daemon, s)
+    assert li.wait_for(lambda e: e["event"] == "deleted", timeout=15), li.events
+    assert [e for e in li.events if e["event"] == "deleted"][0]["data"]["reason"] == "expired"
+    assert li.done.wait(5)
+    assert s.req("GET").status_code == 404
