@@ -272,7 +272,7 @@ typedef struct buf {
 
 static void put(buf *o, const void *x, size_t n)
 {
-    if (o->failed)
+    if (o->failed || (!n && o->b)) /* x may be NULL when n is 0 (an empty delta) */
         return;
     if (o->n + n + 1 > o->cap) {
         size_t cap = o->cap ? o->cap : 4096;
@@ -286,7 +286,8 @@ static void put(buf *o, const void *x, size_t n)
         o->b = b;
         o->cap = cap;
     }
-    memcpy(o->b + o->n, x, n);
+    if (n)
+        memcpy(o->b + o->n, x, n);
     o->n += n;
     o->b[o->n] = 0;
 }
