@@ -1,5 +1,5 @@
 /* http.c — the libmicrohttpd glue: connection callbacks, the checks made before a body is read,
- * body collection, responses, streaming, compute slots, one log line per request.
+ * body collection, compute slots, one log line per request (the responses: reply.c).
  *
  * Threading: MHD runs one thread per connection (MHD_USE_THREAD_PER_CONNECTION), so a handler
  * may block — on a session's write lock or a model's compute lock — without stalling other
@@ -16,8 +16,10 @@
  * Content-Length against max_body_bytes before anything is read, a body where none is taken,
  * Content-Type: 501, 413, 400, 415); body callbacks -> append to a buffer capped at
  * max_body_bytes; final callback -> the query parameters the route takes (400 for others), then
- * the route's handler (routes.c), which calls api/ and queues one response. Streamed responses
- * (levels, GET /complex, event streams) are server/stream.c.
+ * the route's handler (routes.c), which calls api/ and queues one response. Level responses and
+ * GET /complex stream from a callback response (a source: out_read, api_cstream_read) that holds
+ * references on the session's model until the last byte is sent, and no lock: the source copied
+ * what edits change when it opened.
  */
 #include "request.h"
 #include "../api/mem.h"
@@ -88,170 +90,6 @@ void http_req_unref(req *r)
     api_free(r);
     if (trim)
         malloc_trim(0);
-}
-
-/* ---- responses ------------------------------------------------------------------------------ */
-
-typedef struct header {
-    const char *name, *value;
-} header;
-
-/* The headers every answer carries (CORS, nosniff): their number, at most 4. */
-static int common_header_list(const req *r, header out[4])
-{
-    const char *origin = r->srv->cfg.cors_origin;
-    int n = 0;
-    out[n++] = (header){MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, origin};
-    if (strcmp(origin, "*"))
-        out[n++] = (header){MHD_HTTP_HEADER_VARY, "Origin"};
-    out[n++] = (header){MHD_HTTP_HEADER_ACCESS_CONTROL_EXPOSE_HEADERS,
-                        "ETag, Location, Retry-After, Content-Disposition, "
-                        "X-Attribute-Components"};
-    out[n++] = (header){"X-Content-Type-Options", "nosniff"};
-    return n;
-}
-
-static void common_headers(req *r, struct MHD_Response *resp)
-{
-    header h[4];
-    int n = common_header_list(r, h);
-    for (int i = 0; i < n; i++)
-        MHD_add_response_header(resp, h[i].name, h[i].value);
-}
-
-void http_queue(req *r, int status, struct MHD_Response *resp)
-{
-    common_headers(r, resp);
-    r->status = status;
-    r->queued = 1;
-    MHD_queue_response(r->conn, (unsigned)status, resp);
-    MHD_destroy_response(resp);
-}
-
-struct MHD_Response *http_empty(void)
-{
-    return MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);
-}
-
-struct MHD_Response *http_static_response(const void *data, size_t n)
-{
-    return MHD_create_response_from_buffer(n, (void *)data, MHD_RESPMEM_PERSISTENT);
-}
-
-void http_add_header(struct MHD_Response *resp, const char *name, const char *value)
-{
-    MHD_add_response_header(resp, name, value);
-}
-
-struct MHD_Response *http_buffer_response(const char *ctype, char *text, size_t n)
-{
-    struct MHD_Response *resp = MHD_create_response_from_buffer_with_free_callback(n, text, api_free);
-    if (!resp) {
-        api_free(text);
-        return NULL;
-    }
-    if (ctype)
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
-    return resp;
-}
-
-void http_set_etag(struct MHD_Response *resp, uint64_t version)
-{
-    char etag[32];
-    snprintf(etag, sizeof etag, "\"%llu\"", (unsigned long long)version);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
-}
-
-/* A response owning `text` (an api_malloc block, counted in r->bytes) of type ctype; without
- * text, for lack of memory to render it, the static problem `fallback` instead. */
-static struct MHD_Response *text_response(req *r, const char *ctype, char *text,
-                                          const char *fallback)
-{
-    if (!text) { /* nothing left to allocate a body from */
-        struct MHD_Response *resp = http_static_response(fallback, strlen(fallback));
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "application/problem+json");
-        atomic_store(&r->bytes, strlen(fallback));
-        return resp;
-    }
-    size_t n = strlen(text);
-    atomic_store(&r->bytes, n);
-    return http_buffer_response(ctype, text, n);
-}
-
-void http_reply_json(req *r, int status, json_t *body, uint64_t version)
-{
-    char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
-    json_decref(body);
-    if (!text)
-        status = 500;
-    struct MHD_Response *resp = text_response(
-        r, status >= 400 ? "application/problem+json" : "application/json", text,
-        "{\"type\":\"/errors/internal\",\"title\":\"Internal Server Error\",\"status\":500,"
-        "\"detail\":\"could not render the response\"}");
-    if (version)
-        http_set_etag(resp, version);
-    http_queue(r, status, resp);
-}
-
-/* Memory the budget refused during the request (api/mem.h) is not the machine's: the request
- * may succeed once others give some back, so say so (memory-budget, with Retry-After). */
-static const api_problem *budget_problem(req *r, const api_problem *p, api_problem *q)
-{
-    if (p->status != 503 || !p->slug || strcmp(p->slug, "out-of-memory") || !r->mem.over_budget)
-        return p;
-    api_fail(q, 503, "memory-budget", "the daemon's memory budget (--max-memory, %zu bytes) is in "
-             "use by other requests and sessions; retry later (%s)", api_mem_budget(), p->detail);
-    q->retry_after = 2;
-    return q;
-}
-
-/* The problem+json response of p (with Retry-After and WWW-Authenticate where they apply). */
-static struct MHD_Response *problem_response(req *r, const api_problem *p0)
-{
-    api_problem q = {0};
-    const api_problem *p = budget_problem(r, p0, &q);
-    json_t *j = api_problem_json(p);
-    char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
-    json_decref(j);
-    struct MHD_Response *resp = text_response(r, "application/problem+json", text,
-                                              "{\"status\":503}");
-    if (p->retry_after) {
-        char ra[16];
-        snprintf(ra, sizeof ra, "%d", p->retry_after);
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_RETRY_AFTER, ra);
-    }
-    if (p->status == 401)
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"subdivd\"");
-    return resp;
-}
-
-void http_reply_problem(req *r, const api_problem *p)
-{
-    http_queue(r, p->status ? p->status : 500, problem_response(r, p));
-}
-
-void http_reply_versioned(req *r, json_t *j, uint64_t version, const api_problem *p)
-{
-    if (!j) {
-        http_reply_problem(r, p);
-        return;
-    }
-    json_object_set_new(j, "version", json_integer((json_int_t)version));
-    http_reply_json(r, 200, j, version);
-}
-
-void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
-    __attribute__((format(printf, 4, 5)));
-void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
-{
-    api_problem p = {0};
-    va_list ap;
-    va_start(ap, fmt);
-    char detail[320];
-    vsnprintf(detail, sizeof detail, fmt, ap);
-    va_end(ap);
-    api_fail(&p, status, slug, "%s", detail);
-    http_reply_problem(r, &p);
 }
 
 /* ---- compute slots ---------------------------------------------------------------------- */
@@ -406,8 +244,8 @@ static enum MHD_Result refuse_body_now(req *r)
     int n = snprintf(head, sizeof head, "HTTP/1.1 413 %s\r\nDate: %s\r\nConnection: close\r\n"
                      "Content-Type: application/problem+json\r\nContent-Length: %zu\r\n",
                      api_status_title(413), date, strlen(text));
-    header h[4];
-    int nh = common_header_list(r, h);
+    http_header_pair h[4];
+    int nh = http_common_header_list(r, h);
     for (int i = 0; i < nh && n > 0 && (size_t)n < sizeof head; i++)
         n += snprintf(head + n, sizeof head - (size_t)n, "%s: %s\r\n", h[i].name, h[i].value);
     if (n > 0 && (size_t)n < sizeof head - 2)
@@ -450,7 +288,7 @@ static void preflight(req *r, const char *allow)
 /* 405 naming the allowed methods in the Allow header. */
 static void method_not_allowed(req *r, const api_problem *p, const char *allow)
 {
-    struct MHD_Response *resp = problem_response(r, p);
+    struct MHD_Response *resp = http_problem_response(r, p);
     MHD_add_response_header(resp, MHD_HTTP_HEADER_ALLOW, allow);
     http_queue(r, 405, resp);
 }

@@ -89,7 +89,7 @@ const char *http_header(req *r, const char *name);   /* NULL when absent */
 const char *http_arg(req *r, const char *key);       /* a query argument, NULL when absent */
 const struct sockaddr *http_client_address(req *r); /* NULL when unknown */
 
-/* ---- http.c: answering ---- */
+/* ---- reply.c: answering ---- */
 
 struct MHD_Response *http_empty(void);
 struct MHD_Response *http_static_response(const void *data, size_t n);
@@ -106,11 +106,6 @@ void http_reply_problem(req *r, const api_problem *p);
 void http_reply_versioned(req *r, json_t *j, uint64_t version, const api_problem *p);
 void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
-/* Drop a reference on a request (the last frees it, and trims the heap after a large one). */
-void http_req_unref(req *r);
-
-/* ---- stream.c: streamed responses ---- */
-
 /* What a streamed response reads: `read` fills up to max bytes of buf (0 at the end, -1 on a
  * failure, which cuts the response short); `close` frees ctx. */
 typedef struct http_source {
@@ -130,6 +125,20 @@ void http_reply_stream(req *r, api_model *m, http_source src, uint64_t size, con
  * response goes. On failure l is released and a 503 queued. */
 struct ev_listener;
 void http_reply_events(req *r, struct ev_listener *l);
+
+/* The headers every answer carries (CORS, nosniff): their number, at most 4 — for answers
+ * written on the socket itself (a chunked body over the limit, http.c). */
+typedef struct http_header_pair {
+    const char *name, *value;
+} http_header_pair;
+int http_common_header_list(const req *r, http_header_pair out[4]);
+/* The problem+json response of p (a refusal of the memory budget gets its Retry-After). */
+struct MHD_Response *http_problem_response(req *r, const api_problem *p);
+
+/* ---- http.c: a request's end ---- */
+
+/* Drop a reference on r; the last frees it (and trims the heap after a big request). */
+void http_req_unref(req *r);
 
 /* ---- http.c: compute slots ---- */
 

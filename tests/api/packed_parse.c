@@ -74,8 +74,8 @@ static int same(const outcome *a, const outcome *b)
         for (uint32_t i = 0; i < x->n; i++)
             nidx += x->size[i];
         return !strcmp(a->summary, b->summary) && same_input(a->m->in, b->m->in) &&
-               x->n == y->n && !memcmp(x->size, y->size, x->n) &&
-               !memcmp(x->idx, y->idx, nidx * sizeof *x->idx);
+               x->n == y->n && (!x->n || !memcmp(x->size, y->size, x->n)) &&
+               (!nidx || !memcmp(x->idx, y->idx, nidx * sizeof *x->idx));
     }
     if (a->p.status != b->p.status || strcmp(a->p.slug, b->p.slug) ||
         strcmp(a->p.detail, b->p.detail) || a->p.nerrors != b->p.nerrors)
