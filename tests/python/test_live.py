@@ -664,3 +664,31 @@ def test_events_deleted_on_expiry(daemon):
     assert [e for e in li.events if e["event"] == "deleted"][0]["data"]["reason"] == "expired"
     assert li.done.wait(5)
     assert s.req("GET").status_code == 404
+
+
+def test_client_delta_reads_both_layouts(daemon):
+    body = with_attrs(complex_from_text(MIXED))
+    s = new_session(daemon, body)
+    c = subdiv.Client(daemon.url, timeout=30).session(s.id, s.token)
+    before = snapshot(s, 2)
+    v = before[1]["version"]
+    c.edit(moves=[{"index": 1, "position": [1.05, 0.02, 0]}, {"index": 30, "level": 2,
+                                                            "position": [0.3, 0.3, 0.3]}],
+           attributes={"v": [{"index": 2, "value": [5, 6]}]})
+    after = snapshot(s, 2)
+    b = c.delta(2, since=v, attributes=["t", "v"])
+    j = c.delta(2, since=v, format="json", attributes="t,v")
+    assert b["version"] == j["version"] == c.version == after[1]["version"]
+    np.testing.assert_array_equal(b["indices"], j["indices"])
+    np.testing.assert_array_equal(b["positions"], j["positions"].astype(np.float32))
+    np.testing.assert_array_equal(b["normals"], j["normals"])
+    for name in ("t", "v"):
+        np.testing.assert_array_equal(b["attributes"][name], j["attributes"][name].astype(np.float32))
+    pos = before[0]["POSITION"].copy()
+    pos[b["indices"]] = b["positions"]
+    np.testing.assert_array_equal(pos, after[0]["POSITION"])
+    assert [e["level"] for e in c.get_complex()["details"]] == [2]
+    c.put_tags([[3]])
+    with pytest.raises(subdiv.Gone):
+        c.delta(2, since=v)
+    s.delete()
