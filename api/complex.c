@@ -10,6 +10,7 @@
  * classes of level 0, which is immutable once built and so read without the model's lock.
  */
 #include "handlers.h"
+#include "details.h"
 #include "mem.h"
 #include "fill.h"
 #include "internal.h"
@@ -324,7 +325,7 @@ int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *
                            const api_limits *lim, api_model **out, api_problem *p)
 {
     static const char *const keys[] = {"vertices", "simplices", "attributes", "diagonals",
-                                       "fill", NULL};
+                                       "fill", "details", NULL};
     *out = NULL;
     if (api_only_keys(body, "", keys, p))
         return p->status;
@@ -356,6 +357,11 @@ int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *
     keep.overrides = NULL;
     if (!rc && (rc = api_build_model(in, &keep, NULL, lim, out, p)) && in->nfill)
         api_fill_blame(in, nv_posted, ns_posted, p);
+    json_t *dt = json_object_get(body, "details");
+    if (!rc && dt && (rc = api_details_put(*out, dt, p))) { /* offsets of the new complex */
+        api_model_unref(*out);
+        *out = NULL;
+    }
     api_input_unref(in);
     return rc;
 }
@@ -532,11 +538,12 @@ json_t *api_get_complex(api_model *m, api_problem *p)
     for (uint32_t s = 0; s < in->ns; s++)
         if (in->size[s] == 4)
             json_array_append_new(dj, json_pack("[I, i]", (json_int_t)s, sd_complex_diagonal(m->c, s)));
+    json_t *details = api_details_json(m); /* edits change them: under the lock */
     pthread_rwlock_unlock(&m->data);
-    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:o, s:o, s:O}", "vertices", vs,
+    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:o, s:o, s:o, s:O}", "vertices", vs,
                      "simplices", ss, "attributes", at, "diagonals", dj, "classes", "vertices", cv,
-                     "edges", ce, "tags", tags_json(m), "rules", rules_json(m), "summary",
-                     m->summary);
+                     "edges", ce, "tags", tags_json(m), "rules", rules_json(m), "details",
+                     details, "summary", m->summary);
 }
 
 api_cstream *api_get_complex_stream(api_model *m, uint64_t *version, api_problem *p)
@@ -548,8 +555,9 @@ api_cstream *api_get_complex_stream(api_model *m, uint64_t *version, api_problem
     /* under the lock edits take: the copied points and attributes and the version agree */
     pthread_rwlock_rdlock(&m->data);
     *version = atomic_load(&m->version);
-    json_t *t = json_pack("{s:o, s:o, s:O, s:I}", "tags", tags_json(m), "rules", rules_json(m),
-                          "summary", m->summary, "version", (json_int_t)*version);
+    json_t *t = json_pack("{s:o, s:o, s:o, s:O, s:I}", "tags", tags_json(m), "rules",
+                          rules_json(m), "details", api_details_json(m), "summary", m->summary,
+                          "version", (json_int_t)*version);
     char *text = t ? json_dumps(t, JSON_COMPACT) : NULL; /* {"tags":…,"version":N} */
     json_decref(t);
     api_cstream *s = NULL;

@@ -203,18 +203,42 @@ bool out_solid_boundary(out_stream *s)
     return true;
 }
 
-static void add_normal(float *acc, const double *x, const uint32_t *t)
+void out_triangle_normal(const double *x, const uint32_t t[3], float n[3])
 {
     const double *a = x + 3 * (size_t)t[0], *b = x + 3 * (size_t)t[1], *c = x + 3 * (size_t)t[2];
     double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-    float n[3] = {(float)(u[1] * v[2] - u[2] * v[1]), (float)(u[2] * v[0] - u[0] * v[2]),
-                  (float)(u[0] * v[1] - u[1] * v[0])};
+    n[0] = (float)(u[1] * v[2] - u[2] * v[1]);
+    n[1] = (float)(u[2] * v[0] - u[0] * v[2]);
+    n[2] = (float)(u[0] * v[1] - u[1] * v[0]);
+}
+
+void out_normal_unit(float f[3])
+{
+    if (f[0] == 0 && f[1] == 0 && f[2] == 0) { /* on no triangle (most solid vertices) */
+        f[2] = 1;
+        return;
+    }
+    double len = sqrt((double)f[0] * f[0] + (double)f[1] * f[1] + (double)f[2] * f[2]);
+    if (!(len > 1e-30) || !isfinite(len)) {
+        f[0] = f[1] = 0;
+        f[2] = 1;
+    } else
+        for (int k = 0; k < 3; k++)
+            f[k] = (float)(f[k] / len);
+}
+
+static void add_normal(float *acc, const double *x, const uint32_t *t)
+{
+    float n[3];
+    out_triangle_normal(x, t, n);
     for (int k = 0; k < 3; k++)
         for (int j = 0; j < 3; j++)
             acc[3 * (size_t)t[k] + j] += n[j];
 }
 
-/* Area-weighted vertex normals, accumulated in place (float is plenty for a unit direction). */
+/* Area-weighted vertex normals, accumulated in place (float is plenty for a unit direction):
+ * each vertex sums its triangles' out_triangle_normal in triangle order, surface triangles
+ * first, then the boundary ones (api/delta.c recomputes single vertices in the same order). */
 float *out_normals(const sd_level *lv, uint32_t ntr, const uint32_t *bnd, uint32_t nbnd)
 {
     uint32_t nv = sd_level_num_vertices(lv);
@@ -229,20 +253,8 @@ float *out_normals(const sd_level *lv, uint32_t ntr, const uint32_t *bnd, uint32
     }
     for (uint32_t i = 0; i < nbnd; i++)
         add_normal(acc, xyz, bnd + 3 * (size_t)i);
-    for (uint32_t i = 0; i < nv; i++) {
-        float *f = acc + 3 * (size_t)i;
-        if (f[0] == 0 && f[1] == 0 && f[2] == 0) { /* on no triangle (most solid vertices) */
-            f[2] = 1;
-            continue;
-        }
-        double len = sqrt((double)f[0] * f[0] + (double)f[1] * f[1] + (double)f[2] * f[2]);
-        if (!(len > 1e-30) || !isfinite(len)) {
-            f[0] = f[1] = 0;
-            f[2] = 1;
-        } else
-            for (int k = 0; k < 3; k++)
-                f[k] = (float)(f[k] / len);
-    }
+    for (uint32_t i = 0; i < nv; i++)
+        out_normal_unit(acc + 3 * (size_t)i);
     return acc;
 }
 
@@ -264,6 +276,25 @@ out_geometry *out_geometry_compute(const sd_level *lv)
     }
     g->bytes = sizeof *g + (size_t)g->nbnd * 12 + (size_t)sd_level_num_vertices(lv) * 12;
     return g;
+}
+
+out_geometry *out_geometry_copy(const out_geometry *g, uint32_t nv)
+{
+    out_geometry *c = api_calloc(1, sizeof *c);
+    if (!c)
+        return NULL;
+    atomic_init(&c->refs, 1);
+    c->nbnd = g->nbnd;
+    c->bytes = g->bytes;
+    c->bnd = api_malloc(((size_t)g->nbnd * 3 + 1) * sizeof *c->bnd);
+    c->normals = api_malloc(((size_t)nv * 3 + 1) * sizeof *c->normals);
+    if (!c->bnd || !c->normals) {
+        out_geometry_free(c);
+        return NULL;
+    }
+    memcpy(c->bnd, g->bnd, (size_t)g->nbnd * 3 * sizeof *c->bnd);
+    memcpy(c->normals, g->normals, (size_t)nv * 3 * sizeof *c->normals);
+    return c;
 }
 
 out_geometry *out_geometry_ref(out_geometry *g)

@@ -76,12 +76,15 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
                    const api_slot *slot, out_stream **out, const out_format **fmt,
                    uint64_t *version, api_problem *p);
 
-/* PATCH /control-points: moves and attribute values of control points, applied to every cached
- * level through the matrices, in place, and the model's version set to `version` (the one the
- * session publishes it with). Validates all first. An edit that moves a point a level's rules
- * read (Ying-Zorin's corner angle) is answered with a new model instead (*rebuilt, built in a
- * compute slot of `slot`), to be published in place of m, which is left unchanged.
- * counts[l] = points updated at level l; *levels = levels updated. 0 or the status. */
+/* PATCH /control-points: moves and attribute values of control points, and moves of points of
+ * finer levels ("level": l, stored as detail offsets; missing levels are computed, within lim),
+ * applied to every cached level through the matrices, in place, and the model's version set to
+ * `version` (the one the session publishes it with): the changed points are stamped with it
+ * (api/delta.h). Validates all first. An edit that moves a point a level's rules read
+ * (Ying-Zorin's corner angle) is answered with a new model instead (*rebuilt, built in a compute
+ * slot of `slot`, with the session's detail offsets and the edit's), to be published in place of
+ * m, which is left unchanged. counts[l] = points updated at level l; *levels = levels computed
+ * now. 0 or the status. */
 int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim,
              const api_slot *slot, uint64_t *counts, int *levels, api_model **rebuilt,
              api_problem *p);

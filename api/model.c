@@ -14,6 +14,7 @@
 #include <time.h>
 #include <jansson.h>
 #include "out.h"
+#include "delta.h"
 
 api_input *api_input_new(void)
 {
@@ -115,7 +116,8 @@ void api_model_publish(api_model *m)
     for (int l = 0; l <= SD_MAX_LEVEL; l++)
         geo += m->geometry[l] ? m->geometry[l]->bytes : 0;
     atomic_store(&m->levels_cached, m->c ? sd_complex_levels_computed(m->c) : 0);
-    atomic_store(&m->memory_bytes, (m->c ? sd_complex_memory(m->c) : 0) + geo);
+    atomic_store(&m->memory_bytes,
+                 (m->c ? sd_complex_memory(m->c) : 0) + geo + api_delta_bytes(m->delta));
 }
 
 struct out_geometry *api_model_geometry_locked(api_model *m, int level)
@@ -139,6 +141,13 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
         return NULL;
     }
     atomic_init(&m->refs, 1);
+    m->delta = api_delta_new();
+    if (!m->delta) {
+        api_free(m);
+        err->code = SD_ERR_NOMEM;
+        snprintf(err->message, sizeof err->message, "out of memory");
+        return NULL;
+    }
     pthread_mutex_init(&m->lock, NULL);
     pthread_rwlockattr_t ra;
     pthread_rwlockattr_init(&ra); /* an edit waits for the streams in flight, not for new ones */
@@ -257,6 +266,7 @@ void api_model_unref(api_model *m)
     json_decref(m->summary);
     for (int l = 0; l <= SD_MAX_LEVEL; l++)
         out_geometry_free(m->geometry[l]);
+    api_delta_free(m->delta);
     sd_complex_free(m->c);
     api_input_unref(m->in);
     pthread_mutex_destroy(&m->lock);

@@ -98,6 +98,7 @@ typedef struct api_model {
     double seconds[SD_MAX_LEVEL + 1]; /* time spent computing each level (under lock) */
     struct json_t *summary;   /* level-0 summary (docs/API.md PUT /complex), read-only once built */
     struct out_geometry *geometry[SD_MAX_LEVEL + 1]; /* glTF geometry per level, built under lock */
+    struct api_delta *delta;  /* what edits changed in the computed levels (api/delta.h), under lock */
     /* published figures, readable without the lock */
     atomic_int levels_cached;
     atomic_size_t memory_bytes;

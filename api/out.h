@@ -101,6 +101,9 @@ typedef struct out_geometry {
  * drops one and frees it with the last. */
 out_geometry *out_geometry_compute(const sd_level *lv);
 out_geometry *out_geometry_ref(out_geometry *g);
+/* A copy of g (nv: its level's vertex count), one reference, for a writer that must not change
+ * what a stream reads (api/delta.c); NULL without memory. */
+out_geometry *out_geometry_copy(const out_geometry *g, uint32_t nv);
 void out_geometry_free(out_geometry *g);
 
 /* Validate and prepare (with rq->snapshot, copy what edits change: see out_request). The stream

@@ -102,6 +102,12 @@ void out_oct_tet(const uint32_t oct[6], int k, uint32_t tet[4]);
 /* Area-weighted unit vertex normals of the level's surface triangles (first ntr) and the given
  * boundary triangles; (0,0,1) where a vertex has none. NULL when out of memory. */
 float *out_normals(const sd_level *lv, uint32_t ntr, const uint32_t *bnd, uint32_t nbnd);
+/* What triangle t (3 ids into the 3-per-vertex positions x) adds to the normal of each of its
+ * vertices: the cross product of its edges from t[0], as floats. */
+void out_triangle_normal(const double *x, const uint32_t t[3], float n[3]);
+/* A vertex's sum of out_triangle_normal made unit in place; (0,0,1) for a zero or degenerate
+ * sum. out_normals is these two, summed in its triangle order. */
+void out_normal_unit(float f[3]);
 /* s->bnd, s->nbnd: the outward boundary of the shown solids, and with every part shown
  * s->normals, borrowed from rq.geometry when given; else the boundary is computed into
  * s->own_bnd (the normals are left to the writer). false: out of memory. */

@@ -5,9 +5,10 @@
  * Both handlers check shapes, enumerations and index ranges here, with a pointer for every
  * refusal, and leave to the core what needs the complex (a tag is a simplex of it, a petal is open,
  * an override fits its simplex), which api_build_model maps back to pointers. The new model keeps
- * the session's input; only the rules or the tags change.
+ * the session's input and its detail offsets (api/details.c); only the rules or the tags change.
  */
 #include "handlers.h"
+#include "details.h"
 #include "mem.h"
 #include "internal.h"
 #include "jsonin.h"
@@ -15,6 +16,16 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+/* The detail offsets of cur onto the model just built (*out, when rc is 0); the status. */
+static int keep_details(const api_model *cur, int rc, api_model **out, api_problem *p)
+{
+    if (!rc && *out && (rc = api_details_carry(cur, *out, p))) {
+        api_model_unref(*out);
+        *out = NULL;
+    }
+    return rc;
+}
 
 /* ---- PUT /rules ---------------------------------------------------------------------------- */
 
@@ -168,7 +179,7 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
         rc = api_build_model(cur->in, &r, &cur->tags, lim, out, p);
     }
     api_free(list);
-    return rc;
+    return keep_details(cur, rc, out, p);
 }
 
 /* ---- PUT /tags ----------------------------------------------------------------------------- */
@@ -300,5 +311,5 @@ int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *pac
     api_plain_free(tags.size);
     api_plain_free(tags.idx);
     api_plain_free(tags.pet);
-    return rc;
+    return keep_details(cur, rc, out, p);
 }

@@ -61,6 +61,11 @@ static const setting S[] = {
      "address space of the TetGen helper in bytes (default 2 GiB)"},
     {"tetgen", T_STR, OFF(limits.tetgen_helper), 0, 0,
      "the TetGen helper (default: subdivd-tetgen beside subdivd, else on PATH)"},
+    {"sse-heartbeat", T_INT, OFF(sse_heartbeat_s), 1, 3600,
+     "seconds between heartbeat comments of an event stream (default 15; keep it below "
+     "--connection-timeout)"},
+    {"max-listeners", T_INT, OFF(max_listeners), 1, 10000,
+     "event streams one session may have open (default 16; 429 beyond)"},
     {"cors-origin", T_STR, OFF(cors_origin), 0, 0, "allowed browser origin (default *)"},
     {"log-level", T_LOG, OFF(log_level), 0, 0, "error|warn|info|debug (default info)"},
     {"no-auth", T_FLAG, OFF(no_auth), 0, 0, "accept requests without bearer tokens (local dev)"},
@@ -159,6 +164,8 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     c->header_timeout_s = 10;
     c->body_min_rate = 65536;
     c->queue_timeout_s = 30;
+    c->sse_heartbeat_s = 15;
+    c->max_listeners = 16;
     c->max_sessions = API_DEFAULT_MAX_SESSIONS;
     c->ttl_s = API_DEFAULT_TTL_S;
     c->max_ttl_s = API_DEFAULT_MAX_TTL_S;

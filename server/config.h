@@ -22,6 +22,8 @@ typedef struct config {
     int ttl_s;                /* default session idle TTL */
     int max_ttl_s;            /* a larger ttl_s asked for is granted as this */
     int session_rate;         /* sessions one client may create per minute (burst as many) */
+    int sse_heartbeat_s;      /* seconds between heartbeat comments of an event stream */
+    int max_listeners;        /* event streams open at once per session (429 beyond) */
     int no_auth;
     int log_level;
     char cors_origin[256];    /* "*" or one origin */

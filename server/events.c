@@ -40,6 +40,8 @@ struct ev_hub {
     ev_text ring[EV_RING];
     unsigned nring, head;    /* ring[(head + i) % EV_RING] for i < nring, oldest first */
     ev_listener *listeners;
+    unsigned nlisteners;
+    uint64_t newest;         /* the version of the last event published */
 };
 
 static atomic_bool stopping;
@@ -122,9 +124,21 @@ void ev_publish(ev_hub *h, uint64_t version, const char *name, const char *data)
 {
     size_t n;
     char *t = event_text(version, name, data, &n);
-    if (!t)
-        return; /* out of memory: listeners miss it and will resync on reconnect */
     pthread_mutex_lock(&h->mu);
+    if (!t) { /* out of memory: forget the ring and end every stream, so that nobody misses an
+               * event unawares (reconnecting listeners are told to resync) */
+        for (unsigned i = 0; i < h->nring; i++)
+            api_free(h->ring[(h->head + i) % EV_RING].text);
+        h->nring = h->head = 0;
+        for (ev_listener *l = h->listeners; l; l = l->next)
+            if (!l->dropped) {
+                l->dropped = true;
+                atomic_fetch_add(&ndropped, 1);
+            }
+        pthread_cond_broadcast(&h->cv);
+        pthread_mutex_unlock(&h->mu);
+        return;
+    }
     if (h->closed) {
         pthread_mutex_unlock(&h->mu);
         api_free(t);
@@ -135,6 +149,7 @@ void ev_publish(ev_hub *h, uint64_t version, const char *name, const char *data)
         h->head = (h->head + 1) % EV_RING;
         h->nring--;
     }
+    h->newest = version;
     h->ring[(h->head + h->nring) % EV_RING] = (ev_text){version, t, n};
     h->nring++;
     for (ev_listener *l = h->listeners; l; l = l->next)
@@ -166,14 +181,27 @@ void ev_close(ev_hub *h, const char *why)
     pthread_mutex_unlock(&h->mu);
 }
 
-ev_listener *ev_listen(ev_hub *h, int has_last, uint64_t last, uint64_t current_version)
+ev_listener *ev_listen(ev_hub *h, int has_last, uint64_t last, uint64_t current_version,
+                       unsigned max, int *full)
 {
+    *full = 0;
     ev_listener *l = api_calloc(1, sizeof *l);
     if (!l)
         return NULL;
-    l->h = ev_hub_ref(h);
     l->last_send = now_s();
     pthread_mutex_lock(&h->mu);
+    if (h->nlisteners >= max) {
+        pthread_mutex_unlock(&h->mu);
+        api_free(l);
+        *full = 1;
+        return NULL;
+    }
+    l->h = ev_hub_ref(h);
+    if (current_version < h->newest) /* published since the caller read its version */
+        current_version = h->newest;
+    char hello[64];
+    int hn = snprintf(hello, sizeof hello, ": version %llu\n\n", (unsigned long long)current_version);
+    deliver(l, hello, (size_t)hn);
     if (has_last && last != current_version) {
         /* the events after `last` are all kept if the ring holds version last + 1 */
         bool kept = false;
@@ -203,6 +231,7 @@ ev_listener *ev_listen(ev_hub *h, int has_last, uint64_t last, uint64_t current_
     }
     l->next = h->listeners;
     h->listeners = l;
+    h->nlisteners++;
     pthread_mutex_unlock(&h->mu);
     atomic_fetch_add(&nlisteners, 1);
     return l;
@@ -259,6 +288,7 @@ void ev_unlisten(ev_listener *l)
     for (ev_listener **p = &h->listeners; *p; p = &(*p)->next)
         if (*p == l) {
             *p = l->next;
+            h->nlisteners--;
             break;
         }
     pthread_mutex_unlock(&h->mu);

@@ -19,6 +19,7 @@
 
 #define EV_RING 256               /* events kept for replay */
 #define EV_LISTENER_BYTES 65536   /* a listener's buffer: more unread and it is dropped */
+#define EV_SOCKET_BYTES 16384     /* SO_SNDBUF of an event stream's socket (Linux doubles it) */
 
 typedef struct ev_hub ev_hub;
 typedef struct ev_listener ev_listener;
@@ -34,10 +35,13 @@ void ev_publish(ev_hub *h, uint64_t version, const char *name, const char *data)
  * stream ends; later listeners get the same at once. */
 void ev_close(ev_hub *h, const char *why);
 
-/* A new listener. With has_last (the client sent Last-Event-ID: last), the events after `last`
- * are replayed first, or `event: resync` is sent when some of them are no longer kept (or last
- * is ahead of the newest). NULL for lack of memory. */
-ev_listener *ev_listen(ev_hub *h, int has_last, uint64_t last, uint64_t current_version);
+/* A new listener, unless the hub has `max` already (*full set) or there is no memory (NULL).
+ * Its stream starts with a comment naming current_version (so the response's headers go out at
+ * once); with has_last (the client sent Last-Event-ID: last), the events after `last` are
+ * replayed next, or `event: resync` is sent when some of them are no longer kept (or last is
+ * ahead of the newest). */
+ev_listener *ev_listen(ev_hub *h, int has_last, uint64_t last, uint64_t current_version,
+                       unsigned max, int *full);
 /* Up to max bytes of the stream into buf, waiting for something to send (an event, a heartbeat
  * comment after heartbeat_s seconds of silence, or the end). Returns the bytes, or -1 at the end
  * of the stream (closed, dropped, or the daemon stopping: ev_stop_all). */

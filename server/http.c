@@ -24,6 +24,7 @@
 #include "request.h"
 #include "../api/mem.h"
 #include "../api/handlers.h"
+#include "events.h"
 #include "guard.h"
 #include "metrics.h"
 #include <arpa/inet.h>
@@ -388,10 +389,16 @@ static int early_auth(req *r)
     char tbuf[128];
     if (session_token_ok(r->s, parse_bearer(h, tbuf, sizeof tbuf)))
         return 0;
+    int token_query = 0; /* the route lists access_token among its query parameters */
+    for (const char *const *a = r->rt->query; a && *a; a++)
+        token_query |= !strcmp(*a, "access_token");
+    const char *q = token_query && !h ? http_arg(r, "access_token") : NULL;
+    if (q && session_token_ok(r->s, q))
+        return 0;
     api_problem p = {0};
     api_fail(&p, 401, "unauthorized",
-             h ? "the bearer token does not match this session"
-               : "send the session's token as \"Authorization: Bearer <token>\"");
+             h || q ? "the bearer token does not match this session"
+                    : "send the session's token as \"Authorization: Bearer <token>\"");
     http_reply_problem(r, &p);
     return 1;
 }
@@ -698,6 +705,7 @@ bad_addr:
 
 void http_stop(server *srv)
 {
+    ev_stop_all(); /* event streams end, so their connection threads can be joined */
     if (srv->mhd) {
         MHD_stop_daemon(srv->mhd);
         srv->mhd = NULL;

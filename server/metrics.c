@@ -123,3 +123,11 @@ void metrics_write_connections(FILE *f, const guard_stats *s)
             (unsigned long long)s->evicted, (unsigned long long)s->header_timeouts,
             (unsigned long long)s->body_timeouts, (unsigned long long)s->idle_timeouts);
 }
+
+void metrics_write_events(FILE *f, unsigned listeners, uint64_t dropped)
+{
+    sample(f, "subdivd_event_listeners", "gauge",
+           "Open event streams (GET /v1/sessions/{id}/events).", listeners);
+    sample(f, "subdivd_event_listeners_dropped_total", "counter",
+           "Event streams ended because their client did not read (its buffer filled).", dropped);
+}

@@ -2,12 +2,22 @@
  * (with the memory budget's Retry-After), entity tags, and streamed responses read from a source
  * (a level writer, GET /complex) while the response holds references on the session's model and
  * no lock (http.c queues them; routes.c builds them).
+ *
+ * Event streams (http_reply_events) read a listener of the session's hub (server/events.h):
+ * libmicrohttpd calls the reader in the connection's own thread (thread-per-connection,
+ * docs/DECISIONS.md 33) when the socket takes more, and it blocks there on the hub's condition
+ * variable until an event, a heartbeat or the end. A client that does not read never has its
+ * reader called: the hub's bounded buffer fills and the listener is dropped, the socket's own
+ * buffer kept small (EV_SOCKET_BYTES) so that this happens after some 100 KiB of events rather
+ * than after megabytes of kernel buffers (docs/DECISIONS.md 37).
  */
 #include "request.h"
 #include "../api/mem.h"
 #include "../api/handlers.h"
+#include "events.h"
 #include "metrics.h"
 #include <microhttpd.h>
+#include <sys/socket.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -24,7 +34,8 @@ int http_common_header_list(const req *r, http_header_pair out[4])
     if (strcmp(origin, "*"))
         out[n++] = (http_header_pair){MHD_HTTP_HEADER_VARY, "Origin"};
     out[n++] = (http_header_pair){MHD_HTTP_HEADER_ACCESS_CONTROL_EXPOSE_HEADERS,
-                        "ETag, Location, Retry-After, Content-Disposition"};
+                        "ETag, Location, Retry-After, Content-Disposition, "
+                        "X-Attribute-Components"};
     out[n++] = (http_header_pair){"X-Content-Type-Options", "nosniff"};
     return n;
 }
@@ -230,5 +241,63 @@ void http_reply_stream(req *r, api_model *m, http_source src, uint64_t size, con
     if (disposition)
         MHD_add_response_header(resp, "Content-Disposition", disposition);
     http_set_etag(resp, version);
+    http_queue(r, 200, resp);
+}
+
+/* ---- event streams ---------------------------------------------------------------------- */
+
+typedef struct events_ctx {
+    req *r;
+    struct ev_listener *l;
+} events_ctx;
+
+/* Blocks in the connection's own thread until there is something to send (DECISIONS 33). */
+static ssize_t events_read(void *cls, uint64_t pos, char *buf, size_t max)
+{
+    (void)pos;
+    events_ctx *ec = cls;
+    ssize_t n = ev_read(ec->l, buf, max, ec->r->srv->cfg.sse_heartbeat_s);
+    if (n <= 0)
+        return MHD_CONTENT_READER_END_OF_STREAM;
+    atomic_fetch_add(&ec->r->bytes, (uint64_t)n);
+    metrics_bytes((uint64_t)n);
+    return n;
+}
+
+static void events_free(void *cls)
+{
+    events_ctx *ec = cls;
+    ev_unlisten(ec->l);
+    http_req_unref(ec->r);
+    api_free(ec);
+}
+
+void http_reply_events(req *r, struct ev_listener *l)
+{
+    events_ctx *ec = api_malloc(sizeof *ec);
+    struct MHD_Response *resp = NULL;
+    if (ec) {
+        *ec = (events_ctx){r, l};
+        atomic_fetch_add(&r->refs, 1);
+        resp = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 4096, events_read, ec,
+                                                 events_free);
+        if (!resp)
+            events_free(ec);
+    } else
+        ev_unlisten(l);
+    if (!resp) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
+    /* what the kernel holds for a client that does not read is bounded too (the hub's buffer
+     * is the rest), so such a listener is found out and dropped after some 100 KiB of events */
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(r->conn, MHD_CONNECTION_INFO_CONNECTION_FD);
+    int sndbuf = EV_SOCKET_BYTES;
+    if (ci)
+        setsockopt(ci->connect_fd, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "text/event-stream");
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
+    MHD_add_response_header(resp, "X-Accel-Buffering", "no");
     http_queue(r, 200, resp);
 }

@@ -36,7 +36,9 @@ typedef struct route {
     int session;           /* needs a session ({id}) and its token */
     int body;              /* takes a JSON body */
     const char *const *query; /* the query parameters it takes, NULL-terminated ({"*", NULL}:
-                                 any); NULL: none (http.c answers 400 for others) */
+                                 any); NULL: none (http.c answers 400 for others). One that
+                                 lists "access_token" also takes the session's token there
+                                 (EventSource cannot send headers; queries are never logged) */
 } route;
 
 struct req {
@@ -117,6 +119,12 @@ typedef struct http_source {
  * queued. */
 void http_reply_stream(req *r, api_model *m, http_source src, uint64_t size, const char *ctype,
                        const char *disposition, uint64_t version);
+
+/* 200 with a text/event-stream of listener l (server/events.h), read in this connection's
+ * thread until the stream ends (heartbeats every cfg.sse_heartbeat_s); ev_unlisten when the
+ * response goes. On failure l is released and a 503 queued. */
+struct ev_listener;
+void http_reply_events(req *r, struct ev_listener *l);
 
 /* The headers every answer carries (CORS, nosniff): their number, at most 4 — for answers
  * written on the socket itself (a chunked body over the limit, http.c). */

@@ -11,13 +11,18 @@
  * /metrics never queue behind work. Nothing here includes libmicrohttpd (see request.h).
  */
 #include "request.h"
+#include "../api/delta.h"
+#include "../api/details.h"
 #include "../api/complex_stream.h"
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
 #include "../api/mem.h"
+#include "events.h"
 #include "metrics.h"
 #include "parse.h"
 #include "rate.h"
+#include <ctype.h>
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -83,6 +88,10 @@ static void h_metrics(req *r)
     store_foreach(r->srv->st, add_gauges, &g);
     metrics_write(f, store_count(r->srv->st), g.cells, g.bytes, api_mem_in_use());
     http_write_connection_metrics(r->srv, f);
+    unsigned listeners;
+    uint64_t dropped;
+    ev_stats(&listeners, &dropped);
+    metrics_write_events(f, listeners, dropped);
     metrics_write_budget(f, api_mem_budget(), api_mem_budget_used(), api_mem_budget_refusals());
     fclose(f);
     char *body = api_memdup(text, n);
@@ -269,6 +278,18 @@ static int if_match(req *r, uint64_t version, api_problem *p)
                     "again", (unsigned long long)version);
 }
 
+/* Tell the session's event listeners about its new version: {"version", "kind"} and, for an
+ * edit, "updated_points" (its text, as in the PATCH answer). Called under the session's write
+ * lock, so events go out in version order; the hub copies and never waits for a client. */
+static void notify(req *r, uint64_t version, const char *kind, const char *updated)
+{
+    char data[640];
+    snprintf(data, sizeof data, "{\"version\":%llu,\"kind\":\"%s\"%s%s}",
+             (unsigned long long)version, kind, updated ? ",\"updated_points\":" : "",
+             updated ? updated : "");
+    ev_publish(r->s->events, version, "version", data);
+}
+
 /* The compute slots of the daemon as api/ takes them (api_slot): only once the model's lock is
  * held, and shown as the session's progress while held. */
 static int slot_take(void *ud, int level, api_problem *p)
@@ -294,9 +315,9 @@ typedef int (*change_op)(const api_model *cur, json_t *body, const api_packs *pa
                          const api_limits *lim, api_model **next, json_t *answer, api_problem *p);
 
 /* PUT complex / tags / rules, POST refine: parse, check If-Match, build the new model in a
- * compute slot, publish. The session's write lock makes concurrent changes of one session
- * sequential. */
-static void change(req *r, change_op op, const char *const *packed)
+ * compute slot, publish, tell the listeners (`kind`). The session's write lock makes concurrent
+ * changes of one session sequential. */
+static void change(req *r, change_op op, const char *const *packed, const char *kind)
 {
     api_problem p = {0};
     api_packs packs = {0};
@@ -322,6 +343,7 @@ static void change(req *r, change_op op, const char *const *packed)
         return;
     }
     version = session_publish(r->s, next);
+    notify(r, version, kind, NULL);
     pthread_mutex_unlock(&r->s->write);
     json_object_set_new(answer, "version", json_integer((json_int_t)version));
     http_reply_json(r, 200, answer, version);
@@ -330,9 +352,12 @@ static void change(req *r, change_op op, const char *const *packed)
 static int op_complex(const api_model *cur, json_t *body, const api_packs *packs,
                       const api_limits *lim, api_model **next, json_t *answer, api_problem *p)
 {
+    size_t dropped = json_object_get(body, "details") ? 0 : api_details_count(cur);
     int rc = api_put_complex_packed(cur, body, packs, lim, next, p);
     if (!rc && (*next)->summary)
         json_object_set(answer, "summary", (*next)->summary);
+    if (!rc && dropped) /* the offsets named points of the old complex */
+        json_object_set_new(answer, "details_dropped", json_integer((json_int_t)dropped));
     return rc;
 }
 
@@ -356,7 +381,10 @@ static int op_refine(const api_model *cur, json_t *body, const api_packs *packs,
 {
     (void)packs;
     uint64_t red, green;
+    size_t dropped = api_details_count(cur); /* their points do not exist in the refined complex */
     int rc = api_refine(cur, body, lim, next, &red, &green, p);
+    if (!rc && dropped)
+        json_object_set_new(answer, "details_dropped", json_integer((json_int_t)dropped));
     if (!rc) {
         if ((*next)->summary)
             json_object_set(answer, "summary", (*next)->summary);
@@ -366,14 +394,15 @@ static int op_refine(const api_model *cur, json_t *body, const api_packs *packs,
     return rc;
 }
 
-static void h_put_complex(req *r) { change(r, op_complex, api_complex_packed); }
-static void h_put_tags(req *r) { change(r, op_tags, api_tags_packed); }
-static void h_put_rules(req *r) { change(r, op_rules, NULL); }
-static void h_refine(req *r) { change(r, op_refine, NULL); }
+static void h_put_complex(req *r) { change(r, op_complex, api_complex_packed, "complex"); }
+static void h_put_tags(req *r) { change(r, op_tags, api_tags_packed, "tags"); }
+static void h_put_rules(req *r) { change(r, op_rules, NULL, "rules"); }
+static void h_refine(req *r) { change(r, op_refine, NULL, "refine"); }
 
 /* PATCH control-points: If-Match is required (428 without, 412 when stale); the model is changed
  * in place (streams in flight read their own snapshots), or replaced by a new one where the
- * edit moves what a level's rules read (api_edit). */
+ * edit moves what a level's rules read (api_edit). The changed points are stamped with the new
+ * version (api/delta.h), and the listeners told. */
 static void h_edit(req *r)
 {
     api_problem p = {0};
@@ -396,8 +425,17 @@ static void h_edit(req *r)
     if (!(rc = if_match(r, version, &p)))
         rc = api_edit(m, b, version + 1, &r->srv->cfg.limits, &slot, counts, &levels, &rebuilt,
                       &p);
-    if (!rc)
+    char up[512] = "{";
+    for (int l = 0; !rc && l < levels; l++) {
+        size_t u = strlen(up);
+        snprintf(up + u, sizeof up - u, "%s\"%d\":%llu", l ? "," : "", l,
+                 (unsigned long long)counts[l]);
+    }
+    strcat(up, "}");
+    if (!rc) { /* the version api_edit stamped: the write lock is held */
         version = rebuilt ? session_publish(r->s, rebuilt) : session_bump(r->s);
+        notify(r, version, "edit", up);
+    }
     pthread_mutex_unlock(&r->s->write);
     json_decref(b);
     api_model_unref(m);
@@ -405,14 +443,10 @@ static void h_edit(req *r)
         http_reply_problem(r, &p);
         return;
     }
-    json_t *up = json_object();
-    for (int l = 0; l < levels; l++) {
-        char key[12];
-        snprintf(key, sizeof key, "%d", l);
-        json_object_set_new(up, key, json_integer((json_int_t)counts[l]));
-    }
-    http_reply_json(r, 200, json_pack("{s:I, s:o}", "version", (json_int_t)version, "updated_points",
-                                      up), version);
+    json_error_t je;
+    json_t *j = json_loads(up, 0, &je);
+    http_reply_json(r, 200, json_pack("{s:I, s:o*}", "version", (json_int_t)version,
+                                      "updated_points", j), version);
 }
 
 static ssize_t cstream_read(void *ctx, char *buf, size_t max)
@@ -556,6 +590,77 @@ static void matrix(req *r, api_model *m, int level)
 
 static void h_matrix(req *r) { with_level(r, matrix); }
 
+static const char *const DELTA_KEYS[] = {"since", "format", "attributes", NULL};
+
+/* GET /levels/{L}/delta: the points of a level the client holds that changed since a version
+ * (api/delta.h), a body of its own; no compute slot (a level not computed is a 410). */
+static void delta(req *r, api_model *m, int level)
+{
+    api_problem p = {0};
+    api_delta_query q = {http_arg(r, "since"), http_arg(r, "format"), http_arg(r, "attributes")};
+    char *body, comp[1024];
+    size_t len;
+    const char *ctype;
+    uint64_t v;
+    int rc = api_level_delta(m, level, &q, &body, &len, &ctype, comp, sizeof comp, &v, &p);
+    api_model_unref(m);
+    if (rc) {
+        http_reply_problem(r, &p);
+        return;
+    }
+    struct MHD_Response *resp = http_buffer_response(ctype, body, len);
+    if (!resp) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
+    atomic_store(&r->bytes, len);
+    http_set_etag(resp, v);
+    if (comp[0]) /* the components of each attribute of the binary layout */
+        http_add_header(resp, "X-Attribute-Components", comp);
+    http_queue(r, 200, resp);
+}
+
+static void h_delta(req *r) { with_level(r, delta); }
+
+/* ---- handlers: events ------------------------------------------------------------------- */
+
+static const char *const EVENTS_KEYS[] = {"access_token", NULL};
+
+/* GET /events: a text/event-stream of the session's versions (server/events.h), at most
+ * --max-listeners per session (429). Last-Event-ID replays what the client missed; one that is
+ * not a version gets `event: resync`. The stream holds no lock: a client that does not read is
+ * dropped by the hub and never slows a change. */
+static void h_events(req *r)
+{
+    uint64_t version, last = 0;
+    api_model_unref(session_model(r->s, &version));
+    const char *lei = http_header(r, "Last-Event-ID");
+    if (lei) {
+        char *end;
+        errno = 0;
+        last = strtoull(lei, &end, 10);
+        if (!isdigit((unsigned char)*lei) || *end || errno)
+            last = UINT64_MAX; /* ahead of every version: resync */
+    }
+    int full;
+    struct ev_listener *l = ev_listen(r->s->events, lei != NULL, last, version,
+                                      (unsigned)r->srv->cfg.max_listeners, &full);
+    if (!l && full) {
+        api_problem p = {0};
+        p.retry_after = 5;
+        api_fail(&p, 429, "too-many-listeners",
+                 "this session has %d event streams open, its maximum; close one or retry later",
+                 r->srv->cfg.max_listeners);
+        http_reply_problem(r, &p);
+        return;
+    }
+    if (!l) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
+    http_reply_events(r, l);
+}
+
 static const char *const ANALYSIS_KEYS[] = {"vertex", "edge", NULL};
 
 static void h_analysis(req *r)
@@ -583,6 +688,8 @@ static const route ROUTES[] = {
     {"PUT", "/v1/sessions/{id}/rules", h_put_rules, 1, 1, NULL},
     {"GET", "/v1/sessions/{id}/levels/{L}", h_get_level, 1, 0, LEVEL_KEYS},
     {"GET", "/v1/sessions/{id}/levels/{L}/stats", h_level_stats, 1, 0, NULL},
+    {"GET", "/v1/sessions/{id}/levels/{L}/delta", h_delta, 1, 0, DELTA_KEYS},
+    {"GET", "/v1/sessions/{id}/events", h_events, 1, 0, EVENTS_KEYS},
     {"GET", "/v1/sessions/{id}/analysis", h_analysis, 1, 0, ANALYSIS_KEYS},
     {"GET", "/v1/sessions/{id}/matrices/{L}", h_matrix, 1, 0, MATRIX_KEYS},
     {"GET", "/healthz", h_healthz, 0, 0, NULL},

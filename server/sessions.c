@@ -9,6 +9,7 @@
  * compared in constant time.
  */
 #include "sessions.h"
+#include "events.h"
 #include "../api/mem.h"
 #include <math.h>
 #include <stdio.h>
@@ -67,7 +68,7 @@ void store_free(store *st)
     api_free(st);
 }
 
-static int remove_at(store *st, int i);
+static int remove_at(store *st, int i, const char *why);
 
 /* Remove the sessions idle past their TTL (none computing). Caller holds st->mu. */
 static int expire_locked(store *st, double now)
@@ -79,7 +80,7 @@ static int expire_locked(store *st, double now)
         int idle = now - s->last_used > s->ttl_s && atomic_load(&s->busy_level) < 0;
         pthread_mutex_unlock(&s->mu);
         if (idle)
-            gone += remove_at(st, i);
+            gone += remove_at(st, i, "expired");
         else
             i++;
     }
@@ -106,7 +107,7 @@ static int evict_empty_locked(store *st)
             best_used = used;
         }
     }
-    return best >= 0 ? remove_at(st, best) : 0;
+    return best >= 0 ? remove_at(st, best, "evicted") : 0;
 }
 
 /* Seconds until the soonest expiry of a resident session (>= 1). Caller holds st->mu. */
@@ -136,7 +137,9 @@ session *store_create(store *st, int ttl_s, store_admission *a)
         return NULL;
     sd_error e;
     s->model = api_model_new(NULL, NULL, 0, &e);
-    if (!s->model) {
+    s->events = s->model ? ev_hub_new() : NULL;
+    if (!s->events) {
+        api_model_unref(s->model);
         api_free(s);
         return NULL;
     }
@@ -196,9 +199,11 @@ session *store_get(store *st, const char *id)
     return found;
 }
 
-static int remove_at(store *st, int i)
+/* Take session i out of the store; its event listeners get `event: deleted` with `why`. */
+static int remove_at(store *st, int i, const char *why)
 {
     session *s = st->s[i];
+    ev_close(s->events, why);
     st->s[i] = st->s[--st->n];
     st->s[st->n] = NULL;
     session_unref(s);
@@ -211,7 +216,7 @@ int store_remove(store *st, session *s)
     pthread_mutex_lock(&st->mu);
     for (int i = 0; i < st->n && !done; i++)
         if (st->s[i] == s)
-            done = remove_at(st, i);
+            done = remove_at(st, i, "deleted");
     pthread_mutex_unlock(&st->mu);
     return done;
 }
@@ -245,6 +250,7 @@ void session_unref(session *s)
     if (!s || atomic_fetch_sub(&s->refs, 1) != 1)
         return;
     api_model_unref(s->model);
+    ev_hub_unref(s->events);
     pthread_mutex_destroy(&s->mu);
     pthread_mutex_destroy(&s->write);
     explicit_bzero(s->token, sizeof s->token);

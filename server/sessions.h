@@ -29,6 +29,7 @@ typedef struct session {
     int ttl_s;
     double last_used;         /* monotonic seconds */
     time_t created;
+    struct ev_hub *events;    /* its Server-Sent Events (events.h), told when it leaves the store */
     /* progress of a computation in this session, readable without a lock */
     atomic_int busy_level;    /* -1 when idle */
     _Atomic double busy_since;

@@ -1,8 +1,9 @@
 /* faults — every allocation of the api/ request path failed in turn (api_mem_fail_at, api/mem.h).
  *
  * One scenario runs the entry points a session goes through — parse a body, PUT complex, rules and
- * tags, open and drain level 1 in every format (with a slice in some), stats, GET complex, an edit,
- * an analysis, a matrix, a refinement — and frees everything. It runs first with no failure, to
+ * tags, open and drain level 1 in every format (with a slice in some), stats, GET complex, an edit
+ * (a level-1 move among them) and its deltas, an analysis, a matrix, a refinement — and frees
+ * everything. It runs first with no failure, to
  * count, then once for each n with the nth allocation failing, then with every kth failing for a
  * few k. The inputs are valid, so a call may only succeed or refuse with a 5xx problem (a json_t
  * answer may instead be NULL with no problem: the transport answers that with a 500); after each
@@ -12,6 +13,7 @@
  * usage: api_faults [MAX_N]   (0 or absent: every n up to the scenario's allocation count)
  * Prints one line "api_faults: N runs, F failures injected, no leaks" and exits 0, else 1.
  */
+#include "../../api/delta.h"
 #include "../../api/handlers.h"
 #include "../../api/jsonin.h"
 #include "../../api/mem.h"
@@ -27,7 +29,8 @@ static const char RULES[] = "{\"solid_scheme\":\"averaged\",\"overrides\":[{\"si
                             "\"rule\":\"G1\"},{\"simplex\":[1,2],\"rule\":\"N1\",\"dimension\":2}]}";
 static const char RULES0[] = "{\"solid_scheme\":\"averaged\",\"nonmanifold_default\":\"G1\"}";
 static const char TAGS[] = "{\"singular\":[[5],[1,4]]}";
-static const char EDIT[] = "{\"moves\":[{\"index\":1,\"position\":[1,0.1,0]}],\"attributes\":"
+static const char EDIT[] = "{\"moves\":[{\"index\":1,\"position\":[1,0.1,0]},{\"level\":1,"
+                           "\"index\":9,\"position\":[0.5,0.2,0]}],\"attributes\":"
                            "{\"h\":[{\"index\":2,\"value\":5}]}}";
 static const char REFINE[] = "{\"select\":{\"simplices\":[[0,1,2,3]]},\"depth\":1}";
 
@@ -137,8 +140,26 @@ static void edit_and_refine(api_model **m)
     api_model *rebuilt = NULL;
     if (b && api_edit(*m, b, 2, &lim, NULL, counts, &nlev, &rebuilt, &p))
         refused(&p, "api_edit");
-    else if (b)
+    else if (b) {
         oks++;
+        for (int k = 0; k < 2; k++) { /* the edit's delta of the level the streams computed */
+            api_delta_query q = {"1", k ? "json" : "bin", "h,v"};
+            char *text = NULL, comp[64];
+            size_t len;
+            const char *ctype;
+            uint64_t v;
+            memset(&p, 0, sizeof p);
+            /* 410 too: a failure that left the stamps out (or the level uncomputed) makes the
+             * delta unavailable for good, which is what 410 says */
+            if (api_level_delta(*m, 1, &q, &text, &len, &ctype, comp, sizeof comp, &v, &p)) {
+                if (p.status != 410 || !p.detail[0])
+                    refused(&p, "api_level_delta");
+            }
+            else
+                oks++;
+            api_free(text);
+        }
+    }
     if (rebuilt) {
         api_model_unref(*m);
         *m = rebuilt;
@@ -240,7 +261,8 @@ static void meter_limit(void)
 int main(int argc, char **argv)
 {
     uint64_t max = argc > 1 ? strtoull(argv[1], NULL, 10) : 0, runs = 0;
-    int want = 4 + 1 + 3 + 2; /* changes, stats, views, edit and refine; and a level per format */
+    int want = 4 + 1 + 3 + 2 + 2; /* changes, stats, views, edit and refine, the edit's two
+                                   * deltas; and a level per format */
     for (const out_format *f = out_formats; f->name; f++)
         want++;
     run(0, 0); /* the scenario must pass as it is */

@@ -11,10 +11,12 @@
  * program (`make test`, make sanitize).
  * usage: fuzz_api [ITERATIONS [SEED]] | --write-seeds DIR
  */
+#include "../../api/delta.h"
 #include "../../api/complex_stream.h"
 #include "../../api/handlers.h"
 #include "../../api/mem.h"
 #include "../../api/jsonin.h"
+#include "../../api/mem.h"
 #include "plain.h"
 #include <stdint.h>
 #include <stdio.h>
@@ -51,6 +53,12 @@ static const char *const seeds[] = {
     "\"simplices\":[[0,2,6]],\"attributes\":{\"h\":[0,1,2,3,4,5,6]},\"fill\":[{\"surface\":"
     "[[0,2,4],[2,1,4],[1,3,4],[3,0,4],[2,0,5],[1,2,5],[3,1,5],[0,3,5]],\"min_ratio\":1.5,"
     "\"max_volume\":0.5}]}",
+    /* moves at finer levels (detail offsets), and a complex that brings offsets back */
+    "{\"moves\":[{\"index\":1,\"position\":[1,0.1,0]},{\"level\":2,\"index\":20,"
+    "\"position\":[0.2,0.3,0.1]},{\"level\":1,\"index\":9,\"position\":[0.5,0.5,0]}]}",
+    "{\"vertices\":[[0,0,0],[1,0,0],[0,1,0],[0,0,1],[1,1,1]],\"simplices\":[[0,1,2,3],[1,2,3,4]],"
+    "\"details\":[{\"level\":1,\"index\":7,\"offset\":[0,0,0.1]},{\"level\":3,\"index\":40,"
+    "\"offset\":[0.01,0,0]}]}",
 };
 #define NSEEDS (sizeof seeds / sizeof *seeds)
 #ifndef SD_LIBFUZZER
@@ -153,6 +161,24 @@ static void drain_levels(api_model *m, const api_limits *lim)
         }
 }
 
+/* The deltas of levels 0-2 since the edit's version and the one before, both formats. */
+static void drain_deltas(api_model *m)
+{
+    static const char *const since[] = {"0", "1"};
+    for (int level = 0; level <= 2; level++)
+        for (int k = 0; k < 4; k++) {
+            api_delta_query q = {since[k & 1], k & 2 ? "json" : "bin", k == 3 ? "h" : NULL};
+            api_problem p = {0};
+            char *body = NULL, comp[256];
+            size_t len;
+            const char *ctype;
+            uint64_t v;
+            if (api_level_delta(m, level, &q, &body, &len, &ctype, comp, sizeof comp, &v, &p))
+                check_problem(&p, "api_level_delta");
+            api_free(body);
+        }
+}
+
 /* GET /complex streamed (api/complex_stream.c) must be byte for byte the jansson rendering of
  * the document api_get_complex builds, with "version" last, read in odd-sized pieces. */
 static void check_complex_stream(api_model *m)
@@ -242,6 +268,8 @@ static int one(const char *buf, size_t len, const api_limits *lim)
                 api_model_unref(cur);
                 cur = rebuilt;
             }
+            if (accepted)
+                drain_deltas(cur);
         } else if (fns[which](cur, b, lim, &next, &p))
             check_problem(&p, "a change handler");
         else {

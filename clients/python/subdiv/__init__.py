@@ -9,7 +9,7 @@ See subdiv.client (the endpoints), subdiv.errors (typed errors with the problem+
 subdiv.meshes (mesh files -> complex bodies) and subdiv.cli (the command-line tool).
 """
 from .client import ROUTES, Client, Session
-from .errors import (BadRequest, ClientError, Conflict, ContentTooLarge, MethodNotAllowed,
+from .errors import (BadRequest, ClientError, Conflict, ContentTooLarge, Gone, MethodNotAllowed,
                      NotFound, NotImplementedByServer, PreconditionFailed, PreconditionRequired,
                      ProblemError, ServerError, ServiceUnavailable, SubdivError, TooManyRequests,
                      TransportError, Unauthorized, Unprocessable, UnsupportedMediaType, error_for)
@@ -17,6 +17,6 @@ from .meshes import MeshError
 
 __all__ = ["Client", "Session", "ROUTES", "MeshError", "SubdivError", "TransportError",
            "ProblemError", "ClientError", "ServerError", "BadRequest", "Unauthorized", "NotFound",
-           "MethodNotAllowed", "Conflict", "PreconditionFailed", "ContentTooLarge",
+           "MethodNotAllowed", "Conflict", "Gone", "PreconditionFailed", "ContentTooLarge",
            "UnsupportedMediaType", "Unprocessable", "PreconditionRequired", "TooManyRequests",
            "NotImplementedByServer", "ServiceUnavailable", "error_for"]

@@ -268,7 +268,9 @@ class Session:
                             if_match, None)
 
     def edit(self, moves=None, attributes=None, *, if_match=True):
-        """PATCH /control-points; If-Match is the session's known version unless given."""
+        """PATCH /control-points; If-Match is the session's known version unless given. A move
+        is {"index", "position"} with an optional "level" (default 0): a point of a finer level
+        moved there keeps a detail offset (GET /complex lists them as "details")."""
         body = {}
         if moves is not None:
             body["moves"] = moves
@@ -328,6 +330,96 @@ class Session:
         """The level as the JSON of docs/API.md (vertices, cells, attributes, rules, origin)."""
         return json.loads(self.level(level, format="json", **options))
 
+    def delta(self, level, since, format="bin", attributes=None):
+        """GET /levels/{L}/delta?since=V: the points of `level` that changed since version
+        `since` (the version of the level you hold), as a dict: "level", "since", "version" (the
+        version the delta brings you to) and numpy arrays "indices" (uint32: level vertex
+        indices, i.e. rows of the GLB's POSITION accessor), "positions" (n x 3), "normals" (n x 3
+        float32, or None when the level has no drawn triangles) and "attributes" {name: n x
+        ncomp}. `format="bin"` reads the compact "SDD1" layout (positions float32, as the GLB),
+        `format="json"` the JSON one (positions as doubles, as format=json). Raises Gone (410)
+        when the delta is not available (a change since then was not an edit, the level is not
+        computed, ...): fetch the level again."""
+        import numpy as np
+        params = {"since": int(since), "format": format}
+        names = []
+        if attributes is not None:
+            names = [attributes] if isinstance(attributes, str) else list(attributes)
+            params["attributes"] = ",".join(names)
+        r = self._call("GET", f"/levels/{int(level)}/delta", params=params)
+        if format == "json":
+            j = r.json()
+            out = {k: j[k] for k in ("level", "since", "version")}
+            out["indices"] = np.asarray(j["indices"], dtype=np.uint32)
+            out["positions"] = np.asarray(j["positions"], dtype=np.float64).reshape(-1, 3)
+            out["normals"] = (np.asarray(j["normals"], dtype=np.float32).reshape(-1, 3)
+                              if "normals" in j else None)
+            out["attributes"] = {}
+            for name, vals in j["attributes"].items():
+                a = np.asarray(vals, dtype=np.float64)
+                out["attributes"][name] = a.reshape(len(out["indices"]), -1)
+            return out
+        data = r.content
+        magic, level_, since_, version, n, flags = (data[:4],) + tuple(np.frombuffer(data, "<u4", 5, 4))
+        if magic != b"SDD1":
+            raise TransportError(f"not a delta (starts with {magic!r})")
+        off = 24
+        def take(count, dtype, shape):
+            nonlocal off
+            a = np.frombuffer(data, dtype, count, off).reshape(shape)
+            off += a.nbytes
+            return a
+        out = {"level": int(level_), "since": int(since_), "version": int(version)}
+        out["indices"] = take(n, "<u4", (n,))
+        out["positions"] = take(3 * n, "<f4", (n, 3))
+        out["normals"] = take(3 * n, "<f4", (n, 3)) if flags & 1 else None
+        comps = dict(c.split("=") for c in r.headers.get("X-Attribute-Components", "").split(",") if c)
+        out["attributes"] = {name: take(n * int(comps[name]), "<f4", (n, int(comps[name])))
+                             for name in names if flags & 2}
+        if off != len(data):
+            raise TransportError(f"the delta has {len(data)} bytes, its header says {off}")
+        return out
+
+    def events(self, last_event_id=None, *, timeout=None):
+        """GET /events: an iterator of the session's events as dicts {"id", "event", "data"}
+        (data parsed as JSON): "version" after each change (data: version, kind, and for edits
+        updated_points), "resync" when `last_event_id` is too old to replay, "deleted" when the
+        session ends (the iterator ends with the stream). Heartbeat comments are skipped. Close
+        it with .close() (it is a generator). `timeout`: seconds without a byte (heartbeats
+        come every --sse-heartbeat seconds) before TransportError."""
+        extra = {"Accept": "text/event-stream"}
+        if last_event_id is not None:
+            extra["Last-Event-ID"] = str(last_event_id)
+        r = self.client.request("GET", self.url + "/events", headers=self.headers(extra=extra),
+                                stream=True, timeout=timeout or self.client.timeout)
+        try:
+            ev = {}
+            data = []
+            try:
+                for raw in r.iter_lines(chunk_size=1, decode_unicode=False):
+                    line = raw.decode("utf-8")
+                    if not line:
+                        if data or ev:
+                            ev["data"] = json.loads("\n".join(data)) if data else None
+                            ev.setdefault("event", "message")
+                            yield ev
+                        ev, data = {}, []
+                        continue
+                    if line.startswith(":"):
+                        continue
+                    field, _, value = line.partition(":")
+                    value = value[1:] if value.startswith(" ") else value
+                    if field == "data":
+                        data.append(value)
+                    elif field == "id":
+                        ev["id"] = int(value) if value.isdigit() else value
+                    elif field == "event":
+                        ev["event"] = value
+            except requests.RequestException as e:
+                raise TransportError(f"the event stream broke: {e}") from e
+        finally:
+            r.close()
+
     def level_stats(self, level):
         """GET /levels/{L}/stats: counts per cell kind, bytes per format, seconds."""
         return self._call("GET", f"/levels/{int(level)}/stats").json()
@@ -369,6 +461,8 @@ ROUTES = {
     ("PUT", "/v1/sessions/{id}/rules"): "Session.put_rules",
     ("GET", "/v1/sessions/{id}/levels/{L}"): "Session.level",
     ("GET", "/v1/sessions/{id}/levels/{L}/stats"): "Session.level_stats",
+    ("GET", "/v1/sessions/{id}/levels/{L}/delta"): "Session.delta",
+    ("GET", "/v1/sessions/{id}/events"): "Session.events",
     ("GET", "/v1/sessions/{id}/analysis"): "Session.analysis",
     ("GET", "/v1/sessions/{id}/matrices/{L}"): "Session.matrix",
     ("GET", "/healthz"): "Client.healthz",

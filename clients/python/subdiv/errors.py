@@ -81,6 +81,13 @@ class Conflict(ClientError):
     status = 409
 
 
+class Gone(ClientError):
+    """410: a delta is not available (a change since that version was not an edit, the level is
+    not computed, ...): fetch the level again."""
+
+    status = 410
+
+
 class PreconditionFailed(ClientError):
     """412: If-Match named a version the session has moved on from."""
 
@@ -137,7 +144,7 @@ class ServiceUnavailable(ServerError):
 
 
 BY_STATUS = {c.status: c for c in (BadRequest, Unauthorized, NotFound, MethodNotAllowed, Conflict,
-                                   PreconditionFailed, ContentTooLarge, UnsupportedMediaType,
+                                   Gone, PreconditionFailed, ContentTooLarge, UnsupportedMediaType,
                                    Unprocessable, PreconditionRequired, TooManyRequests,
                                    ServerError, NotImplementedByServer, ServiceUnavailable)}
 
