@@ -1022,7 +1022,7 @@ class App {
       version: this.session.version,
       level: this.level,
       maxLevel: this.model?.maxLevel ?? null,
-      shown: this.shown && { ...this.shown },
+      shown: this.shown && { ...this.shown, geometry: this.#geometryHash() },
       tags: c?.tags?.singular ?? [],
       rules: c?.rules ?? null,
       vertexRules: c?.classes.vertices.map((v) => v.rule) ?? [],
@@ -1052,6 +1052,13 @@ class App {
 
   pixels() {
     return this.viewer.pixelStats();
+  }
+
+  // A hash of the drawn level's positions (small levels only: snapshot() is polled).
+  #geometryHash() {
+    const a = this.viewer.level?.positions[0]?.array;
+    if (!a || a.length > 600000) return null;
+    return fnv1a(new Uint8Array(a.buffer, a.byteOffset, a.byteLength));
   }
 
   // The drawn level's buffers (POSITION, NORMAL of the shared accessors), for comparing with a

@@ -61,8 +61,8 @@ function colorsFromSrgb(attr) {
   return new THREE.BufferAttribute(out, 3);
 }
 
-// A points material whose points move `bias` towards the camera (view space) before the depth
-// test: handles on the surface are drawn, those deeper than `bias` behind it are hidden.
+// A points material whose points move `bias` towards the eye (along the line of sight, so they
+// stay where they are on screen) before the depth test: handles on the surface are drawn, those deeper than `bias` behind it are hidden.
 function handleMaterial(opts, bias) {
   const m = new THREE.PointsMaterial({ sizeAttenuation: false, alphaTest: 0.5, ...opts });
   m.userData.bias = { value: bias };
@@ -70,7 +70,8 @@ function handleMaterial(opts, bias) {
     sh.uniforms.depthBias = m.userData.bias;
     sh.vertexShader = 'uniform float depthBias;\n' + sh.vertexShader.replace('#include <project_vertex>',
       'vec4 mvPosition = modelViewMatrix * vec4( transformed, 1.0 );\n' +
-      'mvPosition.z += depthBias;\ngl_Position = projectionMatrix * mvPosition;');
+      'mvPosition.xyz *= max( 0.0, 1.0 - depthBias / length( mvPosition.xyz ) );\n' +
+      'gl_Position = projectionMatrix * mvPosition;');
   };
   return m;
 }
