@@ -53,7 +53,7 @@ export class Session {
     const j = await res.json();
     this.id = j.id;
     this.token = j.token;
-    this.version = 0;
+    this.version = j.version ?? 0;
     return j;
   }
 
@@ -74,7 +74,8 @@ export class Session {
     }
     if (!res.ok) throw new ApiError(what, res.status, await problemOf(res));
     const tag = res.headers.get('ETag');
-    if (tag && /^"\d+"$/.test(tag)) this.version = Number(tag.slice(1, -1));
+    // versions only grow; a read answered before a change may arrive after that change's answer
+    if (tag && /^"\d+"$/.test(tag)) this.version = Math.max(this.version, Number(tag.slice(1, -1)));
     return res;
   }
 
@@ -92,7 +93,7 @@ export class Session {
   async json(what, method, sub, opts) {
     const res = await this.request(what, method, sub, opts);
     const j = await res.json();
-    if (typeof j.version === 'number') this.version = j.version;
+    if (typeof j.version === 'number') this.version = Math.max(this.version, j.version);
     return j;
   }
 

@@ -88,6 +88,9 @@ class App {
     this.syncWanted = false;
     this.events = null;
     this.perf = { updates: [], deltas: 0, deltaBytes: 0, refetches: 0 };
+    this.updating = []; // PATCHes answered whose delta is not drawn yet
+    this.patching = false; // a PATCH is under way
+    this.heard = 0; // the newest edit event heard while a PATCH was under way
     this.selected = null;
     this.messages = [];
     this.ready = false;
@@ -104,9 +107,20 @@ class App {
     return p;
   }
 
+  // "working…" shows when something takes longer than 200 ms (not for every request of a drag:
+  // each change of the page costs a layout and a frame)
   #busy(d) {
     this.pending += d;
-    $('busy').hidden = this.pending === 0;
+    if (this.pending === 0) {
+      clearTimeout(this.busyTimer);
+      this.busyTimer = 0;
+      if (!$('busy').hidden) $('busy').hidden = true;
+    } else if (!this.busyTimer && $('busy').hidden) {
+      this.busyTimer = setTimeout(() => {
+        this.busyTimer = 0;
+        if (this.pending > 0) $('busy').hidden = false;
+      }, 200);
+    }
   }
 
   // A session that expired (404 no-session) is replaced by a new one holding the same model.
@@ -303,6 +317,7 @@ class App {
       rules: this.#levelRuleCounts(), deltas: 0, fetches: (this.shown?.fetches ?? 0) + 1,
     };
     this.perf.refetches++;
+    this.#updatesDone(null);
     this.#syncEditLevels();
     await this.#setupHandles();
     this.#showStats();
@@ -348,7 +363,16 @@ class App {
     $('stats').replaceChildren(dl);
   }
 
+  // At most 4 times a second (a drag changes the version at every update).
   #updateSession() {
+    if (this.sessionTimer) return;
+    this.sessionTimer = setTimeout(() => {
+      this.sessionTimer = 0;
+      this.#showSession();
+    }, 250);
+  }
+
+  #showSession() {
     const s = this.session;
     $('session').textContent = s.id ? `session ${s.id.slice(0, 8)} · v${s.version}` : 'no session';
     // the fragment never reaches a server (nor its logs)
@@ -361,6 +385,7 @@ class App {
       await this.run(async () => {
         this.session.id = id;
         this.session.token = token;
+        this.session.version = 0;
         const complex = await this.session.getComplex();
         const summary = { simplices: {} };
         for (const s of complex.simplices) summary.simplices[s.length - 1] = (summary.simplices[s.length - 1] || 0) + 1;
@@ -425,13 +450,18 @@ class App {
   }
 
   // Bring what is drawn up to the newest version heard of, by deltas: the shown level, the
-  // handle level and (for changes made elsewhere) the control points. 410: fetch again.
-  async #syncNow() {
+  // handle level and (for changes made elsewhere) the control points. 410: fetch again (here
+  // when called from a request of the queue, else as a request of the queue).
+  async #syncNow(inQueue = false) {
     if (!this.shown || !this.model) return;
     const want = Math.max(this.known, this.session.version);
     if (this.shown.version < want) {
       const L = this.shown.level, since = this.shown.version;
       const d = await this.#deltaOr410(() => this.session.delta(L, since));
+      if (!d && !inQueue) {
+        this.requestLevel();
+        return;
+      }
       if (!d) {
         await this.#fetchLevel(); // also sets the handles up again
         return this.#syncCage(want);
@@ -441,6 +471,7 @@ class App {
         this.viewer.applyDelta(d);
       } catch (e) {
         this.info(`The level is fetched again (${e.message}).`);
+        if (!inQueue) return this.requestLevel();
         await this.#fetchLevel();
         return this.#syncCage(want);
       }
@@ -448,12 +479,13 @@ class App {
       this.shown.deltas++;
       this.perf.deltas++;
       this.perf.deltaBytes += d.bytes;
-      this.perf.last = { n: d.n, bytes: d.bytes, version: d.version };
+      this.#updatesDone(d);
     }
+    this.#updatesDone(null);
     const h = this.handleLevel;
     if (h && h.version < want) {
       const d = await this.#deltaOr410(() => this.session.delta(h.level, h.version));
-      if (!d) await this.#setupHandles();
+      if (!d) await (inQueue ? this.#setupHandles() : this.run(() => this.#setupHandles()));
       else {
         const a = h.attr.array;
         for (let k = 0; k < d.n; k++) a.set(d.positions.subarray(3 * k, 3 * k + 3), 3 * d.indices[k]);
@@ -478,7 +510,7 @@ class App {
       if (!(e instanceof ApiError && e.status === 410)) throw e;
     }
     if (!d) {
-      await this.#refreshComplex();
+      await (inQueue ? this.#refreshComplex() : this.run(() => this.#refreshComplex()));
       return;
     }
     const verts = this.model.complex.vertices;
@@ -496,7 +528,8 @@ class App {
     }
   }
 
-  // Coalesced: one sync at a time, and one more if asked meanwhile.
+  // Coalesced: one sync at a time, and one more if asked meanwhile. Deltas are reads: they do
+  // not wait in the request queue, so the next PATCH of a drag is under way meanwhile.
   requestSync() {
     this.syncWanted = true;
     if (this.syncPromise) return this.syncPromise;
@@ -504,7 +537,7 @@ class App {
       try {
         while (this.syncWanted) {
           this.syncWanted = false;
-          await this.run(() => this.#syncNow());
+          await this.#withSession(() => this.#syncNow());
         }
       } catch (e) {
         this.error(e);
@@ -524,11 +557,18 @@ class App {
     this.events = this.session.events({
       version: (data, v) => {
         if (this.session.id !== id || !this.model || !Number.isFinite(v)) return;
-        this.known = Math.max(this.known, v);
         if (data.kind === 'edit') {
+          // an edit heard while our PATCH is under way is most likely that PATCH: its answer
+          // says (and syncs); otherwise it was made elsewhere
+          if (this.patching) {
+            this.heard = Math.max(this.heard, v);
+            return;
+          }
+          this.known = Math.max(this.known, v);
           if (this.shown && this.shown.version < v) this.requestSync();
           return;
         }
+        this.known = Math.max(this.known, v);
         this.run(async () => {
           if (this.complexVersion >= v) return; // ours, or already fetched
           await this.#refreshComplex();
@@ -669,27 +709,41 @@ class App {
     const what = moves.length === 1 ? moves[0].what : `Moving ${moves.length} points`;
     const t0 = performance.now();
     let r;
+    this.patching = true;
     try {
-      r = await this.session.moveControlPoints(body, what);
-    } catch (e) {
-      // 412: the session changed elsewhere; catch up and send the move again (once)
-      if (!(e instanceof ApiError && e.status === 412)) throw e;
-      await this.#syncNow();
-      r = await this.session.moveControlPoints(body, what);
+      try {
+        r = await this.session.moveControlPoints(body, what);
+      } catch (e) {
+        // 412: the session changed elsewhere; catch up and send the move again (once)
+        if (!(e instanceof ApiError && e.status === 412)) throw e;
+        await this.syncPromise; // a delta under way first
+        await this.#syncNow(true);
+        r = await this.session.moveControlPoints(body, what);
+      }
+    } finally {
+      this.patching = false;
     }
     const t1 = performance.now();
     const cageWasCurrent = this.cageVersion + 1 === r.version;
     for (const m of moves) if (m.level === 0) this.model.complex.vertices[m.index] = m.position;
     if (cageWasCurrent) this.cageVersion = r.version; // nothing but this PATCH since
-    this.known = Math.max(this.known, r.version);
-    await this.#syncNow();
-    const t2 = performance.now();
-    const u = this.perf.updates;
-    u.push({
+    this.known = Math.max(this.known, r.version, this.heard);
+    // the delta goes its own way (requestSync), so the next PATCH can start meanwhile; the
+    // update is complete when the buffers hold r.version
+    this.updating.push({
       move: Math.min(...moves.map((m) => m.t)), lastMove: Math.max(...moves.map((m) => m.last)),
-      sent: t0, patched: t1, applied: t2, version: r.version, moves: moves.length,
-      points: this.perf.last?.n ?? 0, bytes: this.perf.last?.bytes ?? 0, shown: this.shown?.version === r.version,
+      sent: t0, patched: t1, version: r.version, moves: moves.length,
     });
+    this.requestSync();
+  }
+
+  // Updates (PATCHes) whose versions the shown level now holds are done: timings for benchmarks.
+  #updatesDone(d) {
+    const t = performance.now(), u = this.perf.updates;
+    while (this.updating.length && this.updating[0].version <= this.shown.version) {
+      const x = this.updating.shift();
+      u.push({ ...x, applied: t, points: d?.n ?? 0, bytes: d?.bytes ?? 0, delta: d?.since ?? null });
+    }
     if (u.length > 20000) u.splice(0, u.length - 10000);
   }
 
@@ -989,7 +1043,9 @@ class App {
 
     const c = this.viewer.canvas;
     c.addEventListener('pointerdown', (ev) => this.onPointerDown(ev), { capture: true });
-    c.addEventListener('pointermove', (ev) => this.onPointerMove(ev));
+    // pointerrawupdate (secure contexts: localhost, https) is not held back to the next frame
+    // as pointermove is: a drag's PATCH leaves as soon as the mouse moves
+    c.addEventListener('onpointerrawupdate' in window ? 'pointerrawupdate' : 'pointermove', (ev) => this.onPointerMove(ev));
     c.addEventListener('pointerup', (ev) => this.onPointerUp(ev));
     c.addEventListener('pointercancel', (ev) => this.onPointerUp(ev));
 
