@@ -13,7 +13,7 @@ CORE_SRC := $(wildcard core/*.c)
 CORE_OBJ := $(patsubst %.c,$(B)/%.o,$(CORE_SRC))
 CORE_LIB := $(B)/libsubdiv.a
 
-.PHONY: all test bench sanitize fuzz run deps clean clean-build
+.PHONY: all test bench soak sanitize fuzz run deps clean clean-build
 all: $(CORE_LIB) $(B)/sdlevel $(B)/test_core
 
 $(B)/%.o: %.c $(wildcard core/*.h)
@@ -90,7 +90,7 @@ test: deps
 sanitize: deps
 	$(MAKE) clean-build B=build-asan
 	$(MAKE) all B=build-asan CFLAGS="-O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all" LDLIBS="$(LDLIBS) -fsanitize=address,undefined"
-	SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core SUBDIVD=build-asan/subdivd FUZZ_API=build-asan/fuzz_api FUZZ_PACKED=build-asan/fuzz_packed FUZZ_HTTP=build-asan/fuzz_http API_FAULTS=build-asan/api_faults sh tests/run_all.sh
+	SD_SANITIZE=1 SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core SUBDIVD=build-asan/subdivd FUZZ_API=build-asan/fuzz_api FUZZ_PACKED=build-asan/fuzz_packed FUZZ_HTTP=build-asan/fuzz_http API_FAULTS=build-asan/api_faults PACKED_PARSE=build-asan/packed_parse SLOTS_TEST=build-asan/slots_test sh tests/run_all.sh
 
 clean-build:
 	rm -rf $(B)

@@ -14,7 +14,11 @@
 #include "mem.h"
 #include "fill.h"
 #include "internal.h"
+#include "complex_stream.h"
 #include "jsonin.h"
+#include "rows.h"
+#include <math.h>
+#include <stdbool.h>
 #include <ctype.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -22,82 +26,89 @@
 
 /* ---- PUT /complex ------------------------------------------------------------------------- */
 
-static int parse_vertices(json_t *v, const api_limits *lim, api_input *in, api_problem *p)
+static int parse_vertices(json_t *v, const api_packs *packs, const api_limits *lim, api_input *in,
+                          api_problem *p)
 {
-    if (!json_is_array(v))
+    api_rows rows;
+    if (!api_rows_open(&rows, v, packs, "/vertices"))
         return api_fail_at(p, 400, "wrong-type", "/vertices", "must be an array of [x, y, z]");
-    size_t n = json_array_size(v);
+    size_t n = api_rows_count(&rows);
     if (n > lim->max_vertices)
         return api_fail_limit(p, "max_vertices", lim->max_vertices, n,
                               "%zu vertices exceed the limit of %u; split the model or raise "
                               "--max-vertices", n, lim->max_vertices);
-    in->xyz = api_plain_malloc((n ? n : 1) * 3 * sizeof *in->xyz);
+    size_t bytes = (n ? n : 1) * 3 * sizeof *in->xyz;
+    in->xyz = api_input_reserve(in, bytes) ? api_plain_malloc(bytes) : NULL;
     if (!in->xyz)
         return api_fail(p, 503, "out-of-memory", "out of memory reading %zu vertices", n);
     in->nv = (uint32_t)n;
     char ptr[96];
-    for (size_t i = 0; i < n; i++) {
-        json_t *x = json_array_get(v, i);
+    api_row x;
+    for (size_t i = 0; api_rows_next(&rows, &x); i++) {
         api_ptr_index(ptr, sizeof ptr, "/vertices", i);
-        if (!json_is_array(x) || json_array_size(x) != 3)
+        if (!api_row_is_array(&x) || api_row_size(&x) != 3)
             return api_fail_at(p, 400, "wrong-type", ptr, "a vertex is an array of 3 numbers");
         for (int k = 0; k < 3; k++) {
-            json_t *c = json_array_get(x, k);
-            if (!json_is_number(c)) {
+            api_num c = api_row_get(&x, (size_t)k);
+            if (!api_num_is_number(c)) {
                 char at[96];
                 api_ptr_index(at, sizeof at, ptr, k);
                 return api_fail_at(p, 400, "wrong-type", at, "a coordinate must be a number");
             }
-            in->xyz[3 * i + k] = json_number_value(c);
+            in->xyz[3 * i + k] = api_num_value(c);
         }
     }
     return 0;
 }
 
-static int parse_simplices(json_t *v, const api_limits *lim, api_input *in, api_problem *p)
+static int parse_simplices(json_t *v, const api_packs *packs, const api_limits *lim,
+                           api_input *in, api_problem *p)
 {
-    if (!json_is_array(v))
+    api_rows rows;
+    if (!api_rows_open(&rows, v, packs, "/simplices"))
         return api_fail_at(p, 400, "wrong-type", "/simplices",
                            "must be an array of simplices (arrays of 1 to 4 vertex indices)");
-    size_t n = json_array_size(v);
+    size_t n = api_rows_count(&rows);
     if (n > lim->max_simplices)
         return api_fail_limit(p, "max_simplices", lim->max_simplices, n,
                               "%zu simplices exceed the limit of %u; split the model or raise "
                               "--max-simplices", n, lim->max_simplices);
     char ptr[96];
     size_t total = 0;
-    for (size_t i = 0; i < n; i++) {   /* shapes first, so the index array is sized exactly */
-        json_t *s = json_array_get(v, i);
+    api_row s;
+    for (size_t i = 0; api_rows_next(&rows, &s); i++) { /* shapes first: the index array is sized exactly */
         api_ptr_index(ptr, sizeof ptr, "/simplices", i);
-        if (!json_is_array(s))
+        if (!api_row_is_array(&s))
             return api_fail_at(p, 400, "wrong-type", ptr,
                                "a simplex is an array of 1 to 4 vertex indices");
-        size_t k = json_array_size(s);
+        size_t k = api_row_size(&s);
         if (k < 1 || k > 4)
             return api_fail_at(p, 422, "invalid-complex", ptr,
                                "simplex %zu has %zu vertices; a simplex has 1 to 4 (point, edge, "
                                "triangle, tetrahedron)", i, k);
         total += k;
     }
-    in->size = api_plain_malloc(n ? n : 1);
-    in->idx = api_plain_malloc((total ? total : 1) * sizeof *in->idx);
+    size_t bytes = (n ? n : 1) + (total ? total : 1) * sizeof *in->idx;
+    if (api_input_reserve(in, bytes)) {
+        in->size = api_plain_malloc(n ? n : 1);
+        in->idx = api_plain_malloc((total ? total : 1) * sizeof *in->idx);
+    }
     if (!in->size || !in->idx)
         return api_fail(p, 503, "out-of-memory", "out of memory reading %zu simplices", n);
     in->ns = (uint32_t)n;
     size_t off = 0;
-    for (size_t i = 0; i < n; i++) {
-        json_t *s = json_array_get(v, i);
-        size_t k = json_array_size(s);
+    api_rows_rewind(&rows);
+    for (size_t i = 0; api_rows_next(&rows, &s); i++) {
+        size_t k = api_row_size(&s);
         in->size[i] = (uint8_t)k;
         for (size_t j = 0; j < k; j++) {
-            long long x;
             char at[96];
             api_ptr_index(ptr, sizeof ptr, "/simplices", i);
             api_ptr_index(at, sizeof at, ptr, j);
-            json_t *e = json_array_get(s, j);
-            if (!json_is_integer(e))
+            api_num e = api_row_get(&s, j);
+            if (!api_num_is_integer(e))
                 return api_fail_at(p, 400, "wrong-type", at, "a vertex index must be an integer");
-            x = json_integer_value(e);
+            long long x = api_num_integer(e);
             if (x < 0 || x >= (long long)in->nv)
                 return api_fail_at(p, 422, "invalid-complex", at,
                                    "index %lld out of range (%u vertices)", x, in->nv);
@@ -118,7 +129,21 @@ static int valid_name(const char *s)
     return 1;
 }
 
-static int parse_attributes(json_t *v, api_input *in, api_problem *p)
+/* One attribute value at `at`: a number within +-API_MAX_VALUE (the bound of coordinates, so
+ * that everything the core interpolates stays far from overflow). */
+static int attribute_value(api_num x, const char *at, const char *what, double *out, api_problem *p)
+{
+    if (!api_num_is_number(x))
+        return api_fail_at(p, 400, "wrong-type", at, "%s", what);
+    double v = api_num_value(x);
+    if (!(fabs(v) <= API_MAX_VALUE))
+        return api_fail_at(p, 422, "out-of-range", at,
+                           "%g is beyond the largest attribute value, +-%g", v, API_MAX_VALUE);
+    *out = v;
+    return 0;
+}
+
+static int parse_attributes(json_t *v, const api_packs *packs, api_input *in, api_problem *p)
 {
     if (!json_is_object(v))
         return api_fail_at(p, 400, "wrong-type", "/attributes",
@@ -135,47 +160,51 @@ static int parse_attributes(json_t *v, api_input *in, api_problem *p)
             return api_fail_at(p, 422, "invalid-name", ptr,
                                "attribute names have 1 to %d letters, digits, '_' or '-'",
                                API_MAX_ATTRIBUTE_NAME);
-        if (!json_is_array(a))
+        api_rows rows;
+        if (!api_rows_open(&rows, a, packs, ptr))
             return api_fail_at(p, 400, "wrong-type", ptr, "must be an array with one value per vertex");
-        if (json_array_size(a) != in->nv)
+        if (api_rows_count(&rows) != in->nv)
             return api_fail_at(p, 422, "wrong-length", ptr, "has %zu values for %u vertices",
-                               json_array_size(a), in->nv);
+                               api_rows_count(&rows), in->nv);
         api_attribute *t = &in->attrs[in->nattrs];
         snprintf(t->name, sizeof t->name, "%s", name);
-        json_t *first = json_array_get(a, 0);
-        t->scalar_form = !json_is_array(first);
-        t->ncomp = t->scalar_form ? 1 : (int)json_array_size(first);
+        api_row x;
+        bool any = api_rows_next(&rows, &x);
+        t->scalar_form = !any || !api_row_is_array(&x);
+        t->ncomp = t->scalar_form ? 1 : (int)api_row_size(&x);
         if (t->ncomp < 1 || t->ncomp > 16) {
             api_ptr_index(at, sizeof at, ptr, 0);
             return api_fail_at(p, 422, "wrong-length", at,
                                "a vector value has 1 to 16 components, not %d", t->ncomp);
         }
-        t->data = api_plain_malloc((in->nv ? in->nv : 1) * (size_t)t->ncomp * sizeof *t->data);
+        size_t bytes = (in->nv ? in->nv : 1) * (size_t)t->ncomp * sizeof *t->data;
+        t->data = api_input_reserve(in, bytes) ? api_plain_malloc(bytes) : NULL;
         if (!t->data)
             return api_fail(p, 503, "out-of-memory", "out of memory reading attribute %s", name);
         in->nattrs++;
-        for (uint32_t i = 0; i < in->nv; i++) {
-            json_t *x = json_array_get(a, i);
+        api_rows_rewind(&rows);
+        for (uint32_t i = 0; api_rows_next(&rows, &x); i++) {
             api_ptr_index(at, sizeof at, ptr, i);
             if (t->scalar_form) {
-                if (!json_is_number(x))
+                if (api_row_is_array(&x))
                     return api_fail_at(p, 400, "wrong-type", at,
                                        "must be a number like the attribute's first value");
-                t->data[i] = json_number_value(x);
+                if (attribute_value(api_row_value(&x), at,
+                                    "must be a number like the attribute's first value",
+                                    &t->data[i], p))
+                    return p->status;
                 continue;
             }
-            if (!json_is_array(x) || json_array_size(x) != (size_t)t->ncomp)
+            if (!api_row_is_array(&x) || api_row_size(&x) != (size_t)t->ncomp)
                 return api_fail_at(p, 400, "wrong-type", at,
                                    "must be an array of %d numbers like the attribute's first value",
                                    t->ncomp);
             for (int k = 0; k < t->ncomp; k++) {
-                json_t *c = json_array_get(x, k);
-                if (!json_is_number(c)) {
-                    char ck[96];
-                    api_ptr_index(ck, sizeof ck, at, k);
-                    return api_fail_at(p, 400, "wrong-type", ck, "must be a number");
-                }
-                t->data[(size_t)i * t->ncomp + k] = json_number_value(c);
+                char ck[96];
+                api_ptr_index(ck, sizeof ck, at, k);
+                if (attribute_value(api_row_get(&x, (size_t)k), ck, "must be a number",
+                                    &t->data[(size_t)i * t->ncomp + k], p))
+                    return p->status;
             }
         }
     }
@@ -184,11 +213,12 @@ static int parse_attributes(json_t *v, api_input *in, api_problem *p)
 
 /* "diagonals": [[simplex, pair]...] — the major diagonal of chosen tetrahedra (001 Sec. 3:
  * pair 0 = edges 01|23, 1 = 02|13, 2 = 03|12 of the simplex as posted). */
-static int parse_diagonals(json_t *v, api_input *in, api_problem *p)
+static int parse_diagonals(json_t *v, const api_packs *packs, api_input *in, api_problem *p)
 {
-    if (!json_is_array(v))
+    api_rows rows;
+    if (!api_rows_open(&rows, v, packs, "/diagonals"))
         return api_fail_at(p, 400, "wrong-type", "/diagonals", "must be an array of [simplex, pair]");
-    size_t n = json_array_size(v);
+    size_t n = api_rows_count(&rows);
     if (n > in->ns)
         return api_fail_at(p, 422, "repeated-index", "/diagonals",
                            "%zu choices for %u simplices: some tetrahedron is listed twice", n, in->ns);
@@ -198,16 +228,16 @@ static int parse_diagonals(json_t *v, api_input *in, api_problem *p)
     if (!in->diag || !seen)
         rc = api_fail(p, 503, "out-of-memory", "out of memory");
     char ptr[96], at[96];
-    for (size_t i = 0; i < n && !rc; i++) {
-        json_t *d = json_array_get(v, i);
+    api_row d;
+    for (size_t i = 0; !rc && api_rows_next(&rows, &d); i++) {
         long long s, k;
         api_ptr_index(ptr, sizeof ptr, "/diagonals", i);
-        if (!json_is_array(d) || json_array_size(d) != 2) {
+        if (!api_row_is_array(&d) || api_row_size(&d) != 2) {
             rc = api_fail_at(p, 400, "wrong-type", ptr, "a choice is [simplex index, pair 0..2]");
             break;
         }
         api_ptr_index(at, sizeof at, ptr, 0);
-        if ((rc = api_get_int(json_array_get(d, 0), at, 0, (long long)in->ns - 1, &s, p)))
+        if ((rc = api_num_get_int(api_row_get(&d, 0), at, 0, (long long)in->ns - 1, &s, p)))
             break;
         if (in->size[s] != 4) {
             rc = api_fail_at(p, 422, "not-a-tetrahedron", at, "simplex %lld is not a tetrahedron", s);
@@ -218,7 +248,7 @@ static int parse_diagonals(json_t *v, api_input *in, api_problem *p)
             break;
         }
         api_ptr_index(at, sizeof at, ptr, 1);
-        if ((rc = api_get_int(json_array_get(d, 1), at, 0, 2, &k, p)))
+        if ((rc = api_num_get_int(api_row_get(&d, 1), at, 0, 2, &k, p)))
             break;
         in->diag[i][0] = (uint32_t)s;
         in->diag[i][1] = (uint32_t)k;
@@ -282,8 +312,17 @@ int api_build_model(api_input *in, const api_rules *rules, const api_tags *tags,
     return 0;
 }
 
+const char *const api_complex_packed[] = {"/vertices", "/simplices", "/attributes/*",
+                                          "/diagonals", "/fill/*/surface", NULL};
+
 int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                     api_problem *p)
+{
+    return api_put_complex_packed(cur, body, NULL, lim, out, p);
+}
+
+int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *packs,
+                           const api_limits *lim, api_model **out, api_problem *p)
 {
     static const char *const keys[] = {"vertices", "simplices", "attributes", "diagonals",
                                        "fill", "details", NULL};
@@ -298,19 +337,19 @@ int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, a
     api_input *in = api_input_new();
     if (!in)
         return api_fail(p, 503, "out-of-memory", "out of memory");
-    int rc = parse_vertices(vs, lim, in, p);
+    int rc = parse_vertices(vs, packs, lim, in, p);
     if (!rc && ss)
-        rc = parse_simplices(ss, lim, in, p);
+        rc = parse_simplices(ss, packs, lim, in, p);
     json_t *attrs = json_object_get(body, "attributes");
     if (!rc && attrs)
-        rc = parse_attributes(attrs, in, p);
+        rc = parse_attributes(attrs, packs, in, p);
     json_t *dg = json_object_get(body, "diagonals");
     if (!rc && dg)
-        rc = parse_diagonals(dg, in, p);
+        rc = parse_diagonals(dg, packs, in, p);
     uint32_t nv_posted = in->nv, ns_posted = in->ns;
     json_t *fill = json_object_get(body, "fill");
     if (!rc && fill) /* TetGen: the tets and Steiner points are appended to `in` (api/fill.c) */
-        rc = api_fill(fill, in, lim, p);
+        rc = api_fill(fill, packs, in, lim, p);
     if (!rc && !in->nv)   /* the core's "no vertices" would point at /simplices */
         rc = api_fail_at(p, 422, "invalid-complex", "/vertices", "the complex has no vertices");
     api_rules keep = cur->rules; /* the preferences stay; overrides named the old simplices */
@@ -394,6 +433,65 @@ json_t *api_json_doubles(const double *x, size_t n)
     return a;
 }
 
+/* The "tags" member of GET /complex: {"singular": [...]} and "petals" when there are any. */
+static json_t *tags_json(const api_model *m)
+{
+    json_t *tj = json_array();
+    for (uint32_t i = 0, off = 0; i < m->tags.n; off += m->tags.size[i++]) {
+        json_t *a = json_array();
+        for (int j = 0; j < m->tags.size[i]; j++)
+            json_array_append_new(a, json_integer(m->tags.idx[off + j]));
+        json_array_append_new(tj, a);
+    }
+    json_t *pj = json_array();
+    for (uint32_t i = 0; i < m->tags.npet; i++) {
+        static const char *const kinds[] = {"convex", "concave", "smooth"};
+        const sd_petal_tag *q = &m->tags.pet[i];
+        json_array_append_new(pj, json_pack("{s:I, s:[I, I, I], s:s}", "vertex",
+                                            (json_int_t)q->vertex, "triangle",
+                                            (json_int_t)q->triangle[0], (json_int_t)q->triangle[1],
+                                            (json_int_t)q->triangle[2], "kind", kinds[q->kind % 3]));
+    }
+    json_t *tags = json_pack("{s:o}", "singular", tj);
+    if (json_array_size(pj)) /* only when given: {"singular"} as PUT otherwise */
+        json_object_set(tags, "petals", pj);
+    json_decref(pj);
+    return tags;
+}
+
+/* The "rules" member of GET /complex: the preferences and overrides as last put. */
+static json_t *rules_json(const api_model *m)
+{
+    static const char *const schemes[] = {"box", "averaged"}, *const weights[] = {"warren", "loop"};
+    static const char *const nmd[] = {"G2", "G1"}, *const surfs[] = {"chang-qin", "ying-zorin"};
+    json_t *oj = json_array();
+    for (uint32_t i = 0; i < m->rules.noverrides; i++) {
+        const sd_override *o = &m->rules.overrides[i];
+        json_t *sx = json_array();
+        for (int j = 0; j < o->nverts; j++)
+            json_array_append_new(sx, json_integer(o->simplex[j]));
+        json_t *x = json_pack("{s:o, s:s}", "simplex", sx, "rule", sd_rule_name(o->rule));
+        if (o->rule == SD_RULE_N1)
+            json_object_set_new(x, "dimension", json_integer(o->dimension));
+        if (o->rule == SD_RULE_N2) {
+            json_t *pr = json_array();
+            for (int j = 0; j < 2; j++) {
+                json_t *q = json_array();
+                for (int u = 0; u < o->pair_size; u++)
+                    json_array_append_new(q, json_integer(o->pair[j][u]));
+                json_array_append_new(pr, q);
+            }
+            json_object_set_new(x, "pair", pr);
+        }
+        json_array_append_new(oj, x);
+    }
+    return json_pack("{s:s, s:o, s:s, s:s, s:s}", "nonmanifold_default",
+                     nmd[m->rules.nonmanifold_default & 1], "overrides", oj, "solid_scheme",
+                     schemes[m->rules.solid_scheme & 1], "surface_weights",
+                     weights[m->rules.surface_weights & 1], "nonmanifold_surface",
+                     surfs[m->rules.nonmanifold_surface & 1]);
+}
+
 json_t *api_get_complex(api_model *m, api_problem *p)
 {
     const api_input *in = m->in;
@@ -436,66 +534,39 @@ json_t *api_get_complex(api_model *m, api_problem *p)
                                                          (json_int_t)ev[2 * i + 1]));
             json_array_append_new(ce, o);
         }
-    json_t *tj = json_array();
-    for (uint32_t i = 0, off = 0; i < m->tags.n; off += m->tags.size[i++]) {
-        json_t *a = json_array();
-        for (int j = 0; j < m->tags.size[i]; j++)
-            json_array_append_new(a, json_integer(m->tags.idx[off + j]));
-        json_array_append_new(tj, a);
-    }
-    json_t *pj = json_array();
-    for (uint32_t i = 0; i < m->tags.npet; i++) {
-        static const char *const kinds[] = {"convex", "concave", "smooth"};
-        const sd_petal_tag *q = &m->tags.pet[i];
-        json_array_append_new(pj, json_pack("{s:I, s:[I, I, I], s:s}", "vertex",
-                                            (json_int_t)q->vertex, "triangle",
-                                            (json_int_t)q->triangle[0], (json_int_t)q->triangle[1],
-                                            (json_int_t)q->triangle[2], "kind", kinds[q->kind % 3]));
-    }
     json_t *dj = json_array();
     for (uint32_t s = 0; s < in->ns; s++)
         if (in->size[s] == 4)
             json_array_append_new(dj, json_pack("[I, i]", (json_int_t)s, sd_complex_diagonal(m->c, s)));
-    json_t *details = api_details_count(m) ? api_details_json(m) : NULL; /* edits change them */
+    json_t *details = api_details_json(m); /* edits change them: under the lock */
     pthread_rwlock_unlock(&m->data);
-    static const char *const schemes[] = {"box", "averaged"}, *const weights[] = {"warren", "loop"};
-    static const char *const nmd[] = {"G2", "G1"}, *const surfs[] = {"chang-qin", "ying-zorin"};
-    json_t *oj = json_array();
-    for (uint32_t i = 0; i < m->rules.noverrides; i++) {
-        const sd_override *o = &m->rules.overrides[i];
-        json_t *sx = json_array();
-        for (int j = 0; j < o->nverts; j++)
-            json_array_append_new(sx, json_integer(o->simplex[j]));
-        json_t *x = json_pack("{s:o, s:s}", "simplex", sx, "rule", sd_rule_name(o->rule));
-        if (o->rule == SD_RULE_N1)
-            json_object_set_new(x, "dimension", json_integer(o->dimension));
-        if (o->rule == SD_RULE_N2) {
-            json_t *pr = json_array();
-            for (int j = 0; j < 2; j++) {
-                json_t *q = json_array();
-                for (int u = 0; u < o->pair_size; u++)
-                    json_array_append_new(q, json_integer(o->pair[j][u]));
-                json_array_append_new(pr, q);
-            }
-            json_object_set_new(x, "pair", pr);
-        }
-        json_array_append_new(oj, x);
+    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:o, s:o, s:o, s:O}", "vertices", vs,
+                     "simplices", ss, "attributes", at, "diagonals", dj, "classes", "vertices", cv,
+                     "edges", ce, "tags", tags_json(m), "rules", rules_json(m), "details",
+                     details, "summary", m->summary);
+}
+
+api_cstream *api_get_complex_stream(api_model *m, uint64_t *version, api_problem *p)
+{
+    if (!m->in) {
+        api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+        return NULL;
     }
-    json_t *tags = json_pack("{s:o}", "singular", tj);
-    if (json_array_size(pj)) /* only when given: {"singular"} as PUT otherwise */
-        json_object_set(tags, "petals", pj);
-    json_decref(pj);
-    json_t *j = json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:o, s:{s:s, s:o, s:s, s:s, s:s}, s:O}",
-                     "vertices", vs, "simplices", ss, "attributes", at, "diagonals", dj,
-                     "classes", "vertices", cv,
-                     "edges", ce, "tags", tags, "rules", "nonmanifold_default",
-                     nmd[m->rules.nonmanifold_default & 1], "overrides", oj,
-                     "solid_scheme", schemes[m->rules.solid_scheme & 1],
-                     "surface_weights", weights[m->rules.surface_weights & 1],
-                     "nonmanifold_surface", surfs[m->rules.nonmanifold_surface & 1],
-                     "summary", m->summary);
-    if (j && details) /* beside tags and rules; only when there are any */
-        json_object_set(j, "details", details);
-    json_decref(details);
-    return j;
+    /* under the lock edits take: the copied points and attributes and the version agree */
+    pthread_rwlock_rdlock(&m->data);
+    *version = atomic_load(&m->version);
+    json_t *t = json_pack("{s:o, s:o, s:o, s:O, s:I}", "tags", tags_json(m), "rules",
+                          rules_json(m), "details", api_details_json(m), "summary", m->summary,
+                          "version", (json_int_t)*version);
+    char *text = t ? json_dumps(t, JSON_COMPACT) : NULL; /* {"tags":…,"version":N} */
+    json_decref(t);
+    api_cstream *s = NULL;
+    if (text) {
+        text[0] = ','; /* it continues the document after "classes" */
+        s = api_cstream_new(m, text, strlen(text));
+    }
+    pthread_rwlock_unlock(&m->data);
+    if (!s)
+        api_fail(p, 503, "out-of-memory", "out of memory opening the complex's stream");
+    return s;
 }

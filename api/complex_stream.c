@@ -1,8 +1,9 @@
 /* complex_stream.c — GET /complex as a stream: the same bytes as json_dumps(JSON_COMPACT) of
  * the whole document, without the document.
  *
- * A complex of a million points is some 60 MB of JSON; as a jansson tree it took 1.4 GB and 25 s
- * per request. Here the big arrays (vertices, simplices, attributes, diagonals, the classes of
+ * A complex of a million points is some 60 MB of JSON points and simplices, and several hundred
+ * MB with the classes of its vertices and edges; as a jansson tree it took 1.4 GB and 25 s per
+ * request. Here the big arrays (vertices, simplices, attributes, diagonals, the classes of
  * vertices and edges) are written element by element into a 64 KiB buffer as the client reads,
  * and only the small members (tags, rules, summary) go through jansson, as a prepared text.
  * Positions and attributes are copied when the stream opens (edits change them in place), so
@@ -11,6 +12,7 @@
  * values, the exponent without '+' or leading zeros), so a client cannot tell the two apart.
  */
 #include "complex_stream.h"
+#include "mem.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -27,7 +29,7 @@ struct api_cstream {
     int nattrs;
     uint32_t nv, ns, ne;
     const uint32_t *ev;
-    char *tail;                       /* ,"tags":…,"rules":…,"summary":…} */
+    char *tail;                       /* ,"tags":…,"rules":…,"summary":…,"version":…} */
     size_t tail_len, tail_at;
     int section, attr;                /* where the writer is */
     size_t item, off;                 /* element within the section; simplex index offset */
@@ -212,19 +214,22 @@ static void fill(api_cstream *s)
 api_cstream *api_cstream_new(const api_model *m, char *tail, size_t tail_len)
 {
     const api_input *in = m->in;
-    api_cstream *s = calloc(1, sizeof *s);
-    if (!s)
+    api_cstream *s = api_calloc(1, sizeof *s);
+    if (!s) {
+        api_free(tail);
         return NULL;
+    }
+    s->tail = tail;
+    s->tail_len = tail_len;
     s->m = m;
     s->nv = in->nv;
     s->ns = in->ns;
     s->nattrs = in->nattrs;
-    s->xyz = malloc((size_t)in->nv * 3 * sizeof *s->xyz + 1);
+    s->xyz = api_malloc((size_t)in->nv * 3 * sizeof *s->xyz + 1);
     int ok = s->xyz != NULL;
     for (int a = 0; ok && a < in->nattrs; a++)
-        ok = (s->adata[a] = malloc((size_t)in->nv * in->attrs[a].ncomp * sizeof(double) + 1)) != NULL;
+        ok = (s->adata[a] = api_malloc((size_t)in->nv * in->attrs[a].ncomp * sizeof(double) + 1)) != NULL;
     if (!ok) {
-        s->tail = NULL;
         api_cstream_free(s);
         return NULL;
     }
@@ -232,8 +237,6 @@ api_cstream *api_cstream_new(const api_model *m, char *tail, size_t tail_len)
     for (int a = 0; a < in->nattrs; a++)
         memcpy(s->adata[a], in->attrs[a].data, (size_t)in->nv * in->attrs[a].ncomp * sizeof(double));
     s->ev = sd_level_edges(m->level0, &s->ne);
-    s->tail = tail;
-    s->tail_len = tail_len;
     s->section = S_VERTICES;
     memcpy(s->buf, "{\"vertices\":[", 13);
     s->len = 13;
@@ -271,9 +274,9 @@ void api_cstream_free(api_cstream *s)
 {
     if (!s)
         return;
-    free(s->xyz);
+    api_free(s->xyz);
     for (int a = 0; a < API_MAX_ATTRIBUTES; a++)
-        free(s->adata[a]);
-    free(s->tail);
-    free(s);
+        api_free(s->adata[a]);
+    api_free(s->tail);
+    api_free(s);
 }

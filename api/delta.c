@@ -12,11 +12,12 @@
  * vertex, its drawn triangles in out_normals' order (surface triangles, then the boundary), built
  * once per level with the glTF geometry. An edit recomputes the cached normal of each of those
  * vertices with out_triangle_normal and out_normal_unit, summed in that order, so the normals
- * equal out_normals' of the edited level bit for bit (docs/DECISIONS.md 34).
+ * equal out_normals' of the edited level bit for bit (docs/DECISIONS.md 36). A geometry a stream
+ * holds a reference on is never written: the model's cache becomes a copy first.
  *
  * Costs (docs/SERVICE.md "Live edits"): 4 bytes per point of a level where a position changed,
  * 4 more per attribute changed there, and with the glTF geometry 4 bytes per vertex plus 12 per
- * drawn triangle for the incidence; a delta scans its level's stamps (4 bytes per point) and
+ * drawn triangle for the incidence (and a copy of the normals while a stream holds them); a delta scans its level's stamps (4 bytes per point) and
  * walks the triangles at the moved points. Stamps are 32-bit: a model past version 2^32 - 1
  * answers 410 (refetch) rather than wrap.
  */
@@ -41,7 +42,6 @@ typedef struct dlevel {
 } dlevel;
 
 struct api_delta {
-    uint64_t from;             /* no delta reaches back before this version (rules rebuilt) */
     dlevel lv[SD_MAX_LEVEL + 1];
 };
 
@@ -177,7 +177,10 @@ static bool with_neighbours(const sd_level *lv, const dlevel *L, const out_geome
 }
 
 /* The cached normals of the vertices around the moved points idx of a level, recomputed as
- * out_normals computes them. Without memory for that the cache goes (the next glTF builds it). */
+ * out_normals computes them. A geometry a stream holds too (refs > 1: the streams took their
+ * references under m->lock, which the edit holds, so none is taken meanwhile) is never written:
+ * the model's cache becomes a copy, and the stream keeps reading the normals of its moment.
+ * Without memory for that the cache goes (the next glTF builds it). */
 static void update_normals(api_model *m, int level, const uint32_t *idx, size_t n)
 {
     out_geometry *g = m->geometry[level];
@@ -188,6 +191,13 @@ static void update_normals(api_model *m, int level, const uint32_t *idx, size_t 
     dlevel *L = &m->delta->lv[level];
     uint32_t *ids = NULL;
     size_t nids = 0;
+    if (lv && atomic_load(&g->refs) > 1) { /* copy on write */
+        out_geometry *c = out_geometry_copy(g, sd_level_num_vertices(lv));
+        out_geometry_free(g);
+        m->geometry[level] = g = c;
+        if (!g)
+            return;
+    }
     if (!lv || !ensure_incidence(L, lv, g) || !with_neighbours(lv, L, g, idx, n, n, &ids, &nids)) {
         out_geometry_free(g);
         m->geometry[level] = NULL;
@@ -247,11 +257,9 @@ void api_delta_report(api_delta_edit *de, sd_edit_report *rep)
     rep->ud = de;
 }
 
-void api_delta_end_edit(api_model *m, uint64_t version, int rules_rebuilt)
+void api_delta_end_edit(api_model *m)
 {
     observe(m); /* levels the edit computed without changing them: as they were before it */
-    if (rules_rebuilt >= 0 && m->delta->from < version)
-        m->delta->from = version;
 }
 
 /* ---- the answer ------------------------------------------------------------------------------ */
@@ -264,7 +272,7 @@ typedef struct buf {
 
 static void put(buf *o, const void *x, size_t n)
 {
-    if (o->failed)
+    if (o->failed || (!n && o->b)) /* x may be NULL when n is 0 (an empty delta) */
         return;
     if (o->n + n + 1 > o->cap) {
         size_t cap = o->cap ? o->cap : 4096;
@@ -278,7 +286,8 @@ static void put(buf *o, const void *x, size_t n)
         o->b = b;
         o->cap = cap;
     }
-    memcpy(o->b + o->n, x, n);
+    if (n)
+        memcpy(o->b + o->n, x, n);
     o->n += n;
     o->b[o->n] = 0;
 }
@@ -448,7 +457,7 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
     }
     observe(m);
     dlevel *L = &m->delta->lv[level];
-    uint64_t from = L->base > m->delta->from ? L->base : m->delta->from;
+    uint64_t from = L->base;
     if (since < from) {
         pthread_mutex_unlock(&m->lock);
         return gone(p, "since version %llu the level changed other than by edits (a new "

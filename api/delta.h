@@ -4,13 +4,13 @@
  * A model keeps, per computed level, the version at which each point's position last changed and,
  * per attribute, the version at which its value did (stamps, fed by sd_edit_report's callback
  * while the edit holds the model's locks), plus the level's drawn-triangle incidence, with which
- * an edit updates the cached glTF normals (m->geometry) of the vertices around moved points in
- * place, summed in out_normals' order — so the glTF after an edit is the bytes of a fresh one,
- * and the normals a delta sends are the glTF's. Only edits are deltas: a new model (complex, tags,
- * rules, refine) starts at its own version, and an edit that builds a level's rules again (entry
- * 26 of docs/DECISIONS.md) raises that start to its version; a delta from before either is
- * refused (410), as is one from before the level was computed, one ahead of the model, or one of
- * a level not computed.
+ * an edit updates the cached glTF normals (m->geometry) of the vertices around moved points —
+ * copy on write, since a stream may hold the geometry — summed in out_normals' order, so the glTF
+ * after an edit is the bytes of a fresh one, and the normals a delta sends are the glTF's. Only
+ * edits are deltas: a new model (complex, tags, rules, refine, or an edit that moved what a
+ * level's rules read, api/edit.c) starts without stamps, so a delta from before it is refused
+ * (410), as is one from before the level was computed, one ahead of the model, or one of a level
+ * not computed (docs/DECISIONS.md 36).
  *
  * Locking: every function here is called with m->lock held (the edit functions also with the
  * data write lock); the stamps and the incidence are m's, freed with it.
@@ -45,9 +45,8 @@ void api_delta_begin_edit(api_model *m);
 /* Zero rep and set its callback to stamp, for this call, the points that changed (and, for
  * positions, to update the cached normals around them). */
 void api_delta_report(api_delta_edit *de, sd_edit_report *rep);
-/* After a successful edit (m->version still the old one): rules_rebuilt as the core reported it
- * for the positions (>= 0: no delta reaches back across this edit). */
-void api_delta_end_edit(api_model *m, uint64_t version, int rules_rebuilt);
+/* After a successful edit (m->version still the old one). */
+void api_delta_end_edit(api_model *m);
 
 /* The query of GET /levels/{L}/delta (NULL = absent). */
 typedef struct api_delta_query {

@@ -4,13 +4,24 @@
  * per topology and applied many times; Sec. 5.2: a move at level l >= 1 is a detail offset the
  * session keeps, sd_complex_move).
  *
- * All-or-nothing: every entry is checked (level and index ranges, repeats, value shapes) before
- * anything changes; then the edit runs under the model's compute lock and its data write lock
- * (so it waits for the streams in flight) — the positions in one sd_complex_move (coarse to fine),
- * then each attribute — and one that fails half-way is undone part by part (control points put
- * back, the offsets as they were). Each call reports the points it changed to api/delta.c, which
- * stamps them with the edit's version and keeps the cached glTF normals in step. The posted input
- * follows the control-point moves, so later rule changes rebuild from the new values.
+ * All-or-nothing: every entry is checked (level and index ranges, repeats, value shapes, and no
+ * simplex of the control complex made degenerate by the control-point moves) before anything
+ * changes; then the edit runs under the model's compute lock and its data write lock — which
+ * streams hold only while they copy what they send (api/levels.c), so an edit never waits for a
+ * slow client — the positions in one sd_complex_move (coarse to fine), then each attribute, and
+ * one that fails half-way is undone part by part (control points put back, the offsets as they
+ * were). Each call reports the points it changed to api/delta.c, which stamps them with the
+ * edit's version and keeps the cached glTF normals in step (copy on write: a stream may hold
+ * them). The edit changes channel values only (rep.in_place): where a level's rules read a moved
+ * point (Ying-Zorin's corner angle), it becomes a new model built from the edited input, with the
+ * session's offsets and the edit's finer moves applied to it, instead of a rebuild of levels in
+ * place, since streams in flight read those levels' topology and rules without a lock. The posted
+ * input follows the control-point moves, so later rule changes rebuild from the new values; the
+ * model's version becomes the edit's, with the values.
+ *
+ * Moves at levels >= 1 are not checked for degeneracy: they change no simplex of the control
+ * complex (which is what PUT /complex validates), only a point of a subdivided level, whose
+ * cells may fold as the levels of any folded control complex do (docs/DECISIONS.md 35).
  */
 #include "handlers.h"
 #include "delta.h"
@@ -128,18 +139,8 @@ static int parse_edit_entries(json_t *arr, const char *base, const char *vkey, i
             rc = api_fail_at(p, 400, "missing-field", at, "\"index\" is required");
             break;
         }
-        if (!json_is_integer(x)) {
-            rc = api_get_int(x, at, 0, 0, &v, p); /* the wrong-type answer */
+        if ((rc = api_get_int(x, at, 0, (long long)count[lv] - 1, &v, p)))
             break;
-        }
-        v = json_integer_value(x);
-        if (v < 0 || (unsigned long long)v >= count[lv]) {
-            rc = api_fail_at(p, 422, "out-of-range", at,
-                             lv ? "point %lld is out of range (level %lld has %llu points)"
-                                : "point %lld is out of range (%lld: %llu control points)",
-                             v, lv, (unsigned long long)count[lv]);
-            break;
-        }
         if (!lv && seen[v] >= 0) {
             rc = api_fail_at(p, 422, "repeated-index", at, "point %lld is edited twice", v);
             break;
@@ -156,7 +157,7 @@ static int parse_edit_entries(json_t *arr, const char *base, const char *vkey, i
             break;
         }
         if (ncomp == 1 && json_is_number(x)) {
-            rc = api_get_number(x, at, 1e15, &e->val[i], p);
+            rc = api_get_number(x, at, API_MAX_VALUE, &e->val[i], p);
             continue;
         }
         if (!json_is_array(x) || json_array_size(x) != (size_t)ncomp) {
@@ -167,7 +168,7 @@ static int parse_edit_entries(json_t *arr, const char *base, const char *vkey, i
         for (int k = 0; k < ncomp && !rc; k++) {
             char ck[96];
             api_ptr_index(ck, sizeof ck, at, k);
-            rc = api_get_number(json_array_get(x, k), ck, 1e15, &e->val[i * ncomp + k], p);
+            rc = api_get_number(json_array_get(x, k), ck, API_MAX_VALUE, &e->val[i * ncomp + k], p);
         }
     }
     for (size_t j = 0; j < e->n0; j++) /* leave `seen` clean for the next list */
@@ -213,15 +214,21 @@ static int part_failed(const edit_part *q, const api_input *in, const sd_error *
 }
 
 /* The detail offsets of the positions, all levels, as sd_complex_set_details takes them (to put
- * back after a failure). false: out of memory. */
-static bool save_details(const sd_complex *c, sd_vertex_at **at, double **off, size_t *n)
+ * back after a failure, or onto a rebuilt model). */
+typedef struct saved_details {
+    size_t n;
+    sd_vertex_at *at;
+    double *off;
+} saved_details;
+
+static bool save_details(const sd_complex *c, saved_details *s)
 {
     size_t k = 0;
     for (int l = 1; l <= SD_MAX_LEVEL; l++)
         k += sd_complex_details(c, 0, l, NULL, NULL);
-    *at = api_malloc((k + 1) * sizeof **at);
-    *off = api_malloc((k + 1) * 3 * sizeof **off);
-    if (!*at || !*off)
+    s->at = api_malloc((k + 1) * sizeof *s->at);
+    s->off = api_malloc((k + 1) * 3 * sizeof *s->off);
+    if (!s->at || !s->off)
         return false;
     k = 0;
     for (int l = 1; l <= SD_MAX_LEVEL; l++) {
@@ -229,17 +236,174 @@ static bool save_details(const sd_complex *c, sd_vertex_at **at, double **off, s
         const double *d;
         size_t m = sd_complex_details(c, 0, l, &idx, &d);
         for (size_t i = 0; i < m; i++, k++) {
-            (*at)[k] = (sd_vertex_at){l, idx[i]};
-            memcpy(*off + 3 * k, d + 3 * i, 3 * sizeof **off);
+            s->at[k] = (sd_vertex_at){l, idx[i]};
+            memcpy(s->off + 3 * k, d + 3 * i, 3 * sizeof *s->off);
         }
     }
-    *n = k;
+    s->n = k;
     return true;
 }
 
-int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim,
-             uint64_t *counts, int *levels, api_problem *p)
+/* Write the edit's control-point values into an input's arrays. */
+static void apply_to_input(api_input *in, const edit_part *parts, int np)
 {
+    for (int i = 0; i < np; i++) {
+        double *dst = parts[i].attr < 0 ? in->xyz : in->attrs[parts[i].attr].data;
+        const int nc = parts[i].ncomp;
+        for (size_t k = 0; k < parts[i].n0; k++)
+            memcpy(dst + (size_t)parts[i].at0[k].index * nc,
+                   parts[i].val + (size_t)parts[i].k0[k] * nc, nc * sizeof *dst);
+    }
+}
+
+/* The moves of points of levels >= 1 of part q (the positions), as one sd_complex_move call
+ * takes them: *at and *val, new blocks; their number. */
+static size_t fine_moves(const edit_part *q, sd_vertex_at **at, double **val)
+{
+    size_t n = q->n - q->n0, k = 0;
+    *at = api_malloc((n + 1) * sizeof **at);
+    *val = api_malloc((n + 1) * 3 * sizeof **val);
+    if (!*at || !*val)
+        return SIZE_MAX;
+    for (size_t i = 0; i < q->n; i++)
+        if (q->at[i].level > 0) {
+            (*at)[k] = q->at[i];
+            memcpy(*val + 3 * k++, q->val + 3 * i, 3 * sizeof **val);
+        }
+    return k;
+}
+
+/* The edit as a new model: a copy of m's input with the control-point values applied, built
+ * with m's rules, overrides and tags (they name simplices, which an edit does not change) in a
+ * compute slot; then m's detail offsets (sv) and the edit's moves at finer levels, applied to it
+ * as to any complex (nobody reads it yet). Its other levels are computed again when asked for;
+ * the result is the one a new complex with the moved points and those offsets gives. */
+static int rebuilt_model(const api_model *m, const edit_part *parts, int np,
+                         const saved_details *sv, const api_limits *lim, const api_slot *slot,
+                         api_model **out, api_problem *p)
+{
+    api_input *in = api_input_copy(m->in);
+    if (!in)
+        return api_fail(p, 503, "out-of-memory", "out of memory copying the complex for the edit");
+    apply_to_input(in, parts, np);
+    int rc = slot ? slot->take(slot->ud, 0, p) : 0;
+    if (!rc) {
+        rc = api_build_model(in, &m->rules, &m->tags, lim, out, p);
+        sd_error e = {0};
+        sd_vertex_at *at = NULL;
+        double *val = NULL;
+        size_t nf = !rc && np && parts[0].attr < 0 ? fine_moves(&parts[0], &at, &val) : 0;
+        if (!rc && (nf == SIZE_MAX ||
+                    (sv->n && sd_complex_set_details((*out)->c, 0, sv->n, sv->at, sv->off, NULL,
+                                                     &e)) ||
+                    (nf && sd_complex_move((*out)->c, 0, nf, at, val, NULL, &e)))) {
+            rc = nf == SIZE_MAX ? api_fail(p, 503, "out-of-memory", "out of memory")
+                                : api_fail_core(p, &e, NULL, NULL);
+            api_model_unref(*out);
+            *out = NULL;
+        }
+        if (!rc) {
+            pthread_mutex_lock(&(*out)->lock);
+            api_model_publish(*out); /* the levels the finer moves computed */
+            pthread_mutex_unlock(&(*out)->lock);
+        }
+        api_free(at);
+        api_free(val);
+        if (slot)
+            slot->give(slot->ud);
+    }
+    api_input_unref(in);
+    return rc;
+}
+
+/* No simplex at a moved control point may become degenerate (PUT /complex's test; inverted is
+ * fine): sd_complex_check_moves on the level-0 moves of part q. 0 or the problem's status. */
+static int check_moves(api_model *m, const edit_part *q, api_problem *p)
+{
+    if (!q->n0)
+        return 0;
+    double *xyz = api_malloc(q->n0 * 3 * sizeof *xyz);
+    uint32_t *idx = api_malloc(q->n0 * sizeof *idx);
+    int rc = 0;
+    sd_error e = {0};
+    if (!xyz || !idx)
+        rc = api_fail(p, 503, "out-of-memory", "out of memory");
+    for (size_t i = 0; !rc && i < q->n0; i++) {
+        idx[i] = q->at0[i].index;
+        memcpy(xyz + 3 * i, q->val + 3 * (size_t)q->k0[i], 3 * sizeof *xyz);
+    }
+    if (!rc && sd_complex_check_moves(m->c, q->n0, idx, xyz, &e)) {
+        char at[64];
+        snprintf(at, sizeof at, "/moves/%u/position", e.item < 0 ? 0 : q->k0[e.item]);
+        rc = e.code == SD_ERR_DEGENERATE ? api_fail_at(p, 422, "invalid-complex", at, "%s", e.message)
+                                         : api_fail_core(p, &e, NULL, NULL);
+    }
+    api_free(xyz);
+    api_free(idx);
+    return rc;
+}
+
+/* Apply the parts to m (its compute lock and data write lock held): every part in place, or
+ * nothing — refused, undone after a failure half-way, or, when a level's rules read a moved
+ * position, *rebuild set to that level (the edit then becomes a new model). 0 or the status. */
+static int apply_locked(api_model *m, edit_part *parts, int np, uint64_t version,
+                        const saved_details *sv, uint64_t *counts, int *rebuild, api_problem *p)
+{
+    sd_error e = {0};
+    int done = 0, rc = np && parts[0].attr < 0 ? check_moves(m, &parts[0], p) : 0;
+    bool fine = np && parts[0].attr < 0 && parts[0].n0 < parts[0].n; /* offsets change */
+    *rebuild = -1;
+    for (; !rc && done < np; done++) {
+        edit_part *q = &parts[done];
+        const double *cur = sd_level_channel(sd_complex_level(m->c, 0, &e), q->channel, NULL);
+        for (size_t i = 0; i < q->n0; i++)
+            memcpy(q->old + i * q->ncomp, cur + (size_t)q->at0[i].index * q->ncomp,
+                   q->ncomp * sizeof *cur);
+        api_delta_edit de = {m, q->attr, version};
+        sd_edit_report rep;
+        api_delta_report(&de, &rep);
+        rep.in_place = 1;
+        if (sd_complex_move(m->c, q->channel, q->n, q->at, q->val, &rep, &e))
+            break;
+        for (int l = 0; l <= SD_MAX_LEVEL; l++)
+            counts[l] = rep.recomputed[l] > counts[l] ? rep.recomputed[l] : counts[l];
+        if (rep.rules_rebuilt >= 0) { /* nothing changed (counts: what the new model differs
+                                       * in); moves are the first part, the only one whose values
+                                       * a level's rules read */
+            *rebuild = rep.rules_rebuilt;
+            return 0;
+        }
+    }
+    if (rc)
+        return rc; /* refused before anything changed */
+    if (done < np) { /* refused by the core or out of memory half-way: undo what was applied */
+        rc = part_failed(&parts[done], m->in, &e, p);
+        for (int i = done - 1; i >= 0; i--) {
+            const edit_part *q = &parts[i];
+            api_delta_edit de = {m, q->attr, version};
+            sd_edit_report rep;
+            if (q->attr < 0 && fine) {
+                api_delta_report(&de, &rep);
+                rep.in_place = 1;
+                sd_complex_set_details(m->c, 0, sv->n, sv->at, sv->off, &rep, NULL);
+            }
+            api_delta_report(&de, &rep);
+            rep.in_place = 1;
+            sd_complex_move(m->c, q->channel, q->n0, q->at0, q->old, &rep, NULL);
+        }
+        return rc;
+    }
+    apply_to_input(m->in, parts, np); /* GET /complex, later rule changes rebuild from it */
+    api_delta_end_edit(m);
+    atomic_store(&m->version, version);
+    return 0;
+}
+
+int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim,
+             const api_slot *slot, uint64_t *counts, int *levels, api_model **rebuilt,
+             api_problem *p)
+{
+    *rebuilt = NULL;
     static const char *const keys[] = {"moves", "attributes", NULL};
     if (!m->c)
         return api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
@@ -295,64 +459,20 @@ int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim
     api_delta_begin_edit(m);
     for (int l = 0; l <= SD_MAX_LEVEL; l++)
         counts[l] = 0;
-    sd_error e = {0};
-    sd_vertex_at *dat = NULL;
-    double *doff = NULL;
-    size_t nd = 0;
-    int done = 0, rebuilt = -1;
-    bool fine = mv && parts[0].n0 < parts[0].n; /* moves at finer levels change the offsets */
-    if (fine && !save_details(m->c, &dat, &doff, &nd)) {
-        e.code = SD_ERR_NOMEM;
-        snprintf(e.message, sizeof e.message, "out of memory");
-        e.item = -1;
-    } else
-        for (; done < np; done++) {
-            edit_part *q = &parts[done];
-            const double *cur = sd_level_channel(sd_complex_level(m->c, 0, &e), q->channel, NULL);
-            for (size_t i = 0; i < q->n0; i++)
-                memcpy(q->old + i * q->ncomp, cur + (size_t)q->at0[i].index * q->ncomp,
-                       q->ncomp * sizeof *cur);
-            api_delta_edit de = {m, q->attr, version};
-            sd_edit_report rep;
-            api_delta_report(&de, &rep);
-            if (sd_complex_move(m->c, q->channel, q->n, q->at, q->val, &rep, &e))
-                break;
-            if (q->attr < 0)
-                rebuilt = rep.rules_rebuilt;
-            for (int l = 0; l <= SD_MAX_LEVEL; l++)
-                counts[l] = rep.recomputed[l] > counts[l] ? rep.recomputed[l] : counts[l];
-        }
-    if (done < np) { /* refused or out of memory half-way: undo what was applied */
-        rc = part_failed(&parts[done], in, &e, p);
-        for (int i = done - 1; i >= 0; i--) {
-            const edit_part *q = &parts[i];
-            api_delta_edit de = {m, q->attr, version};
-            sd_edit_report rep;
-            if (q->attr < 0 && fine) {
-                api_delta_report(&de, &rep);
-                sd_complex_set_details(m->c, 0, nd, dat, doff, &rep, NULL);
-            }
-            api_delta_report(&de, &rep);
-            sd_complex_move(m->c, q->channel, q->n0, q->at0, q->old, &rep, NULL);
-        }
-    } else {
-        /* the posted input follows (GET /complex, later rule changes rebuild from it) */
-        for (int i = 0; i < np; i++) {
-            double *dst = parts[i].attr < 0 ? in->xyz : in->attrs[parts[i].attr].data;
-            const int nc = parts[i].ncomp;
-            for (size_t k = 0; k < parts[i].n0; k++)
-                memcpy(dst + (size_t)parts[i].at0[k].index * nc,
-                       parts[i].val + (size_t)parts[i].k0[k] * nc, nc * sizeof *dst);
-        }
-        api_delta_end_edit(m, version, rebuilt);
-        atomic_store(&m->version, version);
-    }
+    saved_details sv = {0};
+    int rebuild = -1;
+    if (!save_details(m->c, &sv))
+        rc = api_fail(p, 503, "out-of-memory", "out of memory");
+    else
+        rc = apply_locked(m, parts, np, version, &sv, counts, &rebuild, p);
     *levels = sd_complex_levels_computed(m->c);
     api_model_publish(m); /* the by-column matrices of the first edit count as session memory */
     pthread_rwlock_unlock(&m->data);
     pthread_mutex_unlock(&m->lock);
-    api_free(dat);
-    api_free(doff);
+    if (!rc && rebuild >= 0)
+        rc = rebuilt_model(m, parts, np, &sv, lim, slot, rebuilt, p);
+    api_free(sv.at);
+    api_free(sv.off);
     edit_parts_free(parts, np);
     return rc;
 }

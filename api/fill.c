@@ -13,6 +13,7 @@
 #include "fill_internal.h"
 #include "mem.h"
 #include "jsonin.h"
+#include "rows.h"
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
@@ -26,8 +27,8 @@
  * renumbered 0..nloc-1 in order of their global index. */
 /* ---- parsing ------------------------------------------------------------------------------ */
 
-static int parse_entry(json_t *e, size_t k, const api_input *in, const api_limits *lim,
-                       surface *s, api_problem *p)
+static int parse_entry(json_t *e, size_t k, const api_packs *packs, const api_input *in,
+                       const api_limits *lim, surface *s, api_problem *p)
 {
     static const char *const keys[] = {"surface", "max_volume", "min_ratio", NULL};
     char ptr[96], sp[96], at[96], ix[96];
@@ -42,9 +43,10 @@ static int parse_entry(json_t *e, size_t k, const api_input *in, const api_limit
     if (!tris)
         return api_fail_at(p, 400, "missing-field", sp, "\"surface\" is required: the closed "
                            "surface's triangles as [i, j, k] indices into \"vertices\"");
-    if (!json_is_array(tris))
+    api_rows rows;
+    if (!api_rows_open(&rows, tris, packs, sp))
         return api_fail_at(p, 400, "wrong-type", sp, "must be an array of triangles [i, j, k]");
-    size_t n = json_array_size(tris);
+    size_t n = api_rows_count(&rows);
     if (n > lim->max_simplices)
         return api_fail_limit(p, "max_simplices", lim->max_simplices, n,
                               "the surface has %zu triangles, over the limit of %u simplices", n,
@@ -56,20 +58,20 @@ static int parse_entry(json_t *e, size_t k, const api_input *in, const api_limit
     s->tri = api_malloc(3 * n * sizeof *s->tri);
     if (!s->tri)
         return api_fail(p, 503, "out-of-memory", "out of memory reading the surface");
-    for (size_t j = 0; j < n; j++) {
-        json_t *t = json_array_get(tris, j);
+    api_row t;
+    for (size_t j = 0; api_rows_next(&rows, &t); j++) {
         api_ptr_index(at, sizeof at, sp, j);
-        if (!json_is_array(t))
+        if (!api_row_is_array(&t))
             return api_fail_at(p, 400, "wrong-type", at, "a triangle is an array of 3 vertex indices");
-        if (json_array_size(t) != 3)
+        if (api_row_size(&t) != 3)
             return api_fail_at(p, 422, "invalid-surface", at,
-                               "a surface triangle has 3 vertex indices, not %zu", json_array_size(t));
+                               "a surface triangle has 3 vertex indices, not %zu", api_row_size(&t));
         for (size_t m = 0; m < 3; m++) {
             long long x;
             api_ptr_index(ix, sizeof ix, at, m);
             if (!in->nv)
                 return api_fail_at(p, 422, "out-of-range", ix, "there are no vertices to index");
-            if (api_get_int(json_array_get(t, m), ix, 0, (long long)in->nv - 1, &x, p))
+            if (api_num_get_int(api_row_get(&t, m), ix, 0, (long long)in->nv - 1, &x, p))
                 return p->status;
             for (size_t q = 0; q < m; q++)
                 if (s->tri[3 * j + q] == (uint32_t)x)
@@ -250,6 +252,8 @@ static int append(api_input *in, const surface *s, const helper_out *h, api_prob
     }
     in->nv = nv0 + added;
     in->ns = ns0 + nt;
+    if (!api_input_account(in)) /* the grown arrays count against the memory budget */
+        return api_fail(p, 503, "out-of-memory", "out of memory adding TetGen's tetrahedra");
     in->fill[in->nfill++] =
         (api_fill_stats){s->nt, nt, added, nv0, ns0, vol, largest, s->max_volume};
     return 0;
@@ -257,7 +261,8 @@ static int append(api_input *in, const surface *s, const helper_out *h, api_prob
 
 /* ---- entry points ------------------------------------------------------------------------- */
 
-int api_fill(json_t *fill, api_input *in, const api_limits *lim, api_problem *p)
+int api_fill(json_t *fill, const api_packs *packs, api_input *in, const api_limits *lim,
+             api_problem *p)
 {
     if (!json_is_array(fill))
         return api_fail_at(p, 400, "wrong-type", "/fill",
@@ -274,7 +279,7 @@ int api_fill(json_t *fill, api_input *in, const api_limits *lim, api_problem *p)
     int rc = 0;
     uint64_t tri_total = 0;
     for (size_t k = 0; k < n && !rc; k++) {
-        rc = parse_entry(json_array_get(fill, k), k, in, lim, &s[k], p);
+        rc = parse_entry(json_array_get(fill, k), k, packs, in, lim, &s[k], p);
         tri_total += s[k].nt;
     }
     if (!rc && tri_total > lim->max_simplices)

@@ -20,13 +20,17 @@
 
 #include "limits.h"
 #include "model.h"
+#include "packed.h"
 #include "problem.h"
 #include <jansson.h>
 
 /* Validate and run every entry of `fill` (the JSON value of the member) against `in`, whose
  * vertices, simplices and attributes are parsed already; appends the results to `in` and records
- * in->fill. 0, or the problem's status (in may then hold part of the results: drop it). */
-int api_fill(json_t *fill, api_input *in, const api_limits *lim, api_problem *p);
+ * in->fill. The surfaces are read packed where `packs` (may be NULL) holds them
+ * (/fill/k/surface, api/rows.h). 0, or the problem's status (in may then hold part of the
+ * results: drop it). */
+int api_fill(json_t *fill, const api_packs *packs, api_input *in, const api_limits *lim,
+             api_problem *p);
 
 /* After the core refused the filled complex: point errors that name a generated vertex or
  * tetrahedron (index >= nv_posted / ns_posted) at the "fill" entry that made it. */

@@ -263,6 +263,7 @@ out_geometry *out_geometry_compute(const sd_level *lv)
     out_geometry *g = api_calloc(1, sizeof *g);
     if (!g)
         return NULL;
+    atomic_init(&g->refs, 1);
     g->nbnd = sd_level_solid_boundary(lv, NULL);
     g->bnd = api_malloc(((size_t)g->nbnd * 3 + 1) * sizeof *g->bnd);
     if (g->bnd) {
@@ -277,9 +278,35 @@ out_geometry *out_geometry_compute(const sd_level *lv)
     return g;
 }
 
+out_geometry *out_geometry_copy(const out_geometry *g, uint32_t nv)
+{
+    out_geometry *c = api_calloc(1, sizeof *c);
+    if (!c)
+        return NULL;
+    atomic_init(&c->refs, 1);
+    c->nbnd = g->nbnd;
+    c->bytes = g->bytes;
+    c->bnd = api_malloc(((size_t)g->nbnd * 3 + 1) * sizeof *c->bnd);
+    c->normals = api_malloc(((size_t)nv * 3 + 1) * sizeof *c->normals);
+    if (!c->bnd || !c->normals) {
+        out_geometry_free(c);
+        return NULL;
+    }
+    memcpy(c->bnd, g->bnd, (size_t)g->nbnd * 3 * sizeof *c->bnd);
+    memcpy(c->normals, g->normals, (size_t)nv * 3 * sizeof *c->normals);
+    return c;
+}
+
+out_geometry *out_geometry_ref(out_geometry *g)
+{
+    if (g)
+        atomic_fetch_add(&g->refs, 1);
+    return g;
+}
+
 void out_geometry_free(out_geometry *g)
 {
-    if (!g)
+    if (!g || atomic_fetch_sub(&g->refs, 1) != 1)
         return;
     api_free(g->bnd);
     api_free(g->normals);

@@ -14,6 +14,7 @@
 #include "limits.h"
 #include "model.h"
 #include "out.h"
+#include "packed.h"
 #include "problem.h"
 #include <jansson.h>
 
@@ -25,51 +26,84 @@ typedef int (*change_fn_t)(const api_model *cur, json_t *body, const api_limits 
  * model and the function returns 0; else the problem's status. */
 int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                     api_problem *p);
+/* The same with the big arrays of the body packed beside the tree (api/packed.h; packs may be
+ * NULL): the answers are those of the unpacked body. api_complex_packed lists the JSON pointers
+ * to pack (NULL-terminated patterns for api_parse_body_packed). */
+int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *packs,
+                           const api_limits *lim, api_model **out, api_problem *p);
+extern const char *const api_complex_packed[];
 /* PUT /rules: replaces every rule preference (absent fields = defaults). */
 int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                   api_problem *p);
 /* PUT /tags: validates the singular simplices against the complex. */
 int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                  api_problem *p);
+/* The same with "singular" packed beside the tree (api_tags_packed: the patterns). */
+int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *packs,
+                        const api_limits *lim, api_model **out, api_problem *p);
+extern const char *const api_tags_packed[];
 
 /* The summary of a model's complex (new reference; {} without a complex). */
 json_t *api_summary(const api_model *m);
 /* GET /complex (new reference), or NULL + 409 when no complex was posted. Locks the model. */
 json_t *api_get_complex(api_model *m, api_problem *p);
+/* GET /complex as a stream (api/complex_stream.h): the same bytes as json_dumps(JSON_COMPACT) of
+ * api_get_complex's document with "version" added last, which is *version, the version of the
+ * points and attributes it copied. Keep a reference on m until api_cstream_free. NULL + 409 or
+ * 503. */
+struct api_cstream *api_get_complex_stream(api_model *m, uint64_t *version, api_problem *p);
 
 /* Query options of GET /levels/{L} (NULL = absent). */
 typedef struct api_level_query {
     const char *format, *parts, *slice, *attributes, *colormap, *octahedra;
 } api_level_query;
 
-/* Checks the query and the limits, computes level L if needed (locking the model), and opens the
- * output stream; the caller keeps a reference on the model until out_close. */
+/* A compute slot of the transport (the daemon's scheduler; NULL offline): take waits for one
+ * to compute `level` (0) or fills a problem (429) and returns its status; give returns it.
+ * The handlers that may compute a level take one only once they hold the model's lock (a
+ * request waiting for its own session's computation holds no slot). */
+typedef struct api_slot {
+    int (*take)(void *ud, int level, api_problem *p);
+    void (*give)(void *ud);
+    void *ud;
+} api_slot;
+
+/* Checks the query and the limits, computes level L if needed (in a slot), and opens the
+ * output stream on a snapshot of what edits change (points, channels, normals), with that
+ * content's version in *version. The stream holds no lock: close it with out_close, keeping a
+ * reference on the model until then. */
 int api_level_open(api_model *m, int level, const api_level_query *q, const api_limits *lim,
-                   uint64_t version, out_stream **out, const out_format **fmt, api_problem *p);
-/* Close a stream opened by api_level_open (it holds the model's data lock for reading). */
-void api_level_close(api_model *m, out_stream *os);
+                   const api_slot *slot, out_stream **out, const out_format **fmt,
+                   uint64_t *version, api_problem *p);
 
 /* PATCH /control-points: moves and attribute values of control points, and moves of points of
  * finer levels ("level": l, stored as detail offsets; missing levels are computed, within lim),
- * applied to every cached level through the matrices (in place, so it waits for the streams in
- * flight). Validates all first. `version` is the one the edit will have (the session's + 1): the
- * changed points are stamped with it (api/delta.h) and the model takes it. counts[l] = points
- * updated at level l; *levels = levels computed now. 0 or the status. */
+ * applied to every cached level through the matrices, in place, and the model's version set to
+ * `version` (the one the session publishes it with): the changed points are stamped with it
+ * (api/delta.h). Validates all first. An edit that moves a point a level's rules read
+ * (Ying-Zorin's corner angle) is answered with a new model instead (*rebuilt, built in a compute
+ * slot of `slot`, with the session's detail offsets and the edit's), to be published in place of
+ * m, which is left unchanged. counts[l] = points updated at level l; *levels = levels computed
+ * now. 0 or the status. */
 int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim,
-             uint64_t *counts, int *levels, api_problem *p);
+             const api_slot *slot, uint64_t *counts, int *levels, api_model **rebuilt,
+             api_problem *p);
 
 /* GET /levels/{L}/stats (new reference). */
-json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_problem *p);
+json_t *api_level_stats(api_model *m, int level, const api_limits *lim, const api_slot *slot,
+                        api_problem *p);
 
 /* GET /analysis?vertex=i | ?edge=i,j (001 Sec. 4.1): the local subdivision matrix of a control
  * vertex (1-ring block M) or edge (block L of its midpoint) and its eigenvalues, largest in
  * magnitude first. Locks the model (an edge needs level 1). New reference or NULL + problem. */
-json_t *api_analysis(api_model *m, const char *vertex, const char *edge, api_problem *p);
+json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const api_slot *slot,
+                     api_problem *p);
 
 /* GET /matrices/{L}?from=F&format=mtx|json: computes level L if needed and opens the stream of
  * the matrix mapping level F (default 0) to level L. *ctype: the Content-Type. */
 int api_matrix_open(api_model *m, int level, const char *from, const char *format,
-                    const api_limits *lim, out_stream **out, const char **ctype, api_problem *p);
+                    const api_limits *lim, const api_slot *slot, out_stream **out,
+                    const char **ctype, api_problem *p);
 
 /* POST /refine: red-green refinement of the control complex (000 Sec. 4.2) around the selected
  * simplices (by vertex lists), box or sphere (centroids), `depth` times, new points placed by

@@ -34,7 +34,8 @@ static long query_index(const char *s, uint32_t n, const char *name, api_problem
     return v;
 }
 
-json_t *api_analysis(api_model *m, const char *vertex, const char *edge, api_problem *p)
+json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const api_slot *slot,
+                     api_problem *p)
 {
     if (!m->c) {
         api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
@@ -64,6 +65,8 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, api_pro
             return NULL;
         }
     }
+    if (api_level_compute(m, 1, slot, p)) /* an edge's block lives at level 1 */
+        return NULL;
     sd_analysis an;
     sd_error e = {0};
     pthread_mutex_lock(&m->lock);
@@ -98,7 +101,8 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, api_pro
 /* ---- GET /matrices/{L} -------------------------------------------------------------------- */
 
 int api_matrix_open(api_model *m, int level, const char *from, const char *format,
-                    const api_limits *lim, out_stream **out, const char **ctype, api_problem *p)
+                    const api_limits *lim, const api_slot *slot, out_stream **out,
+                    const char **ctype, api_problem *p)
 {
     *out = NULL;
     if (!m->c)
@@ -118,7 +122,7 @@ int api_matrix_open(api_model *m, int level, const char *from, const char *forma
     if (level < 1 || f >= level)
         return api_fail_at(p, 422, "out-of-range", "from",
                            "from (%ld) must be below the level (%d); level 0 has no matrix", f, level);
-    if (api_check_level_limits(m, level, lim, p))
+    if (api_check_level_limits(m, level, lim, p) || api_level_compute(m, level, slot, p))
         return p->status;
     sd_error e = {0};
     pthread_mutex_lock(&m->lock);

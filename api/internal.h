@@ -24,4 +24,10 @@ json_t *api_json_doubles(const double *x, size_t n);
  * max_session_bytes: 0, or the status of a 413 problem naming the limit. */
 int api_check_level_limits(api_model *m, int level, const api_limits *lim, api_problem *p);
 
+/* Compute level L of m (and the missing ones below) unless it is cached, taking the model's
+ * lock and only then a compute slot from `slot` (NULL: none), so requests that wait for their
+ * own session's computation hold no slot. 0 or the problem's status (429, 503). Callers check
+ * the query and the limits first. */
+int api_level_compute(api_model *m, int level, const api_slot *slot, api_problem *p);
+
 #endif

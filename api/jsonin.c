@@ -76,6 +76,19 @@ json_t *api_parse_body(const char *buf, size_t len, int empty_ok, api_problem *p
     return j;
 }
 
+json_t *api_parse_body_packed(char *buf, size_t len, int empty_ok, const char *const *patterns,
+                              size_t min_bytes, api_packs *packs, api_problem *p)
+{
+    if (api_pack_body(buf, len, patterns, min_bytes, API_MAX_JSON_DEPTH, packs)) {
+        api_fail(p, 503, "out-of-memory", "out of memory reading the body; retry later");
+        return NULL;
+    }
+    json_t *j = api_parse_body(buf, len, empty_ok, p);
+    if (!j)
+        api_packs_free(packs);
+    return j;
+}
+
 int api_only_keys(json_t *obj, const char *ptr, const char *const *allowed, api_problem *p)
 {
     const char *k;
@@ -130,28 +143,57 @@ int api_get_enum(json_t *v, const char *ptr, const char *const *names, api_probl
     return -1;
 }
 
-int api_get_int(json_t *v, const char *ptr, long long lo, long long hi, long long *out,
-                api_problem *p)
+int api_num_is_number(api_num v) { return v.packed || json_is_number(v.json); }
+
+int api_num_is_integer(api_num v) { return v.packed ? v.isint : json_is_integer(v.json); }
+
+double api_num_value(api_num v) { return v.packed ? v.x : json_number_value(v.json); }
+
+/* A packed integer is at most 2^53 in magnitude (packed.h): the double holds it exactly. */
+long long api_num_integer(api_num v) { return v.packed ? (long long)v.x : json_integer_value(v.json); }
+
+static const char *num_type_name(api_num v)
 {
-    if (!json_is_integer(v))
-        return api_fail_at(p, 400, "wrong-type", ptr, "must be an integer, not %s", type_name(v));
-    long long x = json_integer_value(v);
+    if (v.packed)
+        return v.isint ? "an integer" : "a number";
+    return v.json ? type_name(v.json) : "missing";
+}
+
+int api_num_get_int(api_num v, const char *ptr, long long lo, long long hi, long long *out,
+                    api_problem *p)
+{
+    if (!api_num_is_integer(v))
+        return api_fail_at(p, 400, "wrong-type", ptr, "must be an integer, not %s",
+                           num_type_name(v));
+    long long x = api_num_integer(v);
     if (x < lo || x > hi)
         return api_fail_at(p, 422, "out-of-range", ptr, "%lld is outside %lld..%lld", x, lo, hi);
     *out = x;
     return 0;
 }
 
-int api_get_number(json_t *v, const char *ptr, double maxabs, double *out, api_problem *p)
+int api_num_get_number(api_num v, const char *ptr, double maxabs, double *out, api_problem *p)
 {
-    if (!json_is_number(v))
-        return api_fail_at(p, 400, "wrong-type", ptr, "must be a number, not %s", type_name(v));
-    double x = json_number_value(v);
+    if (!api_num_is_number(v))
+        return api_fail_at(p, 400, "wrong-type", ptr, "must be a number, not %s",
+                           num_type_name(v));
+    double x = api_num_value(v);
     if (!isfinite(x) || fabs(x) > maxabs)
         return api_fail_at(p, 422, "out-of-range", ptr, "%g exceeds the allowed magnitude %g", x,
                            maxabs);
     *out = x;
     return 0;
+}
+
+int api_get_int(json_t *v, const char *ptr, long long lo, long long hi, long long *out,
+                api_problem *p)
+{
+    return api_num_get_int(api_num_json(v), ptr, lo, hi, out, p);
+}
+
+int api_get_number(json_t *v, const char *ptr, double maxabs, double *out, api_problem *p)
+{
+    return api_num_get_number(api_num_json(v), ptr, maxabs, out, p);
 }
 
 void api_ptr_index(char *dst, size_t cap, const char *base, size_t i)

@@ -2,15 +2,19 @@
  * (format, parts, slice, attributes, colormap, octahedra) into an out_request, the limits checked
  * before a level is computed, and the stream opened on it.
  *
- * A level is computed under the model's lock (api_model_level_locked) and streamed under its data
- * lock for reading, held from api_level_open to api_level_close, so an edit waits for the streams
- * in flight. Formats come from the table of api/formats.c; the glTF ones get the per-level cached
- * geometry. api_estimate_bytes is the over-estimate the session memory limit is checked with.
+ * A level is computed under the model's lock (api_model_level_locked), in a compute slot taken
+ * only once that lock is held (api_level_compute). A stream copies, under the same lock, what
+ * edits change in place — the level's points and the requested channels — and takes a reference
+ * on the cached glTF geometry, with the version of that content; it then holds no lock while
+ * the client reads, and an edit never waits for it (the level's topology and rules, which the
+ * writers also read, stay as they are while the model lives: api/edit.c). Formats come from the table of api/formats.c; the glTF ones get the per-level cached
+ * geometry. api_estimate_bytes is the core's estimate the session memory limit is checked with.
  */
 #include "handlers.h"
 #include "internal.h"
 #include <ctype.h>
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -69,12 +73,14 @@ static int next_item(const char **s, char *buf, size_t cap)
     return 1;
 }
 
+/* A finite number; strtod's ERANGE on underflow (1e-320: a subnormal or 0) is not an error,
+ * only overflow is (C11 7.22.1.3: HUGE_VAL then). */
 static int parse_double(const char *s, double *x)
 {
     char *end;
     errno = 0;
     *x = strtod(s, &end);
-    return *s && !*end && !errno && isfinite(*x);
+    return *s && !*end && (!errno || (errno == ERANGE && fabs(*x) <= DBL_MIN)) && isfinite(*x);
 }
 
 static int add_attr(const api_model *m, out_request *rq, int a)
@@ -177,51 +183,68 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
     return 0;
 }
 
+int api_level_compute(api_model *m, int level, const api_slot *slot, api_problem *p)
+{
+    if (!m->c || atomic_load(&m->levels_cached) > level)
+        return 0;
+    /* the model's lock first: a request waiting for its own session's computation holds no
+     * compute slot, so other sessions' work goes on meanwhile */
+    pthread_mutex_lock(&m->lock);
+    int rc = 0;
+    if (atomic_load(&m->levels_cached) <= level &&
+        !(slot && (rc = slot->take(slot->ud, level, p)))) {
+        sd_error e = {0};
+        if (!api_model_level_locked(m, level, &e))
+            rc = api_fail_core(p, &e, NULL, NULL);
+        if (slot)
+            slot->give(slot->ud);
+    }
+    pthread_mutex_unlock(&m->lock);
+    return rc;
+}
+
 int api_level_open(api_model *m, int level, const api_level_query *q, const api_limits *lim,
-                   uint64_t version, out_stream **out, const out_format **fmt, api_problem *p)
+                   const api_slot *slot, out_stream **out, const out_format **fmt,
+                   uint64_t *version, api_problem *p)
 {
     *out = NULL;
     if (!m->c)
         return api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
     out_request rq;
     memset(&rq, 0, sizeof rq);
-    if (parse_query(m, q, &rq, fmt, p) || api_check_level_limits(m, level, lim, p))
+    if (parse_query(m, q, &rq, fmt, p) || api_check_level_limits(m, level, lim, p) ||
+        api_level_compute(m, level, slot, p))
         return p->status;
     rq.complex = m->c;
     rq.level = level;
-    rq.version = version;
+    rq.snapshot = true;
     sd_error e = {0};
+    /* under the lock that edits take: the points, the channels, the normals and the version
+     * are of one moment; then the stream holds no lock while the client reads */
     pthread_mutex_lock(&m->lock);
     if (api_model_level_locked(m, level, &e)) {
         if ((*fmt)->geometry)
             rq.geometry = api_model_geometry_locked(m, level);
-        pthread_rwlock_rdlock(&m->data); /* held until api_level_close */
+        rq.version = atomic_load(&m->version);
         *out = out_open(&rq, *fmt, &e);
-        if (!*out)
-            pthread_rwlock_unlock(&m->data);
+        api_model_publish(m); /* the writer may have built the level's vertex rules */
     }
     pthread_mutex_unlock(&m->lock);
     if (!*out)
         return e.code == SD_ERR_ARG ? api_fail(p, 422, "invalid-argument", "%s", e.message)
                                     : api_fail_core(p, &e, NULL, NULL);
+    *version = rq.version;
     return 0;
 }
 
-void api_level_close(api_model *m, out_stream *os)
-{
-    if (!os)
-        return;
-    out_close(os);
-    pthread_rwlock_unlock(&m->data);
-}
-
-json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_problem *p)
+json_t *api_level_stats(api_model *m, int level, const api_limits *lim, const api_slot *slot,
+                        api_problem *p)
 {
     if (!m->c) {
         api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
         return NULL;
     }
-    if (api_check_level_limits(m, level, lim, p))
+    if (api_check_level_limits(m, level, lim, p) || api_level_compute(m, level, slot, p))
         return NULL;
     sd_error e = {0};
     pthread_mutex_lock(&m->lock);
@@ -242,6 +265,7 @@ json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_prob
             json_object_set_new(bytes, f->name, json_integer((json_int_t)out_size(s)));
         out_close(s);
     }
+    api_model_publish(m); /* the writers may have built the level's vertex rules */
     pthread_mutex_unlock(&m->lock);
     if (!lv) {
         json_decref(bytes);
@@ -250,11 +274,15 @@ json_t *api_level_stats(api_model *m, int level, const api_limits *lim, api_prob
     }
     sd_counts n;
     sd_complex_counts(m->c, level, &n);
-    return json_pack("{s:i, s:{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:I}, s:o, s:f, s:I}", "level",
+    uint64_t est = 0; /* what levels 1..L take by the estimate the limits are checked with */
+    for (int l = 1; l <= level; l++)
+        est += sd_complex_estimate_level_bytes(m->c, l);
+    return json_pack("{s:i, s:{s:I, s:I, s:I, s:I, s:I, s:I, s:I, s:I}, s:o, s:f, s:I, s:I}", "level",
                      level, "counts", "vertices", (json_int_t)n.vertices, "edges",
                      (json_int_t)n.edges, "faces", (json_int_t)n.faces, "points",
                      (json_int_t)n.points, "curves", (json_int_t)n.curves, "triangles",
                      (json_int_t)n.triangles, "tetrahedra", (json_int_t)n.tetrahedra, "octahedra",
                      (json_int_t)n.octahedra, "bytes", bytes, "seconds", secs, "memory_bytes",
-                     (json_int_t)atomic_load(&m->memory_bytes));
+                     (json_int_t)atomic_load(&m->memory_bytes), "estimated_bytes",
+                     (json_int_t)est);
 }

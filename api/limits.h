@@ -30,6 +30,8 @@
 #define API_MAX_FILL_SURFACES           16            /* entries of "fill" in one request */
 #define API_MAX_PATH_BYTES              256           /* a request's decoded path (414 beyond) */
 #define API_MAX_QUERY_PARAMS            64            /* parameters of a request's query (400) */
+#define API_PACK_MIN_BYTES              4096          /* body arrays packed beside the tree (packed.h) */
+#define API_MAX_VALUE                   1e15          /* magnitude of coordinates and attribute values */
 
 typedef struct api_limits {
     size_t max_body_bytes;

@@ -22,6 +22,9 @@
 #define HDR 16
 
 static atomic_size_t in_use;
+static atomic_size_t elsewhere;        /* core blocks and reservations */
+static size_t budget;                  /* 0: none */
+static _Atomic uint64_t budget_refusals;
 static _Thread_local api_mem_meter *meter;
 static _Atomic uint64_t fail_in;      /* allocations until the next injected failure; 0: off */
 static _Atomic uint64_t fail_every;
@@ -43,12 +46,34 @@ static bool injected(void)
     return true;
 }
 
+/* Whether n more bytes fit the budget, counted in `on` (in_use or elsewhere) when they do. */
+static bool within_budget(atomic_size_t *on, size_t n)
+{
+    size_t was = atomic_fetch_add_explicit(on, n, memory_order_relaxed);
+    if (!budget)
+        return true;
+    size_t other = on == &in_use ? atomic_load_explicit(&elsewhere, memory_order_relaxed)
+                                 : atomic_load_explicit(&in_use, memory_order_relaxed);
+    size_t total = was + n + other;
+    size_t room = budget;
+    if (n <= API_MEM_SMALL)
+        room += budget / 32 > (1u << 20) ? budget / 32 : (1u << 20);
+    if (total <= room && total >= n)
+        return true;
+    atomic_fetch_sub_explicit(on, n, memory_order_relaxed);
+    atomic_fetch_add_explicit(&budget_refusals, 1, memory_order_relaxed);
+    if (meter)
+        meter->over_budget++;
+    return false;
+}
+
 /* Charge n bytes to this thread's meter; false when its limit refuses them. */
 static bool charge(size_t n)
 {
     api_mem_meter *m = meter;
     if (!m)
         return true;
+    m->moved += n;
     if (m->limit && m->net + (int64_t)n > (int64_t)m->limit) {
         m->refused++;
         return false;
@@ -61,8 +86,10 @@ static bool charge(size_t n)
 
 static void credit(size_t n)
 {
-    if (meter)
+    if (meter) {
         meter->net -= (int64_t)n;
+        meter->moved += n;
+    }
 }
 
 void *api_malloc(size_t n)
@@ -71,14 +98,19 @@ void *api_malloc(size_t n)
         refused_here++;
         return NULL;
     }
+    if (!within_budget(&in_use, n + HDR)) {
+        credit(n + HDR);
+        refused_here++;
+        return NULL;
+    }
     unsigned char *b = malloc(n + HDR);
     if (!b) {
+        atomic_fetch_sub_explicit(&in_use, n + HDR, memory_order_relaxed);
         credit(n + HDR);
         refused_here++;
         return NULL;
     }
     memcpy(b, &n, sizeof n);
-    atomic_fetch_add_explicit(&in_use, n + HDR, memory_order_relaxed);
     return b + HDR;
 }
 
@@ -106,18 +138,38 @@ void api_free(void *p)
     free(b);
 }
 
+/* The C library's realloc on the whole block (header included), so a growing buffer is moved
+ * by mremap rather than copied once it is mmapped; the meter is charged the growth first. */
 void *api_realloc(void *p, size_t n)
 {
     if (!p)
         return api_malloc(n);
+    unsigned char *b = (unsigned char *)p - HDR;
     size_t old;
-    memcpy(&old, (unsigned char *)p - HDR, sizeof old);
-    void *q = api_malloc(n);
-    if (!q)
+    memcpy(&old, b, sizeof old);
+    size_t grow = n > old ? n - old : 0;
+    if (n > SIZE_MAX - HDR || injected() || !charge(grow)) {
+        refused_here++;
         return NULL;
-    memcpy(q, p, old < n ? old : n);
-    api_free(p);
-    return q;
+    }
+    if (grow && !within_budget(&in_use, grow)) {
+        credit(grow);
+        refused_here++;
+        return NULL;
+    }
+    unsigned char *q = realloc(b, n + HDR);
+    if (!q) {
+        atomic_fetch_sub_explicit(&in_use, grow, memory_order_relaxed);
+        credit(grow);
+        refused_here++;
+        return NULL;
+    }
+    if (n < old) {
+        atomic_fetch_sub_explicit(&in_use, old - n, memory_order_relaxed);
+        credit(old - n);
+    }
+    memcpy(q, &n, sizeof n);
+    return q + HDR;
 }
 
 void *api_memdup(const void *p, size_t n)
@@ -147,6 +199,60 @@ void *api_plain_realloc(void *p, size_t n) { return plain(injected() ? NULL : re
 void api_plain_free(void *p) { free(p); }
 
 size_t api_mem_in_use(void) { return atomic_load_explicit(&in_use, memory_order_relaxed); }
+
+void api_mem_set_budget(size_t bytes) { budget = bytes; }
+
+size_t api_mem_budget(void) { return budget; }
+
+size_t api_mem_budget_used(void)
+{
+    return atomic_load_explicit(&in_use, memory_order_relaxed) +
+           atomic_load_explicit(&elsewhere, memory_order_relaxed);
+}
+
+uint64_t api_mem_budget_refusals(void) { return atomic_load(&budget_refusals); }
+
+bool api_mem_reserve(size_t n)
+{
+    if (!within_budget(&elsewhere, n)) {
+        refused_here++;
+        return false;
+    }
+    if (meter)
+        meter->moved += n;
+    return true;
+}
+
+void api_mem_unreserve(size_t n)
+{
+    atomic_fetch_sub_explicit(&elsewhere, n, memory_order_relaxed);
+    if (meter)
+        meter->moved += n;
+}
+
+static void *core_alloc(size_t n, void *ud)
+{
+    (void)ud;
+    if (!api_mem_reserve(n))
+        return NULL;
+    void *p = malloc(n);
+    if (!p)
+        api_mem_unreserve(n);
+    return p;
+}
+
+static void core_release(void *p, size_t n, void *ud)
+{
+    (void)ud;
+    free(p);
+    api_mem_unreserve(n);
+}
+
+sd_allocator api_mem_core_allocator(void)
+{
+    sd_allocator a = {core_alloc, core_release, NULL};
+    return a;
+}
 
 api_mem_meter *api_mem_meter_set(api_mem_meter *m)
 {

@@ -22,11 +22,15 @@
  * malloc and free the input's arrays, tags and overrides they work on. So the arrays of an
  * api_input (xyz, size, idx, attribute data), of api_tags and the overrides of api_rules are
  * plain blocks (model.h). The other C-library blocks are open_memstream's buffers (the C library
- * owns them; their text is copied or freed at once, each place says which).
+ * owns them; their text is copied or freed at once, each place says which). Plain blocks are not
+ * counted one by one (they change hands with free()); the input arrays are counted against the
+ * memory budget as a whole instead, reserved by their api_input (model.h).
  */
 #ifndef SUBDIVD_API_MEM_H
 #define SUBDIVD_API_MEM_H
 
+#include "../core/sd.h"
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -52,7 +56,35 @@ typedef struct api_mem_meter {
     int64_t peak;       /* the largest `net` seen */
     uint64_t limit;     /* > 0: an allocation that would take `net` above it fails */
     uint64_t refused;   /* allocations the limit refused */
+    uint64_t over_budget; /* allocations and reservations the memory budget refused */
+    uint64_t moved;     /* bytes taken and given back in all, core blocks and reservations too */
 } api_mem_meter;
+
+/* ---- the memory budget -------------------------------------------------------------------
+ * One number bounds what the daemon holds (--max-memory): the api_* blocks, the core's blocks
+ * (every complex allocates through api_mem_core_allocator) and what is reserved for blocks
+ * allocated otherwise (the input arrays of model.h, api_input_reserve). An allocation or
+ * reservation that would take the total past the budget fails like an allocation that found no
+ * memory, and is counted as over_budget on the thread's meter, so the transport can tell a full
+ * budget (503 memory-budget, retry later) from a machine out of memory. Blocks of at most
+ * API_MEM_SMALL bytes may go past the budget by its headroom (a 32nd of it, at least 1 MiB):
+ * the bookkeeping of requests and the problem that refuses one never fail for want of a few
+ * bytes. 0 (the default) means no budget. */
+#define API_MEM_SMALL (64u << 10)
+
+void api_mem_set_budget(size_t bytes);
+size_t api_mem_budget(void);
+/* Bytes counted against the budget: api blocks + core blocks + reservations. */
+size_t api_mem_budget_used(void);
+/* Refusals of the budget so far, all threads (/metrics). */
+uint64_t api_mem_budget_refusals(void);
+/* Count n bytes allocated elsewhere against the budget: false (nothing counted) when they do
+ * not fit. api_mem_unreserve gives them back. */
+bool api_mem_reserve(size_t n);
+void api_mem_unreserve(size_t n);
+/* The allocator of core complexes (sd_options.allocator): C-library blocks counted against the
+ * budget. */
+sd_allocator api_mem_core_allocator(void);
 
 /* Set this thread's meter (NULL: none); returns the one it replaces. */
 api_mem_meter *api_mem_meter_set(api_mem_meter *m);

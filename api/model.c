@@ -24,10 +24,74 @@ api_input *api_input_new(void)
     return in;
 }
 
+bool api_input_reserve(api_input *in, size_t n)
+{
+    if (!api_mem_reserve(n))
+        return false;
+    in->reserved += n;
+    return true;
+}
+
+bool api_input_account(api_input *in)
+{
+    size_t nidx = 0;
+    for (uint32_t s = 0; s < in->ns; s++)
+        nidx += in->size[s];
+    size_t n = 3 * sizeof(double) * (size_t)in->nv + in->ns + nidx * sizeof(uint32_t);
+    for (int a = 0; a < in->nattrs; a++)
+        n += sizeof(double) * (size_t)in->nv * (size_t)in->attrs[a].ncomp;
+    return n <= in->reserved || api_input_reserve(in, n - in->reserved);
+}
+
+api_input *api_input_copy(const api_input *in)
+{
+    api_input *c = api_input_new();
+    if (!c)
+        return NULL;
+    size_t nidx = 0;
+    for (uint32_t s = 0; s < in->ns; s++)
+        nidx += in->size[s];
+    c->nv = in->nv;
+    c->ns = in->ns;
+    c->nattrs = in->nattrs;
+    c->ndiag = in->ndiag;
+    c->nfill = in->nfill;
+    size_t bytes = 3 * sizeof(double) * (size_t)in->nv + in->ns + nidx * sizeof(uint32_t);
+    for (int a = 0; a < in->nattrs; a++)
+        bytes += sizeof(double) * (size_t)in->nv * (size_t)in->attrs[a].ncomp;
+    bool ok = api_input_reserve(c, bytes);
+    size_t nxyz = 3 * sizeof(double) * ((size_t)in->nv + 1);
+    if (ok && (c->xyz = api_plain_malloc(nxyz)))
+        memcpy(c->xyz, in->xyz, 3 * sizeof(double) * (size_t)in->nv);
+    if (ok && (c->size = api_plain_malloc((size_t)in->ns + 1)))
+        memcpy(c->size, in->size, in->ns);
+    if (ok && (c->idx = api_plain_malloc((nidx + 1) * sizeof *c->idx)))
+        memcpy(c->idx, in->idx, nidx * sizeof *c->idx);
+    ok = ok && c->xyz && c->size && c->idx;
+    for (int a = 0; a < in->nattrs; a++) {
+        c->attrs[a] = in->attrs[a];
+        size_t n = sizeof(double) * (size_t)in->nv * (size_t)in->attrs[a].ncomp;
+        c->attrs[a].data = ok ? api_plain_malloc(n + 1) : NULL;
+        if (c->attrs[a].data)
+            memcpy(c->attrs[a].data, in->attrs[a].data, n);
+        ok = ok && c->attrs[a].data;
+    }
+    if (ok && in->ndiag)
+        ok = (c->diag = api_memdup(in->diag, in->ndiag * sizeof *in->diag)) != NULL;
+    if (ok && in->nfill)
+        ok = (c->fill = api_memdup(in->fill, in->nfill * sizeof *in->fill)) != NULL;
+    if (!ok) {
+        api_input_unref(c);
+        return NULL;
+    }
+    return c;
+}
+
 void api_input_unref(api_input *in)
 {
     if (!in || atomic_fetch_sub(&in->refs, 1) != 1)
         return;
+    api_mem_unreserve(in->reserved);
     api_plain_free(in->xyz);
     api_plain_free(in->size);
     api_plain_free(in->idx);
@@ -56,7 +120,7 @@ void api_model_publish(api_model *m)
                  (m->c ? sd_complex_memory(m->c) : 0) + geo + api_delta_bytes(m->delta));
 }
 
-const struct out_geometry *api_model_geometry_locked(api_model *m, int level)
+struct out_geometry *api_model_geometry_locked(api_model *m, int level)
 {
     if (!m->geometry[level]) {
         sd_error e;
@@ -99,7 +163,8 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
                           .solid_scheme = m->rules.solid_scheme,
                           .nonmanifold_default = m->rules.nonmanifold_default,
                           .nonmanifold_surface = m->rules.nonmanifold_surface,
-                          .max_bytes = (size_t)max_bytes};
+                          .max_bytes = (size_t)max_bytes,
+                          .allocator = api_mem_core_allocator()};
         m->c = sd_complex_new(in->xyz, in->nv, in->idx, in->size, in->ns, &opt, err);
         if (!m->c) {
             api_model_unref(m);

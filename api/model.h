@@ -13,7 +13,9 @@
  * Memory (api/mem.h): the structs, diagonals, fill statistics and caches are api_malloc blocks;
  * the arrays of api_input (xyz, size, idx, attribute data), of api_tags and the overrides of
  * api_rules are C-library blocks (api_plain_*), since sd_refine hands over C-library arrays and
- * the refine bodies of api/refine.c release these with free().
+ * the refine bodies of api/refine.c release these with free(). The input's arrays are counted
+ * against the memory budget through its `reserved` bytes, and the core complex allocates with
+ * api_mem_core_allocator (api/mem.h): one budget bounds sessions and requests alike.
  */
 #ifndef SUBDIVD_MODEL_H
 #define SUBDIVD_MODEL_H
@@ -56,6 +58,8 @@ typedef struct api_input {
     uint32_t (*diag)[2];      /* (simplex index, pair 0..2) */
     uint32_t nfill;           /* "fill" entries run; their tets and points are in the arrays above */
     api_fill_stats *fill;
+    size_t reserved;          /* bytes of the C-library arrays above counted against the memory
+                               * budget (api_input_reserve; given back by the last unref) */
 } api_input;
 
 /* The rule preferences of PUT /rules (docs/API.md); zero = the default. */
@@ -80,9 +84,11 @@ typedef struct api_tags {
 
 typedef struct api_model {
     atomic_int refs;
-    pthread_mutex_t lock;     /* serialises computation on `c` (and edits) */
-    pthread_rwlock_t data;    /* readers of level data (streams, GET /complex) vs edits, which
-                               * change positions and attributes in place */
+    pthread_mutex_t lock;     /* serialises computation on `c`, edits, and the snapshots that
+                               * level streams take when they open */
+    pthread_rwlock_t data;    /* readers of the input that do not take `lock` (GET /complex
+                               * copies positions and attributes) vs edits, which change
+                               * positions and attributes in place */
     api_input *in;            /* NULL: no complex posted yet */
     api_rules rules;
     api_tags tags;            /* owned copy */
@@ -97,12 +103,21 @@ typedef struct api_model {
     atomic_int levels_cached;
     atomic_size_t memory_bytes;
     /* the session version of the model's content: set when the model is published and by
-     * every edit (under both locks) */
+     * every edit (under both locks), so a reader that copies what edits change reads, with
+     * the same lock held, the version of what it copied (a response's ETag is its content's) */
     _Atomic uint64_t version;
 } api_model;
 
 api_input *api_input_new(void);
 void api_input_unref(api_input *in);
+/* A deep copy of an input (a new one, reference 1), its arrays reserved; NULL without memory. */
+api_input *api_input_copy(const api_input *in);
+/* Count n more bytes of the input's C-library arrays against the memory budget (api/mem.h),
+ * before allocating them; false when they do not fit. */
+bool api_input_reserve(api_input *in, size_t n);
+/* Reserve whatever the input's arrays hold beyond in->reserved (for arrays adopted from
+ * elsewhere: sd_refine's); false when it does not fit. */
+bool api_input_account(api_input *in);
 /* The index of the attribute called `name`, or -1. */
 int api_input_find_attr(const api_input *in, const char *name);
 
@@ -130,6 +145,6 @@ void api_model_publish(api_model *m);
 
 /* The glTF geometry (solid boundary, normals) of a computed level, built once (NULL if out of
  * memory — writers then compute their own). The caller holds m->lock. */
-const struct out_geometry *api_model_geometry_locked(api_model *m, int level);
+struct out_geometry *api_model_geometry_locked(api_model *m, int level);
 
 #endif

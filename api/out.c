@@ -106,6 +106,10 @@ void out_close(out_stream *s)
     api_free(s->buf);
     api_free(s->own_bnd);
     api_free(s->own_normals);
+    api_free(s->own_xyz);
+    for (int a = 0; a < OUT_MAX_ATTRS; a++)
+        api_free(s->own_attr[a]);
+    out_geometry_free(s->rq.geometry);
     out_slice_free(&s->slice);
     api_free(s);
 }
@@ -139,6 +143,22 @@ static bool valid_name(const char *name)
                          (name[n] >= '0' && name[n] <= '9') || name[n] == '_' || name[n] == '-'))
             return false;
     return n > 0;
+}
+
+/* The stream's own copies of the positions and the requested channels (rq.snapshot). */
+static bool snapshot(out_stream *s)
+{
+    size_t n = (size_t)s->nv * 3;
+    if (!(s->own_xyz = api_memdup(s->xyz, n * sizeof *s->xyz)))
+        return false;
+    s->xyz = s->own_xyz;
+    for (int a = 0; a < s->rq.nattrs; a++) {
+        n = (size_t)s->nv * (size_t)s->rq.attrs[a].ncomp;
+        if (!(s->own_attr[a] = api_memdup(s->attr[a], n * sizeof *s->attr[a])))
+            return false;
+        s->attr[a] = s->own_attr[a];
+    }
+    return true;
 }
 
 out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err)
@@ -185,6 +205,7 @@ out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err)
     if (!s)
         return fail(NULL, err, SD_ERR_NOMEM, "out of memory");
     s->rq = *rq;
+    out_geometry_ref(s->rq.geometry);
     if (!s->rq.parts)
         s->rq.parts = OUT_PART_ALL;
     s->fmt = f;
@@ -207,6 +228,8 @@ out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err)
             return fail(s, err, SD_ERR_ARG, "attributes: \"%s\" is not a channel of %d components",
                         rq->attrs[a].name, rq->attrs[a].ncomp);
     }
+    if (rq->snapshot && !snapshot(s))
+        return fail(s, err, SD_ERR_NOMEM, "out of memory copying the level's points");
     static const unsigned part_of[5] = {OUT_PART_POINTS, OUT_PART_CURVES, OUT_PART_SURFACES,
                                         OUT_PART_SOLIDS, OUT_PART_SOLIDS};
     for (int k = 0; k < 5; k++)

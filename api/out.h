@@ -14,6 +14,7 @@
 #define SUBDIVD_OUT_H
 
 #include "../core/sd.h"
+#include <stdatomic.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -76,24 +77,37 @@ typedef struct out_request {
     int colormap_attr;       /* index into attrs of the attribute coloured into COLOR_0, or -1 */
     double colormap_min, colormap_max;
     int octahedra_as_polyhedra; /* VTU/VTK: octahedra as VTK_POLYHEDRON (42) instead of 4 tets */
-    /* Optional, borrowed: geometry computed earlier for this level with all parts (see
-     * out_geometry_compute), so that a cached level streams without recomputing it. */
-    const struct out_geometry *geometry;
+    /* Optional: geometry computed earlier for this level with all parts (see
+     * out_geometry_compute), so that a cached level streams without recomputing it. The stream
+     * takes a reference on it. */
+    struct out_geometry *geometry;
+    /* Copy the positions and the requested attribute channels at out_open: the stream then
+     * reads no array that an edit changes in place (channel values), only the level's topology
+     * and rules, and its content is that of the moment it opened. */
+    bool snapshot;
 } out_request;
 
 /* The solid boundary and vertex normals of a level with every part shown — what glTF needs
  * before its first byte. Computing it once per level and passing it in out_request.geometry
  * makes later glTF responses of that level stream at once. */
 typedef struct out_geometry {
+    atomic_int refs;    /* the model's cache and every stream reading it */
     uint32_t nbnd;
     uint32_t *bnd;      /* 3 per boundary triangle, outward */
     float *normals;     /* 3 per vertex */
     size_t bytes;
 } out_geometry;
+/* A new geometry (one reference) or NULL; out_geometry_ref adds a reference, out_geometry_free
+ * drops one and frees it with the last. */
 out_geometry *out_geometry_compute(const sd_level *lv);
+out_geometry *out_geometry_ref(out_geometry *g);
+/* A copy of g (nv: its level's vertex count), one reference, for a writer that must not change
+ * what a stream reads (api/delta.c); NULL without memory. */
+out_geometry *out_geometry_copy(const out_geometry *g, uint32_t nv);
 void out_geometry_free(out_geometry *g);
 
-/* Validate and prepare. Returns NULL and fills err (code SD_ERR_ARG for a bad request, message
+/* Validate and prepare (with rq->snapshot, copy what edits change: see out_request). The stream
+ * borrows nothing of rq but the complex. Returns NULL and fills err (code SD_ERR_ARG for a bad request, message
  * naming the offending option) on failure. */
 out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err);
 /* Total size in bytes if known in advance (GLB, glTF, VTU, VTK), else UINT64_MAX (JSON). */

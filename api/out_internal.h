@@ -64,6 +64,8 @@ struct out_stream {
     const float *normals;      /* glTF: 3 per vertex (idem) */
     uint32_t *own_bnd;
     float *own_normals;
+    double *own_xyz;           /* the snapshot (rq.snapshot) */
+    double *own_attr[OUT_MAX_ATTRS];
     out_slice slice;
     uint64_t size;             /* total bytes, or UINT64_MAX */
     /* generator */

@@ -12,6 +12,7 @@
  * that body anyway, at the same line and column, since blanking keeps every byte offset.
  */
 #include "packed.h"
+#include "mem.h"
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -111,7 +112,7 @@ static bool grow(void **p, size_t *cap, size_t need, size_t elem)
     size_t c = *cap ? *cap : 1024;
     while (c < need)
         c *= 2;
-    void *q = realloc(*p, c * elem);
+    void *q = api_realloc(*p, c * elem);
     if (!q)
         return false;
     *p = q;
@@ -125,7 +126,7 @@ static bool push_value(builder *b, double v, bool isint)
     if (!grow((void **)&b->a.val, &b->capval, i + 1, sizeof *b->a.val))
         return false;
     if (b->capval != capbits) { /* the bit set follows the value array's capacity */
-        uint8_t *bits = realloc(b->a.isint, (b->capval + 7) / 8);
+        uint8_t *bits = api_realloc(b->a.isint, (b->capval + 7) / 8);
         if (!bits)
             return false;
         memset(bits + (capbits + 7) / 8, 0, (b->capval + 7) / 8 - (capbits + 7) / 8);
@@ -148,9 +149,9 @@ static bool push_row(builder *b, uint8_t len)
 
 static void packed_free(api_packed *a)
 {
-    free(a->len);
-    free(a->val);
-    free(a->isint);
+    api_free(a->len);
+    api_free(a->val);
+    api_free(a->isint);
     memset(a, 0, sizeof *a);
 }
 

@@ -40,7 +40,8 @@ typedef struct api_packs {
 /* Scan body[0..len) (modified in place as described above) for the arrays at `patterns`
  * (NULL-terminated JSON pointers; "*" segments) whose text is at least `min_bytes` long, at a
  * nesting depth of at most `max_depth` for their rows. Fills *out (caller-owned; free with
- * api_packs_free). Returns 0, or -1 when memory ran out: out is then empty and the body, partly
+ * api_packs_free; the arrays are counted api/mem.h blocks).
+ * Returns 0, or -1 when memory ran out: out is then empty and the body, partly
  * blanked, is unusable (answer 503). At most 16 arrays are packed; further ones are left to
  * jansson. */
 int api_pack_body(char *body, size_t len, const char *const *patterns, size_t min_bytes,

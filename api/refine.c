@@ -421,7 +421,9 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
         sd_refine_free(&r);
         api_input_unref(in);
         in = nx;
-        if (!marked && step + 1 < depth && sel.kind == 0)
+        if (!api_input_account(in)) /* the adopted arrays count against the memory budget */
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
+        else if (!marked && step + 1 < depth && sel.kind == 0)
             rc = api_fail(p, 503, "out-of-memory", "out of memory");
     }
     free(marked);

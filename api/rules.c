@@ -12,6 +12,7 @@
 #include "mem.h"
 #include "internal.h"
 #include "jsonin.h"
+#include "rows.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -241,8 +242,16 @@ static int parse_petals(json_t *a, uint32_t nv, api_tags *tags, api_problem *p)
     return 0;
 }
 
+const char *const api_tags_packed[] = {"/singular", NULL};
+
 int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                  api_problem *p)
+{
+    return api_put_tags_packed(cur, body, NULL, lim, out, p);
+}
+
+int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *packs,
+                        const api_limits *lim, api_model **out, api_problem *p)
 {
     static const char *const keys[] = {"singular", "petals", NULL};
     *out = NULL;
@@ -252,29 +261,28 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
     if (!s && !pe)
         return api_fail_at(p, 400, "missing-field", "/singular",
                            "\"singular\" is required (or \"petals\" alone: no singular simplices)");
-    if (s && !json_is_array(s)) /* absent: no singular simplices (json_array_* take NULL) */
+    api_rows rows = {0}; /* absent: no singular simplices */
+    if (s && !api_rows_open(&rows, s, packs, "/singular"))
         return api_fail_at(p, 400, "wrong-type", "/singular",
                            "must be an array of simplices (1 to 3 vertex indices)");
-    if ((json_array_size(s) || (pe && (!json_is_array(pe) || json_array_size(pe)))) && !cur->in)
-        return api_fail_at(p, 409, "no-complex", json_array_size(s) ? "/singular" : "/petals",
+    size_t n = api_rows_count(&rows);
+    if ((n || (pe && (!json_is_array(pe) || json_array_size(pe)))) && !cur->in)
+        return api_fail_at(p, 409, "no-complex", n ? "/singular" : "/petals",
                            "tags name simplices of the complex; PUT the complex first");
-    size_t n = json_array_size(s);
     api_tags tags = {0};
     tags.size = api_plain_malloc(n + 1);
     tags.idx = api_plain_malloc((3 * n + 1) * sizeof *tags.idx);
     int rc = !tags.size || !tags.idx ? api_fail(p, 503, "out-of-memory", "out of memory") : 0;
-    size_t i, off = 0;
-    json_t *t;
+    size_t off = 0;
+    api_row t;
     char ptr[96], at[96];
-    json_array_foreach(s, i, t) {
-        if (rc)
-            break;
+    for (size_t i = 0; !rc && api_rows_next(&rows, &t); i++) {
         api_ptr_index(ptr, sizeof ptr, "/singular", i);
-        if (!json_is_array(t)) {
+        if (!api_row_is_array(&t)) {
             rc = api_fail_at(p, 400, "wrong-type", ptr, "a tag is an array of 1 to 3 vertex indices");
             break;
         }
-        size_t k = json_array_size(t);
+        size_t k = api_row_size(&t);
         if (k < 1 || k > 3) {
             rc = api_fail_at(p, 422, "invalid-tag", ptr,
                              "a singular simplex is a vertex, an edge or a triangle (1 to 3 "
@@ -284,8 +292,8 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
         long long seen[3];
         for (size_t j = 0; j < k && !rc; j++) {
             api_ptr_index(at, sizeof at, ptr, j);
-            if ((rc = api_get_int(json_array_get(t, j), at, 0, (long long)cur->in->nv - 1,
-                                  &seen[j], p)))
+            if ((rc = api_num_get_int(api_row_get(&t, j), at, 0, (long long)cur->in->nv - 1,
+                                      &seen[j], p)))
                 break;
             for (size_t q = 0; q < j && !rc; q++)
                 if (seen[q] == seen[j])

@@ -35,6 +35,7 @@
 #include "internal.h"
 #include <math.h>
 #include <stdlib.h>
+#include <stdio.h>
 #include <string.h>
 
 /* ---- the engine's input: operations at points of levels ---------------------------------------- */
@@ -572,6 +573,17 @@ static sd_result run(sd_complex *c, int ch, op *ops, size_t n, const double *val
     }
     clean_maps(&E);
     const int last = stale < 0 ? E.top : stale;
+    if (rep)
+        rep->rules_rebuilt = stale;
+    if (stale >= 0 && rep && rep->in_place) { /* nothing written: the caller builds anew */
+        for (int l = 0; l <= SD_MAX_LEVEL; l++) {
+            rep->recomputed[l] = l <= last ? E.set[l].n : l < c->nlevels ? c->lv[l]->t.nv : 0;
+            rep->nchanged[l] = 0;
+        }
+        if (counts)
+            memcpy(counts, rep->recomputed, sizeof rep->recomputed);
+        goto out;
+    }
     if (stale >= 0) {
         if ((rc = rebuild(&E, stale, ops, n, diff, ndiff, err)))
             goto fail;
@@ -580,8 +592,6 @@ static sd_result run(sd_complex *c, int ch, op *ops, size_t n, const double *val
         swap_lists(&E);
     }
     /* done: report */
-    if (rep)
-        rep->rules_rebuilt = stale;
     for (int l = 0; l <= SD_MAX_LEVEL; l++) {
         uint64_t rec = l <= last ? E.set[l].n : l < c->nlevels ? c->lv[l]->t.nv : 0, chg = 0;
         uint32_t *ids = l <= last ? E.set[l].s->id : diff[l];
@@ -731,4 +741,71 @@ sd_result sd_complex_set_details(sd_complex *c, int channel, size_t n, const sd_
     r = run(c, channel, ops, k, offsets, rep, NULL, err);
     sdi_free(&c->mem, ops);
     return r;
+}
+
+sd_result sd_complex_edit_in_place(sd_complex *c, int channel, size_t n, const uint32_t *idx,
+                                   const double *values, uint64_t *counts, int *rebuild,
+                                   sd_error *err)
+{
+    sd_edit_report rep = {.in_place = 1};
+    sd_result r = moves(c, channel, n, NULL, idx, values, &rep, counts, err);
+    *rebuild = r ? -1 : rep.rules_rebuilt;
+    return r;
+}
+
+/* Whether moving points idx[0..n) to xyz (3 each) leaves every maximal simplex of level 0 that
+ * holds one of them non-degenerate under sd_complex_new's test, with the bounding box of the
+ * moved complex (see sd.h). A scan of level 0's cells and points, with one mark per point. */
+sd_result sd_complex_check_moves(sd_complex *c, size_t n, const uint32_t *idx, const double *xyz,
+                                 sd_error *err)
+{
+    sd_level *l0 = c->lv[0];
+    const uint32_t nv = l0->t.nv;
+    const double *p = l0->ch[0].data;
+    int32_t *mark = sdi_alloc(&c->mem, ((size_t)nv + 1) * sizeof *mark); /* move + 1, or 0 */
+    if (!mark)
+        return sdi_fail_nomem(err, &c->mem);
+    memset(mark, 0, ((size_t)nv + 1) * sizeof *mark);
+    for (size_t i = 0; i < n; i++)
+        if (idx[i] < nv)
+            mark[idx[i]] = (int32_t)i + 1;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t v = 0; v < nv; v++) {
+        const double *x = mark[v] ? xyz + 3 * (size_t)(mark[v] - 1) : p + 3 * (size_t)v;
+        for (int k = 0; k < 3; k++) {
+            lo[k] = fmin(lo[k], x[k]);
+            hi[k] = fmax(hi[k], x[k]);
+        }
+    }
+    double diag = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                       (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    static const char *const kind[] = {"", "", "edge", "triangle", "tetrahedron"};
+    static const char *const measure[] = {"", "", "length", "area", "volume"};
+    sd_result rc = SD_OK;
+    for (int k = SD_CELL_CURVE; k <= SD_CELL_TETRA && !rc; k++) {
+        int size = sd_cell_size((sd_cell_kind)k);
+        uint32_t nc = sd_level_num_cells(l0, (sd_cell_kind)k);
+        for (uint32_t i = 0; i < nc && !rc; i++) {
+            uint32_t v[6], local[4] = {0, 1, 2, 3};
+            sd_level_cell(l0, (sd_cell_kind)k, i, v);
+            int last = 0; /* the latest move among the simplex's points (+1) */
+            double at[12];
+            for (int j = 0; j < size; j++) {
+                last = mark[v[j]] > last ? mark[v[j]] : last;
+                const double *x = mark[v[j]] ? xyz + 3 * (size_t)(mark[v[j]] - 1) : p + 3 * (size_t)v[j];
+                memcpy(at + 3 * j, x, 3 * sizeof *x);
+            }
+            if (last && sdi_simplex_degenerate(at, local, size, diag)) {
+                char vs[64];
+                int w = 0;
+                for (int j = 0; j < size; j++)
+                    w += snprintf(vs + w, sizeof vs - (size_t)w, j ? ", %u" : "%u", v[j]);
+                rc = sdi_fail(err, SD_ERR_DEGENERATE, last - 1, -1,
+                              "moving point %u there makes the %s [%s] degenerate (zero or "
+                              "near-zero %s)", idx[last - 1], kind[size], vs, measure[size]);
+            }
+        }
+    }
+    sdi_free(&c->mem, mark);
+    return rc;
 }

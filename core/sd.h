@@ -125,10 +125,14 @@ void sd_complex_counts(const sd_complex *c, int level, sd_counts *out);
 
 /* Memory in use by the complex (all levels, matrices, channels), in bytes. */
 size_t sd_complex_memory(const sd_complex *c);
-/* The bytes computing the levels up to `level` would add: the core's arrays per entity, summed
- * over the levels not computed yet (from sd_complex_counts, without computing anything). An
- * over-estimate by design, to check a memory limit before asking for a level. */
+/* The bytes computing the levels up to `level` would add: the core's measured cost per entity
+ * (core/complex.c), summed over the levels not computed yet (from sd_complex_counts, without
+ * computing anything), to check a memory limit before asking for a level. Within 30% of what
+ * the levels take once computed, for solids, surfaces, curves and mixed complexes alike. */
 uint64_t sd_complex_estimate_bytes(const sd_complex *c, int level);
+/* The same for level `level` alone (what computing it from level - 1 adds; 0 for level 0),
+ * computed or not. */
+uint64_t sd_complex_estimate_level_bytes(const sd_complex *c, int level);
 int sd_complex_levels_computed(const sd_complex *c);
 
 /* ---- levels ------------------------------------------------------------------------------ */
@@ -310,6 +314,10 @@ typedef struct sd_edit_report {
      * more of a level than its channel values (its rules, the rule of each vertex) may have
      * changed there too */
     int rules_rebuilt;
+    /* in: an edit that would build a level's rules again changes nothing and returns SD_OK with
+     * rules_rebuilt set to that level, recomputed[] what it would have recomputed and no
+     * changed() call (sd_complex_edit_in_place) */
+    int in_place;
 } sd_edit_report;
 
 /* Move points of channel `channel` (0 = positions): point at[i] gets values[i*ncomp ..
@@ -341,6 +349,26 @@ sd_result sd_complex_move(sd_complex *c, int channel, size_t n, const sd_vertex_
  * (sd_edit_report.recomputed). */
 sd_result sd_complex_edit(sd_complex *c, int channel, size_t n, const uint32_t *idx,
                           const double *values, uint64_t *counts, sd_error *err);
+/* sd_complex_edit for callers whose readers keep reading a level's topology and rules without
+ * a lock (the daemon's streams): an edit that would rebuild a level's rules changes nothing and
+ * sets *rebuild to that level (counts then says what sd_complex_edit would have updated: the
+ * full sizes of the finer levels) — the caller builds a new complex from the edited input
+ * instead; any other edit is applied through the matrices, *rebuild = -1. So no array a reader
+ * holds is ever freed or moved, and only channel values change. */
+sd_result sd_complex_edit_in_place(sd_complex *c, int channel, size_t n, const uint32_t *idx,
+                                   const double *values, uint64_t *counts, int *rebuild,
+                                   sd_error *err);
+
+/* Check a move of control points before sd_complex_edit: point idx[i] to xyz[3i..3i+2]. Every
+ * maximal simplex (edge, triangle, tetrahedron) of the control complex that holds a moved
+ * point must stay non-degenerate by sd_complex_new's test and tolerance (no edge shorter than
+ * 1e-12 of the moved complex's bounding-box diagonal, no area or volume below 1e-12 of its
+ * longest edge squared or cubed); orientation does not count, so an inverted tetrahedron is
+ * fine. Simplices without a moved point are not looked at (a move that grows the bounding box
+ * does not make their edges short: their shape did not change). SD_ERR_DEGENERATE with item =
+ * the index i of the latest move among the refused simplex's points. Changes nothing. */
+sd_result sd_complex_check_moves(sd_complex *c, size_t n, const uint32_t *idx, const double *xyz,
+                                 sd_error *err);
 
 /* The detail offsets of channel `channel` at level `level` (1..SD_MAX_LEVEL): returns their number
  * and, if not NULL, points *idx (ascending indices) and *offsets (ncomp doubles each) at them —

@@ -53,6 +53,8 @@ static const setting S[] = {
      "top cells of one level (default 20000000)"},
     {"max-session-bytes", T_U64, OFF(limits.max_session_bytes), 1 << 20, 1LL << 50,
      "core memory per session (default 4 GiB)"},
+    {"max-memory", T_U64, OFF(max_memory), 16LL << 20, 1LL << 50,
+     "memory budget of all requests and sessions, bytes (default 3/4 of RAM or cgroup limit)"},
     {"fill-timeout", T_U32, OFF(limits.fill_seconds), 1, 86400,
      "seconds the TetGen fill of one request may take, all its entries together (default 60)"},
     {"fill-memory", T_U64, OFF(limits.fill_memory_bytes), 64LL << 20, 1LL << 46,
@@ -129,6 +131,25 @@ bad:
     return -1;
 }
 
+/* 3/4 of the memory the daemon may use: the physical RAM, or the cgroup's limit (cgroup v2
+ * memory.max, v1 memory.limit_in_bytes) when it is smaller. */
+static uint64_t default_max_memory(void)
+{
+    long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGESIZE);
+    uint64_t ram = pages > 0 && page > 0 ? (uint64_t)pages * (uint64_t)page : 4ull << 30;
+    static const char *const files[] = {"/sys/fs/cgroup/memory.max",
+                                        "/sys/fs/cgroup/memory/memory.limit_in_bytes"};
+    for (int i = 0; i < 2; i++) {
+        FILE *f = fopen(files[i], "r");
+        unsigned long long v;
+        if (f && fscanf(f, "%llu", &v) == 1 && v > 0 && v < ram)
+            ram = v;
+        if (f)
+            fclose(f);
+    }
+    return ram / 4 * 3;
+}
+
 int config_load(config *c, int argc, char **argv, int first, int *exit_code)
 {
     memset(c, 0, sizeof *c);
@@ -151,6 +172,7 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     c->session_rate = API_DEFAULT_SESSION_RATE;
     c->log_level = LOG_INFO;
     strcpy(c->cors_origin, "*");
+    c->max_memory = default_max_memory();
     c->limits = api_default_limits();
     *exit_code = 2;
     for (size_t i = 0; i < NS; i++) {

@@ -27,6 +27,7 @@ typedef struct config {
     int no_auth;
     int log_level;
     char cors_origin[256];    /* "*" or one origin */
+    uint64_t max_memory;      /* the memory budget of every request (api/mem.h), bytes */
     api_limits limits;
 } config;
 

@@ -19,6 +19,7 @@
 
 #define EV_RING 256               /* events kept for replay */
 #define EV_LISTENER_BYTES 65536   /* a listener's buffer: more unread and it is dropped */
+#define EV_SOCKET_BYTES 16384     /* SO_SNDBUF of an event stream's socket (Linux doubles it) */
 
 typedef struct ev_hub ev_hub;
 typedef struct ev_listener ev_listener;

@@ -1,11 +1,13 @@
 /* http.c — the libmicrohttpd glue: connection callbacks, the checks made before a body is read,
- * body collection, responses, streaming, compute slots, one log line per request.
+ * body collection, compute slots, one log line per request (the responses: reply.c).
  *
  * Threading: MHD runs one thread per connection (MHD_USE_THREAD_PER_CONNECTION), so a handler
  * may block — on a session's write lock or a model's compute lock — without stalling other
- * connections. Computations additionally take one of `threads` compute slots (a semaphore), with
- * a bounded wait and a 429 + Retry-After when the daemon is saturated, so /healthz, /readyz and
- * /metrics never queue behind work.
+ * connections. Computations additionally take one of `threads` compute slots (server/slots.c:
+ * handed to the waiter whose session holds the fewest, and taken only once the model's lock is
+ * held, so a request waiting for its own session's computation holds none), with a bounded wait
+ * and a 429 + Retry-After when the daemon is saturated, so /healthz, /readyz and /metrics never
+ * queue behind work.
  *
  * A request goes: the request line -> on_uri() creates it and takes its query away from
  * libmicrohttpd; first callback (no body yet) -> early(): target (414 for a long path, 400 for a
@@ -14,9 +16,10 @@
  * Content-Length against max_body_bytes before anything is read, a body where none is taken,
  * Content-Type: 501, 413, 400, 415); body callbacks -> append to a buffer capped at
  * max_body_bytes; final callback -> the query parameters the route takes (400 for others), then
- * the route's handler (routes.c), which calls api/ and queues one response. Level responses
- * stream through out_read() from a callback response that holds references on the session's
- * model until the last byte is sent.
+ * the route's handler (routes.c), which calls api/ and queues one response. Level responses and
+ * GET /complex stream from a callback response (a source: out_read, api_cstream_read) that holds
+ * references on the session's model until the last byte is sent, and no lock: the source copied
+ * what edits change when it opened.
  */
 #include "request.h"
 #include "../api/mem.h"
@@ -26,6 +29,7 @@
 #include "metrics.h"
 #include <arpa/inet.h>
 #include <errno.h>
+#include <malloc.h>
 #include <microhttpd.h>
 #include <poll.h>
 #include <sys/socket.h>
@@ -68,166 +72,31 @@ static const char *intern_method(const char *m)
     return "OTHER";
 }
 
-static void req_unref(req *r)
+/* A request that took or gave back this much (its body, parse, levels, a model it freed) is
+ * followed by malloc_trim: what glibc keeps in its heaps below the mmap threshold goes back to
+ * the system, so the resident size follows what the daemon holds. */
+#define TRIM_AFTER_BYTES (32u << 20)
+
+void http_req_unref(req *r)
 {
     if (atomic_fetch_sub(&r->refs, 1) != 1)
         return;
+    api_mem_meter *prev = api_mem_meter_set(&r->mem);
     session_unref(r->s);
     api_free(r->body);
     api_free(r->query);
+    api_mem_meter_set(prev);
+    int trim = r->mem.moved > TRIM_AFTER_BYTES;
     api_free(r);
-}
-
-/* ---- responses ------------------------------------------------------------------------------ */
-
-typedef struct header {
-    const char *name, *value;
-} header;
-
-/* The headers every answer carries (CORS, nosniff): their number, at most 4. */
-static int common_header_list(const req *r, header out[4])
-{
-    const char *origin = r->srv->cfg.cors_origin;
-    int n = 0;
-    out[n++] = (header){MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, origin};
-    if (strcmp(origin, "*"))
-        out[n++] = (header){MHD_HTTP_HEADER_VARY, "Origin"};
-    out[n++] = (header){MHD_HTTP_HEADER_ACCESS_CONTROL_EXPOSE_HEADERS,
-                        "ETag, Location, Retry-After, Content-Disposition, "
-                        "X-Attribute-Components"};
-    out[n++] = (header){"X-Content-Type-Options", "nosniff"};
-    return n;
-}
-
-static void common_headers(req *r, struct MHD_Response *resp)
-{
-    header h[4];
-    int n = common_header_list(r, h);
-    for (int i = 0; i < n; i++)
-        MHD_add_response_header(resp, h[i].name, h[i].value);
-}
-
-void http_queue(req *r, int status, struct MHD_Response *resp)
-{
-    common_headers(r, resp);
-    r->status = status;
-    r->queued = 1;
-    MHD_queue_response(r->conn, (unsigned)status, resp);
-    MHD_destroy_response(resp);
-}
-
-struct MHD_Response *http_empty(void)
-{
-    return MHD_create_response_from_buffer(0, NULL, MHD_RESPMEM_PERSISTENT);
-}
-
-struct MHD_Response *http_static_response(const void *data, size_t n)
-{
-    return MHD_create_response_from_buffer(n, (void *)data, MHD_RESPMEM_PERSISTENT);
-}
-
-void http_add_header(struct MHD_Response *resp, const char *name, const char *value)
-{
-    MHD_add_response_header(resp, name, value);
-}
-
-struct MHD_Response *http_buffer_response(const char *ctype, char *text, size_t n)
-{
-    struct MHD_Response *resp = MHD_create_response_from_buffer_with_free_callback(n, text, api_free);
-    if (!resp) {
-        api_free(text);
-        return NULL;
-    }
-    if (ctype)
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
-    return resp;
-}
-
-void http_set_etag(struct MHD_Response *resp, uint64_t version)
-{
-    char etag[32];
-    snprintf(etag, sizeof etag, "\"%llu\"", (unsigned long long)version);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
-}
-
-void http_reply_json(req *r, int status, json_t *body, uint64_t version)
-{
-    char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
-    json_decref(body);
-    if (!text) {
-        text = api_strdup("{\"type\":\"/errors/internal\",\"title\":\"Internal Server Error\","
-                      "\"status\":500,\"detail\":\"could not render the response\"}");
-        status = 500;
-    }
-    size_t n = strlen(text);
-    atomic_store(&r->bytes, n);
-    struct MHD_Response *resp = http_buffer_response(
-        status >= 400 ? "application/problem+json" : "application/json", text, n);
-    if (version)
-        http_set_etag(resp, version);
-    http_queue(r, status, resp);
-}
-
-/* The problem+json response of p (with Retry-After and WWW-Authenticate where they apply). */
-static struct MHD_Response *problem_response(req *r, const api_problem *p)
-{
-    json_t *j = api_problem_json(p);
-    char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
-    json_decref(j);
-    if (!text)
-        text = api_strdup("{\"status\":500}");
-    size_t n = strlen(text);
-    atomic_store(&r->bytes, n);
-    struct MHD_Response *resp = http_buffer_response("application/problem+json", text, n);
-    if (p->retry_after) {
-        char ra[16];
-        snprintf(ra, sizeof ra, "%d", p->retry_after);
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_RETRY_AFTER, ra);
-    }
-    if (p->status == 401)
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"subdivd\"");
-    return resp;
-}
-
-void http_reply_problem(req *r, const api_problem *p)
-{
-    http_queue(r, p->status ? p->status : 500, problem_response(r, p));
-}
-
-void http_reply_versioned(req *r, json_t *j, uint64_t version, const api_problem *p)
-{
-    if (!j) {
-        http_reply_problem(r, p);
-        return;
-    }
-    json_object_set_new(j, "version", json_integer((json_int_t)version));
-    http_reply_json(r, 200, j, version);
-}
-
-void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
-    __attribute__((format(printf, 4, 5)));
-void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
-{
-    api_problem p = {0};
-    va_list ap;
-    va_start(ap, fmt);
-    char detail[320];
-    vsnprintf(detail, sizeof detail, fmt, ap);
-    va_end(ap);
-    api_fail(&p, status, slug, "%s", detail);
-    http_reply_problem(r, &p);
+    if (trim)
+        malloc_trim(0);
 }
 
 /* ---- compute slots ---------------------------------------------------------------------- */
 
 int http_take_slot(req *r, api_problem *p)
 {
-    struct timespec until;
-    clock_gettime(CLOCK_REALTIME, &until);
-    until.tv_sec += r->srv->cfg.queue_timeout_s;
-    while (sem_timedwait(&r->srv->compute, &until)) {
-        if (errno == EINTR)
-            continue;
+    if (slots_take(r->srv->compute, r->s, r->srv->cfg.queue_timeout_s)) {
         p->retry_after = 5;
         api_fail(p, 429, "busy", "all %d compute threads are busy; retry in a few seconds",
                  r->srv->cfg.threads);
@@ -244,7 +113,7 @@ void http_give_slot(req *r)
 {
     if (r->s)
         atomic_store(&r->s->busy_level, -1);
-    sem_post(&r->srv->compute);
+    slots_give(r->srv->compute, r->s);
 }
 
 
@@ -305,120 +174,6 @@ static int query_refused(req *r, const char *const *allowed)
             }
     }
     return 0;
-}
-
-/* ---- streaming ------------------------------------------------------------------------------ */
-
-typedef struct stream_ctx {
-    req *r;
-    api_model *m;
-    out_stream *os;
-    int level_data;   /* a level stream: holds the model's data lock (api_level_close) */
-} stream_ctx;
-
-static ssize_t stream_read(void *cls, uint64_t pos, char *buf, size_t max)
-{
-    (void)pos;
-    stream_ctx *sc = cls;
-    ssize_t n = out_read(sc->os, buf, max);
-    if (n > 0) {
-        atomic_fetch_add(&sc->r->bytes, (uint64_t)n);
-        metrics_bytes((uint64_t)n);
-        return n;
-    }
-    return n == 0 ? MHD_CONTENT_READER_END_OF_STREAM : MHD_CONTENT_READER_END_WITH_ERROR;
-}
-
-static void stream_free(void *cls)
-{
-    stream_ctx *sc = cls;
-    if (sc->level_data)
-        api_level_close(sc->m, sc->os);
-    else
-        out_close(sc->os);
-    api_model_unref(sc->m);
-    req_unref(sc->r);
-    api_free(sc);
-}
-
-
-void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uint64_t size,
-                       const char *ctype, const char *disposition, uint64_t version)
-{
-    stream_ctx *sc = api_malloc(sizeof *sc);
-    if (!sc) {
-        if (level_data)
-            api_level_close(m, os);
-        else
-            out_close(os);
-        api_model_unref(m);
-        http_fail(r, 503, "out-of-memory", "out of memory");
-        return;
-    }
-    *sc = (stream_ctx){r, m, os, level_data};
-    atomic_fetch_add(&r->refs, 1);
-    struct MHD_Response *resp = MHD_create_response_from_callback(
-        size == UINT64_MAX ? MHD_SIZE_UNKNOWN : size, 256 * 1024, stream_read, sc, stream_free);
-    if (!resp) {
-        stream_free(sc);
-        http_fail(r, 503, "out-of-memory", "out of memory");
-        return;
-    }
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
-    MHD_add_response_header(resp, "Content-Disposition", disposition);
-    http_set_etag(resp, version);
-    http_queue(r, 200, resp);
-}
-
-/* ---- event streams ---------------------------------------------------------------------- */
-
-typedef struct events_ctx {
-    req *r;
-    struct ev_listener *l;
-} events_ctx;
-
-/* Blocks in the connection's own thread until there is something to send (DECISIONS 33). */
-static ssize_t events_read(void *cls, uint64_t pos, char *buf, size_t max)
-{
-    (void)pos;
-    events_ctx *ec = cls;
-    ssize_t n = ev_read(ec->l, buf, max, ec->r->srv->cfg.sse_heartbeat_s);
-    if (n <= 0)
-        return MHD_CONTENT_READER_END_OF_STREAM;
-    atomic_fetch_add(&ec->r->bytes, (uint64_t)n);
-    metrics_bytes((uint64_t)n);
-    return n;
-}
-
-static void events_free(void *cls)
-{
-    events_ctx *ec = cls;
-    ev_unlisten(ec->l);
-    req_unref(ec->r);
-    api_free(ec);
-}
-
-void http_reply_events(req *r, struct ev_listener *l)
-{
-    events_ctx *ec = api_malloc(sizeof *ec);
-    struct MHD_Response *resp = NULL;
-    if (ec) {
-        *ec = (events_ctx){r, l};
-        atomic_fetch_add(&r->refs, 1);
-        resp = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 4096, events_read, ec,
-                                                 events_free);
-        if (!resp)
-            events_free(ec);
-    } else
-        ev_unlisten(l);
-    if (!resp) {
-        http_fail(r, 503, "out-of-memory", "out of memory");
-        return;
-    }
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "text/event-stream");
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
-    MHD_add_response_header(resp, "X-Accel-Buffering", "no");
-    http_queue(r, 200, resp);
 }
 
 /* ---- a chunked body over the limit ------------------------------------------------------- */
@@ -489,8 +244,8 @@ static enum MHD_Result refuse_body_now(req *r)
     int n = snprintf(head, sizeof head, "HTTP/1.1 413 %s\r\nDate: %s\r\nConnection: close\r\n"
                      "Content-Type: application/problem+json\r\nContent-Length: %zu\r\n",
                      api_status_title(413), date, strlen(text));
-    header h[4];
-    int nh = common_header_list(r, h);
+    http_header_pair h[4];
+    int nh = http_common_header_list(r, h);
     for (int i = 0; i < nh && n > 0 && (size_t)n < sizeof head; i++)
         n += snprintf(head + n, sizeof head - (size_t)n, "%s: %s\r\n", h[i].name, h[i].value);
     if (n > 0 && (size_t)n < sizeof head - 2)
@@ -533,7 +288,7 @@ static void preflight(req *r, const char *allow)
 /* 405 naming the allowed methods in the Allow header. */
 static void method_not_allowed(req *r, const api_problem *p, const char *allow)
 {
-    struct MHD_Response *resp = problem_response(r, p);
+    struct MHD_Response *resp = http_problem_response(r, p);
     MHD_add_response_header(resp, MHD_HTTP_HEADER_ALLOW, allow);
     http_queue(r, 405, resp);
 }
@@ -648,6 +403,21 @@ static int early_auth(req *r)
     return 1;
 }
 
+/* The whole buffer of a body whose Content-Length is known, taken before it is read: one block
+ * of the exact size (no doubling), and a body that does not fit the memory budget is refused
+ * before a byte of it arrives. 1 when a response was queued. */
+static int reserve_body(req *r, size_t n)
+{
+    r->body = api_malloc(n + 1);
+    if (!r->body) {
+        http_fail(r, 503, "out-of-memory", "no memory for a body of %zu bytes; retry later", n);
+        return 1;
+    }
+    r->cap = n + 1;
+    r->body[0] = 0;
+    return 0;
+}
+
 /* What can be said of the body before reading it: a transfer coding MHD can frame (501), a
  * Content-Length within max_body_bytes (413, before anything is allocated), no body where the
  * route takes none (400), JSON where it takes one (415). 1 when a response was queued. */
@@ -684,6 +454,8 @@ static int early_body(req *r)
                       r->rt->pattern);
             return 1;
         }
+        if (n > 0 && reserve_body(r, (size_t)n))
+            return 1;
     }
     if (r->rt->body && (cl ? strcmp(cl, "0") : 1)) {
         const char *ct = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
@@ -781,7 +553,7 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
             while (cap < r->len + n + 1)
                 cap *= 2;
             char *b = api_realloc(r->body, cap);
-            if (!b) {
+            if (!b) { /* discard the rest, answer 503 at the end */
                 r->too_big = 1;
                 return MHD_YES;
             }
@@ -851,7 +623,7 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
     log_line(srv, LOG_DEBUG, "%s %s: at most %lld bytes held by the request", r->method, path,
              (long long)r->mem.peak);
     *con_cls = NULL;
-    req_unref(r);
+    http_req_unref(r);
 }
 
 /* libmicrohttpd's messages, as warnings — except those about clients that went away or were

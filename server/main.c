@@ -12,6 +12,7 @@
 #include "rate.h"
 #include "server.h"
 #include <errno.h>
+#include <malloc.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -78,12 +79,23 @@ static int apply_file(api_model **m, const char *path, change_fn_t fn, const api
     if (!buf)
         return 2;
     api_problem p = {0};
-    json_t *b = api_parse_body(buf, len, 0, &p);
+    api_packs packs = {0};
+    /* the big arrays of a complex or of tags packed, as the daemon reads them */
+    const char *const *packed = fn == api_put_complex ? api_complex_packed
+                                : fn == api_put_tags  ? api_tags_packed
+                                                      : NULL;
+    json_t *b = packed ? api_parse_body_packed(buf, len, 0, packed, API_PACK_MIN_BYTES, &packs, &p)
+                       : api_parse_body(buf, len, 0, &p);
     api_free(buf);
     api_model *next = NULL;
-    if (b)
+    if (b && fn == api_put_complex)
+        api_put_complex_packed(*m, b, &packs, lim, &next, &p);
+    else if (b && fn == api_put_tags)
+        api_put_tags_packed(*m, b, &packs, lim, &next, &p);
+    else if (b)
         fn(*m, b, lim, &next, &p);
     json_decref(b);
+    api_packs_free(&packs);
     if (!next)
         return report(&p, what);
     api_model_unref(*m);
@@ -203,7 +215,9 @@ static int refine_main(int argc, char **argv)
         rc = apply_file(&m, a.tags, api_put_tags, &lim, a.tags);
     out_stream *os = NULL;
     const out_format *fmt;
-    if (!rc && api_level_open(m, level, &a.q, &lim, 1, &os, &fmt, &p))
+    uint64_t version;
+    atomic_store(&m->version, 1); /* the version a session's first complex has */
+    if (!rc && api_level_open(m, level, &a.q, &lim, NULL, &os, &fmt, &version, &p))
         rc = report(&p, "the level request");
     if (rc) {
         api_model_unref(m);
@@ -214,7 +228,7 @@ static int refine_main(int argc, char **argv)
     if (!rc)
         fprintf(stderr, "subdivd refine: level %d -> %s (%llu bytes, %.3f s)\n", level, a.out,
                 (unsigned long long)total, m->seconds[level]);
-    api_level_close(m, os);
+    out_close(os);
     api_model_unref(m);
     return rc;
 }
@@ -240,9 +254,15 @@ int main(int argc, char **argv)
     int code;
     if (config_load(&srv.cfg, argc, argv, 1, &code))
         return code;
+    /* Big blocks (bodies, parsed arrays, levels, output buffers) are mmapped and go back to the
+     * system when freed: a fixed threshold turns off glibc's dynamic one, which rises to 32 MiB
+     * after the first big free and then keeps such blocks in the heap for good. */
+    mallopt(M_MMAP_THRESHOLD, 256 * 1024);
+    api_mem_set_budget((size_t)srv.cfg.max_memory);
     srv.st = store_new(srv.cfg.max_sessions);
     srv.session_rate = rate_new(srv.cfg.session_rate, srv.cfg.session_rate, API_RATE_CLIENTS);
-    if (!srv.st || !srv.session_rate || sem_init(&srv.compute, 0, (unsigned)srv.cfg.threads)) {
+    srv.compute = slots_new(srv.cfg.threads);
+    if (!srv.st || !srv.session_rate || !srv.compute) {
         fprintf(stderr, "subdivd: out of memory\n");
         return 1;
     }
@@ -261,21 +281,25 @@ int main(int argc, char **argv)
            srv.cfg.threads, srv.cfg.no_auth ? ", no auth" : "");
     fflush(stdout);
     log_line(&srv, LOG_INFO, "listening on %s:%d, limits: body %zu B, %u vertices, %llu cells/level, "
-             "%llu B/session, %d sessions", srv.cfg.listen, srv.port, srv.cfg.limits.max_body_bytes,
-             srv.cfg.limits.max_vertices, (unsigned long long)srv.cfg.limits.max_cells,
-             (unsigned long long)srv.cfg.limits.max_session_bytes, srv.cfg.max_sessions);
+             "%llu B/session, %d sessions, memory budget %llu B", srv.cfg.listen, srv.port,
+             srv.cfg.limits.max_body_bytes, srv.cfg.limits.max_vertices,
+             (unsigned long long)srv.cfg.limits.max_cells,
+             (unsigned long long)srv.cfg.limits.max_session_bytes, srv.cfg.max_sessions,
+             (unsigned long long)srv.cfg.max_memory);
     while (!stop_requested) {
         usleep(200 * 1000);
         int gone = store_expire(srv.st, mono_now());
-        if (gone)
+        if (gone) {
             log_line(&srv, LOG_INFO, "expired %d idle session(s)", gone);
+            malloc_trim(0); /* what their models held goes back to the system */
+        }
     }
     atomic_store(&srv.draining, 1);
     log_line(&srv, LOG_INFO, "shutting down");
     http_stop(&srv);
     store_free(srv.st);
     rate_free(srv.session_rate);
-    sem_destroy(&srv.compute);
+    slots_free(srv.compute);
     log_line(&srv, LOG_INFO, "stopped");
     return 0;
 }

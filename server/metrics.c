@@ -54,6 +54,13 @@ void metrics_request(const char *route, const char *method, int status, double s
 
 void metrics_bytes(uint64_t n) { atomic_fetch_add(&M.bytes, n); }
 
+/* One metric without labels: its HELP and TYPE lines and its value. */
+static void sample(FILE *f, const char *name, const char *type, const char *help, uint64_t v)
+{
+    fprintf(f, "# HELP %s %s\n# TYPE %s %s\n%s %llu\n", name, help, name, type, name,
+            (unsigned long long)v);
+}
+
 void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t session_bytes,
                    uint64_t api_bytes)
 {
@@ -76,21 +83,25 @@ void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t sessio
     fprintf(f, "subdivd_request_duration_seconds_sum %.6f\n", M.sum);
     fprintf(f, "subdivd_request_duration_seconds_count %llu\n", (unsigned long long)M.count);
     pthread_mutex_unlock(&M.mu);
-    fprintf(f, "# HELP subdivd_sessions Live sessions.\n# TYPE subdivd_sessions gauge\n"
-               "subdivd_sessions %d\n", sessions);
-    fprintf(f, "# HELP subdivd_cached_cells Top cells of every computed level of every session.\n"
-               "# TYPE subdivd_cached_cells gauge\nsubdivd_cached_cells %llu\n",
-            (unsigned long long)cached_cells);
-    fprintf(f, "# HELP subdivd_session_memory_bytes Core memory held by all sessions.\n"
-               "# TYPE subdivd_session_memory_bytes gauge\nsubdivd_session_memory_bytes %llu\n",
-            (unsigned long long)session_bytes);
-    fprintf(f, "# HELP subdivd_api_bytes Memory held by api/ and server/ (requests, parsed bodies, "
-               "models, output streams; api/mem.h).\n"
-               "# TYPE subdivd_api_bytes gauge\nsubdivd_api_bytes %llu\n",
-            (unsigned long long)api_bytes);
-    fprintf(f, "# HELP subdivd_streamed_bytes_total Body bytes of streamed level responses.\n"
-               "# TYPE subdivd_streamed_bytes_total counter\nsubdivd_streamed_bytes_total %llu\n",
-            (unsigned long long)atomic_load(&M.bytes));
+    sample(f, "subdivd_sessions", "gauge", "Live sessions.", (uint64_t)sessions);
+    sample(f, "subdivd_cached_cells", "gauge",
+           "Top cells of every computed level of every session.", cached_cells);
+    sample(f, "subdivd_session_memory_bytes", "gauge", "Core memory held by all sessions.",
+           session_bytes);
+    sample(f, "subdivd_api_bytes", "gauge", "Memory held by api/ and server/ (requests, parsed "
+           "bodies, models, output streams; api/mem.h).", api_bytes);
+    sample(f, "subdivd_streamed_bytes_total", "counter", "Body bytes of streamed level responses.",
+           atomic_load(&M.bytes));
+}
+
+void metrics_write_budget(FILE *f, uint64_t budget, uint64_t used, uint64_t refusals)
+{
+    sample(f, "subdivd_memory_budget_bytes", "gauge",
+           "The memory budget of the daemon (--max-memory).", budget);
+    sample(f, "subdivd_memory_used_bytes", "gauge", "Memory counted against the budget: api/ and "
+           "server/ blocks, core blocks of every complex, input arrays, stream copies.", used);
+    sample(f, "subdivd_memory_refusals_total", "counter",
+           "Allocations the memory budget refused.", refusals);
 }
 
 void metrics_write_connections(FILE *f, const guard_stats *s)
@@ -115,12 +126,8 @@ void metrics_write_connections(FILE *f, const guard_stats *s)
 
 void metrics_write_events(FILE *f, unsigned listeners, uint64_t dropped)
 {
-    fprintf(f, "# HELP subdivd_event_listeners Open event streams (GET /v1/sessions/{id}/events).\n"
-               "# TYPE subdivd_event_listeners gauge\n"
-               "subdivd_event_listeners %u\n"
-               "# HELP subdivd_event_listeners_dropped_total Event streams ended because their "
-               "client did not read (its buffer filled).\n"
-               "# TYPE subdivd_event_listeners_dropped_total counter\n"
-               "subdivd_event_listeners_dropped_total %llu\n",
-            listeners, (unsigned long long)dropped);
+    sample(f, "subdivd_event_listeners", "gauge",
+           "Open event streams (GET /v1/sessions/{id}/events).", listeners);
+    sample(f, "subdivd_event_listeners_dropped_total", "counter",
+           "Event streams ended because their client did not read (its buffer filled).", dropped);
 }

@@ -21,5 +21,8 @@ struct guard_stats;
 void metrics_write_connections(FILE *f, const struct guard_stats *s);
 /* The event streams (events.h: ev_stats). */
 void metrics_write_events(FILE *f, unsigned listeners, uint64_t dropped);
+/* The memory budget (--max-memory, api/mem.h): its size, what is counted against it, and the
+ * allocations it refused. */
+void metrics_write_budget(FILE *f, uint64_t budget, uint64_t used, uint64_t refusals);
 
 #endif

@@ -19,6 +19,7 @@
 #include "../api/problem.h"
 #include <stdatomic.h>
 #include <stdint.h>
+#include <sys/types.h>
 
 struct MHD_Connection;
 struct MHD_Response;
@@ -88,7 +89,7 @@ const char *http_header(req *r, const char *name);   /* NULL when absent */
 const char *http_arg(req *r, const char *key);       /* a query argument, NULL when absent */
 const struct sockaddr *http_client_address(req *r); /* NULL when unknown */
 
-/* ---- http.c: answering ---- */
+/* ---- reply.c: answering ---- */
 
 struct MHD_Response *http_empty(void);
 struct MHD_Response *http_static_response(const void *data, size_t n);
@@ -105,17 +106,39 @@ void http_reply_problem(req *r, const api_problem *p);
 void http_reply_versioned(req *r, json_t *j, uint64_t version, const api_problem *p);
 void http_fail(req *r, int status, const char *slug, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
-/* 200 with a stream (size or UINT64_MAX: chunked) that holds m and r until its last byte, then
- * closes os (with api_level_close when level_data: it holds the model's data lock). On failure
- * everything is released and a 503 queued. */
-void http_reply_stream(req *r, api_model *m, out_stream *os, int level_data, uint64_t size,
-                       const char *ctype, const char *disposition, uint64_t version);
+/* What a streamed response reads: `read` fills up to max bytes of buf (0 at the end, -1 on a
+ * failure, which cuts the response short); `close` frees ctx. */
+typedef struct http_source {
+    void *ctx;
+    ssize_t (*read)(void *ctx, char *buf, size_t max);
+    void (*close)(void *ctx);
+} http_source;
+
+/* 200 with a stream (size or UINT64_MAX: chunked; disposition may be NULL) that holds m and r
+ * until its last byte, then closes the source. On failure everything is released and a 503
+ * queued. */
+void http_reply_stream(req *r, api_model *m, http_source src, uint64_t size, const char *ctype,
+                       const char *disposition, uint64_t version);
 
 /* 200 with a text/event-stream of listener l (server/events.h), read in this connection's
  * thread until the stream ends (heartbeats every cfg.sse_heartbeat_s); ev_unlisten when the
  * response goes. On failure l is released and a 503 queued. */
 struct ev_listener;
 void http_reply_events(req *r, struct ev_listener *l);
+
+/* The headers every answer carries (CORS, nosniff): their number, at most 4 — for answers
+ * written on the socket itself (a chunked body over the limit, http.c). */
+typedef struct http_header_pair {
+    const char *name, *value;
+} http_header_pair;
+int http_common_header_list(const req *r, http_header_pair out[4]);
+/* The problem+json response of p (a refusal of the memory budget gets its Retry-After). */
+struct MHD_Response *http_problem_response(req *r, const api_problem *p);
+
+/* ---- http.c: a request's end ---- */
+
+/* Drop a reference on r; the last frees it (and trims the heap after a big request). */
+void http_req_unref(req *r);
 
 /* ---- http.c: compute slots ---- */
 

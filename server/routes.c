@@ -13,6 +13,7 @@
 #include "request.h"
 #include "../api/delta.h"
 #include "../api/details.h"
+#include "../api/complex_stream.h"
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
 #include "../api/mem.h"
@@ -31,16 +32,27 @@
 
 static void h_healthz(req *r) { http_reply_json(r, 200, json_pack("{s:s}", "status", "ok"), 0); }
 
+/* Ready unless starting, stopping or with its memory budget spent (then a load balancer sends
+ * new work elsewhere until requests and sessions give some back); the budget in both answers. */
 static void h_readyz(req *r)
 {
+    size_t budget = api_mem_budget(), used = api_mem_budget_used();
+    api_problem p = {0};
     if (atomic_load(&r->srv->draining)) {
-        api_problem p = {0};
         p.retry_after = 5;
         api_fail(&p, 503, "not-ready", "the daemon is starting or shutting down");
+    } else if (budget && used >= budget) {
+        p.retry_after = 5;
+        api_fail(&p, 503, "memory-budget", "the memory budget is in use: %zu of %zu bytes "
+                 "(--max-memory)", used, budget);
+    }
+    if (p.status) {
         http_reply_problem(r, &p);
         return;
     }
-    http_reply_json(r, 200, json_pack("{s:s}", "status", "ready"), 0);
+    http_reply_json(r, 200, json_pack("{s:s, s:{s:I, s:I}}", "status", "ready", "memory",
+                                      "budget_bytes", (json_int_t)budget, "used_bytes",
+                                      (json_int_t)used), 0);
 }
 
 typedef struct gauges {
@@ -80,6 +92,7 @@ static void h_metrics(req *r)
     uint64_t dropped;
     ev_stats(&listeners, &dropped);
     metrics_write_events(f, listeners, dropped);
+    metrics_write_budget(f, api_mem_budget(), api_mem_budget_used(), api_mem_budget_refusals());
     fclose(f);
     char *body = api_memdup(text, n);
     free(text); /* open_memstream's buffer belongs to the C library */
@@ -119,11 +132,21 @@ static json_t *parse_body(req *r, int empty_ok, api_problem *p)
     return api_parse_body(r->body ? r->body : "", r->len, empty_ok, p);
 }
 
-/* The JSON body of a change, or NULL once its problem is answered. */
-static json_t *body_or_answer(req *r)
+/* The JSON body of a change, or NULL once its problem is answered. With `packed` (patterns of
+ * api/packed.h) the big arrays are packed into *packs instead of the tree. The body's text is
+ * freed once parsed: nothing reads it afterwards, and a large one is the biggest block of the
+ * request. */
+static json_t *body_or_answer(req *r, const char *const *packed, api_packs *packs)
 {
     api_problem p = {0};
-    json_t *b = parse_body(r, 0, &p);
+    json_t *b;
+    if (packed && r->body)
+        b = api_parse_body_packed(r->body, r->len, 0, packed, API_PACK_MIN_BYTES, packs, &p);
+    else
+        b = parse_body(r, 0, &p);
+    api_free(r->body);
+    r->body = NULL;
+    r->len = r->cap = 0;
     if (!b)
         http_reply_problem(r, &p);
     return b;
@@ -267,18 +290,38 @@ static void notify(req *r, uint64_t version, const char *kind, const char *updat
     ev_publish(r->s->events, version, "version", data);
 }
 
+/* The compute slots of the daemon as api/ takes them (api_slot): only once the model's lock is
+ * held, and shown as the session's progress while held. */
+static int slot_take(void *ud, int level, api_problem *p)
+{
+    req *r = ud;
+    if (http_take_slot(r, p))
+        return p->status;
+    atomic_store(&r->s->busy_level, level);
+    return 0;
+}
+
+static void slot_give(void *ud) { http_give_slot(ud); }
+
+static api_slot slot_of(req *r)
+{
+    api_slot s = {slot_take, slot_give, r};
+    return s;
+}
+
 /* A change builds the session's next model from the current one and may add members to the
  * answer (the summary, what was refined). */
-typedef int (*change_op)(const api_model *cur, json_t *body, const api_limits *lim,
-                         api_model **next, json_t *answer, api_problem *p);
+typedef int (*change_op)(const api_model *cur, json_t *body, const api_packs *packs,
+                         const api_limits *lim, api_model **next, json_t *answer, api_problem *p);
 
 /* PUT complex / tags / rules, POST refine: parse, check If-Match, build the new model in a
  * compute slot, publish, tell the listeners (`kind`). The session's write lock makes concurrent
  * changes of one session sequential. */
-static void change(req *r, change_op op, const char *kind)
+static void change(req *r, change_op op, const char *const *packed, const char *kind)
 {
     api_problem p = {0};
-    json_t *b = body_or_answer(r);
+    api_packs packs = {0};
+    json_t *b = body_or_answer(r, packed, &packs);
     if (!b)
         return;
     pthread_mutex_lock(&r->s->write);
@@ -287,10 +330,11 @@ static void change(req *r, change_op op, const char *kind)
     json_t *answer = json_object();
     int rc;
     if (!(rc = if_match(r, version, &p)) && !(rc = http_take_slot(r, &p))) {
-        rc = op(cur, b, &r->srv->cfg.limits, &next, answer, &p);
+        rc = op(cur, b, &packs, &r->srv->cfg.limits, &next, answer, &p);
         http_give_slot(r);
     }
     json_decref(b);
+    api_packs_free(&packs);
     api_model_unref(cur);
     if (rc) {
         pthread_mutex_unlock(&r->s->write);
@@ -305,11 +349,11 @@ static void change(req *r, change_op op, const char *kind)
     http_reply_json(r, 200, answer, version);
 }
 
-static int op_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
-                      json_t *answer, api_problem *p)
+static int op_complex(const api_model *cur, json_t *body, const api_packs *packs,
+                      const api_limits *lim, api_model **next, json_t *answer, api_problem *p)
 {
     size_t dropped = json_object_get(body, "details") ? 0 : api_details_count(cur);
-    int rc = api_put_complex(cur, body, lim, next, p);
+    int rc = api_put_complex_packed(cur, body, packs, lim, next, p);
     if (!rc && (*next)->summary)
         json_object_set(answer, "summary", (*next)->summary);
     if (!rc && dropped) /* the offsets named points of the old complex */
@@ -317,23 +361,25 @@ static int op_complex(const api_model *cur, json_t *body, const api_limits *lim,
     return rc;
 }
 
-static int op_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
-                   json_t *answer, api_problem *p)
+static int op_tags(const api_model *cur, json_t *body, const api_packs *packs,
+                   const api_limits *lim, api_model **next, json_t *answer, api_problem *p)
 {
     (void)answer;
-    return api_put_tags(cur, body, lim, next, p);
+    return api_put_tags_packed(cur, body, packs, lim, next, p);
 }
 
-static int op_rules(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
-                    json_t *answer, api_problem *p)
+static int op_rules(const api_model *cur, json_t *body, const api_packs *packs,
+                    const api_limits *lim, api_model **next, json_t *answer, api_problem *p)
 {
     (void)answer;
+    (void)packs;
     return api_put_rules(cur, body, lim, next, p);
 }
 
-static int op_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **next,
-                     json_t *answer, api_problem *p)
+static int op_refine(const api_model *cur, json_t *body, const api_packs *packs,
+                     const api_limits *lim, api_model **next, json_t *answer, api_problem *p)
 {
+    (void)packs;
     uint64_t red, green;
     size_t dropped = api_details_count(cur); /* their points do not exist in the refined complex */
     int rc = api_refine(cur, body, lim, next, &red, &green, p);
@@ -348,14 +394,15 @@ static int op_refine(const api_model *cur, json_t *body, const api_limits *lim, 
     return rc;
 }
 
-static void h_put_complex(req *r) { change(r, op_complex, "complex"); }
-static void h_put_tags(req *r) { change(r, op_tags, "tags"); }
-static void h_put_rules(req *r) { change(r, op_rules, "rules"); }
-static void h_refine(req *r) { change(r, op_refine, "refine"); }
+static void h_put_complex(req *r) { change(r, op_complex, api_complex_packed, "complex"); }
+static void h_put_tags(req *r) { change(r, op_tags, api_tags_packed, "tags"); }
+static void h_put_rules(req *r) { change(r, op_rules, NULL, "rules"); }
+static void h_refine(req *r) { change(r, op_refine, NULL, "refine"); }
 
 /* PATCH control-points: If-Match is required (428 without, 412 when stale); the model is changed
- * in place under its data lock, so the edit waits for that session's streams in flight. The
- * changed points are stamped with the new version (api/delta.h), and the listeners told. */
+ * in place (streams in flight read their own snapshots), or replaced by a new one where the
+ * edit moves what a level's rules read (api_edit). The changed points are stamped with the new
+ * version (api/delta.h), and the listeners told. */
 static void h_edit(req *r)
 {
     api_problem p = {0};
@@ -365,16 +412,19 @@ static void h_edit(req *r)
         http_reply_problem(r, &p);
         return;
     }
-    json_t *b = body_or_answer(r);
+    json_t *b = body_or_answer(r, NULL, NULL);
     if (!b)
         return;
     pthread_mutex_lock(&r->s->write);
     uint64_t version;
-    api_model *m = session_model(r->s, &version);
+    api_model *m = session_model(r->s, &version), *rebuilt = NULL;
     uint64_t counts[SD_MAX_LEVEL + 1];
     int levels = 0, rc;
+    api_slot slot = slot_of(r);
+    /* changes are sequential (the write lock): the edit's version is the next one */
     if (!(rc = if_match(r, version, &p)))
-        rc = api_edit(m, b, version + 1, &r->srv->cfg.limits, counts, &levels, &p);
+        rc = api_edit(m, b, version + 1, &r->srv->cfg.limits, &slot, counts, &levels, &rebuilt,
+                      &p);
     char up[512] = "{";
     for (int l = 0; !rc && l < levels; l++) {
         size_t u = strlen(up);
@@ -382,8 +432,8 @@ static void h_edit(req *r)
                  (unsigned long long)counts[l]);
     }
     strcat(up, "}");
-    if (!rc) {
-        version = session_bump(r->s); /* the version api_edit stamped: the write lock is held */
+    if (!rc) { /* the version api_edit stamped: the write lock is held */
+        version = rebuilt ? session_publish(r->s, rebuilt) : session_bump(r->s);
         notify(r, version, "edit", up);
     }
     pthread_mutex_unlock(&r->s->write);
@@ -399,14 +449,28 @@ static void h_edit(req *r)
                                       "updated_points", j), version);
 }
 
+static ssize_t cstream_read(void *ctx, char *buf, size_t max)
+{
+    return (ssize_t)api_cstream_read(ctx, buf, max);
+}
+
+static void cstream_close(void *ctx) { api_cstream_free(ctx); }
+
+/* GET /complex streams (chunked): a complex of a million points is some 60 MB of JSON, which a
+ * jansson tree would hold many times over. */
 static void h_get_complex(req *r)
 {
     uint64_t version;
-    api_model *m = session_model(r->s, &version);
+    api_model *m = session_model(r->s, NULL);
     api_problem p = {0};
-    json_t *j = api_get_complex(m, &p);
-    api_model_unref(m);
-    http_reply_versioned(r, j, version, &p);
+    api_cstream *cs = api_get_complex_stream(m, &version, &p);
+    if (!cs) {
+        api_model_unref(m);
+        http_reply_problem(r, &p);
+        return;
+    }
+    http_source src = {cs, cstream_read, cstream_close};
+    http_reply_stream(r, m, src, UINT64_MAX, "application/json", NULL, version);
 }
 
 
@@ -430,53 +494,42 @@ static int level_of(req *r)
     return level;
 }
 
-/* The handlers of /levels/{L}, /levels/{L}/stats and /matrices/{L}: called with the level
- * and the session's model (a reference they own) once the query and the level are checked. */
-typedef void (*level_fn)(req *r, api_model *m, int level, uint64_t version);
+/* The handlers of /levels/{L}, /levels/{L}/stats and /matrices/{L}: called with the level and
+ * the session's model (a reference they own) once the query and the level are checked. */
+typedef void (*level_fn)(req *r, api_model *m, int level);
 
 static void with_level(req *r, level_fn fn)
 {
     int level = level_of(r);
     if (level < 0)
         return;
-    uint64_t version;
-    api_model *m = session_model(r->s, &version);
-    fn(r, m, level, version);
+    fn(r, session_model(r->s, NULL), level);
 }
 
-/* Take a compute slot when level L of m still has to be computed (*slot says whether one was
- * taken; give it back with give_slot). Non-zero with a problem when none came free in time. */
-static int slot_for_level(req *r, api_model *m, int level, int *slot, api_problem *p)
+/* A stream of the writers of api/out.h as the source of a response. */
+static ssize_t out_source_read(void *ctx, char *buf, size_t max) { return out_read(ctx, buf, max); }
+static void out_source_close(void *ctx) { out_close(ctx); }
+
+static http_source out_source(out_stream *os)
 {
-    *slot = 0;
-    if (!m->c || atomic_load(&m->levels_cached) > level)
-        return 0;
-    if (http_take_slot(r, p))
-        return -1;
-    *slot = 1;
-    atomic_store(&r->s->busy_level, level);
-    return 0;
+    http_source src = {os, out_source_read, out_source_close};
+    return src;
 }
 
-/* After opening a stream: give back the compute slot, and when the open failed (rc), drop the
- * model and answer the problem. Returns rc. */
-static int stream_refused(req *r, api_model *m, int slot, int rc, const api_problem *p)
+/* A refused stream: drop the model and answer the problem. */
+static void stream_refused(req *r, api_model *m, const api_problem *p)
 {
-    if (slot)
-        http_give_slot(r);
-    if (rc) {
-        api_model_unref(m);
-        http_reply_problem(r, p);
-    }
-    return rc;
+    api_model_unref(m);
+    http_reply_problem(r, p);
 }
 
 static const char *const LEVEL_KEYS[] = {"format", "parts", "slice", "attributes", "colormap",
                                          "octahedra", NULL};
 
-static void get_level(req *r, api_model *m, int level, uint64_t version)
+static void get_level(req *r, api_model *m, int level)
 {
     api_problem p = {0};
+    uint64_t version = atomic_load(&m->version);
     if (m->c && if_none_match_hit(r, version)) {
         api_model_unref(m);
         struct MHD_Response *resp = http_empty();
@@ -490,26 +543,25 @@ static void get_level(req *r, api_model *m, int level, uint64_t version)
 #undef Q
     out_stream *os = NULL;
     const out_format *fmt;
-    int slot, rc = slot_for_level(r, m, level, &slot, &p);
-    if (!rc)
-        rc = api_level_open(m, level, &q, &r->srv->cfg.limits, version, &os, &fmt, &p);
-    if (stream_refused(r, m, slot, rc, &p))
+    api_slot slot = slot_of(r);
+    if (api_level_open(m, level, &q, &r->srv->cfg.limits, &slot, &os, &fmt, &version, &p)) {
+        stream_refused(r, m, &p);
         return;
+    }
     char disp[96];
     snprintf(disp, sizeof disp, "%s; filename=\"level-%d%s\"", fmt->disposition, level,
              fmt->extension);
-    http_reply_stream(r, m, os, 1, out_size(os), fmt->mime, disp, version);
+    http_reply_stream(r, m, out_source(os), out_size(os), fmt->mime, disp, version);
 }
 
 static void h_get_level(req *r) { with_level(r, get_level); }
 
-static void level_stats(req *r, api_model *m, int level, uint64_t version)
+static void level_stats(req *r, api_model *m, int level)
 {
     api_problem p = {0};
-    int slot, rc = slot_for_level(r, m, level, &slot, &p);
-    json_t *j = rc ? NULL : api_level_stats(m, level, &r->srv->cfg.limits, &p);
-    if (slot)
-        http_give_slot(r);
+    api_slot slot = slot_of(r);
+    json_t *j = api_level_stats(m, level, &r->srv->cfg.limits, &slot, &p);
+    uint64_t version = atomic_load(&m->version);
     api_model_unref(m);
     http_reply_versioned(r, j, version, &p);
 }
@@ -518,22 +570,22 @@ static void h_level_stats(req *r) { with_level(r, level_stats); }
 
 static const char *const MATRIX_KEYS[] = {"from", "format", NULL};
 
-static void matrix(req *r, api_model *m, int level, uint64_t version)
+static void matrix(req *r, api_model *m, int level)
 {
     api_problem p = {0};
     out_stream *os = NULL;
     const char *ctype = NULL;
     const char *from = http_arg(r, "from");
     const char *fmt = http_arg(r, "format");
-    int slot, rc = slot_for_level(r, m, level, &slot, &p);
-    if (!rc)
-        rc = api_matrix_open(m, level, from, fmt, &r->srv->cfg.limits, &os, &ctype, &p);
-    if (stream_refused(r, m, slot, rc, &p))
+    api_slot slot = slot_of(r);
+    if (api_matrix_open(m, level, from, fmt, &r->srv->cfg.limits, &slot, &os, &ctype, &p)) {
+        stream_refused(r, m, &p);
         return;
+    }
     char disp[96];
     snprintf(disp, sizeof disp, "attachment; filename=\"S_%s_%d.%s\"", from ? from : "0", level,
              fmt && !strcmp(fmt, "json") ? "json" : "mtx");
-    http_reply_stream(r, m, os, 0, UINT64_MAX, ctype, disp, version);
+    http_reply_stream(r, m, out_source(os), UINT64_MAX, ctype, disp, atomic_load(&m->version));
 }
 
 static void h_matrix(req *r) { with_level(r, matrix); }
@@ -542,9 +594,8 @@ static const char *const DELTA_KEYS[] = {"since", "format", "attributes", NULL};
 
 /* GET /levels/{L}/delta: the points of a level the client holds that changed since a version
  * (api/delta.h), a body of its own; no compute slot (a level not computed is a 410). */
-static void delta(req *r, api_model *m, int level, uint64_t version)
+static void delta(req *r, api_model *m, int level)
 {
-    (void)version; /* the answer's ETag is the version of the model's content */
     api_problem p = {0};
     api_delta_query q = {http_arg(r, "since"), http_arg(r, "format"), http_arg(r, "attributes")};
     char *body, comp[1024];
@@ -614,13 +665,11 @@ static const char *const ANALYSIS_KEYS[] = {"vertex", "edge", NULL};
 
 static void h_analysis(req *r)
 {
-    uint64_t version;
-    api_model *m = session_model(r->s, &version);
+    api_model *m = session_model(r->s, NULL);
     api_problem p = {0};
-    int slot, rc = slot_for_level(r, m, 1, &slot, &p); /* an edge's block lives at level 1 */
-    json_t *j = rc ? NULL : api_analysis(m, http_arg(r, "vertex"), http_arg(r, "edge"), &p);
-    if (slot)
-        http_give_slot(r);
+    api_slot slot = slot_of(r);
+    json_t *j = api_analysis(m, http_arg(r, "vertex"), http_arg(r, "edge"), &slot, &p);
+    uint64_t version = atomic_load(&m->version);
     api_model_unref(m);
     http_reply_versioned(r, j, version, &p);
 }

@@ -4,14 +4,14 @@
 
 #include "config.h"
 #include "sessions.h"
-#include <semaphore.h>
+#include "slots.h"
 #include <stdatomic.h>
 
 typedef struct server {
     config cfg;
     store *st;
     struct rate *session_rate; /* session creations per client (rate.h) */
-    sem_t compute;            /* cfg.threads slots for computations */
+    slots *compute;           /* cfg.threads slots for computations, fair between sessions */
     atomic_int draining;      /* /readyz answers 503 while starting or stopping */
     struct MHD_Daemon *mhd;
     struct guard *guard;      /* connection slots: deadlines, eviction (guard.h) */

@@ -271,9 +271,9 @@ uint64_t session_publish(session *s, api_model *m)
 {
     pthread_mutex_lock(&s->mu);
     api_model *old = s->model;
-    s->model = m;
     uint64_t v = ++s->version;
     atomic_store(&m->version, v); /* before anyone can read m */
+    s->model = m;
     pthread_mutex_unlock(&s->mu);
     api_model_unref(old);
     return v;

@@ -87,16 +87,17 @@ static void levels(api_model *m)
         api_problem p = {0};
         out_stream *os = NULL;
         const out_format *fmt;
-        if (api_level_open(m, 1, &q, &lim, 1, &os, &fmt, &p)) {
+        uint64_t version;
+        if (api_level_open(m, 1, &q, &lim, NULL, &os, &fmt, &version, &p)) {
             refused(&p, "api_level_open");
             continue;
         }
         drain(os);
-        api_level_close(m, os);
+        out_close(os);
         oks++;
     }
     api_problem p = {0};
-    json_t *j = api_level_stats(m, 1, &lim, &p);
+    json_t *j = api_level_stats(m, 1, &lim, NULL, &p);
     if (!j && p.status)
         refused(&p, "api_level_stats");
     oks += j != NULL;
@@ -113,14 +114,14 @@ static void views(api_model *m)
     oks += j != NULL;
     json_decref(j);
     memset(&p, 0, sizeof p);
-    if (!(j = api_analysis(m, "0", NULL, &p)) && p.status)
+    if (!(j = api_analysis(m, "0", NULL, NULL, &p)) && p.status)
         refused(&p, "api_analysis");
     oks += j != NULL;
     json_decref(j);
     memset(&p, 0, sizeof p);
     out_stream *os = NULL;
     const char *ctype;
-    if (api_matrix_open(m, 1, "0", "json", &lim, &os, &ctype, &p))
+    if (api_matrix_open(m, 1, "0", "json", &lim, NULL, &os, &ctype, &p))
         refused(&p, "api_matrix_open");
     else {
         drain(os);
@@ -135,8 +136,9 @@ static void edit_and_refine(api_model **m)
     json_t *b = body(EDIT, &p);
     uint64_t counts[SD_MAX_LEVEL + 1], red, green;
     int nlev;
-    api_limits lim0 = api_default_limits();
-    if (b && api_edit(*m, b, 2, &lim0, counts, &nlev, &p))
+    api_limits lim = api_default_limits();
+    api_model *rebuilt = NULL;
+    if (b && api_edit(*m, b, 2, &lim, NULL, counts, &nlev, &rebuilt, &p))
         refused(&p, "api_edit");
     else if (b) {
         oks++;
@@ -158,9 +160,12 @@ static void edit_and_refine(api_model **m)
             api_free(text);
         }
     }
+    if (rebuilt) {
+        api_model_unref(*m);
+        *m = rebuilt;
+    }
     json_decref(b);
     memset(&p, 0, sizeof p);
-    api_limits lim = api_default_limits();
     api_model *next = NULL;
     if ((b = body(REFINE, &p)) && api_refine(*m, b, &lim, &next, &red, &green, &p))
         refused(&p, "api_refine");
@@ -193,7 +198,7 @@ static void scenario(void)
 /* One run failing the nth allocation, then every `every`-th; checks the bytes came back. */
 static void run(uint64_t n, uint64_t every)
 {
-    size_t before = api_mem_in_use();
+    size_t before = api_mem_in_use(), counted = api_mem_budget_used();
     run_n = n;
     api_mem_fail_at(n, every);
     scenario();
@@ -202,6 +207,29 @@ static void run(uint64_t n, uint64_t every)
         fprintf(stderr, "api_faults: n=%llu every=%llu: %zu bytes not freed\n",
                 (unsigned long long)n, (unsigned long long)every, api_mem_in_use() - before);
         bad++;
+    }
+    if (api_mem_budget_used() != counted) { /* core blocks and input reservations too */
+        fprintf(stderr, "api_faults: n=%llu every=%llu: %zd bytes left counted in the budget\n",
+                (unsigned long long)n, (unsigned long long)every,
+                (ssize_t)(api_mem_budget_used() - counted));
+        bad++;
+    }
+}
+
+/* Budgets from nothing up: whatever the scenario cannot get is refused cleanly (a 5xx problem,
+ * counted as over budget), and everything counted is given back. */
+static void budgets(void)
+{
+    for (size_t b = 1; b <= (64u << 20); b *= 4) {
+        api_mem_meter meter = {0}, *prev = api_mem_meter_set(&meter);
+        api_mem_set_budget(b);
+        run(0, 0);
+        api_mem_set_budget(0);
+        api_mem_meter_set(prev);
+        if (b < (1u << 16) && !meter.over_budget) {
+            fprintf(stderr, "api_faults: a budget of %zu bytes refused nothing\n", b);
+            bad++;
+        }
     }
 }
 
@@ -255,6 +283,7 @@ int main(int argc, char **argv)
         for (uint64_t n = 1; n <= every[k]; n++, runs++)
             run(n, every[k]);
     meter_limit();
+    budgets();
     if (bad) {
         fprintf(stderr, "api_faults: %d checks failed\n", bad);
         return 1;

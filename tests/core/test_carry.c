@@ -1,5 +1,5 @@
 /* Tags and rules carried through a refinement step (sd_refine_carry, core/carry.c), and the
- * memory estimate of levels not computed yet (sd_complex_estimate_bytes). */
+ * memory estimate of levels not computed yet (sd_complex_estimate_bytes), against what they take. */
 #include "test.h"
 
 /* The new vertex of refinement r splitting edge a-b, or UINT32_MAX. */
@@ -98,16 +98,28 @@ TEST(carry_nothing)
     sd_refine_free(&r);
 }
 
-/* The figures the daemon has always checked its memory limit with, for level l. */
-static uint64_t level_bytes(const sd_complex *c, int l)
+/* The estimate of level l is within 30% of what computing it takes (sd_complex_memory before
+ * and after, the level's vertex rules prepared as a stream does), for a solid, a surface, a
+ * curve, a mixed complex and a solid with attribute channels; it sums the levels not computed. */
+static int estimate_close(sd_complex *cx, int levels)
 {
-    sd_counts n;
-    sd_complex_counts(c, l, &n);
-    return n.vertices * 240 + n.edges * 24 + n.faces * 26 + n.tetrahedra * 57 + n.octahedra * 104 +
-           (n.curves + n.triangles + n.points) * 4;
+    sd_error err;
+    sd_class k;
+    int ok = sd_complex_vertex_class(cx, 0, 0, &k, &err) == SD_OK;
+    for (int l = 1; ok && l <= levels; l++) {
+        uint64_t est = sd_complex_estimate_level_bytes(cx, l);
+        size_t before = sd_complex_memory(cx);
+        ok = sd_complex_level(cx, l, &err) && !sd_complex_prepare_vertex_rules(cx, l, &err);
+        double real = (double)(sd_complex_memory(cx) - before);
+        if (ok && !(est >= 0.7 * real && est <= 1.3 * real)) {
+            fprintf(stderr, "level %d: estimate %llu, real %.0f\n", l, (unsigned long long)est,
+                    real);
+            ok = 0;
+        }
+    }
+    return ok;
 }
 
-/* The estimate sums fixed per-entity figures over the levels not computed yet. */
 TEST(estimate_bytes)
 {
     mesh m = {0};
@@ -119,12 +131,40 @@ TEST(estimate_bytes)
     sd_error err;
     sd_complex *cx = sd_complex_new(m.xyz, m.nv, m.idx, m.sz, m.ns, NULL, &err);
     CHECK(cx);
-    uint64_t want = level_bytes(cx, 1) + level_bytes(cx, 2) + level_bytes(cx, 3);
+    uint64_t want = sd_complex_estimate_level_bytes(cx, 1) + sd_complex_estimate_level_bytes(cx, 2) +
+                    sd_complex_estimate_level_bytes(cx, 3);
     CHECK(sd_complex_levels_computed(cx) == 1); /* level 0 is computed: not counted */
     CHECK(sd_complex_estimate_bytes(cx, 3) == want);
-    CHECK(sd_complex_estimate_bytes(cx, 0) == 0);
+    CHECK(sd_complex_estimate_bytes(cx, 0) == 0 && sd_complex_estimate_level_bytes(cx, 0) == 0);
     CHECK(sd_complex_level(cx, 1, &err));
-    CHECK(sd_complex_estimate_bytes(cx, 3) == want - level_bytes(cx, 1));
+    CHECK(sd_complex_estimate_bytes(cx, 3) == want - sd_complex_estimate_level_bytes(cx, 1));
     sd_complex_free(cx);
     mesh_free(&m);
+
+    mesh s = {0};
+    shape_cube_tets(&s, 4);
+    CHECK((cx = mesh_complex(&s, NULL, NULL)) && estimate_close(cx, 3));
+    sd_complex_free(cx);
+    CHECK((cx = mesh_complex(&s, NULL, NULL)));
+    double *t = calloc(3 * s.nv, sizeof *t);
+    CHECK(t && sd_complex_add_channel(cx, t, 3, &err) == 1 && estimate_close(cx, 3));
+    free(t);
+    sd_complex_free(cx);
+    mesh_free(&s);
+    shape_icosahedron(&s);
+    CHECK((cx = mesh_complex(&s, NULL, NULL)) && estimate_close(cx, 5));
+    sd_complex_free(cx);
+    mesh_free(&s);
+    for (uint32_t i = 0; i < 400; i++) { /* a zig-zag curve */
+        mesh_v(&s, 0.1 * i, 0.05 * (i % 7), 0);
+        if (i)
+            mesh_s(&s, 2, i - 1, i);
+    }
+    CHECK((cx = mesh_complex(&s, NULL, NULL)) && estimate_close(cx, 5));
+    sd_complex_free(cx);
+    mesh_free(&s);
+    shape_mixed(&s);
+    CHECK((cx = mesh_complex(&s, NULL, NULL)) && estimate_close(cx, 6));
+    sd_complex_free(cx);
+    mesh_free(&s);
 }

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Run the golden scenarios (scenarios.py) against a daemon and print or write their digests.
 
-    capture.py [--write] [--subdivd PATH]
+    capture.py [--write] [--subdivd PATH] [--dump DIR]
 
 Without --write it prints the digests as JSON; with it, it (re)writes manifest.json. A level-stats
 answer is recorded without its timings; every other answer byte for byte (status, content type
@@ -29,7 +29,14 @@ def strip_times(x):
     return x
 
 
+DUMP = None  # a directory: every body is also written there (--dump DIR), to diff two builds
+
+
 def digest(status, ctype, body):
+    if DUMP:
+        import re as _re
+        name = _re.sub(r"[^A-Za-z0-9_.-]+", "_", hashlib.sha256(body).hexdigest()[:16])
+        (pathlib.Path(DUMP) / name).write_bytes(body)
     return {"status": status, "type": ctype, "bytes": len(body),
             "sha256": hashlib.sha256(body).hexdigest()}
 
@@ -100,6 +107,9 @@ def capture(subdivd=None):
 if __name__ == "__main__":
     args = sys.argv[1:]
     sub = None
+    if "--dump" in args:
+        DUMP = args[args.index("--dump") + 1]
+        pathlib.Path(DUMP).mkdir(parents=True, exist_ok=True)
     if "--subdivd" in args:
         sub = args[args.index("--subdivd") + 1]
     res = capture(sub)

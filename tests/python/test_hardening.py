@@ -15,7 +15,8 @@ import time
 import pytest
 import requests
 
-from daemon import Daemon, Session
+import daemon as daemon_mod
+from daemon import SLOW, Daemon, Session
 
 CUBE_V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]]
 CUBE_S = [[0, 1, 2, 3], [1, 2, 3, 4]]
@@ -284,6 +285,7 @@ def big_complex_text(nv, bad_last=False):
     return '{"vertices":[' + pts + '],"simplices":[' + ",".join(tris) + "]}"
 
 
+@pytest.mark.skipif(daemon_mod.SANITIZED, reason="resident size under ASan is its allocator's, not the daemon's")
 def test_parsing_a_large_body_costs_a_small_multiple_of_its_size():
     d = Daemon("--max-body-bytes", str(200 << 20))
     try:
@@ -300,6 +302,7 @@ def test_parsing_a_large_body_costs_a_small_multiple_of_its_size():
         d.stop()
 
 
+@pytest.mark.skipif(daemon_mod.SANITIZED, reason="resident size under ASan is its allocator's, not the daemon's")
 def test_memory_budget_refuses_instead_of_growing_and_rss_returns():
     d = Daemon("--max-body-bytes", str(200 << 20), "--max-memory", str(600 << 20))
     try:
@@ -367,6 +370,7 @@ def test_chunked_body_over_the_limit_is_refused_early():
         d.stop()
 
 
+@pytest.mark.skipif(daemon_mod.SANITIZED, reason="resident size under ASan is its allocator's, not the daemon's")
 def test_get_complex_of_a_large_complex_streams_in_bounded_memory():
     d = Daemon("--max-body-bytes", str(200 << 20))
     try:
@@ -460,7 +464,7 @@ def test_compute_slots_are_fair_across_sessions():
             t.join()
         assert r.status_code == 200
         assert min(done) > 1.0, "A's level should take a while to compute"
-        assert tb < 0.5, (tb, sorted(done))
+        assert tb < 0.5 * SLOW, (tb, sorted(done))
     finally:
         d.stop()
 
@@ -471,9 +475,13 @@ def test_a_killed_daemon_leaves_no_tetgen_helper():
     try:
         s = Session(d)
         V, T = surface("icosphere", 3)
-        threading.Thread(target=lambda: s.put_complex(
-            {"vertices": V, "simplices": [], "fill": [{"surface": T, "max_volume": 1e-5}]}),
-            daemon=True).start()
+        def fill():  # the daemon is killed under it: the request ends without an answer
+            try:
+                s.put_complex({"vertices": V, "simplices": [],
+                               "fill": [{"surface": T, "max_volume": 1e-5}]})
+            except requests.exceptions.ConnectionError:
+                pass
+        threading.Thread(target=fill, daemon=True).start()
         helper = None
         for _ in range(50):
             out = subprocess.run(["pgrep", "-P", str(d.proc.pid)], capture_output=True, text=True)
@@ -581,9 +589,12 @@ def test_patch_refuses_a_degenerate_simplex_and_allows_inversion(daemon):
                   {"index": 1, "position": [0, 1, 0]}])      # vertex 1 onto vertex 2
     assert r.status_code == 422, r.text
     assert any(e["pointer"].startswith("/moves/2") for e in r.json()["errors"]), r.text
-    assert patch(s, [{"index": 3, "position": [0, 0, -1]}]).status_code == 200   # inverted: fine
-    for path in ("/tags", "/rules"):
-        assert s.req("PUT", path, json={}).status_code == 200
+    # tetrahedron [0,1,2,3] inverted: fine (z = -1 would put 3 on the plane of 1, 2, 4 and make
+    # tetrahedron [1,2,3,4] flat, which is refused)
+    assert patch(s, [{"index": 3, "position": [0, 0, -0.5]}]).status_code == 200
+    assert patch(s, [{"index": 3, "position": [0, 0, -1]}]).status_code == 422
+    for path, body in (("/tags", {"singular": []}), ("/rules", {})):   # rebuilt from the edit
+        assert s.req("PUT", path, json=body).status_code == 200
 
 
 def test_if_match_and_if_none_match_parse_entity_tags(daemon):

@@ -139,7 +139,8 @@ class Client:
         return self.request("GET", "/livez").json()
 
     def readyz(self):
-        """GET /readyz: {"status": "ready"}, or ServiceUnavailable while starting or stopping."""
+        """GET /readyz: {"status": "ready", "memory": {"budget_bytes", "used_bytes"}}, or
+        ServiceUnavailable while starting or stopping or with the memory budget in use."""
         return self.request("GET", "/readyz").json()
 
     def metrics(self):
