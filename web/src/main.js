@@ -452,10 +452,10 @@ class App {
   // Bring what is drawn up to the newest version heard of, by deltas: the shown level, the
   // handle level and (for changes made elsewhere) the control points. 410: fetch again (here
   // when called from a request of the queue, else as a request of the queue).
-  async #syncNow(inQueue = false) {
+  async #syncNow(inQueue = false, force = false) {
     if (!this.shown || !this.model) return;
-    const want = Math.max(this.known, this.session.version);
-    if (this.shown.version < want) {
+    let want = Math.max(this.known, this.session.version);
+    if (this.shown.version < want || force) {
       const L = this.shown.level, since = this.shown.version;
       const d = await this.#deltaOr410(() => this.session.delta(L, since));
       if (!d && !inQueue) {
@@ -464,8 +464,9 @@ class App {
       }
       if (!d) {
         await this.#fetchLevel(); // also sets the handles up again
-        return this.#syncCage(want);
+        return this.#syncCage(Math.max(want, this.shown.version), true);
       }
+      want = Math.max(want, d.version);
       if (d.level !== L || d.since !== since) throw new Error(`delta of level ${d.level} since ${d.since}, asked ${L} since ${since}`);
       try {
         this.viewer.applyDelta(d);
@@ -473,7 +474,7 @@ class App {
         this.info(`The level is fetched again (${e.message}).`);
         if (!inQueue) return this.requestLevel();
         await this.#fetchLevel();
-        return this.#syncCage(want);
+        return this.#syncCage(want, true);
       }
       this.shown.version = d.version;
       this.shown.deltas++;
@@ -494,12 +495,12 @@ class App {
         this.viewer.requestRender();
       }
     }
-    await this.#syncCage(want);
+    await this.#syncCage(want, inQueue);
     this.#updateSession();
   }
 
   // The control points changed elsewhere: a JSON delta of level 0 (exact doubles).
-  async #syncCage(want) {
+  async #syncCage(want, inQueue = false) {
     if (this.cageVersion >= want) return;
     const since = this.cageVersion;
     let d = null;
@@ -717,7 +718,7 @@ class App {
         // 412: the session changed elsewhere; catch up and send the move again (once)
         if (!(e instanceof ApiError && e.status === 412)) throw e;
         await this.syncPromise; // a delta under way first
-        await this.#syncNow(true);
+        await this.#syncNow(true, true); // a delta (or a refetch) tells the version
         r = await this.session.moveControlPoints(body, what);
       }
     } finally {
