@@ -13,6 +13,7 @@ import { spawn, execFileSync } from 'node:child_process';
 import fs from 'node:fs';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
+import os from 'node:os';
 
 const REPO = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '..');
 const args = process.argv.slice(2);
@@ -203,13 +204,16 @@ try {
   console.log(`  of which (medians): event to PATCH sent ${f1(parts.queue)} ms, PATCH ${f1(parts.patch)} ms, delta + buffers ${f1(parts.delta)} ms`);
   const ph = (x) => `queued ${f1(x.wait)}, to first byte ${f1(x.server)}, body ${f1(x.body)}, whole ${f1(x.total)} ms`;
   console.log(`  network (resource timing medians): PATCH ${ph(seq.patchNet)}; delta ${ph(seq.deltaNet)}`);
-  console.log(`  first edit after the build: ${f1(first)} ms (${f1(first / med)}x the median)`);
+  const u0 = seq.u[0];
+  console.log(`  first edit after the build: ${f1(first)} ms (${f1(first / med)}x the median): event to PATCH sent ${f1(u0.sent - u0.move)}, ` +
+    `PATCH ${f1(u0.patched - u0.sent)}, delta + buffers ${f1(u0.applied - u0.patched)} ms`);
   console.log(`  ${seq.nPatch} PATCH, ${seq.nDelta} deltas, ${seq.full} level downloads; ${f1(points / seq.u.length)} changed points per edit`);
   console.log(`  bytes per edit: delta body ${f1(seq.deltaBody / seq.u.length)} = ${f1(perPoint)} per changed point (32 x points = ${f1(32 * points / seq.u.length)}); ` +
     `on the wire with headers, PATCH both ways included: ${f1((seq.deltaWire + seq.patchWire + reqBytes) / seq.u.length)} = ${f1(wirePerPoint)} per point`);
   console.log(`  floor: the same PATCH + delta from the page's JS alone, no app code: median ${f1(median(floor))} ms, p90 ${f1(quantile(floor, 0.9))} ms`);
   console.log(`sustained for ${SUSTAIN_S} s: ${moves} pointer moves (250 Hz) -> ${sus.n} updates = ${f1(rate)} updates/s (latency median ${f1(median(sus.lat))} ms, p90 ${f1(quantile(sus.lat, 0.9))} ms)`);
   console.log(`drawing, apart: an updated frame uploaded and drawn (render + gl.finish): median ${f1(median(draw))} ms, p90 ${f1(quantile(draw, 0.9))} ms (software GL here)`);
+  console.log(`machine: ${os.cpus().length} cores, load average ${os.loadavg().map((x) => x.toFixed(1)).join(' ')} at the end (the daemon, chromium's processes and this driver share them)`);
   for (const [g, ok, v] of goals) console.log(`goal ${g}: ${v} — ${ok ? 'met' : 'NOT met'}`);
   if (errors.length) console.log(`page errors: ${errors.join(' | ')}`);
 } finally {
