@@ -150,8 +150,10 @@ try {
   const moves = sus.moves;
   await page.mouse.up();
 
-  // 2b. the floor: the same two requests (PATCH, then the delta) from the page's JS alone
+  // 2b. the floor: the same two requests (PATCH, then the delta) from the page's JS alone (the
+  // page's event stream closed first)
   const floor = await page.evaluate(async ([i, n]) => {
+    window.subdivd.events.close(); // the page would follow each of these edits meanwhile
     const s = window.subdivd.session, base = `/v1/sessions/${s.id}`, auth = { Authorization: `Bearer ${s.token}` };
     let v = s.version;
     const out = [];
