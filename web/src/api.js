@@ -53,7 +53,7 @@ export class Session {
     const j = await res.json();
     this.id = j.id;
     this.token = j.token;
-    this.version = 0;
+    this.version = j.version ?? 0;
     return j;
   }
 
@@ -74,7 +74,8 @@ export class Session {
     }
     if (!res.ok) throw new ApiError(what, res.status, await problemOf(res));
     const tag = res.headers.get('ETag');
-    if (tag && /^"\d+"$/.test(tag)) this.version = Number(tag.slice(1, -1));
+    // versions only grow; a read answered before a change may arrive after that change's answer
+    if (tag && /^"\d+"$/.test(tag)) this.version = Math.max(this.version, Number(tag.slice(1, -1)));
     return res;
   }
 
@@ -92,7 +93,7 @@ export class Session {
   async json(what, method, sub, opts) {
     const res = await this.request(what, method, sub, opts);
     const j = await res.json();
-    if (typeof j.version === 'number') this.version = j.version;
+    if (typeof j.version === 'number') this.version = Math.max(this.version, j.version);
     return j;
   }
 
@@ -112,8 +113,39 @@ export class Session {
     return this.json(what, 'PUT', '/rules', { body: rules });
   }
 
+  // moves: [{index, position, level?}] (level ≥ 1: a detail offset at that level).
   moveControlPoints(moves, what = 'Moving a control point') {
     return this.json(what, 'PATCH', '/control-points', { body: { moves }, ifMatch: this.version });
+  }
+
+  // The level-L points that changed after version `since` (API.md "Live edits", the binary
+  // "SDD1" layout): {level, since, version, n, indices, positions, normals|null, bytes}. A 410
+  // (the change was not an edit, the level is not cached, ...) is an ApiError with status 410:
+  // the caller fetches the level again.
+  async delta(level, since) {
+    const res = await this.request(`Updating level ${level}`, 'GET', `/levels/${level}/delta`,
+      { query: { since, format: 'bin' } });
+    return parseDelta(await res.arrayBuffer());
+  }
+
+  // Server-Sent Events of the session (EventSource cannot send headers: ?access_token=).
+  // handlers: {version(data, id), resync(), deleted(), error(ev)}. Returns the EventSource.
+  events(handlers) {
+    const q = new URLSearchParams({ access_token: this.token });
+    const es = new EventSource(`${this.base}/v1/sessions/${this.id}/events?${q}`);
+    es.addEventListener('version', (ev) => {
+      let data = {};
+      try {
+        data = JSON.parse(ev.data);
+      } catch {
+        data = {};
+      }
+      handlers.version?.(data, Number(ev.lastEventId || data.version));
+    });
+    es.addEventListener('resync', () => handlers.resync?.());
+    es.addEventListener('deleted', () => handlers.deleted?.());
+    es.onerror = (ev) => handlers.error?.(ev, es);
+    return es;
   }
 
   stats(level) {
@@ -125,4 +157,20 @@ export class Session {
     const res = await this.request(`Fetching level ${level}`, 'GET', `/levels/${level}`, { query });
     return res.arrayBuffer();
   }
+}
+
+// "SDD1", uint32 level, since, version, n, flags (bit 0 normals, bit 1 attributes), n uint32
+// indices, n×3 float32 positions, n×3 float32 normals if bit 0 (attributes are not asked for).
+export function parseDelta(buf) {
+  const dv = new DataView(buf);
+  const magic = String.fromCharCode(...new Uint8Array(buf, 0, Math.min(4, buf.byteLength)));
+  if (buf.byteLength < 24 || magic !== 'SDD1') throw new Error(`not an SDD1 delta (${buf.byteLength} bytes)`);
+  const [level, since, version, n, flags] = [4, 8, 12, 16, 20].map((o) => dv.getUint32(o, true));
+  const need = 24 + n * 4 + n * 12 + (flags & 1 ? n * 12 : 0);
+  if (buf.byteLength < need) throw new Error(`short SDD1 delta: ${buf.byteLength} bytes, ${need} needed for ${n} points`);
+  // little endian on every platform a browser runs on; the offsets are multiples of 4
+  const indices = new Uint32Array(buf, 24, n);
+  const positions = new Float32Array(buf, 24 + 4 * n, 3 * n);
+  const normals = flags & 1 ? new Float32Array(buf, 24 + 16 * n, 3 * n) : null;
+  return { level, since, version, n, flags, indices, positions, normals, bytes: buf.byteLength };
 }

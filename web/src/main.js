@@ -5,6 +5,13 @@
 // and point moves are coalesced: while one is under way, later wishes collapse into one more
 // round (requestLevel, queueMove), which is what lets a dragged point and the level slider follow
 // the mouse without a backlog. Every failure ends up in App.error(), shown in words.
+//
+// The live loop (API.md "Live edits"): a move is a PATCH (at most one in flight; the latest
+// position of each point wins), then a delta of the shown level since the version its buffers
+// hold, written into them in place — no level download and no stats request per move. The
+// session's /events stream (EventSource, ?access_token=) tells of changes made elsewhere (another
+// tab): edits are followed by deltas (the cage's by a JSON delta of level 0, exact), anything
+// else by fetching the complex and the level again, as is a delta answered 410.
 import './style.css';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import * as THREE from 'three';
@@ -17,7 +24,7 @@ import { RULE_NAMES, RULE_DESCRIPTIONS, ruleFamily, ruleHex, viridisCss } from '
 const $ = (id) => document.getElementById(id);
 const FIRST_LEVEL = 2;
 const MAX_LEVEL = 6;
-const MAX_CELLS = 1.5e6; // the slider stops before a level would have more top cells than this
+const MAX_CELLS = 2e6; // the slider stops before a level would have more top cells than this
 
 const TOOL_HINTS = {
   move: 'Drag a round control point to reshape it · slide the level · tag creases with the tools on the left',
@@ -70,8 +77,20 @@ class App {
     this.redoStack = [];
     this.levelWanted = false;
     this.levelPromise = null;
-    this.pendingMove = null;
+    this.pendingMoves = new Map(); // "level:index" -> {level, index, position, what, t}
     this.movePromise = null;
+    this.editLevel = 0; // the level whose points the move tool drags
+    this.handleLevel = null; // {level, version} of a level fetched for its handles (1 ≤ l < shown)
+    this.known = 0; // the newest version heard of (answers, events)
+    this.cageVersion = 0; // the version the drawn control points are at
+    this.complexVersion = 0; // the version of the complex (tags, rules) held
+    this.syncPromise = null;
+    this.syncWanted = false;
+    this.events = null;
+    this.perf = { updates: [], deltas: 0, deltaBytes: 0, refetches: 0 };
+    this.updating = []; // PATCHes answered whose delta is not drawn yet
+    this.patching = false; // a PATCH is under way
+    this.heard = 0; // the newest edit event heard while a PATCH was under way
     this.selected = null;
     this.messages = [];
     this.ready = false;
@@ -88,9 +107,20 @@ class App {
     return p;
   }
 
+  // "working…" shows when something takes longer than 200 ms (not for every request of a drag:
+  // each change of the page costs a layout and a frame)
   #busy(d) {
     this.pending += d;
-    $('busy').hidden = this.pending === 0;
+    if (this.pending === 0) {
+      clearTimeout(this.busyTimer);
+      this.busyTimer = 0;
+      if (!$('busy').hidden) $('busy').hidden = true;
+    } else if (!this.busyTimer && $('busy').hidden) {
+      this.busyTimer = setTimeout(() => {
+        this.busyTimer = 0;
+        if (this.pending > 0) $('busy').hidden = false;
+      }, 200);
+    }
   }
 
   // A session that expired (404 no-session) is replaced by a new one holding the same model.
@@ -105,13 +135,16 @@ class App {
       if (c.tags?.singular?.length) await this.session.putTags(c.tags.singular, 'Restoring the tags');
       await this.session.putRules(c.rules, 'Restoring the rules');
       await this.#refreshComplex();
+      this.#listen();
+      this.shown = null; // the new session has no level yet
       this.info('The session had expired; a new one was started with the same model.');
       return fn();
     }
   }
 
   idle() {
-    return this.pending === 0 && !this.levelPromise && !this.movePromise && !this.levelWanted;
+    return this.pending === 0 && !this.levelPromise && !this.movePromise && !this.levelWanted &&
+      !this.syncPromise && !this.pendingMoves.size;
   }
 
   // ---- messages ---------------------------------------------------------------------------
@@ -154,10 +187,14 @@ class App {
   async loadModel(name, body, { attribute } = {}) {
     try {
       await this.run(async () => {
-        if (!this.session.id) await this.session.open();
+        if (!this.session.id) {
+          await this.session.open();
+          this.#listen();
+        }
         const put = await this.session.putComplex(body);
         const complex = await this.session.getComplex();
         this.#setModel(name, complex, put.summary, attribute);
+        this.complexVersion = this.cageVersion = this.known = this.session.version;
       });
     } catch (e) {
       this.error(e);
@@ -205,6 +242,8 @@ class App {
   async #refreshComplex() {
     const complex = await this.session.getComplex();
     this.model.complex = complex;
+    this.complexVersion = this.cageVersion = this.session.version;
+    this.known = Math.max(this.known, this.session.version);
     this.viewer.setCage(complex);
     this.#syncRuleControls();
     this.#tagsNote();
@@ -268,13 +307,19 @@ class App {
     const t0 = performance.now();
     const stats = await this.session.stats(L);
     const buf = await this.session.levelGlb(L, query);
+    const version = this.session.version; // the GLB's ETag: the version of its content
     const gltf = await this.loader.parseAsync(buf, '');
     this.viewer.setLevel(gltf, stats);
+    this.known = Math.max(this.known, version);
     this.shown = {
-      level: L, version: this.session.version, query, stats, bytes: buf.byteLength,
+      level: L, version, query, stats, bytes: buf.byteLength,
       hash: fnv1a(buf), ms: performance.now() - t0, parts: Object.keys(this.viewer.parts),
-      rules: this.#levelRuleCounts(),
+      rules: this.#levelRuleCounts(), deltas: 0, fetches: (this.shown?.fetches ?? 0) + 1,
     };
+    this.perf.refetches++;
+    this.#updatesDone(null);
+    this.#syncEditLevels();
+    await this.#setupHandles();
     this.#showStats();
     this.#legend();
     this.#updateSession();
@@ -318,9 +363,224 @@ class App {
     $('stats').replaceChildren(dl);
   }
 
+  // At most 4 times a second (a drag changes the version at every update).
   #updateSession() {
+    if (this.sessionTimer) return;
+    this.sessionTimer = setTimeout(() => {
+      this.sessionTimer = 0;
+      this.#showSession();
+    }, 250);
+  }
+
+  #showSession() {
     const s = this.session;
     $('session').textContent = s.id ? `session ${s.id.slice(0, 8)} · v${s.version}` : 'no session';
+    // the fragment never reaches a server (nor its logs)
+    $('share').href = s.id ? `${location.pathname}#session=${s.id}&token=${s.token}` : '#';
+  }
+
+  // Open a session another tab started (/#session=ID&token=TOKEN): its model, then follow it.
+  async join(id, token) {
+    try {
+      await this.run(async () => {
+        this.session.id = id;
+        this.session.token = token;
+        this.session.version = 0;
+        const complex = await this.session.getComplex();
+        const summary = { simplices: {} };
+        for (const s of complex.simplices) summary.simplices[s.length - 1] = (summary.simplices[s.length - 1] || 0) + 1;
+        this.#setModel(`session ${id.slice(0, 8)}`, complex, summary);
+        this.complexVersion = this.cageVersion = this.known = this.session.version;
+        this.#listen();
+      });
+    } catch (e) {
+      this.error(e);
+      return false;
+    }
+    await this.requestLevel();
+    return true;
+  }
+
+  // ---- the live loop: handles, deltas, events -----------------------------------------------
+
+  // The edit-level choice offers 0 … the shown level.
+  #syncEditLevels() {
+    const sel = $('edit-level'), top = this.shown?.level ?? 0;
+    if (this.editLevel > top) this.editLevel = 0;
+    if (sel.options.length !== top + 1) {
+      sel.replaceChildren(...Array.from({ length: top + 1 }, (_, l) =>
+        new Option(l === 0 ? '0 (control points)' : `${l}`, l)));
+    }
+    sel.value = this.editLevel;
+  }
+
+  async setEditLevel(l) {
+    this.editLevel = l;
+    try {
+      await this.run(() => this.#setupHandles());
+    } catch (e) {
+      this.error(e);
+    }
+    this.#hint(l === 0 ? `${TOOL_HINTS.move}.` :
+      `Drag a point of level ${l}: it stores a detail offset there (coarser edits keep it).`);
+  }
+
+  // The handles of the edit level: the cage, the shown level's own vertices, or a level fetched
+  // for them (kept up to date by its own deltas).
+  async #setupHandles() {
+    const l = this.editLevel, v = this.viewer;
+    if (l === 0 || !this.shown) {
+      this.handleLevel = null;
+      v.setHandles(0);
+    } else if (l === this.shown.level) {
+      this.handleLevel = null;
+      v.setHandles(l, v.levelPositions(), Viewer.interiorOf(v.level.count, v.level.prims));
+    } else {
+      const buf = await this.session.levelGlb(l, {});
+      const version = this.session.version;
+      const gltf = await this.loader.parseAsync(buf, '');
+      const prims = [];
+      gltf.scene.traverse((o) => { if (o.isMesh || o.isPoints || o.isLine) prims.push(o); });
+      const attr = prims.find((o) => o.geometry.index || o.geometry.attributes._rule)?.geometry.attributes.position;
+      if (!attr) throw new Error(`level ${l} has no points to drag`);
+      this.handleLevel = { level: l, version, attr };
+      v.setHandles(l, attr, Viewer.interiorOf(attr.count, prims));
+      this.#updateSession();
+    }
+  }
+
+  // Bring what is drawn up to the newest version heard of, by deltas: the shown level, the
+  // handle level and (for changes made elsewhere) the control points. 410: fetch again (here
+  // when called from a request of the queue, else as a request of the queue).
+  async #syncNow(inQueue = false, force = false) {
+    if (!this.shown || !this.model) return;
+    let want = Math.max(this.known, this.session.version);
+    if (this.shown.version < want || force) {
+      const L = this.shown.level, since = this.shown.version;
+      const d = await this.#deltaOr410(() => this.session.delta(L, since));
+      if (!d && !inQueue) {
+        this.requestLevel();
+        return;
+      }
+      if (!d) {
+        await this.#fetchLevel(); // also sets the handles up again
+        return this.#syncCage(Math.max(want, this.shown.version), true);
+      }
+      want = Math.max(want, d.version);
+      if (d.level !== L || d.since !== since) throw new Error(`delta of level ${d.level} since ${d.since}, asked ${L} since ${since}`);
+      try {
+        this.viewer.applyDelta(d);
+      } catch (e) {
+        this.info(`The level is fetched again (${e.message}).`);
+        if (!inQueue) return this.requestLevel();
+        await this.#fetchLevel();
+        return this.#syncCage(want, true);
+      }
+      this.shown.version = d.version;
+      this.shown.deltas++;
+      this.perf.deltas++;
+      this.perf.deltaBytes += d.bytes;
+      this.#updatesDone(d);
+    }
+    this.#updatesDone(null);
+    const h = this.handleLevel;
+    if (h && h.version < want) {
+      const d = await this.#deltaOr410(() => this.session.delta(h.level, h.version));
+      if (!d) await (inQueue ? this.#setupHandles() : this.run(() => this.#setupHandles()));
+      else {
+        const a = h.attr.array;
+        for (let k = 0; k < d.n; k++) a.set(d.positions.subarray(3 * k, 3 * k + 3), 3 * d.indices[k]);
+        h.attr.needsUpdate = true;
+        h.version = d.version;
+        this.viewer.requestRender();
+      }
+    }
+    await this.#syncCage(want, inQueue);
+    this.#updateSession();
+  }
+
+  // The control points changed elsewhere: a JSON delta of level 0 (exact doubles).
+  async #syncCage(want, inQueue = false) {
+    if (this.cageVersion >= want) return;
+    const since = this.cageVersion;
+    let d = null;
+    try {
+      const res = await this.session.request('Updating the control points', 'GET', '/levels/0/delta', { query: { since, format: 'json' } });
+      d = await res.json();
+    } catch (e) {
+      if (!(e instanceof ApiError && e.status === 410)) throw e;
+    }
+    if (!d) {
+      await (inQueue ? this.#refreshComplex() : this.run(() => this.#refreshComplex()));
+      return;
+    }
+    const verts = this.model.complex.vertices;
+    d.indices.forEach((i, k) => { verts[i] = d.positions[k].slice(); });
+    if (d.indices.length) this.viewer.moveCageVertices(d.indices, d.positions.flat());
+    this.cageVersion = d.version;
+  }
+
+  async #deltaOr410(get) {
+    try {
+      return await get();
+    } catch (e) {
+      if (e instanceof ApiError && e.status === 410) return null;
+      throw e;
+    }
+  }
+
+  // Coalesced: one sync at a time, and one more if asked meanwhile. Deltas are reads: they do
+  // not wait in the request queue, so the next PATCH of a drag is under way meanwhile.
+  requestSync() {
+    this.syncWanted = true;
+    if (this.syncPromise) return this.syncPromise;
+    this.syncPromise = (async () => {
+      try {
+        while (this.syncWanted) {
+          this.syncWanted = false;
+          await this.#withSession(() => this.#syncNow());
+        }
+      } catch (e) {
+        this.error(e);
+      } finally {
+        this.syncPromise = null;
+      }
+    })();
+    return this.syncPromise;
+  }
+
+  // The session's events: another tab's edits are followed by deltas, its other changes by
+  // fetching the complex and the level again.
+  #listen() {
+    this.events?.close();
+    const id = this.session.id;
+    if (typeof EventSource === 'undefined' || !id) return;
+    this.events = this.session.events({
+      version: (data, v) => {
+        if (this.session.id !== id || !this.model || !Number.isFinite(v)) return;
+        if (data.kind === 'edit') {
+          // an edit heard while our PATCH is under way is most likely that PATCH: its answer
+          // says (and syncs); otherwise it was made elsewhere
+          if (this.patching) {
+            this.heard = Math.max(this.heard, v);
+            return;
+          }
+          this.known = Math.max(this.known, v);
+          if (this.shown && this.shown.version < v) this.requestSync();
+          return;
+        }
+        this.known = Math.max(this.known, v);
+        this.run(async () => {
+          if (this.complexVersion >= v) return; // ours, or already fetched
+          await this.#refreshComplex();
+          this.requestLevel();
+        }).catch((e) => this.error(e));
+      },
+      resync: () => this.resync(),
+      deleted: () => {
+        if (this.session.id === id) this.events?.close();
+      },
+    });
   }
 
   // ---- colour -----------------------------------------------------------------------------
@@ -418,25 +678,24 @@ class App {
 
   // ---- moving control points ----------------------------------------------------------------
 
-  // Ask the daemon to move control point `index` (coalescing: only the latest position of a
-  // burst is sent once the previous PATCH is answered), then show the changed level.
-  queueMove(index, position, what = 'Moving a control point') {
-    if (this.pendingMove && this.pendingMove.index !== index) this.#flushMove();
-    this.pendingMove = { index, position: position.toArray(), what };
+  // Ask the daemon to move point `index` of level `level` (coalescing: while a PATCH is under
+  // way, later moves wait, the latest position of each point wins, and all that waited go in
+  // one PATCH), then bring the drawn level up to date by a delta.
+  queueMove(level, index, position, what = 'Moving a control point', t = performance.now()) {
+    const k = `${level}:${index}`;
+    const prev = this.pendingMoves.get(k);
+    this.pendingMoves.delete(k); // re-inserted last: moves keep the order they were last made in
+    this.pendingMoves.set(k, { level, index, position: position.toArray ? position.toArray() : position, what, t: prev ? prev.t : t, last: t });
     if (this.movePromise) return this.movePromise;
     this.movePromise = (async () => {
       try {
-        while (this.pendingMove) {
-          const m = this.pendingMove;
-          this.pendingMove = null;
-          await this.run(async () => {
-            await this.session.moveControlPoints([{ index: m.index, position: m.position }], m.what);
-            this.model.complex.vertices[m.index] = m.position;
-          });
-          this.requestLevel();
+        while (this.pendingMoves.size) {
+          const moves = [...this.pendingMoves.values()];
+          this.pendingMoves.clear();
+          await this.run(() => this.#patch(moves));
         }
       } catch (e) {
-        this.pendingMove = null;
+        this.pendingMoves.clear();
         this.error(e);
         this.resync(); // show the daemon's positions again
       } finally {
@@ -446,26 +705,61 @@ class App {
     return this.movePromise;
   }
 
-  // A pending move of another point is sent as its own PATCH before the new one.
-  #flushMove() {
-    const m = this.pendingMove;
-    this.pendingMove = null;
-    this.run(() => this.session.moveControlPoints([{ index: m.index, position: m.position }], m.what)
-      .then(() => { this.model.complex.vertices[m.index] = m.position; }))
-      .catch((e) => { this.error(e); this.resync(); });
+  async #patch(moves) {
+    const body = moves.map((m) => (m.level ? { index: m.index, level: m.level, position: m.position } : { index: m.index, position: m.position }));
+    const what = moves.length === 1 ? moves[0].what : `Moving ${moves.length} points`;
+    const t0 = performance.now();
+    let r;
+    this.patching = true;
+    try {
+      try {
+        r = await this.session.moveControlPoints(body, what);
+      } catch (e) {
+        // 412: the session changed elsewhere; catch up and send the move again (once)
+        if (!(e instanceof ApiError && e.status === 412)) throw e;
+        await this.syncPromise; // a delta under way first
+        await this.#syncNow(true, true); // a delta (or a refetch) tells the version
+        r = await this.session.moveControlPoints(body, what);
+      }
+    } finally {
+      this.patching = false;
+    }
+    const t1 = performance.now();
+    const cageWasCurrent = this.cageVersion + 1 === r.version;
+    for (const m of moves) if (m.level === 0) this.model.complex.vertices[m.index] = m.position;
+    if (cageWasCurrent) this.cageVersion = r.version; // nothing but this PATCH since
+    this.known = Math.max(this.known, r.version, this.heard);
+    // the delta goes its own way (requestSync), so the next PATCH can start meanwhile; the
+    // update is complete when the buffers hold r.version
+    this.updating.push({
+      move: Math.min(...moves.map((m) => m.t)), lastMove: Math.max(...moves.map((m) => m.last)),
+      sent: t0, patched: t1, version: r.version, moves: moves.length,
+    });
+    this.requestSync();
+  }
+
+  // Updates (PATCHes) whose versions the shown level now holds are done: timings for benchmarks.
+  #updatesDone(d) {
+    const t = performance.now(), u = this.perf.updates;
+    while (this.updating.length && this.updating[0].version <= this.shown.version) {
+      const x = this.updating.shift();
+      u.push({ ...x, applied: t, points: d?.n ?? 0, bytes: d?.bytes ?? 0, delta: d?.since ?? null });
+    }
+    if (u.length > 20000) u.splice(0, u.length - 10000);
   }
 
   #move(entry, to, what) {
     const p = new THREE.Vector3(...to);
-    this.viewer.moveCageVertex(entry.index, p);
-    this.queueMove(entry.index, p, what);
+    if (entry.level === 0) this.viewer.moveCageVertex(entry.index, p);
+    else if (this.viewer.handles?.level === entry.level) this.viewer.moveHandle(entry.index, p);
+    this.queueMove(entry.level, entry.index, p, what);
   }
 
   undo() {
     const e = this.undoStack.pop();
     if (!e) return;
     this.redoStack.push(e);
-    this.#move(e, e.from, `Undoing the move of point ${e.index}`);
+    this.#move(e, e.from, `Undoing the move of point ${e.index}${e.level ? ` of level ${e.level}` : ''}`);
     this.#syncUndo();
   }
 
@@ -473,7 +767,7 @@ class App {
     const e = this.redoStack.pop();
     if (!e) return;
     this.undoStack.push(e);
-    this.#move(e, e.to, `Redoing the move of point ${e.index}`);
+    this.#move(e, e.to, `Redoing the move of point ${e.index}${e.level ? ` of level ${e.level}` : ''}`);
     this.#syncUndo();
   }
 
@@ -603,15 +897,17 @@ class App {
     const { x, y } = this.#local(ev);
     this.press = { x, y };
     if (this.tool !== 'move' || !this.viewer.visible.cage) return;
-    const i = this.viewer.vertexAt(x, y);
+    const v = this.viewer, level = v.handles?.level ?? 0;
+    const i = v.handleAt(x, y);
     if (i < 0) return;
     ev.stopImmediatePropagation();
     ev.preventDefault();
-    this.viewer.canvas.setPointerCapture(ev.pointerId);
-    this.viewer.controls.enabled = false;
-    const from = this.viewer.cagePosition(i); // float32, for the drag plane
-    this.drag = { index: i, from, to: null, start: this.model.complex.vertices[i].slice() };
-    this.#hint(`Moving control point ${i}…`);
+    v.canvas.setPointerCapture(ev.pointerId);
+    v.controls.enabled = false;
+    const from = v.handlePosition(i); // float32, for the drag plane
+    const start = level === 0 ? this.model.complex.vertices[i].slice() : from.toArray();
+    this.drag = { level, index: i, from, to: null, start };
+    this.#hint(level ? `Moving point ${i} of level ${level}…` : `Moving control point ${i}…`);
   }
 
   onPointerMove(ev) {
@@ -620,8 +916,9 @@ class App {
     const p = this.viewer.pointOnViewPlane(x, y, this.drag.from);
     if (!p) return;
     this.drag.to = p;
-    this.viewer.moveCageVertex(this.drag.index, p);
-    this.queueMove(this.drag.index, p);
+    this.viewer.moveHandle(this.drag.index, p);
+    const what = this.drag.level ? `Moving point ${this.drag.index} of level ${this.drag.level}` : undefined;
+    this.queueMove(this.drag.level, this.drag.index, p, what, ev.timeStamp || performance.now());
   }
 
   onPointerUp(ev) {
@@ -631,7 +928,8 @@ class App {
       this.viewer.controls.enabled = true;
       if (this.viewer.canvas.hasPointerCapture(ev.pointerId)) this.viewer.canvas.releasePointerCapture(ev.pointerId);
       if (d.to && d.to.distanceTo(d.from) > 0) {
-        this.undoStack.push({ index: d.index, from: d.start, to: d.to.toArray() });
+        this.undoStack.push({ level: d.level, index: d.index, from: d.start, to: d.to.toArray() });
+        if (this.slice.on) this.requestLevel(); // the slice is not part of a delta
         this.redoStack = [];
         this.#syncUndo();
       }
@@ -708,6 +1006,8 @@ class App {
     });
     for (const part of ['cage', 'points', 'curves', 'surfaces', 'solids'])
       $(`show-${part}`).addEventListener('change', (ev) => this.viewer.setVisible(part, ev.target.checked));
+    $('show-interior').addEventListener('change', (ev) => this.viewer.setXray(ev.target.checked));
+    $('edit-level').addEventListener('change', (ev) => this.setEditLevel(Number(ev.target.value)));
 
     $('color-mode').addEventListener('change', (ev) => this.setColorMode(ev.target.value));
     for (const id of ['color-min', 'color-max'])
@@ -744,7 +1044,9 @@ class App {
 
     const c = this.viewer.canvas;
     c.addEventListener('pointerdown', (ev) => this.onPointerDown(ev), { capture: true });
-    c.addEventListener('pointermove', (ev) => this.onPointerMove(ev));
+    // pointerrawupdate (secure contexts: localhost, https) is not held back to the next frame
+    // as pointermove is: a drag's PATCH leaves as soon as the mouse moves
+    c.addEventListener('onpointerrawupdate' in window ? 'pointerrawupdate' : 'pointermove', (ev) => this.onPointerMove(ev));
     c.addEventListener('pointerup', (ev) => this.onPointerUp(ev));
     c.addEventListener('pointercancel', (ev) => this.onPointerUp(ev));
 
@@ -777,12 +1079,17 @@ class App {
       version: this.session.version,
       level: this.level,
       maxLevel: this.model?.maxLevel ?? null,
-      shown: this.shown && { ...this.shown },
+      shown: this.shown && { ...this.shown, geometry: this.#geometryHash() },
       tags: c?.tags?.singular ?? [],
       rules: c?.rules ?? null,
       vertexRules: c?.classes.vertices.map((v) => v.rule) ?? [],
       edgeRules: c?.classes.edges.map((e) => ({ vertices: e.vertices, rule: e.rule, singular: e.singular })) ?? [],
       controlPoints: c?.vertices ?? [],
+      editLevel: this.editLevel,
+      handles: this.viewer.handles ? { level: this.viewer.handles.level, count: this.viewer.handles.count } : null,
+      known: this.known,
+      listening: !!this.events && this.events.readyState === 1,
+      perf: { deltas: this.perf.deltas, deltaBytes: this.perf.deltaBytes, refetches: this.perf.refetches, updates: this.perf.updates.length },
       undo: this.undoStack.length,
       redo: this.redoStack.length,
       slicing: this.viewer.slicing,
@@ -804,11 +1111,33 @@ class App {
     return this.viewer.pixelStats();
   }
 
+  // A hash of the drawn level's positions (small levels only: snapshot() is polled).
+  #geometryHash() {
+    const a = this.viewer.level?.positions[0]?.array;
+    if (!a || a.length > 600000) return null;
+    return fnv1a(new Uint8Array(a.buffer, a.byteOffset, a.byteLength));
+  }
+
+  // The drawn level's buffers (POSITION, NORMAL of the shared accessors), for comparing with a
+  // fresh GET of the level.
+  levelBuffers() {
+    const L = this.viewer.level;
+    return { position: L?.positions[0]?.array ?? null, normal: L?.normals[0]?.array ?? null, count: L?.count ?? 0, distinct: L ? [L.positions.length, L.normals.length] : [] };
+  }
+
   async start() {
     this.wire();
     window.subdivd = this;
     $('range').hidden = true;
     const ex = EXAMPLES[0];
+    const frag = new URLSearchParams(location.hash.slice(1));
+    if (frag.get('session') && frag.get('token')) {
+      this.#hint('Joining the session…');
+      if (await this.join(frag.get('session'), frag.get('token'))) {
+        this.ready = true;
+        return;
+      }
+    }
     this.#hint(`Loading the example “${ex.name}”…`);
     await this.loadModel(ex.name, ex.make(), { attribute: ex.attribute });
     if (!this.model) this.#hint('The example could not be loaded — the message below says why.');

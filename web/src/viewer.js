@@ -6,6 +6,15 @@
 // slice, empty ones left out. POINTS and LINES are unambiguous; of the indexed TRIANGLES ones the
 // first is the surfaces when the level has surface triangles (its stats), the other the solid
 // boundary; the non-indexed TRIANGLES one without `_RULE` is the slice.
+//
+// Live edits: every primitive indexes the one POSITION (and NORMAL) accessor, whose order is the
+// level's vertex order, so a delta (api.js parseDelta) is written in place at its indices
+// (applyDelta) and only the changed ranges go to the GPU. The move tool drags "handles": the
+// control points (level 0) or the points of a finer level. A handle behind the drawn surface is
+// neither drawn nor picked (a depth test against the surface, biased by `tol` so points on it
+// count as in front; drawn: the depth test, shifted; picked: a ray against the surface's
+// triangles); a solid's interior handles are drawn over it only when asked (setXray).
+// Drawing is on demand, once per animation frame (requestRender), and can be paused.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { LineSegments2 } from 'three/addons/lines/LineSegments2.js';
@@ -52,6 +61,44 @@ function colorsFromSrgb(attr) {
   return new THREE.BufferAttribute(out, 3);
 }
 
+// A points material whose points move `bias` towards the eye (along the line of sight, so they
+// stay where they are on screen) before the depth test: handles on the surface are drawn, those deeper than `bias` behind it are hidden.
+function handleMaterial(opts, bias) {
+  const m = new THREE.PointsMaterial({ sizeAttenuation: false, alphaTest: 0.5, ...opts });
+  m.userData.bias = { value: bias };
+  m.onBeforeCompile = (sh) => {
+    sh.uniforms.depthBias = m.userData.bias;
+    sh.vertexShader = 'uniform float depthBias;\n' + sh.vertexShader.replace('#include <project_vertex>',
+      'vec4 mvPosition = modelViewMatrix * vec4( transformed, 1.0 );\n' +
+      'mvPosition.xyz *= max( 0.0, 1.0 - depthBias / length( mvPosition.xyz ) );\n' +
+      'gl_Position = projectionMatrix * mvPosition;');
+  };
+  return m;
+}
+
+// Runs of sorted indices, gaps of up to `gap` merged: [start, count] pairs (elements = 3 per index).
+function indexRuns(ix, gap = 16) {
+  const runs = [];
+  let a = ix[0], b = ix[0];
+  for (let k = 1; k < ix.length; k++) {
+    const i = ix[k];
+    if (i < b) return null; // not sorted: upload all
+    if (i - b > gap) {
+      runs.push([a, b - a + 1]);
+      a = i;
+    }
+    b = i;
+  }
+  runs.push([a, b - a + 1]);
+  return runs;
+}
+
+function markRanges(attr, runs) {
+  attr.clearUpdateRanges();
+  if (runs) for (const [a, n] of runs) attr.addUpdateRange(a * attr.itemSize, n * attr.itemSize);
+  attr.needsUpdate = true;
+}
+
 // Expand an indexed LINES geometry into the pairs LineSegmentsGeometry wants.
 function segmentArrays(geom, colorAttr) {
   const idx = geom.index, pos = geom.attributes.position;
@@ -93,7 +140,8 @@ export class Viewer {
 
     this.levelGroup = new THREE.Group();
     this.cageGroup = new THREE.Group();
-    this.scene.add(this.levelGroup, this.cageGroup);
+    this.handleGroup = new THREE.Group(); // handles of a level ≥ 1
+    this.scene.add(this.levelGroup, this.cageGroup, this.handleGroup);
     this.parts = {}; // points, curves, surfaces, solids, slice -> Object3D
     this.visible = { cage: true, points: true, curves: true, surfaces: true, solids: true };
     this.colorMode = 'rule';
@@ -102,6 +150,13 @@ export class Viewer {
     this.disc = discTexture();
     this.planeHelper = null;
     this.cage = null;
+    this.level = null; // {positions, normals: BufferAttribute[], count}
+    this.handles = null; // what the move tool drags: {level, pos, count, interior, tol, objects}
+    this.xray = false; // draw (and pick) a solid's interior handles over its surface
+    this.paused = false;
+    this.rafId = 0;
+    this.renders = 0;
+    this.renderMs = 0;
 
     new ResizeObserver(() => this.resize()).observe(container);
     this.resize();
@@ -118,7 +173,33 @@ export class Viewer {
   }
 
   render() {
+    const t = performance.now();
     this.renderer.render(this.scene, this.camera);
+    this.renders++;
+    this.renderMs += performance.now() - t; // CPU side (the GPU may finish later)
+  }
+
+  // Draw once at the next animation frame (however many changes come before it); nothing is
+  // drawn while paused (a benchmark times the updates alone), resume() draws what is pending.
+  requestRender() {
+    this.dirty = true;
+    if (this.paused || this.rafId) return;
+    this.rafId = requestAnimationFrame(() => {
+      this.rafId = 0;
+      if (this.dirty && !this.paused) {
+        this.dirty = false;
+        this.render();
+      }
+    });
+  }
+
+  pause() {
+    this.paused = true;
+  }
+
+  resume() {
+    this.paused = false;
+    if (this.dirty) this.requestRender();
   }
 
   // Aim the camera at a bounding box (on a new model).
@@ -161,7 +242,21 @@ export class Viewer {
       this.parts[part] = this.#makePart(part, g);
       o.material?.dispose();
     }
-    for (const o of Object.values(this.parts)) this.levelGroup.add(o);
+    for (const o of Object.values(this.parts)) {
+      o.frustumCulled = false; // deltas move vertices; the bounds are not kept up to date
+      this.levelGroup.add(o);
+    }
+    // the shared POSITION / NORMAL accessors (one BufferAttribute each in GLTFLoader's cache;
+    // every distinct one is kept, should a loader ever copy them)
+    const positions = new Set(), normals = new Set();
+    for (const o of prims) {
+      const g = o.geometry;
+      if (!g.index && !g.attributes._rule) continue; // the slice has its own vertices
+      if (g.attributes.position) positions.add(g.attributes.position);
+      if (g.attributes.normal) normals.add(g.attributes.normal);
+    }
+    const count = positions.size ? [...positions][0].count : 0;
+    this.level = { positions: [...positions], normals: [...normals], count, prims };
     this.applyColors();
     this.applyVisibility();
     this.applyClipping();
@@ -230,6 +325,7 @@ export class Viewer {
   applyVisibility() {
     for (const [part, o] of Object.entries(this.parts)) o.visible = part === 'slice' ? this.slicing : this.visible[part];
     this.cageGroup.visible = this.visible.cage;
+    this.handleGroup.visible = this.visible.cage;
   }
 
   // The cross-section plane n·x = d (n any length), or null for none. The half on the camera's
@@ -282,6 +378,213 @@ export class Viewer {
     }
   }
 
+  // Write a delta (api.js parseDelta) into the level's buffers in place; only the changed ranges
+  // are uploaded at the next draw. Throws when the delta does not fit the level (the caller
+  // fetches the level again).
+  applyDelta(d) {
+    const L = this.level;
+    if (!L || !L.positions.length) throw new Error('no level to update');
+    const { n, indices: ix, positions: p, normals: nn } = d;
+    if (!n) return;
+    for (let k = 0; k < n; k++) if (ix[k] >= L.count) throw new Error(`delta index ${ix[k]} past the level's ${L.count} vertices`);
+    const runs = indexRuns(ix);
+    const write = (attr, src) => {
+      const a = attr.array;
+      for (let k = 0; k < n; k++) {
+        const o = 3 * ix[k], q = 3 * k;
+        a[o] = src[q];
+        a[o + 1] = src[q + 1];
+        a[o + 2] = src[q + 2];
+      }
+      markRanges(attr, runs);
+    };
+    for (const attr of L.positions) write(attr, p);
+    if (nn) for (const attr of L.normals) write(attr, nn);
+    this.#refreshCurves();
+    this.requestRender();
+  }
+
+  // The curves are drawn as expanded segment pairs (LineSegments2): copy their ends again.
+  #refreshCurves() {
+    const o = this.parts.curves;
+    if (!o) return;
+    const { p } = segmentArrays(o.userData.source, null);
+    const ib = o.geometry.attributes.instanceStart?.data;
+    if (ib && ib.array.length === p.length) {
+      ib.array.set(p);
+      ib.needsUpdate = true;
+    } else {
+      this.applyColors();
+    }
+  }
+
+  // The level's vertex positions (one BufferAttribute; 3 floats per vertex), for handles.
+  levelPositions() {
+    return this.level?.positions[0] ?? null;
+  }
+
+  // Which vertices of a loaded level no primitive draws (a solid's interior points).
+  static interiorOf(count, prims) {
+    const used = new Uint8Array(count);
+    for (const o of prims) {
+      const g = o.geometry, idx = g.index;
+      if (!g.attributes._rule && !idx) continue; // the slice
+      if (idx) for (let k = 0; k < idx.count; k++) used[idx.array[k]] = 1;
+      else used.fill(1);
+    }
+    for (let i = 0; i < count; i++) used[i] ^= 1;
+    return used; // 1 = interior
+  }
+
+  // ---- the handles: the points the move tool drags ----------------------------------------
+
+  // level 0: the control cage's points (setCage builds them); level ≥ 1: `attr` holds the
+  // level's positions (the shown level's own attribute, or one of a level fetched for this),
+  // `interior` marks the points no primitive draws.
+  setHandles(level, attr, interior) {
+    this.#dropHandles();
+    if (level === 0 || !attr) {
+      this.handles = this.cage ? this.cage.handles : null;
+      this.#applyXray();
+      this.requestRender();
+      return;
+    }
+    const count = attr.count;
+    const tol = (this.cage?.tol ?? 0.05) / 2 ** level;
+    const geo = () => {
+      const g = new THREE.BufferGeometry();
+      g.setAttribute('position', attr);
+      return g;
+    };
+    const front = new THREE.Points(geo(), handleMaterial({ size: 7, color: 0xffd166, map: this.disc }, tol));
+    const over = new THREE.Points(geo(), handleMaterial({ size: 7, color: 0xffd166, map: this.disc, depthTest: false, opacity: 0.6, transparent: true }, 0));
+    for (const o of [front, over]) {
+      o.frustumCulled = false;
+      o.renderOrder = 11;
+    }
+    this.handles = { level, attr, pos: attr.array, count, interior, tol, front, over, own: true };
+    this.handleGroup.add(front, over);
+    this.#applyXray();
+    this.requestRender();
+  }
+
+  #dropHandles() {
+    const h = this.handles;
+    if (!h?.own) return;
+    for (const o of [h.front, h.over]) {
+      this.handleGroup.remove(o);
+      o.geometry.dispose();
+      o.material.dispose();
+    }
+    this.handles = null;
+  }
+
+  // Interior handles drawn over the surface (and pickable through it), or depth tested.
+  setXray(on) {
+    this.xray = on;
+    this.#applyXray();
+    this.requestRender();
+  }
+
+  #applyXray() {
+    const h = this.handles;
+    if (!h) return;
+    const front = [], over = [];
+    for (let i = 0; i < h.count; i++) (this.xray && h.interior[i] ? over : front).push(i);
+    h.front.geometry.setIndex(front);
+    h.over.geometry.setIndex(over);
+    h.over.visible = over.length > 0;
+  }
+
+  handlePosition(i) {
+    return new THREE.Vector3().fromArray(this.handles.pos, 3 * i);
+  }
+
+  // Move handle i in the drawing (level 0: the cage; level ≥ 1: the level's point, which the
+  // delta then confirms).
+  moveHandle(i, p) {
+    const h = this.handles;
+    if (h.level === 0) return this.moveCageVertex(i, p);
+    h.pos[3 * i] = p.x;
+    h.pos[3 * i + 1] = p.y;
+    h.pos[3 * i + 2] = p.z;
+    markRanges(h.attr, [[i, 1]]);
+    this.requestRender();
+  }
+
+  handleAt(x, y, radius = 12) {
+    const h = this.handles;
+    if (!h) return -1;
+    return this.#pick(h.pos, h.count, h.interior, h.tol, x, y, radius);
+  }
+
+  // The nearest point within `radius` CSS pixels of (x, y) that is not behind the drawn surface
+  // (by more than tol), or -1. Interior points pass when drawn over the surface (xray).
+  #pick(pos, count, interior, tol, x, y, radius) {
+    const r = this.canvas.getBoundingClientRect();
+    this.camera.updateMatrixWorld();
+    const m = new THREE.Matrix4().multiplyMatrices(this.camera.projectionMatrix, this.camera.matrixWorldInverse).elements;
+    const cand = [];
+    const r2 = radius * radius, W = r.width / 2, H = r.height / 2;
+    for (let i = 0; i < count; i++) {
+      const px = pos[3 * i], py = pos[3 * i + 1], pz = pos[3 * i + 2];
+      const w = m[3] * px + m[7] * py + m[11] * pz + m[15];
+      if (w <= 0) continue;
+      const sx = ((m[0] * px + m[4] * py + m[8] * pz + m[12]) / w + 1) * W;
+      const sy = (1 - (m[1] * px + m[5] * py + m[9] * pz + m[13]) / w) * H;
+      const d = (sx - x) ** 2 + (sy - y) ** 2;
+      if (d >= r2) continue;
+      cand.push({ i, d });
+    }
+    if (!cand.length) return -1;
+    cand.sort((a, b) => a.d - b.d);
+    const q = new THREE.Vector3();
+    for (const c of cand.slice(0, 16)) {
+      if (this.xray && interior?.[c.i]) return c.i;
+      if (!this.#occluded(q.fromArray(pos, 3 * c.i), tol)) return c.i;
+    }
+    return -1;
+  }
+
+  // Whether the drawn surface (solid boundary, surfaces, slice; the cut-away half excepted)
+  // crosses the segment from the camera to p short of p by more than `tol`. On the CPU, one
+  // pass over the triangles (a pick only: the GPU is not waited for).
+  #occluded(p, tol) {
+    const o = this.camera.getWorldPosition(new THREE.Vector3());
+    const dx = p.x - o.x, dy = p.y - o.y, dz = p.z - o.z;
+    const len = Math.hypot(dx, dy, dz);
+    if (len <= tol) return false;
+    const ux = dx / len, uy = dy / len, uz = dz / len, tmax = len - tol;
+    const cut = this.slicing ? this.clipPlane : null;
+    for (const k of ['solids', 'surfaces', 'slice']) {
+      const m = this.parts[k];
+      if (!m?.isMesh || !m.visible) continue;
+      const g = m.geometry, P = g.attributes.position.array, I = g.index?.array;
+      const nt = (I ? I.length : P.length / 3) / 3;
+      const clip = k !== 'slice' ? cut : null;
+      for (let t = 0; t < nt; t++) {
+        const a = 3 * (I ? I[3 * t] : 3 * t), b = 3 * (I ? I[3 * t + 1] : 3 * t + 1), c = 3 * (I ? I[3 * t + 2] : 3 * t + 2);
+        const e1x = P[b] - P[a], e1y = P[b + 1] - P[a + 1], e1z = P[b + 2] - P[a + 2];
+        const e2x = P[c] - P[a], e2y = P[c + 1] - P[a + 1], e2z = P[c + 2] - P[a + 2];
+        const px = uy * e2z - uz * e2y, py = uz * e2x - ux * e2z, pz = ux * e2y - uy * e2x;
+        const det = e1x * px + e1y * py + e1z * pz;
+        if (det > -1e-12 && det < 1e-12) continue;
+        const inv = 1 / det;
+        const sx = o.x - P[a], sy = o.y - P[a + 1], sz = o.z - P[a + 2];
+        const u = (sx * px + sy * py + sz * pz) * inv;
+        if (u < 0 || u > 1) continue;
+        const qx = sy * e1z - sz * e1y, qy = sz * e1x - sx * e1z, qz = sx * e1y - sy * e1x;
+        const v = (ux * qx + uy * qy + uz * qz) * inv;
+        if (v < 0 || u + v > 1) continue;
+        const d = (e2x * qx + e2y * qy + e2z * qz) * inv;
+        if (d <= 0 || d >= tmax) continue;
+        if (clip && clip.normal.x * (o.x + d * ux) + clip.normal.y * (o.y + d * uy) + clip.normal.z * (o.z + d * uz) + clip.constant < 0) continue;
+        return true;
+      }
+    }
+    return false;
+  }
+
   // ---- the control cage -------------------------------------------------------------------
 
   // complex: GET /complex (vertices, simplices, classes, tags).
@@ -302,14 +605,46 @@ export class Viewer {
     const tags = complex.tags?.singular || [];
     this.cage = { pos, vrule, edges, faces: [...faces.values()], tags };
 
+    // a vertex only in tetrahedra and on none of their boundary triangles is interior
+    const interior = new Uint8Array(nv).fill(1), faceCount = new Map();
+    for (const s of complex.simplices) {
+      if (s.length < 4) for (const v of s) interior[v] = 0;
+      else for (const t of [[s[0], s[1], s[2]], [s[0], s[1], s[3]], [s[0], s[2], s[3]], [s[1], s[2], s[3]]]) {
+        const k = [...t].sort((a, b) => a - b).join(',');
+        faceCount.set(k, (faceCount.get(k) || 0) + 1);
+      }
+    }
+    for (const [k, c] of faceCount) if (c === 1) for (const v of k.split(',')) interior[Number(v)] = 0;
+    // the depth tolerance of the handles: half the median edge length
+    const lens = edges.map(({ v: [a, b] }) => Math.hypot(pos[3 * a] - pos[3 * b], pos[3 * a + 1] - pos[3 * b + 1], pos[3 * a + 2] - pos[3 * b + 2])).sort((a, b) => a - b);
+    this.cage.tol = lens.length ? lens[lens.length >> 1] / 2 : 0.05;
+    this.cage.interior = interior;
+
     const colors = new Float32Array(nv * 3);
     vrule.forEach((r, i) => ruleColor(r).toArray(colors, 3 * i));
-    const vg = new THREE.BufferGeometry();
-    vg.setAttribute('position', new THREE.BufferAttribute(pos, 3));
-    vg.setAttribute('color', new THREE.BufferAttribute(colors, 3));
-    const vm = new THREE.PointsMaterial({ size: 12, sizeAttenuation: false, vertexColors: true, map: this.disc, alphaTest: 0.5, depthTest: false });
-    this.cage.points = new THREE.Points(vg, vm);
-    this.cage.points.renderOrder = 10;
+    const posAttr = new THREE.BufferAttribute(pos, 3);
+    const colAttr = new THREE.BufferAttribute(colors, 3);
+    const pointsOf = (mat) => {
+      const g = new THREE.BufferGeometry();
+      g.setAttribute('position', posAttr);
+      g.setAttribute('color', colAttr);
+      const o = new THREE.Points(g, mat);
+      o.renderOrder = 10;
+      o.frustumCulled = false;
+      return o;
+    };
+    this.cage.points = pointsOf(handleMaterial({ size: 12, vertexColors: true, map: this.disc }, this.cage.tol));
+    this.cage.over = pointsOf(handleMaterial({ size: 12, vertexColors: true, map: this.disc, depthTest: false, transparent: true, opacity: 0.7 }, 0));
+    this.cage.posAttr = posAttr;
+    this.cage.handles = { level: 0, attr: posAttr, pos, count: nv, interior, tol: this.cage.tol, front: this.cage.points, over: this.cage.over };
+    // each vertex's ends in the edge segments (slot 2k + e of edge k), for moves in place
+    const deg = new Int32Array(nv + 1);
+    for (const e of edges) { deg[e.v[0] + 1]++; deg[e.v[1] + 1]++; }
+    for (let i = 0; i < nv; i++) deg[i + 1] += deg[i];
+    const slots = new Int32Array(2 * edges.length), fill = deg.slice(0, nv);
+    edges.forEach((e, k) => { slots[fill[e.v[0]]++] = 2 * k; slots[fill[e.v[1]]++] = 2 * k + 1; });
+    this.cage.edgeStart = deg;
+    this.cage.edgeSlots = slots;
 
     const tv = tags.filter((t) => t.length === 1).map((t) => t[0]);
     const tg = new THREE.BufferGeometry();
@@ -321,6 +656,7 @@ export class Viewer {
     const ec = new Float32Array(edges.length * 6);
     edges.forEach((e, k) => { const c = ruleColor(e.rule); c.toArray(ec, 6 * k); c.toArray(ec, 6 * k + 3); });
     this.cage.edgeLines = new LineSegments2(new LineSegmentsGeometry(), new LineMaterial({ linewidth: 2, vertexColors: true }));
+    this.cage.edgeLines.frustumCulled = false;
     this.cage.edgeColors = ec;
     this.cage.tagLines = new LineSegments2(new LineSegmentsGeometry(), new LineMaterial({ linewidth: 7, color: TAG }));
     this.cage.tagLines.renderOrder = -1;
@@ -337,7 +673,8 @@ export class Viewer {
     this.cage.tagFaces = new THREE.Mesh(tfg, new THREE.MeshBasicMaterial({ color: 0xffe119, transparent: true, opacity: 0.45, side: THREE.DoubleSide, depthWrite: false }));
 
     this.#updateCageLines();
-    this.cageGroup.add(this.cage.tagLines, this.cage.edgeLines, this.cage.tagPoints, this.cage.points, this.cage.faceMesh, this.cage.tagFaces);
+    this.cageGroup.add(this.cage.tagLines, this.cage.edgeLines, this.cage.tagPoints, this.cage.points, this.cage.over, this.cage.faceMesh, this.cage.tagFaces);
+    if (!this.handles || this.handles.level === 0) this.setHandles(0);
     this.applyVisibility();
     this.render();
   }
@@ -363,15 +700,35 @@ export class Viewer {
     return new THREE.Vector3().fromArray(this.cage.pos, 3 * i);
   }
 
-  // Move control vertex i in the drawing only (the daemon is told by main.js).
+  // Move control vertices in the drawing only (the daemon is told by main.js, or told us): the
+  // points and the ends of their edges are written in place.
   moveCageVertex(i, p) {
-    this.cage.pos.set([p.x, p.y, p.z], 3 * i);
-    for (const o of [this.cage.points, this.cage.tagPoints, this.cage.faceMesh, this.cage.tagFaces]) {
+    this.moveCageVertices([i], [p.x, p.y, p.z]);
+  }
+
+  // indices: control vertex indices; xyz: 3 numbers each.
+  moveCageVertices(indices, xyz) {
+    const c = this.cage, ib = c.edgeLines.geometry.attributes.instanceStart?.data;
+    for (let k = 0; k < indices.length; k++) {
+      const i = indices[k];
+      for (let a = 0; a < 3; a++) c.pos[3 * i + a] = xyz[3 * k + a];
+      if (ib) for (let s = c.edgeStart[i]; s < c.edgeStart[i + 1]; s++) ib.array.set(c.pos.subarray(3 * i, 3 * i + 3), 3 * c.edgeSlots[s]);
+    }
+    if (ib) ib.needsUpdate = true;
+    else this.#updateCageLines();
+    c.posAttr.needsUpdate = true;
+    for (const o of [c.tagPoints, c.faceMesh, c.tagFaces]) {
       o.geometry.attributes.position.needsUpdate = true;
       o.geometry.computeBoundingSphere();
     }
-    this.#updateCageLines();
-    this.render();
+    if (c.tags.some((t) => t.length === 2)) {
+      const te = c.tags.filter((t) => t.length === 2);
+      const a = new Float32Array(te.length * 6);
+      te.forEach(([i, j], k) => { a.set(c.pos.subarray(3 * i, 3 * i + 3), 6 * k); a.set(c.pos.subarray(3 * j, 3 * j + 3), 6 * k + 3); });
+      c.tagLines.geometry.dispose();
+      c.tagLines.geometry = new LineSegmentsGeometry().setPositions(a);
+    }
+    this.requestRender();
   }
 
   // ---- picking (screen space, CSS pixels relative to the canvas) --------------------------
@@ -382,16 +739,11 @@ export class Viewer {
     return { x: (v.x + 1) / 2 * r.width, y: (1 - v.y) / 2 * r.height, behind: v.z > 1 };
   }
 
+  // The control vertex under (x, y), not behind the surface (see #pick), or -1.
   vertexAt(x, y, radius = 12) {
     if (!this.cage) return -1;
-    let best = -1, bd = radius * radius;
-    const n = this.cage.pos.length / 3;
-    for (let i = 0; i < n; i++) {
-      const s = this.toScreen(this.cagePosition(i));
-      const d = (s.x - x) ** 2 + (s.y - y) ** 2;
-      if (!s.behind && d < bd) { bd = d; best = i; }
-    }
-    return best;
+    const c = this.cage;
+    return this.#pick(c.pos, c.pos.length / 3, c.interior, c.tol, x, y, radius);
   }
 
   edgeAt(x, y, radius = 7) {
