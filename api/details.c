@@ -38,14 +38,9 @@ json_t *api_details_json(const api_model *m)
     return a;
 }
 
-typedef struct dkey {
-    uint32_t level, index;
-    size_t k;
-} dkey;
-
-static int cmp_dkey(const void *x, const void *y)
+int api_ptkey_cmp(const void *x, const void *y)
 {
-    const dkey *a = x, *b = y;
+    const api_ptkey *a = x, *b = y;
     if (a->level != b->level)
         return a->level < b->level ? -1 : 1;
     if (a->index != b->index)
@@ -76,7 +71,7 @@ int api_details_put(api_model *m, json_t *v, api_problem *p)
     size_t n = json_array_size(v);
     sd_vertex_at *at = api_malloc((n + 1) * sizeof *at);
     double *off = api_malloc((n + 1) * 3 * sizeof *off);
-    dkey *keys = api_malloc((n + 1) * sizeof *keys);
+    api_ptkey *keys = api_malloc((n + 1) * sizeof *keys);
     int rc = !at || !off || !keys ? api_fail(p, 503, "out-of-memory", "out of memory") : 0;
     static const char *const names[] = {"level", "index", "offset", NULL};
     uint64_t count[SD_MAX_LEVEL + 1] = {0};
@@ -130,10 +125,10 @@ int api_details_put(api_model *m, json_t *v, api_problem *p)
             rc = api_get_number(json_array_get(x, (size_t)c), fc, 1e15, &off[3 * i + c], p);
         }
         at[i] = (sd_vertex_at){(int)l, (uint32_t)k};
-        keys[i] = (dkey){(uint32_t)l, (uint32_t)k, i};
+        keys[i] = (api_ptkey){(uint32_t)l, (uint32_t)k, i};
     }
     if (!rc && n > 1) { /* no point twice */
-        qsort(keys, n, sizeof *keys, cmp_dkey);
+        qsort(keys, n, sizeof *keys, api_ptkey_cmp);
         for (size_t i = 1; i < n && !rc; i++)
             if (keys[i].level == keys[i - 1].level && keys[i].index == keys[i - 1].index) {
                 api_ptr_index(ptr, sizeof ptr, "/details", keys[i].k);

@@ -17,4 +17,12 @@ int api_details_put(api_model *m, json_t *details, api_problem *p);
 /* The offsets of `from` onto `to`, a model of the same complex (PUT /tags, PUT /rules). */
 int api_details_carry(const api_model *from, api_model *to, api_problem *p);
 
+/* A point of a level with its place in a request, and the order that finds a point named twice
+ * (level, then index, then place): PUT /complex's details and PATCH's finer moves. */
+typedef struct api_ptkey {
+    uint32_t level, index;
+    size_t k;
+} api_ptkey;
+int api_ptkey_cmp(const void *x, const void *y);
+
 #endif

@@ -25,6 +25,7 @@
  */
 #include "handlers.h"
 #include "delta.h"
+#include "details.h"
 #include "mem.h"
 #include "internal.h"
 #include "jsonin.h"
@@ -45,20 +46,6 @@ typedef struct edit_part {
     double *val, *old;
 } edit_part;
 
-typedef struct ptkey {
-    uint32_t level, index, k;
-} ptkey;
-
-static int cmp_ptkey(const void *x, const void *y)
-{
-    const ptkey *a = x, *b = y;
-    if (a->level != b->level)
-        return a->level < b->level ? -1 : 1;
-    if (a->index != b->index)
-        return a->index < b->index ? -1 : 1;
-    return (a->k > b->k) - (a->k < b->k);
-}
-
 /* No point of a level >= 1 named twice (control points are checked with `seen`). */
 static int repeated_fine(const edit_part *e, const char *base, api_problem *p)
 {
@@ -67,14 +54,14 @@ static int repeated_fine(const edit_part *e, const char *base, api_problem *p)
         n += e->at[i].level > 0;
     if (n < 2)
         return 0;
-    ptkey *k = api_malloc(n * sizeof *k);
+    api_ptkey *k = api_malloc(n * sizeof *k);
     if (!k)
         return api_fail(p, 503, "out-of-memory", "out of memory");
     n = 0;
     for (size_t i = 0; i < e->n; i++)
         if (e->at[i].level > 0)
-            k[n++] = (ptkey){(uint32_t)e->at[i].level, e->at[i].index, (uint32_t)i};
-    qsort(k, n, sizeof *k, cmp_ptkey);
+            k[n++] = (api_ptkey){(uint32_t)e->at[i].level, e->at[i].index, i};
+    qsort(k, n, sizeof *k, api_ptkey_cmp);
     int rc = 0;
     for (size_t i = 1; i < n && !rc; i++)
         if (k[i].level == k[i - 1].level && k[i].index == k[i - 1].index) {

@@ -309,6 +309,22 @@ static void blank(char *a, char *b)
     b[-1] = ']';
 }
 
+/* After a member of an array or object: 1 at a ',' (another follows), 0 at `close` (the end)
+ * or at anything else (failed). */
+static int next_member(scan *st, char close)
+{
+    skip_ws(st);
+    if (st->s < st->end && *st->s == ',') {
+        st->s++;
+        return 1;
+    }
+    if (st->s < st->end && *st->s == close)
+        st->s++;
+    else
+        st->failed = true;
+    return 0;
+}
+
 static void scan_array(scan *st, int depth, char *ptr, size_t plen)
 {
     bool full, prefix;
@@ -347,17 +363,8 @@ static void scan_array(scan *st, int depth, char *ptr, size_t plen)
         ptr[plen] = 0;
         if (st->failed || st->nomem)
             return;
-        skip_ws(st);
-        if (st->s < st->end && *st->s == ',') {
-            st->s++;
-            continue;
-        }
-        if (st->s < st->end && *st->s == ']') {
-            st->s++;
+        if (!next_member(st, ']'))
             return;
-        }
-        st->failed = true;
-        return;
     }
 }
 
@@ -403,17 +410,8 @@ static void scan_object(scan *st, int depth, char *ptr, size_t plen)
         ptr[plen] = 0;
         if (st->failed || st->nomem)
             return;
-        skip_ws(st);
-        if (st->s < st->end && *st->s == ',') {
-            st->s++;
-            continue;
-        }
-        if (st->s < st->end && *st->s == '}') {
-            st->s++;
+        if (!next_member(st, '}'))
             return;
-        }
-        st->failed = true;
-        return;
     }
 }
 
