@@ -330,9 +330,14 @@ static int check_moves(api_model *m, const edit_part *q, api_problem *p)
     return rc;
 }
 
+/* *rebuild after a failed edit whose undo failed too (out of memory): m's complex is no longer
+ * its input, so the session gets a model built again from the input and offsets as they were. */
+#define RESTORE (-2)
+
 /* Apply the parts to m (its compute lock and data write lock held): every part in place, or
- * nothing — refused, undone after a failure half-way, or, when a level's rules read a moved
- * position, *rebuild set to that level (the edit then becomes a new model). 0 or the status. */
+ * nothing — refused, undone after a failure half-way (or, if the undo fails, *rebuild =
+ * RESTORE), or, when a level's rules read a moved position, *rebuild set to that level (the edit
+ * then becomes a new model). 0 or the status. */
 static int apply_locked(api_model *m, edit_part *parts, int np, uint64_t version,
                         const saved_details *sv, uint64_t *counts, int *rebuild, api_problem *p)
 {
@@ -365,6 +370,7 @@ static int apply_locked(api_model *m, edit_part *parts, int np, uint64_t version
         return rc; /* refused before anything changed */
     if (done < np) { /* refused by the core or out of memory half-way: undo what was applied */
         rc = part_failed(&parts[done], m->in, &e, p);
+        bool undone = true;
         for (int i = done - 1; i >= 0; i--) {
             const edit_part *q = &parts[i];
             api_delta_edit de = {m, q->attr, version};
@@ -372,12 +378,14 @@ static int apply_locked(api_model *m, edit_part *parts, int np, uint64_t version
             if (q->attr < 0 && fine) {
                 api_delta_report(&de, &rep);
                 rep.in_place = 1;
-                sd_complex_set_details(m->c, 0, sv->n, sv->at, sv->off, &rep, NULL);
+                undone &= !sd_complex_set_details(m->c, 0, sv->n, sv->at, sv->off, &rep, NULL);
             }
             api_delta_report(&de, &rep);
             rep.in_place = 1;
-            sd_complex_move(m->c, q->channel, q->n0, q->at0, q->old, &rep, NULL);
+            undone &= !sd_complex_move(m->c, q->channel, q->n0, q->at0, q->old, &rep, NULL);
         }
+        if (!undone) /* out of memory for the undo too: the caller restores a new model */
+            *rebuild = RESTORE;
         return rc;
     }
     apply_to_input(m->in, parts, np); /* GET /complex, later rule changes rebuild from it */
@@ -458,6 +466,11 @@ int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim
     pthread_mutex_unlock(&m->lock);
     if (!rc && rebuild >= 0)
         rc = rebuilt_model(m, parts, np, &sv, lim, slot, rebuilt, p);
+    else if (rc && rebuild == RESTORE) { /* the edit failed: its problem stands */
+        api_problem q = {0};
+        if (rebuilt_model(m, parts, 0, &sv, lim, NULL, rebuilt, &q))
+            *rebuilt = NULL; /* still no memory: the next change of the session rebuilds it */
+    }
     api_free(sv.at);
     api_free(sv.off);
     edit_parts_free(parts, np);

@@ -84,7 +84,9 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
  * (Ying-Zorin's corner angle) is answered with a new model instead (*rebuilt, built in a compute
  * slot of `slot`, with the session's detail offsets and the edit's), to be published in place of
  * m, which is left unchanged. counts[l] = points updated at level l; *levels = levels computed
- * now. 0 or the status. */
+ * now. 0 or the status. A failed edit leaves m as it was; only when undoing a half-applied edit
+ * runs out of memory too is *rebuilt set with the status: a model built again from m's input
+ * and offsets (the content before the edit), to be published in place of m. */
 int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim,
              const api_slot *slot, uint64_t *counts, int *levels, api_model **rebuilt,
              api_problem *p);

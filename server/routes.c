@@ -435,7 +435,8 @@ static void h_edit(req *r)
     if (!rc) { /* the version api_edit stamped: the write lock is held */
         version = rebuilt ? session_publish(r->s, rebuilt) : session_bump(r->s);
         notify(r, version, "edit", up);
-    }
+    } else if (rebuilt) /* a failed edit whose undo failed: the content before it, rebuilt */
+        notify(r, session_publish(r->s, rebuilt), "complex", NULL);
     pthread_mutex_unlock(&r->s->write);
     json_decref(b);
     api_model_unref(m);

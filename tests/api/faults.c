@@ -47,6 +47,20 @@ static void refused(const api_problem *p, const char *what)
     bad++;
 }
 
+/* A failed edit leaves the session's complex as its input says (or the model restored in its
+ * place): level 0's positions are the input's, bit for bit. */
+static void same_as_input(api_model *m, const char *what)
+{
+    sd_error e;
+    const sd_level *l0 = m->c ? sd_complex_level(m->c, 0, &e) : NULL;
+    const double *x = l0 ? sd_level_channel(l0, 0, NULL) : NULL;
+    if (!m->c || (x && !memcmp(x, m->in->xyz, 3 * sizeof *x * m->in->nv)))
+        return;
+    fprintf(stderr, "api_faults: n=%llu: %s left positions the input does not have\n",
+            (unsigned long long)run_n, what);
+    bad++;
+}
+
 static json_t *body(const char *text, api_problem *p)
 {
     json_t *b = api_parse_body(text, strlen(text), 0, p);
@@ -138,9 +152,10 @@ static void edit_and_refine(api_model **m)
     int nlev;
     api_limits lim = api_default_limits();
     api_model *rebuilt = NULL;
-    if (b && api_edit(*m, b, 2, &lim, NULL, counts, &nlev, &rebuilt, &p))
+    if (b && api_edit(*m, b, 2, &lim, NULL, counts, &nlev, &rebuilt, &p)) {
         refused(&p, "api_edit");
-    else if (b) {
+        same_as_input(rebuilt ? rebuilt : *m, "a failed api_edit");
+    } else if (b) {
         oks++;
         for (int k = 0; k < 2; k++) { /* the edit's delta of the level the streams computed */
             api_delta_query q = {"1", k ? "json" : "bin", "h,v"};
@@ -278,6 +293,11 @@ int main(int argc, char **argv)
         if (api_mem_failures() == injected) /* n is past the scenario's last allocation */
             break;
     }
+    /* from the nth allocation on, every one fails: a call that fails half-way cannot allocate
+     * its way back (an edit's undo) */
+    for (uint64_t n = 1; n < runs; n++)
+        run(n, 1);
+    runs += runs - 1;
     static const uint64_t every[] = {3, 7, 31};
     for (size_t k = 0; k < sizeof every / sizeof *every; k++)
         for (uint64_t n = 1; n <= every[k]; n++, runs++)
