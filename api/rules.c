@@ -27,6 +27,22 @@ static int keep_details(const api_model *cur, int rc, api_model **out, api_probl
     return rc;
 }
 
+/* A model of cur's complex with other rules or tags, built from a copy of cur's input: an edit
+ * writes the input of the model it edits in place (api/edit.c), which must not be the input a
+ * stream of the previous model still reads. */
+static int build_from_copy(const api_model *cur, const api_rules *rules, const api_tags *tags,
+                           const api_limits *lim, api_model **out, api_problem *p)
+{
+    if (!cur->in) /* no complex yet */
+        return api_build_model(NULL, rules, tags, lim, out, p);
+    api_input *in = api_input_copy(cur->in);
+    if (!in)
+        return api_fail(p, 503, "out-of-memory", "out of memory copying the complex");
+    int rc = api_build_model(in, rules, tags, lim, out, p);
+    api_input_unref(in);
+    return rc;
+}
+
 /* ---- PUT /rules ---------------------------------------------------------------------------- */
 
 static const char *const NM_RULES[] = {"G2", "G1", "N1", "N2", NULL};
@@ -176,7 +192,7 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
     if (!rc) {
         r.overrides = list;
         r.noverrides = (uint32_t)nov;
-        rc = api_build_model(cur->in, &r, &cur->tags, lim, out, p);
+        rc = build_from_copy(cur, &r, &cur->tags, lim, out, p);
     }
     api_free(list);
     return keep_details(cur, rc, out, p);
@@ -307,7 +323,7 @@ int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *pac
     if (!rc && pe)
         rc = parse_petals(pe, cur->in ? cur->in->nv : 0, &tags, p);
     if (!rc) /* the core checks each tag is a vertex, edge or triangle of the complex */
-        rc = api_build_model(cur->in, &cur->rules, &tags, lim, out, p);
+        rc = build_from_copy(cur, &cur->rules, &tags, lim, out, p);
     api_plain_free(tags.size);
     api_plain_free(tags.idx);
     api_plain_free(tags.pet);
