@@ -444,6 +444,9 @@ int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim
         top = parts[0].at[i].level > top ? parts[0].at[i].level : top;
     if (!rc && top >= atomic_load(&m->levels_cached))
         rc = api_check_level_limits(m, top, lim, p);
+    /* the levels the moves need, computed first in a compute slot like GET /levels/{L}'s */
+    if (!rc && top >= atomic_load(&m->levels_cached))
+        rc = api_level_compute(m, top, slot, p);
     if (rc) {
         edit_parts_free(parts, np);
         return rc;
