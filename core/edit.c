@@ -575,16 +575,10 @@ static sd_result run(sd_complex *c, int ch, op *ops, size_t n, const double *val
     const int last = stale < 0 ? E.top : stale;
     if (rep)
         rep->rules_rebuilt = stale;
-    if (stale >= 0 && rep && rep->in_place) { /* nothing written: the caller builds anew */
-        for (int l = 0; l <= SD_MAX_LEVEL; l++) {
-            rep->recomputed[l] = l <= last ? E.set[l].n : l < c->nlevels ? c->lv[l]->t.nv : 0;
-            rep->nchanged[l] = 0;
-        }
-        if (counts)
-            memcpy(counts, rep->recomputed, sizeof rep->recomputed);
-        goto out;
-    }
-    if (stale >= 0) {
+    const bool apply = !(stale >= 0 && rep && rep->in_place); /* else the caller builds anew */
+    if (!apply)
+        ; /* nothing written: the report says what would have been recomputed, nothing changed */
+    else if (stale >= 0) {
         if ((rc = rebuild(&E, stale, ops, n, diff, ndiff, err)))
             goto fail;
     } else {
@@ -595,7 +589,7 @@ static sd_result run(sd_complex *c, int ch, op *ops, size_t n, const double *val
     for (int l = 0; l <= SD_MAX_LEVEL; l++) {
         uint64_t rec = l <= last ? E.set[l].n : l < c->nlevels ? c->lv[l]->t.nv : 0, chg = 0;
         uint32_t *ids = l <= last ? E.set[l].s->id : diff[l];
-        if (l <= last) { /* the changed points first */
+        if (l <= last && apply) { /* the changed points first */
             sdi_escratch *s = E.set[l].s;
             for (uint32_t e = 0; e < E.set[l].n; e++)
                 if (s->chg[e]) {
@@ -603,7 +597,7 @@ static sd_result run(sd_complex *c, int ch, op *ops, size_t n, const double *val
                     s->id[chg++] = s->id[e];
                     s->id[e] = t;
                 }
-        } else
+        } else if (l > last)
             chg = ndiff[l];
         if (counts)
             counts[l] = rec;
