@@ -141,36 +141,48 @@ static bool ensure_incidence(dlevel *L, const sd_level *lv, const out_geometry *
     return true;
 }
 
-static int cmp_u32(const void *a, const void *b)
-{
-    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
-    return (x > y) - (x < y);
-}
-
-/* ids (n, with room for more) plus every vertex of a drawn triangle at one of the first `moved`
- * of them, sorted and unique, into *out (a new block) and *nout. false: out of memory. */
+/* ids (n) plus every vertex of a drawn triangle at one of the first `moved` of them, sorted and
+ * unique, into *out (a new block) and *nout: marked in a bitmap of the level's vertices, which is
+ * then read in order (no sort: the lists hold tens of thousands of repeats). false: out of
+ * memory. */
 static bool with_neighbours(const sd_level *lv, const dlevel *L, const out_geometry *g,
                             const uint32_t *ids, size_t n, size_t moved, uint32_t **out,
                             size_t *nout)
 {
-    size_t cap = n;
-    for (size_t i = 0; L->first && i < moved; i++)
-        cap += 3 * (size_t)(L->first[ids[i] + 1] - L->first[ids[i]]);
-    uint32_t *a = api_malloc((cap + 1) * sizeof *a);
-    if (!a)
+    uint32_t nv = sd_level_num_vertices(lv);
+    size_t nw = ((size_t)nv + 63) / 64;
+    uint64_t *bit = api_calloc(nw + 1, sizeof *bit);
+    if (!bit)
         return false;
-    memcpy(a, ids, n * sizeof *a);
-    size_t k = n;
+    size_t k = 0;
+#define MARK(v)                                                                                    \
+    do {                                                                                           \
+        uint32_t v_ = (v);                                                                         \
+        uint64_t b_ = (uint64_t)1 << (v_ & 63);                                                    \
+        k += !(bit[v_ >> 6] & b_);                                                                 \
+        bit[v_ >> 6] |= b_;                                                                        \
+    } while (0)
+    for (size_t i = 0; i < n; i++)
+        MARK(ids[i]);
     for (size_t i = 0; L->first && i < moved; i++)
         for (uint32_t j = L->first[ids[i]]; j < L->first[ids[i] + 1]; j++) {
-            drawn(lv, L, g, L->tri[j], a + k);
-            k += 3;
+            uint32_t v[3];
+            drawn(lv, L, g, L->tri[j], v);
+            MARK(v[0]);
+            MARK(v[1]);
+            MARK(v[2]);
         }
-    qsort(a, k, sizeof *a, cmp_u32);
+#undef MARK
+    uint32_t *a = api_malloc((k + 1) * sizeof *a);
+    if (!a) {
+        api_free(bit);
+        return false;
+    }
     size_t u = 0;
-    for (size_t i = 0; i < k; i++)
-        if (!u || a[u - 1] != a[i])
-            a[u++] = a[i];
+    for (size_t w = 0; w < nw && u < k; w++)
+        for (uint64_t x = bit[w]; x; x &= x - 1)
+            a[u++] = (uint32_t)(64 * w + (size_t)__builtin_ctzll(x));
+    api_free(bit);
     *out = a;
     *nout = u;
     return true;
@@ -217,6 +229,28 @@ static void update_normals(api_model *m, int level, const uint32_t *idx, size_t 
         memcpy(g->normals + 3 * (size_t)ids[i], acc, sizeof acc);
     }
     api_free(ids);
+}
+
+/* What the first edit would otherwise build, built with the level's geometry (the first edit
+ * costs what later ones do, DECISIONS 38): the stamps of the computed levels, their pages
+ * written now (a fresh page costs a fault when first touched), and the level's incidence. A
+ * failure here only leaves them to the edit. */
+void api_delta_prepare(api_model *m, int level)
+{
+    observe(m);
+    int n = sd_complex_levels_computed(m->c);
+    for (int l = 0; l < n && l <= SD_MAX_LEVEL; l++) {
+        dlevel *L = &m->delta->lv[l];
+        if (!L->pos && (L->pos = api_malloc(((size_t)L->nv + 1) * sizeof *L->pos))) {
+            memset(L->pos, 0, ((size_t)L->nv + 1) * sizeof *L->pos);
+            L->bytes += ((size_t)L->nv + 1) * sizeof *L->pos;
+        }
+    }
+    sd_error e;
+    const sd_level *lv = sd_complex_level(m->c, level, &e);
+    if (lv && m->geometry[level])
+        ensure_incidence(&m->delta->lv[level], lv, m->geometry[level]);
+    sd_complex_prepare_edits(m->c, &e); /* the core's part */
 }
 
 /* ---- edits ----------------------------------------------------------------------------------- */
@@ -290,6 +324,15 @@ static void put(buf *o, const void *x, size_t n)
         memcpy(o->b + o->n, x, n);
     o->n += n;
     o->b[o->n] = 0;
+}
+
+/* Room for n bytes at once (the answer's size is known): no copies while it grows. */
+static void reserve(buf *o, size_t n)
+{
+    if (o->b || !(o->b = api_malloc(n + 1)))
+        return;
+    o->cap = n + 1;
+    o->b[0] = 0;
 }
 
 static void putf(buf *o, const char *fmt, double x)
@@ -367,6 +410,13 @@ static int parse_query(const api_model *m, const api_delta_query *q, uint64_t *s
         a = e ? e + 1 : a + n;
     }
     return 0;
+}
+
+int api_delta_check(const api_model *m, const api_delta_query *q, api_problem *p)
+{
+    uint64_t since;
+    int json, attrs[API_MAX_ATTRIBUTES], nattrs;
+    return parse_query(m, q, &since, &json, attrs, &nattrs, p);
 }
 
 /* Append to *a (k of cap) the points whose stamp st[v] is after `since`. false: no memory. */
@@ -479,7 +529,11 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
     }
     const double *xyz = sd_level_channel(lv, 0, NULL);
     buf o = {0};
+    size_t per = 12 + (normals ? 12 : 0);
+    for (int a = 0; a < nattrs; a++)
+        per += 4 * (size_t)m->in->attrs[attrs[a]].ncomp;
     if (!json) {
+        reserve(&o, 24 + n * (4 + per));
         put(&o, "SDD1", 4);
         put_u32(&o, (uint32_t)level);
         put_u32(&o, (uint32_t)since);
@@ -500,6 +554,7 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
                     put_f32(&o, x[(size_t)ids[i] * nc + k]);
         }
     } else {
+        reserve(&o, 256 + n * (16 + 5 * per)); /* a guess (put grows it): %.17g and %.9g numbers */
         char head[160];
         snprintf(head, sizeof head, "{\"level\":%d,\"since\":%llu,\"version\":%llu,\"indices\":[",
                  level, (unsigned long long)since, (unsigned long long)cur);

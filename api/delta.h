@@ -40,6 +40,9 @@ typedef struct api_delta_edit {
     uint64_t version;    /* the edit's version (the model's current one + 1) */
 } api_delta_edit;
 
+/* With a level's geometry (api_model_geometry_locked): the stamps and incidence edits of it
+ * need, made now rather than by the first edit. */
+void api_delta_prepare(api_model *m, int level);
 /* Before an edit: levels computed since the last edit or delta start at the model's version. */
 void api_delta_begin_edit(api_model *m);
 /* Zero rep and set its callback to stamp, for this call, the points that changed (and, for
@@ -60,5 +63,9 @@ typedef struct api_delta_query {
 int api_level_delta(api_model *m, int level, const api_delta_query *q, char **body, size_t *len,
               const char **ctype, char *components, size_t ccap, uint64_t *version,
               api_problem *p);
+
+/* The query's format and attributes checked against m as api_level_delta would (since must be
+ * given): 0, or the status of the problem. PATCH ?delta= checks it before the edit. */
+int api_delta_check(const api_model *m, const api_delta_query *q, api_problem *p);
 
 #endif

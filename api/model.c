@@ -127,6 +127,8 @@ struct out_geometry *api_model_geometry_locked(api_model *m, int level)
         const sd_level *lv = sd_complex_level(m->c, level, &e);
         if (lv)
             m->geometry[level] = out_geometry_compute(lv);
+        if (m->geometry[level])
+            api_delta_prepare(m, level);
         api_model_publish(m);
     }
     return m->geometry[level];

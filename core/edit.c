@@ -210,6 +210,50 @@ static bool ensure_maps(edit *E)
     return true;
 }
 
+/* Lists with room for cap points of nc components, their pages written (a fresh page costs a
+ * fault when first touched, which the first edit would pay while it grows them). */
+static bool reserve_lists(sd_mem *m, sdi_escratch *s, uint32_t cap, int nc)
+{
+    if (s->cap >= cap && s->dcap >= (size_t)cap * nc)
+        return true;
+    uint32_t *id = sdi_realloc(m, s->id, (size_t)cap * sizeof *id);
+    if (id)
+        s->id = id;
+    double *nv = id ? sdi_realloc(m, s->nv, (size_t)cap * nc * sizeof *nv) : NULL;
+    if (nv)
+        s->nv = nv;
+    double *ov = nv ? sdi_realloc(m, s->ov, (size_t)cap * nc * sizeof *ov) : NULL;
+    if (ov)
+        s->ov = ov;
+    uint8_t *chg = ov ? sdi_realloc(m, s->chg, cap) : NULL;
+    if (!chg)
+        return false;
+    s->chg = chg;
+    memset(s->id, 0, (size_t)cap * sizeof *s->id);
+    memset(s->nv, 0, (size_t)cap * nc * sizeof *s->nv);
+    memset(s->ov, 0, (size_t)cap * nc * sizeof *s->ov);
+    memset(s->chg, 0, cap);
+    s->cap = cap;
+    s->dcap = (size_t)cap * nc;
+    return true;
+}
+
+/* The maps, and lists with room for what a one-point move of a volume recomputes at each level
+ * (about (2^(l+1) + 1)^3 points; at most the level's points): later edits grow them as needed. */
+sd_result sd_complex_prepare_edits(sd_complex *c, sd_error *err)
+{
+    edit E = {.c = c, .m = &c->mem, .top = c->nlevels - 1};
+    if (!ensure_maps(&E))
+        return sdi_fail_nomem(err, &c->mem);
+    for (int l = 0; l <= E.top; l++) {
+        uint64_t side = (2u << l) + 1, want = side * side * side;
+        uint32_t nv = c->lv[l]->t.nv + 1, cap = want < nv ? (uint32_t)want : nv;
+        if (!reserve_lists(&c->mem, c->lv[l]->es, cap < 256 ? 256 : cap, 3))
+            return sdi_fail_nomem(err, &c->mem);
+    }
+    return SD_OK;
+}
+
 /* ---- offsets ------------------------------------------------------------------------------------ */
 
 /* The offset that puts sum s at value v: v - s. fl(s + fl(v - s)) is v whenever v and s are

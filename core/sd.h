@@ -344,6 +344,11 @@ typedef struct sd_edit_report {
 sd_result sd_complex_move(sd_complex *c, int channel, size_t n, const sd_vertex_at *at,
                           const double *values, sd_edit_report *rep, sd_error *err);
 
+/* Build now what the first edit of the computed levels would build (the maps that find a level's
+ * recomputed points), so that edit costs what later ones do. Optional; SD_ERR_NOMEM leaves them
+ * to the edit. Not thread-safe with edits of the same complex (readers are not affected). */
+sd_result sd_complex_prepare_edits(sd_complex *c, sd_error *err);
+
 /* sd_complex_move with control points only: point idx[i] (level 0) gets values[i*ncomp ..].
  * counts (optional, SD_MAX_LEVEL+1 entries) receives the points recomputed per level
  * (sd_edit_report.recomputed). */

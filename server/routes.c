@@ -399,16 +399,103 @@ static void h_put_tags(req *r) { change(r, op_tags, api_tags_packed, "tags"); }
 static void h_put_rules(req *r) { change(r, op_rules, NULL, "rules"); }
 static void h_refine(req *r) { change(r, op_refine, NULL, "refine"); }
 
+static const char *const EDIT_KEYS[] = {"delta", "format", "attributes", NULL};
+
+/* PATCH ?delta=L (docs/API.md "Live edits", DECISIONS 38): the edit answers with the delta of
+ * level L it made, so a dragging client needs one round trip, not two. */
+typedef struct edit_delta {
+    int level;                /* -1: not asked */
+    api_delta_query q;
+    char since[24];
+    char *body;
+    size_t len;
+    const char *ctype;
+    char comp[1024];
+    api_problem p;            /* why there is no delta (410, 503) */
+} edit_delta;
+
+/* The query of a PATCH: 0, or the status of the problem (nothing applied yet). */
+static int edit_query(req *r, edit_delta *d, api_problem *p)
+{
+    const char *lv = http_arg(r, "delta");
+    d->level = -1;
+    d->q = (api_delta_query){d->since, http_arg(r, "format"), http_arg(r, "attributes")};
+    if (!lv) {
+        if (d->q.format || d->q.attributes)
+            return api_fail_at(p, 400, "bad-parameter", d->q.format ? "format" : "attributes",
+                               "format and attributes of a PATCH go with delta=<level>");
+        return 0;
+    }
+    api_problem lp = {0};
+    int level = api_parse_level(lv, &lp);
+    if (level < 0)
+        return api_fail_at(p, lp.status, lp.slug, "delta", "delta: %s", lp.detail);
+    d->level = level;
+    return 0;
+}
+
+/* The answer of an edit with ?delta=: the delta itself (bin: its body; json: inside the
+ * summary), or the summary with "delta": the problem that kept it from being made. */
+static void reply_edit_delta(req *r, edit_delta *d, uint64_t version, const char *up)
+{
+    struct MHD_Response *resp = NULL;
+    char *text = NULL;
+    size_t n = 0;
+    if (d->body && !strcmp(d->ctype, "application/octet-stream")) {
+        resp = http_buffer_response(d->ctype, d->body, d->len);
+        n = d->len;
+    } else {
+        char head[640];
+        int k = snprintf(head, sizeof head, "{\"version\":%llu,\"updated_points\":%s,\"delta\":",
+                         (unsigned long long)version, up);
+        char type[80];
+        snprintf(type, sizeof type, "/errors/%s", d->p.slug ? d->p.slug : "internal");
+        json_t *pj = d->body ? NULL
+                             : json_pack("{s:i, s:s, s:s}", "status", d->p.status, "type", type,
+                                         "detail", d->p.detail);
+        char *pt = pj ? json_dumps(pj, JSON_COMPACT) : NULL;
+        json_decref(pj);
+        const char *tail = d->body ? d->body : pt ? pt : "null";
+        size_t tl = d->body ? d->len : strlen(tail);
+        if ((text = api_malloc((size_t)k + tl + 2))) {
+            memcpy(text, head, (size_t)k);
+            memcpy(text + k, tail, tl);
+            memcpy(text + k + tl, "}", 2);
+            n = (size_t)k + tl + 1;
+            resp = http_buffer_response("application/json", text, n);
+        }
+        api_free(pt); /* jansson allocates with api_malloc */
+        api_free(d->body);
+    }
+    d->body = NULL;
+    if (!resp) {
+        http_fail(r, 503, "out-of-memory", "out of memory (the edit was applied)");
+        return;
+    }
+    atomic_store(&r->bytes, n);
+    http_set_etag(resp, version);
+    http_add_header(resp, "X-Updated-Points", up);
+    if (d->comp[0])
+        http_add_header(resp, "X-Attribute-Components", d->comp);
+    http_queue(r, 200, resp);
+}
+
 /* PATCH control-points: If-Match is required (428 without, 412 when stale); the model is changed
  * in place (streams in flight read their own snapshots), or replaced by a new one where the
  * edit moves what a level's rules read (api_edit). The changed points are stamped with the new
- * version (api/delta.h), and the listeners told. */
+ * version (api/delta.h), and the listeners told; with ?delta=L the answer is the edit's delta of
+ * level L, made under the write lock (nothing else between). */
 static void h_edit(req *r)
 {
     api_problem p = {0};
+    edit_delta d = {0};
     if (!http_header(r, "If-Match")) {
         api_fail(&p, 428, "precondition-required",
                  "send If-Match: \"<version>\" (the session's ETag) with an edit");
+        http_reply_problem(r, &p);
+        return;
+    }
+    if (edit_query(r, &d, &p)) {
         http_reply_problem(r, &p);
         return;
     }
@@ -421,8 +508,9 @@ static void h_edit(req *r)
     uint64_t counts[SD_MAX_LEVEL + 1];
     int levels = 0, rc;
     api_slot slot = slot_of(r);
+    snprintf(d.since, sizeof d.since, "%llu", (unsigned long long)version);
     /* changes are sequential (the write lock): the edit's version is the next one */
-    if (!(rc = if_match(r, version, &p)))
+    if (!(rc = if_match(r, version, &p)) && (d.level < 0 || !(rc = api_delta_check(m, &d.q, &p))))
         rc = api_edit(m, b, version + 1, &r->srv->cfg.limits, &slot, counts, &levels, &rebuilt,
                       &p);
     char up[512] = "{";
@@ -435,6 +523,13 @@ static void h_edit(req *r)
     if (!rc) { /* the version api_edit stamped: the write lock is held */
         version = rebuilt ? session_publish(r->s, rebuilt) : session_bump(r->s);
         notify(r, version, "edit", up);
+        if (d.level >= 0) {
+            api_model *now = session_model(r->s, NULL);
+            uint64_t dv;
+            api_level_delta(now, d.level, &d.q, &d.body, &d.len, &d.ctype, d.comp,
+                            sizeof d.comp, &dv, &d.p);
+            api_model_unref(now);
+        }
     } else if (rebuilt) /* a failed edit whose undo failed: the content before it, rebuilt */
         notify(r, session_publish(r->s, rebuilt), "complex", NULL);
     pthread_mutex_unlock(&r->s->write);
@@ -442,6 +537,10 @@ static void h_edit(req *r)
     api_model_unref(m);
     if (rc) {
         http_reply_problem(r, &p);
+        return;
+    }
+    if (d.level >= 0) {
+        reply_edit_delta(r, &d, version, up);
         return;
     }
     json_error_t je;
@@ -683,7 +782,7 @@ static const route ROUTES[] = {
     {"DELETE", "/v1/sessions/{id}", h_delete_session, 1, 0, NULL},
     {"PUT", "/v1/sessions/{id}/complex", h_put_complex, 1, 1, NULL},
     {"GET", "/v1/sessions/{id}/complex", h_get_complex, 1, 0, NULL},
-    {"PATCH", "/v1/sessions/{id}/control-points", h_edit, 1, 1, NULL},
+    {"PATCH", "/v1/sessions/{id}/control-points", h_edit, 1, 1, EDIT_KEYS},
     {"POST", "/v1/sessions/{id}/refine", h_refine, 1, 1, NULL},
     {"PUT", "/v1/sessions/{id}/tags", h_put_tags, 1, 1, NULL},
     {"PUT", "/v1/sessions/{id}/rules", h_put_rules, 1, 1, NULL},

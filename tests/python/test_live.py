@@ -329,6 +329,73 @@ def test_delta_410_after_an_edit_that_rebuilds_rules(daemon):
     s.delete()
 
 
+@pytest.mark.parametrize("mesh", list(MESHES))
+def test_patch_answers_with_its_delta(daemon, mesh):
+    """PATCH ?delta=L (one round trip for a dragging client): the answer is the delta of level L
+    since the version the edit was made on — the bytes GET /delta gives (bin; the JSON delta
+    inside the summary with format=json) — and, applied to the level fetched before, gives the
+    level fetched after."""
+    body = with_attrs(MESHES[mesh]())
+    s = new_session(daemon, body)
+    V, n = body["vertices"], len(body["vertices"])
+    before = snapshot(s, LEVEL)
+    for step in range(3):
+        v = version_of(s)
+        pts = sorted({(3 * step + 7 * j) % n for j in range(1 + step)})
+        b = {"moves": [{"index": k, "position": moved(V[k], k + step)} for k in pts],
+             "attributes": {"t": [{"index": pts[0], "value": 2.5 * step}]}}
+        fmt = "json" if step == 1 else "bin"
+        r = s.req("PATCH", "/control-points", json=b, headers={"If-Match": f'"{v}"'},
+                  params={"delta": LEVEL, "format": fmt, "attributes": "t,v"})
+        assert r.status_code == 200, r.text
+        assert r.headers["ETag"] == f'"{v + 1}"' and version_of(s) == v + 1
+        ups = json.loads(r.headers["X-Updated-Points"])
+        assert ups["0"] == len(pts)
+        after = snapshot(s, LEVEL)
+        db, dj, _ = deltas(s, LEVEL, v)
+        if fmt == "bin":
+            assert r.headers["Content-Type"] == "application/octet-stream"
+            assert r.headers["X-Attribute-Components"] == "t=1,v=2"
+            got = s.req("GET", f"/levels/{LEVEL}/delta", params={"since": v, "attributes": "t,v"})
+            assert r.content == got.content
+            d = parse_sdd1(r.content, [("t", 1), ("v", 2)])
+            assert (d["since"], d["version"]) == (v, v + 1)
+        else:
+            j = r.json()
+            assert j["version"] == v + 1 and j["updated_points"] == ups
+            assert j["delta"] == dj and (dj["since"], dj["version"]) == (v, v + 1)
+        check_delta(s, LEVEL, before, after, v, v + 1)
+        before = after
+    s.delete()
+
+
+def test_patch_delta_query_checked_before_the_edit(daemon):
+    """A bad ?delta query is refused with nothing applied; a delta the daemon cannot make (a level
+    not computed, an edit that rebuilt rules) leaves the edit applied and says why in the
+    summary."""
+    s = new_session(daemon, complex_from_text(CUBE))
+    assert s.level(1, format="json").status_code == 200
+    v = version_of(s)
+    mv = {"moves": [{"index": 0, "position": [0.01, 0.02, -0.01]}]}
+    for params, status, ptr in [({"delta": "x"}, 400, "delta"), ({"delta": 99}, 422, "delta"),
+                                ({"delta": 1, "format": "xml"}, 422, "format"),
+                                ({"delta": 1, "attributes": "nope"}, 422, "attributes"),
+                                ({"format": "json"}, 400, "format"), ({"what": 1}, 400, None)]:
+        r = s.req("PATCH", "/control-points", json=mv, headers={"If-Match": f'"{v}"'},
+                  params=params)
+        assert r.status_code == status, (params, r.text)
+        if ptr:
+            assert r.json()["errors"][0]["pointer"] == ptr
+        assert version_of(s) == v
+    r = s.req("PATCH", "/control-points", json=mv, headers={"If-Match": f'"{v}"'},
+              params={"delta": 2})
+    assert r.status_code == 200 and r.headers["Content-Type"] == "application/json"
+    j = r.json()
+    assert j["version"] == v + 1 == version_of(s)
+    assert j["delta"]["status"] == 410 and j["delta"]["type"].endswith("/delta-unavailable")
+    s.delete()
+
+
 def snapshot_plain(s, level):
     return glb_arrays(s.level(level).content), s.level(level, format="json").json()
 

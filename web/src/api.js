@@ -118,6 +118,24 @@ export class Session {
     return this.json(what, 'PATCH', '/control-points', { body: { moves }, ifMatch: this.version });
   }
 
+  // The same edit answered with its delta of level `level` (PATCH ?delta=, one round trip):
+  // {version, updated_points, delta} where delta is parseDelta's object (since = the version
+  // the edit was made on), or null when the daemon could not make it (then `gone` says why and
+  // the caller brings the level up to date another way).
+  async moveControlPointsDelta(moves, level, what = 'Moving a control point') {
+    const res = await this.request(what, 'PATCH', '/control-points',
+      { body: { moves }, ifMatch: this.version, query: { delta: level } });
+    const up = res.headers.get('X-Updated-Points');
+    if ((res.headers.get('Content-Type') || '').startsWith('application/octet-stream')) {
+      const delta = parseDelta(await res.arrayBuffer());
+      this.version = Math.max(this.version, delta.version);
+      return { version: delta.version, updated_points: up ? JSON.parse(up) : {}, delta };
+    }
+    const j = await res.json(); // the summary, with the problem that kept the delta from being made
+    if (typeof j.version === 'number') this.version = Math.max(this.version, j.version);
+    return { version: j.version, updated_points: j.updated_points, delta: null, gone: j.delta };
+  }
+
   // The level-L points that changed after version `since` (API.md "Live edits", the binary
   // "SDD1" layout): {level, since, version, n, indices, positions, normals|null, bytes}. A 410
   // (the change was not an edit, the level is not cached, ...) is an ApiError with status 410:

@@ -468,19 +468,19 @@ class App {
       }
       want = Math.max(want, d.version);
       if (d.level !== L || d.since !== since) throw new Error(`delta of level ${d.level} since ${d.since}, asked ${L} since ${since}`);
+      if (this.shown.level !== L || this.shown.version !== since) {
+        // a PATCH's own delta (#patch) was drawn meanwhile: this one is stale; ask again
+        if (this.shown.level === L && this.shown.version < want) this.syncWanted = true;
+        return;
+      }
       try {
-        this.viewer.applyDelta(d);
+        this.#applyShownDelta(d);
       } catch (e) {
         this.info(`The level is fetched again (${e.message}).`);
         if (!inQueue) return this.requestLevel();
         await this.#fetchLevel();
         return this.#syncCage(want, true);
       }
-      this.shown.version = d.version;
-      this.shown.deltas++;
-      this.perf.deltas++;
-      this.perf.deltaBytes += d.bytes;
-      this.#updatesDone(d);
     }
     this.#updatesDone(null);
     const h = this.handleLevel;
@@ -497,6 +497,16 @@ class App {
     }
     await this.#syncCage(want, inQueue);
     this.#updateSession();
+  }
+
+  // A delta of the shown level, since the version its buffers hold, written into them.
+  #applyShownDelta(d) {
+    this.viewer.applyDelta(d);
+    this.shown.version = d.version;
+    this.shown.deltas++;
+    this.perf.deltas++;
+    this.perf.deltaBytes += d.bytes;
+    this.#updatesDone(d);
   }
 
   // The control points changed elsewhere: a JSON delta of level 0 (exact doubles).
@@ -710,10 +720,14 @@ class App {
     const what = moves.length === 1 ? moves[0].what : `Moving ${moves.length} points`;
     const t0 = performance.now();
     let r;
+    // the shown level up to date and no delta under way: the PATCH answers with its delta of the
+    // shown level (one round trip); otherwise the delta follows (requestSync)
+    const direct = this.shown && !this.syncPromise && this.shown.version === this.session.version;
     this.patching = true;
     try {
       try {
-        r = await this.session.moveControlPoints(body, what);
+        r = direct ? await this.session.moveControlPointsDelta(body, this.shown.level, what)
+          : await this.session.moveControlPoints(body, what);
       } catch (e) {
         // 412: the session changed elsewhere; catch up and send the move again (once)
         if (!(e instanceof ApiError && e.status === 412)) throw e;
@@ -735,6 +749,19 @@ class App {
       move: Math.min(...moves.map((m) => m.t)), lastMove: Math.max(...moves.map((m) => m.last)),
       sent: t0, patched: t1, version: r.version, moves: moves.length,
     });
+    const d = r.delta;
+    if (d && this.shown && d.level === this.shown.level && d.since === this.shown.version) {
+      try {
+        this.#applyShownDelta(d);
+      } catch (e) {
+        this.info(`The level is fetched again (${e.message}).`);
+        return this.requestLevel();
+      }
+      this.#updateSession();
+      // what the answer did not bring: the handle level's points, changes made elsewhere
+      if (this.handleLevel || this.known > this.shown.version || this.cageVersion < this.known) this.requestSync();
+      return;
+    }
     this.requestSync();
   }
 
