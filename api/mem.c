@@ -13,6 +13,7 @@
  * api/ and server/, besides the refine bodies and open_memstream's buffers that mem.h names.
  */
 #include "mem.h"
+#include "../core/sd.h"
 #include <jansson.h>
 #include <stdatomic.h>
 #include <stdbool.h>
@@ -110,6 +111,7 @@ void *api_malloc(size_t n)
         refused_here++;
         return NULL;
     }
+    sd_advise_huge(b, n + HDR); /* as the core's blocks (core/alloc.c) */
     memcpy(b, &n, sizeof n);
     return b + HDR;
 }
@@ -164,6 +166,8 @@ void *api_realloc(void *p, size_t n)
         refused_here++;
         return NULL;
     }
+    if (grow)
+        sd_advise_huge(q, n + HDR);
     if (n < old) {
         atomic_fetch_sub_explicit(&in_use, old - n, memory_order_relaxed);
         credit(old - n);

@@ -344,6 +344,11 @@ typedef struct sd_edit_report {
 sd_result sd_complex_move(sd_complex *c, int channel, size_t n, const sd_vertex_at *at,
                           const double *values, sd_edit_report *rep, sd_error *err);
 
+/* Ask the kernel for transparent huge pages over the 2 MiB-aligned part of a block of at least
+ * 4 MiB (madvise MADV_HUGEPAGE; advice only, ignored where unsupported). The core's allocations
+ * do this themselves; exported for the service's own big buffers. */
+void sd_advise_huge(void *p, size_t n);
+
 /* Build now what the first edit of the computed levels would build (the maps that find a level's
  * recomputed points), so that edit costs what later ones do. Optional; SD_ERR_NOMEM leaves them
  * to the edit. Not thread-safe with edits of the same complex (readers are not affected). */

@@ -759,3 +759,29 @@ def test_client_delta_reads_both_layouts(daemon):
     with pytest.raises(subdiv.Gone):
         c.delta(2, since=v)
     s.delete()
+
+
+def test_client_edit_with_its_delta(daemon):
+    """Session.edit(delta=L): the edit's delta in the PATCH answer, as delta() reads it, both
+    layouts; None with the problem when the level is not computed (the edit stands)."""
+    body = with_attrs(complex_from_text(MIXED))
+    s = new_session(daemon, body)
+    c = subdiv.Client(daemon.url, timeout=30).session(s.id, s.token)
+    before = snapshot(s, 2)
+    v = before[1]["version"]
+    r = c.edit(moves=[{"index": 1, "position": [1.05, 0.02, 0]}], delta=2, delta_attributes="t,v")
+    assert r["version"] == v + 1 == c.version and r["updated_points"]["0"] == 1
+    after = snapshot(s, 2)
+    d = r["delta"]
+    assert (d["since"], d["version"], d["level"]) == (v, v + 1, 2)
+    pos = before[0]["POSITION"].copy()
+    pos[d["indices"]] = d["positions"]
+    np.testing.assert_array_equal(pos, after[0]["POSITION"])
+    assert set(d["attributes"]) == {"t", "v"}
+    r = c.edit(moves=[{"index": 1, "position": [1.0, 0.0, 0]}], delta=2, delta_format="json")
+    j = c.delta(2, since=v + 1, format="json")
+    np.testing.assert_array_equal(r["delta"]["indices"], j["indices"])
+    np.testing.assert_array_equal(r["delta"]["positions"], j["positions"])
+    r = c.edit(moves=[{"index": 1, "position": [1.0, 0.01, 0]}], delta=4)
+    assert r["delta"] is None and r["gone"]["status"] == 410 and r["version"] == v + 3 == c.version
+    s.delete()

@@ -267,16 +267,38 @@ class Session:
         return self._change("POST", "/refine", {"select": select, "depth": depth, "positions": positions},
                             if_match, None)
 
-    def edit(self, moves=None, attributes=None, *, if_match=True):
+    def edit(self, moves=None, attributes=None, *, if_match=True, delta=None, delta_format="bin",
+             delta_attributes=None):
         """PATCH /control-points; If-Match is the session's known version unless given. A move
         is {"index", "position"} with an optional "level" (default 0): a point of a finer level
-        moved there keeps a detail offset (GET /complex lists them as "details")."""
+        moved there keeps a detail offset (GET /complex lists them as "details").
+        With `delta=L` the answer carries the edit's delta of level L (PATCH ?delta=, one round
+        trip): {"version", "updated_points", "delta"} where "delta" is what delta() returns for
+        the version the edit was made on, or None when the daemon could not make it ("gone" then
+        holds its problem: the edit stands; fetch the level)."""
         body = {}
         if moves is not None:
             body["moves"] = moves
         if attributes is not None:
             body["attributes"] = attributes
-        return self._change("PATCH", "/control-points", body, if_match, None)
+        if delta is None:
+            return self._change("PATCH", "/control-points", body, if_match, None)
+        params, names = self._delta_params({"delta": int(delta)}, delta_format, delta_attributes)
+        r = self._call("PATCH", "/control-points", json_body=body, if_match=if_match,
+                       params=params)
+        if r.headers.get("Content-Type", "").startswith("application/octet-stream"):
+            d = self._parse_delta_bin(r, names)
+            up = json.loads(r.headers.get("X-Updated-Points", "{}"))
+            return {"version": d["version"], "updated_points": up, "delta": d}
+        j = r.json()
+        self.version = j.get("version", self.version)
+        out = {"version": j["version"], "updated_points": j["updated_points"], "delta": None}
+        d = j.get("delta")
+        if d is not None and "indices" in d:
+            out["delta"] = self._parse_delta_json(d)
+        else:
+            out["gone"] = d
+        return out
 
     # levels
     def level(self, level, format="glb", *, out=None, progress=None, if_none_match=None, **options):
@@ -340,25 +362,38 @@ class Session:
         `format="json"` the JSON one (positions as doubles, as format=json). Raises Gone (410)
         when the delta is not available (a change since then was not an edit, the level is not
         computed, ...): fetch the level again."""
-        import numpy as np
-        params = {"since": int(since), "format": format}
-        names = []
-        if attributes is not None:
-            names = [attributes] if isinstance(attributes, str) else list(attributes)
-            params["attributes"] = ",".join(names)
+        params, names = self._delta_params({"since": int(since)}, format, attributes)
         r = self._call("GET", f"/levels/{int(level)}/delta", params=params)
         if format == "json":
-            j = r.json()
-            out = {k: j[k] for k in ("level", "since", "version")}
-            out["indices"] = np.asarray(j["indices"], dtype=np.uint32)
-            out["positions"] = np.asarray(j["positions"], dtype=np.float64).reshape(-1, 3)
-            out["normals"] = (np.asarray(j["normals"], dtype=np.float32).reshape(-1, 3)
-                              if "normals" in j else None)
-            out["attributes"] = {}
-            for name, vals in j["attributes"].items():
-                a = np.asarray(vals, dtype=np.float64)
-                out["attributes"][name] = a.reshape(len(out["indices"]), -1)
-            return out
+            return self._parse_delta_json(r.json())
+        return self._parse_delta_bin(r, names)
+
+    @staticmethod
+    def _delta_params(params, format, attributes):
+        params["format"] = format
+        names = []
+        if attributes is not None:
+            names = attributes.split(",") if isinstance(attributes, str) else list(attributes)
+            params["attributes"] = ",".join(names)
+        return params, names
+
+    @staticmethod
+    def _parse_delta_json(j):
+        import numpy as np
+        out = {k: j[k] for k in ("level", "since", "version")}
+        out["indices"] = np.asarray(j["indices"], dtype=np.uint32)
+        out["positions"] = np.asarray(j["positions"], dtype=np.float64).reshape(-1, 3)
+        out["normals"] = (np.asarray(j["normals"], dtype=np.float32).reshape(-1, 3)
+                          if "normals" in j else None)
+        out["attributes"] = {}
+        for name, vals in j["attributes"].items():
+            a = np.asarray(vals, dtype=np.float64)
+            out["attributes"][name] = a.reshape(len(out["indices"]), -1)
+        return out
+
+    @staticmethod
+    def _parse_delta_bin(r, names):
+        import numpy as np
         data = r.content
         magic, level_, since_, version, n, flags = (data[:4],) + tuple(np.frombuffer(data, "<u4", 5, 4))
         if magic != b"SDD1":
