@@ -5,7 +5,9 @@
  * version when the level was first seen by an edit or a delta: a level computed later than an
  * edit is seen at the next one, and its content is then that of the model's version); `pos[v]`,
  * the last version at which point v's position changed (0 = not since base), and `attr[a][v]`
- * the same per attribute, each allocated at the first change it records. A delta since V lists
+ * the same per attribute, each allocated at the first change it records (the positions' made
+ * with the level's glTF geometry, api_delta_prepare, so that a first edit costs what later ones
+ * do, DECISIONS 38). A delta since V lists
  * the points stamped after V, plus — when the level has drawn triangles (surface triangles, the
  * solids' boundary: the glTF's NORMAL accessor) — every vertex of a triangle at a moved point,
  * whose glTF normal may have changed with it. That neighbourhood comes from `first`/`tri`: per
@@ -15,9 +17,10 @@
  * equal out_normals' of the edited level bit for bit (docs/DECISIONS.md 36). A geometry a stream
  * holds a reference on is never written: the model's cache becomes a copy first.
  *
- * Costs (docs/SERVICE.md "Live edits"): 4 bytes per point of a level where a position changed,
- * 4 more per attribute changed there, and with the glTF geometry 4 bytes per vertex plus 12 per
- * drawn triangle for the incidence (and a copy of the normals while a stream holds them); a delta scans its level's stamps (4 bytes per point) and
+ * Costs (docs/SERVICE.md "Live edits"): with a level's glTF geometry, 4 bytes per point of
+ * stamps, 4 bytes per vertex plus 12 per drawn triangle for the incidence and a bit per point
+ * (the bitmap that gathers a moved point's neighbours); 4 more per point per attribute changed
+ * there; a copy of the normals while a stream holds them. A delta scans its level's stamps and
  * walks the triangles at the moved points. Stamps are 32-bit: a model past version 2^32 - 1
  * answers 410 (refetch) rather than wrap.
  */
@@ -38,6 +41,7 @@ typedef struct dlevel {
     uint32_t *attr[API_MAX_ATTRIBUTES];
     uint32_t ntr;              /* surface triangles; drawn triangle t >= ntr is boundary t - ntr */
     uint32_t *first, *tri;     /* vertex v's drawn triangles: tri[first[v] .. first[v+1]) */
+    uint64_t *mark;            /* a bit per point, all clear between calls (with_neighbours) */
     size_t bytes;
 } dlevel;
 
@@ -54,6 +58,7 @@ static void level_free(dlevel *L)
         api_free(L->attr[a]);
     api_free(L->first);
     api_free(L->tri);
+    api_free(L->mark);
     memset(L, 0, sizeof *L);
 }
 
@@ -141,19 +146,28 @@ static bool ensure_incidence(dlevel *L, const sd_level *lv, const out_geometry *
     return true;
 }
 
+/* The level's bitmap of points (kept, all clear between calls). false: out of memory. */
+static bool ensure_mark(dlevel *L, uint32_t nv)
+{
+    size_t nw = ((size_t)nv + 63) / 64 + 1;
+    if (!L->mark && (L->mark = api_calloc(nw, sizeof *L->mark)))
+        L->bytes += nw * sizeof *L->mark;
+    return L->mark != NULL;
+}
+
 /* ids (n) plus every vertex of a drawn triangle at one of the first `moved` of them, sorted and
- * unique, into *out (a new block) and *nout: marked in a bitmap of the level's vertices, which is
- * then read in order (no sort: the lists hold tens of thousands of repeats). false: out of
+ * unique, into *out (a new block) and *nout: marked in the level's bitmap, which is then read in
+ * order and left clear (no sort: the lists hold tens of thousands of repeats). false: out of
  * memory. */
-static bool with_neighbours(const sd_level *lv, const dlevel *L, const out_geometry *g,
+static bool with_neighbours(const sd_level *lv, dlevel *L, const out_geometry *g,
                             const uint32_t *ids, size_t n, size_t moved, uint32_t **out,
                             size_t *nout)
 {
     uint32_t nv = sd_level_num_vertices(lv);
     size_t nw = ((size_t)nv + 63) / 64;
-    uint64_t *bit = api_calloc(nw + 1, sizeof *bit);
-    if (!bit)
+    if (!ensure_mark(L, nv))
         return false;
+    uint64_t *bit = L->mark;
     size_t k = 0;
 #define MARK(v)                                                                                    \
     do {                                                                                           \
@@ -174,15 +188,15 @@ static bool with_neighbours(const sd_level *lv, const dlevel *L, const out_geome
         }
 #undef MARK
     uint32_t *a = api_malloc((k + 1) * sizeof *a);
-    if (!a) {
-        api_free(bit);
-        return false;
-    }
     size_t u = 0;
-    for (size_t w = 0; w < nw && u < k; w++)
-        for (uint64_t x = bit[w]; x; x &= x - 1)
+    for (size_t w = 0; w < nw && u < k; w++) {
+        for (uint64_t x = bit[w]; a && x; x &= x - 1)
             a[u++] = (uint32_t)(64 * w + (size_t)__builtin_ctzll(x));
-    api_free(bit);
+        u += a ? 0 : (size_t)__builtin_popcountll(bit[w]);
+        bit[w] = 0;
+    }
+    if (!a)
+        return false;
     *out = a;
     *nout = u;
     return true;
@@ -248,8 +262,10 @@ void api_delta_prepare(api_model *m, int level)
     }
     sd_error e;
     const sd_level *lv = sd_complex_level(m->c, level, &e);
-    if (lv && m->geometry[level])
+    if (lv && m->geometry[level]) {
         ensure_incidence(&m->delta->lv[level], lv, m->geometry[level]);
+        ensure_mark(&m->delta->lv[level], sd_level_num_vertices(lv));
+    }
     sd_complex_prepare_edits(m->c, &e); /* the core's part */
 }
 
@@ -441,7 +457,7 @@ static bool stamped(const uint32_t *st, uint32_t nv, uint64_t since, uint32_t **
 
 /* The points of a level stamped after `since` in positions or in one of the attributes, and,
  * with normals, every vertex of a drawn triangle at a moved point: sorted, each once. */
-static bool collect(const dlevel *L, const sd_level *lv, const out_geometry *g, bool normals,
+static bool collect(dlevel *L, const sd_level *lv, const out_geometry *g, bool normals,
                     uint64_t since, const int *attrs, int nattrs, uint32_t **ids, size_t *n)
 {
     uint32_t *a = NULL;

@@ -40,11 +40,11 @@ static void raw_free(sd_mem *m, void *p, size_t n)
 void sd_advise_huge(void *p, size_t n)
 {
 #ifdef MADV_HUGEPAGE
-    enum { HUGE = 2u << 20, MIN = HUGE };
-    if (!p || n < MIN)
+    enum { THP = 2u << 20 };
+    if (!p || n < THP)
         return;
-    uintptr_t a = ((uintptr_t)p + HUGE - 1) & ~(uintptr_t)(HUGE - 1);
-    uintptr_t b = ((uintptr_t)p + n) & ~(uintptr_t)(HUGE - 1);
+    uintptr_t a = ((uintptr_t)p + THP - 1) & ~(uintptr_t)(THP - 1);
+    uintptr_t b = ((uintptr_t)p + n) & ~(uintptr_t)(THP - 1);
     if (b > a)
         (void)madvise((void *)a, b - a, MADV_HUGEPAGE); /* advice: refused or not, all works */
 #else

@@ -126,18 +126,21 @@ typedef struct edit {
     double *nd[SD_MAX_LEVEL + 1];  /* the new lists' offsets, wherever the lists are */
 } edit;
 
-/* Make room for one more point in p (false: no memory). */
-static __attribute__((noinline)) bool grow(sd_mem *m, pset *p, int nc)
+/* Lists with room for at least cap points and dcap values (never smaller than they are: so a
+ * failure half-way leaves every list at least as long as s->cap and s->dcap say). */
+static bool resize_lists(sd_mem *m, sdi_escratch *s, uint32_t cap, size_t dcap)
 {
-    sdi_escratch *s = p->s;
-    uint32_t cap = p->n < s->cap ? s->cap : s->cap ? 2 * s->cap : 256;
+    cap = cap > s->cap ? cap : s->cap;
+    dcap = dcap > s->dcap ? dcap : s->dcap;
+    if (cap == s->cap && dcap == s->dcap && s->id)
+        return true;
     uint32_t *id = sdi_realloc(m, s->id, (size_t)cap * sizeof *id);
     if (id)
         s->id = id;
-    double *nv = id ? sdi_realloc(m, s->nv, (size_t)cap * nc * sizeof *nv) : NULL;
+    double *nv = id ? sdi_realloc(m, s->nv, dcap * sizeof *nv) : NULL;
     if (nv)
         s->nv = nv;
-    double *ov = nv ? sdi_realloc(m, s->ov, (size_t)cap * nc * sizeof *ov) : NULL;
+    double *ov = nv ? sdi_realloc(m, s->ov, dcap * sizeof *ov) : NULL;
     if (ov)
         s->ov = ov;
     uint8_t *chg = ov ? sdi_realloc(m, s->chg, cap) : NULL;
@@ -145,8 +148,16 @@ static __attribute__((noinline)) bool grow(sd_mem *m, pset *p, int nc)
         return false;
     s->chg = chg;
     s->cap = cap;
-    s->dcap = (size_t)cap * nc;
+    s->dcap = dcap;
     return true;
+}
+
+/* Make room for one more point in p (false: no memory). */
+static __attribute__((noinline)) bool grow(sd_mem *m, pset *p, int nc)
+{
+    sdi_escratch *s = p->s;
+    uint32_t cap = p->n < s->cap ? s->cap : s->cap ? 2 * s->cap : 256;
+    return resize_lists(m, s, cap, (size_t)cap * nc);
 }
 
 /* Add point r to level l's set unless it is there (false: no memory). */
@@ -211,44 +222,38 @@ static bool ensure_maps(edit *E)
 }
 
 /* Lists with room for cap points of nc components, their pages written (a fresh page costs a
- * fault when first touched, which the first edit would pay while it grows them). */
+ * fault when first touched, which the first edit would pay while it grows them; what they hold
+ * between edits is scratch). */
 static bool reserve_lists(sd_mem *m, sdi_escratch *s, uint32_t cap, int nc)
 {
     if (s->cap >= cap && s->dcap >= (size_t)cap * nc)
         return true;
-    uint32_t *id = sdi_realloc(m, s->id, (size_t)cap * sizeof *id);
-    if (id)
-        s->id = id;
-    double *nv = id ? sdi_realloc(m, s->nv, (size_t)cap * nc * sizeof *nv) : NULL;
-    if (nv)
-        s->nv = nv;
-    double *ov = nv ? sdi_realloc(m, s->ov, (size_t)cap * nc * sizeof *ov) : NULL;
-    if (ov)
-        s->ov = ov;
-    uint8_t *chg = ov ? sdi_realloc(m, s->chg, cap) : NULL;
-    if (!chg)
+    if (!resize_lists(m, s, cap, (size_t)cap * nc))
         return false;
-    s->chg = chg;
-    memset(s->id, 0, (size_t)cap * sizeof *s->id);
-    memset(s->nv, 0, (size_t)cap * nc * sizeof *s->nv);
-    memset(s->ov, 0, (size_t)cap * nc * sizeof *s->ov);
-    memset(s->chg, 0, cap);
-    s->cap = cap;
-    s->dcap = (size_t)cap * nc;
+    memset(s->id, 0, (size_t)s->cap * sizeof *s->id);
+    memset(s->nv, 0, s->dcap * sizeof *s->nv);
+    memset(s->ov, 0, s->dcap * sizeof *s->ov);
+    memset(s->chg, 0, s->cap);
     return true;
 }
 
-/* The maps, and lists with room for what a one-point move of a volume recomputes at each level
- * (about (2^(l+1) + 1)^3 points; at most the level's points): later edits grow them as needed. */
+/* The maps, and lists with room for what a one-point move recomputes at each level: about
+ * (2^(l+1) + 1)^d points at level l for cells of dimension d (at most the level's points, at
+ * most 2^16): later edits grow them as needed. */
 sd_result sd_complex_prepare_edits(sd_complex *c, sd_error *err)
 {
     edit E = {.c = c, .m = &c->mem, .top = c->nlevels - 1};
     if (!ensure_maps(&E))
         return sdi_fail_nomem(err, &c->mem);
+    const sd_topo *t0 = &c->lv[0]->t;
+    int dim = t0->ntet || t0->noct ? 3 : t0->ntr ? 2 : t0->ncu ? 1 : 0;
     for (int l = 0; l <= E.top; l++) {
-        uint64_t side = (2u << l) + 1, want = side * side * side;
+        uint64_t side = (2u << l) + 1, want = 1;
+        for (int k = 0; k < dim && want < (1u << 16); k++)
+            want *= side;
+        want = want < (1u << 16) ? want : 1u << 16;
         uint32_t nv = c->lv[l]->t.nv + 1, cap = want < nv ? (uint32_t)want : nv;
-        if (!reserve_lists(&c->mem, c->lv[l]->es, cap < 256 ? 256 : cap, 3))
+        if (!reserve_lists(&c->mem, c->lv[l]->es, cap, 3))
             return sdi_fail_nomem(err, &c->mem);
     }
     return SD_OK;

@@ -344,9 +344,10 @@ typedef struct sd_edit_report {
 sd_result sd_complex_move(sd_complex *c, int channel, size_t n, const sd_vertex_at *at,
                           const double *values, sd_edit_report *rep, sd_error *err);
 
-/* Ask the kernel for transparent huge pages over the 2 MiB-aligned part of a block of at least
- * 4 MiB (madvise MADV_HUGEPAGE; advice only, ignored where unsupported). The core's allocations
- * do this themselves; exported for the service's own big buffers. */
+/* Ask the kernel for transparent huge pages over the 2 MiB-aligned part of a block (madvise
+ * MADV_HUGEPAGE on the whole 2 MiB pages inside it, if any; advice only, ignored where
+ * unsupported or where the memory is not anonymous). The core's allocations do this themselves,
+ * also for the blocks of a plugged sd_allocator; exported for the service's own big buffers. */
 void sd_advise_huge(void *p, size_t n);
 
 /* Build now what the first edit of the computed levels would build (the maps that find a level's

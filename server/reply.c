@@ -35,7 +35,7 @@ int http_common_header_list(const req *r, http_header_pair out[4])
         out[n++] = (http_header_pair){MHD_HTTP_HEADER_VARY, "Origin"};
     out[n++] = (http_header_pair){MHD_HTTP_HEADER_ACCESS_CONTROL_EXPOSE_HEADERS,
                         "ETag, Location, Retry-After, Content-Disposition, "
-                        "X-Attribute-Components"};
+                        "X-Attribute-Components, X-Updated-Points"};
     out[n++] = (http_header_pair){"X-Content-Type-Options", "nosniff"};
     return n;
 }

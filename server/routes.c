@@ -441,18 +441,15 @@ static void reply_edit_delta(req *r, edit_delta *d, uint64_t version, const char
     struct MHD_Response *resp = NULL;
     char *text = NULL;
     size_t n = 0;
-    if (d->body && !strcmp(d->ctype, "application/octet-stream")) {
+    const bool bin = d->body && !strcmp(d->ctype, "application/octet-stream");
+    if (bin) {
         resp = http_buffer_response(d->ctype, d->body, d->len);
         n = d->len;
     } else {
         char head[640];
         int k = snprintf(head, sizeof head, "{\"version\":%llu,\"updated_points\":%s,\"delta\":",
                          (unsigned long long)version, up);
-        char type[80];
-        snprintf(type, sizeof type, "/errors/%s", d->p.slug ? d->p.slug : "internal");
-        json_t *pj = d->body ? NULL
-                             : json_pack("{s:i, s:s, s:s}", "status", d->p.status, "type", type,
-                                         "detail", d->p.detail);
+        json_t *pj = d->body ? NULL : api_problem_json(&d->p);
         char *pt = pj ? json_dumps(pj, JSON_COMPACT) : NULL;
         json_decref(pj);
         const char *tail = d->body ? d->body : pt ? pt : "null";
@@ -475,8 +472,8 @@ static void reply_edit_delta(req *r, edit_delta *d, uint64_t version, const char
     atomic_store(&r->bytes, n);
     http_set_etag(resp, version);
     http_add_header(resp, "X-Updated-Points", up);
-    if (d->comp[0])
-        http_add_header(resp, "X-Attribute-Components", d->comp);
+    if (bin && d->comp[0])
+        http_add_header(resp, "X-Attribute-Components", d->comp); /* the binary layout's */
     http_queue(r, 200, resp);
 }
 

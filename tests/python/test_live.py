@@ -392,7 +392,7 @@ def test_patch_delta_query_checked_before_the_edit(daemon):
     assert r.status_code == 200 and r.headers["Content-Type"] == "application/json"
     j = r.json()
     assert j["version"] == v + 1 == version_of(s)
-    assert j["delta"]["status"] == 410 and j["delta"]["type"].endswith("/delta-unavailable")
+    assert j["delta"]["status"] == 410 and j["delta"]["type"] == "/errors/delta-unavailable"
     s.delete()
 
 
