@@ -89,6 +89,7 @@ class App {
     this.events = null;
     this.perf = { updates: [], deltas: 0, deltaBytes: 0, refetches: 0 };
     this.updating = []; // PATCHes answered whose delta is not drawn yet
+    this.updateWaiters = []; // whenUpdates()
     this.patching = false; // a PATCH is under way
     this.heard = 0; // the newest edit event heard while a PATCH was under way
     this.selected = null;
@@ -773,6 +774,17 @@ class App {
       u.push({ ...x, applied: t, points: d?.n ?? 0, bytes: d?.bytes ?? 0, delta: d?.since ?? null });
     }
     if (u.length > 20000) u.splice(0, u.length - 10000);
+    if (this.updateWaiters.length) {
+      const ready = this.updateWaiters.filter((w) => w.n <= u.length);
+      this.updateWaiters = this.updateWaiters.filter((w) => w.n > u.length);
+      ready.forEach((w) => w.resolve());
+    }
+  }
+
+  // For benchmarks and tests: resolves once perf.updates holds n entries (no polling).
+  whenUpdates(n) {
+    if (this.perf.updates.length >= n) return Promise.resolve();
+    return new Promise((resolve) => this.updateWaiters.push({ n, resolve }));
   }
 
   #move(entry, to, what) {
