@@ -21,7 +21,7 @@ from http_bench import call, mesh_body, start_daemon
 def timed(conn, method, path, body=None, headers=None):
     t = time.perf_counter()
     status, data = call(conn, method, path, body, headers)
-    if status != 200:
+    if status not in (200, 201):
         raise SystemExit(f"{method} {path}: {status} {data[:300]!r}")
     return time.perf_counter() - t, data
 
