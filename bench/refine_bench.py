@@ -12,10 +12,13 @@ the same (GET /levels/{L}?format=json, vertices compared exactly).
 import argparse
 import http.client
 import json
+import pathlib
 import statistics
+import sys
 import time
 
-from http_bench import call, mesh_body, start_daemon
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from http_bench import call, mesh_body, start_daemon  # noqa: E402
 
 
 def timed(conn, method, path, body=None, headers=None):
