@@ -492,7 +492,7 @@ const compareWithRefetch = (pg, level) => pg.evaluate(async (level) => {
   const jlen = dv.getUint32(12, true);
   const gltf = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 20, jlen)));
   const bin = 20 + jlen + 8;
-  const attrs = gltf.meshes[0].primitives.find((p) => p.mode !== 4 || p.indices !== undefined).attributes;
+  const attrs = gltf.meshes.flatMap((m) => m.primitives).find((p) => p.mode !== 4 || p.indices !== undefined).attributes;
   const read = (name) => {
     const a = gltf.accessors[attrs[name]], bv = gltf.bufferViews[a.bufferView];
     return new Uint32Array(buf.slice(bin + (bv.byteOffset || 0) + (a.byteOffset || 0), bin + (bv.byteOffset || 0) + (a.byteOffset || 0) + a.count * 12));
