@@ -31,9 +31,11 @@ CHECKS = [
     "level_slider",      # the slider (keyboard) moves to 0 and back to 2
     "canvas_geometry",   # non-blank pixels (screenshot and read back)
     "stats_shown",       # the panel shows the level's stats as GET /levels/2/stats has them
+    "slice_colour",      # the slice in its own colour (not the solids')
     "cross_section",     # slice on (primitive present, picture changes), moved, off
     "show_hide",         # solid boundary and cage toggles
     "attribute_colour",  # colormap=NAME:min:max and its legend
+    "gltf_loader",       # the GLB in three.js's GLTFLoader: node/mesh per part, one POSITION, extras, linear COLOR_0
     "crease_tag",        # clicking a control edge with the crease tool: PUT /tags 200, tagged
     "crease_colour",     # ... its rule turns to the crease's (curve) and so does its colour
     "nonmanifold_rule",  # G1 for a vertex: 501 shown in words (until issue 4), else its colour
@@ -42,6 +44,8 @@ CHECKS = [
     "undo_redo",         # Ctrl+Z puts it back exactly, Redo moves it again
     "file_open",         # an OBJ from disk
     "file_errors",       # a broken file and a refused one are explained
+    "file_stl_msh",      # STL and Gmsh .msh from disk; the model selector shows the file
+    "level_note",        # the note under the slider says why it stops (the cell limit)
     "session_recovery",  # an expired session is replaced with the same model, and the user told
     "default_rules",     # the default-rule list is G2, G1 (N1/N2 only as overrides of one simplex)
     "occlusion",         # 10³ cubes at level 3: an interior point is not picked nor drawn, unless asked
