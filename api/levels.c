@@ -258,6 +258,9 @@ json_t *api_level_stats(api_model *m, int level, const api_limits *lim, const ap
         rq.level = level;
         rq.parts = OUT_PART_ALL;
         rq.colormap_attr = -1;
+        rq.version = atomic_load(&m->version); /* in the output (glTF asset.extras, VTK title) */
+        for (int a = 0; m->in && a < m->in->nattrs; a++)
+            add_attr(m, &rq, a); /* a level's default: every attribute (parse_query) */
         if (f->geometry)
             rq.geometry = api_model_geometry_locked(m, level);
         out_stream *s = out_open(&rq, f, &e);

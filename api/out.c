@@ -71,7 +71,14 @@ void out_printf(out_stream *s, const char *fmt, ...)
     s->len += (size_t)n;
 }
 
-/* Viridis (matplotlib's colour map sampled at t = 0, 1/8, ..., 1), linear in between. */
+/* sRGB's transfer function undone (IEC 61966-2-1; glTF 2.0 3.7.2.1 wants linear COLOR_0). */
+static double srgb_to_linear(double c)
+{
+    return c <= 0.04045 ? c / 12.92 : pow((c + 0.055) / 1.055, 2.4);
+}
+
+/* Viridis: matplotlib's colour map (sRGB) sampled at t = 0, 1/8, ..., 1, piecewise linear in sRGB
+ * in between, then each channel converted to linear. */
 void out_viridis(double t, float rgb[3])
 {
     static const float V[9][3] = {
@@ -91,6 +98,7 @@ void out_viridis(double t, float rgb[3])
     double f = x - i;
     for (int k = 0; k < 3; k++) {
         double c = V[i][k] + (V[i + 1][k] - V[i][k]) * f;
+        c = srgb_to_linear(c < 0 ? 0 : c > 1 ? 1 : c);
         rgb[k] = (float)(c < 0 ? 0 : c > 1 ? 1 : c);
     }
 }

@@ -1,15 +1,17 @@
 /* out_gltf.c — glTF 2.0: binary .glb (default) and .gltf with the buffer embedded as base64.
  *
- * One scene, one node, one mesh whose primitives share the level's vertex accessors:
+ * One scene; its root node "level L" has a child node per part shown, each with its own mesh of
+ * one primitive, node and mesh named after the part:
  *   points (mode 0, isolated points), curves (mode 1, curve segments), surfaces (mode 4, surface
  *   triangles), solids (mode 4, the outward boundary of the tetrahedra and octahedra), and the
  *   optional slice (mode 4, non-indexed, its own POSITION, NORMAL, `_<NAME>` and COLOR_0: the
  *   cross-section of the solids by the plane, facing +n, attributes interpolated on the cut edges).
- * Shared accessors: POSITION (float32, min/max from the written floats), NORMAL (area-weighted,
- * unit; (0,0,1) where a vertex has no triangle; triangle primitives only), `_<NAME>` per
- * attribute (float32, the first 4 components of longer vectors; made unique with a `_2` suffix),
- * `_RULE` (the sd_rule id as a float) and COLOR_0 (viridis of an attribute's first component
- * over [min,max], float32 RGB).
+ * The first four share the level's vertex accessors, in level vertex order (live edits write
+ * deltas straight into them): POSITION (float32, min/max from the written floats), NORMAL
+ * (area-weighted, unit; (0,0,1) where a vertex has no triangle; triangle primitives only),
+ * `_<NAME>` per attribute (float32, the first 4 components of longer vectors; made unique with a
+ * `_2` suffix), `_RULE` (the sd_rule id as a float) and COLOR_0 (viridis of an attribute's first
+ * component over [min,max], float32 RGB, linear as glTF requires). Accessors carry names.
  * Indices are u16 when the level has at most 65535 vertices, else u32. One material:
  * metallicFactor 0, doubleSided. asset.extras carries the level and version.
  *
@@ -46,6 +48,7 @@ typedef struct gstate {
     int ncarry;
     float nrm_plane[3];
     char name[OUT_MAX_ATTRS + 1][80]; /* glTF attribute names: `_<NAME>` per attribute, _RULE */
+    int nattrs;           /* name[nattrs] is _RULE's */
 } gstate;
 
 static const char B64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
@@ -284,7 +287,7 @@ static void gfree(void *p)
  * already taken (e.g. "a-b" and "A_B", or an attribute called "rule") gets `_2`, `_3`, ... */
 static void attribute_names(const out_stream *s, gstate *g)
 {
-    int n = s->rq.nattrs;
+    int n = g->nattrs = s->rq.nattrs;
     snprintf(g->name[n], sizeof g->name[n], "_RULE");
     for (int a = 0; a < n; a++) {
         char base[72];
@@ -359,8 +362,33 @@ static void plan(out_stream *s, gstate *g, layout *L)
     g->bin_len = off;
 }
 
-/* "bufferViews" and "accessors": one each per section; POSITION's min/max of the float32 values
- * written. */
+/* The parts, in primitive order: node and mesh names, and the primitive modes. */
+static const char *const PART_NAME[5] = {"points", "curves", "surfaces", "solids", "slice"};
+static const int PART_MODE[5] = {0, 1, 4, 4, 4};
+
+/* The accessor's name: the attribute's glTF name (`POSITION`, `_TEMP`, ...), prefixed with
+ * "slice " for the slice's own ones; "<part> indices" for index accessors. */
+static void accessor_name(FILE *f, const gstate *g, const gsec *c)
+{
+    switch (c->id) {
+    case G_POS: fprintf(f, "POSITION"); break;
+    case G_NRM: fprintf(f, "NORMAL"); break;
+    case G_ATTR: fprintf(f, "%s", g->name[c->arg]); break;
+    case G_RULE: fprintf(f, "%s", g->name[g->nattrs]); break;
+    case G_COLOR: fprintf(f, "COLOR_0"); break;
+    case G_IPT:
+    case G_ILN:
+    case G_ITR:
+    case G_IBD: fprintf(f, "%s indices", PART_NAME[c->id - G_IPT]); break;
+    case G_SPOS: fprintf(f, "slice POSITION"); break;
+    case G_SNRM: fprintf(f, "slice NORMAL"); break;
+    case G_SATTR: fprintf(f, "slice %s", g->name[c->arg]); break;
+    case G_SCOLOR: fprintf(f, "slice COLOR_0"); break;
+    }
+}
+
+/* "bufferViews" and "accessors": one each per section, the accessor named; POSITION's min/max
+ * of the float32 values written. */
 static void json_accessors(FILE *f, const out_stream *s, const gstate *g)
 {
     fprintf(f, "\"bufferViews\":[");
@@ -377,8 +405,10 @@ static void json_accessors(FILE *f, const out_stream *s, const gstate *g)
         bool index = c->id >= G_IPT && c->id <= G_IBD;
         static const char *const vt[] = {"", "SCALAR", "VEC2", "VEC3", "VEC4"};
         uint64_t count = index ? c->count * (uint64_t)c->ncomp : c->count;
-        fprintf(f, "%s{\"bufferView\":%d,\"componentType\":%d,\"count\":%llu,\"type\":\"%s\"",
-                i ? "," : "", i, index ? (c->width == 2 ? 5123 : 5125) : 5126,
+        fprintf(f, "%s{\"name\":\"", i ? "," : "");
+        accessor_name(f, g, c);
+        fprintf(f, "\",\"bufferView\":%d,\"componentType\":%d,\"count\":%llu,\"type\":\"%s\"",
+                i, index ? (c->width == 2 ? 5123 : 5125) : 5126,
                 (unsigned long long)count, index ? "SCALAR" : vt[c->ncomp]);
         if (c->id == G_POS || c->id == G_SPOS) {
             float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
@@ -397,41 +427,57 @@ static void json_accessors(FILE *f, const out_stream *s, const gstate *g)
     fprintf(f, "],");
 }
 
-/* "meshes" (one primitive per part shown, then the slice's) and "nodes"; the number of
- * primitives. */
+/* "meshes" (one per part shown, named after it, with its one primitive) and "nodes" (node 0
+ * "level L" with a child node per part, named after it); the number of parts. With no part to
+ * draw the "meshes" member is left out and node 0 has no children. */
 static int json_meshes(FILE *f, const out_stream *s, const gstate *g, const layout *L)
 {
-    int nprim = 0;
-    fprintf(f, "\"meshes\":[{\"name\":\"level %d\",\"primitives\":[", s->rq.level);
-    static const int modes[4] = {0, 1, 4, 4};
-    for (int p = 0; p < 4; p++) {
-        if (!L->prim[p])
-            continue;
-        fprintf(f, "%s{\"attributes\":{\"POSITION\":%d", nprim++ ? "," : "", acc(g, L->pos));
-        if (modes[p] == 4)
-            fprintf(f, ",\"NORMAL\":%d", acc(g, L->nrm));
-        for (int a = 0; a < s->rq.nattrs; a++)
-            fprintf(f, ",\"%s\":%d", g->name[a], L->first_attr + a);
-        fprintf(f, ",\"%s\":%d", g->name[s->rq.nattrs], acc(g, L->rule));
-        if (L->col)
-            fprintf(f, ",\"COLOR_0\":%d", acc(g, L->col));
-        fprintf(f, "},\"indices\":%d,\"mode\":%d,\"material\":0}", acc(g, L->prim[p]), modes[p]);
+    int part[5], nparts = 0;
+    for (int p = 0; p < 4; p++)
+        if (L->prim[p])
+            part[nparts++] = p;
+    if (L->spos)
+        part[nparts++] = 4;
+    if (nparts)
+        fprintf(f, "\"meshes\":[");
+    for (int m = 0; m < nparts; m++) {
+        int p = part[m];
+        fprintf(f, "%s{\"name\":\"%s\",\"primitives\":[{\"attributes\":{", m ? "," : "",
+                PART_NAME[p]);
+        if (p < 4) { /* the shared vertex accessors, in level vertex order */
+            fprintf(f, "\"POSITION\":%d", acc(g, L->pos));
+            if (PART_MODE[p] == 4)
+                fprintf(f, ",\"NORMAL\":%d", acc(g, L->nrm));
+            for (int a = 0; a < s->rq.nattrs; a++)
+                fprintf(f, ",\"%s\":%d", g->name[a], L->first_attr + a);
+            fprintf(f, ",\"%s\":%d", g->name[s->rq.nattrs], acc(g, L->rule));
+            if (L->col)
+                fprintf(f, ",\"COLOR_0\":%d", acc(g, L->col));
+            fprintf(f, "},\"indices\":%d,", acc(g, L->prim[p]));
+        } else { /* the slice's own accessors, non-indexed */
+            fprintf(f, "\"POSITION\":%d,\"NORMAL\":%d", acc(g, L->spos), acc(g, L->snrm));
+            for (int a = 0; a < s->rq.nattrs; a++)
+                fprintf(f, ",\"%s\":%d", g->name[a], L->first_sattr + a);
+            if (L->scol)
+                fprintf(f, ",\"COLOR_0\":%d", acc(g, L->scol));
+            fprintf(f, "},");
+        }
+        fprintf(f, "\"mode\":%d,\"material\":0}]}", PART_MODE[p]);
     }
-    if (L->spos) {
-        fprintf(f, "%s{\"attributes\":{\"POSITION\":%d,\"NORMAL\":%d", nprim++ ? "," : "",
-                acc(g, L->spos), acc(g, L->snrm));
-        for (int a = 0; a < s->rq.nattrs; a++)
-            fprintf(f, ",\"%s\":%d", g->name[a], L->first_sattr + a);
-        if (L->scol)
-            fprintf(f, ",\"COLOR_0\":%d", acc(g, L->scol));
-        fprintf(f, "},\"mode\":4,\"material\":0}");
+    if (nparts)
+        fprintf(f, "],");
+    fprintf(f, "\"nodes\":[{\"name\":\"level %d%s\"", s->rq.level, nparts ? "" : " (empty)");
+    if (nparts) {
+        fprintf(f, ",\"children\":[");
+        for (int m = 0; m < nparts; m++)
+            fprintf(f, "%s%d", m ? "," : "", m + 1);
+        fprintf(f, "]");
     }
-    fprintf(f, "]}],");
-    if (nprim)
-        fprintf(f, "\"nodes\":[{\"name\":\"level %d\",\"mesh\":0}],", s->rq.level);
-    else /* nothing to draw in the chosen parts: an empty node (a mesh needs a primitive) */
-        fprintf(f, "\"nodes\":[{\"name\":\"level %d (empty)\"}],", s->rq.level);
-    return nprim;
+    fprintf(f, "}");
+    for (int m = 0; m < nparts; m++)
+        fprintf(f, ",{\"name\":\"%s\",\"mesh\":%d}", PART_NAME[part[m]], m);
+    fprintf(f, "],");
+    return nparts;
 }
 
 /* The JSON part (glTF: up to the base64 data). The text is the C library's (open_memstream):
@@ -449,7 +495,7 @@ static char *json_part(const out_stream *s, const gstate *g, const layout *L, si
     json_accessors(f, s, g);
     fprintf(f, "\"materials\":[{\"name\":\"subdivd\",\"pbrMetallicRoughness\":{\"baseColorFactor\":"
                "[0.8,0.8,0.8,1],\"metallicFactor\":0,\"roughnessFactor\":0.8},\"doubleSided\":true}],");
-    int nprim = json_meshes(f, s, g, L);
+    json_meshes(f, s, g, L);
     if (g->glb)
         fprintf(f, "\"buffers\":[{\"byteLength\":%llu}]}", (unsigned long long)g->bin_len);
     else
@@ -458,14 +504,6 @@ static char *json_part(const out_stream *s, const gstate *g, const layout *L, si
     if (fclose(f)) {
         free(text); /* open_memstream's buffer belongs to the C library */
         return NULL;
-    }
-    if (!nprim) { /* drop the "meshes" member: a mesh without primitives is invalid */
-        char *m = strstr(text, "\"meshes\":[{");
-        char *e = m ? strstr(m, "]}],") : NULL;
-        if (m && e) {
-            memmove(m, e + 4, strlen(e + 4) + 1);
-            n = strlen(text);
-        }
     }
     *len = n;
     return text;

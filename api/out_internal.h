@@ -91,7 +91,8 @@ void *out_state_new(out_stream *s, size_t size, void (*free_state)(void *), int 
 /* Fill err with SD_ERR_NOMEM, "out of memory"; returns SD_ERR_NOMEM. */
 int out_nomem(sd_error *err);
 
-/* Viridis colour of t in [0,1] (clamped), linear RGB in [0,1]. */
+/* Viridis colour of t in [0,1] (clamped): matplotlib's sRGB colour converted to linear RGB in
+ * [0,1] (what glTF's COLOR_0 holds). */
 void out_viridis(double t, float rgb[3]);
 
 /* ---- geometry (api/geom.c) ---- */

@@ -357,6 +357,26 @@ def test_level_headers_etag_and_sizes(daemon):
     assert s.req("GET", "/levels/2", headers={"If-None-Match": '"0"'}).status_code == 200
 
 
+def test_stats_bytes_are_the_download_sizes(daemon):
+    """stats.bytes[fmt] is the length of GET /levels/L?format=fmt with default options (every
+    attribute, all parts), with and without attributes, at one- and two-digit versions."""
+    with_attrs = json.loads((REPO / "examples" / "mixed.json").read_text())
+    vec = dict(TET, attributes={"t": [0.5, 1, 2, 3], "v": [[1, 2], [3, 4], [5, 6], [7, 8]]})
+    cases = [complex_from_text(MIXED), with_attrs, complex_from_text(CUBE), vec]
+    for body in cases:
+        s = Session(daemon)
+        for puts in (1, 10):  # versions 1 and 10: the version is written into the outputs
+            while s.req("GET").json()["version"] < puts:
+                assert s.put_complex(body).status_code == 200
+            for level in (0, 1, 2):
+                stats = s.req("GET", f"/levels/{level}/stats").json()
+                assert {"glb", "gltf"} <= set(stats["bytes"])
+                for fmt, n in stats["bytes"].items():
+                    r = s.level(level, format=fmt)
+                    assert r.status_code == 200, r.text
+                    assert n == len(r.content), (fmt, level, puts, body.get("attributes"))
+
+
 def test_format_table_is_what_everything_reads(daemon):
     """`subdivd --list-formats` (the table of api/formats.c) is what the daemon serves, what the
     OpenAPI document lists (the format enum and the level's content types), what the Python client

@@ -102,7 +102,7 @@ def glb_arrays(data):
                           offset=v.get("byteOffset", 0) + a.get("byteOffset", 0))
         return x.reshape(a["count"], n).copy()
 
-    prims = [p for p in doc["meshes"][0]["primitives"] if "indices" in p]
+    prims = [p for m in doc["meshes"] for p in m["primitives"] if "indices" in p]
     assert len({p["attributes"]["POSITION"] for p in prims}) == 1
     attrs = prims[0]["attributes"]
     normal = next((p["attributes"]["NORMAL"] for p in prims if "NORMAL" in p["attributes"]), None)

@@ -53,6 +53,22 @@ SLICES = {"mixed": (1, 1, 1, 0.7531), "cube": (1, 2, -0.5, 1.0123), "blocks": (0
 VIRIDIS_0 = (0.267004, 0.004874, 0.329415)
 VIRIDIS_HALF = (0.127568, 0.566949, 0.550556)
 VIRIDIS_1 = (0.993248, 0.906157, 0.143936)
+# ... as hex colours (its documented end points)
+VIRIDIS_HEX_0, VIRIDIS_HEX_1 = "#440154", "#fde725"
+
+
+def srgb_to_linear(c):
+    """IEC 61966-2-1's sRGB transfer function inverted: glTF's COLOR_0 is linear (2.0, 3.7.2.1)."""
+    c = np.asarray(c, dtype=float)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(c):
+    c = np.asarray(c, dtype=float)
+    return np.where(c <= 0.0031308, c * 12.92, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
+LIN_0, LIN_HALF, LIN_1 = (srgb_to_linear(v) for v in (VIRIDIS_0, VIRIDIS_HALF, VIRIDIS_1))
 ATTRS = ["--xattr", "temp", "--xattr", "vec:3", "--xattr", "wide:6"]
 
 
@@ -197,15 +213,37 @@ def read_glb(path):
 
 
 def primitives_by_role(doc, lv, nslice):
-    """Map the primitives to points/curves/surfaces/solids/slice: documented order, empty parts
-    left out."""
+    """Map the parts to their primitives through the node names (docs/OUTPUTS.md): the root node
+    "level L" has one child per part shown, in the order points, curves, surfaces, solids, slice
+    (empty parts left out), node and mesh named after the part, one primitive each."""
     roles = [r for r, n in (("points", len(lv["points"])), ("curves", len(lv["edges"])),
                             ("surfaces", len(lv["triangles"])),
                             ("solids", len(lv["tetrahedra"]) + len(lv["octahedra"])),
                             ("slice", nslice)) if n]
-    prims = doc["meshes"][0]["primitives"] if roles else []
-    assert len(prims) == len(roles)
-    return dict(zip(roles, prims))
+    assert doc["scenes"][doc["scene"]]["nodes"] == [0]
+    root = doc["nodes"][0]
+    children = [doc["nodes"][i] for i in root.get("children", [])]
+    assert [c["name"] for c in children] == roles
+    assert len(doc["nodes"]) == 1 + len(roles) and len(doc.get("meshes", [])) == len(roles)
+    prims = {}
+    for c in children:
+        mesh = doc["meshes"][c["mesh"]]
+        assert mesh["name"] == c["name"] and len(mesh["primitives"]) == 1
+        prims[c["name"]] = mesh["primitives"][0]
+    return prims
+
+
+def shared_accessor_names(doc, prims):
+    """The level's parts share one accessor per attribute; every accessor is named: the
+    attribute's glTF name, "slice <name>" for the slice's own, "<part> indices"."""
+    level = [p for r, p in prims.items() if r != "slice"]
+    for key in {k for p in level for k in p["attributes"]}:
+        assert len({p["attributes"][key] for p in level if key in p["attributes"]}) == 1
+    for role, p in prims.items():
+        for key, i in p["attributes"].items():
+            assert doc["accessors"][i]["name"] == (f"slice {key}" if role == "slice" else key)
+        if "indices" in p:
+            assert doc["accessors"][p["indices"]]["name"] == f"{role} indices"
 
 
 # ---- the level in every format, compared with sdlevel -----------------------------------------
@@ -243,7 +281,8 @@ def test_gltf(tmp_path, meshes, name, level):
         assert "byteStride" not in v or v["target"] == 34962
 
     prims = primitives_by_role(doc, lv, 0)
-    assert doc["nodes"][0].get("mesh") == (0 if prims else None)
+    shared_accessor_names(doc, prims)
+    assert doc["nodes"][0]["name"] == f"level {level}" and "mesh" not in doc["nodes"][0]
     index_type = 5123 if len(p) <= 65535 else 5125
     expect = {"points": (0, lv["points"]), "curves": (1, lv["edges"]),
               "surfaces": (4, lv["triangles"])}
@@ -280,8 +319,8 @@ def test_gltf(tmp_path, meshes, name, level):
         col = acc(a["COLOR_0"])
         assert ((col >= 0) & (col <= 1)).all()
         x = p[:, 0]
-        np.testing.assert_allclose(col[x <= lo], np.tile(VIRIDIS_0, ((x <= lo).sum(), 1)), atol=1e-6)
-        np.testing.assert_allclose(col[x >= hi], np.tile(VIRIDIS_1, ((x >= hi).sum(), 1)), atol=1e-6)
+        np.testing.assert_allclose(col[x <= lo], np.tile(LIN_0, ((x <= lo).sum(), 1)), atol=1e-6)
+        np.testing.assert_allclose(col[x >= hi], np.tile(LIN_1, ((x >= hi).sum(), 1)), atol=1e-6)
     # POSITION min/max are those of the written floats (the validator checks it too)
     if prims:
         a = doc["accessors"][next(iter(prims.values()))["attributes"]["POSITION"]]
@@ -482,7 +521,7 @@ def test_parts(tmp_path, meshes, parts):
     outwrite(mesh, level, "glb", tmp_path / "p.glb", "--parts", parts, "--slice", "1,1,1,0.7531")
     validate(tmp_path / "p.glb")
     doc, _ = read_glb(tmp_path / "p.glb")
-    modes = [p["mode"] for p in doc["meshes"][0]["primitives"]]
+    modes = [pr["mode"] for m in doc["meshes"] for pr in m["primitives"]]
     expect = [m for part, m in (("points", [0]), ("curves", [1]), ("surfaces", [4]),
                                 ("solids", [4, 4])) if part in want for m in m]  # solids: + slice
     assert modes == expect
@@ -504,7 +543,7 @@ def test_nothing_to_draw(tmp_path, meshes):
                  "--slice", "0,0,1,0", "--xattr", "t", "--colormap", "t:0:1")
         validate(tmp_path / f"e.{fmt}")
     doc, _ = read_glb(tmp_path / "e.glb")
-    assert "meshes" not in doc and "mesh" not in doc["nodes"][0]
+    assert "meshes" not in doc and doc["nodes"] == [{"name": "level 1 (empty)"}]
     import vtk
     outwrite(mesh, 1, "vtu", tmp_path / "e.vtu", "--parts", "points")
     r = vtk.vtkXMLUnstructuredGridReader()
@@ -661,6 +700,7 @@ def test_slice(tmp_path, meshes, name, level):
     validate(tmp_path / "s.glb")
     doc, acc = read_glb(tmp_path / "s.glb")
     prims = primitives_by_role(doc, lv, ns)
+    shared_accessor_names(doc, prims)
     sp = prims["slice"]
     assert sp["mode"] == 4 and "indices" not in sp
     a = sp["attributes"]
@@ -671,7 +711,7 @@ def test_slice(tmp_path, meshes, name, level):
     col = acc(a["COLOR_0"])
     assert ((col >= 0) & (col <= 1)).all()
     t = affine(sv, 0)
-    np.testing.assert_allclose(col[t <= 0], np.tile(VIRIDIS_0, ((t <= 0).sum(), 1)), atol=1e-6)
+    np.testing.assert_allclose(col[t <= 0], np.tile(LIN_0, ((t <= 0).sum(), 1)), atol=1e-6)
 
 
 def test_slice_area_of_the_unit_cube(tmp_path, meshes):
@@ -697,7 +737,8 @@ def test_slice_without_solids(tmp_path, meshes):
 
 
 def test_colormap_viridis(tmp_path, meshes):
-    """COLOR_0 = viridis((t - min) / (max - min)) clamped: the published end and middle colours."""
+    """COLOR_0 = viridis((t - min) / (max - min)) clamped: the published end and middle colours,
+    converted from sRGB to linear as glTF requires."""
     mesh = meshes["surface"]
     lv = sdlevel(mesh, 1)
     x = lv["verts"][:, 0]
@@ -706,11 +747,17 @@ def test_colormap_viridis(tmp_path, meshes):
     doc, acc = read_glb(f)
     col = acc(doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"])
     assert ((col >= 0) & (col <= 1)).all()
-    np.testing.assert_allclose(col[x <= -0.5], np.tile(VIRIDIS_0, ((x <= -0.5).sum(), 1)), atol=1e-6)
-    np.testing.assert_allclose(col[x >= 0.5], np.tile(VIRIDIS_1, ((x >= 0.5).sum(), 1)), atol=1e-6)
+    np.testing.assert_allclose(col[x <= -0.5], np.tile(LIN_0, ((x <= -0.5).sum(), 1)), atol=1e-6)
+    np.testing.assert_allclose(col[x >= 0.5], np.tile(LIN_1, ((x >= 0.5).sum(), 1)), atol=1e-6)
     mid = np.abs(x) < 1e-12
     assert mid.any()
-    np.testing.assert_allclose(col[mid], np.tile(VIRIDIS_HALF, (mid.sum(), 1)), atol=1e-6)
+    np.testing.assert_allclose(col[mid], np.tile(LIN_HALF, (mid.sum(), 1)), atol=1e-6)
+    # and the hex end points #440154, #fde725: back in sRGB within their rounding to 1/255
+    for sel, hexc in ((x <= -0.5, VIRIDIS_HEX_0), (x >= 0.5, VIRIDIS_HEX_1)):
+        want = np.array([int(hexc[k:k + 2], 16) / 255 for k in (1, 3, 5)])
+        assert sel.any() and (np.abs(linear_to_srgb(col[sel]) - want) <= 0.5 / 255 + 1e-6).all()
+        # the same end colour as linear values: not the sRGB numbers themselves
+        assert (np.abs(col[sel] - want) > 0.05).any()
     # the luminance of viridis grows with t: colours ordered like the attribute
     lum = col @ np.array([0.2126, 0.7152, 0.0722])
     order = np.argsort(x)

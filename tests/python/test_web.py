@@ -7,6 +7,9 @@ Browser: tests/web/browser_test.mjs drives Debian's chromium (headless, playwrig
 a daemon started here the way `make run` starts it (default flags, another port). It prints one
 JSON report; each of its checks is one test below, so a missing check fails too. Screenshots go
 to test-output/web/.
+
+Readers: web/src/meshfile.js under node reads STL and Gmsh files meshio wrote into what meshio
+reads back.
 """
 import json
 import os
@@ -31,9 +34,11 @@ CHECKS = [
     "level_slider",      # the slider (keyboard) moves to 0 and back to 2
     "canvas_geometry",   # non-blank pixels (screenshot and read back)
     "stats_shown",       # the panel shows the level's stats as GET /levels/2/stats has them
+    "slice_colour",      # the slice in its own colour (not the solids')
     "cross_section",     # slice on (primitive present, picture changes), moved, off
     "show_hide",         # solid boundary and cage toggles
     "attribute_colour",  # colormap=NAME:min:max and its legend
+    "gltf_loader",       # the GLB in three.js's GLTFLoader: node/mesh per part, one POSITION, extras, linear COLOR_0
     "crease_tag",        # clicking a control edge with the crease tool: PUT /tags 200, tagged
     "crease_colour",     # ... its rule turns to the crease's (curve) and so does its colour
     "nonmanifold_rule",  # G1 for a vertex: 501 shown in words (until issue 4), else its colour
@@ -42,6 +47,8 @@ CHECKS = [
     "undo_redo",         # Ctrl+Z puts it back exactly, Redo moves it again
     "file_open",         # an OBJ from disk
     "file_errors",       # a broken file and a refused one are explained
+    "file_stl_msh",      # STL and Gmsh .msh from disk; the model selector shows the file
+    "level_note",        # the note under the slider says why it stops (the cell limit)
     "session_recovery",  # an expired session is replaced with the same model, and the user told
     "default_rules",     # the default-rule list is G2, G1 (N1/N2 only as overrides of one simplex)
     "occlusion",         # 10³ cubes at level 3: an interior point is not picked nor drawn, unless asked
@@ -141,3 +148,43 @@ def test_openapi_is_revalidated(daemon):
     assert r.status_code == 200 and r.headers["Cache-Control"] == "no-cache"
     assert requests.get(daemon.url + "/v1/openapi.json",
                         headers={"If-None-Match": r.headers["ETag"]}).status_code == 304
+
+
+# ---- the page's mesh file readers (web/src/meshfile.js) against meshio ------------------------
+
+READ_MESH = """
+import fs from 'node:fs';
+import { parseMeshFile } from '%s';
+const b = fs.readFileSync(process.argv[2]);
+const body = parseMeshFile(process.argv[2], b.buffer.slice(b.byteOffset, b.byteOffset + b.length));
+console.log(JSON.stringify(body));
+"""
+
+
+@pytest.mark.parametrize("fmt,ext,opts", [("stl", "stl", {"binary": True}), ("stl", "stl", {"binary": False}),
+                                          ("gmsh", "msh", {"binary": False}),
+                                          ("gmsh22", "msh", {"binary": False})])
+def test_meshfile_readers_agree_with_meshio(tmp_path, fmt, ext, opts):
+    """STL (binary, ASCII) and Gmsh .msh (4.1, 2.2 ASCII) written by meshio are read by the page's
+    reader into the points and cells meshio reads back (STL: equal points merged by both)."""
+    import meshio
+    import numpy as np
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0.5]], dtype=float)
+    if fmt == "stl":
+        cells = [("triangle", np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 4]]))]
+    elif fmt == "gmsh":  # meshio writes 4.1 for one cell type without entity data
+        cells = [("tetra", np.array([[0, 1, 2, 3], [1, 2, 3, 4]]))]
+    else:
+        cells = [("tetra", np.array([[0, 1, 2, 3]])), ("triangle", np.array([[1, 2, 4]])),
+                 ("line", np.array([[3, 4]])), ("vertex", np.array([[4]]))]
+    f = tmp_path / f"m.{ext}"
+    meshio.write(str(f), meshio.Mesh(pts, cells), file_format=fmt, **opts)
+    script = tmp_path / "read.mjs"
+    script.write_text(READ_MESH % (REPO / "web" / "src" / "meshfile.js").as_uri())
+    r = subprocess.run(["node", str(script), str(f)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    body = json.loads(r.stdout)
+    m = meshio.read(str(f))
+    np.testing.assert_allclose(np.array(body["vertices"]), m.points, rtol=1e-6)
+    want = sorted(tuple(int(i) for i in c) for block in m.cells for c in block.data)
+    assert sorted(tuple(s) for s in body["simplices"]) == want

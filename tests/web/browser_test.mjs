@@ -217,7 +217,7 @@ await step('stats_shown', async () => {
 });
 
 // 5. the cross-section: on, moved, off
-await step('cross_section', async () => {
+await step(['cross_section', 'slice_colour'], async () => {
   const before = await pixels();
   await page.check('#xsec');
   await idle('window.subdivd.snapshot().shown.query.slice !== undefined');
@@ -227,11 +227,16 @@ await step('cross_section', async () => {
   for (let i = 0; i < 15; i++) await page.keyboard.press('ArrowLeft');
   await idle(`window.subdivd.snapshot().shown.query.slice !== ${JSON.stringify(s1.shown.query.slice)}`);
   const s2 = await snap();
+  const colours = await page.evaluate(() => {
+    const parts = window.subdivd.viewer.parts, hex = (o) => o && !o.material.vertexColors && o.material.color.getHexString();
+    return { slice: hex(parts.slice), solids: parts.solids && (parts.solids.material.vertexColors ? 'vertex colours' : hex(parts.solids)) };
+  });
   await shot('04-cross-section.png');
   const moved = await pixels();
   await page.uncheck('#xsec');
   await idle('window.subdivd.snapshot().shown.query.slice === undefined');
   const s3 = await snap();
+  check('slice_colour', colours.slice === 'ff8c42' && colours.solids !== colours.slice, JSON.stringify(colours));
   check('cross_section',
     s1.shown.parts.includes('slice') && s1.slicing && s2.shown.parts.includes('slice') &&
     sigDiff(before.signature, on.signature) > 0 && sigDiff(on.signature, moved.signature) > 0 &&
@@ -270,6 +275,72 @@ await step('attribute_colour', async () => {
   check('attribute_colour', /^\w+:-?[\d.e-]+:-?[\d.e-]+$/.test(s.shown.query.colormap) && legend.includes(opt.slice(5)) &&
     sigDiff(before.signature, after.signature) > 0,
     `colormap=${s.shown.query.colormap}; legend "${legend.trim().slice(0, 80)}"`);
+});
+
+// 7b. the level GLB through three.js's own GLTFLoader (the page's instance): a named node and
+// mesh per part under "level L", one POSITION BufferAttribute shared by the level's parts,
+// asset.extras {level, version}, and COLOR_0 linear: at t = 0 and t = 1 (a colormap range above,
+// then below, every value) the sRGB->linear conversion of matplotlib's published viridis end
+// colours, computed here.
+await step('gltf_loader', async () => {
+  const r = await page.evaluate(async () => {
+    const app = window.subdivd, L = app.snapshot().shown.level;
+    const attr = Object.keys(app.model.ranges)[0];
+    const get = async (q) => {
+      const res = await fetch(`/v1/sessions/${app.session.id}/levels/${L}?${q}`, {
+        headers: { Authorization: `Bearer ${app.session.token}` }, cache: 'no-store' });
+      return { etag: res.headers.get('ETag'), gltf: await app.loader.parseAsync(await res.arrayBuffer(), '') };
+    };
+    const stats = await (await fetch(`/v1/sessions/${app.session.id}/levels/${L}/stats`, {
+      headers: { Authorization: `Bearer ${app.session.token}` }, cache: 'no-store' })).json();
+    const out = { L, attr, counts: stats.counts, runs: [] };
+    for (const q of [`colormap=${attr}:1e30:2e30`, `colormap=${attr}:-2e30:-1e30`]) {
+      const { etag, gltf } = await get(q);
+      const root = gltf.scene.children[0];
+      const kids = root.children.map((o) => ({ name: o.name, type: o.type, isPoints: !!o.isPoints, isLine: !!o.isLine,
+        isMesh: !!o.isMesh, meshName: (() => {
+          const a = gltf.parser.associations.get(o) || {}, json = gltf.parser.json;
+          const m = a.meshes ?? json.nodes[a.nodes]?.mesh;
+          return json.meshes?.[m]?.name;
+        })() }));
+      const level = root.children.filter((o) => o.name !== 'slice');
+      const pos = new Set(level.map((o) => o.geometry.attributes.position));
+      const col = level[0]?.geometry.attributes.color;
+      const colours = new Set();
+      for (const o of level) {
+        const c = o.geometry.attributes.color;
+        for (let i = 0; c && i < c.count; i++) colours.add([c.getX(i), c.getY(i), c.getZ(i)].map((x) => x.toFixed(6)).join(','));
+      }
+      out.runs.push({ etag, extras: gltf.asset.extras, rootName: root.name, sceneKids: gltf.scene.children.length, kids,
+        sharedPosition: pos.size, positionCount: level[0]?.geometry.attributes.position.count,
+        colorCount: col?.count, colours: [...colours] });
+    }
+    out.vertices = stats.counts.vertices;
+    return out;
+  });
+  const lin = (c) => (c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4);
+  const ends = [[0.267004, 0.004874, 0.329415], [0.993248, 0.906157, 0.143936]].map((c) => c.map(lin)); // #440154, #fde725
+  const c = r.counts;
+  const want = [['points', c.points, 'Points'], ['curves', c.curves, 'Line'], ['surfaces', c.triangles, 'Mesh'],
+    ['solids', c.tetrahedra + c.octahedra, 'Mesh']].filter((w) => w[1] > 0);
+  const problems = [];
+  r.runs.forEach((run, k) => {
+    if (run.sceneKids !== 1 || run.rootName !== `level_${r.L}` && run.rootName !== `level ${r.L}`) problems.push(`root ${run.rootName} (${run.sceneKids})`);
+    if (run.kids.map((o) => o.name).join() !== want.map((w) => w[0]).join()) problems.push(`parts ${run.kids.map((o) => o.name)}`);
+    run.kids.forEach((o, i) => {
+      const w = want[i];
+      if (!w) return;
+      const kind = w[2] === 'Points' ? o.isPoints : w[2] === 'Line' ? o.isLine : o.isMesh;
+      if (!kind || o.meshName !== w[0]) problems.push(`${o.name}: ${o.type}, mesh "${o.meshName}"`);
+    });
+    if (run.sharedPosition !== 1 || run.positionCount !== r.vertices) problems.push(`POSITION: ${run.sharedPosition} attributes of ${run.positionCount}`);
+    const version = Number(JSON.parse(run.etag));
+    if (JSON.stringify(run.extras) !== JSON.stringify({ level: r.L, version })) problems.push(`extras ${JSON.stringify(run.extras)} (ETag ${run.etag})`);
+    const got = run.colours.map((s) => s.split(',').map(Number));
+    if (got.length !== 1 || got[0].some((x, j) => Math.abs(x - ends[k][j]) > 2e-6)) problems.push(`COLOR_0 at t=${k}: ${run.colours.slice(0, 3)} (want ${ends[k].map((x) => x.toFixed(6))})`);
+  });
+  check('gltf_loader', !problems.length,
+    problems.length ? problems.join('; ') : `level ${r.L}: ${want.map((w) => w[0])}; COLOR_0 ${ends.map((e) => e.map((x) => x.toFixed(4)).join(','))} on "${r.attr}"`);
 });
 
 // Control edges to click: the middle of each must pick exactly it (nothing nearer), away from
@@ -463,6 +534,48 @@ await step(['file_open', 'file_errors'], async () => {
     `broken file: ${m1}; refused file: ${m2}`);
 });
 
+// 12b. STL and Gmsh .msh from disk (the repository's examples, read as bytes): the model and the
+// selector show the file; the note under the slider says why it stops (the page's cell limit,
+// counted here independently: a triangle makes 4 per level).
+await step(['file_stl_msh', 'level_note'], async () => {
+  const got = [];
+  for (const [file, points, cells] of [['ball.stl', 42, 80], ['block.msh', 9, 11]]) {
+    await page.setInputFiles('#file', path.join('examples', file));
+    await idle(`window.subdivd.snapshot().model === ${JSON.stringify(file)}`);
+    const s = await snap();
+    const sel = await page.$eval('#example', (e) => e.options[e.selectedIndex].textContent);
+    got.push({ file, points: s.controlPoints.length, simplices: await page.evaluate(() => window.subdivd.model.complex.simplices.length),
+      level: s.shown.level, sel, want: [points, cells] });
+  }
+  await shot('11b-msh.png');
+  check('file_stl_msh', got.every((g) => g.points === g.want[0] && g.simplices === g.want[1] && g.level === 2 && g.sel === `file: ${g.file}`),
+    JSON.stringify(got));
+  // the slider's stop: ball.stl (80 triangles, 80·4^L cells) at the page's deepest level 6; a
+  // 100 × 50 grid of squares (10 000 triangles) where the next level passes 2 M cells
+  const ballNote = await page.textContent('#level-note');
+  const ballMax = await page.$eval('#level', (e) => Number(e.max));
+  const nx = 100, ny = 50, grid = [];
+  for (let j = 0; j <= ny; j++) for (let i = 0; i <= nx; i++) grid.push(`v ${i / nx} ${j / nx} ${0.1 * Math.sin(i / 7) * Math.cos(j / 5)}`);
+  for (let j = 0; j < ny; j++) for (let i = 0; i < nx; i++) {
+    const a = j * (nx + 1) + i + 1;
+    grid.push(`f ${a} ${a + 1} ${a + nx + 2}`, `f ${a} ${a + nx + 2} ${a + nx + 1}`);
+  }
+  const gridFile = path.join(outdir, 'grid.obj');
+  fs.writeFileSync(gridFile, grid.join('\n') + '\n');
+  await page.setInputFiles('#file', gridFile);
+  await idle(`window.subdivd.snapshot().model === 'grid.obj'`);
+  let L = 0;
+  while (L < 6 && 2 * nx * ny * 4 ** (L + 1) <= 2e6) L++;
+  const note = await page.textContent('#level-note');
+  const max = await page.$eval('#level', (e) => Number(e.max));
+  check('level_note', ballMax === 6 && /level 6/.test(ballNote) && max === L && note.includes(`level ${L}`) &&
+    note.includes(`level ${L + 1}`) && /limit/.test(note),
+    `ball.stl: max ${ballMax}, "${ballNote}"; grid: max ${max} (expected ${L}), "${note}"`);
+  // back to the model the next steps had before
+  await page.setInputFiles('#file', path.join(outdir, 'tetra_with_tail.obj'));
+  await idle(`window.subdivd.snapshot().model === 'tetra_with_tail.obj'`);
+});
+
 // 13. a session that expired (deleted here behind the page's back) is replaced, and the user told
 await step('session_recovery', async () => {
   const before = await snap();
@@ -492,7 +605,7 @@ const compareWithRefetch = (pg, level) => pg.evaluate(async (level) => {
   const jlen = dv.getUint32(12, true);
   const gltf = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 20, jlen)));
   const bin = 20 + jlen + 8;
-  const attrs = gltf.meshes[0].primitives.find((p) => p.mode !== 4 || p.indices !== undefined).attributes;
+  const attrs = gltf.meshes.flatMap((m) => m.primitives).find((p) => p.mode !== 4 || p.indices !== undefined).attributes;
   const read = (name) => {
     const a = gltf.accessors[attrs[name]], bv = gltf.bufferViews[a.bufferView];
     return new Uint32Array(buf.slice(bin + (bv.byteOffset || 0) + (a.byteOffset || 0), bin + (bv.byteOffset || 0) + (a.byteOffset || 0) + a.count * 12));

@@ -17,7 +17,7 @@ import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import * as THREE from 'three';
 import { Session, ApiError } from './api.js';
 import { EXAMPLES } from './examples.js';
-import { parseMeshFile } from './meshfile.js';
+import { parseMeshFile, BINARY_TYPES } from './meshfile.js';
 import { Viewer } from './viewer.js';
 import { RULE_NAMES, RULE_DESCRIPTIONS, ruleFamily, ruleHex, viridisCss } from './colors.js';
 
@@ -36,9 +36,10 @@ const TOOL_HINTS = {
 
 const key = (s) => [...s].sort((a, b) => a - b).join(',');
 
-// Top cells of the finest level the slider offers: segments double, triangles quadruple, a
-// tetrahedron splits into 4 tetrahedra + 1 octahedron and an octahedron into 8 + 6 (core/split.c).
-function maxLevel(summary) {
+// The finest level the slider offers and why it stops there: segments double, triangles
+// quadruple, a tetrahedron splits into 4 tetrahedra + 1 octahedron and an octahedron into 8 + 6
+// (core/split.c). {max, next}: next is the top-cell count of level max + 1 (null at MAX_LEVEL).
+function levelRange(summary) {
   const s = summary?.simplices || {};
   const P = s['0'] || 0;
   let E = s['1'] || 0, T = s['2'] || 0, Tet = s['3'] || 0, O = 0;
@@ -46,10 +47,13 @@ function maxLevel(summary) {
     E *= 2;
     T *= 4;
     [Tet, O] = [4 * Tet + 8 * O, Tet + 6 * O];
-    if (P + E + T + Tet + O > MAX_CELLS) return Math.max(1, L - 1);
+    const cells = P + E + T + Tet + O;
+    if (cells > MAX_CELLS) return { max: Math.max(1, L - 1), next: L > 1 ? cells : null };
   }
-  return MAX_LEVEL;
+  return { max: MAX_LEVEL, next: null };
 }
+
+const millions = (n) => `${(n / 1e6).toPrecision(3)} M`;
 
 function fnv1a(buf) {
   const b = new Uint8Array(buf);
@@ -214,7 +218,8 @@ class App {
     // the cross-section moves through the solids (all of the model when it has none)
     const inSolids = complex.simplices.filter((s) => s.length === 4).flat();
     const solidBox = inSolids.length ? new THREE.Box3().setFromPoints(inSolids.map((i) => new THREE.Vector3(...complex.vertices[i]))) : bbox;
-    this.model = { name, complex, summary, ranges, bbox, solidBox, maxLevel: maxLevel(summary) };
+    const range = levelRange(summary);
+    this.model = { name, complex, summary, ranges, bbox, solidBox, maxLevel: range.max };
     this.undoStack = [];
     this.redoStack = [];
     this.selected = null;
@@ -223,7 +228,11 @@ class App {
     $('level').max = this.model.maxLevel;
     $('level').value = this.level;
     $('level-value').textContent = this.level;
+    this.#levelNote(range.next === null
+      ? `The slider stops at level ${range.max}, the deepest the page offers.`
+      : `The slider stops at level ${range.max}: level ${range.max + 1} would have ${millions(range.next)} cells, over the page's limit of ${millions(MAX_CELLS)}.`);
     $('model-name').textContent = `${name}: ${complex.vertices.length} vertices, ${complex.simplices.length} simplices`;
+    this.#syncModelSelect(name);
     // colour choices: rule families, each attribute, plain
     const sel = $('color-mode');
     sel.replaceChildren(new Option('rule family', 'rule'));
@@ -238,6 +247,42 @@ class App {
     this.#syncRuleControls();
     this.#syncUndo();
     this.#tagsNote();
+  }
+
+  // The model selector shows what is loaded: the example of that name, else the file's name
+  // (an extra option, "file: NAME").
+  #syncModelSelect(name) {
+    const sel = $('example');
+    const ex = EXAMPLES.find((e) => e.name === name);
+    let opt = [...sel.options].find((o) => o.value === 'file');
+    if (ex) {
+      opt?.remove();
+      sel.value = ex.id;
+      return;
+    }
+    if (!opt) sel.append(opt = new Option('', 'file'));
+    opt.textContent = `file: ${name}`;
+    sel.value = 'file';
+  }
+
+  // The daemon refused a level by one of its limits (413 with `limit`: max_cells, its cell
+  // count estimate, or max_session_bytes): the slider stops below it and says why.
+  #levelRefused(e) {
+    if (!(e instanceof ApiError && e.status === 413 && e.problem.limit !== undefined && this.model)) return;
+    const L = this.level;
+    if (L < 1) return;
+    this.model.maxLevel = Math.min(this.model.maxLevel, L - 1);
+    this.level = Math.min(this.shown?.level ?? L - 1, this.model.maxLevel);
+    $('level').max = this.model.maxLevel;
+    $('level').value = this.level;
+    $('level-value').textContent = this.level;
+    const what = e.problem.limit_name || e.problem.name || 'its limit';
+    this.#levelNote(`The slider stops at level ${this.model.maxLevel}: the daemon refuses level ${L} (${what}: ${e.problem.detail || e.message}).`);
+  }
+
+  // Why the level slider stops where it does (under the slider).
+  #levelNote(text) {
+    $('level-note').textContent = text;
   }
 
   async #refreshComplex() {
@@ -263,7 +308,8 @@ class App {
   async openFile(file) {
     let body;
     try {
-      body = parseMeshFile(file.name, await file.text());
+      const binary = BINARY_TYPES.includes(file.name.toLowerCase().split('.').pop());
+      body = parseMeshFile(file.name, binary ? await file.arrayBuffer() : await file.text());
     } catch (e) {
       this.error(`Reading ${file.name} failed: ${e.message}`);
       return;
@@ -296,6 +342,7 @@ class App {
       } catch (e) {
         this.levelWanted = false;
         this.error(e);
+        this.#levelRefused(e);
       } finally {
         this.levelPromise = null;
       }
@@ -1021,7 +1068,8 @@ class App {
     for (const ex of EXAMPLES) sel.append(new Option(ex.name, ex.id));
     const loadExample = () => {
       const ex = EXAMPLES.find((e) => e.id === sel.value);
-      this.loadModel(ex.name, ex.make(), { attribute: ex.attribute });
+      if (ex) this.loadModel(ex.name, ex.make(), { attribute: ex.attribute });
+      else this.info('Choose an example to load (the file shown is the one loaded).');
     };
     sel.addEventListener('change', loadExample);
     $('load-example').addEventListener('click', loadExample);

@@ -1,5 +1,7 @@
 // Mesh files from disk -> PUT /complex bodies. Formats: Wavefront OBJ (`v`, `f` polygons fanned
 // into triangles, `l` polylines, `p` points), OFF (faces fanned; 2-index faces are segments),
+// STL (ASCII or binary; equal points merged, in order of first use), Gmsh .msh (ASCII 2.2 and
+// 4.1: points, lines, triangles, quadrangles fanned, tetrahedra; nodes in the file's order),
 // JSON (a PUT /complex body as it is) and the sdlevel text format (`v`, `s`; docs/TEXT_FORMAT.md).
 // Parsing errors throw with the file's line number; everything else is left to the daemon,
 // whose 422 names the offending simplex.
@@ -125,14 +127,161 @@ export function parseJson(text, name = 'JSON') {
   return j;
 }
 
-// The PUT /complex body of a file, chosen by its extension.
-export function parseMeshFile(fileName, text) {
+// STL: triangles of corner coordinates; equal points (exactly equal coordinates) become one
+// vertex, numbered in order of first use. Binary when the size is 84 + 50 n for the n of its
+// header (an ASCII file starting "solid" can be binary too), else ASCII.
+export function parseStl(data, name = 'STL') {
+  const vertices = [], simplices = [], ids = new Map();
+  const vertex = (x, y, z) => {
+    const k = `${x},${y},${z}`;
+    let i = ids.get(k);
+    if (i === undefined) {
+      i = vertices.length;
+      ids.set(k, i);
+      vertices.push([x, y, z]);
+    }
+    return i;
+  };
+  const bytes = typeof data === 'string' ? new TextEncoder().encode(data) : new Uint8Array(data);
+  const dv = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
+  if (bytes.byteLength >= 84 && 84 + 50 * dv.getUint32(80, true) === bytes.byteLength) {
+    const n = dv.getUint32(80, true);
+    for (let t = 0; t < n; t++) {
+      const o = 84 + 50 * t + 12; // after the facet normal
+      const xyz = [0, 1, 2].map((k) => [0, 4, 8].map((d) => dv.getFloat32(o + 12 * k + d, true)));
+      if (!xyz.flat().every(Number.isFinite)) throw new Error(`${name}: triangle ${t + 1} has a coordinate that is not a finite number`);
+      simplices.push(xyz.map(([x, y, z]) => vertex(x, y, z)));
+    }
+  } else {
+    const text = typeof data === 'string' ? data : new TextDecoder().decode(bytes);
+    let corners = [];
+    text.split(/\r?\n/).forEach((raw, k) => {
+      const w = raw.trim().split(/\s+/);
+      if (w[0] === 'vertex') {
+        if (w.length < 4) fail(name, k + 1, 'a vertex needs x y z');
+        const [x, y, z] = numbers(name, k + 1, w.slice(1, 4));
+        corners.push(vertex(x, y, z));
+      } else if (w[0] === 'endloop') {
+        if (corners.length !== 3) fail(name, k + 1, `a facet has ${corners.length} vertices, not 3`);
+        simplices.push(corners);
+        corners = [];
+      }
+    });
+    if (!/^\s*solid/.test(text)) throw new Error(`${name}: neither ASCII STL (no "solid" at the start) nor binary STL (size is not 84 + 50 × the triangle count of its header)`);
+  }
+  if (!simplices.length) throw new Error(`${name}: no triangles`);
+  return { vertices, simplices };
+}
+
+// Gmsh .msh, ASCII 2.2 or 4.1 ($MeshFormat, $Nodes, $Elements; other sections skipped). Element
+// types: 15 point, 1 line, 2 triangle, 3 quadrangle (fanned), 4 tetrahedron; any other type is
+// refused (the daemon takes simplices). Physical groups are not read here (the CLI, `subdiv put`,
+// reads them as tags).
+export function parseMsh(data, name = 'MSH') {
+  const text = typeof data === 'string' ? data : new TextDecoder().decode(new Uint8Array(data));
+  const lines = text.split(/\r?\n/);
+  let p = 0;
+  const section = (tag) => {
+    while (p < lines.length && lines[p].trim() !== tag) p++;
+    if (p >= lines.length) throw new Error(`${name}: no ${tag} section`);
+    p++;
+  };
+  const row = () => {
+    while (p < lines.length && !lines[p].trim()) p++;
+    if (p >= lines.length) fail(name, p, 'file ends early');
+    return [lines[p++].trim().split(/\s+/).map(Number), p];
+  };
+  const ints = (ln, v, what) => {
+    if (v.some((x) => !Number.isInteger(x))) fail(name, ln, `expected integers (${what})`);
+    return v;
+  };
+  section('$MeshFormat');
+  const [fmt, fln] = row();
+  const version = fmt[0];
+  if (fmt[1] === 1) fail(name, fln, 'binary .msh is not read in the browser (save it as ASCII, or use `subdiv put`)');
+  if (!(version >= 2 && version < 3) && version !== 4.1) fail(name, fln, `format ${version}: only 2.2 and 4.1 are read`);
+  const index = new Map(), vertices = [];
+  section('$Nodes');
+  const node = (ln, tag, xyz) => {
+    if (xyz.length < 3 || !xyz.every(Number.isFinite)) fail(name, ln, 'a node needs x y z');
+    index.set(tag, vertices.length);
+    vertices.push(xyz.slice(0, 3));
+  };
+  if (version < 3) {
+    const [[n], ln0] = row();
+    ints(ln0, [n], 'the node count');
+    for (let i = 0; i < n; i++) {
+      const [v, ln] = row();
+      node(ln, v[0], v.slice(1));
+    }
+  } else {
+    const [[blocks], ln0] = row();
+    ints(ln0, [blocks], 'the block count');
+    for (let b = 0; b < blocks; b++) {
+      const [h, ln] = row();
+      const [, , parametric, n] = ints(ln, h, 'a node block header');
+      const tags = [];
+      for (let i = 0; i < n; i++) tags.push(row()[0][0]);
+      for (let i = 0; i < n; i++) {
+        const [v, vl] = row();
+        if (parametric) v.length = 3;
+        node(vl, tags[i], v);
+      }
+    }
+  }
+  const SIZE = { 15: 1, 1: 2, 2: 3, 3: 4, 4: 4 };
+  const simplices = [];
+  const element = (ln, type, tags) => {
+    if (!(type in SIZE)) fail(name, ln, `element type ${type} is not a point, line, triangle, quadrangle or tetrahedron (the daemon takes simplices; convert the mesh, e.g. with gmsh)`);
+    if (tags.length < SIZE[type]) fail(name, ln, `element type ${type} needs ${SIZE[type]} nodes`);
+    const ids = tags.slice(0, SIZE[type]).map((t) => {
+      const i = index.get(t);
+      if (i === undefined) fail(name, ln, `node ${t} is not defined`);
+      return i;
+    });
+    if (type === 3) simplices.push([ids[0], ids[1], ids[2]], [ids[0], ids[2], ids[3]]);
+    else simplices.push(ids);
+  };
+  section('$Elements');
+  if (version < 3) {
+    const [[n], ln0] = row();
+    ints(ln0, [n], 'the element count');
+    for (let i = 0; i < n; i++) {
+      const [v, ln] = row();
+      ints(ln, v, 'an element');
+      element(ln, v[1], v.slice(3 + v[2]));
+    }
+  } else {
+    const [[blocks], ln0] = row();
+    ints(ln0, [blocks], 'the block count');
+    for (let b = 0; b < blocks; b++) {
+      const [h, ln] = row();
+      const [, , type, n] = ints(ln, h, 'an element block header');
+      for (let i = 0; i < n; i++) {
+        const [v, el] = row();
+        element(el, type, ints(el, v, 'an element').slice(1));
+      }
+    }
+  }
+  if (!vertices.length) throw new Error(`${name}: no nodes`);
+  return { vertices, simplices };
+}
+
+// The extensions openFile reads as bytes (the others are text).
+export const BINARY_TYPES = ['stl', 'msh'];
+
+// The PUT /complex body of a file, chosen by its extension: data is its text, or for STL and
+// .msh its bytes (an ArrayBuffer) or text.
+export function parseMeshFile(fileName, data) {
   const ext = fileName.toLowerCase().split('.').pop();
+  const text = () => (typeof data === 'string' ? data : new TextDecoder().decode(new Uint8Array(data)));
   switch (ext) {
-    case 'obj': return parseObj(text, fileName);
-    case 'off': return parseOff(text, fileName);
-    case 'json': return parseJson(text, fileName);
-    case 'txt': return parseText(text, fileName);
-    default: throw new Error(`${fileName}: unknown file type ".${ext}" (OBJ, OFF, JSON or the sdlevel .txt format)`);
+    case 'obj': return parseObj(text(), fileName);
+    case 'off': return parseOff(text(), fileName);
+    case 'stl': return parseStl(data, fileName);
+    case 'msh': return parseMsh(data, fileName);
+    case 'json': return parseJson(text(), fileName);
+    case 'txt': return parseText(text(), fileName);
+    default: throw new Error(`${fileName}: unknown file type ".${ext}" (OBJ, OFF, STL, Gmsh .msh, JSON or the sdlevel .txt format)`);
   }
 }

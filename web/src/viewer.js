@@ -2,10 +2,11 @@
 // posted complex, from GET /complex) on top of it, an optional cross-section plane, and the
 // screen-space picking the tools need. It knows nothing of HTTP; main.js feeds it.
 //
-// Level GLB layout (docs/OUTPUTS.md): primitives in the order points, curves, surfaces, solids,
-// slice, empty ones left out. POINTS and LINES are unambiguous; of the indexed TRIANGLES ones the
-// first is the surfaces when the level has surface triangles (its stats), the other the solid
-// boundary; the non-indexed TRIANGLES one without `_RULE` is the slice.
+// Level GLB layout (docs/OUTPUTS.md): a root node "level L" with one child node per part, each
+// with its own mesh of one primitive, node and mesh named after the part: points, curves,
+// surfaces, solids, slice (empty ones left out). GLTFLoader gives each its node's name.
+// COLOR_0 is linear (glTF 2.0 3.7.2.1) as three.js's vertex colours are; the renderer's output
+// colour space (sRGB) does the rest.
 //
 // Live edits: every primitive indexes the one POSITION (and NORMAL) accessor, whose order is the
 // level's vertex order, so a delta (api.js parseDelta) is written in place at its indices
@@ -24,7 +25,8 @@ import { ruleColor } from './colors.js';
 
 export const BACKGROUND = 0x1e2229;
 const PLAIN = { points: 0xffffff, curves: 0xffa94d, surfaces: 0xc9d6c4, solids: 0xb8c7e0 };
-const SLICE = 0xff8c42;
+const SLICE = 0xff8c42; // the cross-section's own colour (not the solids')
+const PARTS = ['points', 'curves', 'surfaces', 'solids', 'slice']; // node names of a level GLB
 const TAG = 0xffffff;
 
 function discTexture() {
@@ -47,17 +49,6 @@ function discTexture() {
 function colorsFromRules(ruleAttr) {
   const out = new Float32Array(ruleAttr.count * 3);
   for (let i = 0; i < ruleAttr.count; i++) ruleColor(Math.round(ruleAttr.getX(i))).toArray(out, 3 * i);
-  return new THREE.BufferAttribute(out, 3);
-}
-
-// COLOR_0 holds matplotlib's (sRGB) viridis values; convert so the screen shows viridis.
-function colorsFromSrgb(attr) {
-  const out = new Float32Array(attr.count * 3);
-  const c = new THREE.Color();
-  for (let i = 0; i < attr.count; i++) {
-    c.setRGB(attr.getX(i), attr.getY(i), attr.getZ(i), THREE.SRGBColorSpace);
-    c.toArray(out, 3 * i);
-  }
   return new THREE.BufferAttribute(out, 3);
 }
 
@@ -229,17 +220,9 @@ export class Viewer {
     this.levelGroup.clear();
     this.parts = {};
     const prims = [];
-    gltf.scene.traverse((o) => { if (o.isMesh || o.isPoints || o.isLine) prims.push(o); });
-    const tris = prims.filter((o) => o.isMesh && o.geometry.index);
-    const surfacesFirst = (stats?.counts?.triangles ?? 0) > 0;
+    gltf.scene.traverse((o) => { if ((o.isMesh || o.isPoints || o.isLine) && PARTS.includes(o.name)) prims.push(o); });
     for (const o of prims) {
-      const g = o.geometry;
-      let part;
-      if (o.isPoints) part = 'points';
-      else if (o.isLine) part = 'curves';
-      else if (!g.index && !g.attributes._rule) part = 'slice';
-      else part = tris.length === 2 ? (o === tris[0] ? 'surfaces' : 'solids') : (surfacesFirst ? 'surfaces' : 'solids');
-      this.parts[part] = this.#makePart(part, g);
+      this.parts[o.name] = this.#makePart(o.name, o.geometry);
       o.material?.dispose();
     }
     for (const o of Object.values(this.parts)) {
@@ -251,7 +234,7 @@ export class Viewer {
     const positions = new Set(), normals = new Set();
     for (const o of prims) {
       const g = o.geometry;
-      if (!g.index && !g.attributes._rule) continue; // the slice has its own vertices
+      if (o.name === 'slice') continue; // the slice has its own vertices
       if (g.attributes.position) positions.add(g.attributes.position);
       if (g.attributes.normal) normals.add(g.attributes.normal);
     }
@@ -265,7 +248,7 @@ export class Viewer {
 
   #makePart(part, g) {
     g.userData.ruleColors = g.attributes._rule ? colorsFromRules(g.attributes._rule) : null;
-    g.userData.attrColors = g.attributes.color ? colorsFromSrgb(g.attributes.color) : null;
+    g.userData.attrColors = g.attributes.color || null; // COLOR_0: linear already
     g.deleteAttribute('color');
     if (part === 'points') {
       const m = new THREE.PointsMaterial({ size: 6, sizeAttenuation: false, map: this.disc, alphaTest: 0.5 });
@@ -293,8 +276,16 @@ export class Viewer {
 
   applyColors() {
     for (const [part, o] of Object.entries(this.parts)) {
-      if (part === 'slice') continue;
       const g = o.userData.source || o.geometry;
+      if (part === 'slice') { // its own colour; the attribute's when colouring by one
+        const colors = this.colorMode === 'attribute' ? g.userData.attrColors : null;
+        if (colors) g.setAttribute('color', colors);
+        else g.deleteAttribute('color');
+        o.material.vertexColors = !!colors;
+        o.material.color.setHex(colors ? 0xffffff : SLICE);
+        o.material.needsUpdate = true;
+        continue;
+      }
       const colors = this.colorMode === 'rule' ? g.userData.ruleColors
         : this.colorMode === 'attribute' ? g.userData.attrColors : null;
       if (part === 'curves') {
