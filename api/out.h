@@ -58,6 +58,8 @@ enum {
 
 #define OUT_MAX_ATTRS 32
 
+enum { OUT_COMPRESS_NONE = 0, OUT_COMPRESS_ZLIB = 1 };
+
 /* One per-vertex attribute to write: a channel of the complex. */
 typedef struct out_attr {
     const char *name;   /* as posted, e.g. "temperature" (glTF writes "_TEMPERATURE") */
@@ -77,6 +79,8 @@ typedef struct out_request {
     int colormap_attr;       /* index into attrs of the attribute coloured into COLOR_0, or -1 */
     double colormap_min, colormap_max;
     int octahedra_as_polyhedra; /* VTU/VTK: octahedra as VTK_POLYHEDRON (42) instead of 4 tets */
+    int field_names;         /* VTU/VTK: FieldData string arrays rule_names and kind_names */
+    int compress;            /* VTU: OUT_COMPRESS_ZLIB (vtkZLibDataCompressor blocks), else raw */
     /* Optional: geometry computed earlier for this level with all parts (see
      * out_geometry_compute), so that a cached level streams without recomputing it. The stream
      * takes a reference on it. */

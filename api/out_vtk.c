@@ -29,7 +29,7 @@ enum { VT_VERTEX = 1, VT_LINE = 3, VT_TRIANGLE = 5, VT_TETRA = 10, VT_POLYHEDRON
 enum { SLICE_KIND = 5 };
 
 typedef enum {
-    A_ATTR, A_RULE, A_DIM, A_KIND, A_SRC, A_POINTS, A_CONN, A_OFFS, A_TYPES, A_FACES, A_FOFFS
+    A_ATTR, A_RULE, A_DIM, A_KIND, A_SRC, A_CTRL, A_POINTS, A_CONN, A_OFFS, A_TYPES, A_FACES, A_FOFFS
 } arr_id;
 
 /* Arrays (out_section): id an arr_id, arg the attribute (A_ATTR), width the bytes per component
@@ -165,6 +165,12 @@ static void put_item(out_stream *s, const vstate *st, const arr *a, uint64_t i)
         put_num(s, st, a->width, 0,
                 a->id == A_DIM ? c.dim : a->id == A_KIND ? c.kind : a->id == A_SRC ? c.src : c.type);
         break;
+    case A_CTRL: { /* a slice triangle: the cut cell's (src names it, slice.kind its kind) */
+        cell_at(s, st, i, &c);
+        int k = c.kind == SLICE_KIND ? s->slice.kind[i - st->r_sl] : c.kind;
+        put_num(s, st, a->width, 0, sd_level_control_cell(s->lv, (sd_cell_kind)k, (uint32_t)c.src));
+        break;
+    }
     case A_CONN:
         cell_at(s, st, i, &c);
         if (st->legacy)
@@ -285,13 +291,13 @@ static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
                  (unsigned long long)(st->nconn + st->ncell));
         a = out_section_add(&st->a, A_TYPES, 0, 1, 4, st->ncell);
         snprintf(a->head, sizeof a->head, "CELL_TYPES %llu\n", (unsigned long long)st->ncell);
-        static const char *const cnames[] = {"dimension", "kind", "source_cell"};
-        static const arr_id cids[] = {A_DIM, A_KIND, A_SRC};
-        for (int k = 0; k < 3; k++) {
+        static const char *const cnames[] = {"dimension", "kind", "source_cell", "control_cell"};
+        static const arr_id cids[] = {A_DIM, A_KIND, A_SRC, A_CTRL};
+        for (int k = 0; k < 4; k++) {
             a = out_section_add(&st->a, cids[k], 0, 1, 4, st->ncell);
             char first[64] = "";
             if (k == 0) /* the block header comes with the first array */
-                snprintf(first, sizeof first, "CELL_DATA %llu\nFIELD FieldData 3\n",
+                snprintf(first, sizeof first, "CELL_DATA %llu\nFIELD FieldData 4\n",
                          (unsigned long long)st->ncell);
             snprintf(a->head, sizeof a->head, "%s%s 1 %llu int\n", first, cnames[k],
                      (unsigned long long)st->ncell);
@@ -320,6 +326,7 @@ static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
         a = out_section_add(&st->a, A_CONN, 0, 1, 4, st->ncell);
         a->bytes = 4 * st->nconn;
         out_section_add(&st->a, A_POINTS, 0, 3, 8, st->npts);
+        out_section_add(&st->a, A_CTRL, 0, 1, 4, st->ncell);
         out_section_add(&st->a, A_SRC, 0, 1, 4, st->ncell);
         out_section_add(&st->a, A_KIND, 0, 1, 1, st->ncell);
         out_section_add(&st->a, A_DIM, 0, 1, 1, st->ncell);
@@ -328,6 +335,75 @@ static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
             out_section_add(&st->a, A_ATTR, i, s->rq.attrs[i].ncomp, 8, st->npts);
     }
     return 0;
+}
+
+/* The names of the `kind` cell data values (sd_cell_kind, then the slice). */
+static const char *const KIND_NAMES[] = {"point", "curve", "triangle", "tetrahedron", "octahedron",
+                                         "slice"};
+
+/* One string array of FieldData: n names, name(i) the i-th. XML: ASCII character codes, each
+ * string ended by 0 (VTK's own XML writer); legacy binary: each string after its length byte
+ * 0xC0 | length (vtkDataWriter, strings shorter than 64 bytes). */
+static void string_array(FILE *f, bool legacy, const char *array, int n, const char *(*name)(int))
+{
+    if (legacy)
+        fprintf(f, "%s 1 %d string\n", array, n);
+    else
+        fprintf(f, "      <Array type=\"String\" Name=\"%s\" NumberOfTuples=\"%d\" "
+                   "format=\"ascii\">\n       ", array, n);
+    for (int i = 0; i < n; i++) {
+        const char *t = name(i);
+        size_t len = strlen(t);
+        if (legacy) {
+            fputc(0xC0 | (int)len, f); /* the names are short (asserted by their tables) */
+            fwrite(t, 1, len, f);
+        } else {
+            for (size_t k = 0; k <= len; k++)
+                fprintf(f, " %d", (unsigned char)t[k]);
+        }
+    }
+    fprintf(f, legacy ? "\n" : "\n      </Array>\n");
+}
+
+static const char *rule_name_at(int i) { return sd_rule_name((sd_rule)i); }
+static const char *kind_name_at(int i) { return KIND_NAMES[i]; }
+
+/* The dataset's FieldData: `level` (Int32) and `version` (Int64; legacy: double), and with rq.field_names
+ * `rule_names` (index = the `rule` point data value) and `kind_names` (index = `kind`). */
+static void field_data(const out_stream *s, FILE *f, bool legacy)
+{
+    bool names = s->rq.field_names;
+    if (legacy) {
+        unsigned char b[8];
+        uint32_t l = (uint32_t)s->rq.level;
+        uint64_t v = s->rq.version;
+        fprintf(f, "FIELD FieldData %d\nlevel 1 1 int\n", names ? 4 : 2);
+        for (int k = 0; k < 4; k++)
+            b[k] = (unsigned char)(l >> (24 - 8 * k)); /* big-endian */
+        fwrite(b, 1, 4, f);
+        /* legacy: a double (exact below 2^53), since meshio 7 reads no vtktypeint64 and
+         * "long" is 4 bytes on some platforms */
+        fprintf(f, "\nversion 1 1 double\n");
+        double d = (double)v;
+        uint64_t u;
+        memcpy(&u, &d, 8);
+        for (int k = 0; k < 8; k++)
+            b[k] = (unsigned char)(u >> (56 - 8 * k));
+        fwrite(b, 1, 8, f);
+        fprintf(f, "\n");
+    } else
+        fprintf(f, "    <FieldData>\n"
+                   "      <DataArray type=\"Int32\" Name=\"level\" NumberOfTuples=\"1\" "
+                   "format=\"ascii\">%d</DataArray>\n"
+                   "      <DataArray type=\"Int64\" Name=\"version\" NumberOfTuples=\"1\" "
+                   "format=\"ascii\">%llu</DataArray>\n",
+                s->rq.level, (unsigned long long)s->rq.version);
+    if (names) {
+        string_array(f, legacy, "rule_names", SD_RULE_COUNT, rule_name_at);
+        string_array(f, legacy, "kind_names", 6, kind_name_at);
+    }
+    if (!legacy)
+        fprintf(f, "    </FieldData>\n");
 }
 
 static int build_header(out_stream *s, vstate *st, sd_error *err)
@@ -340,6 +416,7 @@ static int build_header(out_stream *s, vstate *st, sd_error *err)
     if (st->legacy) {
         fprintf(f, "# vtk DataFile Version 3.0\nsubdivd level %d version %llu\nBINARY\n"
                    "DATASET UNSTRUCTURED_GRID\n", s->rq.level, (unsigned long long)s->rq.version);
+        field_data(s, f, true);
     } else {
         static const char *const tname[] = {[1] = "UInt8", [4] = "Int32", [8] = "Float64"};
         uint64_t off[OUT_MAX_ATTRS + 12];
@@ -347,8 +424,9 @@ static int build_header(out_stream *s, vstate *st, sd_error *err)
             off[k] = k ? off[k - 1] + 8 + st->a.s[k - 1].bytes : 0;
         int i = st->a.n - 1; /* elements in XML order = blocks from the last */
         fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" "
-                   "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <UnstructuredGrid>\n"
-                   "    <Piece NumberOfPoints=\"%llu\" NumberOfCells=\"%llu\">\n      <PointData>\n",
+                   "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <UnstructuredGrid>\n");
+        field_data(s, f, false);
+        fprintf(f, "    <Piece NumberOfPoints=\"%llu\" NumberOfCells=\"%llu\">\n      <PointData>\n",
                 (unsigned long long)st->npts, (unsigned long long)st->ncell);
 #define DA(name, extra)                                                                            \
     do {                                                                                           \
@@ -367,6 +445,7 @@ static int build_header(out_stream *s, vstate *st, sd_error *err)
         DA("dimension", "");
         DA("kind", "");
         DA("source_cell", "");
+        DA("control_cell", "");
         fprintf(f, "      </CellData>\n      <Points>\n");
         DA("Points", " NumberOfComponents=\"3\"");
         fprintf(f, "      </Points>\n      <Cells>\n");
