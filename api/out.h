@@ -114,7 +114,8 @@ void out_geometry_free(out_geometry *g);
  * borrows nothing of rq but the complex. Returns NULL and fills err (code SD_ERR_ARG for a bad request, message
  * naming the offending option) on failure. */
 out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err);
-/* Total size in bytes if known in advance (GLB, glTF, VTU, VTK), else UINT64_MAX (JSON). */
+/* Total size in bytes if known in advance (GLB, glTF, VTU, VTK), else UINT64_MAX (JSON,
+ * compressed VTU). */
 uint64_t out_size(const out_stream *s);
 /* Fill up to `cap` bytes of buf; returns the number written (> 0), 0 at the end, -1 on an
  * internal failure (the stream can only be cut short then). */

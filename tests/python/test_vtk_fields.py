@@ -175,3 +175,73 @@ def test_bad_parameters(session):
     assert "vtu" in p["detail"]
     problem(session.level(1, format="json", compress="zlib"), 422, "compress")
     assert session.level(1, format="vtk", compress="none").status_code == 200
+
+
+def arrays(g):
+    """Every point and cell data array, the points and the cells of a grid, as numpy arrays."""
+    out = {"Points": vtk_to_numpy(g.GetPoints().GetData()),
+           "types": vtk_to_numpy(g.GetCellTypesArray()),
+           "connectivity": vtk_to_numpy(g.GetCells().GetConnectivityArray()),
+           "offsets": vtk_to_numpy(g.GetCells().GetOffsetsArray())}
+    for kind, d in (("point", g.GetPointData()), ("cell", g.GetCellData())):
+        for i in range(d.GetNumberOfArrays()):
+            out[kind + ":" + d.GetArrayName(i)] = vtk_to_numpy(d.GetArray(i))
+    return out
+
+
+@pytest.mark.parametrize("level", [0, 2, 5])
+@pytest.mark.parametrize("opts", [{}, {"slice": "0.3,0.2,1,0.4", "names": "true"},
+                                  {"octahedra": "polyhedra"}, {"parts": "curves"}])
+def test_zlib_vtu(session, tmp_path, level, opts):
+    raw = session.level(level, format="vtu", **opts)
+    z = session.level(level, format="vtu", compress="zlib", **opts)
+    assert raw.status_code == 200 and z.status_code == 200, z.text
+    assert "Content-Length" in raw.headers
+    assert "Content-Length" not in z.headers and z.headers["Transfer-Encoding"] == "chunked"
+    assert z.headers["ETag"] == raw.headers["ETag"]
+    fr, fz = tmp_path / "raw.vtu", tmp_path / "z.vtu"
+    fr.write_bytes(raw.content)
+    fz.write_bytes(z.content)
+    assert b'compressor="vtkZLibDataCompressor"' in z.content[:400]
+    gr, gz = read_vtk(fr), read_vtk(fz)
+    assert gz.GetNumberOfPoints() == gr.GetNumberOfPoints() > 0
+    assert gz.GetNumberOfCells() == gr.GetNumberOfCells()
+    ar, az = arrays(gr), arrays(gz)
+    assert ar.keys() == az.keys()
+    for k in ar:
+        assert ar[k].dtype == az[k].dtype and (ar[k] == az[k]).all(), k
+    if level == 5 and not opts:  # several 32 KiB blocks per array, and smaller than raw
+        assert gz.GetNumberOfPoints() * 24 > 3 * 32768 and len(z.content) < len(raw.content)
+    if opts.get("octahedra") or opts.get("names"):
+        return  # meshio 7 reads polyhedra only alone, and no string arrays
+    mr, mz = meshio.read(str(fr)), meshio.read(str(fz))
+    assert (mr.points == mz.points).all()
+    assert [c.type for c in mr.cells] == [c.type for c in mz.cells]
+    for a, b in zip(mr.cells, mz.cells):
+        assert (a.data == b.data).all()
+    for k in mr.cell_data:
+        assert all((a == b).all() for a, b in zip(mr.cell_data[k], mz.cell_data[k])), k
+    for k in mr.point_data:
+        assert (mr.point_data[k] == mz.point_data[k]).all(), k
+
+
+def test_offline_same_bytes(daemon, tmp_path):
+    """`subdivd refine` writes what the daemon streams (both version 1: a fresh session)."""
+    import json
+    import subprocess
+
+    from daemon import SUBDIVD
+    s = Session(daemon)
+    assert s.put_complex(BODY).status_code == 200
+    src = tmp_path / "c.json"
+    src.write_text(json.dumps(BODY))
+    for flags, params in ((["--compress", "zlib", "--names", "true"], {"compress": "zlib", "names": "true"}),
+                          ([], {})):
+        out = tmp_path / "o.vtu"
+        r = subprocess.run([str(SUBDIVD), "refine", str(src), "--level", "2", "-o", str(out), *flags],
+                           capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        assert out.read_bytes() == s.level(2, format="vtu", **params).content
+    r = subprocess.run([str(SUBDIVD), "refine", str(src), "--level", "1", "-o", str(tmp_path / "o.vtk"),
+                        "--compress", "zlib"], capture_output=True, text=True)
+    assert r.returncode == 1 and "compress" in r.stderr
