@@ -245,3 +245,40 @@ def test_offline_same_bytes(daemon, tmp_path):
     r = subprocess.run([str(SUBDIVD), "refine", str(src), "--level", "1", "-o", str(tmp_path / "o.vtk"),
                         "--compress", "zlib"], capture_output=True, text=True)
     assert r.returncode == 1 and "compress" in r.stderr
+
+
+def test_pvd_time_series(daemon, tmp_path):
+    """`subdiv refine --pvd DIR`: levels.pvd (parsed as XML: python3-vtk9 has no vtkPVDReader)
+    lists level_K.vtu at timestep K for K = 0..L, each readable by VTK with FieldData level K and
+    the cell counts of the split table."""
+    import json
+    import os
+    import subprocess
+    import xml.etree.ElementTree as ET
+
+    from conftest import REPO
+    src = tmp_path / "c.json"
+    src.write_text(json.dumps(BODY))
+    out = tmp_path / "series"
+    r = subprocess.run([str(REPO / "build" / "subdiv"), "refine", str(src), "--level", "3",
+                        "--pvd", str(out), "--compress", "zlib", "--url", daemon.url, "-q"],
+                       capture_output=True, text=True, timeout=300, env=dict(os.environ))
+    assert r.returncode == 0, r.stderr
+    root = ET.parse(out / "levels.pvd").getroot()
+    assert root.tag == "VTKFile" and root.get("type") == "Collection"
+    sets = root.find("Collection").findall("DataSet")
+    assert [(d.get("timestep"), d.get("file")) for d in sets] == \
+        [(str(k), f"level_{k}.vtu") for k in range(4)]
+    assert sorted(p.name for p in out.iterdir()) == ["level_0.vtu", "level_1.vtu", "level_2.vtu",
+                                                     "level_3.vtu", "levels.pvd"]
+    # top cells per kind from the split table: tets 2, octahedra 0 at level 0
+    npt, ncu, ntr, nt, no = 1, 2, 1, 2, 0  # [8]; [7,1], [5,6]; [1,2,5]; two tets (see BODY)
+    for k, d in enumerate(sets):
+        g = read_vtk(out / d.get("file"))
+        assert vtk_to_numpy(g.GetFieldData().GetArray("level")).tolist() == [k]
+        kind = vtk_to_numpy(g.GetCellData().GetArray("kind"))
+        assert [(kind == c).sum() for c in range(5)] == [npt, ncu, ntr, nt, 4 * no]
+        ncu, ntr, nt, no = 2 * ncu, 4 * ntr, 4 * nt + 8 * no, nt + 6 * no
+    r = subprocess.run([str(REPO / "build" / "subdiv"), "refine", str(src), "--level", "1",
+                        "--url", daemon.url], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "--pvd" in r.stderr
