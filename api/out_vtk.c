@@ -58,7 +58,7 @@ typedef struct vstate {
     z_stream zs;
     bool zs_ready;
     unsigned char *cbuf;  /* the current array's compressed blocks */
-    size_t ccap, clen;
+    size_t ccap, clen, zbound; /* zbound: deflateBound of one block */
     unsigned char *hbuf;  /* its header: UInt64 nblocks, block size, last block size, sizes */
     uint64_t nblk, blk_fill;
     int zstep;            /* per array: 0 text, 1 compress, 2 header, 3 data, 4 next */
@@ -254,8 +254,8 @@ static void z_feed(vstate *st, const unsigned char *p, size_t n)
 {
     while (n) {
         if (st->blk_fill == 0) { /* a new block */
-            st->zs.next_out = st->cbuf + st->clen;
-            st->zs.avail_out = (uInt)(st->ccap - st->clen);
+            st->zs.next_out = st->cbuf + st->clen; /* room for the block's bound (uInt) */
+            st->zs.avail_out = (uInt)st->zbound;
         }
         size_t k = ZBLOCK - st->blk_fill;
         if (k > n)
@@ -363,7 +363,8 @@ static bool z_prepare(vstate *st)
         return false;
     st->zs_ready = true;
     uint64_t nb = z_nblocks(most);
-    st->ccap = (size_t)(nb * deflateBound(&st->zs, ZBLOCK));
+    st->zbound = deflateBound(&st->zs, ZBLOCK);
+    st->ccap = (size_t)(nb * st->zbound);
     st->cbuf = api_malloc(st->ccap ? st->ccap : 1);
     st->hbuf = api_malloc((size_t)(8 * (3 + nb)));
     return st->cbuf && st->hbuf;
