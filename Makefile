@@ -4,7 +4,7 @@ CXX     ?= g++
 CFLAGS  ?= -O2 -g
 override CFLAGS += -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -fPIC
 LDLIBS  += -llapacke -llapack -lm
-API_LIBS := $(shell pkg-config --libs jansson 2>/dev/null || echo -ljansson)
+API_LIBS := $(shell pkg-config --libs jansson zlib 2>/dev/null || echo -ljansson -lz)
 SRV_LIBS := $(shell pkg-config --libs libmicrohttpd 2>/dev/null || echo -lmicrohttpd) -lpthread
 PYTHON  ?= /usr/bin/python3
 B       := build
@@ -13,7 +13,7 @@ CORE_SRC := $(wildcard core/*.c)
 CORE_OBJ := $(patsubst %.c,$(B)/%.o,$(CORE_SRC))
 CORE_LIB := $(B)/libsubdiv.a
 
-.PHONY: all test bench soak sanitize fuzz run deps clean clean-build
+.PHONY: all test test-paraview bench soak sanitize fuzz run deps clean clean-build
 all: $(CORE_LIB) $(B)/sdlevel $(B)/test_core
 
 $(B)/%.o: %.c $(wildcard core/*.h)
@@ -86,6 +86,19 @@ run: deps
 test: deps
 	$(MAKE) all $(OSD_LOOP)
 	@sh tests/run_all.sh
+
+# ParaView itself opens our VTU (raw and zlib), legacy VTK and a PVD series of examples/mixed.json
+# (tests/paraview/check.py). Not part of `make test` or CI: Debian's paraview is a large install,
+# done here when pvpython is missing (apt-get needs root).
+PV_DIR := $(B)/paraview
+test-paraview: all
+	@command -v pvpython >/dev/null 2>&1 || DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends paraview
+	rm -rf $(PV_DIR) && mkdir -p $(PV_DIR)
+	./$(B)/subdivd refine examples/mixed.json --level 2 -o $(PV_DIR)/level.vtu
+	./$(B)/subdivd refine examples/mixed.json --level 2 --compress zlib --names true -o $(PV_DIR)/level_z.vtu
+	./$(B)/subdivd refine examples/mixed.json --level 2 -o $(PV_DIR)/level.vtk
+	SUBDIVD=$(B)/subdivd ./$(B)/subdiv refine examples/mixed.json --level 2 --pvd $(PV_DIR)/series --spawn -q
+	pvpython tests/paraview/check.py examples/mixed.json 2 $(PV_DIR)
 
 sanitize: deps
 	$(MAKE) clean-build B=build-asan

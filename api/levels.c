@@ -180,6 +180,26 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
             return api_fail_at(p, 422, "unknown-value", "octahedra",
                                "octahedra is \"tets\" (4 tetrahedra each) or \"polyhedra\"");
     }
+    bool vtk = !strcmp((*fmt)->name, "vtu") || !strcmp((*fmt)->name, "vtk");
+    if (q->names) {
+        if (!strcmp(q->names, "true"))
+            rq->field_names = 1;
+        else if (strcmp(q->names, "false"))
+            return api_fail_at(p, 422, "unknown-value", "names", "names is \"true\" or \"false\"");
+        if (!vtk)
+            return api_fail_at(p, 422, "not-applicable", "names",
+                               "names applies to format vtu and vtk only, not %s", (*fmt)->name);
+    }
+    if (q->compress) {
+        if (!strcmp(q->compress, "zlib"))
+            rq->compress = OUT_COMPRESS_ZLIB;
+        else if (strcmp(q->compress, "none"))
+            return api_fail_at(p, 422, "unknown-value", "compress",
+                               "compress is \"none\" or \"zlib\"");
+        if (rq->compress && strcmp((*fmt)->name, "vtu"))
+            return api_fail_at(p, 422, "not-applicable", "compress",
+                               "compress=zlib applies to format vtu only, not %s", (*fmt)->name);
+    }
     return 0;
 }
 

@@ -58,6 +58,8 @@ enum {
 
 #define OUT_MAX_ATTRS 32
 
+enum { OUT_COMPRESS_NONE = 0, OUT_COMPRESS_ZLIB = 1 };
+
 /* One per-vertex attribute to write: a channel of the complex. */
 typedef struct out_attr {
     const char *name;   /* as posted, e.g. "temperature" (glTF writes "_TEMPERATURE") */
@@ -77,6 +79,8 @@ typedef struct out_request {
     int colormap_attr;       /* index into attrs of the attribute coloured into COLOR_0, or -1 */
     double colormap_min, colormap_max;
     int octahedra_as_polyhedra; /* VTU/VTK: octahedra as VTK_POLYHEDRON (42) instead of 4 tets */
+    int field_names;         /* VTU/VTK: FieldData string arrays rule_names and kind_names */
+    int compress;            /* VTU: OUT_COMPRESS_ZLIB (vtkZLibDataCompressor blocks), else raw */
     /* Optional: geometry computed earlier for this level with all parts (see
      * out_geometry_compute), so that a cached level streams without recomputing it. The stream
      * takes a reference on it. */
@@ -110,7 +114,8 @@ void out_geometry_free(out_geometry *g);
  * borrows nothing of rq but the complex. Returns NULL and fills err (code SD_ERR_ARG for a bad request, message
  * naming the offending option) on failure. */
 out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err);
-/* Total size in bytes if known in advance (GLB, glTF, VTU, VTK), else UINT64_MAX (JSON). */
+/* Total size in bytes if known in advance (GLB, glTF, VTU, VTK), else UINT64_MAX (JSON,
+ * compressed VTU). */
 uint64_t out_size(const out_stream *s);
 /* Fill up to `cap` bytes of buf; returns the number written (> 0), 0 at the end, -1 on an
  * internal failure (the stream can only be cut short then). */

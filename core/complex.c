@@ -214,6 +214,7 @@ static void add_simplices(sd_complex *c, sd_topo *t, sd_hash *he, sd_hash *hf, c
             }
             for (int i = 0; i < 4; i++)
                 used[q[i]] = 1;
+            c->in_src[SD_CELL_TETRA][t->ntet] = s;
             c->in_tet[s] = t->ntet++;
         }
         off += size[s];
@@ -227,6 +228,7 @@ static void add_simplices(sd_complex *c, sd_topo *t, sd_hash *he, sd_hash *hf, c
             uint32_t f = face_id(hf, t, q, &isnew);
             if (isnew) {
                 t->fflag[f] |= FF_MAX;
+                c->in_src[SD_CELL_TRIANGLE][t->ntr] = s;
                 t->tr[t->ntr++] = f;
                 for (int k = 0; k < 3; k++)
                     edge_id(he, t, q[k], q[(k + 1) % 3]);
@@ -244,6 +246,7 @@ static void add_simplices(sd_complex *c, sd_topo *t, sd_hash *he, sd_hash *hf, c
             uint32_t before = t->ne;
             uint32_t e = edge_id(he, t, q[0], q[1]);
             if (e == before) {
+                c->in_src[SD_CELL_CURVE][t->ncu] = s;
                 t->cu[t->ncu++] = e;
                 used[q[0]] = used[q[1]] = 1;
             }
@@ -255,6 +258,7 @@ static void add_simplices(sd_complex *c, sd_topo *t, sd_hash *he, sd_hash *hf, c
     for (uint32_t s = 0; s < ns; s++) {
         if (size[s] == 1 && !used[idx[off]]) {
             used[idx[off]] = 2;
+            c->in_src[SD_CELL_POINT][t->npt] = s;
             t->pt[t->npt++] = idx[off];
         }
         off += size[s];
@@ -305,10 +309,16 @@ sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const 
     t->tet_d = sdi_calloc(m, count[4] + 1, 1);
     t->tet_b = sdi_calloc(m, count[4] + 1, 1);
     c->in_tet = sdi_alloc(m, (size_t)ns * sizeof *c->in_tet);
+    c->in_src[SD_CELL_TETRA] = sdi_alloc(m, ((size_t)ns + 1) * sizeof *c->in_tet);
+    if (c->in_src[SD_CELL_TETRA]) { /* kinds in the order of add_simplices, each its count */
+        c->in_src[SD_CELL_TRIANGLE] = c->in_src[SD_CELL_TETRA] + count[4];
+        c->in_src[SD_CELL_CURVE] = c->in_src[SD_CELL_TRIANGLE] + count[3];
+        c->in_src[SD_CELL_POINT] = c->in_src[SD_CELL_CURVE] + count[2];
+    }
     c->tet_swapped = sdi_calloc(m, count[4] + 1, 1);
     used = sdi_calloc(m, nv, 1);
     if (!t->ev || !t->fv || !t->fe || !t->fflag || !t->fn3 || !t->pt || !t->cu || !t->tr ||
-        !t->tet || !t->tet_e || !t->tet_f || !t->tet_d || !t->tet_b || !c->in_tet || !c->tet_swapped ||
+        !t->tet || !t->tet_e || !t->tet_f || !t->tet_d || !t->tet_b || !c->in_tet || !c->in_src[SD_CELL_TETRA] || !c->tet_swapped ||
         !used || !sdi_hash_init(m, &he, emax) || !sdi_hash_init(m, &hf, fmax))
         goto nomem;
     c->nin = ns;
@@ -434,6 +444,7 @@ void sd_complex_free(sd_complex *c)
     sdi_free(&c->mem, c->ov);
     sdi_free(&c->mem, c->pet);
     sdi_free(&c->mem, c->in_tet);
+    sdi_free(&c->mem, c->in_src[SD_CELL_TETRA]);
     sdi_free(&c->mem, c->tet_swapped);
     sd_mem m = c->mem;
     sdi_free(&m, c);

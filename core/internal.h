@@ -419,6 +419,8 @@ struct sd_complex {
     /* input bookkeeping */
     uint32_t nin;              /* number of input simplices */
     uint32_t *in_tet;          /* input simplex -> tetrahedron id (or UINT32_MAX) */
+    uint32_t *in_src[5];       /* per sd_cell_kind, level-0 cell -> input simplex (one block
+                                * of nin at in_src[SD_CELL_TETRA]; no octahedra at level 0) */
     uint8_t *tet_swapped;      /* level-0 tet reoriented (slots 2,3 swapped) */
     int nlevels;               /* computed levels */
     /* the singular tags and per-simplex rules as given (singular.c re-applies both to level 0) */

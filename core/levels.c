@@ -232,6 +232,32 @@ const uint32_t *sd_level_edges(const sd_level *lv, uint32_t *n)
     return &lv->t.ev[0][0];
 }
 
+uint32_t sd_level_control_cell(const sd_level *lv, sd_cell_kind k, uint32_t i)
+{
+    const sd_complex *c = lv->cx;
+    for (uint32_t l = lv->index; l > 0; l--) {
+        uint32_t T = c->lv[l - 1]->t.ntet; /* the parent level's tetrahedra */
+        switch (k) {
+        case SD_CELL_POINT: break;
+        case SD_CELL_CURVE: i /= 2; break;
+        case SD_CELL_TRIANGLE: i /= 4; break;
+        case SD_CELL_TETRA:
+            if (i < 4 * T)
+                i /= 4;
+            else
+                i = (i - 4 * T) / 8, k = SD_CELL_OCTA;
+            break;
+        case SD_CELL_OCTA:
+            if (i < T)
+                k = SD_CELL_TETRA;
+            else
+                i = (i - T) / 6;
+            break;
+        }
+    }
+    return k == SD_CELL_OCTA ? UINT32_MAX : c->in_src[k][i]; /* level 0 has no octahedra */
+}
+
 sd_origin_kind sd_level_origin(const sd_level *lv, uint32_t i, uint32_t *a, uint32_t *b)
 {
     *a = *b = UINT32_MAX;

@@ -158,6 +158,13 @@ uint32_t sd_level_num_cells(const sd_level *lv, sd_cell_kind k);
 /* Write the vertex ids of cell i of kind k into v (sd_cell_size(k) ids). */
 void sd_level_cell(const sd_level *lv, sd_cell_kind k, uint32_t i, uint32_t *v);
 
+/* The input simplex (its index among the posted ones) that cell i of kind k of this level
+ * descends from: level 0's cells are posted simplices; a child's parent is closed form
+ * (core/split.c): points keep their index, curve i comes from i/2, triangle i from i/4,
+ * tetrahedron t from tetrahedron t/4 (t < 4 parent tets) or octahedron (t - 4T)/8, octahedron o
+ * from tetrahedron o (o < T) or octahedron (o - T)/6. */
+uint32_t sd_level_control_cell(const sd_level *lv, sd_cell_kind k, uint32_t i);
+
 /* All edges of the level (2n ids), in the order edge points are numbered at level L+1. */
 /* On the finest computed level, the first call builds the level's edges (see Threading above);
  * NULL and *n = 0 if that fails for lack of memory. */

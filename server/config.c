@@ -79,6 +79,7 @@ void config_usage(FILE *f)
                "       subdivd refine INPUT.json --level L [--tags T.json] [--rules R.json]\n"
                "               [--format F] [--parts P] [--slice nx,ny,nz,d] [--attributes A]\n"
                "               [--colormap NAME:min:max] [--octahedra tets|polyhedra]\n"
+               "               [--names true|false] [--compress none|zlib]\n"
                "               -o OUT%s\n"
                "       subdivd --list-routes | --list-formats\n"
                "       subdivd --healthcheck [URL]   (exit 0 if URL, default "

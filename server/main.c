@@ -125,6 +125,8 @@ static int parse_refine_args(int argc, char **argv, refine_args *a)
                            : !strcmp(o, "--attributes") ? &a->q.attributes
                            : !strcmp(o, "--colormap") ? &a->q.colormap
                            : !strcmp(o, "--octahedra") ? &a->q.octahedra
+                           : !strcmp(o, "--names") ? &a->q.names
+                           : !strcmp(o, "--compress") ? &a->q.compress
                                                        : NULL;
         if (dst) {
             if (i + 1 >= argc) {

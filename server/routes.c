@@ -621,7 +621,7 @@ static void stream_refused(req *r, api_model *m, const api_problem *p)
 }
 
 static const char *const LEVEL_KEYS[] = {"format", "parts", "slice", "attributes", "colormap",
-                                         "octahedra", NULL};
+                                         "octahedra", "names", "compress", NULL};
 
 static void get_level(req *r, api_model *m, int level)
 {
@@ -636,7 +636,7 @@ static void get_level(req *r, api_model *m, int level)
     }
 #define Q(k) http_arg(r, k)
     api_level_query q = {Q("format"), Q("parts"), Q("slice"), Q("attributes"), Q("colormap"),
-                         Q("octahedra")};
+                         Q("octahedra"), Q("names"), Q("compress")};
 #undef Q
     out_stream *os = NULL;
     const out_format *fmt;

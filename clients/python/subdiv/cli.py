@@ -3,7 +3,8 @@
     subdiv refine INPUT --level L -o OUT [-o OUT2 ...] [--tags T.json] [--rules R.json]
                   [--fill [--max-volume V] [--min-ratio R]] [--singular-groups A,B]
                   [--parts P] [--slice nx,ny,nz,d] [--attributes A] [--colormap NAME:min:max]
-                  [--octahedra tets|polyhedra] [--save-complex C.json]
+                  [--octahedra tets|polyhedra] [--names true|false] [--compress none|zlib]
+                  [--pvd DIR] [--save-complex C.json]
     subdiv batch JOBS.json [--fail-fast]
     subdiv convert INPUT -o BODY.json [--tags-out T.json] [--fill ...] [--singular-groups A,B]
 
@@ -12,7 +13,8 @@ a private daemon on a free loopback port for the run: --subdivd PATH, default $S
 subdivd beside this program, else on PATH), and --progress auto|bar|lines|none.
 
 INPUT: OBJ, OFF, STL, Gmsh .msh, VTK .vtk/.vtu, TetGen .node/.ele (meshio) or a PUT /complex body
-(.json). OUT: .glb, .gltf, .vtu, .vtk or .json (the level's format). The job file format and the
+(.json). OUT: .glb, .gltf, .vtu, .vtk or .json (the level's format). --pvd DIR writes the levels
+0..L as DIR/level_K.vtu and the ParaView time series DIR/levels.pvd (timestep K = level K). The job file format and the
 exit codes are in clients/README.md; exit codes: 0 done, 1 the daemon refused the input (4xx),
 2 usage, file or mesh error, 3 the daemon failed or could not be reached, 4 the daemon does not
 implement an option that was asked for (501), 130 interrupted. `batch` exits with the code of its
@@ -33,9 +35,9 @@ from .client import FORMATS, Client
 from .errors import ProblemError, SubdivError, TransportError
 
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_DAEMON, EXIT_NOT_IMPLEMENTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
-LEVEL_OPTS = ("parts", "slice", "attributes", "colormap", "octahedra")
+LEVEL_OPTS = ("parts", "slice", "attributes", "colormap", "octahedra", "names", "compress")
 JOB_KEYS = {"input", "output", "outputs", "level", "tags", "rules", "fill", "singular_groups", "options",
-            "name", "save_complex"}
+            "name", "save_complex", "pvd"}
 
 
 class UsageError(Exception):
@@ -220,12 +222,50 @@ def _output_format(path):
     return ext
 
 
+PVD_NAME = "levels.pvd"
+
+
+def pvd_text(files):
+    """A ParaView collection (.pvd) of the VTU files `files` (names relative to it), the K-th at
+    timestep K: VTK's Collection layout, as ParaView writes it."""
+    rows = "".join(f'    <DataSet timestep="{k}" group="" part="0" file="{f}"/>\n'
+                   for k, f in enumerate(files))
+    return ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1" '
+            'byte_order="LittleEndian">\n  <Collection>\n' + rows + "  </Collection>\n</VTKFile>\n")
+
+
+def write_pvd(s, level, directory, options, progress, name):
+    """Levels 0..level of session s as DIR/level_K.vtu, then DIR/levels.pvd (written last, as
+    .part renamed: it exists only once every level is there). Returns [(path, bytes)]."""
+    d = pathlib.Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    results, files = [], []
+    for k in range(level + 1):
+        out = d / f"level_{k}.vtu"
+        progress.begin(f"{name} -> {out.name}")
+        n = s.level(k, format="vtu", out=str(out), progress=progress, **options)
+        progress.done("download", n)
+        results.append((str(out), n))
+        files.append(out.name)
+    text = pvd_text(files).encode()
+    part = d / (PVD_NAME + ".part")
+    part.write_bytes(text)
+    os.replace(part, d / PVD_NAME)
+    results.append((str(d / PVD_NAME), len(text)))
+    return results
+
+
 def run_job(client, job, progress, base=pathlib.Path(".")):
-    """One input through one session: rules, complex, tags, then every output. Returns a list
-    of (output path, bytes)."""
+    """One input through one session: rules, complex, tags, then every output (and with "pvd"
+    the time series of levels 0..L). Returns a list of (output path, bytes)."""
     inp = str(base / job["input"]) if not os.path.isabs(job["input"]) else job["input"]
     level = job["level"]
-    outputs = [o if os.path.isabs(o) else str(base / o) for o in job["outputs"]]
+    outputs = [o if os.path.isabs(o) else str(base / o) for o in job.get("outputs") or []]
+    pvd = job.get("pvd")
+    if pvd is not None:
+        pvd = pvd if os.path.isabs(pvd) else str(base / pvd)
+    if not outputs and pvd is None:
+        raise UsageError("give an output (-o) or --pvd DIR")
     for o in outputs:
         _output_format(o)
     fill = job.get("fill")
@@ -261,6 +301,8 @@ def run_job(client, job, progress, base=pathlib.Path(".")):
                         **job.get("options", {}))
             progress.done("download", n)
             results.append((out, n))
+        if pvd is not None:
+            results += write_pvd(s, level, pvd, job.get("options", {}), progress, name)
     progress.finish()
     extra = ""
     if fills:
@@ -298,7 +340,7 @@ def _report(e, what):
 
 
 def _job_from_args(args):
-    job = {"input": args.input, "level": args.level, "outputs": args.output,
+    job = {"input": args.input, "level": args.level, "outputs": args.output or [], "pvd": args.pvd,
            "tags": args.tags, "rules": args.rules,
            "options": {k: getattr(args, k) for k in LEVEL_OPTS if getattr(args, k) is not None}}
     if args.fill or args.max_volume is not None or args.min_ratio is not None:
@@ -357,6 +399,8 @@ def parse_jobs(path):
         opts = dict(defaults.get("options", {}))
         opts.update(j.get("options", {}))
         job["options"] = opts
+        if "pvd" in job:
+            job.setdefault("outputs", [])
         for k in ("input", "outputs", "level"):
             if k not in job:
                 raise UsageError(f"{path}: /jobs/{i}: \"{k}\" is required")
@@ -367,6 +411,8 @@ def parse_jobs(path):
                              f"{sorted(set(job['options']) - set(LEVEL_OPTS))[0]!r}")
         stem = pathlib.Path(job["input"]).stem
         job["outputs"] = [str(o).format(name=stem, level=job["level"]) for o in job["outputs"]]
+        if job.get("pvd") is not None:
+            job["pvd"] = str(job["pvd"]).format(name=stem, level=job["level"])
         jobs.append(job)
     return base, jobs
 
@@ -445,8 +491,10 @@ def build_parser():
     r = sub.add_parser("refine", parents=[common, mesh], help="one mesh to one or more outputs")
     r.add_argument("input")
     r.add_argument("--level", "-l", type=int, required=True)
-    r.add_argument("-o", "--output", action="append", required=True,
-                   help="an output file: .glb .gltf .vtu .vtk .json (repeatable)")
+    r.add_argument("-o", "--output", action="append",
+                   help="an output file: .glb .gltf .vtu .vtk .json (repeatable; or --pvd)")
+    r.add_argument("--pvd", metavar="DIR", help="levels 0..L as DIR/level_K.vtu and the time "
+                   "series DIR/levels.pvd (ParaView opens it; timestep K = level K)")
     r.add_argument("--tags", help="a PUT /tags body (JSON file)")
     r.add_argument("--rules", help="a PUT /rules body (JSON file)")
     for k in LEVEL_OPTS:

@@ -28,7 +28,7 @@ import requests
 from .errors import ProblemError, TransportError, error_for
 
 FORMATS = ("glb", "gltf", "vtu", "vtk", "json")
-LEVEL_OPTIONS = ("parts", "slice", "attributes", "colormap", "octahedra")
+LEVEL_OPTIONS = ("parts", "slice", "attributes", "colormap", "octahedra", "names", "compress")
 
 
 class _Upload:
@@ -303,7 +303,7 @@ class Session:
     # levels
     def level(self, level, format="glb", *, out=None, progress=None, if_none_match=None, **options):
         """GET /levels/{L}: the level in `format` with the options of docs/OUTPUTS.md (parts,
-        slice, attributes, colormap, octahedra). With `out` (a path) it is streamed into the
+        slice, attributes, colormap, octahedra, names, compress). With `out` (a path) it is streamed into the
         file (written as OUT.part, renamed when complete) and the byte count is returned;
         otherwise the bytes. With `if_none_match` (a version): None when unchanged (304)."""
         params = {"format": format}
