@@ -151,6 +151,11 @@ class Client:
         """GET /v1/openapi.json."""
         return self.request("GET", "/v1/openapi.json").json()
 
+    def error_page(self, slug):
+        """GET /errors/<slug>: the Markdown page of a problem type (ProblemError.slug); NotFound
+        for a slug the daemon does not have."""
+        return self.request("GET", "/errors/" + slug).text
+
     def wait_ready(self, timeout=10):
         """Poll /readyz until it answers 200 (TransportError after `timeout` seconds)."""
         deadline = time.time() + timeout
@@ -505,4 +510,5 @@ ROUTES = {
     ("GET", "/readyz"): "Client.readyz",
     ("GET", "/metrics"): "Client.metrics",
     ("GET", "/v1/openapi.json"): "Client.openapi",
+    ("GET", "/errors/{slug}"): "Client.error_page",
 }
