@@ -56,6 +56,7 @@ def test_console_script_and_import(venv, tmp_path):
     assert r.returncode == 0, r.stderr
     path, version, name = json.loads(r.stdout)
     assert path.startswith(str(venv)), path   # the installed copy, not clients/python
+    assert (venv / path).parent.joinpath("py.typed").exists()
     assert name == "Client"
     r = subprocess.run([str(venv / "bin" / "subdiv"), "--version"], capture_output=True,
                        text=True, env=clean_env(), cwd=tmp_path)
