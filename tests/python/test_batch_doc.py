@@ -14,18 +14,18 @@ VALIDATOR = REPO / "tests" / "tools" / "gltf_validate.js"
 
 
 def blocks():
-    return re.findall(r"^```sh\n(.*?)^```", DOC.read_text(), flags=re.S | re.M)
+    return re.findall(r"^```sh\n(.*?)^```", DOC.read_text(encoding="utf-8"), flags=re.S | re.M)
 
 
 def test_walkthrough_runs_as_written(tmp_path):
     assert len(blocks()) >= 8
     script = tmp_path / "walkthrough.sh"
-    script.write_text("set -eu\n" + "\n".join(blocks()))
+    script.write_text("set -eu\n" + "\n".join(blocks()), encoding="utf-8")
     env = dict(os.environ, OUT=str(tmp_path / "out"))   # PORT unset: the page's default
     env.pop("SUBDIV_URL", None)
     env.pop("PORT", None)
     p = subprocess.Popen(["sh", str(script)], cwd=REPO, env=env, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, start_new_session=True)
+                         stderr=subprocess.PIPE, encoding="utf-8", start_new_session=True)
     try:
         out, err = p.communicate(timeout=300)
     finally:
@@ -45,7 +45,7 @@ def test_walkthrough_runs_as_written(tmp_path):
     assert "3 job(s): 3 done, 0 failed" in err
     assert (o / "ball.vtu").read_bytes() == (o / "ball-offline.vtu").read_bytes()
     r = subprocess.run(["node", str(VALIDATOR), *map(str, sorted(o.glob("**/*.glb")))],
-                       capture_output=True, text=True)
+                       capture_output=True, encoding="utf-8")
     assert r.returncode == 0, r.stdout + r.stderr
 
 
@@ -57,10 +57,10 @@ def test_first_block_fails_loudly_when_its_daemon_cannot_start(tmp_path):
         taken.listen(1)
         port = taken.getsockname()[1]
         script = tmp_path / "first.sh"
-        script.write_text("set -eu\n" + blocks()[0] + '\necho "reached the end"\n')
+        script.write_text("set -eu\n" + blocks()[0] + '\necho "reached the end"\n', encoding="utf-8")
         env = dict(os.environ, PORT=str(port), OUT=str(tmp_path / "out"))
         env.pop("SUBDIV_URL", None)
         r = subprocess.run(["sh", str(script)], cwd=REPO, env=env, capture_output=True,
-                           text=True, timeout=60)
+                           encoding="utf-8", timeout=60)
     assert r.returncode != 0 and "reached the end" not in r.stdout
     assert "subdivd did not start" in r.stderr and "cannot listen" in r.stderr, r.stderr

@@ -31,7 +31,7 @@ def served(tmp_path_factory):
 
 
 def test_every_operation_has_4xx_answers(served):
-    doc = json.loads(served.read_text())
+    doc = json.loads(served.read_text(encoding="utf-8"))
     ids = []
     for p, item in doc["paths"].items():
         for m in METHODS:
@@ -50,7 +50,7 @@ def test_redocly_lint(served):
     env = dict(os.environ, REDOCLY_TELEMETRY="off", REDOCLY_SUPPRESS_UPDATE_NOTICE="true",
                NO_COLOR="1")
     r = subprocess.run([str(REDOCLY), "lint", "--format=json", str(served)], capture_output=True,
-                       text=True, env=env, cwd=served.parent, timeout=120)
+                       encoding="utf-8", env=env, cwd=served.parent, timeout=120)
     out = r.stdout[r.stdout.index("{"):] if "{" in r.stdout else r.stdout
     report = json.loads(out)
     problems = [(p["severity"], p["ruleId"], p["message"], p["location"][0].get("pointer"))

@@ -27,10 +27,10 @@ def venv(tmp_path_factory):
     v = top / "V"
     py = "/usr/bin/python3" if os.path.exists("/usr/bin/python3") else sys.executable
     r = subprocess.run([py, "-m", "venv", "--system-site-packages", str(v)],
-                       capture_output=True, text=True)
+                       capture_output=True, encoding="utf-8")
     assert r.returncode == 0, f"python3 -m venv failed (Debian: python3-venv): {r.stderr}"
     r = subprocess.run([str(v / "bin" / "pip"), "install", "--no-deps", "--no-build-isolation",
-                        "--no-index", str(src)], capture_output=True, text=True,
+                        "--no-index", str(src)], capture_output=True, encoding="utf-8",
                        env={**os.environ, "PIP_DISABLE_PIP_VERSION_CHECK": "1"})
     assert r.returncode == 0, f"pip install failed: {r.stdout}\n{r.stderr}"
     return v
@@ -45,25 +45,25 @@ def clean_env(**extra):
 
 
 def test_console_script_and_import(venv, tmp_path):
-    r = subprocess.run([str(venv / "bin" / "subdiv"), "--help"], capture_output=True, text=True,
+    r = subprocess.run([str(venv / "bin" / "subdiv"), "--help"], capture_output=True, encoding="utf-8",
                        env=clean_env(), cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert "refine" in r.stdout and "batch" in r.stdout and "convert" in r.stdout
     r = subprocess.run([str(venv / "bin" / "python"), "-c",
                         "import subdiv, json; print(json.dumps([subdiv.__file__, subdiv.__version__,"
                         " subdiv.Client.__name__]))"],
-                       capture_output=True, text=True, env=clean_env(), cwd=tmp_path)
+                       capture_output=True, encoding="utf-8", env=clean_env(), cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     path, version, name = json.loads(r.stdout)
     assert path.startswith(str(venv)), path   # the installed copy, not clients/python
     assert (venv / path).parent.joinpath("py.typed").exists()
     assert name == "Client"
     r = subprocess.run([str(venv / "bin" / "subdiv"), "--version"], capture_output=True,
-                       text=True, env=clean_env(), cwd=tmp_path)
+                       encoding="utf-8", env=clean_env(), cwd=tmp_path)
     assert r.returncode == 0 and r.stdout.split() == ["subdiv", version]
-    spec = json.loads((REPO / "api" / "openapi.json").read_text())
+    spec = json.loads((REPO / "api" / "openapi.json").read_text(encoding="utf-8"))
     assert version == spec["info"]["version"]
-    r = subprocess.run([str(SUBDIVD), "--version"], capture_output=True, text=True)
+    r = subprocess.run([str(SUBDIVD), "--version"], capture_output=True, encoding="utf-8")
     assert r.returncode == 0 and r.stdout == f"subdivd {version}\n", r.stdout
 
 
@@ -75,18 +75,18 @@ def test_console_script_against_a_daemon(venv, tmp_path):
         r = subprocess.run([str(venv / "bin" / "subdiv"), "refine", "tet.json", "--level", "1",
                             "-o", "tet.vtu", "-o", "tet.json.out.json", "--url", d.url,
                             "--progress", "none"],
-                           capture_output=True, text=True, env=clean_env(), cwd=tmp_path,
+                           capture_output=True, encoding="utf-8", env=clean_env(), cwd=tmp_path,
                            timeout=120)
         assert r.returncode == 0, r.stdout + r.stderr
         assert (tmp_path / "tet.vtu").read_bytes().startswith(b"<?xml")
-        level = json.loads((tmp_path / "tet.json.out.json").read_text())
+        level = json.loads((tmp_path / "tet.json.out.json").read_text(encoding="utf-8"))
         assert level["level"] == 1 and len(level["vertices"]) > 4
     finally:
         d.stop()
     # --spawn finds the daemon through $SUBDIVD (nothing is beside the venv's script)
     r = subprocess.run([str(venv / "bin" / "subdiv"), "refine", "tet.json", "--level", "1",
                         "-o", "spawned.vtu", "--spawn", "-q"],
-                       capture_output=True, text=True, env=clean_env(SUBDIVD=str(SUBDIVD)),
+                       capture_output=True, encoding="utf-8", env=clean_env(SUBDIVD=str(SUBDIVD)),
                        cwd=tmp_path, timeout=120)
     assert r.returncode == 0, r.stdout + r.stderr
     assert (tmp_path / "spawned.vtu").stat().st_size > 0

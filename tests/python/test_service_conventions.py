@@ -16,7 +16,7 @@ TET = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], "simplices": [[
 
 def table_slugs():
     """{slug: status} of the table in docs/SERVICE.md, "Errors"."""
-    text = (REPO / "docs" / "SERVICE.md").read_text()
+    text = (REPO / "docs" / "SERVICE.md").read_text(encoding="utf-8")
     section = text.split("\n## Errors\n", 1)[1].split("\n## ", 1)[0]
     out = {}
     for line in section.splitlines():
@@ -32,7 +32,7 @@ def code_slugs():
     """The slugs the C sources report: api_fail*/http_fail calls and literal /errors/ types."""
     found = set()
     for path in list((REPO / "api").glob("*.c")) + list((REPO / "server").glob("*.c")):
-        src = path.read_text()
+        src = path.read_text(encoding="utf-8")
         found |= set(re.findall(r"(?:api_fail(?:_at)?|http_fail)\([^,]+,\s*\d{3},\s*\"([a-z-]+)\"", src))
         found |= set(re.findall(r"/errors/([a-z][a-z-]+)", src))
         if "api_fail_limit(" in src:
@@ -76,9 +76,9 @@ def test_every_type_resolves():
 
 
 def test_version():
-    r = subprocess.run([str(SUBDIVD), "--version"], capture_output=True, text=True)
+    r = subprocess.run([str(SUBDIVD), "--version"], capture_output=True, encoding="utf-8")
     assert r.returncode == 0 and re.fullmatch(r"subdivd \d+\.\d+\.\d+\n", r.stdout)
-    r = subprocess.run([str(SUBDIVD), "--help"], capture_output=True, text=True)
+    r = subprocess.run([str(SUBDIVD), "--help"], capture_output=True, encoding="utf-8")
     assert "--version" in r.stdout
 
 
@@ -112,7 +112,7 @@ def test_log_lines_and_metrics():
             assert m and float(m.group(1)) > 0, (kind, text)
             assert re.search(r'^subdivd_compute_total\{kind="%s"\} [1-9]\d*$' % kind, text, re.M)
         # every documented metric name is served
-        doc = (REPO / "docs" / "SERVICE.md").read_text()
+        doc = (REPO / "docs" / "SERVICE.md").read_text(encoding="utf-8")
         for name in ("subdivd_request_duration_seconds", "subdivd_compute_seconds_total",
                      "subdivd_compute_total"):
             assert name in doc and f"# TYPE {name} " in text

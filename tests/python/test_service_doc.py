@@ -15,7 +15,7 @@ DOC = REPO / "docs" / "SERVICE.md"
 
 
 def sh_blocks():
-    return re.findall(r"^```sh\n(.*?)^```", DOC.read_text(), flags=re.S | re.M)
+    return re.findall(r"^```sh\n(.*?)^```", DOC.read_text(encoding="utf-8"), flags=re.S | re.M)
 
 
 def test_session_and_offline_blocks_run(tmp_path):
@@ -29,12 +29,12 @@ def test_session_and_offline_blocks_run(tmp_path):
     (tmp_path / "examples").symlink_to(REPO / "examples")
     (tmp_path / "build").symlink_to(REPO / "build")
     script = tmp_path / "service.sh"
-    script.write_text("set -eu\n" + session[0] + offline[0])
+    script.write_text("set -eu\n" + session[0] + offline[0], encoding="utf-8")
     d = Daemon()
     try:
         env = dict(os.environ, SUBDIV_URL=d.url)
         r = subprocess.run(["sh", str(script)], cwd=tmp_path, env=env, capture_output=True,
-                           text=True, timeout=300)
+                           encoding="utf-8", timeout=300)
     finally:
         d.stop()
     assert r.returncode == 0, r.stdout + r.stderr
