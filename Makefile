@@ -48,7 +48,7 @@ include web/Makefile.inc
 # Assets are URLPATH|CONTENT_TYPE|CACHE_CONTROL|FILE (tools/embed.c); the built web front end
 # lists its own in $(WEB_LIST) (web/Makefile.inc), one per line, since its names carry hashes.
 SRV_SRC := $(wildcard server/*.c)
-SRV_OBJ := $(patsubst %.c,$(B)/%.o,$(SRV_SRC)) $(B)/assets.o
+SRV_OBJ := $(patsubst %.c,$(B)/%.o,$(SRV_SRC)) $(B)/assets.o $(B)/errors.o
 ASSETS  := /v1/openapi.json|application/json|no-cache|api/openapi.json
 $(B)/server/%.o: server/%.c $(wildcard server/*.h) $(wildcard api/*.h) $(wildcard core/*.h)
 	@mkdir -p $(dir $@)
@@ -60,6 +60,12 @@ $(B)/assets.c: $(B)/embed api/openapi.json $(WEB_LIST)
 	$(B)/embed $@ $(foreach a,$(ASSETS),'$(a)') $$(cat $(WEB_LIST))
 $(B)/assets.o: $(B)/assets.c server/server.h
 	$(CC) $(CFLAGS) -Wno-overlength-strings -c $< -o $@
+# the pages of GET /errors/<slug>, from the one table of problem types (docs/SERVICE.md "Errors")
+$(B)/errors.c: tools/errors.awk docs/SERVICE.md
+	@mkdir -p $(B)
+	awk -f tools/errors.awk docs/SERVICE.md > $@.tmp && mv $@.tmp $@
+$(B)/errors.o: $(B)/errors.c server/errors.h
+	$(CC) $(CFLAGS) -c $< -o $@
 $(B)/subdivd: $(SRV_OBJ) $(API_LIB) $(CORE_LIB)
 	$(CC) $(CFLAGS) $(SRV_OBJ) $(API_LIB) $(CORE_LIB) $(API_LIBS) $(SRV_LIBS) $(LDLIBS) -o $@
 

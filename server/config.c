@@ -81,7 +81,7 @@ void config_usage(FILE *f)
                "               [--colormap NAME:min:max] [--octahedra tets|polyhedra]\n"
                "               [--names true|false] [--compress none|zlib]\n"
                "               -o OUT%s\n"
-               "       subdivd --list-routes | --list-formats\n"
+               "       subdivd --list-routes | --list-formats | --version\n"
                "       subdivd --healthcheck [URL]   (exit 0 if URL, default "
                "http://127.0.0.1:8080/healthz, answers 200)\n\noptions (each also read from "
                "SUBDIVD_<NAME>):\n", out_format_list(exts, sizeof exts, true, "|", "|"));

@@ -102,8 +102,9 @@ int http_take_slot(req *r, api_problem *p)
                  r->srv->cfg.threads);
         return -1;
     }
+    r->slot_t0 = mono_now();
     if (r->s) {
-        atomic_store(&r->s->busy_since, mono_now());
+        atomic_store(&r->s->busy_since, r->slot_t0);
         atomic_store(&r->s->busy_level, 0);
     }
     return 0;
@@ -111,6 +112,7 @@ int http_take_slot(req *r, api_problem *p)
 
 void http_give_slot(req *r)
 {
+    metrics_compute(route_kind(r->rt), mono_now() - r->slot_t0);
     if (r->s)
         atomic_store(&r->s->busy_level, -1);
     slots_give(r->srv->compute, r->s);
@@ -615,8 +617,10 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
     parse_log_escape(path, sizeof path, r->path);
     if (r->queued) {
         metrics_request(r->route_name, r->method, r->status, ms / 1e3);
-        log_line(srv, LOG_INFO, "%s %s %d %lluB %.2fms%s", r->method, path, r->status,
-                 (unsigned long long)atomic_load(&r->bytes), ms,
+        log_line(srv, LOG_INFO, "%s %s %d %lluB %.2fms route=%s%s%s%s", r->method, path,
+                 r->status, (unsigned long long)atomic_load(&r->bytes), ms,
+                 r->route_name ? r->route_name : "unknown", r->problem ? " type=/errors/" : "",
+                 r->problem ? r->problem : "",
                  code == MHD_REQUEST_TERMINATED_COMPLETED_OK || r->answered_raw ? ""
                                                                     : " (cut short)");
     }

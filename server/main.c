@@ -243,6 +243,10 @@ int main(int argc, char **argv)
         return refine_main(argc, argv);
     if (argc > 1 && !strcmp(argv[1], "--healthcheck")) /* Docker HEALTHCHECK: no curl needed */
         return probe_main(argc > 2 ? argv[2] : NULL);
+    if (argc > 1 && !strcmp(argv[1], "--version")) {
+        printf("subdivd %s\n", SD_VERSION);
+        return 0;
+    }
     if (argc > 1 && !strcmp(argv[1], "--list-routes")) {
         route_list(stdout);
         return 0;

@@ -1,8 +1,9 @@
-/* metrics.c — request counters, latency histogram and streamed bytes (see metrics.h).
+/* metrics.c — request counters and latency histograms, compute seconds, streamed bytes (see
+ * metrics.h).
  *
  * One process-wide table under a mutex (held for a few comparisons per request); the series
- * are keyed by pointers to static strings (route templates, interned methods), at most
- * MAX_SERIES of them — a new series beyond that is not counted. The gauges are not kept here:
+ * are keyed by pointers to static strings (route templates, interned methods, compute kinds), at
+ * most MAX_SERIES requests series and MAX_KINDS kinds — a new series beyond that is not counted. The gauges are not kept here:
  * the caller samples them when /metrics is scraped.
  */
 #include "metrics.h"
@@ -15,13 +16,19 @@
 static const double bucket_le[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05,
                                    0.1,    0.25,  0.5,    1,     2.5,  5,     10};
 #define NBUCKETS (sizeof bucket_le / sizeof *bucket_le)
+#define MAX_KINDS 32
 
 static struct {
     pthread_mutex_t mu;
     int n;
-    struct { const char *route, *method; int status; uint64_t count; } s[MAX_SERIES];
-    uint64_t bucket[NBUCKETS + 1], count;
-    double sum;
+    struct {
+        const char *route, *method;
+        int status;
+        uint64_t count, bucket[NBUCKETS + 1]; /* latency: per bucket, not cumulated */
+        double sum;
+    } s[MAX_SERIES];
+    int nk;
+    struct { const char *kind; uint64_t count; double seconds; } k[MAX_KINDS];
     atomic_uint_fast64_t bytes;
 } M = {.mu = PTHREAD_MUTEX_INITIALIZER};
 
@@ -39,16 +46,37 @@ void metrics_request(const char *route, const char *method, int status, double s
         M.s[i].method = method;
         M.s[i].status = status;
         M.s[i].count = 0;
+        memset(M.s[i].bucket, 0, sizeof M.s[i].bucket);
+        M.s[i].sum = 0;
         M.n++;
     }
-    if (i < M.n)
+    if (i < M.n) {
+        size_t b = 0;
+        while (b < NBUCKETS && seconds > bucket_le[b])
+            b++;
         M.s[i].count++;
-    size_t b = 0;
-    while (b < NBUCKETS && seconds > bucket_le[b])
-        b++;
-    M.bucket[b]++;
-    M.count++;
-    M.sum += seconds;
+        M.s[i].bucket[b]++;
+        M.s[i].sum += seconds;
+    }
+    pthread_mutex_unlock(&M.mu);
+}
+
+void metrics_compute(const char *kind, double seconds)
+{
+    pthread_mutex_lock(&M.mu);
+    int i = 0;
+    while (i < M.nk && strcmp(M.k[i].kind, kind))
+        i++;
+    if (i == M.nk && M.nk < MAX_KINDS) {
+        M.k[i].kind = kind; /* a static string */
+        M.k[i].count = 0;
+        M.k[i].seconds = 0;
+        M.nk++;
+    }
+    if (i < M.nk) {
+        M.k[i].count++;
+        M.k[i].seconds += seconds;
+    }
     pthread_mutex_unlock(&M.mu);
 }
 
@@ -70,18 +98,37 @@ void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t sessio
     for (int i = 0; i < M.n; i++)
         fprintf(f, "subdivd_requests_total{route=\"%s\",method=\"%s\",status=\"%d\"} %llu\n",
                 M.s[i].route, M.s[i].method, M.s[i].status, (unsigned long long)M.s[i].count);
-    fprintf(f, "# HELP subdivd_request_duration_seconds Time from request start to response queued.\n"
+    fprintf(f, "# HELP subdivd_request_duration_seconds Time from request start to response queued, "
+               "by route template, method and status.\n"
                "# TYPE subdivd_request_duration_seconds histogram\n");
-    uint64_t cum = 0;
-    for (size_t b = 0; b < NBUCKETS; b++) {
-        cum += M.bucket[b];
-        fprintf(f, "subdivd_request_duration_seconds_bucket{le=\"%g\"} %llu\n", bucket_le[b],
-                (unsigned long long)cum);
+    for (int i = 0; i < M.n; i++) {
+        char labels[256];
+        snprintf(labels, sizeof labels, "route=\"%s\",method=\"%s\",status=\"%d\"", M.s[i].route,
+                 M.s[i].method, M.s[i].status);
+        uint64_t cum = 0;
+        for (size_t b = 0; b <= NBUCKETS; b++) {
+            cum += M.s[i].bucket[b];
+            if (b < NBUCKETS)
+                fprintf(f, "subdivd_request_duration_seconds_bucket{%s,le=\"%g\"} %llu\n", labels,
+                        bucket_le[b], (unsigned long long)cum);
+            else
+                fprintf(f, "subdivd_request_duration_seconds_bucket{%s,le=\"+Inf\"} %llu\n",
+                        labels, (unsigned long long)cum);
+        }
+        fprintf(f, "subdivd_request_duration_seconds_sum{%s} %.6f\n", labels, M.s[i].sum);
+        fprintf(f, "subdivd_request_duration_seconds_count{%s} %llu\n", labels,
+                (unsigned long long)M.s[i].count);
     }
-    cum += M.bucket[NBUCKETS];
-    fprintf(f, "subdivd_request_duration_seconds_bucket{le=\"+Inf\"} %llu\n", (unsigned long long)cum);
-    fprintf(f, "subdivd_request_duration_seconds_sum %.6f\n", M.sum);
-    fprintf(f, "subdivd_request_duration_seconds_count %llu\n", (unsigned long long)M.count);
+    fprintf(f, "# HELP subdivd_compute_seconds_total Seconds compute slots were held, by kind of "
+               "work.\n# TYPE subdivd_compute_seconds_total counter\n");
+    for (int i = 0; i < M.nk; i++)
+        fprintf(f, "subdivd_compute_seconds_total{kind=\"%s\"} %.6f\n", M.k[i].kind,
+                M.k[i].seconds);
+    fprintf(f, "# HELP subdivd_compute_total Compute slots taken, by kind of work.\n"
+               "# TYPE subdivd_compute_total counter\n");
+    for (int i = 0; i < M.nk; i++)
+        fprintf(f, "subdivd_compute_total{kind=\"%s\"} %llu\n", M.k[i].kind,
+                (unsigned long long)M.k[i].count);
     pthread_mutex_unlock(&M.mu);
     sample(f, "subdivd_sessions", "gauge", "Live sessions.", (uint64_t)sessions);
     sample(f, "subdivd_cached_cells", "gauge",

@@ -1,7 +1,8 @@
 /* metrics.h — Prometheus counters of the daemon (text exposition format 0.0.4).
  *
- * Requests are counted by route template (not raw path, so the label set stays small), method
- * and status; one latency histogram covers all requests. Gauges (sessions, cached cells, session
+ * Requests are counted, and their latency kept as a histogram, by route template (not raw path,
+ * so the label set stays small), method and status; the seconds compute slots are held are
+ * summed by kind of work (metrics_compute; kinds: route_kind, request.h). Gauges (sessions, cached cells, session
  * memory of the core, bytes held by api/ and server/) are sampled when /metrics is scraped.
  */
 #ifndef SUBDIVD_METRICS_H
@@ -13,6 +14,8 @@
 void metrics_init(void);
 void metrics_request(const char *route, const char *method, int status, double seconds);
 void metrics_bytes(uint64_t n);
+/* One hold of a compute slot: `kind` is a static string. */
+void metrics_compute(const char *kind, double seconds);
 /* Write every metric; the gauges are passed in (api_bytes: api_mem_in_use(), api/mem.h). */
 void metrics_write(FILE *f, int sessions, uint64_t cached_cells, uint64_t session_bytes,
                    uint64_t api_bytes);

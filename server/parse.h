@@ -14,8 +14,8 @@
 #include <stddef.h>
 
 /* Match `path` against a route pattern whose segments are literal or a capture ("{id}", "{L}":
- * one non-empty segment). A capture whose name starts with 'i' goes into id, any other into
- * level, each only if it fits its capacity with its NUL (else no match). 1 on a match. */
+ * "{slug}": one non-empty segment). "{L}" goes into level, any other capture into id, each only
+ * if it fits its capacity with its NUL (else no match). 1 on a match. */
 int parse_route(const char *pattern, const char *path, char *id, size_t id_cap, char *level,
                 size_t level_cap);
 

@@ -139,6 +139,7 @@ struct MHD_Response *http_problem_response(req *r, const api_problem *p0)
 {
     api_problem q = {0};
     const api_problem *p = budget_problem(r, p0, &q);
+    r->problem = p->slug ? p->slug : "error"; /* slugs are static strings */
     json_t *j = api_problem_json(p);
     char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
     json_decref(j);

@@ -54,6 +54,8 @@ struct req {
     int oom;                          /* the query could not be kept: 503 */
     const route *rt;
     const char *route_name;   /* pattern for metrics and logs */
+    const char *problem;      /* the slug of the problem answered (static), logged; or NULL */
+    double slot_t0;           /* when the compute slot was taken (compute seconds by kind) */
     char *body;
     size_t len, cap;
     int too_big;              /* the body could not be kept (out of memory): refused at its end */
@@ -71,7 +73,7 @@ struct req {
 
 /* ---- routes.c ---- */
 
-/* Match `path` against a route pattern; captures {id} and {L} into r. */
+/* Match `path` against a route pattern; captures {L} into seg_level, {id} and {slug} into seg_id. */
 int route_match(const char *pattern, const char *path, req *r);
 /* The route for method (HEAD as GET) and path, with its segments captured; NULL if none. */
 const route *route_find(const char *method, const char *path, req *r);
@@ -79,6 +81,9 @@ const route *route_find(const char *method, const char *path, req *r);
 int route_methods(const char *path, req *r, char *allow, size_t cap);
 /* The pattern of the last route matching path, or "unknown" (a 405's metrics label). */
 const char *route_name_of(const char *path, req *r);
+/* The kind of work a route's compute slot does, for subdivd_compute_seconds_total: complex,
+ * tags, rules, refine, edit, level, stats, delta, analysis, matrix (else "other"). */
+const char *route_kind(const route *rt);
 /* A static asset of the web front end (not under /v1/), served by the route below. */
 int route_is_static(const char *path);
 const route *route_static(void);

@@ -17,6 +17,7 @@
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
 #include "../api/mem.h"
+#include "errors.h"
 #include "events.h"
 #include "metrics.h"
 #include "parse.h"
@@ -123,6 +124,45 @@ static void h_asset(req *r)
     http_add_header(resp, "ETag", a->etag);
     atomic_store(&r->bytes, fresh ? 0 : a->size);
     http_queue(r, fresh ? 304 : 200, resp);
+}
+
+/* GET /errors/<slug>: the page of a problem type (errors.h), so that every `type` resolves. */
+static void h_error_page(req *r)
+{
+    const error_page *e = error_pages;
+    while (e->slug && strcmp(e->slug, r->seg_id))
+        e++;
+    if (!e->slug) {
+        http_fail(r, 404, "not-found", "no problem type %.60s (docs/SERVICE.md, \"Errors\")",
+                  r->seg_id);
+        return;
+    }
+    char *text = NULL;
+    size_t n = 0;
+    FILE *f = open_memstream(&text, &n);
+    if (!f) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
+    fprintf(f, "# %s\n\n**%d %s**: an `application/problem+json` answer with\n"
+               "`\"type\": \"/errors/%s\"`.\n\nWhen: %s.\n", e->slug, e->status,
+            api_status_title(e->status), e->slug, e->when);
+    if (strchr(e->row, ','))
+        fprintf(f, "\nThe same text describes: %s.\n", e->row);
+    fprintf(f, "\n`detail` says what was wrong; `errors[]` (JSON pointers into the request body "
+               "or query parameter names) says where. All types: docs/SERVICE.md, \"Errors\".\n");
+    fclose(f);
+    char *body = api_memdup(text, n);
+    free(text); /* open_memstream's buffer belongs to the C library */
+    if (!body) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
+    atomic_store(&r->bytes, n);
+    struct MHD_Response *resp = http_buffer_response("text/markdown; charset=utf-8", body, n);
+    if (resp)
+        http_add_header(resp, "Cache-Control", "public, max-age=3600");
+    http_queue(r, 200, resp);
 }
 
 /* ---- handlers: sessions ------------------------------------------------------------------ */
@@ -794,6 +834,7 @@ static const route ROUTES[] = {
     {"GET", "/readyz", h_readyz, 0, 0, NULL},
     {"GET", "/metrics", h_metrics, 0, 0, NULL},
     {"GET", "/v1/openapi.json", h_asset, 0, 0, NULL},
+    {"GET", "/errors/{slug}", h_error_page, 0, 0, NULL},
 };
 #define NROUTES (sizeof ROUTES / sizeof *ROUTES)
 
@@ -841,6 +882,23 @@ const char *route_name_of(const char *path, req *r)
         if (route_match(ROUTES[i].pattern, path, r))
             name = ROUTES[i].pattern;
     return name;
+}
+
+const char *route_kind(const route *rt)
+{
+    static const struct { const char *tail, *kind; } K[] = {
+        {"/complex", "complex"}, {"/tags", "tags"},           {"/rules", "rules"},
+        {"/refine", "refine"},   {"/control-points", "edit"}, {"/levels/{L}", "level"},
+        {"/stats", "stats"},     {"/delta", "delta"},         {"/analysis", "analysis"},
+        {"/matrices/{L}", "matrix"},
+    };
+    size_t n = rt ? strlen(rt->pattern) : 0;
+    for (size_t i = 0; i < sizeof K / sizeof *K; i++) {
+        size_t t = strlen(K[i].tail);
+        if (n >= t && !strcmp(rt->pattern + n - t, K[i].tail))
+            return K[i].kind;
+    }
+    return "other";
 }
 
 int route_is_static(const char *path)

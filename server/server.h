@@ -7,6 +7,10 @@
 #include "slots.h"
 #include <stdatomic.h>
 
+/* The daemon's version: `subdivd --version`, info.version of api/openapi.json and the Python
+ * client's subdiv.__version__ are the same string (tests/python/test_packaging.py checks). */
+#define SD_VERSION "1.0.0"
+
 typedef struct server {
     config cfg;
     store *st;

@@ -21,8 +21,9 @@ if [ -n "$missing" ]; then
     DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing
 fi
 [ "$list" = tools/packages.txt ] || exit 0
-# npm tools of the tests (tests/tools/package.json: the Khronos glTF validator)
-if [ ! -d tests/tools/node_modules/gltf-validator ]; then
+# npm tools of the tests (tests/tools/package.json: the Khronos glTF validator, Redocly's OpenAPI
+# linter)
+if [ ! -d tests/tools/node_modules/gltf-validator ] || [ ! -d tests/tools/node_modules/@redocly/cli ]; then
     (cd tests/tools && npm install --no-audit --no-fund --loglevel=error)
 fi
 # npm packages of the web front end (web/package-lock.json: three, esbuild; the Makefile runs the

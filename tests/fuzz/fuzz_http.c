@@ -46,8 +46,8 @@ static int rebuild(const char *pattern, const char *id, const char *level, char 
             const char *pe = strchr(p, '}');
             if (!pe)
                 return 0;
-            put = p[1] == 'i' ? id : level;
-            *(p[1] == 'i' ? &nid : &nlevel) += 1;
+            put = p[1] != 'L' ? id : level; /* {L} is the level, any other capture the id */
+            *(p[1] != 'L' ? &nid : &nlevel) += 1;
             p = pe + 1;
         }
         size_t n = put ? strlen(put) : 1;
@@ -84,7 +84,7 @@ static void check_route(const char *pattern, const char *path, const char *input
 static const char *const patterns[] = {
     "/v1/sessions", "/v1/sessions/{id}", "/v1/sessions/{id}/complex",
     "/v1/sessions/{id}/levels/{L}", "/v1/sessions/{id}/levels/{L}/stats",
-    "/v1/sessions/{id}/matrices/{L}", "/healthz", NULL};
+    "/v1/sessions/{id}/matrices/{L}", "/healthz", "/errors/{slug}", NULL};
 
 static void check_bearer(const char *h, const char *input)
 {

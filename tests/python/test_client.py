@@ -265,3 +265,18 @@ def test_progress_events(client):
     assert down[-1][1] == down[-1][2] == len(data)
     assert all(x[1] <= y[1] for x, y in zip(down, down[1:]))
     s.delete()
+
+
+def test_public_api_has_type_hints():
+    """Every public method of Client and Session annotates its parameters and its result."""
+    import inspect
+    import typing
+    for cls in (subdiv.Client, subdiv.Session):
+        for name, f in inspect.getmembers(cls, inspect.isfunction):
+            if name.startswith("_") and name != "__init__":
+                continue
+            hints = typing.get_type_hints(f)
+            params = [p for p in inspect.signature(f).parameters.values()
+                      if p.name != "self" and p.kind is not p.VAR_POSITIONAL]
+            missing = [p.name for p in params if p.name not in hints]
+            assert not missing and "return" in hints, (cls.__name__, name, missing)

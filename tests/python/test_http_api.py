@@ -63,10 +63,17 @@ def test_metrics_exposition(daemon):
         assert f"# TYPE {name} {kind}" in text
     assert re.search(r'subdivd_requests_total\{route="/healthz",method="GET",status="200"\} [1-9]', text)
     assert re.search(r'subdivd_requests_total\{route="unknown",method="GET",status="404"\} [1-9]', text)
-    buckets = [int(v) for v in re.findall(r'_bucket\{le="[^"]+"\} (\d+)', text)]
-    assert buckets == sorted(buckets), "histogram buckets must be cumulative"
-    count = int(re.search(r"subdivd_request_duration_seconds_count (\d+)", text).group(1))
-    assert buckets[-1] == count and re.search(r'le="\+Inf"', text)
+    # one latency histogram per route, method and status: cumulative buckets ending at the count
+    series = set(re.findall(r'^subdivd_request_duration_seconds_count\{([^}]*)\} \d+$', text, re.M))
+    assert 'route="/healthz",method="GET",status="200"' in series
+    for labels in series:
+        buckets = [int(v) for v in re.findall(
+            r'^subdivd_request_duration_seconds_bucket\{' + re.escape(labels) + r',le="[^"]+"\} (\d+)$',
+            text, re.M)]
+        assert buckets == sorted(buckets), "histogram buckets must be cumulative"
+        count = int(re.search(r'^subdivd_request_duration_seconds_count\{' + re.escape(labels)
+                              + r'\} (\d+)$', text, re.M).group(1))
+        assert buckets[-1] == count and re.search(re.escape(labels) + r',le="\+Inf"', text)
 
 
 def test_metrics_api_bytes_follow_sessions(daemon):
@@ -471,7 +478,8 @@ def test_one_log_line_per_request(daemon):
     time.sleep(0.2)
     new = [l for l in daemon.log_lines[n0:] if s.id in l]
     assert len(new) == 1
-    assert re.search(rf"info GET /v1/sessions/{s.id}/complex 409 \d+B [\d.]+ms$", new[0])
+    assert re.search(rf"info GET /v1/sessions/{s.id}/complex 409 \d+B [\d.]+ms "
+                     r"route=/v1/sessions/\{id\}/complex type=/errors/no-complex$", new[0])
     assert s.token not in "\n".join(daemon.log_lines)
 
 

@@ -554,7 +554,8 @@ def test_after_catalogue(main_env, small_env):
     assert small_env.bystander_state() == small_env.snapshot
 
 
-LOG = re.compile(r"^\d{4}-\d\d-\d\dT[\d:.]+Z info (\S+) (\S+) (\d{3}) \d+B [\d.]+ms$")
+LOG = re.compile(r"^\d{4}-\d\d-\d\dT[\d:.]+Z info (\S+) (\S+) (\d{3}) \d+B [\d.]+ms "
+                 r"route=\S+( type=/errors/[a-z-]+)?$")
 
 
 def test_one_log_line_per_request(main_env):

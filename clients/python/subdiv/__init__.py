@@ -8,6 +8,9 @@
 See subdiv.client (the endpoints), subdiv.errors (typed errors with the problem+json),
 subdiv.meshes (mesh files -> complex bodies) and subdiv.cli (the command-line tool).
 """
+# the daemon's version too (subdivd --version, info.version of api/openapi.json)
+__version__ = "1.0.0"
+
 from .client import ROUTES, Client, Session
 from .errors import (BadRequest, ClientError, Conflict, ContentTooLarge, Gone, MethodNotAllowed,
                      NotFound, NotImplementedByServer, PreconditionFailed, PreconditionRequired,
@@ -15,7 +18,7 @@ from .errors import (BadRequest, ClientError, Conflict, ContentTooLarge, Gone, M
                      TransportError, Unauthorized, Unprocessable, UnsupportedMediaType, error_for)
 from .meshes import MeshError
 
-__all__ = ["Client", "Session", "ROUTES", "MeshError", "SubdivError", "TransportError",
+__all__ = ["__version__", "Client", "Session", "ROUTES", "MeshError", "SubdivError", "TransportError",
            "ProblemError", "ClientError", "ServerError", "BadRequest", "Unauthorized", "NotFound",
            "MethodNotAllowed", "Conflict", "Gone", "PreconditionFailed", "ContentTooLarge",
            "UnsupportedMediaType", "Unprocessable", "PreconditionRequired", "TooManyRequests",

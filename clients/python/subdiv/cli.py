@@ -30,7 +30,7 @@ import sys
 import threading
 import time
 
-from . import meshes
+from . import __version__, meshes
 from .client import FORMATS, Client
 from .errors import ProblemError, SubdivError, TransportError
 
@@ -487,6 +487,7 @@ def build_parser():
                                 epilog="exit codes: 0 done, 1 the daemon refused the input, 2 usage, "
                                 "file or mesh error, 3 the daemon failed or is unreachable, 4 not "
                                 "implemented by the daemon (501), 130 interrupted")
+    p.add_argument("--version", action="version", version=f"subdiv {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("refine", parents=[common, mesh], help="one mesh to one or more outputs")
     r.add_argument("input")

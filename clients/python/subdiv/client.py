@@ -17,15 +17,26 @@ Progress: pass `progress=callable(kind, done, total)`; kind is "upload" or "down
 total None when unknown) or "server" (done = seconds computing, total = the level being computed,
 from GET /v1/sessions/{id}'s "progress"), polled while the daemon works on a request.
 """
+from __future__ import annotations
+
 import io
 import json
 import os
 import threading
 import time
+from typing import Any, Callable, Dict, Iterator, Mapping, Optional, Sequence, Union
 
 import requests
 
 from .errors import ProblemError, TransportError, error_for
+
+# Type names of the public API: JSON documents as Python values; a progress callback
+# progress(kind, done, total): kind "upload"/"download" (bytes; total None when unknown) or
+# "server" (seconds computing, the level being computed).
+JSON = Dict[str, Any]
+Progress = Callable[[str, float, Optional[int]], Any]
+Version = Union[int, str]
+PathLike = Union[str, "os.PathLike[str]"]
 
 FORMATS = ("glb", "gltf", "vtu", "vtk", "json")
 LEVEL_OPTIONS = ("parts", "slice", "attributes", "colormap", "octahedra", "names", "compress")
@@ -85,8 +96,9 @@ class Client:
     Retry-After (capped at `max_wait` seconds each). `poll_interval`: seconds between looks at
     the session's progress while a request with a progress callback runs."""
 
-    def __init__(self, url="http://127.0.0.1:8080", *, timeout=600, retries=0, max_wait=10,
-                 poll_interval=0.25, http=None):
+    def __init__(self, url: str = "http://127.0.0.1:8080", *, timeout: float = 600,
+                 retries: int = 0, max_wait: float = 10, poll_interval: float = 0.25,
+                 http: Optional[requests.Session] = None) -> None:
         self.url = url.rstrip("/")
         self.poll_interval = poll_interval
         self.timeout = timeout
@@ -94,13 +106,16 @@ class Client:
         self.max_wait = max_wait
         self.http = http or requests.Session()
 
-    def close(self):
+    def close(self) -> None:
         self.http.close()
 
     # ---- transport ------------------------------------------------------------------------
 
-    def request(self, method, path, *, json_body=None, data=None, headers=None, params=None,
-                stream=False, progress=None, expect=(200,), timeout=None):
+    def request(self, method: str, path: str, *, json_body: Any = None,
+                data: Optional[bytes] = None, headers: Optional[Mapping[str, str]] = None,
+                params: Optional[Mapping[str, Any]] = None, stream: bool = False,
+                progress: Optional[Progress] = None, expect: Sequence[int] = (200,),
+                timeout: Optional[float] = None) -> requests.Response:
         """One request; `path` is absolute ("/healthz") or a full URL. Raises the typed error
         for any status outside `expect`; returns the requests.Response."""
         url = path if path.startswith("http") else self.url + path
@@ -130,28 +145,33 @@ class Client:
 
     # ---- service ----------------------------------------------------------------------------
 
-    def healthz(self):
+    def healthz(self) -> JSON:
         """GET /healthz: {"status": "ok"} while the daemon lives."""
         return self.request("GET", "/healthz").json()
 
-    def livez(self):
+    def livez(self) -> JSON:
         """GET /livez: the same as /healthz."""
         return self.request("GET", "/livez").json()
 
-    def readyz(self):
+    def readyz(self) -> JSON:
         """GET /readyz: {"status": "ready", "memory": {"budget_bytes", "used_bytes"}}, or
         ServiceUnavailable while starting or stopping or with the memory budget in use."""
         return self.request("GET", "/readyz").json()
 
-    def metrics(self):
+    def metrics(self) -> str:
         """GET /metrics: the Prometheus text."""
         return self.request("GET", "/metrics").text
 
-    def openapi(self):
+    def openapi(self) -> JSON:
         """GET /v1/openapi.json."""
         return self.request("GET", "/v1/openapi.json").json()
 
-    def wait_ready(self, timeout=10):
+    def error_page(self, slug: str) -> str:
+        """GET /errors/<slug>: the Markdown page of a problem type (ProblemError.slug); NotFound
+        for a slug the daemon does not have."""
+        return self.request("GET", "/errors/" + slug).text
+
+    def wait_ready(self, timeout: float = 10) -> JSON:
         """Poll /readyz until it answers 200 (TransportError after `timeout` seconds)."""
         deadline = time.time() + timeout
         while True:
@@ -164,7 +184,7 @@ class Client:
 
     # ---- sessions -----------------------------------------------------------------------------
 
-    def create_session(self, ttl_s=None):
+    def create_session(self, ttl_s: Optional[int] = None) -> Session:
         """POST /v1/sessions: a new Session (deleted by `with ... as s` at the end of the block)."""
         r = self.request("POST", "/v1/sessions", json_body={} if ttl_s is None else {"ttl_s": ttl_s},
                          expect=(201,))
@@ -173,7 +193,7 @@ class Client:
         s.expires_at = j.get("expires_at")
         return s
 
-    def session(self, id, token):
+    def session(self, id: str, token: str) -> Session:
         """A Session object for an existing session (not deleted on exit)."""
         s = Session(self, id, token)
         s.owned = False
@@ -183,25 +203,26 @@ class Client:
 class Session:
     """One session of the daemon: `id`, `token`, and `version` (the last ETag seen)."""
 
-    def __init__(self, client, id, token):
+    def __init__(self, client: Client, id: str, token: str) -> None:
         self.client = client
         self.id, self.token = id, token
         self.url = f"{client.url}/v1/sessions/{id}"
-        self.version = None
-        self.expires_at = None
+        self.version: Optional[int] = None
+        self.expires_at: Optional[str] = None
         self.owned = True
 
-    def __enter__(self):
+    def __enter__(self) -> Session:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: Any) -> None:
         if self.owned:
             try:
                 self.delete()
             except (ProblemError, TransportError):
                 pass
 
-    def headers(self, if_match=None, extra=None):
+    def headers(self, if_match: Union[bool, Version, None] = None,
+                extra: Optional[Mapping[str, str]] = None) -> Dict[str, str]:
         h = {"Authorization": f"Bearer {self.token}"}
         if if_match is True:
             if self.version is None:
@@ -229,27 +250,30 @@ class Session:
         return j
 
     # GET/DELETE /v1/sessions/{id}
-    def info(self):
+    def info(self) -> JSON:
         """GET /v1/sessions/{id}: version, levels_cached, memory_bytes, summary, progress."""
         j = self._call("GET").json()
         self.version = j.get("version", self.version)
         return j
 
-    def delete(self):
+    def delete(self) -> None:
         """DELETE /v1/sessions/{id}."""
         self._call("DELETE", expect=(204,))
         self.owned = False
 
     # the complex, tags and rules
-    def put_complex(self, body, *, if_match=None, progress=None):
+    def put_complex(self, body: JSON, *, if_match: Union[bool, Version, None] = None,
+                    progress: Optional[Progress] = None) -> JSON:
         """PUT /complex (vertices, simplices, attributes, diagonals, fill): {"version", "summary"}."""
         return self._change("PUT", "/complex", body, if_match, progress)
 
-    def get_complex(self):
+    def get_complex(self) -> JSON:
         """GET /complex: the complex (with filled tetrahedra), classes, tags, rules, summary."""
         return self._call("GET", "/complex").json()
 
-    def put_tags(self, singular=None, *, petals=None, body=None, if_match=None):
+    def put_tags(self, singular: Optional[Sequence[Sequence[int]]] = None, *,
+                 petals: Optional[Sequence[JSON]] = None, body: Optional[JSON] = None,
+                 if_match: Union[bool, Version, None] = None) -> JSON:
         """PUT /tags with {"singular": singular, "petals": petals} (or a whole `body`); petals:
         [{"vertex": v, "triangle": [a, b, c], "kind": "convex" | "concave" | "smooth"}]."""
         if body is None:
@@ -258,17 +282,21 @@ class Session:
                 body["petals"] = petals
         return self._change("PUT", "/tags", body, if_match, None)
 
-    def put_rules(self, rules=None, *, if_match=None):
+    def put_rules(self, rules: Optional[JSON] = None, *,
+                  if_match: Union[bool, Version, None] = None) -> JSON:
         """PUT /rules: every preference at once (absent fields are the defaults)."""
         return self._change("PUT", "/rules", rules or {}, if_match, None)
 
-    def refine(self, select, depth=1, positions="subdivision", *, if_match=None):
+    def refine(self, select: Any, depth: int = 1, positions: str = "subdivision", *,
+               if_match: Union[bool, Version, None] = None) -> JSON:
         """POST /refine: red-green refinement of the control complex around `select`."""
         return self._change("POST", "/refine", {"select": select, "depth": depth, "positions": positions},
                             if_match, None)
 
-    def edit(self, moves=None, attributes=None, *, if_match=True, delta=None, delta_format="bin",
-             delta_attributes=None):
+    def edit(self, moves: Optional[Sequence[JSON]] = None, attributes: Optional[JSON] = None, *,
+             if_match: Union[bool, Version, None] = True, delta: Optional[int] = None,
+             delta_format: str = "bin",
+             delta_attributes: Union[str, Sequence[str], None] = None) -> JSON:
         """PATCH /control-points; If-Match is the session's known version unless given. A move
         is {"index", "position"} with an optional "level" (default 0): a point of a finer level
         moved there keeps a detail offset (GET /complex lists them as "details").
@@ -301,7 +329,9 @@ class Session:
         return out
 
     # levels
-    def level(self, level, format="glb", *, out=None, progress=None, if_none_match=None, **options):
+    def level(self, level: int, format: str = "glb", *, out: Optional[PathLike] = None,
+              progress: Optional[Progress] = None, if_none_match: Optional[Version] = None,
+              **options: Any) -> Union[bytes, int, None]:
         """GET /levels/{L}: the level in `format` with the options of docs/OUTPUTS.md (parts,
         slice, attributes, colormap, octahedra, names, compress). With `out` (a path) it is streamed into the
         file (written as OUT.part, renamed when complete) and the byte count is returned;
@@ -348,11 +378,12 @@ class Session:
             if out and os.path.exists(f"{out}.part"):
                 os.unlink(f"{out}.part")
 
-    def level_json(self, level, **options):
+    def level_json(self, level: int, **options: Any) -> JSON:
         """The level as the JSON of docs/API.md (vertices, cells, attributes, rules, origin)."""
         return json.loads(self.level(level, format="json", **options))
 
-    def delta(self, level, since, format="bin", attributes=None):
+    def delta(self, level: int, since: int, format: str = "bin",
+              attributes: Union[str, Sequence[str], None] = None) -> JSON:
         """GET /levels/{L}/delta?since=V: the points of `level` that changed since version
         `since` (the version of the level you hold), as a dict: "level", "since", "version" (the
         version the delta brings you to) and numpy arrays "indices" (uint32: level vertex
@@ -415,7 +446,8 @@ class Session:
             raise TransportError(f"the delta has {len(data)} bytes, its header says {off}")
         return out
 
-    def events(self, last_event_id=None, *, timeout=None):
+    def events(self, last_event_id: Optional[Version] = None, *,
+               timeout: Optional[float] = None) -> Iterator[JSON]:
         """GET /events: an iterator of the session's events as dicts {"id", "event", "data"}
         (data parsed as JSON): "version" after each change (data: version, kind, and for edits
         updated_points), "resync" when `last_event_id` is too old to replay, "deleted" when the
@@ -455,11 +487,12 @@ class Session:
         finally:
             r.close()
 
-    def level_stats(self, level):
+    def level_stats(self, level: int) -> JSON:
         """GET /levels/{L}/stats: counts per cell kind, bytes per format, seconds."""
         return self._call("GET", f"/levels/{int(level)}/stats").json()
 
-    def matrix(self, level, from_level=0, format="mtx", *, out=None):
+    def matrix(self, level: int, from_level: int = 0, format: str = "mtx", *,
+               out: Optional[PathLike] = None) -> Union[str, JSON, int]:
         """GET /matrices/{L}?from=F: Matrix Market text, or the JSON CSR as a dict; with `out`
         written to that file (the byte count is returned)."""
         r = self._call("GET", f"/matrices/{int(level)}", params={"from": from_level, "format": format},
@@ -472,7 +505,8 @@ class Session:
             return len(data)
         return json.loads(data) if format == "json" else data.decode()
 
-    def analysis(self, vertex=None, edge=None):
+    def analysis(self, vertex: Optional[int] = None,
+                 edge: Union[str, Sequence[int], None] = None) -> JSON:
         """GET /analysis?vertex=i or ?edge=i,j: local subdivision matrix and eigenvalues."""
         params = {}
         if vertex is not None:
@@ -505,4 +539,5 @@ ROUTES = {
     ("GET", "/readyz"): "Client.readyz",
     ("GET", "/metrics"): "Client.metrics",
     ("GET", "/v1/openapi.json"): "Client.openapi",
+    ("GET", "/errors/{slug}"): "Client.error_page",
 }
