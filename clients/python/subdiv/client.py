@@ -13,6 +13,9 @@ the problem+json attached. Versions: each answer's ETag updates `Session.version
 it as If-Match (the daemon requires one), other changes send it when asked (`if_match=True`, or a
 version number) so that a concurrent change makes them fail with PreconditionFailed (412).
 
+numpy, meshio and scipy are optional: `level_arrays` (numpy arrays), `level_mesh` (a meshio.Mesh),
+`matrix_sparse` (a scipy.sparse.csr_matrix) and `delta` import them when called.
+
 Progress: pass `progress=callable(kind, done, total)`; kind is "upload" or "download" (bytes;
 total None when unknown) or "server" (done = seconds computing, total = the level being computed,
 from GET /v1/sessions/{id}'s "progress"), polled while the daemon works on a request.
@@ -410,8 +413,8 @@ class Session:
         "vertex" (isolated points), "line" (curve segments), "triangle" (surface triangles) and
         "tetra" (the tetrahedra, then every octahedron (p,q,a,a2,b,b2) split into the 4
         tetrahedra (q,p,a,b), (q,p,b,a2), (q,p,a2,b2), (q,p,b2,a) along its major diagonal p-q:
-        meshio has no octahedron cell, and its VTU reader refuses polyhedra mixed with other
-        cells), empty blocks left out. This is the cell order and the split of the daemon's VTU
+        meshio has no octahedron cell, and meshio 7's VTU reader refuses polyhedra mixed with
+        other cells), empty blocks left out. This is the cell order and the split of the daemon's VTU
         (docs/OUTPUTS.md), so `meshio.read` of GET /levels/{L}?format=vtu gives the same points
         and cells. Point data: the attributes (float64; (n,) or n x ncomp). Cell data, as the
         VTU's: "kind" (0 point, 1 curve, 2 triangle, 3 tetrahedron, 4 octahedron) and
