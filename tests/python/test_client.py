@@ -399,3 +399,37 @@ def test_client_imports_without_numpy_scipy_meshio():
             "print(subdiv.Session.level_mesh.__name__)\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0 and r.stdout.strip() == "level_mesh", r.stderr
+
+
+def test_meshes_read_returns_what_its_docstring_says(tmp_path):
+    """meshes.read: (body, tags) — vertices in file order, quads split into triangles, point data
+    as attributes, tags None without chosen groups; with fill the triangles move into "fill"."""
+    from subdiv import meshes
+    obj = tmp_path / "q.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nf 1 2 3 4\nf 1 2 5\n")
+    body, tags = meshes.read(obj)
+    assert tags is None and set(body) == {"vertices", "simplices"}
+    assert body["vertices"] == [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1]]
+    assert body["simplices"] == [[0, 1, 2], [0, 2, 3], [0, 1, 4]]
+    body, tags = meshes.read(obj, fill={"max_volume": 0.1})   # triangle cells -> the surface
+    assert tags is None and body["simplices"] == [[0, 1, 2], [0, 2, 3]]
+    assert body["fill"] == [{"max_volume": 0.1, "surface": [[0, 1, 4]]}]
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    body, _ = meshes.read(obj, fill={})
+    assert "simplices" not in body and len(body["fill"][0]["surface"]) == 4
+    import meshio
+    import numpy as np
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+    m = meshio.Mesh(pts, [("tetra", [[0, 1, 2, 3]]), ("line", [[0, 1]]), ("vertex", [[3]])],
+                    point_data={"t": np.arange(4.0), "uvw": np.ones((4, 3))},
+                    cell_data={"gmsh:physical": [[1], [2], [3]], "gmsh:geometrical": [[1], [2], [3]]},
+                    field_data={"solid": np.array([1, 3]), "crease_a": np.array([2, 1]),
+                                "corner": np.array([3, 0])})
+    msh = tmp_path / "g.msh"
+    meshio.write(str(msh), m, file_format="gmsh22", binary=False)
+    body, tags = meshes.read(msh)
+    assert body["simplices"] == [[0, 1, 2, 3], [0, 1], [3]]
+    assert body["attributes"] == {"t": [0.0, 1.0, 2.0, 3.0], "uvw": [[1.0, 1.0, 1.0]] * 4}
+    assert sorted(tags) == [[0, 1], [3]]
+    assert meshes.read(msh, singular_groups=["solid"])[1] == []      # chosen, no such cells
+    assert meshes.read(msh, singular_groups=[])[1] is None

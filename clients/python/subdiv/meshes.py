@@ -41,8 +41,10 @@ def read(path, *, fill=None, singular_groups=None):
                     get z = 0);
       "simplices"   [[i], [i, j], [i, j, k], [i, j, k, l], ...] 0-based point indices, the
                     file's vertex, line, triangle and tetra cells (quads and polygons split into
-                    triangles); left out with `fill` when the file has only triangles;
-      "fill"        only with `fill`: [dict(fill, surface=[[i, j, k], ...])], the triangles;
+                    triangles); with `fill` without the triangle cells, and left out when
+                    there is nothing else;
+      "fill"        only with `fill`: [dict(fill, surface=[[i, j, k], ...])], the file's
+                    triangle cells (split quads and polygons stay in "simplices");
       "attributes"  only when the file has numeric point data: {name: [v, ...]} for one
                     component, {name: [[v0, v1, ...], ...]} for more (at most 16 arrays).
     A .json file is its own body (with `fill`, its triangles moved into a "fill" entry).
