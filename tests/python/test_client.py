@@ -328,6 +328,12 @@ def test_level_arrays_match_the_json(client, mesh):
         assert len(s.level_arrays(2)["cells"]["octahedra"]) > 0
         solids = s.level_arrays(1, parts="solids")["cells"]
         assert solids["edges"].shape == (0, 2) and solids["points"].shape == (0,)
+        assert "slice" not in s.level_arrays(1)
+        sl = s.level_arrays(1, slice="0,0,1,0.5")["slice"]
+        j = s.level_json(1, slice="0,0,1,0.5")["slice"]
+        assert len(j["triangles"]) > 0
+        assert sl["vertices"].tolist() == j["vertices"] and sl["triangles"].tolist() == j["triangles"]
+        assert sl["vertices"].shape[1:] == (3,) and sl["triangles"].shape[1:] == (3,)
 
 
 @pytest.mark.parametrize("mesh", ["mixed", "cube"])

@@ -393,20 +393,27 @@ class Session:
         "cells": {"points" (k,), "edges" (k x 2), "triangles" (k x 3), "tetrahedra" (k x 4),
         "octahedra" (k x 6: p, q, a, a2, b, b2 — the major diagonal p-q first)} (int64 vertex
         indices; a part not asked for is an empty array of that shape), "attributes" {name: (n,)
-        for one component, n x ncomp otherwise (float64)}, "rules" (one rule name per vertex)}.
-        Needs numpy (Debian: python3-numpy)."""
+        for one component, n x ncomp otherwise (float64)}, "rules" (one rule name per vertex)},
+        and with the `slice` option "slice": {"vertices" (m x 3 float64), "triangles" (k x 3
+        int64, indices into those vertices)}. Needs numpy (Debian: python3-numpy)."""
         import numpy as np
         j = self.level_json(level, **options)
         cells = {}
         for kind, width in _CELL_WIDTHS.items():
             cells[kind] = np.asarray(j["cells"].get(kind, []), dtype=np.int64).reshape(
                 (-1,) if width == 1 else (-1, width))
-        return {"level": j["level"], "version": j.get("version"),
-                "positions": np.asarray(j["vertices"], dtype=np.float64).reshape(-1, 3),
-                "cells": cells,
-                "attributes": {k: np.asarray(v, dtype=np.float64)
-                               for k, v in j.get("attributes", {}).items()},
-                "rules": list(j.get("rules", []))}
+        out = {"level": j["level"], "version": j.get("version"),
+               "positions": np.asarray(j["vertices"], dtype=np.float64).reshape(-1, 3),
+               "cells": cells,
+               "attributes": {k: np.asarray(v, dtype=np.float64)
+                              for k, v in j.get("attributes", {}).items()},
+               "rules": list(j.get("rules", []))}
+        if "slice" in j:
+            out["slice"] = {"vertices": np.asarray(j["slice"]["vertices"],
+                                                   dtype=np.float64).reshape(-1, 3),
+                            "triangles": np.asarray(j["slice"]["triangles"],
+                                                    dtype=np.int64).reshape(-1, 3)}
+        return out
 
     def level_mesh(self, level: int, **options: Any) -> Any:
         """The level as a meshio.Mesh: points the level's vertices (float64), cell blocks
@@ -419,8 +426,9 @@ class Session:
         and cells. Point data: the attributes (float64; (n,) or n x ncomp). Cell data, as the
         VTU's: "kind" (0 point, 1 curve, 2 triangle, 3 tetrahedron, 4 octahedron) and
         "source_cell" (the index among the cells of that kind at this level; an octahedron's 4
-        tetrahedra share it). Options: those of level() (e.g. parts="solids"). Needs numpy and
-        meshio (Debian: python3-numpy, python3-meshio)."""
+        tetrahedra share it). Options: those of level() (e.g. parts="solids"); a `slice` is not
+        in the mesh (the VTU's slice triangles are: see level_arrays()'s "slice"). Needs numpy
+        and meshio (Debian: python3-numpy, python3-meshio)."""
         import meshio
         import numpy as np
         a = self.level_arrays(level, **options)
