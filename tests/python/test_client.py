@@ -280,3 +280,162 @@ def test_public_api_has_type_hints():
                       if p.name != "self" and p.kind is not p.VAR_POSITIONAL]
             missing = [p.name for p in params if p.name not in hints]
             assert not missing and "return" in hints, (cls.__name__, name, missing)
+
+
+# ---- numpy, meshio and scipy answers ---------------------------------------------------------
+
+CUBE = REPO / "tests" / "cases" / "tetgen_cube" / "mesh.txt"
+
+
+def _with_attributes(body):
+    """The body with a scalar and a 2-vector attribute (point data to carry through)."""
+    n = len(body["vertices"])
+    return dict(body, attributes={"t": [float(i % 5) for i in range(n)],
+                                  "uv": [[float(i), 0.5 * i] for i in range(n)]})
+
+
+def _mesh_bodies():
+    from daemon import complex_from_text
+    return {"mixed": _with_attributes({k: MIXED[k] for k in ("vertices", "simplices")}),
+            "cube": _with_attributes(complex_from_text(CUBE))}
+
+
+@pytest.mark.parametrize("mesh", ["mixed", "cube"])
+def test_level_arrays_match_the_json(client, mesh):
+    """level_arrays(): the arrays hold exactly what GET ?format=json (read here with requests,
+    not through the client) says, with the documented shapes and dtypes."""
+    import numpy as np
+    import requests
+    with client.create_session() as s:
+        s.put_complex(_mesh_bodies()[mesh])
+        for L in (0, 2):
+            a = s.level_arrays(L)
+            j = requests.get(f"{s.url}/levels/{L}", params={"format": "json"},
+                             headers={"Authorization": f"Bearer {s.token}"}, timeout=60).json()
+            assert (a["level"], a["version"]) == (j["level"], j["version"]) == (L, s.version)
+            assert a["positions"].dtype == np.float64 and a["positions"].shape == (len(j["vertices"]), 3)
+            assert a["positions"].tolist() == j["vertices"]
+            widths = {"points": 1, "edges": 2, "triangles": 3, "tetrahedra": 4, "octahedra": 6}
+            assert set(a["cells"]) == set(widths) == set(j["cells"])
+            for kind, w in widths.items():
+                c = a["cells"][kind]
+                assert c.dtype == np.int64 and c.shape[1:] == (() if w == 1 else (w,))
+                assert c.tolist() == j["cells"][kind], kind
+            assert a["attributes"]["t"].shape == (len(j["vertices"]),)
+            assert a["attributes"]["uv"].shape == (len(j["vertices"]), 2)
+            assert {k: v.tolist() for k, v in a["attributes"].items()} == j["attributes"]
+            assert a["rules"] == j["rules"]
+        assert len(s.level_arrays(2)["cells"]["octahedra"]) > 0
+        solids = s.level_arrays(1, parts="solids")["cells"]
+        assert solids["edges"].shape == (0, 2) and solids["points"].shape == (0,)
+        assert "slice" not in s.level_arrays(1)
+        sl = s.level_arrays(1, slice="0,0,1,0.5")["slice"]
+        j = s.level_json(1, slice="0,0,1,0.5")["slice"]
+        assert len(j["triangles"]) > 0
+        assert sl["vertices"].tolist() == j["vertices"] and sl["triangles"].tolist() == j["triangles"]
+        assert sl["vertices"].shape[1:] == (3,) and sl["triangles"].shape[1:] == (3,)
+
+
+@pytest.mark.parametrize("mesh", ["mixed", "cube"])
+@pytest.mark.parametrize("options", [{}, {"parts": "solids"}])
+def test_level_mesh_matches_meshio_reading_the_vtu(client, tmp_path, mesh, options):
+    """level_mesh(): meshio reading the daemon's VTU of the same level (octahedra as 4 tetrahedra,
+    its default) gives the same points, the same cell blocks (types, counts, vertices), the same
+    kind and source_cell cell data and the same attribute point data."""
+    import meshio
+    import numpy as np
+    with client.create_session() as s:
+        s.put_complex(_mesh_bodies()[mesh])
+        for L in (1, 2):
+            m = s.level_mesh(L, **options)
+            assert isinstance(m, meshio.Mesh)
+            vtu = tmp_path / f"{mesh}_{L}.vtu"
+            s.level(L, format="vtu", out=vtu, **options)
+            ref = meshio.read(str(vtu))
+            assert m.points.dtype == np.float64
+            assert np.array_equal(m.points, ref.points)
+            assert [(b.type, len(b.data)) for b in m.cells] == [(b.type, len(b.data)) for b in ref.cells]
+            for b, r in zip(m.cells, ref.cells):
+                assert np.array_equal(b.data, r.data), b.type
+            for name in ("kind", "source_cell"):
+                for x, y in zip(m.cell_data[name], ref.cell_data[name]):
+                    assert np.array_equal(x, y), name
+            assert set(m.point_data) == {"t", "uv"} and set(ref.point_data) == {"t", "uv", "rule"}
+            for name, v in m.point_data.items():
+                assert np.array_equal(v.reshape(len(m.points), -1),
+                                      ref.point_data[name].reshape(len(m.points), -1)), name
+            counts = s.level_stats(L)["counts"]
+            tets = sum(len(b.data) for b in m.cells if b.type == "tetra")
+            assert tets == counts["tetrahedra"] + 4 * counts["octahedra"]
+            if options:
+                assert [b.type for b in m.cells] == ["tetra"]
+
+
+@pytest.mark.parametrize("mesh", ["mixed", "cube"])
+def test_matrix_sparse_reproduces_levels(client, mesh, monkeypatch):
+    """matrix_sparse(): a scipy CSR matrix with P @ (level F positions) = level L positions and
+    P @ (level F attribute) = level L attribute, to 1e-12, the levels being the daemon's JSON;
+    without scipy the JSON CSR dict."""
+    import numpy as np
+    import scipy.sparse
+    with client.create_session() as s:
+        s.put_complex(_mesh_bodies()[mesh])
+        levels = [s.level_json(L) for L in range(3)]
+        for frm, to in ((0, 1), (1, 2), (0, 2)):
+            P = s.matrix_sparse(to, from_level=frm)
+            assert isinstance(P, scipy.sparse.csr_matrix)
+            src, dst = np.array(levels[frm]["vertices"]), np.array(levels[to]["vertices"])
+            assert P.shape == (len(dst), len(src))
+            np.testing.assert_allclose(P @ src, dst, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(P @ np.array(levels[frm]["attributes"]["uv"]),
+                                       levels[to]["attributes"]["uv"], rtol=0, atol=1e-12)
+        monkeypatch.setitem(sys.modules, "scipy", None)
+        monkeypatch.setitem(sys.modules, "scipy.sparse", None)
+        j = s.matrix_sparse(2, from_level=1)
+        assert isinstance(j, dict) and j == s.matrix(2, 1, format="json")
+        assert (j["rows"], j["cols"]) == (len(levels[2]["vertices"]), len(levels[1]["vertices"]))
+
+
+def test_client_imports_without_numpy_scipy_meshio():
+    """numpy, scipy and meshio are imported only by the methods that return their objects."""
+    code = ("import sys\n"
+            "for m in ('numpy', 'scipy', 'scipy.sparse', 'meshio'): sys.modules[m] = None\n"
+            f"sys.path.insert(0, {str(REPO / 'clients' / 'python')!r})\n"
+            "import subdiv, subdiv.cli, subdiv.meshes\n"
+            "print(subdiv.Session.level_mesh.__name__)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.strip() == "level_mesh", r.stderr
+
+
+def test_meshes_read_returns_what_its_docstring_says(tmp_path):
+    """meshes.read: (body, tags) — vertices in file order, quads split into triangles, point data
+    as attributes, tags None without chosen groups; with fill the triangles move into "fill"."""
+    from subdiv import meshes
+    obj = tmp_path / "q.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nf 1 2 3 4\nf 1 2 5\n")
+    body, tags = meshes.read(obj)
+    assert tags is None and set(body) == {"vertices", "simplices"}
+    assert body["vertices"] == [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1]]
+    assert body["simplices"] == [[0, 1, 2], [0, 2, 3], [0, 1, 4]]
+    body, tags = meshes.read(obj, fill={"max_volume": 0.1})   # triangle cells -> the surface
+    assert tags is None and body["simplices"] == [[0, 1, 2], [0, 2, 3]]
+    assert body["fill"] == [{"max_volume": 0.1, "surface": [[0, 1, 4]]}]
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    body, _ = meshes.read(obj, fill={})
+    assert "simplices" not in body and len(body["fill"][0]["surface"]) == 4
+    import meshio
+    import numpy as np
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+    m = meshio.Mesh(pts, [("tetra", [[0, 1, 2, 3]]), ("line", [[0, 1]]), ("vertex", [[3]])],
+                    point_data={"t": np.arange(4.0), "uvw": np.ones((4, 3))},
+                    cell_data={"gmsh:physical": [[1], [2], [3]], "gmsh:geometrical": [[1], [2], [3]]},
+                    field_data={"solid": np.array([1, 3]), "crease_a": np.array([2, 1]),
+                                "corner": np.array([3, 0])})
+    msh = tmp_path / "g.msh"
+    meshio.write(str(msh), m, file_format="gmsh22", binary=False)
+    body, tags = meshes.read(msh)
+    assert body["simplices"] == [[0, 1, 2, 3], [0, 1], [3]]
+    assert body["attributes"] == {"t": [0.0, 1.0, 2.0, 3.0], "uvw": [[1.0, 1.0, 1.0]] * 4}
+    assert sorted(tags) == [[0, 1], [3]]
+    assert meshes.read(msh, singular_groups=["solid"])[1] == []      # chosen, no such cells
+    assert meshes.read(msh, singular_groups=[])[1] is None

@@ -13,6 +13,9 @@ the problem+json attached. Versions: each answer's ETag updates `Session.version
 it as If-Match (the daemon requires one), other changes send it when asked (`if_match=True`, or a
 version number) so that a concurrent change makes them fail with PreconditionFailed (412).
 
+numpy, meshio and scipy are optional: `level_arrays` (numpy arrays), `level_mesh` (a meshio.Mesh),
+`matrix_sparse` (a scipy.sparse.csr_matrix) and `delta` import them when called.
+
 Progress: pass `progress=callable(kind, done, total)`; kind is "upload" or "download" (bytes;
 total None when unknown) or "server" (done = seconds computing, total = the level being computed,
 from GET /v1/sessions/{id}'s "progress"), polled while the daemon works on a request.
@@ -39,6 +42,8 @@ Version = Union[int, str]
 PathLike = Union[str, "os.PathLike[str]"]
 
 FORMATS = ("glb", "gltf", "vtu", "vtk", "json")
+# The cell kinds of format=json's "cells" and the vertices of each.
+_CELL_WIDTHS = {"points": 1, "edges": 2, "triangles": 3, "tetrahedra": 4, "octahedra": 6}
 LEVEL_OPTIONS = ("parts", "slice", "attributes", "colormap", "octahedra", "names", "compress")
 
 
@@ -382,6 +387,71 @@ class Session:
         """The level as the JSON of docs/API.md (vertices, cells, attributes, rules, origin)."""
         return json.loads(self.level(level, format="json", **options))
 
+    def level_arrays(self, level: int, **options: Any) -> JSON:
+        """The level (GET /levels/{L}?format=json, with the level options of level()) as numpy
+        arrays: {"level", "version", "positions" (n x 3 float64, the doubles of format=json),
+        "cells": {"points" (k,), "edges" (k x 2), "triangles" (k x 3), "tetrahedra" (k x 4),
+        "octahedra" (k x 6: p, q, a, a2, b, b2 — the major diagonal p-q first)} (int64 vertex
+        indices; a part not asked for is an empty array of that shape), "attributes" {name: (n,)
+        for one component, n x ncomp otherwise (float64)}, "rules" (one rule name per vertex)},
+        and with the `slice` option "slice": {"vertices" (m x 3 float64), "triangles" (k x 3
+        int64, indices into those vertices)}. Needs numpy (Debian: python3-numpy)."""
+        import numpy as np
+        j = self.level_json(level, **options)
+        cells = {}
+        for kind, width in _CELL_WIDTHS.items():
+            cells[kind] = np.asarray(j["cells"].get(kind, []), dtype=np.int64).reshape(
+                (-1,) if width == 1 else (-1, width))
+        out = {"level": j["level"], "version": j.get("version"),
+               "positions": np.asarray(j["vertices"], dtype=np.float64).reshape(-1, 3),
+               "cells": cells,
+               "attributes": {k: np.asarray(v, dtype=np.float64)
+                              for k, v in j.get("attributes", {}).items()},
+               "rules": list(j.get("rules", []))}
+        if "slice" in j:
+            out["slice"] = {"vertices": np.asarray(j["slice"]["vertices"],
+                                                   dtype=np.float64).reshape(-1, 3),
+                            "triangles": np.asarray(j["slice"]["triangles"],
+                                                    dtype=np.int64).reshape(-1, 3)}
+        return out
+
+    def level_mesh(self, level: int, **options: Any) -> Any:
+        """The level as a meshio.Mesh: points the level's vertices (float64), cell blocks
+        "vertex" (isolated points), "line" (curve segments), "triangle" (surface triangles) and
+        "tetra" (the tetrahedra, then every octahedron (p,q,a,a2,b,b2) split into the 4
+        tetrahedra (q,p,a,b), (q,p,b,a2), (q,p,a2,b2), (q,p,b2,a) along its major diagonal p-q:
+        meshio has no octahedron cell, and meshio 7's VTU reader refuses polyhedra mixed with
+        other cells), empty blocks left out. This is the cell order and the split of the daemon's VTU
+        (docs/OUTPUTS.md), so `meshio.read` of GET /levels/{L}?format=vtu gives the same points
+        and cells. Point data: the attributes (float64; (n,) or n x ncomp). Cell data, as the
+        VTU's: "kind" (0 point, 1 curve, 2 triangle, 3 tetrahedron, 4 octahedron) and
+        "source_cell" (the index among the cells of that kind at this level; an octahedron's 4
+        tetrahedra share it). Options: those of level() (e.g. parts="solids"); a `slice` is not
+        in the mesh (the VTU's slice triangles are: see level_arrays()'s "slice"). Needs numpy
+        and meshio (Debian: python3-numpy, python3-meshio)."""
+        import meshio
+        import numpy as np
+        a = self.level_arrays(level, **options)
+        c = a["cells"]
+        oct_ = c["octahedra"]
+        split = np.stack([oct_[:, [1, 0, a_, b_]] for a_, b_ in ((2, 4), (4, 3), (3, 5), (5, 2))],
+                         axis=1).reshape(-1, 4)
+        blocks = [("vertex", c["points"].reshape(-1, 1), 0, np.arange(len(c["points"]))),
+                  ("line", c["edges"], 1, np.arange(len(c["edges"]))),
+                  ("triangle", c["triangles"], 2, np.arange(len(c["triangles"])))]
+        tets = np.concatenate([c["tetrahedra"], split])
+        kind = np.concatenate([np.full(len(c["tetrahedra"]), 3), np.full(len(split), 4)])
+        src = np.concatenate([np.arange(len(c["tetrahedra"])), np.repeat(np.arange(len(oct_)), 4)])
+        blocks.append(("tetra", tets, kind, src))
+        cells, kinds, sources = [], [], []
+        for name, data, k, s in blocks:
+            if len(data):
+                cells.append((name, data))
+                kinds.append(np.broadcast_to(np.asarray(k, dtype=np.uint8), (len(data),)).copy())
+                sources.append(np.asarray(s, dtype=np.int32))
+        return meshio.Mesh(a["positions"], cells, point_data=dict(a["attributes"]),
+                           cell_data={"kind": kinds, "source_cell": sources})
+
     def delta(self, level: int, since: int, format: str = "bin",
               attributes: Union[str, Sequence[str], None] = None) -> JSON:
         """GET /levels/{L}/delta?since=V: the points of `level` that changed since version
@@ -504,6 +574,19 @@ class Session:
                 f.write(data)
             return len(data)
         return json.loads(data) if format == "json" else data.decode()
+
+    def matrix_sparse(self, level: int, from_level: int = 0) -> Any:
+        """GET /matrices/{L}?from=F&format=json as a scipy.sparse.csr_matrix of shape (rows of
+        level L, points of level F): `P @ positions_F` is level L's positions (level_arrays()),
+        and the same for every attribute. Without scipy (Debian: python3-scipy) the JSON CSR dict
+        of matrix(format="json") ({"from", "to", "rows", "cols", "nnz", "rowptr", "col", "val"})."""
+        j = self.matrix(level, from_level, format="json")
+        try:
+            import scipy.sparse
+        except ImportError:
+            return j
+        return scipy.sparse.csr_matrix((j["val"], j["col"], j["rowptr"]),
+                                       shape=(j["rows"], j["cols"]))
 
     def analysis(self, vertex: Optional[int] = None,
                  edge: Union[str, Sequence[int], None] = None) -> JSON:

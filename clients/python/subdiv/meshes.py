@@ -33,11 +33,33 @@ class MeshError(Exception):
 
 
 def read(path, *, fill=None, singular_groups=None):
-    """(body, tags) for the file at `path`: `body` a PUT /complex body, `tags` a list of singular
-    simplices from Gmsh physical groups (None when the file has none chosen). `fill`: None, or a
-    dict of fill switches ({"max_volume": v, "min_ratio": r}) to post the triangles as a fill
-    surface. `singular_groups`: names of the physical groups that are tags (None: the default
-    prefixes)."""
+    """Read the mesh file at `path`; returns the pair (body, tags).
+
+    `body` is a PUT /complex body (docs/API.md), a dict of plain Python lists ready for
+    `Session.put_complex(body)` or `json.dump`:
+      "vertices"    [[x, y, z], ...] floats, one per point of the file in its order (2-D points
+                    get z = 0);
+      "simplices"   [[i], [i, j], [i, j, k], [i, j, k, l], ...] 0-based point indices, the
+                    file's vertex, line, triangle and tetra cells (quads and polygons split into
+                    triangles); with `fill` without the triangle cells, and left out when
+                    there is nothing else;
+      "fill"        only with `fill`: [dict(fill, surface=[[i, j, k], ...])], the file's
+                    triangle cells (split quads and polygons stay in "simplices");
+      "attributes"  only when the file has numeric point data: {name: [v, ...]} for one
+                    component, {name: [[v0, v1, ...], ...]} for more (at most 16 arrays).
+    A .json file is its own body (with `fill`, its triangles moved into a "fill" entry).
+
+    `tags` is the list of singular simplices from the chosen Gmsh physical groups, each a sorted
+    list of point indices ([i] corner, [i, j] crease, [i, j, k] embedded triangle), duplicates
+    dropped, in file order — the "singular" of a PUT /tags body (`Session.put_tags(tags)`); [] when
+    groups were chosen but hold none of those cells; None when no group was chosen (not a Gmsh
+    file, no group with a default prefix, `singular_groups=[]`, or a .json file).
+
+    `fill`: None, or a dict of fill switches ({"max_volume": v, "min_ratio": r}) to post the
+    triangles as a fill surface. `singular_groups`: names of the physical groups that are tags
+    (None: the groups whose names start with "singular", "crease" or "corner", case-insensitive;
+    a name the file lacks raises MeshError). Raises MeshError when the file cannot be read or is
+    not simplicial."""
     p = pathlib.Path(path)
     kind = FORMATS.get(p.suffix.lower())
     if kind is None:
@@ -83,6 +105,7 @@ def _split(kind, cells, path):
 
 
 def from_meshio(m, *, path="mesh", fill=None, singular_groups=None):
+    """(body, tags) of a meshio.Mesh, as read() returns them; `path` names it in errors."""
     verts = [[float(x) for x in (list(p) + [0.0, 0.0])[:3]] for p in m.points]
     if not verts:
         raise MeshError(f"{path}: the mesh has no points")
