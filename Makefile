@@ -98,7 +98,7 @@ test: deps
 # done here when pvpython is missing (apt-get needs root).
 PV_DIR := $(B)/paraview
 test-paraview: all
-	@command -v pvpython >/dev/null 2>&1 || DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends paraview
+	@command -v pvpython >/dev/null 2>&1 || DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends paraview python3-paraview
 	rm -rf $(PV_DIR) && mkdir -p $(PV_DIR)
 	./$(B)/subdivd refine examples/mixed.json --level 2 -o $(PV_DIR)/level.vtu
 	./$(B)/subdivd refine examples/mixed.json --level 2 --compress zlib --names true -o $(PV_DIR)/level_z.vtu
