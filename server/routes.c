@@ -76,6 +76,19 @@ static void add_gauges(session *s, void *ud)
     api_model_unref(m);
 }
 
+
+/* A response holding a copy of an open_memstream buffer (which belongs to the C library and is
+ * freed here); NULL for lack of memory. */
+static struct MHD_Response *memstream_response(req *r, char *text, size_t n, const char *ctype)
+{
+    char *body = api_memdup(text, n);
+    free(text);
+    if (!body)
+        return NULL;
+    atomic_store(&r->bytes, n);
+    return http_buffer_response(ctype, body, n);
+}
+
 static void h_metrics(req *r)
 {
     char *text = NULL;
@@ -95,14 +108,13 @@ static void h_metrics(req *r)
     metrics_write_events(f, listeners, dropped);
     metrics_write_budget(f, api_mem_budget(), api_mem_budget_used(), api_mem_budget_refusals());
     fclose(f);
-    char *body = api_memdup(text, n);
-    free(text); /* open_memstream's buffer belongs to the C library */
-    if (!body) {
+    struct MHD_Response *resp = memstream_response(r, text, n,
+                                                   "text/plain; version=0.0.4; charset=utf-8");
+    if (!resp) {
         http_fail(r, 503, "out-of-memory", "out of memory");
         return;
     }
-    atomic_store(&r->bytes, n);
-    http_queue(r, 200, http_buffer_response("text/plain; version=0.0.4; charset=utf-8", body, n));
+    http_queue(r, 200, resp);
 }
 
 static void h_asset(req *r)
@@ -152,16 +164,12 @@ static void h_error_page(req *r)
     fprintf(f, "\n`detail` says what was wrong; `errors[]` (JSON pointers into the request body "
                "or query parameter names) says where. All types: docs/SERVICE.md, \"Errors\".\n");
     fclose(f);
-    char *body = api_memdup(text, n);
-    free(text); /* open_memstream's buffer belongs to the C library */
-    if (!body) {
+    struct MHD_Response *resp = memstream_response(r, text, n, "text/markdown; charset=utf-8");
+    if (!resp) {
         http_fail(r, 503, "out-of-memory", "out of memory");
         return;
     }
-    atomic_store(&r->bytes, n);
-    struct MHD_Response *resp = http_buffer_response("text/markdown; charset=utf-8", body, n);
-    if (resp)
-        http_add_header(resp, "Cache-Control", "public, max-age=3600");
+    http_add_header(resp, "Cache-Control", "public, max-age=3600");
     http_queue(r, 200, resp);
 }
 
