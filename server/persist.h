@@ -1,0 +1,105 @@
+/* persist.h — the durable session store (docs/SERVICE.md "Persistence"), apart from the table of
+ * resident sessions (sessions.h).
+ *
+ * What is stored per session is its control data, never its levels: a small record (id, the
+ * SHA-256 of its token, TTL, creation and expiry times, version) and the session's content as a
+ * *snapshot* (the export document of api/export.c at some version) followed by a *journal*:
+ * the bodies of the edits (PATCH control-points) answered since, one entry per version. Any
+ * change other than an edit writes a new snapshot and empties the journal; the daemon also
+ * compacts a long journal into a snapshot. Loading a session is importing its snapshot and
+ * replaying its journal: edits recompute (DECISIONS 17), so the levels are bit-identical.
+ *
+ * Every write is a compare-and-set on the stored version: `expect` must be the version in the
+ * store, or the write is refused with PERSIST_CONFLICT (another daemon on the same store got
+ * there first: the caller answers 412 and drops its resident copy). Back ends:
+ *   memory            nothing is written (the default; every call succeeds)
+ *   sqlite:PATH       one SQLite file in WAL mode (persist_sqlite.c)
+ *   redis://HOST:PORT a redis server shared by several daemons (persist_redis.c)
+ * All functions are thread-safe (each back end serialises its own connection).
+ */
+#ifndef SUBDIVD_PERSIST_H
+#define SUBDIVD_PERSIST_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+typedef enum persist_rc {
+    PERSIST_OK = 0,
+    PERSIST_CONFLICT,     /* the stored version is not `expect` */
+    PERSIST_ABSENT,       /* no such session (deleted, expired, or never stored) */
+    PERSIST_UNAVAILABLE,  /* the store cannot be reached or written (disk full, redis down) */
+    PERSIST_CORRUPT       /* what is stored cannot be read back (a damaged record or entry) */
+} persist_rc;
+
+typedef struct persist_meta {
+    char id[33];
+    unsigned char token_hash[32]; /* SHA-256 of the bearer token */
+    int ttl_s;
+    int64_t created;              /* wall clock, seconds since the epoch */
+    int64_t expires_at;           /* wall clock; the store forgets the session after it */
+    uint64_t version;
+} persist_meta;
+
+/* One journal entry: the edit that made `version`. */
+typedef struct persist_entry {
+    uint64_t version;
+    char *text;                   /* malloc'd, NUL-terminated */
+    size_t len;
+} persist_entry;
+
+/* What persist_load returns: the record, the snapshot (NULL when none was written yet: an empty
+ * session) with the version it was taken at, and the journal entries after it in version order. */
+typedef struct persist_loaded {
+    persist_meta meta;
+    char *snapshot;               /* malloc'd, NUL-terminated, or NULL */
+    size_t snapshot_len;
+    uint64_t snapshot_version;
+    persist_entry *journal;       /* malloc'd array */
+    size_t njournal;
+} persist_loaded;
+
+typedef enum persist_kind { PERSIST_MEMORY, PERSIST_SQLITE, PERSIST_REDIS } persist_kind;
+
+typedef struct persist persist;
+
+/* Open the store named by `spec` ("memory", "sqlite:PATH", "redis://HOST:PORT"); sync_full asks
+ * for fsync at every commit (SQLite synchronous=FULL: survives power loss, not only a crash).
+ * NULL with a message in err on failure (a bad spec, an unreadable file). */
+persist *persist_open(const char *spec, bool sync_full, char *err, size_t cap);
+void persist_close(persist *p);
+persist_kind persist_kind_of(const persist *p);
+/* The spec as given, for the log and /readyz (a redis URL without credentials). */
+const char *persist_name(const persist *p);
+/* Several daemons may share it: every request checks the stored version (persist_version). */
+bool persist_shared(const persist *p);
+/* Anything is written at all (not the memory store). */
+bool persist_durable(const persist *p);
+
+/* A new session: its record at version 0, no snapshot. PERSIST_CONFLICT if the id exists. */
+persist_rc persist_create(persist *p, const persist_meta *m);
+/* The session's content at `version` as a snapshot (the journal emptied), if the stored version
+ * is `expect` (expect == version: a compaction). */
+persist_rc persist_snapshot(persist *p, const char *id, uint64_t expect, uint64_t version,
+                            int64_t expires_at, const char *doc, size_t len);
+/* Append the edit that made `version` (= expect + 1) to the journal, if the stored version is
+ * `expect`. */
+persist_rc persist_append(persist *p, const char *id, uint64_t expect, uint64_t version,
+                          int64_t expires_at, const char *entry, size_t len);
+/* Move the expiry (the session was used). */
+persist_rc persist_touch(persist *p, const char *id, int64_t expires_at);
+persist_rc persist_delete(persist *p, const char *id);
+/* The stored version (shared stores call it per request); PERSIST_ABSENT when gone. */
+persist_rc persist_version(persist *p, const char *id, uint64_t *version);
+/* Everything needed to rebuild the session (free with persist_loaded_free). An expired session
+ * is PERSIST_ABSENT. */
+persist_rc persist_load(persist *p, const char *id, persist_loaded *out);
+void persist_loaded_free(persist_loaded *l);
+/* Forget sessions whose expiry is before `now`; returns how many went (or -1). */
+long persist_expire(persist *p, int64_t now);
+/* Stored unexpired sessions (-1 if the store cannot say). */
+long persist_count(persist *p, int64_t now);
+/* Can the store be written right now? false with the reason (the last failure) in why. */
+bool persist_healthy(persist *p, char *why, size_t cap);
+
+#endif

@@ -1,0 +1,31 @@
+/* persist_impl.h — what a back end of persist.h provides (persist.c dispatches and records the
+ * last failure for persist_healthy; the back ends only talk to their store). */
+#ifndef SUBDIVD_PERSIST_IMPL_H
+#define SUBDIVD_PERSIST_IMPL_H
+
+#include "persist.h"
+
+typedef struct persist_ops {
+    persist_rc (*create)(void *b, const persist_meta *m);
+    persist_rc (*snapshot)(void *b, const char *id, uint64_t expect, uint64_t version,
+                           int64_t expires_at, const char *doc, size_t len);
+    persist_rc (*append)(void *b, const char *id, uint64_t expect, uint64_t version,
+                         int64_t expires_at, const char *entry, size_t len);
+    persist_rc (*touch)(void *b, const char *id, int64_t expires_at);
+    persist_rc (*del)(void *b, const char *id);
+    persist_rc (*version)(void *b, const char *id, uint64_t *version);
+    persist_rc (*load)(void *b, const char *id, persist_loaded *out);
+    long (*expire)(void *b, int64_t now);
+    long (*count)(void *b, int64_t now);
+    /* the back end's own description of its last failure (after a non-OK return) */
+    const char *(*last_error)(void *b);
+    void (*close)(void *b);
+} persist_ops;
+
+/* Back ends: open returns the handle, or NULL with a message. */
+void *persist_sqlite_open(const char *path, bool sync_full, char *err, size_t cap);
+extern const persist_ops persist_sqlite_ops;
+void *persist_redis_open(const char *host, int port, char *err, size_t cap);
+extern const persist_ops persist_redis_ops;
+
+#endif
