@@ -258,6 +258,37 @@ static int parse_diagonals(json_t *v, const api_packs *packs, api_input *in, api
     return rc;
 }
 
+/* "reoriented": [simplex...] — the tetrahedra stored with their last two vertices exchanged, as
+ * GET /complex lists them; when given, exactly these are (whatever their volume now), so a
+ * complex saved after edits that turned tetrahedra inside out rebuilds the same levels. */
+static int parse_reoriented(json_t *v, const api_packs *packs, api_input *in, api_problem *p)
+{
+    api_rows rows;
+    if (!api_rows_open(&rows, v, packs, "/reoriented"))
+        return api_fail_at(p, 400, "wrong-type", "/reoriented", "must be an array of simplex indices");
+    if (api_rows_count(&rows) > in->ns)
+        return api_fail_at(p, 422, "repeated-index", "/reoriented",
+                           "%zu entries for %u simplices: some tetrahedron is listed twice",
+                           api_rows_count(&rows), in->ns);
+    if (!(in->reoriented = api_calloc((size_t)in->ns + 1, 1)))
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    char ptr[96];
+    api_row d;
+    for (size_t i = 0; api_rows_next(&rows, &d); i++) {
+        long long s;
+        api_ptr_index(ptr, sizeof ptr, "/reoriented", i);
+        if (api_row_is_array(&d))
+            return api_fail_at(p, 400, "wrong-type", ptr, "a simplex index");
+        if (api_num_get_int(api_row_value(&d), ptr, 0, (long long)in->ns - 1, &s, p))
+            return p->status;
+        if (in->size[s] != 4)
+            return api_fail_at(p, 422, "not-a-tetrahedron", ptr, "simplex %lld is not a tetrahedron", s);
+        if (in->reoriented[s]++)
+            return api_fail_at(p, 422, "repeated-index", ptr, "simplex %lld is listed twice", s);
+    }
+    return 0;
+}
+
 int api_build_model(api_input *in, const api_rules *rules, const api_tags *tags,
                        const api_limits *lim, api_model **out, api_problem *p)
 {
@@ -299,6 +330,17 @@ int api_build_model(api_input *in, const api_rules *rules, const api_tags *tags,
         }
         return api_fail_core(p, &e, "/simplices", "/vertices");
     }
+    if (m->c && in && !in->reoriented) { /* the orientation is control data from now on */
+        bool any = false;
+        for (uint32_t q = 0; q < in->ns && !any; q++)
+            any = in->size[q] == 4;
+        if (any && !(in->reoriented = api_calloc((size_t)in->ns + 1, 1))) {
+            api_model_unref(m);
+            return api_fail(p, 503, "out-of-memory", "out of memory");
+        }
+        for (uint32_t q = 0; any && q < in->ns; q++)
+            in->reoriented[q] = sd_complex_reoriented(m->c, q) == 1;
+    }
     sd_error e0 = {0};
     sd_class k;
     if (m->c && sd_complex_vertex_class(m->c, 0, 0, &k, &e0) == SD_OK) /* builds level-0 rules */
@@ -313,7 +355,7 @@ int api_build_model(api_input *in, const api_rules *rules, const api_tags *tags,
 }
 
 const char *const api_complex_packed[] = {"/vertices", "/simplices", "/attributes/*",
-                                          "/diagonals", "/fill/*/surface", NULL};
+                                          "/diagonals", "/reoriented", "/fill/*/surface", NULL};
 
 int api_put_complex(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                     api_problem *p)
@@ -325,7 +367,7 @@ int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *
                            const api_limits *lim, api_model **out, api_problem *p)
 {
     static const char *const keys[] = {"vertices", "simplices", "attributes", "diagonals",
-                                       "fill", "details", NULL};
+                                       "reoriented", "fill", "details", NULL};
     *out = NULL;
     if (api_only_keys(body, "", keys, p))
         return p->status;
@@ -346,8 +388,13 @@ int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *
     json_t *dg = json_object_get(body, "diagonals");
     if (!rc && dg)
         rc = parse_diagonals(dg, packs, in, p);
+    json_t *ro = json_object_get(body, "reoriented"), *fill = json_object_get(body, "fill");
+    if (!rc && ro && fill) /* TetGen's tets have no stored orientation to keep */
+        rc = api_fail_at(p, 422, "invalid-complex", "/reoriented",
+                         "\"reoriented\" describes a saved complex; it cannot go with \"fill\"");
+    if (!rc && ro)
+        rc = parse_reoriented(ro, packs, in, p);
     uint32_t nv_posted = in->nv, ns_posted = in->ns;
-    json_t *fill = json_object_get(body, "fill");
     if (!rc && fill) /* TetGen: the tets and Steiner points are appended to `in` (api/fill.c) */
         rc = api_fill(fill, packs, in, lim, p);
     if (!rc && !in->nv)   /* the core's "no vertices" would point at /simplices */
@@ -434,7 +481,7 @@ json_t *api_json_doubles(const double *x, size_t n)
 }
 
 /* The "tags" member of GET /complex: {"singular": [...]} and "petals" when there are any. */
-static json_t *tags_json(const api_model *m)
+json_t *api_tags_json(const api_model *m)
 {
     json_t *tj = json_array();
     for (uint32_t i = 0, off = 0; i < m->tags.n; off += m->tags.size[i++]) {
@@ -460,7 +507,7 @@ static json_t *tags_json(const api_model *m)
 }
 
 /* The "rules" member of GET /complex: the preferences and overrides as last put. */
-static json_t *rules_json(const api_model *m)
+json_t *api_rules_json(const api_model *m)
 {
     static const char *const schemes[] = {"box", "averaged"}, *const weights[] = {"warren", "loop"};
     static const char *const nmd[] = {"G2", "G1"}, *const surfs[] = {"chang-qin", "ying-zorin"};
@@ -492,13 +539,12 @@ static json_t *rules_json(const api_model *m)
                      surfs[m->rules.nonmanifold_surface & 1]);
 }
 
-json_t *api_get_complex(api_model *m, api_problem *p)
+/* The complex as PUT takes it back (vertices, simplices, attributes, every diagonal, the
+ * reoriented tetrahedra, the detail offsets), with the level-0 classes when asked (GET /complex).
+ * Positions and details are read under the data lock edits take. */
+static json_t *complex_json(api_model *m, bool classes)
 {
     const api_input *in = m->in;
-    if (!in) {
-        api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
-        return NULL;
-    }
     pthread_rwlock_rdlock(&m->data);
     json_t *vs = json_array(), *ss = json_array(), *at = json_object();
     for (uint32_t i = 0; i < in->nv; i++)
@@ -519,32 +565,56 @@ json_t *api_get_complex(api_model *m, api_problem *p)
                                                                      t->ncomp));
         json_object_set_new(at, t->name, arr);
     }
-    json_t *cv = json_array(), *ce = json_array();
-    const sd_level *lv = m->level0; /* immutable: no lock, so a computing session still answers */
-    uint32_t ne = 0;
-    const uint32_t *ev = sd_level_edges(lv, &ne);
-    sd_class k;
-    for (uint32_t i = 0; i < in->nv; i++)
-        if (!sd_level_vertex_class(lv, i, &k))
-            json_array_append_new(cv, class_json(&k, sd_level_vertex_singular(lv, i)));
-    for (uint32_t i = 0; i < ne; i++)
-        if (!sd_level_edge_class(lv, i, &k)) {
-            json_t *o = class_json(&k, sd_level_edge_singular(lv, i));
-            json_object_set_new(o, "vertices", json_pack("[I, I]", (json_int_t)ev[2 * i],
-                                                         (json_int_t)ev[2 * i + 1]));
-            json_array_append_new(ce, o);
-        }
-    json_t *dj = json_array();
+    json_t *dj = json_array(), *rj = json_array();
     for (uint32_t s = 0; s < in->ns; s++)
-        if (in->size[s] == 4)
+        if (in->size[s] == 4) {
             json_array_append_new(dj, json_pack("[I, i]", (json_int_t)s, sd_complex_diagonal(m->c, s)));
+            if (sd_complex_reoriented(m->c, s) == 1)
+                json_array_append_new(rj, json_integer(s));
+        }
     json_t *details = api_details_json(m); /* edits change them: under the lock */
     pthread_rwlock_unlock(&m->data);
-    return json_pack("{s:o, s:o, s:o, s:o, s:{s:o, s:o}, s:o, s:o, s:o, s:O}", "vertices", vs,
-                     "simplices", ss, "attributes", at, "diagonals", dj, "classes", "vertices", cv,
-                     "edges", ce, "tags", tags_json(m), "rules", rules_json(m), "details",
-                     details, "summary", m->summary);
+    json_t *j = json_pack("{s:o, s:o, s:o, s:o, s:o}", "vertices", vs, "simplices", ss,
+                          "attributes", at, "diagonals", dj, "reoriented", rj);
+    if (j && classes) {
+        json_t *cv = json_array(), *ce = json_array();
+        const sd_level *lv = m->level0; /* immutable: no lock, so a computing session still answers */
+        uint32_t ne = 0;
+        const uint32_t *ev = sd_level_edges(lv, &ne);
+        sd_class k;
+        for (uint32_t i = 0; i < in->nv; i++)
+            if (!sd_level_vertex_class(lv, i, &k))
+                json_array_append_new(cv, class_json(&k, sd_level_vertex_singular(lv, i)));
+        for (uint32_t i = 0; i < ne; i++)
+            if (!sd_level_edge_class(lv, i, &k)) {
+                json_t *o = class_json(&k, sd_level_edge_singular(lv, i));
+                json_object_set_new(o, "vertices", json_pack("[I, I]", (json_int_t)ev[2 * i],
+                                                             (json_int_t)ev[2 * i + 1]));
+                json_array_append_new(ce, o);
+            }
+        json_object_set_new(j, "classes", json_pack("{s:o, s:o}", "vertices", cv, "edges", ce));
+        json_object_set_new(j, "tags", api_tags_json(m));
+        json_object_set_new(j, "rules", api_rules_json(m));
+    }
+    if (j)
+        json_object_set_new(j, "details", details);
+    else
+        json_decref(details);
+    if (j && classes)
+        json_object_set(j, "summary", m->summary);
+    return j;
 }
+
+json_t *api_get_complex(api_model *m, api_problem *p)
+{
+    if (!m->in) {
+        api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
+        return NULL;
+    }
+    return complex_json(m, true);
+}
+
+json_t *api_complex_json(api_model *m) { return m->in ? complex_json(m, false) : json_null(); }
 
 api_cstream *api_get_complex_stream(api_model *m, uint64_t *version, api_problem *p)
 {
@@ -555,8 +625,8 @@ api_cstream *api_get_complex_stream(api_model *m, uint64_t *version, api_problem
     /* under the lock edits take: the copied points and attributes and the version agree */
     pthread_rwlock_rdlock(&m->data);
     *version = atomic_load(&m->version);
-    json_t *t = json_pack("{s:o, s:o, s:o, s:O, s:I}", "tags", tags_json(m), "rules",
-                          rules_json(m), "details", api_details_json(m), "summary", m->summary,
+    json_t *t = json_pack("{s:o, s:o, s:o, s:O, s:I}", "tags", api_tags_json(m), "rules",
+                          api_rules_json(m), "details", api_details_json(m), "summary", m->summary,
                           "version", (json_int_t)*version);
     char *text = t ? json_dumps(t, JSON_COMPACT) : NULL; /* {"tags":…,"version":N} */
     json_decref(t);

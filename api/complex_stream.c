@@ -3,7 +3,7 @@
  *
  * A complex of a million points is some 60 MB of JSON points and simplices, and several hundred
  * MB with the classes of its vertices and edges; as a jansson tree it took 1.4 GB and 25 s per
- * request. Here the big arrays (vertices, simplices, attributes, diagonals, the classes of
+ * request. Here the big arrays (vertices, simplices, attributes, diagonals, reoriented tetrahedra, the classes of
  * vertices and edges) are written element by element into a 64 KiB buffer as the client reads,
  * and only the small members (tags, rules, summary) go through jansson, as a prepared text.
  * Positions and attributes are copied when the stream opens (edits change them in place), so
@@ -20,7 +20,7 @@
 #define CS_BUF (64 * 1024)
 #define CS_ROW_MAX 1024 /* the longest element: an attribute row of 16 reals */
 
-enum { S_VERTICES, S_SIMPLICES, S_ATTR, S_DIAG, S_VCLASS, S_ECLASS, S_TAIL, S_END };
+enum { S_VERTICES, S_SIMPLICES, S_ATTR, S_DIAG, S_REOR, S_VCLASS, S_ECLASS, S_TAIL, S_END };
 
 struct api_cstream {
     const api_model *m;
@@ -131,6 +131,14 @@ static size_t element(api_cstream *s, char *o)
         k += (size_t)sprintf(o + k, "[%zu,%d]", s->off, sd_complex_diagonal(s->m->c, s->off));
         s->off++;
         return k;
+    case S_REOR:
+        while (s->off < s->ns && sd_complex_reoriented(s->m->c, s->off) != 1)
+            s->off++;
+        if (s->off >= s->ns)
+            return 0;
+        k += (size_t)sprintf(o + k, "%zu", s->off);
+        s->off++;
+        return k;
     case S_VCLASS:
         for (; s->off < s->nv; s->off++)
             if (!sd_level_vertex_class(s->m->level0, (uint32_t)s->off, &c)) {
@@ -167,6 +175,8 @@ static const char *opening(const api_cstream *s, int next)
         return "],\"attributes\":{";
     case S_DIAG:
         return s->nattrs ? "]},\"diagonals\":[" : "},\"diagonals\":[";
+    case S_REOR:
+        return "],\"reoriented\":[";
     case S_VCLASS:
         return "],\"classes\":{\"vertices\":[";
     case S_ECLASS:

@@ -47,6 +47,19 @@ extern const char *const api_tags_packed[];
 json_t *api_summary(const api_model *m);
 /* GET /complex (new reference), or NULL + 409 when no complex was posted. Locks the model. */
 json_t *api_get_complex(api_model *m, api_problem *p);
+/* The complex as PUT /complex takes it back (no classes, tags, rules or summary; "details"
+ * included), json null without a complex. The parts of GET /complex that say the tags and the
+ * rules as PUT /tags and PUT /rules take them. All new references. */
+json_t *api_complex_json(api_model *m);
+json_t *api_tags_json(const api_model *m);
+json_t *api_rules_json(const api_model *m);
+/* GET /export (api/export.c): the session's control data at `version` as one document. */
+json_t *api_export(api_model *m, uint64_t version);
+/* The model of an export document (POST /v1/sessions {"import"}, the durable store's
+ * snapshots); `base` is the document's JSON pointer in the request ("/import"), prefixed to
+ * every problem's pointer. *version is the document's. */
+int api_import(json_t *doc, const char *base, const api_limits *lim, api_model **out,
+               uint64_t *version, api_problem *p);
 /* GET /complex as a stream (api/complex_stream.h): the same bytes as json_dumps(JSON_COMPACT) of
  * api_get_complex's document with "version" added last, which is *version, the version of the
  * points and attributes it copied. Keep a reference on m until api_cstream_free. NULL + 409 or

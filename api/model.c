@@ -78,6 +78,8 @@ api_input *api_input_copy(const api_input *in)
     }
     if (ok && in->ndiag)
         ok = (c->diag = api_memdup(in->diag, in->ndiag * sizeof *in->diag)) != NULL;
+    if (ok && in->reoriented)
+        ok = (c->reoriented = api_memdup(in->reoriented, (size_t)in->ns + 1)) != NULL;
     if (ok && in->nfill)
         ok = (c->fill = api_memdup(in->fill, in->nfill * sizeof *in->fill)) != NULL;
     if (!ok) {
@@ -98,6 +100,7 @@ void api_input_unref(api_input *in)
     for (int a = 0; a < in->nattrs; a++)
         api_plain_free(in->attrs[a].data);
     api_free(in->diag);
+    api_free(in->reoriented);
     api_free(in->fill);
     api_free(in);
 }
@@ -166,7 +169,8 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
                           .nonmanifold_default = m->rules.nonmanifold_default,
                           .nonmanifold_surface = m->rules.nonmanifold_surface,
                           .max_bytes = (size_t)max_bytes,
-                          .allocator = api_mem_core_allocator()};
+                          .allocator = api_mem_core_allocator(),
+                          .reoriented = in->reoriented};
         m->c = sd_complex_new(in->xyz, in->nv, in->idx, in->size, in->ns, &opt, err);
         if (!m->c) {
             api_model_unref(m);

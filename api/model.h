@@ -56,6 +56,11 @@ typedef struct api_input {
     api_attribute attrs[API_MAX_ATTRIBUTES];
     uint32_t ndiag;           /* major diagonals chosen by the client: */
     uint32_t (*diag)[2];      /* (simplex index, pair 0..2) */
+    uint8_t *reoriented;      /* ns bytes (api_malloc) or NULL: which tetrahedra the core stores
+                               * with slots 2 and 3 exchanged (sd_options.reoriented); recorded
+                               * when the input is first built, so a rebuild (rules, tags, an
+                               * edit that changes rules) keeps the numbering even after edits
+                               * turned tetrahedra inside out */
     uint32_t nfill;           /* "fill" entries run; their tets and points are in the arrays above */
     api_fill_stats *fill;
     size_t reserved;          /* bytes of the C-library arrays above counted against the memory

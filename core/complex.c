@@ -9,7 +9,9 @@
  * Construction derives all faces (000 Algorithm 2): unique edges and triangles via a hash, each
  * tetrahedron's edge and face ids, and which listed simplices are really maximal — a listed
  * simplex that is a face of another listed one is absorbed. Tetrahedra are reoriented to positive
- * volume (slots 2 and 3 swapped) so that every later cell is positively oriented too.
+ * volume (slots 2 and 3 swapped) so that every later cell is positively oriented too — or as the
+ * caller says (sd_options.reoriented: a complex saved after edits that turned tetrahedra inside
+ * out is rebuilt with its stored orientation, hence the same numbering of every level).
  *
  * The complex object lives here too: sd_complex_new (options checked, level 0 built, the default
  * non-manifold rules applied) and sd_complex_free, and what changes the whole complex or asks
@@ -196,7 +198,7 @@ static void add_simplices(sd_complex *c, sd_topo *t, sd_hash *he, sd_hash *hf, c
         if (size[s] == 4) {
             uint32_t *q = t->tet[t->ntet];
             memcpy(q, idx + off, 4 * sizeof *q);
-            if (tet_vol6(xyz, q) < 0) {
+            if (c->opt.reoriented ? c->opt.reoriented[s] != 0 : tet_vol6(xyz, q) < 0) {
                 uint32_t tmp = q[2];
                 q[2] = q[3];
                 q[3] = tmp;
@@ -417,7 +419,9 @@ sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, co
     memset(c, 0, sizeof *c);
     c->mem = mem;
     c->opt = o;
-    if (sdi_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err)) {
+    sd_result built = sdi_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err);
+    c->opt.reoriented = NULL; /* the caller's array: not kept */
+    if (built) {
         sd_complex_free(c);
         return NULL;
     }
@@ -479,6 +483,13 @@ int sd_complex_diagonal(const sd_complex *c, size_t simplex)
         return -1;
     uint32_t t = c->in_tet[simplex];
     return map_pair(c->lv[0]->t.tet_d[t], c->tet_swapped[t]);
+}
+
+int sd_complex_reoriented(const sd_complex *c, size_t simplex)
+{
+    if (simplex >= c->nin || c->in_tet[simplex] == UINT32_MAX)
+        return -1;
+    return c->tet_swapped[c->in_tet[simplex]] != 0;
 }
 
 int sd_complex_add_channel(sd_complex *c, const double *data, int ncomp, sd_error *err)

@@ -91,6 +91,12 @@ typedef struct sd_options {
     int threads;             /* threads computing a level may use (0, 1 = the caller's only;
                               * the others are created and joined within the call, and never
                               * allocate); results are the same bytes for any number */
+    const uint8_t *reoriented; /* NULL: each tetrahedron is stored reoriented to positive volume
+                              * (slots 2 and 3 exchanged) when its volume is negative; else one
+                              * byte per input simplex, read for tetrahedra: nonzero = store it
+                              * with slots 2 and 3 exchanged, whatever its volume (what
+                              * sd_complex_reoriented reported, so a saved complex is rebuilt
+                              * with the same numbering). Read by sd_complex_new only. */
 } sd_options;
 
 typedef struct sd_complex sd_complex;
@@ -111,6 +117,10 @@ void sd_complex_free(sd_complex *c);
 sd_result sd_complex_set_diagonal(sd_complex *c, size_t simplex, int pair, sd_error *err);
 /* The diagonal pair in use for input simplex `simplex` (a tetrahedron), or -1. */
 int sd_complex_diagonal(const sd_complex *c, size_t simplex);
+/* Whether input simplex `simplex` (a tetrahedron) is stored with slots 2 and 3 exchanged (1) or
+ * as given (0); -1 if it is not a tetrahedron. The stored order fixes the numbering of every
+ * level (edges and faces are numbered as the tetrahedra's slots meet them). */
+int sd_complex_reoriented(const sd_complex *c, size_t simplex);
 
 /* Add a per-vertex channel of `ncomp` (1..16) doubles per control vertex; returns the channel
  * id (>= 1; channel 0 is the positions) or -1. Data are copied. */

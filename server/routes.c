@@ -225,14 +225,28 @@ static void h_create_session(req *r)
         return;
     }
     json_t *b = parse_body(r, 1, &p);
-    static const char *const keys[] = {"ttl_s", NULL};
+    static const char *const keys[] = {"ttl_s", "import", NULL};
     long long ttl = r->srv->cfg.ttl_s;
-    json_t *t;
+    json_t *t, *imp;
     if (!b || api_only_keys(b, "", keys, &p) ||
         ((t = json_object_get(b, "ttl_s")) && api_get_int(t, "/ttl_s", 1, API_MAX_TTL_S, &ttl, &p))) {
         json_decref(b);
         http_reply_problem(r, &p);
         return;
+    }
+    api_model *imported = NULL; /* {"import": <GET /export>}: built before the session exists */
+    uint64_t imported_version = 0;
+    if ((imp = json_object_get(b, "import"))) {
+        int rc = http_take_slot(r, &p);
+        if (!rc) {
+            rc = api_import(imp, "/import", &r->srv->cfg.limits, &imported, &imported_version, &p);
+            http_give_slot(r);
+        }
+        if (rc) {
+            json_decref(b);
+            http_reply_problem(r, &p);
+            return;
+        }
     }
     json_decref(b);
     if (ttl > r->srv->cfg.max_ttl_s)
@@ -241,6 +255,10 @@ static void h_create_session(req *r)
     session *s = store_create(r->srv->st, (int)ttl, &adm);
     if (adm.evicted)
         log_line(r->srv, LOG_INFO, "the session table was full: an empty idle session went");
+    if (s && imported)
+        session_adopt(s, imported, imported_version);
+    else
+        api_model_unref(imported);
     if (!s && !adm.retry_after_s) {
         http_fail(r, 503, "out-of-memory", "out of memory");
         return;
@@ -257,8 +275,8 @@ static void h_create_session(req *r)
     char exp[32], loc[64];
     iso_time(exp, sizeof exp, session_expires_at(s));
     snprintf(loc, sizeof loc, "/v1/sessions/%s", s->id);
-    json_t *j = json_pack("{s:s, s:s, s:s, s:I}", "id", s->id, "token", s->token, "expires_at",
-                          exp, "ttl_s", (json_int_t)ttl);
+    json_t *j = json_pack("{s:s, s:s, s:s, s:I, s:I}", "id", s->id, "token", s->token, "expires_at",
+                          exp, "ttl_s", (json_int_t)ttl, "version", (json_int_t)imported_version);
     session_unref(s);
     char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
     json_decref(j);
@@ -290,6 +308,23 @@ static void h_get_session(req *r)
                           "memory_bytes", (json_int_t)atomic_load(&m->memory_bytes), "summary",
                           summary, "expires_at", exp, "progress", progress);
     api_model_unref(m);
+    http_reply_json(r, 200, j, version);
+}
+
+/* GET /export: the session's control data as one document (api/export.c), under the write lock
+ * so that its content and version are those of one moment between changes. */
+static void h_export(req *r)
+{
+    pthread_mutex_lock(&r->s->write);
+    uint64_t version;
+    api_model *m = session_model(r->s, &version);
+    json_t *j = api_export(m, version);
+    pthread_mutex_unlock(&r->s->write);
+    api_model_unref(m);
+    if (!j) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
     http_reply_json(r, 200, j, version);
 }
 
@@ -827,6 +862,7 @@ static const route ROUTES[] = {
     {"DELETE", "/v1/sessions/{id}", h_delete_session, 1, 0, NULL},
     {"PUT", "/v1/sessions/{id}/complex", h_put_complex, 1, 1, NULL},
     {"GET", "/v1/sessions/{id}/complex", h_get_complex, 1, 0, NULL},
+    {"GET", "/v1/sessions/{id}/export", h_export, 1, 0, NULL},
     {"PATCH", "/v1/sessions/{id}/control-points", h_edit, 1, 1, EDIT_KEYS},
     {"POST", "/v1/sessions/{id}/refine", h_refine, 1, 1, NULL},
     {"PUT", "/v1/sessions/{id}/tags", h_put_tags, 1, 1, NULL},

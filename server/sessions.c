@@ -279,6 +279,17 @@ uint64_t session_publish(session *s, api_model *m)
     return v;
 }
 
+void session_adopt(session *s, api_model *m, uint64_t version)
+{
+    pthread_mutex_lock(&s->mu);
+    api_model *old = s->model;
+    s->version = version;
+    atomic_store(&m->version, version);
+    s->model = m;
+    pthread_mutex_unlock(&s->mu);
+    api_model_unref(old);
+}
+
 uint64_t session_bump(session *s)
 {
     pthread_mutex_lock(&s->mu);

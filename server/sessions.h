@@ -66,6 +66,8 @@ void session_unref(session *s);
 api_model *session_model(session *s, uint64_t *version);
 /* Publish a new model (the session takes the reference); returns the new version. */
 uint64_t session_publish(session *s, api_model *m);
+/* Give a new session (nobody else holds it yet) its first model at `version` (an import). */
+void session_adopt(session *s, api_model *m, uint64_t version);
 /* Raise the version after an in-place change of the current model; returns it. */
 uint64_t session_bump(session *s);
 /* Expiry time (wall clock, seconds since the epoch). */
