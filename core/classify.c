@@ -13,6 +13,7 @@
  * vertex point is isomorphic to its parent's, and the children of a simplex keep its type.
  */
 #include "internal.h"
+#include <stdlib.h>
 #include <string.h>
 
 static int popcount4(uint8_t f) { return (f & 1) + (f >> 1 & 1) + (f >> 2 & 1) + (f >> 3 & 1); }
@@ -253,34 +254,113 @@ static uint32_t pair_edge_in_face(const sd_topo *t, uint32_t c, int pair, int i)
     return t->tet_e[c][k];
 }
 
+static int cmp_u32x4(const uint32_t *a, const uint32_t *b)
+{
+    for (int i = 0; i < 4; i++)
+        if (a[i] != b[i])
+            return a[i] < b[i] ? -1 : 1;
+    return 0;
+}
+
+/* A row (key, tetrahedron): the key is the tetrahedron's 4 vertex ids ascending. */
+static int cmp_keyrow(const void *a, const void *b)
+{
+    int r = cmp_u32x4(a, b);
+    if (r)
+        return r;
+    uint32_t x = ((const uint32_t *)a)[4], y = ((const uint32_t *)b)[4];
+    return (x > y) - (x < y);
+}
+
+static int cmp_u32(const void *a, const void *b)
+{
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* Ascending; insertion sort for the usual handful (at most 4 on a manifold). */
+static void sort_u32(uint32_t *a, uint32_t n)
+{
+    if (n > 16) {
+        qsort(a, n, sizeof *a, cmp_u32);
+        return;
+    }
+    for (uint32_t i = 1; i < n; i++) {
+        uint32_t x = a[i], j = i;
+        for (; j > 0 && a[j - 1] > x; j--)
+            a[j] = a[j - 1];
+        a[j] = x;
+    }
+}
+
+/* Key of tetrahedron c's pair p: its two edges, each as (min vertex, max vertex), in ascending
+ * order. */
+static void pair_key(const sd_topo *t, uint32_t c, int p, uint32_t k[4])
+{
+    for (int s = 0; s < 2; s++) {
+        const uint32_t *ev = t->ev[t->tet_e[c][s ? 5 - p : p]];
+        k[2 * s] = ev[0] < ev[1] ? ev[0] : ev[1];
+        k[2 * s + 1] = ev[0] < ev[1] ? ev[1] : ev[0];
+    }
+    if (k[2] < k[0] || (k[2] == k[0] && k[3] < k[1])) {
+        uint32_t a = k[0], b = k[1];
+        k[0] = k[2];
+        k[1] = k[3];
+        k[2] = a;
+        k[3] = b;
+    }
+}
+
 /* 001 Algorithm 2 (MAJOR-DIAGONAL-CHOOSE): breadth-first over face-adjacent tetrahedra, each
- * taking the pair with the fewest conflicts against its already visited neighbours (then the
- * lowest pair index, so the result is deterministic); every connected component gets its own
- * search. A conflict is measured by 001 Def. 3.2 (proper diagonals): two tetrahedra sharing a
- * face are proper when their pairs cross that face at the same edge, so that both octahedra's
- * diagonals meet at its midpoint. (Reading Algorithm 2's "c.edges - s" literally, i.e. avoiding
- * the neighbours' edges, makes every shared face improper: after 3 levels of two tetrahedra the
- * shared face then carries interior edges with |rho(e)| = 5; with this rule all are 4 or 6.) */
+ * taking the pair with the fewest conflicts against its already visited neighbours; every
+ * connected component gets its own search. A conflict is measured by 001 Def. 3.2 (proper
+ * diagonals): two tetrahedra sharing a face are proper when their pairs cross that face at the
+ * same edge, so that both octahedra's diagonals meet at its midpoint. (Reading Algorithm 2's
+ * "c.edges - s" literally, i.e. avoiding the neighbours' edges, makes every shared face improper:
+ * after 3 levels of two tetrahedra the shared face then carries interior edges with |rho(e)| = 5;
+ * with this rule all are 4 or 6.)
+ *
+ * The choice depends on the topology alone, not on the order of the tetrahedra or of the
+ * vertices inside each (nor so on whether one was reoriented): a tetrahedron's key is its 4
+ * vertex ids ascending, compared lexicographically; each component starts at its tetrahedron of
+ * smallest key (the tetrahedra are walked in key order, so the first unvisited one of a component
+ * is its smallest); a dequeued tetrahedron enqueues its new face neighbours in ascending key order;
+ * equal conflict counts go to the pair of smallest key (pair_key). The ranks of the keys come from
+ * one sort: O(n log n). */
 sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err)
 {
-    if (t->ntet == 0)
+    const uint32_t n = t->ntet;
+    if (n == 0)
         return SD_OK;
-    uint32_t *queue = sdi_alloc(m, (size_t)t->ntet * sizeof *queue);
-    uint8_t *state = sdi_calloc(m, t->ntet, 1); /* 0 new, 1 queued, 2 visited */
-    if (!queue || !state || !sdi_rels_need(m, R, SDI_REL(SDI_FT))) {
+    uint32_t *queue = sdi_alloc(m, (size_t)n * sizeof *queue);
+    uint32_t *rank = sdi_alloc(m, (size_t)n * sizeof *rank);
+    uint32_t (*order)[5] = sdi_alloc(m, (size_t)n * sizeof *order); /* (key, tet) by key */
+    uint8_t *state = sdi_calloc(m, n, 1); /* 0 new, 1 queued, 2 visited */
+    if (!queue || !rank || !order || !state || !sdi_rels_need(m, R, SDI_REL(SDI_FT))) {
         sdi_free(m, queue);
+        sdi_free(m, rank);
+        sdi_free(m, order);
         sdi_free(m, state);
         return sdi_fail_nomem(err, m);
     }
+    for (uint32_t c = 0; c < n; c++) {
+        memcpy(order[c], t->tet[c], 4 * sizeof **order);
+        sort_u32(order[c], 4);
+        order[c][4] = c;
+    }
+    qsort(order, n, sizeof *order, cmp_keyrow);
+    for (uint32_t r = 0; r < n; r++)
+        rank[order[r][4]] = r;
     const sdi_rel *ft = &R->r[SDI_FT];
-    for (uint32_t start = 0; start < t->ntet; start++) {
+    for (uint32_t r0 = 0; r0 < n; r0++) {
+        uint32_t start = order[r0][4];
         if (state[start])
             continue;
         uint32_t head = 0, tail = 0;
         queue[tail++] = start;
         state[start] = 1;
         while (head < tail) {
-            uint32_t c = queue[head++];
+            uint32_t c = queue[head++], fresh = tail;
             int conflicts[3] = {0, 0, 0};
             for (int i = 0; i < 4; i++) {
                 uint32_t f = t->tet_f[c][i];
@@ -290,7 +370,7 @@ sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err
                         continue;
                     if (state[d] == 0) {
                         state[d] = 1;
-                        queue[tail++] = d;
+                        queue[tail++] = rank[d]; /* ranks for now, tetrahedra after the sort */
                         continue;
                     }
                     if (state[d] != 2)
@@ -303,15 +383,27 @@ sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err
                         conflicts[p] += pair_edge_in_face(t, c, p, i) != theirs;
                 }
             }
+            sort_u32(queue + fresh, tail - fresh);
+            for (uint32_t q = fresh; q < tail; q++)
+                queue[q] = order[queue[q]][4];
             int best = 0;
-            for (int p = 1; p < 3; p++)
-                if (conflicts[p] < conflicts[best])
+            uint32_t bkey[4], key[4];
+            pair_key(t, c, 0, bkey);
+            for (int p = 1; p < 3; p++) {
+                pair_key(t, c, p, key);
+                if (conflicts[p] < conflicts[best] ||
+                    (conflicts[p] == conflicts[best] && cmp_u32x4(key, bkey) < 0)) {
                     best = p;
+                    memcpy(bkey, key, sizeof key);
+                }
+            }
             t->tet_d[c] = (uint8_t)best;
             state[c] = 2;
         }
     }
     sdi_free(m, queue);
+    sdi_free(m, rank);
+    sdi_free(m, order);
     sdi_free(m, state);
     return SD_OK;
 }

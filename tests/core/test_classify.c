@@ -1,5 +1,6 @@
 /* test_classify.c — classification (000 Sec. 2.3-2.4, Fig. 5; 002 Sec. 5.2) on hand-built
- * complexes whose classes are known from the definitions, and the rules chosen for them. */
+ * complexes whose classes are known from the definitions, and the rules chosen for them; the
+ * level-0 major diagonals (001 Algorithm 2), which depend on the topology, not the input order. */
 #include "test.h"
 
 static sd_class vclass(sd_complex *c, int level, uint32_t v)
@@ -270,4 +271,186 @@ TEST(classify_inheritance_matches_recomputation)
         sd_complex_free(c);
         mesh_free(&shapes[s]);
     }
+}
+
+/* ---- level-0 major diagonals (001 Algorithm 2; docs/DECISIONS.md 1) ----------------------- */
+
+/* Input simplex s's pair `pair` (0: 01|23, 1: 02|13, 2: 03|12 in its input order) as vertex ids:
+ * both edges (min, max), the smaller edge first. */
+static void geo_pair(const mesh *m, size_t s, int pair, uint32_t k[4])
+{
+    static const int E[3][4] = {{0, 1, 2, 3}, {0, 2, 1, 3}, {0, 3, 1, 2}};
+    size_t off = 0;
+    for (size_t i = 0; i < s; i++)
+        off += m->sz[i];
+    const uint32_t *q = m->idx + off;
+    for (int h = 0; h < 2; h++) {
+        uint32_t a = q[E[pair][2 * h]], b = q[E[pair][2 * h + 1]];
+        k[2 * h] = a < b ? a : b;
+        k[2 * h + 1] = a < b ? b : a;
+    }
+    if (k[2] < k[0]) {
+        uint32_t a = k[0], b = k[1];
+        k[0] = k[2], k[1] = k[3], k[2] = a, k[3] = b;
+    }
+}
+
+/* The sorted vertex set of input simplex s (a tetrahedron). */
+static void tet_set(const mesh *m, size_t s, uint32_t k[4])
+{
+    size_t off = 0;
+    for (size_t i = 0; i < s; i++)
+        off += m->sz[i];
+    memcpy(k, m->idx + off, 4 * sizeof *k);
+    for (int i = 1; i < 4; i++)
+        for (int j = i; j > 0 && k[j - 1] > k[j]; j--) {
+            uint32_t x = k[j];
+            k[j] = k[j - 1];
+            k[j - 1] = x;
+        }
+}
+
+static uint32_t lcg(uint32_t *s)
+{
+    *s = *s * 1664525u + 1013904223u;
+    return *s >> 8;
+}
+
+/* m's vertices, its tetrahedra in a shuffled order (fixed seed), each with its vertex order
+ * permuted: all 24 permutations in turn (every other one odd, so about half the copies are
+ * reoriented where the originals were not, and the other way round). */
+static void permuted_copy(const mesh *m, mesh *out, uint32_t seed)
+{
+    static const int P[24][4] = {
+        {0, 1, 2, 3}, {0, 1, 3, 2}, {0, 2, 3, 1}, {0, 2, 1, 3}, {0, 3, 1, 2}, {0, 3, 2, 1},
+        {1, 0, 3, 2}, {1, 0, 2, 3}, {1, 2, 0, 3}, {1, 2, 3, 0}, {1, 3, 2, 0}, {1, 3, 0, 2},
+        {2, 0, 1, 3}, {2, 0, 3, 1}, {2, 1, 3, 0}, {2, 1, 0, 3}, {2, 3, 0, 1}, {2, 3, 1, 0},
+        {3, 0, 2, 1}, {3, 0, 1, 2}, {3, 1, 0, 2}, {3, 1, 2, 0}, {3, 2, 1, 0}, {3, 2, 0, 1}};
+    for (size_t v = 0; v < m->nv; v++)
+        mesh_v(out, m->xyz[3 * v], m->xyz[3 * v + 1], m->xyz[3 * v + 2]);
+    size_t *ord = malloc(m->ns * sizeof *ord);
+    for (size_t s = 0; s < m->ns; s++)
+        ord[s] = s;
+    for (size_t s = m->ns; s > 1; s--) {
+        size_t j = lcg(&seed) % s, x = ord[s - 1];
+        ord[s - 1] = ord[j];
+        ord[j] = x;
+    }
+    for (size_t s = 0; s < m->ns; s++) {
+        uint32_t q[4]; /* every simplex here is a tetrahedron */
+        size_t off = 0;
+        for (size_t i = 0; i < ord[s]; i++)
+            off += m->sz[i];
+        memcpy(q, m->idx + off, sizeof q);
+        const int *p = P[s % 24];
+        mesh_s(out, 4, q[p[0]], q[p[1]], q[p[2]], q[p[3]]);
+    }
+    free(ord);
+}
+
+/* Every tetrahedron of a (matched by its vertex set) has the same geometric pair in b. */
+static int same_diagonals(const mesh *a, sd_complex *ca, const mesh *b, sd_complex *cb)
+{
+    for (size_t s = 0; s < a->ns; s++) {
+        uint32_t ks[4], kt[4], pa[4], pb[4];
+        tet_set(a, s, ks);
+        size_t t = 0;
+        for (; t < b->ns; t++) {
+            tet_set(b, t, kt);
+            if (!memcmp(ks, kt, sizeof ks))
+                break;
+        }
+        if (t == b->ns)
+            return 0;
+        geo_pair(a, s, sd_complex_diagonal(ca, s), pa);
+        geo_pair(b, t, sd_complex_diagonal(cb, t), pb);
+        if (memcmp(pa, pb, sizeof pa))
+            return 0;
+    }
+    return 1;
+}
+
+/* One tetrahedron: no neighbours, all 3 pairs tie, the smallest key wins: edges 01|23 of the
+ * vertex ids, whatever the input order. */
+TEST(diagonal_single_tet_tie_goes_to_smallest_pair_key)
+{
+    static const uint32_t orders[4][4] = {{0, 1, 2, 3}, {3, 1, 0, 2}, {2, 0, 3, 1}, {1, 3, 2, 0}};
+    for (int o = 0; o < 4; o++) {
+        mesh m = {0};
+        mesh_v(&m, 0, 0, 0);
+        mesh_v(&m, 1, 0, 0);
+        mesh_v(&m, 0, 1, 0);
+        mesh_v(&m, 0, 0, 1);
+        mesh_s(&m, 4, orders[o][0], orders[o][1], orders[o][2], orders[o][3]);
+        sd_complex *c = mesh_complex(&m, NULL, NULL);
+        CHECK(c);
+        uint32_t k[4];
+        geo_pair(&m, 0, sd_complex_diagonal(c, 0), k);
+        CHECK(k[0] == 0 && k[1] == 1 && k[2] == 2 && k[3] == 3);
+        sd_complex_free(c);
+        mesh_free(&m);
+    }
+}
+
+/* Two tetrahedra {0,1,2,3}, {1,2,3,4} on face 123, posted second one first, in odd orders. The
+ * search starts at {0,1,2,3} (smallest key): a tie, so 01|23, which crosses face 123 at 23. Then
+ * {1,2,3,4}: 12|34 and 13|24 cross it at 12 and 13 (1 conflict each), 14|23 at 23 (none). */
+TEST(diagonal_two_tets_start_at_smallest_key)
+{
+    mesh m = {0};
+    mesh_v(&m, 0, 0, 0);
+    mesh_v(&m, 1, 0, 0);
+    mesh_v(&m, 0, 1, 0);
+    mesh_v(&m, 0, 0, 1);
+    mesh_v(&m, 1, 1, 1);
+    mesh_s(&m, 4, 4u, 2u, 1u, 3u);
+    mesh_s(&m, 4, 3u, 0u, 2u, 1u);
+    sd_complex *c = mesh_complex(&m, NULL, NULL);
+    CHECK(c);
+    uint32_t k[4];
+    geo_pair(&m, 1, sd_complex_diagonal(c, 1), k);
+    CHECK(k[0] == 0 && k[1] == 1 && k[2] == 2 && k[3] == 3);
+    geo_pair(&m, 0, sd_complex_diagonal(c, 0), k);
+    CHECK(k[0] == 1 && k[1] == 4 && k[2] == 2 && k[3] == 3);
+    sd_complex_free(c);
+    mesh_free(&m);
+}
+
+/* A 2x2x2 block of cubes (6 tets each, half of them reoriented), 3 tetrahedra on one face (a
+ * non-manifold face: 3 neighbours through it) and 5 around an edge, as 3 components: the same
+ * complex with its tetrahedra shuffled and their vertices permuted gets the same diagonals. */
+TEST(diagonal_choice_ignores_input_order)
+{
+    mesh m = {0};
+    shape_cube_tets(&m, 2);
+    uint32_t b = (uint32_t)m.nv;
+    mesh_v(&m, 10, 0, 0);
+    mesh_v(&m, 11, 0, 0);
+    mesh_v(&m, 10, 1, 0);
+    mesh_v(&m, 10.3, 0.3, 1);
+    mesh_v(&m, 10.3, 0.3, -1);
+    mesh_v(&m, 11, 1, 0.5);
+    for (uint32_t a = 3; a < 6; a++)
+        mesh_s(&m, 4, b, b + 1, b + 2, b + a);
+    b = (uint32_t)m.nv;
+    mesh_v(&m, 20, 0, 0);
+    mesh_v(&m, 20, 0, 1);
+    for (int i = 0; i < 5; i++)
+        mesh_v(&m, 20 + cos(2 * M_PI * i / 5), sin(2 * M_PI * i / 5), 0.5);
+    for (uint32_t i = 0; i < 5; i++)
+        mesh_s(&m, 4, b, b + 1, b + 2 + i, b + 2 + (i + 1) % 5);
+    sd_complex *c = mesh_complex(&m, NULL, NULL);
+    CHECK(c);
+    for (uint32_t seed = 1; seed <= 4; seed++) {
+        mesh p = {0};
+        permuted_copy(&m, &p, seed);
+        sd_complex *cp = mesh_complex(&p, NULL, NULL);
+        CHECK(cp);
+        int same = same_diagonals(&m, c, &p, cp);
+        sd_complex_free(cp);
+        mesh_free(&p);
+        CHECK(same);
+    }
+    sd_complex_free(c);
+    mesh_free(&m);
 }
