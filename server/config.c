@@ -8,7 +8,7 @@
 #include <string.h>
 #include <unistd.h>
 
-typedef enum { T_INT, T_U32, T_U64, T_SIZE, T_STR, T_FLAG, T_LOG } kind;
+typedef enum { T_INT, T_U32, T_U64, T_SIZE, T_STR, T_FLAG, T_LOG, T_SYNC } kind;
 
 typedef struct setting {
     const char *flag;   /* --flag; env SUBDIVD_FLAG with '-' -> '_' */
@@ -67,6 +67,10 @@ static const setting S[] = {
     {"max-listeners", T_INT, OFF(max_listeners), 1, 10000,
      "event streams one session may have open (default 16; 429 beyond)"},
     {"cors-origin", T_STR, OFF(cors_origin), 0, 0, "allowed browser origin (default *)"},
+    {"store", T_STR, OFF(store), 0, 0,
+     "where sessions are kept: memory (default), sqlite:PATH or redis://HOST:PORT"},
+    {"sync", T_SYNC, OFF(sync_full), 0, 0,
+     "normal (a store write survives a crash of the daemon; default) or full (also a power loss)"},
     {"log-level", T_LOG, OFF(log_level), 0, 0, "error|warn|info|debug (default info)"},
     {"no-auth", T_FLAG, OFF(no_auth), 0, 0, "accept requests without bearer tokens (local dev)"},
 };
@@ -95,6 +99,7 @@ static int set(config *c, const setting *s, const char *v, const char *from)
     if (s->k == T_STR) {
         size_t cap = s->off == OFF(listen)                 ? sizeof c->listen
                      : s->off == OFF(limits.tetgen_helper) ? sizeof c->limits.tetgen_helper
+                     : s->off == OFF(store)                ? sizeof c->store
                                                            : sizeof c->cors_origin;
         if (strlen(v) >= cap)
             goto bad;
@@ -103,6 +108,12 @@ static int set(config *c, const setting *s, const char *v, const char *from)
     }
     if (s->k == T_FLAG) {
         *(int *)p = !(!strcmp(v, "0") || !strcmp(v, "false") || !strcmp(v, "no"));
+        return 0;
+    }
+    if (s->k == T_SYNC) {
+        if (strcmp(v, "normal") && strcmp(v, "full"))
+            goto bad;
+        *(int *)p = !strcmp(v, "full");
         return 0;
     }
     if (s->k == T_LOG) {
@@ -173,6 +184,7 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     c->session_rate = API_DEFAULT_SESSION_RATE;
     c->log_level = LOG_INFO;
     strcpy(c->cors_origin, "*");
+    strcpy(c->store, "memory");
     c->max_memory = default_max_memory();
     c->limits = api_default_limits();
     *exit_code = 2;

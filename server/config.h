@@ -27,6 +27,8 @@ typedef struct config {
     int no_auth;
     int log_level;
     char cors_origin[256];    /* "*" or one origin */
+    char store[512];          /* the durable session store: memory | sqlite:PATH | redis://HOST:PORT */
+    int sync_full;            /* --sync full: fsync every commit of the store (power loss) */
     uint64_t max_memory;      /* the memory budget of every request (api/mem.h), bytes */
     api_limits limits;
 } config;

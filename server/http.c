@@ -378,10 +378,28 @@ static int early_auth(req *r)
 {
     if (!r->rt->session)
         return 0;
-    r->s = store_get(r->srv->st, r->seg_id);
+    store_miss miss;
+    char why[320];
+    r->s = store_get(r->srv->st, r->seg_id, &miss, why, sizeof why);
     if (!r->s) {
-        http_fail(r, 404, "no-session", "no session %.40s (it may have expired or been deleted)",
-                  r->seg_id);
+        api_problem p = {0};
+        if (miss == STORE_NONE) {
+            http_fail(r, 404, "no-session", "no session %.40s (it may have expired or been deleted)",
+                      r->seg_id);
+            return 1;
+        }
+        p.retry_after = miss == STORE_CORRUPT ? 0 : 5;
+        if (miss == STORE_FULL)
+            api_fail(&p, 429, "too-many-sessions", "session %.40s is stored, but every resident "
+                     "session is in use; retry in a few seconds", r->seg_id);
+        else if (miss == STORE_CORRUPT)
+            api_fail(&p, 503, "store-corrupt", "session %.40s cannot be rebuilt from the store: %s",
+                     r->seg_id, why);
+        else
+            api_fail(&p, 503, "store-unavailable", "the session store cannot be read: %s", why);
+        if (miss != STORE_FULL)
+            log_line(r->srv, LOG_ERROR, "session %.40s: %s", r->seg_id, p.detail);
+        http_reply_problem(r, &p);
         return 1;
     }
     if (r->srv->cfg.no_auth)

@@ -265,7 +265,13 @@ int main(int argc, char **argv)
      * after the first big free and then keeps such blocks in the heap for good. */
     mallopt(M_MMAP_THRESHOLD, 256 * 1024);
     api_mem_set_budget((size_t)srv.cfg.max_memory);
-    srv.st = store_new(srv.cfg.max_sessions);
+    char perr[512];
+    srv.persist = persist_open(srv.cfg.store, srv.cfg.sync_full, perr, sizeof perr);
+    if (!srv.persist) {
+        fprintf(stderr, "subdivd: %s\n", perr);
+        return 1;
+    }
+    srv.st = store_new(srv.cfg.max_sessions, srv.persist, &srv.cfg.limits);
     srv.session_rate = rate_new(srv.cfg.session_rate, srv.cfg.session_rate, API_RATE_CLIENTS);
     srv.compute = slots_new(srv.cfg.threads);
     if (!srv.st || !srv.session_rate || !srv.compute) {
@@ -292,8 +298,20 @@ int main(int argc, char **argv)
              (unsigned long long)srv.cfg.limits.max_cells,
              (unsigned long long)srv.cfg.limits.max_session_bytes, srv.cfg.max_sessions,
              (unsigned long long)srv.cfg.max_memory);
+    if (persist_durable(srv.persist)) {
+        long n = persist_count(srv.persist, (int64_t)time(NULL));
+        log_line(&srv, LOG_INFO, "session store %s: %ld session(s) stored, loaded on first use",
+                 persist_name(srv.persist), n);
+    }
+    double swept = mono_now();
     while (!stop_requested) {
         usleep(200 * 1000);
+        if (persist_durable(srv.persist) && mono_now() - swept > 60) {
+            swept = mono_now();
+            long n = persist_expire(srv.persist, (int64_t)time(NULL));
+            if (n > 0)
+                log_line(&srv, LOG_INFO, "the store forgot %ld expired session(s)", n);
+        }
         int gone = store_expire(srv.st, mono_now());
         if (gone) {
             log_line(&srv, LOG_INFO, "expired %d idle session(s)", gone);
@@ -304,6 +322,7 @@ int main(int argc, char **argv)
     log_line(&srv, LOG_INFO, "shutting down");
     http_stop(&srv);
     store_free(srv.st);
+    persist_close(srv.persist);
     rate_free(srv.session_rate);
     slots_free(srv.compute);
     log_line(&srv, LOG_INFO, "stopped");

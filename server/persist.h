@@ -101,5 +101,7 @@ long persist_expire(persist *p, int64_t now);
 long persist_count(persist *p, int64_t now);
 /* Can the store be written right now? false with the reason (the last failure) in why. */
 bool persist_healthy(persist *p, char *why, size_t cap);
+/* "ok", "conflict", … (the log). */
+const char *persist_rc_name(persist_rc rc);
 
 #endif

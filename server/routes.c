@@ -39,6 +39,7 @@ static void h_readyz(req *r)
 {
     size_t budget = api_mem_budget(), used = api_mem_budget_used();
     api_problem p = {0};
+    char why[256];
     if (atomic_load(&r->srv->draining)) {
         p.retry_after = 5;
         api_fail(&p, 503, "not-ready", "the daemon is starting or shutting down");
@@ -46,14 +47,18 @@ static void h_readyz(req *r)
         p.retry_after = 5;
         api_fail(&p, 503, "memory-budget", "the memory budget is in use: %zu of %zu bytes "
                  "(--max-memory)", used, budget);
+    } else if (!persist_healthy(store_persist(r->srv->st), why, sizeof why)) {
+        p.retry_after = 5;
+        api_fail(&p, 503, "store-unavailable", "the session store (%s) cannot be written: %s",
+                 persist_name(store_persist(r->srv->st)), why);
     }
     if (p.status) {
         http_reply_problem(r, &p);
         return;
     }
-    http_reply_json(r, 200, json_pack("{s:s, s:{s:I, s:I}}", "status", "ready", "memory",
+    http_reply_json(r, 200, json_pack("{s:s, s:{s:I, s:I}, s:s}", "status", "ready", "memory",
                                       "budget_bytes", (json_int_t)budget, "used_bytes",
-                                      (json_int_t)used), 0);
+                                      (json_int_t)used, "store", persist_name(store_persist(r->srv->st))), 0);
 }
 
 typedef struct gauges {
@@ -207,6 +212,81 @@ static void iso_time(char *buf, size_t cap, time_t t)
     strftime(buf, cap, "%Y-%m-%dT%H:%M:%SZ", &tm);
 }
 
+/* ---- the durable store ---------------------------------------------------------------------- */
+
+/* The problem of a write the durable store refused (nothing of the change is kept: the resident
+ * copy is dropped when it may differ from the store, and the next request loads it again). */
+static int store_refused(req *r, persist_rc rc, bool drop, api_problem *p)
+{
+    char why[256] = "";
+    persist *ps = store_persist(r->srv->st);
+    if (drop)
+        store_drop(r->srv->st, r->s);
+    switch (rc) {
+    case PERSIST_CONFLICT:
+        return api_fail(p, 412, "stale-version", "another daemon changed this session first; "
+                        "GET it again");
+    case PERSIST_ABSENT:
+        return api_fail(p, 404, "no-session", "session %s was deleted or expired meanwhile", r->s->id);
+    default:
+        persist_healthy(ps, why, sizeof why);
+        log_line(r->srv, LOG_ERROR, "session %s: the store refused a change (%s): %s", r->s->id,
+                 persist_rc_name(rc), why);
+        p->retry_after = 5;
+        return api_fail(p, 503, "store-unavailable", "the change could not be stored, so it was "
+                        "not made: %s", why);
+    }
+}
+
+/* Store model m as the session's content at `version` (the stored one is `expect`): its export
+ * document as the snapshot. 0 or the status of the problem. */
+static int store_snapshot(req *r, api_model *m, uint64_t expect, uint64_t version, api_problem *p)
+{
+    persist *ps = store_persist(r->srv->st);
+    if (!persist_durable(ps))
+        return 0;
+    json_t *doc = api_export(m, version);
+    char *text = doc ? json_dumps(doc, JSON_COMPACT) : NULL;
+    json_decref(doc);
+    if (!text)
+        return api_fail(p, 503, "out-of-memory", "out of memory (the change was not made)");
+    persist_rc rc = persist_snapshot(ps, r->s->id, expect, version, session_stored_expiry(r->s),
+                                     text, strlen(text));
+    api_free(text);
+    if (rc == PERSIST_OK)
+        r->s->journal_len = 0;
+    return rc == PERSIST_OK ? 0 : store_refused(r, rc, rc == PERSIST_CONFLICT, p);
+}
+
+/* A journal this long is folded into a snapshot after the next edit. */
+#define JOURNAL_COMPACT 256
+
+/* Store the edit `body` that made `version`. On a refusal the resident copy, already changed in
+ * place, is dropped. After JOURNAL_COMPACT edits the journal becomes a snapshot (a failure
+ * there loses nothing: the journal still holds every edit). */
+static int store_edit(req *r, json_t *body, uint64_t version, api_problem *p)
+{
+    persist *ps = store_persist(r->srv->st);
+    if (!persist_durable(ps))
+        return 0;
+    char *text = json_dumps(body, JSON_COMPACT);
+    persist_rc rc = text ? persist_append(ps, r->s->id, version - 1, version,
+                                          session_stored_expiry(r->s), text, strlen(text))
+                         : PERSIST_UNAVAILABLE;
+    api_free(text);
+    if (rc != PERSIST_OK)
+        return store_refused(r, rc, true, p);
+    if (++r->s->journal_len >= JOURNAL_COMPACT) {
+        api_model *m = session_model(r->s, NULL);
+        api_problem ignored = {0};
+        if (store_snapshot(r, m, version, version, &ignored))
+            log_line(r->srv, LOG_WARN, "session %s: compacting the journal failed: %s", r->s->id,
+                     ignored.detail);
+        api_model_unref(m);
+    }
+    return 0;
+}
+
 /* POST /v1/sessions: anyone may ask, so each client address has a rate (--session-rate, 429
  * with the seconds until its next token), the TTL is capped (--max-ttl: the answer says what
  * was granted), and a full table first lets an empty idle session go (sessions.c); otherwise
@@ -255,10 +335,28 @@ static void h_create_session(req *r)
     session *s = store_create(r->srv->st, (int)ttl, &adm);
     if (adm.evicted)
         log_line(r->srv, LOG_INFO, "the session table was full: an empty idle session went");
-    if (s && imported)
+    if (s && imported) {
         session_adopt(s, imported, imported_version);
-    else
+        r->s = s; /* the snapshot is the new session's (a create request has no session) */
+        int rc = store_snapshot(r, s->model, 0, imported_version, &p);
+        r->s = NULL;
+        if (rc) {
+            persist_delete(store_persist(r->srv->st), s->id);
+            store_remove(r->srv->st, s);
+            session_unref(s);
+            http_reply_problem(r, &p);
+            return;
+        }
+    } else
         api_model_unref(imported);
+    if (!s && adm.stored != PERSIST_OK) {
+        p.retry_after = 5;
+        char why[256] = "";
+        persist_healthy(store_persist(r->srv->st), why, sizeof why);
+        api_fail(&p, 503, "store-unavailable", "the session could not be stored: %s", why);
+        http_reply_problem(r, &p);
+        return;
+    }
     if (!s && !adm.retry_after_s) {
         http_fail(r, 503, "out-of-memory", "out of memory");
         return;
@@ -330,6 +428,14 @@ static void h_export(req *r)
 
 static void h_delete_session(req *r)
 {
+    persist *ps = store_persist(r->srv->st);
+    persist_rc rc = persist_durable(ps) ? persist_delete(ps, r->s->id) : PERSIST_OK;
+    if (rc != PERSIST_OK && rc != PERSIST_ABSENT) {
+        api_problem p = {0};
+        store_refused(r, rc, false, &p);
+        http_reply_problem(r, &p);
+        return;
+    }
     store_remove(r->srv->st, r->s);
     http_queue(r, 204, http_empty());
 }
@@ -419,6 +525,10 @@ static void change(req *r, change_op op, const char *const *packed, const char *
     json_decref(b);
     api_packs_free(&packs);
     api_model_unref(cur);
+    if (!rc && (rc = store_snapshot(r, next, version, version + 1, &p))) {
+        api_model_unref(next);
+        next = NULL;
+    }
     if (rc) {
         pthread_mutex_unlock(&r->s->write);
         json_decref(answer);
@@ -600,6 +710,10 @@ static void h_edit(req *r)
                  (unsigned long long)counts[l]);
     }
     strcat(up, "}");
+    if (!rc && (rc = store_edit(r, b, version + 1, &p))) {
+        api_model_unref(rebuilt); /* the resident copy went: the store has the session */
+        rebuilt = NULL;
+    }
     if (!rc) { /* the version api_edit stamped: the write lock is held */
         version = rebuilt ? session_publish(r->s, rebuilt) : session_bump(r->s);
         notify(r, version, "edit", up);

@@ -14,6 +14,7 @@
 typedef struct server {
     config cfg;
     store *st;
+    persist *persist;         /* the durable session store (persist.h) */
     struct rate *session_rate; /* session creations per client (rate.h) */
     slots *compute;           /* cfg.threads slots for computations, fair between sessions */
     atomic_int draining;      /* /readyz answers 503 while starting or stopping */

@@ -10,8 +10,10 @@
  */
 #include "sessions.h"
 #include "events.h"
+#include "../api/handlers.h"
 #include "../api/mem.h"
 #include <math.h>
+#include <nettle/sha2.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -21,7 +23,18 @@ struct store {
     pthread_mutex_t mu;
     int cap, n;
     session **s;
+    persist *p;               /* the durable store (borrowed) */
+    api_limits lim;           /* what a replayed journal may compute */
+    pthread_mutex_t load;     /* one session loaded from the durable store at a time */
 };
+
+static void token_hash(const char *token, unsigned char out[32])
+{
+    struct sha256_ctx c;
+    sha256_init(&c);
+    sha256_update(&c, strlen(token), (const uint8_t *)token);
+    sha256_digest(&c, 32, out);
+}
 
 double mono_now(void)
 {
@@ -42,11 +55,13 @@ static int random_bytes(unsigned char *b, size_t n)
     return 0;
 }
 
-store *store_new(int max_sessions)
+store *store_new(int max_sessions, persist *p, const api_limits *lim)
 {
     store *st = api_calloc(1, sizeof *st);
     if (!st)
         return NULL;
+    st->p = p;
+    st->lim = *lim;
     st->cap = max_sessions;
     st->s = api_calloc((size_t)max_sessions, sizeof *st->s);
     if (!st->s) {
@@ -54,8 +69,11 @@ store *store_new(int max_sessions)
         return NULL;
     }
     pthread_mutex_init(&st->mu, NULL);
+    pthread_mutex_init(&st->load, NULL);
     return st;
 }
+
+persist *store_persist(store *st) { return st->p; }
 
 void store_free(store *st)
 {
@@ -64,6 +82,7 @@ void store_free(store *st)
     for (int i = 0; i < st->n; i++)
         session_unref(st->s[i]);
     pthread_mutex_destroy(&st->mu);
+    pthread_mutex_destroy(&st->load);
     api_free(st->s);
     api_free(st);
 }
@@ -87,11 +106,12 @@ static int expire_locked(store *st, double now)
     return gone;
 }
 
-/* Remove the least recently used session that never received a complex and that nobody else
- * holds (no request or stream in flight: store_get takes its reference under st->mu, which the
- * caller holds). 1 if one went. */
+/* Remove the least recently used session that never received a complex (with a durable store:
+ * any session, since the store has it) and that nobody else holds (no request or stream in
+ * flight: store_get takes its reference under st->mu, which the caller holds). 1 if one went. */
 static int evict_empty_locked(store *st)
 {
+    bool any = persist_durable(st->p);
     int best = -1;
     double best_used = 0;
     for (int i = 0; i < st->n; i++) {
@@ -99,7 +119,7 @@ static int evict_empty_locked(store *st)
         if (atomic_load(&s->refs) != 1 || atomic_load(&s->busy_level) >= 0)
             continue;
         pthread_mutex_lock(&s->mu);
-        int empty = !s->model->c;
+        int empty = any || !s->model->c;
         double used = s->last_used;
         pthread_mutex_unlock(&s->mu);
         if (empty && (best < 0 || used < best_used)) {
@@ -107,7 +127,7 @@ static int evict_empty_locked(store *st)
             best_used = used;
         }
     }
-    return best >= 0 ? remove_at(st, best, "evicted") : 0;
+    return best >= 0 ? remove_at(st, best, any ? "reload" : "evicted") : 0;
 }
 
 /* Seconds until the soonest expiry of a resident session (>= 1). Caller holds st->mu. */
@@ -126,12 +146,9 @@ static int soonest_expiry_locked(store *st, double now)
     return c < 1 ? 1 : c > 1e9 ? 1000000000 : (int)c;
 }
 
-session *store_create(store *st, int ttl_s, store_admission *a)
+/* A session struct (reference 1) with an empty model, or NULL for lack of memory. */
+static session *session_alloc(const char *id, const unsigned char hash[32], int ttl_s, time_t created)
 {
-    memset(a, 0, sizeof *a);
-    unsigned char rid[16], rtok[32];
-    if (random_bytes(rid, sizeof rid) || random_bytes(rtok, sizeof rtok))
-        return NULL;
     session *s = api_calloc(1, sizeof *s);
     if (!s)
         return NULL;
@@ -143,26 +160,23 @@ session *store_create(store *st, int ttl_s, store_admission *a)
         api_free(s);
         return NULL;
     }
-    for (int i = 0; i < 16; i++)
-        sprintf(s->id + 2 * i, "%02x", rid[i]);
-    static const char b64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
-    int k = 0; /* 32 bytes -> 43 base64url characters, no padding */
-    for (int i = 0; i < 32; i += 3) {
-        uint32_t v = (uint32_t)rtok[i] << 16 | (i + 1 < 32 ? (uint32_t)rtok[i + 1] << 8 : 0) |
-                     (i + 2 < 32 ? rtok[i + 2] : 0);
-        int nch = i + 2 < 32 ? 4 : 3;
-        for (int j = 0; j < nch; j++)
-            s->token[k++] = b64[(v >> (18 - 6 * j)) & 63];
-    }
-    s->token[k] = 0;
-    atomic_init(&s->refs, 2); /* the store's and the caller's */
+    memcpy(s->id, id, 32);
+    memcpy(s->token_hash, hash, 32);
+    atomic_init(&s->refs, 1);
     pthread_mutex_init(&s->mu, NULL);
     pthread_mutex_init(&s->write, NULL);
     s->ttl_s = ttl_s;
-    s->last_used = mono_now();
-    s->created = time(NULL);
+    s->last_used = s->touched = mono_now();
+    s->created = created;
     atomic_init(&s->busy_level, -1);
-    pthread_mutex_lock(&st->mu);
+    return s;
+}
+
+/* Make room for one more resident session (expired ones first, then an idle one that can go).
+ * Caller holds st->mu; false when the table stays full (*retry_after_s then says when the
+ * soonest expiry is). */
+static bool room_locked(store *st, store_admission *a)
+{
     double now = mono_now();
     if (st->n >= st->cap)
         expire_locked(st, now);
@@ -170,18 +184,186 @@ session *store_create(store *st, int ttl_s, store_admission *a)
         a->evicted = evict_empty_locked(st);
     if (st->n >= st->cap) {
         a->retry_after_s = soonest_expiry_locked(st, now);
+        return false;
+    }
+    return true;
+}
+
+session *store_create(store *st, int ttl_s, store_admission *a)
+{
+    memset(a, 0, sizeof *a);
+    unsigned char rid[16], rtok[32], hash[32];
+    if (random_bytes(rid, sizeof rid) || random_bytes(rtok, sizeof rtok))
+        return NULL;
+    char id[33], token[48];
+    for (int i = 0; i < 16; i++)
+        sprintf(id + 2 * i, "%02x", rid[i]);
+    static const char b64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
+    int k = 0; /* 32 bytes -> 43 base64url characters, no padding */
+    for (int i = 0; i < 32; i += 3) {
+        uint32_t v = (uint32_t)rtok[i] << 16 | (i + 1 < 32 ? (uint32_t)rtok[i + 1] << 8 : 0) |
+                     (i + 2 < 32 ? rtok[i + 2] : 0);
+        int nch = i + 2 < 32 ? 4 : 3;
+        for (int j = 0; j < nch; j++)
+            token[k++] = b64[(v >> (18 - 6 * j)) & 63];
+    }
+    token[k] = 0;
+    token_hash(token, hash);
+    session *s = session_alloc(id, hash, ttl_s, time(NULL));
+    if (!s)
+        return NULL;
+    memcpy(s->token, token, sizeof token);
+    explicit_bzero(token, sizeof token);
+    pthread_mutex_lock(&st->mu);
+    bool ok = room_locked(st, a);
+    pthread_mutex_unlock(&st->mu);
+    if (ok && persist_durable(st->p)) { /* in the store before anyone learns the id */
+        persist_meta m = {.ttl_s = ttl_s, .created = s->created,
+                          .expires_at = (int64_t)time(NULL) + ttl_s};
+        memcpy(m.id, s->id, sizeof m.id);
+        memcpy(m.token_hash, hash, sizeof hash);
+        if ((a->stored = persist_create(st->p, &m)) != PERSIST_OK)
+            ok = false;
+    }
+    if (ok) {
+        pthread_mutex_lock(&st->mu);
+        ok = room_locked(st, a);
+        if (ok) {
+            atomic_fetch_add(&s->refs, 1); /* the store's and the caller's */
+            st->s[st->n++] = s;
+        }
         pthread_mutex_unlock(&st->mu);
-        atomic_store(&s->refs, 1);
+        if (!ok && a->stored == PERSIST_OK && persist_durable(st->p))
+            persist_delete(st->p, s->id);
+    }
+    if (!ok) {
         session_unref(s);
         return NULL;
     }
-    st->s[st->n++] = s;
-    pthread_mutex_unlock(&st->mu);
     return s;
 }
 
-session *store_get(store *st, const char *id)
+/* The model a stored session had: its snapshot imported, its journal replayed (edits recompute,
+ * so the levels are those it had). NULL with the reason in why. */
+static api_model *rebuild(const persist_loaded *l, const api_limits *lim, char *why, size_t cap)
 {
+    api_model *m = NULL;
+    api_problem p = {0};
+    uint64_t v = 0;
+    if (l->snapshot) {
+        json_error_t je;
+        json_t *doc = json_loadb(l->snapshot, l->snapshot_len, JSON_REJECT_DUPLICATES, &je);
+        if (!doc) {
+            snprintf(why, cap, "the snapshot of version %llu is not JSON: %s",
+                     (unsigned long long)l->snapshot_version, je.text);
+            return NULL;
+        }
+        int rc = api_import(doc, "", lim, &m, &v, &p);
+        json_decref(doc);
+        if (rc) {
+            snprintf(why, cap, "the snapshot of version %llu cannot be imported: %.160s%s%.60s",
+                     (unsigned long long)l->snapshot_version, p.detail, p.nerrors ? " at " : "",
+                     p.nerrors ? p.errors[0].pointer : "");
+            return NULL;
+        }
+    } else {
+        sd_error e;
+        if (!(m = api_model_new(NULL, NULL, 0, &e))) {
+            snprintf(why, cap, "out of memory");
+            return NULL;
+        }
+    }
+    for (size_t i = 0; i < l->njournal; i++) {
+        const persist_entry *en = &l->journal[i];
+        json_error_t je;
+        json_t *b = json_loadb(en->text, en->len, JSON_REJECT_DUPLICATES, &je);
+        uint64_t counts[SD_MAX_LEVEL + 1];
+        int levels = 0, rc = b ? 0 : -1;
+        api_model *rebuilt = NULL;
+        memset(&p, 0, sizeof p);
+        if (b)
+            rc = api_edit(m, b, en->version, lim, NULL, counts, &levels, &rebuilt, &p);
+        json_decref(b);
+        if (rebuilt) {
+            api_model_unref(m);
+            m = rebuilt;
+        }
+        if (rc) {
+            snprintf(why, cap, "the edit of version %llu cannot be replayed: %.200s",
+                     (unsigned long long)en->version, b ? p.detail : je.text);
+            api_model_unref(m);
+            return NULL;
+        }
+    }
+    atomic_store(&m->version, l->meta.version);
+    return m;
+}
+
+/* Load session `id` from the durable store into the table (new reference), or NULL + *miss. */
+static session *load(store *st, const char *id, store_miss *miss, char *why, size_t cap)
+{
+    pthread_mutex_lock(&st->load);
+    session *s = NULL;
+    pthread_mutex_lock(&st->mu); /* loaded meanwhile by another request? */
+    for (int i = 0; i < st->n && !s; i++)
+        if (!memcmp(st->s[i]->id, id, 32))
+            s = st->s[i];
+    if (s)
+        atomic_fetch_add(&s->refs, 1);
+    pthread_mutex_unlock(&st->mu);
+    if (s) {
+        pthread_mutex_unlock(&st->load);
+        return s;
+    }
+    persist_loaded l;
+    persist_rc rc = persist_load(st->p, id, &l);
+    char reason[320] = "";
+    if (rc == PERSIST_OK) {
+        api_model *m = rebuild(&l, &st->lim, reason, sizeof reason);
+        if (!m)
+            rc = PERSIST_CORRUPT;
+        else if (!(s = session_alloc(id, l.meta.token_hash, l.meta.ttl_s, (time_t)l.meta.created))) {
+            api_model_unref(m);
+            rc = PERSIST_UNAVAILABLE;
+            snprintf(reason, sizeof reason, "out of memory");
+        } else {
+            session_adopt(s, m, l.meta.version);
+            s->journal_len = (uint32_t)l.njournal;
+            store_admission a = {0};
+            pthread_mutex_lock(&st->mu);
+            bool ok = room_locked(st, &a);
+            if (ok) {
+                atomic_fetch_add(&s->refs, 1);
+                st->s[st->n++] = s;
+            }
+            pthread_mutex_unlock(&st->mu);
+            if (!ok) {
+                session_unref(s);
+                s = NULL;
+                *miss = STORE_FULL;
+            }
+        }
+        persist_loaded_free(&l);
+    } else if (rc == PERSIST_CORRUPT || rc == PERSIST_UNAVAILABLE) {
+        char w[256];
+        persist_healthy(st->p, w, sizeof w);
+        snprintf(reason, sizeof reason, "%s", w);
+    }
+    pthread_mutex_unlock(&st->load);
+    if (!s && rc != PERSIST_OK)
+        *miss = rc == PERSIST_CORRUPT ? STORE_CORRUPT : rc == PERSIST_UNAVAILABLE ? STORE_UNAVAILABLE
+                                                                                : STORE_NONE;
+    if (why && cap)
+        snprintf(why, cap, "%s", reason);
+    return s;
+}
+
+session *store_get(store *st, const char *id, store_miss *miss, char *why, size_t cap)
+{
+    store_miss m0;
+    if (!miss)
+        miss = &m0;
+    *miss = STORE_NONE;
     session *found = NULL;
     if (strlen(id) != 32)
         return NULL;
@@ -196,7 +378,47 @@ session *store_get(store *st, const char *id)
         pthread_mutex_unlock(&found->mu);
     }
     pthread_mutex_unlock(&st->mu);
+    if (!persist_durable(st->p))
+        return found;
+    if (found && persist_shared(st->p) && !pthread_mutex_trylock(&found->write)) {
+        /* another daemon may have changed it (a change of our own in flight holds the lock) */
+        uint64_t stored = 0;
+        persist_rc rc = persist_version(st->p, id, &stored);
+        pthread_mutex_lock(&found->mu);
+        uint64_t mine = found->version;
+        pthread_mutex_unlock(&found->mu);
+        pthread_mutex_unlock(&found->write);
+        if (rc == PERSIST_ABSENT || (rc == PERSIST_OK && stored != mine)) {
+            store_drop(st, found);
+            session_unref(found);
+            found = NULL;
+            if (rc == PERSIST_ABSENT)
+                return NULL;
+        } /* unavailable: the resident copy is served (reads); writes will fail */
+    }
+    if (!found)
+        return load(st, id, miss, why, cap);
+    double now = mono_now();
+    pthread_mutex_lock(&found->mu);
+    double every = found->ttl_s / 10.0 < 60 ? found->ttl_s / 10.0 : 60;
+    bool due = now - found->touched > every;
+    if (due)
+        found->touched = now;
+    pthread_mutex_unlock(&found->mu);
+    if (due)
+        persist_touch(st->p, found->id, session_stored_expiry(found));
     return found;
+}
+
+void store_drop(store *st, session *s)
+{
+    pthread_mutex_lock(&st->mu);
+    for (int i = 0; i < st->n; i++)
+        if (st->s[i] == s) {
+            remove_at(st, i, "reload");
+            break;
+        }
+    pthread_mutex_unlock(&st->mu);
 }
 
 /* Take session i out of the store; its event listeners get `event: deleted` with `why`. */
@@ -254,6 +476,7 @@ void session_unref(session *s)
     pthread_mutex_destroy(&s->mu);
     pthread_mutex_destroy(&s->write);
     explicit_bzero(s->token, sizeof s->token);
+    explicit_bzero(s->token_hash, sizeof s->token_hash);
     api_free(s);
 }
 
@@ -298,6 +521,14 @@ uint64_t session_bump(session *s)
     return v;
 }
 
+int64_t session_stored_expiry(session *s)
+{
+    pthread_mutex_lock(&s->mu);
+    int ttl = s->ttl_s;
+    pthread_mutex_unlock(&s->mu);
+    return (int64_t)time(NULL) + ttl;
+}
+
 time_t session_expires_at(session *s)
 {
     pthread_mutex_lock(&s->mu);
@@ -308,11 +539,11 @@ time_t session_expires_at(session *s)
 
 int session_token_ok(const session *s, const char *presented)
 {
-    size_t n = strlen(s->token);
-    if (!presented || strlen(presented) != n)
+    if (!presented)
         return 0;
-    unsigned char d = 0;
-    for (size_t i = 0; i < n; i++)
-        d |= (unsigned char)(s->token[i] ^ presented[i]);
+    unsigned char h[32], d = 0;
+    token_hash(presented, h);
+    for (size_t i = 0; i < sizeof h; i++)
+        d |= (unsigned char)(s->token_hash[i] ^ h[i]);
     return d == 0;
 }

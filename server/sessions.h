@@ -12,7 +12,9 @@
 #ifndef SUBDIVD_SESSIONS_H
 #define SUBDIVD_SESSIONS_H
 
+#include "../api/limits.h"
 #include "../api/model.h"
+#include "persist.h"
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdint.h>
@@ -21,7 +23,8 @@
 typedef struct session {
     atomic_int refs;
     char id[33];
-    char token[48];
+    char token[48];           /* only when created here (the answer of POST /v1/sessions) */
+    unsigned char token_hash[32]; /* SHA-256 of the token: what is compared, and stored */
     pthread_mutex_t mu;       /* model, version, ttl, last_used */
     pthread_mutex_t write;    /* serialises changes */
     api_model *model;
@@ -30,6 +33,8 @@ typedef struct session {
     double last_used;         /* monotonic seconds */
     time_t created;
     struct ev_hub *events;    /* its Server-Sent Events (events.h), told when it leaves the store */
+    uint32_t journal_len;     /* edits in the durable store's journal since its snapshot (write lock) */
+    double touched;           /* monotonic time the durable store last got its expiry (mu) */
     /* progress of a computation in this session, readable without a lock */
     atomic_int busy_level;    /* -1 when idle */
     _Atomic double busy_since;
@@ -37,13 +42,18 @@ typedef struct session {
 
 typedef struct store store;
 
-store *store_new(int max_sessions);
+/* The table of resident sessions over a durable store (persist.h; the store is borrowed, and
+ * may be the memory store). With a durable store, a session that is not resident is loaded from
+ * it on first use (its snapshot imported, its journal replayed within `lim`), and resident
+ * sessions that are idle may leave the table to make room: the store has them. */
+store *store_new(int max_sessions, persist *p, const api_limits *lim);
 void store_free(store *st);
 
 /* What store_create did to find room, or why there was none. */
 typedef struct store_admission {
     int evicted;              /* an empty idle session went to make room */
     int retry_after_s;        /* refused, the table full: seconds until the soonest expiry (>= 1) */
+    persist_rc stored;        /* refused by the durable store (PERSIST_UNAVAILABLE ...), else OK */
 } store_admission;
 
 /* Create a session (new reference). When the table is full, sessions past their TTL go first,
@@ -51,8 +61,23 @@ typedef struct store_admission {
  * or a stream in flight: the store holds its only reference); NULL when none can go (or out of
  * memory: then retry_after_s is 0). */
 session *store_create(store *st, int ttl_s, store_admission *a);
-/* The live session with this id (new reference) or NULL. Touches its idle clock. */
-session *store_get(store *st, const char *id);
+/* Why store_get found nothing. */
+typedef enum store_miss {
+    STORE_NONE = 0,           /* no such session (never, expired, deleted) */
+    STORE_UNAVAILABLE,        /* the durable store cannot be read now */
+    STORE_CORRUPT,            /* the stored session cannot be rebuilt (damaged data) */
+    STORE_FULL                /* stored, but no room to make it resident (every session busy) */
+} store_miss;
+
+/* The live session with this id (new reference) or NULL with *miss (may be NULL) and, for
+ * STORE_CORRUPT and STORE_UNAVAILABLE, the reason in why (cap bytes; may be NULL). Touches its
+ * idle clock (and, now and then, its expiry in the durable store). With a shared store, a
+ * resident copy older than the stored version is dropped and the session loaded again. */
+session *store_get(store *st, const char *id, store_miss *miss, char *why, size_t cap);
+/* Forget the resident copy of s (the durable store has the truth: after a write it refused, or
+ * lost to another daemon); the next request loads it again. Its listeners are told "reload". */
+void store_drop(store *st, session *s);
+persist *store_persist(store *st);
 /* Remove from the store (the session lives on until its last reference goes). 0 if absent. */
 int store_remove(store *st, session *s);
 /* Remove sessions idle for longer than their TTL; returns how many went. */
@@ -72,6 +97,8 @@ void session_adopt(session *s, api_model *m, uint64_t version);
 uint64_t session_bump(session *s);
 /* Expiry time (wall clock, seconds since the epoch). */
 time_t session_expires_at(session *s);
+/* The expiry to store with a change made now: now + TTL (wall clock). */
+int64_t session_stored_expiry(session *s);
 
 /* Constant-time comparison of a presented token with the session's. */
 int session_token_ok(const session *s, const char *presented);
