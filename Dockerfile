@@ -15,12 +15,15 @@ RUN make build/subdivd build/subdivd-tetgen build/sdlevel \
  && build/subdivd-tetgen --selftest
 
 FROM debian:12-slim AS runtime
-# libjansson4, libmicrohttpd12, liblapacke, zlib1g: subdivd; libtet1.5, libstdc++6: subdivd-tetgen
+# libjansson4, libmicrohttpd12, liblapacke, zlib1g, libsqlite3-0, libnettle8, libhiredis0.14:
+# subdivd; libtet1.5, libstdc++6: subdivd-tetgen
 RUN apt-get update \
  && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends \
-      libjansson4 libmicrohttpd12 liblapacke zlib1g libtet1.5 libstdc++6 \
+      libjansson4 libmicrohttpd12 liblapacke zlib1g libsqlite3-0 libnettle8 libhiredis0.14 \
+      libtet1.5 libstdc++6 \
  && rm -rf /var/lib/apt/lists/* \
- && useradd --system --uid 10001 --create-home --home-dir /home/subdivd subdivd
+ && useradd --system --uid 10001 --create-home --home-dir /home/subdivd subdivd \
+ && mkdir -p /data && chown subdivd /data
 # subdivd finds its TetGen helper beside itself
 COPY --from=build /src/build/subdivd /src/build/subdivd-tetgen /src/build/sdlevel /usr/local/bin/
 COPY --from=build /src/examples /home/subdivd/examples
@@ -30,5 +33,7 @@ EXPOSE 8080
 # the image has no curl: the daemon binary itself is the probe (GET /healthz, exit 0 on 200)
 HEALTHCHECK --interval=30s --timeout=5s --start-period=5s --retries=3 \
     CMD ["subdivd", "--healthcheck", "http://127.0.0.1:8080/healthz"]
+# Sessions are kept in the volume /data (SQLite): they survive the container.
+VOLUME ["/data"]
 # Listen on all interfaces inside the container; publish with `docker run -p 8080:8080`.
-CMD ["subdivd", "--listen", "0.0.0.0", "--port", "8080"]
+CMD ["subdivd", "--listen", "0.0.0.0", "--port", "8080", "--store", "sqlite:/data/sessions.db"]

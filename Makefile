@@ -83,10 +83,13 @@ deps:
 
 # Starts the daemon on localhost:8080 (web front end at /, API under /v1, OpenAPI at
 # /v1/openapi.json). Flags: make run ARGS="--port 9000 --log-level debug".
+# Sessions are kept in $(DATA)/sessions.db (SQLite): they survive a restart of `make run`.
+DATA ?= data
 run: deps
 	$(MAKE) all
-	@echo "subdivd: open http://127.0.0.1:8080/ (API: http://127.0.0.1:8080/v1/openapi.json); Ctrl-C stops it"
-	./$(B)/subdivd $(ARGS)
+	@mkdir -p $(DATA)
+	@echo "subdivd: open http://127.0.0.1:8080/ (API: http://127.0.0.1:8080/v1/openapi.json); sessions in $(DATA)/sessions.db; Ctrl-C stops it"
+	./$(B)/subdivd --store sqlite:$(DATA)/sessions.db $(ARGS)
 
 # Runs every suite and ends with one line: "N passed, N failed".
 test: deps

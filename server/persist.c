@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 struct persist {
     persist_kind kind;
@@ -15,8 +16,16 @@ struct persist {
     void *b;
     pthread_mutex_t mu;       /* the health fields */
     bool failing;
+    double failed_at;         /* monotonic seconds of the last failure */
     char why[256];
 };
+
+static double mono(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
 
 persist *persist_open(const char *spec, bool sync_full, char *err, size_t cap)
 {
@@ -100,6 +109,7 @@ static persist_rc noted_as(persist *p, persist_rc rc, bool write)
     pthread_mutex_lock(&p->mu);
     if (rc == PERSIST_UNAVAILABLE) {
         p->failing = true;
+        p->failed_at = mono();
         snprintf(p->why, sizeof p->why, "%s", p->ops->last_error(p->b));
     } else if (write && rc != PERSIST_UNAVAILABLE)
         p->failing = false;
@@ -146,7 +156,12 @@ persist_rc persist_version(persist *p, const char *id, uint64_t *version)
 persist_rc persist_load(persist *p, const char *id, persist_loaded *out)
 {
     memset(out, 0, sizeof *out);
-    return p->ops ? noted_read(p, p->ops->load(p->b, id, out)) : PERSIST_ABSENT;
+    if (!p->ops)
+        return PERSIST_ABSENT;
+    persist_rc rc = noted_read(p, p->ops->load(p->b, id, out));
+    if (rc != PERSIST_OK && rc != PERSIST_ABSENT)
+        snprintf(out->why, sizeof out->why, "%s", p->ops->last_error(p->b));
+    return rc;
 }
 
 void persist_loaded_free(persist_loaded *l)
@@ -155,18 +170,27 @@ void persist_loaded_free(persist_loaded *l)
     for (size_t i = 0; i < l->njournal; i++)
         free(l->journal[i].text);
     free(l->journal);
-    memset(l, 0, sizeof *l);
+    l->snapshot = NULL;
+    l->journal = NULL;
+    l->njournal = 0;
 }
 
 long persist_expire(persist *p, int64_t now) { return p->ops ? p->ops->expire(p->b, now) : 0; }
 long persist_count(persist *p, int64_t now) { return p->ops ? p->ops->count(p->b, now) : 0; }
 
+void persist_last_failure(persist *p, char *why, size_t cap)
+{
+    pthread_mutex_lock(&p->mu);
+    snprintf(why, cap, "%s", p->why);
+    pthread_mutex_unlock(&p->mu);
+}
+
 bool persist_healthy(persist *p, char *why, size_t cap)
 {
     pthread_mutex_lock(&p->mu);
-    bool failing = p->failing;
+    bool probe = p->failing && mono() - p->failed_at > PERSIST_PROBE_AFTER_S;
     pthread_mutex_unlock(&p->mu);
-    if (failing) /* is it back? a write that names no session (redis reachable, the file writable) */
+    if (probe) /* is it back? a write that names no session (redis reachable, the file writable) */
         noted(p, p->ops->touch(p->b, "-", 0));
     pthread_mutex_lock(&p->mu);
     bool ok = !p->failing;

@@ -57,6 +57,7 @@ typedef struct persist_loaded {
     uint64_t snapshot_version;
     persist_entry *journal;       /* malloc'd array */
     size_t njournal;
+    char why[320];                /* after a failure: what the back end said */
 } persist_loaded;
 
 typedef enum persist_kind { PERSIST_MEMORY, PERSIST_SQLITE, PERSIST_REDIS } persist_kind;
@@ -99,8 +100,13 @@ void persist_loaded_free(persist_loaded *l);
 long persist_expire(persist *p, int64_t now);
 /* Stored unexpired sessions (-1 if the store cannot say). */
 long persist_count(persist *p, int64_t now);
-/* Can the store be written right now? false with the reason (the last failure) in why. */
+/* Can the store be written? false with the reason (the last failure) in why: after a write or
+ * read the store refused for want of space or of a connection, until a probe write succeeds
+ * (tried at most every PERSIST_PROBE_AFTER_S seconds). */
+#define PERSIST_PROBE_AFTER_S 5.0
 bool persist_healthy(persist *p, char *why, size_t cap);
+/* What the last failure was (for an error answer). */
+void persist_last_failure(persist *p, char *why, size_t cap);
 /* "ok", "conflict", … (the log). */
 const char *persist_rc_name(persist_rc rc);
 

@@ -229,7 +229,7 @@ static int store_refused(req *r, persist_rc rc, bool drop, api_problem *p)
     case PERSIST_ABSENT:
         return api_fail(p, 404, "no-session", "session %s was deleted or expired meanwhile", r->s->id);
     default:
-        persist_healthy(ps, why, sizeof why);
+        persist_last_failure(ps, why, sizeof why);
         log_line(r->srv, LOG_ERROR, "session %s: the store refused a change (%s): %s", r->s->id,
                  persist_rc_name(rc), why);
         p->retry_after = 5;
@@ -352,7 +352,7 @@ static void h_create_session(req *r)
     if (!s && adm.stored != PERSIST_OK) {
         p.retry_after = 5;
         char why[256] = "";
-        persist_healthy(store_persist(r->srv->st), why, sizeof why);
+        persist_last_failure(store_persist(r->srv->st), why, sizeof why);
         api_fail(&p, 503, "store-unavailable", "the session could not be stored: %s", why);
         http_reply_problem(r, &p);
         return;

@@ -344,11 +344,8 @@ static session *load(store *st, const char *id, store_miss *miss, char *why, siz
             }
         }
         persist_loaded_free(&l);
-    } else if (rc == PERSIST_CORRUPT || rc == PERSIST_UNAVAILABLE) {
-        char w[256];
-        persist_healthy(st->p, w, sizeof w);
-        snprintf(reason, sizeof reason, "%s", w);
-    }
+    } else if (rc == PERSIST_CORRUPT || rc == PERSIST_UNAVAILABLE)
+        snprintf(reason, sizeof reason, "%s", l.why);
     pthread_mutex_unlock(&st->load);
     if (!s && rc != PERSIST_OK)
         *miss = rc == PERSIST_CORRUPT ? STORE_CORRUPT : rc == PERSIST_UNAVAILABLE ? STORE_UNAVAILABLE

@@ -1,0 +1,404 @@
+"""Sessions that survive (docs/API.md "Persistence and sessions", docs/SERVICE.md "Persistence"):
+exact export/import, the stored orientation of tetrahedra, the SQLite store across kill -9, and
+what the daemon does when the store fails.
+
+Expected level bytes never come from the persistence path itself: they are fetched from the live
+session before the save, or computed by a second daemon with the in-memory store to which the
+same acknowledged requests were sent."""
+import os
+import random
+import sqlite3
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+import requests
+
+from conftest import MAKE_MESH
+from daemon import SLOW, Daemon, Session
+
+TETS = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [1.2, -0.3, 0.4],
+                     [2, 2, 0]],
+        "simplices": [[0, 1, 2, 3], [1, 2, 3, 4], [0, 1, 3, 5], [4, 6]],
+        "attributes": {"t": [1, 2, 3, 4, 5, 6, 7], "uv": [[0, 0], [1, 0], [0, 1], [0, 0], [1, 1],
+                                                          [2, 0], [0, 2]]}}
+
+
+def adopt(daemon, http, created):
+    """A Session object for an answer of POST /v1/sessions made by hand."""
+    s = Session.__new__(Session)
+    s.d, s.http = daemon, http
+    s.id, s.token = created["id"], created["token"]
+    s.base = f"{daemon.url}/v1/sessions/{s.id}"
+    s.auth = {"Authorization": f"Bearer {s.token}"}
+    return s
+
+
+def on(daemon, s):
+    """The same session (id, token) addressed on another daemon."""
+    t = Session.__new__(Session)
+    t.d, t.http, t.id, t.token, t.auth = daemon, requests.Session(), s.id, s.token, s.auth
+    t.base = f"{daemon.url}/v1/sessions/{s.id}"
+    return t
+
+
+def edit(s, moves, version):
+    r = s.req("PATCH", "/control-points", json={"moves": moves}, headers={"If-Match": f'"{version}"'})
+    assert r.status_code == 200, r.text
+    return r.json()["version"]
+
+
+def levels(s, top=3, fmt="glb"):
+    out = {}
+    for level in range(1, top + 1):
+        r = s.level(level, format=fmt)
+        assert r.status_code == 200, r.text
+        out[level] = r.content
+    return out
+
+
+def surface(*args):
+    text = subprocess.run([sys.executable, str(MAKE_MESH), *map(str, args)], check=True,
+                          capture_output=True, text=True).stdout
+    v, f = [], []
+    for line in text.splitlines():
+        t = line.split()
+        if t and t[0] == "v":
+            v.append([float(x) for x in t[1:4]])
+        elif t and t[0] == "s":
+            f.append([int(x) for x in t[1:]])
+    return v, f
+
+
+def signed_volume(v, t):
+    a, b, c, d = (v[i] for i in t)
+    u = [b[k] - a[k] for k in range(3)]
+    w = [c[k] - a[k] for k in range(3)]
+    z = [d[k] - a[k] for k in range(3)]
+    return (u[0] * (w[1] * z[2] - w[2] * z[1]) - u[1] * (w[0] * z[2] - w[2] * z[0]) +
+            u[2] * (w[0] * z[1] - w[1] * z[0]))
+
+
+@pytest.fixture(scope="module")
+def daemon():
+    d = Daemon()
+    yield d
+    d.stop()
+
+
+def shaped_session(daemon):
+    """A session with everything the document carries: attributes, rules with an override,
+    tags, an edit that turns tetrahedron 1 inside out, and a detail offset at level 1."""
+    s = Session(daemon)
+    assert s.put_complex(TETS).status_code == 200
+    r = s.req("PUT", "/rules", json={"surface_weights": "loop",
+                                     "overrides": [{"simplex": [4], "rule": "G1"}]})
+    assert r.status_code == 200, r.text
+    r = s.req("PUT", "/tags", json={"singular": [[0, 1]]})
+    assert r.status_code == 200, r.text
+    v = edit(s, [{"index": 4, "position": [-0.2, -0.2, -0.2]}], r.json()["version"])
+    assert signed_volume([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [-0.2, -0.2, -0.2]],
+                         [1, 2, 3, 4]) < 0   # the edit did invert it
+    v = edit(s, [{"level": 1, "index": 3, "position": [0.1, 0.2, 0.3]}], v)
+    return s, v
+
+
+def test_export_import_is_bit_identical(daemon):
+    s, v = shaped_session(daemon)
+    want = {f: levels(s, 3, f) for f in ("glb", "json", "vtu")}
+    ex = s.req("GET", "/export")
+    assert ex.status_code == 200 and ex.headers["ETag"] == f'"{v}"'
+    doc = ex.json()
+    assert doc["format"] == "subdivd-session" and doc["version"] == v
+    assert doc["complex"]["details"] and doc["rules"]["overrides"] and doc["tags"]["singular"]
+    r = s.http.post(daemon.url + "/v1/sessions", json={"import": doc})
+    assert r.status_code == 201, r.text
+    t = adopt(daemon, s.http, r.json())
+    assert t.id != s.id and t.token != s.token and r.json()["version"] == v
+    assert t.req("GET", "").json()["version"] == v
+    for f in want:
+        assert levels(t, 3, f) == want[f], f
+    again = t.req("GET", "/export")
+    assert again.content == ex.content       # a fixed point: export(import(doc)) == doc
+    # the version continues from the exported one
+    assert edit(t, [{"index": 0, "position": [0.01, 0, 0]}], v) == v + 1
+
+
+def test_saved_complex_reposted_keeps_levels_after_inversion(daemon):
+    """GET /complex with "diagonals" and "reoriented", posted again, gives the same level bytes:
+    a TetGen ball whose edit turns tetrahedra inside out (before, level 2 came out renumbered)."""
+    v, f = surface("icosphere", 2)
+    s = Session(daemon)
+    r = s.put_complex({"vertices": v, "fill": [{"surface": f, "max_volume": 0.05}]})
+    assert r.status_code == 200, r.text
+    c = s.req("GET", "/complex").json()
+    # push a surface vertex through the ball: the tetrahedra at it turn inside out
+    k = 0
+    target = [-0.9 * x for x in c["vertices"][k]]
+    ver = edit(s, [{"index": k, "position": target}], r.json()["version"])
+    c = s.req("GET", "/complex").json()
+    inverted = [i for i, t in enumerate(c["simplices"]) if len(t) == 4 and k in t and
+                (signed_volume(c["vertices"], t) < 0) != (i in c["reoriented"])]
+    assert inverted, "the edit should have turned some tetrahedron inside out"
+    want = levels(s, 2, "json")
+    t = Session(daemon)
+    body = {key: c[key] for key in ("vertices", "simplices", "diagonals", "reoriented")}
+    assert t.put_complex(body).status_code == 200
+    assert levels(t, 2, "json") == {L: b.replace(b'"version":%d' % ver, b'"version":1')
+                                    for L, b in want.items()}
+    # without the stored orientation the points are renumbered (what the member is for)
+    u = Session(daemon)
+    del body["reoriented"]
+    assert u.put_complex(body).status_code == 200
+    assert levels(u, 2, "json")[2] != levels(t, 2, "json")[2]
+
+
+def test_reoriented_is_checked(daemon):
+    s = Session(daemon)
+    base = {"vertices": TETS["vertices"], "simplices": TETS["simplices"]}
+    for bad, status, ptr in [([9], 422, "/reoriented/0"), ([3], 422, "/reoriented/0"),
+                             ([0, 0], 422, "/reoriented/1"), (["x"], 400, "/reoriented/0"),
+                             ({}, 400, "/reoriented")]:
+        r = s.put_complex(dict(base, reoriented=bad))
+        assert r.status_code == status, (bad, r.text)
+        assert r.json()["errors"][0]["pointer"] == ptr, (bad, r.text)
+
+
+def test_import_errors_point_into_the_document(daemon):
+    s = Session(daemon)
+    s.put_complex(TETS)
+    doc = s.req("GET", "/export").json()
+    post = lambda d: requests.post(daemon.url + "/v1/sessions", json={"import": d})
+    for change, status, ptr in [
+            (lambda d: d.update(format="other"), 422, "/import/format"),
+            (lambda d: d.update(format_version=9), 422, "/import/format_version"),
+            (lambda d: d.pop("version"), 400, "/import/version"),
+            (lambda d: d["complex"]["simplices"][0].__setitem__(0, 99), 422,
+             "/import/complex/simplices/0/0"),
+            (lambda d: d["rules"].update(solid_scheme="cubic"), 422, "/import/rules/solid_scheme"),
+            (lambda d: d.update(extra=1), 400, "/import/extra"),
+            (lambda d: d.update(embedded={"m": {}}), 422, "/import/embedded")]:
+        d = __import__("copy").deepcopy(doc)
+        change(d)
+        r = post(d)
+        assert r.status_code == status, r.text
+        assert r.json()["errors"][0]["pointer"] == ptr, r.text
+    # an empty session (rules only) round-trips too
+    e = Session(daemon)
+    assert e.req("PUT", "/rules", json={"solid_scheme": "averaged"}).status_code == 200
+    ed = e.req("GET", "/export").json()
+    assert ed["complex"] is None
+    r = post(ed)
+    assert r.status_code == 201, r.text
+    t = adopt(daemon, requests.Session(), r.json())
+    assert t.req("GET", "/export").json() == ed
+
+
+# ---- the SQLite store --------------------------------------------------------------------------
+
+def store_daemon(path, *flags, env=None):
+    return Daemon("--store", f"sqlite:{path}", *flags, env=env)
+
+
+def test_restart_brings_sessions_back(tmp_path):
+    db = tmp_path / "s.db"
+    d = store_daemon(db)
+    try:
+        s, v = shaped_session(d)
+        empty = Session(d)
+        want = {f: levels(s, 3, f) for f in ("glb", "json")}
+        gone = Session(d)
+        gone.put_complex(TETS)
+        assert gone.delete().status_code == 204
+    finally:
+        d.proc.kill()
+        d.proc.wait()
+    d = store_daemon(db)
+    try:
+        t = on(d, s)
+        r = t.req("GET", "")
+        assert r.status_code == 200, r.text
+        assert r.json()["version"] == v
+        for f in want:
+            assert levels(t, 3, f) == want[f], f
+        wrong = t.req("GET", "", headers={"Authorization": "Bearer " + "x" * 43})
+        assert wrong.status_code == 401
+        assert on(d, empty).req("GET", "").status_code == 200
+        assert on(d, gone).req("GET", "").status_code == 404
+        # the delta history did not survive: a since= before the restart is 410
+        assert t.req("GET", "/levels/2/delta", params={"since": v - 1}).status_code == 410
+        assert edit(t, [{"index": 0, "position": [0.02, 0, 0]}], v) == v + 1
+    finally:
+        d.stop()
+
+
+def reference_level(daemon, complex_body, moves_list, level=2):
+    """Level bytes of a fresh in-memory session given the same complex and edits."""
+    s = Session(daemon)
+    r = s.put_complex(complex_body)
+    assert r.status_code == 200
+    v = r.json()["version"]
+    for moves in moves_list:
+        v = edit(s, moves, v)
+    out = s.level(level).content
+    s.delete()
+    return out, v
+
+
+def test_kill_during_a_stream_of_edits_loses_nothing_acknowledged(tmp_path, daemon):
+    """Three clients edit their own sessions without pause; the daemon is killed (-9) in the
+    middle. After the restart, each session is at its last acknowledged version (or one later:
+    an edit stored whose answer was lost with the daemon), with exactly the levels the
+    acknowledged edits give on a daemon that never stopped."""
+    db = tmp_path / "k.db"
+    d = store_daemon(db)
+    v0, f0 = surface("icosphere", 1)
+    body = {"vertices": v0, "fill": [{"surface": f0}]}
+    sessions = []
+    for _ in range(3):
+        s = Session(d)
+        r = s.put_complex(body)
+        assert r.status_code == 200, r.text
+        sessions.append((s, r.json()["version"]))
+    cx = sessions[0][0].req("GET", "/complex").json()
+    saved = {k: cx[k] for k in ("vertices", "simplices", "diagonals", "reoriented")}
+    nv = len(cx["vertices"])
+    acked = [[] for _ in sessions]    # the moves of every acknowledged edit, in order
+    sent = [None] * len(sessions)     # the edit in flight
+    stop = threading.Event()
+
+    def client(i):
+        s, v = sessions[i]
+        rnd = random.Random(i)
+        http = requests.Session()
+        while not stop.is_set():
+            moves = [{"index": rnd.randrange(nv),
+                      "position": [rnd.uniform(-1, 1), rnd.uniform(-1, 1), rnd.uniform(-1, 1)]}]
+            sent[i] = moves
+            try:
+                r = http.patch(s.base + "/control-points", json={"moves": moves}, timeout=10,
+                               headers=dict(s.auth, **{"If-Match": f'"{v}"'}))
+            except requests.RequestException:
+                return
+            if r.status_code != 200:
+                return
+            v = r.json()["version"]
+            acked[i].append(moves)
+
+    threads = [threading.Thread(target=client, args=(i,)) for i in range(len(sessions))]
+    for t in threads:
+        t.start()
+    time.sleep(1.5 * SLOW)
+    d.proc.kill()
+    d.proc.wait()
+    stop.set()
+    for t in threads:
+        t.join(10)
+    assert all(len(a) > 10 for a in acked), [len(a) for a in acked]
+    d = store_daemon(db)
+    try:
+        for i, (s, v) in enumerate(sessions):
+            t = on(d, s)
+            got = t.req("GET", "")
+            assert got.status_code == 200, got.text
+            stored = got.json()["version"]
+            n = len(acked[i])
+            assert stored in (v + n, v + n + 1), (stored, v, n)
+            moves = acked[i] + ([sent[i]] if stored == v + n + 1 else [])
+            want, _ = reference_level(daemon, saved, moves)
+            assert t.level(2).content == want
+    finally:
+        d.stop()
+
+
+def test_a_damaged_journal_entry_is_refused_not_replayed(tmp_path):
+    db = tmp_path / "c.db"
+    d = store_daemon(db)
+    try:
+        s = Session(d)
+        v = s.put_complex(TETS).json()["version"]
+        for i in range(3):
+            v = edit(s, [{"index": 4, "position": [1, 1, 1 + 0.1 * i]}], v)
+        other = Session(d)
+        other.put_complex(TETS)
+    finally:
+        d.stop()
+    con = sqlite3.connect(db)
+    con.execute("UPDATE journal SET entry = substr(entry, 1, 10) WHERE id = ? AND version = ?",
+                (s.id, v - 1))   # truncated, its checksum no longer matches
+    con.commit()
+    con.close()
+    d = store_daemon(db)
+    try:
+        r = on(d, s).req("GET", "")
+        assert r.status_code == 503 and r.json()["type"] == "/errors/store-corrupt", r.text
+        assert "version %d" % (v - 1) in r.json()["detail"]
+        assert on(d, other).req("GET", "").status_code == 200   # the others are served
+        assert any("store-corrupt" in l or "damaged" in l for l in d.log_lines)
+    finally:
+        d.stop()
+
+
+def test_a_full_disk_refuses_writes_and_loses_nothing(tmp_path):
+    """The file may grow by only a few pages (SQLITE_FULL, as on a full disk): changes that do
+    not fit are 503 and not made; what was acknowledged is there after a restart."""
+    db = tmp_path / "f.db"
+    d = store_daemon(db, env={"SUBDIVD_SQLITE_MAX_PAGES": "12"})
+    try:
+        s = Session(d)
+        r = s.put_complex(TETS)
+        assert r.status_code == 200, r.text
+        v = r.json()["version"]
+        big_v, big_f = surface("icosphere", 3)
+        r = s.put_complex({"vertices": big_v, "simplices": big_f})
+        assert r.status_code == 503, r.text
+        assert r.json()["type"] == "/errors/store-unavailable"
+        assert "full" in r.json()["detail"]
+        assert r.headers.get("Retry-After")
+        # nothing of it is visible: the session is as it was
+        c = on(d, s).req("GET", "/complex")
+        assert c.status_code == 200 and c.json()["version"] == v
+        assert len(c.json()["vertices"]) == len(TETS["vertices"])
+        ready = requests.get(d.url + "/readyz")
+        assert ready.status_code == 503 and "store" in ready.json()["detail"]
+        assert on(d, s).level(2).status_code == 200        # reads go on
+    finally:
+        d.proc.kill()
+        d.proc.wait()
+    d = store_daemon(db)
+    try:
+        c = on(d, s).req("GET", "/complex").json()
+        assert c["version"] == v and c["vertices"] == [[float(x) for x in p] for p in TETS["vertices"]]
+    finally:
+        d.stop()
+
+
+def test_resident_and_stored_sessions_are_counted_apart(tmp_path):
+    """--max-sessions bounds what is in memory; with a durable store, idle sessions leave the
+    table and come back on use."""
+    d = store_daemon(tmp_path / "r.db", "--max-sessions", "2")
+    try:
+        made = []
+        for i in range(5):
+            s = Session(d)
+            body = dict(TETS, vertices=[[x + i, y, z] for x, y, z in TETS["vertices"]])
+            assert s.put_complex(body).status_code == 200
+            made.append(s)
+        for i, s in enumerate(made):
+            c = s.req("GET", "/complex")
+            assert c.status_code == 200
+            assert c.json()["vertices"][0][0] == float(i)
+    finally:
+        d.stop()
+
+
+def test_store_flag_is_checked():
+    for bad in ("disk", "sqlite:", "redis://host:99999", "redis://a@b:1"):
+        p = subprocess.run([str(Daemon.__init__.__globals__["SUBDIVD"]), "--port", "0", "--store", bad],
+                           capture_output=True, text=True, timeout=10)
+        assert p.returncode != 0 and "--store" in p.stderr + p.stdout, (bad, p.stderr)
+    p = subprocess.run([str(Daemon.__init__.__globals__["SUBDIVD"]), "--sync", "sometimes"],
+                       capture_output=True, text=True, timeout=10)
+    assert p.returncode != 0
