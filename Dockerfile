@@ -15,10 +15,10 @@ RUN make build/subdivd build/subdivd-tetgen build/sdlevel \
  && build/subdivd-tetgen --selftest
 
 FROM debian:12-slim AS runtime
-# libjansson4, libmicrohttpd12, liblapacke, zlib1g: subdivd; libtet1.5, libstdc++6: subdivd-tetgen
+# libjansson4, libmicrohttpd12, libhiredis0.14, liblapacke, zlib1g: subdivd; libtet1.5, libstdc++6: subdivd-tetgen
 RUN apt-get update \
  && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends \
-      libjansson4 libmicrohttpd12 liblapacke zlib1g libtet1.5 libstdc++6 \
+      libjansson4 libmicrohttpd12 libhiredis0.14 liblapacke zlib1g libtet1.5 libstdc++6 \
  && rm -rf /var/lib/apt/lists/* \
  && useradd --system --uid 10001 --create-home --home-dir /home/subdivd subdivd
 # subdivd finds its TetGen helper beside itself

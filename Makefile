@@ -5,7 +5,7 @@ CFLAGS  ?= -O2 -g
 override CFLAGS += -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -fPIC
 LDLIBS  += -llapacke -llapack -lm
 API_LIBS := $(shell pkg-config --libs jansson zlib 2>/dev/null || echo -ljansson -lz)
-SRV_LIBS := $(shell pkg-config --libs libmicrohttpd 2>/dev/null || echo -lmicrohttpd) -lpthread
+SRV_LIBS := $(shell pkg-config --libs libmicrohttpd 2>/dev/null || echo -lmicrohttpd) $(shell pkg-config --libs hiredis 2>/dev/null || echo -lhiredis) -lpthread
 PYTHON  ?= /usr/bin/python3
 B       := build
 
