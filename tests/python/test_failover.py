@@ -154,6 +154,10 @@ def test_session_paths_hash_on_the_id(tmp_path):
         created = {http.post(hap.url + "/v1/sessions", json={}, timeout=10).headers.get("X-Subdivd-Node")
                    for _ in range(4)}
         assert created == {"n1", "n2"}, created
+        # HAProxy limits new sessions per client address (the daemons see only its address)
+        codes = [http.post(hap.url + "/v1/sessions", json={}, timeout=10).status_code
+                 for _ in range(28)]
+        assert codes[:26] == [201] * 26 and codes[-1] == 429, codes
     finally:
         if hap:
             hap.stop()
