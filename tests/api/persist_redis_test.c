@@ -10,6 +10,7 @@
  * that returns them in order, a compaction, touch (every key's expiry moves), delete (ABSENT
  * after), damaged journals and a missing snapshot written with hiredis directly (CORRUPT),
  * sessions expired in the record or by redis (ABSENT), a script flush (EVAL fallback), count,
+ * a server that does not answer (UNAVAILABLE after the 2 s command timeout, then a reconnect),
  * a server nobody listens on (UNAVAILABLE within 3 s) and two connections racing the same
  * snapshot 50 times (exactly one winner per round).
  *
@@ -312,6 +313,26 @@ static void test_unavailable(void)
     ops->close(d);
 }
 
+/* A server that does not answer (CLIENT PAUSE): the command times out after 2 s, the next call
+ * after the pause works on a new connection. */
+static void test_timeout(void *b)
+{
+    persist_meta m;
+    uint64_t v;
+    new_meta(&m, (int64_t)time(NULL) + 600);
+    CHECK_RC(b, ops->create(b, &m), PERSIST_OK);
+    freeReplyObject(rawcmd("CLIENT PAUSE 2600 ALL", NULL, NULL));
+    double t0 = now_s();
+    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_UNAVAILABLE);
+    double dt = now_s() - t0;
+    CHECK(dt > 1.5 && dt < 2.6, "timed out after %.2f s", dt);
+    CHECK(strstr(ops->last_error(b), "timed out") != NULL, "last_error %s", ops->last_error(b));
+    printf("timeout: %.2f s: %s\n", dt, ops->last_error(b));
+    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_OK);
+    CHECK(v == 0, "version %" PRIu64 " after the pause", v);
+    ops->del(b, m.id);
+}
+
 /* Two connections (two daemons) race the same compare-and-set: exactly one wins per round. */
 #define ROUNDS 50
 static pthread_barrier_t start_line;
@@ -434,6 +455,7 @@ int main(int argc, char **argv)
         test_expired(b);
         test_count(b);
         test_race(b);
+        test_timeout(b);
         test_unavailable();
         redisFree(raw);
     }
