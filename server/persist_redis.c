@@ -106,7 +106,8 @@ static const char *const SCRIPTS[NSCRIPTS] = {LUA_CREATE, LUA_SNAPSHOT, LUA_APPE
 typedef struct redis_backend {
     pthread_mutex_t mu;
     redisContext *c;          /* NULL while disconnected */
-    bool fresh;               /* c is new: no command has gone through it yet */
+    bool fresh;               /* c was opened by the current call (a failure on it is not a
+                                 stale connection: no retry) */
     char host[256];
     int port;
     char sha[NSCRIPTS][41];   /* SHA-1 of each script (the same on every server) */
@@ -628,6 +629,7 @@ void *persist_redis_open(const char *host, int port, char *err, size_t cap)
      * unreachable one is not an error here (see the header comment) */
     pthread_mutex_lock(&b->mu);
     connect_locked(b);
+    b->fresh = false;   /* the first call may find it stale */
     pthread_mutex_unlock(&b->mu);
     return b;
 }

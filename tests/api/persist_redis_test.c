@@ -405,13 +405,15 @@ static void wait_line(const char *say)
     }
 }
 
-/* redis restarted under an idle connection: the call is retried on a new one; redis down: the
- * call is refused quickly; redis back: the next call works again. */
+/* redis restarted under an idle connection (the one open made, then a used one): the call is
+ * retried on a new one; redis down: the call is refused quickly; redis back: the next call
+ * works again. */
 static void test_recover(void *b)
 {
     persist_meta m;
     uint64_t v;
     new_meta(&m, (int64_t)time(NULL) + 600);
+    wait_line("RESTART");   /* under the connection persist_redis_open made */
     CHECK_RC(b, ops->create(b, &m), PERSIST_OK);
     wait_line("RESTART");
     CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_ABSENT);   /* a new, empty server */

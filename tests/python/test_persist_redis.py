@@ -63,5 +63,5 @@ def test_redis_store_reconnects(redis):
         if p.poll() is None:
             p.kill()
             p.wait()
-    assert seen[-1] == "ok" and "START" in seen, "\n".join(seen)
+    assert seen[-1] == "ok" and seen.count("RESTART") == 2 and "START" in seen, "\n".join(seen)
     assert any(l.startswith("down: redis 127.0.0.1:") for l in seen), "\n".join(seen)
