@@ -5,7 +5,7 @@ CFLAGS  ?= -O2 -g
 override CFLAGS += -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -fPIC
 LDLIBS  += -llapacke -llapack -lm
 API_LIBS := $(shell pkg-config --libs jansson zlib 2>/dev/null || echo -ljansson -lz)
-SRV_LIBS := $(shell pkg-config --libs libmicrohttpd sqlite3 nettle 2>/dev/null || echo -lmicrohttpd -lsqlite3 -lnettle) -lpthread
+SRV_LIBS := $(shell pkg-config --libs libmicrohttpd sqlite3 nettle hiredis 2>/dev/null || echo -lmicrohttpd -lsqlite3 -lnettle -lhiredis) -lpthread
 PYTHON  ?= /usr/bin/python3
 B       := build
 
@@ -112,7 +112,7 @@ test-paraview: all
 sanitize: deps
 	$(MAKE) clean-build B=build-asan
 	$(MAKE) all B=build-asan CFLAGS="-O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all" LDLIBS="$(LDLIBS) -fsanitize=address,undefined"
-	SD_SANITIZE=1 SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core SUBDIVD=build-asan/subdivd FUZZ_API=build-asan/fuzz_api FUZZ_PACKED=build-asan/fuzz_packed FUZZ_HTTP=build-asan/fuzz_http API_FAULTS=build-asan/api_faults PACKED_PARSE=build-asan/packed_parse SLOTS_TEST=build-asan/slots_test sh tests/run_all.sh
+	SD_SANITIZE=1 SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core SUBDIVD=build-asan/subdivd FUZZ_API=build-asan/fuzz_api FUZZ_PACKED=build-asan/fuzz_packed FUZZ_HTTP=build-asan/fuzz_http API_FAULTS=build-asan/api_faults PACKED_PARSE=build-asan/packed_parse SLOTS_TEST=build-asan/slots_test PERSIST_REDIS_TEST=build-asan/persist_redis_test sh tests/run_all.sh
 
 clean-build:
 	rm -rf $(B)

@@ -1,0 +1,270 @@
+"""Several daemons on one redis store behind HAProxy (deploy/haproxy.cfg, docs/DEPLOY.md).
+
+- The routing of deploy/haproxy.cfg itself (needs only haproxy): every path of one session goes
+  to one daemon, requests that name no session go round robin.
+- Failover: a session edited 20 times through HAProxy; the daemon that served it is killed
+  (SIGKILL); the next requests through HAProxy reach the other daemon, which loads the session
+  from redis: the last acknowledged positions and version, and level 2 exactly as before.
+- Two daemons, same session, the same If-Match at the same moment: exactly one 200, one 412.
+
+The store tests need `subdivd --store` (the persistence integration); they skip while the daemon
+does not offer it. HAProxy's configuration is deploy/haproxy.cfg with only its `bind` line and
+its `server` addresses rewritten, so the test checks the file that is shipped.
+"""
+import pathlib
+import re
+import shutil
+import subprocess
+import threading
+import time
+
+import pytest
+import requests
+
+from conftest import REPO
+from daemon import SUBDIVD, Daemon
+from redisd import REDIS_SERVER, RedisServer, free_port
+
+HAPROXY = shutil.which("haproxy")
+CFG = REPO / "deploy" / "haproxy.cfg"
+
+# two tetrahedra sharing the face (1, 2, 3)
+TWO_TETS = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]],
+            "simplices": [[0, 1, 2, 3], [1, 2, 3, 4]]}
+
+
+def _daemon_has_store():
+    try:
+        r = subprocess.run([str(SUBDIVD), "--help"], capture_output=True, text=True, timeout=10)
+    except OSError:
+        return False
+    return "--store" in r.stdout + r.stderr
+
+
+needs_haproxy = pytest.mark.skipif(HAPROXY is None, reason="haproxy is not installed")
+needs_store = pytest.mark.skipif(
+    REDIS_SERVER is None or not _daemon_has_store(),
+    reason="redis-server is not installed, or build/subdivd --help does not mention --store "
+           "(the persistence integration has not landed)")
+
+
+def haproxy_config(front_port, servers):
+    """deploy/haproxy.cfg for this machine: the frontend on front_port, server n<k> at
+    servers[k-1] ("host:port") in every backend."""
+    text = CFG.read_text()
+    text, n = re.subn(r"(?m)^(\s*bind\s+)\S+", rf"\g<1>127.0.0.1:{front_port}", text)
+    assert n == 1, "deploy/haproxy.cfg: one bind line expected"
+    names = set()
+
+    def server(m):
+        names.add(m.group(2))
+        k = int(m.group(2)[1:])
+        return m.group(1) + servers[k - 1]
+    text = re.sub(r"(?m)^(\s*server\s+(n\d+)\s+)\S+", server, text)
+    assert names == {f"n{k + 1}" for k in range(len(servers))}, names
+    return text
+
+
+class HAProxy:
+    """haproxy in the foreground (-db) with the generated configuration; its log in `log`."""
+
+    def __init__(self, directory, servers):
+        self.port = free_port()
+        self.cfg = pathlib.Path(directory) / "haproxy.cfg"
+        self.cfg.write_text(haproxy_config(self.port, servers))
+        chk = subprocess.run([HAPROXY, "-c", "-f", str(self.cfg)], capture_output=True, text=True)
+        assert chk.returncode == 0, chk.stdout + chk.stderr
+        self.logf = pathlib.Path(directory) / "haproxy.log"
+        self.proc = subprocess.Popen([HAPROXY, "-db", "-f", str(self.cfg)],
+                                     stdout=open(self.logf, "w"), stderr=subprocess.STDOUT)
+        self.url = f"http://127.0.0.1:{self.port}"
+        deadline = time.time() + 10
+        while time.time() < deadline:
+            try:
+                requests.get(self.url + "/healthz", timeout=1)
+                return
+            except requests.ConnectionError:
+                assert self.proc.poll() is None, self.log()
+                time.sleep(0.05)
+        raise RuntimeError("haproxy did not start:\n" + self.log())
+
+    def log(self):
+        return self.logf.read_text() if self.logf.exists() else ""
+
+    def stop(self):
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+def _addr(d):
+    return d.url.split("//", 1)[1]
+
+
+@pytest.fixture
+def cluster(tmp_path):
+    """redis, two daemons on it, HAProxy in front: (haproxy, [daemon n1, daemon n2], redis)."""
+    redis = RedisServer(tmp_path).start()
+    daemons, hap = [], None
+    try:
+        daemons = [Daemon("--store", redis.url) for _ in range(2)]
+        hap = HAProxy(tmp_path, [_addr(d) for d in daemons])
+        yield hap, daemons, redis
+    finally:
+        if hap:
+            hap.stop()
+        for d in daemons:
+            d.stop()
+        redis.stop()
+
+
+def test_shipped_config_is_valid():
+    if HAPROXY is None:
+        pytest.skip("haproxy is not installed")
+    r = subprocess.run([HAPROXY, "-c", "-f", str(CFG)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+@needs_haproxy
+def test_session_paths_hash_on_the_id(tmp_path):
+    daemons = [Daemon() for _ in range(2)]
+    hap = None
+    try:
+        hap = HAProxy(tmp_path, [_addr(d) for d in daemons])
+        http = requests.Session()
+        seen = set()
+        for k in range(24):
+            sid = f"{k:02d}" + "ab" * 15
+            nodes = set()
+            for path in ("", "/", "/complex", "/levels/2?format=json", "/levels/3/delta?since=1",
+                         "/events", "/control-points"):
+                method = "PATCH" if path == "/control-points" else "GET"
+                r = http.request(method, f"{hap.url}/v1/sessions/{sid}{path}",
+                                 headers={"Authorization": "Bearer x"}, timeout=10)
+                assert r.status_code in (401, 404), (path, r.status_code, r.text)
+                nodes.add(r.headers.get("X-Subdivd-Node"))
+            assert len(nodes) == 1 and None not in nodes, (sid, nodes)
+            seen |= nodes
+        assert seen == {"n1", "n2"}, f"24 ids all hashed to {seen}"
+        # no session in the path: round robin
+        created = {http.post(hap.url + "/v1/sessions", json={}, timeout=10).headers.get("X-Subdivd-Node")
+                   for _ in range(4)}
+        assert created == {"n1", "n2"}, created
+        # HAProxy limits new sessions per client address (the daemons see only its address)
+        codes = [http.post(hap.url + "/v1/sessions", json={}, timeout=10).status_code
+                 for _ in range(28)]
+        assert codes[:26] == [201] * 26 and codes[-1] == 429, codes
+    finally:
+        if hap:
+            hap.stop()
+        for d in daemons:
+            d.stop()
+
+
+def _patch(http, url, token, version, moves):
+    return http.patch(url + "/control-points", json={"moves": moves}, timeout=60,
+                      headers={"Authorization": f"Bearer {token}", "If-Match": f'"{version}"'})
+
+
+@needs_haproxy
+@needs_store
+def test_failover_keeps_every_acknowledged_edit(cluster):
+    hap, daemons, _redis = cluster
+    http = requests.Session()
+    r = http.post(hap.url + "/v1/sessions", json={}, timeout=10)
+    assert r.status_code == 201, r.text
+    sid, token = r.json()["id"], r.json()["token"]
+    auth = {"Authorization": f"Bearer {token}"}
+    base = f"{hap.url}/v1/sessions/{sid}"
+    r = http.put(base + "/complex", json=TWO_TETS, headers=auth, timeout=60)
+    assert r.status_code == 200, r.text
+    version = r.json()["version"]
+    positions = [list(map(float, p)) for p in TWO_TETS["vertices"]]
+    node = r.headers["X-Subdivd-Node"]
+    for i in range(20):
+        k = i % 5
+        p = [c + 0.01 * (i + 1) * (1 if (i + c_i) % 2 else -1)
+             for c_i, c in enumerate(TWO_TETS["vertices"][k])]
+        r = _patch(http, base, token, version, [{"index": k, "position": p}])
+        assert r.status_code == 200, (i, r.text)
+        assert r.headers["X-Subdivd-Node"] == node, "a session's requests went to two daemons"
+        version = r.json()["version"]
+        positions[k] = p
+    before = http.get(base + "/levels/2", params={"format": "json"}, headers=auth, timeout=60)
+    assert before.status_code == 200, before.text
+    assert before.json()["version"] == version
+
+    victim = daemons[int(node[1:]) - 1]
+    victim.proc.kill()
+    victim.proc.wait()
+
+    t0 = time.time()
+    r = http.get(base + "/complex", headers=auth, timeout=60)
+    assert r.status_code == 200, r.text + "\n" + hap.log()
+    assert r.headers["X-Subdivd-Node"] != node
+    assert r.headers.get("ETag") == f'"{version}"'
+    doc = r.json()
+    assert doc["vertices"] == positions
+    assert doc.get("version", version) == version
+    after = http.get(base + "/levels/2", params={"format": "json"}, headers=auth, timeout=60)
+    assert after.status_code == 200, after.text
+    assert after.json()["vertices"] == before.json()["vertices"]
+    assert after.json()["version"] == version
+    print(f"failover: first answer from the survivor after {time.time() - t0:.2f} s")
+    # and editing goes on there
+    r = _patch(http, base, token, version, [{"index": 0, "position": [0.5, 0.5, -0.5]}])
+    assert r.status_code == 200, r.text
+    assert r.json()["version"] == version + 1
+
+
+@needs_store
+def test_two_daemons_one_if_match_one_winner(tmp_path):
+    redis = RedisServer(tmp_path).start()
+    daemons = []
+    try:
+        daemons = [Daemon("--store", redis.url) for _ in range(2)]
+        http = [requests.Session(), requests.Session()]
+        r = http[0].post(daemons[0].url + "/v1/sessions", json={}, timeout=10)
+        assert r.status_code == 201, r.text
+        sid, token = r.json()["id"], r.json()["token"]
+        auth = {"Authorization": f"Bearer {token}"}
+        r = http[0].put(f"{daemons[0].url}/v1/sessions/{sid}/complex", json=TWO_TETS,
+                        headers=auth, timeout=60)
+        assert r.status_code == 200, r.text
+        version = r.json()["version"]
+        # the other daemon knows the session (from redis)
+        r = http[1].get(f"{daemons[1].url}/v1/sessions/{sid}", headers=auth, timeout=10)
+        assert r.status_code == 200 and r.json()["version"] == version, r.text
+        for rnd in range(10):
+            start = threading.Barrier(2)
+            out = [None, None]
+
+            def edit(k):
+                move = [{"index": 4, "position": [1 + 0.01 * rnd, 1 + 0.02 * k, 1]}]
+                start.wait()
+                out[k] = _patch(http[k], f"{daemons[k].url}/v1/sessions/{sid}", token, version,
+                                move)
+            th = [threading.Thread(target=edit, args=(k,)) for k in range(2)]
+            for t in th:
+                t.start()
+            for t in th:
+                t.join(60)
+            codes = sorted(o.status_code for o in out)
+            assert codes == [200, 412], (rnd, [(o.status_code, o.text) for o in out])
+            winner = next(o for o in out if o.status_code == 200)
+            assert winner.json()["version"] == version + 1
+            version += 1
+        # both agree on the result
+        docs = [http[k].get(f"{daemons[k].url}/v1/sessions/{sid}/complex", headers=auth,
+                            timeout=60) for k in range(2)]
+        assert [d.status_code for d in docs] == [200, 200]
+        assert docs[0].json()["vertices"] == docs[1].json()["vertices"]
+        assert docs[0].headers["ETag"] == docs[1].headers["ETag"] == f'"{version}"'
+    finally:
+        for d in daemons:
+            d.stop()
+        redis.stop()
