@@ -62,6 +62,10 @@ def test_every_endpoint(client, tmp_path):
     assert s.get_complex()["tags"]["singular"] == [[3]]
     glb = s.level(1)
     assert glb[:4] == b"glTF"
+    doc = s.export()
+    assert doc["version"] == 3 and doc["tags"]["singular"] == [[3]]
+    with client.create_session(import_doc=doc) as t:   # the same session, anew
+        assert t.version == 3 and t.id != s.id and t.level(1) == glb
     n = s.level(2, format="vtu", out=tmp_path / "l2.vtu", parts="solids,curves")
     assert n == (tmp_path / "l2.vtu").stat().st_size and not (tmp_path / "l2.vtu.part").exists()
     assert s.level(1, if_none_match=s.version) is None          # 304: unchanged

@@ -189,13 +189,19 @@ class Client:
 
     # ---- sessions -----------------------------------------------------------------------------
 
-    def create_session(self, ttl_s: Optional[int] = None) -> Session:
-        """POST /v1/sessions: a new Session (deleted by `with ... as s` at the end of the block)."""
-        r = self.request("POST", "/v1/sessions", json_body={} if ttl_s is None else {"ttl_s": ttl_s},
-                         expect=(201,))
+    def create_session(self, ttl_s: Optional[int] = None, *, import_doc: Optional[JSON] = None) -> Session:
+        """POST /v1/sessions: a new Session (deleted by `with ... as s` at the end of the block).
+        `import_doc`, a document of Session.export(), recreates that session (new id and token,
+        the version continuing from the document's, bit-identical levels)."""
+        body: JSON = {} if ttl_s is None else {"ttl_s": ttl_s}
+        if import_doc is not None:
+            body["import"] = import_doc
+        r = self.request("POST", "/v1/sessions", json_body=body, expect=(201,))
         j = r.json()
         s = Session(self, j["id"], j["token"])
         s.expires_at = j.get("expires_at")
+        if import_doc is not None:
+            s.version = j.get("version")
         return s
 
     def session(self, id: str, token: str) -> Session:
@@ -275,6 +281,12 @@ class Session:
     def get_complex(self) -> JSON:
         """GET /complex: the complex (with filled tetrahedra), classes, tags, rules, summary."""
         return self._call("GET", "/complex").json()
+
+    def export(self) -> JSON:
+        """GET /export: the session's control data as one document (complex with every diagonal
+        and the stored orientation, details, tags, rules, version), for
+        Client.create_session(import_doc=...)."""
+        return self._call("GET", "/export").json()
 
     def put_tags(self, singular: Optional[Sequence[Sequence[int]]] = None, *,
                  petals: Optional[Sequence[JSON]] = None, body: Optional[JSON] = None,
@@ -607,6 +619,7 @@ ROUTES = {
     ("DELETE", "/v1/sessions/{id}"): "Session.delete",
     ("PUT", "/v1/sessions/{id}/complex"): "Session.put_complex",
     ("GET", "/v1/sessions/{id}/complex"): "Session.get_complex",
+    ("GET", "/v1/sessions/{id}/export"): "Session.export",
     ("PATCH", "/v1/sessions/{id}/control-points"): "Session.edit",
     ("POST", "/v1/sessions/{id}/refine"): "Session.refine",
     ("PUT", "/v1/sessions/{id}/tags"): "Session.put_tags",
