@@ -692,6 +692,19 @@ static void h_edit(req *r)
     json_t *b = body_or_answer(r, NULL, NULL);
     if (!b)
         return;
+    char why[256];
+    if (!persist_healthy(store_persist(r->srv->st), why, sizeof why)) {
+        /* an edit is applied in place before it is stored: with the store known to refuse, it
+         * is not tried (a refusal would drop the resident copy, which reads still use) */
+        json_decref(b);
+        log_line(r->srv, LOG_WARN, "session %s: an edit refused: the store cannot be written: %s",
+                 r->s->id, why);
+        p.retry_after = 5;
+        api_fail(&p, 503, "store-unavailable", "the session store cannot be written now, so the "
+                 "edit was not made: %s", why);
+        http_reply_problem(r, &p);
+        return;
+    }
     pthread_mutex_lock(&r->s->write);
     uint64_t version;
     api_model *m = session_model(r->s, &version), *rebuilt = NULL;

@@ -18,6 +18,7 @@ import requests
 
 from conftest import MAKE_MESH
 from daemon import SLOW, Daemon, Session
+from redisd import REDIS_SERVER, RedisServer
 
 TETS = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [1.2, -0.3, 0.4],
                      [2, 2, 0]],
@@ -196,14 +197,29 @@ def test_import_errors_point_into_the_document(daemon):
     assert t.req("GET", "/export").json() == ed
 
 
-# ---- the SQLite store --------------------------------------------------------------------------
+# ---- the durable stores --------------------------------------------------------------------------
 
 def store_daemon(path, *flags, env=None):
-    return Daemon("--store", f"sqlite:{path}", *flags, env=env)
+    """A daemon on a store: a path is an SQLite file, a RedisServer its redis."""
+    spec = path.url if isinstance(path, RedisServer) else f"sqlite:{path}"
+    return Daemon("--store", spec, *flags, env=env)
 
 
-def test_restart_brings_sessions_back(tmp_path):
-    db = tmp_path / "s.db"
+@pytest.fixture(params=["sqlite", "redis"])
+def store(request, tmp_path):
+    """Each durable store in turn: an SQLite file, or a redis-server of its own."""
+    if request.param == "sqlite":
+        yield tmp_path / "s.db"
+        return
+    if not REDIS_SERVER:
+        pytest.skip("redis-server is not installed (tools/packages.txt lists it)")
+    r = RedisServer(tmp_path).start()
+    yield r
+    r.stop()
+
+
+def test_restart_brings_sessions_back(store):
+    db = store
     d = store_daemon(db)
     try:
         s, v = shaped_session(d)
@@ -247,12 +263,12 @@ def reference_level(daemon, complex_body, moves_list, level=2):
     return out, v
 
 
-def test_kill_during_a_stream_of_edits_loses_nothing_acknowledged(tmp_path, daemon):
+def test_kill_during_a_stream_of_edits_loses_nothing_acknowledged(store, daemon):
     """Three clients edit their own sessions without pause; the daemon is killed (-9) in the
     middle. After the restart, each session is at its last acknowledged version (or one later:
     an edit stored whose answer was lost with the daemon), with exactly the levels the
     acknowledged edits give on a daemon that never stopped."""
-    db = tmp_path / "k.db"
+    db = store
     d = store_daemon(db)
     v0, f0 = surface("icosphere", 1)
     body = {"vertices": v0, "fill": [{"surface": f0}]}
@@ -402,3 +418,39 @@ def test_store_flag_is_checked():
     p = subprocess.run([str(Daemon.__init__.__globals__["SUBDIVD"]), "--sync", "sometimes"],
                        capture_output=True, text=True, timeout=10)
     assert p.returncode != 0
+
+
+def test_redis_down_refuses_changes_and_keeps_reading(tmp_path):
+    """redis stops: changes are 503 store-unavailable and not made, /readyz is 503, resident
+    sessions are still read; redis back (empty: it keeps nothing, as in these tests), the daemon
+    writes again without a restart."""
+    if not REDIS_SERVER:
+        pytest.skip("redis-server is not installed")
+    r = RedisServer(tmp_path).start()
+    d = store_daemon(r)
+    try:
+        s = Session(d)
+        v = s.put_complex(TETS).json()["version"]
+        before = s.level(2).content
+        r.stop()
+        p = s.req("PATCH", "/control-points", json={"moves": [{"index": 0, "position": [0.1, 0, 0]}]},
+                  headers={"If-Match": f'"{v}"'})
+        assert p.status_code == 503 and p.json()["type"] == "/errors/store-unavailable", p.text
+        assert p.headers.get("Retry-After")
+        assert requests.post(d.url + "/v1/sessions", json={}).status_code == 503
+        ready = requests.get(d.url + "/readyz")
+        assert ready.status_code == 503 and ready.json()["type"] == "/errors/store-unavailable"
+        assert any("store refused" in l or "store cannot be written" in l for l in d.log_lines)
+        during = s.level(2)                   # the resident copy is still read
+        assert during.status_code == 200 and during.content == before
+        r.start()   # the same port; an empty redis: the old session is gone from it
+        deadline = time.time() + 10 * SLOW
+        while requests.get(d.url + "/readyz").status_code != 200 and time.time() < deadline:
+            time.sleep(0.5)
+        assert requests.get(d.url + "/readyz").status_code == 200
+        t = Session(d)   # new sessions are stored again
+        assert t.put_complex(TETS).status_code == 200
+        assert s.req("GET", "").status_code == 404   # redis lost it (no AOF here), and says so
+    finally:
+        d.stop()
+        r.stop()
