@@ -171,16 +171,25 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
                           .max_bytes = (size_t)max_bytes,
                           .allocator = api_mem_core_allocator(),
                           .reoriented = in->reoriented};
+        int8_t *given = NULL; /* the chosen diagonals: Algorithm 2 picks the others against them */
+        if (in->ndiag) {
+            if (!(given = api_malloc((size_t)in->ns + 1))) {
+                api_model_unref(m);
+                err->code = SD_ERR_NOMEM;
+                snprintf(err->message, sizeof err->message, "out of memory");
+                return NULL;
+            }
+            memset(given, -1, (size_t)in->ns + 1);
+            for (uint32_t d = 0; d < in->ndiag; d++)
+                given[in->diag[d][0]] = (int8_t)in->diag[d][1];
+            opt.diagonals = given;
+        }
         m->c = sd_complex_new(in->xyz, in->nv, in->idx, in->size, in->ns, &opt, err);
+        api_free(given);
         if (!m->c) {
             api_model_unref(m);
             return NULL;
         }
-        for (uint32_t d = 0; d < in->ndiag; d++)
-            if (sd_complex_set_diagonal(m->c, in->diag[d][0], (int)in->diag[d][1], err)) {
-                api_model_unref(m);
-                return NULL;
-            }
         for (int a = 0; a < in->nattrs; a++) {
             m->channel[a] = sd_complex_add_channel(m->c, in->attrs[a].data, in->attrs[a].ncomp, err);
             if (m->channel[a] < 0) {

@@ -305,6 +305,68 @@ static void adopt_step(api_input *nx, const api_input *in, sd_refinement *r,
     }
 }
 
+/* After a step from `in` (whose simplices are the posted ones `orig`, NULL: the identity): which
+ * posted simplex each new simplex still is — an untouched one (its parent's only child, same
+ * vertex list) — or UINT32_MAX. NULL for lack of memory. */
+static uint32_t *untouched_origins(const api_input *in, const sd_refinement *r, const uint32_t *orig)
+{
+    uint32_t *children = calloc((size_t)in->ns + 1, sizeof *children);
+    uint32_t *out = malloc((r->ns + 1) * sizeof *out);
+    if (!children || !out) {
+        free(children);
+        free(out);
+        return NULL;
+    }
+    for (size_t i = 0; i < r->ns; i++)
+        children[r->parent[i]]++;
+    for (size_t i = 0; i < r->ns; i++) {
+        uint32_t q = r->parent[i];
+        out[i] = children[q] == 1 && r->size[i] == in->size[q] ? (orig ? orig[q] : q) : UINT32_MAX;
+    }
+    free(children);
+    return out;
+}
+
+static double vol6(const double *xyz, const uint32_t *t)
+{
+    const double *a = xyz + 3 * (size_t)t[0], *b = xyz + 3 * (size_t)t[1], *c = xyz + 3 * (size_t)t[2],
+                 *d = xyz + 3 * (size_t)t[3];
+    double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]},
+           w[3] = {d[0] - a[0], d[1] - a[1], d[2] - a[2]};
+    return u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0]) +
+           u[2] * (v[0] * w[1] - v[1] * w[0]);
+}
+
+/* The refined input keeps the choices of its untouched tetrahedra (DECISIONS 17): their stored
+ * orientation and their diagonal, given to the build so that Algorithm 2 chooses the new
+ * tetrahedra's against them; the new ones are oriented by their volume. false without memory. */
+static bool keep_choices(const api_model *cur, api_input *in, const uint32_t *orig)
+{
+    uint32_t ntet = 0;
+    for (uint32_t s = 0; s < in->ns; s++)
+        ntet += in->size[s] == 4;
+    if (!ntet || !orig)
+        return true;
+    api_free(in->reoriented);
+    api_free(in->diag);
+    in->ndiag = 0;
+    in->reoriented = api_calloc((size_t)in->ns + 1, 1);
+    in->diag = api_malloc(((size_t)ntet + 1) * sizeof *in->diag);
+    if (!in->reoriented || !in->diag)
+        return false;
+    for (uint32_t s = 0, off = 0; s < in->ns; off += in->size[s++]) {
+        if (in->size[s] != 4)
+            continue;
+        if (orig[s] != UINT32_MAX) {
+            in->reoriented[s] = sd_complex_reoriented(cur->c, orig[s]) == 1;
+            in->diag[in->ndiag][0] = s;
+            in->diag[in->ndiag++][1] = (uint32_t)sd_complex_diagonal(cur->c, orig[s]);
+        } else
+            in->reoriented[s] = vol6(in->xyz, in->idx + off) < 0;
+    }
+    return true;
+}
+
 /* POST /refine: `depth` steps of sd_refine on the working input, each with its new points placed,
  * its attributes and its tags and overrides carried; then one model from the result. */
 int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
@@ -343,6 +405,7 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
         memcpy(ov, cur->rules.overrides, nov * sizeof *ov);
     atomic_fetch_add(&in->refs, 1);
     uint8_t *marked = NULL;
+    uint32_t *orig = NULL; /* per working simplex: the posted simplex it still is, or UINT32_MAX */
     for (int step = 0; !rc && step < depth; step++) {
         if (step == 0 || sel.kind != 0) { /* later steps of a simplex selection: its children */
             free(marked);
@@ -411,7 +474,12 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
             sd_refine_free(&r);
             break;
         }
+        uint32_t *next_orig = untouched_origins(in, &r, orig); /* before r's arrays move */
         adopt_step(nx, in, &r, attr_new);
+        free(orig);
+        orig = next_orig;
+        if (!orig)
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
         uint8_t *next_marked = calloc(r.ns + 1, 1); /* children of selected simplices */
         if (next_marked)
             for (size_t i = 0; i < r.ns; i++)
@@ -428,6 +496,9 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
     }
     free(marked);
     free(sel.keys);
+    if (!rc && in != cur->in && !keep_choices(cur, in, orig))
+        rc = api_fail(p, 503, "out-of-memory", "out of memory");
+    free(orig);
     if (!rc) { /* with the carried tags and overrides (those that no longer fit are dropped) */
         sd_error e = {0};
         api_model *m = model_with(in, &cur->rules, &tags, ov, nov, lim, &e);

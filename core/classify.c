@@ -326,84 +326,130 @@ static void pair_key(const sd_topo *t, uint32_t c, int p, uint32_t k[4])
  * smallest key (the tetrahedra are walked in key order, so the first unvisited one of a component
  * is its smallest); a dequeued tetrahedron enqueues its new face neighbours in ascending key order;
  * equal conflict counts go to the pair of smallest key (pair_key). The ranks of the keys come from
- * one sort: O(n log n). */
-sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err)
+ * one sort: O(n log n).
+ *
+ * `fixed` (NULL, or per tetrahedron a pair in stored order, -1 where none): those pairs are kept
+ * (a refinement keeps its untouched tetrahedra's), and the search starts from their neighbours,
+ * so the new choices are made against them (001 Alg. 2 seeded with the visited set). */
+typedef struct diag_search {
+    sd_topo *t;
+    const sdi_rel *ft;
+    uint32_t *queue, *rank;
+    uint32_t (*order)[5];
+    uint8_t *state;           /* 0 new, 1 queued, 2 visited */
+    uint32_t head, tail;
+} diag_search;
+
+/* Queue tetrahedron c's new face neighbours in ascending key order. */
+static void queue_neighbours(diag_search *S, uint32_t c)
+{
+    sd_topo *t = S->t;
+    uint32_t fresh = S->tail;
+    for (int i = 0; i < 4; i++) {
+        uint32_t f = t->tet_f[c][i];
+        for (uint32_t k = S->ft->off[f]; k < S->ft->off[f + 1]; k++) {
+            uint32_t d = S->ft->item[k];
+            if (S->state[d] == 0) {
+                S->state[d] = 1;
+                S->queue[S->tail++] = S->rank[d]; /* ranks for now, tetrahedra after the sort */
+            }
+        }
+    }
+    sort_u32(S->queue + fresh, S->tail - fresh);
+    for (uint32_t q = fresh; q < S->tail; q++)
+        S->queue[q] = S->order[S->queue[q]][4];
+}
+
+/* The breadth-first search from what is queued: each dequeued tetrahedron takes the pair with
+ * the fewest conflicts against its visited neighbours (ties: the pair of smallest key). */
+static void search(diag_search *S)
+{
+    sd_topo *t = S->t;
+    while (S->head < S->tail) {
+        uint32_t c = S->queue[S->head++];
+        int conflicts[3] = {0, 0, 0};
+        for (int i = 0; i < 4; i++) {
+            uint32_t f = t->tet_f[c][i];
+            for (uint32_t k = S->ft->off[f]; k < S->ft->off[f + 1]; k++) {
+                uint32_t d = S->ft->item[k];
+                if (d == c || S->state[d] != 2)
+                    continue;
+                int j = 0;
+                while (j < 3 && t->tet_f[d][j] != f)
+                    j++;
+                uint32_t theirs = pair_edge_in_face(t, d, t->tet_d[d], j);
+                for (int p = 0; p < 3; p++)
+                    conflicts[p] += pair_edge_in_face(t, c, p, i) != theirs;
+            }
+        }
+        queue_neighbours(S, c);
+        int best = 0;
+        uint32_t bkey[4], key[4];
+        pair_key(t, c, 0, bkey);
+        for (int p = 1; p < 3; p++) {
+            pair_key(t, c, p, key);
+            if (conflicts[p] < conflicts[best] ||
+                (conflicts[p] == conflicts[best] && cmp_u32x4(key, bkey) < 0)) {
+                best = p;
+                memcpy(bkey, key, sizeof key);
+            }
+        }
+        t->tet_d[c] = (uint8_t)best;
+        S->state[c] = 2;
+    }
+}
+
+sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, const int8_t *fixed,
+                               sd_error *err)
 {
     const uint32_t n = t->ntet;
     if (n == 0)
         return SD_OK;
-    uint32_t *queue = sdi_alloc(m, (size_t)n * sizeof *queue);
-    uint32_t *rank = sdi_alloc(m, (size_t)n * sizeof *rank);
-    uint32_t (*order)[5] = sdi_alloc(m, (size_t)n * sizeof *order); /* (key, tet) by key */
-    uint8_t *state = sdi_calloc(m, n, 1); /* 0 new, 1 queued, 2 visited */
-    if (!queue || !rank || !order || !state || !sdi_rels_need(m, R, SDI_REL(SDI_FT))) {
-        sdi_free(m, queue);
-        sdi_free(m, rank);
-        sdi_free(m, order);
-        sdi_free(m, state);
+    diag_search S = {.t = t};
+    S.queue = sdi_alloc(m, (size_t)n * sizeof *S.queue);
+    S.rank = sdi_alloc(m, (size_t)n * sizeof *S.rank);
+    S.order = sdi_alloc(m, (size_t)n * sizeof *S.order); /* (key, tet) by key */
+    S.state = sdi_calloc(m, n, 1);
+    if (!S.queue || !S.rank || !S.order || !S.state || !sdi_rels_need(m, R, SDI_REL(SDI_FT))) {
+        sdi_free(m, S.queue);
+        sdi_free(m, S.rank);
+        sdi_free(m, S.order);
+        sdi_free(m, S.state);
         return sdi_fail_nomem(err, m);
     }
     for (uint32_t c = 0; c < n; c++) {
-        memcpy(order[c], t->tet[c], 4 * sizeof **order);
-        sort_u32(order[c], 4);
-        order[c][4] = c;
+        memcpy(S.order[c], t->tet[c], 4 * sizeof **S.order);
+        sort_u32(S.order[c], 4);
+        S.order[c][4] = c;
     }
-    qsort(order, n, sizeof *order, cmp_keyrow);
+    qsort(S.order, n, sizeof *S.order, cmp_keyrow);
     for (uint32_t r = 0; r < n; r++)
-        rank[order[r][4]] = r;
-    const sdi_rel *ft = &R->r[SDI_FT];
-    for (uint32_t r0 = 0; r0 < n; r0++) {
-        uint32_t start = order[r0][4];
-        if (state[start])
-            continue;
-        uint32_t head = 0, tail = 0;
-        queue[tail++] = start;
-        state[start] = 1;
-        while (head < tail) {
-            uint32_t c = queue[head++], fresh = tail;
-            int conflicts[3] = {0, 0, 0};
-            for (int i = 0; i < 4; i++) {
-                uint32_t f = t->tet_f[c][i];
-                for (uint32_t k = ft->off[f]; k < ft->off[f + 1]; k++) {
-                    uint32_t d = ft->item[k];
-                    if (d == c)
-                        continue;
-                    if (state[d] == 0) {
-                        state[d] = 1;
-                        queue[tail++] = rank[d]; /* ranks for now, tetrahedra after the sort */
-                        continue;
-                    }
-                    if (state[d] != 2)
-                        continue;
-                    int j = 0;
-                    while (j < 3 && t->tet_f[d][j] != f)
-                        j++;
-                    uint32_t theirs = pair_edge_in_face(t, d, t->tet_d[d], j);
-                    for (int p = 0; p < 3; p++)
-                        conflicts[p] += pair_edge_in_face(t, c, p, i) != theirs;
-                }
+        S.rank[S.order[r][4]] = r;
+    S.ft = &R->r[SDI_FT];
+    if (fixed) { /* the given pairs first; the search starts from their neighbours, in key order */
+        for (uint32_t c = 0; c < n; c++)
+            if (fixed[c] >= 0 && fixed[c] <= 2) {
+                t->tet_d[c] = (uint8_t)fixed[c];
+                S.state[c] = 2;
             }
-            sort_u32(queue + fresh, tail - fresh);
-            for (uint32_t q = fresh; q < tail; q++)
-                queue[q] = order[queue[q]][4];
-            int best = 0;
-            uint32_t bkey[4], key[4];
-            pair_key(t, c, 0, bkey);
-            for (int p = 1; p < 3; p++) {
-                pair_key(t, c, p, key);
-                if (conflicts[p] < conflicts[best] ||
-                    (conflicts[p] == conflicts[best] && cmp_u32x4(key, bkey) < 0)) {
-                    best = p;
-                    memcpy(bkey, key, sizeof key);
-                }
-            }
-            t->tet_d[c] = (uint8_t)best;
-            state[c] = 2;
+        for (uint32_t r0 = 0; r0 < n; r0++) {
+            uint32_t c = S.order[r0][4];
+            if (fixed[c] >= 0 && fixed[c] <= 2)
+                queue_neighbours(&S, c);
         }
+        search(&S);
     }
-    sdi_free(m, queue);
-    sdi_free(m, rank);
-    sdi_free(m, order);
-    sdi_free(m, state);
+    for (uint32_t r0 = 0; r0 < n; r0++) {
+        uint32_t start = S.order[r0][4];
+        if (S.state[start])
+            continue;
+        S.queue[S.tail++] = start;
+        S.state[start] = 1;
+        search(&S);
+    }
+    sdi_free(m, S.queue);
+    sdi_free(m, S.rank);
+    sdi_free(m, S.order);
+    sdi_free(m, S.state);
     return SD_OK;
 }

@@ -27,6 +27,8 @@
 #define SD_MAX_COORD 1e15
 #define SD_DEGENERATE_TOL 1e-12
 
+static int map_pair(int pair, bool swapped);
+
 const uint8_t SDI_TET_E[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
 const uint8_t SDI_TET_F[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
 const uint8_t SDI_OCT_E[12][2] = {{0, 2}, {0, 4}, {0, 3}, {0, 5}, {1, 2}, {1, 4},
@@ -348,8 +350,18 @@ sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const 
     c->nlevels = 1;
     sdi_rels R = {.t = t};
     r = sdi_classify_level0(m, t, &R, err);
+    int8_t *fixed = NULL; /* the caller's pairs (sd_options.diagonals), in stored order */
+    if (!r && c->opt.diagonals && t->ntet) {
+        if (!(fixed = sdi_alloc(m, t->ntet)))
+            r = sdi_fail_nomem(err, m);
+        for (uint32_t q = 0; fixed && q < t->ntet; q++) {
+            int8_t d = c->opt.diagonals[c->in_src[SD_CELL_TETRA][q]];
+            fixed[q] = d >= 0 && d <= 2 ? (int8_t)map_pair(d, c->tet_swapped[q]) : -1;
+        }
+    }
     if (!r)
-        r = sdi_choose_diagonals(m, t, &R, err);
+        r = sdi_choose_diagonals(m, t, &R, fixed, err);
+    sdi_free(m, fixed);
     sdi_rels_free(m, &R);
     if (r) {
         c->lv[0] = NULL;
@@ -420,7 +432,8 @@ sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, co
     c->mem = mem;
     c->opt = o;
     sd_result built = sdi_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err);
-    c->opt.reoriented = NULL; /* the caller's array: not kept */
+    c->opt.reoriented = NULL; /* the caller's arrays: not kept */
+    c->opt.diagonals = NULL;
     if (built) {
         sd_complex_free(c);
         return NULL;

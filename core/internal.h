@@ -467,7 +467,8 @@ sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const 
 
 /* ---- classify.c: classes of level 0 (R: its relations, built as needed) -------------------- */
 sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err);
-sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err);
+sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, const int8_t *fixed,
+                               sd_error *err);
 
 /* ---- split.c: child topology and inherited classification of the next level, part by part
  * (see sd_topo); each needs the parent's edges and faces (cells: and the child's nothing; faces:

@@ -97,6 +97,10 @@ typedef struct sd_options {
                               * with slots 2 and 3 exchanged, whatever its volume (what
                               * sd_complex_reoriented reported, so a saved complex is rebuilt
                               * with the same numbering). Read by sd_complex_new only. */
+    const int8_t *diagonals; /* NULL, or one per input simplex, read for tetrahedra: a pair 0..2
+                              * (as sd_complex_set_diagonal takes it) kept as given, or -1: chosen
+                              * by 001 Algorithm 2 against the given ones (a refinement keeps its
+                              * untouched tetrahedra's). Read by sd_complex_new only. */
 } sd_options;
 
 typedef struct sd_complex sd_complex;

@@ -154,3 +154,45 @@ def test_refine_errors(daemon, body, status, pointer):
 def test_refine_needs_complex(daemon):
     r = Session(daemon).req("POST", "/refine", json={"select": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}})
     assert r.status_code == 409
+
+
+def pair_edges(t, p):
+    """The two opposite edges of diagonal pair p of tetrahedron t (as posted), as vertex sets."""
+    o = {0: ((0, 1), (2, 3)), 1: ((0, 2), (1, 3)), 2: ((0, 3), (1, 2))}[p]
+    return frozenset(frozenset((t[a], t[b])) for a, b in o)
+
+
+def test_refine_keeps_the_choices_of_untouched_tetrahedra(daemon):
+    """DECISIONS 17: the untouched tetrahedra keep their diagonal and their stored orientation
+    (even one an edit turned inside out, whose volume now says otherwise); new ones are oriented
+    by their volume."""
+    body = complex_from_text(CUBE)
+    s = Session(daemon)
+    r = s.put_complex(body)
+    assert r.status_code == 200
+    c0 = s.req("GET", "/complex").json()
+    tets0 = {frozenset(t): (i, t) for i, t in enumerate(c0["simplices"]) if len(t) == 4}
+    diag0 = {i: p for i, p in c0["diagonals"]}
+    pairs0 = {k: pair_edges(t, diag0[i]) for k, (i, t) in tets0.items()}
+    reor0 = {k for k, (i, t) in tets0.items() if i in set(c0["reoriented"])}
+    t0 = tets_of(body)[5]
+    r = s.req("POST", "/refine", json={"select": {"simplices": [t0]}, "positions": "midpoint"})
+    assert r.status_code == 200, r.text
+    c = s.req("GET", "/complex").json()
+    diag = {i: p for i, p in c["diagonals"]}
+    reor = set(c["reoriented"])
+    p = np.array(c["vertices"])
+    kept = new = 0
+    for i, t in enumerate(c["simplices"]):
+        if len(t) != 4:
+            continue
+        k = frozenset(t)
+        if k in tets0 and tets0[k][1] == t:        # untouched: same vertex list
+            kept += 1
+            assert pair_edges(t, diag[i]) == pairs0[k], (i, t)
+            assert (i in reor) == (k in reor0), (i, t)
+        else:
+            new += 1
+            a, b, cc, d = p[t]
+            assert (i in reor) == (np.dot(np.cross(b - a, cc - a), d - a) < 0), (i, t)
+    assert kept and new
