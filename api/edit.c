@@ -339,7 +339,8 @@ static int check_moves(api_model *m, const edit_part *q, api_problem *p)
  * RESTORE), or, when a level's rules read a moved position, *rebuild set to that level (the edit
  * then becomes a new model). 0 or the status. */
 static int apply_locked(api_model *m, edit_part *parts, int np, uint64_t version,
-                        const saved_details *sv, uint64_t *counts, int *rebuild, api_problem *p)
+                        const saved_details *sv, uint64_t *counts, int *rebuild,
+                        const api_edit_commit *commit, api_problem *p)
 {
     sd_error e = {0};
     int done = 0, rc = np && parts[0].attr < 0 ? check_moves(m, &parts[0], p) : 0;
@@ -368,8 +369,11 @@ static int apply_locked(api_model *m, edit_part *parts, int np, uint64_t version
     }
     if (rc)
         return rc; /* refused before anything changed */
-    if (done < np) { /* refused by the core or out of memory half-way: undo what was applied */
-        rc = part_failed(&parts[done], m->in, &e, p);
+    /* applied in full: kept unless the commit (the durable store) refuses it */
+    bool kept = done == np && (!commit || !(rc = commit->fn(commit->ud, p)));
+    if (!kept) { /* refused by the core, out of memory half-way, or not committed: undo */
+        if (done < np)
+            rc = part_failed(&parts[done], m->in, &e, p);
         bool undone = true;
         for (int i = done - 1; i >= 0; i--) {
             const edit_part *q = &parts[i];
@@ -397,6 +401,13 @@ static int apply_locked(api_model *m, edit_part *parts, int np, uint64_t version
 int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim,
              const api_slot *slot, uint64_t *counts, int *levels, api_model **rebuilt,
              api_problem *p)
+{
+    return api_edit_commit_by(m, body, version, lim, slot, NULL, counts, levels, rebuilt, p);
+}
+
+int api_edit_commit_by(api_model *m, json_t *body, uint64_t version, const api_limits *lim,
+                       const api_slot *slot, const api_edit_commit *commit, uint64_t *counts,
+                       int *levels, api_model **rebuilt, api_problem *p)
 {
     *rebuilt = NULL;
     static const char *const keys[] = {"moves", "attributes", NULL};
@@ -462,7 +473,7 @@ int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim
     if (!save_details(m->c, &sv))
         rc = api_fail(p, 503, "out-of-memory", "out of memory");
     else
-        rc = apply_locked(m, parts, np, version, &sv, counts, &rebuild, p);
+        rc = apply_locked(m, parts, np, version, &sv, counts, &rebuild, commit, p);
     *levels = sd_complex_levels_computed(m->c);
     api_model_publish(m); /* the by-column matrices of the first edit count as session memory */
     pthread_rwlock_unlock(&m->data);

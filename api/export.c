@@ -112,6 +112,11 @@ int api_import(json_t *doc, const char *base, const api_limits *lim, api_model *
         return api_fail(p, 503, "out-of-memory", "out of memory");
     int rc = 0;
     json_t *ov = rules ? json_object_get(rules, "overrides") : NULL;
+    if (ov && !json_is_array(ov)) {
+        snprintf(at, sizeof at, "%s/rules/overrides", base);
+        api_model_unref(m);
+        return api_fail_at(p, 400, "wrong-type", at, "must be an array of overrides");
+    }
     if (rules) { /* the preferences first: PUT /complex keeps them */
         json_t *pref = json_copy(rules);
         if (!pref)

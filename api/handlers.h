@@ -103,6 +103,19 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
 int api_edit(api_model *m, json_t *body, uint64_t version, const api_limits *lim,
              const api_slot *slot, uint64_t *counts, int *levels, api_model **rebuilt,
              api_problem *p);
+/* The same, where the transport must keep the edit before anyone sees it (the durable store,
+ * server/persist.h): once the edit is applied in place, and while the model's locks still keep
+ * readers out, commit->fn is called; when it fails (0 or the status of its problem) the edit is
+ * undone — the points and offsets back to the bytes they had — and its problem returned. Not
+ * called for an edit answered with *rebuilt (nothing changed in place: the caller keeps the new
+ * model before publishing it). */
+typedef struct api_edit_commit {
+    int (*fn)(void *ud, api_problem *p);
+    void *ud;
+} api_edit_commit;
+int api_edit_commit_by(api_model *m, json_t *body, uint64_t version, const api_limits *lim,
+                       const api_slot *slot, const api_edit_commit *commit, uint64_t *counts,
+                       int *levels, api_model **rebuilt, api_problem *p);
 
 /* GET /levels/{L}/stats (new reference). */
 json_t *api_level_stats(api_model *m, int level, const api_limits *lim, const api_slot *slot,

@@ -378,44 +378,43 @@ static int early_auth(req *r)
 {
     if (!r->rt->session)
         return 0;
+    const char *h = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
+                                                MHD_HTTP_HEADER_AUTHORIZATION);
+    char tbuf[128];
+    const char *bearer = parse_bearer(h, tbuf, sizeof tbuf);
+    int token_query = 0; /* the route lists access_token among its query parameters */
+    for (const char *const *a = r->rt->query; a && *a; a++)
+        token_query |= !strcmp(*a, "access_token");
+    const char *q = token_query && !h ? http_arg(r, "access_token") : NULL;
+    const char *presented = bearer ? bearer : q;
     store_miss miss;
     char why[320];
-    r->s = store_get(r->srv->st, r->seg_id, &miss, why, sizeof why);
-    if (!r->s) {
-        api_problem p = {0};
-        if (miss == STORE_NONE) {
-            http_fail(r, 404, "no-session", "no session %.40s (it may have expired or been deleted)",
-                      r->seg_id);
-            return 1;
-        }
+    r->s = store_get(r->srv->st, r->seg_id, r->srv->cfg.no_auth ? NULL : presented ? presented : "",
+                     &miss, why, sizeof why);
+    api_problem p = {0};
+    if (!r->s && miss == STORE_NONE) {
+        http_fail(r, 404, "no-session", "no session %.40s (it may have expired or been deleted)",
+                  r->seg_id);
+        return 1;
+    }
+    if (!r->s && miss != STORE_UNAUTHORIZED) { /* the details go to the log, not to the client */
         p.retry_after = miss == STORE_CORRUPT ? 0 : 5;
         if (miss == STORE_FULL)
             api_fail(&p, 429, "too-many-sessions", "session %.40s is stored, but every resident "
                      "session is in use; retry in a few seconds", r->seg_id);
         else if (miss == STORE_CORRUPT)
-            api_fail(&p, 503, "store-corrupt", "session %.40s cannot be rebuilt from the store: %s",
-                     r->seg_id, why);
+            api_fail(&p, 503, "store-corrupt", "session %.40s cannot be rebuilt from the store "
+                     "(damaged data; the daemon's log says where)", r->seg_id);
         else
-            api_fail(&p, 503, "store-unavailable", "the session store cannot be read: %s", why);
+            api_fail(&p, 503, "store-unavailable", "the session store cannot be read now");
         if (miss != STORE_FULL)
-            log_line(r->srv, LOG_ERROR, "session %.40s: %s", r->seg_id, p.detail);
+            log_line(r->srv, LOG_ERROR, "session %.40s: %s: %s", r->seg_id,
+                     miss == STORE_CORRUPT ? "store-corrupt" : "store-unavailable", why);
         http_reply_problem(r, &p);
         return 1;
     }
-    if (r->srv->cfg.no_auth)
+    if (r->s && (r->srv->cfg.no_auth || session_token_ok(r->s, presented)))
         return 0;
-    const char *h = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
-                                                MHD_HTTP_HEADER_AUTHORIZATION);
-    char tbuf[128];
-    if (session_token_ok(r->s, parse_bearer(h, tbuf, sizeof tbuf)))
-        return 0;
-    int token_query = 0; /* the route lists access_token among its query parameters */
-    for (const char *const *a = r->rt->query; a && *a; a++)
-        token_query |= !strcmp(*a, "access_token");
-    const char *q = token_query && !h ? http_arg(r, "access_token") : NULL;
-    if (q && session_token_ok(r->s, q))
-        return 0;
-    api_problem p = {0};
     api_fail(&p, 401, "unauthorized",
              h || q ? "the bearer token does not match this session"
                     : "send the session's token as \"Authorization: Bearer <token>\"");

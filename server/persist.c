@@ -111,7 +111,7 @@ static persist_rc noted_as(persist *p, persist_rc rc, bool write)
         p->failing = true;
         p->failed_at = mono();
         snprintf(p->why, sizeof p->why, "%s", p->ops->last_error(p->b));
-    } else if (write && rc != PERSIST_UNAVAILABLE)
+    } else if (write && rc == PERSIST_OK)
         p->failing = false;
     pthread_mutex_unlock(&p->mu);
     return rc;
@@ -190,8 +190,12 @@ bool persist_healthy(persist *p, char *why, size_t cap)
     pthread_mutex_lock(&p->mu);
     bool probe = p->failing && mono() - p->failed_at > PERSIST_PROBE_AFTER_S;
     pthread_mutex_unlock(&p->mu);
-    if (probe) /* is it back? a write that names no session (redis reachable, the file writable) */
-        noted(p, p->ops->touch(p->b, "-", 0));
+    if (probe) { /* is it back? a real write that names no session */
+        pthread_mutex_lock(&p->mu);
+        p->failed_at = mono(); /* one probe at a time, every PERSIST_PROBE_AFTER_S */
+        pthread_mutex_unlock(&p->mu);
+        noted(p, p->ops->probe(p->b));
+    }
     pthread_mutex_lock(&p->mu);
     bool ok = !p->failing;
     if (!ok)

@@ -16,6 +16,9 @@ typedef struct persist_ops {
     persist_rc (*version)(void *b, const char *id, uint64_t *version);
     persist_rc (*load)(void *b, const char *id, persist_loaded *out);
     long (*expire)(void *b, int64_t now);
+    /* a real write that names no session (it allocates space, as a change would): does the
+     * store take writes again? */
+    persist_rc (*probe)(void *b);
     long (*count)(void *b, int64_t now);
     /* the back end's own description of its last failure (after a non-OK return) */
     const char *(*last_error)(void *b);

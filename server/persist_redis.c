@@ -549,6 +549,22 @@ static persist_rc r_version(void *vb, const char *id, uint64_t *version)
     return rc;
 }
 
+/* A write of a short-lived key (OOM, READONLY, MISCONF and a lost connection all refuse it). */
+static persist_rc r_probe(void *vb)
+{
+    redis_backend *b = vb;
+    const char *argv[5] = {"SET", "subdivd:probe", "1", "PX", "10000"};
+    size_t len[5] = {3, 13, 1, 2, 5};
+    pthread_mutex_lock(&b->mu);
+    redisReply *r = exec_locked(b, 5, argv, len);
+    pthread_mutex_unlock(&b->mu);
+    if (!r)
+        return PERSIST_UNAVAILABLE;
+    persist_rc rc = r->type == REDIS_REPLY_ERROR ? error_reply(b, NULL, r) : PERSIST_OK;
+    freeReplyObject(r);
+    return rc;
+}
+
 /* Redis expires the keys itself (EXPIREAT on every key). */
 static long r_expire(void *vb, int64_t now)
 {
@@ -644,6 +660,7 @@ const persist_ops persist_redis_ops = {
     .load = r_load,
     .expire = r_expire,
     .count = r_count,
+    .probe = r_probe,
     .last_error = r_last_error,
     .close = r_close,
 };

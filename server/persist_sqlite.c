@@ -28,7 +28,7 @@
 enum {
     Q_BEGIN, Q_COMMIT, Q_ROLLBACK, Q_BEGIN_READ, Q_CREATE, Q_CAS_SNAP, Q_CAS_APPEND, Q_DEL_JOURNAL,
     Q_ADD_ENTRY, Q_VERSION, Q_TOUCH, Q_DELETE, Q_LOAD, Q_LOAD_JOURNAL, Q_EXPIRE_J, Q_EXPIRE_S,
-    Q_COUNT, NQ
+    Q_COUNT, Q_PROBE_PUT, Q_PROBE_DEL, NQ
 };
 
 static const char *const SQL[NQ] = {
@@ -53,6 +53,8 @@ static const char *const SQL[NQ] = {
     [Q_EXPIRE_J] = "DELETE FROM journal WHERE id IN (SELECT id FROM sessions WHERE expires_at < ?1)",
     [Q_EXPIRE_S] = "DELETE FROM sessions WHERE expires_at < ?1",
     [Q_COUNT] = "SELECT count(*) FROM sessions WHERE expires_at >= ?1",
+    [Q_PROBE_PUT] = "INSERT OR REPLACE INTO probe(k, v) VALUES (1, zeroblob(65536))",
+    [Q_PROBE_DEL] = "DELETE FROM probe",
 };
 
 static const char SCHEMA[] =
@@ -62,7 +64,8 @@ static const char SCHEMA[] =
     "snapshot_crc INTEGER);"
     "CREATE TABLE IF NOT EXISTS journal(id TEXT NOT NULL, version INTEGER NOT NULL, "
     "entry BLOB NOT NULL, crc INTEGER NOT NULL, PRIMARY KEY (id, version)) WITHOUT ROWID;"
-    "CREATE INDEX IF NOT EXISTS sessions_expiry ON sessions(expires_at);";
+    "CREATE INDEX IF NOT EXISTS sessions_expiry ON sessions(expires_at);"
+    "CREATE TABLE IF NOT EXISTS probe(k INTEGER PRIMARY KEY, v BLOB);";
 
 typedef struct sqlite_store {
     pthread_mutex_t mu;
@@ -444,6 +447,20 @@ static long sq_count(void *b, int64_t now)
     return n;
 }
 
+/* 64 KiB written and committed, then deleted: a full disk (or a file at its page cap) refuses it. */
+static persist_rc sq_probe(void *b)
+{
+    sqlite_store *s = b;
+    pthread_mutex_lock(&s->mu);
+    int rc = run(s, Q_PROBE_PUT);
+    persist_rc r = rc == SQLITE_DONE ? PERSIST_OK : failed(s, "writing (a probe)", rc);
+    rc = run(s, Q_PROBE_DEL);
+    if (r == PERSIST_OK && rc != SQLITE_DONE)
+        r = failed(s, "writing (a probe)", rc);
+    pthread_mutex_unlock(&s->mu);
+    return r;
+}
+
 const persist_ops persist_sqlite_ops = {
     .create = sq_create,
     .snapshot = sq_snapshot,
@@ -454,6 +471,7 @@ const persist_ops persist_sqlite_ops = {
     .load = sq_load,
     .expire = sq_expire,
     .count = sq_count,
+    .probe = sq_probe,
     .last_error = sq_last_error,
     .close = sq_close,
 };

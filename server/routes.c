@@ -255,16 +255,16 @@ static int store_snapshot(req *r, api_model *m, uint64_t expect, uint64_t versio
     api_free(text);
     if (rc == PERSIST_OK)
         r->s->journal_len = 0;
-    return rc == PERSIST_OK ? 0 : store_refused(r, rc, rc == PERSIST_CONFLICT, p);
+    return rc == PERSIST_OK ? 0 : store_refused(r, rc, rc == PERSIST_CONFLICT || rc == PERSIST_ABSENT, p);
 }
 
 /* A journal this long is folded into a snapshot after the next edit. */
 #define JOURNAL_COMPACT 256
 
-/* Store the edit `body` that made `version`. On a refusal the resident copy, already changed in
- * place, is dropped. After JOURNAL_COMPACT edits the journal becomes a snapshot (a failure
- * there loses nothing: the journal still holds every edit). */
-static int store_edit(req *r, json_t *body, uint64_t version, api_problem *p)
+/* Store the edit `body` that made `version` in the journal (0, or the status of the problem:
+ * the edit is then not made). A store that holds another version, or none, means the resident
+ * copy is stale: it is dropped, and the next request loads the stored one. */
+static int store_journal(req *r, json_t *body, uint64_t version, api_problem *p)
 {
     persist *ps = store_persist(r->srv->st);
     if (!persist_durable(ps))
@@ -275,16 +275,39 @@ static int store_edit(req *r, json_t *body, uint64_t version, api_problem *p)
                          : PERSIST_UNAVAILABLE;
     api_free(text);
     if (rc != PERSIST_OK)
-        return store_refused(r, rc, true, p);
-    if (++r->s->journal_len >= JOURNAL_COMPACT) {
-        api_model *m = session_model(r->s, NULL);
-        api_problem ignored = {0};
-        if (store_snapshot(r, m, version, version, &ignored))
-            log_line(r->srv, LOG_WARN, "session %s: compacting the journal failed: %s", r->s->id,
-                     ignored.detail);
-        api_model_unref(m);
-    }
+        return store_refused(r, rc, rc == PERSIST_CONFLICT || rc == PERSIST_ABSENT, p);
+    r->s->journal_len++;
     return 0;
+}
+
+/* The commit of an edit applied in place (api_edit_commit_by): its journal entry. */
+typedef struct edit_commit {
+    req *r;
+    json_t *body;
+    uint64_t version;
+} edit_commit;
+
+static int commit_edit(void *ud, api_problem *p)
+{
+    edit_commit *c = ud;
+    return store_journal(c->r, c->body, c->version, p);
+}
+
+/* After JOURNAL_COMPACT edits the journal becomes a snapshot of the published model (under the
+ * write lock, after the publish). A failure loses nothing — the journal still holds every edit
+ * — and is tried again 64 edits later. */
+static void store_compact(req *r, uint64_t version)
+{
+    if (r->s->journal_len < JOURNAL_COMPACT || !persist_durable(store_persist(r->srv->st)))
+        return;
+    api_model *m = session_model(r->s, NULL);
+    api_problem ignored = {0};
+    if (store_snapshot(r, m, version, version, &ignored)) {
+        log_line(r->srv, LOG_WARN, "session %s: compacting the journal failed: %s", r->s->id,
+                 ignored.detail);
+        r->s->journal_len = JOURNAL_COMPACT - 64;
+    }
+    api_model_unref(m);
 }
 
 /* POST /v1/sessions: anyone may ask, so each client address has a rate (--session-rate, 429
@@ -714,8 +737,12 @@ static void h_edit(req *r)
     snprintf(d.since, sizeof d.since, "%llu", (unsigned long long)version);
     /* changes are sequential (the write lock): the edit's version is the next one */
     if (!(rc = if_match(r, version, &p)) && (d.level < 0 || !(rc = api_delta_check(m, &d.q, &p))))
-        rc = api_edit(m, b, version + 1, &r->srv->cfg.limits, &slot, counts, &levels, &rebuilt,
-                      &p);
+    {
+        edit_commit ec = {r, b, version + 1};
+        api_edit_commit commit = {commit_edit, &ec};
+        rc = api_edit_commit_by(m, b, version + 1, &r->srv->cfg.limits, &slot, &commit, counts,
+                                &levels, &rebuilt, &p);
+    }
     char up[512] = "{";
     for (int l = 0; !rc && l < levels; l++) {
         size_t u = strlen(up);
@@ -723,12 +750,13 @@ static void h_edit(req *r)
                  (unsigned long long)counts[l]);
     }
     strcat(up, "}");
-    if (!rc && (rc = store_edit(r, b, version + 1, &p))) {
-        api_model_unref(rebuilt); /* the resident copy went: the store has the session */
+    if (!rc && rebuilt && (rc = store_journal(r, b, version + 1, &p))) {
+        api_model_unref(rebuilt); /* a new model (nothing changed in place): not published */
         rebuilt = NULL;
     }
     if (!rc) { /* the version api_edit stamped: the write lock is held */
         version = rebuilt ? session_publish(r->s, rebuilt) : session_bump(r->s);
+        store_compact(r, version);
         notify(r, version, "edit", up);
         if (d.level >= 0) {
             api_model *now = session_model(r->s, NULL);
@@ -737,6 +765,9 @@ static void h_edit(req *r)
                             sizeof d.comp, &dv, &d.p);
             api_model_unref(now);
         }
+    } else if (rebuilt && persist_durable(store_persist(r->srv->st))) {
+        api_model_unref(rebuilt); /* a failed edit whose undo failed: the store has the content */
+        store_drop(r->srv->st, r->s);
     } else if (rebuilt) /* a failed edit whose undo failed: the content before it, rebuilt */
         notify(r, session_publish(r->s, rebuilt), "complex", NULL);
     pthread_mutex_unlock(&r->s->write);

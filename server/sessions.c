@@ -25,7 +25,7 @@ struct store {
     session **s;
     persist *p;               /* the durable store (borrowed) */
     api_limits lim;           /* what a replayed journal may compute */
-    pthread_mutex_t load;     /* one session loaded from the durable store at a time */
+    pthread_mutex_t load[16]; /* loads from the durable store: one at a time per stripe of ids */
 };
 
 static void token_hash(const char *token, unsigned char out[32])
@@ -69,7 +69,8 @@ store *store_new(int max_sessions, persist *p, const api_limits *lim)
         return NULL;
     }
     pthread_mutex_init(&st->mu, NULL);
-    pthread_mutex_init(&st->load, NULL);
+    for (int i = 0; i < 16; i++)
+        pthread_mutex_init(&st->load[i], NULL);
     return st;
 }
 
@@ -82,7 +83,8 @@ void store_free(store *st)
     for (int i = 0; i < st->n; i++)
         session_unref(st->s[i]);
     pthread_mutex_destroy(&st->mu);
-    pthread_mutex_destroy(&st->load);
+    for (int i = 0; i < 16; i++)
+        pthread_mutex_destroy(&st->load[i]);
     api_free(st->s);
     api_free(st);
 }
@@ -146,6 +148,14 @@ static int soonest_expiry_locked(store *st, double now)
     return c < 1 ? 1 : c > 1e9 ? 1000000000 : (int)c;
 }
 
+/* How often a session's expiry is written to the durable store for reads alone: a tenth of its
+ * TTL, at most a minute. The stored expiry carries as much slack, so the store never forgets a
+ * session before the resident copy would expire. (s->ttl_s is constant.) */
+static double touch_every(const session *s)
+{
+    return s->ttl_s / 10.0 < 60 ? s->ttl_s / 10.0 : 60;
+}
+
 /* A session struct (reference 1) with an empty model, or NULL for lack of memory. */
 static session *session_alloc(const char *id, const unsigned char hash[32], int ttl_s, time_t created)
 {
@@ -166,7 +176,8 @@ static session *session_alloc(const char *id, const unsigned char hash[32], int 
     pthread_mutex_init(&s->mu, NULL);
     pthread_mutex_init(&s->write, NULL);
     s->ttl_s = ttl_s;
-    s->last_used = s->touched = mono_now();
+    s->last_used = mono_now();
+    s->touched = -1e300; /* the first use writes the expiry (a loaded session's may be close) */
     s->created = created;
     atomic_init(&s->busy_level, -1);
     return s;
@@ -214,6 +225,12 @@ session *store_create(store *st, int ttl_s, store_admission *a)
         return NULL;
     memcpy(s->token, token, sizeof token);
     explicit_bzero(token, sizeof token);
+    char why[8];
+    if (persist_durable(st->p) && !persist_healthy(st->p, why, sizeof why)) {
+        a->stored = PERSIST_UNAVAILABLE; /* refused before anything resident makes room */
+        session_unref(s);
+        return NULL;
+    }
     pthread_mutex_lock(&st->mu);
     bool ok = room_locked(st, a);
     pthread_mutex_unlock(&st->mu);
@@ -225,6 +242,7 @@ session *store_create(store *st, int ttl_s, store_admission *a)
         if ((a->stored = persist_create(st->p, &m)) != PERSIST_OK)
             ok = false;
     }
+    s->touched = mono_now(); /* the store has its expiry */
     if (ok) {
         pthread_mutex_lock(&st->mu);
         ok = room_locked(st, a);
@@ -299,10 +317,13 @@ static api_model *rebuild(const persist_loaded *l, const api_limits *lim, char *
     return m;
 }
 
-/* Load session `id` from the durable store into the table (new reference), or NULL + *miss. */
-static session *load(store *st, const char *id, store_miss *miss, char *why, size_t cap)
+/* Load session `id` from the durable store into the table (new reference), or NULL + *miss.
+ * `token` (NULL: not checked) must be the session's before anything is rebuilt. */
+static session *load(store *st, const char *id, const char *token, store_miss *miss, char *why,
+                     size_t cap)
 {
-    pthread_mutex_lock(&st->load);
+    pthread_mutex_t *lk = &st->load[strtol((char[]){id[0], 0}, NULL, 16) & 15];
+    pthread_mutex_lock(lk);
     session *s = NULL;
     pthread_mutex_lock(&st->mu); /* loaded meanwhile by another request? */
     for (int i = 0; i < st->n && !s; i++)
@@ -312,12 +333,34 @@ static session *load(store *st, const char *id, store_miss *miss, char *why, siz
         atomic_fetch_add(&s->refs, 1);
     pthread_mutex_unlock(&st->mu);
     if (s) {
-        pthread_mutex_unlock(&st->load);
+        pthread_mutex_unlock(lk);
         return s;
+    }
+    store_admission room = {0};
+    pthread_mutex_lock(&st->mu); /* room first: a rebuild that cannot be kept is not made */
+    bool space = room_locked(st, &room);
+    pthread_mutex_unlock(&st->mu);
+    if (!space) {
+        pthread_mutex_unlock(lk);
+        *miss = STORE_FULL;
+        return NULL;
     }
     persist_loaded l;
     persist_rc rc = persist_load(st->p, id, &l);
     char reason[320] = "";
+    unsigned char h[32];
+    if (rc == PERSIST_OK && token) {
+        token_hash(token, h);
+        unsigned char d = 0;
+        for (int i = 0; i < 32; i++)
+            d |= (unsigned char)(h[i] ^ l.meta.token_hash[i]);
+        if (d) { /* nothing is rebuilt for a client without the token */
+            persist_loaded_free(&l);
+            pthread_mutex_unlock(lk);
+            *miss = STORE_UNAUTHORIZED;
+            return NULL;
+        }
+    }
     if (rc == PERSIST_OK) {
         api_model *m = rebuild(&l, &st->lim, reason, sizeof reason);
         if (!m)
@@ -346,7 +389,7 @@ static session *load(store *st, const char *id, store_miss *miss, char *why, siz
         persist_loaded_free(&l);
     } else if (rc == PERSIST_CORRUPT || rc == PERSIST_UNAVAILABLE)
         snprintf(reason, sizeof reason, "%s", l.why);
-    pthread_mutex_unlock(&st->load);
+    pthread_mutex_unlock(lk);
     if (!s && rc != PERSIST_OK)
         *miss = rc == PERSIST_CORRUPT ? STORE_CORRUPT : rc == PERSIST_UNAVAILABLE ? STORE_UNAVAILABLE
                                                                                 : STORE_NONE;
@@ -355,14 +398,15 @@ static session *load(store *st, const char *id, store_miss *miss, char *why, siz
     return s;
 }
 
-session *store_get(store *st, const char *id, store_miss *miss, char *why, size_t cap)
+session *store_get(store *st, const char *id, const char *token, store_miss *miss, char *why,
+                   size_t cap)
 {
     store_miss m0;
     if (!miss)
         miss = &m0;
     *miss = STORE_NONE;
     session *found = NULL;
-    if (strlen(id) != 32)
+    if (strlen(id) != 32 || strspn(id, "0123456789abcdef") != 32)
         return NULL;
     pthread_mutex_lock(&st->mu);
     for (int i = 0; i < st->n && !found; i++)
@@ -393,12 +437,11 @@ session *store_get(store *st, const char *id, store_miss *miss, char *why, size_
                 return NULL;
         } /* unavailable: the resident copy is served (reads); writes will fail */
     }
-    if (!found)
-        return load(st, id, miss, why, cap);
+    if (!found && !(found = load(st, id, token, miss, why, cap)))
+        return NULL;
     double now = mono_now();
     pthread_mutex_lock(&found->mu);
-    double every = found->ttl_s / 10.0 < 60 ? found->ttl_s / 10.0 : 60;
-    bool due = now - found->touched > every;
+    bool due = now - found->touched > touch_every(found);
     if (due)
         found->touched = now;
     pthread_mutex_unlock(&found->mu);
@@ -522,8 +565,9 @@ int64_t session_stored_expiry(session *s)
 {
     pthread_mutex_lock(&s->mu);
     int ttl = s->ttl_s;
+    double slack = touch_every(s);
     pthread_mutex_unlock(&s->mu);
-    return (int64_t)time(NULL) + ttl;
+    return (int64_t)time(NULL) + ttl + (int64_t)ceil(slack);
 }
 
 time_t session_expires_at(session *s)

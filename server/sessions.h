@@ -66,14 +66,18 @@ typedef enum store_miss {
     STORE_NONE = 0,           /* no such session (never, expired, deleted) */
     STORE_UNAVAILABLE,        /* the durable store cannot be read now */
     STORE_CORRUPT,            /* the stored session cannot be rebuilt (damaged data) */
-    STORE_FULL                /* stored, but no room to make it resident (every session busy) */
+    STORE_FULL,               /* stored, but no room to make it resident (every session busy) */
+    STORE_UNAUTHORIZED        /* stored, but the token given is not its own (nothing was loaded) */
 } store_miss;
 
 /* The live session with this id (new reference) or NULL with *miss (may be NULL) and, for
- * STORE_CORRUPT and STORE_UNAVAILABLE, the reason in why (cap bytes; may be NULL). Touches its
- * idle clock (and, now and then, its expiry in the durable store). With a shared store, a
- * resident copy older than the stored version is dropped and the session loaded again. */
-session *store_get(store *st, const char *id, store_miss *miss, char *why, size_t cap);
+ * STORE_CORRUPT and STORE_UNAVAILABLE, the reason in why (cap bytes; may be NULL; for the log,
+ * not for clients). Touches its idle clock (and, now and then, its expiry in the durable store).
+ * A session that is not resident is loaded only for the holder of its `token` (NULL: anyone,
+ * --no-auth); a resident one is returned whatever the token (the caller checks it). With a
+ * shared store, a resident copy older than the stored version is dropped and loaded again. */
+session *store_get(store *st, const char *id, const char *token, store_miss *miss, char *why,
+                   size_t cap);
 /* Forget the resident copy of s (the durable store has the truth: after a write it refused, or
  * lost to another daemon); the next request loads it again. Its listeners are told "reload". */
 void store_drop(store *st, session *s);
