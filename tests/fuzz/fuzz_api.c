@@ -59,6 +59,12 @@ static const char *const seeds[] = {
     "{\"vertices\":[[0,0,0],[1,0,0],[0,1,0],[0,0,1],[1,1,1]],\"simplices\":[[0,1,2,3],[1,2,3,4]],"
     "\"details\":[{\"level\":1,\"index\":7,\"offset\":[0,0,0.1]},{\"level\":3,\"index\":40,"
     "\"offset\":[0.01,0,0]}]}",
+    /* a GET /export document (POST /v1/sessions {"import"}) with a tetrahedron stored reoriented */
+    "{\"format\":\"subdivd-session\",\"format_version\":1,\"version\":5,\"complex\":{"
+    "\"vertices\":[[0,0,0],[1,0,0],[0,1,0],[0,0,1],[1,1,1]],\"simplices\":[[0,1,2,3],[1,2,3,4]],"
+    "\"attributes\":{},\"diagonals\":[[0,1],[1,0]],\"reoriented\":[1],\"details\":[]},"
+    "\"tags\":{\"singular\":[[0,1]]},\"rules\":{\"surface_weights\":\"loop\",\"overrides\":["
+    "{\"simplex\":[4],\"rule\":\"G1\"}]},\"embedded\":{}}",
 };
 #define NSEEDS (sizeof seeds / sizeof *seeds)
 #ifndef SD_LIBFUZZER
@@ -209,6 +215,34 @@ static void check_complex_stream(api_model *m)
     api_free(want);
 }
 
+/* Export, import, export again: the same bytes (api/export.c: every input of a build is in the
+ * document exactly), and the import of an export never fails. */
+static void check_export_roundtrip(api_model *m, const api_limits *lim)
+{
+    json_t *doc = api_export(m, 3);
+    char *text = doc ? json_dumps(doc, JSON_COMPACT) : NULL;
+    api_problem p = {0};
+    api_model *back = NULL;
+    uint64_t v = 0;
+    int rc = doc ? api_import(doc, "/import", lim, &back, &v, &p) : -1;
+    json_decref(doc);
+    if (rc && p.status == 503) { /* out of memory is the one excuse */
+        api_free(text);
+        return;
+    }
+    json_t *again = rc ? NULL : api_export(back, v);
+    char *text2 = again ? json_dumps(again, JSON_COMPACT) : NULL;
+    json_decref(again);
+    if (!text || rc || v != 3 || !text2 || strcmp(text, text2)) {
+        fprintf(stderr, "fuzz_api: export/import/export differs (import: %d %s)\nfirst  %.300s\n"
+                        "second %.300s\n", rc, p.detail, text ? text : "", text2 ? text2 : "");
+        abort();
+    }
+    api_model_unref(back);
+    api_free(text);
+    api_free(text2);
+}
+
 /* One body through parsing, a change handler (on an empty model or one with a valid complex)
  * and, when accepted, every writer; 1 when it was accepted. */
 static int one(const char *buf, size_t len, const api_limits *lim)
@@ -247,7 +281,7 @@ static int one(const char *buf, size_t len, const api_limits *lim)
         check_problem(&p, "api_parse_body");
     } else {
         change_fn_t fns[] = {api_put_complex, api_put_rules, api_put_tags};
-        int which = (int)fuzz_rnd(5);
+        int which = (int)fuzz_rnd(6);
         uint64_t red, green, counts[SD_MAX_LEVEL + 1];
         int levels;
         if (which == 3) { /* refinement: a new model like the changes */
@@ -270,6 +304,16 @@ static int one(const char *buf, size_t len, const api_limits *lim)
             }
             if (accepted)
                 drain_deltas(cur);
+        } else if (which == 5) { /* an import document: a new model, or a problem */
+            uint64_t v;
+            if (api_import(b, "/import", lim, &next, &v, &p))
+                check_problem(&p, "api_import");
+            else {
+                accepted = 1;
+                api_model_unref(cur);
+                cur = next;
+                check_export_roundtrip(cur, lim);
+            }
         } else if (fns[which](cur, b, lim, &next, &p))
             check_problem(&p, "a change handler");
         else {
@@ -279,6 +323,7 @@ static int one(const char *buf, size_t len, const api_limits *lim)
             if (cur->c)
                 drain_levels(cur, lim);
             check_complex_stream(cur);
+            check_export_roundtrip(cur, lim);
         }
         json_decref(b);
     }
