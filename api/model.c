@@ -146,6 +146,7 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
         return NULL;
     }
     atomic_init(&m->refs, 1);
+    atomic_init(&m->progress, -1.0);
     m->delta = api_delta_new();
     if (!m->delta) {
         api_free(m);
@@ -294,7 +295,20 @@ const sd_level *api_model_level_locked(api_model *m, int level, sd_error *err)
     struct timespec t0, t1;
     int before = sd_complex_levels_computed(m->c);
     clock_gettime(CLOCK_MONOTONIC, &t0);
-    const sd_level *lv = sd_complex_level(m->c, level, err);
+    const sd_level *lv = NULL;
+    if (before > level)
+        lv = sd_complex_level(m->c, level, err);
+    else { /* one level at a time, so GET /v1/sessions/{id} can say how far the work is */
+        double total = (double)sd_complex_estimate_bytes(m->c, level);
+        atomic_store(&m->progress, 0.0);
+        for (int l = before; l <= level; l++) {
+            if (!(lv = sd_complex_level(m->c, l, err)))
+                break;
+            if (total > 0)
+                atomic_store(&m->progress, 1.0 - (double)sd_complex_estimate_bytes(m->c, level) / total);
+        }
+        atomic_store(&m->progress, -1.0);
+    }
     clock_gettime(CLOCK_MONOTONIC, &t1);
     if (lv && before <= level) /* the time of the levels computed now goes to the highest */
         m->seconds[level] += (double)(t1.tv_sec - t0.tv_sec) + (t1.tv_nsec - t0.tv_nsec) * 1e-9;

@@ -107,6 +107,8 @@ typedef struct api_model {
     /* published figures, readable without the lock */
     atomic_int levels_cached;
     atomic_size_t memory_bytes;
+    _Atomic double progress;  /* while levels are computed: the fraction of that work done (by
+                               * the bytes the levels take, sd_complex_estimate_bytes); else -1 */
     /* the session version of the model's content: set when the model is published and by
      * every edit (under both locks), so a reader that copies what edits change reads, with
      * the same lock held, the version of what it copied (a response's ETag is its content's) */

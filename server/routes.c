@@ -420,9 +420,13 @@ static void h_get_session(req *r)
     iso_time(exp, sizeof exp, session_expires_at(r->s));
     json_t *progress = json_null();
     int busy = atomic_load(&r->s->busy_level);
-    if (busy >= 0)
+    double fraction = atomic_load(&m->progress);
+    if (busy >= 0) {
         progress = json_pack("{s:s, s:i, s:f}", "state", "computing", "level", busy, "seconds",
                              mono_now() - atomic_load(&r->s->busy_since));
+        if (progress && fraction >= 0) /* levels of the current model: how far, by their bytes */
+            json_object_set_new(progress, "fraction", json_real(fraction));
+    }
     json_t *summary = m->summary ? json_incref(m->summary) : json_object();
     json_t *j = json_pack("{s:s, s:I, s:i, s:I, s:o, s:s, s:o}", "id", r->s->id, "version",
                           (json_int_t)version, "levels_cached", atomic_load(&m->levels_cached),

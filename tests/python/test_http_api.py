@@ -438,18 +438,23 @@ def test_progress_is_reported():
         seen = []
         t = threading.Thread(target=lambda: seen.append(s.req("GET", "/levels/3/stats").status_code))
         t.start()
-        progress = None
+        samples = []
         deadline = time.time() + 60
         while t.is_alive() and time.time() < deadline:
             p = s.req("GET").json()["progress"]
             if p:
-                progress = p
-                break
-            time.sleep(0.01)
+                samples.append(p)
+            time.sleep(0.005)
         t.join()
         assert seen == [200]
-        assert progress is not None and progress["state"] == "computing"
+        assert samples, "the computation was never seen"
+        progress = samples[0]
+        assert progress["state"] == "computing"
         assert 0 <= progress["level"] <= 3 and progress["seconds"] >= 0
+        # levels are computed one at a time: the fraction of their bytes done, never backwards
+        fractions = [p["fraction"] for p in samples if "fraction" in p]
+        assert fractions and all(0 <= f < 1 for f in fractions), samples
+        assert fractions == sorted(fractions)
     finally:
         assert d.stop() == 0
 

@@ -53,6 +53,11 @@ def _size(n):
         n /= 1000
 
 
+def _server(done, total):
+    """The daemon's progress: a fraction of the levels' work (total 1.0), or seconds."""
+    return f"{100 * done:3.0f}%" if total else f"{done:.1f} s"
+
+
 class Progress:
     """Renders client progress events on stderr: one updating line on a terminal ("bar"),
     milestone lines otherwise ("lines"), or nothing."""
@@ -96,7 +101,7 @@ class Progress:
                 if kind == "server":
                     if prev is None or now - self.last >= 2:
                         self.last = now
-                        print(f"  {self.label}: daemon computing level {total} ({done:.1f} s)",
+                        print(f"  {self.label}: daemon computing, {_server(done, total)}",
                               file=self.out, flush=True)
                 elif total is not None and done >= total and (prev is None or prev[0] < total):
                     verb = "sent" if kind == "upload" else "received"
@@ -109,7 +114,7 @@ class Progress:
                 continue
             done, total = self.state[kind]
             if kind == "server":
-                parts.append(f"computing level {total} {done:.1f} s")
+                parts.append(f"computing {_server(done, total)}")
             elif total:
                 parts.append(f"{kind} {100 * done // max(total, 1):3d}% {_size(done)}/{_size(total)}")
             else:

@@ -17,8 +17,9 @@ numpy, meshio and scipy are optional: `level_arrays` (numpy arrays), `level_mesh
 `matrix_sparse` (a scipy.sparse.csr_matrix) and `delta` import them when called.
 
 Progress: pass `progress=callable(kind, done, total)`; kind is "upload" or "download" (bytes;
-total None when unknown) or "server" (done = seconds computing, total = the level being computed,
-from GET /v1/sessions/{id}'s "progress"), polled while the daemon works on a request.
+total None when unknown) or "server", polled from GET /v1/sessions/{id}'s "progress" while the
+daemon works on a request: done = the fraction of the work done and total = 1.0 while it computes
+levels, else done = the seconds it has been at it and total None.
 """
 from __future__ import annotations
 
@@ -35,9 +36,9 @@ from .errors import ProblemError, TransportError, error_for
 
 # Type names of the public API: JSON documents as Python values; a progress callback
 # progress(kind, done, total): kind "upload"/"download" (bytes; total None when unknown) or
-# "server" (seconds computing, the level being computed).
+# "server" (the fraction of the levels' work done, total 1.0; or seconds, total None).
 JSON = Dict[str, Any]
-Progress = Callable[[str, float, Optional[int]], Any]
+Progress = Callable[[str, float, Optional[float]], Any]
 Version = Union[int, str]
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -92,7 +93,10 @@ class _ServerProgress:
             except (requests.RequestException, ValueError):
                 p = None
             if p and not self.stop.is_set():
-                self.progress("server", p.get("seconds", 0.0), p.get("level"))
+                if p.get("fraction") is not None:     # levels: how far, 0..1
+                    self.progress("server", float(p["fraction"]), 1.0)
+                else:                                 # other work: the seconds so far
+                    self.progress("server", p.get("seconds", 0.0), None)
         http.close()
 
 
