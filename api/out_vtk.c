@@ -224,7 +224,7 @@ static void put_item(out_stream *s, const vstate *st, const arr *a, uint64_t i)
  * like every api_malloc block), then encoded; the size is not known in advance (chunked). */
 
 #define ZBLOCK 32768u /* VTK's default block size */
-#define ZLEVEL 5      /* vtkZLibDataCompressor's default compression level */
+#define ZLEVEL 1      /* deflate's fastest level (VTK reads any; its own default is 5) */
 
 static voidpf z_alloc(voidpf op, uInt n, uInt size) { (void)op; return api_calloc(n, size); }
 static void z_free(voidpf op, voidpf p) { (void)op; api_free(p); }
