@@ -9,16 +9,15 @@ import os
 import random
 import sqlite3
 import subprocess
-import sys
 import threading
 import time
 
 import pytest
 import requests
 
-from conftest import MAKE_MESH
-from daemon import SLOW, Daemon, Session
+from daemon import SLOW, SUBDIVD, Daemon, Session
 from redisd import REDIS_SERVER, RedisServer
+from test_fill import surface
 
 TETS = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [1.2, -0.3, 0.4],
                      [2, 2, 0]],
@@ -58,19 +57,6 @@ def levels(s, top=3, fmt="glb"):
         assert r.status_code == 200, r.text
         out[level] = r.content
     return out
-
-
-def surface(*args):
-    text = subprocess.run([sys.executable, str(MAKE_MESH), *map(str, args)], check=True,
-                          capture_output=True, text=True).stdout
-    v, f = [], []
-    for line in text.splitlines():
-        t = line.split()
-        if t and t[0] == "v":
-            v.append([float(x) for x in t[1:4]])
-        elif t and t[0] == "s":
-            f.append([int(x) for x in t[1:]])
-    return v, f
 
 
 def signed_volume(v, t):
@@ -199,6 +185,11 @@ def test_import_errors_point_into_the_document(daemon):
 
 # ---- the durable stores --------------------------------------------------------------------------
 
+def kill9(d):
+    d.proc.kill()
+    d.proc.wait()
+
+
 def store_daemon(path, *flags, env=None):
     """A daemon on a store: a path is an SQLite file, a RedisServer its redis."""
     spec = path.url if isinstance(path, RedisServer) else f"sqlite:{path}"
@@ -229,8 +220,7 @@ def test_restart_brings_sessions_back(store):
         gone.put_complex(TETS)
         assert gone.delete().status_code == 204
     finally:
-        d.proc.kill()
-        d.proc.wait()
+        kill9(d)
     d = store_daemon(db)
     try:
         t = on(d, s)
@@ -311,8 +301,7 @@ def test_kill_during_a_stream_of_edits_loses_nothing_acknowledged(store, daemon)
     for t in threads:
         t.start()
     time.sleep(1.5 * SLOW)
-    d.proc.kill()
-    d.proc.wait()
+    kill9(d)
     stop.set()
     for t in threads:
         t.join(10)
@@ -385,8 +374,7 @@ def test_a_full_disk_refuses_writes_and_loses_nothing(tmp_path):
         assert ready.status_code == 503 and "store" in ready.json()["detail"]
         assert on(d, s).level(2).status_code == 200        # reads go on
     finally:
-        d.proc.kill()
-        d.proc.wait()
+        kill9(d)
     d = store_daemon(db)
     try:
         c = on(d, s).req("GET", "/complex").json()
@@ -428,8 +416,7 @@ def test_a_refused_edit_is_undone_not_kept(tmp_path):
         if tagged:
             v = t.json()["version"]
     finally:
-        d.proc.kill()
-        d.proc.wait()
+        kill9(d)
     d = store_daemon(db)
     try:
         c = on(d, s).req("GET", "/complex").json()
@@ -460,10 +447,10 @@ def test_resident_and_stored_sessions_are_counted_apart(tmp_path):
 
 def test_store_flag_is_checked():
     for bad in ("disk", "sqlite:", "redis://host:99999", "redis://a@b:1"):
-        p = subprocess.run([str(Daemon.__init__.__globals__["SUBDIVD"]), "--port", "0", "--store", bad],
+        p = subprocess.run([str(SUBDIVD), "--port", "0", "--store", bad],
                            capture_output=True, text=True, timeout=10)
         assert p.returncode != 0 and "--store" in p.stderr + p.stdout, (bad, p.stderr)
-    p = subprocess.run([str(Daemon.__init__.__globals__["SUBDIVD"]), "--sync", "sometimes"],
+    p = subprocess.run([str(SUBDIVD), "--sync", "sometimes"],
                        capture_output=True, text=True, timeout=10)
     assert p.returncode != 0
 
