@@ -625,3 +625,36 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
     *ctype = json ? "application/json" : "application/octet-stream";
     return 0;
 }
+
+int api_delta_moved(api_model *m, int level, const char *since_text, uint64_t *since,
+                    int *json, const char *format, uint32_t **ids, size_t *n, api_problem *p)
+{
+    api_delta_query q = {since_text, format, NULL};
+    int attrs[API_MAX_ATTRIBUTES], nattrs;
+    *ids = NULL;
+    *n = 0;
+    if (parse_query(m, &q, since, json, attrs, &nattrs, p))
+        return p->status;
+    uint64_t cur = atomic_load(&m->version);
+    if (level >= sd_complex_levels_computed(m->c))
+        return gone(p, "level %llu is not computed in this session's current model (version %llu)",
+                    (unsigned long long)level, (unsigned long long)cur);
+    if (*since > cur)
+        return gone(p, "version %llu is ahead of the session's version %llu",
+                    (unsigned long long)*since, (unsigned long long)cur);
+    if (cur > UINT32_MAX)
+        return gone(p, "versions past %llu (here %llu) have no deltas", UINT32_MAX,
+                    (unsigned long long)cur);
+    observe(m);
+    dlevel *L = &m->delta->lv[level];
+    if (*since < L->base)
+        return gone(p, "since version %llu the level changed other than by edits: deltas of it "
+                    "start at version %llu", (unsigned long long)*since, (unsigned long long)L->base);
+    size_t cap = 0;
+    if (!stamped(L->pos, L->nv, *since, ids, n, &cap)) {
+        api_free(*ids);
+        *ids = NULL;
+        return api_fail(p, 503, "out-of-memory", "out of memory building the delta; retry later");
+    }
+    return 0;
+}

@@ -68,4 +68,11 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
  * given): 0, or the status of the problem. PATCH ?delta= checks it before the edit. */
 int api_delta_check(const api_model *m, const api_delta_query *q, api_problem *p);
 
+/* The points of level L whose position changed after version *since (parsed from since_text,
+ * with format bin|json into *json), in ascending order (an api_malloc block, may be NULL when
+ * none), under the rules of api_level_delta (410 ...). The caller holds m->lock. For the deltas
+ * of what follows a level (embedded models). */
+int api_delta_moved(api_model *m, int level, const char *since_text, uint64_t *since,
+                    int *json, const char *format, uint32_t **ids, size_t *n, api_problem *p);
+
 #endif

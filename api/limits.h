@@ -32,6 +32,9 @@
 #define API_MAX_QUERY_PARAMS            64            /* parameters of a request's query (400) */
 #define API_PACK_MIN_BYTES              4096          /* body arrays packed beside the tree (packed.h) */
 #define API_MAX_VALUE                   1e15          /* magnitude of coordinates and attribute values */
+#define API_MAX_EMBEDDED                8             /* embedded models of one session */
+#define API_MAX_EMBED_NAME              48            /* an embedded model's name */
+#define API_DEFAULT_MAX_EMBEDDED_VERTICES 2000000u    /* vertices of one embedded model */
 
 typedef struct api_limits {
     size_t max_body_bytes;
@@ -44,13 +47,14 @@ typedef struct api_limits {
                                      each helper's CPU-time limit is what is left of it */
     uint64_t fill_memory_bytes;   /* RLIMIT_AS of the helper */
     char tetgen_helper[256];      /* "" = subdivd-tetgen beside the running binary, else on PATH */
+    uint32_t max_embedded_vertices; /* of one embedded model (PUT /embedded/{name}) */
 } api_limits;
 
 static inline api_limits api_default_limits(void)
 {
     api_limits l = {API_DEFAULT_MAX_BODY_BYTES, API_DEFAULT_MAX_VERTICES, API_DEFAULT_MAX_SIMPLICES,
                     API_DEFAULT_MAX_CELLS, API_DEFAULT_MAX_SESSION_BYTES, API_DEFAULT_FILL_SECONDS,
-                    API_DEFAULT_FILL_MEMORY_BYTES, ""};
+                    API_DEFAULT_FILL_MEMORY_BYTES, "", API_DEFAULT_MAX_EMBEDDED_VERTICES};
     return l;
 }
 

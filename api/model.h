@@ -104,6 +104,9 @@ typedef struct api_model {
     struct json_t *summary;   /* level-0 summary (docs/API.md PUT /complex), read-only once built */
     struct out_geometry *geometry[SD_MAX_LEVEL + 1]; /* glTF geometry per level, built under lock */
     struct api_delta *delta;  /* what edits changed in the computed levels (api/delta.h), under lock */
+    struct api_embed *embed;  /* API_MAX_EMBEDDED embedded models (api/embedded.h), nembed in use;
+                               * under lock */
+    int nembed;
     /* published figures, readable without the lock */
     atomic_int levels_cached;
     atomic_size_t memory_bytes;

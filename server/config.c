@@ -59,6 +59,8 @@ static const setting S[] = {
      "seconds the TetGen fill of one request may take, all its entries together (default 60)"},
     {"fill-memory", T_U64, OFF(limits.fill_memory_bytes), 64LL << 20, 1LL << 46,
      "address space of the TetGen helper in bytes (default 2 GiB)"},
+    {"max-embedded-vertices", T_U32, OFF(limits.max_embedded_vertices), 1, 0xfffffffeLL,
+     "vertices of one embedded model (default 2000000)"},
     {"tetgen", T_STR, OFF(limits.tetgen_helper), 0, 0,
      "the TetGen helper (default: subdivd-tetgen beside subdivd, else on PATH)"},
     {"sse-heartbeat", T_INT, OFF(sse_heartbeat_s), 1, 3600,
