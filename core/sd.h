@@ -486,6 +486,65 @@ sd_result sd_analyze_vertex(sd_complex *c, uint32_t v, sd_analysis *out, sd_erro
 sd_result sd_analyze_edge(sd_complex *c, uint32_t a, uint32_t b, sd_analysis *out, sd_error *err);
 void sd_analysis_free(sd_analysis *a);
 
+/* ---- embedded models (004 Sec. 5.1, eq. 13; core/embed.c) -------------------------------- */
+
+/* Free-form deformation: each vertex of a user's model is located in a solid cell of a level and
+ * bound to the cell's 4 vertices by barycentric coordinates; it then follows the solid as the
+ * level's points move (edits change positions in place, so an embedding stays valid while the
+ * level's topology does: until the level is dropped, by sd_complex_free, set_diagonal,
+ * add_channel, set_singular and the other calls that drop levels). Cells are the level's
+ * tetrahedra (0..T-1), then each octahedron o as the 4 tetrahedra around its major diagonal,
+ * numbered T + 4o + k, split as the outputs write it: (q,p,a,b), (q,p,b,a2), (q,p,a2,b2),
+ * (q,p,b2,a) for an octahedron (p,q,a,a2,b,b2). */
+typedef enum { SD_OUTSIDE_REFUSE = 0, SD_OUTSIDE_FIXED, SD_OUTSIDE_NEAREST } sd_outside;
+typedef struct sd_embedding sd_embedding;
+
+/* What a bind found: how many model vertices lie in no solid cell, and the first of them
+ * (indices into the model, ascending). */
+typedef struct sd_bind_report {
+    size_t outside;
+    size_t first[8];
+    int nfirst;
+} sd_bind_report;
+
+/* Bind n model vertices (xyz: 3n doubles, copied from) to the solid cells of level lv, read at
+ * the time of the call. A vertex goes to the lowest-numbered cell that holds it (on a shared face
+ * or in overlapping cells, too): within 1e-12 of the cell's longest edge of each of its face
+ * planes. A vertex in no cell, by `mode`: SD_OUTSIDE_REFUSE: SD_ERR_VALUE (item = the first such
+ * vertex), nothing returned, rep filled; SD_OUTSIDE_FIXED: it keeps its position (kept in the
+ * embedding) whatever the level does; SD_OUTSIDE_NEAREST: bound to the cell whose closest point
+ * is nearest to it (the lowest index among equals), its coordinates then outside [0,1] (they
+ * still sum to 1 and reproduce the vertex at the current positions). Memory comes from `alloc`
+ * (NULL: the C library), at most max_bytes (0: no cap) counting the locating grid while it
+ * exists. Errors: SD_ERR_ARG (no lv, out or xyz, an unknown mode), SD_ERR_VALUE (a coordinate
+ * not finite: item = the vertex, field = the coordinate; a level without solid cells; refused
+ * vertices), SD_ERR_LIMIT (over max_bytes, more than 2^30 vertices or 2^32 cells), SD_ERR_NOMEM.
+ * rep (optional) is filled in every mode. On success *out is the caller's, freed with
+ * sd_embed_free; it borrows nothing (lv is passed again to read positions). Const on the level:
+ * may run beside readers of the complex, not beside an edit. */
+sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outside mode,
+                        const sd_allocator *alloc, size_t max_bytes, sd_embedding **out,
+                        sd_bind_report *rep, sd_error *err);
+void sd_embed_free(sd_embedding *e);
+/* The number of model vertices, and the bytes the embedding holds (~76 per model vertex + 4 per
+ * level vertex). */
+size_t sd_embed_count(const sd_embedding *e);
+size_t sd_embed_memory(const sd_embedding *e);
+/* Vertex i's 4 level vertices and weights (summing to 1): returns 1; 0 (idx, w untouched) when
+ * it is fixed or i is out of range. */
+int sd_embed_weights(const sd_embedding *e, size_t i, uint32_t idx[4], double w[4]);
+/* Every model vertex at the current positions of lv (the level it was bound to): 3n doubles
+ * into out; fixed vertices at their rest position. */
+void sd_embed_positions(const sd_embedding *e, const sd_level *lv, double *out);
+/* After an edit that changed the positions of the `nchanged` level vertices `changed` (any
+ * order, repeats and indices beyond the level allowed; e.g. what sd_edit_report.changed gives for
+ * this level): recompute the model vertices bound to any of them into out (3n doubles holding
+ * the previous positions; the others are not written), write their indices to moved (room for
+ * n; ascending, each once) and return how many. Costs what the vertices found do, not n. Not
+ * thread-safe on the same embedding (it keeps a stamp per vertex). */
+size_t sd_embed_update(sd_embedding *e, const sd_level *lv, const uint32_t *changed,
+                       size_t nchanged, double *out, uint32_t *moved);
+
 #ifdef __cplusplus
 }
 #endif

@@ -1,0 +1,775 @@
+/* embed.c — models embedded in the subdivision solid: the core of free-form deformation
+ * (004 Sec. 5.1, eq. 13).
+ *
+ * A model vertex is located in a solid cell of level L and bound to its 4 vertices by
+ * barycentric coordinates; afterwards it is the same combination of those vertices' current
+ * positions, so it follows the solid as control points move (an edit changes a level's
+ * positions in place and keeps its topology, so the binding stays valid). Barycentric
+ * coordinates reproduce affine functions, so an affine map of the control points (which
+ * subdivision commutes with) maps the model by the same map, and a model bound without any
+ * edit sits exactly where it was given.
+ *
+ * Cells: a level's tetrahedra, then each octahedron as the 4 tetrahedra around its major
+ * diagonal (004 eq. 13), split the way the outputs write it (api/geom.c out_oct_tet): octahedron
+ * (p,q,a,a2,b,b2) with equator cycle a,b,a2,b2 gives (q,p,a,b), (q,p,b,a2), (q,p,a2,b2),
+ * (q,p,b2,a), positive like the octahedron. Cell T + 4o + k is octahedron o's k-th.
+ *
+ * Locating is a uniform grid over the cells' bounding boxes (each cell listed, in increasing
+ * index, in every bucket its box meets; buckets about the size of a cell's box, so a cell is in
+ * ~8 of them). Model vertices are taken in bucket order (a counting sort) so that consecutive
+ * vertices test the same cells while they are in cache; each tests its bucket's cells in
+ * increasing index and the first that holds it wins — so a point on a shared face, or in
+ * overlapping cells, goes to the lowest index. "Holds" means: within 1e-12 of the cell's longest
+ * edge of every face plane (all barycentric coordinates >= -1e-12 settles it at once, since a
+ * height is at most the longest edge; a coordinate below that is checked against the face's true
+ * height only when a cheap bound does not reject it). Boxes are widened by 1e-6 of the longest
+ * edge so that such points are in the cell's buckets (exact for cells whose corners are not
+ * sharper than that).
+ * A vertex in no cell is, by mode, refused, fixed (kept at its rest position, stored in place of
+ * its weights), or bound to the nearest cell: buckets are searched in growing shells around its
+ * own (clamped to the grid) until the best distance is below what the unexplored buckets can
+ * offer (per axis, the gap to the first bucket outside the shell); the distance is the exact
+ * point-tetrahedron distance (closest point on its faces). Its coordinates then extrapolate.
+ *
+ * Updates: at bind time the inverse map (level vertex -> model vertices bound to it, CSR, each
+ * row ascending) is built, so the model vertices an edit moves are found in time proportional to
+ * their number; a per-embedding stamp array dedupes them (a counter, not a clear per call), and
+ * a radix sort (insertion sort when few) returns them ascending.
+ *
+ * Memory: the embedding's own sd_mem (allocator and cap as sd_options'), counting the locating
+ * grid while it exists; sd_embed_memory is what stays (about 76 bytes per model vertex plus 4
+ * per level vertex).
+ */
+#include "internal.h"
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define IN_TOL 1e-12   /* distance to a face plane, relative to the cell's longest edge */
+#define BOX_TOL 1e-6   /* box widening, relative to the cell's longest edge */
+#define NONE UINT32_MAX
+
+struct sd_embedding {
+    sd_mem mem;
+    size_t n;
+    uint32_t nlv;       /* level vertices at bind time */
+    uint32_t *idx;      /* 4n: the cell's vertices, or idx[4i] = NONE: fixed */
+    double *w;          /* 4n: weights, or the rest position (3) of a fixed vertex */
+    uint32_t *rowptr;   /* nlv + 1: level vertex -> model vertices */
+    uint32_t *col;
+    uint32_t *stamp;    /* n: the last update that listed the vertex */
+    uint32_t *scratch;  /* n: the radix sort's other half */
+    uint32_t epoch;
+};
+
+/* ---- cells ------------------------------------------------------------------------------- */
+
+typedef struct cells {
+    const sd_level *lv;
+    const double *x;
+    uint32_t ntet, nc;
+} cells;
+
+static void cell_verts(const cells *C, uint32_t c, uint32_t v[4])
+{
+    if (c < C->ntet) {
+        sd_level_cell(C->lv, SD_CELL_TETRA, c, v);
+        return;
+    }
+    static const int eq[4] = {2, 4, 3, 5}; /* a, b, a2, b2: out_oct_tet's split */
+    uint32_t o[6], k = (c - C->ntet) & 3;
+    sd_level_cell(C->lv, SD_CELL_OCTA, (c - C->ntet) >> 2, o);
+    v[0] = o[1];
+    v[1] = o[0];
+    v[2] = o[eq[k]];
+    v[3] = o[eq[(k + 1) & 3]];
+}
+
+static inline void sub3(const double *a, const double *b, double *r)
+{
+    r[0] = a[0] - b[0];
+    r[1] = a[1] - b[1];
+    r[2] = a[2] - b[2];
+}
+static inline double dot3(const double *a, const double *b)
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+static inline void cross3(const double *a, const double *b, double *r)
+{
+    r[0] = a[1] * b[2] - a[2] * b[1];
+    r[1] = a[2] * b[0] - a[0] * b[2];
+    r[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+static double longest_edge(const double *const P[4])
+{
+    double m = 0;
+    for (int i = 0; i < 4; i++)
+        for (int j = i + 1; j < 4; j++) {
+            double d[3];
+            sub3(P[i], P[j], d);
+            double l = dot3(d, d);
+            m = l > m ? l : m;
+        }
+    return sqrt(m);
+}
+
+/* Barycentric coordinates of p in tetrahedron P (Cramer on the 3x3 system of the edges from
+ * P[0]); false for a degenerate one. */
+static bool bary(const double *const P[4], const double *p, double lam[4])
+{
+    double e1[3], e2[3], e3[3], d[3], n[3];
+    sub3(P[1], P[0], e1);
+    sub3(P[2], P[0], e2);
+    sub3(P[3], P[0], e3);
+    sub3(p, P[0], d);
+    cross3(e2, e3, n);
+    double det = dot3(e1, n);
+    if (!(det != 0) || !isfinite(det))
+        return false;
+    double dn[3], nd[3];
+    cross3(d, e3, dn);
+    cross3(e2, d, nd);
+    lam[1] = dot3(d, n) / det;
+    lam[2] = dot3(e1, dn) / det;
+    lam[3] = dot3(e1, nd) / det;
+    lam[0] = 1 - lam[1] - lam[2] - lam[3];
+    return true;
+}
+
+/* Does tetrahedron P (longest edge L) hold p, within IN_TOL L of each face plane? lam gets the
+ * coordinates. The distance beyond face i is -lam_i h_i, h_i = |det| / (2 A_i) <= L. */
+static bool holds(const double *const P[4], double L, const double *p, double lam[4])
+{
+    double e1[3], e2[3], e3[3], d[3], n[3];
+    sub3(P[1], P[0], e1);
+    sub3(P[2], P[0], e2);
+    sub3(P[3], P[0], e3);
+    sub3(p, P[0], d);
+    cross3(e2, e3, n);
+    double det = dot3(e1, n);
+    if (!(det != 0))
+        return false;
+    const double ad = fabs(det), tl = IN_TOL * L;
+    /* distance_i >= -lam_i |det| / L^2 (a face's area is at most L^2 / 2): reject on that */
+    const double cut = tl * L * L;
+    lam[1] = dot3(d, n) / det;
+    if (-lam[1] * ad > cut)
+        return false;
+    double dn[3], nd[3];
+    cross3(d, e3, dn);
+    lam[2] = dot3(e1, dn) / det;
+    if (-lam[2] * ad > cut)
+        return false;
+    cross3(e2, d, nd);
+    lam[3] = dot3(e1, nd) / det;
+    if (-lam[3] * ad > cut)
+        return false;
+    lam[0] = 1 - lam[1] - lam[2] - lam[3];
+    if (-lam[0] * ad > cut)
+        return false;
+    for (int i = 0; i < 4; i++) {
+        if (lam[i] >= -IN_TOL)
+            continue;
+        const double *f[3];
+        for (int j = 0, k = 0; j < 4; j++)
+            if (j != i)
+                f[k++] = P[j];
+        double u[3], v[3], c[3];
+        sub3(f[1], f[0], u);
+        sub3(f[2], f[0], v);
+        cross3(u, v, c);
+        double area2 = sqrt(dot3(c, c)); /* twice the face's area */
+        if (-lam[i] * ad > tl * area2)
+            return false;
+    }
+    return true;
+}
+
+/* Closest point to p on triangle abc, squared distance (Ericson, Real-Time Collision Detection
+ * 5.1.5: Voronoi regions of the vertices, edges and face). */
+static double tri_dist2(const double *p, const double *a, const double *b, const double *c)
+{
+    double ab[3], ac[3], ap[3], q[3];
+    sub3(b, a, ab);
+    sub3(c, a, ac);
+    sub3(p, a, ap);
+    double d1 = dot3(ab, ap), d2 = dot3(ac, ap);
+    if (d1 <= 0 && d2 <= 0) {
+        memcpy(q, a, sizeof q);
+        goto done;
+    }
+    double bp[3];
+    sub3(p, b, bp);
+    double d3 = dot3(ab, bp), d4 = dot3(ac, bp);
+    if (d3 >= 0 && d4 <= d3) {
+        memcpy(q, b, sizeof q);
+        goto done;
+    }
+    double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+        double t = d1 / (d1 - d3);
+        for (int k = 0; k < 3; k++)
+            q[k] = a[k] + t * ab[k];
+        goto done;
+    }
+    double cp[3];
+    sub3(p, c, cp);
+    double d5 = dot3(ab, cp), d6 = dot3(ac, cp);
+    if (d6 >= 0 && d5 <= d6) {
+        memcpy(q, c, sizeof q);
+        goto done;
+    }
+    double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+        double t = d2 / (d2 - d6);
+        for (int k = 0; k < 3; k++)
+            q[k] = a[k] + t * ac[k];
+        goto done;
+    }
+    double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+        double t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        for (int k = 0; k < 3; k++)
+            q[k] = b[k] + t * (c[k] - b[k]);
+        goto done;
+    }
+    double den = 1 / (va + vb + vc), v = vb * den, w = vc * den;
+    for (int k = 0; k < 3; k++)
+        q[k] = a[k] + ab[k] * v + ac[k] * w;
+done:;
+    double d[3];
+    sub3(p, q, d);
+    return dot3(d, d);
+}
+
+/* Squared distance from p to tetrahedron P: 0 inside, else to the nearest face. */
+static double tet_dist2(const double *const P[4], const double *p)
+{
+    double lam[4];
+    if (bary(P, p, lam) && lam[0] >= 0 && lam[1] >= 0 && lam[2] >= 0 && lam[3] >= 0)
+        return 0;
+    double best = DBL_MAX;
+    for (int i = 0; i < 4; i++) {
+        const double *f[3];
+        for (int j = 0, k = 0; j < 4; j++)
+            if (j != i)
+                f[k++] = P[j];
+        double d = tri_dist2(p, f[0], f[1], f[2]);
+        best = d < best ? d : best;
+    }
+    return best;
+}
+
+/* ---- the grid ------------------------------------------------------------------------------ */
+
+typedef struct grid {
+    double lo[3], h[3], inv[3];
+    uint32_t dim[3];
+    size_t nb;
+    uint32_t *start;    /* nb + 1 */
+    uint32_t *cell;     /* the cells of bucket b: cell[start[b] .. start[b+1]) */
+    float *len;         /* per cell: its longest edge, rounded up */
+} grid;
+
+static inline uint32_t axis_at(const grid *g, int a, double x)
+{
+    double t = floor((x - g->lo[a]) * g->inv[a]);
+    if (!(t > 0))
+        return 0;
+    return t >= g->dim[a] ? g->dim[a] - 1 : (uint32_t)t;
+}
+
+static inline size_t bucket_of(const grid *g, const double *p)
+{
+    return ((size_t)axis_at(g, 2, p[2]) * g->dim[1] + axis_at(g, 1, p[1])) * g->dim[0] +
+           axis_at(g, 0, p[0]);
+}
+
+static void cell_pts(const cells *C, uint32_t c, const double *P[4])
+{
+    uint32_t v[4];
+    cell_verts(C, c, v);
+    for (int k = 0; k < 4; k++)
+        P[k] = C->x + 3 * (size_t)v[k];
+}
+
+/* The widened box of cell c (its longest edge from the grid's table). */
+static void cell_box(const cells *C, const grid *g, uint32_t c, double lo[3], double hi[3])
+{
+    const double *P[4];
+    cell_pts(C, c, P);
+    double pad = BOX_TOL * g->len[c];
+    for (int a = 0; a < 3; a++) {
+        double l = P[0][a], h = P[0][a];
+        for (int k = 1; k < 4; k++) {
+            l = P[k][a] < l ? P[k][a] : l;
+            h = P[k][a] > h ? P[k][a] : h;
+        }
+        lo[a] = l - pad;
+        hi[a] = h + pad;
+    }
+}
+
+static void grid_free(sd_mem *m, grid *g)
+{
+    sdi_free(m, g->start);
+    sdi_free(m, g->cell);
+    sdi_free(m, g->len);
+}
+
+static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
+{
+    memset(g, 0, sizeof *g);
+    g->len = sdi_alloc(m, (size_t)C->nc * sizeof *g->len);
+    if (!g->len)
+        return sdi_fail_nomem(err, m);
+    /* pass 1: longest edges, the bounding box, the mean box size */
+    double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX}, ext = 0;
+    for (uint32_t c = 0; c < C->nc; c++) {
+        const double *P[4];
+        cell_pts(C, c, P);
+        double L = longest_edge(P);
+        float f = (float)L;
+        g->len[c] = (double)f < L ? nextafterf(f, FLT_MAX) : f;
+        for (int a = 0; a < 3; a++) {
+            double l = P[0][a], h = P[0][a];
+            for (int k = 1; k < 4; k++) {
+                l = P[k][a] < l ? P[k][a] : l;
+                h = P[k][a] > h ? P[k][a] : h;
+            }
+            lo[a] = l < lo[a] ? l : lo[a];
+            hi[a] = h > hi[a] ? h : hi[a];
+            ext += h - l;
+        }
+    }
+    /* buckets about the mean box extent (a cell then meets ~8), at most ~2 per cell and 2048 a side */
+    double s = ext / (3.0 * C->nc), span[3];
+    for (int a = 0; a < 3; a++) {
+        span[a] = hi[a] - lo[a];
+        double pad = 1e-9 * (span[a] + fabs(lo[a]) + fabs(hi[a])) + DBL_MIN;
+        lo[a] -= pad;
+        span[a] += 2 * pad;
+    }
+    for (;;) {
+        double nb = 1;
+        for (int a = 0; a < 3; a++) {
+            double d = s > 0 ? ceil(span[a] / s) : 1;
+            g->dim[a] = d < 1 ? 1 : d > 2048 ? 2048 : (uint32_t)d;
+            nb *= g->dim[a];
+        }
+        if ((nb <= 2.0 * C->nc + 8 && nb < UINT32_MAX) || !(s > 0))
+            break;
+        s *= 1.25;
+    }
+    g->nb = (size_t)g->dim[0] * g->dim[1] * g->dim[2];
+    for (int a = 0; a < 3; a++) {
+        g->lo[a] = lo[a];
+        g->h[a] = span[a] / g->dim[a];
+        g->inv[a] = g->dim[a] / span[a];
+    }
+    g->start = sdi_calloc(m, g->nb + 1, sizeof *g->start);
+    if (!g->start)
+        return sdi_fail_nomem(err, m);
+    /* pass 2: entries per bucket; pass 3: the entries, cells in increasing order */
+    uint64_t total = 0;
+    for (int pass = 0; pass < 2; pass++) {
+        for (uint32_t c = 0; c < C->nc; c++) {
+            double bl[3], bh[3];
+            cell_box(C, g, c, bl, bh);
+            uint32_t i0[3], i1[3];
+            for (int a = 0; a < 3; a++) {
+                i0[a] = axis_at(g, a, bl[a]);
+                i1[a] = axis_at(g, a, bh[a]);
+            }
+            for (uint32_t z = i0[2]; z <= i1[2]; z++)
+                for (uint32_t y = i0[1]; y <= i1[1]; y++) {
+                    size_t row = ((size_t)z * g->dim[1] + y) * g->dim[0];
+                    for (uint32_t x = i0[0]; x <= i1[0]; x++) {
+                        if (pass == 0)
+                            g->start[row + x + 1]++;
+                        else
+                            g->cell[g->start[row + x]++] = c;
+                    }
+                    if (pass == 0)
+                        total += i1[0] - i0[0] + 1;
+                }
+        }
+        if (pass == 0) {
+            if (total >= UINT32_MAX)
+                return sdi_fail(err, SD_ERR_LIMIT, -1, -1,
+                                "the locating grid would hold %llu cell entries (at most %u)",
+                                (unsigned long long)total, UINT32_MAX - 1);
+            for (size_t b = 0; b < g->nb; b++)
+                g->start[b + 1] += g->start[b];
+            g->cell = sdi_alloc(m, (size_t)total * sizeof *g->cell);
+            if (!g->cell)
+                return sdi_fail_nomem(err, m);
+        }
+    }
+    /* pass 3 advanced each start to the next bucket's: shift back */
+    memmove(g->start + 1, g->start, g->nb * sizeof *g->start);
+    g->start[0] = 0;
+    return SD_OK;
+}
+
+/* The first cell of p's bucket that holds p (NONE if none), its coordinates in lam. */
+static uint32_t locate(const cells *C, const grid *g, size_t b, const double *p, double lam[4])
+{
+    for (uint32_t j = g->start[b]; j < g->start[b + 1]; j++) {
+        uint32_t c = g->cell[j];
+        const double *P[4];
+        cell_pts(C, c, P);
+        if (holds(P, g->len[c], p, lam))
+            return c;
+    }
+    return NONE;
+}
+
+/* The nearest cell to p (lowest index among equals): shells of buckets around p's. */
+static uint32_t nearest(const cells *C, const grid *g, const double *p)
+{
+    int64_t b[3], d[3];
+    for (int a = 0; a < 3; a++) {
+        b[a] = axis_at(g, a, p[a]);
+        d[a] = g->dim[a];
+    }
+    double best = DBL_MAX;
+    uint32_t bc = NONE;
+    for (int64_t r = 0;; r++) {
+        int64_t l[3], h[3];
+        for (int a = 0; a < 3; a++) {
+            l[a] = b[a] - r < 0 ? 0 : b[a] - r;
+            h[a] = b[a] + r >= d[a] ? d[a] - 1 : b[a] + r;
+        }
+        for (int64_t z = l[2]; z <= h[2]; z++)
+            for (int64_t y = l[1]; y <= h[1]; y++) {
+                bool edge = llabs(z - b[2]) == r || llabs(y - b[1]) == r;
+                for (int64_t x = l[0]; x <= h[0]; x++) {
+                    if (!edge && llabs(x - b[0]) != r) { /* inside the shell: jump across */
+                        if (x < b[0] + r)
+                            x = b[0] + r - 1;
+                        continue;
+                    }
+                    size_t k = ((size_t)z * g->dim[1] + (size_t)y) * g->dim[0] + (size_t)x;
+                    for (uint32_t j = g->start[k]; j < g->start[k + 1]; j++) {
+                        uint32_t c = g->cell[j];
+                        const double *P[4];
+                        cell_pts(C, c, P);
+                        double q = tet_dist2(P, p);
+                        if (q < best || (q == best && c < bc)) {
+                            best = q;
+                            bc = c;
+                        }
+                    }
+                }
+            }
+        /* what the buckets beyond the shell can offer: per axis, the gap to the first of them */
+        double bound = DBL_MAX;
+        bool more = false;
+        for (int a = 0; a < 3; a++) {
+            if (b[a] + r + 1 < d[a]) {
+                double e = g->lo[a] + (double)(b[a] + r + 1) * g->h[a] - p[a];
+                bound = fmin(bound, e > 0 ? e : 0);
+                more = true;
+            }
+            if (b[a] - r - 1 >= 0) {
+                double e = p[a] - (g->lo[a] + (double)(b[a] - r) * g->h[a]);
+                bound = fmin(bound, e > 0 ? e : 0);
+                more = true;
+            }
+        }
+        if (!more || (bc != NONE && best < bound * bound))
+            return bc;
+    }
+}
+
+/* ---- binding ------------------------------------------------------------------------------- */
+
+void sd_embed_free(sd_embedding *e)
+{
+    if (!e)
+        return;
+    sd_mem m = e->mem;
+    sdi_free(&m, e->idx);
+    sdi_free(&m, e->w);
+    sdi_free(&m, e->rowptr);
+    sdi_free(&m, e->col);
+    sdi_free(&m, e->stamp);
+    sdi_free(&m, e->scratch);
+    sdi_free(&m, e);
+}
+
+static void note_outside(sd_bind_report *rep, size_t i)
+{
+    if (rep->nfirst < (int)(sizeof rep->first / sizeof *rep->first))
+        rep->first[rep->nfirst++] = i;
+    rep->outside++;
+}
+
+/* The inverse map: level vertex -> bound model vertices (ascending). */
+static bool build_inverse(sd_embedding *e)
+{
+    e->rowptr = sdi_calloc(&e->mem, (size_t)e->nlv + 1, sizeof *e->rowptr);
+    if (!e->rowptr)
+        return false;
+    size_t nent = 0;
+    for (size_t i = 0; i < e->n; i++)
+        if (e->idx[4 * i] != NONE) {
+            for (int k = 0; k < 4; k++)
+                e->rowptr[e->idx[4 * i + k] + 1]++;
+            nent += 4;
+        }
+    for (uint32_t v = 0; v < e->nlv; v++)
+        e->rowptr[v + 1] += e->rowptr[v];
+    e->col = sdi_alloc(&e->mem, (nent ? nent : 1) * sizeof *e->col);
+    if (!e->col)
+        return false;
+    for (size_t i = 0; i < e->n; i++)
+        if (e->idx[4 * i] != NONE)
+            for (int k = 0; k < 4; k++)
+                e->col[e->rowptr[e->idx[4 * i + k]]++] = (uint32_t)i;
+    memmove(e->rowptr + 1, e->rowptr, (size_t)e->nlv * sizeof *e->rowptr);
+    e->rowptr[0] = 0;
+    return true;
+}
+
+sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outside mode,
+                        const sd_allocator *alloc, size_t max_bytes, sd_embedding **out,
+                        sd_bind_report *rep, sd_error *err)
+{
+    sd_bind_report dummy;
+    if (!rep)
+        rep = &dummy;
+    memset(rep, 0, sizeof *rep);
+    if (out)
+        *out = NULL;
+    if (!lv || !out || (n && !xyz))
+        return sdi_fail(err, SD_ERR_ARG, -1, -1, "no level, model or result given");
+    if (mode != SD_OUTSIDE_REFUSE && mode != SD_OUTSIDE_FIXED && mode != SD_OUTSIDE_NEAREST)
+        return sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown outside mode %d", (int)mode);
+    if (n > UINT32_MAX / 4)
+        return sdi_fail(err, SD_ERR_LIMIT, -1, -1, "%zu model vertices (at most %u)", n,
+                        UINT32_MAX / 4);
+    cells C = {lv, sd_level_channel(lv, 0, NULL), sd_level_num_cells(lv, SD_CELL_TETRA), 0};
+    uint64_t nc = C.ntet + 4 * (uint64_t)sd_level_num_cells(lv, SD_CELL_OCTA);
+    if (nc == 0)
+        return sdi_fail(err, SD_ERR_VALUE, -1, -1, "level %u has no solid cells", sd_level_index(lv));
+    if (nc >= UINT32_MAX)
+        return sdi_fail(err, SD_ERR_LIMIT, -1, -1, "%llu solid cells (at most %u)",
+                        (unsigned long long)nc, UINT32_MAX - 1);
+    C.nc = (uint32_t)nc;
+    for (size_t i = 0; i < 3 * n; i++)
+        if (!isfinite(xyz[i]))
+            return sdi_fail(err, SD_ERR_VALUE, (long)(i / 3), (int)(i % 3),
+                            "model vertex %zu: coordinate %d is not finite", i / 3, (int)(i % 3));
+
+    sd_mem m;
+    sdi_mem_init(&m, alloc, max_bytes);
+    const uint32_t nlv = sd_level_num_vertices(lv);
+    /* what stays: the vertices' cells and weights, the inverse map, stamps and scratch */
+    const double keep = 16.0 * 8 + (double)n * (16 + 32 + 16 + 4 + 4) + 4.0 * ((double)nlv + 1);
+    if (max_bytes && keep > (double)max_bytes)
+        return sdi_fail(err, SD_ERR_LIMIT, -1, -1,
+                        "binding %zu model vertices takes %.0f bytes (limit %zu)", n, keep,
+                        max_bytes);
+    sd_embedding *e = sdi_calloc(&m, 1, sizeof *e);
+    if (!e)
+        return sdi_fail_nomem(err, &m);
+    e->n = n;
+    e->nlv = nlv;
+    e->idx = sdi_alloc(&m, (n ? 4 * n : 1) * sizeof *e->idx);
+    e->w = e->idx ? sdi_alloc(&m, (n ? 4 * n : 1) * sizeof *e->w) : NULL;
+    e->stamp = e->w ? sdi_calloc(&m, n ? n : 1, sizeof *e->stamp) : NULL;
+    e->scratch = e->stamp ? sdi_alloc(&m, (n ? n : 1) * sizeof *e->scratch) : NULL;
+    sd_result r = SD_OK;
+    grid g = {0};
+    uint32_t *ord = NULL, *cnt = NULL;
+    if (!e->scratch) {
+        r = sdi_fail_nomem(err, &m);
+        goto fail;
+    }
+    if ((r = grid_build(&m, &C, &g, err)))
+        goto fail;
+
+    /* model vertices in bucket order: e->scratch holds each one's bucket meanwhile */
+    ord = sdi_alloc(&m, (n ? n : 1) * sizeof *ord);
+    cnt = ord ? sdi_calloc(&m, g.nb + 1, sizeof *cnt) : NULL;
+    if (!cnt) {
+        r = sdi_fail_nomem(err, &m);
+        goto fail;
+    }
+    for (size_t i = 0; i < n; i++) {
+        e->scratch[i] = (uint32_t)bucket_of(&g, xyz + 3 * i);
+        cnt[e->scratch[i] + 1]++;
+    }
+    for (size_t b = 0; b < g.nb; b++)
+        cnt[b + 1] += cnt[b];
+    for (size_t i = 0; i < n; i++)
+        ord[cnt[e->scratch[i]]++] = (uint32_t)i;
+    sdi_free(&m, cnt);
+    cnt = NULL;
+
+    for (size_t j = 0; j < n; j++) {
+        size_t i = ord[j];
+        double lam[4];
+        uint32_t c = locate(&C, &g, e->scratch[i], xyz + 3 * i, lam);
+        if (c == NONE) {
+            e->idx[4 * i] = NONE; /* settled below, in model order */
+            continue;
+        }
+        cell_verts(&C, c, e->idx + 4 * i);
+        memcpy(e->w + 4 * i, lam, sizeof lam);
+    }
+    for (size_t i = 0; i < n; i++) {
+        if (e->idx[4 * i] != NONE)
+            continue;
+        note_outside(rep, i);
+        if (mode == SD_OUTSIDE_FIXED) {
+            memcpy(e->w + 4 * i, xyz + 3 * i, 3 * sizeof *e->w);
+            e->w[4 * i + 3] = 0;
+        } else if (mode == SD_OUTSIDE_NEAREST) {
+            uint32_t c = nearest(&C, &g, xyz + 3 * i);
+            const double *P[4];
+            cell_pts(&C, c, P);
+            cell_verts(&C, c, e->idx + 4 * i);
+            if (!bary(P, xyz + 3 * i, e->w + 4 * i)) { /* not for a valid complex's cells */
+                r = sdi_fail(err, SD_ERR_DEGENERATE, (long)i, -1,
+                             "model vertex %zu: its nearest cell %u is degenerate", i, c);
+                goto fail;
+            }
+        }
+    }
+    if (mode == SD_OUTSIDE_REFUSE && rep->outside) {
+        r = sdi_fail(err, SD_ERR_VALUE, (long)rep->first[0], -1,
+                     "%zu of %zu model vertices are in no solid cell of level %u (the first: %zu)",
+                     rep->outside, n, sd_level_index(lv), rep->first[0]);
+        goto fail;
+    }
+    sdi_free(&m, ord);
+    ord = NULL;
+    grid_free(&m, &g);
+    memset(&g, 0, sizeof g);
+    e->mem = m; /* from here on the embedding counts itself */
+    if (!build_inverse(e)) {
+        m = e->mem;
+        r = sdi_fail_nomem(err, &m);
+        sd_embed_free(e);
+        return r;
+    }
+    *out = e;
+    return SD_OK;
+
+fail:
+    sdi_free(&m, ord);
+    sdi_free(&m, cnt);
+    grid_free(&m, &g);
+    e->mem = m;
+    sd_embed_free(e);
+    return r;
+}
+
+/* ---- reading ------------------------------------------------------------------------------- */
+
+size_t sd_embed_count(const sd_embedding *e)
+{
+    return e ? e->n : 0;
+}
+
+size_t sd_embed_memory(const sd_embedding *e)
+{
+    return e ? e->mem.used : 0;
+}
+
+int sd_embed_weights(const sd_embedding *e, size_t i, uint32_t idx[4], double w[4])
+{
+    if (!e || i >= e->n || e->idx[4 * i] == NONE)
+        return 0;
+    memcpy(idx, e->idx + 4 * i, 4 * sizeof *idx);
+    memcpy(w, e->w + 4 * i, 4 * sizeof *w);
+    return 1;
+}
+
+static inline void place(const sd_embedding *e, const double *x, size_t i, double *o)
+{
+    const uint32_t *v = e->idx + 4 * i;
+    const double *w = e->w + 4 * i;
+    if (v[0] == NONE) {
+        memcpy(o, w, 3 * sizeof *o);
+        return;
+    }
+    const double *a = x + 3 * (size_t)v[0], *b = x + 3 * (size_t)v[1], *c = x + 3 * (size_t)v[2],
+                 *d = x + 3 * (size_t)v[3];
+    for (int k = 0; k < 3; k++)
+        o[k] = w[0] * a[k] + w[1] * b[k] + w[2] * c[k] + w[3] * d[k];
+}
+
+void sd_embed_positions(const sd_embedding *e, const sd_level *lv, double *out)
+{
+    const double *x = sd_level_channel(lv, 0, NULL);
+    for (size_t i = 0; i < e->n; i++)
+        place(e, x, i, out + 3 * i);
+}
+
+/* Ascending order of a[0..k) (distinct values below 2^32), tmp of k. */
+static void sort_ids(uint32_t *a, uint32_t *tmp, size_t k)
+{
+    if (k < 64) {
+        for (size_t i = 1; i < k; i++) {
+            uint32_t v = a[i];
+            size_t j = i;
+            for (; j && a[j - 1] > v; j--)
+                a[j] = a[j - 1];
+            a[j] = v;
+        }
+        return;
+    }
+    uint32_t mx = 0;
+    for (size_t i = 0; i < k; i++)
+        mx = a[i] > mx ? a[i] : mx;
+    uint32_t *src = a, *dst = tmp;
+    for (int shift = 0; shift < 32 && (mx >> shift); shift += 11) {
+        size_t c[2049] = {0};
+        for (size_t i = 0; i < k; i++)
+            c[((src[i] >> shift) & 2047) + 1]++;
+        for (int d = 0; d < 2048; d++)
+            c[d + 1] += c[d];
+        for (size_t i = 0; i < k; i++)
+            dst[c[(src[i] >> shift) & 2047]++] = src[i];
+        uint32_t *t = src;
+        src = dst;
+        dst = t;
+    }
+    if (src != a)
+        memcpy(a, src, k * sizeof *a);
+}
+
+size_t sd_embed_update(sd_embedding *e, const sd_level *lv, const uint32_t *changed,
+                       size_t nchanged, double *out, uint32_t *moved)
+{
+    if (++e->epoch == 0) { /* the counter wrapped: start the stamps afresh */
+        memset(e->stamp, 0, e->n * sizeof *e->stamp);
+        e->epoch = 1;
+    }
+    const uint32_t ep = e->epoch;
+    size_t k = 0;
+    for (size_t j = 0; j < nchanged; j++) {
+        uint32_t v = changed[j];
+        if (v >= e->nlv)
+            continue;
+        for (uint32_t q = e->rowptr[v]; q < e->rowptr[v + 1]; q++) {
+            uint32_t i = e->col[q];
+            if (e->stamp[i] != ep) {
+                e->stamp[i] = ep;
+                moved[k++] = i;
+            }
+        }
+    }
+    sort_ids(moved, e->scratch, k);
+    const double *x = sd_level_channel(lv, 0, NULL);
+    for (size_t j = 0; j < k; j++)
+        place(e, x, moved[j], out + 3 * (size_t)moved[j]);
+    return k;
+}
