@@ -15,6 +15,7 @@
 #include "mem.h"
 #include "rows.h"
 #include <ctype.h>
+#include <stdarg.h>
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>

@@ -12,6 +12,7 @@
  * handlers, so an import is checked like those requests, and a problem points into the
  * document ("/import/complex/vertices/3").
  */
+#include "embedded.h"
 #include "handlers.h"
 #include "internal.h"
 #include "jsonin.h"
@@ -25,9 +26,10 @@
 json_t *api_export(api_model *m, uint64_t version)
 {
     json_t *cx = api_complex_json(m), *tags = api_tags_json(m), *rules = api_rules_json(m);
-    json_t *j = json_pack("{s:s, s:i, s:I, s:o*, s:o*, s:o*, s:{}}", "format", EXPORT_FORMAT,
+    json_t *j = json_pack("{s:s, s:i, s:I, s:o*, s:o*, s:o*, s:o*}", "format", EXPORT_FORMAT,
                           "format_version", EXPORT_FORMAT_VERSION, "version", (json_int_t)version,
-                          "complex", cx, "tags", tags, "rules", rules, "embedded");
+                          "complex", cx, "tags", tags, "rules", rules, "embedded",
+                          api_embed_export(m));
     return j;
 }
 
@@ -89,9 +91,8 @@ int api_import(json_t *doc, const char *base, const api_limits *lim, api_model *
         return p->status;
     json_t *emb = json_object_get(doc, "embedded");
     snprintf(at, sizeof at, "%s/embedded", base);
-    if (emb && (!json_is_object(emb) || json_object_size(emb)))
-        return api_fail_at(p, 422, "unknown-value", at,
-                           "embedded models are not supported by this daemon: must be {}");
+    if (emb && !json_is_object(emb))
+        return api_fail_at(p, 400, "wrong-type", at, "must be an object: name -> model");
     json_t *cx = json_object_get(doc, "complex"), *tags = json_object_get(doc, "tags");
     json_t *rules = json_object_get(doc, "rules");
     if (rules && !json_is_object(rules)) {
@@ -139,6 +140,11 @@ int api_import(json_t *doc, const char *base, const api_limits *lim, api_model *
     if (!rc && tags && !tags_empty(tags)) {
         snprintf(at, sizeof at, "%s/tags", base);
         rc = step(api_put_tags, &m, tags, lim, at, p);
+    }
+    if (!rc && emb && json_object_size(emb)) { /* bound to the imported levels */
+        atomic_store(&m->version, (uint64_t)v);
+        snprintf(at, sizeof at, "%s/embedded", base);
+        rc = api_embed_import(m, emb, at, lim, p);
     }
     if (rc) {
         api_model_unref(m);

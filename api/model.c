@@ -7,6 +7,7 @@
  * which are api_malloc ones is in model.h; api_model_unref frees each with its own family.
  */
 #include "model.h"
+#include "embedded.h"
 #include "mem.h"
 #include <stdio.h>
 #include <stdlib.h>
@@ -119,8 +120,8 @@ void api_model_publish(api_model *m)
     for (int l = 0; l <= SD_MAX_LEVEL; l++)
         geo += m->geometry[l] ? m->geometry[l]->bytes : 0;
     atomic_store(&m->levels_cached, m->c ? sd_complex_levels_computed(m->c) : 0);
-    atomic_store(&m->memory_bytes,
-                 (m->c ? sd_complex_memory(m->c) : 0) + geo + api_delta_bytes(m->delta));
+    atomic_store(&m->memory_bytes, (m->c ? sd_complex_memory(m->c) : 0) + geo +
+                                       api_delta_bytes(m->delta) + api_embed_bytes(m));
 }
 
 struct out_geometry *api_model_geometry_locked(api_model *m, int level)
@@ -283,6 +284,7 @@ void api_model_unref(api_model *m)
     for (int l = 0; l <= SD_MAX_LEVEL; l++)
         out_geometry_free(m->geometry[l]);
     api_delta_free(m->delta);
+    api_embed_free_all(m); /* before the complex: the bindings are to its level */
     sd_complex_free(m->c);
     api_input_unref(m->in);
     pthread_mutex_destroy(&m->lock);

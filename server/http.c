@@ -481,6 +481,8 @@ static int early_body(req *r)
                                                      MHD_HTTP_HEADER_CONTENT_TYPE);
         int json = ct && !strncasecmp(ct, "application/json", 16) &&
                    (ct[16] == 0 || ct[16] == ';' || ct[16] == ' ');
+        if (r->rt->body == 2 && ct && !strncasecmp(ct, "application/octet-stream", 24))
+            json = 1; /* a route that also takes binary bodies (PUT /embedded/{name}) */
         if (!json && (cl || te0)) {
             http_fail(r, 415, "unsupported-media-type",
                       "send the body as application/json (got %.60s)", ct ? ct : "no Content-Type");

@@ -19,7 +19,7 @@ int parse_route(const char *pattern, const char *path, char *id, size_t id_cap, 
             size_t n = strcspn(s, "/");
             if (!pe || n == 0)
                 return 0;
-            int is_id = p[1] != 'L';
+            int is_id = p[1] == 'i' || p[1] == 's'; /* {id}, {slug}; {L} and {name}: the other */
             char *dst = is_id ? id : level;
             size_t cap = is_id ? id_cap : level_cap;
             if (n >= cap)

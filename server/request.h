@@ -34,7 +34,7 @@ typedef struct route {
     const char *pattern;   /* segments; "{id}" and "{L}" match one segment */
     handler_fn fn;
     int session;           /* needs a session ({id}) and its token */
-    int body;              /* takes a JSON body */
+    int body;              /* takes a JSON body (2: or application/octet-stream) */
     const char *const *query; /* the query parameters it takes, NULL-terminated ({"*", NULL}:
                                  any); NULL: none (http.c answers 400 for others). One that
                                  lists "access_token" also takes the session's token there
@@ -63,7 +63,7 @@ struct req {
     double t0;
     session *s;
     char seg_id[40];
-    char seg_level[24];
+    char seg_level[64];    /* {L}, or an embedded model's {name} */
     int status;
     atomic_uint_fast64_t bytes;
     int queued;
@@ -73,7 +73,8 @@ struct req {
 
 /* ---- routes.c ---- */
 
-/* Match `path` against a route pattern; captures {L} into seg_level, {id} and {slug} into seg_id. */
+/* Match `path` against a route pattern; captures {L} and {name} into seg_level, {id} and {slug}
+ * into seg_id. */
 int route_match(const char *pattern, const char *path, req *r);
 /* The route for method (HEAD as GET) and path, with its segments captured; NULL if none. */
 const route *route_find(const char *method, const char *path, req *r);

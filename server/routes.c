@@ -14,6 +14,7 @@
 #include "../api/delta.h"
 #include "../api/details.h"
 #include "../api/complex_stream.h"
+#include "../api/embedded.h"
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
 #include "../api/mem.h"
@@ -547,6 +548,11 @@ static void change(req *r, change_op op, const char *const *packed, const char *
     int rc;
     if (!(rc = if_match(r, version, &p)) && !(rc = http_take_slot(r, &p))) {
         rc = op(cur, b, &packs, &r->srv->cfg.limits, &next, answer, &p);
+        /* the embedded models, their rest shapes bound to the new model (all or nothing) */
+        if (!rc && (rc = api_embed_rebind(cur, next, &r->srv->cfg.limits, NULL, &p))) {
+            api_model_unref(next);
+            next = NULL;
+        }
         http_give_slot(r);
     }
     json_decref(b);
@@ -754,6 +760,10 @@ static void h_edit(req *r)
                  (unsigned long long)counts[l]);
     }
     strcat(up, "}");
+    if (!rc && rebuilt && (rc = api_embed_rebind(m, rebuilt, &r->srv->cfg.limits, &slot, &p))) {
+        api_model_unref(rebuilt);
+        rebuilt = NULL;
+    }
     if (!rc && rebuilt && (rc = store_journal(r, b, version + 1, &p))) {
         api_model_unref(rebuilt); /* a new model (nothing changed in place): not published */
         rebuilt = NULL;
@@ -964,6 +974,166 @@ static void delta(req *r, api_model *m, int level)
 
 static void h_delta(req *r) { with_level(r, delta); }
 
+/* ---- handlers: embedded models (api/embedded.h) ------------------------------------------- */
+
+static const char *const EMBED_PUT_KEYS[] = {"level", "outside", NULL};
+static const char *const EMBED_GET_KEYS[] = {"format", NULL};
+
+/* The commit of an in-place change of the model's embedded list: the model's snapshot. */
+typedef struct embed_commit {
+    req *r;
+    api_model *m;
+    uint64_t version;
+} embed_commit;
+
+static int commit_embed(void *ud, api_problem *p)
+{
+    embed_commit *c = ud;
+    return store_snapshot(c->r, c->m, c->version - 1, c->version, p);
+}
+
+/* A body the handler answers itself (api_malloc'd), with the version as ETag. */
+static void reply_body(req *r, char *body, size_t len, const char *ctype, uint64_t version)
+{
+    struct MHD_Response *resp = http_buffer_response(ctype, body, len);
+    if (!resp) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
+    atomic_store(&r->bytes, len);
+    http_set_etag(resp, version);
+    http_queue(r, 200, resp);
+}
+
+/* PUT /embedded/{name}: JSON {"vertices", "triangles", "level", "outside"}, or the binary layout
+ * (application/octet-stream, level and outside in the query). Bound in a compute slot, stored,
+ * published in place with a new version, told to the listeners (kind "embedded"). */
+static void h_put_embedded(req *r)
+{
+    api_problem p = {0};
+    api_embed_def *d = NULL;
+    const char *ct = http_header(r, "Content-Type");
+    int rc;
+    if (ct && !strncasecmp(ct, "application/octet-stream", 24)) {
+        rc = api_embed_parse_binary(r->body ? r->body : "", r->len, r->seg_level,
+                                    http_arg(r, "level"), http_arg(r, "outside"),
+                                    &r->srv->cfg.limits, &d, &p);
+    } else {
+        if (http_arg(r, "level") || http_arg(r, "outside")) {
+            api_fail_at(&p, 400, "bad-parameter", http_arg(r, "level") ? "level" : "outside",
+                        "level and outside go in the JSON body (the query is for binary bodies)");
+            http_reply_problem(r, &p);
+            return;
+        }
+        json_t *b = body_or_answer(r, NULL, NULL);
+        if (!b)
+            return;
+        rc = api_embed_parse(b, r->seg_level, &r->srv->cfg.limits, &d, &p);
+        json_decref(b);
+    }
+    if (rc) {
+        http_reply_problem(r, &p);
+        return;
+    }
+    pthread_mutex_lock(&r->s->write);
+    uint64_t version;
+    api_model *m = session_model(r->s, &version);
+    json_t *summary = NULL;
+    api_slot slot = slot_of(r);
+    embed_commit ec = {r, m, version + 1};
+    api_edit_commit commit = {commit_embed, &ec};
+    if (!(rc = if_match(r, version, &p)))
+        rc = api_embed_put(m, d, version + 1, &r->srv->cfg.limits, &slot, &commit, &summary, &p);
+    api_embed_def_unref(d);
+    if (!rc) {
+        version = session_bump(r->s);
+        notify(r, version, "embedded", NULL);
+    }
+    pthread_mutex_unlock(&r->s->write);
+    api_model_unref(m);
+    if (rc) {
+        http_reply_problem(r, &p);
+        return;
+    }
+    http_reply_json(r, 200, json_pack("{s:I, s:o}", "version", (json_int_t)version, "embedded",
+                                      summary ? summary : json_object()), version);
+}
+
+static void h_delete_embedded(req *r)
+{
+    api_problem p = {0};
+    pthread_mutex_lock(&r->s->write);
+    uint64_t version;
+    api_model *m = session_model(r->s, &version);
+    embed_commit ec = {r, m, version + 1};
+    api_edit_commit commit = {commit_embed, &ec};
+    int rc = if_match(r, version, &p);
+    if (!rc)
+        rc = api_embed_delete(m, r->seg_level, version + 1, &commit, &p);
+    if (!rc) {
+        version = session_bump(r->s);
+        notify(r, version, "embedded", NULL);
+    }
+    pthread_mutex_unlock(&r->s->write);
+    api_model_unref(m);
+    if (rc) {
+        http_reply_problem(r, &p);
+        return;
+    }
+    struct MHD_Response *resp = http_empty();
+    http_set_etag(resp, version);
+    http_queue(r, 204, resp);
+}
+
+static void h_list_embedded(req *r)
+{
+    uint64_t version;
+    api_model *m = session_model(r->s, &version);
+    json_t *j = api_embed_list(m);
+    api_model_unref(m);
+    if (!j) {
+        http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
+    http_reply_json(r, 200, json_pack("{s:I, s:o}", "version", (json_int_t)version, "embedded", j),
+                    version);
+}
+
+static void h_get_embedded(req *r)
+{
+    api_problem p = {0};
+    api_model *m = session_model(r->s, NULL);
+    char *body;
+    size_t len;
+    const char *ctype;
+    uint64_t v;
+    int rc = api_embed_get(m, r->seg_level, http_arg(r, "format"), &body, &len, &ctype, &v, &p);
+    api_model_unref(m);
+    if (rc) {
+        http_reply_problem(r, &p);
+        return;
+    }
+    reply_body(r, body, len, ctype, v);
+}
+
+static void h_embedded_delta(req *r)
+{
+    api_problem p = {0};
+    api_model *m = session_model(r->s, NULL);
+    char *body;
+    size_t len;
+    const char *ctype;
+    uint64_t v;
+    int rc = api_embed_delta(m, r->seg_level, http_arg(r, "since"), http_arg(r, "format"), &body,
+                             &len, &ctype, &v, &p);
+    api_model_unref(m);
+    if (rc) {
+        http_reply_problem(r, &p);
+        return;
+    }
+    reply_body(r, body, len, ctype, v);
+}
+
 /* ---- handlers: events ------------------------------------------------------------------- */
 
 static const char *const EVENTS_KEYS[] = {"access_token", NULL};
@@ -1033,6 +1203,11 @@ static const route ROUTES[] = {
     {"GET", "/v1/sessions/{id}/levels/{L}/stats", h_level_stats, 1, 0, NULL},
     {"GET", "/v1/sessions/{id}/levels/{L}/delta", h_delta, 1, 0, DELTA_KEYS},
     {"GET", "/v1/sessions/{id}/events", h_events, 1, 0, EVENTS_KEYS},
+    {"GET", "/v1/sessions/{id}/embedded", h_list_embedded, 1, 0, NULL},
+    {"PUT", "/v1/sessions/{id}/embedded/{name}", h_put_embedded, 1, 2, EMBED_PUT_KEYS},
+    {"GET", "/v1/sessions/{id}/embedded/{name}", h_get_embedded, 1, 0, EMBED_GET_KEYS},
+    {"DELETE", "/v1/sessions/{id}/embedded/{name}", h_delete_embedded, 1, 0, NULL},
+    {"GET", "/v1/sessions/{id}/embedded/{name}/delta", h_embedded_delta, 1, 0, DELTA_KEYS},
     {"GET", "/v1/sessions/{id}/analysis", h_analysis, 1, 0, ANALYSIS_KEYS},
     {"GET", "/v1/sessions/{id}/matrices/{L}", h_matrix, 1, 0, MATRIX_KEYS},
     {"GET", "/healthz", h_healthz, 0, 0, NULL},
