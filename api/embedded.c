@@ -731,6 +731,7 @@ int api_embed_rebind(const api_model *from, api_model *to, const api_limits *lim
         api_embed e;
         if (bind(to, from->embed[i].def, lim, slot, &e, p)) {
             api_embed_free_all(to);
+            p->nerrors = 0; /* the pointers were the model's, not this request's */
             return p->status;
         }
         to->embed[to->nembed++] = e;

@@ -28,7 +28,7 @@ import json
 import os
 import threading
 import time
-from typing import Any, Callable, Dict, Iterator, Mapping, Optional, Sequence, Union
+from typing import Any, Callable, Dict, Iterator, List, Mapping, Optional, Sequence, Union
 
 import requests
 
@@ -532,6 +532,65 @@ class Session:
             raise TransportError(f"the delta has {len(data)} bytes, its header says {off}")
         return out
 
+    # embedded models (free-form deformation, docs/API.md "Embedded models")
+    def put_embedded(self, name: str, vertices: Any, triangles: Any = None, *, level: int = 2,
+                     outside: str = "refuse", binary: Optional[bool] = None) -> JSON:
+        """PUT /embedded/{name}: bind a model (vertices n x 3, optional triangles k x 3) to level
+        `level` of the solid; `outside` "refuse" (422 naming the vertices outside), "fixed" or
+        "nearest". Big models (or `binary=True`) go as the binary layout, not JSON. Returns
+        {"version", "embedded": {...}}."""
+        n = len(vertices)
+        if binary is None:
+            binary = n > 20000
+        if binary:
+            import struct
+            flat = [float(c) for v in vertices for c in v]
+            tri = [int(i) for t in (triangles or []) for i in t]
+            body = struct.pack(f"<II{len(flat)}d{len(tri)}I", n, len(tri) // 3, *flat, *tri)
+            r = self._note(self.client.request(
+                "PUT", f"{self.url}/embedded/{name}", data=body,
+                params={"level": level, "outside": outside},
+                headers=self.headers(extra={"Content-Type": "application/octet-stream"})))
+        else:
+            doc: JSON = {"vertices": [list(map(float, v)) for v in vertices], "level": level,
+                         "outside": outside}
+            if triangles is not None:
+                doc["triangles"] = [list(map(int, t)) for t in triangles]
+            r = self._call("PUT", f"/embedded/{name}", json_body=doc)
+        j = r.json()
+        self.version = j.get("version", self.version)
+        return j
+
+    def embedded(self) -> List[JSON]:
+        """GET /embedded: the session's embedded models (name, vertices, triangles, level,
+        outside, outside_vertices)."""
+        return self._call("GET", "/embedded").json()["embedded"]
+
+    def get_embedded(self, name: str, format: str = "json") -> Any:
+        """GET /embedded/{name}: the deformed model — a dict for json ({"name", "level",
+        "version", "vertices", "triangles"}), text for obj, bytes for glb."""
+        r = self._call("GET", f"/embedded/{name}", params={"format": format})
+        return r.json() if format == "json" else r.text if format == "obj" else r.content
+
+    def delete_embedded(self, name: str) -> None:
+        """DELETE /embedded/{name}."""
+        self._call("DELETE", f"/embedded/{name}", expect=(204,))
+
+    def embedded_delta(self, name: str, since: int, format: str = "bin") -> JSON:
+        """GET /embedded/{name}/delta?since=V: the model vertices that moved since version V,
+        as delta() returns them ("indices", "positions"; normals and attributes None/{}).
+        Raises Gone (410) when the model was bound after V, or as for levels."""
+        r = self._call("GET", f"/embedded/{name}/delta", params={"since": int(since), "format": format})
+        if format == "json":
+            j = r.json()
+            import numpy as np
+            out = {k: j[k] for k in ("level", "since", "version")}
+            out["indices"] = np.asarray(j["indices"], dtype=np.uint32)
+            out["positions"] = np.asarray(j["positions"], dtype=np.float64).reshape(-1, 3)
+            out["normals"], out["attributes"] = None, {}
+            return out
+        return self._parse_delta_bin(r, [])
+
     def events(self, last_event_id: Optional[Version] = None, *,
                timeout: Optional[float] = None) -> Iterator[JSON]:
         """GET /events: an iterator of the session's events as dicts {"id", "event", "data"}
@@ -632,6 +691,11 @@ ROUTES = {
     ("GET", "/v1/sessions/{id}/levels/{L}/stats"): "Session.level_stats",
     ("GET", "/v1/sessions/{id}/levels/{L}/delta"): "Session.delta",
     ("GET", "/v1/sessions/{id}/events"): "Session.events",
+    ("GET", "/v1/sessions/{id}/embedded"): "Session.embedded",
+    ("PUT", "/v1/sessions/{id}/embedded/{name}"): "Session.put_embedded",
+    ("GET", "/v1/sessions/{id}/embedded/{name}"): "Session.get_embedded",
+    ("DELETE", "/v1/sessions/{id}/embedded/{name}"): "Session.delete_embedded",
+    ("GET", "/v1/sessions/{id}/embedded/{name}/delta"): "Session.embedded_delta",
     ("GET", "/v1/sessions/{id}/analysis"): "Session.analysis",
     ("GET", "/v1/sessions/{id}/matrices/{L}"): "Session.matrix",
     ("GET", "/healthz"): "Client.healthz",

@@ -1,0 +1,290 @@
+"""Embedded models (free-form deformation, 004 Sec. 5.1; docs/API.md "Embedded models").
+
+Expected values come from outside the daemon's binding code: the containing cell and the
+barycentric coordinates of a model vertex are found here from the level's own JSON (its
+tetrahedra, and its octahedra split into the 4 tetrahedra around their major diagonal, 004
+eq. 13) with numpy's solver, and the deformed position is that combination of the level's
+points after the edit; affine maps of every control point must carry the model by the same map
+(subdivision reproduces affine functions)."""
+import struct
+
+import numpy as np
+import pytest
+import requests
+
+from daemon import Daemon, Session
+from test_persist import adopt, edit, on, store_daemon
+
+# a block of 2 x 2 x 1 cubes, 5 tetrahedra each (so the solid has room inside at level 2)
+def cubes(nx=2, ny=2, nz=1):
+    vid = {}
+    verts, tets = [], []
+
+    def v(i, j, k):
+        if (i, j, k) not in vid:
+            vid[(i, j, k)] = len(verts)
+            verts.append([float(i), float(j), float(k)])
+        return vid[(i, j, k)]
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                c = [v(i + a, j + b, k + d) for d in (0, 1) for b in (0, 1) for a in (0, 1)]
+                if (i + j + k) % 2 == 0:
+                    tets += [[c[0], c[1], c[2], c[4]], [c[1], c[3], c[2], c[7]],
+                             [c[1], c[4], c[5], c[7]], [c[2], c[4], c[7], c[6]],
+                             [c[1], c[2], c[4], c[7]]]
+                else:
+                    tets += [[c[0], c[1], c[3], c[5]], [c[0], c[3], c[2], c[6]],
+                             [c[0], c[5], c[4], c[6]], [c[3], c[5], c[6], c[7]],
+                             [c[0], c[3], c[5], c[6]]]
+    return {"vertices": verts, "simplices": tets}
+
+
+BLOCK = cubes()
+
+
+def model_points(n, seed=1):
+    rnd = np.random.default_rng(seed)
+    return (rnd.uniform([0.6, 0.6, 0.35], [1.4, 1.4, 0.65], size=(n, 3))).tolist()
+
+
+@pytest.fixture(scope="module")
+def daemon():
+    d = Daemon()
+    yield d
+    d.stop()
+
+
+def session_with_model(daemon, pts, level=2, **extra):
+    s = Session(daemon)
+    r = s.put_complex(BLOCK)
+    assert r.status_code == 200, r.text
+    r = s.req("PUT", "/embedded/m", json=dict({"vertices": pts, "level": level}, **extra))
+    assert r.status_code == 200, r.text
+    return s, r.json()["version"]
+
+
+def deformed(s, name="m"):
+    r = s.req("GET", f"/embedded/{name}")
+    assert r.status_code == 200, r.text
+    return np.array(r.json()["vertices"])
+
+
+def level_cells(s, level):
+    j = s.level(level, format="json").json()
+    x = np.array(j["vertices"])
+    tets = [list(t) for t in j["cells"]["tetrahedra"]]
+    for p, q, a, a2, b, b2 in j["cells"]["octahedra"]:     # around the major diagonal (p, q)
+        tets += [[p, q, a, b], [p, q, b, a2], [p, q, a2, b2], [p, q, b2, a]]
+    return x, np.array(tets)
+
+
+def locate(x, tets, p, tol=1e-12):
+    """The lowest cell containing p and its barycentric coordinates, by an independent solve."""
+    for c, t in enumerate(tets):
+        P = x[t]
+        A = np.vstack([P.T, np.ones(4)])
+        lam = np.linalg.solve(A, np.append(p, 1.0))
+        if lam.min() >= -tol:
+            return c, lam
+    return None, None
+
+
+def test_no_edit_gives_the_rest_shape(daemon):
+    pts = model_points(200)
+    s, _ = session_with_model(daemon, pts)
+    assert np.abs(deformed(s) - np.array(pts)).max() <= 1e-12
+
+
+def test_positions_are_the_barycentric_combination_of_the_cell(daemon):
+    """After an edit, each model vertex is sum(w_i p_i) over the level cell it was bound in (the
+    cell and weights found here, at the positions of the time of the binding)."""
+    pts = model_points(60, seed=3)
+    s, v = session_with_model(daemon, pts)
+    x0, tets = level_cells(s, 2)
+    bound = [locate(x0, tets, np.array(p)) for p in pts]
+    assert all(c is not None for c, _ in bound)
+    v = edit(s, [{"index": 4, "position": [1.1, 0.9, 0.2]}], v)
+    x1, _ = level_cells(s, 2)
+    want = np.array([lam @ x1[tets[c]] for c, lam in bound])
+    assert np.abs(deformed(s) - want).max() <= 1e-9
+    # in octahedra too: some of the vertices sit in the 4 tetrahedra of an octahedron
+    ntet = len(s.level(2, format="json").json()["cells"]["tetrahedra"])
+    assert any(c >= ntet for c, _ in bound) and any(c < ntet for c, _ in bound)
+
+
+def test_an_affine_map_of_the_control_points_maps_the_model(daemon):
+    pts = model_points(150, seed=5)
+    s, v = session_with_model(daemon, pts)
+    A = np.array([[1.1, 0.2, 0.0], [-0.1, 0.9, 0.3], [0.05, 0.0, 1.2]])
+    b = np.array([0.3, -0.2, 0.5])
+    moves = [{"index": i, "position": (A @ np.array(p) + b).tolist()}
+             for i, p in enumerate(BLOCK["vertices"])]
+    edit(s, moves, v)
+    want = np.array(pts) @ A.T + b
+    assert np.abs(deformed(s) - want).max() <= 1e-9
+
+
+def test_a_move_leaves_vertices_outside_its_support_unchanged(daemon):
+    pts = model_points(400, seed=7)
+    s, v = session_with_model(daemon, pts)
+    before = deformed(s)
+    x0, tets = level_cells(s, 2)
+    bound = [locate(x0, tets, np.array(p))[0] for p in pts]
+    v2 = edit(s, [{"index": 0, "position": [-0.1, -0.1, 0.05]}], v)
+    x1, _ = level_cells(s, 2)
+    moved_pts = set(np.nonzero(np.any(x1 != x0, axis=1))[0].tolist())
+    after = deformed(s)
+    touched = np.array([bool(set(tets[c].tolist()) & moved_pts) for c in bound])
+    assert (after[~touched] == before[~touched]).all()       # bit for bit
+    assert touched.any() and (~touched).any()
+    # the delta lists exactly the vertices that moved, with their new positions
+    d = s.req("GET", "/embedded/m/delta", params={"since": v, "format": "json"})
+    assert d.status_code == 200 and d.headers["ETag"] == f'"{v2}"'
+    j = d.json()
+    changed = np.nonzero(np.any(after != before, axis=1))[0].tolist()
+    assert sorted(j["indices"]) == changed
+    assert np.array_equal(np.array(j["positions"]), after[j["indices"]])
+    # binary: SDD1, float32 positions
+    b = s.req("GET", "/embedded/m/delta", params={"since": v}).content
+    assert b[:4] == b"SDD1"
+    lvl, since, ver, n, flags = struct.unpack_from("<5I", b, 4)
+    assert (lvl, since, ver, n, flags) == (2, v, v2, len(changed), 0)
+    idx = np.frombuffer(b, "<u4", n, 24)
+    xyz = np.frombuffer(b, "<f4", 3 * n, 24 + 4 * n).reshape(n, 3)
+    assert idx.tolist() == sorted(changed)
+    assert np.array_equal(xyz, after[idx].astype(np.float32))
+    # a version before the binding is 410
+    assert s.req("GET", "/embedded/m/delta", params={"since": v - 1}).status_code == 410
+
+
+def test_outside_vertices(daemon):
+    s = Session(daemon)
+    assert s.put_complex(BLOCK).status_code == 200
+    pts = model_points(20) + [[5, 5, 5], [-1, 0.5, 0.5]]
+    r = s.req("PUT", "/embedded/m", json={"vertices": pts})
+    assert r.status_code == 422, r.text
+    assert "2 of its 22 vertices" in r.json()["detail"] and "20, 21" in r.json()["detail"]
+    assert s.req("GET", "/embedded/m").status_code == 404                 # nothing was kept
+    r = s.req("PUT", "/embedded/m", json={"vertices": pts, "outside": "fixed"})
+    assert r.status_code == 200 and r.json()["embedded"]["outside_vertices"] == 2
+    v = r.json()["version"]
+    edit(s, [{"index": i, "position": [x + 0.5, y, z]} for i, (x, y, z) in enumerate(BLOCK["vertices"])], v)
+    got = deformed(s)
+    assert got[20:].tolist() == [[5.0, 5.0, 5.0], [-1.0, 0.5, 0.5]]          # rigid
+    assert np.abs(got[:20] - (np.array(pts[:20]) + [0.5, 0, 0])).max() <= 1e-9
+    # nearest: bound to the closest cell, coordinates outside [0, 1]: still exact with no edit,
+    # and carried by an affine map like the others
+    t = Session(daemon)
+    assert t.put_complex(BLOCK).status_code == 200
+    r = t.req("PUT", "/embedded/n", json={"vertices": pts, "outside": "nearest"})
+    assert r.status_code == 200, r.text
+    assert np.abs(deformed(t, "n") - np.array(pts)).max() <= 1e-9
+    v = r.json()["version"]
+    edit(t, [{"index": i, "position": [x + 0.5, y, z]} for i, (x, y, z) in enumerate(BLOCK["vertices"])], v)
+    assert np.abs(deformed(t, "n") - (np.array(pts) + [0.5, 0, 0])).max() <= 1e-9
+
+
+def test_formats_list_delete_and_errors(daemon, tmp_path):
+    pts = model_points(30)
+    tris = [[i, i + 1, i + 2] for i in range(0, 27, 3)]
+    s, v = session_with_model(daemon, pts, triangles=tris)
+    j = s.req("GET", "/embedded/m").json()
+    assert j["name"] == "m" and j["level"] == 2 and j["triangles"] == tris
+    obj = s.req("GET", "/embedded/m", params={"format": "obj"}).text
+    assert obj.count("\nv ") == 30 and obj.count("\nf ") == 9
+    glb = s.req("GET", "/embedded/m", params={"format": "glb"})
+    assert glb.headers["Content-Type"] == "model/gltf-binary" and glb.content[:4] == b"glTF"
+    (tmp_path / "m.glb").write_bytes(glb.content)
+    import subprocess
+    from conftest import REPO
+    out = subprocess.run(["node", str(REPO / "tests" / "tools" / "gltf_validate.js"),
+                          str(tmp_path / "m.glb")], capture_output=True, text=True)
+    assert out.returncode == 0 and "0 errors, 0 warnings" in out.stdout, out.stdout + out.stderr
+    lst = s.req("GET", "/embedded").json()["embedded"]
+    assert [e["name"] for e in lst] == ["m"] and lst[0]["vertices"] == 30
+    # binary upload
+    blob = struct.pack("<II", 3, 1) + struct.pack("<9d", *sum(pts[:3], [])) + struct.pack("<3I", 0, 1, 2)
+    r = s.req("PUT", "/embedded/bin", data=blob, params={"level": 1},
+              headers={"Content-Type": "application/octet-stream"})
+    assert r.status_code == 200, r.text
+    assert s.req("GET", "/embedded/bin").json()["vertices"] == pts[:3]
+    bad = s.req("PUT", "/embedded/bin", data=blob[:-2], headers={"Content-Type": "application/octet-stream"})
+    assert bad.status_code == 400
+    for body, status, ptr in [({"vertices": [[0, 0]]}, 400, "/vertices/0"),
+                              ({"vertices": pts, "triangles": [[0, 1, 99]]}, 422, "/triangles/0/2"),
+                              ({"vertices": pts, "level": 99}, 422, "/level"),
+                              ({"vertices": pts, "outside": "ignore"}, 422, "/outside"),
+                              ({"vertices": pts, "colour": 1}, 400, "/colour")]:
+        r = s.req("PUT", "/embedded/x", json=body)
+        assert r.status_code == status, (body, r.text)
+        assert r.json()["errors"][0]["pointer"] == ptr, r.text
+    assert s.req("PUT", "/embedded/bad%20name", json={"vertices": pts}).status_code == 400
+    assert s.req("DELETE", "/embedded/m").status_code == 204
+    assert s.req("GET", "/embedded/m").status_code == 404
+    assert s.req("DELETE", "/embedded/m").status_code == 404
+    e = Session(daemon)   # no complex yet
+    assert e.req("PUT", "/embedded/m", json={"vertices": pts}).status_code == 409
+
+
+def test_changes_rebind_the_rest_shape_all_or_nothing(daemon):
+    pts = model_points(50)
+    s, v = session_with_model(daemon, pts)
+    v = edit(s, [{"index": 0, "position": [0.05, 0.0, 0.0]}], v)
+    assert np.abs(deformed(s) - np.array(pts)).max() > 0        # it followed the edit
+    r = s.req("PUT", "/tags", json={"singular": [[0, 1]]})      # a new model: bound anew
+    assert r.status_code == 200, r.text
+    assert np.abs(deformed(s) - np.array(pts)).max() <= 1e-12
+    # a complex the model does not fit in: the change is refused, naming the model
+    small = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], "simplices": [[0, 1, 2, 3]]}
+    r = s.put_complex(small)
+    assert r.status_code == 422 and '"m"' in r.json()["detail"], r.text
+    assert len(s.req("GET", "/complex").json()["vertices"]) == len(BLOCK["vertices"])
+
+
+def test_export_import_and_restart_keep_embedded_models(daemon, tmp_path):
+    pts = model_points(40)
+    s, v = session_with_model(daemon, pts)
+    ex = s.req("GET", "/export").json()
+    assert list(ex["embedded"]) == ["m"]
+    r = requests.post(daemon.url + "/v1/sessions", json={"import": ex})
+    assert r.status_code == 201, r.text
+    t = adopt(daemon, requests.Session(), r.json())
+    assert np.array_equal(deformed(t), deformed(s))
+    db = tmp_path / "e.db"
+    d = store_daemon(db)
+    try:
+        u, v = session_with_model(d, pts)
+        before = deformed(u)
+    finally:
+        d.proc.kill()
+        d.proc.wait()
+    d = store_daemon(db)
+    try:
+        assert np.array_equal(deformed(on(d, u)), before)
+    finally:
+        d.stop()
+
+
+def test_python_client(daemon):
+    import subdiv
+    c = subdiv.Client(daemon.url)
+    with c.create_session() as s:
+        s.put_complex(BLOCK)
+        pts = model_points(25)
+        j = s.put_embedded("m", pts, [[0, 1, 2]])
+        assert j["embedded"]["vertices"] == 25
+        assert s.put_embedded("b", pts[:5], binary=True)["embedded"]["vertices"] == 5
+        assert [e["name"] for e in s.embedded()] == ["m", "b"]
+        assert np.abs(np.array(s.get_embedded("m")["vertices"]) - pts).max() <= 1e-12
+        v = s.version
+        s.edit(moves=[{"index": 4, "position": [1.05, 0.95, 0.1]}])
+        d = s.embedded_delta("m", v, format="json")
+        assert d["version"] == s.version and len(d["indices"])
+        full = np.array(s.get_embedded("m")["vertices"])
+        assert np.array_equal(d["positions"], full[d["indices"]])
+        b = s.embedded_delta("m", v)
+        assert b["indices"].tolist() == d["indices"].tolist()
+        assert s.get_embedded("m", "glb")[:4] == b"glTF" and s.get_embedded("m", "obj").startswith("#")
+        s.delete_embedded("b")
+        assert [e["name"] for e in s.embedded()] == ["m"]
