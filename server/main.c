@@ -1,9 +1,11 @@
-/* main.c — the subdivd binary: the daemon, and `subdivd refine` (the offline mode).
+/* main.c — the subdivd binary: the daemon, `subdivd refine` and `subdivd deform` (the offline
+ * mode).
  *
  * Both modes go through the same api/ handlers: the daemon maps HTTP requests onto them, the
  * offline mode maps files and flags onto them and writes the level with the same streaming
  * writer into a file — same validation, same errors (printed as problem+json), same bytes.
  */
+#include "../api/embedded.h"
 #include "../api/handlers.h"
 #include "../api/mem.h"
 #include "../api/jsonin.h"
@@ -235,10 +237,187 @@ static int refine_main(int argc, char **argv)
     return rc;
 }
 
+/* ---- subdivd deform: an embedded model through edits, offline ---------------------------- */
+
+/* A Wavefront OBJ's vertices and faces (polygons as fans) as the body of PUT /embedded/{name}:
+ * {"vertices", "triangles"}; NULL (said why) when it cannot be read. */
+static json_t *obj_model(const char *text, size_t len, const char *path)
+{
+    json_t *vs = json_array(), *ts = json_array();
+    size_t nv = 0;
+    const char *s = text, *end = text + len;
+    for (int line = 1; vs && ts && s < end; line++) {
+        const char *e = memchr(s, '\n', (size_t)(end - s));
+        size_t n = e ? (size_t)(e - s) : (size_t)(end - s);
+        char buf[4096];
+        if (n >= sizeof buf) {
+            fprintf(stderr, "subdivd deform: %s:%d: line too long\n", path, line);
+            goto bad;
+        }
+        memcpy(buf, s, n);
+        buf[n] = 0;
+        s += n + 1;
+        if (buf[0] == 'v' && buf[1] == ' ') {
+            double x, y, z;
+            if (sscanf(buf + 2, "%lf %lf %lf", &x, &y, &z) != 3) {
+                fprintf(stderr, "subdivd deform: %s:%d: a vertex is \"v x y z\"\n", path, line);
+                goto bad;
+            }
+            json_array_append_new(vs, json_pack("[f, f, f]", x, y, z));
+            nv++;
+        } else if (buf[0] == 'f' && buf[1] == ' ') {
+            long idx[64];
+            int k = 0;
+            for (char *t = strtok(buf + 2, " \t\r"); t && k < 64; t = strtok(NULL, " \t\r")) {
+                long i = strtol(t, NULL, 10); /* "i", "i/t", "i//n", "i/t/n"; negative: relative */
+                idx[k++] = i < 0 ? (long)nv + i : i - 1;
+            }
+            for (int j = 1; j + 1 < k; j++) {
+                if (idx[0] < 0 || idx[j] < 0 || idx[j + 1] < 0 || (size_t)idx[0] >= nv ||
+                    (size_t)idx[j] >= nv || (size_t)idx[j + 1] >= nv) {
+                    fprintf(stderr, "subdivd deform: %s:%d: a face names a vertex not defined "
+                            "before it\n", path, line);
+                    goto bad;
+                }
+                json_array_append_new(ts, json_pack("[I, I, I]", (json_int_t)idx[0],
+                                                    (json_int_t)idx[j], (json_int_t)idx[j + 1]));
+            }
+        }
+    }
+    return json_pack("{s:o, s:o}", "vertices", vs, "triangles", ts);
+bad:
+    json_decref(vs);
+    json_decref(ts);
+    return NULL;
+}
+
+static int deform_main(int argc, char **argv)
+{
+    const char *input = NULL, *embed = NULL, *level = "2", *outside = "refuse", *moves = NULL,
+               *out = NULL, *tags = NULL, *rules = NULL;
+    for (int i = 2; i < argc; i++) {
+        const char *o = argv[i];
+        const char **dst = !strcmp(o, "--embed") ? &embed
+                           : !strcmp(o, "--level") || !strcmp(o, "-l") ? &level
+                           : !strcmp(o, "--outside") ? &outside
+                           : !strcmp(o, "--moves") ? &moves
+                           : !strcmp(o, "--tags") ? &tags
+                           : !strcmp(o, "--rules") ? &rules
+                           : !strcmp(o, "-o") || !strcmp(o, "--output") ? &out
+                                                                         : NULL;
+        if (dst && i + 1 < argc)
+            *dst = argv[++i];
+        else if (dst || (o[0] == '-' && o[1])) {
+            fprintf(stderr, "subdivd deform: %s %s\n", o, dst ? "needs a value" : "is not an option");
+            return 2;
+        } else if (!input)
+            input = o;
+        else {
+            fprintf(stderr, "subdivd deform: unexpected argument %s\n", o);
+            return 2;
+        }
+    }
+    const char *ext = out ? strrchr(out, '.') : NULL;
+    const char *format = !ext ? NULL : !strcmp(ext, ".obj") ? "obj" : !strcmp(ext, ".json") ? "json"
+                                     : !strcmp(ext, ".glb") ? "glb" : NULL;
+    if (!input || !embed || !out || !format) {
+        fprintf(stderr, "usage: subdivd deform COMPLEX.json --embed MODEL.obj|.json [--level L] "
+                        "[--outside refuse|fixed|nearest] [--moves MOVES.json] [--tags T.json] "
+                        "[--rules R.json] -o OUT.obj|.json|.glb\n");
+        return 2;
+    }
+    api_limits lim = api_default_limits();
+    sd_error e = {0};
+    api_model *m = api_model_new(NULL, NULL, 0, &e);
+    if (!m)
+        return 3;
+    int rc = rules ? apply_file(&m, rules, api_put_rules, &lim, rules) : 0;
+    if (!rc)
+        rc = apply_file(&m, input, api_put_complex, &lim, input);
+    if (!rc && tags)
+        rc = apply_file(&m, tags, api_put_tags, &lim, tags);
+    size_t len;
+    char *text = rc ? NULL : read_file(embed, lim.max_body_bytes, &len);
+    json_t *body = NULL;
+    api_problem p = {0};
+    if (!rc && !text)
+        rc = 2;
+    else if (!rc) {
+        const char *mx = strrchr(embed, '.');
+        body = mx && !strcmp(mx, ".json") ? api_parse_body(text, len, 0, &p)
+                                          : obj_model(text, len, embed);
+        if (!body)
+            rc = p.status ? report(&p, embed) : 2;
+    }
+    api_free(text);
+    api_embed_def *d = NULL;
+    uint64_t version = 1;
+    atomic_store(&m->version, version);
+    if (!rc) {
+        json_t *lv = json_integer(strtol(level, NULL, 10)), *os = json_string(outside);
+        json_object_set_new(body, "level", lv);
+        json_object_set_new(body, "outside", os);
+        if (api_embed_parse(body, "model", &lim, &d, &p))
+            rc = report(&p, embed);
+    }
+    json_decref(body);
+    json_t *summary = NULL;
+    if (!rc && api_embed_put(m, d, ++version, &lim, NULL, NULL, &summary, &p))
+        rc = report(&p, "binding the model");
+    api_embed_def_unref(d);
+    if (!rc && summary)
+        fprintf(stderr, "subdivd deform: %s bound to level %s (%lld vertices outside)\n", embed,
+                level, (long long)json_integer_value(json_object_get(summary, "outside_vertices")));
+    json_decref(summary);
+    if (!rc && moves) { /* a PATCH body, or an array of them applied in turn */
+        char *mt = read_file(moves, lim.max_body_bytes, &len);
+        json_t *mj = mt ? api_parse_body(mt, len, 0, &p) : NULL;
+        api_free(mt);
+        if (!mj)
+            rc = mt ? report(&p, moves) : 2;
+        for (size_t i = 0; !rc && i < (json_is_array(mj) ? json_array_size(mj) : 1); i++) {
+            json_t *b = json_is_array(mj) ? json_array_get(mj, i) : mj;
+            uint64_t counts[SD_MAX_LEVEL + 1];
+            int levels;
+            api_model *rebuilt = NULL;
+            if (api_edit(m, b, ++version, &lim, NULL, counts, &levels, &rebuilt, &p))
+                rc = report(&p, moves);
+            else if (rebuilt && api_embed_rebind(m, rebuilt, &lim, NULL, &p)) {
+                api_model_unref(rebuilt);
+                rc = report(&p, moves);
+            } else if (rebuilt) {
+                api_model_unref(m);
+                m = rebuilt;
+            }
+        }
+        json_decref(mj);
+    }
+    char *res = NULL;
+    const char *ctype;
+    if (!rc && api_embed_get(m, "model", format, &res, &len, &ctype, &version, &p))
+        rc = report(&p, "writing the model");
+    if (!rc) {
+        char tmp[4096];
+        snprintf(tmp, sizeof tmp, "%s.part", out);
+        FILE *f = fopen(tmp, "wb");
+        if (!f || fwrite(res, 1, len, f) != len || fclose(f) || rename(tmp, out)) {
+            fprintf(stderr, "subdivd deform: cannot write %s: %s\n", out, strerror(errno));
+            unlink(tmp);
+            rc = 2;
+        } else
+            fprintf(stderr, "subdivd deform: -> %s (%zu bytes)\n", out, len);
+    }
+    api_free(res);
+    api_model_unref(m);
+    return rc;
+}
+
 /* ---- daemon ------------------------------------------------------------------------------- */
 
 int main(int argc, char **argv)
 {
+    if (argc > 1 && !strcmp(argv[1], "deform"))
+        return deform_main(argc, argv);
     if (argc > 1 && !strcmp(argv[1], "refine"))
         return refine_main(argc, argv);
     if (argc > 1 && !strcmp(argv[1], "--healthcheck")) /* Docker HEALTHCHECK: no curl needed */

@@ -288,3 +288,34 @@ def test_python_client(daemon):
         assert s.get_embedded("m", "glb")[:4] == b"glTF" and s.get_embedded("m", "obj").startswith("#")
         s.delete_embedded("b")
         assert [e["name"] for e in s.embedded()] == ["m"]
+
+
+def test_offline_deform_equals_the_daemon(daemon, tmp_path):
+    """`subdivd deform` (examples/ffd) writes what the daemon answers for the same requests."""
+    import json
+    import subprocess
+    from conftest import REPO
+    from daemon import SUBDIVD
+    ex = REPO / "examples" / "ffd"
+    out = tmp_path / "t.json"
+    r = subprocess.run([str(SUBDIVD), "deform", str(ex / "block.json"), "--embed", str(ex / "torus.obj"),
+                        "--level", "2", "--moves", str(ex / "moves.json"), "-o", str(out)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    offline = json.loads(out.read_text())
+    s = Session(daemon)
+    v = s.put_complex(json.loads((ex / "block.json").read_text())).json()["version"]
+    verts, tris = [], []
+    for line in (ex / "torus.obj").read_text().splitlines():
+        t = line.split()
+        if t and t[0] == "v":
+            verts.append([float(x) for x in t[1:4]])
+        elif t and t[0] == "f":
+            q = [int(x) - 1 for x in t[1:]]
+            tris += [[q[0], q[k], q[k + 1]] for k in range(1, len(q) - 1)]
+    r = s.req("PUT", "/embedded/model", json={"vertices": verts, "triangles": tris, "level": 2})
+    assert r.status_code == 200, r.text
+    edit(s, json.loads((ex / "moves.json").read_text())["moves"], r.json()["version"])
+    online = s.req("GET", "/embedded/model").json()
+    assert offline["vertices"] == online["vertices"] and offline["triangles"] == online["triangles"]
+    assert np.abs(np.array(online["vertices"]) - np.array(verts)).max() > 0.01   # it moved
