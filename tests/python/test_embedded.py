@@ -267,6 +267,9 @@ def test_export_import_and_restart_keep_embedded_models(daemon, tmp_path):
 
 
 def test_python_client(daemon):
+    import sys
+    from conftest import REPO
+    sys.path.insert(0, str(REPO / "clients" / "python"))
     import subdiv
     c = subdiv.Client(daemon.url)
     with c.create_session() as s:
