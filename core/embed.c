@@ -265,27 +265,41 @@ static double tet_dist2(const double *const P[4], const double *p)
 
 /* ---- the grid ------------------------------------------------------------------------------ */
 
+/* Coordinates are quantized to 16 bits a side over the cells' bounding box (floor, clamped);
+ * each cell keeps its widened box so quantized (min and max floored: a point of the box
+ * quantizes inside it, floor being monotone), a cheap test before the exact one. Buckets are
+ * ranges of quantized values, bucket (q * dim) >> 16 on each axis, so a point's bucket lies in
+ * the bucket range of every box holding it. */
+#define QBITS 16
+#define QMAX 65535u
+
 typedef struct grid {
-    double lo[3], h[3], inv[3];
+    double lo[3], qs[3], quantum[3];
     uint32_t dim[3];
     size_t nb;
     uint32_t *start;    /* nb + 1 */
     uint32_t *cell;     /* the cells of bucket b: cell[start[b] .. start[b+1]) */
     float *len;         /* per cell: its longest edge, rounded up */
+    uint16_t (*box)[6]; /* per cell: its widened box, quantized (min xyz, max xyz) */
 } grid;
 
-static inline uint32_t axis_at(const grid *g, int a, double x)
+static inline uint32_t quant(const grid *g, int a, double x)
 {
-    double t = floor((x - g->lo[a]) * g->inv[a]);
+    double t = floor((x - g->lo[a]) * g->qs[a]);
     if (!(t > 0))
         return 0;
-    return t >= g->dim[a] ? g->dim[a] - 1 : (uint32_t)t;
+    return t >= QMAX ? QMAX : (uint32_t)t;
 }
 
-static inline size_t bucket_of(const grid *g, const double *p)
+static inline uint32_t axis_of(const grid *g, int a, uint32_t q)
 {
-    return ((size_t)axis_at(g, 2, p[2]) * g->dim[1] + axis_at(g, 1, p[1])) * g->dim[0] +
-           axis_at(g, 0, p[0]);
+    return (uint32_t)(((uint64_t)q * g->dim[a]) >> QBITS);
+}
+
+static inline size_t bucket_q(const grid *g, const uint32_t q[3])
+{
+    return ((size_t)axis_of(g, 2, q[2]) * g->dim[1] + axis_of(g, 1, q[1])) * g->dim[0] +
+           axis_of(g, 0, q[0]);
 }
 
 static void cell_pts(const cells *C, uint32_t c, const double *P[4])
@@ -296,35 +310,20 @@ static void cell_pts(const cells *C, uint32_t c, const double *P[4])
         P[k] = C->x + 3 * (size_t)v[k];
 }
 
-/* The widened box of cell c (its longest edge from the grid's table). */
-static void cell_box(const cells *C, const grid *g, uint32_t c, double lo[3], double hi[3])
-{
-    const double *P[4];
-    cell_pts(C, c, P);
-    double pad = BOX_TOL * g->len[c];
-    for (int a = 0; a < 3; a++) {
-        double l = P[0][a], h = P[0][a];
-        for (int k = 1; k < 4; k++) {
-            l = P[k][a] < l ? P[k][a] : l;
-            h = P[k][a] > h ? P[k][a] : h;
-        }
-        lo[a] = l - pad;
-        hi[a] = h + pad;
-    }
-}
-
 static void grid_free(sd_mem *m, grid *g)
 {
     sdi_free(m, g->start);
     sdi_free(m, g->cell);
     sdi_free(m, g->len);
+    sdi_free(m, g->box);
 }
 
 static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
 {
     memset(g, 0, sizeof *g);
     g->len = sdi_alloc(m, (size_t)C->nc * sizeof *g->len);
-    if (!g->len)
+    g->box = g->len ? sdi_alloc(m, (size_t)C->nc * sizeof *g->box) : NULL;
+    if (!g->box)
         return sdi_fail_nomem(err, m);
     /* pass 1: longest edges, the bounding box, the mean box size */
     double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX}, ext = 0;
@@ -349,9 +348,12 @@ static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
     double s = ext / (3.0 * C->nc), span[3];
     for (int a = 0; a < 3; a++) {
         span[a] = hi[a] - lo[a];
-        double pad = 1e-9 * (span[a] + fabs(lo[a]) + fabs(hi[a])) + DBL_MIN;
+        double pad = 1e-6 * span[a] + 1e-12 * (fabs(lo[a]) + fabs(hi[a])) + DBL_MIN;
         lo[a] -= pad;
         span[a] += 2 * pad;
+        g->lo[a] = lo[a];
+        g->qs[a] = (QMAX + 1.0) / span[a];
+        g->quantum[a] = span[a] / (QMAX + 1.0);
     }
     for (;;) {
         double nb = 1;
@@ -365,24 +367,33 @@ static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
         s *= 1.25;
     }
     g->nb = (size_t)g->dim[0] * g->dim[1] * g->dim[2];
-    for (int a = 0; a < 3; a++) {
-        g->lo[a] = lo[a];
-        g->h[a] = span[a] / g->dim[a];
-        g->inv[a] = g->dim[a] / span[a];
-    }
     g->start = sdi_calloc(m, g->nb + 1, sizeof *g->start);
     if (!g->start)
         return sdi_fail_nomem(err, m);
-    /* pass 2: entries per bucket; pass 3: the entries, cells in increasing order */
+    /* pass 2: the quantized boxes and the entries per bucket; pass 3: the entries, cells in
+     * increasing order */
     uint64_t total = 0;
     for (int pass = 0; pass < 2; pass++) {
         for (uint32_t c = 0; c < C->nc; c++) {
-            double bl[3], bh[3];
-            cell_box(C, g, c, bl, bh);
+            uint16_t *q = g->box[c];
+            if (pass == 0) {
+                const double *P[4];
+                cell_pts(C, c, P);
+                double pad = BOX_TOL * g->len[c];
+                for (int a = 0; a < 3; a++) {
+                    double l = P[0][a], h = P[0][a];
+                    for (int k = 1; k < 4; k++) {
+                        l = P[k][a] < l ? P[k][a] : l;
+                        h = P[k][a] > h ? P[k][a] : h;
+                    }
+                    q[a] = (uint16_t)quant(g, a, l - pad);
+                    q[3 + a] = (uint16_t)quant(g, a, h + pad);
+                }
+            }
             uint32_t i0[3], i1[3];
             for (int a = 0; a < 3; a++) {
-                i0[a] = axis_at(g, a, bl[a]);
-                i1[a] = axis_at(g, a, bh[a]);
+                i0[a] = axis_of(g, a, q[a]);
+                i1[a] = axis_of(g, a, q[3 + a]);
             }
             for (uint32_t z = i0[2]; z <= i1[2]; z++)
                 for (uint32_t y = i0[1]; y <= i1[1]; y++) {
@@ -415,11 +426,21 @@ static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
     return SD_OK;
 }
 
-/* The first cell of p's bucket that holds p (NONE if none), its coordinates in lam. */
-static uint32_t locate(const cells *C, const grid *g, size_t b, const double *p, double lam[4])
+static inline bool box_has(const uint16_t b[6], const uint32_t q[3])
 {
+    return q[0] >= b[0] && q[0] <= b[3] && q[1] >= b[1] && q[1] <= b[4] && q[2] >= b[2] &&
+           q[2] <= b[5];
+}
+
+/* The first cell of p's bucket that holds p (NONE if none), its coordinates in lam. */
+static uint32_t locate(const cells *C, const grid *g, const uint32_t q[3], const double *p,
+                       double lam[4])
+{
+    size_t b = bucket_q(g, q);
     for (uint32_t j = g->start[b]; j < g->start[b + 1]; j++) {
         uint32_t c = g->cell[j];
+        if (!box_has(g->box[c], q))
+            continue;
         const double *P[4];
         cell_pts(C, c, P);
         if (holds(P, g->len[c], p, lam))
@@ -428,12 +449,26 @@ static uint32_t locate(const cells *C, const grid *g, size_t b, const double *p,
     return NONE;
 }
 
+/* A lower bound on the squared distance from p to cell c (its quantized box, one quantum wider
+ * on each side against rounding). */
+static double box_dist2(const grid *g, uint32_t c, const double *p)
+{
+    double s = 0;
+    for (int a = 0; a < 3; a++) {
+        double l = g->lo[a] + ((double)g->box[c][a] - 1) * g->quantum[a];
+        double h = g->lo[a] + ((double)g->box[c][3 + a] + 2) * g->quantum[a];
+        double d = p[a] < l ? l - p[a] : p[a] > h ? p[a] - h : 0;
+        s += d * d;
+    }
+    return s;
+}
+
 /* The nearest cell to p (lowest index among equals): shells of buckets around p's. */
 static uint32_t nearest(const cells *C, const grid *g, const double *p)
 {
     int64_t b[3], d[3];
     for (int a = 0; a < 3; a++) {
-        b[a] = axis_at(g, a, p[a]);
+        b[a] = axis_of(g, a, quant(g, a, p[a]));
         d[a] = g->dim[a];
     }
     double best = DBL_MAX;
@@ -456,6 +491,8 @@ static uint32_t nearest(const cells *C, const grid *g, const double *p)
                     size_t k = ((size_t)z * g->dim[1] + (size_t)y) * g->dim[0] + (size_t)x;
                     for (uint32_t j = g->start[k]; j < g->start[k + 1]; j++) {
                         uint32_t c = g->cell[j];
+                        if (box_dist2(g, c, p) > best)
+                            continue;
                         const double *P[4];
                         cell_pts(C, c, P);
                         double q = tet_dist2(P, p);
@@ -466,17 +503,20 @@ static uint32_t nearest(const cells *C, const grid *g, const double *p)
                     }
                 }
             }
-        /* what the buckets beyond the shell can offer: per axis, the gap to the first of them */
+        /* what the buckets beyond the shell can offer: per axis, the gap to the first of them
+         * (bucket i starts at quantized value ceil(i 2^16 / dim)), less a quantum for rounding */
         double bound = DBL_MAX;
         bool more = false;
         for (int a = 0; a < 3; a++) {
             if (b[a] + r + 1 < d[a]) {
-                double e = g->lo[a] + (double)(b[a] + r + 1) * g->h[a] - p[a];
+                double q0 = ceil((double)(b[a] + r + 1) * (QMAX + 1.0) / (double)d[a]) - 1;
+                double e = g->lo[a] + q0 * g->quantum[a] - p[a];
                 bound = fmin(bound, e > 0 ? e : 0);
                 more = true;
             }
             if (b[a] - r - 1 >= 0) {
-                double e = p[a] - (g->lo[a] + (double)(b[a] - r) * g->h[a]);
+                double q1 = ceil((double)(b[a] - r) * (QMAX + 1.0) / (double)d[a]) + 1;
+                double e = p[a] - (g->lo[a] + q1 * g->quantum[a]);
                 bound = fmin(bound, e > 0 ? e : 0);
                 more = true;
             }
@@ -602,7 +642,10 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
         goto fail;
     }
     for (size_t i = 0; i < n; i++) {
-        e->scratch[i] = (uint32_t)bucket_of(&g, xyz + 3 * i);
+        uint32_t q[3];
+        for (int a = 0; a < 3; a++)
+            q[a] = quant(&g, a, xyz[3 * i + a]);
+        e->scratch[i] = (uint32_t)bucket_q(&g, q);
         cnt[e->scratch[i] + 1]++;
     }
     for (size_t b = 0; b < g.nb; b++)
@@ -615,7 +658,10 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     for (size_t j = 0; j < n; j++) {
         size_t i = ord[j];
         double lam[4];
-        uint32_t c = locate(&C, &g, e->scratch[i], xyz + 3 * i, lam);
+        uint32_t q[3];
+        for (int a = 0; a < 3; a++)
+            q[a] = quant(&g, a, xyz[3 * i + a]);
+        uint32_t c = locate(&C, &g, q, xyz + 3 * i, lam);
         if (c == NONE) {
             e->idx[4 * i] = NONE; /* settled below, in model order */
             continue;
