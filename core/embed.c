@@ -54,11 +54,15 @@ struct sd_embedding {
     sd_mem mem;
     size_t n;
     uint32_t nlv;       /* level vertices at bind time */
-    uint32_t *idx;      /* 4n: the cell's vertices, or idx[4i] = NONE: fixed */
-    double *w;          /* 4n: weights, or the rest position (3) of a fixed vertex */
-    uint32_t *rowptr;   /* nlv + 1: level vertex -> model vertices */
+    /* bindings are stored by slot, model vertices in bucket order (so that the vertices an edit
+     * moves, which are near each other, are mostly near each other in memory too) */
+    uint32_t *model;    /* n: slot -> model vertex */
+    uint32_t *slot;     /* n: model vertex -> slot */
+    uint32_t *idx;      /* 4 per slot: the cell's vertices, or idx[4s] = NONE: fixed */
+    double *w;          /* 4 per slot: weights, or the rest position (3) of a fixed vertex */
+    uint32_t *rowptr;   /* nlv + 1: level vertex -> slots */
     uint32_t *col;
-    uint32_t *stamp;    /* n: the last update that listed the vertex */
+    uint32_t *stamp;    /* per slot: the last update that listed it */
     uint32_t *scratch;  /* n: the radix sort's other half */
     uint32_t epoch;
 };
@@ -533,6 +537,8 @@ void sd_embed_free(sd_embedding *e)
     if (!e)
         return;
     sd_mem m = e->mem;
+    sdi_free(&m, e->model);
+    sdi_free(&m, e->slot);
     sdi_free(&m, e->idx);
     sdi_free(&m, e->w);
     sdi_free(&m, e->rowptr);
@@ -549,7 +555,7 @@ static void note_outside(sd_bind_report *rep, size_t i)
     rep->outside++;
 }
 
-/* The inverse map: level vertex -> bound model vertices (ascending). */
+/* The inverse map: level vertex -> the slots bound to it (ascending). */
 static bool build_inverse(sd_embedding *e)
 {
     e->rowptr = sdi_calloc(&e->mem, (size_t)e->nlv + 1, sizeof *e->rowptr);
@@ -610,7 +616,7 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     sdi_mem_init(&m, alloc, max_bytes);
     const uint32_t nlv = sd_level_num_vertices(lv);
     /* what stays: the vertices' cells and weights, the inverse map, stamps and scratch */
-    const double keep = 16.0 * 8 + (double)n * (16 + 32 + 16 + 4 + 4) + 4.0 * ((double)nlv + 1);
+    const double keep = 16.0 * 10 + (double)n * (16 + 32 + 16 + 4 + 4 + 8) + 4.0 * ((double)nlv + 1);
     if (max_bytes && keep > (double)max_bytes)
         return sdi_fail(err, SD_ERR_LIMIT, -1, -1,
                         "binding %zu model vertices takes %.0f bytes (limit %zu)", n, keep,
@@ -620,13 +626,15 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
         return sdi_fail_nomem(err, &m);
     e->n = n;
     e->nlv = nlv;
-    e->idx = sdi_alloc(&m, (n ? 4 * n : 1) * sizeof *e->idx);
+    e->model = sdi_alloc(&m, (n ? n : 1) * sizeof *e->model);
+    e->slot = e->model ? sdi_alloc(&m, (n ? n : 1) * sizeof *e->slot) : NULL;
+    e->idx = e->slot ? sdi_alloc(&m, (n ? 4 * n : 1) * sizeof *e->idx) : NULL;
     e->w = e->idx ? sdi_alloc(&m, (n ? 4 * n : 1) * sizeof *e->w) : NULL;
     e->stamp = e->w ? sdi_calloc(&m, n ? n : 1, sizeof *e->stamp) : NULL;
     e->scratch = e->stamp ? sdi_alloc(&m, (n ? n : 1) * sizeof *e->scratch) : NULL;
     sd_result r = SD_OK;
     grid g = {0};
-    uint32_t *ord = NULL, *cnt = NULL;
+    uint32_t *ord = e->model, *cnt = NULL;
     if (!e->scratch) {
         r = sdi_fail_nomem(err, &m);
         goto fail;
@@ -634,9 +642,8 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     if ((r = grid_build(&m, &C, &g, err)))
         goto fail;
 
-    /* model vertices in bucket order: e->scratch holds each one's bucket meanwhile */
-    ord = sdi_alloc(&m, (n ? n : 1) * sizeof *ord);
-    cnt = ord ? sdi_calloc(&m, g.nb + 1, sizeof *cnt) : NULL;
+    /* model vertices in bucket order (their slots): e->scratch holds each one's bucket meanwhile */
+    cnt = sdi_calloc(&m, g.nb + 1, sizeof *cnt);
     if (!cnt) {
         r = sdi_fail_nomem(err, &m);
         goto fail;
@@ -650,8 +657,10 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     }
     for (size_t b = 0; b < g.nb; b++)
         cnt[b + 1] += cnt[b];
-    for (size_t i = 0; i < n; i++)
-        ord[cnt[e->scratch[i]]++] = (uint32_t)i;
+    for (size_t i = 0; i < n; i++) {
+        e->slot[i] = cnt[e->scratch[i]]++;
+        ord[e->slot[i]] = (uint32_t)i;
+    }
     sdi_free(&m, cnt);
     cnt = NULL;
 
@@ -663,25 +672,26 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
             q[a] = quant(&g, a, xyz[3 * i + a]);
         uint32_t c = locate(&C, &g, q, xyz + 3 * i, lam);
         if (c == NONE) {
-            e->idx[4 * i] = NONE; /* settled below, in model order */
+            e->idx[4 * j] = NONE; /* settled below, in model order */
             continue;
         }
-        cell_verts(&C, c, e->idx + 4 * i);
-        memcpy(e->w + 4 * i, lam, sizeof lam);
+        cell_verts(&C, c, e->idx + 4 * j);
+        memcpy(e->w + 4 * j, lam, sizeof lam);
     }
     for (size_t i = 0; i < n; i++) {
-        if (e->idx[4 * i] != NONE)
+        size_t j = e->slot[i];
+        if (e->idx[4 * j] != NONE)
             continue;
         note_outside(rep, i);
         if (mode == SD_OUTSIDE_FIXED) {
-            memcpy(e->w + 4 * i, xyz + 3 * i, 3 * sizeof *e->w);
-            e->w[4 * i + 3] = 0;
+            memcpy(e->w + 4 * j, xyz + 3 * i, 3 * sizeof *e->w);
+            e->w[4 * j + 3] = 0;
         } else if (mode == SD_OUTSIDE_NEAREST) {
             uint32_t c = nearest(&C, &g, xyz + 3 * i);
             const double *P[4];
             cell_pts(&C, c, P);
-            cell_verts(&C, c, e->idx + 4 * i);
-            if (!bary(P, xyz + 3 * i, e->w + 4 * i)) { /* not for a valid complex's cells */
+            cell_verts(&C, c, e->idx + 4 * j);
+            if (!bary(P, xyz + 3 * i, e->w + 4 * j)) { /* not for a valid complex's cells */
                 r = sdi_fail(err, SD_ERR_DEGENERATE, (long)i, -1,
                              "model vertex %zu: its nearest cell %u is degenerate", i, c);
                 goto fail;
@@ -694,8 +704,6 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
                      rep->outside, n, sd_level_index(lv), rep->first[0]);
         goto fail;
     }
-    sdi_free(&m, ord);
-    ord = NULL;
     grid_free(&m, &g);
     memset(&g, 0, sizeof g);
     e->mem = m; /* from here on the embedding counts itself */
@@ -709,7 +717,6 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     return SD_OK;
 
 fail:
-    sdi_free(&m, ord);
     sdi_free(&m, cnt);
     grid_free(&m, &g);
     e->mem = m;
@@ -731,17 +738,18 @@ size_t sd_embed_memory(const sd_embedding *e)
 
 int sd_embed_weights(const sd_embedding *e, size_t i, uint32_t idx[4], double w[4])
 {
-    if (!e || i >= e->n || e->idx[4 * i] == NONE)
+    if (!e || i >= e->n || e->idx[4 * (size_t)e->slot[i]] == NONE)
         return 0;
-    memcpy(idx, e->idx + 4 * i, 4 * sizeof *idx);
-    memcpy(w, e->w + 4 * i, 4 * sizeof *w);
+    memcpy(idx, e->idx + 4 * (size_t)e->slot[i], 4 * sizeof *idx);
+    memcpy(w, e->w + 4 * (size_t)e->slot[i], 4 * sizeof *w);
     return 1;
 }
 
-static inline void place(const sd_embedding *e, const double *x, size_t i, double *o)
+/* The position of slot s at positions x. */
+static inline void place(const sd_embedding *e, const double *x, size_t s, double *o)
 {
-    const uint32_t *v = e->idx + 4 * i;
-    const double *w = e->w + 4 * i;
+    const uint32_t *v = e->idx + 4 * s;
+    const double *w = e->w + 4 * s;
     if (v[0] == NONE) {
         memcpy(o, w, 3 * sizeof *o);
         return;
@@ -755,8 +763,8 @@ static inline void place(const sd_embedding *e, const double *x, size_t i, doubl
 void sd_embed_positions(const sd_embedding *e, const sd_level *lv, double *out)
 {
     const double *x = sd_level_channel(lv, 0, NULL);
-    for (size_t i = 0; i < e->n; i++)
-        place(e, x, i, out + 3 * i);
+    for (size_t s = 0; s < e->n; s++)
+        place(e, x, s, out + 3 * (size_t)e->model[s]);
 }
 
 /* Ascending order of a[0..k) (distinct values below 2^32), tmp of k. */
@@ -806,16 +814,20 @@ size_t sd_embed_update(sd_embedding *e, const sd_level *lv, const uint32_t *chan
         if (v >= e->nlv)
             continue;
         for (uint32_t q = e->rowptr[v]; q < e->rowptr[v + 1]; q++) {
-            uint32_t i = e->col[q];
-            if (e->stamp[i] != ep) {
-                e->stamp[i] = ep;
-                moved[k++] = i;
+            uint32_t s = e->col[q];
+            if (e->stamp[s] != ep) {
+                e->stamp[s] = ep;
+                moved[k++] = s;
             }
         }
     }
-    sort_ids(moved, e->scratch, k);
+    /* slots found near each other are near each other in memory: place them in that order */
     const double *x = sd_level_channel(lv, 0, NULL);
-    for (size_t j = 0; j < k; j++)
-        place(e, x, moved[j], out + 3 * (size_t)moved[j]);
+    for (size_t j = 0; j < k; j++) {
+        uint32_t s = moved[j], i = e->model[s];
+        place(e, x, s, out + 3 * (size_t)i);
+        moved[j] = i;
+    }
+    sort_ids(moved, e->scratch, k);
     return k;
 }
