@@ -14,31 +14,38 @@
  * (p,q,a,a2,b,b2) with equator cycle a,b,a2,b2 gives (q,p,a,b), (q,p,b,a2), (q,p,a2,b2),
  * (q,p,b2,a), positive like the octahedron. Cell T + 4o + k is octahedron o's k-th.
  *
- * Locating is a uniform grid over the cells' bounding boxes (each cell listed, in increasing
- * index, in every bucket its box meets; buckets about the size of a cell's box, so a cell is in
- * ~8 of them). Model vertices are taken in bucket order (a counting sort) so that consecutive
- * vertices test the same cells while they are in cache; each tests its bucket's cells in
- * increasing index and the first that holds it wins — so a point on a shared face, or in
- * overlapping cells, goes to the lowest index. "Holds" means: within 1e-12 of the cell's longest
- * edge of every face plane (all barycentric coordinates >= -1e-12 settles it at once, since a
- * height is at most the longest edge; a coordinate below that is checked against the face's true
- * height only when a cheap bound does not reject it). Boxes are widened by 1e-6 of the longest
+ * Locating is a uniform grid over the level's bounding box, in coordinates quantized to 16 bits
+ * a side: each cell is listed, in increasing index, in every bucket its (widened, quantized) box
+ * meets; buckets are about the mean size of a cell's box (from a sample of cells), so a cell is
+ * in ~8 of them and a bucket lists ~70 (a tetrahedron's box is ~10 times its volume). Model
+ * vertices are taken in bucket order (a counting sort) so that consecutive vertices test the
+ * same cells while they are in cache; each tests its bucket's cells in increasing index — the
+ * quantized box first (12 bytes a cell, one branch), then the exact test — and the first that
+ * holds it wins, so a point on a shared face, or in overlapping cells, goes to the lowest index.
+ * "Holds" means: within 1e-12 of the cell's longest edge of every face plane (all barycentric
+ * coordinates >= -1e-12 settles it at once, since a height is at most the longest edge; a
+ * coordinate below that is checked against the face's true height only when a cheap bound does
+ * not reject it). Boxes are widened by 1e-6 of the longest
  * edge so that such points are in the cell's buckets (exact for cells whose corners are not
  * sharper than that).
  * A vertex in no cell is, by mode, refused, fixed (kept at its rest position, stored in place of
  * its weights), or bound to the nearest cell: buckets are searched in growing shells around its
  * own (clamped to the grid) until the best distance is below what the unexplored buckets can
  * offer (per axis, the gap to the first bucket outside the shell); the distance is the exact
- * point-tetrahedron distance (closest point on its faces). Its coordinates then extrapolate.
+ * point-tetrahedron distance (closest point on its faces), skipped for cells whose box is
+ * farther than the best so far. Its coordinates then extrapolate.
  *
- * Updates: at bind time the inverse map (level vertex -> model vertices bound to it, CSR, each
- * row ascending) is built, so the model vertices an edit moves are found in time proportional to
- * their number; a per-embedding stamp array dedupes them (a counter, not a clear per call), and
- * a radix sort (insertion sort when few) returns them ascending.
+ * Bindings are stored by slot, the model's vertices in bucket order, so that the vertices an edit
+ * moves (near each other in space) are near each other in memory whatever the model's order.
+ * Updates: at bind time the inverse map (level vertex -> slots bound to it, CSR, each row
+ * ascending) is built, so the model vertices an edit moves are found in time proportional to
+ * their number; a per-slot stamp array dedupes them (a counter, not a clear per call), they are
+ * recomputed in slot order, and a radix sort (insertion sort when few) returns their model
+ * indices ascending.
  *
  * Memory: the embedding's own sd_mem (allocator and cap as sd_options'), counting the locating
- * grid while it exists; sd_embed_memory is what stays (about 76 bytes per model vertex plus 4
- * per level vertex).
+ * grid while it exists (~16 bytes a cell + 4 per entry, ~50 per cell in all); sd_embed_memory
+ * is what stays (80 bytes per model vertex plus 4 per level vertex).
  */
 #include "internal.h"
 #include <float.h>
@@ -72,7 +79,7 @@ struct sd_embedding {
 typedef struct cells {
     const sd_level *lv;
     const double *x;
-    uint32_t ntet, nc;
+    uint32_t ntet, nc, nv;
 } cells;
 
 static void cell_verts(const cells *C, uint32_t c, uint32_t v[4])
@@ -329,27 +336,28 @@ static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
     g->box = g->len ? sdi_alloc(m, (size_t)C->nc * sizeof *g->box) : NULL;
     if (!g->box)
         return sdi_fail_nomem(err, m);
-    /* pass 1: longest edges, the bounding box, the mean box size */
+    /* the grid spans the level's vertices (those of any part: a far curve only makes it
+     * coarser); the mean box extent of the cells, from a sample of at most 2^16 */
     double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX}, ext = 0;
-    for (uint32_t c = 0; c < C->nc; c++) {
+    for (uint32_t v = 0; v < C->nv; v++)
+        for (int a = 0; a < 3; a++) {
+            double x = C->x[3 * (size_t)v + a];
+            lo[a] = x < lo[a] ? x : lo[a];
+            hi[a] = x > hi[a] ? x : hi[a];
+        }
+    const uint32_t stride = C->nc > 65536 ? C->nc / 65536 : 1;
+    uint32_t nsample = 0;
+    for (uint32_t c = 0; c < C->nc; c += stride, nsample++) {
         const double *P[4];
         cell_pts(C, c, P);
-        double L = longest_edge(P);
-        float f = (float)L;
-        g->len[c] = (double)f < L ? nextafterf(f, FLT_MAX) : f;
         for (int a = 0; a < 3; a++) {
-            double l = P[0][a], h = P[0][a];
-            for (int k = 1; k < 4; k++) {
-                l = P[k][a] < l ? P[k][a] : l;
-                h = P[k][a] > h ? P[k][a] : h;
-            }
-            lo[a] = l < lo[a] ? l : lo[a];
-            hi[a] = h > hi[a] ? h : hi[a];
+            double l = fmin(fmin(P[0][a], P[1][a]), fmin(P[2][a], P[3][a]));
+            double h = fmax(fmax(P[0][a], P[1][a]), fmax(P[2][a], P[3][a]));
             ext += h - l;
         }
     }
     /* buckets about the mean box extent (a cell then meets ~8), at most ~2 per cell and 2048 a side */
-    double s = ext / (3.0 * C->nc), span[3];
+    double s = ext / (3.0 * nsample), span[3];
     for (int a = 0; a < 3; a++) {
         span[a] = hi[a] - lo[a];
         double pad = 1e-6 * span[a] + 1e-12 * (fabs(lo[a]) + fabs(hi[a])) + DBL_MIN;
@@ -374,8 +382,8 @@ static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
     g->start = sdi_calloc(m, g->nb + 1, sizeof *g->start);
     if (!g->start)
         return sdi_fail_nomem(err, m);
-    /* pass 2: the quantized boxes and the entries per bucket; pass 3: the entries, cells in
-     * increasing order */
+    /* pass 1: the longest edges, the quantized boxes and the entries per bucket; pass 2: the
+     * entries, cells in increasing order */
     uint64_t total = 0;
     for (int pass = 0; pass < 2; pass++) {
         for (uint32_t c = 0; c < C->nc; c++) {
@@ -383,6 +391,9 @@ static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
             if (pass == 0) {
                 const double *P[4];
                 cell_pts(C, c, P);
+                double L = longest_edge(P);
+                float f = (float)L;
+                g->len[c] = (double)f < L ? nextafterf(f, FLT_MAX) : f;
                 double pad = BOX_TOL * g->len[c];
                 for (int a = 0; a < 3; a++) {
                     double l = P[0][a], h = P[0][a];
@@ -424,7 +435,7 @@ static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
                 return sdi_fail_nomem(err, m);
         }
     }
-    /* pass 3 advanced each start to the next bucket's: shift back */
+    /* pass 2 advanced each start to the next bucket's: shift back */
     memmove(g->start + 1, g->start, g->nb * sizeof *g->start);
     g->start[0] = 0;
     return SD_OK;
@@ -432,8 +443,9 @@ static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
 
 static inline bool box_has(const uint16_t b[6], const uint32_t q[3])
 {
-    return q[0] >= b[0] && q[0] <= b[3] && q[1] >= b[1] && q[1] <= b[4] && q[2] >= b[2] &&
-           q[2] <= b[5];
+    /* one branch: q - min <= max - min, unsigned, fails below min too */
+    return ((q[0] - b[0] <= (uint32_t)(b[3] - b[0])) & (q[1] - b[1] <= (uint32_t)(b[4] - b[1])) &
+            (q[2] - b[2] <= (uint32_t)(b[5] - b[2]))) != 0;
 }
 
 /* The first cell of p's bucket that holds p (NONE if none), its coordinates in lam. */
@@ -599,7 +611,8 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     if (n > UINT32_MAX / 4)
         return sdi_fail(err, SD_ERR_LIMIT, -1, -1, "%zu model vertices (at most %u)", n,
                         UINT32_MAX / 4);
-    cells C = {lv, sd_level_channel(lv, 0, NULL), sd_level_num_cells(lv, SD_CELL_TETRA), 0};
+    cells C = {lv, sd_level_channel(lv, 0, NULL), sd_level_num_cells(lv, SD_CELL_TETRA), 0,
+               sd_level_num_vertices(lv)};
     uint64_t nc = C.ntet + 4 * (uint64_t)sd_level_num_cells(lv, SD_CELL_OCTA);
     if (nc == 0)
         return sdi_fail(err, SD_ERR_VALUE, -1, -1, "level %u has no solid cells", sd_level_index(lv));

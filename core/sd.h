@@ -526,8 +526,8 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
                         const sd_allocator *alloc, size_t max_bytes, sd_embedding **out,
                         sd_bind_report *rep, sd_error *err);
 void sd_embed_free(sd_embedding *e);
-/* The number of model vertices, and the bytes the embedding holds (~76 per model vertex + 4 per
- * level vertex). */
+/* The number of model vertices, and the bytes the embedding holds (80 per model vertex + 4 per
+ * level vertex; binding takes ~50 more per cell of the level meanwhile). */
 size_t sd_embed_count(const sd_embedding *e);
 size_t sd_embed_memory(const sd_embedding *e);
 /* Vertex i's 4 level vertices and weights (summing to 1): returns 1; 0 (idx, w untouched) when
