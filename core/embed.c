@@ -14,31 +14,38 @@
  * (p,q,a,a2,b,b2) with equator cycle a,b,a2,b2 gives (q,p,a,b), (q,p,b,a2), (q,p,a2,b2),
  * (q,p,b2,a), positive like the octahedron. Cell T + 4o + k is octahedron o's k-th.
  *
- * Locating is a uniform grid over the cells' bounding boxes (each cell listed, in increasing
- * index, in every bucket its box meets; buckets about the size of a cell's box, so a cell is in
- * ~8 of them). Model vertices are taken in bucket order (a counting sort) so that consecutive
- * vertices test the same cells while they are in cache; each tests its bucket's cells in
- * increasing index and the first that holds it wins — so a point on a shared face, or in
- * overlapping cells, goes to the lowest index. "Holds" means: within 1e-12 of the cell's longest
- * edge of every face plane (all barycentric coordinates >= -1e-12 settles it at once, since a
- * height is at most the longest edge; a coordinate below that is checked against the face's true
- * height only when a cheap bound does not reject it). Boxes are widened by 1e-6 of the longest
+ * Locating is a uniform grid over the level's bounding box, in coordinates quantized to 16 bits
+ * a side: each cell is listed, in increasing index, in every bucket its (widened, quantized) box
+ * meets; buckets are about the mean size of a cell's box (from a sample of cells), so a cell is
+ * in ~8 of them and a bucket lists ~70 (a tetrahedron's box is ~10 times its volume). Model
+ * vertices are taken in bucket order (a counting sort) so that consecutive vertices test the
+ * same cells while they are in cache; each tests its bucket's cells in increasing index — the
+ * quantized box first (12 bytes a cell, one branch), then the exact test — and the first that
+ * holds it wins, so a point on a shared face, or in overlapping cells, goes to the lowest index.
+ * "Holds" means: within 1e-12 of the cell's longest edge of every face plane (all barycentric
+ * coordinates >= -1e-12 settles it at once, since a height is at most the longest edge; a
+ * coordinate below that is checked against the face's true height only when a cheap bound does
+ * not reject it). Boxes are widened by 1e-6 of the longest
  * edge so that such points are in the cell's buckets (exact for cells whose corners are not
  * sharper than that).
  * A vertex in no cell is, by mode, refused, fixed (kept at its rest position, stored in place of
  * its weights), or bound to the nearest cell: buckets are searched in growing shells around its
  * own (clamped to the grid) until the best distance is below what the unexplored buckets can
  * offer (per axis, the gap to the first bucket outside the shell); the distance is the exact
- * point-tetrahedron distance (closest point on its faces). Its coordinates then extrapolate.
+ * point-tetrahedron distance (closest point on its faces), skipped for cells whose box is
+ * farther than the best so far. Its coordinates then extrapolate.
  *
- * Updates: at bind time the inverse map (level vertex -> model vertices bound to it, CSR, each
- * row ascending) is built, so the model vertices an edit moves are found in time proportional to
- * their number; a per-embedding stamp array dedupes them (a counter, not a clear per call), and
- * a radix sort (insertion sort when few) returns them ascending.
+ * Bindings are stored by slot, the model's vertices in bucket order, so that the vertices an edit
+ * moves (near each other in space) are near each other in memory whatever the model's order.
+ * Updates: at bind time the inverse map (level vertex -> slots bound to it, CSR, each row
+ * ascending) is built, so the model vertices an edit moves are found in time proportional to
+ * their number; a per-slot stamp array dedupes them (a counter, not a clear per call), they are
+ * recomputed in slot order, and a radix sort (insertion sort when few) returns their model
+ * indices ascending.
  *
  * Memory: the embedding's own sd_mem (allocator and cap as sd_options'), counting the locating
- * grid while it exists; sd_embed_memory is what stays (about 76 bytes per model vertex plus 4
- * per level vertex).
+ * grid while it exists (~16 bytes a cell + 4 per entry, ~50 per cell in all); sd_embed_memory
+ * is what stays (80 bytes per model vertex plus 4 per level vertex).
  */
 #include "internal.h"
 #include <float.h>
@@ -54,11 +61,15 @@ struct sd_embedding {
     sd_mem mem;
     size_t n;
     uint32_t nlv;       /* level vertices at bind time */
-    uint32_t *idx;      /* 4n: the cell's vertices, or idx[4i] = NONE: fixed */
-    double *w;          /* 4n: weights, or the rest position (3) of a fixed vertex */
-    uint32_t *rowptr;   /* nlv + 1: level vertex -> model vertices */
+    /* bindings are stored by slot, model vertices in bucket order (so that the vertices an edit
+     * moves, which are near each other, are mostly near each other in memory too) */
+    uint32_t *model;    /* n: slot -> model vertex */
+    uint32_t *slot;     /* n: model vertex -> slot */
+    uint32_t *idx;      /* 4 per slot: the cell's vertices, or idx[4s] = NONE: fixed */
+    double *w;          /* 4 per slot: weights, or the rest position (3) of a fixed vertex */
+    uint32_t *rowptr;   /* nlv + 1: level vertex -> slots */
     uint32_t *col;
-    uint32_t *stamp;    /* n: the last update that listed the vertex */
+    uint32_t *stamp;    /* per slot: the last update that listed it */
     uint32_t *scratch;  /* n: the radix sort's other half */
     uint32_t epoch;
 };
@@ -68,7 +79,7 @@ struct sd_embedding {
 typedef struct cells {
     const sd_level *lv;
     const double *x;
-    uint32_t ntet, nc;
+    uint32_t ntet, nc, nv;
 } cells;
 
 static void cell_verts(const cells *C, uint32_t c, uint32_t v[4])
@@ -265,27 +276,41 @@ static double tet_dist2(const double *const P[4], const double *p)
 
 /* ---- the grid ------------------------------------------------------------------------------ */
 
+/* Coordinates are quantized to 16 bits a side over the cells' bounding box (floor, clamped);
+ * each cell keeps its widened box so quantized (min and max floored: a point of the box
+ * quantizes inside it, floor being monotone), a cheap test before the exact one. Buckets are
+ * ranges of quantized values, bucket (q * dim) >> 16 on each axis, so a point's bucket lies in
+ * the bucket range of every box holding it. */
+#define QBITS 16
+#define QMAX 65535u
+
 typedef struct grid {
-    double lo[3], h[3], inv[3];
+    double lo[3], qs[3], quantum[3];
     uint32_t dim[3];
     size_t nb;
     uint32_t *start;    /* nb + 1 */
     uint32_t *cell;     /* the cells of bucket b: cell[start[b] .. start[b+1]) */
     float *len;         /* per cell: its longest edge, rounded up */
+    uint16_t (*box)[6]; /* per cell: its widened box, quantized (min xyz, max xyz) */
 } grid;
 
-static inline uint32_t axis_at(const grid *g, int a, double x)
+static inline uint32_t quant(const grid *g, int a, double x)
 {
-    double t = floor((x - g->lo[a]) * g->inv[a]);
+    double t = floor((x - g->lo[a]) * g->qs[a]);
     if (!(t > 0))
         return 0;
-    return t >= g->dim[a] ? g->dim[a] - 1 : (uint32_t)t;
+    return t >= QMAX ? QMAX : (uint32_t)t;
 }
 
-static inline size_t bucket_of(const grid *g, const double *p)
+static inline uint32_t axis_of(const grid *g, int a, uint32_t q)
 {
-    return ((size_t)axis_at(g, 2, p[2]) * g->dim[1] + axis_at(g, 1, p[1])) * g->dim[0] +
-           axis_at(g, 0, p[0]);
+    return (uint32_t)(((uint64_t)q * g->dim[a]) >> QBITS);
+}
+
+static inline size_t bucket_q(const grid *g, const uint32_t q[3])
+{
+    return ((size_t)axis_of(g, 2, q[2]) * g->dim[1] + axis_of(g, 1, q[1])) * g->dim[0] +
+           axis_of(g, 0, q[0]);
 }
 
 static void cell_pts(const cells *C, uint32_t c, const double *P[4])
@@ -296,62 +321,51 @@ static void cell_pts(const cells *C, uint32_t c, const double *P[4])
         P[k] = C->x + 3 * (size_t)v[k];
 }
 
-/* The widened box of cell c (its longest edge from the grid's table). */
-static void cell_box(const cells *C, const grid *g, uint32_t c, double lo[3], double hi[3])
-{
-    const double *P[4];
-    cell_pts(C, c, P);
-    double pad = BOX_TOL * g->len[c];
-    for (int a = 0; a < 3; a++) {
-        double l = P[0][a], h = P[0][a];
-        for (int k = 1; k < 4; k++) {
-            l = P[k][a] < l ? P[k][a] : l;
-            h = P[k][a] > h ? P[k][a] : h;
-        }
-        lo[a] = l - pad;
-        hi[a] = h + pad;
-    }
-}
-
 static void grid_free(sd_mem *m, grid *g)
 {
     sdi_free(m, g->start);
     sdi_free(m, g->cell);
     sdi_free(m, g->len);
+    sdi_free(m, g->box);
 }
 
 static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
 {
     memset(g, 0, sizeof *g);
     g->len = sdi_alloc(m, (size_t)C->nc * sizeof *g->len);
-    if (!g->len)
+    g->box = g->len ? sdi_alloc(m, (size_t)C->nc * sizeof *g->box) : NULL;
+    if (!g->box)
         return sdi_fail_nomem(err, m);
-    /* pass 1: longest edges, the bounding box, the mean box size */
+    /* the grid spans the level's vertices (those of any part: a far curve only makes it
+     * coarser); the mean box extent of the cells, from a sample of at most 2^16 */
     double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX}, ext = 0;
-    for (uint32_t c = 0; c < C->nc; c++) {
+    for (uint32_t v = 0; v < C->nv; v++)
+        for (int a = 0; a < 3; a++) {
+            double x = C->x[3 * (size_t)v + a];
+            lo[a] = x < lo[a] ? x : lo[a];
+            hi[a] = x > hi[a] ? x : hi[a];
+        }
+    const uint32_t stride = C->nc > 65536 ? C->nc / 65536 : 1;
+    uint32_t nsample = 0;
+    for (uint32_t c = 0; c < C->nc; c += stride, nsample++) {
         const double *P[4];
         cell_pts(C, c, P);
-        double L = longest_edge(P);
-        float f = (float)L;
-        g->len[c] = (double)f < L ? nextafterf(f, FLT_MAX) : f;
         for (int a = 0; a < 3; a++) {
-            double l = P[0][a], h = P[0][a];
-            for (int k = 1; k < 4; k++) {
-                l = P[k][a] < l ? P[k][a] : l;
-                h = P[k][a] > h ? P[k][a] : h;
-            }
-            lo[a] = l < lo[a] ? l : lo[a];
-            hi[a] = h > hi[a] ? h : hi[a];
+            double l = fmin(fmin(P[0][a], P[1][a]), fmin(P[2][a], P[3][a]));
+            double h = fmax(fmax(P[0][a], P[1][a]), fmax(P[2][a], P[3][a]));
             ext += h - l;
         }
     }
     /* buckets about the mean box extent (a cell then meets ~8), at most ~2 per cell and 2048 a side */
-    double s = ext / (3.0 * C->nc), span[3];
+    double s = ext / (3.0 * nsample), span[3];
     for (int a = 0; a < 3; a++) {
         span[a] = hi[a] - lo[a];
-        double pad = 1e-9 * (span[a] + fabs(lo[a]) + fabs(hi[a])) + DBL_MIN;
+        double pad = 1e-6 * span[a] + 1e-12 * (fabs(lo[a]) + fabs(hi[a])) + DBL_MIN;
         lo[a] -= pad;
         span[a] += 2 * pad;
+        g->lo[a] = lo[a];
+        g->qs[a] = (QMAX + 1.0) / span[a];
+        g->quantum[a] = span[a] / (QMAX + 1.0);
     }
     for (;;) {
         double nb = 1;
@@ -365,24 +379,36 @@ static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
         s *= 1.25;
     }
     g->nb = (size_t)g->dim[0] * g->dim[1] * g->dim[2];
-    for (int a = 0; a < 3; a++) {
-        g->lo[a] = lo[a];
-        g->h[a] = span[a] / g->dim[a];
-        g->inv[a] = g->dim[a] / span[a];
-    }
     g->start = sdi_calloc(m, g->nb + 1, sizeof *g->start);
     if (!g->start)
         return sdi_fail_nomem(err, m);
-    /* pass 2: entries per bucket; pass 3: the entries, cells in increasing order */
+    /* pass 1: the longest edges, the quantized boxes and the entries per bucket; pass 2: the
+     * entries, cells in increasing order */
     uint64_t total = 0;
     for (int pass = 0; pass < 2; pass++) {
         for (uint32_t c = 0; c < C->nc; c++) {
-            double bl[3], bh[3];
-            cell_box(C, g, c, bl, bh);
+            uint16_t *q = g->box[c];
+            if (pass == 0) {
+                const double *P[4];
+                cell_pts(C, c, P);
+                double L = longest_edge(P);
+                float f = (float)L;
+                g->len[c] = (double)f < L ? nextafterf(f, FLT_MAX) : f;
+                double pad = BOX_TOL * g->len[c];
+                for (int a = 0; a < 3; a++) {
+                    double l = P[0][a], h = P[0][a];
+                    for (int k = 1; k < 4; k++) {
+                        l = P[k][a] < l ? P[k][a] : l;
+                        h = P[k][a] > h ? P[k][a] : h;
+                    }
+                    q[a] = (uint16_t)quant(g, a, l - pad);
+                    q[3 + a] = (uint16_t)quant(g, a, h + pad);
+                }
+            }
             uint32_t i0[3], i1[3];
             for (int a = 0; a < 3; a++) {
-                i0[a] = axis_at(g, a, bl[a]);
-                i1[a] = axis_at(g, a, bh[a]);
+                i0[a] = axis_of(g, a, q[a]);
+                i1[a] = axis_of(g, a, q[3 + a]);
             }
             for (uint32_t z = i0[2]; z <= i1[2]; z++)
                 for (uint32_t y = i0[1]; y <= i1[1]; y++) {
@@ -409,17 +435,28 @@ static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
                 return sdi_fail_nomem(err, m);
         }
     }
-    /* pass 3 advanced each start to the next bucket's: shift back */
+    /* pass 2 advanced each start to the next bucket's: shift back */
     memmove(g->start + 1, g->start, g->nb * sizeof *g->start);
     g->start[0] = 0;
     return SD_OK;
 }
 
-/* The first cell of p's bucket that holds p (NONE if none), its coordinates in lam. */
-static uint32_t locate(const cells *C, const grid *g, size_t b, const double *p, double lam[4])
+static inline bool box_has(const uint16_t b[6], const uint32_t q[3])
 {
+    /* one branch: q - min <= max - min, unsigned, fails below min too */
+    return ((q[0] - b[0] <= (uint32_t)(b[3] - b[0])) & (q[1] - b[1] <= (uint32_t)(b[4] - b[1])) &
+            (q[2] - b[2] <= (uint32_t)(b[5] - b[2]))) != 0;
+}
+
+/* The first cell of p's bucket that holds p (NONE if none), its coordinates in lam. */
+static uint32_t locate(const cells *C, const grid *g, const uint32_t q[3], const double *p,
+                       double lam[4])
+{
+    size_t b = bucket_q(g, q);
     for (uint32_t j = g->start[b]; j < g->start[b + 1]; j++) {
         uint32_t c = g->cell[j];
+        if (!box_has(g->box[c], q))
+            continue;
         const double *P[4];
         cell_pts(C, c, P);
         if (holds(P, g->len[c], p, lam))
@@ -428,12 +465,26 @@ static uint32_t locate(const cells *C, const grid *g, size_t b, const double *p,
     return NONE;
 }
 
+/* A lower bound on the squared distance from p to cell c (its quantized box, one quantum wider
+ * on each side against rounding). */
+static double box_dist2(const grid *g, uint32_t c, const double *p)
+{
+    double s = 0;
+    for (int a = 0; a < 3; a++) {
+        double l = g->lo[a] + ((double)g->box[c][a] - 1) * g->quantum[a];
+        double h = g->lo[a] + ((double)g->box[c][3 + a] + 2) * g->quantum[a];
+        double d = p[a] < l ? l - p[a] : p[a] > h ? p[a] - h : 0;
+        s += d * d;
+    }
+    return s;
+}
+
 /* The nearest cell to p (lowest index among equals): shells of buckets around p's. */
 static uint32_t nearest(const cells *C, const grid *g, const double *p)
 {
     int64_t b[3], d[3];
     for (int a = 0; a < 3; a++) {
-        b[a] = axis_at(g, a, p[a]);
+        b[a] = axis_of(g, a, quant(g, a, p[a]));
         d[a] = g->dim[a];
     }
     double best = DBL_MAX;
@@ -456,6 +507,8 @@ static uint32_t nearest(const cells *C, const grid *g, const double *p)
                     size_t k = ((size_t)z * g->dim[1] + (size_t)y) * g->dim[0] + (size_t)x;
                     for (uint32_t j = g->start[k]; j < g->start[k + 1]; j++) {
                         uint32_t c = g->cell[j];
+                        if (box_dist2(g, c, p) > best)
+                            continue;
                         const double *P[4];
                         cell_pts(C, c, P);
                         double q = tet_dist2(P, p);
@@ -466,17 +519,20 @@ static uint32_t nearest(const cells *C, const grid *g, const double *p)
                     }
                 }
             }
-        /* what the buckets beyond the shell can offer: per axis, the gap to the first of them */
+        /* what the buckets beyond the shell can offer: per axis, the gap to the first of them
+         * (bucket i starts at quantized value ceil(i 2^16 / dim)), less a quantum for rounding */
         double bound = DBL_MAX;
         bool more = false;
         for (int a = 0; a < 3; a++) {
             if (b[a] + r + 1 < d[a]) {
-                double e = g->lo[a] + (double)(b[a] + r + 1) * g->h[a] - p[a];
+                double q0 = ceil((double)(b[a] + r + 1) * (QMAX + 1.0) / (double)d[a]) - 1;
+                double e = g->lo[a] + q0 * g->quantum[a] - p[a];
                 bound = fmin(bound, e > 0 ? e : 0);
                 more = true;
             }
             if (b[a] - r - 1 >= 0) {
-                double e = p[a] - (g->lo[a] + (double)(b[a] - r) * g->h[a]);
+                double q1 = ceil((double)(b[a] - r) * (QMAX + 1.0) / (double)d[a]) + 1;
+                double e = p[a] - (g->lo[a] + q1 * g->quantum[a]);
                 bound = fmin(bound, e > 0 ? e : 0);
                 more = true;
             }
@@ -493,6 +549,8 @@ void sd_embed_free(sd_embedding *e)
     if (!e)
         return;
     sd_mem m = e->mem;
+    sdi_free(&m, e->model);
+    sdi_free(&m, e->slot);
     sdi_free(&m, e->idx);
     sdi_free(&m, e->w);
     sdi_free(&m, e->rowptr);
@@ -509,7 +567,7 @@ static void note_outside(sd_bind_report *rep, size_t i)
     rep->outside++;
 }
 
-/* The inverse map: level vertex -> bound model vertices (ascending). */
+/* The inverse map: level vertex -> the slots bound to it (ascending). */
 static bool build_inverse(sd_embedding *e)
 {
     e->rowptr = sdi_calloc(&e->mem, (size_t)e->nlv + 1, sizeof *e->rowptr);
@@ -553,7 +611,8 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     if (n > UINT32_MAX / 4)
         return sdi_fail(err, SD_ERR_LIMIT, -1, -1, "%zu model vertices (at most %u)", n,
                         UINT32_MAX / 4);
-    cells C = {lv, sd_level_channel(lv, 0, NULL), sd_level_num_cells(lv, SD_CELL_TETRA), 0};
+    cells C = {lv, sd_level_channel(lv, 0, NULL), sd_level_num_cells(lv, SD_CELL_TETRA), 0,
+               sd_level_num_vertices(lv)};
     uint64_t nc = C.ntet + 4 * (uint64_t)sd_level_num_cells(lv, SD_CELL_OCTA);
     if (nc == 0)
         return sdi_fail(err, SD_ERR_VALUE, -1, -1, "level %u has no solid cells", sd_level_index(lv));
@@ -570,7 +629,7 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     sdi_mem_init(&m, alloc, max_bytes);
     const uint32_t nlv = sd_level_num_vertices(lv);
     /* what stays: the vertices' cells and weights, the inverse map, stamps and scratch */
-    const double keep = 16.0 * 8 + (double)n * (16 + 32 + 16 + 4 + 4) + 4.0 * ((double)nlv + 1);
+    const double keep = 16.0 * 10 + (double)n * (16 + 32 + 16 + 4 + 4 + 8) + 4.0 * ((double)nlv + 1);
     if (max_bytes && keep > (double)max_bytes)
         return sdi_fail(err, SD_ERR_LIMIT, -1, -1,
                         "binding %zu model vertices takes %.0f bytes (limit %zu)", n, keep,
@@ -580,13 +639,15 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
         return sdi_fail_nomem(err, &m);
     e->n = n;
     e->nlv = nlv;
-    e->idx = sdi_alloc(&m, (n ? 4 * n : 1) * sizeof *e->idx);
+    e->model = sdi_alloc(&m, (n ? n : 1) * sizeof *e->model);
+    e->slot = e->model ? sdi_alloc(&m, (n ? n : 1) * sizeof *e->slot) : NULL;
+    e->idx = e->slot ? sdi_alloc(&m, (n ? 4 * n : 1) * sizeof *e->idx) : NULL;
     e->w = e->idx ? sdi_alloc(&m, (n ? 4 * n : 1) * sizeof *e->w) : NULL;
     e->stamp = e->w ? sdi_calloc(&m, n ? n : 1, sizeof *e->stamp) : NULL;
     e->scratch = e->stamp ? sdi_alloc(&m, (n ? n : 1) * sizeof *e->scratch) : NULL;
     sd_result r = SD_OK;
     grid g = {0};
-    uint32_t *ord = NULL, *cnt = NULL;
+    uint32_t *ord = e->model, *cnt = NULL;
     if (!e->scratch) {
         r = sdi_fail_nomem(err, &m);
         goto fail;
@@ -594,48 +655,56 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     if ((r = grid_build(&m, &C, &g, err)))
         goto fail;
 
-    /* model vertices in bucket order: e->scratch holds each one's bucket meanwhile */
-    ord = sdi_alloc(&m, (n ? n : 1) * sizeof *ord);
-    cnt = ord ? sdi_calloc(&m, g.nb + 1, sizeof *cnt) : NULL;
+    /* model vertices in bucket order (their slots): e->scratch holds each one's bucket meanwhile */
+    cnt = sdi_calloc(&m, g.nb + 1, sizeof *cnt);
     if (!cnt) {
         r = sdi_fail_nomem(err, &m);
         goto fail;
     }
     for (size_t i = 0; i < n; i++) {
-        e->scratch[i] = (uint32_t)bucket_of(&g, xyz + 3 * i);
+        uint32_t q[3];
+        for (int a = 0; a < 3; a++)
+            q[a] = quant(&g, a, xyz[3 * i + a]);
+        e->scratch[i] = (uint32_t)bucket_q(&g, q);
         cnt[e->scratch[i] + 1]++;
     }
     for (size_t b = 0; b < g.nb; b++)
         cnt[b + 1] += cnt[b];
-    for (size_t i = 0; i < n; i++)
-        ord[cnt[e->scratch[i]]++] = (uint32_t)i;
+    for (size_t i = 0; i < n; i++) {
+        e->slot[i] = cnt[e->scratch[i]]++;
+        ord[e->slot[i]] = (uint32_t)i;
+    }
     sdi_free(&m, cnt);
     cnt = NULL;
 
     for (size_t j = 0; j < n; j++) {
         size_t i = ord[j];
         double lam[4];
-        uint32_t c = locate(&C, &g, e->scratch[i], xyz + 3 * i, lam);
+        uint32_t q[3];
+        for (int a = 0; a < 3; a++)
+            q[a] = quant(&g, a, xyz[3 * i + a]);
+        uint32_t c = locate(&C, &g, q, xyz + 3 * i, lam);
         if (c == NONE) {
-            e->idx[4 * i] = NONE; /* settled below, in model order */
+            e->idx[4 * j] = NONE; /* settled below, in model order */
             continue;
         }
-        cell_verts(&C, c, e->idx + 4 * i);
-        memcpy(e->w + 4 * i, lam, sizeof lam);
+        cell_verts(&C, c, e->idx + 4 * j);
+        memcpy(e->w + 4 * j, lam, sizeof lam);
     }
     for (size_t i = 0; i < n; i++) {
-        if (e->idx[4 * i] != NONE)
+        size_t j = e->slot[i];
+        if (e->idx[4 * j] != NONE)
             continue;
         note_outside(rep, i);
         if (mode == SD_OUTSIDE_FIXED) {
-            memcpy(e->w + 4 * i, xyz + 3 * i, 3 * sizeof *e->w);
-            e->w[4 * i + 3] = 0;
+            memcpy(e->w + 4 * j, xyz + 3 * i, 3 * sizeof *e->w);
+            e->w[4 * j + 3] = 0;
         } else if (mode == SD_OUTSIDE_NEAREST) {
             uint32_t c = nearest(&C, &g, xyz + 3 * i);
             const double *P[4];
             cell_pts(&C, c, P);
-            cell_verts(&C, c, e->idx + 4 * i);
-            if (!bary(P, xyz + 3 * i, e->w + 4 * i)) { /* not for a valid complex's cells */
+            cell_verts(&C, c, e->idx + 4 * j);
+            if (!bary(P, xyz + 3 * i, e->w + 4 * j)) { /* not for a valid complex's cells */
                 r = sdi_fail(err, SD_ERR_DEGENERATE, (long)i, -1,
                              "model vertex %zu: its nearest cell %u is degenerate", i, c);
                 goto fail;
@@ -648,8 +717,6 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
                      rep->outside, n, sd_level_index(lv), rep->first[0]);
         goto fail;
     }
-    sdi_free(&m, ord);
-    ord = NULL;
     grid_free(&m, &g);
     memset(&g, 0, sizeof g);
     e->mem = m; /* from here on the embedding counts itself */
@@ -663,7 +730,6 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     return SD_OK;
 
 fail:
-    sdi_free(&m, ord);
     sdi_free(&m, cnt);
     grid_free(&m, &g);
     e->mem = m;
@@ -685,17 +751,18 @@ size_t sd_embed_memory(const sd_embedding *e)
 
 int sd_embed_weights(const sd_embedding *e, size_t i, uint32_t idx[4], double w[4])
 {
-    if (!e || i >= e->n || e->idx[4 * i] == NONE)
+    if (!e || i >= e->n || e->idx[4 * (size_t)e->slot[i]] == NONE)
         return 0;
-    memcpy(idx, e->idx + 4 * i, 4 * sizeof *idx);
-    memcpy(w, e->w + 4 * i, 4 * sizeof *w);
+    memcpy(idx, e->idx + 4 * (size_t)e->slot[i], 4 * sizeof *idx);
+    memcpy(w, e->w + 4 * (size_t)e->slot[i], 4 * sizeof *w);
     return 1;
 }
 
-static inline void place(const sd_embedding *e, const double *x, size_t i, double *o)
+/* The position of slot s at positions x. */
+static inline void place(const sd_embedding *e, const double *x, size_t s, double *o)
 {
-    const uint32_t *v = e->idx + 4 * i;
-    const double *w = e->w + 4 * i;
+    const uint32_t *v = e->idx + 4 * s;
+    const double *w = e->w + 4 * s;
     if (v[0] == NONE) {
         memcpy(o, w, 3 * sizeof *o);
         return;
@@ -709,8 +776,8 @@ static inline void place(const sd_embedding *e, const double *x, size_t i, doubl
 void sd_embed_positions(const sd_embedding *e, const sd_level *lv, double *out)
 {
     const double *x = sd_level_channel(lv, 0, NULL);
-    for (size_t i = 0; i < e->n; i++)
-        place(e, x, i, out + 3 * i);
+    for (size_t s = 0; s < e->n; s++)
+        place(e, x, s, out + 3 * (size_t)e->model[s]);
 }
 
 /* Ascending order of a[0..k) (distinct values below 2^32), tmp of k. */
@@ -760,16 +827,20 @@ size_t sd_embed_update(sd_embedding *e, const sd_level *lv, const uint32_t *chan
         if (v >= e->nlv)
             continue;
         for (uint32_t q = e->rowptr[v]; q < e->rowptr[v + 1]; q++) {
-            uint32_t i = e->col[q];
-            if (e->stamp[i] != ep) {
-                e->stamp[i] = ep;
-                moved[k++] = i;
+            uint32_t s = e->col[q];
+            if (e->stamp[s] != ep) {
+                e->stamp[s] = ep;
+                moved[k++] = s;
             }
         }
     }
-    sort_ids(moved, e->scratch, k);
+    /* slots found near each other are near each other in memory: place them in that order */
     const double *x = sd_level_channel(lv, 0, NULL);
-    for (size_t j = 0; j < k; j++)
-        place(e, x, moved[j], out + 3 * (size_t)moved[j]);
+    for (size_t j = 0; j < k; j++) {
+        uint32_t s = moved[j], i = e->model[s];
+        place(e, x, s, out + 3 * (size_t)i);
+        moved[j] = i;
+    }
+    sort_ids(moved, e->scratch, k);
     return k;
 }

@@ -518,7 +518,8 @@ typedef struct sd_bind_report {
  * (NULL: the C library), at most max_bytes (0: no cap) counting the locating grid while it
  * exists. Errors: SD_ERR_ARG (no lv, out or xyz, an unknown mode), SD_ERR_VALUE (a coordinate
  * not finite: item = the vertex, field = the coordinate; a level without solid cells; refused
- * vertices), SD_ERR_LIMIT (over max_bytes, more than 2^30 vertices or 2^32 cells), SD_ERR_NOMEM.
+ * vertices), SD_ERR_LIMIT (over max_bytes, more than 2^30 vertices or 2^32 cells), SD_ERR_NOMEM,
+ * SD_ERR_DEGENERATE (a nearest cell of zero volume: not in a level of a valid complex).
  * rep (optional) is filled in every mode. On success *out is the caller's, freed with
  * sd_embed_free; it borrows nothing (lv is passed again to read positions). Const on the level:
  * may run beside readers of the complex, not beside an edit. */
@@ -526,8 +527,8 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
                         const sd_allocator *alloc, size_t max_bytes, sd_embedding **out,
                         sd_bind_report *rep, sd_error *err);
 void sd_embed_free(sd_embedding *e);
-/* The number of model vertices, and the bytes the embedding holds (~76 per model vertex + 4 per
- * level vertex). */
+/* The number of model vertices, and the bytes the embedding holds (80 per model vertex + 4 per
+ * level vertex; binding takes ~50 more per cell of the level meanwhile). */
 size_t sd_embed_count(const sd_embedding *e);
 size_t sd_embed_memory(const sd_embedding *e);
 /* Vertex i's 4 level vertices and weights (summing to 1): returns 1; 0 (idx, w untouched) when

@@ -552,3 +552,85 @@ TEST(embed_errors)
     sd_complex_free(c);
     mesh_free(&m);
 }
+
+/* Every level vertex and every edge midpoint of a level (on many shared faces at once) goes to
+ * the lowest-numbered cell that has it: the first cell listing the vertex, or both ends. */
+TEST(embed_vertices_and_edges_lowest_cell)
+{
+    mesh m = {0};
+    shape_cube_tets(&m, 2);
+    sd_complex *c = mesh_complex(&m, NULL, NULL);
+    const sd_level *lv = sd_complex_level(c, 1, NULL);
+    CHECK(lv);
+    const double *x = sd_level_channel(lv, 0, NULL);
+    const uint32_t nv = sd_level_num_vertices(lv), nc = ncells(lv);
+    uint32_t ne = 0;
+    const uint32_t *ev = sd_level_edges(lv, &ne);
+    CHECK(ev && ne > 0);
+    const size_t n = nv + ne;
+    double *p = malloc(3 * n * sizeof *p);
+    uint32_t *expect = malloc(n * sizeof *expect);
+    for (size_t i = 0; i < n; i++) {
+        uint32_t a = i < nv ? (uint32_t)i : ev[2 * (i - nv)], b = i < nv ? a : ev[2 * (i - nv) + 1];
+        for (int k = 0; k < 3; k++)
+            p[3 * i + k] = 0.5 * (x[3 * a + k] + x[3 * b + k]);
+        expect[i] = UINT32_MAX;
+        for (uint32_t q = 0; q < nc && expect[i] == UINT32_MAX; q++) {
+            uint32_t v[4];
+            cell_of(lv, q, v);
+            bool ha = false, hb = false;
+            for (int k = 0; k < 4; k++) {
+                ha |= v[k] == a;
+                hb |= v[k] == b;
+            }
+            if (ha && hb)
+                expect[i] = q;
+        }
+        CHECK(expect[i] != UINT32_MAX);
+    }
+    sd_embedding *e = NULL;
+    sd_bind_report rep;
+    CHECK(sd_embed_bind(lv, p, n, SD_OUTSIDE_REFUSE, NULL, 0, &e, &rep, NULL) == SD_OK);
+    for (size_t i = 0; i < n; i++) {
+        uint32_t idx[4], v[4];
+        double w[4];
+        CHECK(sd_embed_weights(e, i, idx, w));
+        cell_of(lv, expect[i], v);
+        CHECK(same_set(idx, v));
+        uint32_t a = i < nv ? (uint32_t)i : ev[2 * (i - nv)], b = i < nv ? a : ev[2 * (i - nv) + 1];
+        CHECK_NEAR(weight_of(idx, w, a) + (a == b ? 0 : weight_of(idx, w, b)), 1, 1e-12);
+    }
+    sd_embed_free(e);
+    free(p);
+    free(expect);
+    sd_complex_free(c);
+    mesh_free(&m);
+}
+
+/* The tolerance is a distance: 1e-12 of the longest edge beyond a face plane, also for a flat
+ * cell whose barycentric coordinate is then far below -1e-12. */
+TEST(embed_tolerance_is_a_distance)
+{
+    mesh m = {0};
+    mesh_v(&m, 0, 0, 0);
+    mesh_v(&m, 1, 0, 0);
+    mesh_v(&m, 0, 1, 0);
+    mesh_v(&m, 0.3, 0.3, 1e-3);
+    mesh_s(&m, 4, 0, 1, 2, 3);
+    sd_complex *c = mesh_complex(&m, NULL, NULL);
+    const sd_level *lv = sd_complex_level(c, 0, NULL);
+    const double L = sqrt(2.0); /* the edge (1,0,0)-(0,1,0) */
+    const double p[6] = {0.2, 0.2, -0.5e-12 * L, 0.2, 0.2, -2e-12 * L};
+    sd_embedding *e = NULL;
+    sd_bind_report rep;
+    CHECK(sd_embed_bind(lv, p, 2, SD_OUTSIDE_FIXED, NULL, 0, &e, &rep, NULL) == SD_OK);
+    CHECK(rep.outside == 1 && rep.first[0] == 1);
+    uint32_t idx[4];
+    double w[4];
+    CHECK(sd_embed_weights(e, 0, idx, w) == 1);
+    CHECK(weight_of(idx, w, 3) < -1e-10); /* z / height: far below -1e-12 */
+    CHECK(sd_embed_weights(e, 1, idx, w) == 0);
+    sd_embed_free(e);
+    sd_complex_free(c);
+    mesh_free(&m);
+}
