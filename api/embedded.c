@@ -752,11 +752,101 @@ json_t *api_embed_export(const api_model *m)
             json_array_append_new(ts, json_pack("[I, I, I]", (json_int_t)d->tri[3 * t],
                                                 (json_int_t)d->tri[3 * t + 1],
                                                 (json_int_t)d->tri[3 * t + 2]));
-        json_object_set_new(o, d->name, json_pack("{s:o, s:o, s:i, s:s}", "vertices", vs,
+        /* the binding itself: re-binding the rest shape to points edited since would differ */
+        json_t *bj = json_array();
+        for (uint32_t v = 0; bj && v < d->nv; v++) {
+            uint32_t idx[4];
+            double w[4];
+            if (!sd_embed_weights(m->embed[i].bind, v, idx, w)) {
+                json_array_append_new(bj, json_null());
+                continue;
+            }
+            json_t *row = json_pack("[I, I, I, I]", (json_int_t)idx[0], (json_int_t)idx[1],
+                                    (json_int_t)idx[2], (json_int_t)idx[3]);
+            for (int k = 0; row && k < 4; k++)
+                json_array_append_new(row, json_real(w[k]));
+            json_array_append_new(bj, row);
+        }
+        json_object_set_new(o, d->name, json_pack("{s:o, s:o, s:i, s:s, s:o}", "vertices", vs,
                                                   "triangles", ts, "level", d->level, "outside",
-                                                  OUTSIDE[d->outside]));
+                                                  OUTSIDE[d->outside], "binding", bj));
     }
     return o;
+}
+
+/* A saved binding ([[i0, i1, i2, i3, w0, w1, w2, w3] | null per vertex]) of d into m's list. */
+static int restore(api_model *m, api_embed_def *d, json_t *b, const char *base,
+                   const api_limits *lim, api_problem *p)
+{
+    char at[176];
+    snprintf(at, sizeof at, "%s/binding", base);
+    if (!json_is_array(b) || json_array_size(b) != d->nv)
+        return api_fail_at(p, 400, "wrong-type", at, "must be one entry per vertex (%u)", d->nv);
+    if (!ensure_list(m))
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    if (find(m, d->name) >= 0 || m->nembed >= API_MAX_EMBEDDED)
+        return api_fail_at(p, 422, "limit-exceeded", at, "model \"%s\" twice, or too many", d->name);
+    if (api_check_level_limits(m, d->level, lim, p) || api_level_compute(m, d->level, NULL, p))
+        return p->status;
+    uint32_t *idx = api_malloc(16 * ((size_t)d->nv + 1));
+    double *w = api_malloc(32 * ((size_t)d->nv + 1));
+    int rc = !idx || !w ? api_fail(p, 503, "out-of-memory", "out of memory") : 0;
+    for (uint32_t v = 0; !rc && v < d->nv; v++) {
+        json_t *row = json_array_get(b, v);
+        if (json_is_null(row)) {
+            idx[4 * (size_t)v] = UINT32_MAX;
+            continue;
+        }
+        char ptr[200];
+        snprintf(ptr, sizeof ptr, "%s/%u", at, v);
+        if (!json_is_array(row) || json_array_size(row) != 8) {
+            rc = api_fail_at(p, 400, "wrong-type", ptr, "a binding is [4 level vertices, 4 weights]");
+            break;
+        }
+        for (int k = 0; !rc && k < 4; k++) {
+            long long x;
+            char ck[216];
+            snprintf(ck, sizeof ck, "%s/%d", ptr, k);
+            if (!(rc = api_get_int(json_array_get(row, (size_t)k), ck, 0, UINT32_MAX - 1, &x, p)))
+                idx[4 * (size_t)v + k] = (uint32_t)x;
+            snprintf(ck, sizeof ck, "%s/%d", ptr, 4 + k);
+            if (!rc)
+                rc = api_get_number(json_array_get(row, (size_t)(4 + k)), ck, 1e6,
+                                    &w[4 * (size_t)v + k], p);
+        }
+    }
+    api_embed e = {0};
+    if (!rc) {
+        e.scratch = api_malloc(3 * sizeof(double) * ((size_t)d->nv + 1));
+        e.moved = api_malloc(sizeof(uint32_t) * ((size_t)d->nv + 1));
+        if (!e.scratch || !e.moved)
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
+    }
+    if (!rc) {
+        pthread_mutex_lock(&m->lock);
+        sd_error err = {0};
+        const sd_level *lv = sd_complex_level(m->c, d->level, &err);
+        sd_allocator al = api_mem_core_allocator();
+        if (!lv || sd_embed_restore(lv, d->nv, idx, w, d->rest, &al, 0, &e.bind, &err))
+            rc = err.code == SD_ERR_NOMEM ? api_fail(p, 503, "out-of-memory", "out of memory")
+                                          : api_fail_at(p, 422, "outside", at, "model \"%s\": %s",
+                                                        d->name, err.message);
+        if (!rc) {
+            for (uint32_t v = 0; v < d->nv; v++)
+                e.outside += idx[4 * (size_t)v] == UINT32_MAX;
+            e.since = atomic_load(&m->version);
+            atomic_fetch_add(&d->refs, 1);
+            e.def = d;
+            m->embed[m->nembed++] = e;
+            api_model_publish(m);
+        }
+        pthread_mutex_unlock(&m->lock);
+    }
+    if (rc)
+        embed_clear(&e);
+    api_free(idx);
+    api_free(w);
+    return rc;
 }
 
 int api_embed_import(api_model *m, json_t *emb, const char *base, const api_limits *lim,
@@ -772,12 +862,19 @@ int api_embed_import(api_model *m, json_t *emb, const char *base, const api_limi
         snprintf(at, sizeof at, "%s/%.48s", base, name);
         api_embed_def *d = NULL;
         api_problem q = {0};
+        json_t *def = json_is_object(v) ? json_copy(v) : json_incref(v), *binding = NULL;
+        if (json_is_object(def) && (binding = json_object_get(def, "binding")))
+            json_incref(binding), json_object_del(def, "binding");
         int rc = name_ok(name, &q) ? api_fail_at(p, 422, "bad-parameter", at, "%s", q.detail)
-                                   : parse_def(v, name, at, lim, &d, p);
+                                   : parse_def(def, name, at, lim, &d, p);
+        json_decref(def);
         json_t *unused = NULL;
-        if (!rc)
+        if (!rc && binding)
+            rc = restore(m, d, binding, at, lim, p);
+        else if (!rc)
             rc = api_embed_put(m, d, atomic_load(&m->version), lim, NULL, NULL, &unused, p);
         json_decref(unused);
+        json_decref(binding);
         api_embed_def_unref(d);
         if (rc)
             return rc;

@@ -737,6 +737,71 @@ fail:
     return r;
 }
 
+sd_result sd_embed_restore(const sd_level *lv, size_t n, const uint32_t *idx, const double *w,
+                           const double *rest, const sd_allocator *alloc, size_t max_bytes,
+                           sd_embedding **out, sd_error *err)
+{
+    if (out)
+        *out = NULL;
+    if (!lv || !out || (n && (!idx || !w || !rest)))
+        return sdi_fail(err, SD_ERR_ARG, -1, -1, "no level, binding or result given");
+    if (n > UINT32_MAX / 4)
+        return sdi_fail(err, SD_ERR_LIMIT, -1, -1, "%zu model vertices (at most %u)", n,
+                        UINT32_MAX / 4);
+    const uint32_t nlv = sd_level_num_vertices(lv);
+    for (size_t i = 0; i < n; i++) { /* a binding of another level, or damaged: refused */
+        if (idx[4 * i] == NONE)
+            continue;
+        double sum = 0;
+        for (int k = 0; k < 4; k++) {
+            if (idx[4 * i + k] >= nlv || !isfinite(w[4 * i + k]))
+                return sdi_fail(err, SD_ERR_VALUE, (long)i, k, "model vertex %zu: level vertex "
+                                "%u or its weight is not one of level %u", i, idx[4 * i + k],
+                                sd_level_index(lv));
+            sum += w[4 * i + k];
+        }
+        if (!(fabs(sum - 1) <= 1e-9))
+            return sdi_fail(err, SD_ERR_VALUE, (long)i, -1, "model vertex %zu: its weights add "
+                            "up to %.17g, not 1", i, sum);
+    }
+    sd_mem m;
+    sdi_mem_init(&m, alloc, max_bytes);
+    sd_embedding *e = sdi_calloc(&m, 1, sizeof *e);
+    if (!e)
+        return sdi_fail_nomem(err, &m);
+    e->n = n;
+    e->nlv = nlv;
+    e->model = sdi_alloc(&m, (n ? n : 1) * sizeof *e->model);
+    e->slot = e->model ? sdi_alloc(&m, (n ? n : 1) * sizeof *e->slot) : NULL;
+    e->idx = e->slot ? sdi_alloc(&m, (n ? 4 * n : 1) * sizeof *e->idx) : NULL;
+    e->w = e->idx ? sdi_alloc(&m, (n ? 4 * n : 1) * sizeof *e->w) : NULL;
+    e->stamp = e->w ? sdi_calloc(&m, n ? n : 1, sizeof *e->stamp) : NULL;
+    e->scratch = e->stamp ? sdi_alloc(&m, (n ? n : 1) * sizeof *e->scratch) : NULL;
+    e->mem = m;
+    if (!e->scratch) {
+        sd_result r = sdi_fail_nomem(err, &m);
+        sd_embed_free(e);
+        return r;
+    }
+    for (size_t i = 0; i < n; i++) { /* slots in model order (a bind's bucket order is lost) */
+        e->model[i] = e->slot[i] = (uint32_t)i;
+        memcpy(e->idx + 4 * i, idx + 4 * i, 4 * sizeof *idx);
+        if (idx[4 * i] == NONE) {
+            memcpy(e->w + 4 * i, rest + 3 * i, 3 * sizeof *e->w);
+            e->w[4 * i + 3] = 0;
+        } else
+            memcpy(e->w + 4 * i, w + 4 * i, 4 * sizeof *w);
+    }
+    if (!build_inverse(e)) {
+        m = e->mem;
+        sd_result r = sdi_fail_nomem(err, &m);
+        sd_embed_free(e);
+        return r;
+    }
+    *out = e;
+    return SD_OK;
+}
+
 /* ---- reading ------------------------------------------------------------------------------- */
 
 size_t sd_embed_count(const sd_embedding *e)

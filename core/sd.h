@@ -526,6 +526,14 @@ typedef struct sd_bind_report {
 sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outside mode,
                         const sd_allocator *alloc, size_t max_bytes, sd_embedding **out,
                         sd_bind_report *rep, sd_error *err);
+/* An embedding from a binding saved with sd_embed_weights (a session's export): per model
+ * vertex its 4 level vertices and weights (idx[4i] = UINT32_MAX: a fixed vertex, kept at
+ * rest[3i..]), checked against lv (indices in range, weights finite and summing to 1 within
+ * 1e-9: SD_ERR_VALUE otherwise). The positions it gives are those of the embedding it was saved
+ * from, bit for bit. */
+sd_result sd_embed_restore(const sd_level *lv, size_t n, const uint32_t *idx, const double *w,
+                           const double *rest, const sd_allocator *alloc, size_t max_bytes,
+                           sd_embedding **out, sd_error *err);
 void sd_embed_free(sd_embedding *e);
 /* The number of model vertices, and the bytes the embedding holds (80 per model vertex + 4 per
  * level vertex; binding takes ~50 more per cell of the level meanwhile). */

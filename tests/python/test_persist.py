@@ -166,7 +166,7 @@ def test_import_errors_point_into_the_document(daemon):
              "/import/complex/simplices/0/0"),
             (lambda d: d["rules"].update(solid_scheme="cubic"), 422, "/import/rules/solid_scheme"),
             (lambda d: d.update(extra=1), 400, "/import/extra"),
-            (lambda d: d.update(embedded={"m": {}}), 422, "/import/embedded")]:
+            (lambda d: d.update(embedded={"m": {}}), 400, "/import/embedded/m/vertices")]:
         d = __import__("copy").deepcopy(doc)
         change(d)
         r = post(d)
