@@ -720,6 +720,7 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     grid_free(&m, &g);
     memset(&g, 0, sizeof g);
     e->mem = m; /* from here on the embedding counts itself */
+    memset(e->stamp, 0, (n ? n : 1) * sizeof *e->stamp); /* pages written now, not by updates */
     if (!build_inverse(e)) {
         m = e->mem;
         r = sdi_fail_nomem(err, &m);
