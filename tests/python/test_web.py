@@ -45,6 +45,7 @@ CHECKS = [
     "solid_scheme",      # a rule the daemon has (averaged) changes the level
     "drag_point",        # dragging a control point: version advances, GLB and picture change
     "undo_redo",         # Ctrl+Z puts it back exactly, Redo moves it again
+    "embed_model",       # an OBJ embedded in the solid follows a drag by its deltas, drawn = the daemon's
     "file_open",         # an OBJ from disk
     "file_errors",       # a broken file and a refused one are explained
     "file_stl_msh",      # STL and Gmsh .msh from disk; the model selector shows the file

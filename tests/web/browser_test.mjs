@@ -501,6 +501,38 @@ await step(['drag_point', 'undo_redo'], async () => {
     `undo -> ${undone.controlPoints[pick.index]}, redo -> ${redone.controlPoints[pick.index]}; versions ${undone.version}, ${redone.version}`);
 });
 
+// 11b. an embedded model (free-form deformation): an OBJ bound to the shown level, drawn in its own
+// colour, follows a drag by its own deltas; what is drawn equals the daemon's model (float32)
+await step('embed_model', async () => {
+  const s0 = await snap();
+  const c = [0, 1, 2].map((k) => s0.controlPoints.reduce((a, p) => a + p[k], 0) / s0.controlPoints.length);
+  const r = 0.15, pts = [[r, 0, 0], [-r, 0, 0], [0, r, 0], [0, -r, 0], [0, 0, r], [0, 0, -r]];
+  const obj = pts.map((p) => `v ${p.map((x, k) => (x + c[k]).toFixed(6)).join(' ')}`).join('\n') +
+    '\nf 1 3 5\nf 3 2 5\nf 2 4 5\nf 4 1 5\nf 3 1 6\nf 2 3 6\nf 4 2 6\nf 1 4 6\n';
+  const file = path.join(outdir, 'octahedron.obj');
+  fs.writeFileSync(file, obj);
+  await page.setInputFiles('#embed-file', file);
+  await idle(`window.subdivd.snapshot().embedded`);
+  const bound = await page.evaluate(() => window.subdivd.embeddedCompare());
+  const pick = await pickableVertex(() => true);
+  if (!pick) throw new Error('no clickable control vertex on screen');
+  const before = await snap();
+  await page.mouse.move(pick.at.x, pick.at.y);
+  await page.mouse.down();
+  for (let k = 1; k <= 8; k++) await page.mouse.move(pick.at.x + 6 * k, pick.at.y - 5 * k);
+  await page.mouse.up();
+  await idle(`window.subdivd.snapshot().undo === ${before.undo + 1} && !window.subdivd.snapshot().embedded.busy && window.subdivd.snapshot().embedded.version === window.subdivd.snapshot().version`);
+  const after = await snap();
+  const cmp = await page.evaluate(() => window.subdivd.embeddedCompare());
+  await shot('09b-embedded.png');
+  await page.click('#embed-remove');
+  await idle(`!window.subdivd.snapshot().embedded`);
+  check('embed_model', bound.count === 6 && bound.differ === 0 && cmp.differ === 0 && cmp.drawn === 6 &&
+    after.embedded.deltas > 0 && after.embedded.version === after.version,
+    `6 vertices bound at level ${after.embedded.level}; after the drag ${after.embedded.deltas} embedded deltas, ` +
+    `${cmp.differ} of ${3 * cmp.count} drawn floats differ from GET /embedded/model`);
+});
+
 // 12. files from disk: an OBJ loads; a broken one and one the daemon refuses are explained
 await step(['file_open', 'file_errors'], async () => {
   const good = path.join(outdir, 'tetra_with_tail.obj');

@@ -166,6 +166,24 @@ export class Session {
     return es;
   }
 
+  // Embedded models (free-form deformation): bind, read, follow, remove.
+  putEmbedded(name, body) {
+    return this.json(`Embedding ${name}`, 'PUT', `/embedded/${name}`, { body, ifMatch: this.version });
+  }
+
+  getEmbedded(name) {
+    return this.json(`Reading ${name}`, 'GET', `/embedded/${name}`);
+  }
+
+  async embeddedDelta(name, since) {
+    const res = await this.request(`Updating ${name}`, 'GET', `/embedded/${name}/delta`, { query: { since, format: 'bin' } });
+    return parseDelta(await res.arrayBuffer());
+  }
+
+  async deleteEmbedded(name) {
+    await this.request(`Removing ${name}`, 'DELETE', `/embedded/${name}`, { ifMatch: this.version });
+  }
+
   stats(level) {
     return this.json(`Reading the statistics of level ${level}`, 'GET', `/levels/${level}/stats`);
   }

@@ -196,6 +196,7 @@ class App {
           await this.session.open();
           this.#listen();
         }
+        if (this.embedded) await this.#dropEmbedded(); // it would be bound to the new complex
         const put = await this.session.putComplex(body);
         const complex = await this.session.getComplex();
         this.#setModel(name, complex, put.summary, attribute);
@@ -305,6 +306,92 @@ class App {
     this.requestLevel();
   }
 
+  // ---- an embedded model (free-form deformation, docs/WEB.md) -------------------------------
+
+  // Bind a mesh file's triangles (or points) to the shown level; it then follows every drag.
+  async embedFile(file) {
+    if (!this.model) return this.info('Load a model with solids first.');
+    let body;
+    try {
+      const binary = BINARY_TYPES.includes(file.name.toLowerCase().split('.').pop());
+      body = parseMeshFile(file.name, binary ? await file.arrayBuffer() : await file.text());
+    } catch (e) {
+      this.error(`Reading ${file.name} failed: ${e.message}`);
+      return;
+    }
+    const triangles = body.simplices.filter((t) => t.length === 3);
+    const level = this.level;
+    try {
+      await this.run(async () => {
+        // "nearest": subdivision shrinks the solid, so a model near the cage's boundary binds too
+        const put = await this.session.putEmbedded('model', { vertices: body.vertices, triangles, level, outside: 'nearest' });
+        this.known = Math.max(this.known, put.version);
+        if (this.cageVersion === put.version - 1) this.cageVersion = put.version; // points as they were
+        if (this.complexVersion === put.version - 1) this.complexVersion = put.version;
+        await this.#fetchEmbedded(file.name, put.embedded);
+        this.requestSync();
+      });
+    } catch (e) {
+      this.error(e);
+    }
+  }
+
+  async #fetchEmbedded(name = this.embedded?.file, summary = this.embedded?.summary) {
+    const j = await this.session.getEmbedded('model');
+    this.viewer.setEmbedded(new Float32Array(j.vertices.flat()), new Uint32Array(j.triangles.flat()));
+    this.embedded = { file: name, summary, version: j.version, level: j.level, busy: false, again: false, deltas: 0 };
+    const out = summary?.outside_vertices ? `, ${summary.outside_vertices} bound to the nearest cell` : '';
+    $('embed-note').textContent = `${name}: ${j.vertices.length} vertices bound to level ${j.level}${out}; it follows the solid.`;
+    $('embed-remove').disabled = false;
+  }
+
+  async #dropEmbedded() {
+    const before = this.session.version;
+    await this.session.deleteEmbedded('model');
+    if (this.cageVersion === before) this.cageVersion = this.session.version;
+    if (this.complexVersion === before) this.complexVersion = this.session.version;
+    this.embedded = null;
+    this.viewer.setEmbedded(null);
+    $('embed-note').textContent = '';
+    $('embed-remove').disabled = true;
+  }
+
+  removeEmbedded() {
+    if (!this.embedded) return;
+    this.run(() => this.#dropEmbedded()).catch((e) => this.error(e));
+  }
+
+  // After the shown level moved: the embedded model's vertices that moved too (one request in
+  // flight; a 410 — the model was bound again after a change — fetches it whole).
+  #followEmbedded() {
+    const e = this.embedded;
+    if (!e) return;
+    if (e.busy) {
+      e.again = true;
+      return;
+    }
+    e.busy = true;
+    (async () => {
+      try {
+        do {
+          e.again = false;
+          if (e.version >= this.session.version) break;
+          const d = await this.session.embeddedDelta('model', e.version);
+          if (this.embedded !== e) return;
+          this.viewer.moveEmbedded(d);
+          e.version = d.version;
+          e.deltas++;
+        } while (e.again);
+      } catch (err) {
+        if (err instanceof ApiError && (err.status === 410 || err.status === 404)) {
+          if (this.embedded === e) await this.#fetchEmbedded().catch(() => {});
+        } else this.error(err);
+      } finally {
+        e.busy = false;
+      }
+    })();
+  }
+
   async openFile(file) {
     let body;
     try {
@@ -367,6 +454,7 @@ class App {
     this.perf.refetches++;
     this.#updatesDone(null);
     this.#syncEditLevels();
+    if (this.embedded && this.embedded.version < version) await this.#fetchEmbedded(); // bound anew
     await this.#setupHandles();
     this.#showStats();
     this.#legend();
@@ -550,6 +638,7 @@ class App {
   // A delta of the shown level, since the version its buffers hold, written into them.
   #applyShownDelta(d) {
     this.viewer.applyDelta(d);
+    this.#followEmbedded();
     this.shown.version = d.version;
     this.shown.deltas++;
     this.perf.deltas++;
@@ -616,6 +705,13 @@ class App {
     this.events = this.session.events({
       version: (data, v) => {
         if (this.session.id !== id || !this.model || !Number.isFinite(v)) return;
+        if (data.kind === 'embedded') { // the control complex is as it was: the level stays
+          this.known = Math.max(this.known, v);
+          if (this.complexVersion === v - 1) this.complexVersion = v;
+          if (this.cageVersion === v - 1) this.cageVersion = v;
+          if (this.shown && this.shown.version < v) this.requestSync();
+          return;
+        }
         if (data.kind === 'edit') {
           // an edit heard while our PATCH is under way is most likely that PATCH: its answer
           // says (and syncs); otherwise it was made elsewhere
@@ -1078,6 +1174,12 @@ class App {
       if (f) this.openFile(f);
       ev.target.value = '';
     });
+    $('embed-file').addEventListener('change', (ev) => {
+      const f = ev.target.files[0];
+      if (f) this.embedFile(f);
+      ev.target.value = '';
+    });
+    $('embed-remove').addEventListener('click', () => this.removeEmbedded());
     const view = $('view');
     view.addEventListener('dragover', (ev) => ev.preventDefault());
     view.addEventListener('drop', (ev) => {
@@ -1180,8 +1282,19 @@ class App {
       undo: this.undoStack.length,
       redo: this.redoStack.length,
       slicing: this.viewer.slicing,
+      embedded: this.embedded && { file: this.embedded.file, version: this.embedded.version, level: this.embedded.level, deltas: this.embedded.deltas, busy: this.embedded.busy },
       messages: this.messages.slice(),
     };
+  }
+
+  // The embedded model's drawn positions (float32) and the daemon's (GET /embedded/model).
+  async embeddedCompare() {
+    const mine = this.viewer.embeddedPositions();
+    const j = await this.session.getEmbedded('model');
+    const theirs = new Float32Array(j.vertices.flat());
+    let differ = 0;
+    for (let i = 0; i < theirs.length; i++) if (mine[i] !== theirs[i]) differ++;
+    return { version: j.version, count: j.vertices.length, differ, drawn: mine ? mine.length / 3 : 0 };
   }
 
   // Page coordinates of a control vertex, or of the middle of an edge / triangle.

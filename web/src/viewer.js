@@ -395,6 +395,50 @@ export class Viewer {
     this.requestRender();
   }
 
+  // An embedded model (free-form deformation): its own mesh, drawn in its own material over the
+  // solid; positions n×3 (float32), triangles k×3 (none: points). null removes it.
+  setEmbedded(positions, triangles) {
+    if (this.embedded) {
+      this.scene.remove(this.embedded);
+      this.embedded.geometry.dispose();
+      this.embedded.material.dispose();
+      this.embedded = null;
+    }
+    if (positions) {
+      const g = new THREE.BufferGeometry();
+      g.setAttribute('position', new THREE.BufferAttribute(positions, 3));
+      let o;
+      if (triangles && triangles.length) {
+        g.setIndex(new THREE.BufferAttribute(triangles, 1));
+        g.computeVertexNormals();
+        // drawn over the solid (depth test off): a model embedded in a solid is inside it
+        o = new THREE.Mesh(g, new THREE.MeshStandardMaterial({ color: 0xf58231, roughness: 0.5, metalness: 0.1, side: THREE.DoubleSide, depthTest: false, transparent: true, opacity: 0.9 }));
+      } else {
+        o = new THREE.Points(g, new THREE.PointsMaterial({ color: 0xf58231, size: 4, sizeAttenuation: false, depthTest: false }));
+      }
+      o.name = 'embedded';
+      o.renderOrder = 2;
+      this.embedded = o;
+      this.scene.add(o);
+    }
+    this.requestRender();
+  }
+
+  // The embedded model's vertices that moved (an embedded delta: indices, positions).
+  moveEmbedded(d) {
+    const o = this.embedded;
+    if (!o || !d.n) return;
+    const a = o.geometry.attributes.position;
+    for (let k = 0; k < d.n; k++) a.array.set(d.positions.subarray(3 * k, 3 * k + 3), 3 * d.indices[k]);
+    a.needsUpdate = true;
+    if (o.isMesh) o.geometry.computeVertexNormals();
+    this.requestRender();
+  }
+
+  embeddedPositions() {
+    return this.embedded ? Array.from(this.embedded.geometry.attributes.position.array) : null;
+  }
+
   // The curves are drawn as expanded segment pairs (LineSegments2): copy their ends again.
   #refreshCurves() {
     const o = this.parts.curves;
