@@ -328,3 +328,13 @@ def test_offline_deform_equals_the_daemon(daemon, tmp_path):
     online = s.req("GET", "/embedded/model").json()
     assert offline["vertices"] == online["vertices"] and offline["triangles"] == online["triangles"]
     assert np.abs(np.array(online["vertices"]) - np.array(verts)).max() > 0.01   # it moved
+    # and `subdiv deform` (the Python client's command) through the daemon: the same vertices
+    import os
+    import sys
+    cli = tmp_path / "cli.json"
+    env = dict(os.environ, PYTHONPATH=str(REPO / "clients" / "python"))
+    r = subprocess.run([sys.executable, "-m", "subdiv", "deform", str(ex / "block.json"), "--embed",
+                        str(ex / "torus.obj"), "--moves", str(ex / "moves.json"), "-o", str(cli),
+                        "--url", daemon.url, "-q"], capture_output=True, text=True, timeout=120, env=env)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(cli.read_text())["vertices"] == offline["vertices"]

@@ -468,6 +468,43 @@ def cmd_convert(args):
     return EXIT_OK
 
 
+def cmd_deform(args):
+    """A mesh as the solid, a model embedded in it, moves, the deformed model written out."""
+    progress = Progress(args.progress, quiet=args.quiet)
+    ext = pathlib.Path(args.output).suffix.lower()
+    fmt = {".obj": "obj", ".json": "json", ".glb": "glb"}.get(ext)
+    if not fmt:
+        raise UsageError(f"cannot tell the format from {args.output!r}: use .obj, .json or .glb")
+    try:
+        body, tags = meshes.read(args.input)
+        model, _ = meshes.read(args.embed)
+        tris = [t for t in model["simplices"] if len(t) == 3]
+        moves = json.loads(pathlib.Path(args.moves).read_text()) if args.moves else []
+        moves = moves if isinstance(moves, list) else [moves]
+        with Connection(args) as client, client.create_session() as s:
+            progress.begin(f"{args.input} + {args.embed}")
+            s.put_complex(body, progress=progress)
+            if tags:
+                s.put_tags(tags)
+            j = s.put_embedded("model", model["vertices"], tris or None, level=args.level,
+                               outside=args.outside)
+            for m in moves:
+                s.edit(moves=m["moves"]) if "moves" in m else s.edit(**m)
+            out = s.get_embedded("model", fmt)
+            data = out if isinstance(out, bytes) else (json.dumps(out) if fmt == "json" else out).encode()
+            part = pathlib.Path(args.output + ".part")
+            part.write_bytes(data)
+            part.replace(args.output)
+            progress.note(f"{args.embed}: {j['embedded']['vertices']} vertices at level {args.level} "
+                          f"({j['embedded']['outside_vertices']} outside), {len(moves)} edit(s) "
+                          f"-> {args.output} ({len(data)} bytes)")
+        return EXIT_OK
+    except (SubdivError, meshes.MeshError, UsageError, OSError, ValueError, KeyError) as e:
+        progress.finish()
+        _report(e, args.input)
+        return _exit_code(e) if isinstance(e, (SubdivError, meshes.MeshError, UsageError, OSError)) else EXIT_USAGE
+
+
 def build_parser():
     common = argparse.ArgumentParser(add_help=False)
     g = common.add_argument_group("daemon")
@@ -511,6 +548,15 @@ def build_parser():
     b.add_argument("jobfile")
     b.add_argument("--fail-fast", action="store_true", help="stop at the first failed job")
     b.set_defaults(fn=cmd_batch)
+    d = sub.add_parser("deform", parents=[common], help="a model embedded in a mesh's solid, "
+                       "deformed by moves (free-form deformation)")
+    d.add_argument("input", help="the solid: any mesh file of refine")
+    d.add_argument("--embed", required=True, help="the model: OBJ, OFF, STL (its triangles) or JSON")
+    d.add_argument("--level", "-l", type=int, default=2, help="the level it is bound to (default 2)")
+    d.add_argument("--outside", choices=("refuse", "fixed", "nearest"), default="refuse")
+    d.add_argument("--moves", help="a PATCH /control-points body, or a list of them (JSON file)")
+    d.add_argument("-o", "--output", required=True, help="the deformed model: .obj .json .glb")
+    d.set_defaults(fn=cmd_deform)
     c = sub.add_parser("convert", parents=[mesh], help="a mesh file to a PUT /complex body (no daemon)")
     c.add_argument("input")
     c.add_argument("-o", "--output", required=True)
