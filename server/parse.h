@@ -13,9 +13,10 @@
 
 #include <stddef.h>
 
-/* Match `path` against a route pattern whose segments are literal or a capture ("{id}", "{L}":
- * "{slug}": one non-empty segment). "{L}" goes into level, any other capture into id, each only
- * if it fits its capacity with its NUL (else no match). 1 on a match. */
+/* Match `path` against a route pattern whose segments are literal or a capture ("{id}", "{L}",
+ * "{slug}", "{name}": one non-empty segment). "{id}" and "{slug}" go into id, any other capture
+ * ("{L}", an embedded model's "{name}") into level, each only if it fits its capacity with its
+ * NUL (else no match). 1 on a match. */
 int parse_route(const char *pattern, const char *path, char *id, size_t id_cap, char *level,
                 size_t level_cap);
 

@@ -46,8 +46,10 @@ static int rebuild(const char *pattern, const char *id, const char *level, char 
             const char *pe = strchr(p, '}');
             if (!pe)
                 return 0;
-            put = p[1] != 'L' ? id : level; /* {L} is the level, any other capture the id */
-            *(p[1] != 'L' ? &nid : &nlevel) += 1;
+            /* {id} and {slug} are the id; {L}, {name} and any other capture the level's slot */
+            int is_id = p[1] == 'i' || p[1] == 's';
+            put = is_id ? id : level;
+            *(is_id ? &nid : &nlevel) += 1;
             p = pe + 1;
         }
         size_t n = put ? strlen(put) : 1;
