@@ -301,8 +301,11 @@ static int bind(api_model *m, api_embed_def *d, const api_limits *lim, const api
     sd_bind_report rep = {0};
     const sd_level *lv = sd_complex_level(m->c, d->level, &err);
     sd_allocator al = api_mem_core_allocator();
-    sd_result r = lv ? sd_embed_bind(lv, d->rest, d->nv, (sd_outside)d->outside, &al, 0, &e->bind,
-                                     &rep, &err)
+    /* the session's memory limit bounds its models too: what the model holds already is used */
+    size_t used = (m->c ? sd_complex_memory(m->c) : 0) + api_embed_bytes(m);
+    size_t room = lim->max_session_bytes > used ? (size_t)(lim->max_session_bytes - used) : 1;
+    sd_result r = lv ? sd_embed_bind(lv, d->rest, d->nv, (sd_outside)d->outside, &al, room,
+                                     &e->bind, &rep, &err)
                      : err.code;
     e->since = atomic_load(&m->version);
     pthread_mutex_unlock(&m->lock);
@@ -310,6 +313,10 @@ static int bind(api_model *m, api_embed_def *d, const api_limits *lim, const api
         embed_clear(e);
         if (err.code == SD_ERR_NOMEM)
             return api_fail(p, 503, "out-of-memory", "out of memory binding the model");
+        if (err.code == SD_ERR_LIMIT)
+            return api_fail_limit(p, "max_session_bytes", lim->max_session_bytes,
+                                  (uint64_t)used + 80ull * d->nv, "model \"%s\": %s (the session "
+                                  "holds %zu bytes; --max-session-bytes)", d->name, err.message, used);
         if (rep.outside) {
             char first[160] = "";
             for (int i = 0; i < rep.nfirst; i++) {

@@ -338,3 +338,19 @@ def test_offline_deform_equals_the_daemon(daemon, tmp_path):
                         "--url", daemon.url, "-q"], capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 0, r.stderr
     assert json.loads(cli.read_text())["vertices"] == offline["vertices"]
+
+
+def test_models_count_against_the_session_memory_limit():
+    d = Daemon("--max-session-bytes", str(4 << 20))
+    try:
+        s = Session(d)
+        assert s.put_complex(BLOCK).status_code == 200
+        pts = model_points(100000)
+        blob = struct.pack("<II", len(pts), 0) + np.asarray(pts, dtype="<f8").tobytes()
+        r = s.req("PUT", "/embedded/big", data=blob, headers={"Content-Type": "application/octet-stream"})
+        assert r.status_code == 413 and r.json()["limit_name"] == "max_session_bytes", r.text
+        assert s.req("GET", "/embedded").json()["embedded"] == []
+        small = s.req("PUT", "/embedded/small", json={"vertices": model_points(100)})
+        assert small.status_code == 200, small.text
+    finally:
+        d.stop()
