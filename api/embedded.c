@@ -797,6 +797,8 @@ static int restore(api_model *m, api_embed_def *d, json_t *b, const char *base,
 {
     char at[176];
     snprintf(at, sizeof at, "%s/binding", base);
+    if (!m->c)
+        return api_fail_at(p, 409, "no-complex", at, "embedded models need a complex with solids");
     if (!json_is_array(b) || json_array_size(b) != d->nv)
         return api_fail_at(p, 400, "wrong-type", at, "must be one entry per vertex (%u)", d->nv);
     if (!ensure_list(m))

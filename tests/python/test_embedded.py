@@ -354,3 +354,13 @@ def test_models_count_against_the_session_memory_limit():
         assert small.status_code == 200, small.text
     finally:
         d.stop()
+
+
+def test_an_import_with_a_model_and_no_complex_is_refused(daemon):
+    doc = {"format": "subdivd-session", "format_version": 1, "version": 1, "complex": None,
+           "embedded": {"a": {"vertices": [[0, 0, 0]], "binding": [None]}}}
+    r = requests.post(daemon.url + "/v1/sessions", json={"import": doc})
+    assert r.status_code == 409, r.text
+    del doc["embedded"]["a"]["binding"]
+    assert requests.post(daemon.url + "/v1/sessions", json={"import": doc}).status_code == 409
+    assert requests.get(daemon.url + "/healthz").status_code == 200
