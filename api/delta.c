@@ -25,6 +25,7 @@
  * answers 410 (refetch) rather than wrap.
  */
 #include "delta.h"
+#include "buf.h"
 #include "mem.h"
 #include "out_internal.h"
 #include <ctype.h>
@@ -314,77 +315,34 @@ void api_delta_end_edit(api_model *m)
 
 /* ---- the answer ------------------------------------------------------------------------------ */
 
-typedef struct buf {
-    char *b;
-    size_t n, cap;
-    bool failed;
-} buf;
-
-static void put(buf *o, const void *x, size_t n)
-{
-    if (o->failed || (!n && o->b)) /* x may be NULL when n is 0 (an empty delta) */
-        return;
-    if (o->n + n + 1 > o->cap) {
-        size_t cap = o->cap ? o->cap : 4096;
-        while (cap < o->n + n + 1)
-            cap *= 2;
-        char *b = api_realloc(o->b, cap);
-        if (!b) {
-            o->failed = true;
-            return;
-        }
-        o->b = b;
-        o->cap = cap;
-    }
-    if (n)
-        memcpy(o->b + o->n, x, n);
-    o->n += n;
-    o->b[o->n] = 0;
-}
-
-/* Room for n bytes at once (the answer's size is known): no copies while it grows. */
-static void reserve(buf *o, size_t n)
-{
-    if (o->b || !(o->b = api_malloc(n + 1)))
-        return;
-    o->cap = n + 1;
-    o->b[0] = 0;
-}
-
-static void putf(buf *o, const char *fmt, double x)
-{
-    char t[40];
-    int k = snprintf(t, sizeof t, fmt, x);
-    put(o, t, (size_t)k);
-}
-
-static void put_u32(buf *o, uint32_t x) { put(o, &x, 4); } /* little endian, as the GLB */
-
-static void put_f32(buf *o, double x)
-{
-    float f = (float)x;
-    put(o, &f, 4);
-}
-
-/* JSON numbers as the level's format=json writes them (api/out_json.c). */
-static void put_vec(buf *o, const double *x, int n)
-{
-    if (n > 1)
-        put(o, "[", 1);
-    for (int k = 0; k < n; k++) {
-        if (k)
-            put(o, ",", 1);
-        putf(o, "%.17g", x[k]);
-    }
-    if (n > 1)
-        put(o, "]", 1);
-}
-
 static int gone(api_problem *p, const char *fmt, unsigned long long a, unsigned long long b)
 {
     char d[320];
     snprintf(d, sizeof d, fmt, a, b);
     return api_fail(p, 410, "delta-unavailable", "%s; GET the level again", d);
+}
+
+/* Can level L's delta since `since` be answered (m->lock held)? 0, or the 410 (api/delta.h). */
+static int since_ok(api_model *m, int level, uint64_t since, api_problem *p)
+{
+    uint64_t cur = atomic_load(&m->version);
+    if (level >= sd_complex_levels_computed(m->c))
+        return gone(p, "level %llu is not computed in this session's current model (version %llu)",
+                    (unsigned long long)level, (unsigned long long)cur);
+    if (since > cur)
+        return gone(p, "version %llu is ahead of the session's version %llu",
+                    (unsigned long long)since, (unsigned long long)cur);
+    if (cur > UINT32_MAX)
+        return gone(p, "versions past %llu (here %llu) have no deltas", UINT32_MAX,
+                    (unsigned long long)cur);
+    observe(m);
+    uint64_t from = m->delta->lv[level].base;
+    if (since < from)
+        return gone(p, "since version %llu the level changed other than by edits (a new "
+                    "complex, tags, rules or refinement, or an edit that built rules again), or "
+                    "was computed after it: deltas of it start at version %llu",
+                    (unsigned long long)since, (unsigned long long)from);
+    return 0;
 }
 
 /* The query: since, format (0 bin, 1 json), the attributes. 0 or the problem's status. */
@@ -505,32 +463,13 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
         snprintf(components + u, ccap - u, "%s%s=%d", i ? "," : "", a->name, a->ncomp);
     }
     pthread_mutex_lock(&m->lock);
-    uint64_t cur = atomic_load(&m->version);
-    *version = cur;
-    int rc = 0;
-    if (level >= sd_complex_levels_computed(m->c))
-        rc = gone(p, "level %llu is not computed in this session's current model (version %llu)",
-                  (unsigned long long)level, (unsigned long long)cur);
-    else if (since > cur)
-        rc = gone(p, "version %llu is ahead of the session's version %llu",
-                  (unsigned long long)since, (unsigned long long)cur);
-    else if (cur > UINT32_MAX)
-        rc = gone(p, "versions past %llu (here %llu) have no deltas", UINT32_MAX,
-                  (unsigned long long)cur);
+    uint64_t cur = *version = atomic_load(&m->version);
+    int rc = since_ok(m, level, since, p);
     if (rc) {
         pthread_mutex_unlock(&m->lock);
         return rc;
     }
-    observe(m);
     dlevel *L = &m->delta->lv[level];
-    uint64_t from = L->base;
-    if (since < from) {
-        pthread_mutex_unlock(&m->lock);
-        return gone(p, "since version %llu the level changed other than by edits (a new "
-                    "complex, tags, rules or refinement, or an edit that built rules again), or "
-                    "was computed after it: deltas of it start at version %llu",
-                    (unsigned long long)since, (unsigned long long)from);
-    }
     sd_error e = {0};
     const sd_level *lv = sd_complex_level(m->c, level, &e);
     const out_geometry *g = api_model_geometry_locked(m, level);
@@ -544,74 +483,74 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
         return api_fail(p, 503, "out-of-memory", "out of memory building the delta; retry later");
     }
     const double *xyz = sd_level_channel(lv, 0, NULL);
-    buf o = {0};
+    api_buf o = {0};
     size_t per = 12 + (normals ? 12 : 0);
     for (int a = 0; a < nattrs; a++)
         per += 4 * (size_t)m->in->attrs[attrs[a]].ncomp;
     if (!json) {
-        reserve(&o, 24 + n * (4 + per));
-        put(&o, "SDD1", 4);
-        put_u32(&o, (uint32_t)level);
-        put_u32(&o, (uint32_t)since);
-        put_u32(&o, (uint32_t)cur);
-        put_u32(&o, (uint32_t)n);
-        put_u32(&o, (normals ? 1u : 0u) | (nattrs ? 2u : 0u));
-        put(&o, ids, n * sizeof *ids);
+        api_buf_reserve(&o, 24 + n * (4 + per));
+        api_buf_put(&o, "SDD1", 4);
+        api_buf_u32(&o, (uint32_t)level);
+        api_buf_u32(&o, (uint32_t)since);
+        api_buf_u32(&o, (uint32_t)cur);
+        api_buf_u32(&o, (uint32_t)n);
+        api_buf_u32(&o, (normals ? 1u : 0u) | (nattrs ? 2u : 0u));
+        api_buf_put(&o, ids, n * sizeof *ids);
         for (size_t i = 0; i < n; i++)
             for (int k = 0; k < 3; k++)
-                put_f32(&o, xyz[3 * (size_t)ids[i] + k]);
+                api_buf_f32(&o, xyz[3 * (size_t)ids[i] + k]);
         for (size_t i = 0; normals && i < n; i++)
-            put(&o, g->normals + 3 * (size_t)ids[i], 12);
+            api_buf_put(&o, g->normals + 3 * (size_t)ids[i], 12);
         for (int a = 0; a < nattrs; a++) {
             int nc;
             const double *x = sd_level_channel(lv, m->channel[attrs[a]], &nc);
             for (size_t i = 0; i < n; i++)
                 for (int k = 0; k < nc; k++)
-                    put_f32(&o, x[(size_t)ids[i] * nc + k]);
+                    api_buf_f32(&o, x[(size_t)ids[i] * nc + k]);
         }
     } else {
-        reserve(&o, 256 + n * (16 + 5 * per)); /* a guess (put grows it): %.17g and %.9g numbers */
+        api_buf_reserve(&o, 256 + n * (16 + 5 * per)); /* a guess (put grows it): %.17g and %.9g numbers */
         char head[160];
         snprintf(head, sizeof head, "{\"level\":%d,\"since\":%llu,\"version\":%llu,\"indices\":[",
                  level, (unsigned long long)since, (unsigned long long)cur);
-        put(&o, head, strlen(head));
+        api_buf_put(&o, head, strlen(head));
         for (size_t i = 0; i < n; i++) {
             char t[16];
-            put(&o, t, (size_t)snprintf(t, sizeof t, i ? ",%u" : "%u", ids[i]));
+            api_buf_put(&o, t, (size_t)snprintf(t, sizeof t, i ? ",%u" : "%u", ids[i]));
         }
-        put(&o, "],\"positions\":[", 15);
+        api_buf_put(&o, "],\"positions\":[", 15);
         for (size_t i = 0; i < n; i++) {
             if (i)
-                put(&o, ",", 1);
-            put_vec(&o, xyz + 3 * (size_t)ids[i], 3);
+                api_buf_put(&o, ",", 1);
+            api_buf_reals(&o, xyz + 3 * (size_t)ids[i], 3);
         }
-        put(&o, "]", 1);
+        api_buf_put(&o, "]", 1);
         if (normals) {
-            put(&o, ",\"normals\":[", 12);
+            api_buf_put(&o, ",\"normals\":[", 12);
             for (size_t i = 0; i < n; i++) {
                 const float *f = g->normals + 3 * (size_t)ids[i];
-                put(&o, i ? ",[" : "[", i ? 2 : 1);
+                api_buf_put(&o, i ? ",[" : "[", i ? 2 : 1);
                 for (int k = 0; k < 3; k++)
-                    putf(&o, k ? ",%.9g" : "%.9g", (double)f[k]);
-                put(&o, "]", 1);
+                    api_buf_printf(&o, k ? ",%.9g" : "%.9g", (double)f[k]);
+                api_buf_put(&o, "]", 1);
             }
-            put(&o, "]", 1);
+            api_buf_put(&o, "]", 1);
         }
-        put(&o, ",\"attributes\":{", 15);
+        api_buf_put(&o, ",\"attributes\":{", 15);
         for (int a = 0; a < nattrs; a++) {
             int nc;
             const double *x = sd_level_channel(lv, m->channel[attrs[a]], &nc);
             char t[API_MAX_ATTRIBUTE_NAME + 8];
-            put(&o, t, (size_t)snprintf(t, sizeof t, "%s\"%s\":[", a ? "," : "",
+            api_buf_put(&o, t, (size_t)snprintf(t, sizeof t, "%s\"%s\":[", a ? "," : "",
                                         m->in->attrs[attrs[a]].name));
             for (size_t i = 0; i < n; i++) {
                 if (i)
-                    put(&o, ",", 1);
-                put_vec(&o, x + (size_t)ids[i] * nc, nc);
+                    api_buf_put(&o, ",", 1);
+                api_buf_reals(&o, x + (size_t)ids[i] * nc, nc);
             }
-            put(&o, "]", 1);
+            api_buf_put(&o, "]", 1);
         }
-        put(&o, "}}", 2);
+        api_buf_put(&o, "}}", 2);
     }
     api_model_publish(m); /* the incidence and the geometry count as session memory */
     pthread_mutex_unlock(&m->lock);
@@ -635,21 +574,9 @@ int api_delta_moved(api_model *m, int level, const char *since_text, uint64_t *s
     *n = 0;
     if (parse_query(m, &q, since, json, attrs, &nattrs, p))
         return p->status;
-    uint64_t cur = atomic_load(&m->version);
-    if (level >= sd_complex_levels_computed(m->c))
-        return gone(p, "level %llu is not computed in this session's current model (version %llu)",
-                    (unsigned long long)level, (unsigned long long)cur);
-    if (*since > cur)
-        return gone(p, "version %llu is ahead of the session's version %llu",
-                    (unsigned long long)*since, (unsigned long long)cur);
-    if (cur > UINT32_MAX)
-        return gone(p, "versions past %llu (here %llu) have no deltas", UINT32_MAX,
-                    (unsigned long long)cur);
-    observe(m);
+    if (since_ok(m, level, *since, p))
+        return p->status;
     dlevel *L = &m->delta->lv[level];
-    if (*since < L->base)
-        return gone(p, "since version %llu the level changed other than by edits: deltas of it "
-                    "start at version %llu", (unsigned long long)*since, (unsigned long long)L->base);
     size_t cap = 0;
     if (!stamped(L->pos, L->nv, *since, ids, n, &cap)) {
         api_free(*ids);

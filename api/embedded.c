@@ -9,13 +9,13 @@
  * since (api_delta_moved), which costs what those vertices cost.
  */
 #include "embedded.h"
+#include "buf.h"
 #include "delta.h"
 #include "internal.h"
 #include "jsonin.h"
 #include "mem.h"
 #include "rows.h"
 #include <ctype.h>
-#include <stdarg.h>
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -277,6 +277,20 @@ static int find(const api_model *m, const char *name)
     return -1;
 }
 
+/* The buffers a delta writes into (sd_embed_update's output), their pages written now: a delta
+ * touches scattered parts of them, and a first touch costs a page fault each (DECISIONS 38). */
+static bool embed_buffers(api_embed *e, uint32_t nv)
+{
+    size_t nx = 3 * sizeof(double) * ((size_t)nv + 1), nm = sizeof(uint32_t) * ((size_t)nv + 1);
+    e->scratch = api_malloc(nx);
+    e->moved = api_malloc(nm);
+    if (!e->scratch || !e->moved)
+        return false;
+    memset(e->scratch, 0, nx);
+    memset(e->moved, 0, nm);
+    return true;
+}
+
 /* Bind d to the level of m (computed first), into *e. The caller holds no lock of m. */
 static int bind(api_model *m, api_embed_def *d, const api_limits *lim, const api_slot *slot,
                 api_embed *e, api_problem *p)
@@ -286,16 +300,10 @@ static int bind(api_model *m, api_embed_def *d, const api_limits *lim, const api
         return api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
     if (api_check_level_limits(m, d->level, lim, p) || api_level_compute(m, d->level, slot, p))
         return p->status;
-    e->scratch = api_malloc(3 * sizeof(double) * ((size_t)d->nv + 1));
-    e->moved = api_malloc(sizeof(uint32_t) * ((size_t)d->nv + 1));
-    if (!e->scratch || !e->moved) {
+    if (!embed_buffers(e, d->nv)) {
         embed_clear(e);
         return api_fail(p, 503, "out-of-memory", "out of memory");
     }
-    /* their pages written now: a delta touches scattered parts of them, and a first touch costs
-     * a page fault each (DECISIONS 38's lesson) */
-    memset(e->scratch, 0, 3 * sizeof(double) * ((size_t)d->nv + 1));
-    memset(e->moved, 0, sizeof(uint32_t) * ((size_t)d->nv + 1));
     pthread_mutex_lock(&m->lock);
     sd_error err = {0};
     sd_bind_report rep = {0};
@@ -370,6 +378,7 @@ int api_embed_put(api_model *m, api_embed_def *d, uint64_t version, const api_li
         return rc;
     }
     api_embed old = {0};
+    api_delta_begin_edit(m); /* levels computed until now keep their deltas across this version */
     uint64_t was = atomic_load(&m->version);
     if (at >= 0)
         old = m->embed[at];
@@ -409,6 +418,7 @@ int api_embed_delete(api_model *m, const char *name, uint64_t version,
         return api_fail(p, 404, "not-found", "no embedded model \"%.48s\" in this session", name);
     }
     api_embed gone = m->embed[at];
+    api_delta_begin_edit(m);
     uint64_t was = atomic_load(&m->version);
     memmove(&m->embed[at], &m->embed[at + 1], (size_t)(m->nembed - at - 1) * sizeof *m->embed);
     m->nembed--;
@@ -445,110 +455,46 @@ json_t *api_embed_list(api_model *m)
 
 /* ---- writing a deformed model ----------------------------------------------------------------- */
 
-typedef struct buf {
-    char *b;
-    size_t n, cap;
-    bool failed;
-} buf;
-
-static void put(buf *o, const void *x, size_t n)
+static void write_json(api_buf *o, const api_embed *e, const double *x, uint64_t version)
 {
-    if (o->failed)
-        return;
-    if (o->n + n > o->cap) {
-        size_t c = o->cap ? 2 * o->cap : 4096;
-        while (c < o->n + n)
-            c *= 2;
-        char *nb = api_realloc(o->b, c);
-        if (!nb) {
-            o->failed = true;
-            return;
-        }
-        o->b = nb;
-        o->cap = c;
-    }
-    memcpy(o->b + o->n, x, n);
-    o->n += n;
-}
-
-static void putf(buf *o, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void putf(buf *o, const char *fmt, ...)
-{
-    char t[128];
-    va_list ap;
-    va_start(ap, fmt);
-    int k = vsnprintf(t, sizeof t, fmt, ap);
-    va_end(ap);
-    put(o, t, (size_t)(k < (int)sizeof t ? k : (int)sizeof t - 1));
-}
-
-static void put_u32(buf *o, uint32_t v)
-{
-    unsigned char b[4] = {(unsigned char)v, (unsigned char)(v >> 8), (unsigned char)(v >> 16),
-                          (unsigned char)(v >> 24)};
-    put(o, b, 4);
-}
-
-static void put_f32(buf *o, double v)
-{
-    float f = (float)v;
-    put(o, &f, 4);
-}
-
-/* A real as jansson writes it ("%.17g", ".0" after an integral value). */
-static void put_real(buf *o, double v)
-{
-    char t[40];
-    int n = snprintf(t, sizeof t, "%.17g", v);
-    if (!strpbrk(t, ".eni"))
-        n += snprintf(t + n, sizeof t - (size_t)n, ".0");
-    put(o, t, (size_t)n);
-}
-
-static void write_json(buf *o, const api_embed *e, const double *x, uint64_t version)
-{
-    putf(o, "{\"name\":\"%s\",\"level\":%d,\"version\":%llu,\"vertices\":[", e->def->name,
+    api_buf_printf(o, "{\"name\":\"%s\",\"level\":%d,\"version\":%llu,\"vertices\":[", e->def->name,
          e->def->level, (unsigned long long)version);
     for (uint32_t i = 0; i < e->def->nv; i++) {
-        put(o, i ? ",[" : "[", i ? 2 : 1);
-        for (int k = 0; k < 3; k++) {
-            if (k)
-                put(o, ",", 1);
-            put_real(o, x[3 * (size_t)i + k]);
-        }
-        put(o, "]", 1);
+        if (i)
+            api_buf_put(o, ",", 1);
+        api_buf_reals(o, x + 3 * (size_t)i, 3);
     }
-    put(o, "],\"triangles\":[", 15);
+    api_buf_put(o, "],\"triangles\":[", 15);
     for (uint32_t t = 0; t < e->def->nt; t++) {
         const uint32_t *v = e->def->tri + 3 * (size_t)t;
-        putf(o, "%s[%u,%u,%u]", t ? "," : "", v[0], v[1], v[2]);
+        api_buf_printf(o, "%s[%u,%u,%u]", t ? "," : "", v[0], v[1], v[2]);
     }
-    put(o, "]}", 2);
+    api_buf_put(o, "]}", 2);
 }
 
-static void write_obj(buf *o, const api_embed *e, const double *x, uint64_t version)
+static void write_obj(api_buf *o, const api_embed *e, const double *x, uint64_t version)
 {
-    putf(o, "# subdivd: embedded model \"%s\" at level %d, version %llu\n", e->def->name,
+    api_buf_printf(o, "# subdivd: embedded model \"%s\" at level %d, version %llu\n", e->def->name,
          e->def->level, (unsigned long long)version);
     for (uint32_t i = 0; i < e->def->nv; i++) {
-        put(o, "v ", 2);
+        api_buf_put(o, "v ", 2);
         for (int k = 0; k < 3; k++) {
             if (k)
-                put(o, " ", 1);
+                api_buf_put(o, " ", 1);
             char t[40];
-            put(o, t, (size_t)snprintf(t, sizeof t, "%.17g", x[3 * (size_t)i + k]));
+            api_buf_put(o, t, (size_t)snprintf(t, sizeof t, "%.17g", x[3 * (size_t)i + k]));
         }
-        put(o, "\n", 1);
+        api_buf_put(o, "\n", 1);
     }
     for (uint32_t t = 0; t < e->def->nt; t++) {
         const uint32_t *v = e->def->tri + 3 * (size_t)t;
-        putf(o, "f %u %u %u\n", v[0] + 1, v[1] + 1, v[2] + 1);
+        api_buf_printf(o, "f %u %u %u\n", v[0] + 1, v[1] + 1, v[2] + 1);
     }
 }
 
 /* A GLB (glTF 2.0 binary) of one mesh: POSITION (float32, with its bounds) and, with triangles,
  * uint32 indices; points otherwise. */
-static void write_glb(buf *o, const api_embed *e, const double *x, uint64_t version)
+static void write_glb(api_buf *o, const api_embed *e, const double *x, uint64_t version)
 {
     uint32_t nv = e->def->nv, nt = e->def->nt;
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
@@ -591,19 +537,19 @@ static void write_glb(buf *o, const api_embed *e, const double *x, uint64_t vers
         return;
     }
     size_t jn = strlen(text), jpad = (4 - jn % 4) % 4, bn = pos_bytes + idx_bytes;
-    put(o, "glTF", 4);
-    put_u32(o, 2);
-    put_u32(o, (uint32_t)(12 + 8 + jn + jpad + 8 + bn));
-    put_u32(o, (uint32_t)(jn + jpad));
-    put(o, "JSON", 4);
-    put(o, text, jn);
-    put(o, "    ", jpad);
-    put_u32(o, (uint32_t)bn);
-    put(o, "BIN\0", 4);
+    api_buf_put(o, "glTF", 4);
+    api_buf_u32(o, 2);
+    api_buf_u32(o, (uint32_t)(12 + 8 + jn + jpad + 8 + bn));
+    api_buf_u32(o, (uint32_t)(jn + jpad));
+    api_buf_put(o, "JSON", 4);
+    api_buf_put(o, text, jn);
+    api_buf_put(o, "    ", jpad);
+    api_buf_u32(o, (uint32_t)bn);
+    api_buf_put(o, "BIN\0", 4);
     for (size_t i = 0; i < 3 * (size_t)nv; i++)
-        put_f32(o, x[i]);
+        api_buf_f32(o, x[i]);
     for (size_t i = 0; i < 3 * (size_t)nt; i++)
-        put_u32(o, e->def->tri[i]);
+        api_buf_u32(o, e->def->tri[i]);
     api_free(text);
 }
 
@@ -638,7 +584,7 @@ int api_embed_get(api_model *m, const char *name, const char *format, char **bod
     }
     sd_embed_positions(e->bind, lv, x);
     *version = atomic_load(&m->version);
-    buf o = {0};
+    api_buf o = {0};
     if (f == 0)
         write_json(&o, e, x, *version);
     else if (f == 1)
@@ -688,10 +634,11 @@ int api_embed_delta(api_model *m, const char *name, const char *since, const cha
     size_t k = sd_embed_update(e->bind, lv, ids, n, e->scratch, e->moved);
     api_free(ids);
     uint64_t cur = *version = atomic_load(&m->version);
-    buf o = {0};
+    api_buf o = {0};
     if (!json) { /* written in place at its exact size: 24 + 16 bytes per vertex */
         size_t need = 24 + 16 * k;
-        if ((o.b = api_malloc(need))) {
+        api_buf_reserve(&o, need);
+        if (o.b) {
             uint32_t head[6] = {0, (uint32_t)e->def->level, (uint32_t)from, (uint32_t)cur,
                                 (uint32_t)k, 0};
             memcpy(head, "SDD1", 4);
@@ -704,25 +651,22 @@ int api_embed_delta(api_model *m, const char *name, const char *since, const cha
                 f[3 * i + 1] = (float)x[1];
                 f[3 * i + 2] = (float)x[2];
             }
-            o.n = o.cap = need;
+            o.n = need;
+            o.b[need] = 0;
         } else
             o.failed = true;
     } else {
-        putf(&o, "{\"name\":\"%s\",\"level\":%d,\"since\":%llu,\"version\":%llu,\"indices\":[",
+        api_buf_printf(&o, "{\"name\":\"%s\",\"level\":%d,\"since\":%llu,\"version\":%llu,\"indices\":[",
              e->def->name, e->def->level, (unsigned long long)from, (unsigned long long)cur);
         for (size_t i = 0; i < k; i++)
-            putf(&o, i ? ",%u" : "%u", e->moved[i]);
-        put(&o, "],\"positions\":[", 15);
+            api_buf_printf(&o, i ? ",%u" : "%u", e->moved[i]);
+        api_buf_put(&o, "],\"positions\":[", 15);
         for (size_t i = 0; i < k; i++) {
-            put(&o, i ? ",[" : "[", i ? 2 : 1);
-            for (int c = 0; c < 3; c++) {
-                if (c)
-                    put(&o, ",", 1);
-                put_real(&o, e->scratch[3 * (size_t)e->moved[i] + c]);
-            }
-            put(&o, "]", 1);
+            if (i)
+                api_buf_put(&o, ",", 1);
+            api_buf_reals(&o, e->scratch + 3 * (size_t)e->moved[i], 3);
         }
-        put(&o, "]}", 2);
+        api_buf_put(&o, "]}", 2);
     }
     pthread_mutex_unlock(&m->lock);
     if (o.failed || !o.b) {
@@ -791,22 +735,57 @@ json_t *api_embed_export(const api_model *m)
     return o;
 }
 
-/* A saved binding ([[i0, i1, i2, i3, w0, w1, w2, w3] | null per vertex]) of d into m's list. */
-static int restore(api_model *m, api_embed_def *d, json_t *b, const char *base,
-                   const api_limits *lim, api_problem *p)
+/* Put d into m's list with a given binding (idx, w: 4 per vertex, idx UINT32_MAX for a fixed
+ * vertex) — one saved in a document, or carried from a model of the same topology — instead of
+ * binding its rest shape anew. Problems point at `at`. */
+static int adopt_binding(api_model *m, api_embed_def *d, const uint32_t *idx, const double *w,
+                         const char *at, const api_limits *lim, api_problem *p)
 {
-    char at[176];
-    snprintf(at, sizeof at, "%s/binding", base);
     if (!m->c)
         return api_fail_at(p, 409, "no-complex", at, "embedded models need a complex with solids");
-    if (!json_is_array(b) || json_array_size(b) != d->nv)
-        return api_fail_at(p, 400, "wrong-type", at, "must be one entry per vertex (%u)", d->nv);
     if (!ensure_list(m))
         return api_fail(p, 503, "out-of-memory", "out of memory");
     if (find(m, d->name) >= 0 || m->nembed >= API_MAX_EMBEDDED)
         return api_fail_at(p, 422, "limit-exceeded", at, "model \"%s\" twice, or too many", d->name);
     if (api_check_level_limits(m, d->level, lim, p) || api_level_compute(m, d->level, NULL, p))
         return p->status;
+    api_embed e = {0};
+    if (!embed_buffers(&e, d->nv)) {
+        embed_clear(&e);
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    }
+    int rc = 0;
+    pthread_mutex_lock(&m->lock);
+    sd_error err = {0};
+    const sd_level *lv = sd_complex_level(m->c, d->level, &err);
+    sd_allocator al = api_mem_core_allocator();
+    if (!lv || sd_embed_restore(lv, d->nv, idx, w, d->rest, &al, 0, &e.bind, &err))
+        rc = err.code == SD_ERR_NOMEM ? api_fail(p, 503, "out-of-memory", "out of memory")
+                                      : api_fail_at(p, 422, "outside", at, "model \"%s\": %s",
+                                                    d->name, err.message);
+    if (!rc) {
+        for (uint32_t v = 0; v < d->nv; v++)
+            e.outside += idx[4 * (size_t)v] == UINT32_MAX;
+        e.since = atomic_load(&m->version);
+        atomic_fetch_add(&d->refs, 1);
+        e.def = d;
+        m->embed[m->nembed++] = e;
+        api_model_publish(m);
+    }
+    pthread_mutex_unlock(&m->lock);
+    if (rc)
+        embed_clear(&e);
+    return rc;
+}
+
+/* A saved binding ([[i0, i1, i2, i3, w0, w1, w2, w3] | null per vertex]) of d into m's list. */
+static int restore(api_model *m, api_embed_def *d, json_t *b, const char *base,
+                   const api_limits *lim, api_problem *p)
+{
+    char at[176];
+    snprintf(at, sizeof at, "%s/binding", base);
+    if (!json_is_array(b) || json_array_size(b) != d->nv)
+        return api_fail_at(p, 400, "wrong-type", at, "must be one entry per vertex (%u)", d->nv);
     uint32_t *idx = api_malloc(16 * ((size_t)d->nv + 1));
     double *w = api_malloc(32 * ((size_t)d->nv + 1));
     int rc = !idx || !w ? api_fail(p, 503, "out-of-memory", "out of memory") : 0;
@@ -830,41 +809,36 @@ static int restore(api_model *m, api_embed_def *d, json_t *b, const char *base,
                 idx[4 * (size_t)v + k] = (uint32_t)x;
             snprintf(ck, sizeof ck, "%s/%d", ptr, 4 + k);
             if (!rc)
-                rc = api_get_number(json_array_get(row, (size_t)(4 + k)), ck, 1e6,
+                rc = api_get_number(json_array_get(row, (size_t)(4 + k)), ck, API_MAX_VALUE,
                                     &w[4 * (size_t)v + k], p);
         }
     }
-    api_embed e = {0};
-    if (!rc) {
-        e.scratch = api_malloc(3 * sizeof(double) * ((size_t)d->nv + 1));
-        e.moved = api_malloc(sizeof(uint32_t) * ((size_t)d->nv + 1));
-        if (!e.scratch || !e.moved)
-            rc = api_fail(p, 503, "out-of-memory", "out of memory");
-    }
-    if (!rc) {
-        pthread_mutex_lock(&m->lock);
-        sd_error err = {0};
-        const sd_level *lv = sd_complex_level(m->c, d->level, &err);
-        sd_allocator al = api_mem_core_allocator();
-        if (!lv || sd_embed_restore(lv, d->nv, idx, w, d->rest, &al, 0, &e.bind, &err))
-            rc = err.code == SD_ERR_NOMEM ? api_fail(p, 503, "out-of-memory", "out of memory")
-                                          : api_fail_at(p, 422, "outside", at, "model \"%s\": %s",
-                                                        d->name, err.message);
-        if (!rc) {
-            for (uint32_t v = 0; v < d->nv; v++)
-                e.outside += idx[4 * (size_t)v] == UINT32_MAX;
-            e.since = atomic_load(&m->version);
-            atomic_fetch_add(&d->refs, 1);
-            e.def = d;
-            m->embed[m->nembed++] = e;
-            api_model_publish(m);
-        }
-        pthread_mutex_unlock(&m->lock);
-    }
-    if (rc)
-        embed_clear(&e);
+    if (!rc)
+        rc = adopt_binding(m, d, idx, w, at, lim, p);
     api_free(idx);
     api_free(w);
+    return rc;
+}
+
+int api_embed_carry(const api_model *from, api_model *to, const api_limits *lim, api_problem *p)
+{
+    int rc = 0;
+    for (int i = 0; !rc && i < from->nembed; i++) {
+        const api_embed *e = &from->embed[i];
+        uint32_t n = e->def->nv, *idx = api_malloc(16 * ((size_t)n + 1));
+        double *w = api_malloc(32 * ((size_t)n + 1));
+        if (!idx || !w)
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
+        for (uint32_t v = 0; !rc && v < n; v++)
+            if (!sd_embed_weights(e->bind, v, idx + 4 * (size_t)v, w + 4 * (size_t)v))
+                idx[4 * (size_t)v] = UINT32_MAX;
+        if (!rc)
+            rc = adopt_binding(to, e->def, idx, w, "", lim, p);
+        api_free(idx);
+        api_free(w);
+    }
+    if (rc)
+        api_embed_free_all(to);
     return rc;
 }
 

@@ -12,7 +12,8 @@
  * A definition (name, rest shape, level, outside mode) is immutable and shared by the models of a
  * session; the binding belongs to one model (its complex's level L). Changing the complex, the
  * tags or the rules makes a new model, to which every definition is bound anew (all or nothing:
- * a vertex outside under "refuse" fails the change with 422). PUT and DELETE change the current
+ * a vertex outside under "refuse" fails the change with 422); a new model of the same topology
+ * (an edit that built rules again, a replayed journal) carries the bindings over instead. PUT and DELETE change the current
  * model's list in place, under its lock, with a new session version, like an edit.
  * Locking: the list and the bindings are read and changed with m->lock held.
  */
@@ -86,6 +87,10 @@ int api_embed_delta(api_model *m, const char *name, const char *since, const cha
  * 0, or 422 naming the model whose vertices fall outside under "refuse" (to is unchanged). */
 int api_embed_rebind(const api_model *from, api_model *to, const api_limits *lim,
                      const api_slot *slot, api_problem *p);
+/* Every model of `from` put into `to` with the binding it has — `to` being a model of the same
+ * topology (an edit that built rules again, a replayed journal): the models go on from where
+ * they are, not from their rest shape. 0, or the status (to's list then empty). */
+int api_embed_carry(const api_model *from, api_model *to, const api_limits *lim, api_problem *p);
 /* The models as GET /export holds them: {name: {"vertices", "triangles", "level", "outside"}}. */
 json_t *api_embed_export(const api_model *m);
 /* The "embedded" member of an import document into m (freshly built): 0 or the status, the

@@ -14,18 +14,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Octahedron (p,q,a,a2,b,b2) with equator cycle a,b,a2,b2: four tetrahedra around the major
- * diagonal p-q. The order (q,p,...) makes them positive for a positive octahedron (checked by
- * the output tests through their volumes). */
-void out_oct_tet(const uint32_t o[6], int k, uint32_t t[4])
-{
-    static const int eq[4] = {2, 4, 3, 5}; /* a, b, a2, b2 */
-    t[0] = o[1];
-    t[1] = o[0];
-    t[2] = o[eq[k]];
-    t[3] = o[eq[(k + 1) & 3]];
-}
-
 /* ---- the cross-section ------------------------------------------------------------------ */
 
 typedef struct slicer {
@@ -166,7 +154,7 @@ bool out_compute_slice(out_stream *s)
     for (uint32_t i = 0; i < no && !sl.failed; i++) {
         sd_level_cell(s->lv, SD_CELL_OCTA, i, v);
         for (int k = 0; k < 4; k++) {
-            out_oct_tet(v, k, t);
+            sd_octa_tet(v, k, t);
             slice_tet(&sl, t, i, SD_CELL_OCTA);
         }
     }

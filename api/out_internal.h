@@ -97,9 +97,6 @@ void out_viridis(double t, float rgb[3]);
 
 /* ---- geometry (api/geom.c) ---- */
 
-/* The k-th of the 4 tetrahedra an octahedron is written as (split along its major diagonal,
- * positively oriented like the octahedron). */
-void out_oct_tet(const uint32_t oct[6], int k, uint32_t tet[4]);
 /* Area-weighted unit vertex normals of the level's surface triangles (first ntr) and the given
  * boundary triangles; (0,0,1) where a vertex has none. NULL when out of memory. */
 float *out_normals(const sd_level *lv, uint32_t ntr, const uint32_t *bnd, uint32_t nbnd);

@@ -99,7 +99,7 @@ static void cell_at(const out_stream *s, const vstate *st, uint64_t c, vcell *o)
         uint64_t k = c - st->r_oct;
         uint32_t v[6], t[4];
         sd_level_cell(s->lv, SD_CELL_OCTA, (uint32_t)(k / 4), v);
-        out_oct_tet(v, (int)(k % 4), t);
+        sd_octa_tet(v, (int)(k % 4), t);
         *o = (vcell){VT_TETRA, 3, SD_CELL_OCTA, 4, (long)(k / 4), {t[0], t[1], t[2], t[3]}};
     } else {
         uint32_t v[6];

@@ -184,6 +184,15 @@ const double *sd_level_channel(const sd_level *lv, int channel, int *ncomp)
     return lv->ch[channel].data;
 }
 
+void sd_octa_tet(const uint32_t o[6], int k, uint32_t t[4])
+{
+    static const int eq[4] = {2, 4, 3, 5}; /* the equator cycle a, b, a2, b2 */
+    t[0] = o[1];
+    t[1] = o[0];
+    t[2] = o[eq[k & 3]];
+    t[3] = o[eq[(k + 1) & 3]];
+}
+
 int sd_cell_size(sd_cell_kind k)
 {
     static const int n[] = {1, 2, 3, 4, 6};

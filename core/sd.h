@@ -168,6 +168,10 @@ const double *sd_level_channel(const sd_level *lv, int channel, int *ncomp);
  * the major diagonal (p,q) first. */
 typedef enum { SD_CELL_POINT = 0, SD_CELL_CURVE, SD_CELL_TRIANGLE, SD_CELL_TETRA, SD_CELL_OCTA } sd_cell_kind;
 int sd_cell_size(sd_cell_kind k);   /* 1, 2, 3, 4, 6 */
+/* The k-th (0..3) of the 4 tetrahedra around an octahedron's major diagonal (p,q): (q, p, e_k,
+ * e_k+1) over the equator cycle a, b, a2, b2 — positively oriented for a positive octahedron.
+ * The one split of the outputs (api/geom.c), the embedding (core/embed.c) and 004 eq. 13. */
+void sd_octa_tet(const uint32_t oct[6], int k, uint32_t tet[4]);
 uint32_t sd_level_num_cells(const sd_level *lv, sd_cell_kind k);
 /* Write the vertex ids of cell i of kind k into v (sd_cell_size(k) ids). */
 void sd_level_cell(const sd_level *lv, sd_cell_kind k, uint32_t i, uint32_t *v);
@@ -529,7 +533,7 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
 /* An embedding from a binding saved with sd_embed_weights (a session's export): per model
  * vertex its 4 level vertices and weights (idx[4i] = UINT32_MAX: a fixed vertex, kept at
  * rest[3i..]), checked against lv (indices in range, weights finite and summing to 1 within
- * 1e-9: SD_ERR_VALUE otherwise). The positions it gives are those of the embedding it was saved
+ * 1e-9 of their magnitudes: SD_ERR_VALUE otherwise). The positions it gives are those of the embedding it was saved
  * from, bit for bit. */
 sd_result sd_embed_restore(const sd_level *lv, size_t n, const uint32_t *idx, const double *w,
                            const double *rest, const sd_allocator *alloc, size_t max_bytes,

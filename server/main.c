@@ -382,7 +382,7 @@ static int deform_main(int argc, char **argv)
             api_model *rebuilt = NULL;
             if (api_edit(m, b, ++version, &lim, NULL, counts, &levels, &rebuilt, &p))
                 rc = report(&p, moves);
-            else if (rebuilt && api_embed_rebind(m, rebuilt, &lim, NULL, &p)) {
+            else if (rebuilt && api_embed_carry(m, rebuilt, &lim, &p)) {
                 api_model_unref(rebuilt);
                 rc = report(&p, moves);
             } else if (rebuilt) {

@@ -725,19 +725,6 @@ static void h_edit(req *r)
     json_t *b = body_or_answer(r, NULL, NULL);
     if (!b)
         return;
-    char why[256];
-    if (!persist_healthy(store_persist(r->srv->st), why, sizeof why)) {
-        /* an edit is applied in place before it is stored: with the store known to refuse, it
-         * is not tried (a refusal would drop the resident copy, which reads still use) */
-        json_decref(b);
-        log_line(r->srv, LOG_WARN, "session %s: an edit refused: the store cannot be written: %s",
-                 r->s->id, why);
-        p.retry_after = 5;
-        api_fail(&p, 503, "store-unavailable", "the session store cannot be written now, so the "
-                 "edit was not made: %s", why);
-        http_reply_problem(r, &p);
-        return;
-    }
     pthread_mutex_lock(&r->s->write);
     uint64_t version;
     api_model *m = session_model(r->s, &version), *rebuilt = NULL;
@@ -760,7 +747,7 @@ static void h_edit(req *r)
                  (unsigned long long)counts[l]);
     }
     strcat(up, "}");
-    if (!rc && rebuilt && (rc = api_embed_rebind(m, rebuilt, &r->srv->cfg.limits, &slot, &p))) {
+    if (!rc && rebuilt && (rc = api_embed_carry(m, rebuilt, &r->srv->cfg.limits, &p))) {
         api_model_unref(rebuilt);
         rebuilt = NULL;
     }
@@ -782,8 +769,11 @@ static void h_edit(req *r)
     } else if (rebuilt && persist_durable(store_persist(r->srv->st))) {
         api_model_unref(rebuilt); /* a failed edit whose undo failed: the store has the content */
         store_drop(r->srv->st, r->s);
-    } else if (rebuilt) /* a failed edit whose undo failed: the content before it, rebuilt */
+    } else if (rebuilt) { /* a failed edit whose undo failed: the content before it, rebuilt */
+        api_problem q = {0};
+        api_embed_carry(m, rebuilt, &r->srv->cfg.limits, &q); /* what fits goes on */
         notify(r, session_publish(r->s, rebuilt), "complex", NULL);
+    }
     pthread_mutex_unlock(&r->s->write);
     json_decref(b);
     api_model_unref(m);
@@ -992,6 +982,38 @@ static int commit_embed(void *ud, api_problem *p)
     return store_snapshot(c->r, c->m, c->version - 1, c->version, p);
 }
 
+/* PUT or DELETE of an embedded model: a change of the current model in place (api/embedded.h)
+ * under the session's write lock, If-Match checked, stored by its commit, then a new version
+ * told to the listeners. 0 (*version the new one) or the problem's status. */
+typedef struct embed_op {
+    enum { EMBED_PUT, EMBED_DELETE } kind;
+    api_embed_def *def;       /* PUT */
+    const char *name;         /* DELETE */
+    json_t *summary;          /* PUT's answer */
+} embed_op;
+
+static int embed_change(req *r, embed_op *op, uint64_t *version, api_problem *p)
+{
+    pthread_mutex_lock(&r->s->write);
+    api_model *m = session_model(r->s, version);
+    api_slot slot = slot_of(r);
+    embed_commit ec = {r, m, *version + 1};
+    api_edit_commit commit = {commit_embed, &ec};
+    int rc = if_match(r, *version, p);
+    if (!rc && op->kind == EMBED_PUT)
+        rc = api_embed_put(m, op->def, *version + 1, &r->srv->cfg.limits, &slot, &commit,
+                           &op->summary, p);
+    else if (!rc)
+        rc = api_embed_delete(m, op->name, *version + 1, &commit, p);
+    if (!rc) {
+        *version = session_bump(r->s);
+        notify(r, *version, "embedded", NULL);
+    }
+    pthread_mutex_unlock(&r->s->write);
+    api_model_unref(m);
+    return rc;
+}
+
 /* A body the handler answers itself (api_malloc'd), with the version as ETag. */
 static void reply_body(req *r, char *body, size_t len, const char *ctype, uint64_t version)
 {
@@ -1035,48 +1057,24 @@ static void h_put_embedded(req *r)
         http_reply_problem(r, &p);
         return;
     }
-    pthread_mutex_lock(&r->s->write);
+    embed_op op = {EMBED_PUT, d, NULL, NULL};
     uint64_t version;
-    api_model *m = session_model(r->s, &version);
-    json_t *summary = NULL;
-    api_slot slot = slot_of(r);
-    embed_commit ec = {r, m, version + 1};
-    api_edit_commit commit = {commit_embed, &ec};
-    if (!(rc = if_match(r, version, &p)))
-        rc = api_embed_put(m, d, version + 1, &r->srv->cfg.limits, &slot, &commit, &summary, &p);
+    rc = embed_change(r, &op, &version, &p);
     api_embed_def_unref(d);
-    if (!rc) {
-        version = session_bump(r->s);
-        notify(r, version, "embedded", NULL);
-    }
-    pthread_mutex_unlock(&r->s->write);
-    api_model_unref(m);
     if (rc) {
         http_reply_problem(r, &p);
         return;
     }
     http_reply_json(r, 200, json_pack("{s:I, s:o}", "version", (json_int_t)version, "embedded",
-                                      summary ? summary : json_object()), version);
+                                      op.summary ? op.summary : json_object()), version);
 }
 
 static void h_delete_embedded(req *r)
 {
     api_problem p = {0};
-    pthread_mutex_lock(&r->s->write);
+    embed_op op = {EMBED_DELETE, NULL, r->seg_level, NULL};
     uint64_t version;
-    api_model *m = session_model(r->s, &version);
-    embed_commit ec = {r, m, version + 1};
-    api_edit_commit commit = {commit_embed, &ec};
-    int rc = if_match(r, version, &p);
-    if (!rc)
-        rc = api_embed_delete(m, r->seg_level, version + 1, &commit, &p);
-    if (!rc) {
-        version = session_bump(r->s);
-        notify(r, version, "embedded", NULL);
-    }
-    pthread_mutex_unlock(&r->s->write);
-    api_model_unref(m);
-    if (rc) {
+    if (embed_change(r, &op, &version, &p)) {
         http_reply_problem(r, &p);
         return;
     }

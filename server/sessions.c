@@ -10,6 +10,7 @@
  */
 #include "sessions.h"
 #include "events.h"
+#include "../api/embedded.h"
 #include "../api/handlers.h"
 #include "../api/mem.h"
 #include <math.h>
@@ -302,6 +303,8 @@ static api_model *rebuild(const persist_loaded *l, const api_limits *lim, char *
         if (b)
             rc = api_edit(m, b, en->version, lim, NULL, counts, &levels, &rebuilt, &p);
         json_decref(b);
+        if (rebuilt && !rc && api_embed_carry(m, rebuilt, lim, &p))
+            rc = -1; /* the embedded models do not carry over: as a replay that failed */
         if (rebuilt) {
             api_model_unref(m);
             m = rebuilt;

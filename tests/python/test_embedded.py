@@ -364,3 +364,49 @@ def test_an_import_with_a_model_and_no_complex_is_refused(daemon):
     del doc["embedded"]["a"]["binding"]
     assert requests.post(daemon.url + "/v1/sessions", json={"import": doc}).status_code == 409
     assert requests.get(daemon.url + "/healthz").status_code == 200
+
+
+def test_a_second_model_keeps_the_first_ones_delta(daemon):
+    """PUT of another model is a new version, not a change of the level: deltas since before it
+    are still answered."""
+    pts = model_points(30)
+    s, v = session_with_model(daemon, pts)
+    r = s.req("PUT", "/embedded/other", json={"vertices": model_points(5, seed=9)})
+    assert r.status_code == 200, r.text
+    v2 = edit(s, [{"index": 4, "position": [1.05, 0.95, 0.1]}], r.json()["version"])
+    d = s.req("GET", "/embedded/m/delta", params={"since": v, "format": "json"})
+    assert d.status_code == 200, d.text
+    assert d.json()["version"] == v2
+    assert s.level(2, format="json").status_code == 200
+    assert s.req("GET", "/levels/2/delta", params={"since": v}).status_code == 200
+
+
+def test_an_edit_that_builds_rules_again_keeps_the_models_where_they_are(daemon):
+    """Ying-Zorin fins beside the block: moving a fin point builds the rules again (a new model of
+    the same topology); the embedded model is carried with its binding, not bound anew from its
+    rest shape — it stays where the earlier edits put it, and keeps following."""
+    V = [[0, 0, 0], [0, 0, 1], [0, 0, 2], [1, 0, 0], [1, 0, 1], [1, 0, 2],
+         [-.5, .8, 0], [-.5, .8, 1], [-.5, .8, 2], [-.5, -.8, 0], [-.5, -.8, 1], [-.5, -.8, 2]]
+    T = []
+    for a in (3, 6, 9):
+        T += [[0, 1, a + 1], [0, a + 1, a], [1, 2, a + 2], [1, a + 2, a + 1]]
+    off = len(V)
+    body = {"vertices": V + [[x + 10, y, z] for x, y, z in BLOCK["vertices"]],
+            "simplices": T + [[i + off for i in t] for t in BLOCK["simplices"]]}
+    s = Session(daemon)
+    assert s.put_complex(body).status_code == 200
+    assert s.req("PUT", "/rules", json={"nonmanifold_surface": "ying-zorin"}).status_code == 200
+    assert s.req("PUT", "/tags", json={"petals": [{"vertex": 0, "triangle": [0, 4, 3],
+                                                   "kind": "convex"}]}).status_code == 200
+    pts = (np.array(model_points(40)) + [10, 0, 0]).tolist()
+    r = s.req("PUT", "/embedded/m", json={"vertices": pts})
+    assert r.status_code == 200, r.text
+    c = off + BLOCK["vertices"].index([1.0, 1.0, 1.0])       # the top face's middle point
+    v = edit(s, [{"index": c, "position": [11.1, 0.9, 1.2]}], r.json()["version"])
+    moved = deformed(s)
+    assert np.abs(moved - np.array(pts)).max() > 1e-3
+    v = edit(s, [{"index": 3, "position": [1.2, 0.7, -0.1]}], v)   # rules built again
+    assert s.req("GET", "/levels/2/delta", params={"since": v - 1}).status_code == 410  # a new model
+    assert np.array_equal(deformed(s), moved)
+    edit(s, [{"index": c, "position": [11.0, 1.0, 1.0]}], v)   # back where it was posted
+    assert np.abs(deformed(s) - np.array(pts)).max() <= 1e-12
