@@ -408,6 +408,16 @@ struct sd_level {
     sd_channel ch[SD_MAX_CHANNELS];
 };
 
+/* sharp.c: the edges (ids, sharpness) and vertices with a sharpness in (0, 10) of one level,
+ * each list in increasing id (see sharp.c). */
+typedef struct sdi_sharp {
+    uint32_t ne, nv;
+    uint32_t *e;
+    float *es;
+    uint32_t *v;
+    float *vs;
+} sdi_sharp;
+
 typedef struct sd_petal_at {
     uint32_t v, f;
     uint8_t kind; /* SD_PETAL_* */
@@ -434,6 +444,9 @@ struct sd_complex {
     size_t npet;
     sd_petal_at *pet;
     sd_level *lv[SD_MAX_LEVEL + 1];
+    /* semi-sharp creases (sharp.c): level 0's lists and the crease method (SD_CREASE_*) */
+    sdi_sharp sh;
+    int sh_method;
     /* detail offsets (details.c): SD_MAX_CHANNELS x (SD_MAX_LEVEL + 1) lists, NULL until the
      * first offset is stored */
     struct sdi_dlist *det;
@@ -682,6 +695,42 @@ sdi_emask sdi_mask_yz_petal_edge(const sd_yzend end[2]);
 /* The flattened row's weight (yz.c) of ring point j in the row of edge v-ring[i] of a petal of k
  * triangles whose centre reads it as x (on q = p - v: the centre takes the rest of 1). */
 double sdi_mask_yz_flat(const sd_yzend *x, uint32_t k, uint32_t i, uint32_t j);
+
+/* ---- sharp.c: semi-sharp creases (OpenSubdiv's Sdc::Crease) ------------------------------ */
+void sdi_sharp_free(sd_mem *m, sdi_sharp *s);
+/* Level `level`'s lists from level 0's (levels below it computed, with their edges); empty when
+ * the complex has none. false: no memory. */
+bool sdi_sharp_level(sd_complex *c, int level, sdi_sharp *out);
+/* The sharpness of the halves of each listed edge of level t (cs[i][k]: the half at ev[e][k]). */
+bool sdi_sharp_children(sd_mem *m, const sd_topo *t, const sdi_sharp *s, int method,
+                        float (*cs)[2]);
+/* What the rows a sharpness reaches become (stencil.c applies them on the base rows): */
+typedef struct sdi_sharp_vertex {
+    uint32_t v;
+    uint8_t prule, crule;  /* this level's and the child's rule: smooth, crease, corner */
+    uint8_t nedge[2];      /* a crease's two sharp edges (parent, child); 0: the base's own */
+    uint32_t edge[2][2];
+    int32_t pos[2][2];     /* their places in rho */
+    double w;              /* the parent rule's weight in the blend */
+} sdi_sharp_vertex;
+typedef struct sdi_sharp_edge {
+    uint32_t e;
+    bool crease;           /* the midpoint; else the blend with w = the sharpness */
+    double w;
+} sdi_sharp_edge;
+typedef struct sdi_sharp_rows_t {
+    uint32_t nvert, nedge;
+    sdi_sharp_vertex *vert; /* in increasing vertex id */
+    sdi_sharp_edge *edge;   /* in increasing edge id */
+} sdi_sharp_rows_t;
+/* From a level's lists, its vertex rules vr and rho's `take` (rules.c). false: no memory. */
+bool sdi_sharp_rows(sd_mem *m, const sd_topo *t, const sdi_sharp *s, int method,
+                    const uint8_t *vr, const uint8_t *take, sdi_sharp_rows_t *out);
+void sdi_sharp_rows_free(sd_mem *m, sdi_sharp_rows_t *r);
+/* Turn a base row w (len entries: centre, rho, ...) into the sharp one (tmp: 2 len doubles). */
+void sdi_sharp_vertex_row(const sdi_sharp_vertex *x, double *w, uint32_t len, double *tmp);
+/* The same for an edge row (ends, ring). */
+void sdi_sharp_edge_row(const sdi_sharp_edge *x, double *w, uint32_t len);
 
 /* ---- stencil.c: S_l from the rules, rings and masks ------------------------------------------ */
 sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);

@@ -224,6 +224,26 @@ sd_result sd_complex_edge_class(sd_complex *c, int level, uint32_t e, sd_class *
  * stay tagged at every level; drops computed levels >= 1. idx/size as for sd_complex_new. */
 sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint8_t *size,
                                   size_t n, sd_error *err);
+/* Semi-sharp creases with OpenSubdiv's semantics (Sdc::Crease; docs/RULES.md "Semi-sharp
+ * creases"): a sharpness s in [0, 10) on a vertex or on an edge of a surface or of the solids'
+ * boundary surface. While the level is below s the edge is a crease (the vertex a corner); at a
+ * fractional s the rows blend; children decrement (SD_CREASE_UNIFORM) or follow Chaikin's rule
+ * (SD_CREASE_CHAIKIN: 3/4 s + 1/4 the mean of the other semi-sharp edges at the end, minus 1). A
+ * vertex's rule comes from its sharp edges (OpenSubdiv's smooth, dart, crease, corner), the edges
+ * of its own crease (a boundary, singular tags) counting as infinitely sharp. s >= 10 is
+ * infinitely sharp: give it as a singular tag (SD_ERR_VALUE here). s = 0 entries are ignored.
+ * Errors (item = the entry, field = SD_SH_FIELD_*): SD_ERR_ARITY, SD_ERR_INDEX, SD_ERR_ARG (not an
+ * edge, or not a surface or solid-boundary edge), SD_ERR_VALUE, SD_ERR_DUPLICATE. Replaces earlier
+ * sharpness; drops computed levels >= 1. */
+enum { SD_CREASE_UNIFORM = 0, SD_CREASE_CHAIKIN = 1 };
+typedef struct sd_sharpness {
+    uint32_t v[2];
+    int nverts;                /* 1 vertex, 2 edge */
+    float value;
+} sd_sharpness;
+enum { SD_SH_FIELD_SIMPLEX = 0, SD_SH_FIELD_VALUE };
+sd_result sd_complex_set_sharpness(sd_complex *c, const sd_sharpness *s, size_t n, int method,
+                                   sd_error *err);
 /* Per-simplex non-manifold rules (000 Sec. 3.5; docs/RULES.md), for non-manifold vertices and
  * edges of level 0; their descendants at every level keep them:
  *   SD_RULE_N1  (type 1) the rules of dimension `dimension` alone: the simplex follows the rule it

@@ -41,6 +41,8 @@ typedef struct build {
     uint64_t nexp, nring, ebase;     /* explicit columns; ring entries; where edge rows start */
     uint32_t *cur, *col;             /* where each vertex's rho goes in col; col */
     double loopc[SDI_LOOP_CACHE];    /* Loop weights by valence */
+    sdi_sharp_rows_t sh;             /* rows a semi-sharp crease reaches (sharp.c) */
+    double *stmp;                    /* their scratch: 2 wcap doubles */
 } build;
 
 /* The explicit columns of edge e's row: its ring. */
@@ -149,6 +151,16 @@ static bool wbuf_fit(build *B, uint32_t n)
     return true;
 }
 
+/* Room for the sharp rows' scratch (2 n doubles), after wbuf_fit(n). */
+static bool stmp_fit(build *B, uint32_t n)
+{
+    double *t = sdi_realloc(B->m, B->stmp, 2 * (size_t)n * sizeof *t);
+    if (!t)
+        return false;
+    B->stmp = t;
+    return true;
+}
+
 /* A vertex row is [self, a x |rho|, b x octahedral opposites]; cur[v]: where v's rho goes. */
 static bool vertex_patterns(build *B, sd_csrb *S)
 {
@@ -158,6 +170,7 @@ static bool vertex_patterns(build *B, sd_csrb *S)
     uint32_t vmemo[SD_RULE_COUNT][MEMO];
     memset(vmemo, 0xff, sizeof vmemo);
     uint64_t nexp = 0;
+    const sdi_sharp_vertex *sv = B->sh.vert, *sv_end = sv + B->sh.nvert;
     for (uint32_t v = 0; v < nv; v++) {
         uint8_t r = B->vr[v];
         uint32_t na = cnt_a[v], nb = cnt_b ? cnt_b[v] : 0, id = UINT32_MAX;
@@ -165,7 +178,8 @@ static bool vertex_patterns(build *B, sd_csrb *S)
             S->kchk[v / SD_CHK] = nexp;
         cur[v] = (uint32_t)nexp;
         nexp += na + nb;
-        bool memo = nb == 0 && na < MEMO;
+        const sdi_sharp_vertex *sharp = sv < sv_end && sv->v == v ? sv++ : NULL;
+        bool memo = nb == 0 && na < MEMO && !sharp;
         if (memo)
             id = vmemo[r][na];
         if (id == UINT32_MAX) {
@@ -179,7 +193,12 @@ static bool vertex_patterns(build *B, sd_csrb *S)
                 wbuf[1 + i] = w.a;
             for (uint32_t i = 0; i < nb; i++)
                 wbuf[1 + na + i] = w.b;
-            if ((id = sdi_pats_intern(B->m, &B->pats, wbuf, 1 + na + nb)) == UINT32_MAX)
+            if (sharp) {
+                if (!stmp_fit(B, 1 + na + nb))
+                    return false;
+                sdi_sharp_vertex_row(sharp, B->wbuf, 1 + na + nb, B->stmp);
+            }
+            if ((id = sdi_pats_intern(B->m, &B->pats, B->wbuf, 1 + na + nb)) == UINT32_MAX)
                 return false;
             if (memo)
                 vmemo[r][na] = id;
@@ -224,6 +243,7 @@ static bool edge_patterns(build *B, sd_csrb *S)
     memset(ememo, 0xff, sizeof ememo);
     uint64_t nexp = B->nexp, nring = 0;
     B->ebase = nexp;
+    const sdi_sharp_edge *se = B->sh.edge, *se_end = se + B->sh.nedge;
     for (uint32_t e = 0; e < ne; e++) {
         uint32_t k = ring_len(B, e), r = nv + e;
         if (r % SD_CHK == 0)
@@ -237,7 +257,14 @@ static bool edge_patterns(build *B, sd_csrb *S)
         bool petal = B->gam && er[e] == SD_RULE_LOOP && k == 2 &&
                      (B->gam[e][0].kind == SD_YZ_FIRST || B->gam[e][1].kind == SD_YZ_FIRST);
         bool flat = ring == SDI_RING_FLAT;
-        bool memo = !cls && k < MEMO && !petal && !flat;
+        /* a semi-sharp edge whose rule is a surface's (Loop, on a surface or the solids'
+         * boundary): the blend of sharp.c */
+        const sdi_sharp_edge *sharp = se < se_end && se->e == e ? se++ : NULL;
+        if (sharp && er[e] != SD_RULE_LOOP && er[e] != SD_RULE_SOLID_BOUNDARY)
+            sharp = NULL;
+        if (sharp && (petal || flat))
+            sharp = NULL; /* Ying-Zorin's rows at singular vertices win (DECISIONS 41) */
+        bool memo = !cls && k < MEMO && !petal && !flat && !sharp;
         uint32_t id = memo ? ememo[er[e]][k] : UINT32_MAX;
         if ((flat || petal) && (id = yz_pattern(B, e, k, flat)) == UINT32_MAX)
             return false;
@@ -251,6 +278,8 @@ static bool edge_patterns(build *B, sd_csrb *S)
             wbuf[1] = w.end[1];
             for (uint32_t i = 0; i < k; i++)
                 wbuf[2 + i] = cls && cls[i] ? w.diag : w.ring;
+            if (sharp)
+                sdi_sharp_edge_row(sharp, wbuf, 2 + k);
             if ((id = sdi_pats_intern(B->m, &B->pats, wbuf, 2 + k)) == UINT32_MAX)
                 return false;
             if (memo)
@@ -326,6 +355,15 @@ sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         return sdi_fail(err, SD_ERR_LIMIT, -1, -1, "too many points for 32-bit ids");
     if (!choose(&B, cx, lv))
         goto nomem;
+    if (cx->sh.ne || cx->sh.nv) { /* semi-sharp creases reaching this level (sharp.c) */
+        sdi_sharp lsh;
+        if (!sdi_sharp_level(cx, lv->index, &lsh))
+            goto nomem;
+        bool ok = sdi_sharp_rows(m, t, &lsh, cx->sh_method, B.vr, B.take, &B.sh);
+        sdi_sharp_free(m, &lsh);
+        if (!ok)
+            goto nomem;
+    }
     B.wbuf = sdi_alloc(m, (size_t)B.wcap * sizeof *B.wbuf);
     if (!B.wbuf || !sdi_csrb_init(m, &lv->S, nv, ne, no, nv, t->ev, t->oct) ||
         !vertex_patterns(&B, &lv->S) || !edge_patterns(&B, &lv->S) || !cell_patterns(&B, &lv->S))
@@ -363,6 +401,8 @@ out:
     sdi_free(m, B.take);
     sdi_free(m, B.gam);
     sdi_free(m, B.wbuf);
+    sdi_free(m, B.stmp);
+    sdi_sharp_rows_free(m, &B.sh);
     sdi_free(m, B.cnt_a);
     sdi_free(m, B.cnt_b);
     sdi_free(m, B.opp);

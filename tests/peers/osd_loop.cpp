@@ -1,10 +1,12 @@
 // osd_loop — the peer: OpenSubdiv's uniform Loop refinement of a triangle mesh, in double
 // precision, for tests and benchmarks of subdivd.
 //
-//   osd_loop [-l L] [--time N] [--origins] [--rules] INPUT
+//   osd_loop [-l L] [--time N] [--origins] [--rules] [--chaikin] INPUT
 //
-// INPUT is the text format of docs/TEXT_FORMAT.md, restricted to `v x y z` lines and 3-index
-// `s i j k` lines (triangles); anything else is refused with exit status 2.
+// INPUT is the text format of docs/TEXT_FORMAT.md, restricted to `v x y z` lines, 3-index
+// `s i j k` lines (triangles) and `c` lines (`c i S`: vertex sharpness, a Far corner; `c i j S`:
+// edge sharpness, a Far crease; given to Far as floats, 10 and more infinitely sharp); anything
+// else is refused with exit status 2. --chaikin: Sdc::Options::CREASE_CHAIKIN.
 //
 // Default output: level L in the format of docs/TEXT_FORMAT.md (`level`, `vertices`, `v x y z`
 // with %.17g, `triangles`, `t i j k`). --origins appends to each `v` line where the point comes
@@ -51,7 +53,7 @@ using namespace OpenSubdiv;
 
 namespace {
 
-const char *const kUsage = "usage: osd_loop [-l L] [--time N] [--origins] [--rules] INPUT";
+const char *const kUsage = "usage: osd_loop [-l L] [--time N] [--origins] [--rules] [--chaikin] INPUT";
 const int kMaxLevel = 10;  // Far's limit for uniform refinement
 
 // The primvar type Far::PrimvarRefinerReal<double> interpolates.
@@ -84,6 +86,9 @@ void on_far_warning(const char *message) {
 struct Mesh {
     std::vector<double> xyz;  // 3 per vertex
     std::vector<int> tris;    // 3 per triangle
+    std::vector<int> crease_v, corner_v;  // 2 per crease, 1 per corner
+    std::vector<float> crease_s, corner_s;
+    bool chaikin = false;
 };
 
 // A whole-number command-line argument in [lo, hi].
@@ -141,8 +146,25 @@ Mesh read_mesh(const char *path) {
             if (ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2])
                 die(where + "degenerate triangle: " + line);
             m.tris.insert(m.tris.end(), ids.begin(), ids.end());
+        } else if (tag == "c") {
+            std::vector<double> x;
+            double d;
+            while (ss >> d)
+                x.push_back(d);
+            if ((x.size() != 2 && x.size() != 3) || !at_end(ss))
+                die(where + "bad sharpness line: " + line);
+            for (size_t k = 0; k + 1 < x.size(); k++)
+                if (x[k] < 0 || x[k] >= (double)(m.xyz.size() / 3) || x[k] != (int)x[k])
+                    die(where + "bad vertex index in: " + line);
+            if (x.size() == 2) {
+                m.corner_v.push_back((int)x[0]);
+                m.corner_s.push_back((float)x[1]);
+            } else {
+                m.crease_v.insert(m.crease_v.end(), {(int)x[0], (int)x[1]});
+                m.crease_s.push_back((float)x[2]);
+            }
         } else {
-            die(where + "unsupported line (only v and 3-index s): " + line);
+            die(where + "unsupported line (only v, 3-index s and c): " + line);
         }
     }
     if (in.bad())
@@ -174,9 +196,17 @@ void run(const Mesh &m, int level, Result &r) {
     desc.numFaces = nf;
     desc.numVertsPerFace = per_face.data();
     desc.vertIndicesPerFace = m.tris.data();
+    desc.numCreases = (int)m.crease_s.size();
+    desc.creaseVertexIndexPairs = m.crease_v.data();
+    desc.creaseWeights = m.crease_s.data();
+    desc.numCorners = (int)m.corner_s.size();
+    desc.cornerVertexIndices = m.corner_v.data();
+    desc.cornerWeights = m.corner_s.data();
 
     Sdc::Options options;
     options.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
+    if (m.chaikin)
+        options.SetCreasingMethod(Sdc::Options::CREASE_CHAIKIN);
     g_far_error = false;
     r.refiner = Far::TopologyRefinerFactory<Descriptor>::Create(
         desc, Far::TopologyRefinerFactory<Descriptor>::Options(Sdc::SCHEME_LOOP, options));
@@ -209,7 +239,7 @@ double now() {
 
 int main(int argc, char **argv) {
     int level = 2, reps = 0;
-    bool origins = false, rules = false;
+    bool origins = false, rules = false, chaikin = false;
     const char *path = nullptr;
     for (int i = 1; i < argc; i++) {
         if (!std::strcmp(argv[i], "-l")) {
@@ -224,6 +254,8 @@ int main(int argc, char **argv) {
             origins = true;
         } else if (!std::strcmp(argv[i], "--rules")) {
             rules = true;
+        } else if (!std::strcmp(argv[i], "--chaikin")) {
+            chaikin = true;
         } else if (argv[i][0] == '-' && argv[i][1]) {
             die(std::string("unknown option ") + argv[i] + "\n" + kUsage);
         } else if (path) {
@@ -237,6 +269,7 @@ int main(int argc, char **argv) {
     Far::SetErrorCallback(on_far_error);
     Far::SetWarningCallback(on_far_warning);
     Mesh mesh = read_mesh(path);
+    mesh.chaikin = chaikin;
 
     if (reps > 0) {
         std::vector<double> t(reps);

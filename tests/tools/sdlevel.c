@@ -21,13 +21,13 @@ static void usage(void)
 {
     fprintf(stderr, "usage: sdlevel [-l L] [-w warren|loop] [-s box|averaged] [-n chang-qin|ying-zorin] "
                     "[--classes] "
-                    "[--matrix] [--stats] INPUT\n");
+                    "[--chaikin] [--matrix] [--stats] INPUT\n");
     exit(2);
 }
 
 int main(int argc, char **argv)
 {
-    int level = 1, classes = 0, matrix = 0, stats = 0;
+    int level = 1, classes = 0, matrix = 0, stats = 0, chaikin = 0;
     sd_options opt = {0};
     const char *path = NULL;
     for (int i = 1; i < argc; i++) {
@@ -55,6 +55,8 @@ int main(int argc, char **argv)
             classes = 1;
         else if (!strcmp(argv[i], "--matrix"))
             matrix = 1;
+        else if (!strcmp(argv[i], "--chaikin"))
+            chaikin = 1;
         else if (!strcmp(argv[i], "--stats"))
             stats = 1;
         else if (argv[i][0] == '-' && argv[i][1])
@@ -89,6 +91,35 @@ int main(int argc, char **argv)
             fprintf(stderr, "sdlevel: bad diagonal line 'd %ld %ld'\n", d[0], d[1]);
             return 2;
         }
+    }
+    /* `c` lines: a sharpness; 10 and more is infinitely sharp, a singular tag */
+    if (tm.ncr) {
+        sd_sharpness *sh = calloc(tm.ncr, sizeof *sh);
+        uint32_t *tag = calloc(2 * tm.ncr, sizeof *tag);
+        uint8_t *tsz = calloc(tm.ncr, 1);
+        size_t nsh = 0, ntag = 0, ntid = 0;
+        if (!sh || !tag || !tsz) {
+            fprintf(stderr, "sdlevel: out of memory\n");
+            return 1;
+        }
+        for (size_t i = 0; i < tm.ncr; i++) {
+            int n = tm.crn[i];
+            if (tm.crs[i] >= 10) {
+                for (int k = 0; k < n; k++)
+                    tag[ntid++] = tm.crv[2 * i + k];
+                tsz[ntag++] = (uint8_t)n;
+            } else
+                sh[nsh++] = (sd_sharpness){{tm.crv[2 * i], tm.crv[2 * i + 1]}, n, (float)tm.crs[i]};
+        }
+        if ((ntag && sd_complex_set_singular(c, tag, tsz, ntag, &err)) ||
+            sd_complex_set_sharpness(c, sh, nsh, chaikin ? SD_CREASE_CHAIKIN : SD_CREASE_UNIFORM,
+                                     &err)) {
+            fprintf(stderr, "sdlevel: bad sharpness (item %ld): %s\n", err.item, err.message);
+            return 2;
+        }
+        free(sh);
+        free(tag);
+        free(tsz);
     }
     const sd_level *lv = sd_complex_level(c, level, &err);
     if (!lv) {

@@ -29,7 +29,7 @@ int textmesh_read(const char *path, textmesh *m, char *err, size_t errlen)
         snprintf(err, errlen, "%s: %s", path, strerror(errno));
         return -1;
     }
-    size_t cx = 0, ci = 0, cs = 0, cd = 0, ni = 0;
+    size_t cx = 0, ci = 0, cs = 0, cd = 0, ni = 0, cc1 = 0, cc2 = 0, cc3 = 0;
     char line[4096];
     long lineno = 0;
     while (fgets(line, sizeof line, f)) {
@@ -76,6 +76,31 @@ int textmesh_read(const char *path, textmesh *m, char *err, size_t errlen)
                 m->ndiag++;
                 ok = 1;
             }
+        } else if (p[0] == 'c' && (p[1] == ' ' || p[1] == '\t')) {
+            /* c i S (vertex) or c i j S (edge): ids, then the sharpness */
+            double x[3];
+            int n = 0;
+            char *q = p + 1, *end;
+            while (n < 3) {
+                double d = strtod(q, &end);
+                if (end == q)
+                    break;
+                x[n++] = d;
+                q = end;
+            }
+            while (*q == ' ' || *q == '\t' || *q == '\n' || *q == '\r')
+                q++;
+            if ((n == 2 || n == 3) && !*q && x[0] >= 0 && x[0] <= UINT32_MAX &&
+                (n == 2 || (x[1] >= 0 && x[1] <= UINT32_MAX)) &&
+                !grow((void **)&m->crv, &cc1, 2 * (m->ncr + 1), sizeof *m->crv) &&
+                !grow((void **)&m->crn, &cc2, m->ncr + 1, 1) &&
+                !grow((void **)&m->crs, &cc3, m->ncr + 1, sizeof *m->crs)) {
+                m->crv[2 * m->ncr] = (uint32_t)x[0];
+                m->crv[2 * m->ncr + 1] = n == 3 ? (uint32_t)x[1] : 0;
+                m->crn[m->ncr] = (uint8_t)(n - 1);
+                m->crs[m->ncr++] = x[n - 1];
+                ok = 1;
+            }
         }
         if (!ok) {
             snprintf(err, errlen, "%s:%ld: cannot parse line", path, lineno);
@@ -96,5 +121,8 @@ void textmesh_free(textmesh *m)
     free(m->idx);
     free(m->size);
     free(m->diag);
+    free(m->crv);
+    free(m->crn);
+    free(m->crs);
     memset(m, 0, sizeof *m);
 }

@@ -9,7 +9,10 @@ typedef struct textmesh {
     uint32_t *idx;     /* simplex vertex ids, consecutive */
     uint8_t *size;     /* per simplex */
     long *diag;        /* pairs (t, k) of `d` lines */
-    size_t nv, ns, ndiag;
+    uint32_t *crv;     /* `c` lines: 2 vertex ids each (the second unused for a vertex) */
+    uint8_t *crn;      /* 1 vertex, 2 edge */
+    double *crs;       /* the sharpness */
+    size_t nv, ns, ndiag, ncr;
 } textmesh;
 
 /* Read `path` ("-" = stdin). Returns 0, or -1 with a message in err. Free with textmesh_free. */

@@ -1,0 +1,514 @@
+/* sharp.c — semi-sharp creases: OpenSubdiv's Sdc::Crease semantics on our rows.
+ *
+ * A sharpness s in (0, 10) on an edge of a surface (or of the solids' boundary surface) or on a
+ * vertex; infinitely sharp (s >= 10) is a singular tag and not stored here (the caller turns it
+ * into one). Values are floats, and every sharpness computation is done in float as Sdc does it,
+ * so a fractional weight is the same number OpenSubdiv computes.
+ *
+ * Per level (derived from level 0's lists on demand, never stored): the edges and vertices whose
+ * sharpness is > 0. Children: a vertex point keeps s - 1 (0 below 1); the half of edge e at its
+ * end x (edge 2e at ev[e][0], 2e+1 at ev[e][1]: split.c) gets s - 1, or with the Chaikin rule
+ * (3/4 s + 1/4 the mean of the other semi-sharp edges at x) - 1; edges made inside faces are
+ * smooth. Rows (stencil.c asks crease_vertex_row / crease_edge_row here for every row that a
+ * sharpness reaches, on top of the row the rules made without it — the "base" row):
+ *   edge point (Scheme::ComputeEdgeVertexMask): s > 0 and both halves still sharp: the midpoint;
+ *     otherwise the smooth row blended with the midpoint by w = s (OpenSubdiv does not clamp it).
+ *   vertex point (ComputeVertexVertexMask): the rule of the vertex at this level (pRule) and of
+ *     its child (cRule) from the vertex's sharpness and the number of sharp edges at it — any
+ *     vertex sharpness or more than two: corner; two: crease (B-spline along them); fewer: smooth
+ *     (a dart is smooth) — where edges of the base rule's own creases (surface boundary, singular
+ *     tags: infinitely sharp) count as two. Same rules: that rule's mask; else the blend
+ *     w pRule + (1 - w) cRule, w = the mean sharpness of what became smooth (<= 1).
+ * The base row is the smooth mask (Loop or the solid boundary's Loop) or the crease mask (a
+ * boundary or singular crease); every sharper mask reads a subset of its columns (the crease
+ * neighbours are points of rho), so a row keeps its columns and only its weights change.
+ * Base rules other than these (solid interiors, G2, per-simplex choices) follow only a vertex
+ * sharpness (the corner blend); edges do not change their rule (DECISIONS 41).
+ */
+#include "internal.h"
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define SHARP_INF 10.0f
+
+static float decrement(float s) { return s > 1.0f ? s - 1.0f : 0.0f; }
+
+/* ---- level 0: the stored lists ---------------------------------------------------------- */
+
+typedef struct keyed {
+    uint32_t id, src; /* the vertex or edge id; the entry's index in the input */
+    float s;
+} keyed;
+static int cmp_keyed(const void *x, const void *y)
+{
+    const keyed *a = x, *b = y;
+    if (a->id != b->id)
+        return (a->id > b->id) - (a->id < b->id);
+    return (a->src > b->src) - (a->src < b->src);
+}
+
+/* Sort by id; the first entry naming the same id as an earlier one, or NULL. */
+static const keyed *sort_find_repeat(keyed *a, size_t n)
+{
+    qsort(a, n, sizeof *a, cmp_keyed);
+    const keyed *rep = NULL;
+    for (size_t i = 1; i < n; i++)
+        if (a[i].id == a[i - 1].id && (!rep || a[i].src < rep->src))
+            rep = &a[i];
+    return rep;
+}
+
+/* Whether edge e of level 0 is an edge of a maximal triangle or of a face on the solids'
+ * boundary (needs the relation edge -> faces). */
+static bool surface_edge(const sd_topo *t, const sdi_rels *R, uint32_t e)
+{
+    const sdi_rel *ef = &R->r[SDI_EF];
+    for (uint32_t k = ef->off[e]; k < ef->off[e + 1]; k++)
+        if (t->fflag[ef->item[k]] & (FF_MAX | FF_BND3))
+            return true;
+    return false;
+}
+
+sd_result sd_complex_set_sharpness(sd_complex *c, const sd_sharpness *sh, size_t n, int method,
+                                   sd_error *err)
+{
+    sd_topo *t = &c->lv[0]->t;
+    sd_mem *m = &c->mem;
+    if (method != SD_CREASE_UNIFORM && method != SD_CREASE_CHAIKIN)
+        return sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown crease method %d", method);
+    keyed *e = sdi_alloc(m, (n ? n : 1) * sizeof *e), *v = sdi_alloc(m, (n ? n : 1) * sizeof *v);
+    sdi_rels rels = {.t = t};
+    sd_result rc = SD_OK;
+    if (!e || !v ||
+        (n && !sdi_rels_need(m, &rels, SDI_REL(SDI_VE) | SDI_REL(SDI_EF)))) {
+        rc = sdi_fail_nomem(err, m);
+        goto out;
+    }
+    size_t ne = 0, nv = 0;
+    for (size_t i = 0; i < n && !rc; i++) {
+        const sd_sharpness *x = sh + i;
+        float s = x->value;
+        if (x->nverts != 1 && x->nverts != 2) {
+            rc = sdi_fail(err, SD_ERR_ARITY, (long)i, SD_SH_FIELD_SIMPLEX,
+                          "sharpness %zu: a vertex or an edge, not %d vertices", i, x->nverts);
+            break;
+        }
+        for (int j = 0; j < x->nverts; j++)
+            if (x->v[j] >= t->nv)
+                rc = sdi_fail(err, SD_ERR_INDEX, (long)i, SD_SH_FIELD_SIMPLEX,
+                              "sharpness %zu: vertex %u out of range", i, x->v[j]);
+        if (rc)
+            break;
+        if (!(s >= 0.0f) || !(s < SHARP_INF)) { /* NaN included */
+            rc = sdi_fail(err, SD_ERR_VALUE, (long)i, SD_SH_FIELD_VALUE,
+                          "sharpness %zu: a value in [0, 10) (10 and more is a singular tag)", i);
+            break;
+        }
+        if (x->nverts == 1) {
+            v[nv++] = (keyed){x->v[0], (uint32_t)i, s};
+            continue;
+        }
+        uint32_t id = x->v[0] == x->v[1] ? UINT32_MAX : sdi_rels_edge(&rels, x->v[0], x->v[1]);
+        if (id == UINT32_MAX)
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_SH_FIELD_SIMPLEX,
+                          "sharpness %zu: %u-%u is not an edge of the complex", i, x->v[0], x->v[1]);
+        else if (!surface_edge(t, &rels, id))
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_SH_FIELD_SIMPLEX,
+                          "sharpness %zu: edge %u-%u is neither a surface edge nor on the solids' "
+                          "boundary", i, x->v[0], x->v[1]);
+        else
+            e[ne++] = (keyed){id, (uint32_t)i, s};
+    }
+    if (rc)
+        goto out;
+    const keyed *re = sort_find_repeat(e, ne), *rv = sort_find_repeat(v, nv);
+    if (re || rv) {
+        const keyed *r = re && (!rv || re->src < rv->src) ? re : rv;
+        rc = sdi_fail(err, SD_ERR_DUPLICATE, (long)r->src, SD_SH_FIELD_SIMPLEX,
+                      "sharpness %u names the same %s as an earlier one", r->src,
+                      r == re ? "edge" : "vertex");
+        goto out;
+    }
+    /* keep the nonzero ones */
+    size_t je = 0, jv = 0;
+    for (size_t i = 0; i < ne; i++)
+        if (e[i].s > 0.0f)
+            e[je++] = e[i];
+    for (size_t i = 0; i < nv; i++)
+        if (v[i].s > 0.0f)
+            v[jv++] = v[i];
+    uint32_t *ee = sdi_alloc(m, (je ? je : 1) * sizeof *ee), *vv = sdi_alloc(m, (jv ? jv : 1) * sizeof *vv);
+    float *es = sdi_alloc(m, (je ? je : 1) * sizeof *es), *vs = sdi_alloc(m, (jv ? jv : 1) * sizeof *vs);
+    if (!ee || !vv || !es || !vs) {
+        sdi_free(m, ee);
+        sdi_free(m, vv);
+        sdi_free(m, es);
+        sdi_free(m, vs);
+        rc = sdi_fail_nomem(err, m);
+        goto out;
+    }
+    for (size_t i = 0; i < je; i++) {
+        ee[i] = e[i].id;
+        es[i] = e[i].s;
+    }
+    for (size_t i = 0; i < jv; i++) {
+        vv[i] = v[i].id;
+        vs[i] = v[i].s;
+    }
+    sdi_free(m, c->sh.e);
+    sdi_free(m, c->sh.es);
+    sdi_free(m, c->sh.v);
+    sdi_free(m, c->sh.vs);
+    c->sh = (sdi_sharp){(uint32_t)je, (uint32_t)jv, ee, es, vv, vs};
+    c->sh_method = method;
+    sdi_drop_rules(c, c->lv[0]); /* level 0's rows change; every finer level follows */
+out:
+    sdi_rels_free(m, &rels);
+    sdi_free(m, e);
+    sdi_free(m, v);
+    return rc;
+}
+
+void sdi_sharp_free(sd_mem *m, sdi_sharp *s)
+{
+    sdi_free(m, s->e);
+    sdi_free(m, s->es);
+    sdi_free(m, s->v);
+    sdi_free(m, s->vs);
+    memset(s, 0, sizeof *s);
+}
+
+/* ---- children ---------------------------------------------------------------------------- */
+
+/* The sharp edges at each vertex, as positions into s->e (by vertex, then edge id). */
+typedef struct at_vertex {
+    uint32_t v, i;
+} at_vertex;
+static int cmp_at(const void *x, const void *y)
+{
+    const at_vertex *a = x, *b = y;
+    if (a->v != b->v)
+        return (a->v > b->v) - (a->v < b->v);
+    return (a->i > b->i) - (a->i < b->i);
+}
+
+bool sdi_sharp_children(sd_mem *m, const sd_topo *t, const sdi_sharp *s, int method,
+                        float (*cs)[2])
+{
+    for (uint32_t i = 0; i < s->ne; i++)
+        cs[i][0] = cs[i][1] = decrement(s->es[i]);
+    if (method != SD_CREASE_CHAIKIN || s->ne < 2)
+        return true;
+    at_vertex *a = sdi_alloc(m, 2 * (size_t)s->ne * sizeof *a);
+    if (!a)
+        return false;
+    for (uint32_t i = 0; i < s->ne; i++)
+        for (int k = 0; k < 2; k++)
+            a[2 * i + k] = (at_vertex){t->ev[s->e[i]][k], i};
+    size_t n = 2 * (size_t)s->ne;
+    qsort(a, n, sizeof *a, cmp_at);
+    for (size_t j = 0, j1; j < n; j = j1) {
+        float sum = 0.0f;
+        int cnt = 0;
+        for (j1 = j; j1 < n && a[j1].v == a[j].v; j1++) { /* in increasing edge id */
+            sum += s->es[a[j1].i];
+            cnt++;
+        }
+        if (cnt < 2)
+            continue; /* one semi-sharp edge: a plain decrement */
+        for (size_t q = j; q < j1; q++) {
+            uint32_t i = a[q].i;
+            float p = s->es[i];
+            float other = (sum - p) / (float)(cnt - 1);
+            float c = ((0.75f * p) + (0.25f * other)) - 1.0f;
+            int k = t->ev[s->e[i]][0] == a[q].v ? 0 : 1;
+            cs[i][k] = c > 0.0f ? c : 0.0f;
+        }
+    }
+    sdi_free(m, a);
+    return true;
+}
+
+/* Level l+1's lists from level l's (s, with cs its children's edge sharpness). */
+static bool next_lists(sd_mem *m, const sdi_sharp *s, const float (*cs)[2], sdi_sharp *out)
+{
+    memset(out, 0, sizeof *out);
+    out->e = sdi_alloc(m, (2 * (size_t)s->ne + 1) * sizeof *out->e);
+    out->es = sdi_alloc(m, (2 * (size_t)s->ne + 1) * sizeof *out->es);
+    out->v = sdi_alloc(m, ((size_t)s->nv + 1) * sizeof *out->v);
+    out->vs = sdi_alloc(m, ((size_t)s->nv + 1) * sizeof *out->vs);
+    if (!out->e || !out->es || !out->v || !out->vs) {
+        sdi_sharp_free(m, out);
+        return false;
+    }
+    for (uint32_t i = 0; i < s->ne; i++) /* halves 2e, 2e + 1: still in increasing order */
+        for (int k = 0; k < 2; k++)
+            if (cs[i][k] > 0.0f) {
+                out->e[out->ne] = 2 * s->e[i] + (uint32_t)k;
+                out->es[out->ne++] = cs[i][k];
+            }
+    for (uint32_t i = 0; i < s->nv; i++) {
+        float d = decrement(s->vs[i]);
+        if (d > 0.0f) {
+            out->v[out->nv] = s->v[i];
+            out->vs[out->nv++] = d;
+        }
+    }
+    return true;
+}
+
+bool sdi_sharp_level(sd_complex *c, int level, sdi_sharp *out)
+{
+    sd_mem *m = &c->mem;
+    memset(out, 0, sizeof *out);
+    if (!c->sh.ne && !c->sh.nv)
+        return true;
+    sdi_sharp cur = {0};
+    /* a copy of level 0's lists */
+    cur.e = sdi_alloc(m, ((size_t)c->sh.ne + 1) * sizeof *cur.e);
+    cur.es = sdi_alloc(m, ((size_t)c->sh.ne + 1) * sizeof *cur.es);
+    cur.v = sdi_alloc(m, ((size_t)c->sh.nv + 1) * sizeof *cur.v);
+    cur.vs = sdi_alloc(m, ((size_t)c->sh.nv + 1) * sizeof *cur.vs);
+    if (!cur.e || !cur.es || !cur.v || !cur.vs) {
+        sdi_sharp_free(m, &cur);
+        return false;
+    }
+    cur.ne = c->sh.ne;
+    cur.nv = c->sh.nv;
+    memcpy(cur.e, c->sh.e, cur.ne * sizeof *cur.e);
+    memcpy(cur.es, c->sh.es, cur.ne * sizeof *cur.es);
+    memcpy(cur.v, c->sh.v, cur.nv * sizeof *cur.v);
+    memcpy(cur.vs, c->sh.vs, cur.nv * sizeof *cur.vs);
+    for (int l = 0; l < level && (cur.ne || cur.nv); l++) {
+        float (*cs)[2] = sdi_alloc(m, ((size_t)cur.ne + 1) * sizeof *cs);
+        sdi_sharp nx;
+        bool ok = cs && sdi_sharp_children(m, &c->lv[l]->t, &cur, c->sh_method, cs) &&
+                  next_lists(m, &cur, (const float(*)[2])cs, &nx);
+        sdi_free(m, cs);
+        sdi_sharp_free(m, &cur);
+        if (!ok)
+            return false;
+        cur = nx;
+    }
+    *out = cur;
+    return true;
+}
+
+/* ---- rows -------------------------------------------------------------------------------- */
+
+enum { R_SMOOTH, R_CREASE, R_CORNER };
+
+static int vertex_rule(float vs, int nsharp)
+{
+    return vs > 0.0f || nsharp > 2 ? R_CORNER : nsharp == 2 ? R_CREASE : R_SMOOTH;
+}
+
+/* How the base rule of a vertex counts (see the header): 0 smooth, 2 a crease of its own, -1
+ * edges do not count (only a vertex sharpness), -2 nothing applies (a corner). */
+static int base_count(uint8_t rule)
+{
+    switch (rule) {
+    case SD_RULE_LOOP:
+    case SD_RULE_SOLID_BOUNDARY:
+        return 0;
+    case SD_RULE_LOOP_BOUNDARY:
+    case SD_RULE_CURVE:
+        return 2;
+    case SD_RULE_CORNER:
+        return -2;
+    default:
+        return -1;
+    }
+}
+
+bool sdi_sharp_rows(sd_mem *m, const sd_topo *t, const sdi_sharp *s, int method,
+                    const uint8_t *vr, const uint8_t *take, sdi_sharp_rows_t *out)
+{
+    memset(out, 0, sizeof *out);
+    if (!s->ne && !s->nv)
+        return true;
+    float (*cs)[2] = sdi_alloc(m, ((size_t)s->ne + 1) * sizeof *cs);
+    int32_t *slot = sdi_alloc(m, ((size_t)t->nv + 1) * sizeof *slot);
+    /* per vertex reached: its edges (sharp at this level) as (vertex, edge list index) */
+    at_vertex *a = sdi_alloc(m, (2 * (size_t)s->ne + 1) * sizeof *a);
+    if (!cs || !slot || !a || !sdi_sharp_children(m, t, s, method, cs))
+        goto nomem;
+    /* edge rows */
+    out->edge = sdi_alloc(m, ((size_t)s->ne + 1) * sizeof *out->edge);
+    if (!out->edge)
+        goto nomem;
+    for (uint32_t i = 0; i < s->ne; i++) {
+        sdi_sharp_edge *x = &out->edge[out->nedge++];
+        x->e = s->e[i];
+        x->crease = cs[i][0] > 0.0f && cs[i][1] > 0.0f;
+        x->w = (double)s->es[i];
+    }
+    /* the vertices reached: ends of sharp edges and sharp vertices, once each */
+    size_t na = 0;
+    for (uint32_t i = 0; i < s->ne; i++)
+        for (int k = 0; k < 2; k++)
+            a[na++] = (at_vertex){t->ev[s->e[i]][k], i};
+    qsort(a, na, sizeof *a, cmp_at);
+    size_t nreach = 0;
+    for (size_t j = 0; j < na; j++)
+        if (!j || a[j].v != a[j - 1].v)
+            nreach++;
+    out->vert = sdi_calloc(m, nreach + s->nv + 1, sizeof *out->vert);
+    if (!out->vert)
+        goto nomem;
+    /* merge the two sorted sources into out->vert (sorted by vertex) */
+    size_t j = 0, q = 0;
+    while (j < na || q < s->nv) {
+        uint32_t v = j < na && (q >= s->nv || a[j].v <= s->v[q]) ? a[j].v : s->v[q];
+        sdi_sharp_vertex *x = &out->vert[out->nvert];
+        memset(x, 0, sizeof *x);
+        x->v = v;
+        x->pos[0][0] = x->pos[0][1] = x->pos[1][0] = x->pos[1][1] = -1;
+        float pvs = 0.0f;
+        if (q < s->nv && s->v[q] == v)
+            pvs = s->vs[q++];
+        float cvs = decrement(pvs);
+        int base = base_count(vr[v] & SDI_VR_RULE);
+        int np = base > 0 ? base : 0, nc = np;
+        /* transitions (Crease::ComputeFractionalWeightAtVertex): vertex first, then edges */
+        int tcount = 0;
+        float tsum = 0.0f;
+        if (pvs > 0.0f && cvs <= 0.0f) {
+            tcount = 1;
+            tsum = pvs;
+        }
+        size_t j0 = j;
+        for (; j < na && a[j].v == v; j++) {
+            if (base < 0)
+                continue;
+            uint32_t i = a[j].i;
+            int k = t->ev[s->e[i]][0] == v ? 0 : 1;
+            float ps = s->es[i], c = cs[i][k];
+            np++;
+            if (c > 0.0f)
+                nc++;
+            if (method == SD_CREASE_CHAIKIN ? c <= 0.0f : ps <= 1.0f) {
+                tsum += ps;
+                tcount++;
+            }
+        }
+        if (base == -2) { /* a corner stays one */
+            continue;
+        }
+        int pr = vertex_rule(pvs, np), cr = vertex_rule(cvs, nc);
+        if (pr == R_SMOOTH) /* smooth or a dart: the base row */
+            continue;
+        x->prule = (uint8_t)pr;
+        x->crule = (uint8_t)cr;
+        float fw = tcount ? tsum / (float)tcount : 0.0f;
+        x->w = pr == cr ? 1.0 : (double)(fw > 1.0f ? 1.0f : fw);
+        /* the two sharp edges a crease rule reads when they are not the base rule's own (base
+         * 0): every sharp edge for the parent, those whose half stays sharp for the child */
+        for (size_t jj = j0; jj < j && base == 0; jj++) {
+            uint32_t i = a[jj].i;
+            int k = t->ev[s->e[i]][0] == v ? 0 : 1;
+            if (pr == R_CREASE && x->nedge[0] < 2)
+                x->edge[0][x->nedge[0]++] = s->e[i];
+            if (cr == R_CREASE && cs[i][k] > 0.0f && x->nedge[1] < 2)
+                x->edge[1][x->nedge[1]++] = s->e[i];
+        }
+        out->nvert++;
+    }
+    /* positions of those edges in rho (rings.c: rho in increasing edge order, through the edges
+     * v reads) */
+    for (uint32_t i = 0; i < t->nv; i++)
+        slot[i] = -1;
+    for (uint32_t i = 0; i < out->nvert; i++)
+        if (out->vert[i].nedge[0] || out->vert[i].nedge[1])
+            slot[out->vert[i].v] = (int32_t)i;
+    uint32_t *cnt = sdi_calloc(m, (size_t)out->nvert + 1, sizeof *cnt);
+    if (!cnt)
+        goto nomem;
+    for (uint32_t e = 0; e < t->ne; e++)
+        for (int k = 0; k < 2; k++) {
+            int32_t sl = slot[t->ev[e][k]];
+            if (sl < 0 || !(take[e] & (1u << k)))
+                continue;
+            sdi_sharp_vertex *x = &out->vert[sl];
+            for (int r = 0; r < 2; r++)
+                for (int p = 0; p < x->nedge[r]; p++)
+                    if (x->edge[r][p] == e)
+                        x->pos[r][p] = (int32_t)cnt[sl];
+            cnt[sl]++;
+        }
+    sdi_free(m, cnt);
+    sdi_free(m, cs);
+    sdi_free(m, slot);
+    sdi_free(m, a);
+    return true;
+nomem:
+    sdi_free(m, cs);
+    sdi_free(m, slot);
+    sdi_free(m, a);
+    sdi_sharp_rows_free(m, out);
+    return false;
+}
+
+void sdi_sharp_rows_free(sd_mem *m, sdi_sharp_rows_t *r)
+{
+    sdi_free(m, r->vert);
+    sdi_free(m, r->edge);
+    memset(r, 0, sizeof *r);
+}
+
+/* One rule's mask (which: 0 the parent's, 1 the child's) into w, given the base row of len
+ * entries (see the header); false if a crease edge is not in rho (then the base row stays). */
+static bool rule_mask(const sdi_sharp_vertex *x, int which, const double *base, uint32_t len,
+                      double *w)
+{
+    int rule = which ? x->crule : x->prule;
+    if (rule == R_SMOOTH || (rule == R_CREASE && !x->nedge[which])) { /* the base row */
+        memcpy(w, base, len * sizeof *w);
+        return true;
+    }
+    memset(w, 0, len * sizeof *w);
+    if (rule == R_CORNER) {
+        w[0] = 1.0;
+        return true;
+    }
+    for (int p = 0; p < 2; p++)
+        if (x->nedge[which] != 2 || x->pos[which][p] < 0 || (uint32_t)x->pos[which][p] + 1 >= len)
+            return false;
+    w[0] = 0.75;
+    w[1 + x->pos[which][0]] = 0.125;
+    w[1 + x->pos[which][1]] = 0.125;
+    return true;
+}
+
+void sdi_sharp_vertex_row(const sdi_sharp_vertex *x, double *w, uint32_t len, double *tmp)
+{
+    /* tmp: 2 len doubles. Parent mask into tmp, child mask into tmp + len */
+    double *pm = tmp, *cm = tmp + len;
+    if (!rule_mask(x, 0, w, len, pm))
+        return;
+    if (x->prule == x->crule) {
+        memcpy(w, pm, len * sizeof *w);
+        return;
+    }
+    if (!rule_mask(x, 1, w, len, cm))
+        return;
+    double pw = x->w, cw = 1.0 - pw;
+    for (uint32_t i = 0; i < len; i++)
+        w[i] = pw * pm[i] + cw * cm[i];
+}
+
+void sdi_sharp_edge_row(const sdi_sharp_edge *x, double *w, uint32_t len)
+{
+    if (x->crease) {
+        w[0] = w[1] = 0.5;
+        for (uint32_t i = 2; i < len; i++)
+            w[i] = 0.0;
+        return;
+    }
+    double pw = x->w, cw = 1.0 - pw;
+    w[0] = pw * 0.5 + cw * w[0];
+    w[1] = pw * 0.5 + cw * w[1];
+    for (uint32_t i = 2; i < len; i++)
+        w[i] *= cw;
+}
