@@ -309,17 +309,21 @@ int api_build_model(api_input *in, const api_rules *rules, const api_tags *tags,
             strncat(ptr, fields[e.field], sizeof ptr - strlen(ptr) - 1);
         return api_fail_at(p, 422, "invalid-override", ptr, "%s", e.message);
     }
-    bool petal = false;
-    if (m && tags && (tags->n || tags->npet) && api_model_set_tags(m, tags, &e, &petal)) {
+    int which = API_TAG_SINGULAR;
+    if (m && tags && (api_tags_any(tags) || (rules && rules->crease_method)) &&
+        api_model_set_tags(m, tags, &e, &which)) {
         api_model_unref(m);
         if (e.code == SD_ERR_NOMEM)
             return api_fail(p, 503, "out-of-memory", "out of memory");
         char ptr[96];
-        api_ptr_index(ptr, sizeof ptr, petal ? "/petals" : "/singular",
-                      (size_t)(e.item < 0 ? 0 : e.item));
+        static const char *const lists[] = {"/singular", "/petals", "/sharpness"};
+        api_ptr_index(ptr, sizeof ptr, lists[which], (size_t)(e.item < 0 ? 0 : e.item));
         static const char *const fields[] = {"/vertex", "/triangle", "/kind"};
-        if (petal && e.field >= 0 && e.field < 3)
+        static const char *const sfields[] = {"/simplex", "/value"};
+        if (which == API_TAG_PETAL && e.field >= 0 && e.field < 3)
             strncat(ptr, fields[e.field], sizeof ptr - strlen(ptr) - 1);
+        if (which == API_TAG_SHARPNESS && e.field >= 0 && e.field < 2)
+            strncat(ptr, sfields[e.field], sizeof ptr - strlen(ptr) - 1);
         return api_fail_at(p, 422, "invalid-tag", ptr, "%s", e.message);
     }
     if (!m) {
@@ -503,6 +507,17 @@ json_t *api_tags_json(const api_model *m)
     if (json_array_size(pj)) /* only when given: {"singular"} as PUT otherwise */
         json_object_set(tags, "petals", pj);
     json_decref(pj);
+    if (m->tags.nsh) {
+        json_t *sj = json_array();
+        for (uint32_t i = 0; i < m->tags.nsh; i++) {
+            const api_sharp *x = &m->tags.sh[i];
+            json_t *sx = json_array();
+            for (int j = 0; j < x->nverts; j++)
+                json_array_append_new(sx, json_integer(x->v[j]));
+            json_array_append_new(sj, json_pack("{s:o, s:f}", "simplex", sx, "value", x->value));
+        }
+        json_object_set_new(tags, "sharpness", sj);
+    }
     return tags;
 }
 
@@ -511,6 +526,7 @@ json_t *api_rules_json(const api_model *m)
 {
     static const char *const schemes[] = {"box", "averaged"}, *const weights[] = {"warren", "loop"};
     static const char *const nmd[] = {"G2", "G1"}, *const surfs[] = {"chang-qin", "ying-zorin"};
+    static const char *const creases[] = {"uniform", "chaikin"};
     json_t *oj = json_array();
     for (uint32_t i = 0; i < m->rules.noverrides; i++) {
         const sd_override *o = &m->rules.overrides[i];
@@ -532,11 +548,12 @@ json_t *api_rules_json(const api_model *m)
         }
         json_array_append_new(oj, x);
     }
-    return json_pack("{s:s, s:o, s:s, s:s, s:s}", "nonmanifold_default",
+    return json_pack("{s:s, s:o, s:s, s:s, s:s, s:s}", "nonmanifold_default",
                      nmd[m->rules.nonmanifold_default & 1], "overrides", oj, "solid_scheme",
                      schemes[m->rules.solid_scheme & 1], "surface_weights",
                      weights[m->rules.surface_weights & 1], "nonmanifold_surface",
-                     surfs[m->rules.nonmanifold_surface & 1]);
+                     surfs[m->rules.nonmanifold_surface & 1], "crease_method",
+                     creases[m->rules.crease_method & 1]);
 }
 
 /* The complex as PUT takes it back (vertices, simplices, attributes, every diagonal, the

@@ -59,8 +59,9 @@ static int step(change_fn_t fn, api_model **cur, json_t *body, const api_limits 
 static bool tags_empty(json_t *t)
 {
     json_t *s = json_object_get(t, "singular"), *pe = json_object_get(t, "petals");
-    return json_array_size(s) == 0 && json_array_size(pe) == 0 && (!s || json_is_array(s)) &&
-           (!pe || json_is_array(pe));
+    json_t *sh = json_object_get(t, "sharpness");
+    return json_array_size(s) == 0 && json_array_size(pe) == 0 && json_array_size(sh) == 0 &&
+           (!s || json_is_array(s)) && (!pe || json_is_array(pe)) && (!sh || json_is_array(sh));
 }
 
 int api_import(json_t *doc, const char *base, const api_limits *lim, api_model **out,

@@ -212,14 +212,16 @@ bool api_tags_copy(api_tags *dst, const api_tags *src)
     size_t nidx = 0;
     for (uint32_t i = 0; i < src->n; i++)
         nidx += src->size[i];
-    api_tags t = {.n = src->n, .npet = src->npet};
+    api_tags t = {.n = src->n, .npet = src->npet, .nsh = src->nsh};
     t.size = api_plain_malloc(src->n + 1);
     t.idx = api_plain_malloc((nidx + 1) * sizeof *t.idx);
     t.pet = api_plain_malloc((src->npet + 1) * sizeof *t.pet);
-    if (!t.size || !t.idx || !t.pet) {
+    t.sh = api_plain_malloc((src->nsh + 1) * sizeof *t.sh);
+    if (!t.size || !t.idx || !t.pet || !t.sh) {
         api_plain_free(t.size);
         api_plain_free(t.idx);
         api_plain_free(t.pet);
+        api_plain_free(t.sh);
         *dst = (api_tags){0};
         return false;
     }
@@ -229,13 +231,17 @@ bool api_tags_copy(api_tags *dst, const api_tags *src)
     }
     if (src->npet)
         memcpy(t.pet, src->pet, src->npet * sizeof *t.pet);
+    if (src->nsh)
+        memcpy(t.sh, src->sh, src->nsh * sizeof *t.sh);
     *dst = t;
     return true;
 }
 
-int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, bool *petal)
+/* The singular tags with the infinitely sharp sharpness after them (s >= 10 is a singular tag:
+ * docs/API.md "Creases"), and the finite sharpness for the core; then all three lists. */
+int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, int *which)
 {
-    *petal = false;
+    *which = API_TAG_SINGULAR;
     if (!api_tags_copy(&m->tags, t)) {
         err->code = SD_ERR_NOMEM;
         snprintf(err->message, sizeof err->message, "out of memory");
@@ -243,11 +249,65 @@ int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, bool *pet
     }
     if (!m->c)
         return 0;
-    int rc = sd_complex_set_singular(m->c, t->idx, t->size, t->n, err);
+    size_t nidx = 0, ninf = 0;
+    for (uint32_t i = 0; i < t->n; i++)
+        nidx += t->size[i];
+    for (uint32_t i = 0; i < t->nsh; i++)
+        ninf += t->sh[i].value >= 10;
+    uint8_t *size = api_plain_malloc(t->n + ninf + 1);
+    uint32_t *idx = api_plain_malloc((nidx + 2 * ninf + 1) * sizeof *idx);
+    uint32_t *from = api_plain_malloc((ninf + 1) * sizeof *from); /* sharpness entry of each */
+    sd_sharpness *fin = api_plain_malloc((t->nsh - ninf + 1) * sizeof *fin);
+    uint32_t *fin_from = api_plain_malloc((t->nsh - ninf + 1) * sizeof *fin_from);
+    int rc = SD_OK;
+    if (!size || !idx || !from || !fin || !fin_from) {
+        err->code = SD_ERR_NOMEM;
+        snprintf(err->message, sizeof err->message, "out of memory");
+        rc = SD_ERR_NOMEM;
+        goto out;
+    }
+    if (t->n) {
+        memcpy(size, t->size, t->n);
+        memcpy(idx, t->idx, nidx * sizeof *idx);
+    }
+    size_t ns = t->n, nf = 0;
+    for (uint32_t i = 0; i < t->nsh; i++) {
+        const api_sharp *x = &t->sh[i];
+        if (x->value >= 10) {
+            from[ns - t->n] = i;
+            for (int j = 0; j < x->nverts; j++)
+                idx[nidx++] = x->v[j];
+            size[ns++] = (uint8_t)x->nverts;
+        } else {
+            fin_from[nf] = i;
+            fin[nf++] = (sd_sharpness){{x->v[0], x->v[1]}, x->nverts, (float)x->value};
+        }
+    }
+    rc = sd_complex_set_singular(m->c, idx, size, ns, err);
+    if (rc && err->item >= (long)t->n) { /* an infinitely sharp entry */
+        *which = API_TAG_SHARPNESS;
+        err->item = from[err->item - t->n];
+        err->field = SD_SH_FIELD_SIMPLEX;
+    }
     if (!rc && t->npet) {
         rc = sd_complex_set_petals(m->c, t->pet, t->npet, err);
-        *petal = rc != 0;
+        if (rc)
+            *which = API_TAG_PETAL;
     }
+    if (!rc && (nf || m->rules.crease_method)) {
+        rc = sd_complex_set_sharpness(m->c, fin, nf, m->rules.crease_method, err);
+        if (rc) {
+            *which = API_TAG_SHARPNESS;
+            if (err->item >= 0 && (size_t)err->item < nf)
+                err->item = fin_from[err->item];
+        }
+    }
+out:
+    api_plain_free(size);
+    api_plain_free(idx);
+    api_plain_free(from);
+    api_plain_free(fin);
+    api_plain_free(fin_from);
     return rc;
 }
 
@@ -279,6 +339,7 @@ void api_model_unref(api_model *m)
     api_plain_free(m->tags.size);
     api_plain_free(m->tags.idx);
     api_plain_free(m->tags.pet);
+    api_plain_free(m->tags.sh);
     api_plain_free(m->rules.overrides);
     json_decref(m->summary);
     for (int l = 0; l <= SD_MAX_LEVEL; l++)

@@ -73,18 +73,29 @@ typedef struct api_rules {
     int surface_weights;      /* SD_WEIGHTS_* */
     int nonmanifold_default;  /* SD_NM_* */
     int nonmanifold_surface;  /* SD_NMSURF_* */
+    int crease_method;        /* SD_CREASE_*: how semi-sharp creases decrease */
     uint32_t noverrides;      /* per-simplex choices (owned by the model that holds them) */
     sd_override *overrides;
 } api_rules;
 
-/* Tags (PUT /tags): n singular simplices of 1..3 vertex ids, stored consecutively, and npet
- * petal tags (corner kinds of open petals, 003 Sec. 2). */
+/* A sharpness of PUT /tags: a vertex or an edge and its value as given (>= 10: infinitely sharp,
+ * applied as a singular tag). */
+typedef struct api_sharp {
+    uint32_t v[2];
+    int nverts;
+    double value;
+} api_sharp;
+
+/* Tags (PUT /tags): n singular simplices of 1..3 vertex ids, stored consecutively, npet petal
+ * tags (corner kinds of open petals, 003 Sec. 2) and nsh sharpness values. */
 typedef struct api_tags {
     uint32_t n;
     uint8_t *size;
     uint32_t *idx;
     uint32_t npet;
     sd_petal_tag *pet;
+    uint32_t nsh;
+    api_sharp *sh;
 } api_tags;
 
 typedef struct api_model {
@@ -140,9 +151,13 @@ int api_model_set_overrides(api_model *m, const sd_override *ov, uint32_t n, sd_
 api_model *api_model_ref(api_model *m);
 void api_model_unref(api_model *m);
 
-/* Apply singular and petal tags to a model being built (copies them). SD_ERR_* + err (item = the
- * tag); *petal says whether the refused tag is a petal tag (field = SD_PT_FIELD_*). */
-int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, bool *petal);
+/* Apply singular and petal tags and sharpness to a model being built (copies them). SD_ERR_* +
+ * err (item = the tag); *which says which list the refused tag is in (API_TAG_*; field =
+ * SD_PT_FIELD_* for a petal, SD_SH_FIELD_* for a sharpness). */
+enum { API_TAG_SINGULAR, API_TAG_PETAL, API_TAG_SHARPNESS };
+int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, int *which);
+/* Whether t holds anything. */
+static inline bool api_tags_any(const api_tags *t) { return t->n || t->npet || t->nsh; }
 /* A deep copy of src into *dst (arrays never NULL); false (dst empty) for lack of memory. */
 bool api_tags_copy(api_tags *dst, const api_tags *src);
 

@@ -169,6 +169,47 @@ static bool in_region(const selection *s, const double *xyz, const uint32_t *v, 
 
 static int cmp_pair(const void *x, const void *y) { return memcmp(x, y, 2 * sizeof(uint32_t)); }
 
+/* The sharpness of a refinement step's children: a split edge's two halves keep its value (a
+ * change of the control complex, not a subdivision level: nothing decreases), vertices theirs.
+ * A new array (malloc) and its size in *n_out; NULL without memory. */
+static api_sharp *carry_sharpness(const sd_refinement *r, const api_sharp *sh, uint32_t n,
+                                  uint32_t *n_out)
+{
+    uint32_t (*key)[3] = malloc((r->nsplit + 1) * sizeof *key); /* sorted ends, new vertex */
+    api_sharp *out = malloc((2 * (size_t)n + 1) * sizeof *out);
+    if (!key || !out) {
+        free(key);
+        free(out);
+        return NULL;
+    }
+    for (size_t k = 0; k < r->nsplit; k++) {
+        uint32_t a = r->split[k][0], b = r->split[k][1];
+        key[k][0] = a < b ? a : b;
+        key[k][1] = a < b ? b : a;
+        key[k][2] = (uint32_t)(r->nv - r->nsplit + k);
+    }
+    qsort(key, r->nsplit, sizeof *key, cmp_pair);
+    uint32_t m = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        api_sharp x = sh[i];
+        uint32_t q[2] = {x.v[0] < x.v[1] ? x.v[0] : x.v[1], x.v[0] < x.v[1] ? x.v[1] : x.v[0]};
+        const uint32_t(*hit)[3] = x.nverts == 2 ? bsearch(q, key, r->nsplit, sizeof *key, cmp_pair)
+                                                 : NULL;
+        if (!hit) {
+            out[m++] = x;
+            continue;
+        }
+        for (int h = 0; h < 2; h++) {
+            out[m] = x;
+            out[m].v[0] = x.v[h];
+            out[m++].v[1] = (*hit)[2];
+        }
+    }
+    free(key);
+    *n_out = m;
+    return out;
+}
+
 static api_model *model_with(api_input *in, const api_rules *rules, const api_tags *tags,
                              sd_override *ov, uint32_t nov, const api_limits *lim, sd_error *e)
 {
@@ -185,8 +226,8 @@ static api_model *model_with(api_input *in, const api_rules *rules, const api_ta
         memmove(ov + bad, ov + bad + 1, (nov - bad - 1) * sizeof *ov);
         nov--;
     }
-    bool petal;
-    if ((tags->n || tags->npet) && api_model_set_tags(m, tags, e, &petal)) {
+    int which;
+    if ((api_tags_any(tags) || rules->crease_method) && api_model_set_tags(m, tags, e, &which)) {
         api_model_unref(m);
         return NULL;
     }
@@ -459,8 +500,13 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
                 rc = api_fail(p, 503, "out-of-memory", "out of memory");
             } else {
                 sd_tag_set_free(&was); /* malloc'ed, as the carried ones */
+                api_sharp *sh = carry_sharpness(&r, tags.sh, tags.nsh, &tags.nsh);
+                free(tags.sh);
                 tags = (api_tags){.n = (uint32_t)now.ntags, .size = now.size, .idx = now.idx,
-                                  .npet = (uint32_t)now.npetals, .pet = now.petals};
+                                  .npet = (uint32_t)now.npetals, .pet = now.petals,
+                                  .nsh = sh ? tags.nsh : 0, .sh = sh};
+                if (!sh)
+                    rc = api_fail(p, 503, "out-of-memory", "out of memory");
                 ov = now.overrides;
                 nov = (uint32_t)now.noverrides;
             }
@@ -512,6 +558,7 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
     free(tags.size);
     free(tags.idx);
     free(tags.pet);
+    free(tags.sh);
     api_input_unref(in);
     return rc;
 }

@@ -13,6 +13,7 @@
 #include "internal.h"
 #include "jsonin.h"
 #include "rows.h"
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -141,7 +142,9 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
                   api_problem *p)
 {
     static const char *const keys[] = {"nonmanifold_default", "overrides", "solid_scheme",
-                                       "surface_weights", "nonmanifold_surface", NULL};
+                                       "surface_weights", "nonmanifold_surface", "crease_method",
+                                       NULL};
+    static const char *const creases[] = {"uniform", "chaikin", NULL};
     static const char *const schemes[] = {"box", "averaged", NULL};
     static const char *const weights[] = {"warren", "loop", NULL};
     static const char *const surfaces[] = {"chang-qin", "ying-zorin", NULL};
@@ -162,6 +165,9 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
         return p->status;
     if ((v = json_object_get(body, "nonmanifold_surface")) &&
         (surf = api_get_enum(v, "/nonmanifold_surface", surfaces, p)) < 0)
+        return p->status;
+    if ((v = json_object_get(body, "crease_method")) &&
+        (r.crease_method = api_get_enum(v, "/crease_method", creases, p)) < 0)
         return p->status;
     if (nm >= 2)
         return api_fail_at(p, 422, "invalid-rule", "/nonmanifold_default",
@@ -258,6 +264,118 @@ static int parse_petals(json_t *a, uint32_t nv, api_tags *tags, api_problem *p)
     return 0;
 }
 
+/* Sharpness entries by simplex (sorted ends), then by position. */
+typedef struct sharp_key {
+    uint32_t a, b, i;
+} sharp_key;
+static int cmp_sharp_key(const void *x, const void *y)
+{
+    const sharp_key *p = x, *q = y;
+    if (p->a != q->a)
+        return p->a < q->a ? -1 : 1;
+    if (p->b != q->b)
+        return p->b < q->b ? -1 : 1;
+    return (p->i > q->i) - (p->i < q->i);
+}
+
+/* 422 for the first entry naming the same vertex or edge as an earlier one. */
+static int sharpness_repeat(const api_tags *t, api_problem *p)
+{
+    sharp_key *k = api_plain_malloc((t->nsh + 1) * sizeof *k);
+    if (!k)
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    for (uint32_t i = 0; i < t->nsh; i++) {
+        const api_sharp *x = &t->sh[i];
+        uint32_t lo = x->v[0], hi = x->nverts == 2 ? x->v[1] : UINT32_MAX;
+        if (x->nverts == 2 && lo > hi) {
+            uint32_t s = lo;
+            lo = hi;
+            hi = s;
+        }
+        k[i] = (sharp_key){lo, hi, i};
+    }
+    qsort(k, t->nsh, sizeof *k, cmp_sharp_key);
+    uint32_t bad = UINT32_MAX;
+    for (uint32_t i = 1; i < t->nsh; i++)
+        if (k[i].a == k[i - 1].a && k[i].b == k[i - 1].b && k[i].i < bad)
+            bad = k[i].i;
+    api_plain_free(k);
+    if (bad == UINT32_MAX)
+        return 0;
+    char at[112];
+    api_ptr_index(at, sizeof at, "/sharpness", bad);
+    strncat(at, "/simplex", sizeof at - strlen(at) - 1);
+    return api_fail_at(p, 422, "invalid-tag", at, "names the same %s as an earlier entry",
+                       t->sh[bad].nverts == 2 ? "edge" : "vertex");
+}
+
+/* "sharpness": [{"simplex": [v] | [a, b], "value": s}] (docs/API.md "Creases"): shapes, ranges
+ * and repeats here; whether the simplex is a vertex or a surface edge of the complex in the
+ * core. At most one entry per vertex or edge of the complex. */
+static int parse_sharpness(json_t *a, const api_input *in, api_tags *tags, api_problem *p)
+{
+    static const char *const keys[] = {"simplex", "value", NULL};
+    if (!json_is_array(a))
+        return api_fail_at(p, 400, "wrong-type", "/sharpness",
+                           "must be an array of {\"simplex\", \"value\"}");
+    size_t n = json_array_size(a), i;
+    if (!in)
+        return n ? api_fail_at(p, 409, "no-complex", "/sharpness",
+                               "sharpness names simplices of the complex; PUT the complex first")
+                 : 0;
+    if (n > (size_t)in->nv + 6 * (size_t)in->ns) /* > vertices + edges: before allocating */
+        return api_fail_at(p, 422, "limit-exceeded", "/sharpness",
+                           "%zu sharpness values for a complex of %u vertices and %u simplices: "
+                           "at most one per vertex or edge", n, in->nv, in->ns);
+    tags->sh = api_plain_malloc((n + 1) * sizeof *tags->sh);
+    if (!tags->sh)
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    json_t *o;
+    char ptr[96], at[112], at2[128];
+    json_array_foreach(a, i, o) {
+        api_ptr_index(ptr, sizeof ptr, "/sharpness", i);
+        if (!json_is_object(o))
+            return api_fail_at(p, 400, "wrong-type", ptr,
+                               "a sharpness is an object {\"simplex\", \"value\"}");
+        if (api_only_keys(o, ptr, keys, p))
+            return p->status;
+        json_t *sx = json_object_get(o, "simplex"), *v = json_object_get(o, "value");
+        api_ptr_key(at, sizeof at, ptr, "simplex");
+        if (!sx)
+            return api_fail_at(p, 400, "missing-field", at, "\"simplex\" is required");
+        if (!json_is_array(sx))
+            return api_fail_at(p, 400, "wrong-type", at, "a simplex is an array of vertex indices");
+        size_t k = json_array_size(sx);
+        if (k < 1 || k > 2)
+            return api_fail_at(p, 422, "invalid-tag", at,
+                               "a sharpness is on a vertex or an edge (1 or 2 indices), not %zu "
+                               "(a triangle is a singular tag)", k);
+        api_sharp *x = &tags->sh[i];
+        x->nverts = (int)k;
+        for (size_t j = 0; j < k; j++) {
+            long long id;
+            api_ptr_index(at2, sizeof at2, at, j);
+            if (api_get_int(json_array_get(sx, j), at2, 0, (long long)in->nv - 1, &id, p))
+                return p->status;
+            x->v[j] = (uint32_t)id;
+        }
+        x->v[1] = k == 2 ? x->v[1] : 0;
+        if (k == 2 && x->v[0] == x->v[1])
+            return api_fail_at(p, 422, "invalid-tag", at2, "vertex %u appears twice", x->v[0]);
+        api_ptr_key(at, sizeof at, ptr, "value");
+        if (!v)
+            return api_fail_at(p, 400, "missing-field", at, "\"value\" is required");
+        if (!json_is_number(v))
+            return api_fail_at(p, 400, "wrong-type", at, "a sharpness is a number");
+        x->value = json_number_value(v);
+        if (!(x->value >= 0) || !isfinite(x->value))
+            return api_fail_at(p, 422, "invalid-tag", at,
+                               "a sharpness is 0 or more (10 and more: infinitely sharp)");
+        tags->nsh++;
+    }
+    return sharpness_repeat(tags, p);
+}
+
 const char *const api_tags_packed[] = {"/singular", NULL};
 
 int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
@@ -269,14 +387,16 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
 int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *packs,
                         const api_limits *lim, api_model **out, api_problem *p)
 {
-    static const char *const keys[] = {"singular", "petals", NULL};
+    static const char *const keys[] = {"singular", "petals", "sharpness", NULL};
     *out = NULL;
     if (api_only_keys(body, "", keys, p))
         return p->status;
     json_t *s = json_object_get(body, "singular"), *pe = json_object_get(body, "petals");
-    if (!s && !pe)
+    json_t *sh = json_object_get(body, "sharpness");
+    if (!s && !pe && !sh)
         return api_fail_at(p, 400, "missing-field", "/singular",
-                           "\"singular\" is required (or \"petals\" alone: no singular simplices)");
+                           "\"singular\" is required (or \"petals\" or \"sharpness\" alone: no "
+                           "singular simplices)");
     api_rows rows = {0}; /* absent: no singular simplices */
     if (s && !api_rows_open(&rows, s, packs, "/singular"))
         return api_fail_at(p, 400, "wrong-type", "/singular",
@@ -322,10 +442,13 @@ int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *pac
     }
     if (!rc && pe)
         rc = parse_petals(pe, cur->in ? cur->in->nv : 0, &tags, p);
+    if (!rc && sh)
+        rc = parse_sharpness(sh, cur->in, &tags, p);
     if (!rc) /* the core checks each tag is a vertex, edge or triangle of the complex */
         rc = build_from_copy(cur, &cur->rules, &tags, lim, out, p);
     api_plain_free(tags.size);
     api_plain_free(tags.idx);
     api_plain_free(tags.pet);
+    api_plain_free(tags.sh);
     return keep_details(cur, rc, out, p);
 }

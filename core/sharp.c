@@ -274,10 +274,26 @@ bool sdi_sharp_level(sd_complex *c, int level, sdi_sharp *out)
         sdi_sharp_free(m, &cur);
         return false;
     }
-    cur.ne = c->sh.ne;
+    /* the edges whose rule is a surface's: a boundary or a crease of tags or rules is
+     * infinitely sharp already (OpenSubdiv's boundary edges), so its sharpness neither changes
+     * its row nor counts at its ends, nor in Chaikin's means (halves keep their edge's rule) */
+    const sd_topo *t0 = &c->lv[0]->t;
+    uint8_t *er = c->sh.ne ? sdi_alloc(m, (size_t)t0->ne + 1) : NULL;
+    if (c->sh.ne && !er) {
+        sdi_sharp_free(m, &cur);
+        return false;
+    }
+    if (er) {
+        bool g2, opp;
+        sdi_edge_rules(t0, 1, er, &g2, &opp);
+    }
+    for (uint32_t i = 0; i < c->sh.ne; i++)
+        if (er[c->sh.e[i]] == SD_RULE_LOOP || er[c->sh.e[i]] == SD_RULE_SOLID_BOUNDARY) {
+            cur.e[cur.ne] = c->sh.e[i];
+            cur.es[cur.ne++] = c->sh.es[i];
+        }
+    sdi_free(m, er);
     cur.nv = c->sh.nv;
-    memcpy(cur.e, c->sh.e, cur.ne * sizeof *cur.e);
-    memcpy(cur.es, c->sh.es, cur.ne * sizeof *cur.es);
     memcpy(cur.v, c->sh.v, cur.nv * sizeof *cur.v);
     memcpy(cur.vs, c->sh.vs, cur.nv * sizeof *cur.vs);
     for (int l = 0; l < level && (cur.ne || cur.nv); l++) {
