@@ -293,14 +293,18 @@ class Session:
         return self._call("GET", "/export").json()
 
     def put_tags(self, singular: Optional[Sequence[Sequence[int]]] = None, *,
-                 petals: Optional[Sequence[JSON]] = None, body: Optional[JSON] = None,
+                 petals: Optional[Sequence[JSON]] = None,
+                 sharpness: Optional[Sequence[JSON]] = None, body: Optional[JSON] = None,
                  if_match: Union[bool, Version, None] = None) -> JSON:
-        """PUT /tags with {"singular": singular, "petals": petals} (or a whole `body`); petals:
-        [{"vertex": v, "triangle": [a, b, c], "kind": "convex" | "concave" | "smooth"}]."""
+        """PUT /tags with {"singular": singular, "petals": petals, "sharpness": sharpness} (or a
+        whole `body`); petals: [{"vertex": v, "triangle": [a, b, c], "kind": "convex" |
+        "concave" | "smooth"}]; sharpness: [{"simplex": [a, b] or [v], "value": s}]."""
         if body is None:
             body = {"singular": singular or []}
             if petals is not None:
                 body["petals"] = petals
+            if sharpness is not None:
+                body["sharpness"] = sharpness
         return self._change("PUT", "/tags", body, if_match, None)
 
     def put_rules(self, rules: Optional[JSON] = None, *,
