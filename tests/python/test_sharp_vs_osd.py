@@ -77,7 +77,7 @@ def write(path, xyz, tris, sharp):
         for p in xyz:
             f.write("v %.17g %.17g %.17g\n" % tuple(p))
         for t in tris:
-            f.write("s %d %d %d\n" % tuple(t))
+            f.write("s " + " ".join(str(int(i)) for i in t) + "\n")
         for s in sharp:
             f.write("c " + " ".join(str(x) for x in s[:-1]) + " %r\n" % s[-1])
 
@@ -221,3 +221,112 @@ def test_sharpness_equals_opensubdiv(tmp_path, osd_loop, case, chaikin):
     a = parse(run([str(SDLEVEL), "-l", "2", "-w", "loop", str(path)]))[0]
     b = parse(run([str(SDLEVEL), "-l", "2", "-w", "loop", str(plain)]))[0]
     assert np.abs(a - b).max() > 1e-3
+
+
+def cube_tets(n, rng):
+    """n^3 cubes of 6 tetrahedra each (around each cube's main diagonal), jittered inside."""
+    vid = {}
+    xyz = []
+    for z in range(n + 1):
+        for y in range(n + 1):
+            for x in range(n + 1):
+                vid[x, y, z] = len(xyz)
+                inner = 0 < x < n and 0 < y < n and 0 < z < n
+                j = (lambda: 0.08 * rng.uniform(-1, 1)) if inner else (lambda: 0.0)
+                xyz.append((x + j(), y + j(), z + j()))
+    tets = []
+    for z in range(n):
+        for y in range(n):
+            for x in range(n):
+                c = [vid[x + (k & 1), y + (k >> 1 & 1), z + (k >> 2)] for k in range(8)]
+                for a, b in ((1, 3), (1, 5), (2, 3), (2, 6), (4, 5), (4, 6)):
+                    tets.append((c[0], c[a], c[b], c[7]))
+    return xyz, tets
+
+
+def test_solid_boundary_with_sharpness_equals_its_surface(tmp_path):
+    """The boundary surface of a box-spline solid follows the surface rules (001 Sec. 3.6), so
+    with sharp boundary edges and a sharp boundary vertex its points equal those of the same
+    surface subdivided alone with the same sharpness (matched by position, one to one)."""
+    from scipy.spatial import cKDTree
+    rng = random.Random(11)
+    xyz, tets = cube_tets(2, rng)
+    count = {}
+    for t in tets:
+        for k in range(4):
+            f = tuple(sorted(t[:k] + t[k + 1:]))
+            count[f] = count.get(f, 0) + 1
+    bnd = [f for f, c in count.items() if c == 1]
+    es = edges_of(bnd)
+    sharp = [(a, b, round(rng.uniform(0.3, 3.7), 3)) for a, b in rng.sample(es, 14)]
+    sharp += [(bnd[0][0], 1.3), (bnd[5][1], 2.6)]
+    solid, surf, plain = tmp_path / "solid.txt", tmp_path / "surf.txt", tmp_path / "plain.txt"
+    write(solid, xyz, tets, sharp)
+    # the surface alone: its own vertices only (inner ones would stay as isolated points)
+    used = sorted({v for f in bnd for v in f})
+    new = {v: i for i, v in enumerate(used)}
+    write(surf, [xyz[v] for v in used], [[new[v] for v in f] for f in bnd],
+          [tuple(new[v] for v in x[:-1]) + (x[-1],) for x in sharp])
+    write(plain, xyz, tets, [])
+    for L in (1, 2, 3):
+        a = parse(run([str(SDLEVEL), "-l", str(L), str(solid)]))[0]
+        b = parse(run([str(SDLEVEL), "-l", str(L), str(surf)]))[0]
+        d, j = cKDTree(a).query(b)
+        assert d.max() < 1e-12, (L, d.max())
+        assert len(set(j.tolist())) == len(b)
+    a = parse(run([str(SDLEVEL), "-l", "2", str(solid)]))[0]
+    c = parse(run([str(SDLEVEL), "-l", "2", str(plain)]))[0]
+    assert np.abs(a - c).max() > 1e-3  # the sharpness matters
+
+
+def test_rows_sum_to_one_with_sharpness(tmp_path):
+    rng = random.Random(4)
+    xyz, tris = torus(7, 5, rng)
+    path = tmp_path / "t.txt"
+    write(path, xyz, tris, random_sharp(rng, tris, len(xyz), 12, 3))
+    for L in (1, 2):
+        rows = [line.split() for line in
+                run([str(SDLEVEL), "-l", str(L), "-w", "loop", "--matrix", str(path)]).splitlines()
+                if line.startswith("row ")]
+        assert rows
+        for r in rows:
+            w = [float(x) for x in r[4::2]]
+            assert abs(sum(w) - 1) < 1e-12, r
+
+
+def test_vertex_sharpness_on_a_curve(tmp_path):
+    """A closed polygon (cubic B-spline curve) with vertex sharpness 1.5 at vertex 0: a corner at
+    level 1 (its child still has 0.5), then the blend w = 0.5 of the corner and the B-spline
+    rule (docs/RULES.md "Semi-sharp creases"), then the B-spline rule; derived by hand here."""
+    pts = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0.5, 1.5, 0.2]], float)
+    n = len(pts)
+    path = tmp_path / "c.txt"
+    write(path, pts, [], [(0, 1.5)])
+    with open(path, "a") as f:
+        for i in range(n):
+            f.write("s %d %d\n" % (i, (i + 1) % n))
+
+    def step(p, w0):
+        """One level of the closed curve: vertex points first, then edge midpoints; w0 is
+        vertex 0's weight on the corner rule."""
+        m = len(p)
+        vp = [(6 * p[i] + p[i - 1] + p[(i + 1) % m]) / 8 for i in range(m)]
+        vp[0] = w0 * p[0] + (1 - w0) * vp[0]
+        ep = [(p[i] + p[(i + 1) % m]) / 2 for i in range(m)]
+        # the level's curve order: vertex i, edge point of (i, i+1), ...
+        return vp, ep
+
+    # follow the curve in order around: our level numbering puts vertex points first, then edge
+    # points; compare by position (the child of vertex 0 is index 0 at every level)
+    cur = list(pts)
+    for L, w0 in ((1, 1.0), (2, 0.5), (3, 0.0)):
+        vp, ep = step(np.array(cur), w0)
+        ring = []
+        for i in range(len(cur)):
+            ring += [vp[i], ep[i]]
+        cur = ring
+        ours = parse(run([str(SDLEVEL), "-l", str(L), str(path)]))[0]
+        np.testing.assert_allclose(ours[0], cur[0], atol=1e-14)
+        from scipy.spatial import cKDTree
+        d, _ = cKDTree(ours).query(np.array(cur))
+        assert d.max() < 1e-14, (L, d.max())
