@@ -34,6 +34,29 @@
 
 static float decrement(float s) { return s > 1.0f ? s - 1.0f : 0.0f; }
 
+void sdi_sharp_free(sd_mem *m, sdi_sharp *s)
+{
+    sdi_free(m, s->e);
+    sdi_free(m, s->es);
+    sdi_free(m, s->v);
+    sdi_free(m, s->vs);
+    memset(s, 0, sizeof *s);
+}
+
+/* Room for ne edges and nv vertices in *s (emptied); false (and nothing held) without memory. */
+static bool lists_alloc(sd_mem *m, sdi_sharp *s, size_t ne, size_t nv)
+{
+    memset(s, 0, sizeof *s);
+    s->e = sdi_alloc(m, (ne + 1) * sizeof *s->e);
+    s->es = sdi_alloc(m, (ne + 1) * sizeof *s->es);
+    s->v = sdi_alloc(m, (nv + 1) * sizeof *s->v);
+    s->vs = sdi_alloc(m, (nv + 1) * sizeof *s->vs);
+    if (s->e && s->es && s->v && s->vs)
+        return true;
+    sdi_sharp_free(m, s);
+    return false;
+}
+
 /* ---- level 0: the stored lists ---------------------------------------------------------- */
 
 typedef struct keyed {
@@ -138,29 +161,23 @@ sd_result sd_complex_set_sharpness(sd_complex *c, const sd_sharpness *sh, size_t
     for (size_t i = 0; i < nv; i++)
         if (v[i].s > 0.0f)
             v[jv++] = v[i];
-    uint32_t *ee = sdi_alloc(m, (je ? je : 1) * sizeof *ee), *vv = sdi_alloc(m, (jv ? jv : 1) * sizeof *vv);
-    float *es = sdi_alloc(m, (je ? je : 1) * sizeof *es), *vs = sdi_alloc(m, (jv ? jv : 1) * sizeof *vs);
-    if (!ee || !vv || !es || !vs) {
-        sdi_free(m, ee);
-        sdi_free(m, vv);
-        sdi_free(m, es);
-        sdi_free(m, vs);
+    sdi_sharp nw;
+    if (!lists_alloc(m, &nw, je, jv)) {
         rc = sdi_fail_nomem(err, m);
         goto out;
     }
     for (size_t i = 0; i < je; i++) {
-        ee[i] = e[i].id;
-        es[i] = e[i].s;
+        nw.e[i] = e[i].id;
+        nw.es[i] = e[i].s;
     }
     for (size_t i = 0; i < jv; i++) {
-        vv[i] = v[i].id;
-        vs[i] = v[i].s;
+        nw.v[i] = v[i].id;
+        nw.vs[i] = v[i].s;
     }
-    sdi_free(m, c->sh.e);
-    sdi_free(m, c->sh.es);
-    sdi_free(m, c->sh.v);
-    sdi_free(m, c->sh.vs);
-    c->sh = (sdi_sharp){(uint32_t)je, (uint32_t)jv, ee, es, vv, vs};
+    nw.ne = (uint32_t)je;
+    nw.nv = (uint32_t)jv;
+    sdi_sharp_free(m, &c->sh);
+    c->sh = nw;
     c->sh_method = method;
     sdi_drop_rules(c, c->lv[0]); /* level 0's rows change; every finer level follows */
 out:
@@ -170,14 +187,6 @@ out:
     return rc;
 }
 
-void sdi_sharp_free(sd_mem *m, sdi_sharp *s)
-{
-    sdi_free(m, s->e);
-    sdi_free(m, s->es);
-    sdi_free(m, s->v);
-    sdi_free(m, s->vs);
-    memset(s, 0, sizeof *s);
-}
 
 /* ---- children ---------------------------------------------------------------------------- */
 
@@ -233,15 +242,8 @@ bool sdi_sharp_children(sd_mem *m, const sd_topo *t, const sdi_sharp *s, int met
 /* Level l+1's lists from level l's (s, with cs its children's edge sharpness). */
 static bool next_lists(sd_mem *m, const sdi_sharp *s, const float (*cs)[2], sdi_sharp *out)
 {
-    memset(out, 0, sizeof *out);
-    out->e = sdi_alloc(m, (2 * (size_t)s->ne + 1) * sizeof *out->e);
-    out->es = sdi_alloc(m, (2 * (size_t)s->ne + 1) * sizeof *out->es);
-    out->v = sdi_alloc(m, ((size_t)s->nv + 1) * sizeof *out->v);
-    out->vs = sdi_alloc(m, ((size_t)s->nv + 1) * sizeof *out->vs);
-    if (!out->e || !out->es || !out->v || !out->vs) {
-        sdi_sharp_free(m, out);
+    if (!lists_alloc(m, out, 2 * (size_t)s->ne, s->nv))
         return false;
-    }
     for (uint32_t i = 0; i < s->ne; i++) /* halves 2e, 2e + 1: still in increasing order */
         for (int k = 0; k < 2; k++)
             if (cs[i][k] > 0.0f) {
@@ -264,16 +266,9 @@ bool sdi_sharp_level(sd_complex *c, int level, sdi_sharp *out)
     memset(out, 0, sizeof *out);
     if (!c->sh.ne && !c->sh.nv)
         return true;
-    sdi_sharp cur = {0};
-    /* a copy of level 0's lists */
-    cur.e = sdi_alloc(m, ((size_t)c->sh.ne + 1) * sizeof *cur.e);
-    cur.es = sdi_alloc(m, ((size_t)c->sh.ne + 1) * sizeof *cur.es);
-    cur.v = sdi_alloc(m, ((size_t)c->sh.nv + 1) * sizeof *cur.v);
-    cur.vs = sdi_alloc(m, ((size_t)c->sh.nv + 1) * sizeof *cur.vs);
-    if (!cur.e || !cur.es || !cur.v || !cur.vs) {
-        sdi_sharp_free(m, &cur);
+    sdi_sharp cur; /* a copy of level 0's lists */
+    if (!lists_alloc(m, &cur, c->sh.ne, c->sh.nv))
         return false;
-    }
     /* the edges whose rule is a surface's: a boundary or a crease of tags or rules is
      * infinitely sharp already (OpenSubdiv's boundary edges), so its sharpness neither changes
      * its row nor counts at its ends, nor in Chaikin's means (halves keep their edge's rule) */
