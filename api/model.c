@@ -280,7 +280,7 @@ int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, int *whic
             size[ns++] = (uint8_t)x->nverts;
         } else {
             fin_from[nf] = i;
-            fin[nf++] = (sd_sharpness){{x->v[0], x->v[1]}, x->nverts, (float)x->value};
+            fin[nf++] = (sd_sharpness){{x->v[0], x->v[1], x->v[2]}, x->nverts, (float)x->value};
         }
     }
     rc = sd_complex_set_singular(m->c, idx, size, ns, err);

@@ -81,8 +81,8 @@ typedef struct api_rules {
 /* A sharpness of PUT /tags: a vertex or an edge and its value as given (>= 10: infinitely sharp,
  * applied as a singular tag). */
 typedef struct api_sharp {
-    uint32_t v[2];
-    int nverts;
+    uint32_t v[3];
+    int nverts;                /* 1 vertex, 2 edge, 3 triangle inside a solid */
     double value;
 } api_sharp;
 

@@ -169,45 +169,40 @@ static bool in_region(const selection *s, const double *xyz, const uint32_t *v, 
 
 static int cmp_pair(const void *x, const void *y) { return memcmp(x, y, 2 * sizeof(uint32_t)); }
 
-/* The sharpness of a refinement step's children: a split edge's two halves keep its value (a
- * change of the control complex, not a subdivision level: nothing decreases), vertices theirs.
- * A new array (malloc) and its size in *n_out; NULL without memory. */
+/* The sharpness of a refinement step's children, carried by the core as tags are (a split
+ * edge's halves, a triangle's children; vertices stay) with the value of what they come from:
+ * a change of the control complex, not a subdivision level, so nothing decreases. A new array
+ * (malloc) and its size in *n_out; NULL without memory. */
 static api_sharp *carry_sharpness(const sd_refinement *r, const api_sharp *sh, uint32_t n,
                                   uint32_t *n_out)
 {
-    uint32_t (*key)[3] = malloc((r->nsplit + 1) * sizeof *key); /* sorted ends, new vertex */
-    api_sharp *out = malloc((2 * (size_t)n + 1) * sizeof *out);
-    if (!key || !out) {
-        free(key);
-        free(out);
-        return NULL;
-    }
-    for (size_t k = 0; k < r->nsplit; k++) {
-        uint32_t a = r->split[k][0], b = r->split[k][1];
-        key[k][0] = a < b ? a : b;
-        key[k][1] = a < b ? b : a;
-        key[k][2] = (uint32_t)(r->nv - r->nsplit + k);
-    }
-    qsort(key, r->nsplit, sizeof *key, cmp_pair);
-    uint32_t m = 0;
-    for (uint32_t i = 0; i < n; i++) {
-        api_sharp x = sh[i];
-        uint32_t q[2] = {x.v[0] < x.v[1] ? x.v[0] : x.v[1], x.v[0] < x.v[1] ? x.v[1] : x.v[0]};
-        const uint32_t(*hit)[3] = x.nverts == 2 ? bsearch(q, key, r->nsplit, sizeof *key, cmp_pair)
-                                                 : NULL;
-        if (!hit) {
-            out[m++] = x;
-            continue;
+    sd_tag_set in = {.idx = malloc((3 * (size_t)n + 1) * sizeof *in.idx),
+                     .size = malloc((size_t)n + 1)}, out;
+    sd_error e;
+    api_sharp *res = NULL;
+    if (in.idx && in.size) {
+        size_t at = 0;
+        for (uint32_t i = 0; i < n; i++) {
+            in.size[i] = (uint8_t)sh[i].nverts;
+            for (int j = 0; j < sh[i].nverts; j++)
+                in.idx[at++] = sh[i].v[j];
         }
-        for (int h = 0; h < 2; h++) {
-            out[m] = x;
-            out[m].v[0] = x.v[h];
-            out[m++].v[1] = (*hit)[2];
+        in.ntags = n;
+        if (sd_refine_carry(r, &in, &out, &e) == SD_OK) {
+            if ((res = malloc((out.ntags + 1) * sizeof *res))) {
+                size_t off = 0;
+                for (size_t k = 0; k < out.ntags; off += out.size[k++]) {
+                    res[k] = (api_sharp){.nverts = out.size[k], .value = sh[out.from[k]].value};
+                    memcpy(res[k].v, out.idx + off, out.size[k] * sizeof *out.idx);
+                }
+                *n_out = (uint32_t)out.ntags;
+            }
+            sd_tag_set_free(&out);
         }
     }
-    free(key);
-    *n_out = m;
-    return out;
+    free(in.idx);
+    free(in.size);
+    return res;
 }
 
 static api_model *model_with(api_input *in, const api_rules *rules, const api_tags *tags,
@@ -495,7 +490,7 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
             }
         }
         if (!rc) { /* the step's tags and overrides, carried to the children (core) */
-            sd_tag_set was = {tags.idx, tags.size, tags.n, tags.pet, tags.npet, ov, nov}, now;
+            sd_tag_set was = {tags.idx, tags.size, tags.n, tags.pet, tags.npet, ov, nov, NULL}, now;
             if (sd_refine_carry(&r, &was, &now, &e)) {
                 rc = api_fail(p, 503, "out-of-memory", "out of memory");
             } else {
@@ -509,6 +504,7 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
                     rc = api_fail(p, 503, "out-of-memory", "out of memory");
                 ov = now.overrides;
                 nov = (uint32_t)now.noverrides;
+                free(now.from);
             }
         }
         api_input *nx = rc ? NULL : api_input_new();

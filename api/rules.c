@@ -266,15 +266,14 @@ static int parse_petals(json_t *a, uint32_t nv, api_tags *tags, api_problem *p)
 
 /* Sharpness entries by simplex (sorted ends), then by position. */
 typedef struct sharp_key {
-    uint32_t a, b, i;
+    uint32_t v[3], i; /* sorted ids, UINT32_MAX past the simplex's size; the entry */
 } sharp_key;
 static int cmp_sharp_key(const void *x, const void *y)
 {
     const sharp_key *p = x, *q = y;
-    if (p->a != q->a)
-        return p->a < q->a ? -1 : 1;
-    if (p->b != q->b)
-        return p->b < q->b ? -1 : 1;
+    for (int k = 0; k < 3; k++)
+        if (p->v[k] != q->v[k])
+            return p->v[k] < q->v[k] ? -1 : 1;
     return (p->i > q->i) - (p->i < q->i);
 }
 
@@ -286,18 +285,21 @@ static int sharpness_repeat(const api_tags *t, api_problem *p)
         return api_fail(p, 503, "out-of-memory", "out of memory");
     for (uint32_t i = 0; i < t->nsh; i++) {
         const api_sharp *x = &t->sh[i];
-        uint32_t lo = x->v[0], hi = x->nverts == 2 ? x->v[1] : UINT32_MAX;
-        if (x->nverts == 2 && lo > hi) {
-            uint32_t s = lo;
-            lo = hi;
-            hi = s;
+        sharp_key q = {{UINT32_MAX, UINT32_MAX, UINT32_MAX}, i};
+        for (int j = 0; j < x->nverts; j++) { /* insertion sort of at most 3 */
+            int at = j;
+            while (at > 0 && q.v[at - 1] > x->v[j]) {
+                q.v[at] = q.v[at - 1];
+                at--;
+            }
+            q.v[at] = x->v[j];
         }
-        k[i] = (sharp_key){lo, hi, i};
+        k[i] = q;
     }
     qsort(k, t->nsh, sizeof *k, cmp_sharp_key);
     uint32_t bad = UINT32_MAX;
     for (uint32_t i = 1; i < t->nsh; i++)
-        if (k[i].a == k[i - 1].a && k[i].b == k[i - 1].b && k[i].i < bad)
+        if (!memcmp(k[i].v, k[i - 1].v, sizeof k[i].v) && k[i].i < bad)
             bad = k[i].i;
     api_plain_free(k);
     if (bad == UINT32_MAX)
@@ -305,8 +307,9 @@ static int sharpness_repeat(const api_tags *t, api_problem *p)
     char at[112];
     api_ptr_index(at, sizeof at, "/sharpness", bad);
     strncat(at, "/simplex", sizeof at - strlen(at) - 1);
+    static const char *const what[] = {"vertex", "edge", "triangle"};
     return api_fail_at(p, 422, "invalid-tag", at, "names the same %s as an earlier entry",
-                       t->sh[bad].nverts == 2 ? "edge" : "vertex");
+                       what[(t->sh[bad].nverts - 1) % 3]);
 }
 
 /* "sharpness": [{"simplex": [v] | [a, b], "value": s}] (docs/API.md "Creases"): shapes, ranges
@@ -323,10 +326,10 @@ static int parse_sharpness(json_t *a, const api_input *in, api_tags *tags, api_p
         return n ? api_fail_at(p, 409, "no-complex", "/sharpness",
                                "sharpness names simplices of the complex; PUT the complex first")
                  : 0;
-    if (n > (size_t)in->nv + 6 * (size_t)in->ns) /* > vertices + edges: before allocating */
+    if (n > (size_t)in->nv + 10 * (size_t)in->ns) /* > vertices + edges + faces: before allocating */
         return api_fail_at(p, 422, "limit-exceeded", "/sharpness",
                            "%zu sharpness values for a complex of %u vertices and %u simplices: "
-                           "at most one per vertex or edge", n, in->nv, in->ns);
+                           "at most one per vertex, edge or triangle", n, in->nv, in->ns);
     tags->sh = api_plain_malloc((n + 1) * sizeof *tags->sh);
     if (!tags->sh)
         return api_fail(p, 503, "out-of-memory", "out of memory");
@@ -346,11 +349,12 @@ static int parse_sharpness(json_t *a, const api_input *in, api_tags *tags, api_p
         if (!json_is_array(sx))
             return api_fail_at(p, 400, "wrong-type", at, "a simplex is an array of vertex indices");
         size_t k = json_array_size(sx);
-        if (k < 1 || k > 2)
+        if (k < 1 || k > 3)
             return api_fail_at(p, 422, "invalid-tag", at,
-                               "a sharpness is on a vertex or an edge (1 or 2 indices), not %zu "
-                               "(a triangle is a singular tag)", k);
+                               "a sharpness is on a vertex, an edge or a triangle (1 to 3 "
+                               "indices), not %zu", k);
         api_sharp *x = &tags->sh[i];
+        memset(x->v, 0, sizeof x->v);
         x->nverts = (int)k;
         for (size_t j = 0; j < k; j++) {
             long long id;
@@ -358,10 +362,11 @@ static int parse_sharpness(json_t *a, const api_input *in, api_tags *tags, api_p
             if (api_get_int(json_array_get(sx, j), at2, 0, (long long)in->nv - 1, &id, p))
                 return p->status;
             x->v[j] = (uint32_t)id;
+            for (size_t q = 0; q < j; q++)
+                if (x->v[q] == x->v[j])
+                    return api_fail_at(p, 422, "invalid-tag", at2, "vertex %u appears twice",
+                                       x->v[j]);
         }
-        x->v[1] = k == 2 ? x->v[1] : 0;
-        if (k == 2 && x->v[0] == x->v[1])
-            return api_fail_at(p, 422, "invalid-tag", at2, "vertex %u appears twice", x->v[0]);
         api_ptr_key(at, sizeof at, ptr, "value");
         if (!v)
             return api_fail_at(p, 400, "missing-field", at, "\"value\" is required");

@@ -134,6 +134,7 @@ static void carry_tags(const step *s, const sd_tag_set *in, sd_tag_set *out)
         uint32_t mid;
         if (in->size[i] == 2 && (mid = step_mid(s, v[0], v[1])) != UINT32_MAX) {
             for (int h = 0; h < 2; h++) {
+                out->from[out->ntags] = (uint32_t)i;
                 out->size[out->ntags++] = 2;
                 out->idx[at++] = v[h];
                 out->idx[at++] = mid;
@@ -142,11 +143,13 @@ static void carry_tags(const step *s, const sd_tag_set *in, sd_tag_set *out)
             uint32_t ch[4][3];
             int n = step_tri_children(s, v, NULL, 0, ch);
             for (int c = 0; c < n; c++) {
+                out->from[out->ntags] = (uint32_t)i;
                 out->size[out->ntags++] = 3;
                 memcpy(out->idx + at, ch[c], sizeof ch[c]);
                 at += 3;
             }
         } else {
+            out->from[out->ntags] = (uint32_t)i;
             out->size[out->ntags++] = in->size[i];
             memcpy(out->idx + at, v, in->size[i] * sizeof *v);
             at += in->size[i];
@@ -226,7 +229,8 @@ sd_result sd_refine_carry(const sd_refinement *r, const sd_tag_set *in, sd_tag_s
     out->idx = malloc((12 * in->ntags + 1) * sizeof *out->idx);
     out->petals = malloc((in->npetals + 1) * sizeof *out->petals);
     out->overrides = malloc((3 * in->noverrides + 1) * sizeof *out->overrides);
-    if (!out->size || !out->idx || !out->petals || !out->overrides) {
+    out->from = malloc((4 * in->ntags + 1) * sizeof *out->from);
+    if (!out->size || !out->idx || !out->petals || !out->overrides || !out->from) {
         step_free(&s);
         sd_tag_set_free(out);
         return sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory carrying tags and rules");
@@ -245,5 +249,6 @@ void sd_tag_set_free(sd_tag_set *t)
     free(t->size);
     free(t->petals);
     free(t->overrides);
+    free(t->from);
     memset(t, 0, sizeof *t);
 }

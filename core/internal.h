@@ -416,6 +416,11 @@ typedef struct sdi_sharp {
     float *es;
     uint32_t *v;
     float *vs;
+    /* sharp triangles inside solids: level-0 face ids and their sharpness at this level; at
+     * level l a level-0 face f stands for the faces [f span, (f + 1) span), span = 4^l */
+    uint32_t nf, span;
+    uint32_t *f;
+    float *fs;
 } sdi_sharp;
 
 typedef struct sd_petal_at {
@@ -718,10 +723,27 @@ typedef struct sdi_sharp_edge {
     bool crease;           /* the midpoint; else the blend with w = the sharpness */
     double w;
 } sdi_sharp_edge;
+/* Rows of the sharp embedded surface (sharp triangles inside solids): the surface's rule
+ * (SDI_SURF_*) blended with the solid's row by w. */
+enum { SDI_SURF_LOOP = 1, SDI_SURF_BSPLINE, SDI_SURF_CORNER, SDI_SURF_MIDPOINT };
+typedef struct sdi_surf_vertex {
+    uint32_t v, off, n;    /* its surface neighbours: nb[off .. off + n) (rho positions) */
+    uint8_t kind;
+    double w;
+} sdi_surf_vertex;
+typedef struct sdi_surf_edge {
+    uint32_t e, opp[2];    /* Loop's opposite vertices (kind LOOP) */
+    uint8_t kind;
+    double w;
+} sdi_surf_edge;
 typedef struct sdi_sharp_rows_t {
     uint32_t nvert, nedge;
     sdi_sharp_vertex *vert; /* in increasing vertex id */
     sdi_sharp_edge *edge;   /* in increasing edge id */
+    uint32_t nsvert, nsedge;
+    sdi_surf_vertex *svert; /* in increasing vertex id */
+    sdi_surf_edge *sedge;   /* in increasing edge id */
+    int32_t *nbpos;         /* rho positions of the surface vertices' neighbours (-1: none) */
 } sdi_sharp_rows_t;
 /* From a level's lists, its vertex rules vr and rho's `take` (rules.c). false: no memory. */
 bool sdi_sharp_rows(sd_mem *m, const sd_topo *t, const sdi_sharp *s, int method,
@@ -731,6 +753,11 @@ void sdi_sharp_rows_free(sd_mem *m, sdi_sharp_rows_t *r);
 void sdi_sharp_vertex_row(const sdi_sharp_vertex *x, double *w, uint32_t len, double *tmp);
 /* The same for an edge row (ends, ring). */
 void sdi_sharp_edge_row(const sdi_sharp_edge *x, double *w, uint32_t len);
+/* The sharp surface's rows on a solid's base rows (weights: SD_WEIGHTS_*; ring: the edge row's
+ * ring, len - 2 entries); unchanged if a neighbour is not in the row. */
+void sdi_surf_vertex_row(const sdi_sharp_rows_t *r, const sdi_surf_vertex *x, int weights,
+                         double *w, uint32_t len, double *tmp);
+void sdi_surf_edge_row(const sdi_surf_edge *x, const uint32_t *ring, double *w, uint32_t len);
 
 /* ---- stencil.c: S_l from the rules, rings and masks ------------------------------------------ */
 sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err);

@@ -232,13 +232,18 @@ sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint
  * vertex's rule comes from its sharp edges (OpenSubdiv's smooth, dart, crease, corner), the edges
  * of its own crease (a boundary, singular tags) counting as infinitely sharp. s >= 10 is
  * infinitely sharp: give it as a singular tag (SD_ERR_VALUE here). s = 0 entries are ignored.
+ * A triangle inside a solid (a face of two cells) with sharpness s is a sharp embedded surface:
+ * its vertices and edges follow the embedded surface's rules (Loop over the sharp triangles,
+ * B-spline along its boundary, corners where that is not a curve) blended with the solid's rows
+ * by min(1, s_l), s_l = s - l (docs/RULES.md; the sharp triangles of one vertex or edge: the
+ * largest). A triangle's children keep s - 1.
  * Errors (item = the entry, field = SD_SH_FIELD_*): SD_ERR_ARITY, SD_ERR_INDEX, SD_ERR_ARG (not an
  * edge, or not a surface or solid-boundary edge), SD_ERR_VALUE, SD_ERR_DUPLICATE. Replaces earlier
  * sharpness; drops computed levels >= 1. */
 enum { SD_CREASE_UNIFORM = 0, SD_CREASE_CHAIKIN = 1 };
 typedef struct sd_sharpness {
-    uint32_t v[2];
-    int nverts;                /* 1 vertex, 2 edge */
+    uint32_t v[3];
+    int nverts;                /* 1 vertex, 2 edge, 3 a triangle inside a solid */
     float value;
 } sd_sharpness;
 enum { SD_SH_FIELD_SIMPLEX = 0, SD_SH_FIELD_VALUE };
@@ -475,6 +480,7 @@ typedef struct sd_tag_set {
     size_t npetals;
     sd_override *overrides;
     size_t noverrides;
+    uint32_t *from;            /* out only: per tag, the index of the tag of `in` it comes from */
 } sd_tag_set;
 
 /* Carry `in`, given for the complex that refinement r was made from, to the refined complex:

@@ -40,18 +40,23 @@ void sdi_sharp_free(sd_mem *m, sdi_sharp *s)
     sdi_free(m, s->es);
     sdi_free(m, s->v);
     sdi_free(m, s->vs);
+    sdi_free(m, s->f);
+    sdi_free(m, s->fs);
     memset(s, 0, sizeof *s);
 }
 
 /* Room for ne edges and nv vertices in *s (emptied); false (and nothing held) without memory. */
-static bool lists_alloc(sd_mem *m, sdi_sharp *s, size_t ne, size_t nv)
+static bool lists_alloc(sd_mem *m, sdi_sharp *s, size_t ne, size_t nv, size_t nf)
 {
     memset(s, 0, sizeof *s);
+    s->span = 1;
     s->e = sdi_alloc(m, (ne + 1) * sizeof *s->e);
     s->es = sdi_alloc(m, (ne + 1) * sizeof *s->es);
     s->v = sdi_alloc(m, (nv + 1) * sizeof *s->v);
     s->vs = sdi_alloc(m, (nv + 1) * sizeof *s->vs);
-    if (s->e && s->es && s->v && s->vs)
+    s->f = sdi_alloc(m, (nf + 1) * sizeof *s->f);
+    s->fs = sdi_alloc(m, (nf + 1) * sizeof *s->fs);
+    if (s->e && s->es && s->v && s->vs && s->f && s->fs)
         return true;
     sdi_sharp_free(m, s);
     return false;
@@ -101,20 +106,22 @@ sd_result sd_complex_set_sharpness(sd_complex *c, const sd_sharpness *sh, size_t
     if (method != SD_CREASE_UNIFORM && method != SD_CREASE_CHAIKIN)
         return sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown crease method %d", method);
     keyed *e = sdi_alloc(m, (n ? n : 1) * sizeof *e), *v = sdi_alloc(m, (n ? n : 1) * sizeof *v);
+    keyed *f = sdi_alloc(m, (n ? n : 1) * sizeof *f);
     sdi_rels rels = {.t = t};
     sd_result rc = SD_OK;
-    if (!e || !v ||
-        (n && !sdi_rels_need(m, &rels, SDI_REL(SDI_VE) | SDI_REL(SDI_EF)))) {
+    if (!e || !v || !f ||
+        (n && !sdi_rels_need(m, &rels, SDI_REL(SDI_VE) | SDI_REL(SDI_EF) | SDI_REL(SDI_VF)))) {
         rc = sdi_fail_nomem(err, m);
         goto out;
     }
-    size_t ne = 0, nv = 0;
+    size_t ne = 0, nv = 0, nf = 0;
     for (size_t i = 0; i < n && !rc; i++) {
         const sd_sharpness *x = sh + i;
         float s = x->value;
-        if (x->nverts != 1 && x->nverts != 2) {
+        if (x->nverts < 1 || x->nverts > 3) {
             rc = sdi_fail(err, SD_ERR_ARITY, (long)i, SD_SH_FIELD_SIMPLEX,
-                          "sharpness %zu: a vertex or an edge, not %d vertices", i, x->nverts);
+                          "sharpness %zu: a vertex, an edge or a triangle, not %d vertices", i,
+                          x->nverts);
             break;
         }
         for (int j = 0; j < x->nverts; j++)
@@ -132,6 +139,16 @@ sd_result sd_complex_set_sharpness(sd_complex *c, const sd_sharpness *sh, size_t
             v[nv++] = (keyed){x->v[0], (uint32_t)i, s};
             continue;
         }
+        if (x->nverts == 3) { /* a face of two solid cells */
+            uint32_t id = sdi_rels_face(&rels, x->v);
+            if (id == UINT32_MAX || t->fn3[id] != 2)
+                rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_SH_FIELD_SIMPLEX,
+                              "sharpness %zu: %u-%u-%u is not a triangle inside a solid (a face "
+                              "of two cells)", i, x->v[0], x->v[1], x->v[2]);
+            else
+                f[nf++] = (keyed){id, (uint32_t)i, s};
+            continue;
+        }
         uint32_t id = x->v[0] == x->v[1] ? UINT32_MAX : sdi_rels_edge(&rels, x->v[0], x->v[1]);
         if (id == UINT32_MAX)
             rc = sdi_fail(err, SD_ERR_ARG, (long)i, SD_SH_FIELD_SIMPLEX,
@@ -145,24 +162,33 @@ sd_result sd_complex_set_sharpness(sd_complex *c, const sd_sharpness *sh, size_t
     }
     if (rc)
         goto out;
-    const keyed *re = sort_find_repeat(e, ne), *rv = sort_find_repeat(v, nv);
-    if (re || rv) {
-        const keyed *r = re && (!rv || re->src < rv->src) ? re : rv;
-        rc = sdi_fail(err, SD_ERR_DUPLICATE, (long)r->src, SD_SH_FIELD_SIMPLEX,
-                      "sharpness %u names the same %s as an earlier one", r->src,
-                      r == re ? "edge" : "vertex");
+    const keyed *rep[3] = {sort_find_repeat(e, ne), sort_find_repeat(v, nv),
+                           sort_find_repeat(f, nf)};
+    static const char *const what[3] = {"edge", "vertex", "triangle"};
+    int first = -1;
+    for (int k = 0; k < 3; k++)
+        if (rep[k] && (first < 0 || rep[k]->src < rep[first]->src))
+            first = k;
+    if (first >= 0) {
+        rc = sdi_fail(err, SD_ERR_DUPLICATE, (long)rep[first]->src, SD_SH_FIELD_SIMPLEX,
+                      "sharpness %u names the same %s as an earlier one", rep[first]->src,
+                      what[first]);
         goto out;
     }
+    qsort(f, nf, sizeof *f, cmp_keyed);
     /* keep the nonzero ones */
-    size_t je = 0, jv = 0;
+    size_t je = 0, jv = 0, jf = 0;
     for (size_t i = 0; i < ne; i++)
         if (e[i].s > 0.0f)
             e[je++] = e[i];
     for (size_t i = 0; i < nv; i++)
         if (v[i].s > 0.0f)
             v[jv++] = v[i];
+    for (size_t i = 0; i < nf; i++)
+        if (f[i].s > 0.0f)
+            f[jf++] = f[i];
     sdi_sharp nw;
-    if (!lists_alloc(m, &nw, je, jv)) {
+    if (!lists_alloc(m, &nw, je, jv, jf)) {
         rc = sdi_fail_nomem(err, m);
         goto out;
     }
@@ -174,8 +200,13 @@ sd_result sd_complex_set_sharpness(sd_complex *c, const sd_sharpness *sh, size_t
         nw.v[i] = v[i].id;
         nw.vs[i] = v[i].s;
     }
+    for (size_t i = 0; i < jf; i++) {
+        nw.f[i] = f[i].id;
+        nw.fs[i] = f[i].s;
+    }
     nw.ne = (uint32_t)je;
     nw.nv = (uint32_t)jv;
+    nw.nf = (uint32_t)jf;
     sdi_sharp_free(m, &c->sh);
     c->sh = nw;
     c->sh_method = method;
@@ -184,6 +215,7 @@ out:
     sdi_rels_free(m, &rels);
     sdi_free(m, e);
     sdi_free(m, v);
+    sdi_free(m, f);
     return rc;
 }
 
@@ -242,8 +274,16 @@ bool sdi_sharp_children(sd_mem *m, const sd_topo *t, const sdi_sharp *s, int met
 /* Level l+1's lists from level l's (s, with cs its children's edge sharpness). */
 static bool next_lists(sd_mem *m, const sdi_sharp *s, const float (*cs)[2], sdi_sharp *out)
 {
-    if (!lists_alloc(m, out, 2 * (size_t)s->ne, s->nv))
+    if (!lists_alloc(m, out, 2 * (size_t)s->ne, s->nv, s->nf))
         return false;
+    out->span = s->span * 4; /* a face's children: 4 f .. 4 f + 3 (split.c) */
+    for (uint32_t i = 0; i < s->nf; i++) {
+        float d = s->fs[i] - 1.0f;
+        if (d > 0.0f) {
+            out->f[out->nf] = s->f[i];
+            out->fs[out->nf++] = d;
+        }
+    }
     for (uint32_t i = 0; i < s->ne; i++) /* halves 2e, 2e + 1: still in increasing order */
         for (int k = 0; k < 2; k++)
             if (cs[i][k] > 0.0f) {
@@ -264,11 +304,14 @@ bool sdi_sharp_level(sd_complex *c, int level, sdi_sharp *out)
 {
     sd_mem *m = &c->mem;
     memset(out, 0, sizeof *out);
-    if (!c->sh.ne && !c->sh.nv)
+    if (!c->sh.ne && !c->sh.nv && !c->sh.nf)
         return true;
     sdi_sharp cur; /* a copy of level 0's lists */
-    if (!lists_alloc(m, &cur, c->sh.ne, c->sh.nv))
+    if (!lists_alloc(m, &cur, c->sh.ne, c->sh.nv, c->sh.nf))
         return false;
+    cur.nf = c->sh.nf;
+    memcpy(cur.f, c->sh.f, cur.nf * sizeof *cur.f);
+    memcpy(cur.fs, c->sh.fs, cur.nf * sizeof *cur.fs);
     /* the edges whose rule is a surface's: a boundary or a crease of tags or rules is
      * infinitely sharp already (OpenSubdiv's boundary edges), so its sharpness neither changes
      * its row nor counts at its ends, nor in Chaikin's means (halves keep their edge's rule) */
@@ -291,7 +334,7 @@ bool sdi_sharp_level(sd_complex *c, int level, sdi_sharp *out)
     cur.nv = c->sh.nv;
     memcpy(cur.v, c->sh.v, cur.nv * sizeof *cur.v);
     memcpy(cur.vs, c->sh.vs, cur.nv * sizeof *cur.vs);
-    for (int l = 0; l < level && (cur.ne || cur.nv); l++) {
+    for (int l = 0; l < level && (cur.ne || cur.nv || cur.nf); l++) {
         float (*cs)[2] = sdi_alloc(m, ((size_t)cur.ne + 1) * sizeof *cs);
         sdi_sharp nx;
         bool ok = cs && sdi_sharp_children(m, &c->lv[l]->t, &cur, c->sh_method, cs) &&
@@ -333,10 +376,193 @@ static int base_count(uint8_t rule)
     }
 }
 
+/* ---- the sharp embedded surface ---------------------------------------------------------- */
+
+typedef struct edge_face {
+    uint32_t e, f;
+    float s;
+} edge_face;
+static int cmp_edge_face(const void *x, const void *y)
+{
+    const edge_face *a = x, *b = y;
+    if (a->e != b->e)
+        return (a->e > b->e) - (a->e < b->e);
+    return (a->f > b->f) - (a->f < b->f);
+}
+typedef struct vert_edge {
+    uint32_t v, e;
+    uint8_t bnd;  /* the edge is on the surface's boundary (one sharp triangle) */
+    uint8_t nm;   /* ... or on three or more */
+    float w;
+} vert_edge;
+static int cmp_vert_edge(const void *x, const void *y)
+{
+    const vert_edge *a = x, *b = y;
+    if (a->v != b->v)
+        return (a->v > b->v) - (a->v < b->v);
+    return (a->e > b->e) - (a->e < b->e);
+}
+
+static double clamp1(float s) { return s >= 1.0f ? 1.0 : (double)s; }
+
+/* The rows of the sharp triangles alive at this level: each interior solid edge and vertex on
+ * them gets the embedded surface's rule (Loop over the sharp triangles, B-spline along their
+ * boundary, a corner where neither fits; an edge of three or more sharp triangles is a crease)
+ * and a weight min(1, s) of the sharpest triangle at it. */
+static bool surf_rows(sd_mem *m, const sd_topo *t, const sdi_sharp *s, const uint8_t *vr,
+                      const uint8_t *take, sdi_sharp_rows_t *out)
+{
+    uint64_t nfaces = (uint64_t)s->nf * s->span;
+    edge_face *ef = sdi_alloc(m, (3 * nfaces + 1) * sizeof *ef);
+    if (!ef)
+        return false;
+    size_t n = 0;
+    for (uint32_t i = 0; i < s->nf; i++)
+        for (uint64_t k = 0; k < s->span; k++) {
+            uint32_t f = (uint32_t)((uint64_t)s->f[i] * s->span + k);
+            for (int j = 0; j < 3; j++)
+                ef[n++] = (edge_face){t->fe[f][j], f, s->fs[i]};
+        }
+    qsort(ef, n, sizeof *ef, cmp_edge_face);
+    size_t nedges = 0;
+    for (size_t j = 0; j < n; j++)
+        nedges += !j || ef[j].e != ef[j - 1].e;
+    out->sedge = sdi_alloc(m, (nedges + 1) * sizeof *out->sedge);
+    vert_edge *ve = sdi_alloc(m, (2 * nedges + 1) * sizeof *ve);
+    if (!out->sedge || !ve) {
+        sdi_free(m, ef);
+        sdi_free(m, ve);
+        return false;
+    }
+    size_t nve = 0;
+    for (size_t j = 0, j1; j < n; j = j1) {
+        uint32_t e = ef[j].e, cnt = 0;
+        float smax = 0.0f;
+        sdi_surf_edge x = {.e = e};
+        for (j1 = j; j1 < n && ef[j1].e == e; j1++) {
+            if (cnt < 2) { /* the vertex of the triangle across e */
+                const uint32_t *fv = t->fv[ef[j1].f];
+                for (int q = 0; q < 3; q++)
+                    if (fv[q] != t->ev[e][0] && fv[q] != t->ev[e][1])
+                        x.opp[cnt] = fv[q];
+            }
+            cnt++;
+            smax = ef[j1].s > smax ? ef[j1].s : smax;
+        }
+        x.kind = cnt == 2 ? SDI_SURF_LOOP : SDI_SURF_MIDPOINT;
+        x.w = clamp1(smax);
+        if (t->efam[e] == FAM3 && !(t->eflag[e] & EF_DC))
+            out->sedge[out->nsedge++] = x; /* an edge inside the solids */
+        for (int k = 0; k < 2; k++)
+            ve[nve++] = (vert_edge){t->ev[e][k], e, cnt == 1, cnt > 2, smax};
+    }
+    sdi_free(m, ef);
+    qsort(ve, nve, sizeof *ve, cmp_vert_edge);
+    size_t nverts = 0;
+    for (size_t j = 0; j < nve; j++)
+        nverts += !j || ve[j].v != ve[j - 1].v;
+    out->svert = sdi_alloc(m, (nverts + 1) * sizeof *out->svert);
+    uint32_t *nbe = sdi_alloc(m, (nve + 1) * sizeof *nbe); /* the neighbours' edges */
+    out->nbpos = sdi_alloc(m, (nve + 1) * sizeof *out->nbpos);
+    int32_t *slot = sdi_alloc(m, ((size_t)t->nv + 1) * sizeof *slot);
+    uint32_t *cnt = sdi_calloc(m, nverts + 1, sizeof *cnt), *cur = sdi_calloc(m, nverts + 1, sizeof *cur);
+    bool ok = out->svert && nbe && out->nbpos && slot && cnt && cur;
+    uint32_t off = 0;
+    for (size_t j = 0, j1; ok && j < nve; j = j1) {
+        uint32_t v = ve[j].v, nb = 0, nbnd = 0;
+        bool nm = false;
+        float smax = 0.0f;
+        for (j1 = j; j1 < nve && ve[j1].v == v; j1++) {
+            nb++;
+            nbnd += ve[j1].bnd;
+            nm |= ve[j1].nm;
+            smax = ve[j1].w > smax ? ve[j1].w : smax;
+        }
+        if ((vr[v] & SDI_VR_RULE) != SD_RULE_SOLID)
+            continue; /* on the solids' boundary or of another rule: its own row */
+        sdi_surf_vertex x = {.v = v, .off = off, .w = clamp1(smax)};
+        x.kind = nm ? SDI_SURF_CORNER : nbnd == 0 ? SDI_SURF_LOOP
+               : nbnd == 2 ? SDI_SURF_BSPLINE : SDI_SURF_CORNER;
+        for (size_t q = j; q < j1; q++)
+            if (x.kind == SDI_SURF_LOOP || (x.kind == SDI_SURF_BSPLINE && ve[q].bnd))
+                nbe[off + x.n++] = ve[q].e; /* in increasing edge id, as rho */
+        off += x.n;
+        out->svert[out->nsvert++] = x;
+    }
+    /* the neighbours' places in rho (rings.c: increasing edge id, through the edges v reads) */
+    if (ok) {
+        for (uint32_t i = 0; i < t->nv; i++)
+            slot[i] = -1;
+        for (uint32_t i = 0; i < out->nsvert; i++)
+            slot[out->svert[i].v] = (int32_t)i;
+        for (uint32_t i = 0; i < off; i++)
+            out->nbpos[i] = -1;
+        for (uint32_t e = 0; e < t->ne; e++)
+            for (int k = 0; k < 2; k++) {
+                int32_t sl = slot[t->ev[e][k]];
+                if (sl < 0 || !(take[e] & (1u << k)))
+                    continue;
+                const sdi_surf_vertex *x = &out->svert[sl];
+                if (cur[sl] < x->n && nbe[x->off + cur[sl]] == e)
+                    out->nbpos[x->off + cur[sl]++] = (int32_t)cnt[sl];
+                cnt[sl]++;
+            }
+    }
+    sdi_free(m, ve);
+    sdi_free(m, nbe);
+    sdi_free(m, slot);
+    sdi_free(m, cnt);
+    sdi_free(m, cur);
+    return ok;
+}
+
+void sdi_surf_vertex_row(const sdi_sharp_rows_t *r, const sdi_surf_vertex *x, int weights,
+                         double *w, uint32_t len, double *tmp)
+{
+    memset(tmp, 0, len * sizeof *tmp);
+    if (x->kind == SDI_SURF_CORNER)
+        tmp[0] = 1.0;
+    else {
+        double c = x->kind == SDI_SURF_LOOP ? sdi_loop_weight(weights, x->n) : 1.0 / 8.0;
+        tmp[0] = x->kind == SDI_SURF_LOOP ? 1 - x->n * c : 6.0 / 8.0;
+        for (uint32_t i = 0; i < x->n; i++) {
+            int32_t p = r->nbpos[x->off + i];
+            if (p < 0 || (uint32_t)p + 1 >= len)
+                return; /* not in the row: it stays */
+            tmp[1 + p] = c;
+        }
+    }
+    for (uint32_t i = 0; i < len; i++)
+        w[i] = x->w * tmp[i] + (1.0 - x->w) * w[i];
+}
+
+void sdi_surf_edge_row(const sdi_surf_edge *x, const uint32_t *ring, double *w, uint32_t len)
+{
+    int pos[2] = {-1, -1};
+    if (x->kind == SDI_SURF_LOOP) {
+        for (uint32_t i = 0; i + 2 < len; i++)
+            for (int k = 0; k < 2; k++)
+                if (ring[i] == x->opp[k] && pos[k] < 0)
+                    pos[k] = (int)i;
+        if (pos[0] < 0 || pos[1] < 0)
+            return; /* not in the ring: the row stays */
+    }
+    double e = x->kind == SDI_SURF_LOOP ? 3.0 / 8.0 : 0.5, cw = 1.0 - x->w;
+    w[0] = x->w * e + cw * w[0];
+    w[1] = x->w * e + cw * w[1];
+    for (uint32_t i = 2; i < len; i++)
+        w[i] *= cw;
+    if (x->kind == SDI_SURF_LOOP)
+        for (int k = 0; k < 2; k++)
+            w[2 + pos[k]] += x->w / 8.0;
+}
+
 bool sdi_sharp_rows(sd_mem *m, const sd_topo *t, const sdi_sharp *s, int method,
                     const uint8_t *vr, const uint8_t *take, sdi_sharp_rows_t *out)
 {
     memset(out, 0, sizeof *out);
+    if (s->nf && !surf_rows(m, t, s, vr, take, out))
+        return false;
     if (!s->ne && !s->nv)
         return true;
     float (*cs)[2] = sdi_alloc(m, ((size_t)s->ne + 1) * sizeof *cs);
@@ -465,6 +691,9 @@ void sdi_sharp_rows_free(sd_mem *m, sdi_sharp_rows_t *r)
 {
     sdi_free(m, r->vert);
     sdi_free(m, r->edge);
+    sdi_free(m, r->svert);
+    sdi_free(m, r->sedge);
+    sdi_free(m, r->nbpos);
     memset(r, 0, sizeof *r);
 }
 

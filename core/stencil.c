@@ -171,6 +171,7 @@ static bool vertex_patterns(build *B, sd_csrb *S)
     memset(vmemo, 0xff, sizeof vmemo);
     uint64_t nexp = 0;
     const sdi_sharp_vertex *sv = B->sh.vert, *sv_end = sv + B->sh.nvert;
+    const sdi_surf_vertex *uv = B->sh.svert, *uv_end = uv + B->sh.nsvert;
     for (uint32_t v = 0; v < nv; v++) {
         uint8_t r = B->vr[v];
         uint32_t na = cnt_a[v], nb = cnt_b ? cnt_b[v] : 0, id = UINT32_MAX;
@@ -179,7 +180,8 @@ static bool vertex_patterns(build *B, sd_csrb *S)
         cur[v] = (uint32_t)nexp;
         nexp += na + nb;
         const sdi_sharp_vertex *sharp = sv < sv_end && sv->v == v ? sv++ : NULL;
-        bool memo = nb == 0 && na < MEMO && !sharp;
+        const sdi_surf_vertex *surf = uv < uv_end && uv->v == v ? uv++ : NULL;
+        bool memo = nb == 0 && na < MEMO && !sharp && !surf;
         if (memo)
             id = vmemo[r][na];
         if (id == UINT32_MAX) {
@@ -193,11 +195,12 @@ static bool vertex_patterns(build *B, sd_csrb *S)
                 wbuf[1 + i] = w.a;
             for (uint32_t i = 0; i < nb; i++)
                 wbuf[1 + na + i] = w.b;
-            if (sharp) {
-                if (!stmp_fit(B, 1 + na + nb))
-                    return false;
+            if ((sharp || surf) && !stmp_fit(B, 1 + na + nb))
+                return false;
+            if (surf) /* the sharp embedded surface first, a vertex sharpness on top */
+                sdi_surf_vertex_row(&B->sh, surf, B->weights, B->wbuf, 1 + na + nb, B->stmp);
+            if (sharp)
                 sdi_sharp_vertex_row(sharp, B->wbuf, 1 + na + nb, B->stmp);
-            }
             if ((id = sdi_pats_intern(B->m, &B->pats, B->wbuf, 1 + na + nb)) == UINT32_MAX)
                 return false;
             if (memo)
@@ -244,6 +247,7 @@ static bool edge_patterns(build *B, sd_csrb *S)
     uint64_t nexp = B->nexp, nring = 0;
     B->ebase = nexp;
     const sdi_sharp_edge *se = B->sh.edge, *se_end = se + B->sh.nedge;
+    const sdi_surf_edge *ue = B->sh.sedge, *ue_end = ue + B->sh.nsedge;
     for (uint32_t e = 0; e < ne; e++) {
         uint32_t k = ring_len(B, e), r = nv + e;
         if (r % SD_CHK == 0)
@@ -264,7 +268,10 @@ static bool edge_patterns(build *B, sd_csrb *S)
             sharp = NULL;
         if (sharp && (petal || flat))
             sharp = NULL; /* Ying-Zorin's rows at singular vertices win (DECISIONS 41) */
-        bool memo = !cls && k < MEMO && !petal && !flat && !sharp;
+        const sdi_surf_edge *surf = ue < ue_end && ue->e == e ? ue++ : NULL;
+        if (surf && er[e] != SD_RULE_SOLID)
+            surf = NULL;
+        bool memo = !cls && k < MEMO && !petal && !flat && !sharp && !surf;
         uint32_t id = memo ? ememo[er[e]][k] : UINT32_MAX;
         if ((flat || petal) && (id = yz_pattern(B, e, k, flat)) == UINT32_MAX)
             return false;
@@ -280,6 +287,8 @@ static bool edge_patterns(build *B, sd_csrb *S)
                 wbuf[2 + i] = cls && cls[i] ? w.diag : w.ring;
             if (sharp)
                 sdi_sharp_edge_row(sharp, wbuf, 2 + k);
+            if (surf)
+                sdi_surf_edge_row(surf, ring_of(B, e), wbuf, 2 + k);
             if ((id = sdi_pats_intern(B->m, &B->pats, wbuf, 2 + k)) == UINT32_MAX)
                 return false;
             if (memo)
@@ -355,7 +364,7 @@ sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         return sdi_fail(err, SD_ERR_LIMIT, -1, -1, "too many points for 32-bit ids");
     if (!choose(&B, cx, lv))
         goto nomem;
-    if (cx->sh.ne || cx->sh.nv) { /* semi-sharp creases reaching this level (sharp.c) */
+    if (cx->sh.ne || cx->sh.nv || cx->sh.nf) { /* semi-sharp creases reaching this level */
         sdi_sharp lsh;
         if (!sdi_sharp_level(cx, lv->index, &lsh))
             goto nomem;

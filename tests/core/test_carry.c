@@ -42,7 +42,7 @@ TEST(carry_through_red_green)
         {.simplex = {0}, .nverts = 1, .rule = SD_RULE_N2, .pair = {{0, 1, 2}, {0, 2, 3}},
          .pair_size = 3},
     };
-    sd_tag_set in = {tidx, tsize, 4, &pet, 1, ov, 3}, out;
+    sd_tag_set in = {tidx, tsize, 4, &pet, 1, ov, 3, NULL}, out;
     CHECK(sd_refine_carry(&r, &in, &out, &err) == SD_OK);
 
     /* vertex 1; halves 0-m02, 2-m02; 2-3; the two children of 0-2-3 */

@@ -214,3 +214,41 @@ def test_edits_equal_a_fresh_build(daemon, mesh):
     for level in (1, 2, 3):
         assert s.level(level, format="json").json()["vertices"] == \
             t.level(level, format="json").json()["vertices"]
+
+
+def test_sharp_triangles_inside_a_solid(daemon):
+    """A sharp triangle inside a solid is an embedded surface while its sharpness lasts: with
+    s = 2, levels 1 and 2 equal the same triangles tagged singular, level 3 does not; s >= 10 is
+    the singular tag at every level (docs/RULES.md "Semi-sharp creases")."""
+    from test_sharp_vs_osd import cube_tets
+    xyz, tets = cube_tets(3, random.Random(2))
+    cx = {"vertices": [list(p) for p in xyz], "simplices": [list(t) for t in tets]}
+    faces = {}
+    for t in tets:
+        for k in range(4):
+            f = tuple(sorted(t[:k] + t[k + 1:]))
+            faces[f] = faces.get(f, 0) + 1
+    inner = [list(f) for f, c in faces.items() if c == 2 and all(
+        v // 16 == 1 and 1 <= v % 4 <= 2 and 1 <= v // 4 % 4 <= 2 for v in f)]
+    assert len(inner) == 2
+
+    def make(tags):
+        s = Session(daemon)
+        assert s.put_complex(cx).status_code == 200
+        r = s.req("PUT", "/tags", json=tags)
+        assert r.status_code == 200, r.text
+        return s
+    sharp = make({"sharpness": [{"simplex": f, "value": 2} for f in inner]})
+    inf = make({"sharpness": [{"simplex": f, "value": 10} for f in inner]})
+    tagged = make({"singular": inner})
+    for level in (1, 2, 3):
+        t = tagged.level(level, format="json").json()["vertices"]
+        assert inf.level(level, format="json").json()["vertices"] == t
+        same = sharp.level(level, format="json").json()["vertices"] == t
+        assert same == (level < 3), level
+    # a face on the solid's boundary is not inside it
+    bnd = next(list(f) for f, c in faces.items() if c == 1)
+    s = Session(daemon)
+    assert s.put_complex(cx).status_code == 200
+    r = s.req("PUT", "/tags", json={"sharpness": [{"simplex": bnd, "value": 1}]})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/sharpness/0/simplex"

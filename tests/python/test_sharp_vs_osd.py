@@ -330,3 +330,58 @@ def test_vertex_sharpness_on_a_curve(tmp_path):
         from scipy.spatial import cKDTree
         d, _ = cKDTree(ours).query(np.array(cur))
         assert d.max() < 1e-14, (L, d.max())
+
+
+def matrix_rows(path, level):
+    """The rows of S mapping level-1 points to level `level`, as {row: {col: weight}}."""
+    rows = {}
+    for line in run([str(SDLEVEL), "-l", str(level), "--matrix", str(path)]).splitlines():
+        if line.startswith("row "):
+            f = line.split()
+            rows[int(f[1])] = {int(f[i]): float(f[i + 1]) for i in range(3, len(f), 2)}
+    return rows
+
+
+def apply_rows(rows, p):
+    out = np.zeros((len(rows), 3))
+    for r, cols in rows.items():
+        for c, w in cols.items():
+            out[r] += w * p[c]
+    return out
+
+
+@pytest.mark.parametrize("s", [2.0, 1.5, 0.4])
+def test_sharp_embedded_surface(tmp_path, s):
+    """A sharp triangle inside a solid (docs/RULES.md "Semi-sharp creases"): while s_l >= 1 the
+    levels are those of the same triangles tagged singular (an embedded surface, 000 Sec. 4.1);
+    at a fractional s_l the rows are w S_tagged + (1 - w) S_plain, w = s_l, applied here to the
+    previous level from the two other complexes' matrices; after that the plain solid's rows."""
+    rng = random.Random(2)
+    xyz, tets = cube_tets(3, rng)
+    count = {}
+    for t in tets:
+        for k in range(4):
+            f = tuple(sorted(t[:k] + t[k + 1:]))
+            count[f] = count.get(f, 0) + 1
+
+    def inner(v):  # vertex ids: x + 4 y + 16 z
+        return v // 16 == 1 and 1 <= v % 4 <= 2 and 1 <= v // 4 % 4 <= 2
+    surf = [f for f, c in count.items() if c == 2 and all(inner(v) for v in f)]
+    assert len(surf) == 2
+    sharp, tagged, plain = (tmp_path / n for n in ("sharp.txt", "tagged.txt", "plain.txt"))
+    write(sharp, xyz, tets, [f + (s,) for f in surf])
+    write(tagged, xyz, tets, [f + (10.0,) for f in surf])
+    write(plain, xyz, tets, [])
+    prev = np.array(xyz, float)
+    for L in (1, 2, 3):
+        # sharpness is a float (as OpenSubdiv stores it), decreased in float
+        w = min(1.0, max(0.0, float(np.float32(s) - np.float32(L - 1))))
+        st, sp = matrix_rows(tagged, L), matrix_rows(plain, L)
+        want = w * apply_rows(st, prev) + (1 - w) * apply_rows(sp, prev)
+        got = parse(run([str(SDLEVEL), "-l", str(L), str(sharp)]))[0]
+        assert np.abs(got - want).max() < 1e-12, (L, np.abs(got - want).max())
+        prev = got
+    # the surface matters at level 1
+    a = parse(run([str(SDLEVEL), "-l", "1", str(sharp)]))[0]
+    b = parse(run([str(SDLEVEL), "-l", "1", str(plain)]))[0]
+    assert np.abs(a - b).max() > 1e-3

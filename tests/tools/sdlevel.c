@@ -95,7 +95,7 @@ int main(int argc, char **argv)
     /* `c` lines: a sharpness; 10 and more is infinitely sharp, a singular tag */
     if (tm.ncr) {
         sd_sharpness *sh = calloc(tm.ncr, sizeof *sh);
-        uint32_t *tag = calloc(2 * tm.ncr, sizeof *tag);
+        uint32_t *tag = calloc(3 * tm.ncr, sizeof *tag);
         uint8_t *tsz = calloc(tm.ncr, 1);
         size_t nsh = 0, ntag = 0, ntid = 0;
         if (!sh || !tag || !tsz) {
@@ -106,10 +106,11 @@ int main(int argc, char **argv)
             int n = tm.crn[i];
             if (tm.crs[i] >= 10) {
                 for (int k = 0; k < n; k++)
-                    tag[ntid++] = tm.crv[2 * i + k];
+                    tag[ntid++] = tm.crv[3 * i + k];
                 tsz[ntag++] = (uint8_t)n;
             } else
-                sh[nsh++] = (sd_sharpness){{tm.crv[2 * i], tm.crv[2 * i + 1]}, n, (float)tm.crs[i]};
+                sh[nsh++] = (sd_sharpness){{tm.crv[3 * i], tm.crv[3 * i + 1], tm.crv[3 * i + 2]}, n,
+                                           (float)tm.crs[i]};
         }
         if ((ntag && sd_complex_set_singular(c, tag, tsz, ntag, &err)) ||
             sd_complex_set_sharpness(c, sh, nsh, chaikin ? SD_CREASE_CHAIKIN : SD_CREASE_UNIFORM,

@@ -77,11 +77,11 @@ int textmesh_read(const char *path, textmesh *m, char *err, size_t errlen)
                 ok = 1;
             }
         } else if (p[0] == 'c' && (p[1] == ' ' || p[1] == '\t')) {
-            /* c i S (vertex) or c i j S (edge): ids, then the sharpness */
-            double x[3];
+            /* c i S (vertex), c i j S (edge) or c i j k S (triangle): ids, then the sharpness */
+            double x[4];
             int n = 0;
             char *q = p + 1, *end;
-            while (n < 3) {
+            while (n < 4) {
                 double d = strtod(q, &end);
                 if (end == q)
                     break;
@@ -90,13 +90,14 @@ int textmesh_read(const char *path, textmesh *m, char *err, size_t errlen)
             }
             while (*q == ' ' || *q == '\t' || *q == '\n' || *q == '\r')
                 q++;
-            if ((n == 2 || n == 3) && !*q && x[0] >= 0 && x[0] <= UINT32_MAX &&
-                (n == 2 || (x[1] >= 0 && x[1] <= UINT32_MAX)) &&
-                !grow((void **)&m->crv, &cc1, 2 * (m->ncr + 1), sizeof *m->crv) &&
+            int ids_ok = n >= 2 && !*q;
+            for (int k = 0; k + 1 < n; k++)
+                ids_ok &= x[k] >= 0 && x[k] <= UINT32_MAX;
+            if (ids_ok && !grow((void **)&m->crv, &cc1, 3 * (m->ncr + 1), sizeof *m->crv) &&
                 !grow((void **)&m->crn, &cc2, m->ncr + 1, 1) &&
                 !grow((void **)&m->crs, &cc3, m->ncr + 1, sizeof *m->crs)) {
-                m->crv[2 * m->ncr] = (uint32_t)x[0];
-                m->crv[2 * m->ncr + 1] = n == 3 ? (uint32_t)x[1] : 0;
+                for (int k = 0; k < 3; k++)
+                    m->crv[3 * m->ncr + k] = k + 1 < n ? (uint32_t)x[k] : 0;
                 m->crn[m->ncr] = (uint8_t)(n - 1);
                 m->crs[m->ncr++] = x[n - 1];
                 ok = 1;

@@ -9,8 +9,8 @@ typedef struct textmesh {
     uint32_t *idx;     /* simplex vertex ids, consecutive */
     uint8_t *size;     /* per simplex */
     long *diag;        /* pairs (t, k) of `d` lines */
-    uint32_t *crv;     /* `c` lines: 2 vertex ids each (the second unused for a vertex) */
-    uint8_t *crn;      /* 1 vertex, 2 edge */
+    uint32_t *crv;     /* `c` lines: 3 vertex ids each (those past crn unused) */
+    uint8_t *crn;      /* 1 vertex, 2 edge, 3 triangle */
     double *crs;       /* the sharpness */
     size_t nv, ns, ndiag, ncr;
 } textmesh;
