@@ -255,7 +255,7 @@ int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, int *whic
     for (uint32_t i = 0; i < t->nsh; i++)
         ninf += t->sh[i].value >= 10;
     uint8_t *size = api_plain_malloc(t->n + ninf + 1);
-    uint32_t *idx = api_plain_malloc((nidx + 2 * ninf + 1) * sizeof *idx);
+    uint32_t *idx = api_plain_malloc((nidx + 3 * ninf + 1) * sizeof *idx);
     uint32_t *from = api_plain_malloc((ninf + 1) * sizeof *from); /* sharpness entry of each */
     sd_sharpness *fin = api_plain_malloc((t->nsh - ninf + 1) * sizeof *fin);
     uint32_t *fin_from = api_plain_malloc((t->nsh - ninf + 1) * sizeof *fin_from);
