@@ -13,6 +13,7 @@
 #include "details.h"
 #include "mem.h"
 #include "fill.h"
+#include "repair.h"
 #include "internal.h"
 #include "complex_stream.h"
 #include "jsonin.h"
@@ -367,7 +368,7 @@ int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *
                            const api_limits *lim, api_model **out, api_problem *p)
 {
     static const char *const keys[] = {"vertices", "simplices", "attributes", "diagonals",
-                                       "reoriented", "fill", "details", NULL};
+                                       "reoriented", "fill", "details", "repair", NULL};
     *out = NULL;
     if (api_only_keys(body, "", keys, p))
         return p->status;
@@ -376,6 +377,9 @@ int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *
         return api_fail_at(p, 400, "missing-field", "/vertices", "\"vertices\" is required");
     if (!ss && !json_object_get(body, "fill"))
         return api_fail_at(p, 400, "missing-field", "/simplices", "\"simplices\" is required");
+    json_t *rp = json_object_get(body, "repair");
+    if (rp && !json_is_boolean(rp))
+        return api_fail_at(p, 400, "wrong-type", "/repair", "must be true or false");
     api_input *in = api_input_new();
     if (!in)
         return api_fail(p, 503, "out-of-memory", "out of memory");
@@ -394,6 +398,8 @@ int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *
                          "\"reoriented\" describes a saved complex; it cannot go with \"fill\"");
     if (!rc && ro)
         rc = parse_reoriented(ro, packs, in, p);
+    if (!rc && json_is_true(rp)) /* drops what the core would refuse one by one (api/repair.c) */
+        rc = api_repair(in, p);
     uint32_t nv_posted = in->nv, ns_posted = in->ns;
     if (!rc && fill) /* TetGen: the tets and Steiner points are appended to `in` (api/fill.c) */
         rc = api_fill(fill, packs, in, lim, p);
@@ -463,13 +469,15 @@ json_t *api_summary(const api_model *m)
                                                "edges", (json_int_t)nme[t]));
     }
     json_t *fill = api_fill_summary(m->in);
-    return json_pack("{s:I, s:I, s:I, s:{s:I, s:I, s:I, s:I}, s:{s:I, s:I}, s:o, s:{s:I, s:I}, s:o*}",
+    json_t *sum = json_pack("{s:I, s:I, s:I, s:{s:I, s:I, s:I, s:I}, s:{s:I, s:I}, s:o, s:{s:I, s:I}, s:o*}",
                      "vertices", (json_int_t)n.vertices, "edges", (json_int_t)n.edges, "faces",
                      (json_int_t)n.faces, "simplices", "0", (json_int_t)n.points, "1",
                      (json_int_t)n.curves, "2", (json_int_t)n.triangles, "3",
                      (json_int_t)n.tetrahedra, "boundary", "vertices", (json_int_t)bv, "edges",
                      (json_int_t)be, "nonmanifold", nm, "extraordinary", "vertices",
                      (json_int_t)xv, "edges", (json_int_t)xe, "fill", fill);
+    api_repair_summary(m->in, sum);
+    return sum;
 }
 
 json_t *api_json_doubles(const double *x, size_t n)

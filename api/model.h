@@ -65,6 +65,8 @@ typedef struct api_input {
     api_fill_stats *fill;
     size_t reserved;          /* bytes of the C-library arrays above counted against the memory
                                * budget (api_input_reserve; given back by the last unref) */
+    struct json_t *repaired;  /* PUT /complex "repair": what was dropped (api/repair.c), shared
+                               * read-only by copies; NULL without a repair */
 } api_input;
 
 /* The rule preferences of PUT /rules (docs/API.md); zero = the default. */
@@ -77,6 +79,13 @@ typedef struct api_rules {
     sd_override *overrides;
 } api_rules;
 
+/* The last "crease_angle" of PUT /tags (api/crease.c): its edges are among the singular tags. */
+typedef struct api_crease {
+    bool set;                 /* given with the tags now in force */
+    double degrees;
+    uint32_t tagged;          /* edges over the angle (some may also have been listed) */
+} api_crease;
+
 /* Tags (PUT /tags): n singular simplices of 1..3 vertex ids, stored consecutively, and npet
  * petal tags (corner kinds of open petals, 003 Sec. 2). */
 typedef struct api_tags {
@@ -85,6 +94,7 @@ typedef struct api_tags {
     uint32_t *idx;
     uint32_t npet;
     sd_petal_tag *pet;
+    api_crease crease;        /* what "crease_angle" added (api/crease.c), for the report */
 } api_tags;
 
 typedef struct api_model {
