@@ -14,6 +14,7 @@
 #include "mem.h"
 #include "fill.h"
 #include "repair.h"
+#include "crease.h"
 #include "internal.h"
 #include "complex_stream.h"
 #include "jsonin.h"
@@ -514,6 +515,19 @@ json_t *api_tags_json(const api_model *m)
     return tags;
 }
 
+/* The "tags" member of GET /complex: the tags and, when they came with one, what "crease_angle"
+ * added (not in the export: its edges are among the singular tags, which is what an import
+ * restores). */
+static json_t *tags_report_json(const api_model *m)
+{
+    json_t *t = api_tags_json(m), *ca = api_crease_json(&m->tags);
+    if (t && ca)
+        json_object_set_new(t, "crease_angle", ca);
+    else
+        json_decref(ca);
+    return t;
+}
+
 /* The "rules" member of GET /complex: the preferences and overrides as last put. */
 json_t *api_rules_json(const api_model *m)
 {
@@ -601,7 +615,7 @@ static json_t *complex_json(api_model *m, bool classes)
                 json_array_append_new(ce, o);
             }
         json_object_set_new(j, "classes", json_pack("{s:o, s:o}", "vertices", cv, "edges", ce));
-        json_object_set_new(j, "tags", api_tags_json(m));
+        json_object_set_new(j, "tags", tags_report_json(m));
         json_object_set_new(j, "rules", api_rules_json(m));
     }
     if (j)
@@ -633,7 +647,7 @@ api_cstream *api_get_complex_stream(api_model *m, uint64_t *version, api_problem
     /* under the lock edits take: the copied points and attributes and the version agree */
     pthread_rwlock_rdlock(&m->data);
     *version = atomic_load(&m->version);
-    json_t *t = json_pack("{s:o, s:o, s:o, s:O, s:I}", "tags", api_tags_json(m), "rules",
+    json_t *t = json_pack("{s:o, s:o, s:o, s:O, s:I}", "tags", tags_report_json(m), "rules",
                           api_rules_json(m), "details", api_details_json(m), "summary", m->summary,
                           "version", (json_int_t)*version);
     char *text = t ? json_dumps(t, JSON_COMPACT) : NULL; /* {"tags":…,"version":N} */
