@@ -312,7 +312,8 @@ int api_build_model(api_input *in, const api_rules *rules, const api_tags *tags,
         return api_fail_at(p, 422, "invalid-override", ptr, "%s", e.message);
     }
     bool petal = false;
-    if (m && tags && (tags->n || tags->npet) && api_model_set_tags(m, tags, &e, &petal)) {
+    if (m && tags && (tags->n || tags->npet || tags->crease.set) &&
+        api_model_set_tags(m, tags, &e, &petal)) {
         api_model_unref(m);
         if (e.code == SD_ERR_NOMEM)
             return api_fail(p, 503, "out-of-memory", "out of memory");
