@@ -240,3 +240,24 @@ def test_offline_crease_angle(tmp_path):
     r = subprocess.run([str(SUBDIVD), "refine", str(src), "--level", "1", "--crease-angle", "181",
                         "-o", str(out)], capture_output=True, text=True)
     assert r.returncode == 1 and "/crease_angle" in r.stderr
+
+
+def test_python_client_and_cli(daemon, tmp_path):
+    import sys
+    from conftest import REPO
+    sys.path.insert(0, str(REPO / "clients" / "python"))
+    from subdiv import Client
+    v, tris = cube_surface()
+    with Client(daemon.url).create_session() as s:
+        s.put_complex({"vertices": v, "simplices": tris})
+        assert s.put_tags(crease_angle=45)["crease_angle"] == {"degrees": 45, "tagged": 12}
+        assert len(s.get_complex()["tags"]["singular"]) == 12
+    src = tmp_path / "cube.json"
+    src.write_text(json.dumps({"vertices": v, "simplices": tris}))
+    r = subprocess.run([str(REPO / "build" / "subdiv"), "refine", str(src), "--url", daemon.url,
+                        "--level", "1", "--crease-angle", "45", "-o", str(tmp_path / "a.json")],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "cube.json: crease angle 45: 12 edges tagged" in r.stderr
+    p = np.array(json.loads((tmp_path / "a.json").read_text())["vertices"])
+    np.testing.assert_array_equal(p[:8], np.array(v, dtype=float))  # corners fixed

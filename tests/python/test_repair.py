@@ -4,6 +4,7 @@ dropped, reported in summary.repaired with their posted indices, and the rest su
 as the cleaned mesh posted without repair; without repair the same mesh is the 422 it was."""
 import json
 import subprocess
+import sys
 
 import pytest
 
@@ -152,3 +153,42 @@ def test_offline_repair(tmp_path):
     r = subprocess.run([str(SUBDIVD), "refine", str(src), "--level", "2", "-o", str(out_a)],
                        capture_output=True, text=True)
     assert r.returncode == 1 and "/simplices/3" in r.stderr
+
+
+def write_obj(path, verts, faces):
+    path.write_text("".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in verts)
+                    + "".join("f " + " ".join(str(i + 1) for i in f) + "\n" for f in faces))
+
+
+def test_python_cli_obj_repair(daemon, tmp_path):
+    """An OBJ with two faces on the same three vertices and a degenerate one, through the Python
+    client's `subdiv refine --repair`: the level is the cleaned OBJ's."""
+    from conftest import REPO
+    subdiv = REPO / "build" / "subdiv"
+    v, clean = grid()
+    faces = clean[:4] + [clean[1][::-1], [0, 1, 2]] + clean[4:]
+    write_obj(tmp_path / "dirty.obj", v, faces)
+    write_obj(tmp_path / "clean.obj", v, clean)
+
+    def refine(name, *flags):
+        out = tmp_path / (name + ".json")
+        r = subprocess.run([str(subdiv), "refine", str(tmp_path / (name + ".obj")), "--url",
+                            daemon.url, "--level", "2", "-o", str(out), *flags],
+                           capture_output=True, text=True, timeout=120)
+        return r, out
+    r, a = refine("dirty", "--repair")
+    assert r.returncode == 0, r.stderr
+    assert "dirty.obj: repaired: 2 simplices dropped" in r.stderr
+    r, b = refine("clean")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(a.read_text()) == json.loads(b.read_text())
+    r, _ = refine("dirty")
+    # refused as before: per-simplex checks come before the duplicates (the degenerate 5)
+    assert r.returncode == 1 and "/simplices/5" in r.stderr
+    # the client's method says the same
+    sys.path.insert(0, str(REPO / "clients" / "python"))
+    from subdiv import Client
+    with Client(daemon.url).create_session() as s:
+        summ = s.put_complex({"vertices": v, "simplices": faces}, repair=True)["summary"]
+        assert summ["repaired"] == [{"index": 4, "reason": "duplicate", "of": 1},
+                                    {"index": 5, "reason": "degenerate"}]
