@@ -471,7 +471,8 @@ json_t *api_summary(const api_model *m)
                                                "edges", (json_int_t)nme[t]));
     }
     json_t *fill = api_fill_summary(m->in);
-    json_t *sum = json_pack("{s:I, s:I, s:I, s:{s:I, s:I, s:I, s:I}, s:{s:I, s:I}, s:o, s:{s:I, s:I}, s:o*}",
+    json_t *sum = json_pack("{s:I, s:I, s:I, s:{s:I, s:I, s:I, s:I}, s:{s:I, s:I}, s:o, "
+                            "s:{s:I, s:I}, s:o*}",
                      "vertices", (json_int_t)n.vertices, "edges", (json_int_t)n.edges, "faces",
                      (json_int_t)n.faces, "simplices", "0", (json_int_t)n.points, "1",
                      (json_int_t)n.curves, "2", (json_int_t)n.triangles, "3",

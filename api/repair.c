@@ -1,4 +1,4 @@
-/* repair.c — PUT /complex {"repair": true} (docs/API.md "Control complex", docs/DECISIONS.md 41): the
+/* repair.c — PUT /complex {"repair": true} (docs/API.md "Control complex", DECISIONS 41): the
  * posted simplices the core would refuse one at a time — a vertex twice ("repeated-vertex"),
  * zero or near-zero length, area or volume by the core's own tolerance ("degenerate"), the
  * vertices of an earlier kept simplex in any order ("duplicate", e.g. an OBJ's two faces on the
@@ -85,7 +85,8 @@ int api_repair(api_input *in, api_problem *p)
         rc = api_fail(p, 503, "out-of-memory", "out of memory repairing %zu simplices", ns);
     sd_allocator a = api_mem_core_allocator();
     sd_error e = {0};
-    sd_result r = rc ? SD_OK : sd_complex_check(in->xyz, in->nv, in->idx, in->size, ns, &a, why, of, &e);
+    sd_result r = rc ? SD_OK
+                     : sd_complex_check(in->xyz, in->nv, in->idx, in->size, ns, &a, why, of, &e);
     if (r == SD_ERR_NOMEM)
         rc = api_fail(p, 503, "out-of-memory", "out of memory repairing %zu simplices", ns);
     else if (!rc && r == SD_OK)

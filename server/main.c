@@ -88,7 +88,8 @@ static int apply_file(api_model **m, const char *path, change_fn_t fn, const api
                                 : fn == api_put_tags  ? api_tags_packed
                                                       : NULL;
     json_t *b = !path    ? json_object()
-                : packed ? api_parse_body_packed(buf, len, 0, packed, API_PACK_MIN_BYTES, &packs, &p)
+                : packed ? api_parse_body_packed(buf, len, 0, packed, API_PACK_MIN_BYTES, &packs,
+                                                 &p)
                          : api_parse_body(buf, len, 0, &p);
     api_free(buf);
     if (b && extra && json_is_object(b))
