@@ -5,11 +5,11 @@
  * format (with a slice in some), stats, GET complex, an edit (a level-1 move among them) and its
  * deltas, an analysis, a matrix, a refinement — and frees everything. It runs first with no
  * failure, to count, then once for each n with the nth allocation failing, then with every kth
- * failing for a few k. The inputs are valid, so a call may only succeed or refuse with a 5xx problem (a json_t
- * answer may instead be NULL with no problem: the transport answers that with a 500); after each
- * run the bytes in use must be back where they started (api_mem_in_use: a leak of a counted
- * block fails here, under any build; make sanitize adds ASan's leak check for the rest). A last
- * check: a per-thread meter with a limit refuses a body's parse with a 503.
+ * failing for a few k. The inputs are valid, so a call may only succeed or refuse with a 5xx
+ * problem (a json_t answer may instead be NULL with no problem: the transport answers that with a
+ * 500); after each run the bytes in use must be back where they started (api_mem_in_use: a leak of
+ * a counted block fails here, under any build; make sanitize adds ASan's leak check for the rest).
+ * A last check: a per-thread meter with a limit refuses a body's parse with a 503.
  * usage: api_faults [MAX_N]   (0 or absent: every n up to the scenario's allocation count)
  * Prints one line "api_faults: N runs, F failures injected, no leaks" and exits 0, else 1.
  */
