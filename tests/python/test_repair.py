@@ -192,3 +192,23 @@ def test_python_cli_obj_repair(daemon, tmp_path):
         summ = s.put_complex({"vertices": v, "simplices": faces}, repair=True)["summary"]
         assert summ["repaired"] == [{"index": 4, "reason": "duplicate", "of": 1},
                                     {"index": 5, "reason": "degenerate"}]
+
+
+def test_store_keeps_the_cleaned_complex(tmp_path):
+    """The store holds the repaired complex: after a restart the levels are the same bytes, the
+    simplices the cleaned ones, and there is no report (nothing was repaired by the import)."""
+    v, posted, cleaned, _ = dirty()
+    db = f"sqlite:{tmp_path / 's.db'}"
+    d = Daemon("--store", db)
+    s = Session(d)
+    assert s.put_complex({"vertices": v, "simplices": posted, "repair": True}).status_code == 200
+    level = s.level(2, format="json").content
+    assert d.stop() == 0
+    d2 = Daemon("--store", db)
+    try:
+        s.base = s.base.replace(d.url, d2.url)
+        g = s.req("GET", "/complex").json()
+        assert g["simplices"] == cleaned and "repaired" not in g["summary"]
+        assert s.level(2, format="json").content == level
+    finally:
+        assert d2.stop() == 0
