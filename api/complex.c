@@ -13,6 +13,8 @@
 #include "details.h"
 #include "mem.h"
 #include "fill.h"
+#include "repair.h"
+#include "crease.h"
 #include "internal.h"
 #include "complex_stream.h"
 #include "jsonin.h"
@@ -371,7 +373,7 @@ int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *
                            const api_limits *lim, api_model **out, api_problem *p)
 {
     static const char *const keys[] = {"vertices", "simplices", "attributes", "diagonals",
-                                       "reoriented", "fill", "details", NULL};
+                                       "reoriented", "fill", "details", "repair", NULL};
     *out = NULL;
     if (api_only_keys(body, "", keys, p))
         return p->status;
@@ -380,6 +382,9 @@ int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *
         return api_fail_at(p, 400, "missing-field", "/vertices", "\"vertices\" is required");
     if (!ss && !json_object_get(body, "fill"))
         return api_fail_at(p, 400, "missing-field", "/simplices", "\"simplices\" is required");
+    json_t *rp = json_object_get(body, "repair");
+    if (rp && !json_is_boolean(rp))
+        return api_fail_at(p, 400, "wrong-type", "/repair", "must be true or false");
     api_input *in = api_input_new();
     if (!in)
         return api_fail(p, 503, "out-of-memory", "out of memory");
@@ -398,6 +403,8 @@ int api_put_complex_packed(const api_model *cur, json_t *body, const api_packs *
                          "\"reoriented\" describes a saved complex; it cannot go with \"fill\"");
     if (!rc && ro)
         rc = parse_reoriented(ro, packs, in, p);
+    if (!rc && json_is_true(rp)) /* drops what the core would refuse one by one (api/repair.c) */
+        rc = api_repair(in, p);
     uint32_t nv_posted = in->nv, ns_posted = in->ns;
     if (!rc && fill) /* TetGen: the tets and Steiner points are appended to `in` (api/fill.c) */
         rc = api_fill(fill, packs, in, lim, p);
@@ -467,13 +474,16 @@ json_t *api_summary(const api_model *m)
                                                "edges", (json_int_t)nme[t]));
     }
     json_t *fill = api_fill_summary(m->in);
-    return json_pack("{s:I, s:I, s:I, s:{s:I, s:I, s:I, s:I}, s:{s:I, s:I}, s:o, s:{s:I, s:I}, s:o*}",
+    json_t *sum = json_pack("{s:I, s:I, s:I, s:{s:I, s:I, s:I, s:I}, s:{s:I, s:I}, s:o, "
+                            "s:{s:I, s:I}, s:o*}",
                      "vertices", (json_int_t)n.vertices, "edges", (json_int_t)n.edges, "faces",
                      (json_int_t)n.faces, "simplices", "0", (json_int_t)n.points, "1",
                      (json_int_t)n.curves, "2", (json_int_t)n.triangles, "3",
                      (json_int_t)n.tetrahedra, "boundary", "vertices", (json_int_t)bv, "edges",
                      (json_int_t)be, "nonmanifold", nm, "extraordinary", "vertices",
                      (json_int_t)xv, "edges", (json_int_t)xe, "fill", fill);
+    api_repair_summary(m->in, sum);
+    return sum;
 }
 
 json_t *api_json_doubles(const double *x, size_t n)
@@ -519,6 +529,19 @@ json_t *api_tags_json(const api_model *m)
         json_object_set_new(tags, "sharpness", sj);
     }
     return tags;
+}
+
+/* The "tags" member of GET /complex: the tags and, when they came with one, what "crease_angle"
+ * added (not in the export: its edges are among the singular tags, which is what an import
+ * restores). */
+static json_t *tags_report_json(const api_model *m)
+{
+    json_t *t = api_tags_json(m), *ca = api_crease_json(&m->tags);
+    if (t && ca)
+        json_object_set_new(t, "crease_angle", ca);
+    else
+        json_decref(ca);
+    return t;
 }
 
 /* The "rules" member of GET /complex: the preferences and overrides as last put. */
@@ -610,7 +633,7 @@ static json_t *complex_json(api_model *m, bool classes)
                 json_array_append_new(ce, o);
             }
         json_object_set_new(j, "classes", json_pack("{s:o, s:o}", "vertices", cv, "edges", ce));
-        json_object_set_new(j, "tags", api_tags_json(m));
+        json_object_set_new(j, "tags", tags_report_json(m));
         json_object_set_new(j, "rules", api_rules_json(m));
     }
     if (j)
@@ -642,7 +665,7 @@ api_cstream *api_get_complex_stream(api_model *m, uint64_t *version, api_problem
     /* under the lock edits take: the copied points and attributes and the version agree */
     pthread_rwlock_rdlock(&m->data);
     *version = atomic_load(&m->version);
-    json_t *t = json_pack("{s:o, s:o, s:o, s:O, s:I}", "tags", api_tags_json(m), "rules",
+    json_t *t = json_pack("{s:o, s:o, s:o, s:O, s:I}", "tags", tags_report_json(m), "rules",
                           api_rules_json(m), "details", api_details_json(m), "summary", m->summary,
                           "version", (json_int_t)*version);
     char *text = t ? json_dumps(t, JSON_COMPACT) : NULL; /* {"tags":…,"version":N} */

@@ -34,6 +34,7 @@
 #define API_MAX_VALUE                   1e15          /* magnitude of coordinates and attribute values */
 #define API_MAX_EMBEDDED                8             /* embedded models of one session */
 #define API_MAX_EMBED_NAME              48            /* an embedded model's name */
+#define API_MAX_REPAIRED_LISTED         1000          /* dropped simplices a repair lists (all counted) */
 #define API_DEFAULT_MAX_EMBEDDED_VERTICES 2000000u    /* vertices of one embedded model */
 
 typedef struct api_limits {

@@ -83,6 +83,7 @@ api_input *api_input_copy(const api_input *in)
         ok = (c->reoriented = api_memdup(in->reoriented, (size_t)in->ns + 1)) != NULL;
     if (ok && in->nfill)
         ok = (c->fill = api_memdup(in->fill, in->nfill * sizeof *in->fill)) != NULL;
+    c->repaired = json_incref(in->repaired);
     if (!ok) {
         api_input_unref(c);
         return NULL;
@@ -103,6 +104,7 @@ void api_input_unref(api_input *in)
     api_free(in->diag);
     api_free(in->reoriented);
     api_free(in->fill);
+    json_decref(in->repaired);
     api_free(in);
 }
 
@@ -213,6 +215,7 @@ bool api_tags_copy(api_tags *dst, const api_tags *src)
     for (uint32_t i = 0; i < src->n; i++)
         nidx += src->size[i];
     api_tags t = {.n = src->n, .npet = src->npet, .nsh = src->nsh};
+    t.crease = src->crease;
     t.size = api_plain_malloc(src->n + 1);
     t.idx = api_plain_malloc((nidx + 1) * sizeof *t.idx);
     t.pet = api_plain_malloc((src->npet + 1) * sizeof *t.pet);

@@ -65,6 +65,8 @@ typedef struct api_input {
     api_fill_stats *fill;
     size_t reserved;          /* bytes of the C-library arrays above counted against the memory
                                * budget (api_input_reserve; given back by the last unref) */
+    struct json_t *repaired;  /* PUT /complex "repair": what was dropped (api/repair.c), shared
+                               * read-only by copies; NULL without a repair */
 } api_input;
 
 /* The rule preferences of PUT /rules (docs/API.md); zero = the default. */
@@ -78,7 +80,14 @@ typedef struct api_rules {
     sd_override *overrides;
 } api_rules;
 
-/* A sharpness of PUT /tags: a vertex or an edge and its value as given (>= 10: infinitely sharp,
+/* The last "crease_angle" of PUT /tags (api/crease.c): its edges are among the singular tags. */
+typedef struct api_crease {
+    bool set;                 /* given with the tags now in force */
+    double degrees;
+    uint32_t tagged;          /* edges over the angle (some may also have been listed) */
+} api_crease;
+
+/* A sharpness of PUT /tags: a vertex, an edge or a triangle and its value as given (>= 10: infinitely sharp,
  * applied as a singular tag). */
 typedef struct api_sharp {
     uint32_t v[3];
@@ -96,6 +105,7 @@ typedef struct api_tags {
     sd_petal_tag *pet;
     uint32_t nsh;
     api_sharp *sh;
+    api_crease crease;        /* what "crease_angle" added (api/crease.c), for the report */
 } api_tags;
 
 typedef struct api_model {
@@ -157,7 +167,7 @@ void api_model_unref(api_model *m);
 enum { API_TAG_SINGULAR, API_TAG_PETAL, API_TAG_SHARPNESS };
 int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, int *which);
 /* Whether t holds anything. */
-static inline bool api_tags_any(const api_tags *t) { return t->n || t->npet || t->nsh; }
+static inline bool api_tags_any(const api_tags *t) { return t->n || t->npet || t->nsh || t->crease.set; }
 /* A deep copy of src into *dst (arrays never NULL); false (dst empty) for lack of memory. */
 bool api_tags_copy(api_tags *dst, const api_tags *src);
 

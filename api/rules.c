@@ -11,6 +11,7 @@
 #include "details.h"
 #include "mem.h"
 #include "internal.h"
+#include "crease.h"
 #include "jsonin.h"
 #include "rows.h"
 #include <math.h>
@@ -392,16 +393,16 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
 int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *packs,
                         const api_limits *lim, api_model **out, api_problem *p)
 {
-    static const char *const keys[] = {"singular", "petals", "sharpness", NULL};
+    static const char *const keys[] = {"singular", "petals", "sharpness", "crease_angle", NULL};
     *out = NULL;
     if (api_only_keys(body, "", keys, p))
         return p->status;
     json_t *s = json_object_get(body, "singular"), *pe = json_object_get(body, "petals");
-    json_t *sh = json_object_get(body, "sharpness");
-    if (!s && !pe && !sh)
+    json_t *sh = json_object_get(body, "sharpness"), *ca = json_object_get(body, "crease_angle");
+    if (!s && !pe && !sh && !ca)
         return api_fail_at(p, 400, "missing-field", "/singular",
-                           "\"singular\" is required (or \"petals\" or \"sharpness\" alone: no "
-                           "singular simplices)");
+                           "\"singular\" is required (or \"petals\", \"sharpness\" or "
+                           "\"crease_angle\" alone: no listed singular simplices)");
     api_rows rows = {0}; /* absent: no singular simplices */
     if (s && !api_rows_open(&rows, s, packs, "/singular"))
         return api_fail_at(p, 400, "wrong-type", "/singular",
@@ -449,6 +450,8 @@ int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *pac
         rc = parse_petals(pe, cur->in ? cur->in->nv : 0, &tags, p);
     if (!rc && sh)
         rc = parse_sharpness(sh, cur->in, &tags, p);
+    if (!rc && ca) /* the edges over the angle join the listed ones (api/crease.c) */
+        rc = api_crease_tags(cur, ca, &tags, p);
     if (!rc) /* the core checks each tag is a vertex, edge or triangle of the complex */
         rc = build_from_copy(cur, &cur->rules, &tags, lim, out, p);
     api_plain_free(tags.size);

@@ -93,9 +93,13 @@ bool sdi_simplex_degenerate(const double *xyz, const uint32_t *s, int n, double 
 
 static const char *const kind_name[] = {"", "point", "edge", "triangle", "tetrahedron"};
 
-/* The validation pass: nothing is allocated but the duplicate hash. */
+/* The validation pass: nothing is allocated but the duplicate hash. With `why` (ns bytes), the
+ * refusals a repair drops are recorded instead (why[s] = SD_ERR_REPEATED, SD_ERR_DEGENERATE or
+ * SD_ERR_DUPLICATE, of[s] = the earlier kept simplex a duplicate repeats; SD_OK kept) and only
+ * the others fail: the same order of checks either way, so what one refuses the other names. */
 static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint32_t *idx,
-                          const uint8_t *size, uint32_t ns, sd_error *err)
+                          const uint8_t *size, uint32_t ns, uint8_t *why, uint32_t *of,
+                          sd_error *err)
 {
     if (nv == 0)
         return sdi_fail(err, SD_ERR_EMPTY, -1, -1, "the complex has no vertices");
@@ -126,19 +130,28 @@ static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint3
                            "simplex %u has %d vertices; a simplex has 1 to 4 (point, edge, "
                            "triangle, tetrahedron)", s, n);
         const uint32_t *t = idx + off;
+        sd_result bad = SD_OK;
         for (int i = 0; i < n; i++) {
             if (t[i] >= nv)
                 return sdi_fail(err, SD_ERR_INDEX, s, i,
                                "simplex %u: vertex index %u out of range (%u vertices)", s, t[i], nv);
-            for (int j = 0; j < i; j++)
-                if (t[j] == t[i])
-                    return sdi_fail(err, SD_ERR_REPEATED, s, i,
-                                   "simplex %u: vertex %u appears twice", s, t[i]);
+            for (int j = 0; j < i && !bad; j++)
+                if (t[j] == t[i]) {
+                    if (!why)
+                        return sdi_fail(err, SD_ERR_REPEATED, s, i,
+                                       "simplex %u: vertex %u appears twice", s, t[i]);
+                    bad = SD_ERR_REPEATED;
+                }
         }
-        if (sdi_simplex_degenerate(xyz, t, n, diag))
-            return sdi_fail(err, SD_ERR_DEGENERATE, s, -1,
-                           "simplex %u: degenerate %s (zero or near-zero %s)", s, kind_name[n],
-                           n == 2 ? "length" : n == 3 ? "area" : "volume");
+        if (!bad && sdi_simplex_degenerate(xyz, t, n, diag)) {
+            if (!why)
+                return sdi_fail(err, SD_ERR_DEGENERATE, s, -1,
+                               "simplex %u: degenerate %s (zero or near-zero %s)", s, kind_name[n],
+                               n == 2 ? "length" : n == 3 ? "area" : "volume");
+            bad = SD_ERR_DEGENERATE;
+        }
+        if (why)
+            why[s] = (uint8_t)bad;
         off += n;
     }
 
@@ -146,19 +159,35 @@ static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint3
     if (!sdi_hash_init(m, &h, ns))
         return sdi_fail_nomem(err, m);
     off = 0;
-    for (uint32_t s = 0; s < ns; s++) {
+    for (uint32_t s = 0; s < ns; off += size[s++]) {
+        if (why && why[s])
+            continue;
         uint32_t k[4];
         sdi_key(k, idx + off, size[s]);
         uint32_t prev = sdi_hash_get_or_put(&h, k, s);
-        if (prev != UINT32_MAX) {
+        if (prev != UINT32_MAX && why) {
+            why[s] = SD_ERR_DUPLICATE;
+            if (of)
+                of[s] = prev;
+        } else if (prev != UINT32_MAX) {
             sdi_hash_free(m, &h);
             return sdi_fail(err, SD_ERR_DUPLICATE, s, -1,
                            "simplex %u repeats simplex %u (same vertices)", s, prev);
         }
-        off += size[s];
     }
     sdi_hash_free(m, &h);
     return SD_OK;
+}
+
+sd_result sd_complex_check(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
+                           size_t ns, const sd_allocator *a, uint8_t *why, uint32_t *of,
+                           sd_error *err)
+{
+    if (!why || nv > UINT32_MAX || ns > UINT32_MAX)
+        return sdi_fail(err, SD_ERR_ARG, -1, -1, "sd_complex_check: no `why`, or over 2^32 items");
+    sd_mem m;
+    sdi_mem_init(&m, a, 0);
+    return validate(&m, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, why, of, err);
 }
 
 static uint32_t edge_id(sd_hash *h, sd_topo *t, uint32_t a, uint32_t b)
@@ -280,7 +309,7 @@ sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const 
                           const uint8_t *size, uint32_t ns, sd_error *err)
 {
     sd_mem *m = &c->mem;
-    sd_result r = validate(m, xyz, nv, idx, size, ns, err);
+    sd_result r = validate(m, xyz, nv, idx, size, ns, NULL, NULL, err);
     if (r)
         return r;
 

@@ -113,6 +113,18 @@ sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, co
                            size_t ns, const sd_options *opt, sd_error *err);
 void sd_complex_free(sd_complex *c);
 
+/* What sd_complex_new would refuse in each simplex, for a caller that drops those simplices
+ * instead (PUT /complex "repair"): why[s] (ns bytes, caller-owned) = SD_OK (kept),
+ * SD_ERR_REPEATED (a vertex twice), SD_ERR_DEGENERATE (sd_complex_new's tolerance: no other
+ * test) or SD_ERR_DUPLICATE (the vertices, in any order, of an earlier kept simplex; of[s] =
+ * that simplex when `of`, ns entries, is not NULL). A simplex that is a face of another is kept
+ * (sd_complex_new absorbs it). The other refusals (no vertices or simplices, a coordinate, an
+ * arity, an index out of range) are returned as sd_complex_new returns them. `a`: the allocator
+ * of the one scratch hash (NULL = libc). Builds nothing. */
+sd_result sd_complex_check(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
+                           size_t ns, const sd_allocator *a, uint8_t *why, uint32_t *of,
+                           sd_error *err);
+
 /* Force the major diagonal of the tetrahedron given as input simplex `simplex` to its
  * opposite-edge pair `pair` (0: edges 01|23, 1: 02|13, 2: 03|12 in the input's vertex order),
  * overriding 001 Algorithm 2's choice. Drops computed levels >= 1 and, if the pair changes, the

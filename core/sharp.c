@@ -23,7 +23,7 @@
  * boundary or singular crease); every sharper mask reads a subset of its columns (the crease
  * neighbours are points of rho), so a row keeps its columns and only its weights change.
  * Base rules other than these (solid interiors, G2, per-simplex choices) follow only a vertex
- * sharpness (the corner blend); edges do not change their rule (DECISIONS 41).
+ * sharpness (the corner blend); edges do not change their rule (DECISIONS 43).
  */
 #include "internal.h"
 #include <math.h>

@@ -267,7 +267,7 @@ static bool edge_patterns(build *B, sd_csrb *S)
         if (sharp && er[e] != SD_RULE_LOOP && er[e] != SD_RULE_SOLID_BOUNDARY)
             sharp = NULL;
         if (sharp && (petal || flat))
-            sharp = NULL; /* Ying-Zorin's rows at singular vertices win (DECISIONS 41) */
+            sharp = NULL; /* Ying-Zorin's rows at singular vertices win (DECISIONS 43) */
         const sdi_surf_edge *surf = ue < ue_end && ue->e == e ? ue++ : NULL;
         if (surf && er[e] != SD_RULE_SOLID)
             surf = NULL;

@@ -83,6 +83,7 @@ void config_usage(FILE *f)
     char exts[128];
     fprintf(f, "usage: subdivd [options]            run the daemon\n"
                "       subdivd refine INPUT.json --level L [--tags T.json] [--rules R.json]\n"
+               "               [--repair] [--crease-angle DEG]\n"
                "               [--format F] [--parts P] [--slice nx,ny,nz,d] [--attributes A]\n"
                "               [--colormap NAME:min:max] [--octahedra tets|polyhedra]\n"
                "               [--names true|false] [--compress none|zlib]\n"

@@ -72,13 +72,14 @@ static int report(const api_problem *p, const char *what)
     return p->status == 413 || p->status == 422 || p->status == 400 ? 1 : 3;
 }
 
-/* Apply one change handler to *m from a JSON file. */
+/* Apply one change handler to *m from a JSON file (NULL: an empty body), with the members of
+ * `extra` (borrowed; may be NULL: the command line's --repair, --crease-angle) added. */
 static int apply_file(api_model **m, const char *path, change_fn_t fn, const api_limits *lim,
-                      const char *what)
+                      const char *what, json_t *extra)
 {
     size_t len;
-    char *buf = read_file(path, lim->max_body_bytes, &len);
-    if (!buf)
+    char *buf = path ? read_file(path, lim->max_body_bytes, &len) : NULL;
+    if (path && !buf)
         return 2;
     api_problem p = {0};
     api_packs packs = {0};
@@ -86,9 +87,13 @@ static int apply_file(api_model **m, const char *path, change_fn_t fn, const api
     const char *const *packed = fn == api_put_complex ? api_complex_packed
                                 : fn == api_put_tags  ? api_tags_packed
                                                       : NULL;
-    json_t *b = packed ? api_parse_body_packed(buf, len, 0, packed, API_PACK_MIN_BYTES, &packs, &p)
-                       : api_parse_body(buf, len, 0, &p);
+    json_t *b = !path    ? json_object()
+                : packed ? api_parse_body_packed(buf, len, 0, packed, API_PACK_MIN_BYTES, &packs,
+                                                 &p)
+                         : api_parse_body(buf, len, 0, &p);
     api_free(buf);
+    if (b && extra && json_is_object(b))
+        json_object_update(b, extra);
     api_model *next = NULL;
     if (b && fn == api_put_complex)
         api_put_complex_packed(*m, b, &packs, lim, &next, &p);
@@ -107,7 +112,8 @@ static int apply_file(api_model **m, const char *path, change_fn_t fn, const api
 
 /* The command line of `subdivd refine`. */
 typedef struct refine_args {
-    const char *input, *out, *tags, *rules, *level;
+    const char *input, *out, *tags, *rules, *level, *crease_angle;
+    int repair;               /* --repair: PUT /complex's "repair" */
     api_level_query q;        /* --format (else from -o's extension), --parts, ... */
 } refine_args;
 
@@ -129,8 +135,11 @@ static int parse_refine_args(int argc, char **argv, refine_args *a)
                            : !strcmp(o, "--octahedra") ? &a->q.octahedra
                            : !strcmp(o, "--names") ? &a->q.names
                            : !strcmp(o, "--compress") ? &a->q.compress
+                           : !strcmp(o, "--crease-angle") ? &a->crease_angle
                                                        : NULL;
-        if (dst) {
+        if (!strcmp(o, "--repair"))
+            a->repair = 1;
+        else if (dst) {
             if (i + 1 >= argc) {
                 fprintf(stderr, "subdivd refine: %s needs a value\n", o);
                 return 2;
@@ -211,12 +220,30 @@ static int refine_main(int argc, char **argv)
     api_model *m = api_model_new(NULL, NULL, 0, &e);
     if (!m)
         return 3;
-    if (a.rules)
-        rc = apply_file(&m, a.rules, api_put_rules, &lim, a.rules);
+    json_t *repair = json_pack("{s:b}", "repair", a.repair), *crease = NULL;
+    if (a.crease_angle) { /* a number here; its range is PUT /tags's (422) */
+        char *end;
+        double deg = strtod(a.crease_angle, &end);
+        if (!*a.crease_angle || *end) {
+            fprintf(stderr, "subdivd refine: --crease-angle needs a number of degrees, not %s\n",
+                    a.crease_angle);
+            rc = 2;
+        }
+        crease = json_pack("{s:f}", "crease_angle", deg);
+    }
+    if (!rc && a.rules)
+        rc = apply_file(&m, a.rules, api_put_rules, &lim, a.rules, NULL);
     if (!rc)
-        rc = apply_file(&m, a.input, api_put_complex, &lim, a.input);
-    if (!rc && a.tags)
-        rc = apply_file(&m, a.tags, api_put_tags, &lim, a.tags);
+        rc = apply_file(&m, a.input, api_put_complex, &lim, a.input, a.repair ? repair : NULL);
+    if (!rc && (a.tags || crease))
+        rc = apply_file(&m, a.tags, api_put_tags, &lim, a.tags ? a.tags : "--crease-angle", crease);
+    json_decref(repair);
+    json_decref(crease);
+    if (!rc && a.repair && m->summary && json_object_get(m->summary, "repaired_count"))
+        fprintf(stderr, "subdivd refine: repaired: %lld simplices dropped\n",
+                (long long)json_integer_value(json_object_get(m->summary, "repaired_count")));
+    if (!rc && crease)
+        fprintf(stderr, "subdivd refine: crease angle: %u edges tagged\n", m->tags.crease.tagged);
     out_stream *os = NULL;
     const out_format *fmt;
     uint64_t version;
@@ -331,11 +358,11 @@ static int deform_main(int argc, char **argv)
     api_model *m = api_model_new(NULL, NULL, 0, &e);
     if (!m)
         return 3;
-    int rc = rules ? apply_file(&m, rules, api_put_rules, &lim, rules) : 0;
+    int rc = rules ? apply_file(&m, rules, api_put_rules, &lim, rules, NULL) : 0;
     if (!rc)
-        rc = apply_file(&m, input, api_put_complex, &lim, input);
+        rc = apply_file(&m, input, api_put_complex, &lim, input, NULL);
     if (!rc && tags)
-        rc = apply_file(&m, tags, api_put_tags, &lim, tags);
+        rc = apply_file(&m, tags, api_put_tags, &lim, tags, NULL);
     size_t len;
     char *text = rc ? NULL : read_file(embed, lim.max_body_bytes, &len);
     json_t *body = NULL;

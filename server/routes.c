@@ -14,6 +14,7 @@
 #include "../api/delta.h"
 #include "../api/details.h"
 #include "../api/complex_stream.h"
+#include "../api/crease.h"
 #include "../api/embedded.h"
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
@@ -590,8 +591,11 @@ static int op_complex(const api_model *cur, json_t *body, const api_packs *packs
 static int op_tags(const api_model *cur, json_t *body, const api_packs *packs,
                    const api_limits *lim, api_model **next, json_t *answer, api_problem *p)
 {
-    (void)answer;
-    return api_put_tags_packed(cur, body, packs, lim, next, p);
+    int rc = api_put_tags_packed(cur, body, packs, lim, next, p);
+    json_t *ca = rc ? NULL : api_crease_json(&(*next)->tags);
+    if (ca) /* what "crease_angle" tagged */
+        json_object_set_new(answer, "crease_angle", ca);
+    return rc;
 }
 
 static int op_rules(const api_model *cur, json_t *body, const api_packs *packs,

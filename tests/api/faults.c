@@ -1,15 +1,15 @@
 /* faults — every allocation of the api/ request path failed in turn (api_mem_fail_at, api/mem.h).
  *
- * One scenario runs the entry points a session goes through — parse a body, PUT complex, rules and
- * tags, open and drain level 1 in every format (with a slice in some), stats, GET complex, an edit
- * (a level-1 move among them) and its deltas, an analysis, a matrix, a refinement — and frees
- * everything. It runs first with no failure, to
- * count, then once for each n with the nth allocation failing, then with every kth failing for a
- * few k. The inputs are valid, so a call may only succeed or refuse with a 5xx problem (a json_t
- * answer may instead be NULL with no problem: the transport answers that with a 500); after each
- * run the bytes in use must be back where they started (api_mem_in_use: a leak of a counted
- * block fails here, under any build; make sanitize adds ASan's leak check for the rest). A last
- * check: a per-thread meter with a limit refuses a body's parse with a 503.
+ * One scenario runs the entry points a session goes through — parse a body, PUT complex (and a
+ * repaired one apart), rules and tags (with a crease angle), open and drain level 1 in every
+ * format (with a slice in some), stats, GET complex, an edit (a level-1 move among them) and its
+ * deltas, an analysis, a matrix, a refinement — and frees everything. It runs first with no
+ * failure, to count, then once for each n with the nth allocation failing, then with every kth
+ * failing for a few k. The inputs are valid, so a call may only succeed or refuse with a 5xx
+ * problem (a json_t answer may instead be NULL with no problem: the transport answers that with a
+ * 500); after each run the bytes in use must be back where they started (api_mem_in_use: a leak of
+ * a counted block fails here, under any build; make sanitize adds ASan's leak check for the rest).
+ * A last check: a per-thread meter with a limit refuses a body's parse with a 503.
  * usage: api_faults [MAX_N]   (0 or absent: every n up to the scenario's allocation count)
  * Prints one line "api_faults: N runs, F failures injected, no leaks" and exits 0, else 1.
  */
@@ -28,7 +28,11 @@ static const char COMPLEX[] =
 static const char RULES[] = "{\"solid_scheme\":\"averaged\",\"overrides\":[{\"simplex\":[1],"
                             "\"rule\":\"G1\"},{\"simplex\":[1,2],\"rule\":\"N1\",\"dimension\":2}]}";
 static const char RULES0[] = "{\"solid_scheme\":\"averaged\",\"nonmanifold_default\":\"G1\"}";
-static const char TAGS[] = "{\"singular\":[[5],[1,4]]}";
+static const char TAGS[] = "{\"singular\":[[5],[1,4]],\"crease_angle\":10}";
+/* a repair (api/repair.c): a duplicate tetrahedron with a diagonal, a repeated vertex */
+static const char REPAIR[] =
+    "{\"vertices\":[[0,0,0],[1,0,0],[0,1,0],[0,0,1],[1,1,0]],\"simplices\":[[0,1,2,3],"
+    "[3,2,1,0],[1,2,4],[4,4,2]],\"diagonals\":[[1,0]],\"repair\":true}";
 static const char EDIT[] = "{\"moves\":[{\"index\":1,\"position\":[1,0.1,0]},{\"level\":1,"
                            "\"index\":9,\"position\":[0.5,0.2,0]}],\"attributes\":"
                            "{\"h\":[{\"index\":2,\"value\":5}]}}";
@@ -199,6 +203,11 @@ static void scenario(void)
     if (!m)
         return;
     change(&m, RULES0, api_put_rules, "api_put_rules (no complex)");
+    api_model *r = api_model_new(NULL, NULL, 0, &e); /* a repair, on a model of its own */
+    if (r) {
+        change(&r, REPAIR, api_put_complex, "api_put_complex (repair)");
+        api_model_unref(r);
+    }
     change(&m, COMPLEX, api_put_complex, "api_put_complex");
     if (m->c) {
         change(&m, RULES, api_put_rules, "api_put_rules");
@@ -276,8 +285,8 @@ static void meter_limit(void)
 int main(int argc, char **argv)
 {
     uint64_t max = argc > 1 ? strtoull(argv[1], NULL, 10) : 0, runs = 0;
-    int want = 4 + 1 + 3 + 2 + 2; /* changes, stats, views, edit and refine, the edit's two
-                                   * deltas; and a level per format */
+    int want = 5 + 1 + 3 + 2 + 2; /* changes (a repair among them), stats, views, edit and
+                                   * refine, the edit's two deltas; and a level per format */
     for (const out_format *f = out_formats; f->name; f++)
         want++;
     run(0, 0); /* the scenario must pass as it is */

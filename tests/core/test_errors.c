@@ -172,3 +172,36 @@ TEST(errors_allocation_failures)
     }
     mesh_free(&m);
 }
+
+/* sd_complex_check: the refusals sd_complex_new makes one simplex at a time are recorded, in the
+ * same order of tests (a repeated vertex before degeneracy, duplicates among kept ones only);
+ * the refusals of the whole input stay errors. */
+TEST(errors_check_for_repair)
+{
+    mesh m = {0};
+    mesh_v(&m, 0, 0, 0);
+    mesh_v(&m, 1, 0, 0);
+    mesh_v(&m, 2, 0, 0);
+    mesh_v(&m, 0, 1, 0);
+    mesh_s(&m, 3, 0, 1, 3);   /* 0 kept */
+    mesh_s(&m, 3, 0, 1, 2);   /* 1 collinear */
+    mesh_s(&m, 3, 3, 1, 0);   /* 2 repeats 0 */
+    mesh_s(&m, 3, 1, 1, 2);   /* 3 repeated vertex (also degenerate: the repeat is named) */
+    mesh_s(&m, 3, 2, 1, 0);   /* 4 repeats 1, which was dropped: degenerate itself */
+    mesh_s(&m, 2, 0, 1);      /* 5 an edge of 0: kept (absorbed by sd_complex_new) */
+    mesh_s(&m, 2, 1, 0);      /* 6 repeats 5 */
+    uint8_t why[7];
+    uint32_t of[7];
+    sd_error err;
+    CHECK(sd_complex_check(m.xyz, m.nv, m.idx, m.sz, m.ns, NULL, why, of, &err) == SD_OK);
+    CHECK(why[0] == SD_OK && why[1] == SD_ERR_DEGENERATE && why[2] == SD_ERR_DUPLICATE &&
+          of[2] == 0 && why[3] == SD_ERR_REPEATED && why[4] == SD_ERR_DEGENERATE &&
+          why[5] == SD_OK && why[6] == SD_ERR_DUPLICATE && of[6] == 5);
+    CHECK(try(&m, NULL, &err) == SD_ERR_DEGENERATE && err.item == 1); /* without repair */
+    m.idx[m.ni - 1] = 9;
+    CHECK(sd_complex_check(m.xyz, m.nv, m.idx, m.sz, m.ns, NULL, why, NULL, &err) == SD_ERR_INDEX &&
+          err.item == 6);
+    CHECK(sd_complex_check(m.xyz, m.nv, m.idx, m.sz, 0, NULL, why, NULL, &err) == SD_ERR_EMPTY);
+    CHECK(sd_complex_check(m.xyz, m.nv, m.idx, m.sz, m.ns, NULL, NULL, NULL, &err) == SD_ERR_ARG);
+    mesh_free(&m);
+}

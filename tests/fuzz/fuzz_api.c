@@ -40,6 +40,12 @@ static const char *const seeds[] = {
     "\"dimension\":2},{\"simplex\":[3],\"rule\":\"G1\"},{\"simplex\":[2],\"rule\":\"G2\"},"
     "{\"simplex\":[1,3],\"rule\":\"N2\",\"pair\":[[1,3,0],[1,3,2]]}]}",
     "{\"singular\":[]}",
+    /* repair (api/repair.c): a duplicate, a degenerate and a repeated-vertex simplex, a diagonal on
+     * a dropped tetrahedron; crease_angle (api/crease.c) alone and with listed tags */
+    "{\"vertices\":[[0,0,0],[1,0,0],[0,1,0],[0,0,1],[1,1,1],[2,0,0]],\"simplices\":[[0,1,2,3],"
+    "[3,2,1,0],[0,1,5],[1,2,3,4],[4,4,1],[0,1]],\"diagonals\":[[1,2],[3,0]],\"repair\":true}",
+    "{\"crease_angle\":30}",
+    "{\"singular\":[[0,1]],\"crease_angle\":0,\"petals\":[]}",
     "{\"singular\":[[0],[0,1],[0,1,2]]}",
     "{\"singular\":[[2]],\"petals\":[{\"vertex\":0,\"triangle\":[0,4,3],\"kind\":\"concave\"},"
     "{\"vertex\":0,\"triangle\":[0,1,7],\"kind\":\"smooth\"}]}",

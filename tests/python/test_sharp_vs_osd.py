@@ -201,7 +201,7 @@ def test_sharpness_equals_opensubdiv(tmp_path, osd_loop, case, chaikin):
     if chaikin:
         # Chaikin's mean of the other semi-sharp edges at a vertex is a float sum, which
         # OpenSubdiv takes in its own order of the edges around the vertex (we take them in
-        # edge order; docs/DECISIONS.md 41): with three or more at a vertex a child sharpness
+        # edge order; docs/DECISIONS.md 43): with three or more at a vertex a child sharpness
         # can differ in its last float bit, so such meshes agree to float precision only ...
         assert max(worst) < 1e-6, worst
         # ... and exactly without them

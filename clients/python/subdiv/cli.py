@@ -37,7 +37,7 @@ from .errors import ProblemError, SubdivError, TransportError
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_DAEMON, EXIT_NOT_IMPLEMENTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
 LEVEL_OPTS = ("parts", "slice", "attributes", "colormap", "octahedra", "names", "compress")
 JOB_KEYS = {"input", "output", "outputs", "level", "tags", "rules", "fill", "singular_groups", "options",
-            "name", "save_complex", "pvd"}
+            "name", "save_complex", "pvd", "repair", "crease_angle"}
 
 
 class UsageError(Exception):
@@ -285,6 +285,16 @@ def run_job(client, job, progress, base=pathlib.Path(".")):
         tags = {"singular": tags}
     if tags is None and group_tags:
         tags = {"singular": group_tags}
+    if job.get("repair") not in (None, False, True):
+        raise UsageError("repair is true or false")
+    if job.get("repair"):  # dropped simplices are reported (docs/API.md, "repair")
+        body["repair"] = True
+    crease = job.get("crease_angle")
+    if crease is not None:
+        if isinstance(crease, bool) or not isinstance(crease, (int, float)):
+            raise UsageError("crease_angle is a number of degrees")
+        tags = dict(tags or {})
+        tags["crease_angle"] = crease
     name = job.get("name") or pathlib.Path(inp).name
     progress.begin(name)
     results = []
@@ -293,8 +303,14 @@ def run_job(client, job, progress, base=pathlib.Path(".")):
             s.put_rules(rules)
         answer = s.put_complex(body, progress=progress)
         fills = answer.get("summary", {}).get("fill")
+        repaired = answer.get("summary", {}).get("repaired_count")
         if tags is not None:
-            s.put_tags(body=tags)
+            creased = s.put_tags(body=tags).get("crease_angle")
+            if creased is not None:
+                progress.note(f"{name}: crease angle {creased['degrees']:g}: "
+                              f"{creased['tagged']} edges tagged")
+        if repaired is not None:
+            progress.note(f"{name}: repaired: {repaired} simplices dropped")
         if job.get("save_complex"):
             sc = job["save_complex"]
             with open(sc if os.path.isabs(sc) else base / sc, "w") as f:
@@ -355,6 +371,10 @@ def _job_from_args(args):
         job["singular_groups"] = [g for g in args.singular_groups.split(",") if g]
     if args.save_complex:
         job["save_complex"] = args.save_complex
+    if args.repair:
+        job["repair"] = True
+    if args.crease_angle is not None:
+        job["crease_angle"] = args.crease_angle
     return job
 
 
@@ -543,6 +563,10 @@ def build_parser():
     for k in LEVEL_OPTS:
         r.add_argument("--" + k, help=f"level option {k} (docs/OUTPUTS.md)")
     r.add_argument("--save-complex", help="write GET /complex (after tags) to this file")
+    r.add_argument("--repair", action="store_true", help="drop degenerate, repeated-vertex and "
+                   "duplicate simplices instead of refusing the mesh (reported)")
+    r.add_argument("--crease-angle", type=float, metavar="DEG", help="tag as creases the surface "
+                   "edges whose dihedral angle exceeds DEG degrees (0..180)")
     r.set_defaults(fn=cmd_refine)
     b = sub.add_parser("batch", parents=[common], help="run a job file")
     b.add_argument("jobfile")

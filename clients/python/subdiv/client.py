@@ -278,8 +278,12 @@ class Session:
 
     # the complex, tags and rules
     def put_complex(self, body: JSON, *, if_match: Union[bool, Version, None] = None,
-                    progress: Optional[Progress] = None) -> JSON:
-        """PUT /complex (vertices, simplices, attributes, diagonals, fill): {"version", "summary"}."""
+                    progress: Optional[Progress] = None, repair: bool = False) -> JSON:
+        """PUT /complex (vertices, simplices, attributes, diagonals, fill): {"version", "summary"}.
+        `repair=True` drops degenerate, repeated-vertex and duplicate simplices instead of a 422;
+        summary["repaired"] lists them ({"index", "reason"}, at most 1000; "repaired_count")."""
+        if repair:
+            body = dict(body, repair=True)
         return self._change("PUT", "/complex", body, if_match, progress)
 
     def get_complex(self) -> JSON:
@@ -295,16 +299,21 @@ class Session:
     def put_tags(self, singular: Optional[Sequence[Sequence[int]]] = None, *,
                  petals: Optional[Sequence[JSON]] = None,
                  sharpness: Optional[Sequence[JSON]] = None, body: Optional[JSON] = None,
-                 if_match: Union[bool, Version, None] = None) -> JSON:
+                 if_match: Union[bool, Version, None] = None,
+                 crease_angle: Optional[float] = None) -> JSON:
         """PUT /tags with {"singular": singular, "petals": petals, "sharpness": sharpness} (or a
         whole `body`); petals: [{"vertex": v, "triangle": [a, b, c], "kind": "convex" |
-        "concave" | "smooth"}]; sharpness: [{"simplex": [a, b] or [v], "value": s}]."""
+        "concave" | "smooth"}]; sharpness: [{"simplex": [a, b] or [v], "value": s}].
+        `crease_angle` (degrees, 0..180) also tags every surface edge whose dihedral angle
+        exceeds it; the answer's "crease_angle" says {"degrees", "tagged"}."""
         if body is None:
             body = {"singular": singular or []}
             if petals is not None:
                 body["petals"] = petals
             if sharpness is not None:
                 body["sharpness"] = sharpness
+            if crease_angle is not None:
+                body["crease_angle"] = crease_angle
         return self._change("PUT", "/tags", body, if_match, None)
 
     def put_rules(self, rules: Optional[JSON] = None, *,
