@@ -41,6 +41,10 @@ CHECKS = [
     "gltf_loader",       # the GLB in three.js's GLTFLoader: node/mesh per part, one POSITION, extras, linear COLOR_0
     "crease_tag",        # clicking a control edge with the crease tool: PUT /tags 200, tagged
     "crease_colour",     # ... its rule turns to the crease's (curve) and so does its colour
+    "crease_sharpness",  # the same edge at sharpness 0.5: one PUT /tags keeping the other tags; level changes
+    "sharpness_colour",  # colour by sharpness: that edge in the ramp colour, untagged edges grey, a legend
+    "crease_method",     # the crease-method selector: PUT /rules crease_method chaikin, and back
+    "crease_angle",      # creases over 40° / 100°: the edges tagged = those computed in the test; unticking restores
     "nonmanifold_rule",  # G1 for a vertex: 501 shown in words (until issue 4), else its colour
     "solid_scheme",      # a rule the daemon has (averaged) changes the level
     "drag_point",        # dragging a control point: version advances, GLB and picture change

@@ -373,6 +373,7 @@ const pickableVertex = (pred) => page.evaluate((predSrc) => {
 }, pred.toString());
 
 // 8. tag a crease by clicking a control edge: its rule (and colour) turns to the crease's
+let creased = null; // the edge step 8 tagged, where it is on screen, and the level's geometry
 await step(['crease_tag', 'crease_colour'], async () => {
   await page.check('input[name=tool][value=crease]');
   const candidates = await pickableEdges((e) => e.rule === 'solid-boundary' && !e.singular);
@@ -396,6 +397,7 @@ await step(['crease_tag', 'crease_colour'], async () => {
     `PUT /tags ${status}; edge ${pick.edge.vertices} tagged: ${tagged}; errors: ${errs.map((e) => e.text).join(' | ')}`);
   // the rule of the edge and of the level's vertices along it change, and so does the colour drawn
   const x = pick.at.x - canvasBox.x, y = pick.at.y - canvasBox.y;
+  creased = { edge: [...pick.edge.vertices], at: pick.at, x, y, plain: before.shown.geometry, singular: after.shown.geometry };
   const cb = coloursNear(pngBefore, x, y), ca = coloursNear(pngAfter, x, y);
   const want = edgeAfter.rule;
   check('crease_colour', edgeAfter.rule !== pick.edge.rule && edgeAfter.rule === 'curve' &&
@@ -404,6 +406,137 @@ await step(['crease_tag', 'crease_colour'], async () => {
     `edge rule ${pick.edge.rule} -> ${edgeAfter.rule}; level vertices on curve rules ${before.shown.rules.curve || 0} -> ` +
     `${after.shown.rules.curve || 0}; colour distance to ${want} at the edge ${cb[want]} -> ${ca[want]}, ` +
     `to ${pick.edge.rule} before ${cb[pick.edge.rule]}`);
+});
+
+// 8b. semi-sharp creases (issue 19): the edge of step 8 set to sharpness 0.5 by a click with the
+// sharpness field at 0.5 (one PUT /tags that keeps every other tag), its colour when colouring
+// by sharpness, the crease method selector, and creases by dihedral angle (the edges the page
+// tags equal those computed here from the complex, and go away again).
+const sameEdge = (a, b) => [...a].sort((x, y) => x - y).join() === [...b].sort((x, y) => x - y).join();
+// sRGB of the page's sharpness ramp (docs/WEB.md) at 0.5, and its grey for no sharpness
+const SHARP_AT_05 = [254, 225, 138], NO_SHARP = [154, 154, 154];
+const rgbNear = (png, x, y, c, r = 2) => {
+  let best = 1e9;
+  for (let dy = -r; dy <= r; dy++)
+    for (let dx = -r; dx <= r; dx++) {
+      const px = png.at(Math.round(x) + dx, Math.round(y) + dy);
+      best = Math.min(best, Math.abs(px[0] - c[0]) + Math.abs(px[1] - c[1]) + Math.abs(px[2] - c[2]));
+    }
+  return best;
+};
+// Edges with exactly two surface faces of one kind (maximal triangles, or boundary faces of the
+// tetrahedra) whose normals, the faces oriented alike across the edge, are more than deg apart.
+function dihedralEdges(complex, deg) {
+  const X = complex.vertices, faces = new Map(), count = new Map();
+  const k3 = (t) => [...t].sort((a, b) => a - b).join();
+  for (const s of complex.simplices)
+    if (s.length === 4)
+      for (const t of [[s[0], s[1], s[2]], [s[0], s[1], s[3]], [s[0], s[2], s[3]], [s[1], s[2], s[3]]])
+        count.set(k3(t), [(count.get(k3(t))?.[0] || 0) + 1, t]);
+  const all = [...complex.simplices.filter((s) => s.length === 3).map((t) => [t, 0]),
+    ...[...count.values()].filter(([n]) => n === 1).map(([, t]) => [t, 1])];
+  for (const [t, kind] of all)
+    for (let j = 0; j < 3; j++) {
+      const a = Math.min(t[j], t[(j + 1) % 3]), b = Math.max(t[j], t[(j + 1) % 3]);
+      const e = `${a},${b}`;
+      if (!faces.has(e)) faces.set(e, []);
+      faces.get(e).push({ c: t[(j + 2) % 3], kind });
+    }
+  const sub = (p, q) => [X[p][0] - X[q][0], X[p][1] - X[q][1], X[p][2] - X[q][2]];
+  const cross = (u, v) => [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+  const out = [];
+  for (const [e, f] of faces) {
+    if (f.length !== 2 || f[0].kind !== f[1].kind) continue;
+    const [a, b] = e.split(',').map(Number);
+    const n1 = cross(sub(b, a), sub(f[0].c, a)), n2 = cross(sub(a, b), sub(f[1].c, b));
+    const dot = n1[0] * n2[0] + n1[1] * n2[1] + n1[2] * n2[2];
+    const ang = Math.atan2(Math.hypot(...cross(n1, n2)), dot) * 180 / Math.PI;
+    if (ang > deg) out.push(e);
+  }
+  return out.sort();
+}
+await step(['crease_sharpness', 'sharpness_colour', 'crease_method', 'crease_angle'], async () => {
+  if (!creased) throw new Error('step 8 tagged no edge');
+  await page.check('input[name=tool][value=crease]');
+  const before = await snap();
+  await page.fill('#tag-sharpness', '0.5');
+  const req = page.waitForRequest((r) => r.url().endsWith('/tags') && r.method() === 'PUT');
+  const resp = page.waitForResponse((r) => r.url().endsWith('/tags') && r.request().method() === 'PUT');
+  const n = before.messages.length;
+  await page.mouse.click(creased.at.x, creased.at.y);
+  const body = JSON.parse((await req).postData());
+  const status = (await resp).status();
+  await idle(`window.subdivd.snapshot().shown.version > ${before.version}`);
+  const after = await snap();
+  const errs = await errorsSince(n);
+  const others = before.tags.filter((t) => !sameEdge(t, creased.edge));
+  const sentSharp = (body.sharpness || []).filter((e) => sameEdge(e.simplex, creased.edge));
+  const held = after.sharpness.find((e) => sameEdge(e.simplex, creased.edge));
+  const cls = after.edgeRules.find((e) => sameEdge(e.vertices, creased.edge));
+  check('crease_sharpness', status === 200 && !errs.length && sentSharp.length === 1 && sentSharp[0].value === 0.5 &&
+    JSON.stringify(body.singular) === JSON.stringify(others) && held?.value === 0.5 && !cls.singular &&
+    JSON.stringify(after.tags) === JSON.stringify(others) &&
+    after.shown.geometry !== creased.singular && after.shown.geometry !== creased.plain,
+    `PUT /tags ${status} ${JSON.stringify(body)}; held ${JSON.stringify(held)}; edge singular ${cls?.singular}; ` +
+    `geometry ${creased.plain} (untagged) / ${creased.singular} (singular) / ${after.shown.geometry} (0.5); errors ${errs.map((e) => e.text).join(' | ')}`);
+
+  // colour by sharpness: the edge in the ramp's colour at 0.5, an untagged edge grey
+  const pngRule = await shot('07b-sharp-rule-colour.png');
+  await page.selectOption('#color-mode', 'sharpness');
+  await idle();
+  const pngSharp = await shot('07c-sharp-colour.png');
+  const plainEdges = await pickableEdges((e) => e.rule === 'solid-boundary' && !e.singular);
+  const canvasBox = await (await page.$('#view canvas')).boundingBox();
+  const other = plainEdges.find((c) => !sameEdge(c.edge.vertices, creased.edge) &&
+    rgbNear(pngSharp, c.at.x - canvasBox.x, c.at.y - canvasBox.y, NO_SHARP) < 40);
+  const legend = await page.$eval('#legend', (e) => e.textContent);
+  const dNow = rgbNear(pngSharp, creased.x, creased.y, SHARP_AT_05), dRule = rgbNear(pngRule, creased.x, creased.y, SHARP_AT_05);
+  check('sharpness_colour', dNow < 60 && dRule > dNow + 40 && !!other && /sharpness/.test(legend),
+    `distance to the 0.5 colour at the edge: ${dNow} (by sharpness) vs ${dRule} (by rule); a grey untagged edge: ${!!other}; legend “${legend}”`);
+  await page.selectOption('#color-mode', 'rule');
+  await idle();
+
+  // the crease method: PUT /rules with crease_method chaikin, and back
+  const r1 = page.waitForResponse((r) => r.url().endsWith('/rules') && r.request().method() === 'PUT');
+  await page.selectOption('#rule-crease', 'chaikin');
+  const st1 = (await r1).status();
+  await idle(`window.subdivd.snapshot().rules.crease_method === 'chaikin'`);
+  const ch = await snap();
+  await page.selectOption('#rule-crease', 'uniform');
+  await idle(`window.subdivd.snapshot().rules.crease_method === 'uniform'`);
+  const un = await snap();
+  check('crease_method', st1 === 200 && ch.rules.crease_method === 'chaikin' && un.rules.crease_method === 'uniform' &&
+    ch.rules.solid_scheme === before.rules.solid_scheme && un.version > ch.version,
+    `PUT /rules ${st1}; crease_method ${ch.rules.crease_method} then ${un.rules.crease_method}`);
+
+  // creases over 40°: exactly the edges computed here join the tags; 100° takes those away
+  // (and adds what is over 100); unticking leaves the tags as they were
+  const base = await snap();
+  const complex = await page.evaluate(() => window.subdivd.model.complex);
+  const baseKeys = new Set(base.tags.map((t) => [...t].sort((a, b) => a - b).join()));
+  const want40 = dihedralEdges(complex, 40), want100 = dihedralEdges(complex, 100);
+  const added = (s) => s.tags.filter((t) => t.length === 2).map((t) => [...t].sort((a, b) => a - b).join())
+    .filter((k) => !baseKeys.has(k)).sort();
+  const expectAdded = (w) => w.filter((k) => !baseKeys.has(k)).sort();
+  const rq = page.waitForRequest((r) => r.url().endsWith('/tags') && r.method() === 'PUT');
+  await page.check('#crease-angle-on');
+  const sent = JSON.parse((await rq).postData());
+  await idle(`window.subdivd.snapshot().creaseAngle !== null`);
+  const a40 = await snap();
+  await page.$eval('#crease-angle', (e) => { e.value = '100'; e.dispatchEvent(new Event('input')); e.dispatchEvent(new Event('change')); });
+  await idle(`window.subdivd.snapshot().creaseAngle?.degrees === 100`);
+  const a100 = await snap();
+  await page.uncheck('#crease-angle-on');
+  await idle('window.subdivd.snapshot().creaseAngle === null');
+  const off = await snap();
+  const note = await page.$eval('#tags-note', (e) => e.textContent);
+  check('crease_angle', sent.crease_angle === 40 && want40.length > 0 &&
+    a40.creaseAngle.tagged === want40.length && JSON.stringify(added(a40)) === JSON.stringify(expectAdded(want40)) &&
+    a100.creaseAngle.tagged === want100.length && JSON.stringify(added(a100)) === JSON.stringify(expectAdded(want100)) &&
+    JSON.stringify(off.tags) === JSON.stringify(base.tags) && JSON.stringify(off.sharpness) === JSON.stringify(base.sharpness),
+    `over 40°: ${want40.length} computed, ${a40.creaseAngle?.tagged} tagged, added ${added(a40).length} (want ${expectAdded(want40).length}); ` +
+    `over 100°: ${want100.length} computed, ${a100.creaseAngle?.tagged} tagged; after unticking ${off.tags.length} tags (before ${base.tags.length}); note “${note}”`);
+  await page.fill('#tag-sharpness', '10');
 });
 
 // 9. choose a non-manifold rule for a vertex. Until the daemon implements non-default rules

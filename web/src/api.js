@@ -105,8 +105,9 @@ export class Session {
     return this.json('Reading the control complex', 'GET', '/complex');
   }
 
-  putTags(singular, what = 'Tagging') {
-    return this.json(what, 'PUT', '/tags', { body: { singular } });
+  // tags: {singular, petals?, sharpness?, crease_angle?} (a PUT replaces every tag).
+  putTags(tags, what = 'Tagging') {
+    return this.json(what, 'PUT', '/tags', { body: tags });
   }
 
   putRules(rules, what = 'Changing the rules') {

@@ -70,3 +70,23 @@ export function viridisCss() {
     `rgb(${Math.round(r * 255)} ${Math.round(g * 255)} ${Math.round(b * 255)}) ${(i * 12.5).toFixed(1)}%`);
   return `linear-gradient(to right, ${stops.join(', ')})`;
 }
+
+// Sharpness (PUT /tags "sharpness"; 10 and over, and singular tags, are infinitely sharp): a ramp
+// from pale yellow (just above 0) through orange to dark red (10), simplices without any sharpness
+// in grey. sRGB stops at s = 0, 2.5, 5, 7.5, 10.
+const SHARP_STOPS = [[1.0, 0.93, 0.6], [0.99, 0.7, 0.3], [0.95, 0.42, 0.13], [0.8, 0.15, 0.1], [0.45, 0.0, 0.05]];
+export const NO_SHARPNESS = new THREE.Color('#9a9a9a');
+
+// A THREE.Color (linear working space) for a sharpness s > 0 (Infinity allowed).
+export function sharpnessColor(s) {
+  const t = Math.min(Math.max(s, 0), 10) / 2.5;
+  const i = Math.min(Math.floor(t), SHARP_STOPS.length - 2), f = t - i;
+  const a = SHARP_STOPS[i], b = SHARP_STOPS[i + 1];
+  return new THREE.Color().setRGB(a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]), THREE.SRGBColorSpace);
+}
+
+export function sharpnessCss() {
+  const stops = SHARP_STOPS.map(([r, g, b], i) =>
+    `rgb(${Math.round(r * 255)} ${Math.round(g * 255)} ${Math.round(b * 255)}) ${i * 25}%`);
+  return `linear-gradient(to right, ${stops.join(', ')})`;
+}

@@ -19,7 +19,7 @@ import { Session, ApiError } from './api.js';
 import { EXAMPLES } from './examples.js';
 import { parseMeshFile, BINARY_TYPES } from './meshfile.js';
 import { Viewer } from './viewer.js';
-import { RULE_NAMES, RULE_DESCRIPTIONS, ruleFamily, ruleHex, viridisCss } from './colors.js';
+import { RULE_NAMES, RULE_DESCRIPTIONS, ruleFamily, ruleHex, viridisCss, sharpnessCss } from './colors.js';
 
 const $ = (id) => document.getElementById(id);
 const FIRST_LEVEL = 2;
@@ -28,13 +28,22 @@ const MAX_CELLS = 2e6; // the slider stops before a level would have more top ce
 
 const TOOL_HINTS = {
   move: 'Drag a round control point to reshape it · slide the level · tag creases with the tools on the left',
-  corner: 'Click a control vertex to tag it as a corner (click again to untag)',
-  crease: 'Click a control edge to tag it as a crease (click again to untag)',
-  surface: 'Click a control triangle to tag it as an embedded surface (click again to untag)',
+  corner: 'Click a control vertex to tag it as a corner of the sharpness set in the panel (click again to untag)',
+  crease: 'Click a control edge to tag it as a crease of the sharpness set in the panel (click again to untag)',
+  surface: 'Click a control triangle to tag it as an embedded surface of the sharpness set in the panel (click again to untag)',
   rule: 'Click a control vertex or edge, then choose its non-manifold rule in the panel',
 };
 
 const key = (s) => [...s].sort((a, b) => a - b).join(',');
+
+// What a PUT /tags must send to keep every tag the complex has (a PUT replaces them all).
+function tagsOf(complex) {
+  const t = complex.tags || {};
+  const out = { singular: (t.singular || []).map((s) => [...s]) };
+  if (t.petals?.length) out.petals = t.petals.map((p) => ({ ...p }));
+  if (t.sharpness?.length) out.sharpness = t.sharpness.map((e) => ({ simplex: [...e.simplex], value: e.value }));
+  return out;
+}
 
 // The finest level the slider offers and why it stops there: segments double, triangles
 // quadruple, a tetrahedron splits into 4 tetrahedra + 1 octahedron and an octahedron into 8 + 6
@@ -137,7 +146,8 @@ class App {
       const c = this.model.complex;
       await this.session.open();
       await this.session.putComplex({ vertices: c.vertices, simplices: c.simplices, attributes: c.attributes });
-      if (c.tags?.singular?.length) await this.session.putTags(c.tags.singular, 'Restoring the tags');
+      const t = tagsOf(c);
+      if (t.singular.length || t.petals || t.sharpness) await this.session.putTags(t, 'Restoring the tags');
       await this.session.putRules(c.rules, 'Restoring the rules');
       await this.#refreshComplex();
       this.#listen();
@@ -224,6 +234,8 @@ class App {
     this.undoStack = [];
     this.redoStack = [];
     this.selected = null;
+    this.angleTagged = null;
+    $('crease-angle-on').checked = false;
     $('override').hidden = true;
     this.level = Math.min(this.level, this.model.maxLevel);
     $('level').max = this.model.maxLevel;
@@ -238,6 +250,7 @@ class App {
     const sel = $('color-mode');
     sel.replaceChildren(new Option('rule family', 'rule'));
     for (const a of Object.keys(ranges)) sel.append(new Option(`attribute: ${a}`, `attr:${a}`));
+    sel.append(new Option('sharpness (control cage)', 'sharpness'));
     sel.append(new Option('plain', 'plain'));
     if (this.color.mode === 'attribute' && !(this.color.attr in ranges)) this.color.mode = 'rule';
     if (attribute && attribute in ranges && this.color.mode === 'attribute') this.#setColorAttr(attribute);
@@ -779,6 +792,22 @@ class App {
       box.append(title, bar, labels);
       return;
     }
+    if (this.color.mode === 'sharpness') {
+      const title = document.createElement('div');
+      title.textContent = 'control edges and vertices by sharpness';
+      const bar = document.createElement('div');
+      bar.className = 'bar';
+      bar.style.background = sharpnessCss();
+      const labels = document.createElement('div');
+      labels.className = 'bar-labels';
+      for (const v of ['0', '5', '≥ 10 (singular)']) {
+        const s = document.createElement('span');
+        s.textContent = v;
+        labels.append(s);
+      }
+      box.append(title, bar, labels);
+      return;
+    }
     if (this.color.mode !== 'rule' || !this.model) return;
     // the families present: the cage's vertices and edges, and the shown level's vertices
     const seen = new Set();
@@ -960,32 +989,98 @@ class App {
 
   // ---- tags -------------------------------------------------------------------------------
 
-  async toggleTag(simplex) {
-    const kind = ['corner', 'crease', 'embedded-surface triangle'][simplex.length - 1];
-    const cur = this.model.complex.tags?.singular || [];
-    const k = key(simplex);
-    const has = cur.some((t) => key(t) === k);
-    const next = has ? cur.filter((t) => key(t) !== k) : [...cur, simplex];
-    await this.setTags(next, `${has ? 'Untagging' : 'Tagging'} the ${kind} ${simplex.join('–')}`);
+  // The sharpness the tag tools give (the field under them): a number > 0, Infinity from 10 on
+  // (infinitely sharp: a singular tag), or null (and a message) when the field is not usable.
+  #toolSharpness() {
+    const s = Number($('tag-sharpness').value);
+    if (!Number.isFinite(s) || s <= 0) {
+      this.error(`The sharpness must be a number above 0 (10 or more is infinitely sharp); got “${$('tag-sharpness').value}”.`);
+      return null;
+    }
+    return s >= 10 ? Infinity : s;
   }
 
-  async setTags(list, what) {
+  // A click of the corner, crease or embedded-surface tool: the simplex gets the tools'
+  // sharpness (a singular tag when infinite, a `sharpness` entry otherwise); a click on a
+  // simplex that already has that sharpness untags it.
+  async toggleTag(simplex) {
+    const kind = ['corner', 'crease', 'embedded-surface triangle'][simplex.length - 1];
+    const want = this.#toolSharpness();
+    if (want === null) return;
+    const t = tagsOf(this.model.complex);
+    const k = key(simplex);
+    const had = t.singular.some((s) => key(s) === k) ? Infinity
+      : (t.sharpness || []).find((e) => key(e.simplex) === k)?.value;
+    t.singular = t.singular.filter((s) => key(s) !== k);
+    if (t.sharpness) t.sharpness = t.sharpness.filter((e) => key(e.simplex) !== k);
+    const name = `the ${kind} ${simplex.join('–')}`;
+    let what;
+    if (had !== undefined && (had === want || Math.abs(had - want) < 1e-6)) {
+      what = `Untagging ${name}`;
+    } else {
+      if (want === Infinity) t.singular.push(simplex);
+      else (t.sharpness ||= []).push({ simplex, value: want });
+      const s = want === Infinity ? 'infinitely sharp' : `sharpness ${want}`;
+      what = had === undefined ? `Tagging ${name} (${s})` : `Setting ${name} to ${s}`;
+    }
+    await this.setTags(t, what);
+  }
+
+  // tags: a PUT /tags body, or a list of singular simplices (no sharpness, no petals).
+  async setTags(tags, what) {
+    const body = Array.isArray(tags) ? { singular: tags } : tags;
+    let answer = null;
     try {
       await this.run(async () => {
-        await this.session.putTags(list, what);
+        answer = await this.session.putTags(body, what);
         await this.#refreshComplex();
       });
     } catch (e) {
       this.error(e);
-      return;
+      return null;
     }
     await this.requestLevel();
+    return answer;
+  }
+
+  // Creases by dihedral angle (PUT /tags "crease_angle"): the edges it tags join the singular
+  // tags. The page remembers which ones it added, so moving the slider (or unticking the box)
+  // first takes those away again; tags set by hand are kept.
+  async applyCreaseAngle() {
+    if (!this.model) return;
+    const on = $('crease-angle-on').checked, deg = Number($('crease-angle').value);
+    const t = tagsOf(this.model.complex);
+    const mine = this.angleTagged && this.angleTagged.model === this.model ? this.angleTagged.keys : new Set();
+    t.singular = t.singular.filter((s) => !mine.has(key(s)));
+    const before = new Set(t.singular.map(key));
+    if (!on) {
+      this.angleTagged = null;
+      if (mine.size || this.model.complex.tags?.crease_angle) await this.setTags(t, 'Removing the creases tagged by angle');
+      this.#tagsNote();
+      return;
+    }
+    t.crease_angle = deg;
+    const answer = await this.setTags(t, `Tagging the edges sharper than ${deg}° as creases`);
+    if (!answer) return;
+    const added = (this.model.complex.tags?.singular || []).map(key).filter((k) => !before.has(k));
+    this.angleTagged = { model: this.model, keys: new Set(added) };
+    this.info(`${answer.crease_angle?.tagged ?? added.length} edges have a dihedral angle over ${deg}°; ${added.length} of them were not tagged already.`);
   }
 
   #tagsNote() {
-    const t = this.model?.complex.tags?.singular || [];
+    const tags = this.model?.complex.tags || {};
+    const t = tags.singular || [], sh = tags.sharpness || [];
     const n = [1, 2, 3].map((k) => t.filter((s) => s.length === k).length);
-    $('tags-note').textContent = t.length ? `Tagged: ${n[0]} corners, ${n[1]} crease edges, ${n[2]} surface triangles.` : 'No tags.';
+    const parts = [];
+    if (t.length) parts.push(`${n[0]} corners, ${n[1]} crease edges, ${n[2]} surface triangles`);
+    const semi = sh.filter((e) => e.value > 0 && e.value < 10);
+    if (semi.length) {
+      const v = semi.map((e) => e.value);
+      const lo = Math.min(...v), hi = Math.max(...v);
+      parts.push(`${semi.length} semi-sharp (sharpness ${lo === hi ? lo : `${lo}–${hi}`})`);
+    }
+    if (tags.crease_angle) parts.push(`${tags.crease_angle.tagged} edges over ${tags.crease_angle.degrees}°`);
+    $('tags-note').textContent = parts.length ? `Tagged: ${parts.join('; ')}.` : 'No tags.';
   }
 
   // ---- rules ------------------------------------------------------------------------------
@@ -996,6 +1091,7 @@ class App {
     $('rule-solid').value = r.solid_scheme || 'box';
     $('rule-surface').value = r.surface_weights || 'warren';
     $('rule-nms').value = r.nonmanifold_surface || 'chang-qin';
+    $('rule-crease').value = r.crease_method || 'uniform';
   }
 
   async changeRules(patch, what) {
@@ -1220,7 +1316,12 @@ class App {
       r.addEventListener('change', (ev) => ev.target.checked && this.setTool(ev.target.value));
     $('undo').addEventListener('click', () => this.undo());
     $('redo').addEventListener('click', () => this.redo());
-    $('clear-tags').addEventListener('click', () => this.model && this.setTags([], 'Removing every tag'));
+    $('clear-tags').addEventListener('click', () => {
+      if (!this.model) return;
+      $('crease-angle-on').checked = false;
+      this.angleTagged = null;
+      this.setTags([], 'Removing every tag');
+    });
 
     const rule = (id, field, label) => $(id).addEventListener('change', (ev) =>
       this.model && this.changeRules({ [field]: ev.target.value }, `Choosing ${label} ${ev.target.value}`));
@@ -1228,6 +1329,10 @@ class App {
     rule('rule-solid', 'solid_scheme', 'the solid scheme');
     rule('rule-surface', 'surface_weights', 'the surface weights');
     rule('rule-nms', 'nonmanifold_surface', 'the non-manifold surface rules');
+    rule('rule-crease', 'crease_method', 'the crease method');
+    $('crease-angle').addEventListener('input', (ev) => { $('crease-angle-value').textContent = `${ev.target.value}°`; });
+    $('crease-angle').addEventListener('change', () => $('crease-angle-on').checked && this.applyCreaseAngle());
+    $('crease-angle-on').addEventListener('change', () => this.applyCreaseAngle());
     $('override-rule').addEventListener('change', () => this.#overrideFields());
     $('override-apply').addEventListener('click', () => this.applyOverride());
 
@@ -1270,6 +1375,8 @@ class App {
       maxLevel: this.model?.maxLevel ?? null,
       shown: this.shown && { ...this.shown, geometry: this.#geometryHash() },
       tags: c?.tags?.singular ?? [],
+      sharpness: c?.tags?.sharpness ?? [],
+      creaseAngle: c?.tags?.crease_angle ?? null,
       rules: c?.rules ?? null,
       vertexRules: c?.classes.vertices.map((v) => v.rule) ?? [],
       edgeRules: c?.classes.edges.map((e) => ({ vertices: e.vertices, rule: e.rule, singular: e.singular })) ?? [],

@@ -21,7 +21,9 @@ import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { LineSegments2 } from 'three/addons/lines/LineSegments2.js';
 import { LineSegmentsGeometry } from 'three/addons/lines/LineSegmentsGeometry.js';
 import { LineMaterial } from 'three/addons/lines/LineMaterial.js';
-import { ruleColor } from './colors.js';
+import { ruleColor, sharpnessColor, NO_SHARPNESS } from './colors.js';
+
+const simplexKey = (s) => [...s].sort((a, b) => a - b).join(',');
 
 export const BACKGROUND = 0x1e2229;
 const PLAIN = { points: 0xffffff, curves: 0xffa94d, surfaces: 0xc9d6c4, solids: 0xb8c7e0 };
@@ -272,6 +274,26 @@ export class Viewer {
   setColorMode(mode) {
     this.colorMode = mode;
     this.applyColors();
+    if (this.cage) {
+      this.#fillCageColors();
+      this.cage.colAttr.needsUpdate = true;
+      this.cage.edgeLines.geometry.setColors(this.cage.edgeColors);
+      this.requestRender();
+    }
+  }
+
+  // The cage's vertex and edge colours: by rule family, or (colour mode "sharpness") by the
+  // sharpness of each vertex and edge (grey without one).
+  #fillCageColors() {
+    const { vrule, edges, sharp, colors, edgeColors: ec } = this.cage;
+    const bySharp = this.colorMode === 'sharpness';
+    const colorOf = (simplex, rule) => {
+      if (!bySharp) return ruleColor(rule);
+      const s = sharp.get(simplexKey(simplex));
+      return s === undefined ? NO_SHARPNESS : sharpnessColor(s);
+    };
+    vrule.forEach((r, i) => colorOf([i], r).toArray(colors, 3 * i));
+    edges.forEach((e, k) => { const c = colorOf(e.v, e.rule); c.toArray(ec, 6 * k); c.toArray(ec, 6 * k + 3); });
   }
 
   applyColors() {
@@ -637,8 +659,15 @@ export class Viewer {
       const tri = s.length === 3 ? [s] : s.length === 4 ? [[s[0], s[1], s[2]], [s[0], s[1], s[3]], [s[0], s[2], s[3]], [s[1], s[2], s[3]]] : [];
       for (const t of tri) faces.set([...t].sort((a, b) => a - b).join(','), t);
     }
-    const tags = complex.tags?.singular || [];
-    this.cage = { pos, vrule, edges, faces: [...faces.values()], tags };
+    // tagged simplices (drawn with a halo): singular ones and those with a sharpness; `sharp`
+    // maps each to its sharpness (singular: Infinity) for colouring by sharpness
+    const singular = complex.tags?.singular || [];
+    const semi = (complex.tags?.sharpness || []).filter((e) => e.value > 0);
+    const tags = [...singular, ...semi.map((e) => e.simplex)];
+    const sharp = new Map();
+    for (const e of semi) sharp.set(simplexKey(e.simplex), e.value >= 10 ? Infinity : e.value);
+    for (const t of singular) sharp.set(simplexKey(t), Infinity);
+    this.cage = { pos, vrule, edges, faces: [...faces.values()], tags, sharp };
 
     // a vertex only in tetrahedra and on none of their boundary triangles is interior
     const interior = new Uint8Array(nv).fill(1), faceCount = new Map();
@@ -656,7 +685,7 @@ export class Viewer {
     this.cage.interior = interior;
 
     const colors = new Float32Array(nv * 3);
-    vrule.forEach((r, i) => ruleColor(r).toArray(colors, 3 * i));
+    this.cage.colors = colors;
     const posAttr = new THREE.BufferAttribute(pos, 3);
     const colAttr = new THREE.BufferAttribute(colors, 3);
     const pointsOf = (mat) => {
@@ -689,10 +718,11 @@ export class Viewer {
     this.cage.tagPoints.renderOrder = 9;
 
     const ec = new Float32Array(edges.length * 6);
-    edges.forEach((e, k) => { const c = ruleColor(e.rule); c.toArray(ec, 6 * k); c.toArray(ec, 6 * k + 3); });
+    this.cage.colAttr = colAttr;
+    this.cage.edgeColors = ec;
+    this.#fillCageColors();
     this.cage.edgeLines = new LineSegments2(new LineSegmentsGeometry(), new LineMaterial({ linewidth: 2, vertexColors: true }));
     this.cage.edgeLines.frustumCulled = false;
-    this.cage.edgeColors = ec;
     this.cage.tagLines = new LineSegments2(new LineSegmentsGeometry(), new LineMaterial({ linewidth: 7, color: TAG }));
     this.cage.tagLines.renderOrder = -1;
 
