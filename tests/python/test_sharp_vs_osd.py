@@ -244,6 +244,16 @@ def cube_tets(n, rng):
     return xyz, tets
 
 
+def face_counts(tets):
+    """How many of the tetrahedra each triangle (sorted vertex ids) is a face of."""
+    count = {}
+    for t in tets:
+        for k in range(4):
+            f = tuple(sorted(t[:k] + t[k + 1:]))
+            count[f] = count.get(f, 0) + 1
+    return count
+
+
 def test_solid_boundary_with_sharpness_equals_its_surface(tmp_path):
     """The boundary surface of a box-spline solid follows the surface rules (001 Sec. 3.6), so
     with sharp boundary edges and a sharp boundary vertex its points equal those of the same
@@ -251,11 +261,7 @@ def test_solid_boundary_with_sharpness_equals_its_surface(tmp_path):
     from scipy.spatial import cKDTree
     rng = random.Random(11)
     xyz, tets = cube_tets(2, rng)
-    count = {}
-    for t in tets:
-        for k in range(4):
-            f = tuple(sorted(t[:k] + t[k + 1:]))
-            count[f] = count.get(f, 0) + 1
+    count = face_counts(tets)
     bnd = [f for f, c in count.items() if c == 1]
     es = edges_of(bnd)
     sharp = [(a, b, round(rng.uniform(0.3, 3.7), 3)) for a, b in rng.sample(es, 14)]
@@ -358,11 +364,7 @@ def test_sharp_embedded_surface(tmp_path, s):
     previous level from the two other complexes' matrices; after that the plain solid's rows."""
     rng = random.Random(2)
     xyz, tets = cube_tets(3, rng)
-    count = {}
-    for t in tets:
-        for k in range(4):
-            f = tuple(sorted(t[:k] + t[k + 1:]))
-            count[f] = count.get(f, 0) + 1
+    count = face_counts(tets)
 
     def inner(v):  # vertex ids: x + 4 y + 16 z
         return v // 16 == 1 and 1 <= v % 4 <= 2 and 1 <= v // 4 % 4 <= 2
