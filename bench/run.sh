@@ -18,7 +18,7 @@ D=build/bench-data
 $PY bench/make_mesh.py torus 100 100 > $D/torus.txt
 $PY bench/make_mesh.py cubes 12 > $D/cubes12.txt
 WARM="glibc.malloc.mmap_max=0:glibc.malloc.trim_threshold=4294967295"
-best() { sed -E 's/.*seconds_best=([0-9.]+).*/\1/'; }
+best() { sed -E 's/.* seconds_best=([0-9.]+).*/\1/'; }
 median() { sort -n | awk '{a[NR] = $1} END {print a[int((NR + 1) / 2)]}'; }
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
 echo "== surface: uniform Loop (loop weights) of torus 100x100 (20000 triangles), $ROUNDS rounds"
@@ -43,6 +43,10 @@ for L in 1 2 3 4; do
     done
 done
 rm -f "$T"
+# The figures above are batch refinement (the edit index made by the first edit, timed apart as
+# edit_seconds_best); the daemon builds it with each level (bench --edits):
+echo "== surface, the daemon's way (edit index with the levels): warm L4, 1 thread"
+echo "warm L4  $(GLIBC_TUNABLES=$WARM build/bench --edits --reps $REPS -j 1 -w loop $D/torus.txt 4)"
 echo "== solid: box-spline scheme on 12^3 cubes (10368 tetrahedra), one thread"
 for L in 1 2 3; do
     echo "cold L$L  $(build/bench --reps 1 $D/cubes12.txt $L)"

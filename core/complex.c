@@ -425,7 +425,8 @@ static sd_result check_options(const sd_options *o, sd_error *err)
     } f[] = {{"surface_weights", o->surface_weights},         /* SD_WEIGHTS_* */
              {"nonmanifold_default", o->nonmanifold_default}, /* SD_NM_* */
              {"nonmanifold_surface", o->nonmanifold_surface}, /* SD_NMSURF_* */
-             {"solid_scheme", o->solid_scheme}};              /* SD_SOLID_* */
+             {"solid_scheme", o->solid_scheme},               /* SD_SOLID_* */
+             {"edit_index", o->edit_index}};                  /* SD_EDIT_INDEX_* */
     for (size_t i = 0; i < sizeof f / sizeof *f; i++)
         if (f[i].value != 0 && f[i].value != 1)
             return sdi_fail(err, SD_ERR_ARG, -1, -1, "unknown %s %d", f[i].name, f[i].value);

@@ -240,9 +240,23 @@ static bool reserve_lists(sd_mem *m, sdi_escratch *s, uint32_t cap, int nc)
 /* The maps, and lists with room for what a one-point move recomputes at each level: about
  * (2^(l+1) + 1)^d points at level l for cells of dimension d (at most the level's points, at
  * most 2^16): later edits grow them as needed. */
+/* The by-column index of every computed level's S (sd_options.edit_index LAZY leaves it to here). */
+static sd_result ensure_index(sd_complex *c, sd_error *err)
+{
+    sd_result r = SD_OK;
+    for (int l = 0; !r && l + 1 < c->nlevels; l++)
+        r = sdi_csrb_index(&c->mem, &c->lv[l]->S, err);
+    if (!r)
+        c->edit_indexed = true; /* and levels made from now on index theirs (levels.c) */
+    return r;
+}
+
 sd_result sd_complex_prepare_edits(sd_complex *c, sd_error *err)
 {
     edit E = {.c = c, .m = &c->mem, .top = c->nlevels - 1};
+    sd_result r = ensure_index(c, err);
+    if (r)
+        return r;
     if (!ensure_maps(&E))
         return sdi_fail_nomem(err, &c->mem);
     const sd_topo *t0 = &c->lv[0]->t;
@@ -597,6 +611,10 @@ static sd_result run(sd_complex *c, int ch, op *ops, size_t n, const double *val
     if (need >= c->nlevels && !sd_complex_level(c, need, err)) {
         sdi_drop_levels(c, old_nl);
         return err->code;
+    }
+    if ((rc = ensure_index(c, err))) { /* nothing changed yet: all or nothing */
+        sdi_drop_levels(c, old_nl);
+        return rc;
     }
     edit E = {.c = c, .m = m, .ch = ch, .nc = c->lv[0]->ch[ch].ncomp, .top = c->nlevels - 1,
               .values = values};

@@ -438,6 +438,8 @@ struct sd_complex {
                                 * of nin at in_src[SD_CELL_TETRA]; no octahedra at level 0) */
     uint8_t *tet_swapped;      /* level-0 tet reoriented (slots 2,3 swapped) */
     int nlevels;               /* computed levels */
+    bool edit_indexed;         /* an edit was prepared: levels made later index S with them
+                                * (sd_options.edit_index LAZY) */
     /* the singular tags and per-simplex rules as given (singular.c re-applies both to level 0) */
     size_t ntags;
     uint32_t *tag_at;          /* vertex, edge or face id of level 0 */

@@ -101,7 +101,15 @@ typedef struct sd_options {
                               * (as sd_complex_set_diagonal takes it) kept as given, or -1: chosen
                               * by 001 Algorithm 2 against the given ones (a refinement keeps its
                               * untouched tetrahedra's). Read by sd_complex_new only. */
+    int edit_index;          /* SD_EDIT_INDEX_*: when the by-column index of each level's S that
+                              * edits use (sd_complex_move and friends) is made */
 } sd_options;
+
+/* SD_EDIT_INDEX_WITH_LEVELS (the default): with each level, so the first edit costs what later
+ * ones do (a service's live editing). SD_EDIT_INDEX_LAZY: by sd_complex_prepare_edits or the
+ * first edit, whichever comes first — batch refinement that never edits skips its time and
+ * memory (docs/BENCHMARKS.md). Levels and edits give the same bytes either way. */
+enum { SD_EDIT_INDEX_WITH_LEVELS = 0, SD_EDIT_INDEX_LAZY = 1 };
 
 typedef struct sd_complex sd_complex;
 

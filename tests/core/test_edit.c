@@ -247,17 +247,21 @@ static sd_result random_call(sd_complex *c, const mesh *m, int L, bool levels, s
     return sd_complex_move(c, ch, n, at, v, rep, NULL);
 }
 
-static void random_edits(bool levels)
+/* lazy: the complex edited is made with sd_options.edit_index LAZY (the fresh builds it is
+ * compared with are not), so the first edit makes the by-column index. */
+static void random_edits(bool levels, bool lazy)
 {
-    const int L = 3, rounds = 300;
+    const int L = 3, rounds = lazy ? 100 : 300;
     for (int sh = 0; sh < 5; sh++) {
         mesh m = {0};
         const sd_options *o;
         shape(sh, &m, &o);
+        sd_options lo = o ? *o : (sd_options){0};
+        lo.edit_index = SD_EDIT_INDEX_LAZY;
         double *attr = malloc(m.nv * 2 * sizeof *attr);
         for (size_t i = 0; i < 2 * m.nv; i++)
             attr[i] = urand();
-        sd_complex *c = mesh_complex(&m, o, NULL);
+        sd_complex *c = mesh_complex(&m, lazy ? &lo : o, NULL);
         CHECK(c && sd_complex_add_channel(c, attr, 2, NULL) == 1 && sd_complex_level(c, L, NULL));
         for (int round = 0; round < rounds; round++) {
             bool check = round % 3 == 0; /* the report against a before/after comparison */
@@ -295,13 +299,20 @@ static void random_edits(bool levels)
 TEST(edit_random_is_a_fresh_build)
 {
     /* control points only (sd_complex_edit and level-0 moves): no drift, to the last bit */
-    random_edits(false);
+    random_edits(false, false);
 }
 
 TEST(edit_random_with_details_is_a_fresh_build)
 {
     /* moves at levels 0..3: the same bytes as a new complex given the same offsets */
-    random_edits(true);
+    random_edits(true, false);
+}
+
+TEST(edit_lazy_index_is_a_fresh_build)
+{
+    /* levels built without the edit index (batch refinement), then edited at every level,
+     * Ying-Zorin rule rebuilds included: the first edit makes the index, results unchanged */
+    random_edits(true, true);
 }
 
 /* ---- detail offsets ----------------------------------------------------------------------- */
