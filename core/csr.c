@@ -384,10 +384,8 @@ typedef struct ucol {
 } ucol;
 
 /* Pass 1 (ub = NULL) counts each column's bytes; pass 2 writes the codes (column c's block at
- * ubase[c >> SDI_UBLK]). Rows in order; only columns clo <= c < clo + span (a column's codes
- * depend on its own earlier rows only, so parts by column ranges write the same bytes). */
-static void index_pass(const sd_csrb *s, ucol *u, uint8_t *ub, const uint64_t *ubase, uint32_t *rchk,
-                       uint32_t clo, uint32_t span)
+ * ubase[c >> SDI_UBLK]). Rows in order. */
+static void index_pass(const sd_csrb *s, ucol *u, uint8_t *ub, const uint64_t *ubase, uint32_t *rchk)
 {
     const uint32_t b1 = s->nvr, b2 = s->nvr + s->ner;
     size_t k = 0;
@@ -401,8 +399,6 @@ static void index_pass(const sd_csrb *s, ucol *u, uint8_t *ub, const uint64_t *u
         const uint32_t *exp = opp ? s->eopp[r - b1] : s->col + k;
         for (uint32_t i = 0; i < n; i++) {
             const uint32_t c = i < nimp ? imp[i] : exp[i - nimp];
-            if (c - clo >= span)
-                continue; /* another part's column */
             ucol *x = &u[c];
             uint64_t v = ucode(r, c, x->last);
             x->last = r;
@@ -424,24 +420,7 @@ static void index_pass(const sd_csrb *s, ucol *u, uint8_t *ub, const uint64_t *u
     }
 }
 
-typedef struct ipass {
-    const sd_csrb *s;
-    ucol *u;
-    uint8_t *ub;
-    const uint64_t *ubase;
-    uint32_t *rchk;
-} ipass;
-
-/* One part of a pass: a contiguous range of columns; part 0 also writes the row checkpoints. */
-static void ipass_part(void *arg, uint32_t part, uint32_t nparts)
-{
-    const ipass *a = arg;
-    const uint64_t nc = a->s->ncols;
-    const uint32_t lo = (uint32_t)(nc * part / nparts), hi = (uint32_t)(nc * (part + 1) / nparts);
-    index_pass(a->s, a->u, a->ub, a->ubase, part == 0 ? a->rchk : NULL, lo, hi - lo);
-}
-
-sd_result sdi_csrb_index(sd_mem *m, sd_csrb *s, int threads, sd_error *err)
+sd_result sdi_csrb_index(sd_mem *m, sd_csrb *s, sd_error *err)
 {
     if (s->ub)
         return SD_OK;
@@ -456,11 +435,7 @@ sd_result sdi_csrb_index(sd_mem *m, sd_csrb *s, int threads, sd_error *err)
         goto nomem;
     for (uint32_t j = 0; j < nc; j++)
         u[j] = (ucol){UINT32_MAX, 0};
-    /* each column's bytes, and the row checkpoints; both passes read every row, so a part
-     * needs a good share of the nonzeros to pay (sdi_par's minimum, per part) */
-    const uint64_t work = (uint64_t)s->nrows * 2;
-    ipass a = {.s = s, .u = u, .rchk = rchk};
-    sdi_par(threads, work, ipass_part, &a);
+    index_pass(s, u, NULL, NULL, rchk); /* each column's bytes, and the row checkpoints */
     uint64_t total = 0;
     for (uint32_t j = 0; j <= nc; j++) {
         if ((j & ((1u << SDI_UBLK) - 1)) == 0)
@@ -477,8 +452,7 @@ sd_result sdi_csrb_index(sd_mem *m, sd_csrb *s, int threads, sd_error *err)
         goto nomem;
     for (uint32_t j = 0; j < nc; j++)
         u[j] = (ucol){UINT32_MAX, urel[j]};
-    a = (ipass){.s = s, .u = u, .ub = ub, .ubase = ubase};
-    sdi_par(threads, work, ipass_part, &a);
+    index_pass(s, u, ub, ubase, NULL);
     s->ub = ub;
     s->ubase = ubase;
     s->urel = urel;

@@ -245,7 +245,7 @@ static sd_result ensure_index(sd_complex *c, sd_error *err)
 {
     sd_result r = SD_OK;
     for (int l = 0; !r && l + 1 < c->nlevels; l++)
-        r = sdi_csrb_index(&c->mem, &c->lv[l]->S, c->opt.threads, err);
+        r = sdi_csrb_index(&c->mem, &c->lv[l]->S, err);
     if (!r)
         c->edit_indexed = true; /* and levels made from now on index theirs (levels.c) */
     return r;

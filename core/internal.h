@@ -316,7 +316,7 @@ void sdi_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int 
  * (a row that lists j twice comes twice). */
 #define SDI_UBLK 16
 #define SD_RCHK 8u
-sd_result sdi_csrb_index(sd_mem *m, sd_csrb *s, int threads, sd_error *err);
+sd_result sdi_csrb_index(sd_mem *m, sd_csrb *s, sd_error *err);
 typedef struct sdi_users {
     const uint8_t *p, *end;
     uint32_t j, r;

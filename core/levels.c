@@ -125,7 +125,7 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
     if (!r)
         r = ensure_faces(c, l, err); /* the rules may have been built before, the faces dropped */
     if (!r && (c->opt.edit_index != SD_EDIT_INDEX_LAZY || c->edit_indexed))
-        r = sdi_csrb_index(m, &p->S, c->opt.threads, err); /* kept with S, so it may exist from before */
+        r = sdi_csrb_index(m, &p->S, err); /* kept with S, so it may exist from before */
     if (r)
         return r;
     sd_level *lv = sdi_calloc(m, 1, sizeof *lv);
