@@ -295,7 +295,7 @@ int api_build_model(api_input *in, const api_rules *rules, const api_tags *tags,
                        const api_limits *lim, api_model **out, api_problem *p)
 {
     sd_error e = {0};
-    api_model *m = api_model_new(in, rules, lim->max_session_bytes, &e);
+    api_model *m = api_model_new(in, rules, lim->max_session_bytes, lim->batch, &e);
     /* overrides name simplices: kept by a change of tags or rules, not by a new complex (the
      * callers with a new complex pass rules without them) */
     if (m && rules && rules->noverrides &&

@@ -109,7 +109,7 @@ int api_import(json_t *doc, const char *base, const api_limits *lim, api_model *
         return api_fail_at(p, 400, "wrong-type", at, "must be the body of PUT /complex, or null");
     }
     sd_error e;
-    api_model *m = api_model_new(NULL, NULL, 0, &e);
+    api_model *m = api_model_new(NULL, NULL, 0, false, &e);
     if (!m)
         return api_fail(p, 503, "out-of-memory", "out of memory");
     int rc = 0;

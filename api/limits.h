@@ -9,6 +9,7 @@
 #define SUBDIVD_LIMITS_H
 
 #include <stddef.h>
+#include <stdbool.h>
 #include <stdint.h>
 
 #define API_DEFAULT_MAX_BODY_BYTES      (64u << 20)   /* request body */
@@ -49,13 +50,16 @@ typedef struct api_limits {
     uint64_t fill_memory_bytes;   /* RLIMIT_AS of the helper */
     char tetgen_helper[256];      /* "" = subdivd-tetgen beside the running binary, else on PATH */
     uint32_t max_embedded_vertices; /* of one embedded model (PUT /embedded/{name}) */
+    bool batch;                   /* the offline `subdivd refine`: levels are written, not edited,
+                                     so the core builds no edit index (DECISIONS 46); the daemon
+                                     leaves it false */
 } api_limits;
 
 static inline api_limits api_default_limits(void)
 {
     api_limits l = {API_DEFAULT_MAX_BODY_BYTES, API_DEFAULT_MAX_VERTICES, API_DEFAULT_MAX_SIMPLICES,
                     API_DEFAULT_MAX_CELLS, API_DEFAULT_MAX_SESSION_BYTES, API_DEFAULT_FILL_SECONDS,
-                    API_DEFAULT_FILL_MEMORY_BYTES, "", API_DEFAULT_MAX_EMBEDDED_VERTICES};
+                    API_DEFAULT_FILL_MEMORY_BYTES, "", API_DEFAULT_MAX_EMBEDDED_VERTICES, false};
     return l;
 }
 

@@ -140,7 +140,8 @@ struct out_geometry *api_model_geometry_locked(api_model *m, int level)
     return m->geometry[level];
 }
 
-api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_bytes, sd_error *err)
+api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_bytes, bool batch,
+                         sd_error *err)
 {
     api_model *m = api_calloc(1, sizeof *m);
     if (!m) {
@@ -174,7 +175,9 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
                           .nonmanifold_surface = m->rules.nonmanifold_surface,
                           .max_bytes = (size_t)max_bytes,
                           .allocator = api_mem_core_allocator(),
-                          .reoriented = in->reoriented};
+                          .reoriented = in->reoriented,
+                          /* batch: levels written out, never edited (DECISIONS 46) */
+                          .edit_index = batch ? SD_EDIT_INDEX_LAZY : SD_EDIT_INDEX_WITH_LEVELS};
         int8_t *given = NULL; /* the chosen diagonals: Algorithm 2 picks the others against them */
         if (in->ndiag) {
             if (!(given = api_malloc((size_t)in->ns + 1))) {

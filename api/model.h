@@ -154,7 +154,8 @@ int api_input_find_attr(const api_input *in, const char *name);
 
 /* A new model from an input (borrowed: the model takes its own reference; may be NULL) and
  * rules; builds and classifies the core complex under `max_bytes`. NULL + err on failure. */
-api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_bytes, sd_error *err);
+api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_bytes, bool batch,
+                         sd_error *err);
 /* Apply per-simplex rule overrides to a model being built (copies them into m->rules).
  * SD_ERR_* + err (item = the override, field = SD_OV_FIELD_*). */
 int api_model_set_overrides(api_model *m, const sd_override *ov, uint32_t n, sd_error *err);

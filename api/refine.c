@@ -208,7 +208,7 @@ static api_sharp *carry_sharpness(const sd_refinement *r, const api_sharp *sh, u
 static api_model *model_with(api_input *in, const api_rules *rules, const api_tags *tags,
                              sd_override *ov, uint32_t nov, const api_limits *lim, sd_error *e)
 {
-    api_model *m = api_model_new(in, rules, lim->max_session_bytes, e);
+    api_model *m = api_model_new(in, rules, lim->max_session_bytes, lim->batch, e);
     if (!m)
         return NULL;
     while (nov && api_model_set_overrides(m, ov, nov, e)) {

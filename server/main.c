@@ -212,12 +212,13 @@ static int refine_main(int argc, char **argv)
     if (rc)
         return rc;
     api_limits lim = api_default_limits();
+    lim.batch = true; /* written out, never edited: no edit index (DECISIONS 46) */
     api_problem p = {0};
     int level = api_parse_level(a.level, &p);
     if (level < 0)
         return report(&p, "--level");
     sd_error e = {0};
-    api_model *m = api_model_new(NULL, NULL, 0, &e);
+    api_model *m = api_model_new(NULL, NULL, 0, false, &e);
     if (!m)
         return 3;
     json_t *repair = json_pack("{s:b}", "repair", a.repair), *crease = NULL;
@@ -355,7 +356,7 @@ static int deform_main(int argc, char **argv)
     }
     api_limits lim = api_default_limits();
     sd_error e = {0};
-    api_model *m = api_model_new(NULL, NULL, 0, &e);
+    api_model *m = api_model_new(NULL, NULL, 0, false, &e);
     if (!m)
         return 3;
     int rc = rules ? apply_file(&m, rules, api_put_rules, &lim, rules, NULL) : 0;

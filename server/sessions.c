@@ -164,7 +164,7 @@ static session *session_alloc(const char *id, const unsigned char hash[32], int 
     if (!s)
         return NULL;
     sd_error e;
-    s->model = api_model_new(NULL, NULL, 0, &e);
+    s->model = api_model_new(NULL, NULL, 0, false, &e);
     s->events = s->model ? ev_hub_new() : NULL;
     if (!s->events) {
         api_model_unref(s->model);
@@ -287,7 +287,7 @@ static api_model *rebuild(const persist_loaded *l, const api_limits *lim, char *
         }
     } else {
         sd_error e;
-        if (!(m = api_model_new(NULL, NULL, 0, &e))) {
+        if (!(m = api_model_new(NULL, NULL, 0, false, &e))) {
             snprintf(why, cap, "out of memory");
             return NULL;
         }

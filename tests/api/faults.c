@@ -199,11 +199,11 @@ static void edit_and_refine(api_model **m)
 static void scenario(void)
 {
     sd_error e = {0};
-    api_model *m = api_model_new(NULL, NULL, 0, &e);
+    api_model *m = api_model_new(NULL, NULL, 0, false, &e);
     if (!m)
         return;
     change(&m, RULES0, api_put_rules, "api_put_rules (no complex)");
-    api_model *r = api_model_new(NULL, NULL, 0, &e); /* a repair, on a model of its own */
+    api_model *r = api_model_new(NULL, NULL, 0, false, &e); /* a repair, on a model of its own */
     if (r) {
         change(&r, REPAIR, api_put_complex, "api_put_complex (repair)");
         api_model_unref(r);

@@ -105,7 +105,7 @@ int main(int argc, char **argv)
     lim.max_vertices = 100000;
     lim.max_simplices = 100000;
     sd_error e;
-    api_model *cur = api_model_new(NULL, NULL, 0, &e);
+    api_model *cur = api_model_new(NULL, NULL, 0, false, &e);
     tags_mode = argc > 1 && !strcmp(argv[1], "tags");
     if (tags_mode) {
         api_problem p = {0};

@@ -255,7 +255,7 @@ static int one(const char *buf, size_t len, const api_limits *lim)
 {
     int accepted = 0;
     sd_error e;
-    api_model *cur = api_model_new(NULL, NULL, 0, &e), *next = NULL;
+    api_model *cur = api_model_new(NULL, NULL, 0, false, &e), *next = NULL;
     if (!cur)
         return 0;
     /* a valid complex first, so tags and overrides have something to refer to */
