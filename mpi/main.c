@@ -54,7 +54,7 @@ static int parse_args(int argc, char **argv, args *a)
 {
     memset(a, 0, sizeof *a);
     a->level = -1;
-    a->halo = 1;
+    a->halo = 2; /* DECISIONS 44 */
     const char *why = NULL;
     if (argc < 2 || strcmp(argv[1], "refine"))
         why = "the command is `refine`";
@@ -218,10 +218,9 @@ static int read_model(const args *a, api_model **out)
     if (!m)
         return EXIT_FAILED;
     int rc = 0;
-    if (a->rules)
+    rc = apply_file(&m, a->input, api_put_complex, &lim);
+    if (!rc && a->rules) /* after the complex: overrides name its simplices */
         rc = apply_file(&m, a->rules, api_put_rules, &lim);
-    if (!rc)
-        rc = apply_file(&m, a->input, api_put_complex, &lim);
     if (!rc && a->tags)
         rc = apply_file(&m, a->tags, api_put_tags, &lim);
     if (rc) {
