@@ -54,7 +54,7 @@ static int parse_args(int argc, char **argv, args *a)
 {
     memset(a, 0, sizeof *a);
     a->level = -1;
-    a->halo = 2; /* DECISIONS 44 */
+    a->halo = -1; /* DECISIONS 44: 2 rings with tetrahedra, else 1 */
     const char *why = NULL;
     if (argc < 2 || strcmp(argv[1], "refine"))
         why = "the command is `refine`";
@@ -313,7 +313,7 @@ static void write_stats(const args *a, const rstat *st, const mp_piece *p)
     }
     const sd_counts *G = &p->global[p->level];
     json_t *j = json_pack("{s:i,s:i,s:i,s:{s:I,s:I,s:I,s:I,s:I,s:I},s:o}", "ranks", nranks_,
-                          "level", a->level, "halo", a->halo, "level_counts", "points",
+                          "level", a->level, "halo", p->halo, "level_counts", "points",
                           (json_int_t)G->vertices, "point_cells", (json_int_t)G->points, "curves",
                           (json_int_t)G->curves, "triangles", (json_int_t)G->triangles,
                           "tetrahedra", (json_int_t)G->tetrahedra, "octahedra",

@@ -26,6 +26,7 @@
  * the one-process numbering wherever the star of an entity is whole; piece.c relies on that). */
 typedef struct mp_piece {
     int rank, nparts, level;
+    int halo;                     /* rings of simplices around the owned ones */
     api_rules rules;              /* the rule preferences (overrides below) */
     sd_counts global[SD_MAX_LEVEL + 1]; /* the one-process counts of levels 0..level */
     uint64_t global_ns;           /* input simplices of the whole mesh */
@@ -71,7 +72,8 @@ int mp_unpack(const unsigned char *data, size_t len, mp_piece *p);
 /* part.c (rank 0). Partition the maximal simplices of m's level 0 into `nparts` parts with METIS
  * (dual graph: simplices sharing a facet of the smaller one, or a vertex for points and curves;
  * weighted by what each becomes at `level`) and cut the pieces: pieces[r] for rank r, with
- * `halo` rings of simplices (by shared vertices) around the owned ones. `seconds` gets the time
+ * `halo` rings of simplices (by shared vertices) around the owned ones (-1: the default of
+ * DECISIONS 44, two rings with tetrahedra in the complex, else one). `seconds` gets the time
  * of the partition alone. 0, or -1 with a message in err. */
 int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces,
                  double *seconds, char *err, size_t errlen);

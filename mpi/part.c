@@ -418,6 +418,8 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
     if (metis_parts(m, &c, level, nparts, part, err, errlen))
         goto out;
     *seconds = mp_now() - t0;
+    if (halo < 0) /* DECISIONS 44: octahedra reach two edges of their level, triangles one */
+        halo = sd_level_num_cells(m->level0, SD_CELL_TETRA) ? 2 : 1;
     uint32_t nv = m->in->nv;
     ring = malloc(((size_t)c.n + 1) * sizeof *ring);
     lid = malloc(((size_t)nv + 1) * sizeof *lid);
@@ -462,6 +464,7 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
             snprintf(err, errlen, "out of memory cutting piece %d", r);
             goto out;
         }
+        pieces[r].halo = halo;
     }
     rc = 0;
 out:

@@ -363,9 +363,11 @@ static void gmaps_free(gmaps *g)
 
 static uint64_t *alloc64(uint64_t n) { return malloc((size_t)(n ? n : 1) * sizeof(uint64_t)); }
 
-/* Level l+1's maps from level l's (G: the one-process counts of level l). Edges and faces only
- * when `with_ef` (level L needs neither). */
-static int gmaps_next(const gmaps *a, const sd_counts *G, const sd_counts *n1, int with_ef, gmaps *b)
+/* Level l+1's maps from level l's (G: the one-process counts of level l). Edges only when
+ * `with_e`, faces only when `with_f` (level L's vertices need level L-1's edges, and those
+ * level L-2's faces: nothing finer). */
+static int gmaps_next(const gmaps *a, const sd_counts *G, const sd_counts *n1, int with_e,
+                      int with_f, gmaps *b)
 {
     memset(b, 0, sizeof *b);
     b->n = *n1;
@@ -376,24 +378,26 @@ static int gmaps_next(const gmaps *a, const sd_counts *G, const sd_counts *n1, i
     b->cu = alloc64(n1->curves);
     b->tr = alloc64(n1->triangles);
     b->pt = alloc64(n1->points);
-    if (with_ef) {
+    if (with_e)
         b->e = alloc64(n1->edges);
+    if (with_f)
         b->f = alloc64(n1->faces);
-    }
-    if (!b->v || !b->t || !b->o || !b->cu || !b->tr || !b->pt || (with_ef && (!b->e || !b->f)))
+    if (!b->v || !b->t || !b->o || !b->cu || !b->tr || !b->pt || (with_e && !b->e) ||
+        (with_f && !b->f))
         return -1;
     for (uint64_t i = 0; i < n1->vertices; i++)
         b->v[i] = i < n->vertices                ? a->v[i]
                   : i < n->vertices + n->edges ? G->vertices + a->e[i - n->vertices]
                                                : G->vertices + G->edges +
                                                      a->o[i - n->vertices - n->edges];
-    if (with_ef) {
+    if (with_e)
         for (uint64_t i = 0; i < n1->edges; i++) {
             uint64_t h = 2 * n->edges, fi = h + 3 * n->faces;
             b->e[i] = i < h    ? 2 * a->e[i / 2] + i % 2
                       : i < fi ? 2 * G->edges + 3 * a->f[(i - h) / 3] + (i - h) % 3
                                : 2 * G->edges + 3 * G->faces + 12 * a->o[(i - fi) / 12] + (i - fi) % 12;
         }
+    if (with_f)
         for (uint64_t i = 0; i < n1->faces; i++) {
             uint64_t h = 4 * n->faces, ti = h + 4 * n->tetrahedra;
             b->f[i] = i < h    ? 4 * a->f[i / 4] + i % 4
@@ -401,7 +405,6 @@ static int gmaps_next(const gmaps *a, const sd_counts *G, const sd_counts *n1, i
                                : 4 * G->faces + 4 * G->tetrahedra + 24 * a->o[(i - ti) / 24] +
                                      (i - ti) % 24;
         }
-    }
     for (uint64_t i = 0; i < n1->tetrahedra; i++) {
         uint64_t h = 4 * n->tetrahedra;
         b->t[i] = i < h ? 4 * a->t[i / 4] + i % 4
@@ -561,7 +564,7 @@ int mp_refine(const mp_piece *p, uint64_t max_bytes, int quiet, const char *tag,
     for (int l = 0; l < p->level; l++) {
         sd_counts n1;
         sd_complex_counts(r->m->c, l + 1, &n1);
-        int rc = gmaps_next(&g, &p->global[l], &n1, l + 1 < p->level, &h);
+        int rc = gmaps_next(&g, &p->global[l], &n1, l + 1 < p->level, l + 2 < p->level, &h);
         gmaps_free(&g);
         g = h;
         if (rc) {

@@ -12,6 +12,7 @@ complexes with singular tags, semi-sharp creases and per-simplex overrides; leve
 ranks (3 oversubscribed). A halo of 0 rings is shown to be wrong (the comparison sees it), and
 failures stop every rank with a message and a non-zero exit.
 """
+import collections
 import json
 import os
 import pathlib
@@ -308,11 +309,8 @@ def test_pieces_equal_the_one_process_level(tmp_path, tmp_path_factory, name, nr
         # the owned cells partition the level: every cell once, with the one-process vertices
         assert len(seen_cells) == len(ref_cells)
         assert sorted((t, vs) for _, _, t, vs in seen_cells) == sorted(ref_cells)
-        keys = [(kk, c) for kk, c, _, _ in seen_cells]
-        octa = [key for key in keys if key[0] == 4]
-        rest = [key for key in keys if key[0] != 4]
-        assert len(set(rest)) == len(rest)
-        assert all(octa.count(key) == 4 for key in set(octa))   # 4 tets per octahedron
+        times = collections.Counter((kk, c) for kk, c, _, _ in seen_cells)
+        assert all(n == (4 if kk == 4 else 1) for (kk, c), n in times.items())   # 4 per octahedron
         # the parallel reader sees the whole level
         whole = read(out)
         assert whole.GetNumberOfCells() == len(ref_cells)
@@ -379,6 +377,9 @@ def test_thinner_halos_are_wrong_for_solids(tmp_path, tmp_path_factory, halo, le
     ref_pts, _, _ = reference(tmp_path_factory, "solid-box", level)
     out = tmp_path / "h.pvtu"
     r = mpirun(nranks, "refine", mesh, "--level", level, "-o", out, "--halo", halo, "-q")
+    if halo == 0 and r.returncode:   # or the numbering check sees the rim's edges first
+        assert r.returncode == 3 and "internal: " in r.stderr and "in the piece" in r.stderr
+        return
     assert r.returncode == 0, r.stderr
     worst = 0.0
     for g in pieces_of(out, nranks):
