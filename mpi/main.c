@@ -170,7 +170,7 @@ static int report(const api_problem *p, const char *what)
     json_t *j = api_problem_json(p);
     char *t = json_dumps(j, JSON_INDENT(2));
     fprintf(stderr, "%s: %s refused (%d):\n%s\n", tag_, what, p->status, t ? t : "");
-    free(t);
+    api_free(t); /* jansson allocates with api/mem.c's functions */
     json_decref(j);
     return p->status == 413 || p->status == 422 || p->status == 400 ? EXIT_REFUSED : EXIT_FAILED;
 }

@@ -154,11 +154,13 @@ int mp_write_piece(const mp_piece *p, const mp_result *r, const char *path, uint
                 uint32_t v[6];
                 sd_level_cell(r->lv, (sd_cell_kind)k, i, v);
                 for (int j = 0; j < sd_cell_size((sd_cell_kind)k); j++)
-                    if (slot[v[j]] == UINT32_MAX)
-                        slot[v[j]] = (uint32_t)npts++;
+                    slot[v[j]] = 0;
                 ncells += (uint64_t)vtk_cells(k);
                 nconn += (uint64_t)vtk_cells(k) * (uint64_t)vtk_size(k);
             }
+    for (uint32_t v = 0; v < nv; v++) /* the piece's points in its level's order */
+        if (slot[v] != UINT32_MAX)
+            slot[v] = (uint32_t)npts++;
     int na = p->nattrs;
     double *xyz = malloc((size_t)npts * 24 + 8);
     int64_t *gid = malloc((size_t)npts * 8 + 8);

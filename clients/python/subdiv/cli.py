@@ -391,7 +391,7 @@ def find_subdivd_mpi():
 
 def cmd_refine_mpi(args):
     """`refine --mpi N`: the mesh converted here (as `convert` does), then `mpirun -n N
-    subdivd-mpi refine` on it (docs/BATCH.md "8."): no daemon; one .pvtu (a VTU piece per rank)
+    subdivd-mpi refine` on it (docs/BATCH.md, section 7): no daemon; one .pvtu (a VTU piece per rank)
     or one merged .vtu. mpirun's stderr (each rank's progress) passes through."""
     job = _job_from_args(args)
     outs = job["outputs"]
