@@ -33,7 +33,7 @@ enum { EXIT_REFUSED = 1, EXIT_USAGE = 2, EXIT_FAILED = 3 };
 
 typedef struct args {
     const char *input, *out, *tags, *rules, *stats;
-    int level, halo, merge, nowrite, quiet;
+    int level, halo, merge, nowrite, quiet, one_at_a_time;
     uint64_t max_bytes;
 } args;
 
@@ -44,7 +44,7 @@ static void usage(FILE *f)
 {
     fprintf(f, "usage: mpirun -n N subdivd-mpi refine INPUT.json --level L -o OUT.pvtu|OUT.vtu\n"
                "       [--tags T.json] [--rules R.json] [--merge] [--halo K] [--max-memory BYTES]\n"
-               "       [--stats S.json] [--no-write] [-q]\n"
+               "       [--stats S.json] [--no-write] [--one-at-a-time] [-q]\n"
                "INPUT, --tags and --rules are the bodies of PUT /complex, /tags and /rules\n"
                "(docs/API.md); `subdiv refine --mpi N` converts other mesh files first.\n");
 }
@@ -78,6 +78,8 @@ static int parse_args(int argc, char **argv, args *a)
             a->merge = 1;
         else if (!strcmp(o, "--no-write"))
             a->nowrite = 1;
+        else if (!strcmp(o, "--one-at-a-time"))
+            a->one_at_a_time = 1;
         else if (!strcmp(o, "-q") || !strcmp(o, "--quiet"))
             a->quiet = 1;
         else if (o[0] == '-' && o[1]) {
@@ -235,10 +237,23 @@ static int read_model(const args *a, api_model **out)
 
 /* Every rank says whether it failed (with its exit code); all learn the worst. Returns 0 or the
  * exit code every rank then returns. */
+/* Wait for a request, sleeping between tests: Open MPI's blocking calls poll a core flat out,
+ * which a rank that finished early would take from the ranks still computing when the machine
+ * has fewer cores than ranks (or other work). */
+static void wait_sleeping(MPI_Request *rq)
+{
+    int done = 0;
+    struct timespec ts = {0, 1000000};
+    for (MPI_Test(rq, &done, MPI_STATUS_IGNORE); !done; MPI_Test(rq, &done, MPI_STATUS_IGNORE))
+        nanosleep(&ts, NULL);
+}
+
 static int checkpoint(int code, const char *phase)
 {
     int mine[2] = {code, code ? rank_ + 1 : 0}, all[2];
-    MPI_Allreduce(mine, all, 2, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+    MPI_Request rq;
+    MPI_Iallreduce(mine, all, 2, MPI_INT, MPI_MAX, MPI_COMM_WORLD, &rq);
+    wait_sleeping(&rq);
     if (all[0] && !rank_ && !code)
         fprintf(stderr, "subdivd-mpi: stopped (%s) after a failure on rank %d\n", phase,
                 all[1] - 1);
@@ -257,7 +272,9 @@ static int send_bytes(const unsigned char *d, uint64_t n, int to)
 
 static unsigned char *recv_bytes(int from, uint64_t *n)
 {
-    MPI_Recv(n, 1, MPI_UINT64_T, from, 1, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    MPI_Request rq;
+    MPI_Irecv(n, 1, MPI_UINT64_T, from, 1, MPI_COMM_WORLD, &rq);
+    wait_sleeping(&rq);
     unsigned char *d = malloc((size_t)*n + 1);
     for (uint64_t o = 0; o < *n; o += 1u << 30) {
         int c = (int)(*n - o < (1u << 30) ? *n - o : (1u << 30));
@@ -391,11 +408,22 @@ static int run(const args *a)
                 piece.ns, piece.ns - piece.nhalo, piece.nhalo, piece.nv);
     st.owned_simplices = piece.ns - piece.nhalo;
     st.halo_simplices = piece.nhalo;
-    /* 3. refine */
+    /* 3. refine (--one-at-a-time: rank r starts when rank r-1 is done, so each is timed as if
+     * alone on its machine; a benchmark of a machine with fewer free cores than ranks) */
+    int turn = 0;
+    if (a->one_at_a_time && rank_) {
+        MPI_Request rq;
+        MPI_Irecv(&turn, 1, MPI_INT, rank_ - 1, 3, MPI_COMM_WORLD, &rq);
+        wait_sleeping(&rq);
+        tc = mp_now();
+        cpu0 = cpu_now();
+    }
     if (mp_refine(&piece, a->max_bytes, a->quiet, tag_, &res, err, sizeof err)) {
         fprintf(stderr, "%s: %s\n", tag_, err);
         rc = EXIT_FAILED;
     }
+    if (a->one_at_a_time && rank_ + 1 < nranks_)
+        MPI_Send(&turn, 1, MPI_INT, rank_ + 1, 3, MPI_COMM_WORLD);
     st.t_build = res.seconds_build;
     st.t_refine = res.seconds_refine;
     st.t_ids = res.seconds_ids;

@@ -78,20 +78,30 @@ int mp_unpack(const unsigned char *data, size_t len, mp_piece *p);
 int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces,
                  double *seconds, char *err, size_t errlen);
 
-/* piece.c. What a rank computes from its piece: the level, the global id of every level-L point
- * it writes, which cells it owns. */
+/* piece.c. What a rank computes from its piece: the level, and the maps that give the global id
+ * of every level-L point and cell (those of level L-1, from which level L's follow in closed
+ * form: kept 8 times smaller than level L's would be). */
+typedef struct mp_maps mp_maps;
 typedef struct mp_result {
+    const mp_piece *p;
     api_model *m;                 /* the sub-complex's model (NULL for an empty piece) */
     const sd_level *lv;           /* level L of it */
-    uint64_t *vgid;               /* per local level-L vertex: its one-process index */
-    int32_t *vowner;              /* the lowest rank among the owners of the cells around it */
-    uint64_t *cgid[5];            /* per sd_cell_kind: the one-process index of each level-L cell */
-    uint8_t *cown[5];             /* 1: the cell descends from a simplex this rank owns */
-    uint32_t *cctrl[5];           /* global input simplex it descends from */
-    uint32_t ncell[5];
+    mp_maps *g;
+    int32_t *vowner;              /* per level-L vertex: the lowest rank owning a cell around it */
+    uint32_t ncell[5];            /* per sd_cell_kind */
     uint64_t owned_cells, local_cells; /* top cells of level L: owned / in the piece */
     double seconds_build, seconds_refine, seconds_ids;
 } mp_result;
+
+/* Level-L vertex v's index in the one-process level; cell i of kind k's index among that
+ * level's cells of its kind; the piece's simplex (local input index) the cell descends from. */
+uint64_t mp_vgid(const mp_result *r, uint32_t v);
+uint64_t mp_cgid(const mp_result *r, int k, uint32_t i);
+uint32_t mp_csrc(const mp_result *r, int k, uint32_t i);
+static inline int mp_cown(const mp_result *r, int k, uint32_t i)
+{
+    return r->p->spart[mp_csrc(r, k, i)] == r->p->rank;
+}
 
 /* Build the piece's sub-complex, compute its level `p->level` (a line per level on stderr,
  * prefixed `tag`, unless quiet) and map it to global ids. 0, or -1 with a message in err. */

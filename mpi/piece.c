@@ -328,125 +328,162 @@ static uint32_t kmap_get(const kmap *m, key3 k)
     return UINT32_MAX;
 }
 
+/* The maps of one level: local entity -> one-process id, and each cell's simplex of the piece
+ * (the local input index it descends from). Cells by sd_cell_kind. */
+struct mp_maps {
+    uint64_t *v, *e, *f;
+    uint64_t *c[5];
+    uint32_t *s[5];
+    sd_counts n;                  /* the piece's counts of the level */
+    sd_counts G;                  /* the one-process counts of the level */
+    int top;                      /* these are level L's own maps (L = 0) */
+};
+
+static void maps_free(mp_maps *g)
+{
+    if (!g)
+        return;
+    free(g->v);
+    free(g->e);
+    free(g->f);
+    for (int k = 0; k < 5; k++) {
+        free(g->c[k]);
+        free(g->s[k]);
+    }
+    memset(g, 0, sizeof *g);
+}
+
 void mp_result_free(mp_result *r)
 {
     if (r->m)
         api_model_unref(r->m);
-    free(r->vgid);
+    maps_free(r->g);
+    free(r->g);
     free(r->vowner);
-    for (int k = 0; k < 5; k++) {
-        free(r->cgid[k]);
-        free(r->cown[k]);
-        free(r->cctrl[k]);
-    }
     memset(r, 0, sizeof *r);
 }
 
-/* The maps of one level: local entity -> one-process id. */
-typedef struct gmaps {
-    uint64_t *v, *e, *f, *t, *o, *cu, *tr, *pt;
-    sd_counts n;                  /* local counts of the level */
-} gmaps;
+static uint64_t *alloc64(uint64_t n) { return malloc((size_t)(n ? n : 1) * sizeof(uint64_t)); }
+static uint32_t *alloc32(uint64_t n) { return malloc((size_t)(n ? n : 1) * sizeof(uint32_t)); }
 
-static void gmaps_free(gmaps *g)
+static uint64_t kcount(const sd_counts *n, int k)
 {
-    free(g->v);
-    free(g->e);
-    free(g->f);
-    free(g->t);
-    free(g->o);
-    free(g->cu);
-    free(g->tr);
-    free(g->pt);
-    memset(g, 0, sizeof *g);
+    return k == SD_CELL_POINT ? n->points : k == SD_CELL_CURVE ? n->curves
+           : k == SD_CELL_TRIANGLE ? n->triangles : k == SD_CELL_TETRA ? n->tetrahedra
+                                                                        : n->octahedra;
 }
 
-static uint64_t *alloc64(uint64_t n) { return malloc((size_t)(n ? n : 1) * sizeof(uint64_t)); }
+/* One step of the closed forms (core/split.c): the level-(l+1) id of a vertex or cell from
+ * level l's maps `a` (local counts a->n, one-process counts a->G). */
+static inline uint64_t next_vertex(const mp_maps *a, uint64_t i)
+{
+    const sd_counts *n = &a->n, *G = &a->G;
+    return i < n->vertices              ? a->v[i]
+           : i < n->vertices + n->edges ? G->vertices + a->e[i - n->vertices]
+                                        : G->vertices + G->edges + a->c[SD_CELL_OCTA][i - n->vertices - n->edges];
+}
 
-/* Level l+1's maps from level l's (G: the one-process counts of level l). Edges only when
- * `with_e`, faces only when `with_f` (level L's vertices need level L-1's edges, and those
- * level L-2's faces: nothing finer). */
-static int gmaps_next(const gmaps *a, const sd_counts *G, const sd_counts *n1, int with_e,
-                      int with_f, gmaps *b)
+static inline uint64_t next_cell(const mp_maps *a, int k, uint64_t i)
+{
+    uint64_t nt = a->n.tetrahedra;
+    switch (k) {
+    case SD_CELL_POINT: return a->c[k][i];
+    case SD_CELL_CURVE: return 2 * a->c[k][i / 2] + i % 2;
+    case SD_CELL_TRIANGLE: return 4 * a->c[k][i / 4] + i % 4;
+    case SD_CELL_TETRA:
+        return i < 4 * nt ? 4 * a->c[SD_CELL_TETRA][i / 4] + i % 4
+                          : 4 * a->G.tetrahedra + 8 * a->c[SD_CELL_OCTA][(i - 4 * nt) / 8] + (i - 4 * nt) % 8;
+    default:
+        return i < nt ? a->c[SD_CELL_TETRA][i]
+                      : a->G.tetrahedra + 6 * a->c[SD_CELL_OCTA][(i - nt) / 6] + (i - nt) % 6;
+    }
+}
+
+static inline uint32_t next_src(const mp_maps *a, int k, uint64_t i)
+{
+    uint64_t nt = a->n.tetrahedra;
+    switch (k) {
+    case SD_CELL_POINT: return a->s[k][i];
+    case SD_CELL_CURVE: return a->s[k][i / 2];
+    case SD_CELL_TRIANGLE: return a->s[k][i / 4];
+    case SD_CELL_TETRA: return i < 4 * nt ? a->s[SD_CELL_TETRA][i / 4] : a->s[SD_CELL_OCTA][(i - 4 * nt) / 8];
+    default: return i < nt ? a->s[SD_CELL_TETRA][i] : a->s[SD_CELL_OCTA][(i - nt) / 6];
+    }
+}
+
+uint64_t mp_vgid(const mp_result *r, uint32_t v) { return r->g->top ? r->g->v[v] : next_vertex(r->g, v); }
+uint64_t mp_cgid(const mp_result *r, int k, uint32_t i)
+{
+    return r->g->top ? r->g->c[k][i] : next_cell(r->g, k, i);
+}
+uint32_t mp_csrc(const mp_result *r, int k, uint32_t i)
+{
+    return r->g->top ? r->g->s[k][i] : next_src(r->g, k, i);
+}
+
+/* Level l+1's maps from level l's. Edges only when `with_e`, faces only when `with_f` (level
+ * L's vertices need level L-1's edges, and those level L-2's faces: nothing finer). */
+static int maps_next(const mp_maps *a, const sd_counts *n1, const sd_counts *G1, int with_e,
+                     int with_f, mp_maps *b)
 {
     memset(b, 0, sizeof *b);
     b->n = *n1;
-    const sd_counts *n = &a->n;
-    b->v = alloc64(n1->vertices);
-    b->t = alloc64(n1->tetrahedra);
-    b->o = alloc64(n1->octahedra);
-    b->cu = alloc64(n1->curves);
-    b->tr = alloc64(n1->triangles);
-    b->pt = alloc64(n1->points);
+    b->G = *G1;
+    const sd_counts *n = &a->n, *G = &a->G;
+    int ok = (b->v = alloc64(n1->vertices)) != NULL;
+    for (int k = 0; k < 5; k++)
+        ok = ok && (b->c[k] = alloc64(kcount(n1, k))) && (b->s[k] = alloc32(kcount(n1, k)));
     if (with_e)
-        b->e = alloc64(n1->edges);
+        ok = ok && (b->e = alloc64(n1->edges));
     if (with_f)
-        b->f = alloc64(n1->faces);
-    if (!b->v || !b->t || !b->o || !b->cu || !b->tr || !b->pt || (with_e && !b->e) ||
-        (with_f && !b->f))
+        ok = ok && (b->f = alloc64(n1->faces));
+    if (!ok)
         return -1;
     for (uint64_t i = 0; i < n1->vertices; i++)
-        b->v[i] = i < n->vertices                ? a->v[i]
-                  : i < n->vertices + n->edges ? G->vertices + a->e[i - n->vertices]
-                                               : G->vertices + G->edges +
-                                                     a->o[i - n->vertices - n->edges];
-    if (with_e)
-        for (uint64_t i = 0; i < n1->edges; i++) {
-            uint64_t h = 2 * n->edges, fi = h + 3 * n->faces;
+        b->v[i] = next_vertex(a, i);
+    if (with_e) {
+        uint64_t h = 2 * n->edges, fi = h + 3 * n->faces;
+        for (uint64_t i = 0; i < n1->edges; i++)
             b->e[i] = i < h    ? 2 * a->e[i / 2] + i % 2
                       : i < fi ? 2 * G->edges + 3 * a->f[(i - h) / 3] + (i - h) % 3
-                               : 2 * G->edges + 3 * G->faces + 12 * a->o[(i - fi) / 12] + (i - fi) % 12;
-        }
-    if (with_f)
-        for (uint64_t i = 0; i < n1->faces; i++) {
-            uint64_t h = 4 * n->faces, ti = h + 4 * n->tetrahedra;
-            b->f[i] = i < h    ? 4 * a->f[i / 4] + i % 4
-                      : i < ti ? 4 * G->faces + 4 * a->t[(i - h) / 4] + (i - h) % 4
-                               : 4 * G->faces + 4 * G->tetrahedra + 24 * a->o[(i - ti) / 24] +
-                                     (i - ti) % 24;
-        }
-    for (uint64_t i = 0; i < n1->tetrahedra; i++) {
-        uint64_t h = 4 * n->tetrahedra;
-        b->t[i] = i < h ? 4 * a->t[i / 4] + i % 4
-                        : 4 * G->tetrahedra + 8 * a->o[(i - h) / 8] + (i - h) % 8;
+                               : 2 * G->edges + 3 * G->faces + 12 * a->c[SD_CELL_OCTA][(i - fi) / 12] +
+                                     (i - fi) % 12;
     }
-    for (uint64_t i = 0; i < n1->octahedra; i++)
-        b->o[i] = i < n->tetrahedra ? a->t[i]
-                                    : G->tetrahedra + 6 * a->o[(i - n->tetrahedra) / 6] +
-                                          (i - n->tetrahedra) % 6;
-    for (uint64_t i = 0; i < n1->curves; i++)
-        b->cu[i] = 2 * a->cu[i / 2] + i % 2;
-    for (uint64_t i = 0; i < n1->triangles; i++)
-        b->tr[i] = 4 * a->tr[i / 4] + i % 4;
-    for (uint64_t i = 0; i < n1->points; i++)
-        b->pt[i] = a->pt[i];
+    if (with_f) {
+        uint64_t h = 4 * n->faces, ti = h + 4 * n->tetrahedra;
+        for (uint64_t i = 0; i < n1->faces; i++)
+            b->f[i] = i < h    ? 4 * a->f[i / 4] + i % 4
+                      : i < ti ? 4 * G->faces + 4 * a->c[SD_CELL_TETRA][(i - h) / 4] + (i - h) % 4
+                               : 4 * G->faces + 4 * G->tetrahedra +
+                                     24 * a->c[SD_CELL_OCTA][(i - ti) / 24] + (i - ti) % 24;
+    }
+    for (int k = 0; k < 5; k++)
+        for (uint64_t i = 0; i < kcount(n1, k); i++) {
+            b->c[k][i] = next_cell(a, k, i);
+            b->s[k][i] = next_src(a, k, i);
+        }
     return 0;
 }
 
 /* Level 0's maps: vertices and cells from the piece, edges and faces by their vertices. The
  * edges and faces of owned simplices must be stored in the one-process order (see the top). */
-static int gmaps_level0(const mp_piece *p, const sd_level *lv0, gmaps *g, char *err, size_t errlen)
+static int maps_level0(const mp_piece *p, const sd_level *lv0, mp_maps *g, char *err, size_t errlen)
 {
     const sd_topo *t = &lv0->t;
     memset(g, 0, sizeof *g);
     sd_complex_counts(lv0->cx, 0, &g->n);
+    g->G = p->global[0];
     if (!t->faces) {
         snprintf(err, errlen, "internal: level 0 has no faces");
         return -1;
     }
-    g->v = alloc64(t->nv);
-    g->e = alloc64(t->ne);
-    g->f = alloc64(t->nf);
-    g->t = alloc64(t->ntet);
-    g->o = alloc64(1);
-    g->cu = alloc64(t->ncu);
-    g->tr = alloc64(t->ntr);
-    g->pt = alloc64(t->npt);
+    int ok = (g->v = alloc64(t->nv)) && (g->e = alloc64(t->ne)) && (g->f = alloc64(t->nf));
+    for (int k = 0; k < 5; k++)
+        ok = ok && (g->c[k] = alloc64(kcount(&g->n, k))) && (g->s[k] = alloc32(kcount(&g->n, k)));
     uint8_t *vown = calloc((size_t)p->nv + 1, 1);
     kmap km = {0};
     int rc = -1;
-    if (!g->v || !g->e || !g->f || !g->t || !g->o || !g->cu || !g->tr || !g->pt || !vown ||
-        kmap_init(&km, (uint64_t)p->ne0 + p->nf0)) {
+    if (!ok || !vown || kmap_init(&km, (uint64_t)p->ne0 + p->nf0)) {
         snprintf(err, errlen, "out of memory numbering level 0");
         goto out;
     }
@@ -459,11 +496,12 @@ static int gmaps_level0(const mp_piece *p, const sd_level *lv0, gmaps *g, char *
                 vown[p->sidx[off + j]] = 1;
         off += p->ssize[s];
     }
-    sd_cell_kind kinds[4] = {SD_CELL_POINT, SD_CELL_CURVE, SD_CELL_TRIANGLE, SD_CELL_TETRA};
-    uint64_t *maps[4] = {g->pt, g->cu, g->tr, g->t};
     for (int k = 0; k < 4; k++)
-        for (uint32_t i = 0; i < sd_level_num_cells(lv0, kinds[k]); i++)
-            maps[k][i] = p->scell[sd_level_control_cell(lv0, kinds[k], i)];
+        for (uint32_t i = 0; i < sd_level_num_cells(lv0, (sd_cell_kind)k); i++) {
+            uint32_t s = sd_level_control_cell(lv0, (sd_cell_kind)k, i);
+            g->s[k][i] = s;
+            g->c[k][i] = p->scell[s];
+        }
     for (uint32_t e = 0; e < p->ne0; e++)
         kmap_put(&km, mkkey(p->e0 + 2 * (size_t)e, 2), e);
     for (uint32_t f = 0; f < p->nf0; f++)
@@ -509,6 +547,7 @@ int mp_refine(const mp_piece *p, uint64_t max_bytes, int quiet, const char *tag,
               char *err, size_t errlen)
 {
     memset(r, 0, sizeof *r);
+    r->p = p;
     if (!p->ns)
         return 0;
     double t0 = mp_now();
@@ -555,31 +594,31 @@ int mp_refine(const mp_piece *p, uint64_t max_bytes, int quiet, const char *tag,
     r->lv = lv;
     r->seconds_refine = mp_now() - t1;
     double t2 = mp_now();
-    /* global ids, level by level */
-    gmaps g, h;
-    if (gmaps_level0(p, lv0, &g, err, errlen)) {
-        gmaps_free(&g);
+    /* the maps of level L-1 (level L's ids follow from them when asked), or level 0's */
+    r->g = calloc(1, sizeof *r->g);
+    if (!r->g || maps_level0(p, lv0, r->g, err, errlen)) {
+        if (!r->g)
+            snprintf(err, errlen, "out of memory");
         return -1;
     }
-    for (int l = 0; l < p->level; l++) {
+    r->g->top = p->level == 0;
+    for (int l = 0; l + 1 < p->level; l++) {
         sd_counts n1;
         sd_complex_counts(r->m->c, l + 1, &n1);
-        int rc = gmaps_next(&g, &p->global[l], &n1, l + 1 < p->level, l + 2 < p->level, &h);
-        gmaps_free(&g);
-        g = h;
+        mp_maps h;
+        int rc = maps_next(r->g, &n1, &p->global[l + 1], 1, l + 3 <= p->level, &h);
+        maps_free(r->g);
+        *r->g = h;
         if (rc) {
-            gmaps_free(&g);
             snprintf(err, errlen, "out of memory numbering level %d", l + 1);
             return -1;
         }
     }
+    /* owner of each point: the lowest owner among the cells around it (all of them are in the
+     * piece for the points of owned cells) */
     uint32_t nv = sd_level_num_vertices(lv);
-    r->vgid = g.v;
-    g.v = NULL;
-    uint64_t *cm[5] = {g.pt, g.cu, g.tr, g.t, g.o};
     r->vowner = malloc(((size_t)nv + 1) * sizeof *r->vowner);
     if (!r->vowner) {
-        gmaps_free(&g);
         snprintf(err, errlen, "out of memory");
         return -1;
     }
@@ -589,22 +628,8 @@ int mp_refine(const mp_piece *p, uint64_t max_bytes, int quiet, const char *tag,
         uint32_t n = sd_level_num_cells(lv, (sd_cell_kind)k);
         int sz = sd_cell_size((sd_cell_kind)k);
         r->ncell[k] = n;
-        r->cgid[k] = cm[k];
-        r->cown[k] = malloc((size_t)n + 1);
-        r->cctrl[k] = malloc(((size_t)n + 1) * sizeof *r->cctrl[k]);
-        if (!r->cown[k] || !r->cctrl[k]) {
-            for (int q = k + 1; q < 5; q++)
-                free(cm[q]);
-            g.pt = g.cu = g.tr = g.t = g.o = NULL;
-            gmaps_free(&g);
-            snprintf(err, errlen, "out of memory");
-            return -1;
-        }
         for (uint32_t i = 0; i < n; i++) {
-            uint32_t s = sd_level_control_cell(lv, (sd_cell_kind)k, i);
-            int32_t owner = p->spart[s];
-            r->cown[k][i] = owner == p->rank;
-            r->cctrl[k][i] = p->sg[s];
+            int32_t owner = p->spart[mp_csrc(r, k, i)];
             r->owned_cells += owner == p->rank;
             uint32_t v[6];
             sd_level_cell(lv, (sd_cell_kind)k, i, v);
@@ -614,8 +639,6 @@ int mp_refine(const mp_piece *p, uint64_t max_bytes, int quiet, const char *tag,
         }
         r->local_cells += n;
     }
-    g.pt = g.cu = g.tr = g.t = g.o = NULL;
-    gmaps_free(&g);
     r->seconds_ids = mp_now() - t2;
     return 0;
 }

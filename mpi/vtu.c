@@ -150,7 +150,7 @@ int mp_write_piece(const mp_piece *p, const mp_result *r, const char *path, uint
     uint64_t npts = 0, ncells = 0, nconn = 0;
     for (int k = 0; k < 5; k++)
         for (uint32_t i = 0; i < r->ncell[k]; i++)
-            if (r->cown[k][i]) {
+            if (mp_cown(r, k, i)) {
                 uint32_t v[6];
                 sd_level_cell(r->lv, (sd_cell_kind)k, i, v);
                 for (int j = 0; j < sd_cell_size((sd_cell_kind)k); j++)
@@ -183,7 +183,7 @@ int mp_write_piece(const mp_piece *p, const mp_result *r, const char *path, uint
         if (slot[v] != UINT32_MAX) {
             uint32_t s = slot[v];
             memcpy(xyz + 3 * (size_t)s, pos + 3 * (size_t)v, 24);
-            gid[s] = (int64_t)r->vgid[v];
+            gid[s] = (int64_t)mp_vgid(r, v);
             own[s] = r->vowner[v];
             for (int a = 0; a < na; a++) {
                 int nc;
@@ -194,7 +194,7 @@ int mp_write_piece(const mp_piece *p, const mp_result *r, const char *path, uint
     uint64_t c = 0, o = 0;
     for (int k = 0; k < 5; k++)
         for (uint32_t i = 0; i < r->ncell[k]; i++) {
-            if (!r->cown[k][i])
+            if (!mp_cown(r, k, i))
                 continue;
             uint32_t v[6];
             sd_level_cell(r->lv, (sd_cell_kind)k, i, v);
@@ -210,8 +210,8 @@ int mp_write_piece(const mp_piece *p, const mp_result *r, const char *path, uint
                 offs[c] = (int64_t)o;
                 types[c] = (uint8_t)VT[k];
                 kinds[c] = (uint8_t)k;
-                cid[c] = (int64_t)r->cgid[k][i];
-                ctrl[c] = (int64_t)r->cctrl[k][i];
+                cid[c] = (int64_t)mp_cgid(r, k, i);
+                ctrl[c] = (int64_t)r->p->sg[mp_csrc(r, k, i)];
                 c++;
             }
         }
@@ -288,7 +288,7 @@ void mp_merge_blob(const mp_piece *p, const mp_result *r, mp_buf *b)
     }
     for (int k = 0; k < 5; k++)
         for (uint32_t i = 0; i < r->ncell[k]; i++)
-            if (r->cown[k][i]) {
+            if (mp_cown(r, k, i)) {
                 uint32_t v[6];
                 sd_level_cell(r->lv, (sd_cell_kind)k, i, v);
                 for (int j = 0; j < sd_cell_size((sd_cell_kind)k); j++)
@@ -302,7 +302,8 @@ void mp_merge_blob(const mp_piece *p, const mp_result *r, mp_buf *b)
     const double *pos = r->lv ? sd_level_channel(r->lv, 0, &nc3) : NULL;
     for (uint32_t v = 0; v < nv; v++)
         if (used[v] && r->vowner[v] == p->rank) {
-            mp_buf_put(b, &r->vgid[v], 8);
+            uint64_t gv = mp_vgid(r, v);
+            mp_buf_put(b, &gv, 8);
             mp_buf_put(b, pos + 3 * (size_t)v, 24);
             for (int a = 0; a < p->nattrs; a++) {
                 int nc;
@@ -314,17 +315,20 @@ void mp_merge_blob(const mp_piece *p, const mp_result *r, mp_buf *b)
     for (int k = 0; k < 5; k++) {
         uint64_t nc = 0;
         for (uint32_t i = 0; i < r->ncell[k]; i++)
-            nc += r->cown[k][i];
+            nc += mp_cown(r, k, i);
         mp_buf_put(b, &nc, 8);
         for (uint32_t i = 0; i < r->ncell[k]; i++)
-            if (r->cown[k][i]) {
+            if (mp_cown(r, k, i)) {
                 uint32_t v[6];
-                uint64_t ctrl = r->cctrl[k][i];
+                uint64_t ctrl = r->p->sg[mp_csrc(r, k, i)], cg = mp_cgid(r, k, i);
                 sd_level_cell(r->lv, (sd_cell_kind)k, i, v);
-                mp_buf_put(b, &r->cgid[k][i], 8);
+                mp_buf_put(b, &cg, 8);
                 mp_buf_put(b, &ctrl, 8);
                 for (int j = 0; j < sd_cell_size((sd_cell_kind)k); j++)
-                    mp_buf_put(b, &r->vgid[v[j]], 8);
+                    {
+                    uint64_t gw = mp_vgid(r, v[j]);
+                    mp_buf_put(b, &gw, 8);
+                }
             }
     }
 }
