@@ -73,8 +73,8 @@ $(B)/subdivd: $(SRV_OBJ) $(API_LIB) $(CORE_LIB)
 # Open MPI's mpicc and METIS (tools/packages.txt); `make all` builds it when mpicc is there.
 MPICC   ?= mpicc
 MPI_SRC := $(wildcard mpi/*.c)
-$(B)/subdivd-mpi: $(MPI_SRC) mpi/mp.h $(API_LIB) $(CORE_LIB)
-	$(MPICC) $(CFLAGS) $(MPI_SRC) $(API_LIB) $(CORE_LIB) -lmetis $(API_LIBS) -lpthread $(LDLIBS) -o $@
+$(B)/subdivd-mpi: $(MPI_SRC) mpi/mp.h tests/tools/textmesh.c tests/tools/textmesh.h $(API_LIB) $(CORE_LIB)
+	$(MPICC) $(CFLAGS) $(MPI_SRC) tests/tools/textmesh.c $(API_LIB) $(CORE_LIB) -lmetis $(API_LIBS) -lpthread $(LDLIBS) -o $@
 ifneq ($(shell command -v $(MPICC) 2>/dev/null),)
 EXTRA_ALL += $(B)/subdivd-mpi
 endif

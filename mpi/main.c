@@ -1,6 +1,6 @@
 /* main.c — subdivd-mpi: one level of a big mesh refined by several MPI processes.
  *
- *     mpirun -n N subdivd-mpi refine INPUT.json --level L -o OUT.pvtu [--tags T.json]
+ *     mpirun -n N subdivd-mpi refine INPUT.json|INPUT.txt --level L -o OUT.pvtu [--tags T.json]
  *            [--rules R.json] [--merge] [--halo K] [--max-memory BYTES] [--stats S.json]
  *            [--no-write] [-q]
  *
@@ -20,6 +20,7 @@
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
 #include "../api/mem.h"
+#include "../tests/tools/textmesh.h"
 #include "mp.h"
 #include <errno.h>
 #include <mpi.h>
@@ -46,7 +47,8 @@ static void usage(FILE *f)
                "       [--tags T.json] [--rules R.json] [--merge] [--halo K] [--max-memory BYTES]\n"
                "       [--stats S.json] [--no-write] [--one-at-a-time] [-q]\n"
                "INPUT, --tags and --rules are the bodies of PUT /complex, /tags and /rules\n"
-               "(docs/API.md); `subdiv refine --mpi N` converts other mesh files first.\n");
+               "(docs/API.md), or INPUT.txt the text format of docs/TEXT_FORMAT.md;\n"
+               "`subdiv refine --mpi N` converts other mesh files first.\n");
 }
 
 /* 0, or the exit code after saying what is wrong (rank 0 speaks). */
@@ -177,19 +179,22 @@ static int report(const api_problem *p, const char *what)
     return p->status == 413 || p->status == 422 || p->status == 400 ? EXIT_REFUSED : EXIT_FAILED;
 }
 
-static int apply_file(api_model **m, const char *path, change_fn_t fn, const api_limits *lim)
+/* Apply one change handler to *m: the body of a JSON file, or `given` (stolen) when not NULL. */
+static int apply_file(api_model **m, const char *path, change_fn_t fn, const api_limits *lim,
+                      json_t *given)
 {
     size_t len;
-    char *buf = read_file(path, &len);
-    if (!buf)
+    char *buf = given ? NULL : read_file(path, &len);
+    if (!buf && !given)
         return EXIT_USAGE;
     api_problem p = {0};
     api_packs packs = {0};
     const char *const *packed = fn == api_put_complex ? api_complex_packed
                                 : fn == api_put_tags  ? api_tags_packed
                                                       : NULL;
-    json_t *b = packed ? api_parse_body_packed(buf, len, 0, packed, API_PACK_MIN_BYTES, &packs, &p)
-                       : api_parse_body(buf, len, 0, &p);
+    json_t *b = given    ? given
+                : packed ? api_parse_body_packed(buf, len, 0, packed, API_PACK_MIN_BYTES, &packs, &p)
+                         : api_parse_body(buf, len, 0, &p);
     api_free(buf);
     api_model *next = NULL;
     if (b && fn == api_put_complex)
@@ -207,6 +212,71 @@ static int apply_file(api_model **m, const char *path, change_fn_t fn, const api
     return 0;
 }
 
+/* A mesh in the text format of docs/TEXT_FORMAT.md as the bodies of PUT /complex (vertices,
+ * simplices, the `d` lines as diagonals) and PUT /tags (the `c` lines as sharpness; NULL when
+ * there are none). 0, or EXIT_USAGE after saying why. */
+static int text_bodies(const char *path, json_t **complex, json_t **tags)
+{
+    textmesh tm;
+    char why[256];
+    if (textmesh_read(path, &tm, why, sizeof why)) {
+        fprintf(stderr, "%s: %s: %s\n", tag_, path, why);
+        return EXIT_USAGE;
+    }
+    json_t *v = json_array(), *sx = json_array(), *dg = json_array(), *sh = json_array();
+    for (size_t i = 0; i < tm.nv; i++)
+        json_array_append_new(v, json_pack("[f,f,f]", tm.xyz[3 * i], tm.xyz[3 * i + 1],
+                                           tm.xyz[3 * i + 2]));
+    size_t o = 0, ntet = 0;
+    long *tet_at = malloc((tm.ns + 1) * sizeof *tet_at); /* t-th tetrahedron -> simplex */
+    for (size_t i = 0; i < tm.ns; i++) {
+        json_t *q = json_array();
+        for (int j = 0; j < tm.size[i]; j++)
+            json_array_append_new(q, json_integer(tm.idx[o + (size_t)j]));
+        o += tm.size[i];
+        json_array_append_new(sx, q);
+        if (tm.size[i] == 4 && tet_at)
+            tet_at[ntet++] = (long)i;
+    }
+    int rc = 0;
+    for (size_t i = 0; tet_at && i < tm.ndiag; i++) {
+        long t = tm.diag[2 * i], k = tm.diag[2 * i + 1];
+        if (t < 0 || (size_t)t >= ntet) {
+            fprintf(stderr, "%s: %s: 'd %ld %ld' names no tetrahedron\n", tag_, path, t, k);
+            rc = EXIT_USAGE;
+            break;
+        }
+        json_array_append_new(dg, json_pack("[I,I]", (json_int_t)tet_at[t], (json_int_t)k));
+    }
+    for (size_t i = 0; i < tm.ncr; i++) {
+        json_t *q = json_array();
+        for (int j = 0; j < tm.crn[i]; j++)
+            json_array_append_new(q, json_integer(tm.crv[3 * i + (size_t)j]));
+        json_array_append_new(sh, json_pack("{s:o,s:f}", "simplex", q, "value", tm.crs[i]));
+    }
+    free(tet_at);
+    *complex = json_pack("{s:o,s:o}", "vertices", v, "simplices", sx);
+    if (json_array_size(dg))
+        json_object_set(*complex, "diagonals", dg);
+    json_decref(dg);
+    *tags = json_array_size(sh) ? json_pack("{s:o}", "sharpness", sh) : (json_decref(sh), NULL);
+    textmesh_free(&tm);
+    if (rc || !tet_at) {
+        json_decref(*complex);
+        json_decref(*tags);
+        if (!rc)
+            fprintf(stderr, "%s: out of memory reading %s\n", tag_, path);
+        return EXIT_USAGE;
+    }
+    return 0;
+}
+
+static int is_text(const char *path)
+{
+    size_t n = strlen(path);
+    return n > 4 && !strcmp(path + n - 4, ".txt");
+}
+
 static int read_model(const args *a, api_model **out)
 {
     api_limits lim = api_default_limits();
@@ -220,11 +290,22 @@ static int read_model(const args *a, api_model **out)
     if (!m)
         return EXIT_FAILED;
     int rc = 0;
-    rc = apply_file(&m, a->input, api_put_complex, &lim);
+    json_t *cb = NULL, *tb = NULL;
+    if (is_text(a->input))
+        rc = text_bodies(a->input, &cb, &tb);
+    if (!rc)
+        rc = apply_file(&m, a->input, api_put_complex, &lim, cb);
+    else
+        json_decref(tb), tb = NULL;
     if (!rc && a->rules) /* after the complex: overrides name its simplices */
-        rc = apply_file(&m, a->rules, api_put_rules, &lim);
-    if (!rc && a->tags)
-        rc = apply_file(&m, a->tags, api_put_tags, &lim);
+        rc = apply_file(&m, a->rules, api_put_rules, &lim, NULL);
+    if (!rc && a->tags) /* --tags replaces the text file's sharpness, as a PUT does */
+        rc = apply_file(&m, a->tags, api_put_tags, &lim, NULL);
+    else if (!rc && tb) {
+        rc = apply_file(&m, a->input, api_put_tags, &lim, tb);
+        tb = NULL;
+    }
+    json_decref(tb);
     if (rc) {
         api_model_unref(m);
         return rc;

@@ -442,3 +442,86 @@ def test_missing_file(tmp_path):
     r = mpirun(2, "refine", tmp_path / "none.json", "--level", 1, "-o", tmp_path / "o.pvtu")
     assert r.returncode == 2
     assert "cannot open" in r.stderr
+
+
+# ---- other inputs -----------------------------------------------------------------------------
+
+def sdlevel_points(path, level):
+    """The level's points as build/sdlevel prints them (the core alone, no api/)."""
+    from conftest import SDLEVEL
+    out = subprocess.run([str(SDLEVEL), "-l", str(level), str(path)], capture_output=True,
+                         text=True, check=True).stdout
+    return np.array([[float(x) for x in l.split()[1:4]] for l in out.splitlines()
+                     if l.startswith("v ")])
+
+
+def max_error(pvtu, n, ref):
+    worst = 0.0
+    for g in pieces_of(pvtu, n):
+        if g.GetNumberOfPoints():
+            gid = arr(g, "global_id")
+            worst = max(worst, np.abs(vtk_to_numpy(g.GetPoints().GetData()) - ref[gid]).max())
+    return worst
+
+
+def test_text_format_input(tmp_path):
+    """INPUT.txt (docs/TEXT_FORMAT.md) with sharpness lines, against sdlevel's level."""
+    from conftest import MAKE_MESH
+    for name, args, extra in (("torus", ["torus", 12, 9], "c 0 1 2.5\nc 5 1.5\n"),
+                              ("block", ["cubes", 3], "")):
+        text = subprocess.run(["/usr/bin/python3", str(MAKE_MESH), *map(str, args)],
+                              capture_output=True, text=True, check=True).stdout
+        path = tmp_path / f"{name}.txt"
+        path.write_text(text + extra)
+        out = tmp_path / f"{name}.pvtu"
+        r = mpirun(2, "refine", path, "--level", 2, "-o", out, "-q")
+        assert r.returncode == 0, r.stderr
+        ref = sdlevel_points(path, 2)
+        assert max_error(out, 2, ref) <= 1e-12
+        assert read(out).GetNumberOfCells() > 0
+
+
+def test_text_diagonal_lines_are_posted_diagonals(tmp_path):
+    """`d t k` lines become PUT /complex "diagonals" (the others chosen against them, as the
+    API does): the level equals subdivd refine's of that JSON body."""
+    v, t = cubes(3, seed=9)
+    lines = ["v %.17g %.17g %.17g" % tuple(p) for p in v] + ["s " + " ".join(map(str, s)) for s in t]
+    (tmp_path / "b.txt").write_text("\n".join(lines + ["d 0 1", "d 7 2", "d 30 0"]) + "\n")
+    body = {"vertices": v, "simplices": t, "diagonals": [[0, 1], [7, 2], [30, 0]]}
+    (tmp_path / "b.json").write_text(json.dumps(body))
+    r = subprocess.run([str(SUBDIVD), "refine", str(tmp_path / "b.json"), "--level", "2", "-o",
+                        str(tmp_path / "ref.vtu")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    ref = vtk_to_numpy(read(tmp_path / "ref.vtu").GetPoints().GetData())
+    r = mpirun(3, "refine", tmp_path / "b.txt", "--level", 2, "-o", tmp_path / "o.pvtu", "-q")
+    assert r.returncode == 0, r.stderr
+    assert max_error(tmp_path / "o.pvtu", 3, ref) <= 1e-12
+
+
+def test_cli_mpi_converts_and_runs(tmp_path):
+    """`subdiv refine MESH --mpi N`: the mesh file converted as `subdiv convert` does, refined by
+    N processes; the same level as subdivd refine of the converted body."""
+    subdiv = REPO / "build" / "subdiv"
+    mesh = REPO / "examples" / "block.msh"
+    env = dict(ENV, SUBDIVD_MPI=str(MPI))
+    r = subprocess.run([str(subdiv), "convert", str(mesh), "-o", str(tmp_path / "b.json"),
+                        "--tags-out", str(tmp_path / "t.json")], capture_output=True, text=True,
+                       env=env)
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run([str(SUBDIVD), "refine", str(tmp_path / "b.json"), "--level", "2",
+                        "--tags", str(tmp_path / "t.json"), "-o", str(tmp_path / "ref.vtu")],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    g0 = read(tmp_path / "ref.vtu")
+    ref = vtk_to_numpy(g0.GetPoints().GetData())
+    r = subprocess.run([str(subdiv), "refine", str(mesh), "--level", "2", "-o",
+                        str(tmp_path / "o.pvtu"), "--mpi", "2"], capture_output=True, text=True,
+                       env=env, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "subdivd-mpi: rank 1/2: level 2:" in r.stderr
+    assert max_error(tmp_path / "o.pvtu", 2, ref) <= 1e-12
+    assert read(tmp_path / "o.pvtu").GetNumberOfCells() == g0.GetNumberOfCells()
+    r = subprocess.run([str(subdiv), "refine", str(mesh), "--level", "2", "-o",
+                        str(tmp_path / "o.glb"), "--mpi", "2"], capture_output=True, text=True,
+                       env=env)
+    assert r.returncode == 2 and "--mpi writes one output" in r.stderr
