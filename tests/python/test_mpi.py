@@ -525,3 +525,26 @@ def test_cli_mpi_converts_and_runs(tmp_path):
                         str(tmp_path / "o.glb"), "--mpi", "2"], capture_output=True, text=True,
                        env=env)
     assert r.returncode == 2 and "--mpi writes one output" in r.stderr
+
+
+def test_more_ranks_than_simplices(tmp_path, tmp_path_factory):
+    """examples/mixed.json has 5 simplices: on 7 ranks two get none and write empty pieces; the
+    .pvtu still holds the whole level, and --merge the one-process VTU."""
+    mesh = REPO / "examples" / "mixed.json"
+    ref = tmp_path / "ref.vtu"
+    r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", "2", "-o", str(ref)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    g0 = read(ref)
+    ref_pts = vtk_to_numpy(g0.GetPoints().GetData())
+    r = mpirun(7, "refine", mesh, "--level", 2, "-o", tmp_path / "o.pvtu", "-q")
+    assert r.returncode == 0, r.stderr
+    pieces = pieces_of(tmp_path / "o.pvtu", 7)
+    assert sum(p.GetNumberOfCells() == 0 for p in pieces) == 2
+    assert read(tmp_path / "o.pvtu").GetNumberOfCells() == g0.GetNumberOfCells()
+    assert max_error(tmp_path / "o.pvtu", 7, ref_pts) <= 1e-12
+    r = mpirun(7, "refine", mesh, "--level", 2, "-o", tmp_path / "m.vtu", "-q")
+    assert r.returncode == 0, r.stderr
+    g = read(tmp_path / "m.vtu")
+    assert np.abs(vtk_to_numpy(g.GetPoints().GetData()) - ref_pts).max() <= 1e-12
+    assert cells_of(g) == cells_of(g0)
