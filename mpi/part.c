@@ -9,7 +9,8 @@
  * parts get the same refinement work rather than the same count.
  *
  * A piece is the owned simplices plus `halo` rings (ring k + 1: every simplex sharing a vertex
- * with ring k); DECISIONS 44 derives why one ring makes every owned level-L point exact. The
+ * with ring k); DECISIONS 44 derives how many rings make every owned level-L point exact (two
+ * with tetrahedra or Ying-Zorin's rules, else one). The
  * piece's tags and per-simplex rules are those of the whole complex whose vertices are all in the
  * piece and which touch a vertex whose star is whole (`vfull`): exactly those whose
  * classification the piece reproduces; the others lie outside the owned cells' reach. Global
@@ -418,8 +419,12 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
     if (metis_parts(m, &c, level, nparts, part, err, errlen))
         goto out;
     *seconds = mp_now() - t0;
-    if (halo < 0) /* DECISIONS 44: octahedra reach two edges of their level, triangles one */
-        halo = sd_level_num_cells(m->level0, SD_CELL_TETRA) ? 2 : 1;
+    if (halo < 0) /* DECISIONS 44: octahedra and Ying-Zorin's flattened petal rows reach two
+                   * edges of their level, the other rows one */
+        halo = sd_level_num_cells(m->level0, SD_CELL_TETRA) ||
+                       m->rules.nonmanifold_surface == SD_NMSURF_YING_ZORIN
+                   ? 2
+                   : 1;
     uint32_t nv = m->in->nv;
     ring = malloc(((size_t)c.n + 1) * sizeof *ring);
     lid = malloc(((size_t)nv + 1) * sizeof *lid);

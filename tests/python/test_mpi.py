@@ -135,9 +135,9 @@ def mixed():
     return body
 
 
-def book(pages=3, n=4):
-    """`pages` triangle strips sharing one spine (non-manifold edges and vertices), plus a tet
-    block glued to the spine's end vertex."""
+def book(pages=3, n=4, block=True):
+    """`pages` triangle strips sharing one spine (non-manifold edges and vertices), plus (with
+    `block`) a tet block glued to the spine's end vertex."""
     v = [[0, 0, j] for j in range(n + 1)]
     f = []
     for p in range(pages):
@@ -151,6 +151,8 @@ def book(pages=3, n=4):
             for j in range(n):
                 f += [[row0[j], row0[j + 1], row[j + 1]], [row0[j], row[j + 1], row[j]]]
             row0 = row
+    if not block:
+        return jitter(v, 7, 0.03), f
     cv, ct = cubes(2, seed=6)
     off = len(v)
     top = n  # the spine's top vertex (0, 0, n) is glued to the block's corner 0
@@ -192,6 +194,10 @@ def cases():
                        {"simplex": [1, 2], "rule": "N2", "pair": [[1, 2, 7], [1, 2, 17]]}]})
     out["nonmanifold-ying-zorin"] = ({"vertices": v, "simplices": s}, None,
                                      {"nonmanifold_surface": "ying-zorin"})
+    v, s = book(pages=4, n=6, block=False)   # triangles only: one ring of halo
+    out["sheets-chang-qin"] = ({"vertices": v, "simplices": s}, {"singular": [[3]]}, None)
+    out["sheets-ying-zorin"] = ({"vertices": v, "simplices": s}, {"singular": [[0]]},
+                                {"nonmanifold_surface": "ying-zorin"})
     return out
 
 
