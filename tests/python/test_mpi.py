@@ -196,8 +196,10 @@ def cases():
                                      {"nonmanifold_surface": "ying-zorin"})
     v, s = book(pages=4, n=6, block=False)   # triangles only: one ring of halo
     out["sheets-chang-qin"] = ({"vertices": v, "simplices": s}, {"singular": [[3]]}, None)
-    out["sheets-ying-zorin"] = ({"vertices": v, "simplices": s}, {"singular": [[0]]},
-                                {"nonmanifold_surface": "ying-zorin"})
+    out["sheets-ying-zorin"] = (
+        {"vertices": v, "simplices": s},
+        {"singular": [[0]], "petals": [{"vertex": 6, "triangle": [5, 6, 13], "kind": "concave"}]},
+        {"nonmanifold_surface": "ying-zorin"})
     return out
 
 
