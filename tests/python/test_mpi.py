@@ -172,6 +172,13 @@ def cases():
     v, t = cubes(4)
     out["solid-box"] = ({"vertices": v, "simplices": t}, None, None)
     out["solid-averaged"] = ({"vertices": v, "simplices": t}, None, {"solid_scheme": "averaged"})
+    # a sharp triangle inside the solid (a face of two cells), a semi-sharp boundary edge and
+    # vertex, a singular boundary crease
+    out["solid-sharp"] = ({"vertices": v, "simplices": t},
+                          {"singular": [[0, 5], [5, 10]],
+                           "sharpness": [{"simplex": [31, 61, 62], "value": 2.5},
+                                         {"simplex": [0, 1], "value": 1.5},
+                                         {"simplex": [124], "value": 2.0}]}, None)
     v, f = icosphere(2)
     out["sphere-loop"] = ({"vertices": v, "simplices": f}, None, {"surface_weights": "loop"})
     v, f = grid(8, 7)
