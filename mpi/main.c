@@ -496,7 +496,7 @@ static int run(const args *a)
         MPI_Request rq;
         MPI_Irecv(&turn, 1, MPI_INT, rank_ - 1, 3, MPI_COMM_WORLD, &rq);
         wait_sleeping(&rq);
-        tc = mp_now();
+        tc = mp_now() - st.t_distribute; /* its share of the distribution still counts */
         cpu0 = cpu_now();
     }
     if (mp_refine(&piece, a->max_bytes, a->quiet, tag_, &res, err, sizeof err)) {
