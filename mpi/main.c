@@ -485,8 +485,8 @@ static int run(const args *a)
     if ((rc = checkpoint(rc, "distributing the pieces")))
         goto done;
     if (!a->quiet)
-        fprintf(stderr, "%s: piece of %u simplices (%u owned, %u halo), %u vertices\n", tag_,
-                piece.ns, piece.ns - piece.nhalo, piece.nhalo, piece.nv);
+        fprintf(stderr, "%s: piece of %u simplices (%u owned, %u in %d halo rings), %u vertices\n",
+                tag_, piece.ns, piece.ns - piece.nhalo, piece.nhalo, piece.halo, piece.nv);
     st.owned_simplices = piece.ns - piece.nhalo;
     st.halo_simplices = piece.nhalo;
     /* 3. refine (--one-at-a-time: rank r starts when rank r-1 is done, so each is timed as if
