@@ -503,8 +503,6 @@ static int run(const args *a)
         fprintf(stderr, "%s: %s\n", tag_, err);
         rc = EXIT_FAILED;
     }
-    if (a->one_at_a_time && rank_ + 1 < nranks_)
-        MPI_Send(&turn, 1, MPI_INT, rank_ + 1, 3, MPI_COMM_WORLD);
     st.t_build = res.seconds_build;
     st.t_refine = res.seconds_refine;
     st.t_ids = res.seconds_ids;
@@ -512,6 +510,11 @@ static int run(const args *a)
     st.local_cells = res.local_cells;
     st.t_compute = mp_now() - tc;
     st.cpu_compute = cpu_now() - cpu0;
+    if (a->one_at_a_time && a->nowrite) /* as on a machine of its own: the next rank does not
+                                          * find this one's memory taken */
+        mp_result_free(&res);
+    if (a->one_at_a_time && rank_ + 1 < nranks_)
+        MPI_Send(&turn, 1, MPI_INT, rank_ + 1, 3, MPI_COMM_WORLD);
     if ((rc = checkpoint(rc, "refining")))
         goto done;
     if (!a->quiet)
