@@ -524,6 +524,7 @@ static int run(const args *a)
     /* 4. write */
     double tw = mp_now();
     if (a->nowrite) {
+        /* benchmarks: nothing written */
     } else if (!a->merge) {
         char path[4096];
         piece_path(a->out, rank_, path, sizeof path);
@@ -598,7 +599,7 @@ static int run(const args *a)
     if (!rank_ && all) {
         double comp = 0, cpu = 0, wr = 0;
         long rss = 0;
-        uint64_t halo = 0, local = 0, owned = 0;
+        uint64_t local = 0, owned = 0;
         for (int r = 0; r < nranks_; r++) {
             comp = all[r].t_compute > comp ? all[r].t_compute : comp;
             cpu = all[r].cpu_compute > cpu ? all[r].cpu_compute : cpu;
@@ -606,7 +607,6 @@ static int run(const args *a)
             rss = all[r].maxrss_kb > rss ? all[r].maxrss_kb : rss;
             local += all[r].local_cells;
             owned += all[r].owned_cells;
-            halo += all[r].halo_simplices;
         }
         fprintf(stderr, "subdivd-mpi: level %d on %d ranks: compute %.2f s (CPU %.2f s on the "
                         "slowest rank; read %.2f s apart), write %.2f s, peak memory %.1f MB on "
@@ -614,7 +614,6 @@ static int run(const args *a)
                 a->level, nranks_, comp, cpu, all[0].t_read, wr, rss / 1024.0,
                 local ? 100.0 * (double)(local - owned) / (double)local : 0.0,
                 a->nowrite ? "(not written)" : a->out);
-        (void)halo;
         if (a->stats)
             write_stats(a, all, &piece);
     }
