@@ -340,6 +340,11 @@ int mp_merge_write(const char *path, const mp_piece *p0, const unsigned char *co
     uint64_t npts = G->vertices, nk[5] = {G->points, G->curves, G->triangles, G->tetrahedra,
                                           G->octahedra};
     int na = p0->nattrs, rc = -1;
+    if (npts > UINT32_MAX) {
+        snprintf(err, errlen, "%llu points are too many to merge into one VTU; write pieces (.pvtu)",
+                 (unsigned long long)npts);
+        return -1;
+    }
     uint64_t ncells = 0, nconn = 0;
     for (int k = 0; k < 5; k++) {
         ncells += nk[k] * (uint64_t)vtk_cells(k);
