@@ -15,7 +15,8 @@
  * the same code (1: the mesh or tags were refused, 2: usage or a file, 3: a rank failed). A rank
  * that dies outright is mpirun's to report (it then ends the others, non-zero).
  * Progress: one line per rank and phase on stderr, prefixed "subdivd-mpi: rank R/N" (-q: none
- * but errors and the summary).
+ * but errors and the summary). Test hook: SUBDIVD_MPI_FAIL_AT=R:N fails the N-th allocation of
+ * rank R from the refinement on (api_mem_fail_at), to test one rank failing alone.
  */
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
@@ -499,6 +500,13 @@ static int run(const args *a)
         tc = mp_now() - st.t_distribute; /* its share of the distribution still counts */
         cpu0 = cpu_now();
     }
+    /* test hook: SUBDIVD_MPI_FAIL_AT=R:N fails rank R's N-th allocation from here on (api/mem.h),
+     * so tests see one rank fail alone */
+    const char *hook = getenv("SUBDIVD_MPI_FAIL_AT");
+    int hook_rank;
+    unsigned long long hook_n;
+    if (hook && sscanf(hook, "%d:%llu", &hook_rank, &hook_n) == 2 && hook_rank == rank_)
+        api_mem_fail_at(hook_n, 0);
     if (mp_refine(&piece, a->max_bytes, a->quiet, tag_, &res, err, sizeof err)) {
         fprintf(stderr, "%s: %s\n", tag_, err);
         rc = EXIT_FAILED;

@@ -440,6 +440,23 @@ def test_a_failing_rank_stops_all(tmp_path):
     assert not list(tmp_path.glob("o*.vtu")) and not (tmp_path / "o.pvtu").exists()
 
 
+@pytest.mark.parametrize("nth", [1, 5])
+def test_one_failing_rank_stops_the_others(tmp_path, nth):
+    """Rank 1 alone runs out of memory (the test hook SUBDIVD_MPI_FAIL_AT fails its nth
+    allocation): it says so, rank 0 says the run stopped because of rank 1, nothing is written,
+    and mpirun exits 3."""
+    out = tmp_path / "o.pvtu"
+    r = subprocess.run([MPIRUN, "-n", "3", "--oversubscribe", str(MPI), "refine",
+                        str(REPO / "examples" / "mixed.json"), "--level", "3", "-o", str(out)],
+                       capture_output=True, text=True, timeout=300,
+                       env=dict(ENV, SUBDIVD_MPI_FAIL_AT=f"1:{nth}"))
+    assert r.returncode == 3, r.stderr
+    assert "subdivd-mpi: rank 1/3: out of memory" in r.stderr, r.stderr
+    assert "subdivd-mpi: stopped (refining) after a failure on rank 1" in r.stderr
+    assert "rank 0/3: out of memory" not in r.stderr and "rank 2/3: out of memory" not in r.stderr
+    assert not list(tmp_path.glob("o*"))
+
+
 @pytest.mark.parametrize("args,msg", [
     ([], "INPUT, --level L and -o OUT are required"),
     (["m.json", "--level", "1", "-o", "x.vtk"], "-o must end in .pvtu"),
