@@ -580,3 +580,15 @@ def test_more_ranks_than_simplices(tmp_path, tmp_path_factory):
     g = read(tmp_path / "m.vtu")
     assert np.abs(vtk_to_numpy(g.GetPoints().GetData()) - ref_pts).max() <= 1e-12
     assert cells_of(g) == cells_of(g0)
+
+
+def test_level_4_solid_averaged(tmp_path, tmp_path_factory):
+    """Two rings stay enough at level 4 (DECISIONS 44: the front's advance is a geometric
+    series): the averaged solid scheme on 3 ranks."""
+    mesh, extra = write_case(tmp_path, "solid-averaged")
+    ref_pts, ref_cells, _ = reference(tmp_path_factory, "solid-averaged", 4)
+    out = tmp_path / "l4.pvtu"
+    r = mpirun(3, "refine", mesh, "--level", 4, "-o", out, "-q", *extra)
+    assert r.returncode == 0, r.stderr
+    assert max_error(out, 3, ref_pts) <= 1e-12
+    assert read(out).GetNumberOfCells() == len(ref_cells)
