@@ -69,6 +69,16 @@ $(B)/errors.o: $(B)/errors.c server/errors.h
 $(B)/subdivd: $(SRV_OBJ) $(API_LIB) $(CORE_LIB)
 	$(CC) $(CFLAGS) $(SRV_OBJ) $(API_LIB) $(CORE_LIB) $(API_LIBS) $(SRV_LIBS) $(LDLIBS) -o $@
 
+# mpi/: subdivd-mpi, one level refined by several MPI processes (docs/BATCH.md), built with
+# Open MPI's mpicc and METIS (tools/packages.txt); `make all` builds it when mpicc is there.
+MPICC   ?= mpicc
+MPI_SRC := $(wildcard mpi/*.c)
+$(B)/subdivd-mpi: $(MPI_SRC) mpi/mp.h tests/tools/textmesh.c tests/tools/textmesh.h $(API_LIB) $(CORE_LIB)
+	$(MPICC) $(CFLAGS) $(MPI_SRC) tests/tools/textmesh.c $(API_LIB) $(CORE_LIB) -lmetis $(API_LIBS) -lpthread $(LDLIBS) -o $@
+ifneq ($(shell command -v $(MPICC) 2>/dev/null),)
+EXTRA_ALL += $(B)/subdivd-mpi
+endif
+
 -include tests/peers/Makefile.inc
 -include tests/tools/Makefile.inc
 -include tests/fuzz/Makefile.inc

@@ -232,10 +232,11 @@ static int refine_main(int argc, char **argv)
         }
         crease = json_pack("{s:f}", "crease_angle", deg);
     }
-    if (!rc && a.rules)
-        rc = apply_file(&m, a.rules, api_put_rules, &lim, a.rules, NULL);
+    /* the complex first: per-simplex overrides in --rules name its simplices */
     if (!rc)
         rc = apply_file(&m, a.input, api_put_complex, &lim, a.input, a.repair ? repair : NULL);
+    if (!rc && a.rules)
+        rc = apply_file(&m, a.rules, api_put_rules, &lim, a.rules, NULL);
     if (!rc && (a.tags || crease))
         rc = apply_file(&m, a.tags, api_put_tags, &lim, a.tags ? a.tags : "--crease-angle", crease);
     json_decref(repair);

@@ -37,7 +37,8 @@ def test_walkthrough_runs_as_written(tmp_path):
     o = tmp_path / "out"
     for f in ("ball.vtu", "ball.glb", "block.vtu", "mixed.glb", "ball-offline.vtu",
               "out/ball.vtu", "out/ball-L2.glb", "out/block.vtu", "out/block-L3.glb",
-              "out/mixed.vtu", "out/mixed-L2.glb"):
+              "out/mixed.vtu", "out/mixed-L2.glb", "block-mpi.pvtu", "block-mpi_0.vtu",
+              "block-mpi_1.vtu", "mixed-merged.vtu"):
         assert (o / f).stat().st_size > 0, f
     assert "{'tetra':" in out                                   # step 2 read the VTU back
     assert "tags: [[4, 5], [5, 7], [6, 7], [4, 6]] | rules: averaged" in out

@@ -5,6 +5,7 @@
                   [--parts P] [--slice nx,ny,nz,d] [--attributes A] [--colormap NAME:min:max]
                   [--octahedra tets|polyhedra] [--names true|false] [--compress none|zlib]
                   [--pvd DIR] [--save-complex C.json]
+    subdiv refine INPUT --level L -o OUT.pvtu|OUT.vtu --mpi N [--tags T.json] [--rules R.json]
     subdiv batch JOBS.json [--fail-fast]
     subdiv convert INPUT -o BODY.json [--tags-out T.json] [--fill ...] [--singular-groups A,B]
 
@@ -378,7 +379,71 @@ def _job_from_args(args):
     return job
 
 
+def find_subdivd_mpi():
+    launcher = os.environ.get("SUBDIV_LAUNCHER") or sys.argv[0]
+    for cand in (os.environ.get("SUBDIVD_MPI"),
+                 str(pathlib.Path(launcher).resolve().parent / "subdivd-mpi"),
+                 shutil.which("subdivd-mpi")):
+        if cand and os.access(cand, os.X_OK) and not os.path.isdir(cand):
+            return cand
+    raise UsageError("--mpi: cannot find subdivd-mpi; set SUBDIVD_MPI or build it (make build/subdivd-mpi)")
+
+
+def cmd_refine_mpi(args):
+    """`refine --mpi N`: the mesh converted here (as `convert` does), then `mpirun -n N
+    subdivd-mpi refine` on it (docs/BATCH.md, section 7): no daemon; one .pvtu (a VTU piece per rank)
+    or one merged .vtu. mpirun's stderr (each rank's progress) passes through."""
+    job = _job_from_args(args)
+    outs = job["outputs"]
+    if args.mpi < 1:
+        raise UsageError("--mpi takes a number of processes (1 or more)")
+    if len(outs) != 1 or not outs[0].endswith((".pvtu", ".vtu")) or job.get("pvd"):
+        raise UsageError("--mpi writes one output: OUT.pvtu (a piece per process) or OUT.vtu (merged)")
+    if job["options"] or job.get("save_complex") or job.get("repair") or job.get("crease_angle") is not None:
+        raise UsageError("--mpi takes the mesh, --level, --tags, --rules and one -o; no level options, "
+                         "--save-complex, --repair or --crease-angle")
+    mpirun = shutil.which("mpirun")
+    if not mpirun:
+        raise UsageError("--mpi: mpirun is not on PATH (Debian: openmpi-bin)")
+    exe = find_subdivd_mpi()
+    import tempfile
+    with tempfile.TemporaryDirectory(prefix="subdiv-mpi-") as tmp:
+        try:
+            body, group_tags = meshes.read(args.input, fill=job.get("fill"),
+                                           singular_groups=job.get("singular_groups"))
+        except (meshes.MeshError, OSError) as e:
+            _report(e, args.input)
+            return EXIT_USAGE
+        mesh = pathlib.Path(tmp) / "mesh.json"
+        mesh.write_text(json.dumps(body))
+        cmd = [mpirun, "-n", str(args.mpi)]
+        if args.mpi > (os.cpu_count() or 1):
+            cmd.append("--oversubscribe")
+        cmd += [exe, "refine", str(mesh), "--level", str(args.level), "-o", outs[0]]
+        if job.get("tags"):
+            cmd += ["--tags", job["tags"]]
+        elif group_tags:
+            t = pathlib.Path(tmp) / "tags.json"
+            t.write_text(json.dumps({"singular": group_tags}))
+            cmd += ["--tags", str(t)]
+        if job.get("rules"):
+            cmd += ["--rules", job["rules"]]
+        if args.quiet or args.progress == "none":
+            cmd.append("-q")
+        try:
+            rc = subprocess.run(cmd).returncode
+        except KeyboardInterrupt:
+            return EXIT_INTERRUPTED
+    return rc if rc in (EXIT_OK, EXIT_REFUSED, EXIT_USAGE) else EXIT_DAEMON
+
+
 def cmd_refine(args):
+    if args.mpi is not None:
+        try:
+            return cmd_refine_mpi(args)
+        except UsageError as e:
+            _report(e, args.input)
+            return EXIT_USAGE
     job = _job_from_args(args)
     progress = Progress(args.progress, quiet=args.quiet)
     try:
@@ -567,6 +632,8 @@ def build_parser():
                    "duplicate simplices instead of refusing the mesh (reported)")
     r.add_argument("--crease-angle", type=float, metavar="DEG", help="tag as creases the surface "
                    "edges whose dihedral angle exceeds DEG degrees (0..180)")
+    r.add_argument("--mpi", type=int, metavar="N", help="refine with N MPI processes (mpirun -n N "
+                   "subdivd-mpi; no daemon): -o OUT.pvtu (a piece per process) or OUT.vtu (merged)")
     r.set_defaults(fn=cmd_refine)
     b = sub.add_parser("batch", parents=[common], help="run a job file")
     b.add_argument("jobfile")

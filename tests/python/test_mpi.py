@@ -1,0 +1,594 @@
+"""subdivd-mpi (issue 21): a level refined by several MPI processes on loopback equals the level
+one process computes.
+
+The reference is the one-process level of the same mesh, tags and rules, written by `subdivd
+refine` (the same api/ and core/ code in one process): every point a piece writes must be that
+level's point with the same index (`global_id`) to 1e-12, the owned cells of all pieces together
+must be that level's cells exactly once each (same vertices by global id, same kind and index),
+the `owner` of a point the lowest rank among the pieces using it, and the .pvtu must open in
+VTK's parallel reader with the level's counts. Cases: solids (both schemes), closed and open
+surfaces (both weights), curves with junctions, a mixed complex with attributes, and non-manifold
+complexes with singular tags, semi-sharp creases and per-simplex overrides; levels 1-3 on 2 and 3
+ranks (3 oversubscribed). A halo of 0 rings is shown to be wrong (the comparison sees it), and
+failures stop every rank with a message and a non-zero exit.
+"""
+import collections
+import json
+import os
+import pathlib
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from conftest import REPO
+from daemon import SUBDIVD
+
+MPI = pathlib.Path(os.environ.get("SUBDIVD_MPI", str(REPO / "build" / "subdivd-mpi"))).resolve()
+MPIRUN = shutil.which("mpirun")
+ENV = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+           OMPI_MCA_btl="self,tcp,vader", OMPI_MCA_btl_tcp_if_include="lo",
+           OMPI_MCA_oob_tcp_if_include="lo", OMPI_MCA_rmaps_base_oversubscribe="1")
+
+pytestmark = pytest.mark.skipif(not MPIRUN or not MPI.exists(),
+                                reason="needs Open MPI (tools/packages.txt) and build/subdivd-mpi")
+
+vtk = pytest.importorskip("vtkmodules.vtkIOXML")
+from vtkmodules.util.numpy_support import vtk_to_numpy  # noqa: E402
+
+
+# ---- meshes -----------------------------------------------------------------------------------
+
+def jitter(v, seed, amount=0.08):
+    rng = np.random.RandomState(seed)
+    return (np.asarray(v, float) + rng.uniform(-amount, amount, np.shape(v))).tolist()
+
+
+def cubes(n, seed=1):
+    """n^3 cubes, 6 tetrahedra each (Kuhn), vertices jittered."""
+    idx = lambda i, j, k: (i * (n + 1) + j) * (n + 1) + k
+    v = [[i, j, k] for i in range(n + 1) for j in range(n + 1) for k in range(n + 1)]
+    t = []
+    perms = [(0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)]
+    for i in range(n):
+        for j in range(n):
+            for k in range(n):
+                for p in perms:
+                    c = [i, j, k]
+                    s = [idx(*c)]
+                    for a in p:
+                        c[a] += 1
+                        s.append(idx(*c))
+                    t.append(s)
+    return jitter(v, seed), t
+
+
+def grid(nu, nv, seed=2, z=0.0):
+    """An open nu x nv patch of triangles (bumpy, with a boundary)."""
+    idx = lambda i, j: i * (nv + 1) + j
+    v = [[i, j, z + 0.3 * np.sin(i) * np.cos(j)] for i in range(nu + 1) for j in range(nv + 1)]
+    f = []
+    for i in range(nu):
+        for j in range(nv):
+            a, b, c, d = idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)
+            f += [[a, b, c], [a, c, d]] if (i + j) % 2 else [[a, b, d], [b, c, d]]
+    return jitter(v, seed, 0.05), f
+
+
+def icosphere(n):
+    p = (1 + 5 ** 0.5) / 2
+    v = [(-1, p, 0), (1, p, 0), (-1, -p, 0), (1, -p, 0), (0, -1, p), (0, 1, p), (0, -1, -p),
+         (0, 1, -p), (p, 0, -1), (p, 0, 1), (-p, 0, -1), (-p, 0, 1)]
+    f = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
+         (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
+         (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    v = [list(q) for q in v]
+    for _ in range(n):
+        mid, nf = {}, []
+
+        def m(a, b):
+            k = (min(a, b), max(a, b))
+            if k not in mid:
+                v.append([(v[a][i] + v[b][i]) / 2 for i in range(3)])
+                mid[k] = len(v) - 1
+            return mid[k]
+        for a, b, c in f:
+            ab, bc, ca = m(a, b), m(b, c), m(c, a)
+            nf += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+        f = nf
+    v = [[x / np.linalg.norm(q) * (1 + 0.1 * np.sin(3 * q[0] + q[2])) for x in q] for q in v]
+    return jitter(v, 3, 0.02), [list(t) for t in f]
+
+
+def curves_net(n=6):
+    """A net of polylines on an n x n grid: junctions of valence 4 and 3, open ends."""
+    idx = lambda i, j: i * (n + 1) + j
+    v = [[i, j, 0.2 * np.sin(i + 2 * j)] for i in range(n + 1) for j in range(n + 1)]
+    c = [[idx(i, j), idx(i + 1, j)] for i in range(n) for j in range(0, n + 1, 2)]
+    c += [[idx(i, j), idx(i, j + 1)] for i in range(0, n + 1, 3) for j in range(n)]
+    used = sorted({x for s in c for x in s})
+    ren = {o: k for k, o in enumerate(used)}
+    return jitter([v[o] for o in used], 4, 0.05), [[ren[a], ren[b]] for a, b in c]
+
+
+def mixed():
+    """A tet block with a triangle fin on one face's edge, a curve from a corner, an isolated
+    point, and an attribute."""
+    v, t = cubes(3, seed=5)
+    n = len(v)
+    # fin: a strip of triangles on the block's edge x = 0, z = 0 (vertices (0, j, 0))
+    base = [4 * j for j in range(4)]  # the block's vertices (0, j, 0)
+    fin = []
+    for j in range(4):
+        v.append([-1.0, j + 0.1 * j, -0.5 - 0.05 * j])
+    for j in range(3):
+        a, b, c, d = base[j], base[j + 1], n + j + 1, n + j
+        fin += [[a, b, c], [a, c, d]]
+    m = len(v)
+    v += [[3.5, 3.6, 3.4], [4.2, 4.0, 4.5], [5.0, 4.4, 5.2], [9.0, 9.0, 9.0]]
+    cur = [[63, m], [m, m + 1], [m + 1, m + 2]]
+    pt = [[m + 3]]
+    height = [float(p[2]) for p in v]
+    body = {"vertices": v, "simplices": t + fin + cur + pt,
+            "attributes": {"height": height, "uv": [[p[0], p[1] * 0.5] for p in v]}}
+    return body
+
+
+def book(pages=3, n=4, block=True):
+    """`pages` triangle strips sharing one spine (non-manifold edges and vertices), plus (with
+    `block`) a tet block glued to the spine's end vertex."""
+    v = [[0, 0, j] for j in range(n + 1)]
+    f = []
+    for p in range(pages):
+        ang = 2 * np.pi * p / pages + 0.3
+        row0 = list(range(n + 1))
+        for r in range(1, 3):
+            row = []
+            for j in range(n + 1):
+                v.append([r * np.cos(ang) + 0.05 * j, r * np.sin(ang), j + 0.1 * r])
+                row.append(len(v) - 1)
+            for j in range(n):
+                f += [[row0[j], row0[j + 1], row[j + 1]], [row0[j], row[j + 1], row[j]]]
+            row0 = row
+    if not block:
+        return jitter(v, 7, 0.03), f
+    cv, ct = cubes(2, seed=6)
+    off = len(v)
+    top = n  # the spine's top vertex (0, 0, n) is glued to the block's corner 0
+    cv = [[x + 0.0, y + 0.0, z + n] for x, y, z in cv]
+    ren = {0: top}
+    k = off
+    for i in range(1, len(cv)):
+        ren[i] = k
+        k += 1
+    v += cv[1:]
+    t = [[ren[a] for a in s] for s in ct]
+    return jitter(v, 7, 0.03), f + t
+
+
+def cases():
+    out = {}
+    v, t = cubes(4)
+    out["solid-box"] = ({"vertices": v, "simplices": t}, None, None)
+    out["solid-averaged"] = ({"vertices": v, "simplices": t}, None, {"solid_scheme": "averaged"})
+    # a sharp triangle inside the solid (a face of two cells), a semi-sharp boundary edge and
+    # vertex, a singular boundary crease
+    out["solid-sharp"] = ({"vertices": v, "simplices": t},
+                          {"singular": [[0, 5], [5, 10]],
+                           "sharpness": [{"simplex": [31, 61, 62], "value": 2.5},
+                                         {"simplex": [0, 1], "value": 1.5},
+                                         {"simplex": [124], "value": 2.0}]}, None)
+    v, f = icosphere(2)
+    out["sphere-loop"] = ({"vertices": v, "simplices": f}, None, {"surface_weights": "loop"})
+    v, f = grid(8, 7)
+    out["open-surface-creases"] = (
+        {"vertices": v, "simplices": f},
+        {"singular": [[8 * 3 + j, 8 * 3 + j + 1] for j in range(3)] + [[40]],
+         "sharpness": [{"simplex": [8 * 5 + j, 8 * 5 + j + 1], "value": 1.5 + j}
+                       for j in range(4)] + [{"simplex": [50], "value": 2.0}]},
+        {"crease_method": "chaikin"})
+    v, c = curves_net()
+    out["curves"] = ({"vertices": v, "simplices": c}, {"singular": [[5]]}, None)
+    out["mixed"] = (mixed(), {"singular": [[63]]}, None)
+    v, s = book()
+    out["nonmanifold-g2"] = ({"vertices": v, "simplices": s}, {"singular": [[1]]}, None)
+    out["nonmanifold-overrides"] = (
+        {"vertices": v, "simplices": s}, None,
+        {"nonmanifold_default": "G1",
+         "overrides": [{"simplex": [2], "rule": "G2"}, {"simplex": [0, 1], "rule": "G1"},
+                       {"simplex": [4], "rule": "N1", "dimension": 3},
+                       {"simplex": [1, 2], "rule": "N2", "pair": [[1, 2, 7], [1, 2, 17]]}]})
+    out["nonmanifold-ying-zorin"] = ({"vertices": v, "simplices": s}, None,
+                                     {"nonmanifold_surface": "ying-zorin"})
+    v, s = book(pages=4, n=6, block=False)   # triangles only: one ring of halo
+    out["sheets-chang-qin"] = ({"vertices": v, "simplices": s}, {"singular": [[3]]}, None)
+    out["sheets-ying-zorin"] = (
+        {"vertices": v, "simplices": s},
+        {"singular": [[0]], "petals": [{"vertex": 6, "triangle": [5, 6, 13], "kind": "concave"}]},
+        {"nonmanifold_surface": "ying-zorin"})
+    return out
+
+
+CASES = cases()
+
+
+# ---- running ----------------------------------------------------------------------------------
+
+def write_case(d, name):
+    body, tags, rules = CASES[name]
+    d = pathlib.Path(d)
+    (d / "mesh.json").write_text(json.dumps(body))
+    extra = []
+    if tags:
+        (d / "tags.json").write_text(json.dumps(tags))
+        extra += ["--tags", str(d / "tags.json")]
+    if rules:
+        (d / "rules.json").write_text(json.dumps(rules))
+        extra += ["--rules", str(d / "rules.json")]
+    return d / "mesh.json", extra
+
+
+def mpirun(n, *args, timeout=300):
+    return subprocess.run([MPIRUN, "-n", str(n), "--oversubscribe", str(MPI), *map(str, args)],
+                          capture_output=True, text=True, env=ENV, timeout=timeout)
+
+
+def read(path):
+    r = (vtk.vtkXMLPUnstructuredGridReader() if str(path).endswith(".pvtu")
+         else vtk.vtkXMLUnstructuredGridReader())
+    r.SetFileName(str(path))
+    r.Update()
+    return r.GetOutput()
+
+
+def arr(g, name, cell=False):
+    a = (g.GetCellData() if cell else g.GetPointData()).GetArray(name)
+    assert a is not None, name
+    return vtk_to_numpy(a)
+
+
+def cells_of(g):
+    conn = vtk_to_numpy(g.GetCells().GetConnectivityArray())
+    offs = vtk_to_numpy(g.GetCells().GetOffsetsArray())
+    types = vtk_to_numpy(g.GetCellTypesArray())
+    return [(int(types[i]), tuple(conn[offs[i]:offs[i + 1]])) for i in range(len(types))]
+
+
+_refs = {}
+
+
+def reference(tmp_path_factory, name, level):
+    """The one-process level: points (index = global id) and cells, from `subdivd refine`."""
+    key = (name, level)
+    if key not in _refs:
+        d = tmp_path_factory.mktemp(f"ref-{name}-{level}")
+        mesh, extra = write_case(d, name)
+        out = d / "ref.vtu"
+        r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", str(level), "-o",
+                            str(out), *extra], capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        g = read(out)
+        _refs[key] = (vtk_to_numpy(g.GetPoints().GetData()).copy(), cells_of(g),
+                      vtk_to_numpy(g.GetCellData().GetArray("kind")).copy()
+                      if g.GetCellData().GetArray("kind") is not None else None)
+    return _refs[key]
+
+
+def pieces_of(pvtu, n):
+    stem = str(pvtu)[:-5]
+    return [read(f"{stem}_{r}.vtu") for r in range(n)]
+
+
+# ---- the acceptance tests --------------------------------------------------------------------
+
+@pytest.mark.parametrize("nranks", [2, 3])
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_pieces_equal_the_one_process_level(tmp_path, tmp_path_factory, name, nranks):
+    mesh, extra = write_case(tmp_path, name)
+    for level in (1, 2, 3):
+        ref_pts, ref_cells, _ = reference(tmp_path_factory, name, level)
+        out = tmp_path / f"l{level}.pvtu"
+        stats = tmp_path / f"l{level}.json"
+        r = mpirun(nranks, "refine", mesh, "--level", level, "-o", out, "--stats", stats, *extra)
+        assert r.returncode == 0, r.stderr
+        # progress per rank on stderr
+        for k in range(nranks):
+            assert f"subdivd-mpi: rank {k}/{nranks}: level {level}:" in r.stderr, r.stderr
+        pieces = pieces_of(out, nranks)
+        seen_cells = []
+        users = {}
+        for k, g in enumerate(pieces):
+            pts = vtk_to_numpy(g.GetPoints().GetData()) if g.GetNumberOfPoints() else np.zeros((0, 3))
+            gid = arr(g, "global_id") if g.GetNumberOfPoints() else np.zeros(0, int)
+            assert len(set(gid.tolist())) == len(gid), "a piece lists a point twice"
+            assert (gid >= 0).all() and (gid < len(ref_pts)).all()
+            err = np.abs(pts - ref_pts[gid]).max() if len(gid) else 0.0
+            assert err <= 1e-12, f"{name} level {level} rank {k}: max error {err}"
+            for x in gid.tolist():
+                users.setdefault(x, set()).add(k)
+            if g.GetNumberOfCells():
+                cid = arr(g, "cell_id", cell=True)
+                kind = arr(g, "kind", cell=True)
+                for (t, vs), c, kk in zip(cells_of(g), cid, kind):
+                    seen_cells.append((int(kk), int(c), t, tuple(int(gid[i]) for i in vs)))
+            owner = arr(g, "owner") if g.GetNumberOfPoints() else []
+            for x, o in zip(gid.tolist(), list(owner)):
+                users.setdefault(x, set()).add(k)
+        # every point of the level is written, with the lowest user as owner
+        assert sorted(users) == list(range(len(ref_pts)))
+        for k, g in enumerate(pieces):
+            if g.GetNumberOfPoints():
+                for x, o in zip(arr(g, "global_id").tolist(), arr(g, "owner").tolist()):
+                    assert o == min(users[x]), (x, o, users[x])
+        # the owned cells partition the level: every cell once, with the one-process vertices
+        assert len(seen_cells) == len(ref_cells)
+        assert sorted((t, vs) for _, _, t, vs in seen_cells) == sorted(ref_cells)
+        times = collections.Counter((kk, c) for kk, c, _, _ in seen_cells)
+        assert all(n == (4 if kk == 4 else 1) for (kk, c), n in times.items())   # 4 per octahedron
+        # the parallel reader sees the whole level
+        whole = read(out)
+        assert whole.GetNumberOfCells() == len(ref_cells)
+        assert whole.GetNumberOfPoints() == sum(p.GetNumberOfPoints() for p in pieces)
+        s = json.loads(stats.read_text())
+        assert s["ranks"] == nranks and s["level"] == level
+        assert s["level_counts"]["points"] == len(ref_pts)
+        assert sum(p["owned_simplices"] for p in s["per_rank"]) == \
+            len(CASES[name][0]["simplices"]) - absorbed(CASES[name][0])
+
+
+def absorbed(body):
+    """Posted simplices that are faces of others (the core absorbs them): none in these cases."""
+    return 0
+
+
+@pytest.mark.parametrize("name", ["mixed", "nonmanifold-overrides", "solid-box"])
+def test_merged_vtu_is_the_one_process_vtu(tmp_path, tmp_path_factory, name):
+    """--merge: rank 0 assembles one VTU with the one-process points in order and cells in the
+    one-process order (that of subdivd refine's VTU)."""
+    mesh, extra = write_case(tmp_path, name)
+    ref_pts, ref_cells, ref_kind = reference(tmp_path_factory, name, 2)
+    out = tmp_path / "merged.vtu"
+    r = mpirun(3, "refine", mesh, "--level", 2, "-o", out, *extra)
+    assert r.returncode == 0, r.stderr
+    g = read(out)
+    pts = vtk_to_numpy(g.GetPoints().GetData())
+    assert pts.shape == ref_pts.shape
+    assert np.abs(pts - ref_pts).max() <= 1e-12
+    assert (arr(g, "global_id") == np.arange(len(ref_pts))).all()
+    assert cells_of(g) == ref_cells
+    if ref_kind is not None:
+        assert (arr(g, "kind", cell=True) == ref_kind).all()
+    if name == "mixed":   # attributes travel with the points
+        assert g.GetPointData().GetArray("height") is not None
+        assert g.GetPointData().GetArray("uv").GetNumberOfComponents() == 2
+
+
+def test_attributes_match_one_process(tmp_path):
+    body = mixed()
+    mesh = tmp_path / "m.json"
+    mesh.write_text(json.dumps(body))
+    ref = tmp_path / "ref.vtu"
+    r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", "2", "-o", str(ref),
+                        "--attributes", "height,uv"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    g0 = read(ref)
+    out = tmp_path / "o.pvtu"
+    r = mpirun(2, "refine", mesh, "--level", 2, "-o", out)
+    assert r.returncode == 0, r.stderr
+    for g in pieces_of(out, 2):
+        gid = arr(g, "global_id")
+        for a in ("height", "uv"):
+            want = vtk_to_numpy(g0.GetPointData().GetArray(a))[gid]
+            assert np.abs(arr(g, a) - want).max() <= 1e-12
+
+
+@pytest.mark.parametrize("halo,level,nranks", [(0, 2, 2), (1, 3, 3)])
+def test_thinner_halos_are_wrong_for_solids(tmp_path, tmp_path_factory, halo, level, nranks):
+    """Without a halo the pieces' rims are false boundaries, and one ring is too thin for the
+    tetrahedron-octahedron split by level 3 (DECISIONS 44): the comparison must see both, so the
+    tests above would catch a halo that is too thin. The default (two rings) is exact."""
+    mesh, extra = write_case(tmp_path, "solid-box")
+    ref_pts, _, _ = reference(tmp_path_factory, "solid-box", level)
+    out = tmp_path / "h.pvtu"
+    r = mpirun(nranks, "refine", mesh, "--level", level, "-o", out, "--halo", halo, "-q")
+    if halo == 0 and r.returncode:   # or the numbering check sees the rim's edges first
+        assert r.returncode == 3 and "internal: " in r.stderr and "in the piece" in r.stderr
+        return
+    assert r.returncode == 0, r.stderr
+    worst = 0.0
+    for g in pieces_of(out, nranks):
+        gid = arr(g, "global_id")
+        worst = max(worst, np.abs(vtk_to_numpy(g.GetPoints().GetData()) - ref_pts[gid]).max())
+    assert worst > 1e-4
+
+
+def test_one_rank_is_the_one_process_level(tmp_path, tmp_path_factory):
+    mesh, extra = write_case(tmp_path, "mixed")
+    ref_pts, ref_cells, _ = reference(tmp_path_factory, "mixed", 3)
+    out = tmp_path / "one.pvtu"
+    r = mpirun(1, "refine", mesh, "--level", 3, "-o", out, *extra)
+    assert r.returncode == 0, r.stderr
+    (g,) = pieces_of(out, 1)
+    assert (arr(g, "global_id") == np.arange(len(ref_pts))).all()   # the level's own order
+    assert np.abs(vtk_to_numpy(g.GetPoints().GetData()) - ref_pts).max() <= 1e-12
+    assert cells_of(g) == ref_cells
+    assert (arr(g, "owner") == 0).all()
+
+
+# ---- failures ---------------------------------------------------------------------------------
+
+def test_refused_mesh_stops_every_rank(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"vertices": [[0, 0, 0], [1, 0, 0]], "simplices": [[0, 5]]}))
+    r = mpirun(3, "refine", bad, "--level", 1, "-o", tmp_path / "o.pvtu")
+    assert r.returncode == 1, r.stderr
+    assert "subdivd-mpi: rank 0/3:" in r.stderr and "refused (422)" in r.stderr
+    assert "/simplices/0/1" in r.stderr
+    assert not list(tmp_path.glob("o*"))
+
+
+def test_a_failing_rank_stops_all(tmp_path):
+    """A memory cap per rank that the level does not fit in: the ranks that hit it say so, the
+    run stops before writing and exits 3."""
+    mesh, extra = write_case(tmp_path, "solid-box")
+    r = mpirun(2, "refine", mesh, "--level", 3, "-o", tmp_path / "o.pvtu", "--max-memory",
+               2_000_000)
+    assert r.returncode == 3, r.stderr
+    assert "level 3 failed" in r.stderr or "refused" in r.stderr, r.stderr
+    assert "subdivd-mpi: rank" in r.stderr
+    assert not list(tmp_path.glob("o*.vtu")) and not (tmp_path / "o.pvtu").exists()
+
+
+@pytest.mark.parametrize("nth", [1, 5])
+def test_one_failing_rank_stops_the_others(tmp_path, nth):
+    """Rank 1 alone runs out of memory (the test hook SUBDIVD_MPI_FAIL_AT fails its nth
+    allocation): it says so, rank 0 says the run stopped because of rank 1, nothing is written,
+    and mpirun exits 3."""
+    out = tmp_path / "o.pvtu"
+    r = subprocess.run([MPIRUN, "-n", "3", "--oversubscribe", str(MPI), "refine",
+                        str(REPO / "examples" / "mixed.json"), "--level", "3", "-o", str(out)],
+                       capture_output=True, text=True, timeout=300,
+                       env=dict(ENV, SUBDIVD_MPI_FAIL_AT=f"1:{nth}"))
+    assert r.returncode == 3, r.stderr
+    assert "subdivd-mpi: rank 1/3: out of memory" in r.stderr, r.stderr
+    assert "subdivd-mpi: stopped (refining) after a failure on rank 1" in r.stderr
+    assert "rank 0/3: out of memory" not in r.stderr and "rank 2/3: out of memory" not in r.stderr
+    assert not list(tmp_path.glob("o*"))
+
+
+@pytest.mark.parametrize("args,msg", [
+    ([], "INPUT, --level L and -o OUT are required"),
+    (["m.json", "--level", "1", "-o", "x.vtk"], "-o must end in .pvtu"),
+    (["m.json", "--level", "x", "-o", "x.pvtu"], "--level takes a whole number"),
+    (["m.json", "--level", "1", "-o", "x.pvtu", "--bogus"], "unknown option --bogus"),
+    (["m.json", "--level", "1", "-o", "x.pvtu", "--merge"], "--merge writes one .vtu"),
+])
+def test_usage_errors(tmp_path, args, msg):
+    r = mpirun(2, "refine", *args)
+    assert r.returncode == 2
+    assert msg in r.stderr and r.stderr.count(msg) == 1   # said once, by rank 0
+
+
+def test_missing_file(tmp_path):
+    r = mpirun(2, "refine", tmp_path / "none.json", "--level", 1, "-o", tmp_path / "o.pvtu")
+    assert r.returncode == 2
+    assert "cannot open" in r.stderr
+
+
+# ---- other inputs -----------------------------------------------------------------------------
+
+def sdlevel_points(path, level):
+    """The level's points as build/sdlevel prints them (the core alone, no api/)."""
+    from conftest import SDLEVEL
+    out = subprocess.run([str(SDLEVEL), "-l", str(level), str(path)], capture_output=True,
+                         text=True, check=True).stdout
+    return np.array([[float(x) for x in l.split()[1:4]] for l in out.splitlines()
+                     if l.startswith("v ")])
+
+
+def max_error(pvtu, n, ref):
+    worst = 0.0
+    for g in pieces_of(pvtu, n):
+        if g.GetNumberOfPoints():
+            gid = arr(g, "global_id")
+            worst = max(worst, np.abs(vtk_to_numpy(g.GetPoints().GetData()) - ref[gid]).max())
+    return worst
+
+
+def test_text_format_input(tmp_path):
+    """INPUT.txt (docs/TEXT_FORMAT.md) with sharpness lines, against sdlevel's level."""
+    from conftest import MAKE_MESH
+    for name, args, extra in (("torus", ["torus", 12, 9], "c 0 1 2.5\nc 5 1.5\n"),
+                              ("block", ["cubes", 3], "")):
+        text = subprocess.run(["/usr/bin/python3", str(MAKE_MESH), *map(str, args)],
+                              capture_output=True, text=True, check=True).stdout
+        path = tmp_path / f"{name}.txt"
+        path.write_text(text + extra)
+        out = tmp_path / f"{name}.pvtu"
+        r = mpirun(2, "refine", path, "--level", 2, "-o", out, "-q")
+        assert r.returncode == 0, r.stderr
+        ref = sdlevel_points(path, 2)
+        assert max_error(out, 2, ref) <= 1e-12
+        assert read(out).GetNumberOfCells() > 0
+
+
+def test_text_diagonal_lines_are_posted_diagonals(tmp_path):
+    """`d t k` lines become PUT /complex "diagonals" (the others chosen against them, as the
+    API does): the level equals subdivd refine's of that JSON body."""
+    v, t = cubes(3, seed=9)
+    lines = ["v %.17g %.17g %.17g" % tuple(p) for p in v] + ["s " + " ".join(map(str, s)) for s in t]
+    (tmp_path / "b.txt").write_text("\n".join(lines + ["d 0 1", "d 7 2", "d 30 0"]) + "\n")
+    body = {"vertices": v, "simplices": t, "diagonals": [[0, 1], [7, 2], [30, 0]]}
+    (tmp_path / "b.json").write_text(json.dumps(body))
+    r = subprocess.run([str(SUBDIVD), "refine", str(tmp_path / "b.json"), "--level", "2", "-o",
+                        str(tmp_path / "ref.vtu")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    ref = vtk_to_numpy(read(tmp_path / "ref.vtu").GetPoints().GetData())
+    r = mpirun(3, "refine", tmp_path / "b.txt", "--level", 2, "-o", tmp_path / "o.pvtu", "-q")
+    assert r.returncode == 0, r.stderr
+    assert max_error(tmp_path / "o.pvtu", 3, ref) <= 1e-12
+
+
+def test_cli_mpi_converts_and_runs(tmp_path):
+    """`subdiv refine MESH --mpi N`: the mesh file converted as `subdiv convert` does, refined by
+    N processes; the same level as subdivd refine of the converted body."""
+    subdiv = REPO / "build" / "subdiv"
+    mesh = REPO / "examples" / "block.msh"
+    env = dict(ENV, SUBDIVD_MPI=str(MPI))
+    r = subprocess.run([str(subdiv), "convert", str(mesh), "-o", str(tmp_path / "b.json"),
+                        "--tags-out", str(tmp_path / "t.json")], capture_output=True, text=True,
+                       env=env)
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run([str(SUBDIVD), "refine", str(tmp_path / "b.json"), "--level", "2",
+                        "--tags", str(tmp_path / "t.json"), "-o", str(tmp_path / "ref.vtu")],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    g0 = read(tmp_path / "ref.vtu")
+    ref = vtk_to_numpy(g0.GetPoints().GetData())
+    r = subprocess.run([str(subdiv), "refine", str(mesh), "--level", "2", "-o",
+                        str(tmp_path / "o.pvtu"), "--mpi", "2"], capture_output=True, text=True,
+                       env=env, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "subdivd-mpi: rank 1/2: level 2:" in r.stderr
+    assert max_error(tmp_path / "o.pvtu", 2, ref) <= 1e-12
+    assert read(tmp_path / "o.pvtu").GetNumberOfCells() == g0.GetNumberOfCells()
+    r = subprocess.run([str(subdiv), "refine", str(mesh), "--level", "2", "-o",
+                        str(tmp_path / "o.glb"), "--mpi", "2"], capture_output=True, text=True,
+                       env=env)
+    assert r.returncode == 2 and "--mpi writes one output" in r.stderr
+
+
+def test_more_ranks_than_simplices(tmp_path, tmp_path_factory):
+    """examples/mixed.json has 5 simplices: on 7 ranks two get none and write empty pieces; the
+    .pvtu still holds the whole level, and --merge the one-process VTU."""
+    mesh = REPO / "examples" / "mixed.json"
+    ref = tmp_path / "ref.vtu"
+    r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", "2", "-o", str(ref)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    g0 = read(ref)
+    ref_pts = vtk_to_numpy(g0.GetPoints().GetData())
+    r = mpirun(7, "refine", mesh, "--level", 2, "-o", tmp_path / "o.pvtu", "-q")
+    assert r.returncode == 0, r.stderr
+    pieces = pieces_of(tmp_path / "o.pvtu", 7)
+    assert sum(p.GetNumberOfCells() == 0 for p in pieces) == 2
+    assert read(tmp_path / "o.pvtu").GetNumberOfCells() == g0.GetNumberOfCells()
+    assert max_error(tmp_path / "o.pvtu", 7, ref_pts) <= 1e-12
+    r = mpirun(7, "refine", mesh, "--level", 2, "-o", tmp_path / "m.vtu", "-q")
+    assert r.returncode == 0, r.stderr
+    g = read(tmp_path / "m.vtu")
+    assert np.abs(vtk_to_numpy(g.GetPoints().GetData()) - ref_pts).max() <= 1e-12
+    assert cells_of(g) == cells_of(g0)
+
+
+def test_level_4_solid_averaged(tmp_path, tmp_path_factory):
+    """Two rings stay enough at level 4 (DECISIONS 44: the front's advance is a geometric
+    series): the averaged solid scheme on 3 ranks."""
+    mesh, extra = write_case(tmp_path, "solid-averaged")
+    ref_pts, ref_cells, _ = reference(tmp_path_factory, "solid-averaged", 4)
+    out = tmp_path / "l4.pvtu"
+    r = mpirun(3, "refine", mesh, "--level", 4, "-o", out, "-q", *extra)
+    assert r.returncode == 0, r.stderr
+    assert max_error(out, 3, ref_pts) <= 1e-12
+    assert read(out).GetNumberOfCells() == len(ref_cells)
