@@ -1,0 +1,507 @@
+"""Limit positions and limit normals (001 Sec. 4; docs/RULES.md "Limits"; core/limit.c).
+
+Expected values come from outside the code:
+- OpenSubdiv 3.5's Far::PrimvarRefinerReal<double>::Limit (tests/peers/osd_loop.cpp --limit) for
+  Loop surfaces, closed, open and with infinitely sharp creases, with Loop's weights: limit
+  positions to 1e-12 and limit normals (cross product of its limit tangents) to 1e-9, points
+  matched by origin level by level;
+- the cubic B-spline's limit mask (1/6, 2/3, 1/6) and Warren's closed form, derived here from the
+  1-ring block written down in numpy;
+- the dominant left eigenvector of the 1-ring block of a solid's interior vertex, built here from
+  the tetrahedra with the box-spline rules of docs/RULES.md (not read from the core);
+- convergence: |p_lim - p_{L+k}| falls like the block's subdominant eigenvalues, computed here.
+"""
+import math
+import random
+import subprocess
+
+import numpy as np
+import pytest
+
+from conftest import SDLEVEL
+from test_sharp_vs_osd import bipyramids, cube_tets, disc, torus, write
+
+
+def run(cmd):
+    return subprocess.run([str(c) for c in cmd], check=True, capture_output=True,
+                          text=True).stdout
+
+
+def parse(text):
+    """Points, their origins ('V', a) / ('E', a, b) / ('I',), and normals if listed."""
+    pts, orig, nrm = [], [], []
+    for line in text.splitlines():
+        f = line.split()
+        if not f:
+            continue
+        if f[0] == "v":
+            pts.append([float(x) for x in f[1:4]])
+            if len(f) < 5 or f[4] == "I":
+                orig.append(("I",))
+            elif f[4] == "V":
+                orig.append(("V", int(f[5])))
+            else:
+                orig.append((f[4],) + tuple(sorted(int(x) for x in f[5:])))
+        elif f[0] == "n":
+            nrm.append([float(x) for x in f[1:4]])
+    return np.array(pts), orig, np.array(nrm)
+
+
+def ours(path, L, limit=True, weights="loop"):
+    args = [SDLEVEL, "-l", L, "-w", weights] + (["--limit"] if limit else []) + [path]
+    return parse(run(args))
+
+
+def osd(peer, path, L):
+    return parse(run([peer, "-l", L, "--origins", "--limit", path]))
+
+
+def match(peer, path, L):
+    """Our level-L points' indices in OpenSubdiv's level L (by origin, level by level)."""
+    m = None
+    for l in range(0, L + 1):
+        _, o, _ = ours(path, l, limit=False)
+        _, r, _ = parse(run([peer, "-l", l, "--origins", path]))
+        if l == 0:
+            m = list(range(len(o)))
+            continue
+        index = {k: j for j, k in enumerate(r)}
+        m = [index[("V", m[k[1]])] if k[0] == "V" else index[("E",) + tuple(sorted((m[k[1]], m[k[2]])))]
+             for k in o]
+        assert sorted(m) == list(range(len(r)))
+    return m
+
+
+def surface_case(name, rng):
+    if name == "torus":
+        xyz, tris = torus(9, 7, rng)
+        return xyz, tris, []
+    if name == "bipyramids":
+        xyz, tris = bipyramids(rng)
+        return xyz, tris, []
+    if name == "disc-open":
+        xyz, tris = disc(rng)
+        return xyz, tris, []
+    if name == "torus-creased":  # two infinitely sharp rings: crease vertices, no darts
+        xyz, tris = torus(9, 7, rng)
+        V = 7
+        sharp = [(3 * V + j, 3 * V + (j + 1) % V, 10.0) for j in range(V)]
+        sharp += [(i * V + 5, ((i + 1) % 9) * V + 5, 10.0) for i in range(9)]
+        return xyz, tris, sharp
+    if name == "disc-creased":  # a crease across the disc, boundary to boundary
+        xyz, tris = disc(rng, rings=3, n=6)
+        # the vertices on the x axis: rows r = 1..3 at angle 0 and pi, and the centre
+        ring_start = [1, 7, 19]
+        ids = [ring_start[2] + 9, ring_start[1] + 6, ring_start[0] + 3, 0, ring_start[0],
+               ring_start[1], ring_start[2]]
+        es = {tuple(sorted(e)) for t in tris for e in ((t[0], t[1]), (t[1], t[2]), (t[0], t[2]))}
+        sharp = [(a, b, 10.0) for a, b in zip(ids, ids[1:]) if tuple(sorted((a, b))) in es]
+        assert len(sharp) == 6
+        return xyz, tris, sharp
+    raise ValueError(name)
+
+
+SURFACES = ["torus", "bipyramids", "disc-open", "torus-creased", "disc-creased"]
+
+
+def crease_vertices(tris, sharp, n):
+    """Vertices on a sharp edge that are not on the boundary (OpenSubdiv's crease vertices)."""
+    on = set()
+    for s in sharp:
+        on.update(s[:2])
+    return on
+
+
+@pytest.mark.parametrize("case", SURFACES)
+@pytest.mark.parametrize("L", [0, 1, 2])
+def test_loop_limits_equal_opensubdiv(tmp_path, osd_loop, case, L):
+    rng = random.Random(sum(map(ord, case)))
+    xyz, tris, sharp = surface_case(case, rng)
+    path = tmp_path / f"{case}.txt"
+    write(path, xyz, tris, sharp)
+    p, o, n = ours(path, L)
+    q, r, m = osd(osd_loop, path, L)
+    idx = match(osd_loop, path, L)
+    assert p.shape == q.shape and n.shape == m.shape == p.shape
+    assert np.abs(p - q[idx]).max() < 1e-12
+    # the limit is not the level's point (the test would pass trivially otherwise)
+    lv, _, _ = ours(path, L, limit=False)
+    assert np.abs(lv - p).max() > 1e-3
+    # normals: everywhere but on interior creases, where OpenSubdiv gives one side's (which it
+    # picks by its own edge order) and we the unit sum of both sides'
+    crease = set()
+    if sharp:
+        # the level-L points on the creases: children of crease vertices and of crease edges
+        on0 = {s[0] for s in sharp} | {s[1] for s in sharp}
+        cur = set(on0)
+        edges = {tuple(sorted(s[:2])) for s in sharp}
+        for l in range(1, L + 1):
+            _, ol, _ = ours(path, l, limit=False)
+            nxt, nedges = set(), set()
+            for i, k in enumerate(ol):
+                if k[0] == "V" and k[1] in cur:
+                    nxt.add(i)
+                elif k[0] == "E" and k[1:] in edges:
+                    nxt.add(i)
+            for i, k in enumerate(ol):
+                if k[0] == "E" and k[1:] in edges:
+                    nedges |= {tuple(sorted((i, k[1]))), tuple(sorted((i, k[2])))}
+            cur, edges = nxt, nedges
+        crease = cur
+    keep = [i for i in range(len(p)) if i not in crease]
+    assert np.abs(n[keep] - m[idx][keep]).max() < 1e-9
+    assert np.allclose(np.linalg.norm(n, axis=1), 1)
+    # on the creases: unit, and at right angles to the limit crease tangent, the cubic
+    # B-spline's (q_b - q_a) / 2 over the two crease neighbours (found here from the level)
+    if crease:
+        lvp, _, _ = ours(path, L, limit=False)
+        nb = {}
+        for e in edges:
+            for a, b in (e, e[::-1]):
+                nb.setdefault(a, []).append(b)
+        checked = 0
+        for i in crease:
+            if len(nb.get(i, [])) == 2:
+                t = lvp[nb[i][1]] - lvp[nb[i][0]]
+                assert abs(np.dot(t / np.linalg.norm(t), n[i])) < 1e-9
+                checked += 1
+        assert checked > 0
+
+
+def warren_block(n):
+    """The 1-ring block of a smooth interior vertex of valence n with Warren's weights
+    (docs/RULES.md: beta = 3/16 at n = 3, else 3/(8n); edges 3/8, 3/8, 1/8, 1/8)."""
+    beta = 3 / 16 if n == 3 else 3 / (8 * n)
+    M = np.zeros((n + 1, n + 1))
+    M[0, 0] = 1 - n * beta
+    M[0, 1:] = beta
+    for i in range(n):
+        M[1 + i, 0] = M[1 + i, 1 + i] = 3 / 8
+        M[1 + i, 1 + (i - 1) % n] += 1 / 8
+        M[1 + i, 1 + (i + 1) % n] += 1 / 8
+    return M
+
+
+def left_limit(M):
+    w, vl = np.linalg.eig(M.T)
+    j = int(np.argmin(abs(w - 1)))
+    l = np.real(vl[:, j])
+    return l / l.sum()
+
+
+def test_warren_closed_form_is_the_eigenvector():
+    """Warren's limit mask: 1/2 centre, 1/(2n) each neighbour for n > 3; 2/5, 1/5 at n = 3 —
+    the closed form core/limit.c uses, against the block's left eigenvector."""
+    for n in range(3, 13):
+        l = left_limit(warren_block(n))
+        want = [2 / 5] + [1 / 5] * 3 if n == 3 else [1 / 2] + [1 / (2 * n)] * n
+        assert np.abs(l - want).max() < 1e-12
+
+
+@pytest.mark.parametrize("case", ["torus", "bipyramids", "disc-open"])
+def test_warren_limits(tmp_path, case):
+    """With Warren's weights: interior vertices by the closed form above on their level-L
+    1-ring (read from the level's triangles here), boundary vertices by (1/6, 2/3, 1/6)."""
+    rng = random.Random(5)
+    xyz, tris, _ = surface_case(case, rng)
+    path = tmp_path / "w.txt"
+    write(path, xyz, tris, [])
+    p, _, _ = ours(path, 0, weights="warren")
+    x = np.array(xyz)
+    nbr, cnt = {}, {}
+    for t in tris:
+        for i in range(3):
+            a, b = t[i], t[(i + 1) % 3]
+            nbr.setdefault(a, set()).add(b)
+            nbr.setdefault(b, set()).add(a)
+            e = tuple(sorted((a, b)))
+            cnt[e] = cnt.get(e, 0) + 1
+    for v in range(len(xyz)):
+        bnd = [u for u in nbr[v] if cnt[tuple(sorted((u, v)))] == 1]
+        if bnd:
+            want = 2 / 3 * x[v] + (x[bnd[0]] + x[bnd[1]]) / 6
+        else:
+            k = len(nbr[v])
+            c0, c = (2 / 5, 1 / 5) if k == 3 else (1 / 2, 1 / (2 * k))
+            want = c0 * x[v] + c * sum(x[u] for u in nbr[v])
+        assert np.abs(p[v] - want).max() < 1e-12
+
+
+def errors(path, L, K, weights="loop", vertices=None):
+    """max over level-L points (or the given ones) of |p_lim - p_{L+k}|, k = 1..K."""
+    p, _, _ = ours(path, L, weights=weights)
+    sel = range(len(p)) if vertices is None else vertices
+    out = []
+    for k in range(1, K + 1):
+        q, _, _ = ours(path, L + k, limit=False, weights=weights)
+        out.append(max(np.linalg.norm(p[i] - q[i]) for i in sel))
+    return np.array(out)
+
+
+def assert_rate(e, lam, slack=0.03):
+    """e_k falls like lam^k: every ratio at most lam (+ slack), and e_K within a factor 4 of
+    e_1 lam^(K-1) from below (the rate is not faster than lam for no reason: e_K > 0)."""
+    r = e[1:] / e[:-1]
+    assert (r <= lam + slack).all(), (r, lam)
+    assert e[-1] > 0
+    assert e[-1] <= 4 * e[0] * lam ** (len(e) - 1), (e, lam)
+
+
+def test_convergence_curve(tmp_path):
+    """Cubic B-spline curves: a closed polygon and an open one (ends fixed). The limit is the
+    (1/6, 2/3, 1/6) mask, ends themselves; the error at a vertex falls like 1/4^k (the block
+    [[3/4,1/8,1/8],[1/2,1/2,0],[1/2,0,1/2]]'s eigenvalues 1, 1/2, 1/4: the 1/2 mode is odd and
+    does not reach the centre)."""
+    rng = random.Random(3)
+    n = 9
+    xyz = [(math.cos(2 * math.pi * k / n) * (1 + 0.2 * rng.uniform(-1, 1)),
+            math.sin(2 * math.pi * k / n), 0.3 * rng.uniform(-1, 1)) for k in range(n)]
+    closed = [(k, (k + 1) % n) for k in range(n)]
+    opened = [(k, k + 1) for k in range(n - 1)]
+    B = np.array([[3 / 4, 1 / 8, 1 / 8], [1 / 2, 1 / 2, 0], [1 / 2, 0, 1 / 2]])
+    ev = sorted(abs(np.linalg.eigvals(B)))
+    assert abs(left_limit(B) - [2 / 3, 1 / 6, 1 / 6]).max() < 1e-12
+    x = np.array(xyz)
+    for segs, ends in ((closed, []), (opened, [0, n - 1])):
+        path = tmp_path / "c.txt"
+        with open(path, "w") as f:
+            for v in xyz:
+                f.write("v %.17g %.17g %.17g\n" % v)
+            for a, b in segs:
+                f.write(f"s {a} {b}\n")
+        p, _, _ = ours(path, 0)
+        for v in range(n):
+            want = x[v] if v in ends else 2 / 3 * x[v] + (x[(v - 1) % n] + x[(v + 1) % n]) / 6
+            assert np.abs(p[v] - want).max() < 1e-14
+        inner = [v for v in range(n) if v not in ends]
+        assert_rate(errors(path, 0, 5, vertices=inner), ev[0])
+        assert_rate(errors(path, 1, 5), ev[0])
+
+
+def loop_block(n):
+    """Loop's 1-ring block at an interior vertex (Loop's beta)."""
+    beta = (5 / 8 - (3 / 8 + math.cos(2 * math.pi / n) / 4) ** 2) / n
+    M = warren_block(n)
+    M[0, 0] = 1 - n * beta
+    M[0, 1:] = beta
+    return M
+
+
+def centre_rate(M):
+    """The largest |eigenvalue| != 1 of block M whose right eigenvector reaches the centre
+    (row 0): the rate at which a vertex point converges to its limit."""
+    w, vr = np.linalg.eig(M)
+    return max(abs(w[j]) for j in range(len(w))
+               if abs(w[j] - 1) > 1e-9 and abs(vr[0, j]) > 1e-9)
+
+
+@pytest.mark.parametrize("case", ["bipyramids", "disc-open", "torus-creased"])
+def test_convergence_loop(tmp_path, case):
+    """Loop surfaces (closed, open, creased): at every level-L vertex the error falls like the
+    slowest centre rate among the blocks that occur — interior: computed from loop_block(n) for
+    the valences of the mesh; boundary and crease vertices: the curve's 1/4."""
+    rng = random.Random(sum(map(ord, case)))
+    xyz, tris, sharp = surface_case(case, rng)
+    path = tmp_path / "s.txt"
+    write(path, xyz, tris, sharp)
+    val = {}
+    for t in tris:
+        for i in range(3):
+            val.setdefault(t[i], set()).update((t[(i + 1) % 3], t[(i + 2) % 3]))
+    lam = max([centre_rate(loop_block(len(s))) for s in val.values()] + [0.25])
+    assert_rate(errors(path, 0, 5, vertices=range(len(xyz))), lam)
+
+
+def tet_rings(tets):
+    nb, ering = {}, {}
+    for t in tets:
+        for i in range(4):
+            for j in range(4):
+                if i != j:
+                    nb.setdefault(t[i], set()).add(t[j])
+                    ering.setdefault((t[i], t[j]), set()).update(
+                        t[k] for k in range(4) if k not in (i, j))
+    return nb, ering
+
+
+def box_block(v, nb, ering):
+    """The 1-ring block of an interior solid vertex v at level 0 with the box-spline rules of
+    docs/RULES.md (001 eqs. 3.3-3.8): vertex 9/16 v + 7/(16k) each neighbour; edge [v, x] with
+    ring rho(e) (the other vertices of the tetrahedra around it): |rho| = 6: 10/32 (v + x) +
+    2/32 each, = 4: 8/32, 4/32, else 5/16 (v + x) + 3/(8 |rho|) each. Level 0 has no
+    octahedra, and one level later v's star is the same (its corner tetrahedra)."""
+    ring = sorted(nb[v])
+    pts = [v] + ring
+    at = {u: i for i, u in enumerate(pts)}
+    k = len(ring)
+    M = np.zeros((k + 1, k + 1))
+    M[0, 0] = 9 / 16
+    M[0, 1:] = 7 / (16 * k)
+    for i, x in enumerate(ring):
+        r = ering[(v, x)]
+        m = len(r)
+        a, c = (10 / 32, 2 / 32) if m == 6 else (8 / 32, 4 / 32) if m == 4 else (5 / 16, 3 / (8 * m))
+        M[1 + i, 0] += a
+        M[1 + i, at[x]] += a
+        for u in r:
+            M[1 + i, at[u]] += c
+    assert np.allclose(M.sum(axis=1), 1)
+    return pts, M
+
+
+def write_solid(path, xyz, cells):
+    with open(path, "w") as f:
+        for p in xyz:
+            f.write("v %.17g %.17g %.17g\n" % tuple(p))
+        for t in cells:
+            f.write("s " + " ".join(map(str, t)) + "\n")
+
+
+def star(n, rng):
+    """A bipyramid over an n-gon split into 2n tetrahedra around its axis, with a vertex inside
+    the axis: the centre (index 0) is interior with valence n + 2."""
+    xyz = [(0.02 * rng.uniform(-1, 1), 0.02 * rng.uniform(-1, 1), 0.0)]
+    for k in range(n):
+        a = 2 * math.pi * k / n
+        xyz.append((math.cos(a), math.sin(a), 0.1 * rng.uniform(-1, 1)))
+    xyz += [(0.0, 0.0, 1.0), (0.0, 0.0, -1.1)]
+    top, bot = n + 1, n + 2
+    tets = []
+    for k in range(n):
+        a, b = 1 + k, 1 + (k + 1) % n
+        tets += [(0, a, b, top), (0, b, a, bot)]
+    return xyz, tets
+
+
+@pytest.mark.parametrize("n", [4, 5, 7])
+def test_solid_interior_is_the_eigenvector(tmp_path, n):
+    """The limit of an interior solid vertex is the dominant left eigenvector of its 1-ring block,
+    built here from the tetrahedra, applied to its 1-ring (1e-9)."""
+    rng = random.Random(n)
+    xyz, tets = star(n, rng)
+    path = tmp_path / "star.txt"
+    write_solid(path, xyz, tets)
+    nb, ering = tet_rings(tets)
+    pts, M = box_block(0, nb, ering)
+    l = left_limit(M)
+    want = l @ np.array(xyz)[pts]
+    p, _, _ = ours(path, 0)
+    assert np.abs(p[0] - want).max() < 1e-9
+    assert np.abs(p[0] - np.array(xyz[0])).max() > 1e-4 or n == 4
+
+
+def test_solid_interior_cube(tmp_path):
+    """The same for the interior vertex of 2^3 cubes of 6 tetrahedra (valence 14)."""
+    rng = random.Random(11)
+    xyz, tets = cube_tets(2, rng)
+    path = tmp_path / "cube.txt"
+    write_solid(path, xyz, tets)
+    nb, ering = tet_rings(tets)
+    centre = 13  # (1, 1, 1)
+    pts, M = box_block(centre, nb, ering)
+    assert len(pts) == 15
+    want = left_limit(M) @ np.array(xyz)[pts]
+    p, _, _ = ours(path, 0)
+    assert np.abs(p[centre] - want).max() < 1e-9
+
+
+def test_convergence_solid(tmp_path):
+    """Solid interior and boundary: the error of the level-0 vertices falls like the slowest
+    centre rate of their blocks (interior: box_block here; boundary: the Loop blocks of the
+    boundary surface, and the curve's 1/4 does not occur), over k = 1..4 (level 5 of a solid
+    is large for a shared machine)."""
+    rng = random.Random(2)
+    xyz, tets = star(5, rng)
+    path = tmp_path / "star.txt"
+    write_solid(path, xyz, tets)
+    nb, ering = tet_rings(tets)
+    lam_in = centre_rate(box_block(0, nb, ering)[1])
+    e_in = errors(path, 0, 4, vertices=[0])
+    assert_rate(e_in, lam_in, slack=0.05)
+    bval = {}
+    count = {}
+    for t in tets:
+        for k in range(4):
+            f = tuple(sorted(t[:k] + t[k + 1:]))
+            count[f] = count.get(f, 0) + 1
+    for f, c in count.items():
+        if c == 1:
+            for v in f:
+                bval.setdefault(v, set()).update(u for u in f if u != v)
+    lam_b = max(centre_rate(loop_block(len(s))) for s in bval.values())
+    assert_rate(errors(path, 0, 4, vertices=sorted(bval)), lam_b, slack=0.05)
+
+
+def test_solid_boundary_normals_are_its_surface_loop_normals(tmp_path, osd_loop):
+    """The box-spline solid's boundary follows Loop over its boundary surface (001 Sec. 3.6), so
+    at level 1 its boundary points' limit positions and normals equal OpenSubdiv's Loop limits
+    of that surface (outward), matched by origin."""
+    rng = random.Random(7)
+    xyz, tets = cube_tets(2, rng)
+    x = np.array(xyz)
+    faces = {}
+    for t in tets:
+        vol = np.dot(np.cross(x[t[1]] - x[t[0]], x[t[2]] - x[t[0]]), x[t[3]] - x[t[0]])
+        for k in range(4):
+            f = [t[j] for j in range(4) if j != k]
+            # outward: the face seen from outside, away from the opposite vertex
+            nrm = np.cross(x[f[1]] - x[f[0]], x[f[2]] - x[f[0]])
+            if np.dot(nrm, x[t[k]] - x[f[0]]) > 0:
+                f = [f[0], f[2], f[1]]
+            key = tuple(sorted(f))
+            faces.setdefault(key, []).append(f)
+        assert abs(vol) > 0
+    bnd = [fs[0] for fs in faces.values() if len(fs) == 1]
+    used = sorted({v for f in bnd for v in f})
+    new = {v: i for i, v in enumerate(used)}
+    solid, surf = tmp_path / "solid.txt", tmp_path / "surf.txt"
+    write_solid(solid, xyz, tets)
+    write(surf, [xyz[v] for v in used], [[new[v] for v in f] for f in bnd], [])
+    for L in (1, 2):
+        p, o, n = ours(solid, L)
+        q, r, m = osd(osd_loop, surf, L)
+        # the solid's level-L boundary points by origin, followed from level 0 (old -> new ids)
+        mp = {v: new[v] for v in used}
+        for l in range(1, L + 1):
+            _, ol, _ = ours(solid, l, limit=False)
+            _, rl, _ = parse(run([osd_loop, "-l", l, "--origins", surf]))
+            index = {k: j for j, k in enumerate(rl)}
+            nm = {}
+            for i, k in enumerate(ol):
+                if k[0] == "V" and k[1] in mp:
+                    nm[i] = index[("V", mp[k[1]])]
+                elif k[0] == "E" and k[1] in mp and k[2] in mp:
+                    key = ("E",) + tuple(sorted((mp[k[1]], mp[k[2]])))
+                    if key in index:
+                        nm[i] = index[key]
+            mp = nm
+        assert len(mp) == len(q)
+        ids = sorted(mp)
+        j = [mp[i] for i in ids]
+        assert np.abs(p[ids] - q[j]).max() < 1e-12
+        assert np.abs(n[ids] - m[j]).max() < 1e-9
+
+
+@pytest.mark.parametrize("chaikin", [False, True], ids=["uniform", "chaikin"])
+@pytest.mark.parametrize("case", ["torus-chains", "disc-open"])
+def test_semi_sharp_limit_is_taken_where_sharpness_has_expired(tmp_path, osd_loop, case, chaikin):
+    """Semi-sharp creases (0.3 - 3.7, edges and vertices): the limit of a level-0 vertex is
+    taken at level E = ceil(max sharpness), where every sharpness has expired; it equals
+    OpenSubdiv's Limit at its level E (smooth masks there) of the same vertex (vertex children
+    keep their index in both) to 1e-12, and level-0 errors fall like the Loop centre rate."""
+    from test_sharp_vs_osd import make_case
+    rng = random.Random(sum(map(ord, case)))
+    xyz, tris, sharp = make_case(case, rng)
+    keys = [tuple(sorted(s[:-1])) for s in sharp]
+    sharp = [s for i, s in enumerate(sharp) if keys.index(keys[i]) == i]
+    path = tmp_path / "sh.txt"
+    write(path, xyz, tris, sharp)
+    E = math.ceil(max(s[-1] for s in sharp))
+    extra = ["--chaikin"] if chaikin else []
+    p = parse(run([SDLEVEL, "-l", 0, "-w", "loop", "--limit", *extra, path]))[0]
+    q = parse(run([osd_loop, "-l", E, "--limit", *extra, path]))[0]
+    nv = len(xyz)
+    assert np.abs(p - q[:nv]).max() < 1e-12
+    # at level 0 the sharpness still matters: OpenSubdiv's level-0 limit masks differ
+    q0 = parse(run([osd_loop, "-l", 0, "--limit", *extra, path]))[0]
+    assert np.abs(p - q0).max() > 1e-3
