@@ -68,7 +68,8 @@ struct api_cstream *api_get_complex_stream(api_model *m, uint64_t *version, api_
 
 /* Query options of GET /levels/{L} (NULL = absent). */
 typedef struct api_level_query {
-    const char *format, *parts, *slice, *attributes, *colormap, *octahedra, *names, *compress;
+    const char *format, *parts, *slice, *attributes, *colormap, *octahedra, *names, *compress,
+        *limit;
 } api_level_query;
 
 /* A compute slot of the transport (the daemon's scheduler; NULL offline): take waits for one

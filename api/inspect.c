@@ -34,6 +34,58 @@ static long query_index(const char *s, uint32_t n, const char *name, api_problem
     return v;
 }
 
+/* ---- limit masks ---- */
+
+static const char *limit_method_name(int method)
+{
+    switch (method) {
+    case SD_LIMIT_FIXED: return "fixed";
+    case SD_LIMIT_BSPLINE: return "bspline";
+    case SD_LIMIT_LOOP: return "loop";
+    case SD_LIMIT_EIGEN: return "eigenvector";
+    default: return "none";
+    }
+}
+
+/* "limit_mask": the weights on points.ids (0 where the mask does not read a point); into *info
+ * ("limit"): what found them and at which level, the tangent masks on the same points where the
+ * point has one tangent plane, and the points of the mask outside points.ids (none for a closed
+ * block) */
+static json_t *limit_mask_json(const sd_analysis *an, const sd_limit_mask *lm, json_t **info)
+{
+    *info = json_null();
+    double *w = calloc((size_t)an->size * 3, sizeof *w);
+    if (!w)
+        return json_null();
+    json_t *extra = json_array();
+    for (int i = 0; i < lm->n; i++) {
+        int k = 0;
+        while (k < an->size && an->points[k] != lm->points[i])
+            k++;
+        if (k == an->size) {
+            if (lm->w[i] != 0 || (lm->t1 && (lm->t1[i] != 0 || lm->t2[i] != 0)))
+                json_array_append_new(extra, json_pack("{s:I, s:f}", "id", (json_int_t)lm->points[i],
+                                                       "weight", lm->w[i]));
+            continue;
+        }
+        w[k] += lm->w[i];
+        if (lm->t1) {
+            w[an->size + k] += lm->t1[i];
+            w[2 * (size_t)an->size + k] += lm->t2[i];
+        }
+    }
+    json_t *mask = api_json_doubles(w, (size_t)an->size);
+    json_t *j = json_pack("{s:s, s:i, s:o}", "method", limit_method_name(lm->method), "level",
+                          lm->eval_level, "outside", extra);
+    *info = j;
+    if (lm->t1)
+        json_object_set_new(j, "tangents",
+                            json_pack("[o, o]", api_json_doubles(w + an->size, (size_t)an->size),
+                                      api_json_doubles(w + 2 * (size_t)an->size, (size_t)an->size)));
+    free(w);
+    return mask;
+}
+
 json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const api_slot *slot,
                      api_problem *p)
 {
@@ -67,11 +119,20 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
     }
     if (api_level_compute(m, 1, slot, p)) /* an edge's block lives at level 1 */
         return NULL;
+    /* the limit mask is read at the limit level of the block's level (core/limit.c) */
+    pthread_mutex_lock(&m->lock);
+    int ll = sd_complex_limit_level(m->c, b < 0 ? 0 : 1);
+    pthread_mutex_unlock(&m->lock);
+    if (api_level_compute(m, ll, slot, p))
+        return NULL;
     sd_analysis an;
+    sd_limit_mask lm = {0};
     sd_error e = {0};
     pthread_mutex_lock(&m->lock);
     sd_result r = b < 0 ? sd_analyze_vertex(m->c, (uint32_t)a, &an, &e)
                         : sd_analyze_edge(m->c, (uint32_t)a, (uint32_t)b, &an, &e);
+    if (!r && (r = sd_limit_mask_of(m->c, an.level, an.points[0], &lm, &e)))
+        sd_analysis_free(&an);
     pthread_mutex_unlock(&m->lock);
     if (r) {
         if (r == SD_ERR_ARG)
@@ -93,7 +154,11 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
     json_t *j = json_pack("{s:s, s:i, s:o, s:o, s:{s:i, s:o}, s:b}", "rule",
                           sd_rule_name(an.rule), "size", an.size, "matrix", mat, "eigenvalues", eig,
                           "points", "level", an.level, "ids", pts, "closed", an.closed);
+    json_t *info;
+    json_object_set_new(j, "limit_mask", limit_mask_json(&an, &lm, &info));
+    json_object_set_new(j, "limit", info);
     sd_analysis_free(&an);
+    sd_limit_mask_free(&lm);
     return j;
 }
 

@@ -505,3 +505,140 @@ def test_semi_sharp_limit_is_taken_where_sharpness_has_expired(tmp_path, osd_loo
     # at level 0 the sharpness still matters: OpenSubdiv's level-0 limit masks differ
     q0 = parse(run([osd_loop, "-l", 0, "--limit", *extra, path]))[0]
     assert np.abs(p - q0).max() > 1e-3
+
+
+# ---- through the daemon: ?limit=true, limit_mask, detail offsets --------------------------------
+
+@pytest.fixture(scope="module")
+def daemon():
+    from daemon import Daemon
+    d = Daemon()
+    yield d
+    assert d.stop() == 0
+
+
+def session(daemon, body, rules=None):
+    from daemon import Session
+    s = Session(daemon)
+    assert s.put_complex(body).status_code == 200
+    if rules:
+        r = s.req("PUT", "/rules", json=rules)
+        assert r.status_code == 200, r.text
+    return s
+
+
+def b1_bipyramid():
+    v = [[0, 0, 0], [0, 0, 1]]
+    v += [[math.cos(2 * math.pi * i / 3), math.sin(2 * math.pi * i / 3), 0.05 * i] for i in range(3)]
+    v.append([0.1, 0, -1])
+    s = []
+    for i in range(3):
+        a, b = 2 + i, 2 + (i + 1) % 3
+        s += [[0, 1, a, b], [0, 5, a, b]]
+    return {"vertices": v, "simplices": s}
+
+
+def test_limit_mask_of_appendix_b1(daemon):
+    """The bipyramid centre of 001 Appendix B.1: limit_mask is the dominant left eigenvector of
+    the paper's printed 6x6 block (its order: centre, apex 1, ring 2 3 4, apex 5), and the level's
+    ?limit=true point is that mask on the control points."""
+    s = session(daemon, b1_bipyramid())
+    j = s.req("GET", "/analysis", params={"vertex": 0}).json()
+    s16, e, q, f, w = 1 / 16, 1 / 8, 1 / 4, 5 / 16, 7 / 80
+    B1 = np.array([[9 * s16, w, w, w, w, w], [f, f, e, e, e, 0], [q, e, q, e, e, e],
+                   [q, e, e, q, e, e], [q, e, e, e, q, e], [f, 0, e, e, e, f]])
+    want = left_limit(B1)
+    ids = j["points"]["ids"]
+    got = np.array(j["limit_mask"])
+    assert len(got) == len(ids)
+    np.testing.assert_allclose(got[[ids.index(v) for v in range(6)]], want, atol=1e-12)
+    assert j["limit"]["method"] == "eigenvector" and j["limit"]["level"] == 1
+    assert j["limit"]["outside"] == []
+    x = np.array(b1_bipyramid()["vertices"])
+    lim = s.level(0, format="json", limit="true").json()["vertices"]
+    np.testing.assert_allclose(lim[0], want @ x[[0, 1, 2, 3, 4, 5]], atol=1e-12)
+    plain = s.level(0, format="json").json()["vertices"]
+    assert np.abs(np.array(lim) - plain).max() > 1e-3
+
+
+def surface_body(case, seed):
+    xyz, tris, sharp = surface_case(case, random.Random(seed))
+    return {"vertices": [list(p) for p in xyz], "simplices": [list(t) for t in tris]}, sharp
+
+
+def test_loop_limit_mask_and_tangents(daemon):
+    """A Loop vertex of valence n: limit_mask = (1 - n chi, chi ...) with chi = 1/(n + 3/(8 beta))
+    (Loop's beta), tangents cos / sin (2 pi i / n) over its ring in the triangles' order."""
+    body, _ = surface_body("bipyramids", 1)
+    s = session(daemon, body, {"surface_weights": "loop"})
+    for v in range(3, 13):  # the apex of the n-gon bipyramid: index of its top
+        top = sum(k + 2 for k in range(3, v)) + v
+        j = s.req("GET", "/analysis", params={"vertex": top}).json()
+        n = len(j["points"]["ids"]) - 1
+        assert n == v
+        beta = (5 / 8 - (3 / 8 + math.cos(2 * math.pi / n) / 4) ** 2) / n
+        chi = 1 / (n + 3 / (8 * beta))
+        np.testing.assert_allclose(j["limit_mask"], [1 - n * chi] + [chi] * n, atol=1e-15)
+        assert j["limit"]["method"] == "loop" and j["limit"]["level"] == 0
+        t1, t2 = (np.array(t) for t in j["limit"]["tangents"])
+        assert abs(t1[0]) < 1e-15 and abs(t2[0]) < 1e-15
+        # the ring's weights are cos/sin of equally spaced angles: |(t1, t2)_i| = 1, and
+        # consecutive ones (in the ring's order found here) are 2 pi / n apart
+        np.testing.assert_allclose(np.hypot(t1[1:], t2[1:]), 1, atol=1e-12)
+        ang = np.sort(np.mod(np.arctan2(t2[1:], t1[1:]), 2 * math.pi))
+        np.testing.assert_allclose(np.diff(ang), 2 * math.pi / n, atol=1e-9)
+
+
+def glb_normals(data):
+    from test_live import glb_arrays
+    g = glb_arrays(data)
+    return g["POSITION"], g["NORMAL"]
+
+
+@pytest.mark.parametrize("L", [0, 2])
+def test_limit_on_every_format(daemon, tmp_path, osd_loop, L):
+    """?limit=true on json, vtk and glb: the points are OpenSubdiv's limits (json to 1e-12; the
+    formats' float32 positions and normals to 1e-6), glTF normals its limit normals."""
+    body, _ = surface_body("disc-open", 3)
+    s = session(daemon, body, {"surface_weights": "loop"})
+    path = tmp_path / "d.txt"
+    write(path, body["vertices"], body["simplices"], [])
+    q, _, m = osd(osd_loop, path, L)
+    idx = match(osd_loop, path, L)
+    j = s.level(L, format="json", limit="true").json()
+    np.testing.assert_allclose(np.array(j["vertices"]), q[idx], atol=1e-12)
+    r = s.level(L, format="glb", limit="true")
+    assert r.status_code == 200
+    pos, nrm = glb_normals(r.content)
+    np.testing.assert_allclose(pos, q[idx], atol=1e-6)
+    np.testing.assert_allclose(nrm, m[idx], atol=1e-6)
+    plain = glb_normals(s.level(L, format="glb").content)[1]
+    assert np.abs(plain - nrm).max() > 1e-3  # area-weighted normals are not the limit's
+    vtk = s.level(L, format="vtk", limit="true")
+    assert vtk.status_code == 200 and vtk.content != s.level(L, format="vtk").content
+
+
+@pytest.mark.parametrize("value", ["yes", "1", ""])
+def test_limit_bad_value(daemon, value):
+    s = session(daemon, b1_bipyramid())
+    r = s.level(0, format="json", limit=value)
+    assert r.status_code == 422
+    assert r.headers["Content-Type"].startswith("application/problem+json")
+    assert r.json()["errors"][0]["pointer"] == "limit"
+
+
+def test_limit_includes_detail_offsets(daemon):
+    """A detail offset at level 2: ?limit=true at level 1 takes the limit from level 2 (the
+    finest level with offsets), so a level-1 vertex's limit equals that of the same vertex at
+    level 2, and the offset moves it."""
+    body, _ = surface_body("torus", 4)
+    s = session(daemon, body, {"surface_weights": "loop"})
+    before = np.array(s.level(1, format="json", limit="true").json()["vertices"])
+    etag = s.req("GET", "/complex").headers.get("ETag")
+    edit = {"moves": [{"level": 2, "index": 5, "position": [0.5, 0.5, 0.9]}]}
+    r = s.req("PATCH", "/control-points", json=edit, headers={"If-Match": etag} if etag else {})
+    assert r.status_code == 200, r.text
+    l1 = np.array(s.level(1, format="json", limit="true").json()["vertices"])
+    l2 = np.array(s.level(2, format="json", limit="true").json()["vertices"])
+    np.testing.assert_allclose(l1, l2[:len(l1)], atol=1e-12)
+    assert np.abs(l1[5] - before[5]).max() > 1e-3
