@@ -642,3 +642,50 @@ def test_limit_includes_detail_offsets(daemon):
     l2 = np.array(s.level(2, format="json", limit="true").json()["vertices"])
     np.testing.assert_allclose(l1, l2[:len(l1)], atol=1e-12)
     assert np.abs(l1[5] - before[5]).max() > 1e-3
+
+
+def test_convergence_solid_finer_levels(tmp_path):
+    """Every point of levels 1 and 2 of a solid (vertex, edge and cell points, interior and
+    boundary): the error falls geometrically at most like the slowest rate of the level-0 blocks
+    here (interior: box_block; boundary: the Loop blocks), plus slack for the new points'
+    configurations (valence 12 + 2 diagonals and their boundary counterparts)."""
+    rng = random.Random(1)
+    xyz, tets = star(5, rng)
+    path = tmp_path / "star.txt"
+    write_solid(path, xyz, tets)
+    for L in (1, 2):
+        p, _, _ = ours(path, L)
+        es = []
+        for k in range(1, 6 - L + 1):
+            q, _, _ = ours(path, L + k, limit=False)
+            es.append(np.linalg.norm(p - q[:len(p)], axis=1).max())
+        es = np.array(es)
+        r = es[1:] / es[:-1]
+        assert (r < 0.4).all(), r
+        assert es[-1] < 0.4 ** (len(es) - 1) * es[0]
+
+
+def test_convergence_nonmanifold(tmp_path):
+    """A solid with a fin of three triangles on one of its boundary edges (a G2 edge, G2
+    vertices) and a curve from its apex: the limits there are the eigenvectors of blocks with no
+    closed form. The error of every control point falls geometrically (ratio at most 0.6, over
+    k = 1..6), which a wrong limit cannot do (its error tends to a nonzero constant)."""
+    rng = random.Random(1)
+    xyz, tets = star(5, rng)
+    cells = [list(t) for t in tets]
+    n0 = len(xyz)
+    xyz += [(1.6, 0.6, 0.3), (1.7, 0.9, -0.4), (0.1, 0.2, 1.8), (0.3, -0.2, 2.5), (-0.2, 0.1, 3.1)]
+    cells += [[1, 2, n0], [1, 2, n0 + 1], [n0, 2, n0 + 1]]
+    cells += [[6, n0 + 2], [n0 + 2, n0 + 3], [n0 + 3, n0 + 4]]
+    path = tmp_path / "nm.txt"
+    write_solid(path, xyz, cells)
+    p, _, _ = ours(path, 0)
+    es = []
+    for k in range(1, 7):
+        q, _, _ = ours(path, k, limit=False)
+        es.append(np.linalg.norm(p - q[:len(p)], axis=1))
+    es = np.array(es)
+    moving = es[0] > 1e-12  # fixed points (the curve's end) have no error at all
+    r = es[2:, moving] / es[1:-1, moving]
+    assert (r <= 0.6).all(), r.max()
+    assert es[-1].max() < 0.6 ** 5 * es[0].max()
