@@ -689,3 +689,40 @@ def test_convergence_nonmanifold(tmp_path):
     r = es[2:, moving] / es[1:-1, moving]
     assert (r <= 0.6).all(), r.max()
     assert es[-1].max() < 0.6 ** 5 * es[0].max()
+
+
+def test_offline_client_and_cli(daemon, tmp_path):
+    """The offline mode (`subdivd refine --limit`), the Python client (`level(..., limit=True)`)
+    and `subdiv refine --limit true` give the daemon's ?limit=true level (the JSON's version
+    aside), on examples/mixed.json (a solid, a fin, a curve, a point)."""
+    import json
+    import sys
+    from conftest import REPO
+    from daemon import SUBDIVD
+    body = json.loads((REPO / "examples" / "mixed.json").read_text())
+    s = session(daemon, body)
+    want = s.level(1, format="json", limit="true").json()
+    plain = s.level(1, format="json").json()
+    assert np.abs(np.array(want["vertices"]) - plain["vertices"]).max() > 1e-3
+    src = tmp_path / "mixed.json"
+    src.write_text(json.dumps(body))
+    out = tmp_path / "l1.json"
+    r = subprocess.run([str(SUBDIVD), "refine", str(src), "--level", "1", "--limit", "-o", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    got = json.loads(out.read_text())
+    assert got["vertices"] == want["vertices"] and got["cells"] == want["cells"]
+    sys.path.insert(0, str(REPO / "clients" / "python"))
+    import subdiv
+    c = subdiv.Client(daemon.url)
+    cs = c.session(s.id, s.token)
+    assert json.loads(cs.level(1, format="json", limit=True))["vertices"] == want["vertices"]
+    assert json.loads(cs.level(1, format="json", limit=False))["vertices"] == plain["vertices"]
+    c.close()
+    env = dict(__import__("os").environ, SUBDIVD=str(SUBDIVD))
+    out2 = tmp_path / "cli.json"
+    r = subprocess.run([str(REPO / "build" / "subdiv"), "refine", str(src), "--level", "1",
+                        "--limit", "true", "-o", str(out2), "--url", daemon.url],
+                       capture_output=True, text=True, env=env)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(out2.read_text())["vertices"] == want["vertices"]
