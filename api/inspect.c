@@ -86,7 +86,30 @@ static json_t *limit_mask_json(const sd_analysis *an, const sd_limit_mask *lm, j
     return mask;
 }
 
-json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const api_slot *slot,
+/* "full": {"size", "matrix", "eigenvalues", "points": {"level", "ids"}} */
+static json_t *eig_json(const sd_analysis *a)
+{
+    json_t *eig = json_array();
+    for (int i = 0; i < a->size; i++) /* a real eigenvalue as a number, a complex one as [re, im] */
+        json_array_append_new(eig, fabs(a->eig_im[i]) <= 1e-12 * (1 + fabs(a->eig_re[i]))
+                                       ? json_real(a->eig_re[i])
+                                       : json_pack("[f, f]", a->eig_re[i], a->eig_im[i]));
+    return eig;
+}
+
+static json_t *full_json(const sd_analysis *a)
+{
+    json_t *mat = json_array(), *pts = json_array();
+    for (int i = 0; i < a->size; i++) {
+        json_array_append_new(mat, api_json_doubles(a->matrix + (size_t)i * a->size, (size_t)a->size));
+        json_array_append_new(pts, json_integer(a->points[i]));
+    }
+    return json_pack("{s:i, s:o, s:o, s:{s:i, s:o}}", "size", a->size, "matrix", mat,
+                     "eigenvalues", eig_json(a), "points", "level", a->level, "ids", pts);
+}
+
+json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const api_limits *lim,
+                     const api_slot *slot,
                      api_problem *p)
 {
     if (!m->c) {
@@ -119,20 +142,36 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
     }
     if (api_level_compute(m, 1, slot, p)) /* an edge's block lives at level 1 */
         return NULL;
-    /* the limit mask is read at the limit level of the block's level (core/limit.c) */
+    /* the limit mask is read at the limit level of the block's level (core/limit.c), the full
+     * matrix at levels 1 and 2; each only within the limits (else null) */
     pthread_mutex_lock(&m->lock);
     int ll = sd_complex_limit_level(m->c, b < 0 ? 0 : 1);
     pthread_mutex_unlock(&m->lock);
-    if (api_level_compute(m, ll, slot, p))
+    api_problem skip = {0};
+    bool with_limit = !api_check_level_limits(m, ll, lim, &skip);
+    bool with_full = !api_check_level_limits(m, 2, lim, &skip);
+    if ((with_limit && api_level_compute(m, ll, slot, p)) ||
+        (with_full && api_level_compute(m, 2, slot, p)))
         return NULL;
-    sd_analysis an;
+    sd_analysis an, fa = {0};
     sd_limit_mask lm = {0};
-    sd_error e = {0};
+    sd_error e = {0}, fe = {0};
     pthread_mutex_lock(&m->lock);
     sd_result r = b < 0 ? sd_analyze_vertex(m->c, (uint32_t)a, &an, &e)
                         : sd_analyze_edge(m->c, (uint32_t)a, (uint32_t)b, &an, &e);
-    if (!r && (r = sd_limit_mask_of(m->c, an.level, an.points[0], &lm, &e)))
+    if (!r && with_limit && (r = sd_limit_mask_of(m->c, an.level, an.points[0], &lm, &e)))
         sd_analysis_free(&an);
+    sd_result fr = SD_ERR_ARG;
+    if (!r && with_full) {
+        fr = b < 0 ? sd_analyze_full_vertex(m->c, (uint32_t)a, &fa, &fe)
+                   : sd_analyze_full_edge(m->c, (uint32_t)a, (uint32_t)b, &fa, &fe);
+        if (fr && fr != SD_ERR_ARG) { /* not invariant is no error: "full" is null then */
+            r = fr;
+            e = fe;
+            sd_analysis_free(&an);
+            sd_limit_mask_free(&lm);
+        }
+    }
     pthread_mutex_unlock(&m->lock);
     if (r) {
         if (r == SD_ERR_ARG)
@@ -154,9 +193,11 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
     json_t *j = json_pack("{s:s, s:i, s:o, s:o, s:{s:i, s:o}, s:b}", "rule",
                           sd_rule_name(an.rule), "size", an.size, "matrix", mat, "eigenvalues", eig,
                           "points", "level", an.level, "ids", pts, "closed", an.closed);
-    json_t *info;
-    json_object_set_new(j, "limit_mask", limit_mask_json(&an, &lm, &info));
+    json_t *info = json_null();
+    json_object_set_new(j, "limit_mask", with_limit ? limit_mask_json(&an, &lm, &info) : json_null());
     json_object_set_new(j, "limit", info);
+    json_object_set_new(j, "full", fr ? json_null() : full_json(&fa));
+    sd_analysis_free(&fa);
     sd_analysis_free(&an);
     sd_limit_mask_free(&lm);
     return j;

@@ -526,6 +526,14 @@ sd_result sd_analyze_vertex(sd_complex *c, uint32_t v, sd_analysis *out, sd_erro
 /* The block L ((2k+3)x(2k+3)) of control edge a-b: the 1-ring block of the edge's midpoint
  * after one level (001 Sec. 4.1). */
 sd_result sd_analyze_edge(sd_complex *c, uint32_t a, uint32_t b, sd_analysis *out, sd_error *err);
+/* The full matrix of the invariant neighbourhood (001 Sec. 4.1, Appendix B): at level 1, the
+ * points of the control cells containing vertex v (5k - 5 for an interior solid vertex) or edge
+ * a-b (4k + 3), centre and 1-ring first (as the block has them), as S_1 maps them onto their
+ * counterparts at level 2 (the scaling about the centre by 1/2; core/analysis.c). SD_ERR_ARG
+ * when the neighbourhood is not invariant (a point without its counterpart, a row reading
+ * outside it: boundaries, neighbourhoods that need more levels). */
+sd_result sd_analyze_full_vertex(sd_complex *c, uint32_t v, sd_analysis *out, sd_error *err);
+sd_result sd_analyze_full_edge(sd_complex *c, uint32_t a, uint32_t b, sd_analysis *out, sd_error *err);
 void sd_analysis_free(sd_analysis *a);
 
 /* ---- limit positions and normals (001 Sec. 4; docs/RULES.md "Limits"; core/limit.c) ------ */

@@ -1182,7 +1182,8 @@ static void h_analysis(req *r)
     api_model *m = session_model(r->s, NULL);
     api_problem p = {0};
     api_slot slot = slot_of(r);
-    json_t *j = api_analysis(m, http_arg(r, "vertex"), http_arg(r, "edge"), &slot, &p);
+    json_t *j = api_analysis(m, http_arg(r, "vertex"), http_arg(r, "edge"),
+                             &r->srv->cfg.limits, &slot, &p);
     uint64_t version = atomic_load(&m->version);
     api_model_unref(m);
     http_reply_versioned(r, j, version, &p);
