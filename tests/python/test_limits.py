@@ -726,3 +726,162 @@ def test_offline_client_and_cli(daemon, tmp_path):
                        capture_output=True, text=True, env=env)
     assert r.returncode == 0, r.stderr
     assert json.loads(out2.read_text())["vertices"] == want["vertices"]
+
+
+# ---- full invariant-neighbourhood matrices (001 Sec. 4.1, Appendix B) ---------------------------
+
+# 001 Appendix B's printed matrices, row by row as column:fraction (the paper's point order).
+B1_PRINTED = [
+    "0:9/16 1:7/80 2:7/80 3:7/80 4:7/80 5:7/80",
+    "0:5/16 1:5/16 2:1/8 3:1/8 4:1/8",
+    "0:1/4 1:1/8 2:1/4 3:1/8 4:1/8 5:1/8",
+    "0:1/4 1:1/8 2:1/8 3:1/4 4:1/8 5:1/8",
+    "0:1/4 1:1/8 2:1/8 3:1/8 4:1/4 5:1/8",
+    "0:5/16 2:1/8 3:1/8 4:1/8 5:5/16",
+    "0:7/128 1:9/16 2:7/128 3:7/128 4:7/128 6:7/128 7:7/128 8:7/128 9:7/128",
+    "0:1/16 1:5/16 2:5/16 3:1/16 4:1/16 7:1/16 10:1/16 12:1/16",
+    "0:1/16 1:5/16 2:1/16 3:5/16 4:1/16 8:1/16 12:1/16 14:1/16",
+    "0:1/16 1:5/16 2:1/16 3:1/16 4:5/16 9:1/16 10:1/16 14:1/16",
+    "0:3/40 1:3/40 2:5/16 4:5/16 5:3/40 10:3/40 16:3/40",
+    "0:7/160 1:7/160 2:9/16 3:7/160 4:7/160 5:7/160 7:7/160 10:7/160 11:7/160 12:7/160 16:7/160",
+    "0:3/40 1:3/40 2:5/16 3:5/16 5:3/40 12:3/40 17:3/40",
+    "0:7/160 1:7/160 2:7/160 3:9/16 4:7/160 5:7/160 8:7/160 12:7/160 13:7/160 14:7/160 17:7/160",
+    "0:3/40 1:3/40 3:5/16 4:5/16 5:3/40 14:3/40 18:3/40",
+    "0:7/160 1:7/160 2:7/160 3:7/160 4:9/16 5:7/160 9:7/160 10:7/160 14:7/160 15:7/160 18:7/160",
+    "0:3/40 2:5/16 3:3/40 4:3/40 5:5/16 16:3/40 17:3/40",
+    "0:3/40 2:3/40 3:5/16 4:3/40 5:5/16 17:3/40 18:3/40",
+    "0:3/40 2:3/40 3:3/40 4:5/16 5:5/16 16:3/40 18:3/40",
+    # the printed matrix has 19 columns: the 20th, which only this row reads (its own point, the
+    # row then sums to 1), is lost (SPEC 3.1); restored here as 19:7/128
+    "0:7/128 2:7/128 3:7/128 4:7/128 5:9/16 16:7/128 17:7/128 18:7/128 19:7/128",
+]
+B2_PRINTED = [
+    "0:9/16 1:7/160 2:7/160 3:7/160 4:7/160 5:7/160 6:7/160 7:7/160 8:7/160 9:7/160 10:7/160",
+    "0:1/4 1:1/4 3:1/8 4:1/8 5:1/8 6:1/8",
+    "0:1/4 2:1/4 7:1/8 8:1/8 9:1/8 10:1/8",
+    "0:5/16 1:3/40 3:5/16 4:3/40 6:3/40 7:3/40 8:3/40",
+    "0:5/16 1:3/40 3:3/40 4:5/16 5:3/40 8:3/40 9:3/40",
+    "0:5/16 1:3/40 4:3/40 5:5/16 6:3/40 9:3/40 10:3/40",
+    "0:5/16 1:3/40 3:3/40 5:3/40 6:5/16 7:3/40 10:3/40",
+    "0:5/16 2:3/40 3:3/40 6:3/40 7:5/16 8:3/40 10:3/40",
+    "0:5/16 2:3/40 3:3/40 4:3/40 7:3/40 8:5/16 9:3/40",
+    "0:5/16 2:3/40 4:3/40 5:3/40 8:3/40 9:5/16 10:3/40",
+    "0:5/16 2:3/40 5:3/40 6:3/40 7:3/40 9:3/40 10:5/16",
+    "0:1/16 3:5/16 6:1/16 7:5/16 8:1/16 11:1/16 12:1/16 18:1/16",
+    "0:1/8 3:1/4 4:1/8 7:1/8 8:1/4 12:1/8",
+    "0:1/16 3:1/16 4:5/16 8:5/16 9:1/16 12:1/16 13:1/16 14:1/16",
+    "0:1/8 4:1/4 5:1/8 8:1/8 9:1/4 14:1/8",
+    "0:1/16 4:1/16 5:5/16 9:5/16 10:1/16 14:1/16 15:1/16 16:1/16",
+    "0:1/8 5:1/4 6:1/8 9:1/8 10:1/4 16:1/8",
+    "0:1/16 5:1/16 6:5/16 7:1/16 10:5/16 16:1/16 17:1/16 18:1/16",
+    "0:1/8 3:1/8 6:1/4 7:1/4 10:1/8 18:1/8",
+]
+
+
+def printed(rows):
+    from fractions import Fraction
+    n = len(rows)
+    M = np.zeros((n, n))
+    for i, r in enumerate(rows):
+        for item in r.split():
+            j, f = item.split(":")
+            M[i, int(j)] = float(Fraction(f))
+    return M
+
+
+def same_up_to_permutation(F, P, fixed):
+    """A permutation perm (paper index -> ours) with F[perm i, perm j] = P[i, j] for all i, j,
+    extending `fixed`, by backtracking; None if there is none."""
+    n = len(P)
+    perm, used = dict(fixed), set(fixed.values())
+    order = [i for i in range(n) if i not in perm]
+
+    def ok(i):
+        return all(abs(F[perm[i], q] - P[i, j]) < 1e-12 and abs(F[q, perm[i]] - P[j, i]) < 1e-12
+                   for j, q in perm.items())
+
+    def rec(k):
+        if k == len(order):
+            return True
+        i = order[k]
+        for c in range(n):
+            if c not in used:
+                perm[i] = c
+                used.add(c)
+                if ok(i) and rec(k + 1):
+                    return True
+                del perm[i]
+                used.discard(c)
+        return False
+    return perm if rec(0) else None
+
+
+def edge_star_body(k, pair):
+    v = [[0, 0, 1], [0, 0, -1]] + [[math.cos(2 * math.pi * i / k), math.sin(2 * math.pi * i / k), 0]
+                                    for i in range(k)]
+    return {"vertices": v, "simplices": [[0, 1, 2 + i, 2 + (i + 1) % k] for i in range(k)],
+            "diagonals": [[i, pair] for i in range(k)]}
+
+
+def test_full_appendix_b2_is_the_printed_matrix(daemon):
+    """001 B.2, the valence-4 edge with skew diagonals (pair 1, Fig. 23 first row): `full` is the
+    printed 19 x 19 (4k + 3) exactly, up to the order of its points (the centre first in both),
+    and its 11 largest eigenvalues are the paper's list (with 1/8 the 11th)."""
+    s = session(daemon, edge_star_body(4, 1))
+    j = s.req("GET", "/analysis", params={"edge": "0,1"}).json()
+    f = j["full"]
+    assert f["size"] == 19 and f["points"]["level"] == 1
+    F = np.array(f["matrix"])
+    assert same_up_to_permutation(F, printed(B2_PRINTED), {0: 0}) is not None
+    r2 = math.sqrt(2)
+    want = [1, (45 + math.sqrt(985)) / 160, (25 + 6 * r2) / 80, (25 + 6 * r2) / 80, 19 / 80,
+            (25 - 6 * r2) / 80, (25 - 6 * r2) / 80, 3 / 16, 13 / 80, 13 / 80, 1 / 8]
+    np.testing.assert_allclose(f["eigenvalues"][:11], want, atol=1e-12)
+    # the block's own 11th eigenvalue is (45 - sqrt 985)/160, not 1/8 (SPEC 3.1)
+    assert abs(j["eigenvalues"][10] - (45 - math.sqrt(985)) / 160) < 1e-12
+
+
+def test_full_appendix_b2_diagonals_toward_the_edge(daemon):
+    """Diagonals toward the edge (pair 0): the midpoint is a regular octet-truss vertex
+    (DECISIONS 2), so the full matrix has the regular lattice's leading spectrum: B.2's
+    1, 1/2, 1/2, 1/2 and then 1/4 (its garbled S'_e gives (25 + sqrt 385)/160 there)."""
+    s = session(daemon, edge_star_body(4, 0))
+    f = s.req("GET", "/analysis", params={"edge": "0,1"}).json()["full"]
+    np.testing.assert_allclose(f["eigenvalues"][:11], [1, .5, .5, .5] + [.25] * 6 + [.125],
+                               atol=1e-12)
+
+
+def test_full_appendix_b1(daemon):
+    """001 B.1, the bipyramid centre (k = 5, 5k - 5 = 20), each tetrahedron's major diagonal at an
+    equator spoke (pair 2 of (0, pole, a, b)): the top-left 6 x 6 is the printed one with zeros
+    beside it; 17 of the 20 printed rows are rows of ours (as weights), the other 3 being the
+    vertex points of the equator spokes' midpoints, which the paper gives 10 neighbours (edges
+    only) and 001 Def. 3.3 12 (2 major diagonals: 9/16 and 7/192 each); and the spectrum holds the
+    paper's list {1, 5/16, (15 + sqrt 70)/80, 3/20, 1/8, 1/8} (3/20 twice here)."""
+    body = b1_bipyramid()
+    body["diagonals"] = [[i, 2] for i in range(6)]
+    s = session(daemon, body)
+    j = s.req("GET", "/analysis", params={"vertex": 0}).json()
+    f = j["full"]
+    assert f["size"] == 20
+    F = np.array(f["matrix"])
+    P = printed(B1_PRINTED)
+    blk = j["points"]["ids"]
+    order = [blk.index(v) for v in range(6)]
+    np.testing.assert_allclose(F[np.ix_(order, order)], P[:6, :6], atol=1e-15)
+    assert not F[:6, 6:].any()
+    sig = lambda r: tuple(sorted(round(x, 12) for x in r if x))  # noqa: E731
+    ours = [sig(r) for r in F]
+    left = []
+    for r in P:
+        if sig(r) in ours:
+            ours.remove(sig(r))
+        else:
+            left.append(sig(r))
+    assert len(left) == 3 and all(r == sig([7 / 160] * 10 + [9 / 16]) for r in left)
+    assert len(ours) == 3 and all(r == sig([7 / 192] * 12 + [9 / 16]) for r in ours)
+    ev = [x for x in f["eigenvalues"] if not isinstance(x, list)]
+    for w in [1, 5 / 16, (15 + math.sqrt(70)) / 80, 3 / 20, 1 / 8, 1 / 8]:
+        k = int(np.argmin([abs(x - w) for x in ev]))
+        assert abs(ev[k] - w) < 1e-12
+        ev.pop(k)
