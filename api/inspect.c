@@ -56,7 +56,7 @@ static json_t *limit_mask_json(const sd_analysis *an, const sd_limit_mask *lm, j
     *info = json_null();
     double *w = calloc((size_t)an->size * 3, sizeof *w);
     if (!w)
-        return json_null();
+        return NULL;
     json_t *extra = json_array();
     for (int i = 0; i < lm->n; i++) {
         int k = 0;
@@ -77,11 +77,14 @@ static json_t *limit_mask_json(const sd_analysis *an, const sd_limit_mask *lm, j
     json_t *mask = api_json_doubles(w, (size_t)an->size);
     json_t *j = json_pack("{s:s, s:i, s:o}", "method", limit_method_name(lm->method), "level",
                           lm->eval_level, "outside", extra);
-    *info = j;
-    if (lm->t1)
+    if (j && lm->t1 &&
         json_object_set_new(j, "tangents",
                             json_pack("[o, o]", api_json_doubles(w + an->size, (size_t)an->size),
-                                      api_json_doubles(w + 2 * (size_t)an->size, (size_t)an->size)));
+                                      api_json_doubles(w + 2 * (size_t)an->size, (size_t)an->size)))) {
+        json_decref(j);
+        j = NULL;
+    }
+    *info = j;
     free(w);
     return mask;
 }
@@ -100,9 +103,15 @@ static json_t *eig_json(const sd_analysis *a)
 static json_t *full_json(const sd_analysis *a)
 {
     json_t *mat = json_array(), *pts = json_array();
-    for (int i = 0; i < a->size; i++) {
-        json_array_append_new(mat, api_json_doubles(a->matrix + (size_t)i * a->size, (size_t)a->size));
-        json_array_append_new(pts, json_integer(a->points[i]));
+    bool ok = mat && pts;
+    for (int i = 0; i < a->size && ok; i++)
+        ok = !json_array_append_new(mat, api_json_doubles(a->matrix + (size_t)i * a->size,
+                                                          (size_t)a->size)) &&
+             !json_array_append_new(pts, json_integer(a->points[i]));
+    if (!ok) {
+        json_decref(mat);
+        json_decref(pts);
+        return NULL;
     }
     return json_pack("{s:i, s:o, s:o, s:{s:i, s:o}}", "size", a->size, "matrix", mat,
                      "eigenvalues", eig_json(a), "points", "level", a->level, "ids", pts);
@@ -194,9 +203,13 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
                           sd_rule_name(an.rule), "size", an.size, "matrix", mat, "eigenvalues", eig,
                           "points", "level", an.level, "ids", pts, "closed", an.closed);
     json_t *info = json_null();
-    json_object_set_new(j, "limit_mask", with_limit ? limit_mask_json(&an, &lm, &info) : json_null());
-    json_object_set_new(j, "limit", info);
-    json_object_set_new(j, "full", fr ? json_null() : full_json(&fa));
+    json_t *mask = with_limit ? limit_mask_json(&an, &lm, &info) : json_null();
+    /* each set takes its value (and drops it when it fails): out of memory is no answer */
+    if (json_object_set_new(j, "limit_mask", mask) | json_object_set_new(j, "limit", info) |
+        json_object_set_new(j, "full", fr ? json_null() : full_json(&fa))) {
+        json_decref(j);
+        j = NULL;
+    }
     sd_analysis_free(&fa);
     sd_analysis_free(&an);
     sd_limit_mask_free(&lm);
