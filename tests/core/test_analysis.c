@@ -294,3 +294,42 @@ TEST(analysis_full_loop_vertex)
     sd_complex_free(c);
     mesh_free(&m);
 }
+
+/* 001 Table 2 (extraordinary vertices) through the full matrix: the centre of a bipyramid over an
+ * n-gon split into 2n tetrahedra (0, a, b, pole) (valence n + 2), with the major diagonal pair
+ * 0 (0-a | b-pole) in every tetrahedron — pair 1 in the first for valence 5 — has the printed
+ * first 6 eigenvalues (to the table's 6 decimals; its 0.312499 and 0.249998 are 5/16 and 1/4)
+ * for valences 5, 6, 7, 8(b) and 9 (DECISIONS 45). */
+TEST(analysis_table2_vertices_full)
+{
+    static const double table2[5][6] = {
+        {1, 0.3125, 0.292083, 0.15, 0.125, 0.125},
+        {1, 0.312499, 0.25, 0.25, 0.25, 0.15},
+        {1, 0.327254, 0.327254, 0.3125, 0.275888, 0.15},
+        {1, 0.375, 0.375, 0.3125, 0.270178, 0.15},
+        {1, 0.405872, 0.405872, 0.3125, 0.26545, 0.19437}};
+    for (int n = 3; n <= 7; n++) {
+        mesh m = {0};
+        mesh_v(&m, 0.01, 0.02, 0);
+        for (int k = 0; k < n; k++)
+            mesh_v(&m, cos(2 * M_PI * k / n), sin(2 * M_PI * k / n), 0.03 * ((k * 7) % 5 - 2));
+        uint32_t top = mesh_v(&m, 0, 0, 1), bot = mesh_v(&m, 0, 0, -1.1);
+        for (int k = 0; k < n; k++) {
+            uint32_t a = 1 + k, b = 1 + (k + 1) % n;
+            mesh_s(&m, 4, 0u, a, b, top);
+            mesh_s(&m, 4, 0u, b, a, bot);
+        }
+        sd_complex *c = mesh_complex(&m, NULL, NULL);
+        CHECK(c);
+        for (int t = 0; t < 2 * n; t++)
+            CHECK(sd_complex_set_diagonal(c, (size_t)t, n == 3 && t == 0, NULL) == SD_OK);
+        sd_analysis a;
+        CHECK(sd_analyze_full_vertex(c, 0, &a, NULL) == SD_OK);
+        CHECK(a.size == 5 * (n + 2) - 5);
+        for (int i = 0; i < 6; i++)
+            CHECK_NEAR(hypot(a.eig_re[i], a.eig_im[i]), table2[n - 3][i], 2e-6);
+        sd_analysis_free(&a);
+        sd_complex_free(c);
+        mesh_free(&m);
+    }
+}
