@@ -333,3 +333,31 @@ TEST(analysis_table2_vertices_full)
         mesh_free(&m);
     }
 }
+
+/* 001 Table 3 through the full matrix (4k + 3 points): the same first 6 eigenvalues as the block
+ * L's, skew diagonals (pair 1), valences 5-9. */
+TEST(analysis_table3_edges_full)
+{
+    static const double table3[5][6] = {
+        {1, 0.480205, 0.480205, 0.480205, 0.25, 0.2375},
+        {1, 0.517404, 0.517404, 0.480205, 0.3125, 0.3125},
+        {1, 0.541169, 0.541169, 0.480204, 0.372645, 0.372645},
+        {1, 0.557148, 0.557148, 0.480205, 0.418566, 0.418566},
+        {1, 0.568361, 0.568361, 0.480206, 0.453454, 0.453454}};
+    for (int k = 5; k <= 9; k++) {
+        mesh m = {0};
+        shape_edge_star(&m, k);
+        sd_complex *c = mesh_complex(&m, NULL, NULL);
+        CHECK(c);
+        for (int i = 0; i < k; i++)
+            CHECK(sd_complex_set_diagonal(c, (size_t)i, 1, NULL) == SD_OK);
+        sd_analysis a;
+        CHECK(sd_analyze_full_edge(c, 0, 1, &a, NULL) == SD_OK);
+        CHECK(a.size == 4 * k + 3);
+        for (int i = 0; i < 6; i++)
+            CHECK_NEAR(hypot(a.eig_re[i], a.eig_im[i]), table3[k - 5][i], 1.5e-6);
+        sd_analysis_free(&a);
+        sd_complex_free(c);
+        mesh_free(&m);
+    }
+}
