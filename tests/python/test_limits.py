@@ -295,11 +295,13 @@ def centre_rate(M):
                if abs(w[j] - 1) > 1e-9 and abs(vr[0, j]) > 1e-9)
 
 
+@pytest.mark.parametrize("weights", ["loop", "warren"])
 @pytest.mark.parametrize("case", ["bipyramids", "disc-open", "torus-creased"])
-def test_convergence_loop(tmp_path, case):
-    """Loop surfaces (closed, open, creased): at every level-L vertex the error falls like the
-    slowest centre rate among the blocks that occur — interior: computed from loop_block(n) for
-    the valences of the mesh; boundary and crease vertices: the curve's 1/4."""
+def test_convergence_loop(tmp_path, case, weights):
+    """Loop surfaces (closed, open, creased; Loop's and Warren's weights): at every level-L
+    vertex the error falls like the slowest centre rate among the blocks that occur — interior:
+    computed from loop_block(n) / warren_block(n) for the valences of the mesh; boundary and
+    crease vertices: the curve's 1/4."""
     rng = random.Random(sum(map(ord, case)))
     xyz, tris, sharp = surface_case(case, rng)
     path = tmp_path / "s.txt"
@@ -308,8 +310,9 @@ def test_convergence_loop(tmp_path, case):
     for t in tris:
         for i in range(3):
             val.setdefault(t[i], set()).update((t[(i + 1) % 3], t[(i + 2) % 3]))
-    lam = max([centre_rate(loop_block(len(s))) for s in val.values()] + [0.25])
-    assert_rate(errors(path, 0, 5, vertices=range(len(xyz))), lam)
+    block = loop_block if weights == "loop" else warren_block
+    lam = max([centre_rate(block(len(s))) for s in val.values()] + [0.25])
+    assert_rate(errors(path, 0, 5, weights=weights, vertices=range(len(xyz))), lam)
 
 
 def tet_rings(tets):
