@@ -888,3 +888,33 @@ def test_full_appendix_b1(daemon):
         k = int(np.argmin([abs(x - w) for x in ev]))
         assert abs(ev[k] - w) < 1e-12
         ev.pop(k)
+
+
+@pytest.mark.parametrize("rules", ["chang-qin", "ying-zorin"])
+def test_convergence_nonmanifold_surface(tmp_path, rules):
+    """Three fins of triangles around one edge (a non-manifold edge with its two ends), under
+    Chang-Qin's G2 and Ying-Zorin's rules: the error of every control point falls geometrically
+    (ratio at most 0.6 over the last three of k = 1..7: at the G2 edge's ends the error first
+    dips, two modes of opposite sign crossing, then falls at about 1/2), so the limits
+    (eigenvectors, B-spline along the Ying-Zorin crease) are the fixed points."""
+    xyz = [(0, 0, 0), (0, 0, 1)]
+    tris = []
+    for f in range(3):
+        a = 2 * math.pi * f / 3
+        base = len(xyz)
+        for j in range(3):
+            r = 1 + 0.1 * j
+            xyz.append((r * math.cos(a + 0.2 * (j - 1)), r * math.sin(a + 0.2 * (j - 1)),
+                        0.5 * (j - 1) + 0.5 + 0.05 * f))
+        tris += [(0, 1, base + 1), (0, base + 1, base), (1, base + 2, base + 1)]
+    path = tmp_path / "fins.txt"
+    write(path, xyz, tris, [])
+
+    def level(L, lim):
+        return parse(run([SDLEVEL, "-l", L, "-n", rules] + (["--limit"] if lim else []) + [path]))[0]
+    p = level(0, True)
+    es = np.array([np.linalg.norm(p - level(k, False)[:len(p)], axis=1) for k in range(1, 8)])
+    moving = es[0] > 1e-12
+    r = es[-3:, moving] / es[-4:-1, moving]
+    assert (r <= 0.6).all(), r.max()
+    assert es[-1].max() < 0.01 * es[0].max()
