@@ -531,14 +531,9 @@ def session(daemon, body, rules=None):
 
 
 def b1_bipyramid():
-    v = [[0, 0, 0], [0, 0, 1]]
-    v += [[math.cos(2 * math.pi * i / 3), math.sin(2 * math.pi * i / 3), 0.05 * i] for i in range(3)]
-    v.append([0.1, 0, -1])
-    s = []
-    for i in range(3):
-        a, b = 2 + i, 2 + (i + 1) % 3
-        s += [[0, 1, a, b], [0, 5, a, b]]
-    return {"vertices": v, "simplices": s}
+    """001 Appendix B.1's triangular bipyramid (centre 0, poles 1 and 5, ring 2 3 4)."""
+    from test_http_analysis import bipyramid
+    return bipyramid()
 
 
 def test_limit_mask_of_appendix_b1(daemon):
