@@ -68,7 +68,8 @@ struct api_cstream *api_get_complex_stream(api_model *m, uint64_t *version, api_
 
 /* Query options of GET /levels/{L} (NULL = absent). */
 typedef struct api_level_query {
-    const char *format, *parts, *slice, *attributes, *colormap, *octahedra, *names, *compress;
+    const char *format, *parts, *slice, *attributes, *colormap, *octahedra, *names, *compress,
+        *limit;
 } api_level_query;
 
 /* A compute slot of the transport (the daemon's scheduler; NULL offline): take waits for one
@@ -123,9 +124,12 @@ json_t *api_level_stats(api_model *m, int level, const api_limits *lim, const ap
 
 /* GET /analysis?vertex=i | ?edge=i,j (001 Sec. 4.1): the local subdivision matrix of a control
  * vertex (1-ring block M) or edge (block L of its midpoint) and its eigenvalues, largest in
- * magnitude first. Locks the model (an edge needs level 1). New reference or NULL + problem. */
-json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const api_slot *slot,
-                     api_problem *p);
+ * magnitude first, the centre's limit mask (at its limit level) and, where the neighbourhood is
+ * invariant, the full matrix (levels 1 and 2). Locks the model (an edge needs level 1). Levels
+ * past lim are not computed for the limit mask or the full matrix: they are null then. New
+ * reference or NULL + problem. */
+json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const api_limits *lim,
+                     const api_slot *slot, api_problem *p);
 
 /* GET /matrices/{L}?from=F&format=mtx|json: computes level L if needed and opens the stream of
  * the matrix mapping level F (default 0) to level L. *ctype: the Content-Type. */

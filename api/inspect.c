@@ -34,7 +34,91 @@ static long query_index(const char *s, uint32_t n, const char *name, api_problem
     return v;
 }
 
-json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const api_slot *slot,
+/* ---- limit masks ---- */
+
+static const char *limit_method_name(int method)
+{
+    switch (method) {
+    case SD_LIMIT_FIXED: return "fixed";
+    case SD_LIMIT_BSPLINE: return "bspline";
+    case SD_LIMIT_LOOP: return "loop";
+    case SD_LIMIT_EIGEN: return "eigenvector";
+    default: return "none";
+    }
+}
+
+/* "limit_mask": the weights on points.ids (0 where the mask does not read a point); into *info
+ * ("limit"): what found them and at which level, the tangent masks on the same points where the
+ * point has one tangent plane, and the points of the mask outside points.ids (none for a closed
+ * block) */
+static json_t *limit_mask_json(const sd_analysis *an, const sd_limit_mask *lm, json_t **info)
+{
+    *info = json_null();
+    double *w = calloc((size_t)an->size * 3, sizeof *w);
+    if (!w)
+        return NULL;
+    json_t *extra = json_array();
+    for (int i = 0; i < lm->n; i++) {
+        int k = 0;
+        while (k < an->size && an->points[k] != lm->points[i])
+            k++;
+        if (k == an->size) {
+            if (lm->w[i] != 0 || (lm->t1 && (lm->t1[i] != 0 || lm->t2[i] != 0)))
+                json_array_append_new(extra, json_pack("{s:I, s:f}", "id", (json_int_t)lm->points[i],
+                                                       "weight", lm->w[i]));
+            continue;
+        }
+        w[k] += lm->w[i];
+        if (lm->t1) {
+            w[an->size + k] += lm->t1[i];
+            w[2 * (size_t)an->size + k] += lm->t2[i];
+        }
+    }
+    json_t *mask = api_json_doubles(w, (size_t)an->size);
+    json_t *j = json_pack("{s:s, s:i, s:o}", "method", limit_method_name(lm->method), "level",
+                          lm->eval_level, "outside", extra);
+    if (j && lm->t1 &&
+        json_object_set_new(j, "tangents",
+                            json_pack("[o, o]", api_json_doubles(w + an->size, (size_t)an->size),
+                                      api_json_doubles(w + 2 * (size_t)an->size, (size_t)an->size)))) {
+        json_decref(j);
+        j = NULL;
+    }
+    *info = j;
+    free(w);
+    return mask;
+}
+
+/* "full": {"size", "matrix", "eigenvalues", "points": {"level", "ids"}} */
+static json_t *eig_json(const sd_analysis *a)
+{
+    json_t *eig = json_array();
+    for (int i = 0; i < a->size; i++) /* a real eigenvalue as a number, a complex one as [re, im] */
+        json_array_append_new(eig, fabs(a->eig_im[i]) <= 1e-12 * (1 + fabs(a->eig_re[i]))
+                                       ? json_real(a->eig_re[i])
+                                       : json_pack("[f, f]", a->eig_re[i], a->eig_im[i]));
+    return eig;
+}
+
+static json_t *full_json(const sd_analysis *a)
+{
+    json_t *mat = json_array(), *pts = json_array();
+    bool ok = mat && pts;
+    for (int i = 0; i < a->size && ok; i++)
+        ok = !json_array_append_new(mat, api_json_doubles(a->matrix + (size_t)i * a->size,
+                                                          (size_t)a->size)) &&
+             !json_array_append_new(pts, json_integer(a->points[i]));
+    if (!ok) {
+        json_decref(mat);
+        json_decref(pts);
+        return NULL;
+    }
+    return json_pack("{s:i, s:o, s:o, s:{s:i, s:o}}", "size", a->size, "matrix", mat,
+                     "eigenvalues", eig_json(a), "points", "level", a->level, "ids", pts);
+}
+
+json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const api_limits *lim,
+                     const api_slot *slot,
                      api_problem *p)
 {
     if (!m->c) {
@@ -67,11 +151,36 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
     }
     if (api_level_compute(m, 1, slot, p)) /* an edge's block lives at level 1 */
         return NULL;
-    sd_analysis an;
-    sd_error e = {0};
+    /* the limit mask is read at the limit level of the block's level (core/limit.c), the full
+     * matrix at levels 1 and 2; each only within the limits (else null) */
+    pthread_mutex_lock(&m->lock);
+    int ll = sd_complex_limit_level(m->c, b < 0 ? 0 : 1);
+    pthread_mutex_unlock(&m->lock);
+    api_problem skip = {0};
+    bool with_limit = !api_check_level_limits(m, ll, lim, &skip);
+    bool with_full = !api_check_level_limits(m, 2, lim, &skip);
+    if ((with_limit && api_level_compute(m, ll, slot, p)) ||
+        (with_full && api_level_compute(m, 2, slot, p)))
+        return NULL;
+    sd_analysis an, fa = {0};
+    sd_limit_mask lm = {0};
+    sd_error e = {0}, fe = {0};
     pthread_mutex_lock(&m->lock);
     sd_result r = b < 0 ? sd_analyze_vertex(m->c, (uint32_t)a, &an, &e)
                         : sd_analyze_edge(m->c, (uint32_t)a, (uint32_t)b, &an, &e);
+    if (!r && with_limit && (r = sd_limit_mask_of(m->c, an.level, an.points[0], &lm, &e)))
+        sd_analysis_free(&an);
+    sd_result fr = SD_ERR_ARG;
+    if (!r && with_full) {
+        fr = b < 0 ? sd_analyze_full_vertex(m->c, (uint32_t)a, &fa, &fe)
+                   : sd_analyze_full_edge(m->c, (uint32_t)a, (uint32_t)b, &fa, &fe);
+        if (fr && fr != SD_ERR_ARG) { /* not invariant is no error: "full" is null then */
+            r = fr;
+            e = fe;
+            sd_analysis_free(&an);
+            sd_limit_mask_free(&lm);
+        }
+    }
     pthread_mutex_unlock(&m->lock);
     if (r) {
         if (r == SD_ERR_ARG)
@@ -93,7 +202,17 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
     json_t *j = json_pack("{s:s, s:i, s:o, s:o, s:{s:i, s:o}, s:b}", "rule",
                           sd_rule_name(an.rule), "size", an.size, "matrix", mat, "eigenvalues", eig,
                           "points", "level", an.level, "ids", pts, "closed", an.closed);
+    json_t *info = json_null();
+    json_t *mask = with_limit ? limit_mask_json(&an, &lm, &info) : json_null();
+    /* each set takes its value (and drops it when it fails): out of memory is no answer */
+    if (json_object_set_new(j, "limit_mask", mask) | json_object_set_new(j, "limit", info) |
+        json_object_set_new(j, "full", fr ? json_null() : full_json(&fa))) {
+        json_decref(j);
+        j = NULL;
+    }
+    sd_analysis_free(&fa);
     sd_analysis_free(&an);
+    sd_limit_mask_free(&lm);
     return j;
 }
 

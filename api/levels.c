@@ -180,6 +180,12 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
             return api_fail_at(p, 422, "unknown-value", "octahedra",
                                "octahedra is \"tets\" (4 tetrahedra each) or \"polyhedra\"");
     }
+    if (q->limit) {
+        if (!strcmp(q->limit, "true"))
+            rq->limit = true;
+        else if (strcmp(q->limit, "false"))
+            return api_fail_at(p, 422, "unknown-value", "limit", "limit is \"true\" or \"false\"");
+    }
     bool vtk = !strcmp((*fmt)->name, "vtu") || !strcmp((*fmt)->name, "vtk");
     if (q->names) {
         if (!strcmp(q->names, "true"))
@@ -235,6 +241,15 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
     if (parse_query(m, q, &rq, fmt, p) || api_check_level_limits(m, level, lim, p) ||
         api_level_compute(m, level, slot, p))
         return p->status;
+    if (rq.limit) {
+        /* limits are read at the limit level (offsets, sharpness, solids: core/limit.c), which
+         * is computed like any level the client asks for */
+        pthread_mutex_lock(&m->lock);
+        int e = sd_complex_limit_level(m->c, level);
+        pthread_mutex_unlock(&m->lock);
+        if (e > level && (api_check_level_limits(m, e, lim, p) || api_level_compute(m, e, slot, p)))
+            return p->status;
+    }
     rq.complex = m->c;
     rq.level = level;
     rq.snapshot = true;
@@ -243,7 +258,7 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
      * are of one moment; then the stream holds no lock while the client reads */
     pthread_mutex_lock(&m->lock);
     if (api_model_level_locked(m, level, &e)) {
-        if ((*fmt)->geometry)
+        if ((*fmt)->geometry && !rq.limit)
             rq.geometry = api_model_geometry_locked(m, level);
         rq.version = atomic_load(&m->version);
         *out = out_open(&rq, *fmt, &e);

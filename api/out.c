@@ -169,6 +169,35 @@ static bool snapshot(out_stream *s)
     return true;
 }
 
+/* The level's points at their limit positions (into the stream's own copy) and their limit
+ * normals (0 0 0 where a point has none; the glTF writer fills those in). */
+static int limit_points(out_stream *s, sd_error *err)
+{
+    size_t n = (size_t)s->nv * 3;
+    double *x = api_malloc((n + 1) * sizeof *x), *nrm = api_malloc((n + 1) * sizeof *nrm);
+    float *f = api_malloc((n + 1) * sizeof *f);
+    if (!x || !nrm || !f) {
+        api_free(x);
+        api_free(nrm);
+        api_free(f);
+        return out_nomem(err);
+    }
+    sd_result r = sd_complex_limit(s->rq.complex, s->rq.level, 0, x, nrm, err);
+    if (r) {
+        api_free(x);
+        api_free(nrm);
+        api_free(f);
+        return r;
+    }
+    for (size_t i = 0; i < n; i++)
+        f[i] = (float)nrm[i];
+    api_free(nrm);
+    api_free(s->own_xyz);
+    s->xyz = s->own_xyz = x;
+    s->normals = s->own_normals = f;
+    return 0;
+}
+
 out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err)
 {
     if (!f || !f->init)
@@ -236,8 +265,16 @@ out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err)
             return fail(s, err, SD_ERR_ARG, "attributes: \"%s\" is not a channel of %d components",
                         rq->attrs[a].name, rq->attrs[a].ncomp);
     }
+    if (rq->limit && rq->geometry)
+        return fail(s, err, SD_ERR_ARG, "limit: no cached geometry with limit positions");
     if (rq->snapshot && !snapshot(s))
         return fail(s, err, SD_ERR_NOMEM, "out of memory copying the level's points");
+    if (rq->limit && limit_points(s, &e)) {
+        if (err)
+            *err = e;
+        out_close(s);
+        return NULL;
+    }
     static const unsigned part_of[5] = {OUT_PART_POINTS, OUT_PART_CURVES, OUT_PART_SURFACES,
                                         OUT_PART_SOLIDS, OUT_PART_SOLIDS};
     for (int k = 0; k < 5; k++)

@@ -89,6 +89,10 @@ typedef struct out_request {
      * reads no array that an edit changes in place (channel values), only the level's topology
      * and rules, and its content is that of the moment it opened. */
     bool snapshot;
+    /* Every point at its limit position (sd_complex_limit: the limit level is computed already),
+     * and glTF normals from the limit tangents (the area-weighted normal where a point has no
+     * tangent plane); geometry must then be NULL (its normals are the level's). */
+    bool limit;
 } out_request;
 
 /* The solid boundary and vertex normals of a level with every part shown — what glTF needs

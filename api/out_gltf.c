@@ -549,6 +549,21 @@ static int init(out_stream *s, bool glb, sd_error *err)
         if (!(s->own_normals = out_normals(s->lv, ntr, s->bnd, s->nbnd)))
             return out_nomem(err);
         s->normals = s->own_normals;
+    } else if (s->rq.limit && s->own_normals) {
+        /* limit normals; the area-weighted one where a point has no tangent plane */
+        float *area = (ntr || s->nbnd) ? out_normals(s->lv, ntr, s->bnd, s->nbnd) : NULL;
+        if ((ntr || s->nbnd) && !area)
+            return out_nomem(err);
+        for (uint32_t i = 0; i < s->nv; i++) {
+            float *q = s->own_normals + 3 * (size_t)i;
+            if (q[0] == 0 && q[1] == 0 && q[2] == 0) {
+                if (area)
+                    memcpy(q, area + 3 * (size_t)i, 3 * sizeof *q);
+                else
+                    q[2] = 1;
+            }
+        }
+        api_free(area);
     }
     layout L;
     plan(s, g, &L);

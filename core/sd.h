@@ -534,7 +534,55 @@ sd_result sd_analyze_vertex(sd_complex *c, uint32_t v, sd_analysis *out, sd_erro
 /* The block L ((2k+3)x(2k+3)) of control edge a-b: the 1-ring block of the edge's midpoint
  * after one level (001 Sec. 4.1). */
 sd_result sd_analyze_edge(sd_complex *c, uint32_t a, uint32_t b, sd_analysis *out, sd_error *err);
+/* The full matrix of the invariant neighbourhood (001 Sec. 4.1, Appendix B): at level 1, the
+ * points of the control cells containing vertex v (5k - 5 for an interior solid vertex) or edge
+ * a-b (4k + 3), centre and 1-ring first (as the block has them), as S_1 maps them onto their
+ * counterparts at level 2 (the scaling about the centre by 1/2; core/analysis.c). SD_ERR_ARG
+ * when the neighbourhood is not invariant (a point without its counterpart, a row reading
+ * outside it: boundaries, neighbourhoods that need more levels). */
+sd_result sd_analyze_full_vertex(sd_complex *c, uint32_t v, sd_analysis *out, sd_error *err);
+sd_result sd_analyze_full_edge(sd_complex *c, uint32_t a, uint32_t b, sd_analysis *out, sd_error *err);
 void sd_analysis_free(sd_analysis *a);
+
+/* ---- limit positions and normals (001 Sec. 4; docs/RULES.md "Limits"; core/limit.c) ------ */
+
+/* How a limit mask was found: the point is fixed, the cubic B-spline's (2/3 centre, 1/6 each
+ * of its two curve neighbours), Loop's (1 - n chi) centre + chi each of its n neighbours with
+ * chi = 1 / (n + 3 / (8 beta)), beta the vertex row's (Loop's or Warren's) — or the dominant left
+ * eigenvector of the point's 1-ring block of S (analysis.c's), or none (the block is not closed
+ * or has no simple dominant eigenvalue 1: the point itself is returned). */
+enum { SD_LIMIT_NONE = -1, SD_LIMIT_FIXED = 0, SD_LIMIT_BSPLINE, SD_LIMIT_LOOP, SD_LIMIT_EIGEN };
+
+/* The level whose 1-ring blocks give the limits of level `level`'s points: the finest of
+ * `level`, the finest level holding detail offsets (any channel), ceil of the largest semi-sharp
+ * sharpness (where every sharpness has expired) and, with solids, 1. A point keeps its index
+ * from `level` to it (vertex points come first). */
+int sd_complex_limit_level(const sd_complex *c, int level);
+
+/* The limit of every point of level `level` (computed if need be, and the limit level with it):
+ * channel `channel`'s values into out (ncomp per point), and, if normals is not NULL, the unit
+ * limit normal of each point into normals (3 per point; 0 0 0 where the point has no tangent
+ * plane: curves, isolated points, solid interiors, vertices whose triangles are not one fan).
+ * Normals are t1 x t2 of OpenSubdiv's Loop limit tangent masks (Sdc::Scheme<SCHEME_LOOP>) on
+ * the positions of the limit level, over the point's triangles (maximal triangles and the solids'
+ * boundary, as oriented); on an interior crease, the unit sum of its two sides' normals. */
+sd_result sd_complex_limit(sd_complex *c, int level, int channel, double *out, double *normals,
+                           sd_error *err);
+
+/* One point's limit mask: weights on points of level `level` (the mask of the limit level
+ * composed with S down to `level`), and its tangent masks (NULL where it has no single tangent
+ * plane, an interior crease included). Free with sd_limit_mask_free. */
+typedef struct sd_limit_mask {
+    int n;
+    uint32_t *points;          /* n ids of level `level` */
+    double *w;                 /* the position weights, summing to 1 */
+    double *t1, *t2;           /* tangent weights on the same points (sum 0), or NULL */
+    int level, eval_level;     /* the level of `points`; the level the mask was taken at */
+    int method;                /* SD_LIMIT_* */
+} sd_limit_mask;
+sd_result sd_limit_mask_of(sd_complex *c, int level, uint32_t v, sd_limit_mask *out,
+                           sd_error *err);
+void sd_limit_mask_free(sd_limit_mask *m);
 
 /* ---- embedded models (004 Sec. 5.1, eq. 13; core/embed.c) -------------------------------- */
 

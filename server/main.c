@@ -139,6 +139,8 @@ static int parse_refine_args(int argc, char **argv, refine_args *a)
                                                        : NULL;
         if (!strcmp(o, "--repair"))
             a->repair = 1;
+        else if (!strcmp(o, "--limit")) /* GET /levels/{L}?limit=true */
+            a->q.limit = "true";
         else if (dst) {
             if (i + 1 >= argc) {
                 fprintf(stderr, "subdivd refine: %s needs a value\n", o);

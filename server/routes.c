@@ -870,7 +870,7 @@ static void stream_refused(req *r, api_model *m, const api_problem *p)
 }
 
 static const char *const LEVEL_KEYS[] = {"format", "parts", "slice", "attributes", "colormap",
-                                         "octahedra", "names", "compress", NULL};
+                                         "octahedra", "names", "compress", "limit", NULL};
 
 static void get_level(req *r, api_model *m, int level)
 {
@@ -885,7 +885,7 @@ static void get_level(req *r, api_model *m, int level)
     }
 #define Q(k) http_arg(r, k)
     api_level_query q = {Q("format"), Q("parts"), Q("slice"), Q("attributes"), Q("colormap"),
-                         Q("octahedra"), Q("names"), Q("compress")};
+                         Q("octahedra"), Q("names"), Q("compress"), Q("limit")};
 #undef Q
     out_stream *os = NULL;
     const out_format *fmt;
@@ -1182,7 +1182,8 @@ static void h_analysis(req *r)
     api_model *m = session_model(r->s, NULL);
     api_problem p = {0};
     api_slot slot = slot_of(r);
-    json_t *j = api_analysis(m, http_arg(r, "vertex"), http_arg(r, "edge"), &slot, &p);
+    json_t *j = api_analysis(m, http_arg(r, "vertex"), http_arg(r, "edge"),
+                             &r->srv->cfg.limits, &slot, &p);
     uint64_t version = atomic_load(&m->version);
     api_model_unref(m);
     http_reply_versioned(r, j, version, &p);

@@ -132,7 +132,7 @@ static void views(api_model *m)
     oks += j != NULL;
     json_decref(j);
     memset(&p, 0, sizeof p);
-    if (!(j = api_analysis(m, "0", NULL, NULL, &p)) && p.status)
+    if (!(j = api_analysis(m, "0", NULL, &lim, NULL, &p)) && p.status)
         refused(&p, "api_analysis");
     oks += j != NULL;
     json_decref(j);

@@ -1,12 +1,16 @@
 // osd_loop — the peer: OpenSubdiv's uniform Loop refinement of a triangle mesh, in double
 // precision, for tests and benchmarks of subdivd.
 //
-//   osd_loop [-l L] [--time N] [--origins] [--rules] [--chaikin] INPUT
+//   osd_loop [-l L] [--time N] [--origins] [--rules] [--chaikin] [--limit] INPUT
 //
 // INPUT is the text format of docs/TEXT_FORMAT.md, restricted to `v x y z` lines, 3-index
 // `s i j k` lines (triangles) and `c` lines (`c i S`: vertex sharpness, a Far corner; `c i j S`:
 // edge sharpness, a Far crease; given to Far as floats, 10 and more infinitely sharp); anything
 // else is refused with exit status 2. --chaikin: Sdc::Options::CREASE_CHAIKIN.
+// --limit: the `v` lines hold level L's points pushed to their limit positions by
+// Far::PrimvarRefinerReal<double>::Limit (Sdc's Loop limit masks applied at level L), and a list
+// `normals N` / `n x y z` (%.17g) follows the vertices: cross(tangent1, tangent2) of Limit's
+// tangent masks, normalized (0 0 0 where that cross product vanishes).
 //
 // Default output: level L in the format of docs/TEXT_FORMAT.md (`level`, `vertices`, `v x y z`
 // with %.17g, `triangles`, `t i j k`). --origins appends to each `v` line where the point comes
@@ -40,6 +44,7 @@
 #include <time.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
@@ -53,7 +58,8 @@ using namespace OpenSubdiv;
 
 namespace {
 
-const char *const kUsage = "usage: osd_loop [-l L] [--time N] [--origins] [--rules] [--chaikin] INPUT";
+const char *const kUsage =
+    "usage: osd_loop [-l L] [--time N] [--origins] [--rules] [--chaikin] [--limit] INPUT";
 const int kMaxLevel = 10;  // Far's limit for uniform refinement
 
 // The primvar type Far::PrimvarRefinerReal<double> interpolates.
@@ -186,7 +192,7 @@ struct Result {
 
 // The timed job: build the topology, refine it uniformly to `level` and interpolate the
 // positions of every level.
-void run(const Mesh &m, int level, Result &r) {
+void run(const Mesh &m, int level, Result &r, bool full = false) {
     typedef Far::TopologyDescriptor Descriptor;
     int nv = (int)(m.xyz.size() / 3);
     int nf = (int)(m.tris.size() / 3);
@@ -212,7 +218,9 @@ void run(const Mesh &m, int level, Result &r) {
         desc, Far::TopologyRefinerFactory<Descriptor>::Options(Sdc::SCHEME_LOOP, options));
     if (!r.refiner || g_far_error)
         die("OpenSubdiv refused the mesh");
-    r.refiner->RefineUniform(Far::TopologyRefiner::UniformOptions(level));
+    Far::TopologyRefiner::UniformOptions uniform(level);
+    uniform.fullTopologyInLastLevel = full;  // Limit() reads the last level's full topology
+    r.refiner->RefineUniform(uniform);
     if (g_far_error)
         die("OpenSubdiv failed to refine the mesh");
 
@@ -239,7 +247,7 @@ double now() {
 
 int main(int argc, char **argv) {
     int level = 2, reps = 0;
-    bool origins = false, rules = false, chaikin = false;
+    bool origins = false, rules = false, chaikin = false, limit = false;
     const char *path = nullptr;
     for (int i = 1; i < argc; i++) {
         if (!std::strcmp(argv[i], "-l")) {
@@ -256,6 +264,8 @@ int main(int argc, char **argv) {
             rules = true;
         } else if (!std::strcmp(argv[i], "--chaikin")) {
             chaikin = true;
+        } else if (!std::strcmp(argv[i], "--limit")) {
+            limit = true;
         } else if (argv[i][0] == '-' && argv[i][1]) {
             die(std::string("unknown option ") + argv[i] + "\n" + kUsage);
         } else if (path) {
@@ -290,7 +300,7 @@ int main(int argc, char **argv) {
     }
 
     Result r;
-    run(mesh, level, r);
+    run(mesh, level, r, limit);
     Far::TopologyLevel const &fin = r.refiner->GetLevel(level);
     if (rules) {
         Far::TopologyLevel const &l0 = r.refiner->GetLevel(0);
@@ -307,12 +317,22 @@ int main(int argc, char **argv) {
                         (int)l0.IsEdgeNonManifold(e));
         }
     }
+    std::vector<Vertex> lim, tan1, tan2;
+    if (limit) {
+        lim.resize(fin.GetNumVertices());
+        tan1.resize(lim.size());
+        tan2.resize(lim.size());
+        Far::PrimvarRefinerReal<double> primvar(*r.refiner);
+        primvar.Limit(r.verts.data() + r.finest, lim, tan1, tan2);
+        if (g_far_error)
+            die("OpenSubdiv failed to evaluate the limit");
+    }
     std::printf("level %d\nvertices %d\n", level, fin.GetNumVertices());
     // level L's vertices: the children of level L-1's vertices first, then of its edges (see the
     // notes above; Loop has no face children)
     int nvp = level > 0 ? r.refiner->GetLevel(level - 1).GetNumVertices() : fin.GetNumVertices();
     for (int i = 0; i < fin.GetNumVertices(); i++) {
-        const double *p = r.verts[r.finest + i].p;
+        const double *p = limit ? lim[i].p : r.verts[r.finest + i].p;
         std::printf("v %.17g %.17g %.17g", p[0], p[1], p[2]);
         if (origins && level == 0) {
             std::printf(" I");
@@ -323,6 +343,18 @@ int main(int argc, char **argv) {
             std::printf(" E %d %d", ev[0], ev[1]);
         }
         std::printf("\n");
+    }
+    if (limit) {
+        std::printf("normals %d\n", fin.GetNumVertices());
+        for (int i = 0; i < fin.GetNumVertices(); i++) {
+            const double *a = tan1[i].p, *b = tan2[i].p;
+            double n[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                           a[0] * b[1] - a[1] * b[0]};
+            double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            for (double &x : n)
+                x = len > 0 ? x / len : 0.0;
+            std::printf("n %.17g %.17g %.17g\n", n[0], n[1], n[2]);
+        }
     }
     std::printf("triangles %d\n", fin.GetNumFaces());
     for (int f = 0; f < fin.GetNumFaces(); f++) {

@@ -21,13 +21,13 @@ static void usage(void)
 {
     fprintf(stderr, "usage: sdlevel [-l L] [-w warren|loop] [-s box|averaged] [-n chang-qin|ying-zorin] "
                     "[--classes] "
-                    "[--chaikin] [--matrix] [--stats] INPUT\n");
+                    "[--chaikin] [--matrix] [--stats] [--limit] INPUT\n");
     exit(2);
 }
 
 int main(int argc, char **argv)
 {
-    int level = 1, classes = 0, matrix = 0, stats = 0, chaikin = 0;
+    int level = 1, classes = 0, matrix = 0, stats = 0, chaikin = 0, limit = 0;
     sd_options opt = {0};
     const char *path = NULL;
     for (int i = 1; i < argc; i++) {
@@ -59,6 +59,8 @@ int main(int argc, char **argv)
             chaikin = 1;
         else if (!strcmp(argv[i], "--stats"))
             stats = 1;
+        else if (!strcmp(argv[i], "--limit"))
+            limit = 1;
         else if (argv[i][0] == '-' && argv[i][1])
             usage();
         else
@@ -141,6 +143,18 @@ int main(int argc, char **argv)
     int nc;
     const double *x = sd_level_channel(lv, 0, &nc);
     uint32_t nv = sd_level_num_vertices(lv);
+    /* --limit: the points at their limit positions, then their limit normals (sd_complex_limit) */
+    double *lim = NULL, *nrm = NULL;
+    if (limit) {
+        lim = malloc((size_t)nv * 3 * sizeof *lim);
+        nrm = malloc((size_t)nv * 3 * sizeof *nrm);
+        if (!lim || !nrm || sd_complex_limit(c, level, 0, lim, nrm, &err)) {
+            fprintf(stderr, "sdlevel: limit: %s\n", lim && nrm ? err.message : "out of memory");
+            return 1;
+        }
+        lv = sd_complex_level(c, level, &err);
+        x = lim;
+    }
     printf("level %d\nvertices %u\n", level, nv);
     for (uint32_t i = 0; i < nv; i++) {
         uint32_t a, b;
@@ -152,6 +166,13 @@ int main(int argc, char **argv)
         case SD_ORIGIN_EDGE: printf(" E %u %u\n", a, b); break;
         case SD_ORIGIN_CELL: printf(" C %u\n", a); break;
         }
+    }
+    if (limit) {
+        printf("normals %u\n", nv);
+        for (uint32_t i = 0; i < nv; i++)
+            printf("n %.17g %.17g %.17g\n", nrm[3 * i], nrm[3 * i + 1], nrm[3 * i + 2]);
+        free(lim);
+        free(nrm);
     }
     for (int k = 0; k < 5; k++) {
         uint32_t n = sd_level_num_cells(lv, (sd_cell_kind)k), v[6];

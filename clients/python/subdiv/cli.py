@@ -4,7 +4,7 @@
                   [--fill [--max-volume V] [--min-ratio R]] [--singular-groups A,B]
                   [--parts P] [--slice nx,ny,nz,d] [--attributes A] [--colormap NAME:min:max]
                   [--octahedra tets|polyhedra] [--names true|false] [--compress none|zlib]
-                  [--pvd DIR] [--save-complex C.json]
+                  [--limit true|false] [--pvd DIR] [--save-complex C.json]
     subdiv refine INPUT --level L -o OUT.pvtu|OUT.vtu --mpi N [--tags T.json] [--rules R.json]
     subdiv batch JOBS.json [--fail-fast]
     subdiv convert INPUT -o BODY.json [--tags-out T.json] [--fill ...] [--singular-groups A,B]
@@ -36,7 +36,8 @@ from .client import FORMATS, Client
 from .errors import ProblemError, SubdivError, TransportError
 
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_DAEMON, EXIT_NOT_IMPLEMENTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
-LEVEL_OPTS = ("parts", "slice", "attributes", "colormap", "octahedra", "names", "compress")
+LEVEL_OPTS = ("parts", "slice", "attributes", "colormap", "octahedra", "names", "compress",
+              "limit")
 JOB_KEYS = {"input", "output", "outputs", "level", "tags", "rules", "fill", "singular_groups", "options",
             "name", "save_complex", "pvd", "repair", "crease_angle"}
 

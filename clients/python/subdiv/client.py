@@ -45,7 +45,8 @@ PathLike = Union[str, "os.PathLike[str]"]
 FORMATS = ("glb", "gltf", "vtu", "vtk", "json")
 # The cell kinds of format=json's "cells" and the vertices of each.
 _CELL_WIDTHS = {"points": 1, "edges": 2, "triangles": 3, "tetrahedra": 4, "octahedra": 6}
-LEVEL_OPTIONS = ("parts", "slice", "attributes", "colormap", "octahedra", "names", "compress")
+LEVEL_OPTIONS = ("parts", "slice", "attributes", "colormap", "octahedra", "names", "compress",
+                 "limit")
 
 
 class _Upload:
@@ -367,13 +368,16 @@ class Session:
               progress: Optional[Progress] = None, if_none_match: Optional[Version] = None,
               **options: Any) -> Union[bytes, int, None]:
         """GET /levels/{L}: the level in `format` with the options of docs/OUTPUTS.md (parts,
-        slice, attributes, colormap, octahedra, names, compress). With `out` (a path) it is streamed into the
+        slice, attributes, colormap, octahedra, names, compress, limit: True for every point at its
+        limit position, docs/API.md "Limits and analysis"). With `out` (a path) it is streamed into the
         file (written as OUT.part, renamed when complete) and the byte count is returned;
         otherwise the bytes. With `if_none_match` (a version): None when unchanged (304)."""
         params = {"format": format}
         for k, v in options.items():
             if k not in LEVEL_OPTIONS:
                 raise TypeError(f"unknown level option {k!r}; one of {', '.join(LEVEL_OPTIONS)}")
+            if isinstance(v, bool):
+                v = "true" if v else "false"
             if v is not None:
                 params[k] = v
         extra = {"If-None-Match": f'"{if_none_match}"'} if if_none_match is not None else None
