@@ -1,6 +1,7 @@
 /* buf.c — see buf.h. */
 #include "buf.h"
 #include "mem.h"
+#include <errno.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
@@ -68,4 +69,40 @@ void api_buf_reals(api_buf *o, const double *x, int n)
         api_buf_printf(o, k ? ",%.17g" : "%.17g", x[k]);
     if (n > 1)
         api_buf_put(o, "]", 1);
+}
+
+char *api_read_file(const char *who, const char *path, size_t max, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        fprintf(stderr, "%s: cannot open %s: %s\n", who, path, strerror(errno));
+        return NULL;
+    }
+    api_buf o = {0};
+    char chunk[1 << 16];
+    size_t r;
+    while (!o.failed && (r = fread(chunk, 1, sizeof chunk, f)) > 0) {
+        if (o.n + r > max) {
+            fprintf(stderr, "%s: %s is larger than %zu bytes\n", who, path, max);
+            fclose(f);
+            api_free(o.b);
+            return NULL;
+        }
+        api_buf_put(&o, chunk, r);
+    }
+    bool bad = ferror(f);
+    fclose(f);
+    if (bad || o.failed) {
+        fprintf(stderr, "%s: %s reading %s\n", who, bad ? "an error" : "out of memory", path);
+        api_free(o.b);
+        return NULL;
+    }
+    if (!o.b) /* an empty file: still a string */
+        api_buf_put(&o, "", 0);
+    if (o.failed) {
+        fprintf(stderr, "%s: out of memory reading %s\n", who, path);
+        return NULL;
+    }
+    *len = o.n;
+    return o.b;
 }

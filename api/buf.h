@@ -25,4 +25,9 @@ void api_buf_f32(api_buf *o, double x);    /* as float32, little endian */
 /* n reals as JSON: one number, or [x,y,...] for n > 1. */
 void api_buf_reals(api_buf *o, const double *x, int n);
 
+/* The whole of a file (the offline modes' inputs), api_malloc'd and NUL-terminated, *len its
+ * bytes; NULL after a line on stderr starting with `who` when it cannot be opened or read, is
+ * larger than max bytes, or memory ran out. */
+char *api_read_file(const char *who, const char *path, size_t max, size_t *len);
+
 #endif

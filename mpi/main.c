@@ -18,6 +18,7 @@
  * but errors and the summary). Test hook: SUBDIVD_MPI_FAIL_AT=R:N fails the N-th allocation of
  * rank R from the refinement on (api_mem_fail_at), to test one rank failing alone.
  */
+#include "../api/buf.h"
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
 #include "../api/mem.h"
@@ -140,34 +141,7 @@ static int parse_args(int argc, char **argv, args *a)
 
 static char *read_file(const char *path, size_t *len)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        fprintf(stderr, "%s: cannot open %s: %s\n", tag_, path, strerror(errno));
-        return NULL;
-    }
-    size_t cap = 1 << 16, n = 0;
-    char *b = api_malloc(cap);
-    while (b) {
-        if (n == cap) {
-            char *nb = api_realloc(b, cap * 2);
-            if (!nb) {
-                api_free(b);
-                b = NULL;
-                break;
-            }
-            b = nb;
-            cap *= 2;
-        }
-        size_t r = fread(b + n, 1, cap - n, f);
-        n += r;
-        if (r == 0)
-            break;
-    }
-    fclose(f);
-    if (!b)
-        fprintf(stderr, "%s: out of memory reading %s\n", tag_, path);
-    *len = n;
-    return b;
+    return api_read_file(tag_, path, SIZE_MAX, len);
 }
 
 static int report(const api_problem *p, const char *what)

@@ -5,6 +5,7 @@
  * offline mode maps files and flags onto them and writes the level with the same streaming
  * writer into a file — same validation, same errors (printed as problem+json), same bytes.
  */
+#include "../api/buf.h"
 #include "../api/embedded.h"
 #include "../api/handlers.h"
 #include "../api/mem.h"
@@ -28,38 +29,7 @@ static void on_signal(int sig) { (void)sig; stop_requested = 1; }
 
 static char *read_file(const char *path, size_t max, size_t *len)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        fprintf(stderr, "subdivd: cannot open %s: %s\n", path, strerror(errno));
-        return NULL;
-    }
-    size_t cap = 1 << 16, n = 0;
-    char *b = api_malloc(cap);
-    while (b) {
-        if (n == cap) {
-            if (cap > max) {
-                fprintf(stderr, "subdivd: %s is larger than --max-body-bytes (%zu)\n", path, max);
-                api_free(b);
-                fclose(f);
-                return NULL;
-            }
-            char *nb = api_realloc(b, cap * 2);
-            if (!nb) {
-                api_free(b);
-                b = NULL;
-                break;
-            }
-            b = nb;
-            cap *= 2;
-        }
-        size_t r = fread(b + n, 1, cap - n, f);
-        n += r;
-        if (r == 0)
-            break;
-    }
-    fclose(f);
-    *len = n;
-    return b;
+    return api_read_file("subdivd", path, max, len);
 }
 
 static int report(const api_problem *p, const char *what)
