@@ -42,6 +42,11 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
 int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *packs,
                         const api_limits *lim, api_model **out, api_problem *p);
 extern const char *const api_tags_packed[];
+/* The offline modes' change (api/offline.c): fn applied to the text buf (len bytes; NULL: an empty
+ * object) parsed as the daemon parses that body, or to `body` (stolen) when not NULL, with the
+ * members of `extra` (borrowed, may be NULL) added. 0 and *out the new model, else the status. */
+int api_apply_text(const api_model *cur, change_fn_t fn, char *buf, size_t len, json_t *body,
+                   json_t *extra, const api_limits *lim, api_model **out, api_problem *p);
 
 /* The summary of a model's complex (new reference; {} without a complex). */
 json_t *api_summary(const api_model *m);

@@ -158,28 +158,14 @@ static int report(const api_problem *p, const char *what)
 static int apply_file(api_model **m, const char *path, change_fn_t fn, const api_limits *lim,
                       json_t *given)
 {
-    size_t len;
+    size_t len = 0;
     char *buf = given ? NULL : read_file(path, &len);
     if (!buf && !given)
         return EXIT_USAGE;
     api_problem p = {0};
-    api_packs packs = {0};
-    const char *const *packed = fn == api_put_complex ? api_complex_packed
-                                : fn == api_put_tags  ? api_tags_packed
-                                                      : NULL;
-    json_t *b = given    ? given
-                : packed ? api_parse_body_packed(buf, len, 0, packed, API_PACK_MIN_BYTES, &packs, &p)
-                         : api_parse_body(buf, len, 0, &p);
-    api_free(buf);
     api_model *next = NULL;
-    if (b && fn == api_put_complex)
-        api_put_complex_packed(*m, b, &packs, lim, &next, &p);
-    else if (b && fn == api_put_tags)
-        api_put_tags_packed(*m, b, &packs, lim, &next, &p);
-    else if (b)
-        fn(*m, b, lim, &next, &p);
-    json_decref(b);
-    api_packs_free(&packs);
+    api_apply_text(*m, fn, buf, len, given, NULL, lim, &next, &p);
+    api_free(buf);
     if (!next)
         return report(&p, path);
     api_model_unref(*m);

@@ -47,32 +47,14 @@ static int report(const api_problem *p, const char *what)
 static int apply_file(api_model **m, const char *path, change_fn_t fn, const api_limits *lim,
                       const char *what, json_t *extra)
 {
-    size_t len;
+    size_t len = 0;
     char *buf = path ? read_file(path, lim->max_body_bytes, &len) : NULL;
     if (path && !buf)
         return 2;
     api_problem p = {0};
-    api_packs packs = {0};
-    /* the big arrays of a complex or of tags packed, as the daemon reads them */
-    const char *const *packed = fn == api_put_complex ? api_complex_packed
-                                : fn == api_put_tags  ? api_tags_packed
-                                                      : NULL;
-    json_t *b = !path    ? json_object()
-                : packed ? api_parse_body_packed(buf, len, 0, packed, API_PACK_MIN_BYTES, &packs,
-                                                 &p)
-                         : api_parse_body(buf, len, 0, &p);
-    api_free(buf);
-    if (b && extra && json_is_object(b))
-        json_object_update(b, extra);
     api_model *next = NULL;
-    if (b && fn == api_put_complex)
-        api_put_complex_packed(*m, b, &packs, lim, &next, &p);
-    else if (b && fn == api_put_tags)
-        api_put_tags_packed(*m, b, &packs, lim, &next, &p);
-    else if (b)
-        fn(*m, b, lim, &next, &p);
-    json_decref(b);
-    api_packs_free(&packs);
+    api_apply_text(*m, fn, buf, len, NULL, extra, lim, &next, &p);
+    api_free(buf);
     if (!next)
         return report(&p, what);
     api_model_unref(*m);
