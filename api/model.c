@@ -176,6 +176,7 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
                           .max_bytes = (size_t)max_bytes,
                           .allocator = api_mem_core_allocator(),
                           .reoriented = in->reoriented,
+                          .classes = in->classes,
                           /* batch: levels written out, never edited (DECISIONS 46) */
                           .edit_index = batch ? SD_EDIT_INDEX_LAZY : SD_EDIT_INDEX_WITH_LEVELS};
         int8_t *given = NULL; /* the chosen diagonals: Algorithm 2 picks the others against them */

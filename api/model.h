@@ -67,6 +67,9 @@ typedef struct api_input {
                                * budget (api_input_reserve; given back by the last unref) */
     struct json_t *repaired;  /* PUT /complex "repair": what was dropped (api/repair.c), shared
                                * read-only by copies; NULL without a repair */
+    const sd_level0_classes *classes; /* borrowed, or NULL: level-0 classes computed elsewhere
+                               * (sd_options.classes; subdivd-mpi's pieces), outliving the
+                               * models built from this input; not copied by api_input_copy */
 } api_input;
 
 /* The rule preferences of PUT /rules (docs/API.md); zero = the default. */

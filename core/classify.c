@@ -246,6 +246,93 @@ sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err)
     return rc;
 }
 
+/* ---- class codes: classes computed elsewhere (sd_level0_classes) ---------------------------
+ * A code packs what classification derives from an entity's star and nothing else: family,
+ * boundary bits and non-manifold type of vertices and edges (and NM_C2B), maximality, solid
+ * boundary and the saturated number of 3-cells of faces. Tags, overrides and rules come later
+ * from these (singular.c, overrides.c, rules.c), so a complex that takes shipped codes derives
+ * the shipper's rules wherever its own tags and neighbourhoods are the shipper's. */
+enum { CODE_SET = 0x8000 };
+static const uint8_t VF_CLS = VF_DC | VF_CURVE_END, EF_CLS = EF_DC | EF_BND2 | EF_CURVE,
+                     FF_CLS = FF_MAX | FF_BND3;
+
+static uint16_t vertex_code(const sd_topo *t, uint32_t v)
+{
+    return (uint16_t)(CODE_SET | t->vfam[v] | (t->vflag[v] & VF_CLS) << 4 | nm_type(t->vnm[v]) << 6);
+}
+static uint16_t edge_code(const sd_topo *t, uint32_t e)
+{
+    return (uint16_t)(CODE_SET | t->efam[e] | (t->eflag[e] & EF_CLS) << 4 | nm_type(t->enm[e]) << 7 |
+                      (t->enm[e] & NM_C2B ? 1u << 10 : 0));
+}
+static uint16_t face_code(const sd_topo *t, uint32_t f)
+{
+    return (uint16_t)(CODE_SET | (t->fflag[f] & FF_CLS) | (t->fn3[f] < 3 ? t->fn3[f] : 3) << 2);
+}
+
+void sdi_class_codes(const sd_topo *t, uint16_t *vertex, uint16_t *edge, uint16_t *face)
+{
+    for (uint32_t v = 0; vertex && v < t->nv; v++)
+        vertex[v] = vertex_code(t, v);
+    for (uint32_t e = 0; edge && e < t->ne; e++)
+        edge[e] = edge_code(t, e);
+    for (uint32_t f = 0; face && f < t->nf; f++)
+        face[f] = face_code(t, f);
+}
+
+sd_result sdi_take_classes(sd_mem *m, sd_topo *t, sdi_rels *R, const sd_level0_classes *K,
+                           sd_error *err)
+{
+    if (K->nv > t->nv || (K->nv && !K->vertex) || (K->ne && (!K->edge_v || !K->edge)) ||
+        (K->nf && (!K->face_v || !K->face)))
+        return sdi_fail(err, SD_ERR_ARG, -1, -1, "classes: more vertices than the complex, or a missing array");
+    if (!sdi_rels_need(m, R, SDI_REL(SDI_VE) | SDI_REL(SDI_VF)))
+        return sdi_fail_nomem(err, m);
+    size_t diff = 0;
+    for (size_t v = 0; v < K->nv; v++) {
+        uint16_t k = K->vertex[v];
+        if (!k || k == vertex_code(t, (uint32_t)v))
+            continue;
+        diff++;
+        t->vfam[v] = k & 15;
+        t->vflag[v] = (uint8_t)((t->vflag[v] & ~VF_CLS) | (k >> 4 & VF_CLS));
+        t->vnm[v] = (uint8_t)((t->vnm[v] & ~NM_TYPE) | (k >> 6 & NM_TYPE));
+    }
+    for (size_t i = 0; i < K->ne; i++) {
+        const uint32_t *ab = K->edge_v + 2 * i;
+        if (!K->edge[i])
+            continue;
+        uint32_t e = ab[0] < t->nv && ab[1] < t->nv ? sdi_rels_edge(R, ab[0], ab[1]) : UINT32_MAX;
+        if (e == UINT32_MAX)
+            return sdi_fail(err, SD_ERR_ARG, (long)i, -1, "classes: edge %zu is not an edge of the complex", i);
+        uint16_t k = K->edge[i];
+        if (k == edge_code(t, e))
+            continue;
+        diff++;
+        t->efam[e] = k & 15;
+        t->eflag[e] = (uint8_t)((t->eflag[e] & ~EF_CLS) | (k >> 4 & EF_CLS));
+        t->enm[e] = (uint8_t)((t->enm[e] & ~(NM_TYPE | NM_C2B)) | (k >> 7 & NM_TYPE) |
+                              (k >> 10 & 1 ? NM_C2B : 0));
+    }
+    for (size_t i = 0; i < K->nf; i++) {
+        const uint32_t *q = K->face_v + 3 * i;
+        if (!K->face[i])
+            continue;
+        uint32_t f = q[0] < t->nv && q[1] < t->nv && q[2] < t->nv ? sdi_rels_face(R, q) : UINT32_MAX;
+        if (f == UINT32_MAX)
+            return sdi_fail(err, SD_ERR_ARG, (long)i, -1, "classes: face %zu is not a face of the complex", i);
+        uint16_t k = K->face[i];
+        if (k == face_code(t, f))
+            continue;
+        diff++;
+        t->fflag[f] = (uint8_t)((t->fflag[f] & ~FF_CLS) | (k & FF_CLS));
+        t->fn3[f] = (uint8_t)(k >> 2 & 3);
+    }
+    if (K->differing)
+        *K->differing = diff;
+    return SD_OK;
+}
+
 /* The edge of tetrahedron c's diagonal pair that lies in its local face i (each opposite pair
  * has exactly one edge in every face: the one not touching vertex i). */
 static uint32_t pair_edge_in_face(const sd_topo *t, uint32_t c, int pair, int i)

@@ -379,6 +379,8 @@ sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const 
     c->nlevels = 1;
     sdi_rels R = {.t = t};
     r = sdi_classify_level0(m, t, &R, err);
+    if (!r && c->opt.classes) /* classes computed elsewhere (subdivd-mpi's whole complex) */
+        r = sdi_take_classes(m, t, &R, c->opt.classes, err);
     int8_t *fixed = NULL; /* the caller's pairs (sd_options.diagonals), in stored order */
     if (!r && c->opt.diagonals && t->ntet) {
         if (!(fixed = sdi_alloc(m, t->ntet)))
@@ -464,6 +466,7 @@ sd_complex *sd_complex_new(const double *xyz, size_t nv, const uint32_t *idx, co
     sd_result built = sdi_level0_build(c, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, err);
     c->opt.reoriented = NULL; /* the caller's arrays: not kept */
     c->opt.diagonals = NULL;
+    c->opt.classes = NULL;
     if (built) {
         sd_complex_free(c);
         return NULL;
@@ -527,6 +530,11 @@ int sd_complex_diagonal(const sd_complex *c, size_t simplex)
         return -1;
     uint32_t t = c->in_tet[simplex];
     return map_pair(c->lv[0]->t.tet_d[t], c->tet_swapped[t]);
+}
+
+void sd_complex_class_codes(const sd_complex *c, uint16_t *vertex, uint16_t *edge, uint16_t *face)
+{
+    sdi_class_codes(&c->lv[0]->t, vertex, edge, face);
 }
 
 int sd_complex_reoriented(const sd_complex *c, size_t simplex)

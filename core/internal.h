@@ -487,6 +487,11 @@ sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const 
 
 /* ---- classify.c: classes of level 0 (R: its relations, built as needed) -------------------- */
 sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err);
+/* The class codes of level 0 (sd_complex_class_codes), and taking shipped ones instead of the
+ * classification's (sd_options.classes; sets *K->differing). */
+void sdi_class_codes(const sd_topo *t, uint16_t *vertex, uint16_t *edge, uint16_t *face);
+sd_result sdi_take_classes(sd_mem *m, sd_topo *t, sdi_rels *R, const sd_level0_classes *K,
+                           sd_error *err);
 sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, const int8_t *fixed,
                                sd_error *err);
 

@@ -103,7 +103,31 @@ typedef struct sd_options {
                               * untouched tetrahedra's). Read by sd_complex_new only. */
     int edit_index;          /* SD_EDIT_INDEX_*: when the by-column index of each level's S that
                               * edits use (sd_complex_move and friends) is made */
+    const struct sd_level0_classes *classes; /* NULL, or level-0 classes computed elsewhere
+                              * (below), taken instead of the complex's own. Read by
+                              * sd_complex_new only. */
 } sd_options;
+
+/* Classes of level-0 entities computed elsewhere: subdivd-mpi classifies the whole complex once
+ * and ships each piece the classes of the entities whose star the piece holds whole (DECISIONS
+ * 44). A class code is what sd_complex_class_codes gives: family, boundary and non-manifold
+ * type (000 Sec. 2) of a vertex or edge, maximality and the 3-cells around a face. The complex
+ * takes these codes instead of its own for the entities listed (code 0: its own), then derives
+ * tags, per-simplex rules and rules from them as it always does, and counts in *differing the
+ * entries that were not what it found itself. Entities are given by input vertex
+ * ids; an edge or face with a nonzero code that is not one of the complex is SD_ERR_ARG. */
+typedef struct sd_level0_classes {
+    size_t nv;                  /* codes of input vertices 0 .. nv-1 (nv <= the complex's) */
+    const uint16_t *vertex;
+    size_t ne;                  /* edges: 2 input vertex ids each in edge_v */
+    const uint32_t *edge_v;
+    const uint16_t *edge;
+    size_t nf;                  /* faces: 3 input vertex ids each in face_v */
+    const uint32_t *face_v;
+    const uint16_t *face;
+    size_t *differing;          /* NULL, or set by sd_complex_new: the entries (of any kind)
+                                 * whose code was not the complex's own (taken anyway) */
+} sd_level0_classes;
 
 /* SD_EDIT_INDEX_WITH_LEVELS (the default): with each level, so the first edit costs what later
  * ones do (a service's live editing). SD_EDIT_INDEX_LAZY: by sd_complex_prepare_edits or the
@@ -145,6 +169,12 @@ int sd_complex_diagonal(const sd_complex *c, size_t simplex);
  * as given (0); -1 if it is not a tetrahedron. The stored order fixes the numbering of every
  * level (edges and faces are numbered as the tetrahedra's slots meet them). */
 int sd_complex_reoriented(const sd_complex *c, size_t simplex);
+
+/* The class codes of level 0 (see sd_level0_classes; never 0): vertex[i] for vertex i (nv
+ * entries), edge[e] for edge e in sd_level_edges' order, face[f] for face f in level 0's face
+ * order (the order the simplices first meet their faces: tetrahedra first, then triangles). Any
+ * of the arrays may be NULL. The codes compare equal exactly when the classes do. */
+void sd_complex_class_codes(const sd_complex *c, uint16_t *vertex, uint16_t *edge, uint16_t *face);
 
 /* Add a per-vertex channel of `ncomp` (1..16) doubles per control vertex; returns the channel
  * id (>= 1; channel 0 is the positions) or -1. Data are copied. */

@@ -338,6 +338,7 @@ typedef struct rstat {
     double cpu_compute;
     long maxrss_kb;
     uint64_t owned_simplices, halo_simplices, owned_cells, local_cells, bytes;
+    uint64_t classes_shipped, classes_differing, rules_checked;
 } rstat;
 
 static double cpu_now(void)
@@ -369,7 +370,11 @@ static void write_stats(const args *a, const rstat *st, const mp_piece *p)
                              s->t_refine, "ids_s", s->t_ids, "compute_s", s->t_compute,
                              "compute_cpu_s", s->cpu_compute, "write_bytes", (json_int_t)s->bytes,
                              "peak_rss_bytes", (json_int_t)s->maxrss_kb * 1024));
-        json_object_set_new(json_array_get(ranks, (size_t)r), "write_s", json_real(s->t_write));
+        json_t *o = json_array_get(ranks, (size_t)r);
+        json_object_set_new(o, "write_s", json_real(s->t_write));
+        json_object_set_new(o, "classes_shipped", json_integer((json_int_t)s->classes_shipped));
+        json_object_set_new(o, "classes_differing", json_integer((json_int_t)s->classes_differing));
+        json_object_set_new(o, "rules_checked", json_integer((json_int_t)s->rules_checked));
     }
     const sd_counts *G = &p->global[p->level];
     json_t *j = json_pack("{s:i,s:i,s:i,s:{s:I,s:I,s:I,s:I,s:I,s:I},s:o}", "ranks", nranks_,
@@ -477,6 +482,9 @@ static int run(const args *a)
     st.t_ids = res.seconds_ids;
     st.owned_cells = res.owned_cells;
     st.local_cells = res.local_cells;
+    st.classes_shipped = res.classes_shipped;
+    st.classes_differing = res.classes_differing;
+    st.rules_checked = res.rules_checked;
     st.t_compute = mp_now() - tc;
     st.cpu_compute = cpu_now() - cpu0;
     if (a->one_at_a_time && a->nowrite) /* as on a machine of its own: the next rank does not
@@ -486,10 +494,15 @@ static int run(const args *a)
         MPI_Send(&turn, 1, MPI_INT, rank_ + 1, 3, MPI_COMM_WORLD);
     if ((rc = checkpoint(rc, "refining")))
         goto done;
-    if (!a->quiet)
+    if (!a->quiet) {
+        fprintf(stderr, "%s: level-0 classes: %llu from the whole complex (%llu differing from "
+                "the piece's own), %llu rules checked equal\n", tag_,
+                (unsigned long long)st.classes_shipped, (unsigned long long)st.classes_differing,
+                (unsigned long long)st.rules_checked);
         fprintf(stderr, "%s: level %d: %llu of %llu cells owned (compute %.2f s)\n", tag_,
-                a->level, (unsigned long long)res.owned_cells, (unsigned long long)res.local_cells,
+                a->level, (unsigned long long)st.owned_cells, (unsigned long long)st.local_cells,
                 st.t_compute);
+    }
     /* 4. write */
     double tw = mp_now();
     if (a->nowrite) {

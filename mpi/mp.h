@@ -4,7 +4,8 @@
  * level-0 maximal simplices with METIS (part.c), and cuts one mp_piece per rank: the rank's own
  * simplices plus a halo of whole rings of simplices around them, with the vertices, attributes,
  * tags and overrides restricted to that sub-complex, the global choices (diagonals, orientation)
- * of its tetrahedra, and what the rank needs to number its level-L points and cells as the
+ * of its tetrahedra, the whole complex's level-0 classes and rules where the piece holds an
+ * entity's star, and what the rank needs to number its level-L points and cells as the
  * one-process level numbers them (the global ids of its level-0 vertices, edges, faces and cells,
  * and the global counts of every level). A piece travels as one flat byte buffer (mp_pack /
  * mp_unpack). Each rank then builds its sub-complex with the same api/ and core/ code, refines
@@ -49,6 +50,14 @@ typedef struct mp_piece {
     uint32_t *e0g;                /* their global ids */
     uint32_t *f0;                 /* 3 local ids each, in the one-process order */
     uint32_t *f0g;
+    /* the whole complex's level-0 classification (DECISIONS 44), for the entities whose star
+     * the piece holds whole (0 for the others: the piece classifies those itself): class codes
+     * (sd_complex_class_codes), taken by the piece's core instead of its own, and the rule and
+     * valence each vertex and edge follows in the whole complex, which the piece checks its own
+     * against */
+    uint16_t *vcls, *ecls, *fcls; /* nv, ne0, nf0 */
+    uint8_t *vrule, *erule;       /* sd_rule; nv, ne0 */
+    uint32_t *vval, *eval;
     api_tags tags;                /* restricted to the piece, local ids */
     uint32_t nov;
     sd_override *ov;              /* the same for the per-simplex rules */
@@ -90,6 +99,11 @@ typedef struct mp_result {
     int32_t *vowner;              /* per level-L vertex: the lowest rank owning a cell around it */
     uint32_t ncell[5];            /* per sd_cell_kind */
     uint64_t owned_cells, local_cells; /* top cells of level L: owned / in the piece */
+    uint64_t classes_shipped;     /* level-0 vertices, edges and faces given the whole complex's
+                                   * class; of those, how many differed from the piece's own */
+    uint64_t classes_differing;
+    uint64_t rules_checked;       /* level-0 vertices and edges whose rule and valence were
+                                   * checked equal to the whole complex's */
     double seconds_build, seconds_refine, seconds_ids;
 } mp_result;
 

@@ -15,7 +15,10 @@
  * piece and which touch a vertex whose star is whole (`vfull`): exactly those whose
  * classification the piece reproduces; the others lie outside the owned cells' reach. Global
  * choices travel with the simplices: each tetrahedron's diagonal pair and orientation, as the
- * whole complex chose them (001 Algorithm 2 looks at neighbours the piece may not have).
+ * whole complex chose them (001 Algorithm 2 looks at neighbours the piece may not have), and
+ * the whole complex's level-0 classification, computed once here: the class codes of the
+ * entities whose star the piece holds whole, which the piece's core takes instead of its own,
+ * and their rules and valences, which the piece checks its own against (piece.c).
  */
 #include "../core/internal.h"
 #include "mp.h"
@@ -198,9 +201,64 @@ out:
     return rc;
 }
 
+/* The whole complex's level-0 classification, computed once (DECISIONS 44): class codes of
+ * every vertex, edge and face, and the rule and valence of every vertex and edge. */
+typedef struct whole_classes {
+    uint16_t *v, *e, *f;
+    uint8_t *vr, *er;
+    uint32_t *vv, *ev;
+} whole_classes;
+
+static void whole_classes_free(whole_classes *w)
+{
+    free(w->v);
+    free(w->e);
+    free(w->f);
+    free(w->vr);
+    free(w->er);
+    free(w->vv);
+    free(w->ev);
+}
+
+static int whole_classes_get(api_model *m, whole_classes *w, char *err, size_t errlen)
+{
+    const sd_topo *t = &m->level0->t;
+    memset(w, 0, sizeof *w);
+    w->v = malloc(((size_t)t->nv + 1) * sizeof *w->v);
+    w->e = malloc(((size_t)t->ne + 1) * sizeof *w->e);
+    w->f = malloc(((size_t)t->nf + 1) * sizeof *w->f);
+    w->vr = malloc((size_t)t->nv + 1);
+    w->er = malloc((size_t)t->ne + 1);
+    w->vv = malloc(((size_t)t->nv + 1) * sizeof *w->vv);
+    w->ev = malloc(((size_t)t->ne + 1) * sizeof *w->ev);
+    if (!w->v || !w->e || !w->f || !w->vr || !w->er || !w->vv || !w->ev) {
+        snprintf(err, errlen, "out of memory classifying the complex");
+        return -1;
+    }
+    sd_complex_class_codes(m->c, w->v, w->e, w->f);
+    sd_error e = {0};
+    sd_class k;
+    if (t->nv && sd_complex_vertex_class(m->c, 0, 0, &k, &e)) { /* builds level 0's rules */
+        snprintf(err, errlen, "the rules of level 0: %s", e.message);
+        return -1;
+    }
+    for (uint32_t i = 0; i < t->nv; i++) {
+        sd_level_vertex_class(m->level0, i, &k);
+        w->vr[i] = k.rule;
+        w->vv[i] = k.valence;
+    }
+    for (uint32_t i = 0; i < t->ne; i++) {
+        sd_level_edge_class(m->level0, i, &k);
+        w->er[i] = k.rule;
+        w->ev[i] = k.valence;
+    }
+    return 0;
+}
+
 /* Cut piece r: cells with ring >= 0 (0 = owned). lid: scratch per global vertex (UINT32_MAX). */
-static int cut_piece(const api_model *m, const cells *c, const int32_t *part, const int32_t *ring,
-                     uint32_t *lid, int r, int nparts, int level, mp_piece *p)
+static int cut_piece(const api_model *m, const cells *c, const whole_classes *w,
+                     const int32_t *part, const int32_t *ring, uint32_t *lid, int r, int nparts,
+                     int level, mp_piece *p)
 {
     const api_input *in = m->in;
     const sd_level *lv0 = m->level0;
@@ -318,6 +376,32 @@ static int cut_piece(const api_model *m, const cells *c, const int32_t *part, co
             p->f0g[p->nf0++] = f;
         }
     }
+    /* the whole complex's classes where the piece holds the star: a vertex with a whole star,
+     * an edge or face with one such vertex (its star lies in that vertex's) */
+    p->vcls = calloc((size_t)nv + 1, sizeof *p->vcls);
+    p->vrule = calloc((size_t)nv + 1, 1);
+    p->vval = calloc((size_t)nv + 1, sizeof *p->vval);
+    p->ecls = calloc((size_t)p->ne0 + 1, sizeof *p->ecls);
+    p->erule = calloc((size_t)p->ne0 + 1, 1);
+    p->eval = calloc((size_t)p->ne0 + 1, sizeof *p->eval);
+    p->fcls = calloc((size_t)p->nf0 + 1, sizeof *p->fcls);
+    if (!p->vcls || !p->vrule || !p->vval || !p->ecls || !p->erule || !p->eval || !p->fcls)
+        return -1;
+    for (uint32_t l = 0; l < nv; l++)
+        if (p->vfull[l]) {
+            p->vcls[l] = w->v[p->vg[l]];
+            p->vrule[l] = w->vr[p->vg[l]];
+            p->vval[l] = w->vv[p->vg[l]];
+        }
+    for (uint32_t q = 0; q < p->ne0; q++)
+        if (p->vfull[p->e0[2 * q]] || p->vfull[p->e0[2 * q + 1]]) {
+            p->ecls[q] = w->e[p->e0g[q]];
+            p->erule[q] = w->er[p->e0g[q]];
+            p->eval[q] = w->ev[p->e0g[q]];
+        }
+    for (uint32_t q = 0; q < p->nf0; q++)
+        if (p->vfull[p->f0[3 * q]] || p->vfull[p->f0[3 * q + 1]] || p->vfull[p->f0[3 * q + 2]])
+            p->fcls[q] = w->f[p->f0g[q]];
     /* tags and overrides: all vertices in the piece, one with a whole star */
 #define KEEP(vs, nvs, ok)                                                                        \
     do {                                                                                         \
@@ -407,6 +491,7 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
     int rc = -1;
     int32_t *part = NULL, *ring = NULL;
     uint32_t *lid = NULL, *list = NULL, *vseen = NULL;
+    whole_classes w = {0};
     if (build_cells(m, &c)) {
         snprintf(err, errlen, "out of memory listing the simplices");
         goto out;
@@ -425,6 +510,8 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
                        m->rules.nonmanifold_surface == SD_NMSURF_YING_ZORIN
                    ? 2
                    : 1;
+    if (whole_classes_get(m, &w, err, errlen))
+        goto out;
     uint32_t nv = m->in->nv;
     ring = malloc(((size_t)c.n + 1) * sizeof *ring);
     lid = malloc(((size_t)nv + 1) * sizeof *lid);
@@ -465,7 +552,7 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
             }
             from = to;
         }
-        if (cut_piece(m, &c, part, ring, lid, r, nparts, level, &pieces[r])) {
+        if (cut_piece(m, &c, &w, part, ring, lid, r, nparts, level, &pieces[r])) {
             snprintf(err, errlen, "out of memory cutting piece %d", r);
             goto out;
         }
@@ -474,6 +561,7 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
     rc = 0;
 out:
     cells_free(&c);
+    whole_classes_free(&w);
     free(part);
     free(ring);
     free(lid);

@@ -76,6 +76,13 @@ void mp_piece_free(mp_piece *p)
     free(p->e0g);
     free(p->f0);
     free(p->f0g);
+    free(p->vcls);
+    free(p->ecls);
+    free(p->fcls);
+    free(p->vrule);
+    free(p->erule);
+    free(p->vval);
+    free(p->eval);
     free(p->tags.size);
     free(p->tags.idx);
     free(p->tags.pet);
@@ -128,6 +135,13 @@ void mp_pack(const mp_piece *p, mp_buf *b)
     put_arr(b, p->e0g, (uint64_t)p->ne0 * 4);
     put_arr(b, p->f0, (uint64_t)p->nf0 * 12);
     put_arr(b, p->f0g, (uint64_t)p->nf0 * 4);
+    put_arr(b, p->vcls, nv * 2);
+    put_arr(b, p->ecls, (uint64_t)p->ne0 * 2);
+    put_arr(b, p->fcls, (uint64_t)p->nf0 * 2);
+    put_arr(b, p->vrule, nv);
+    put_arr(b, p->erule, p->ne0);
+    put_arr(b, p->vval, nv * 4);
+    put_arr(b, p->eval, (uint64_t)p->ne0 * 4);
     put_arr(b, p->tags.size, p->tags.n);
     put_arr(b, p->tags.idx, tidx_len(&p->tags) * 4);
     put_arr(b, p->tags.pet, (uint64_t)p->tags.npet * sizeof *p->tags.pet);
@@ -196,6 +210,13 @@ int mp_unpack(const unsigned char *data, size_t len, mp_piece *p)
     p->e0g = get_arr(&c, (uint64_t)h.ne0 * 4);
     p->f0 = get_arr(&c, (uint64_t)h.nf0 * 12);
     p->f0g = get_arr(&c, (uint64_t)h.nf0 * 4);
+    p->vcls = get_arr(&c, nv * 2);
+    p->ecls = get_arr(&c, (uint64_t)h.ne0 * 2);
+    p->fcls = get_arr(&c, (uint64_t)h.nf0 * 2);
+    p->vrule = get_arr(&c, nv);
+    p->erule = get_arr(&c, h.ne0);
+    p->vval = get_arr(&c, nv * 4);
+    p->eval = get_arr(&c, (uint64_t)h.ne0 * 4);
     p->tags.size = get_arr(&c, h.tags.n);
     ni = 0;
     for (uint32_t i = 0; p->tags.size && i < h.tags.n; i++)
@@ -213,7 +234,7 @@ int mp_unpack(const unsigned char *data, size_t len, mp_piece *p)
 
 /* ---- build and refine ---------------------------------------------------------------------- */
 
-static api_input *piece_input(const mp_piece *p)
+static api_input *piece_input(const mp_piece *p, sd_level0_classes *K)
 {
     api_input *in = api_input_new();
     if (!in)
@@ -238,6 +259,10 @@ static api_input *piece_input(const mp_piece *p)
     memcpy(in->idx, p->sidx, (size_t)ni * sizeof(uint32_t));
     memcpy(in->reoriented, p->sreor, p->ns);
     in->reoriented[p->ns] = 0;
+    *K = (sd_level0_classes){.nv = p->nv, .vertex = p->vcls, .ne = p->ne0, .edge_v = p->e0,
+                             .edge = p->ecls, .nf = p->nf0, .face_v = p->f0, .face = p->fcls,
+                             .differing = K->differing};
+    in->classes = K;
     for (uint32_t s = 0; s < p->ns; s++)
         if (p->ssize[s] == 4 && p->sdiag[s] >= 0) {
             in->diag[in->ndiag][0] = s;
@@ -467,7 +492,23 @@ static int maps_next(const mp_maps *a, const sd_counts *n1, const sd_counts *G1,
 
 /* Level 0's maps: vertices and cells from the piece, edges and faces by their vertices. The
  * edges and faces of owned simplices must be stored in the one-process order (see the top). */
-static int maps_level0(const mp_piece *p, const sd_level *lv0, mp_maps *g, char *err, size_t errlen)
+/* Whether the piece's level-0 entity follows the whole complex's rule and valence (a rule
+ * differs only if DECISIONS 44's argument fails somewhere: a bug, and then an error). */
+static int same_rule(const mp_piece *p, const sd_class *k, int rule, uint32_t valence,
+                     const char *what, uint64_t gid, char *err, size_t errlen)
+{
+    if (k->rule == rule && k->valence == valence)
+        return 1;
+    snprintf(err, errlen,
+             "internal: level-0 %s %llu follows rule %s (valence %u) in piece %d and %s (valence "
+             "%u) in the whole complex",
+             what, (unsigned long long)gid, sd_rule_name((sd_rule)k->rule), k->valence, p->rank,
+             sd_rule_name((sd_rule)rule), valence);
+    return 0;
+}
+
+static int maps_level0(const mp_piece *p, const sd_level *lv0, mp_maps *g, uint64_t *checked,
+                       char *err, size_t errlen)
 {
     const sd_topo *t = &lv0->t;
     memset(g, 0, sizeof *g);
@@ -487,8 +528,16 @@ static int maps_level0(const mp_piece *p, const sd_level *lv0, mp_maps *g, char 
         snprintf(err, errlen, "out of memory numbering level 0");
         goto out;
     }
-    for (uint32_t i = 0; i < t->nv; i++)
+    for (uint32_t i = 0; i < t->nv; i++) {
         g->v[i] = p->vg[i];
+        sd_class k;
+        if (p->vcls[i]) {
+            if (sd_level_vertex_class(lv0, i, &k) ||
+                !same_rule(p, &k, p->vrule[i], p->vval[i], "vertex", p->vg[i], err, errlen))
+                goto out;
+            ++*checked;
+        }
+    }
     uint64_t off = 0;
     for (uint32_t s = 0; s < p->ns; s++) {
         if (p->spart[s] == p->rank)
@@ -514,6 +563,13 @@ static int maps_level0(const mp_piece *p, const sd_level *lv0, mp_maps *g, char 
             goto out;
         }
         g->e[e] = p->e0g[q];
+        sd_class k;
+        if (p->ecls[q]) {
+            if (sd_level_edge_class(lv0, e, &k) ||
+                !same_rule(p, &k, p->erule[q], p->eval[q], "edge", p->e0g[q], err, errlen))
+                goto out;
+            ++*checked;
+        }
         if ((vown[t->ev[e][0]] && vown[t->ev[e][1]]) &&
             (p->e0[2 * q] != t->ev[e][0] || p->e0[2 * q + 1] != t->ev[e][1])) {
             snprintf(err, errlen, "internal: edge %u-%u is stored reversed in the piece",
@@ -551,7 +607,9 @@ int mp_refine(const mp_piece *p, uint64_t max_bytes, int quiet, const char *tag,
     if (!p->ns)
         return 0;
     double t0 = mp_now();
-    api_input *in = piece_input(p);
+    size_t differing = 0;
+    sd_level0_classes K = {.differing = &differing};
+    api_input *in = piece_input(p, &K);
     if (!in) {
         snprintf(err, errlen, "out of memory building the piece's input");
         return -1;
@@ -564,6 +622,7 @@ int mp_refine(const mp_piece *p, uint64_t max_bytes, int quiet, const char *tag,
     lim.batch = true; /* written out, never edited: no edit index (DECISIONS 46) */
     api_problem prob = {0};
     int st = api_build_model(in, &rules, &p->tags, &lim, &r->m, &prob);
+    in->classes = NULL; /* K is this call's; the core has taken the classes */
     api_input_unref(in);
     if (st) {
         snprintf(err, errlen, "the piece's complex was refused (%d %s): %s", prob.status,
@@ -572,8 +631,18 @@ int mp_refine(const mp_piece *p, uint64_t max_bytes, int quiet, const char *tag,
         return -1;
     }
     r->seconds_build = mp_now() - t0;
+    r->classes_differing = differing;
+    for (uint32_t i = 0; i < p->nv; i++)
+        r->classes_shipped += p->vcls[i] != 0;
+    for (uint32_t i = 0; i < p->ne0; i++)
+        r->classes_shipped += p->ecls[i] != 0;
+    for (uint32_t i = 0; i < p->nf0; i++)
+        r->classes_shipped += p->fcls[i] != 0;
     sd_error e = {0};
     const sd_level *lv0 = sd_complex_level(r->m->c, 0, &e);
+    sd_class k0; /* level 0's rules, which the level-0 map checks (built anyway for level 1) */
+    if (lv0 && p->nv && sd_complex_vertex_class(r->m->c, 0, 0, &k0, &e))
+        lv0 = NULL;
     const sd_level *lv = lv0;
     double t1 = mp_now();
     for (int l = 1; lv && l <= p->level; l++) {
@@ -597,7 +666,7 @@ int mp_refine(const mp_piece *p, uint64_t max_bytes, int quiet, const char *tag,
     double t2 = mp_now();
     /* the maps of level L-1 (level L's ids follow from them when asked), or level 0's */
     r->g = calloc(1, sizeof *r->g);
-    if (!r->g || maps_level0(p, lv0, r->g, err, errlen)) {
+    if (!r->g || maps_level0(p, lv0, r->g, &r->rules_checked, err, errlen)) {
         if (!r->g)
             snprintf(err, errlen, "out of memory");
         return -1;

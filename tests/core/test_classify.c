@@ -454,3 +454,86 @@ TEST(diagonal_choice_ignores_input_order)
     sd_complex_free(c);
     mesh_free(&m);
 }
+
+/* Classes computed elsewhere (sd_options.classes, what subdivd-mpi ships its pieces): the codes
+ * of a complex given back to the same complex change nothing; given to a piece that lacks part of
+ * a vertex's star, the vertex takes the whole complex's class and rule; an edge that is not in
+ * the complex is refused. */
+TEST(classify_shipped_classes)
+{
+    mesh m = {0}; /* the hexagonal fan of classify_boundary: centre 0 interior, valence 6 */
+    mesh_v(&m, 0, 0, 0);
+    for (int i = 0; i < 6; i++)
+        mesh_v(&m, cos(M_PI * i / 3), sin(M_PI * i / 3), 0.25 * (i % 2));
+    for (int i = 0; i < 6; i++)
+        mesh_s(&m, 3, 0, 1 + i, 1 + (i + 1) % 6);
+    sd_complex *whole = mesh_complex(&m, NULL, NULL);
+    CHECK(whole);
+    uint32_t ne;
+    const uint32_t *ev = sd_level_edges(sd_complex_level(whole, 0, NULL), &ne);
+    uint16_t vc[7], ec[12], fc[6];
+    sd_complex_class_codes(whole, vc, ec, fc);
+    for (int i = 0; i < 7; i++)
+        CHECK(vc[i] != 0);
+    CHECK(ne == 12);
+    uint32_t fv[18];
+    for (int i = 0; i < 6; i++) {
+        fv[3 * i] = 0;
+        fv[3 * i + 1] = 1 + i;
+        fv[3 * i + 2] = 1 + (i + 1) % 6;
+    }
+    /* the same complex with its own codes: nothing differs, the rules are the same */
+    size_t differing = 99;
+    sd_level0_classes K = {.nv = 7, .vertex = vc, .ne = 12, .edge_v = ev, .edge = ec,
+                           .nf = 6, .face_v = fv, .face = fc, .differing = &differing};
+    sd_options o = {.classes = &K};
+    sd_complex *again = mesh_complex(&m, &o, NULL);
+    CHECK(again && differing == 0);
+    for (uint32_t v = 0; v < 7; v++)
+        CHECK(vclass(again, 0, v).rule == vclass(whole, 0, v).rule &&
+              vclass(again, 0, v).boundary == vclass(whole, 0, v).boundary);
+    sd_complex_free(again);
+
+    /* a piece: the fan without triangle 0-6-1, so the centre is on the piece's boundary. Shipped
+     * the whole fan's class of the centre alone, it follows Loop's interior rule over its six
+     * neighbours: 1 - 6 beta at the centre, beta = 1/16 (Loop, valence 6) on each of them. */
+    mesh piece = {0};
+    for (uint32_t v = 0; v < 7; v++)
+        mesh_v(&piece, m.xyz[3 * v], m.xyz[3 * v + 1], m.xyz[3 * v + 2]);
+    for (int i = 0; i < 5; i++)
+        mesh_s(&piece, 3, 0, 1 + i, 2 + i);
+    sd_complex *own = mesh_complex(&piece, NULL, NULL);
+    CHECK(own && vclass(own, 0, 0).boundary && vclass(own, 0, 0).rule != SD_RULE_LOOP);
+    uint16_t pvc[7] = {vc[0]};
+    sd_level0_classes P = {.nv = 7, .vertex = pvc, .differing = &differing};
+    o.classes = &P;
+    sd_complex *shipped = mesh_complex(&piece, &o, NULL);
+    CHECK(shipped && differing == 1);
+    sd_class k = vclass(shipped, 0, 0);
+    CHECK(!k.boundary && k.rule == SD_RULE_LOOP && k.valence == 6);
+    const sd_level *l1 = sd_complex_level(shipped, 1, NULL);
+    CHECK(l1);
+    if (l1) {
+        int nc;
+        const double *p = sd_level_channel(l1, 0, &nc);
+        for (int d = 0; d < 3; d++) {
+            double want = (1 - 6 / 16.0) * m.xyz[d];
+            for (int j = 1; j <= 6; j++)
+                want += m.xyz[3 * j + d] / 16.0;
+            CHECK(fabs(p[d] - want) < 1e-15);
+        }
+    }
+    sd_complex_free(own);
+    sd_complex_free(shipped);
+
+    /* an edge the piece does not have (6-1) is refused, naming the entry */
+    uint32_t bad_ev[2] = {6, 1};
+    uint16_t bad_ec[1] = {ec[0]};
+    sd_level0_classes B = {.ne = 1, .edge_v = bad_ev, .edge = bad_ec};
+    o.classes = &B;
+    sd_error err;
+    CHECK(!mesh_complex(&piece, &o, &err) && err.code == SD_ERR_ARG && err.item == 0);
+    sd_complex_free(whole);
+    mesh_free(&piece);
+    mesh_free(&m);
+}

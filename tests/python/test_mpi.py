@@ -13,6 +13,7 @@ ranks (3 oversubscribed). A halo of 0 rings is shown to be wrong (the comparison
 failures stop every rank with a message and a non-zero exit.
 """
 import collections
+import itertools
 import json
 import os
 import pathlib
@@ -335,6 +336,13 @@ def test_pieces_equal_the_one_process_level(tmp_path, tmp_path_factory, name, nr
         assert s["level_counts"]["points"] == len(ref_pts)
         assert sum(p["owned_simplices"] for p in s["per_rank"]) == \
             len(CASES[name][0]["simplices"]) - absorbed(CASES[name][0])
+        # the whole complex's level-0 classes reached every piece, agreed with what the piece
+        # holds whole, and every rank follows the whole complex's rules there
+        for p in s["per_rank"]:
+            if p["owned_simplices"]:
+                assert p["classes_shipped"] > 0 and p["rules_checked"] > 0, p
+            assert p["classes_differing"] == 0, p
+        assert "level-0 classes:" in r.stderr
 
 
 def absorbed(body):
@@ -407,8 +415,19 @@ def test_one_rank_is_the_one_process_level(tmp_path, tmp_path_factory):
     mesh, extra = write_case(tmp_path, "mixed")
     ref_pts, ref_cells, _ = reference(tmp_path_factory, "mixed", 3)
     out = tmp_path / "one.pvtu"
-    r = mpirun(1, "refine", mesh, "--level", 3, "-o", out, *extra)
+    stats = tmp_path / "one.json"
+    r = mpirun(1, "refine", mesh, "--level", 3, "-o", out, "--stats", stats, *extra)
     assert r.returncode == 0, r.stderr
+    # one piece holds every star: every level-0 vertex, edge and face gets the whole complex's
+    # class, and every vertex's and edge's rule is checked (counted here from the mesh)
+    simplices = CASES["mixed"][0]["simplices"]
+    verts = {v for s_ in simplices for v in s_}
+    edges = {tuple(sorted(e)) for s_ in simplices for e in itertools.combinations(s_, 2)}
+    faces = {tuple(sorted(f)) for s_ in simplices for f in itertools.combinations(s_, 3)}
+    (p,) = json.loads(stats.read_text())["per_rank"]
+    assert p["classes_shipped"] == len(verts) + len(edges) + len(faces)
+    assert p["rules_checked"] == len(verts) + len(edges)
+    assert p["classes_differing"] == 0
     (g,) = pieces_of(out, 1)
     assert (arr(g, "global_id") == np.arange(len(ref_pts))).all()   # the level's own order
     assert np.abs(vtk_to_numpy(g.GetPoints().GetData()) - ref_pts).max() <= 1e-12
