@@ -87,7 +87,7 @@ def test_runtime_stage():
     hc = [a for w, a in rt if w == "HEALTHCHECK"]
     assert len(hc) == 1 and "/healthz" in hc[0] and "--healthcheck" in hc[0]
     copies = " ".join(a for w, a in rt if w == "COPY")
-    for binary in ("subdivd", "subdivd-tetgen"):
+    for binary in ("subdivd", "subdivd-tetgen", "sdlevel", "subdivd-mpi"):
         assert f"/build/{binary} " in copies + " "
     cmd = [a for w, a in rt if w == "CMD"][-1]
     assert "0.0.0.0" in cmd and "8080" in cmd
@@ -133,7 +133,9 @@ def test_runtime_libraries_are_installed():
     assert "libtet1.5" in runtime
     have = _deps(runtime + ["libc6"])
     missing = {}
-    for binary in (SUBDIVD, SUBDIVD.parent / "subdivd-tetgen", SUBDIVD.parent / "sdlevel"):
+    assert "openmpi-bin" in runtime   # mpirun, for subdivd-mpi
+    for binary in (SUBDIVD, SUBDIVD.parent / "subdivd-tetgen", SUBDIVD.parent / "sdlevel",
+                   SUBDIVD.parent / "subdivd-mpi"):
         out = subprocess.run(["ldd", str(binary)], capture_output=True, text=True, check=True).stdout
         for lib, path in re.findall(r"(\S+) => (/\S+)", out):
             if "asan" in lib or "ubsan" in lib:
