@@ -68,8 +68,9 @@ typedef struct api_input {
     struct json_t *repaired;  /* PUT /complex "repair": what was dropped (api/repair.c), shared
                                * read-only by copies; NULL without a repair */
     const sd_level0_classes *classes; /* borrowed, or NULL: level-0 classes computed elsewhere
-                               * (sd_options.classes; subdivd-mpi's pieces), outliving the
-                               * models built from this input; not copied by api_input_copy */
+                               * (sd_options.classes; subdivd-mpi's pieces), read only while a
+                               * model is built from this input (the caller clears it after);
+                               * not copied by api_input_copy */
 } api_input;
 
 /* The rule preferences of PUT /rules (docs/API.md); zero = the default. */

@@ -247,14 +247,26 @@ sd_result sdi_classify_level0(sd_mem *m, sd_topo *t, sdi_rels *R, sd_error *err)
 }
 
 /* ---- class codes: classes computed elsewhere (sd_level0_classes) ---------------------------
- * A code packs what classification derives from an entity's star and nothing else: family,
- * boundary bits and non-manifold type of vertices and edges (and NM_C2B), maximality, solid
- * boundary and the saturated number of 3-cells of faces. Tags, overrides and rules come later
- * from these (singular.c, overrides.c, rules.c), so a complex that takes shipped codes derives
- * the shipper's rules wherever its own tags and neighbourhoods are the shipper's. */
-enum { CODE_SET = 0x8000 };
-static const uint8_t VF_CLS = VF_DC | VF_CURVE_END, EF_CLS = EF_DC | EF_BND2 | EF_CURVE,
-                     FF_CLS = FF_MAX | FF_BND3;
+ * A code packs what classification derives from an entity's star: for vertices and edges the
+ * family (bits 0-3), boundary bits and non-manifold type (and NM_C2B); for faces maximality,
+ * solid boundary and the saturated number of 3-cells. Tags, overrides and rules come later from
+ * these (singular.c, overrides.c, rules.c), so a complex that takes shipped codes derives the
+ * shipper's rules wherever its own tags and neighbourhoods are the shipper's. Some of a code is
+ * the complex's topology, which a shipped code cannot change: the family, a curve segment, a
+ * maximal triangle, the 3-cells around a face (`*_TOPO`); the rest is what a piece that lacks
+ * part of an entity's star may get wrong: the boundary bits, the non-manifold type (`*_CLASS`).
+ *
+ *   vertex  0-3 family | 4 VF_DC | 5 VF_CURVE_END | 6-8 type
+ *   edge    0-3 family | 4 EF_DC | 5 EF_BND2 | 6 EF_CURVE | 7-9 type | 10 NM_C2B
+ *   face    0 FF_MAX | 1 FF_BND3 | 2-3 3-cells (0, 1, 2, 3 or more)
+ */
+enum {
+    CODE_SET = 0x8000,
+    V_TOPO = 0x000f, V_CLASS = 0x01f0,
+    E_TOPO = 0x004f, E_CLASS = 0x07b0,
+    F_TOPO = 0x000d, F_CLASS = 0x0002,
+};
+static const uint8_t VF_CLS = VF_DC | VF_CURVE_END, EF_CLS = EF_DC | EF_BND2;
 
 static uint16_t vertex_code(const sd_topo *t, uint32_t v)
 {
@@ -262,12 +274,13 @@ static uint16_t vertex_code(const sd_topo *t, uint32_t v)
 }
 static uint16_t edge_code(const sd_topo *t, uint32_t e)
 {
-    return (uint16_t)(CODE_SET | t->efam[e] | (t->eflag[e] & EF_CLS) << 4 | nm_type(t->enm[e]) << 7 |
-                      (t->enm[e] & NM_C2B ? 1u << 10 : 0));
+    return (uint16_t)(CODE_SET | t->efam[e] | (t->eflag[e] & (EF_CLS | EF_CURVE)) << 4 |
+                      nm_type(t->enm[e]) << 7 | (t->enm[e] & NM_C2B ? 1u << 10 : 0));
 }
 static uint16_t face_code(const sd_topo *t, uint32_t f)
 {
-    return (uint16_t)(CODE_SET | (t->fflag[f] & FF_CLS) | (t->fn3[f] < 3 ? t->fn3[f] : 3) << 2);
+    return (uint16_t)(CODE_SET | (t->fflag[f] & (FF_MAX | FF_BND3)) |
+                      (t->fn3[f] < 3 ? t->fn3[f] : 3) << 2);
 }
 
 void sdi_class_codes(const sd_topo *t, uint16_t *vertex, uint16_t *edge, uint16_t *face)
@@ -280,6 +293,12 @@ void sdi_class_codes(const sd_topo *t, uint16_t *vertex, uint16_t *edge, uint16_
         face[f] = face_code(t, f);
 }
 
+/* 0 when shipped code k may replace the entity's own (a code of the same topology), else 1. */
+static int code_fits(uint16_t k, uint16_t own, uint16_t topo, uint16_t cls)
+{
+    return !(k & CODE_SET) || (k & ~(CODE_SET | topo | cls)) || ((k ^ own) & topo);
+}
+
 sd_result sdi_take_classes(sd_mem *m, sd_topo *t, sdi_rels *R, const sd_level0_classes *K,
                            sd_error *err)
 {
@@ -288,49 +307,71 @@ sd_result sdi_take_classes(sd_mem *m, sd_topo *t, sdi_rels *R, const sd_level0_c
         return sdi_fail(err, SD_ERR_ARG, -1, -1, "classes: more vertices than the complex, or a missing array");
     if (!sdi_rels_need(m, R, SDI_REL(SDI_VE) | SDI_REL(SDI_VF)))
         return sdi_fail_nomem(err, m);
-    size_t diff = 0;
-    for (size_t v = 0; v < K->nv; v++) {
-        uint16_t k = K->vertex[v];
-        if (!k || k == vertex_code(t, (uint32_t)v))
-            continue;
-        diff++;
-        t->vfam[v] = k & 15;
-        t->vflag[v] = (uint8_t)((t->vflag[v] & ~VF_CLS) | (k >> 4 & VF_CLS));
-        t->vnm[v] = (uint8_t)((t->vnm[v] & ~NM_TYPE) | (k >> 6 & NM_TYPE));
-    }
-    for (size_t i = 0; i < K->ne; i++) {
+    /* all checked before any is taken: a refused list leaves nothing changed */
+    for (size_t v = 0; v < K->nv; v++)
+        if (K->vertex[v] && code_fits(K->vertex[v], vertex_code(t, (uint32_t)v), V_TOPO, V_CLASS))
+            return sdi_fail(err, SD_ERR_ARG, (long)v, -1,
+                            "classes: vertex %zu: not a class code of its family", v);
+    uint32_t *eid = K->ne ? sdi_alloc(m, K->ne * sizeof *eid) : NULL;
+    uint32_t *fid = K->nf ? sdi_alloc(m, K->nf * sizeof *fid) : NULL;
+    sd_result rc = SD_OK;
+    if ((K->ne && !eid) || (K->nf && !fid))
+        rc = sdi_fail_nomem(err, m);
+    for (size_t i = 0; !rc && i < K->ne; i++) {
         const uint32_t *ab = K->edge_v + 2 * i;
         if (!K->edge[i])
             continue;
         uint32_t e = ab[0] < t->nv && ab[1] < t->nv ? sdi_rels_edge(R, ab[0], ab[1]) : UINT32_MAX;
+        eid[i] = e;
         if (e == UINT32_MAX)
-            return sdi_fail(err, SD_ERR_ARG, (long)i, -1, "classes: edge %zu is not an edge of the complex", i);
-        uint16_t k = K->edge[i];
-        if (k == edge_code(t, e))
-            continue;
-        diff++;
-        t->efam[e] = k & 15;
-        t->eflag[e] = (uint8_t)((t->eflag[e] & ~EF_CLS) | (k >> 4 & EF_CLS));
-        t->enm[e] = (uint8_t)((t->enm[e] & ~(NM_TYPE | NM_C2B)) | (k >> 7 & NM_TYPE) |
-                              (k >> 10 & 1 ? NM_C2B : 0));
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, -1, "classes: edge %zu is not an edge of the complex", i);
+        else if (code_fits(K->edge[i], edge_code(t, e), E_TOPO, E_CLASS))
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, -1,
+                          "classes: edge %zu: not a class code of its family and kind", i);
     }
-    for (size_t i = 0; i < K->nf; i++) {
+    for (size_t i = 0; !rc && i < K->nf; i++) {
         const uint32_t *q = K->face_v + 3 * i;
         if (!K->face[i])
             continue;
         uint32_t f = q[0] < t->nv && q[1] < t->nv && q[2] < t->nv ? sdi_rels_face(R, q) : UINT32_MAX;
+        fid[i] = f;
         if (f == UINT32_MAX)
-            return sdi_fail(err, SD_ERR_ARG, (long)i, -1, "classes: face %zu is not a face of the complex", i);
-        uint16_t k = K->face[i];
-        if (k == face_code(t, f))
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, -1, "classes: face %zu is not a face of the complex", i);
+        else if (code_fits(K->face[i], face_code(t, f), F_TOPO, F_CLASS))
+            rc = sdi_fail(err, SD_ERR_ARG, (long)i, -1,
+                          "classes: face %zu: not a class code of a face with its cells", i);
+    }
+    size_t diff = 0;
+    for (size_t v = 0; !rc && v < K->nv; v++) {
+        uint16_t k = K->vertex[v];
+        if (!k || k == vertex_code(t, (uint32_t)v))
             continue;
         diff++;
-        t->fflag[f] = (uint8_t)((t->fflag[f] & ~FF_CLS) | (k & FF_CLS));
-        t->fn3[f] = (uint8_t)(k >> 2 & 3);
+        t->vflag[v] = (uint8_t)((t->vflag[v] & ~VF_CLS) | (k >> 4 & VF_CLS));
+        t->vnm[v] = (uint8_t)((t->vnm[v] & ~NM_TYPE) | (k >> 6 & NM_TYPE));
     }
-    if (K->differing)
+    for (size_t i = 0; !rc && i < K->ne; i++) {
+        uint16_t k = K->edge[i];
+        if (!k || k == edge_code(t, eid[i]))
+            continue;
+        uint32_t e = eid[i];
+        diff++;
+        t->eflag[e] = (uint8_t)((t->eflag[e] & ~EF_CLS) | (k >> 4 & EF_CLS));
+        t->enm[e] = (uint8_t)((t->enm[e] & ~(NM_TYPE | NM_C2B)) | (k >> 7 & NM_TYPE) |
+                              (k >> 10 & 1 ? NM_C2B : 0));
+    }
+    for (size_t i = 0; !rc && i < K->nf; i++) {
+        uint16_t k = K->face[i];
+        if (!k || k == face_code(t, fid[i]))
+            continue;
+        diff++;
+        t->fflag[fid[i]] = (uint8_t)((t->fflag[fid[i]] & ~FF_BND3) | (k & FF_BND3));
+    }
+    sdi_free(m, eid);
+    sdi_free(m, fid);
+    if (!rc && K->differing)
         *K->differing = diff;
-    return SD_OK;
+    return rc;
 }
 
 /* The edge of tetrahedron c's diagonal pair that lies in its local face i (each opposite pair

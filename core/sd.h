@@ -111,11 +111,14 @@ typedef struct sd_options {
 /* Classes of level-0 entities computed elsewhere: subdivd-mpi classifies the whole complex once
  * and ships each piece the classes of the entities whose star the piece holds whole (DECISIONS
  * 44). A class code is what sd_complex_class_codes gives: family, boundary and non-manifold
- * type (000 Sec. 2) of a vertex or edge, maximality and the 3-cells around a face. The complex
- * takes these codes instead of its own for the entities listed (code 0: its own), then derives
- * tags, per-simplex rules and rules from them as it always does, and counts in *differing the
- * entries that were not what it found itself. Entities are given by input vertex
- * ids; an edge or face with a nonzero code that is not one of the complex is SD_ERR_ARG. */
+ * type (000 Sec. 2) of a vertex or edge, maximality, solid boundary and the 3-cells around a
+ * face. The complex takes these codes instead of its own for the entities listed (code 0: its
+ * own), then derives tags, per-simplex rules and rules from them as it always does, and counts
+ * in *differing the entries that were not what it found itself. Only the classes may differ:
+ * the boundary bits and the non-manifold type; a code whose topology (family, curve segment,
+ * maximal triangle, 3-cells around a face) is not the entity's own, or that is not a code, is
+ * SD_ERR_ARG (item = its index in its list), as is an edge or face with a nonzero code that is
+ * not one of the complex. Entities are given by input vertex ids. */
 typedef struct sd_level0_classes {
     size_t nv;                  /* codes of input vertices 0 .. nv-1 (nv <= the complex's) */
     const uint16_t *vertex;
@@ -171,9 +174,11 @@ int sd_complex_diagonal(const sd_complex *c, size_t simplex);
 int sd_complex_reoriented(const sd_complex *c, size_t simplex);
 
 /* The class codes of level 0 (see sd_level0_classes; never 0): vertex[i] for vertex i (nv
- * entries), edge[e] for edge e in sd_level_edges' order, face[f] for face f in level 0's face
- * order (the order the simplices first meet their faces: tetrahedra first, then triangles). Any
- * of the arrays may be NULL. The codes compare equal exactly when the classes do. */
+ * entries), edge[e] for edge e in sd_level_edges' order, face[f] for face f of level 0 (faces
+ * counts entries, in the order the simplices first meet their faces: tetrahedra first, then
+ * triangles; no accessor hands out their vertices — subdivd-mpi reads them from the core's
+ * topology). Any of the arrays may be NULL. The codes compare equal exactly when the classes
+ * do. */
 void sd_complex_class_codes(const sd_complex *c, uint16_t *vertex, uint16_t *edge, uint16_t *face);
 
 /* Add a per-vertex channel of `ncomp` (1..16) doubles per control vertex; returns the channel

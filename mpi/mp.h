@@ -22,6 +22,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+enum { MP_UNCHECKED = 0xff };
+
 /* One rank's share of the control complex, in its local numbering (vertices ascending by global
  * id, simplices ascending by global input index: the sub-complex's own numbering then follows
  * the one-process numbering wherever the star of an entity is whole; piece.c relies on that). */
@@ -50,13 +52,13 @@ typedef struct mp_piece {
     uint32_t *e0g;                /* their global ids */
     uint32_t *f0;                 /* 3 local ids each, in the one-process order */
     uint32_t *f0g;
-    /* the whole complex's level-0 classification (DECISIONS 44), for the entities whose star
-     * the piece holds whole (0 for the others: the piece classifies those itself): class codes
-     * (sd_complex_class_codes), taken by the piece's core instead of its own, and the rule and
-     * valence each vertex and edge follows in the whole complex, which the piece checks its own
-     * against */
+    /* the whole complex's level-0 classification (DECISIONS 44): class codes
+     * (sd_complex_class_codes) of the entities whose star the piece holds whole (0 for the
+     * others: the piece classifies those itself), taken by the piece's core instead of its own;
+     * and the rule and valence each vertex of the owned simplices and each edge at one follows
+     * in the whole complex (MP_UNCHECKED elsewhere), which the piece checks its own against */
     uint16_t *vcls, *ecls, *fcls; /* nv, ne0, nf0 */
-    uint8_t *vrule, *erule;       /* sd_rule; nv, ne0 */
+    uint8_t *vrule, *erule;       /* sd_rule or MP_UNCHECKED; nv, ne0 */
     uint32_t *vval, *eval;
     api_tags tags;                /* restricted to the piece, local ids */
     uint32_t nov;
@@ -82,7 +84,8 @@ int mp_unpack(const unsigned char *data, size_t len, mp_piece *p);
  * (dual graph: simplices sharing a facet of the smaller one, or a vertex for points and curves;
  * weighted by what each becomes at `level`) and cut the pieces: pieces[r] for rank r, with
  * `halo` rings of simplices (by shared vertices) around the owned ones (-1: the default of
- * DECISIONS 44: two rings with tetrahedra in the complex or Ying-Zorin's rules, else one). `seconds` gets the time
+ * DECISIONS 44: two rings with tetrahedra, non-manifold simplices or Ying-Zorin's rules in the
+ * complex, else one). `seconds` gets the time
  * of the partition alone. 0, or -1 with a message in err. */
 int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces,
                  double *seconds, char *err, size_t errlen);

@@ -10,7 +10,7 @@
  *
  * A piece is the owned simplices plus `halo` rings (ring k + 1: every simplex sharing a vertex
  * with ring k); DECISIONS 44 derives how many rings make every owned level-L point exact (two
- * with tetrahedra or Ying-Zorin's rules, else one). The
+ * with tetrahedra, non-manifold simplices or Ying-Zorin's rules, else one). The
  * piece's tags and per-simplex rules are those of the whole complex whose vertices are all in the
  * piece and which touch a vertex whose star is whole (`vfull`): exactly those whose
  * classification the piece reproduces; the others lie outside the owned cells' reach. Global
@@ -387,18 +387,44 @@ static int cut_piece(const api_model *m, const cells *c, const whole_classes *w,
     p->fcls = calloc((size_t)p->nf0 + 1, sizeof *p->fcls);
     if (!p->vcls || !p->vrule || !p->vval || !p->ecls || !p->erule || !p->eval || !p->fcls)
         return -1;
-    for (uint32_t l = 0; l < nv; l++)
-        if (p->vfull[l]) {
+    /* The rules and valences are checked on the vertices of the owned simplices and the edges
+     * at them: the level-1 rows the owned points of every level read (half an edge around the
+     * owned vertices; solids read further, and have two rings). A rule may read more than its
+     * entity's star (G2 keeps a vertex's neighbours by their classes and rings an edge with the
+     * common neighbours of its ends; Ying-Zorin's petal edges read their ends' rules), so on the
+     * rim a piece's rules differ from the whole complex's as its points do; at these entities
+     * they must not, and a halo too thin for the mesh (--halo) is caught there when it changes a
+     * rule or a valence (a row's weights can differ with neither: DECISIONS 44's depth is the
+     * guarantee, this the check). */
+    uint8_t *own = calloc((size_t)nv + 1, 1);
+    if (!own)
+        return -1;
+    o = 0;
+    for (uint32_t q = 0; q < ns; q++) {
+        for (int j = 0; p->spart[q] == r && j < p->ssize[q]; j++)
+            own[p->sidx[o + j]] = 1;
+        o += p->ssize[q];
+    }
+    memset(p->vrule, MP_UNCHECKED, (size_t)nv + 1);
+    memset(p->erule, MP_UNCHECKED, (size_t)p->ne0 + 1);
+    for (uint32_t l = 0; l < nv; l++) {
+        if (p->vfull[l])
             p->vcls[l] = w->v[p->vg[l]];
+        if (own[l]) {
             p->vrule[l] = w->vr[p->vg[l]];
             p->vval[l] = w->vv[p->vg[l]];
         }
-    for (uint32_t q = 0; q < p->ne0; q++)
-        if (p->vfull[p->e0[2 * q]] || p->vfull[p->e0[2 * q + 1]]) {
+    }
+    for (uint32_t q = 0; q < p->ne0; q++) {
+        uint32_t a = p->e0[2 * q], b = p->e0[2 * q + 1];
+        if (p->vfull[a] || p->vfull[b])
             p->ecls[q] = w->e[p->e0g[q]];
+        if (own[a] || own[b]) {
             p->erule[q] = w->er[p->e0g[q]];
             p->eval[q] = w->ev[p->e0g[q]];
         }
+    }
+    free(own);
     for (uint32_t q = 0; q < p->nf0; q++)
         if (p->vfull[p->f0[3 * q]] || p->vfull[p->f0[3 * q + 1]] || p->vfull[p->f0[3 * q + 2]])
             p->fcls[q] = w->f[p->f0g[q]];
@@ -491,7 +517,7 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
     int rc = -1;
     int32_t *part = NULL, *ring = NULL;
     uint32_t *lid = NULL, *list = NULL, *vseen = NULL;
-    whole_classes w = {0};
+    whole_classes whole = {0};
     if (build_cells(m, &c)) {
         snprintf(err, errlen, "out of memory listing the simplices");
         goto out;
@@ -504,14 +530,20 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
     if (metis_parts(m, &c, level, nparts, part, err, errlen))
         goto out;
     *seconds = mp_now() - t0;
-    if (halo < 0) /* DECISIONS 44: octahedra and Ying-Zorin's flattened petal rows reach two
-                   * edges of their level, the other rows one */
-        halo = sd_level_num_cells(m->level0, SD_CELL_TETRA) ||
+    if (whole_classes_get(m, &whole, err, errlen))
+        goto out;
+    if (halo < 0) { /* DECISIONS 44: octahedra and Ying-Zorin's flattened petal rows reach two
+                     * edges of their level, G2's rows read their neighbours' classes; the
+                     * other rows one edge, of classes in their own star */
+        const sd_topo *t0 = &m->level0->t;
+        bool nonmanifold = false;
+        for (uint32_t v = 0; v < t0->nv && !nonmanifold; v++)
+            nonmanifold = nm_type(t0->vnm[v]) != 0;
+        halo = sd_level_num_cells(m->level0, SD_CELL_TETRA) || nonmanifold ||
                        m->rules.nonmanifold_surface == SD_NMSURF_YING_ZORIN
                    ? 2
                    : 1;
-    if (whole_classes_get(m, &w, err, errlen))
-        goto out;
+    }
     uint32_t nv = m->in->nv;
     ring = malloc(((size_t)c.n + 1) * sizeof *ring);
     lid = malloc(((size_t)nv + 1) * sizeof *lid);
@@ -552,7 +584,7 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
             }
             from = to;
         }
-        if (cut_piece(m, &c, &w, part, ring, lid, r, nparts, level, &pieces[r])) {
+        if (cut_piece(m, &c, &whole, part, ring, lid, r, nparts, level, &pieces[r])) {
             snprintf(err, errlen, "out of memory cutting piece %d", r);
             goto out;
         }
@@ -561,7 +593,7 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
     rc = 0;
 out:
     cells_free(&c);
-    whole_classes_free(&w);
+    whole_classes_free(&whole);
     free(part);
     free(ring);
     free(lid);

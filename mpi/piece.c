@@ -492,18 +492,25 @@ static int maps_next(const mp_maps *a, const sd_counts *n1, const sd_counts *G1,
 
 /* Level 0's maps: vertices and cells from the piece, edges and faces by their vertices. The
  * edges and faces of owned simplices must be stored in the one-process order (see the top). */
-/* Whether the piece's level-0 entity follows the whole complex's rule and valence (a rule
- * differs only if DECISIONS 44's argument fails somewhere: a bug, and then an error). */
+/* Whether the piece's level-0 vertex or edge (local vertex ids v, n of them) follows the whole
+ * complex's rule and valence. They differ only where the piece lacks something the rule reads
+ * (DECISIONS 44): then the owned points would be wrong, and the run stops. */
 static int same_rule(const mp_piece *p, const sd_class *k, int rule, uint32_t valence,
-                     const char *what, uint64_t gid, char *err, size_t errlen)
+                     const uint32_t *v, int n, char *err, size_t errlen)
 {
     if (k->rule == rule && k->valence == valence)
         return 1;
+    char at[64];
+    if (n == 1)
+        snprintf(at, sizeof at, "vertex %u", p->vg[v[0]]);
+    else
+        snprintf(at, sizeof at, "edge %u-%u", p->vg[v[0]], p->vg[v[1]]);
     snprintf(err, errlen,
-             "internal: level-0 %s %llu follows rule %s (valence %u) in piece %d and %s (valence "
-             "%u) in the whole complex",
-             what, (unsigned long long)gid, sd_rule_name((sd_rule)k->rule), k->valence, p->rank,
-             sd_rule_name((sd_rule)rule), valence);
+             "the rules of piece %d are not the whole complex's at %s: %s (valence %u) there, %s "
+             "(valence %u) in the whole complex; a halo of %d ring%s is too thin for this mesh "
+             "(--halo)",
+             p->rank, at, sd_rule_name((sd_rule)k->rule), k->valence, sd_rule_name((sd_rule)rule),
+             valence, p->halo, p->halo == 1 ? "" : "s");
     return 0;
 }
 
@@ -531,9 +538,9 @@ static int maps_level0(const mp_piece *p, const sd_level *lv0, mp_maps *g, uint6
     for (uint32_t i = 0; i < t->nv; i++) {
         g->v[i] = p->vg[i];
         sd_class k;
-        if (p->vcls[i]) {
+        if (p->vrule[i] != MP_UNCHECKED) {
             if (sd_level_vertex_class(lv0, i, &k) ||
-                !same_rule(p, &k, p->vrule[i], p->vval[i], "vertex", p->vg[i], err, errlen))
+                !same_rule(p, &k, p->vrule[i], p->vval[i], &i, 1, err, errlen))
                 goto out;
             ++*checked;
         }
@@ -564,9 +571,9 @@ static int maps_level0(const mp_piece *p, const sd_level *lv0, mp_maps *g, uint6
         }
         g->e[e] = p->e0g[q];
         sd_class k;
-        if (p->ecls[q]) {
+        if (p->erule[q] != MP_UNCHECKED) {
             if (sd_level_edge_class(lv0, e, &k) ||
-                !same_rule(p, &k, p->erule[q], p->eval[q], "edge", p->e0g[q], err, errlen))
+                !same_rule(p, &k, p->erule[q], p->eval[q], t->ev[e], 2, err, errlen))
                 goto out;
             ++*checked;
         }

@@ -533,6 +533,14 @@ TEST(classify_shipped_classes)
     o.classes = &B;
     sd_error err;
     CHECK(!mesh_complex(&piece, &o, &err) && err.code == SD_ERR_ARG && err.item == 0);
+    /* a code cannot change the topology: the centre as a curve vertex (family C_1), or a code
+     * without its marker bit, is refused */
+    uint16_t topo[7] = {0, (uint16_t)((vc[1] & ~15) | 2)};
+    sd_level0_classes T = {.nv = 7, .vertex = topo};
+    o.classes = &T;
+    CHECK(!mesh_complex(&piece, &o, &err) && err.code == SD_ERR_ARG && err.item == 1);
+    topo[1] = vc[1] & 0x7fff;
+    CHECK(!mesh_complex(&piece, &o, &err) && err.code == SD_ERR_ARG && err.item == 1);
     sd_complex_free(whole);
     mesh_free(&piece);
     mesh_free(&m);

@@ -202,12 +202,20 @@ def cases():
                        {"simplex": [1, 2], "rule": "N2", "pair": [[1, 2, 7], [1, 2, 17]]}]})
     out["nonmanifold-ying-zorin"] = ({"vertices": v, "simplices": s}, None,
                                      {"nonmanifold_surface": "ying-zorin"})
-    v, s = book(pages=4, n=6, block=False)   # triangles only: one ring of halo
+    v, s = book(pages=4, n=6, block=False)   # triangles only, non-manifold: two rings of halo
     out["sheets-chang-qin"] = ({"vertices": v, "simplices": s}, {"singular": [[3]]}, None)
     out["sheets-ying-zorin"] = (
         {"vertices": v, "simplices": s},
         {"singular": [[0]], "petals": [{"vertex": 6, "triangle": [5, 6, 13], "kind": "concave"}]},
         {"nonmanifold_surface": "ying-zorin"})
+    # a G2 edge ring that reads beyond the edge's star: the spine 0-1 of three sheets and a
+    # vertex 5 joined to both ends by other triangles (its class decides whether the ring keeps
+    # it, so one ring of halo is not enough)
+    out["g2-edge-ring"] = ({"vertices": [[0, 0, 0], [0, 0, 1], [1, 0, 0.5], [-0.5, 0.87, 0.5],
+                                         [-0.5, -0.87, 0.5], [0.5, 0.5, 0.6], [1, 1.2, -0.5],
+                                         [1.2, 1, 1.5], [0, -1, -1], [1, -1, -1.2]],
+                            "simplices": [[0, 8, 9], [0, 1, 2], [0, 1, 3], [0, 1, 4], [0, 5, 6],
+                                          [1, 5, 7]]}, None, None)
     return out
 
 
@@ -345,6 +353,27 @@ def test_pieces_equal_the_one_process_level(tmp_path, tmp_path_factory, name, nr
         assert "level-0 classes:" in r.stderr
 
 
+@pytest.mark.parametrize("nranks", [4, 8])
+@pytest.mark.parametrize("name", ["nonmanifold-g2", "nonmanifold-ying-zorin", "sheets-ying-zorin",
+                                  "g2-edge-ring"])
+def test_many_small_pieces_of_nonmanifold_complexes(tmp_path, tmp_path_factory, name, nranks):
+    """Parts of a few simplices put most of every piece near its rim, where G2's rows read
+    their neighbours' classes and Ying-Zorin's petal edges their ends' rules: the default halo
+    keeps every owned point exact and every checked rule the whole complex's."""
+    test_pieces_equal_the_one_process_level(tmp_path, tmp_path_factory, name, nranks)
+
+
+def test_a_halo_too_thin_for_g2_stops(tmp_path):
+    """One ring around the part owning the sheet [0, 8, 9] misses the triangle [1, 5, 7], so the
+    G2 ring of the spine 0-1 (common neighbours of its ends, 5 among them in the whole complex)
+    is another: the run stops naming the edge instead of writing wrong points."""
+    mesh, extra = write_case(tmp_path, "g2-edge-ring")
+    r = mpirun(6, "refine", mesh, "--level", 2, "-o", tmp_path / "o.pvtu", "--halo", 1, "-q")
+    assert r.returncode == 3, r.stderr
+    assert "are not the whole complex's at edge 0-1: G2 (valence 3) there, G2 (valence 4)" in \
+        r.stderr and "a halo of 1 ring is too thin" in r.stderr, r.stderr
+
+
 def absorbed(body):
     """Posted simplices that are faces of others (the core absorbs them): none in these cases."""
     return 0
@@ -400,8 +429,10 @@ def test_thinner_halos_are_wrong_for_solids(tmp_path, tmp_path_factory, halo, le
     ref_pts, _, _ = reference(tmp_path_factory, "solid-box", level)
     out = tmp_path / "h.pvtu"
     r = mpirun(nranks, "refine", mesh, "--level", level, "-o", out, "--halo", halo, "-q")
-    if halo == 0 and r.returncode:   # or the numbering check sees the rim's edges first
-        assert r.returncode == 3 and "internal: " in r.stderr and "in the piece" in r.stderr
+    if halo == 0 and r.returncode:   # the owned entities' rules, or the numbering, see the rim
+        assert r.returncode == 3, r.stderr
+        assert ("are not the whole complex's at" in r.stderr and "too thin" in r.stderr) or \
+            ("internal: " in r.stderr and "in the piece" in r.stderr), r.stderr
         return
     assert r.returncode == 0, r.stderr
     worst = 0.0
