@@ -30,7 +30,8 @@
  * again from the new positions (the old ones kept aside), and the finer levels recomputed whole
  * beside the old ones (kept until the new ones are complete, so a failure can put everything
  * back); moves at those finer levels take their offsets as each level is made. The result is the
- * one a new complex with the moved points gives.
+ * one a new complex with the moved points gives. Tangent-plane constraints (tangent.c) read every
+ * position after S, so on a complex with them every change of positions takes this path.
  */
 #include "internal.h"
 #include <math.h>
@@ -436,11 +437,17 @@ static sd_result gather(edit *E, int l, sd_error *err)
     return SD_OK;
 }
 
-/* Does a changed point of level l's set move a position its rules read? */
+/* Does a changed point of level l's set move a position its rules read? With tangent-plane
+ * constraints every position does: the modifications after S read them (tangent.c). */
 static bool stale_at(const edit *E, int l)
 {
     const uint8_t *geo = E->c->lv[l]->geo;
     const pset *s = &E->set[l];
+    const bool tp = E->ch == 0 && E->c->ntt &&
+                    E->c->opt.nonmanifold_surface == SD_NMSURF_YING_ZORIN;
+    for (uint32_t e = 0; tp && e < s->n; e++)
+        if (s->s->chg[e])
+            return true;
     for (uint32_t e = 0; E->ch == 0 && geo && e < s->n; e++)
         if (s->s->chg[e] && geo[s->s->id[e]])
             return true;
