@@ -31,11 +31,15 @@
  *   length as a_1"), halved each level (lambda_1 = 1/2); a vertex inserted on a tagged edge
  *   between two constrained petals gets (T_a + T_b)/4, the midpoint rule with 003 App. B's
  *   factor 1/2 (t_1^{j+1} = (t_0^j + t_1^j)/4), and is constrained from then on; the two halves
- *   of a tagged edge are tagged. a_1 / lambda_1^r then tends to T_0: the interior tangent is the
- *   given one and the limit normal is T_0 x (the curve tangent).
+ *   of a tagged edge are tagged. The limit tangent plane at v is then the one of the curve
+ *   tangent and T_0, the limit normal T_0 x (the curve tangent).
  * All the modifications of a level are computed from S's points and added together (an inner
  * point of a petal is in the 1-rings of two vertices of the curve), so the result does not
- * depend on an order. Inferred data (Fig. 6) is taken from level 0's positions: the Loop normal
+ * depend on an order. With a curve's vertices modifying the inner points they share, a_1 itself
+ * also takes a part along the curve from its neighbours' modifications; the plane does not
+ * change (tests/python/test_tangent_planes.py reads the limit of a_1 / lambda_1^r from levels 2
+ * to 6: the error has the modes (1 - s)^r and (1 - s)^2r only, and the limit normals of two
+ * petals made tangent agree to 1e-14). Inferred data (Fig. 6) is taken from level 0's positions: the Loop normal
  * of a closed petal is a_1 x a_2 there, a petal's interior tangent a_1.
  *
  * A vertex whose rule at a level is not Ying-Zorin's petal rule (a PUT /rules choice of its
