@@ -216,11 +216,12 @@ static int cmp_u64pair(const void *a, const void *b)
 }
 
 static sd_result check_petal(const sd_complex *c, const sdi_rels *R, const uint8_t *tagv,
-                             scratch *S, uint32_t *owner, size_t i, sd_error *err)
+                             scratch *S, uint32_t *owner, const sd_tangent_tag *tt, size_t i,
+                             sd_error *err)
 {
     const sd_topo *t = &c->lv[0]->t;
     const sdi_rel *ve = &R->r[SDI_VE];
-    const sd_tangent_tag *g = &c->tt[i];
+    const sd_tangent_tag *g = &tt[i];
     const uint32_t v = g->vertex;
     const char *what = g->kind == SD_TT_NORMAL ? "normal" : "tangent";
     uint32_t f = sdi_rels_face(R, g->triangle);
@@ -287,11 +288,11 @@ static sd_result check_petal(const sd_complex *c, const sdi_rels *R, const uint8
     return SD_OK;
 }
 
-static sd_result check_edge(const sd_complex *c, const sdi_rels *R, size_t i, uint32_t *tt_f,
-                            uint64_t *key, sd_error *err)
+static sd_result check_edge(const sd_complex *c, const sdi_rels *R, const sd_tangent_tag *tt,
+                            size_t i, uint32_t *tt_f, uint64_t *key, sd_error *err)
 {
     const sd_topo *t = &c->lv[0]->t;
-    const sd_tangent_tag *g = &c->tt[i];
+    const sd_tangent_tag *g = &tt[i];
     uint32_t e = g->edge[0] == g->edge[1] ? UINT32_MAX : sdi_rels_edge(R, g->edge[0], g->edge[1]);
     if (e == UINT32_MAX)
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_EDGE,
@@ -403,24 +404,20 @@ sd_result sd_complex_set_tangents(sd_complex *c, const sd_tangent_tag *tt, size_
             owner[f] = UINT32_MAX;
         sdi_tagged_vertices(c, t, tagv);
     }
-    /* check_petal reads c->tt: point it at the copy for the checks */
-    sd_tangent_tag *old = c->tt;
-    c->tt = copy;
     size_t nk = 0;
     for (size_t i = 0; i < n && !rc; i++) {
         tt_f[2 * i] = tt_f[2 * i + 1] = UINT32_MAX;
         if (tt[i].kind == SD_TT_EDGE) {
             uint64_t key = 0;
-            rc = check_edge(c, &R, i, tt_f, &key, err);
+            rc = check_edge(c, &R, tt, i, tt_f, &key, err);
             if (!rc) /* by edge, then entry: a repeat sorts after its first */
                 keys[2 * nk] = key, keys[2 * nk + 1] = i, nk++;
         } else {
-            rc = check_petal(c, &R, tagv, &S, owner, i, err);
+            rc = check_petal(c, &R, tagv, &S, owner, tt, i, err);
             if (!rc)
                 tt_f[2 * i] = sdi_rels_face(&R, tt[i].triangle);
         }
     }
-    c->tt = old;
     if (!rc && nk > 1) { /* one entry per edge: the first repeat, by entry */
         qsort(keys, nk, 2 * sizeof *keys, cmp_u64pair);
         size_t bad = SIZE_MAX, first = 0;
@@ -535,6 +532,40 @@ static void scale_to(double *d, const double *dir, double len)
         d[k] = l > 0 ? dir[k] / l * len : 0;
 }
 
+/* 003 Fig. 6(b): the unit average of the Loop normals a_1 x a_2 of the closed petals of the
+ * group starting at entry i, each oriented like the first (the modification reads n n^T only);
+ * false if it has no direction. */
+static bool shared_normal(const sd_complex *c, const sd_topo *t, const sdi_rel *ef,
+                          const double *x, scratch *S, size_t i, double out[3])
+{
+    const sd_tangent_tag *g = &c->tt[i];
+    double sum[3] = {0, 0, 0}, first[3] = {0, 0, 0};
+    for (size_t j = i; j < c->ntt && c->tt[j].kind == SD_TT_NORMAL && c->tt[j].group == g->group;
+         j++) {
+        uint32_t n, nf;
+        if (petal_ring(t, ef, g->vertex, c->tt_f[2 * j], S->ring, S->tmp, S->faces, S->cap, &n,
+                       &nf) != RING_CLOSED)
+            continue;
+        for (uint32_t q = 0; q < n; q++)
+            S->tmp[q] = other_end(t, S->ring[q], g->vertex);
+        double a1[3], a2[3], nn[3];
+        closed_a(x, g->vertex, S->tmp, n, a1, a2);
+        cross3(a1, a2, nn);
+        if (dot3(nn, nn) == 0)
+            continue;
+        scale_to(nn, nn, 1);
+        if (dot3(first, first) == 0)
+            memcpy(first, nn, sizeof first);
+        const double sg = dot3(nn, first) < 0 ? -1 : 1;
+        for (int d = 0; d < 3; d++)
+            sum[d] += sg * nn[d];
+    }
+    if (dot3(sum, sum) == 0)
+        return false;
+    scale_to(out, sum, 1);
+    return true;
+}
+
 static sd_result level0(sd_complex *c, const sdi_rels *R, scratch *S, struct sdi_tplane **out,
                         sd_error *err)
 {
@@ -545,6 +576,7 @@ static sd_result level0(sd_complex *c, const sdi_rels *R, scratch *S, struct sdi
     tplist L = {0};
     struct sdi_tplane *tp = sdi_calloc(m, 1, sizeof *tp);
     size_t ne = 0;
+    double avg[3] = {0, 0, 0}; /* the current group's shared normal */
     if (!tp)
         goto nomem;
     for (size_t i = 0; i < c->ntt; i++) {
@@ -568,33 +600,16 @@ static sd_result level0(sd_complex *c, const sdi_rels *R, scratch *S, struct sdi
             r.key = petal_key(S, nf);
             if (!isnan(g->vec[0])) {
                 scale_to(r.d, g->vec, 1);
-            } else { /* 003 Fig. 6(b): the unit average of the group's Loop normals */
-                double sum[3] = {0, 0, 0}, first[3] = {0, 0, 0};
+            } else { /* 003 Fig. 6(b): the group's shared normal, made at its first entry */
                 size_t j0 = i;
                 while (j0 > 0 && c->tt[j0 - 1].kind == SD_TT_NORMAL &&
                        c->tt[j0 - 1].group == g->group)
                     j0--;
-                for (size_t j = j0; j < c->ntt && c->tt[j].kind == SD_TT_NORMAL &&
-                                    c->tt[j].group == g->group; j++) {
-                    uint32_t nj, nfj;
-                    if (petal_ring(t, ef, v, c->tt_f[2 * j], S->ring, S->tmp, S->faces, S->cap,
-                                   &nj, &nfj) != RING_CLOSED)
-                        continue;
-                    for (uint32_t q = 0; q < nj; q++)
-                        S->tmp[q] = other_end(t, S->ring[q], v);
-                    double a1[3], a2[3], nn[3];
-                    closed_a(x, v, S->tmp, nj, a1, a2);
-                    cross3(a1, a2, nn);
-                    scale_to(nn, nn, 1);
-                    if (dot3(first, first) == 0)
-                        memcpy(first, nn, sizeof first);
-                    double sg = dot3(nn, first) < 0 ? -1 : 1; /* a plane: orient like the first */
-                    for (int d = 0; d < 3; d++)
-                        sum[d] += sg * nn[d];
-                }
-                if (dot3(sum, sum) == 0)
+                if (j0 == i && !shared_normal(c, t, ef, x, S, i, avg))
+                    memset(avg, 0, sizeof avg);
+                if (dot3(avg, avg) == 0)
                     continue;
-                scale_to(r.d, sum, 1);
+                memcpy(r.d, avg, sizeof r.d);
             }
         }
         if (!tp_push(m, &L, r))
