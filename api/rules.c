@@ -305,8 +305,8 @@ static int get_triangle(json_t *tr, const char *at, uint32_t nv, uint32_t out[3]
 }
 
 /* An entry's object with its allowed and required keys. */
-static int tt_entry(json_t *o, const char *ptr, const char *const *keys, int nreq, const char *shape,
-                    api_problem *p)
+static int tt_entry(json_t *o, const char *ptr, const char *const *keys, int nreq,
+                    const char *shape, api_problem *p)
 {
     if (!json_is_object(o))
         return api_fail_at(p, 400, "wrong-type", ptr, "an entry is an object %s", shape);
@@ -364,7 +364,9 @@ static int parse_tangents(json_t *nm, json_t *tg, json_t *te, uint32_t nv, api_t
             if (tt_entry(o, ptr, L == 0 ? kn : L == 1 ? kt : ke, L == 2 ? 1 : L == 0 ? 2 : 3,
                          shapes[L], p))
                 return p->status;
-            sd_tangent_tag x = {.kind = L == 0 ? SD_TT_NORMAL : L == 1 ? SD_TT_TANGENT : SD_TT_EDGE};
+            sd_tangent_tag x = {.kind = L == 0   ? SD_TT_NORMAL
+                                        : L == 1 ? SD_TT_TANGENT
+                                                 : SD_TT_EDGE};
             long long id;
             if (L < 2) {
                 api_ptr_key(at, sizeof at, ptr, "vertex");

@@ -39,8 +39,9 @@
  * also takes a part along the curve from its neighbours' modifications; the plane does not
  * change (tests/python/test_tangent_planes.py reads the limit of a_1 / lambda_1^r from levels 2
  * to 6: the error has the modes (1 - s)^r and (1 - s)^2r only, and the limit normals of two
- * petals made tangent agree to 1e-14). Inferred data (Fig. 6) is taken from level 0's positions: the Loop normal
- * of a closed petal is a_1 x a_2 there, a petal's interior tangent a_1.
+ * petals made tangent agree to 1e-14). Inferred data (Fig. 6) is taken from level 0's
+ * positions: the Loop normal of a closed petal is a_1 x a_2 there, a petal's interior tangent
+ * a_1.
  *
  * A vertex whose rule at a level is not Ying-Zorin's petal rule (a PUT /rules choice of its
  * own, chang-qin) is left alone there and its data is not carried further.

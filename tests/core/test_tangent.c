@@ -148,7 +148,9 @@ TEST(tangent_moves_only_the_constrained_sheets)
         const sd_level *lv = sd_complex_level(plain, L, &err);
         for (uint32_t v = 0; v < sd_level_num_vertices(lv); v++, at += 3) {
             int f = fin_of(lv, v);
-            double d = fabs(a[at] - b[at]) + fabs(a[at + 1] - b[at + 1]) + fabs(a[at + 2] - b[at + 2]);
+            double d = 0;
+            for (int q = 0; q < 3; q++)
+                d += fabs(a[at + q] - b[at + q]);
             if (d > 1e-12)
                 moved[f]++;
         }

@@ -401,7 +401,8 @@ def test_normal_at_complex_vertex(daemon, mode):
 
 def test_echo_export_import_and_edit(daemon):
     V, T = tjunction()
-    tags = {"tangents": [{"vertex": 2, "triangle": sheet_triangle(T, 0, 2), "tangent": [0, 1, 0.5]}],
+    tags = {"tangents": [{"vertex": 2, "triangle": sheet_triangle(T, 0, 2),
+                          "tangent": [0, 1, 0.5]}],
             "tangent_edges": [{"edge": [1, 2], "triangles": [sheet_triangle(T, 0, 1),
                                                              sheet_triangle(T, 1, 1)]},
                               {"edge": [2, 3]}]}
@@ -427,7 +428,8 @@ def test_echo_export_import_and_edit(daemon):
     V2 = [list(p) for p in V]
     V2[11] = moved
     u = session(daemon, V2, T, tags)
-    assert s.level(3, format="json").json()["vertices"] == u.level(3, format="json").json()["vertices"]
+    got, want = (x.level(3, format="json").json()["vertices"] for x in (s, u))
+    assert got == want
     for x in (s, t, u):
         x.delete()
 
@@ -454,7 +456,8 @@ def test_hostile_tangent_tags(daemon):
         ({"tangents": [dict(ok_t, tangent=[0, 1])]}, 422, "/tangents/0/tangent"),
         ({"tangents": [dict(ok_t, tangent=[0, "a", 1])]}, 400, "/tangents/0/tangent/1"),
         ({"tangents": [dict(ok_t, tangent=[0, 0, 0])]}, 422, "/tangents/0/tangent"),
-        ({"tangents": [dict(ok_t, tangent=[-2, 0, 0])]}, 422, "/tangents/0/tangent"),  # along the curve
+        ({"tangents": [dict(ok_t, tangent=[-2, 0, 0])]}, 422,
+         "/tangents/0/tangent"),                                      # along the curve
         ({"tangents": [dict(ok_t, vertex=0, triangle=sheet_triangle(T, 0, 0))]}, 422,
          "/tangents/0/vertex"),                                       # complex vertex
         ({"tangents": [dict(ok_t, vertex=7)]}, 422, "/tangents/0/triangle"),  # not holding it
