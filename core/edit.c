@@ -550,6 +550,10 @@ static sd_result rebuild(edit *E, int s, op *ops, size_t nops, uint32_t **diff, 
         c->lv[l] = NULL;
     }
     c->nlevels = s + 1;
+    const bool tp = tp_active(c, E->ch);
+    for (size_t i = 0; tp && i < nops; i++) /* the moves' offsets, made below */
+        if (ops[i].kind == OP_MOVE && (int)ops[i].level > s)
+            memset(E->nd[ops[i].level] + (size_t)ops[i].pos * nc, 0, nc * sizeof(double));
     for (int l = s + 1; l < nl && !r; l++) {
         if (!sd_complex_level(c, l, err)) {
             r = err->code;
@@ -564,14 +568,11 @@ static sd_result rebuild(edit *E, int s, op *ops, size_t nops, uint32_t **diff, 
             double *nv = p + (size_t)o->index * nc;
             double *d = E->nd[l] + (size_t)o->pos * nc; /* in the installed list */
             int bad;
-            /* the point before its offset: S's row, or with tangent-plane constraints the
-             * level build's value less the offset the gathering put in the installed list (the
-             * modifications of tangent.c come between the two) */
-            if (!tp_active(E->c, E->ch))
+            /* the point before its offset: S's row, or with tangent-plane constraints the level
+             * build's value (its offset 0 in the installed list, below: the modifications of
+             * tangent.c come between the two) */
+            if (!tp)
                 sdi_csrb_eval(&up->S, o->index, up->ch[E->ch].data, NULL, NULL, nc, nv, NULL);
-            else
-                for (int q = 0; q < nc; q++)
-                    nv[q] -= d[q];
             if (!offset_for(E->values + (size_t)o->item * nc, nv, d, nc, &bad)) {
                 r = sdi_fail(err, SD_ERR_VALUE, (long)o->item, bad,
                              "point %u of level %d: the offset to value %d is not finite or "

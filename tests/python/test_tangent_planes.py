@@ -430,7 +430,25 @@ def test_echo_export_import_and_edit(daemon):
     u = session(daemon, V2, T, tags)
     got, want = (x.level(3, format="json").json()["vertices"] for x in (s, u))
     assert got == want
-    for x in (s, t, u):
+    # a move at level 1 of a modified point: where asked, and kept by the export's offsets
+    X1, tris1 = level(s, 1)
+    ring = sheet_ring(X1, tris1, 2, SHEETS[0])
+    q = ring[1]
+    ver = s.req("GET", "/complex").headers["ETag"]
+    to = list(X1[q] + np.array([0.0, 0.05, 0.1]))
+    r = s.req("PATCH", "/control-points", headers={"If-Match": ver},
+              json={"moves": [{"level": 1, "index": int(q), "position": to}]})
+    assert r.status_code == 200, r.text
+    assert np.allclose(level(s, 1)[0][q], to, atol=1e-12)
+    r = s.http.post(daemon.url + "/v1/sessions", json={"import": s.req("GET", "/export").json()})
+    assert r.status_code == 201, r.text
+    j = r.json()
+    w = Session.__new__(Session)
+    w.d, w.http, w.id, w.token = daemon, s.http, j["id"], j["token"]
+    w.base, w.auth = f"{daemon.url}/v1/sessions/{w.id}", {"Authorization": f"Bearer {w.token}"}
+    got, want = (x.level(3, format="json").json()["vertices"] for x in (s, w))
+    assert got == want
+    for x in (s, t, u, w):
         x.delete()
 
 
