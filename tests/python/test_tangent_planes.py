@@ -176,17 +176,14 @@ def petals_at(tris, v):
     return rings
 
 
-def sheet_ring(X, tris, v, direction):
-    """The open petal of v whose inner points lie most along `direction`."""
-    best, score = None, -2
-    for ring in petals_at(tris, v):
-        if len(ring) < 3:
-            continue
-        c = np.mean([X[u] for u in ring[1:-1]], axis=0) - X[v]
-        sc = unit(c) @ unit(direction)
-        if sc > score:
-            best, score = ring, sc
-    return best
+def sheet_ring(X, tris, v, sh):
+    """The petal of v in sheet `sh`, read from the topology: a level's triangles come in the order
+    of their level-0 ancestors (face f's descendants are 4^L f .. 4^L (f + 1) - 1), so each sheet
+    is a third of them."""
+    span = len(tris) // 3
+    rings = petals_at([t for t in tris[sh * span:(sh + 1) * span] if v in t], v)
+    assert len(rings) == 1 and len(rings[0]) >= 3
+    return rings[0]
 
 
 def a1_a2(X, v, ring):
@@ -222,7 +219,7 @@ def interior_limits(s, vertices, sheets, origin_level=0):
         X, tris = level(s, L)
         for v in vertices:
             for sh in sheets:
-                ring = sheet_ring(X, tris, v, SHEETS[sh])
+                ring = sheet_ring(X, tris, v, sh)
                 a1, a2 = a1_a2(X, v, ring)
                 seqs.setdefault((v, sh), []).append((a1 * 2.0 ** (L - origin_level), a2))
     out = {}
@@ -273,7 +270,7 @@ def test_inferred_tangent_plane_along_curve(daemon):
     X0 = np.array(V, float)
     want = {}
     for v in (1, 2, 3):
-        a = [a1_a2(X0, v, sheet_ring(X0, T, v, SHEETS[sh]))[0] for sh in (0, 1)]
+        a = [a1_a2(X0, v, sheet_ring(X0, T, v, sh))[0] for sh in (0, 1)]
         d = unit(a[1] - a[0])
         for sh in (0, 1):
             want[(v, sh)] = math.copysign(np.linalg.norm(a[sh]), a[sh] @ d) * d
@@ -284,7 +281,7 @@ def test_inferred_tangent_plane_along_curve(daemon):
         assert same_plane(n0, n1), (v, n0, n1)
         for sh in (0, 1):                                        # the projection is tangent
             assert abs(n0 @ unit(want[(v, sh)])) < 1e-9, (v, sh)
-        fin = a1_a2(X0, v, sheet_ring(X0, T, v, SHEETS[2]))[0]
+        fin = a1_a2(X0, v, sheet_ring(X0, T, v, 2))[0]
         assert np.allclose(lim[(v, 2)][0], fin, atol=1e-10)     # untouched: a_1 scales by 1/2
     # the vertices inserted on the tagged edges: midpoint interpolation (003 App. B)
     for m, (a, b) in curve_vertices_level1(s, V, T):
@@ -321,6 +318,23 @@ def test_prescribed_opposite_tangents(daemon):
     s.delete()
 
 
+def test_three_patches_share_one_plane(daemon):
+    """Any number of patches can be made tangential along a curve (003 Sec. 3, Fig. 5(b)): the
+    fin too gets a tangent, -t, folding it onto the side of sheet 1; all three limit normals
+    are one."""
+    V, T = tjunction()
+    t = np.array([0.05, 1.0, 0.4])
+    tangents = [{"vertex": v, "triangle": sheet_triangle(T, sh, v), "tangent": list(sign * t)}
+                for v in (1, 2, 3) for sh, sign in ((0, 1), (1, -1), (2, -1))]
+    tags = {"tangents": tangents, "tangent_edges": [{"edge": [1, 2]}, {"edge": [2, 3]}]}
+    s = session(daemon, V, T, tags)
+    lim = interior_limits(s, (1, 2, 3), (0, 1, 2))
+    for v in (1, 2, 3):
+        n = [limit_normal(*lim[(v, sh)]) for sh in (0, 1, 2)]
+        assert same_plane(n[0], n[1]) and same_plane(n[0], n[2]), (v, n)
+    s.delete()
+
+
 def test_without_constraints_the_sheets_keep_their_planes(daemon):
     """The control: with no tangent tags a_1 2^r is the level-0 a_1 at every level (l^1 is a left
     eigenvector of the rules), so the halves meet at their own angle."""
@@ -331,8 +345,8 @@ def test_without_constraints_the_sheets_keep_their_planes(daemon):
     for v in (1, 2, 3):
         n = []
         for sh in (0, 1):
-            a0 = a1_a2(X0, v, sheet_ring(X0, T, v, SHEETS[sh]))
-            a3 = a1_a2(X, v, sheet_ring(X, tris, v, SHEETS[sh]))
+            a0 = a1_a2(X0, v, sheet_ring(X0, T, v, sh))
+            a3 = a1_a2(X, v, sheet_ring(X, tris, v, sh))
             assert np.allclose(a3[0] * 8, a0[0], atol=1e-12)
             n.append(limit_normal(a0[0], a0[1]))
         assert np.linalg.norm(np.cross(n[0], n[1])) > 0.5
@@ -432,7 +446,7 @@ def test_echo_export_import_and_edit(daemon):
     assert got == want
     # a move at level 1 of a modified point: where asked, and kept by the export's offsets
     X1, tris1 = level(s, 1)
-    ring = sheet_ring(X1, tris1, 2, SHEETS[0])
+    ring = sheet_ring(X1, tris1, 2, 0)
     q = ring[1]
     ver = s.req("GET", "/complex").headers["ETag"]
     to = list(X1[q] + np.array([0.0, 0.05, 0.1]))
