@@ -338,9 +338,13 @@ static int tt_push(api_tags *tags, uint32_t *cap, sd_tangent_tag x, api_problem 
 /* "normals": [{"vertex", "triangles": [[a, b, c], ...], "normal"?}], "tangents": [{"vertex",
  * "triangle", "tangent"}], "tangent_edges": [{"edge": [a, b], "triangles"?: [t0, t1]}]: shapes
  * and ranges here, the rest (the petal is closed, the vertex simple, ...) in the core. */
-static int parse_tangents(json_t *nm, json_t *tg, json_t *te, uint32_t nv, api_tags *tags,
-                          api_problem *p)
+static int parse_tangents(json_t *nm, json_t *tg, json_t *te, const api_input *in,
+                          api_tags *tags, api_problem *p)
 {
+    const uint32_t nv = in ? in->nv : 0;
+    /* at most one entry per petal or edge: fewer than vertices + edges + faces, before
+     * allocating (as for sharpness) */
+    const size_t most = in ? (size_t)in->nv + 10 * (size_t)in->ns : 0;
     static const char *const lists[] = {"/normals", "/tangents", "/tangent_edges"};
     static const char *const shapes[] = {"{\"vertex\", \"triangles\", \"normal\"}",
                                          "{\"vertex\", \"triangle\", \"tangent\"}",
@@ -358,6 +362,11 @@ static int parse_tangents(json_t *nm, json_t *tg, json_t *te, uint32_t nv, api_t
         if (!json_is_array(a))
             return api_fail_at(p, 400, "wrong-type", lists[L], "must be an array of %s",
                                shapes[L]);
+        if (json_array_size(a) > most)
+            return api_fail_at(p, 422, "limit-exceeded", lists[L],
+                               "%zu entries for a complex of %u vertices and %u simplices: at "
+                               "most one per petal or edge", json_array_size(a), nv,
+                               in ? in->ns : 0);
         size_t i;
         json_array_foreach(a, i, o) {
             api_ptr_index(ptr, sizeof ptr, lists[L], i);
@@ -425,7 +434,7 @@ static int parse_tangents(json_t *nm, json_t *tg, json_t *te, uint32_t nv, api_t
                 continue;
             }
             /* normals: one core entry per petal, the group being the entry */
-            if (!json_is_array(trs) || json_array_size(trs) == 0)
+            if (!json_is_array(trs) || json_array_size(trs) == 0 || json_array_size(trs) > most)
                 return api_fail_at(p, json_is_array(trs) ? 422 : 400,
                                    json_is_array(trs) ? "invalid-tag" : "wrong-type", at,
                                    "an array of triangles, one in each closed petal");
@@ -726,7 +735,7 @@ int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *pac
     if (!rc && sh)
         rc = parse_sharpness(sh, cur->in, &tags, p);
     if (!rc && (nm || tg || te))
-        rc = parse_tangents(nm, tg, te, cur->in ? cur->in->nv : 0, &tags, p);
+        rc = parse_tangents(nm, tg, te, cur->in, &tags, p);
     if (!rc && ca) /* the edges over the angle join the listed ones (api/crease.c) */
         rc = api_crease_tags(cur, ca, &tags, p);
     if (!rc) /* the core checks each tag is a vertex, edge or triangle of the complex */

@@ -511,6 +511,7 @@ def test_hostile_tangent_tags(daemon):
          "/tangent_edges/0/triangles/1"),
         ({"tangent_edges": [{"edge": [1, 2], "triangles": [A1, [1, 2, 99]]}]}, 422,
          "/tangent_edges/0/triangles/1/2"),
+        ({"tangent_edges": [{"edge": [1, 2]}] * 600}, 422, "/tangent_edges"),  # > nv + 10 ns
     ]
     for body, status, ptr in cases:
         refuse(s, body, status, ptr)
