@@ -85,6 +85,12 @@ static inline double dot3(const double *a, const double *b)
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
 
+/* |a|, without overflow for directions given as large as the API takes (1e300) */
+static inline double norm3(const double *a)
+{
+    return hypot(hypot(a[0], a[1]), a[2]);
+}
+
 static inline void cross3(const double *a, const double *b, double *c)
 {
     c[0] = a[1] * b[2] - a[2] * b[1];
@@ -281,7 +287,7 @@ static sd_result check_petal(const sd_complex *c, const sdi_rels *R, const uint8
         for (int d = 0; d < 3; d++)
             cv[d] = x[3 * (size_t)q0 + d] - x[3 * (size_t)qk + d];
         cross3(cv, g->vec, w);
-        if (sqrt(dot3(w, w)) <= 1e-9 * sqrt(dot3(cv, cv) * dot3(g->vec, g->vec)))
+        if (norm3(w) <= 1e-9 * norm3(cv) * norm3(g->vec))
             return sdi_fail(err, SD_ERR_VALUE, (long)i, SD_TT_FIELD_VECTOR,
                             "tangent %zu: the interior tangent is along the singular curve at "
                             "vertex %u, so it spans no tangent plane with it", i, v);
@@ -360,8 +366,8 @@ sd_result sd_complex_set_tangents(sd_complex *c, const sd_tangent_tag *tt, size_
                                 "tangent tag %zu: vertex %u out of range", i, g->triangle[j]);
         bool shared = g->kind == SD_TT_NORMAL && isnan(g->vec[0]) && isnan(g->vec[1]) &&
                       isnan(g->vec[2]);
-        double len = sqrt(dot3(g->vec, g->vec));
-        if (!shared && !(isfinite(len) && len > 1e-300))
+        double len = norm3(g->vec);
+        if (!shared && !(isfinite(len) && len > 0))
             return sdi_fail(err, SD_ERR_VALUE, (long)i, SD_TT_FIELD_VECTOR,
                             "tangent tag %zu: the %s is not a finite vector of non-zero length",
                             i, g->kind == SD_TT_NORMAL ? "normal" : "tangent");
@@ -528,7 +534,7 @@ static const sdi_tprec *find_rec(const tplist *L, uint32_t v, uint32_t key)
 
 static void scale_to(double *d, const double *dir, double len)
 {
-    double l = sqrt(dot3(dir, dir));
+    double l = norm3(dir);
     for (int k = 0; k < 3; k++)
         d[k] = l > 0 ? dir[k] / l * len : 0;
 }
@@ -592,7 +598,7 @@ static sd_result level0(sd_complex *c, const sdi_rels *R, scratch *S, struct sdi
             double a1[3];
             if (!petal_a1(t, ef, x, S, v, f, a1, &r.key))
                 continue;
-            double len = sqrt(dot3(a1, a1));
+            double len = norm3(a1);
             scale_to(r.d, g->vec, len > 0 ? len : 1);
         } else {
             uint32_t n, nf;
@@ -644,7 +650,7 @@ static sd_result level0(sd_complex *c, const sdi_rels *R, scratch *S, struct sdi
             if (giv[0] || giv[1]) { /* one given: the other takes its opposite */
                 int h = giv[0] ? 1 : 0;
                 double neg[3] = {-giv[1 - h]->d[0], -giv[1 - h]->d[1], -giv[1 - h]->d[2]};
-                double len = sqrt(dot3(a[h], a[h]));
+                double len = norm3(a[h]);
                 scale_to(T[h], neg, len > 0 ? len : 1);
                 sdi_tprec r = {.v = v, .f = c->tt_f[2 * i + h], .key = key[h],
                                .kind = SD_TT_TANGENT};
@@ -656,11 +662,11 @@ static sd_result level0(sd_complex *c, const sdi_rels *R, scratch *S, struct sdi
             double d[3];
             for (int k = 0; k < 3; k++)
                 d[k] = a[1][k] - a[0][k];
-            double dl = sqrt(dot3(d, d));
-            if (!(dl > 1e-12 * (sqrt(dot3(a[0], a[0])) + sqrt(dot3(a[1], a[1])))))
+            double dl = norm3(d);
+            if (!(dl > 1e-12 * (norm3(a[0]) + norm3(a[1]))))
                 continue; /* the same interior tangent: nothing to project onto */
             for (int h = 0; h < 2; h++) {
-                double pr = dot3(a[h], d) / dl, len = sqrt(dot3(a[h], a[h]));
+                double pr = dot3(a[h], d) / dl, len = norm3(a[h]);
                 if (pr == 0)
                     break;
                 scale_to(T[h], d, pr < 0 ? -len : len);
