@@ -318,8 +318,10 @@ int api_build_model(api_input *in, const api_rules *rules, const api_tags *tags,
         if (e.code == SD_ERR_NOMEM)
             return api_fail(p, 503, "out-of-memory", "out of memory");
         char ptr[96];
-        static const char *const lists[] = {"/singular", "/petals", "/sharpness"};
+        static const char *const lists[] = {"/singular", "/petals", "/sharpness", ""};
         api_ptr_index(ptr, sizeof ptr, lists[which], (size_t)(e.item < 0 ? 0 : e.item));
+        if (which == API_TAG_TANGENT)
+            api_tangent_ptr(tags, e.item, e.field, ptr, sizeof ptr);
         static const char *const fields[] = {"/vertex", "/triangle", "/kind"};
         static const char *const sfields[] = {"/simplex", "/value"};
         if (which == API_TAG_PETAL && e.field >= 0 && e.field < 3)
@@ -528,6 +530,7 @@ json_t *api_tags_json(const api_model *m)
         }
         json_object_set_new(tags, "sharpness", sj);
     }
+    api_tangents_json(&m->tags, tags);
     return tags;
 }
 

@@ -60,6 +60,12 @@ static bool tags_empty(json_t *t)
 {
     json_t *s = json_object_get(t, "singular"), *pe = json_object_get(t, "petals");
     json_t *sh = json_object_get(t, "sharpness");
+    static const char *const more[] = {"normals", "tangents", "tangent_edges"};
+    for (int i = 0; i < 3; i++) {
+        json_t *x = json_object_get(t, more[i]);
+        if (x && (!json_is_array(x) || json_array_size(x)))
+            return false;
+    }
     return json_array_size(s) == 0 && json_array_size(pe) == 0 && json_array_size(sh) == 0 &&
            (!s || json_is_array(s)) && (!pe || json_is_array(pe)) && (!sh || json_is_array(sh));
 }

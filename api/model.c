@@ -218,13 +218,16 @@ bool api_tags_copy(api_tags *dst, const api_tags *src)
     size_t nidx = 0;
     for (uint32_t i = 0; i < src->n; i++)
         nidx += src->size[i];
-    api_tags t = {.n = src->n, .npet = src->npet, .nsh = src->nsh};
+    api_tags t = {.n = src->n, .npet = src->npet, .nsh = src->nsh, .ntt = src->ntt,
+                  .nnormals = src->nnormals, .ntangents = src->ntangents};
     t.crease = src->crease;
     t.size = api_plain_malloc(src->n + 1);
     t.idx = api_plain_malloc((nidx + 1) * sizeof *t.idx);
     t.pet = api_plain_malloc((src->npet + 1) * sizeof *t.pet);
     t.sh = api_plain_malloc((src->nsh + 1) * sizeof *t.sh);
-    if (!t.size || !t.idx || !t.pet || !t.sh) {
+    t.tt = api_plain_malloc((src->ntt + 1) * sizeof *t.tt);
+    if (!t.size || !t.idx || !t.pet || !t.sh || !t.tt) {
+        api_plain_free(t.tt);
         api_plain_free(t.size);
         api_plain_free(t.idx);
         api_plain_free(t.pet);
@@ -240,6 +243,8 @@ bool api_tags_copy(api_tags *dst, const api_tags *src)
         memcpy(t.pet, src->pet, src->npet * sizeof *t.pet);
     if (src->nsh)
         memcpy(t.sh, src->sh, src->nsh * sizeof *t.sh);
+    if (src->ntt)
+        memcpy(t.tt, src->tt, src->ntt * sizeof *t.tt);
     *dst = t;
     return true;
 }
@@ -301,6 +306,11 @@ int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, int *whic
         if (rc)
             *which = API_TAG_PETAL;
     }
+    if (!rc && t->ntt) {
+        rc = sd_complex_set_tangents(m->c, t->tt, t->ntt, err);
+        if (rc)
+            *which = API_TAG_TANGENT;
+    }
     if (!rc && (nf || m->rules.crease_method)) {
         rc = sd_complex_set_sharpness(m->c, fin, nf, m->rules.crease_method, err);
         if (rc) {
@@ -347,6 +357,7 @@ void api_model_unref(api_model *m)
     api_plain_free(m->tags.idx);
     api_plain_free(m->tags.pet);
     api_plain_free(m->tags.sh);
+    api_plain_free(m->tags.tt);
     api_plain_free(m->rules.overrides);
     json_decref(m->summary);
     for (int l = 0; l <= SD_MAX_LEVEL; l++)

@@ -110,6 +110,11 @@ typedef struct api_tags {
     uint32_t nsh;
     api_sharp *sh;
     api_crease crease;        /* what "crease_angle" added (api/crease.c), for the report */
+    /* tangent-plane constraints (003 Sec. 3): "normals" (one entry per petal, group = the
+     * entry), then "tangents", then "tangent_edges", in the core's form; nnormals and ntangents
+     * count the JSON entries of the first two lists */
+    uint32_t ntt, nnormals, ntangents;
+    sd_tangent_tag *tt;
 } api_tags;
 
 typedef struct api_model {
@@ -169,10 +174,19 @@ void api_model_unref(api_model *m);
 /* Apply singular and petal tags and sharpness to a model being built (copies them). SD_ERR_* +
  * err (item = the tag); *which says which list the refused tag is in (API_TAG_*; field =
  * SD_PT_FIELD_* for a petal, SD_SH_FIELD_* for a sharpness). */
-enum { API_TAG_SINGULAR, API_TAG_PETAL, API_TAG_SHARPNESS };
+enum { API_TAG_SINGULAR, API_TAG_PETAL, API_TAG_SHARPNESS, API_TAG_TANGENT };
 int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, int *which);
 /* Whether t holds anything. */
-static inline bool api_tags_any(const api_tags *t) { return t->n || t->npet || t->nsh || t->crease.set; }
+static inline bool api_tags_any(const api_tags *t)
+{
+    return t->n || t->npet || t->nsh || t->ntt || t->crease.set;
+}
+/* The JSON pointer (/normals/0/triangles/1, /tangents/2/tangent, ...) of core tangent tag `item`'s
+ * field (SD_TT_FIELD_*), for a refused one. */
+void api_tangent_ptr(const api_tags *t, long item, int field, char *ptr, size_t n);
+/* The "normals", "tangents" and "tangent_edges" members of t's JSON form into obj (none when
+ * empty). */
+void api_tangents_json(const api_tags *t, struct json_t *obj);
 /* A deep copy of src into *dst (arrays never NULL); false (dst empty) for lack of memory. */
 bool api_tags_copy(api_tags *dst, const api_tags *src);
 

@@ -497,6 +497,7 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
                 sd_tag_set_free(&was); /* malloc'ed, as the carried ones */
                 api_sharp *sh = carry_sharpness(&r, tags.sh, tags.nsh, &tags.nsh);
                 free(tags.sh);
+                free(tags.tt); /* tangent-plane constraints act on the first step, not carried */
                 tags = (api_tags){.n = (uint32_t)now.ntags, .size = now.size, .idx = now.idx,
                                   .npet = (uint32_t)now.npetals, .pet = now.petals,
                                   .nsh = sh ? tags.nsh : 0, .sh = sh};
@@ -553,6 +554,7 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
     free(ov);
     free(tags.size);
     free(tags.idx);
+    free(tags.tt);
     free(tags.pet);
     free(tags.sh);
     api_input_unref(in);

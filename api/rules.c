@@ -265,6 +265,280 @@ static int parse_petals(json_t *a, uint32_t nv, api_tags *tags, api_problem *p)
     return 0;
 }
 
+/* ---- tangent-plane constraints (003 Sec. 3; docs/API.md "Tangent planes") ------------------ */
+
+/* [x, y, z]: three finite numbers (the core refuses the zero vector and the rest). */
+static int get_vec3(json_t *a, const char *at, double out[3], api_problem *p)
+{
+    if (!json_is_array(a) || json_array_size(a) != 3)
+        return api_fail_at(p, json_is_array(a) ? 422 : 400,
+                           json_is_array(a) ? "invalid-tag" : "wrong-type", at,
+                           "a direction is an array of 3 numbers");
+    char at2[160];
+    for (size_t j = 0; j < 3; j++) {
+        api_ptr_index(at2, sizeof at2, at, j);
+        if (api_get_number(json_array_get(a, j), at2, 1e300, &out[j], p))
+            return p->status;
+    }
+    return 0;
+}
+
+/* [a, b, c]: three different vertex indices. */
+static int get_triangle(json_t *tr, const char *at, uint32_t nv, uint32_t out[3], api_problem *p)
+{
+    if (!json_is_array(tr) || json_array_size(tr) != 3)
+        return api_fail_at(p, json_is_array(tr) ? 422 : 400,
+                           json_is_array(tr) ? "invalid-tag" : "wrong-type", at,
+                           "a triangle is an array of 3 vertex indices");
+    char at2[160];
+    for (size_t j = 0; j < 3; j++) {
+        long long x;
+        api_ptr_index(at2, sizeof at2, at, j);
+        if (api_get_int(json_array_get(tr, j), at2, 0, (long long)nv - 1, &x, p))
+            return p->status;
+        out[j] = (uint32_t)x;
+        for (size_t q = 0; q < j; q++)
+            if (out[q] == out[j])
+                return api_fail_at(p, 422, "invalid-tag", at2, "vertex %lld appears twice", x);
+    }
+    return 0;
+}
+
+/* An entry's object with its allowed and required keys. */
+static int tt_entry(json_t *o, const char *ptr, const char *const *keys, int nreq,
+                    const char *shape, api_problem *p)
+{
+    if (!json_is_object(o))
+        return api_fail_at(p, 400, "wrong-type", ptr, "an entry is an object %s", shape);
+    if (api_only_keys(o, ptr, keys, p))
+        return p->status;
+    char at[160];
+    for (int f = 0; f < nreq; f++)
+        if (!json_object_get(o, keys[f])) {
+            api_ptr_key(at, sizeof at, ptr, keys[f]);
+            return api_fail_at(p, 400, "missing-field", at, "\"%s\" is required", keys[f]);
+        }
+    return 0;
+}
+
+static int tt_push(api_tags *tags, uint32_t *cap, sd_tangent_tag x, api_problem *p)
+{
+    if (tags->ntt == *cap) {
+        uint32_t nc = *cap ? 2 * *cap : 16;
+        sd_tangent_tag *n = api_plain_realloc(tags->tt, (size_t)nc * sizeof *n);
+        if (!n)
+            return api_fail(p, 503, "out-of-memory", "out of memory");
+        tags->tt = n;
+        *cap = nc;
+    }
+    tags->tt[tags->ntt++] = x;
+    return 0;
+}
+
+/* "normals": [{"vertex", "triangles": [[a, b, c], ...], "normal"?}], "tangents": [{"vertex",
+ * "triangle", "tangent"}], "tangent_edges": [{"edge": [a, b], "triangles"?: [t0, t1]}]: shapes
+ * and ranges here, the rest (the petal is closed, the vertex simple, ...) in the core. */
+static int parse_tangents(json_t *nm, json_t *tg, json_t *te, const api_input *in,
+                          api_tags *tags, api_problem *p)
+{
+    const uint32_t nv = in ? in->nv : 0;
+    /* at most one entry per petal or edge: fewer than vertices + edges + faces, before
+     * allocating (as for sharpness) */
+    const size_t most = in ? (size_t)in->nv + 10 * (size_t)in->ns : 0;
+    static const char *const lists[] = {"/normals", "/tangents", "/tangent_edges"};
+    static const char *const shapes[] = {"{\"vertex\", \"triangles\", \"normal\"}",
+                                         "{\"vertex\", \"triangle\", \"tangent\"}",
+                                         "{\"edge\", \"triangles\"}"};
+    static const char *const kn[] = {"vertex", "triangles", "normal", NULL};
+    static const char *const kt[] = {"vertex", "triangle", "tangent", NULL};
+    static const char *const ke[] = {"edge", "triangles", NULL};
+    json_t *l3[3] = {nm, tg, te};
+    uint32_t cap = 0;
+    char ptr[96], at[160], at2[176];
+    for (int L = 0; L < 3; L++) {
+        json_t *a = l3[L], *o;
+        if (!a)
+            continue;
+        if (!json_is_array(a))
+            return api_fail_at(p, 400, "wrong-type", lists[L], "must be an array of %s",
+                               shapes[L]);
+        if (json_array_size(a) > most)
+            return api_fail_at(p, 422, "limit-exceeded", lists[L],
+                               "%zu entries for a complex of %u vertices and %u simplices: at "
+                               "most one per petal or edge", json_array_size(a), nv,
+                               in ? in->ns : 0);
+        size_t i;
+        json_array_foreach(a, i, o) {
+            api_ptr_index(ptr, sizeof ptr, lists[L], i);
+            if (tt_entry(o, ptr, L == 0 ? kn : L == 1 ? kt : ke, L == 2 ? 1 : L == 0 ? 2 : 3,
+                         shapes[L], p))
+                return p->status;
+            sd_tangent_tag x = {.kind = L == 0   ? SD_TT_NORMAL
+                                        : L == 1 ? SD_TT_TANGENT
+                                                 : SD_TT_EDGE};
+            long long id;
+            if (L < 2) {
+                api_ptr_key(at, sizeof at, ptr, "vertex");
+                if (api_get_int(json_object_get(o, "vertex"), at, 0, (long long)nv - 1, &id, p))
+                    return p->status;
+                x.vertex = (uint32_t)id;
+                json_t *vec = json_object_get(o, L == 0 ? "normal" : "tangent");
+                api_ptr_key(at, sizeof at, ptr, L == 0 ? "normal" : "tangent");
+                if (!vec)
+                    x.vec[0] = x.vec[1] = x.vec[2] = NAN; /* a shared normal (Fig. 6(b)) */
+                else if (get_vec3(vec, at, x.vec, p))
+                    return p->status;
+            }
+            if (L == 1) {
+                api_ptr_key(at, sizeof at, ptr, "triangle");
+                if (get_triangle(json_object_get(o, "triangle"), at, nv, x.triangle, p) ||
+                    tt_push(tags, &cap, x, p))
+                    return p->status;
+                tags->ntangents++;
+                continue;
+            }
+            json_t *trs = json_object_get(o, "triangles");
+            api_ptr_key(at, sizeof at, ptr, "triangles");
+            if (L == 2) {
+                json_t *ed = json_object_get(o, "edge");
+                api_ptr_key(at2, sizeof at2, ptr, "edge");
+                if (!json_is_array(ed) || json_array_size(ed) != 2)
+                    return api_fail_at(p, json_is_array(ed) ? 422 : 400,
+                                       json_is_array(ed) ? "invalid-tag" : "wrong-type", at2,
+                                       "an edge is an array of 2 vertex indices");
+                for (size_t j = 0; j < 2; j++) {
+                    char at3[192];
+                    api_ptr_index(at3, sizeof at3, at2, j);
+                    if (api_get_int(json_array_get(ed, j), at3, 0, (long long)nv - 1, &id, p))
+                        return p->status;
+                    x.edge[j] = (uint32_t)id;
+                }
+                if (x.edge[0] == x.edge[1])
+                    return api_fail_at(p, 422, "invalid-tag", at2, "vertex %u appears twice",
+                                       x.edge[0]);
+                if (trs) {
+                    if (!json_is_array(trs) || json_array_size(trs) != 2)
+                        return api_fail_at(p, json_is_array(trs) ? 422 : 400,
+                                           json_is_array(trs) ? "invalid-tag" : "wrong-type", at,
+                                           "the two triangles of the edge whose petals share "
+                                           "a tangent plane (003 Fig. 6(c))");
+                    for (size_t h = 0; h < 2; h++) {
+                        api_ptr_index(at2, sizeof at2, at, h);
+                        if (get_triangle(json_array_get(trs, h), at2, nv, x.pair[h], p))
+                            return p->status;
+                    }
+                    x.npair = 2;
+                }
+                if (tt_push(tags, &cap, x, p))
+                    return p->status;
+                continue;
+            }
+            /* normals: one core entry per petal, the group being the entry */
+            if (!json_is_array(trs) || json_array_size(trs) == 0 || json_array_size(trs) > most)
+                return api_fail_at(p, json_is_array(trs) ? 422 : 400,
+                                   json_is_array(trs) ? "invalid-tag" : "wrong-type", at,
+                                   "an array of triangles, one in each closed petal");
+            size_t h;
+            json_t *tr;
+            x.group = (uint32_t)i;
+            json_array_foreach(trs, h, tr) {
+                api_ptr_index(at2, sizeof at2, at, h);
+                if (get_triangle(tr, at2, nv, x.triangle, p) || tt_push(tags, &cap, x, p))
+                    return p->status;
+            }
+            tags->nnormals++;
+        }
+    }
+    return 0;
+}
+
+void api_tangent_ptr(const api_tags *t, long item, int field, char *ptr, size_t n)
+{
+    if (item < 0 || (size_t)item >= t->ntt) {
+        snprintf(ptr, n, "/normals");
+        return;
+    }
+    const sd_tangent_tag *x = &t->tt[item];
+    uint32_t nn = 0, nt = 0;
+    for (uint32_t i = 0; i < t->ntt; i++) { /* core entries of the normals, of the tangents */
+        nn += t->tt[i].kind == SD_TT_NORMAL;
+        nt += t->tt[i].kind == SD_TT_TANGENT;
+    }
+    char at[64];
+    if (x->kind == SD_TT_NORMAL) {
+        long sub = 0;
+        while (item - sub > 0 && t->tt[item - sub - 1].kind == SD_TT_NORMAL &&
+               t->tt[item - sub - 1].group == x->group)
+            sub++;
+        api_ptr_index(at, sizeof at, "/normals", x->group);
+        if (field == SD_TT_FIELD_TRIANGLE)
+            snprintf(ptr, n, "%s/triangles/%ld", at, sub);
+        else
+            snprintf(ptr, n, "%s/%s", at,
+                     field == SD_TT_FIELD_VERTEX ? "vertex"
+                     : isnan(x->vec[0])          ? "triangles"
+                                                 : "normal");
+    } else if (x->kind == SD_TT_TANGENT) {
+        api_ptr_index(at, sizeof at, "/tangents", (size_t)(item - nn));
+        snprintf(ptr, n, "%s/%s", at,
+                 field == SD_TT_FIELD_VERTEX     ? "vertex"
+                 : field == SD_TT_FIELD_TRIANGLE ? "triangle"
+                                                 : "tangent");
+    } else {
+        api_ptr_index(at, sizeof at, "/tangent_edges", (size_t)(item - nn - nt));
+        snprintf(ptr, n, "%s/%s", at,
+                 field == SD_TT_FIELD_PAIR0   ? "triangles/0"
+                 : field == SD_TT_FIELD_PAIR1 ? "triangles/1"
+                                              : "edge");
+    }
+}
+
+static json_t *tri_json(const uint32_t v[3])
+{
+    return json_pack("[I, I, I]", (json_int_t)v[0], (json_int_t)v[1], (json_int_t)v[2]);
+}
+
+void api_tangents_json(const api_tags *t, json_t *obj)
+{
+    if (!t->ntt)
+        return;
+    json_t *nm = json_array(), *tg = json_array(), *te = json_array();
+    for (uint32_t i = 0, j; i < t->ntt; i = j) {
+        const sd_tangent_tag *x = &t->tt[i];
+        j = i + 1;
+        if (x->kind == SD_TT_NORMAL) {
+            json_t *trs = json_array();
+            json_array_append_new(trs, tri_json(x->triangle));
+            for (; j < t->ntt && t->tt[j].kind == SD_TT_NORMAL && t->tt[j].group == x->group; j++)
+                json_array_append_new(trs, tri_json(t->tt[j].triangle));
+            json_t *o = json_pack("{s:I, s:o}", "vertex", (json_int_t)x->vertex, "triangles", trs);
+            if (!isnan(x->vec[0]))
+                json_object_set_new(o, "normal",
+                                    json_pack("[f, f, f]", x->vec[0], x->vec[1], x->vec[2]));
+            json_array_append_new(nm, o);
+        } else if (x->kind == SD_TT_TANGENT) {
+            json_array_append_new(tg, json_pack("{s:I, s:o, s:[f, f, f]}", "vertex",
+                                                (json_int_t)x->vertex, "triangle",
+                                                tri_json(x->triangle), "tangent", x->vec[0],
+                                                x->vec[1], x->vec[2]));
+        } else {
+            json_t *o = json_pack("{s:[I, I]}", "edge", (json_int_t)x->edge[0],
+                                  (json_int_t)x->edge[1]);
+            if (x->npair == 2)
+                json_object_set_new(o, "triangles",
+                                    json_pack("[o, o]", tri_json(x->pair[0]), tri_json(x->pair[1])));
+            json_array_append_new(te, o);
+        }
+    }
+    json_t *l3[3] = {nm, tg, te};
+    static const char *const names[] = {"normals", "tangents", "tangent_edges"};
+    for (int L = 0; L < 3; L++) {
+        if (json_array_size(l3[L]))
+            json_object_set(obj, names[L], l3[L]);
+        json_decref(l3[L]);
+    }
+}
+
 /* Sharpness entries by simplex (sorted ends), then by position. */
 typedef struct sharp_key {
     uint32_t v[3], i; /* sorted ids, UINT32_MAX past the simplex's size; the entry */
@@ -393,16 +667,20 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
 int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *packs,
                         const api_limits *lim, api_model **out, api_problem *p)
 {
-    static const char *const keys[] = {"singular", "petals", "sharpness", "crease_angle", NULL};
+    static const char *const keys[] = {"singular", "petals", "sharpness", "crease_angle",
+                                       "normals", "tangents", "tangent_edges", NULL};
     *out = NULL;
     if (api_only_keys(body, "", keys, p))
         return p->status;
     json_t *s = json_object_get(body, "singular"), *pe = json_object_get(body, "petals");
     json_t *sh = json_object_get(body, "sharpness"), *ca = json_object_get(body, "crease_angle");
-    if (!s && !pe && !sh && !ca)
+    json_t *nm = json_object_get(body, "normals"), *tg = json_object_get(body, "tangents");
+    json_t *te = json_object_get(body, "tangent_edges");
+    if (!s && !pe && !sh && !ca && !nm && !tg && !te)
         return api_fail_at(p, 400, "missing-field", "/singular",
-                           "\"singular\" is required (or \"petals\", \"sharpness\" or "
-                           "\"crease_angle\" alone: no listed singular simplices)");
+                           "\"singular\" is required (or \"petals\", \"sharpness\", "
+                           "\"crease_angle\", \"normals\", \"tangents\" or "
+                           "\"tangent_edges\" alone: no listed singular simplices)");
     api_rows rows = {0}; /* absent: no singular simplices */
     if (s && !api_rows_open(&rows, s, packs, "/singular"))
         return api_fail_at(p, 400, "wrong-type", "/singular",
@@ -411,6 +689,12 @@ int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *pac
     if ((n || (pe && (!json_is_array(pe) || json_array_size(pe)))) && !cur->in)
         return api_fail_at(p, 409, "no-complex", n ? "/singular" : "/petals",
                            "tags name simplices of the complex; PUT the complex first");
+    json_t *l3[3] = {nm, tg, te};
+    static const char *const l3n[] = {"/normals", "/tangents", "/tangent_edges"};
+    for (int L = 0; L < 3; L++)
+        if (l3[L] && (!json_is_array(l3[L]) || json_array_size(l3[L])) && !cur->in)
+            return api_fail_at(p, 409, "no-complex", l3n[L],
+                               "tags name simplices of the complex; PUT the complex first");
     api_tags tags = {0};
     tags.size = api_plain_malloc(n + 1);
     tags.idx = api_plain_malloc((3 * n + 1) * sizeof *tags.idx);
@@ -450,6 +734,8 @@ int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *pac
         rc = parse_petals(pe, cur->in ? cur->in->nv : 0, &tags, p);
     if (!rc && sh)
         rc = parse_sharpness(sh, cur->in, &tags, p);
+    if (!rc && (nm || tg || te))
+        rc = parse_tangents(nm, tg, te, cur->in, &tags, p);
     if (!rc && ca) /* the edges over the angle join the listed ones (api/crease.c) */
         rc = api_crease_tags(cur, ca, &tags, p);
     if (!rc) /* the core checks each tag is a vertex, edge or triangle of the complex */
@@ -458,5 +744,6 @@ int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *pac
     api_plain_free(tags.idx);
     api_plain_free(tags.pet);
     api_plain_free(tags.sh);
+    api_plain_free(tags.tt);
     return keep_details(cur, rc, out, p);
 }

@@ -493,6 +493,8 @@ void sd_complex_free(sd_complex *c)
     sdi_free(&c->mem, c->tag_k);
     sdi_free(&c->mem, c->ov);
     sdi_free(&c->mem, c->pet);
+    sdi_free(&c->mem, c->tt);
+    sdi_free(&c->mem, c->tt_f);
     sdi_sharp_free(&c->mem, &c->sh);
     sdi_free(&c->mem, c->in_tet);
     sdi_free(&c->mem, c->in_src[SD_CELL_TETRA]);

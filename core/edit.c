@@ -30,7 +30,10 @@
  * again from the new positions (the old ones kept aside), and the finer levels recomputed whole
  * beside the old ones (kept until the new ones are complete, so a failure can put everything
  * back); moves at those finer levels take their offsets as each level is made. The result is the
- * one a new complex with the moved points gives.
+ * one a new complex with the moved points gives. Tangent-plane constraints (tangent.c) read every
+ * position after S, so on a complex with them every change of positions takes this path, from
+ * the level coarser than the first changed one when that is 1 or finer: a level's points are then
+ * S p plus their modifications, and a move there takes its offset against those.
  */
 #include "internal.h"
 #include <math.h>
@@ -436,11 +439,22 @@ static sd_result gather(edit *E, int l, sd_error *err)
     return SD_OK;
 }
 
-/* Does a changed point of level l's set move a position its rules read? */
+/* Whether channel ch's levels take tangent-plane modifications after S (tangent.c). */
+static bool tp_active(const sd_complex *c, int ch)
+{
+    return ch == 0 && c->ntt && c->opt.nonmanifold_surface == SD_NMSURF_YING_ZORIN;
+}
+
+/* Does a changed point of level l's set move a position its rules read? With tangent-plane
+ * constraints every position does: the modifications after S read them (tangent.c). */
 static bool stale_at(const edit *E, int l)
 {
     const uint8_t *geo = E->c->lv[l]->geo;
     const pset *s = &E->set[l];
+    const bool tp = tp_active(E->c, E->ch);
+    for (uint32_t e = 0; tp && e < s->n; e++)
+        if (s->s->chg[e])
+            return true;
     for (uint32_t e = 0; E->ch == 0 && geo && e < s->n; e++)
         if (s->s->chg[e] && geo[s->s->id[e]])
             return true;
@@ -536,6 +550,10 @@ static sd_result rebuild(edit *E, int s, op *ops, size_t nops, uint32_t **diff, 
         c->lv[l] = NULL;
     }
     c->nlevels = s + 1;
+    const bool tp = tp_active(c, E->ch);
+    for (size_t i = 0; tp && i < nops; i++) /* the moves' offsets, made below */
+        if (ops[i].kind == OP_MOVE && (int)ops[i].level > s)
+            memset(E->nd[ops[i].level] + (size_t)ops[i].pos * nc, 0, nc * sizeof(double));
     for (int l = s + 1; l < nl && !r; l++) {
         if (!sd_complex_level(c, l, err)) {
             r = err->code;
@@ -550,7 +568,11 @@ static sd_result rebuild(edit *E, int s, op *ops, size_t nops, uint32_t **diff, 
             double *nv = p + (size_t)o->index * nc;
             double *d = E->nd[l] + (size_t)o->pos * nc; /* in the installed list */
             int bad;
-            sdi_csrb_eval(&up->S, o->index, up->ch[E->ch].data, NULL, NULL, nc, nv, NULL);
+            /* the point before its offset: S's row, or with tangent-plane constraints the level
+             * build's value (its offset 0 in the installed list, below: the modifications of
+             * tangent.c come between the two) */
+            if (!tp)
+                sdi_csrb_eval(&up->S, o->index, up->ch[E->ch].data, NULL, NULL, nc, nv, NULL);
             if (!offset_for(E->values + (size_t)o->item * nc, nv, d, nc, &bad)) {
                 r = sdi_fail(err, SD_ERR_VALUE, (long)o->item, bad,
                              "point %u of level %d: the offset to value %d is not finite or "
@@ -639,6 +661,8 @@ static sd_result run(sd_complex *c, int ch, op *ops, size_t n, const double *val
             stale = l;
     }
     clean_maps(&E);
+    if (stale > 0 && tp_active(c, ch))
+        stale--; /* level stale is S p + modifications: made again, its moves' offsets against it */
     const int last = stale < 0 ? E.top : stale;
     if (rep)
         rep->rules_rebuilt = stale;

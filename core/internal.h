@@ -403,6 +403,9 @@ struct sd_level {
      * alpha: the corner and the far ends of its petal's singular edges), or NULL if none; an
      * edit moving such a point rebuilds this level's rules (edit.c) */
     uint8_t *geo;
+    /* the tangent-plane constraints' data at this level's points (tangent.c), made with the next
+     * level (level 0's from the tags, finer ones from the coarser data), or NULL */
+    struct sdi_tplane *tp;
     /* channels of this level (channel 0 = positions) */
     int nch;
     sd_channel ch[SD_MAX_CHANNELS];
@@ -450,6 +453,11 @@ struct sd_complex {
      * sorted by (v, f); a face f of level L reads the entry of f >> 2 L */
     size_t npet;
     sd_petal_at *pet;
+    /* tangent-plane constraints (sd_complex_set_tangents, tangent.c) as given, with the level-0
+     * face of each entry's triangle (tt_f[2 i]) or pair (tt_f[2 i], tt_f[2 i + 1]) */
+    size_t ntt;
+    sd_tangent_tag *tt;
+    uint32_t *tt_f;
     sd_level *lv[SD_MAX_LEVEL + 1];
     /* semi-sharp creases (sharp.c): level 0's lists and the crease method (SD_CREASE_*) */
     sdi_sharp sh;
@@ -580,6 +588,14 @@ static inline bool sdi_yz_simple(int type, uint32_t nsing)
     return type != 3 && nsing == 2;
 }
 /* petals.c: walking the petals of a vertex (see there). */
+/* The vertices of the singular tags (1: tagged, 2: on a tagged edge or triangle) into tagv. */
+void sdi_tagged_vertices(const sd_complex *c, const sd_topo *t, uint8_t *tagv);
+/* tangent.c: 003 Sec. 3's tangent and normal modification of level l + 1's positions x (S_l
+ * applied), from level l's constraint data, which it makes first at level 0; level l + 1's data
+ * goes to next->tp. Needs level l's faces. A complex without tangent tags, or not under
+ * ying-zorin, returns at once. */
+sd_result sdi_tp_step(sd_complex *c, int l, sd_level *next, double *x, sd_error *err);
+void sdi_tp_free(sd_mem *m, struct sdi_tplane *tp);
 enum { SDI_PETAL_FAN, SDI_PETAL_YZ };
 /* The maximal triangles of edge e (needs the relation edge -> faces): their number, the first two
  * (in increasing id) into two. */

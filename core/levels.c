@@ -21,6 +21,7 @@ void sdi_level_free(sd_mem *m, sd_level *lv)
         return;
     sdi_topo_free(m, &lv->t);
     sdi_level_free_rules(m, lv);
+    sdi_tp_free(m, lv->tp);
     sdi_free(m, lv->slot);
     sdi_escratch_free(m, lv->es);
     for (int i = 0; i < lv->nch; i++)
@@ -116,7 +117,8 @@ sd_result sdi_ensure_rules(sd_complex *c, int level, sd_error *err)
 }
 
 /* Compute level l+1 from level l: its topology, then every channel as S_l p^l plus the channel's
- * detail offsets at level l+1 (details.c), and S_l's column index for later edits (csr.c). */
+ * detail offsets at level l+1 (details.c), and S_l's column index for later edits (csr.c). The
+ * positions take the tangent-plane constraints' modifications (tangent.c) between the two. */
 static sd_result next_level(sd_complex *c, int l, sd_error *err)
 {
     sd_mem *m = &c->mem;
@@ -150,6 +152,11 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
             return sdi_fail_nomem(err, m);
         }
         sdi_csr_apply(&p->S, p->ch[i].data, lv->ch[i].data, nc, c->opt.threads);
+        /* the tangent-plane constraints move positions after S, before the offsets (003 Sec. 3) */
+        if (i == 0 && c->ntt && (r = sdi_tp_step(c, l, lv, lv->ch[0].data, err))) {
+            sdi_level_free(m, lv);
+            return r;
+        }
         sdi_det_add(c, i, l + 1, lv->ch[i].data, nc);
     }
     c->lv[l + 1] = lv;

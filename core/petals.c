@@ -179,8 +179,7 @@ static sd_result check_ids(const sd_topo *t, const sd_petal_tag *pt, size_t n, s
     return SD_OK;
 }
 
-/* The vertices of the singular tags into tagv. */
-static void singular_vertices(const sd_complex *c, const sd_topo *t, uint8_t *tagv)
+void sdi_tagged_vertices(const sd_complex *c, const sd_topo *t, uint8_t *tagv)
 {
     /* vertices of the singular tags (1: tagged, 2: on a tagged edge or triangle): they follow
      * the tags whatever the rule preferences, so a petal tag there would never act. (A rule
@@ -360,7 +359,7 @@ sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *pt, size_t n,
     if (n) {
         for (uint32_t f = 0; f < t->nf; f++)
             P.owner[f] = UINT32_MAX;
-        singular_vertices(c, t, P.tagv);
+        sdi_tagged_vertices(c, t, P.tagv);
     }
     bool any_smooth = false;
     for (size_t i = 0; i < n && !rc; i++) {

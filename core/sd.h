@@ -352,6 +352,44 @@ typedef struct sd_petal_tag {
 enum { SD_PT_FIELD_VERTEX = 0, SD_PT_FIELD_TRIANGLE, SD_PT_FIELD_KIND };
 sd_result sd_complex_set_petals(sd_complex *c, const sd_petal_tag *p, size_t n, sd_error *err);
 
+/* Tangent-plane constraints (003 Sec. 3) under nonmanifold_surface = ying-zorin; each entry one
+ * piece of 003's "prescribed tangent and normal data":
+ *   SD_TT_NORMAL   the closed petal of complex singular vertex `vertex` holding `triangle` gets
+ *                  the normal `vec` (normal modification on every level); entries with the same
+ *                  `group` and vec NaN share the unit average of their petals' Loop normals
+ *                  (003 Fig. 6(b)), each oriented like the group's first;
+ *   SD_TT_TANGENT  the open petal of simple singular vertex `vertex` holding `triangle` gets the
+ *                  interior tangent `vec` (tangent modification on every level);
+ *   SD_TT_EDGE     the singular edge `edge` interpolates its ends' interior tangents to the
+ *                  vertices inserted on it (midpoint rule), at every level; with npair = 2, the
+ *                  petals holding pair[0] and pair[1] at each end also get the projections of
+ *                  their own interior tangents onto their difference (003 Fig. 6(c)) where no
+ *                  SD_TT_TANGENT gives one (one given: the other takes its opposite).
+ * Every level uses s = SD_TT_S (3/4). The vertex must be a singular vertex of a triangle-only
+ * region and not tagged singular (as for petal tags), the triangle a surface triangle holding
+ * it, the petal closed (NORMAL, at a complex vertex) or open with 2 or more triangles (TANGENT,
+ * at a simple vertex), vec finite and not zero, an interior tangent not along the singular
+ * curve; one entry per petal (NORMAL and TANGENT together); the edge a singular edge (boundary
+ * or non-manifold) of triangles only, the pair two different surface triangles holding it.
+ * Errors: SD_ERR_INDEX / SD_ERR_ARG / SD_ERR_VALUE with item = the entry and field =
+ * SD_TT_FIELD_*. Call after the singular tags; replaces earlier tangent tags; drops computed
+ * levels >= 1. Edits of positions on a complex with tangent tags recompute the finer levels
+ * whole (the modifications read positions). */
+enum { SD_TT_NORMAL, SD_TT_TANGENT, SD_TT_EDGE };
+typedef struct sd_tangent_tag {
+    int kind;
+    uint32_t vertex, triangle[3]; /* NORMAL, TANGENT */
+    double vec[3];                /* NORMAL (NaN: shared), TANGENT */
+    uint32_t group;               /* NORMAL */
+    uint32_t edge[2];             /* EDGE */
+    uint32_t pair[2][3];          /* EDGE, npair = 2 */
+    int npair;
+} sd_tangent_tag;
+enum { SD_TT_FIELD_VERTEX = 0, SD_TT_FIELD_TRIANGLE, SD_TT_FIELD_VECTOR, SD_TT_FIELD_EDGE,
+       SD_TT_FIELD_PAIR0, SD_TT_FIELD_PAIR1 };
+#define SD_TT_S 0.75
+sd_result sd_complex_set_tangents(sd_complex *c, const sd_tangent_tag *t, size_t n, sd_error *err);
+
 /* Whether vertex i / edge e of a level belongs to the singular complex. */
 int sd_level_vertex_singular(const sd_level *lv, uint32_t i);
 int sd_level_edge_singular(const sd_level *lv, uint32_t e);

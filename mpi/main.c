@@ -402,6 +402,11 @@ static int run(const args *a)
         api_model *m = NULL;
         rc = read_model(a, &m);
         st.t_read = mp_now() - t;
+        if (!rc && m->tags.ntt) { /* the modifications read whole curves and petals (DECISIONS 47) */
+            fprintf(stderr, "%s: tangent-plane constraints (normals, tangents, tangent_edges) are "
+                            "not offered across ranks; use subdivd refine\n", tag_);
+            rc = EXIT_REFUSED;
+        }
         if (!rc) {
             double tp = mp_now();
             pieces = calloc((size_t)nranks_, sizeof *pieces);

@@ -301,12 +301,18 @@ class Session:
                  petals: Optional[Sequence[JSON]] = None,
                  sharpness: Optional[Sequence[JSON]] = None, body: Optional[JSON] = None,
                  if_match: Union[bool, Version, None] = None,
-                 crease_angle: Optional[float] = None) -> JSON:
+                 crease_angle: Optional[float] = None,
+                 normals: Optional[Sequence[JSON]] = None,
+                 tangents: Optional[Sequence[JSON]] = None,
+                 tangent_edges: Optional[Sequence[JSON]] = None) -> JSON:
         """PUT /tags with {"singular": singular, "petals": petals, "sharpness": sharpness} (or a
         whole `body`); petals: [{"vertex": v, "triangle": [a, b, c], "kind": "convex" |
         "concave" | "smooth"}]; sharpness: [{"simplex": [a, b] or [v], "value": s}].
         `crease_angle` (degrees, 0..180) also tags every surface edge whose dihedral angle
-        exceeds it; the answer's "crease_angle" says {"degrees", "tagged"}."""
+        exceeds it; the answer's "crease_angle" says {"degrees", "tagged"}. Tangent-plane
+        constraints (003 Sec. 3, ying-zorin; docs/API.md "Tangent-plane constraints"): normals
+        [{"vertex", "triangles": [[a, b, c], ...], "normal"?: [x, y, z]}], tangents [{"vertex",
+        "triangle", "tangent"}], tangent_edges [{"edge": [a, b], "triangles"?: [t0, t1]}]."""
         if body is None:
             body = {"singular": singular or []}
             if petals is not None:
@@ -315,6 +321,10 @@ class Session:
                 body["sharpness"] = sharpness
             if crease_angle is not None:
                 body["crease_angle"] = crease_angle
+            for k, v in (("normals", normals), ("tangents", tangents),
+                         ("tangent_edges", tangent_edges)):
+                if v is not None:
+                    body[k] = v
         return self._change("PUT", "/tags", body, if_match, None)
 
     def put_rules(self, rules: Optional[JSON] = None, *,
