@@ -612,9 +612,21 @@ static int op_refine(const api_model *cur, json_t *body, const api_packs *packs,
     (void)packs;
     uint64_t red, green;
     size_t dropped = api_details_count(cur); /* their points do not exist in the refined complex */
+    size_t tangents = 0;                      /* not carried (DECISIONS 47 (f)): the entries */
+    if (cur->tags.ntt) {                      /* of the three lists, as GET /complex echoes them */
+        json_t *echo = json_object();
+        api_tangents_json(&cur->tags, echo);
+        const char *key;
+        json_t *list;
+        json_object_foreach(echo, key, list)
+            tangents += json_array_size(list);
+        json_decref(echo);
+    }
     int rc = api_refine(cur, body, lim, next, &red, &green, p);
     if (!rc && dropped)
         json_object_set_new(answer, "details_dropped", json_integer((json_int_t)dropped));
+    if (!rc && tangents)
+        json_object_set_new(answer, "tangent_tags_dropped", json_integer((json_int_t)tangents));
     if (!rc) {
         if ((*next)->summary)
             json_object_set(answer, "summary", (*next)->summary);

@@ -466,6 +466,30 @@ def test_echo_export_import_and_edit(daemon):
         x.delete()
 
 
+def test_refine_says_it_drops_the_constraints(daemon):
+    """POST /refine does not carry tangent-plane constraints (DECISIONS 47 (f)): the answer
+    counts the entries dropped, and the refined complex lists none."""
+    V, T = tjunction()
+    tags = {"tangents": [{"vertex": 2, "triangle": sheet_triangle(T, 0, 2),
+                          "tangent": [0, 1, 0.5]}],
+            "tangent_edges": [{"edge": [1, 2]}, {"edge": [2, 3]}]}
+    s = session(daemon, V, T, tags)
+    ver = s.req("GET", "/complex").headers["ETag"]
+    r = s.req("POST", "/refine", headers={"If-Match": ver},
+              json={"select": {"simplices": [T[0]]}})
+    assert r.status_code == 200, r.text
+    assert r.json()["tangent_tags_dropped"] == 3
+    got = s.req("GET", "/complex").json().get("tags", {})
+    assert not got.get("tangents") and not got.get("tangent_edges") and not got.get("normals")
+    plain = session(daemon, V, T)
+    ver = plain.req("GET", "/complex").headers["ETag"]
+    r = plain.req("POST", "/refine", headers={"If-Match": ver},
+                  json={"select": {"simplices": [T[0]]}})
+    assert r.status_code == 200 and "tangent_tags_dropped" not in r.json(), r.text
+    for x in (s, plain):
+        x.delete()
+
+
 def refuse(s, body, status, pointer):
     r = s.req("PUT", "/tags", json=body)
     assert r.status_code == status, (body, r.text)
