@@ -17,6 +17,8 @@
  * The rules and stencils of a level are built all-or-nothing: on failure the level has neither.
  */
 #include "internal.h"
+#include <assert.h>
+#include <stddef.h>
 #include <string.h>
 
 /* The state of one build, shared by the steps that may run in parallel (each writes only its own
@@ -36,13 +38,10 @@ typedef struct build {
     sdi_rels rel;                    /* the level's incidence relations, if a ring needs them */
     bool stride;                     /* edge rings stay in opp (S.eopp): no solid or G2 rings */
     sd_pats pats;
-    double *wbuf;                    /* one row's weights */
-    uint32_t wcap;
     uint64_t nexp, nring, ebase;     /* explicit columns; ring entries; where edge rows start */
     uint32_t *cur, *col;             /* where each vertex's rho goes in col; col */
     double loopc[SDI_LOOP_CACHE];    /* Loop weights by valence */
     sdi_sharp_rows_t sh;             /* rows a semi-sharp crease reaches (sharp.c) */
-    double *stmp;                    /* their scratch: 2 wcap doubles */
 } build;
 
 /* The explicit columns of edge e's row: its ring. */
@@ -138,46 +137,105 @@ static bool choose(build *B, sd_complex *cx, sd_level *lv)
 
 enum { MEMO = 64 }; /* rows memoized by rule and size up to this size */
 
+/* Step 2 runs over ranges of rows. With one part it is one pass (ROWS_SERIAL: each row's pattern
+ * interned into the level's table as it comes). With several, pattern ids must still be those of
+ * the serial pass — the order in which rows first use each set of weights — so it takes two:
+ * ROWS_COLLECT, each part interns its rows' weights into its own table (in the order its rows
+ * first use them) and writes nothing; the parts' tables are then interned into the level's one in
+ * part order, which is the serial order; ROWS_ASSIGN, each part looks its rows' weights up in the
+ * level's table (read only) and writes their ids, cur and kchk from the explicit columns of the
+ * parts before it. A part's table and buffers come from its own sd_mem (plain malloc: the core's
+ * counter is not shared between threads); they are scratch, freed before the build returns. */
+enum { ROWS_SERIAL, ROWS_COLLECT, ROWS_ASSIGN };
+
+typedef struct rows {
+    sd_mem *m;                       /* allocates wbuf, stmp and (not ROWS_ASSIGN) pats */
+    sd_pats *pats;                   /* interned into, or (ROWS_ASSIGN) looked up */
+    int mode;
+    uint32_t lo, hi;                 /* the rows, vertex or edge ids */
+    double *wbuf;                    /* one row's weights */
+    uint32_t wcap;
+    double *stmp;                    /* the sharp rows' scratch: 2 wcap doubles */
+    uint64_t nexp, nring;            /* explicit columns (from the rows' first) and ring entries */
+    bool ok;
+} rows;
+
 /* Room for a row of n weights. */
-static bool wbuf_fit(build *B, uint32_t n)
+static bool wbuf_fit(rows *X, uint32_t n)
 {
-    if (n <= B->wcap)
+    if (n <= X->wcap && X->wbuf)
         return true;
-    double *w = sdi_realloc(B->m, B->wbuf, (size_t)n * sizeof *w);
+    uint32_t cap = n < 64 ? 64 : n;
+    double *w = sdi_realloc(X->m, X->wbuf, (size_t)cap * sizeof *w);
     if (!w)
         return false;
-    B->wbuf = w;
-    B->wcap = n;
+    X->wbuf = w;
+    X->wcap = cap;
     return true;
 }
 
 /* Room for the sharp rows' scratch (2 n doubles), after wbuf_fit(n). */
-static bool stmp_fit(build *B, uint32_t n)
+static bool stmp_fit(rows *X, uint32_t n)
 {
-    double *t = sdi_realloc(B->m, B->stmp, 2 * (size_t)n * sizeof *t);
+    double *t = sdi_realloc(X->m, X->stmp, 2 * (size_t)n * sizeof *t);
     if (!t)
         return false;
-    B->stmp = t;
+    X->stmp = t;
     return true;
 }
 
-/* A vertex row is [self, a x |rho|, b x octahedral opposites]; cur[v]: where v's rho goes. */
-static bool vertex_patterns(build *B, sd_csrb *S)
+/* The id of the weights in wbuf (UINT32_MAX: no memory). */
+static uint32_t row_id(rows *X, uint32_t len)
 {
-    const uint32_t nv = B->t->nv;
+    if (X->mode != ROWS_ASSIGN)
+        return sdi_pats_intern(X->m, X->pats, X->wbuf, len);
+    uint32_t id = sdi_pats_find(X->pats, X->wbuf, len);
+    assert(id != UINT32_MAX); /* the same rows were collected */
+    return id;
+}
+
+/* Where the entries of a list of sharp.c (n entries of `size` bytes, sorted by the id each
+ * starts with) reach id x: the first entry whose id is at least x. */
+static size_t first_at(const void *list, size_t n, size_t size, uint32_t x)
+{
+    _Static_assert(offsetof(sdi_sharp_vertex, v) == 0 && offsetof(sdi_surf_vertex, v) == 0 &&
+                   offsetof(sdi_sharp_edge, e) == 0 && offsetof(sdi_surf_edge, e) == 0,
+                   "sharp.c's lists start with their ids");
+    size_t lo = 0, hi = n;
+    while (lo < hi) {
+        size_t mid = (lo + hi) / 2;
+        uint32_t id;
+        memcpy(&id, (const char *)list + mid * size, sizeof id);
+        if (id < x)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+#define FIRST_AT(list, n, x) ((list) + first_at((list), (n), sizeof *(list), (x)))
+
+/* A vertex row is [self, a x |rho|, b x octahedral opposites]; cur[v]: where v's rho goes. */
+static bool vertex_patterns(const build *B, rows *X, sd_csrb *S)
+{
     const uint32_t *cnt_b = B->cnt_b;
     uint32_t *cnt_a = B->cnt_a, *cur = B->cnt_a;
+    const bool write = X->mode != ROWS_COLLECT;
     uint32_t vmemo[SD_RULE_COUNT][MEMO];
     memset(vmemo, 0xff, sizeof vmemo);
-    uint64_t nexp = 0;
-    const sdi_sharp_vertex *sv = B->sh.vert, *sv_end = sv + B->sh.nvert;
-    const sdi_surf_vertex *uv = B->sh.svert, *uv_end = uv + B->sh.nsvert;
-    for (uint32_t v = 0; v < nv; v++) {
+    uint64_t nexp = X->nexp;
+    const sdi_sharp_vertex *sv_end = B->sh.vert + B->sh.nvert;
+    const sdi_surf_vertex *uv_end = B->sh.svert + B->sh.nsvert;
+    const sdi_sharp_vertex *sv = FIRST_AT(B->sh.vert, B->sh.nvert, X->lo);
+    const sdi_surf_vertex *uv = FIRST_AT(B->sh.svert, B->sh.nsvert, X->lo);
+    for (uint32_t v = X->lo; v < X->hi; v++) {
         uint8_t r = B->vr[v];
         uint32_t na = cnt_a[v], nb = cnt_b ? cnt_b[v] : 0, id = UINT32_MAX;
-        if (v % SD_CHK == 0)
-            S->kchk[v / SD_CHK] = nexp;
-        cur[v] = (uint32_t)nexp;
+        if (write) {
+            if (v % SD_CHK == 0)
+                S->kchk[v / SD_CHK] = nexp;
+            cur[v] = (uint32_t)nexp;
+        }
         nexp += na + nb;
         const sdi_sharp_vertex *sharp = sv < sv_end && sv->v == v ? sv++ : NULL;
         const sdi_surf_vertex *surf = uv < uv_end && uv->v == v ? uv++ : NULL;
@@ -187,70 +245,72 @@ static bool vertex_patterns(build *B, sd_csrb *S)
         if (id == UINT32_MAX) {
             sdi_vnb nbh = {na, nb, B->weights, B->scheme, B->loopc};
             sdi_vmask w = sdi_vertex_mask(r, &nbh);
-            if (!wbuf_fit(B, 1 + na + nb))
+            if (!wbuf_fit(X, 1 + na + nb))
                 return false;
-            double *wbuf = B->wbuf;
+            double *wbuf = X->wbuf;
             wbuf[0] = w.self;
             for (uint32_t i = 0; i < na; i++)
                 wbuf[1 + i] = w.a;
             for (uint32_t i = 0; i < nb; i++)
                 wbuf[1 + na + i] = w.b;
-            if ((sharp || surf) && !stmp_fit(B, 1 + na + nb))
+            if ((sharp || surf) && !stmp_fit(X, 1 + na + nb))
                 return false;
             if (surf) /* the sharp embedded surface first, a vertex sharpness on top */
-                sdi_surf_vertex_row(&B->sh, surf, B->weights, B->wbuf, 1 + na + nb, B->stmp);
+                sdi_surf_vertex_row(&B->sh, surf, B->weights, wbuf, 1 + na + nb, X->stmp);
             if (sharp)
-                sdi_sharp_vertex_row(sharp, B->wbuf, 1 + na + nb, B->stmp);
-            if ((id = sdi_pats_intern(B->m, &B->pats, B->wbuf, 1 + na + nb)) == UINT32_MAX)
+                sdi_sharp_vertex_row(sharp, wbuf, 1 + na + nb, X->stmp);
+            if ((id = row_id(X, 1 + na + nb)) == UINT32_MAX)
                 return false;
             if (memo)
                 vmemo[r][na] = id;
         }
-        if (!sdi_csrb_set_pat(B->m, S, v, id))
+        if (write && !sdi_csrb_set_pat(B->m, S, v, id))
             return false;
     }
-    B->nexp = nexp;
+    X->nexp = nexp;
     return true;
 }
 
 /* The pattern of an edge row that is not its rule's mask over its ring: a flattened row (yz.c)
  * or 003 Fig. 4f from its singular ends (masks.c); UINT32_MAX: no memory. */
-static uint32_t yz_pattern(build *B, uint32_t e, uint32_t k, bool flat)
+static uint32_t yz_pattern(const build *B, rows *X, uint32_t e, uint32_t k, bool flat)
 {
     double *wbuf;
     if (flat) {
-        if (!wbuf_fit(B, 2 + k))
+        if (!wbuf_fit(X, 2 + k))
             return UINT32_MAX;
-        wbuf = B->wbuf;
+        wbuf = X->wbuf;
         wbuf[0] = B->yz.ends[e][0];
         wbuf[1] = B->yz.ends[e][1];
         memcpy(wbuf + 2, B->yz.w + B->yz.off[e], k * sizeof *wbuf);
-        return sdi_pats_intern(B->m, &B->pats, wbuf, 2 + k);
+        return row_id(X, 2 + k);
     }
     sdi_emask w = sdi_mask_yz_petal_edge(B->gam[e]);
-    if (!wbuf_fit(B, 4))
+    if (!wbuf_fit(X, 4))
         return UINT32_MAX;
-    wbuf = B->wbuf;
+    wbuf = X->wbuf;
     wbuf[0] = w.end[0];
     wbuf[1] = w.end[1];
     wbuf[2] = wbuf[3] = w.ring;
-    return sdi_pats_intern(B->m, &B->pats, wbuf, 4);
+    return row_id(X, 4);
 }
 
 /* An edge row is [end, end, ring...]. */
-static bool edge_patterns(build *B, sd_csrb *S)
+static bool edge_patterns(const build *B, rows *X, sd_csrb *S)
 {
-    const uint32_t nv = B->t->nv, ne = B->t->ne;
+    const uint32_t nv = B->t->nv;
     const uint8_t *er = B->er;
+    const bool write = X->mode != ROWS_COLLECT;
     uint32_t ememo[SD_RULE_COUNT][MEMO];
     memset(ememo, 0xff, sizeof ememo);
-    uint64_t nexp = B->nexp, nring = 0;
-    B->ebase = nexp;
-    const sdi_sharp_edge *se = B->sh.edge, *se_end = se + B->sh.nedge;
-    const sdi_surf_edge *ue = B->sh.sedge, *ue_end = ue + B->sh.nsedge;
-    for (uint32_t e = 0; e < ne; e++) {
+    uint64_t nexp = X->nexp, nring = 0;
+    const sdi_sharp_edge *se_end = B->sh.edge + B->sh.nedge;
+    const sdi_surf_edge *ue_end = B->sh.sedge + B->sh.nsedge;
+    const sdi_sharp_edge *se = FIRST_AT(B->sh.edge, B->sh.nedge, X->lo);
+    const sdi_surf_edge *ue = FIRST_AT(B->sh.sedge, B->sh.nsedge, X->lo);
+    for (uint32_t e = X->lo; e < X->hi; e++) {
         uint32_t k = ring_len(B, e), r = nv + e;
-        if (r % SD_CHK == 0)
+        if (write && r % SD_CHK == 0)
             S->kchk[r / SD_CHK] = nexp;
         nring += k;
         if (!B->stride)
@@ -273,14 +333,14 @@ static bool edge_patterns(build *B, sd_csrb *S)
             surf = NULL;
         bool memo = !cls && k < MEMO && !petal && !flat && !sharp && !surf;
         uint32_t id = memo ? ememo[er[e]][k] : UINT32_MAX;
-        if ((flat || petal) && (id = yz_pattern(B, e, k, flat)) == UINT32_MAX)
+        if ((flat || petal) && (id = yz_pattern(B, X, e, k, flat)) == UINT32_MAX)
             return false;
         if (id == UINT32_MAX) {
             sdi_enb nbh = {k, cls};
             sdi_emask w = sdi_edge_mask(er[e], &nbh);
-            if (!wbuf_fit(B, 2 + k))
+            if (!wbuf_fit(X, 2 + k))
                 return false;
-            double *wbuf = B->wbuf;
+            double *wbuf = X->wbuf;
             wbuf[0] = w.end[0];
             wbuf[1] = w.end[1];
             for (uint32_t i = 0; i < k; i++)
@@ -289,17 +349,125 @@ static bool edge_patterns(build *B, sd_csrb *S)
                 sdi_sharp_edge_row(sharp, wbuf, 2 + k);
             if (surf)
                 sdi_surf_edge_row(surf, ring_of(B, e), wbuf, 2 + k);
-            if ((id = sdi_pats_intern(B->m, &B->pats, wbuf, 2 + k)) == UINT32_MAX)
+            if ((id = row_id(X, 2 + k)) == UINT32_MAX)
                 return false;
             if (memo)
                 ememo[er[e]][k] = id;
         }
-        if (!sdi_csrb_set_pat(B->m, S, nv + e, id))
+        if (write && !sdi_csrb_set_pat(B->m, S, nv + e, id))
             return false;
     }
-    B->nexp = nexp;
-    B->nring = nring;
+    X->nexp = nexp;
+    X->nring = nring;
     return true;
+}
+
+/* The parts of step 2: per part its vertex rows and its edge rows, each with its own table. */
+typedef struct pjob {
+    const build *B;
+    sd_csrb *S;
+    rows v[SD_PAR_MAXT], e[SD_PAR_MAXT];
+    sd_mem mem[SD_PAR_MAXT];
+    sd_pats vpats[SD_PAR_MAXT], epats[SD_PAR_MAXT];
+} pjob;
+
+static void patterns_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    pjob *J = arg;
+    (void)nparts;
+    rows *v = &J->v[part], *e = &J->e[part];
+    v->ok = vertex_patterns(J->B, v, J->S);
+    e->wbuf = v->wbuf; /* one part's buffers, handed from its vertex rows to its edge rows */
+    e->wcap = v->wcap;
+    e->stmp = v->stmp;
+    v->wbuf = v->stmp = NULL;
+    e->ok = v->ok && edge_patterns(J->B, e, J->S);
+}
+
+/* Step 2 for the vertex and edge rows: each row's pattern, cur, kchk, B->nexp, B->nring and
+ * B->ebase. */
+static bool row_patterns(build *B, sd_csrb *S)
+{
+    const sd_topo *t = B->t;
+    const uint32_t nparts = sdi_par_parts(B->threads, (uint64_t)t->nv + t->ne);
+    if (nparts == 1) {
+        rows X = {.m = B->m, .pats = &B->pats, .mode = ROWS_SERIAL, .lo = 0, .hi = t->nv};
+        bool ok = vertex_patterns(B, &X, S);
+        B->ebase = X.nexp;
+        X.lo = 0;
+        X.hi = t->ne;
+        ok = ok && edge_patterns(B, &X, S);
+        B->nexp = X.nexp;
+        B->nring = X.nring;
+        sdi_free(B->m, X.wbuf);
+        sdi_free(B->m, X.stmp);
+        return ok;
+    }
+    pjob *J = sdi_calloc(B->m, 1, sizeof *J);
+    if (!J)
+        return false;
+    J->B = B;
+    J->S = S;
+    for (uint32_t p = 0; p < nparts; p++) {
+        uint64_t lo, hi;
+        sdi_mem_init(&J->mem[p], NULL, 0);
+        sdi_range(t->nv, p, nparts, &lo, &hi);
+        J->v[p] = (rows){.m = &J->mem[p], .pats = &J->vpats[p], .mode = ROWS_COLLECT,
+                         .lo = (uint32_t)lo, .hi = (uint32_t)hi};
+        sdi_range(t->ne, p, nparts, &lo, &hi);
+        J->e[p] = (rows){.m = &J->mem[p], .pats = &J->epats[p], .mode = ROWS_COLLECT,
+                         .lo = (uint32_t)lo, .hi = (uint32_t)hi};
+    }
+    sdi_par(B->threads, (uint64_t)t->nv + t->ne, patterns_part, J);
+    bool ok = true;
+    for (uint32_t p = 0; p < nparts; p++)
+        ok = ok && J->e[p].ok;
+    /* the level's table: the parts' patterns in part order, vertex rows' before edge rows' */
+    for (int blk = 0; blk < 2 && ok; blk++)
+        for (uint32_t p = 0; p < nparts && ok; p++) {
+            const sd_pats *q = blk ? &J->epats[p] : &J->vpats[p];
+            for (uint32_t id = 0; id < q->n && ok; id++)
+                ok = sdi_pats_intern(B->m, &B->pats, q->w + q->off[id], q->off[id + 1] - q->off[id]) !=
+                     UINT32_MAX;
+        }
+    /* each part's first explicit column, from the counts of the parts before it */
+    uint64_t at = 0;
+    for (uint32_t p = 0; p < nparts; p++) {
+        uint64_t n = J->v[p].nexp;
+        J->v[p].nexp = at;
+        at += n;
+    }
+    B->ebase = at;
+    B->nring = 0;
+    for (uint32_t p = 0; p < nparts; p++) {
+        uint64_t n = J->e[p].nexp;
+        J->e[p].nexp = at;
+        at += n;
+        B->nring += J->e[p].nring;
+    }
+    B->nexp = at;
+    if (ok && (ok = sdi_csrb_pat_width(B->m, S, B->pats.n))) {
+        for (uint32_t p = 0; p < nparts; p++) {
+            sdi_free(&J->mem[p], J->e[p].wbuf);
+            sdi_free(&J->mem[p], J->e[p].stmp);
+            J->e[p].wbuf = J->e[p].stmp = NULL;
+            J->v[p].mode = J->e[p].mode = ROWS_ASSIGN;
+            J->v[p].pats = J->e[p].pats = &B->pats;
+        }
+        sdi_par(B->threads, (uint64_t)t->nv + t->ne, patterns_part, J);
+        for (uint32_t p = 0; p < nparts; p++)
+            ok = ok && J->e[p].ok;
+    }
+    for (uint32_t p = 0; p < nparts; p++) {
+        sdi_free(&J->mem[p], J->v[p].wbuf);
+        sdi_free(&J->mem[p], J->v[p].stmp);
+        sdi_free(&J->mem[p], J->e[p].wbuf);
+        sdi_free(&J->mem[p], J->e[p].stmp);
+        sdi_pats_free(&J->mem[p], &J->vpats[p]);
+        sdi_pats_free(&J->mem[p], &J->epats[p]);
+    }
+    sdi_free(B->m, J);
+    return ok;
 }
 
 /* Cell points of octahedra: all their columns implicit. */
@@ -313,9 +481,10 @@ static bool cell_patterns(build *B, sd_csrb *S)
     S->kchk[(nrows + SD_CHK - 1) / SD_CHK] = B->nexp;
     if (!t->noct)
         return true;
+    double w[6];
     for (int i = 0; i < 6; i++)
-        B->wbuf[i] = sdi_mask_cell(B->scheme, i);
-    uint32_t id = sdi_pats_intern(B->m, &B->pats, B->wbuf, 6);
+        w[i] = sdi_mask_cell(B->scheme, i);
+    uint32_t id = sdi_pats_intern(B->m, &B->pats, w, 6);
     if (id == UINT32_MAX)
         return false;
     for (uint32_t o = 0; o < t->noct; o++)
@@ -353,7 +522,7 @@ sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
     const sd_topo *t = &lv->t;
     const uint32_t nv = t->nv, ne = t->ne, no = t->noct;
     build B = {.m = m, .t = t, .weights = cx->opt.surface_weights, .scheme = cx->opt.solid_scheme,
-               .threads = cx->opt.threads, .rel = {.t = t}, .wcap = 64};
+               .threads = cx->opt.threads, .rel = {.t = t}};
     sd_result rc = SD_OK;
     for (uint32_t k = 1; k < SDI_LOOP_CACHE; k++)
         B.loopc[k] = sdi_loop_weight(B.weights, k);
@@ -373,9 +542,8 @@ sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         if (!ok)
             goto nomem;
     }
-    B.wbuf = sdi_alloc(m, (size_t)B.wcap * sizeof *B.wbuf);
-    if (!B.wbuf || !sdi_csrb_init(m, &lv->S, nv, ne, no, nv, t->ev, t->oct) ||
-        !vertex_patterns(&B, &lv->S) || !edge_patterns(&B, &lv->S) || !cell_patterns(&B, &lv->S))
+    if (!sdi_csrb_init(m, &lv->S, nv, ne, no, nv, t->ev, t->oct) || !row_patterns(&B, &lv->S) ||
+        !cell_patterns(&B, &lv->S))
         goto nomem;
     B.cur = B.cnt_a;
     uint64_t nnz = (B.nexp - (B.stride ? 0 : B.nring)) + B.nring + nv + 2ull * ne + 6ull * no;
@@ -409,8 +577,6 @@ out:
     sdi_pats_free(m, &B.pats);
     sdi_free(m, B.take);
     sdi_free(m, B.gam);
-    sdi_free(m, B.wbuf);
-    sdi_free(m, B.stmp);
     sdi_sharp_rows_free(m, &B.sh);
     sdi_free(m, B.cnt_a);
     sdi_free(m, B.cnt_b);
