@@ -111,11 +111,37 @@ static inline bool ov_take(const sd_topo *t, uint8_t r, uint32_t v, uint32_t e)
     }
 }
 
-void sdi_vertex_rho(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b,
-                    uint8_t *take)
+/* rho in parts (sd_options.threads): the edges, then the octahedra, are one sequence of items cut
+ * into ranges. Part 0 counts into cnt_a / cnt_b, part p >= 1 into its own arrays (R->at, R->nb),
+ * and the merge (per vertex) adds them up and turns R->at[p][v] into the number of v's entries
+ * the parts before p give: where p's entries of v's rho start. sdi_vertex_rho_cols writes them
+ * there, each part its own items in order, so a row's columns are in the serial order whatever
+ * the number of parts (the golden outputs depend on it), and no counter is shared. */
+typedef struct rhojob {
+    const sd_topo *t;
+    int scheme;
+    uint8_t *vr;                    /* (counting: flagged) */
+    const uint8_t *vrule, *take_r;  /* (columns) */
+    uint32_t *cnt_a, *cnt_b, *cur, *col;
+    uint8_t *take;
+    sdi_rho_parts *R;
+} rhojob;
+
+static void rho_count_part(void *arg, uint32_t part, uint32_t nparts)
 {
-    const uint32_t nv = t->nv, ne = t->ne, no = t->noct;
-    for (uint32_t e = 0; e < ne; e++) {
+    const rhojob *J = arg;
+    const sd_topo *t = J->t;
+    const uint32_t nv = t->nv, ne = t->ne;
+    const uint8_t *vr = J->vr;
+    uint32_t *cnt_a = part ? J->R->at[part] : J->cnt_a, *cnt_b = part ? J->R->nb[part] : J->cnt_b;
+    if (part) {
+        memset(cnt_a, 0, (size_t)nv * sizeof *cnt_a);
+        if (cnt_b)
+            memset(cnt_b, 0, (size_t)nv * sizeof *cnt_b);
+    }
+    uint64_t lo, hi;
+    sdi_range((uint64_t)ne + t->noct, part, nparts, &lo, &hi);
+    for (uint32_t e = (uint32_t)lo; e < hi && e < ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
         unsigned m = edge_kinds(t->efam[e], t->eflag[e]);
         uint8_t ra = vr[a], rb = vr[b];
@@ -127,44 +153,132 @@ void sdi_vertex_rho(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, 
                     : (m >> SDI_RULE_RHO[rb]) & 1u;
         cnt_a[a] += ta;
         cnt_a[b] += tb;
-        if (take)
-            take[e] = (uint8_t)(ta | tb << 1);
+        if (J->take)
+            J->take[e] = (uint8_t)(ta | tb << 1);
     }
-    for (uint32_t v = 0; v < nv; v++)
-        vr[v] &= SDI_VR_RULE;
-    for (uint32_t o = 0; o < no; o++) {
-        uint32_t p = t->oct[o][0], q = t->oct[o][1];
-        if (via_diag(t, vr[p], scheme, p, q))
+    for (uint64_t i = lo > ne ? lo : ne; i < hi; i++) {
+        const uint32_t *q = t->oct[i - ne];
+        uint32_t p = q[0], r = q[1];
+        if (via_diag(t, vr[p] & SDI_VR_RULE, J->scheme, p, r)) /* the flags go in the merge */
             cnt_a[p]++;
-        if (via_diag(t, vr[q], scheme, q, p))
-            cnt_a[q]++;
-        if (scheme == SD_SOLID_AVERAGED)
-            for (int i = 0; i < 6; i++)
-                if (vr[t->oct[o][i]] == SD_RULE_SOLID)
-                    cnt_b[t->oct[o][i]]++;
+        if (via_diag(t, vr[r] & SDI_VR_RULE, J->scheme, r, p))
+            cnt_a[r]++;
+        if (J->scheme == SD_SOLID_AVERAGED)
+            for (int k = 0; k < 6; k++)
+                if ((vr[q[k]] & SDI_VR_RULE) == SD_RULE_SOLID)
+                    cnt_b[q[k]]++;
     }
 }
 
-void sdi_vertex_rho_cols(const sd_topo *t, int scheme, const uint8_t *vr, const uint8_t *take,
-                         uint32_t *cur, uint32_t *col)
+static void rho_merge_part(void *arg, uint32_t part, uint32_t nparts)
 {
-    for (uint32_t e = 0; e < t->ne; e++) {
+    const rhojob *J = arg;
+    const sdi_rho_parts *R = J->R;
+    uint64_t lo, hi;
+    sdi_range(J->t->nv, part, nparts, &lo, &hi);
+    for (uint32_t v = (uint32_t)lo; v < hi; v++) {
+        J->vr[v] &= SDI_VR_RULE;
+        uint32_t a = J->cnt_a[v], b = J->cnt_b ? J->cnt_b[v] : 0;
+        for (uint32_t p = 1; p < R->n; p++) {
+            uint32_t na = R->at[p][v], nb = J->cnt_b ? R->nb[p][v] : 0;
+            R->at[p][v] = a + b;
+            a += na;
+            b += nb;
+        }
+        J->cnt_a[v] = a;
+        if (J->cnt_b)
+            J->cnt_b[v] = b;
+    }
+}
+
+/* Parts of rho at most for `threads` over t (each beyond the first an array of nv counts). */
+static int rho_threads(int threads) { return threads < SDI_RHO_MAXP ? threads : SDI_RHO_MAXP; }
+
+bool sdi_vertex_rho(sd_mem *m, const sd_topo *t, int scheme, int threads, uint8_t *vr,
+                    uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take, sdi_rho_parts *R)
+{
+    sdi_rho_parts one = {0};
+    if (!R)
+        threads = 1, R = &one;
+    threads = rho_threads(threads);
+    const uint64_t items = (uint64_t)t->ne + t->noct;
+    memset(R, 0, sizeof *R);
+    R->n = sdi_par_parts(threads, items);
+    for (uint32_t p = 1; p < R->n; p++)
+        if (!(R->at[p] = sdi_alloc(m, ((size_t)t->nv + 1) * sizeof *R->at[p])) ||
+            (cnt_b && !(R->nb[p] = sdi_alloc(m, ((size_t)t->nv + 1) * sizeof *R->nb[p])))) {
+            sdi_rho_parts_free(m, R);
+            return false;
+        }
+    rhojob J = {.t = t, .scheme = scheme, .vr = vr, .cnt_a = cnt_a, .cnt_b = cnt_b, .take = take,
+                .R = R};
+    sdi_par(threads, items, rho_count_part, &J);
+    sdi_par(threads, t->nv, rho_merge_part, &J);
+    for (uint32_t p = 1; p < R->n; p++) { /* the counts of class B are in cnt_b now */
+        sdi_free(m, R->nb[p]);
+        R->nb[p] = NULL;
+    }
+    return true;
+}
+
+void sdi_rho_parts_free(sd_mem *m, sdi_rho_parts *R)
+{
+    for (uint32_t p = 0; p < SDI_RHO_MAXP; p++) {
+        sdi_free(m, R->at[p]);
+        sdi_free(m, R->nb[p]);
+    }
+    memset(R, 0, sizeof *R);
+}
+
+/* Where each part's entries go: from cur[v], after those of the parts before it. */
+static void rho_at_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const rhojob *J = arg;
+    uint64_t lo, hi;
+    sdi_range(J->t->nv, part, nparts, &lo, &hi);
+    for (uint32_t p = 1; p < J->R->n; p++) {
+        uint32_t *at = J->R->at[p];
+        for (uint32_t v = (uint32_t)lo; v < hi; v++)
+            at[v] += J->cur[v];
+    }
+}
+
+static void rho_cols_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const rhojob *J = arg;
+    const sd_topo *t = J->t;
+    const uint32_t ne = t->ne;
+    const uint8_t *vr = J->vrule, *take = J->take_r;
+    uint32_t *cur = part ? J->R->at[part] : J->cur, *col = J->col;
+    uint64_t lo, hi;
+    sdi_range((uint64_t)ne + t->noct, part, nparts, &lo, &hi);
+    for (uint32_t e = (uint32_t)lo; e < hi && e < ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
         if ((take[e] & 1) && vr[a] != SD_RULE_CORNER)
             col[cur[a]++] = b;
         if ((take[e] & 2) && vr[b] != SD_RULE_CORNER)
             col[cur[b]++] = a;
     }
-    for (uint32_t o = 0; o < t->noct; o++) {
-        const uint32_t *q = t->oct[o];
-        for (int i = 0; i < 2; i++)
-            if (vr[q[i]] != SD_RULE_CORNER && via_diag(t, vr[q[i]], scheme, q[i], q[i ^ 1]))
-                col[cur[q[i]]++] = q[i ^ 1];
-        if (scheme == SD_SOLID_AVERAGED)
-            for (int i = 0; i < 6; i++)
-                if (vr[q[i]] == SD_RULE_SOLID)
-                    col[cur[q[i]]++] = q[i ^ 1];
+    for (uint64_t i = lo > ne ? lo : ne; i < hi; i++) {
+        const uint32_t *q = t->oct[i - ne];
+        for (int k = 0; k < 2; k++)
+            if (vr[q[k]] != SD_RULE_CORNER && via_diag(t, vr[q[k]], J->scheme, q[k], q[k ^ 1]))
+                col[cur[q[k]]++] = q[k ^ 1];
+        if (J->scheme == SD_SOLID_AVERAGED)
+            for (int k = 0; k < 6; k++)
+                if (vr[q[k]] == SD_RULE_SOLID)
+                    col[cur[q[k]]++] = q[k ^ 1];
     }
+}
+
+void sdi_vertex_rho_cols(const sd_topo *t, int scheme, const uint8_t *vr,
+                         const uint8_t *take, sdi_rho_parts *R, uint32_t *cur, uint32_t *col)
+{
+    rhojob J = {.t = t, .scheme = scheme, .vrule = vr, .take_r = take, .cur = cur, .col = col,
+                .R = R};
+    if (R->n > 1) /* (the count's R->n parts again: sdi_par_parts(R->n, items) is R->n) */
+        sdi_par((int)R->n, t->nv, rho_at_part, &J);
+    sdi_par((int)R->n, (uint64_t)t->ne + t->noct, rho_cols_part, &J);
 }
 
 /* ---- rings of edges ---------------------------------------------------------------------- */
@@ -172,14 +286,30 @@ void sdi_vertex_rho_cols(const sd_topo *t, int scheme, const uint8_t *vr, const 
 enum { M_SSURF = 4, M_LOOP = 8, M_SB = 16, M_N2 = 32 }; /* which faces give an edge its opposite
                                                           * vertices */
 
-void sdi_edge_opposites(const sd_topo *t, const uint8_t *er, uint32_t (*opp)[2], uint8_t *nopp)
+/* In parts by ranges of edges: each part reads every face but writes only its own edges, which
+ * so see their faces in id order, as alone (the faces' arrays are read twice, the edges' written
+ * once; the scattered writes, not the reading, are the cost). */
+typedef struct oppjob {
+    const sd_topo *t;
+    const uint8_t *er;
+    uint32_t (*opp)[2];
+    uint8_t *nopp;
+} oppjob;
+
+static void opp_part(void *arg, uint32_t part, uint32_t nparts)
 {
-    for (uint32_t e = 0; e < t->ne; e++) {
+    const oppjob *J = arg;
+    const sd_topo *t = J->t;
+    uint8_t *nopp = J->nopp;
+    uint64_t lo_, hi_;
+    sdi_range(t->ne, part, nparts, &lo_, &hi_);
+    const uint32_t lo = (uint32_t)lo_, hi = (uint32_t)hi_;
+    for (uint32_t e = lo; e < hi; e++) {
         /* an embedded surface's edge takes its opposite vertices from tagged triangles */
         bool ss = t->eflag[e] & EF_SSURF;
         bool n2 = (t->ovmask & OVM_N2T) && nm_ov(t->enm[e]) == OV_N2 && !ss &&
                   !(t->eflag[e] & EF_CREASE);
-        uint8_t ring = SDI_RULE_RING[er[e]];
+        uint8_t ring = SDI_RULE_RING[J->er[e]];
         nopp[e] = ring == SDI_RING_OPPOSITE ? (ss ? M_SSURF : n2 ? M_N2 : M_LOOP)
                 : ring == SDI_RING_BOUNDARY_OPPOSITE && !ss ? M_SB : 0;
     }
@@ -191,15 +321,24 @@ void sdi_edge_opposites(const sd_topo *t, const uint8_t *er, uint32_t (*opp)[2],
                         (ff & FF_N2SEL ? M_N2 : 0);
         for (int j = 0; j < 3; j++) {
             uint32_t e = t->fe[f][j];
+            if (e < lo || e >= hi)
+                continue;
             unsigned n = nopp[e];
             if (!(n & want))
                 continue;
             if ((n & 3) < 2)
-                opp[e][n & 3] = t->fv[f][(j + 2) % 3];
+                J->opp[e][n & 3] = t->fv[f][(j + 2) % 3];
             if ((n & 3) < 3)
                 nopp[e] = (uint8_t)(n + 1);
         }
     }
+}
+
+void sdi_edge_opposites(const sd_topo *t, int threads, const uint8_t *er, uint32_t (*opp)[2],
+                        uint8_t *nopp)
+{
+    oppjob J = {t, er, opp, nopp};
+    sdi_par(threads, t->ne, opp_part, &J);
 }
 
 /* Equator neighbours in an octahedron: cycle a(2), b(4), a2(3), b2(5). */

@@ -30,6 +30,7 @@ typedef struct build {
     uint8_t *vr, *er;                /* the level's rules (vrule, erule) */
     uint8_t *take;                   /* per edge: which end reads the other through it */
     uint32_t *cnt_a, *cnt_b;         /* rho sizes (rings.c); cnt_a then becomes cur */
+    sdi_rho_parts rho;               /* where the parts that counted rho write it (rings.c) */
     uint32_t (*opp)[2];              /* opposite vertices of edges (rings.c) */
     uint8_t *nopp;
     sd_yzend (*gam)[2];              /* Ying-Zorin rules per edge end (rules.c) */
@@ -40,6 +41,7 @@ typedef struct build {
     sd_pats pats;
     uint64_t nexp, nring, ebase;     /* explicit columns; ring entries; where edge rows start */
     uint32_t *cur, *col;             /* where each vertex's rho goes in col; col */
+    const size_t *S_kchk;            /* S's kchk (where chunks of rows start in col) */
     double loopc[SDI_LOOP_CACHE];    /* Loop weights by valence */
     sdi_sharp_rows_t sh;             /* rows a semi-sharp crease reaches (sharp.c) */
 } build;
@@ -78,19 +80,6 @@ static inline const uint32_t *ring_of(const build *B, uint32_t e)
 
 /* ---- 1. rules and neighbourhoods ---------------------------------------------------------- */
 
-static void vrules_task(void *arg)
-{
-    build *B = arg;
-    sdi_vertex_rules(B->t, B->scheme, B->vr, B->cnt_a, B->cnt_b, B->take);
-}
-
-static void opp_task(void *arg)
-{
-    build *B = arg;
-    if (B->nopp)
-        sdi_edge_opposites(B->t, B->er, B->opp, B->nopp);
-}
-
 static bool choose(build *B, sd_complex *cx, sd_level *lv)
 {
     sd_mem *m = B->m;
@@ -114,8 +103,11 @@ static bool choose(build *B, sd_complex *cx, sd_level *lv)
         if (!B->opp || !B->nopp)
             return false;
     }
-    /* vertex rules and rho sizes, and the edges' opposite vertices, at once */
-    sdi_par2(B->threads, nv + (uint64_t)ne, vrules_task, B, opp_task, B);
+    /* vertex rules and rho sizes, and the edges' opposite vertices, each in parallel parts */
+    if (!sdi_vertex_rules(m, t, B->scheme, B->threads, B->vr, B->cnt_a, B->cnt_b, B->take, &B->rho))
+        return false;
+    if (B->nopp)
+        sdi_edge_opposites(t, B->threads, B->er, B->opp, B->nopp);
     if (solids && !sdi_solid_rings(m, t, B->er, B->scheme, B->threads, &B->sr))
         return false;
     if (any_g2e && !sdi_g2_rings(m, &B->rel, B->er, &B->gr))
@@ -495,19 +487,24 @@ static bool cell_patterns(build *B, sd_csrb *S)
 
 /* ---- 3. columns -------------------------------------------------------------------------- */
 
-static void vrows_task(void *arg)
+/* Edge rows' explicit columns (their rings) in parts: whole chunks of SD_CHK rows, each starting
+ * at the column kchk gives it (the first chunk of edge rows at ebase), as apply_part cuts S. */
+static void erows_part(void *arg, uint32_t part, uint32_t nparts)
 {
-    build *B = arg;
-    sdi_vertex_rho_cols(B->t, B->scheme, B->vr, B->take, B->cur, B->col);
-}
-
-static void erows_task(void *arg)
-{
-    build *B = arg;
-    if (B->stride)
+    const build *B = arg;
+    const uint32_t nv = B->t->nv, ne = B->t->ne;
+    const uint64_t c_lo = nv / SD_CHK, c_hi = ((uint64_t)nv + ne + SD_CHK - 1) / SD_CHK;
+    uint64_t c0, c1;
+    sdi_range(c_hi - c_lo, part, nparts, &c0, &c1);
+    uint64_t r0 = (c_lo + c0) * SD_CHK, r1 = (c_lo + c1) * SD_CHK;
+    if (r0 < nv)
+        r0 = nv;
+    if (r1 > (uint64_t)nv + ne)
+        r1 = (uint64_t)nv + ne;
+    if (r0 >= r1)
         return;
-    uint64_t at = B->ebase;
-    for (uint32_t e = 0; e < B->t->ne; e++) {
+    uint64_t at = r0 == nv ? B->ebase : B->S_kchk[r0 / SD_CHK];
+    for (uint32_t e = (uint32_t)(r0 - nv); e < r1 - nv; e++) {
         uint32_t k = ring_len(B, e);
         if (k) {
             memcpy(B->col + at, ring_of(B, e), k * sizeof *B->col);
@@ -559,8 +556,12 @@ sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         lv->S.eopp = B.opp;
         B.opp = NULL;
     }
-    /* the columns: vertex rows and edge rows at once */
-    sdi_par2(B.threads, B.nexp, vrows_task, &B, erows_task, &B);
+    /* the columns: vertex rows, then edge rows, each in parallel parts */
+    sdi_vertex_rho_cols(t, B.scheme, B.vr, B.take, &B.rho, B.cur, B.col);
+    if (!B.stride) {
+        B.S_kchk = lv->S.kchk;
+        sdi_par(B.threads, B.nexp - B.ebase, erows_part, &B);
+    }
 
     lv->have_rules = true;
     goto out;
@@ -580,6 +581,7 @@ out:
     sdi_sharp_rows_free(m, &B.sh);
     sdi_free(m, B.cnt_a);
     sdi_free(m, B.cnt_b);
+    sdi_rho_parts_free(m, &B.rho);
     sdi_free(m, B.opp);
     sdi_free(m, B.nopp);
     sdi_rings_free(m, &B.sr);
