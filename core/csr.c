@@ -63,20 +63,6 @@ bool sdi_csrb_set_pat_slow(sd_mem *m, sd_csrb *b, uint32_t r, uint32_t id)
     return true;
 }
 
-bool sdi_csrb_pat_width(sd_mem *m, sd_csrb *b, uint32_t npat)
-{
-    uint8_t pw = npat <= 256 ? 1 : npat <= 65536 ? 2 : 4;
-    if (pw <= b->pw)
-        return true;
-    void *np = sdi_alloc(m, ((size_t)b->nrows + 1) * pw);
-    if (!np)
-        return false;
-    sdi_free(m, b->pat);
-    b->pat = np;
-    b->pw = pw;
-    return true;
-}
-
 void sdi_csrb_free(sd_mem *m, sd_csrb *b)
 {
     sdi_free(m, b->col);
@@ -134,28 +120,14 @@ static bool pat_rehash(sd_mem *m, sd_pats *p, uint32_t cap)
     return true;
 }
 
-/* The slot holding pattern w, or the empty one where it would go. */
-static uint32_t pat_slot(const sd_pats *p, const double *w, uint32_t len)
-{
-    uint32_t i = (uint32_t)pat_hash(w, len) & (p->hcap - 1);
-    for (; p->slot[i] != UINT32_MAX; i = (i + 1) & (p->hcap - 1))
-        if (pat_equal(p, p->slot[i], w, len))
-            break;
-    return i;
-}
-
-uint32_t sdi_pats_find(const sd_pats *p, const double *w, uint32_t len)
-{
-    return p->hcap ? p->slot[pat_slot(p, w, len)] : UINT32_MAX;
-}
-
 uint32_t sdi_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len)
 {
     if (2 * (p->n + 1) > p->hcap && !pat_rehash(m, p, p->hcap ? 2 * p->hcap : 64))
         return UINT32_MAX;
-    uint32_t i = pat_slot(p, w, len);
-    if (p->slot[i] != UINT32_MAX)
-        return p->slot[i];
+    uint32_t i = (uint32_t)pat_hash(w, len) & (p->hcap - 1);
+    for (; p->slot[i] != UINT32_MAX; i = (i + 1) & (p->hcap - 1))
+        if (pat_equal(p, p->slot[i], w, len))
+            return p->slot[i];
     if (p->n + 2 > p->capn) {
         uint32_t cap = p->capn ? 2 * p->capn : 64;
         uint32_t *off = sdi_realloc(m, p->off, (size_t)cap * sizeof *off);

@@ -244,11 +244,6 @@ bool sdi_csrb_init(sd_mem *m, sd_csrb *b, uint32_t nvr, uint32_t ner, uint32_t n
                   const uint32_t (*ev)[2], const uint32_t (*oct)[6]);
 void sdi_csrb_free(sd_mem *m, sd_csrb *b);
 uint32_t sdi_pats_intern(sd_mem *m, sd_pats *p, const double *w, uint32_t len); /* UINT32_MAX: no memory */
-/* The id of pattern w if interned (UINT32_MAX: not); reads p only, so parts may share it. */
-uint32_t sdi_pats_find(const sd_pats *p, const double *w, uint32_t len);
-/* Pattern ids wide enough for ids < npat before any is set, so that setting them from parallel
- * parts never widens (the ids set so far are not kept). false: no memory. */
-bool sdi_csrb_pat_width(sd_mem *m, sd_csrb *b, uint32_t npat);
 void sdi_pats_free(sd_mem *m, sd_pats *p);
 /* Copy the patterns into b (the caller frees p); nnz: the number of entries. */
 bool sdi_csrb_finish(sd_mem *m, sd_csrb *b, sd_pats *p, size_t nnz);

@@ -130,26 +130,28 @@ static bool choose(build *B, sd_complex *cx, sd_level *lv)
 enum { MEMO = 64 }; /* rows memoized by rule and size up to this size */
 
 /* Step 2 runs over ranges of rows. With one part it is one pass (ROWS_SERIAL: each row's pattern
- * interned into the level's table as it comes). With several, pattern ids must still be those of
- * the serial pass — the order in which rows first use each set of weights — so it takes two:
- * ROWS_COLLECT, each part interns its rows' weights into its own table (in the order its rows
- * first use them) and writes nothing; the parts' tables are then interned into the level's one in
- * part order, which is the serial order; ROWS_ASSIGN, each part looks its rows' weights up in the
- * level's table (read only) and writes their ids, cur and kchk from the explicit columns of the
- * parts before it. A part's table and buffers come from its own sd_mem (plain malloc: the core's
+ * interned into the level's table as it comes, cur and kchk written). With several, pattern ids
+ * must still be those of the serial pass — the order in which rows first use each set of
+ * weights: each part (ROWS_LOCAL) interns its rows' weights into its own table, in the order its
+ * rows first use them, and writes those local ids (one byte) and its edge rows' kchk from its own
+ * first column; the parts' tables are then interned into the level's one in part order, which is
+ * the serial order, and a light pass per part turns local ids into the level's (widening them if
+ * need be), writes cur and the vertex rows' kchk and moves the edge rows' kchk by the explicit
+ * columns of the parts before. A part whose rows use more than 256 patterns leaves it to the
+ * serial pass. A part's table and buffers come from its own sd_mem (plain malloc: the core's
  * counter is not shared between threads); they are scratch, freed before the build returns. */
-enum { ROWS_SERIAL, ROWS_COLLECT, ROWS_ASSIGN };
+enum { ROWS_SERIAL, ROWS_LOCAL };
 
 typedef struct rows {
-    sd_mem *m;                       /* allocates wbuf, stmp and (not ROWS_ASSIGN) pats */
-    sd_pats *pats;                   /* interned into, or (ROWS_ASSIGN) looked up */
+    sd_mem *m;                       /* allocates wbuf, stmp and pats */
+    sd_pats *pats;                   /* interned into */
     int mode;
     uint32_t lo, hi;                 /* the rows, vertex or edge ids */
     double *wbuf;                    /* one row's weights */
     uint32_t wcap;
     double *stmp;                    /* the sharp rows' scratch: 2 wcap doubles */
     uint64_t nexp, nring;            /* explicit columns (from the rows' first) and ring entries */
-    bool ok;
+    bool ok, full;                   /* full: more local patterns than a byte holds */
 } rows;
 
 /* Room for a row of n weights. */
@@ -176,13 +178,14 @@ static bool stmp_fit(rows *X, uint32_t n)
     return true;
 }
 
-/* The id of the weights in wbuf (UINT32_MAX: no memory). */
+/* The id of the weights in wbuf (UINT32_MAX: no memory, or ROWS_LOCAL and not a byte). */
 static uint32_t row_id(rows *X, uint32_t len)
 {
-    if (X->mode != ROWS_ASSIGN)
-        return sdi_pats_intern(X->m, X->pats, X->wbuf, len);
-    uint32_t id = sdi_pats_find(X->pats, X->wbuf, len);
-    assert(id != UINT32_MAX); /* the same rows were collected */
+    uint32_t id = sdi_pats_intern(X->m, X->pats, X->wbuf, len);
+    if (X->mode == ROWS_LOCAL && id != UINT32_MAX && id > 255) {
+        X->full = true;
+        return UINT32_MAX;
+    }
     return id;
 }
 
@@ -212,7 +215,7 @@ static bool vertex_patterns(const build *B, rows *X, sd_csrb *S)
 {
     const uint32_t *cnt_b = B->cnt_b;
     uint32_t *cnt_a = B->cnt_a, *cur = B->cnt_a;
-    const bool write = X->mode != ROWS_COLLECT;
+    const bool serial = X->mode == ROWS_SERIAL; /* else cur and kchk come in the remap */
     uint32_t vmemo[SD_RULE_COUNT][MEMO];
     memset(vmemo, 0xff, sizeof vmemo);
     uint64_t nexp = X->nexp;
@@ -223,7 +226,7 @@ static bool vertex_patterns(const build *B, rows *X, sd_csrb *S)
     for (uint32_t v = X->lo; v < X->hi; v++) {
         uint8_t r = B->vr[v];
         uint32_t na = cnt_a[v], nb = cnt_b ? cnt_b[v] : 0, id = UINT32_MAX;
-        if (write) {
+        if (serial) {
             if (v % SD_CHK == 0)
                 S->kchk[v / SD_CHK] = nexp;
             cur[v] = (uint32_t)nexp;
@@ -256,7 +259,7 @@ static bool vertex_patterns(const build *B, rows *X, sd_csrb *S)
             if (memo)
                 vmemo[r][na] = id;
         }
-        if (write && !sdi_csrb_set_pat(B->m, S, v, id))
+        if (!sdi_csrb_set_pat(B->m, S, v, id))
             return false;
     }
     X->nexp = nexp;
@@ -292,7 +295,6 @@ static bool edge_patterns(const build *B, rows *X, sd_csrb *S)
 {
     const uint32_t nv = B->t->nv;
     const uint8_t *er = B->er;
-    const bool write = X->mode != ROWS_COLLECT;
     uint32_t ememo[SD_RULE_COUNT][MEMO];
     memset(ememo, 0xff, sizeof ememo);
     uint64_t nexp = X->nexp, nring = 0;
@@ -302,7 +304,7 @@ static bool edge_patterns(const build *B, rows *X, sd_csrb *S)
     const sdi_surf_edge *ue = FIRST_AT(B->sh.sedge, B->sh.nsedge, X->lo);
     for (uint32_t e = X->lo; e < X->hi; e++) {
         uint32_t k = ring_len(B, e), r = nv + e;
-        if (write && r % SD_CHK == 0)
+        if (r % SD_CHK == 0)
             S->kchk[r / SD_CHK] = nexp;
         nring += k;
         if (!B->stride)
@@ -346,7 +348,7 @@ static bool edge_patterns(const build *B, rows *X, sd_csrb *S)
             if (memo)
                 ememo[er[e]][k] = id;
         }
-        if (write && !sdi_csrb_set_pat(B->m, S, nv + e, id))
+        if (!sdi_csrb_set_pat(B->m, S, nv + e, id))
             return false;
     }
     X->nexp = nexp;
@@ -354,13 +356,17 @@ static bool edge_patterns(const build *B, rows *X, sd_csrb *S)
     return true;
 }
 
-/* The parts of step 2: per part its vertex rows and its edge rows, each with its own table. */
+/* The parts of step 2: per part its vertex rows and its edge rows, each with its own table,
+ * then what its local ids are in the level's table. */
 typedef struct pjob {
     const build *B;
     sd_csrb *S;
+    const uint8_t *lid;              /* the local ids (S's pattern ids before the remap) */
     rows v[SD_PAR_MAXT], e[SD_PAR_MAXT];
     sd_mem mem[SD_PAR_MAXT];
     sd_pats vpats[SD_PAR_MAXT], epats[SD_PAR_MAXT];
+    uint32_t *vmap[SD_PAR_MAXT], *emap[SD_PAR_MAXT]; /* local id -> the level's */
+    uint64_t ebase[SD_PAR_MAXT];     /* the first explicit column of the part's edge rows */
 } pjob;
 
 static void patterns_part(void *arg, uint32_t part, uint32_t nparts)
@@ -376,25 +382,67 @@ static void patterns_part(void *arg, uint32_t part, uint32_t nparts)
     e->ok = v->ok && edge_patterns(J->B, e, J->S);
 }
 
+/* Set row r's pattern id at S's width (known to hold it). */
+static inline void put_pat(sd_csrb *S, uint32_t r, uint32_t id)
+{
+    if (S->pw == 1)
+        ((uint8_t *)S->pat)[r] = (uint8_t)id;
+    else if (S->pw == 2)
+        ((uint16_t *)S->pat)[r] = (uint16_t)id;
+    else
+        ((uint32_t *)S->pat)[r] = id;
+}
+
+static void remap_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const pjob *J = arg;
+    const build *B = J->B;
+    sd_csrb *S = J->S;
+    const uint32_t nv = B->t->nv, *vmap = J->vmap[part], *emap = J->emap[part];
+    const uint32_t *cnt_b = B->cnt_b;
+    uint32_t *cur = B->cnt_a;
+    (void)nparts;
+    uint64_t nexp = J->v[part].nexp;
+    for (uint32_t v = J->v[part].lo; v < J->v[part].hi; v++) {
+        if (v % SD_CHK == 0)
+            S->kchk[v / SD_CHK] = nexp;
+        uint32_t n = cur[v] + (cnt_b ? cnt_b[v] : 0); /* (cnt_a becomes cur) */
+        cur[v] = (uint32_t)nexp;
+        nexp += n;
+        put_pat(S, v, vmap[J->lid[v]]);
+    }
+    const uint32_t e0 = J->e[part].lo, e1 = J->e[part].hi;
+    for (uint64_t r = ((uint64_t)nv + e0 + SD_CHK - 1) / SD_CHK * SD_CHK; r < (uint64_t)nv + e1;
+         r += SD_CHK)
+        S->kchk[r / SD_CHK] += J->ebase[part];
+    for (uint32_t e = e0; e < e1; e++)
+        put_pat(S, nv + e, emap[J->lid[nv + e]]);
+}
+
 /* Step 2 for the vertex and edge rows: each row's pattern, cur, kchk, B->nexp, B->nring and
  * B->ebase. */
+static bool serial_patterns(build *B, sd_csrb *S)
+{
+    const sd_topo *t = B->t;
+    rows X = {.m = B->m, .pats = &B->pats, .mode = ROWS_SERIAL, .lo = 0, .hi = t->nv};
+    bool ok = vertex_patterns(B, &X, S);
+    B->ebase = X.nexp;
+    X.lo = 0;
+    X.hi = t->ne;
+    ok = ok && edge_patterns(B, &X, S);
+    B->nexp = X.nexp;
+    B->nring = X.nring;
+    sdi_free(B->m, X.wbuf);
+    sdi_free(B->m, X.stmp);
+    return ok;
+}
+
 static bool row_patterns(build *B, sd_csrb *S)
 {
     const sd_topo *t = B->t;
     const uint32_t nparts = sdi_par_parts(B->threads, (uint64_t)t->nv + t->ne);
-    if (nparts == 1) {
-        rows X = {.m = B->m, .pats = &B->pats, .mode = ROWS_SERIAL, .lo = 0, .hi = t->nv};
-        bool ok = vertex_patterns(B, &X, S);
-        B->ebase = X.nexp;
-        X.lo = 0;
-        X.hi = t->ne;
-        ok = ok && edge_patterns(B, &X, S);
-        B->nexp = X.nexp;
-        B->nring = X.nring;
-        sdi_free(B->m, X.wbuf);
-        sdi_free(B->m, X.stmp);
-        return ok;
-    }
+    if (nparts == 1 || S->pw != 1)
+        return serial_patterns(B, S);
     pjob *J = sdi_calloc(B->m, 1, sizeof *J);
     if (!J)
         return false;
@@ -404,23 +452,28 @@ static bool row_patterns(build *B, sd_csrb *S)
         uint64_t lo, hi;
         sdi_mem_init(&J->mem[p], NULL, 0);
         sdi_range(t->nv, p, nparts, &lo, &hi);
-        J->v[p] = (rows){.m = &J->mem[p], .pats = &J->vpats[p], .mode = ROWS_COLLECT,
+        J->v[p] = (rows){.m = &J->mem[p], .pats = &J->vpats[p], .mode = ROWS_LOCAL,
                          .lo = (uint32_t)lo, .hi = (uint32_t)hi};
         sdi_range(t->ne, p, nparts, &lo, &hi);
-        J->e[p] = (rows){.m = &J->mem[p], .pats = &J->epats[p], .mode = ROWS_COLLECT,
+        J->e[p] = (rows){.m = &J->mem[p], .pats = &J->epats[p], .mode = ROWS_LOCAL,
                          .lo = (uint32_t)lo, .hi = (uint32_t)hi};
     }
     sdi_par(B->threads, (uint64_t)t->nv + t->ne, patterns_part, J);
-    bool ok = true;
-    for (uint32_t p = 0; p < nparts; p++)
+    bool ok = true, full = false;
+    for (uint32_t p = 0; p < nparts; p++) {
         ok = ok && J->e[p].ok;
+        full = full || J->v[p].full || J->e[p].full;
+    }
     /* the level's table: the parts' patterns in part order, vertex rows' before edge rows' */
     for (int blk = 0; blk < 2 && ok; blk++)
         for (uint32_t p = 0; p < nparts && ok; p++) {
             const sd_pats *q = blk ? &J->epats[p] : &J->vpats[p];
+            uint32_t *map = sdi_alloc(&J->mem[p], ((size_t)q->n + 1) * sizeof *map);
+            *(blk ? &J->emap[p] : &J->vmap[p]) = map;
+            ok = map != NULL;
             for (uint32_t id = 0; id < q->n && ok; id++)
-                ok = sdi_pats_intern(B->m, &B->pats, q->w + q->off[id], q->off[id + 1] - q->off[id]) !=
-                     UINT32_MAX;
+                ok = (map[id] = sdi_pats_intern(B->m, &B->pats, q->w + q->off[id],
+                                                q->off[id + 1] - q->off[id])) != UINT32_MAX;
         }
     /* each part's first explicit column, from the counts of the parts before it */
     uint64_t at = 0;
@@ -432,33 +485,37 @@ static bool row_patterns(build *B, sd_csrb *S)
     B->ebase = at;
     B->nring = 0;
     for (uint32_t p = 0; p < nparts; p++) {
-        uint64_t n = J->e[p].nexp;
-        J->e[p].nexp = at;
-        at += n;
+        J->ebase[p] = at;
+        at += J->e[p].nexp;
         B->nring += J->e[p].nring;
     }
     B->nexp = at;
-    if (ok && (ok = sdi_csrb_pat_width(B->m, S, B->pats.n))) {
-        for (uint32_t p = 0; p < nparts; p++) {
-            sdi_free(&J->mem[p], J->e[p].wbuf);
-            sdi_free(&J->mem[p], J->e[p].stmp);
-            J->e[p].wbuf = J->e[p].stmp = NULL;
-            J->v[p].mode = J->e[p].mode = ROWS_ASSIGN;
-            J->v[p].pats = J->e[p].pats = &B->pats;
+    if (ok) { /* the level's ids, as wide as their number needs */
+        uint8_t pw = B->pats.n <= 256 ? 1 : B->pats.n <= 65536 ? 2 : 4;
+        J->lid = S->pat;
+        if (pw > 1 && !(S->pat = sdi_alloc(B->m, ((size_t)S->nrows + 1) * pw))) {
+            S->pat = (void *)J->lid;
+            ok = false;
+        } else {
+            S->pw = pw;
+            sdi_par(B->threads, (uint64_t)t->nv + t->ne, remap_part, J);
+            if ((void *)J->lid != S->pat)
+                sdi_free(B->m, (void *)J->lid);
         }
-        sdi_par(B->threads, (uint64_t)t->nv + t->ne, patterns_part, J);
-        for (uint32_t p = 0; p < nparts; p++)
-            ok = ok && J->e[p].ok;
     }
     for (uint32_t p = 0; p < nparts; p++) {
         sdi_free(&J->mem[p], J->v[p].wbuf);
         sdi_free(&J->mem[p], J->v[p].stmp);
         sdi_free(&J->mem[p], J->e[p].wbuf);
         sdi_free(&J->mem[p], J->e[p].stmp);
+        sdi_free(&J->mem[p], J->vmap[p]);
+        sdi_free(&J->mem[p], J->emap[p]);
         sdi_pats_free(&J->mem[p], &J->vpats[p]);
         sdi_pats_free(&J->mem[p], &J->epats[p]);
     }
     sdi_free(B->m, J);
+    if (full) /* more patterns in a part than its byte ids hold: the serial pass */
+        return serial_patterns(B, S);
     return ok;
 }
 
