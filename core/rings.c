@@ -411,41 +411,55 @@ static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
     }
 }
 
-bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int scheme, int threads,
-                     sdi_rings *R)
+/* The candidates in parts, as rho (above): the tetrahedra, then the octahedra, one sequence of
+ * cells cut into ranges; part 0 counts into R->off, part p >= 1 into its own array, which then
+ * says where its candidates of each edge go, after those of the parts before it. (The sort that
+ * follows would make any order the same; the parts keep the serial one anyway.) */
+typedef struct srjob {
+    const sd_topo *t;
+    const uint8_t *erule;
+    bool avg;
+    sdi_rings *R;
+    uint32_t *at[SDI_RHO_MAXP]; /* part 0: cur; part p >= 1: its counts, then its cursor */
+} srjob;
+
+static void solid_count_part(void *arg, uint32_t part, uint32_t nparts)
 {
-    uint32_t ne = t->ne;
-    R->off = sdi_calloc(m, (size_t)ne + 1, sizeof *R->off);
-    R->len = sdi_calloc(m, ne ? ne : 1, sizeof *R->len);
-    if (!R->off || !R->len)
-        return false;
-    bool avg = scheme == SD_SOLID_AVERAGED;
-    /* count */
-    for (uint32_t c = 0; c < t->ntet; c++)
+    const srjob *J = arg;
+    const sd_topo *t = J->t;
+    const uint8_t *erule = J->erule;
+    uint32_t *cnt = part ? J->at[part] : J->R->off + 1;
+    if (part)
+        memset(cnt, 0, (size_t)t->ne * sizeof *cnt);
+    uint64_t lo, hi;
+    sdi_range((uint64_t)t->ntet + t->noct, part, nparts, &lo, &hi);
+    for (uint32_t c = (uint32_t)lo; c < hi && c < t->ntet; c++)
         for (int k = 0; k < 6; k++)
             if (SDI_RULE_RING[erule[t->tet_e[c][k]]] == SDI_RING_SOLID)
-                R->off[t->tet_e[c][k] + 1] += 2;
-    for (uint32_t o = 0; o < t->noct; o++)
+                cnt[t->tet_e[c][k]] += 2;
+    for (uint64_t i = lo > t->ntet ? lo : t->ntet; i < hi; i++) {
+        const uint32_t *oe = t->oct_e[i - t->ntet];
         for (int k = 0; k < 12; k++)
-            if (SDI_RULE_RING[erule[t->oct_e[o][k]]] == SDI_RING_SOLID)
-                R->off[t->oct_e[o][k] + 1] += avg ? 4 : (k < 8 ? 3 : 2);
-    for (uint32_t e = 0; e < ne; e++)
-        R->off[e + 1] += R->off[e];
-    size_t total = R->off[ne];
-    R->v = sdi_alloc(m, (total + 1) * sizeof *R->v);
-    R->cls = sdi_alloc(m, total + 1);
-    uint32_t *cur = sdi_alloc(m, ((size_t)ne + 1) * sizeof *cur);
-    if (!R->v || !R->cls || !cur) {
-        sdi_free(m, cur);
-        return false;
+            if (SDI_RULE_RING[erule[oe[k]]] == SDI_RING_SOLID)
+                cnt[oe[k]] += J->avg ? 4 : (k < 8 ? 3 : 2);
     }
-    memcpy(cur, R->off, (size_t)ne * sizeof *cur);
+}
+
+static void solid_fill_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const srjob *J = arg;
+    const sd_topo *t = J->t;
+    const uint8_t *erule = J->erule;
+    sdi_rings *R = J->R;
+    uint32_t *cur = J->at[part];
+    uint64_t lo, hi;
+    sdi_range((uint64_t)t->ntet + t->noct, part, nparts, &lo, &hi);
 #define PUSH(e, x, c)                                                                        \
     do {                                                                                     \
         R->v[cur[e]] = (x);                                                                  \
         R->cls[cur[e]++] = (c);                                                              \
     } while (0)
-    for (uint32_t c = 0; c < t->ntet; c++)
+    for (uint32_t c = (uint32_t)lo; c < hi && c < t->ntet; c++)
         for (int k = 0; k < 6; k++) {
             uint32_t e = t->tet_e[c][k];
             if (SDI_RULE_RING[erule[e]] != SDI_RING_SOLID)
@@ -454,27 +468,28 @@ bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int sche
             PUSH(e, t->tet[c][SDI_TET_E[5 - k][0]], 0);
             PUSH(e, t->tet[c][SDI_TET_E[5 - k][1]], 0);
         }
-    for (uint32_t o = 0; o < t->noct; o++)
+    for (uint64_t i = lo > t->ntet ? lo : t->ntet; i < hi; i++) {
+        const uint32_t o = (uint32_t)(i - t->ntet);
         for (int k = 0; k < 12; k++) {
             uint32_t e = t->oct_e[o][k];
             if (SDI_RULE_RING[erule[e]] != SDI_RING_SOLID)
                 continue;
             const uint32_t *q = t->oct[o];
-            int i = SDI_OCT_E[k][0], j = SDI_OCT_E[k][1];
-            if (avg) {
+            int a = SDI_OCT_E[k][0], j = SDI_OCT_E[k][1];
+            if (J->avg) {
                 /* faces of the octahedron on the edge: the two common neighbours;
                  * through the octahedron's diagonals: the opposites of both ends */
                 int com[2], nc = 0;
                 for (int w = 0; w < 6 && nc < 2; w++)
-                    if (w != i && w != j && w != (i ^ 1) && w != (j ^ 1))
+                    if (w != a && w != j && w != (a ^ 1) && w != (j ^ 1))
                         com[nc++] = w;
                 PUSH(e, q[com[0]], 0);
                 PUSH(e, q[com[1]], 0);
-                PUSH(e, q[i ^ 1], 1);
+                PUSH(e, q[a ^ 1], 1);
                 PUSH(e, q[j ^ 1], 1);
             } else if (k < 8) {
                 /* [P, x] with P on the diagonal: tets (p,q,x,prev), (p,q,x,next) */
-                int P = i, x = j;
+                int P = a, x = j;
                 PUSH(e, q[P ^ 1], 0);
                 PUSH(e, q[OCT_EQ_NB[x][0]], 0);
                 PUSH(e, q[OCT_EQ_NB[x][1]], 0);
@@ -484,12 +499,52 @@ bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int sche
                 PUSH(e, q[1], 0);
             }
         }
+    }
 #undef PUSH
-    sdi_free(m, cur);
+}
+
+bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int scheme, int threads,
+                     sdi_rings *R)
+{
+    uint32_t ne = t->ne;
+    const uint64_t cells = (uint64_t)t->ntet + t->noct;
+    srjob J = {.t = t, .erule = erule, .avg = scheme == SD_SOLID_AVERAGED, .R = R};
+    const int pt = threads < SDI_RHO_MAXP ? threads : SDI_RHO_MAXP;
+    const uint32_t np = sdi_par_parts(pt, cells);
+    bool ok = false;
+    R->off = sdi_calloc(m, (size_t)ne + 1, sizeof *R->off);
+    R->len = sdi_calloc(m, ne ? ne : 1, sizeof *R->len);
+    for (uint32_t p = 0; p < np; p++)
+        if (!(J.at[p] = sdi_alloc(m, ((size_t)ne + 1) * sizeof *J.at[p])))
+            goto out;
+    if (!R->off || !R->len)
+        goto out;
+    /* count */
+    sdi_par(pt, cells, solid_count_part, &J);
+    for (uint32_t e = 0; e < ne; e++) { /* where each part's candidates go, and the offsets */
+        uint32_t at = R->off[e], n = R->off[e + 1];
+        J.at[0][e] = at;
+        for (uint32_t p = 1; p < np; p++) {
+            uint32_t k = J.at[p][e];
+            J.at[p][e] = at + n;
+            n += k;
+        }
+        R->off[e + 1] = at + n;
+    }
+    size_t total = R->off[ne];
+    R->v = sdi_alloc(m, (total + 1) * sizeof *R->v);
+    R->cls = sdi_alloc(m, total + 1);
+    if (!R->v || !R->cls)
+        goto out;
+    sdi_par(pt, cells, solid_fill_part, &J);
     /* sort and deduplicate each edge's list (as (vertex, class) pairs), edges in parallel */
-    ring_sort_job J = {R, ne, true};
-    sdi_par(threads, R->off[ne], ring_sort_part, &J);
-    return J.ok;
+    ring_sort_job S = {R, ne, true};
+    sdi_par(threads, R->off[ne], ring_sort_part, &S);
+    ok = S.ok;
+out:
+    for (uint32_t p = 0; p < np; p++)
+        sdi_free(m, J.at[p]);
+    return ok;
 }
 
 /* Rings of G2 edges: the common neighbours (edges and diagonals) of both ends, filtered. The
