@@ -367,7 +367,7 @@ static void apply_part(void *arg, uint32_t part, uint32_t nparts)
 void sdi_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads)
 {
     ajob J = {s, in, out, nc};
-    sdi_par(threads, s->nnz, apply_part, &J);
+    sdi_par_dyn(threads, s->nnz, 4, apply_part, &J);
 }
 
 /* ---- by columns: the rows that use each column (edits) --------------------------------------- */

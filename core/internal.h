@@ -60,8 +60,10 @@ typedef void (*sd_part_fn)(void *arg, uint32_t part, uint32_t nparts);
 uint32_t sdi_par_parts(int threads, uint64_t work);
 /* fn(arg, i, n) for every part i of n; part 0 in the calling thread. */
 void sdi_par(int threads, uint64_t work, sd_part_fn fn, void *arg);
-/* f0(a0) and f1(a1) at once (one after the other if serial). */
-void sdi_par2(int threads, uint64_t work, void (*f0)(void *), void *a0, void (*f1)(void *), void *a1);
+/* fn(arg, c, n) for every chunk c of n = per_thread times the parts of sdi_par, the threads
+ * taking chunks in turn; fn(arg, 0, 1) if serial. Only for fn whose results do not depend on
+ * the cut (each item's outputs are its own). */
+void sdi_par_dyn(int threads, uint64_t work, uint32_t per_thread, sd_part_fn fn, void *arg);
 /* Part `part` of nparts of [0, n): [*lo, *hi). */
 void sdi_range(uint64_t n, uint32_t part, uint32_t nparts, uint64_t *lo, uint64_t *hi);
 
