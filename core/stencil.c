@@ -3,13 +3,16 @@
  *
  * One builder for every rule family (OpenSubdiv's Far stencil tables in spirit): per row a
  * weight pattern and the columns that are not implicit (csr.c). The steps:
- *   1. rules: every edge's (in parallel parts), then every vertex's with the sizes of its rho
- *      beside the edges' opposite vertices (both at once), then the rings of solid and G2 edges
- *      and the Ying-Zorin rules and rows of the edges at singular vertices (yz.c);
+ *   1. rules: every edge's, then every vertex's with the sizes of its rho, the edges' opposite
+ *      vertices, then the rings of solid and G2 edges and the Ying-Zorin rules and rows of the
+ *      edges at singular vertices (yz.c);
  *   2. patterns: each row's weights from its rule's mask, interned (the same weights bit for bit
  *      are one pattern) and memoized by rule and size, so a level costs a few mask evaluations;
- *   3. columns: vertex rows (rho in edge order, then diagonals and opposites) and edge rows (the
- *      ring) filled at once into their places, counted in step 2.
+ *   3. columns: vertex rows (rho in edge order, then diagonals and opposites), then edge rows
+ *      (the ring), into their places counted in step 2.
+ * With sd_options.threads each step runs in parallel parts (par.c) cut by fixed rules, and what
+ * depends on order — pattern ids, the order of rho — is merged in part order, so S is the same
+ * bytes for any number of threads (tests/core/test_threads.c).
  * Where every edge row's ring is two opposite vertices (a pure surface, no G2 or flattened rows)
  * those are kept as they are (S.eopp) instead of being copied. No adjacency list is built for
  * the common cases, so the memory is the matrix itself. Every row sums to 1 (tests/core).
@@ -17,7 +20,6 @@
  * The rules and stencils of a level are built all-or-nothing: on failure the level has neither.
  */
 #include "internal.h"
-#include <assert.h>
 #include <stddef.h>
 #include <string.h>
 
