@@ -359,16 +359,18 @@ static bool edge_patterns(const build *B, rows *X, sd_csrb *S)
 }
 
 /* The parts of step 2: per part its vertex rows and its edge rows, each with its own table,
- * then what its local ids are in the level's table. */
+ * then what its local ids are in the level's table. The parts are PCHUNK chunks per thread,
+ * taken in turn (sdi_par_dyn): what a part writes depends on its rows only, not on who runs it. */
+enum { PCHUNK = 4 };
 typedef struct pjob {
     const build *B;
     sd_csrb *S;
     const uint8_t *lid;              /* the local ids (S's pattern ids before the remap) */
-    rows v[SD_PAR_MAXT], e[SD_PAR_MAXT];
-    sd_mem mem[SD_PAR_MAXT];
-    sd_pats vpats[SD_PAR_MAXT], epats[SD_PAR_MAXT];
-    uint32_t *vmap[SD_PAR_MAXT], *emap[SD_PAR_MAXT]; /* local id -> the level's */
-    uint64_t ebase[SD_PAR_MAXT];     /* the first explicit column of the part's edge rows */
+    rows v[PCHUNK * SD_PAR_MAXT], e[PCHUNK * SD_PAR_MAXT];
+    sd_mem mem[PCHUNK * SD_PAR_MAXT];
+    sd_pats vpats[PCHUNK * SD_PAR_MAXT], epats[PCHUNK * SD_PAR_MAXT];
+    uint32_t *vmap[PCHUNK * SD_PAR_MAXT], *emap[PCHUNK * SD_PAR_MAXT]; /* local id -> the level's */
+    uint64_t ebase[PCHUNK * SD_PAR_MAXT]; /* the first explicit column of the part's edge rows */
 } pjob;
 
 static void patterns_part(void *arg, uint32_t part, uint32_t nparts)
@@ -442,8 +444,9 @@ static bool serial_patterns(build *B, sd_csrb *S)
 static bool row_patterns(build *B, sd_csrb *S)
 {
     const sd_topo *t = B->t;
-    const uint32_t nparts = sdi_par_parts(B->threads, (uint64_t)t->nv + t->ne);
-    if (nparts == 1 || S->pw != 1)
+    const uint64_t work = (uint64_t)t->nv + t->ne;
+    const uint32_t nparts = PCHUNK * sdi_par_parts(B->threads, work); /* sdi_par_dyn's chunks */
+    if (nparts == PCHUNK || S->pw != 1)
         return serial_patterns(B, S);
     pjob *J = sdi_calloc(B->m, 1, sizeof *J);
     if (!J)
@@ -460,7 +463,7 @@ static bool row_patterns(build *B, sd_csrb *S)
         J->e[p] = (rows){.m = &J->mem[p], .pats = &J->epats[p], .mode = ROWS_LOCAL,
                          .lo = (uint32_t)lo, .hi = (uint32_t)hi};
     }
-    sdi_par(B->threads, (uint64_t)t->nv + t->ne, patterns_part, J);
+    sdi_par_dyn(B->threads, work, PCHUNK, patterns_part, J);
     bool ok = true, full = false;
     for (uint32_t p = 0; p < nparts; p++) {
         ok = ok && J->e[p].ok;
@@ -500,7 +503,7 @@ static bool row_patterns(build *B, sd_csrb *S)
             ok = false;
         } else {
             S->pw = pw;
-            sdi_par(B->threads, (uint64_t)t->nv + t->ne, remap_part, J);
+            sdi_par_dyn(B->threads, work, PCHUNK, remap_part, J);
             if ((void *)J->lid != S->pat)
                 sdi_free(B->m, (void *)J->lid);
         }
