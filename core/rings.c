@@ -176,6 +176,11 @@ static void rho_merge_part(void *arg, uint32_t part, uint32_t nparts)
     const sdi_rho_parts *R = J->R;
     uint64_t lo, hi;
     sdi_range(J->t->nv, part, nparts, &lo, &hi);
+    if (R->n == 1) { /* the counts are all part 0's: only the flags go */
+        for (uint32_t v = (uint32_t)lo; v < hi; v++)
+            J->vr[v] &= SDI_VR_RULE;
+        return;
+    }
     for (uint32_t v = (uint32_t)lo; v < hi; v++) {
         J->vr[v] &= SDI_VR_RULE;
         uint32_t a = J->cnt_a[v], b = J->cnt_b ? J->cnt_b[v] : 0;
@@ -296,14 +301,12 @@ typedef struct oppjob {
     uint8_t *nopp;
 } oppjob;
 
-static void opp_part(void *arg, uint32_t part, uint32_t nparts)
+/* Edges [lo, hi); all: that is every edge (no test per face, the serial case). */
+static inline __attribute__((always_inline)) void opp_edges(const oppjob *J, uint32_t lo,
+                                                            uint32_t hi, bool all)
 {
-    const oppjob *J = arg;
     const sd_topo *t = J->t;
     uint8_t *nopp = J->nopp;
-    uint64_t lo_, hi_;
-    sdi_range(t->ne, part, nparts, &lo_, &hi_);
-    const uint32_t lo = (uint32_t)lo_, hi = (uint32_t)hi_;
     for (uint32_t e = lo; e < hi; e++) {
         /* an embedded surface's edge takes its opposite vertices from tagged triangles */
         bool ss = t->eflag[e] & EF_SSURF;
@@ -321,7 +324,7 @@ static void opp_part(void *arg, uint32_t part, uint32_t nparts)
                         (ff & FF_N2SEL ? M_N2 : 0);
         for (int j = 0; j < 3; j++) {
             uint32_t e = t->fe[f][j];
-            if (e < lo || e >= hi)
+            if (!all && (e < lo || e >= hi))
                 continue;
             unsigned n = nopp[e];
             if (!(n & want))
@@ -332,6 +335,17 @@ static void opp_part(void *arg, uint32_t part, uint32_t nparts)
                 nopp[e] = (uint8_t)(n + 1);
         }
     }
+}
+
+static void opp_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const oppjob *J = arg;
+    uint64_t lo, hi;
+    sdi_range(J->t->ne, part, nparts, &lo, &hi);
+    if (nparts == 1)
+        opp_edges(J, 0, J->t->ne, true);
+    else
+        opp_edges(J, (uint32_t)lo, (uint32_t)hi, false);
 }
 
 void sdi_edge_opposites(const sd_topo *t, int threads, const uint8_t *er, uint32_t (*opp)[2],

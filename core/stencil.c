@@ -213,9 +213,13 @@ static size_t first_at(const void *list, size_t n, size_t size, uint32_t x)
 #define FIRST_AT(list, n, x) ((list) + first_at((list), (n), sizeof *(list), (x)))
 
 /* A vertex row is [self, a x |rho|, b x octahedral opposites]; cur[v]: where v's rho goes. */
-static bool vertex_patterns(const build *B, rows *X, sd_csrb *S)
+static inline __attribute__((always_inline)) bool
+vertex_patterns(const build *B, rows *X, sd_csrb *S)
 {
-    const uint32_t *cnt_b = B->cnt_b;
+    /* B's and X's fields in locals: the stores below could alias them, so they would be read
+     * again for every row */
+    const uint32_t lo = X->lo, hi = X->hi, *cnt_b = B->cnt_b;
+    const uint8_t *vr = B->vr;
     uint32_t *cnt_a = B->cnt_a, *cur = B->cnt_a;
     const bool serial = X->mode == ROWS_SERIAL; /* else cur and kchk come in the remap */
     uint32_t vmemo[SD_RULE_COUNT][MEMO];
@@ -223,10 +227,10 @@ static bool vertex_patterns(const build *B, rows *X, sd_csrb *S)
     uint64_t nexp = X->nexp;
     const sdi_sharp_vertex *sv_end = B->sh.vert + B->sh.nvert;
     const sdi_surf_vertex *uv_end = B->sh.svert + B->sh.nsvert;
-    const sdi_sharp_vertex *sv = FIRST_AT(B->sh.vert, B->sh.nvert, X->lo);
-    const sdi_surf_vertex *uv = FIRST_AT(B->sh.svert, B->sh.nsvert, X->lo);
-    for (uint32_t v = X->lo; v < X->hi; v++) {
-        uint8_t r = B->vr[v];
+    const sdi_sharp_vertex *sv = FIRST_AT(B->sh.vert, B->sh.nvert, lo);
+    const sdi_surf_vertex *uv = FIRST_AT(B->sh.svert, B->sh.nsvert, lo);
+    for (uint32_t v = lo; v < hi; v++) {
+        uint8_t r = vr[v];
         uint32_t na = cnt_a[v], nb = cnt_b ? cnt_b[v] : 0, id = UINT32_MAX;
         if (serial) {
             if (v % SD_CHK == 0)
@@ -293,18 +297,19 @@ static uint32_t yz_pattern(const build *B, rows *X, uint32_t e, uint32_t k, bool
 }
 
 /* An edge row is [end, end, ring...]. */
-static bool edge_patterns(const build *B, rows *X, sd_csrb *S)
+static inline __attribute__((always_inline)) bool
+edge_patterns(const build *B, rows *X, sd_csrb *S)
 {
-    const uint32_t nv = B->t->nv;
+    const uint32_t nv = B->t->nv, lo = X->lo, hi = X->hi;
     const uint8_t *er = B->er;
     uint32_t ememo[SD_RULE_COUNT][MEMO];
     memset(ememo, 0xff, sizeof ememo);
     uint64_t nexp = X->nexp, nring = 0;
     const sdi_sharp_edge *se_end = B->sh.edge + B->sh.nedge;
     const sdi_surf_edge *ue_end = B->sh.sedge + B->sh.nsedge;
-    const sdi_sharp_edge *se = FIRST_AT(B->sh.edge, B->sh.nedge, X->lo);
-    const sdi_surf_edge *ue = FIRST_AT(B->sh.sedge, B->sh.nsedge, X->lo);
-    for (uint32_t e = X->lo; e < X->hi; e++) {
+    const sdi_sharp_edge *se = FIRST_AT(B->sh.edge, B->sh.nedge, lo);
+    const sdi_surf_edge *ue = FIRST_AT(B->sh.sedge, B->sh.nsedge, lo);
+    for (uint32_t e = lo; e < hi; e++) {
         uint32_t k = ring_len(B, e), r = nv + e;
         if (r % SD_CHK == 0)
             S->kchk[r / SD_CHK] = nexp;
