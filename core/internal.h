@@ -544,23 +544,14 @@ uint8_t sdi_vertex_rule(const sd_topo *t, uint32_t v);
 /* The rule of every edge into er, in parallel parts; whether any edge's ring is G2's, and whether
  * any is the opposite vertices of its faces. */
 void sdi_edge_rules(const sd_topo *t, int threads, uint8_t *er, bool *any_g2, bool *any_opp);
-/* rho counted in parts (rings.c): part p >= 1's entries of vertex v's rho start at[p][v] after
- * cur[v] (the sizes of SD_PAR_MAXT parts would take too much memory: at most SDI_RHO_MAXP). */
-enum { SDI_RHO_MAXP = 4 };
-typedef struct sdi_rho_parts {
-    uint32_t n;                    /* parts (1: in order, alone) */
-    uint32_t *at[SDI_RHO_MAXP];
-    uint32_t *nb[SDI_RHO_MAXP];    /* (while counting: their class-B counts) */
-} sdi_rho_parts;
-void sdi_rho_parts_free(sd_mem *m, sdi_rho_parts *r);
 /* The rule of every vertex and the sizes of its rho (cnt_a: edge and diagonal neighbours, cnt_b:
  * the averaged scheme's octahedral opposites, NULL for the box scheme; zeroed by the caller): the
  * classification's rule, turned into a corner where its neighbourhood does not fit it (a curve or
  * surface boundary point with other than 2 neighbours, any rule with none). If `take` is not
  * NULL, take[e] gets bit 0 if ev[e][0] reads ev[e][1] through e, bit 1 for the converse. In
- * parallel parts (threads); R as for sdi_vertex_rho. false: no memory. */
+ * parallel parts (threads). false: no memory. */
 bool sdi_vertex_rules(sd_mem *m, const sd_topo *t, int scheme, int threads, uint8_t *vr,
-                      uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take, sdi_rho_parts *R);
+                      uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take);
 /* The same without rho: nv entries into vr (no stencils needed). */
 sd_result sdi_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr);
 /* The rule reported for a vertex / edge whose computed rule is r (N1, N2, G1, Ying-Zorin's where
@@ -651,15 +642,14 @@ void sdi_yzrows_free(sd_mem *m, sd_yzrows *y);
 enum { SDI_VR_RULE = 0x1f, SDI_VR_BND = 0x20, SDI_VR_OWN = 0x40, SDI_VR_SLOW = 0x80 };
 /* The sizes of every vertex's rho (see sdi_vertex_rules) for the rules in vr, flagged: SLOW, rho
  * decided per neighbour (G2, singular vertices); OWN, by the simplex's own choice. Clears the
- * flags. In parts (threads) if R is not NULL: then R tells sdi_vertex_rho_cols where each part's
- * entries go (the caller frees it). false: no memory. */
+ * flags. In parallel parts (threads). false: no memory. */
 bool sdi_vertex_rho(sd_mem *m, const sd_topo *t, int scheme, int threads, uint8_t *vr,
-                    uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take, sdi_rho_parts *R);
+                    uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take);
 /* rho itself: vertex v's neighbours into col from cur[v] on (cur advances), in the order counted:
- * through edges (in edge order), then major diagonals, then octahedral opposites; in the parts
- * that counted them (R). */
-void sdi_vertex_rho_cols(const sd_topo *t, int scheme, const uint8_t *vr, const uint8_t *take,
-                         sdi_rho_parts *R, uint32_t *cur, uint32_t *col);
+ * through edges (in edge order), then major diagonals, then octahedral opposites; in parallel
+ * parts by ranges of vertices. */
+void sdi_vertex_rho_cols(const sd_topo *t, int scheme, int threads, const uint8_t *vr,
+                         const uint8_t *take, uint32_t *cur, uint32_t *col);
 /* N1 / N2 (overrides.c): is e, at a vertex with choice ov, on the boundary of the part it follows? */
 bool sdi_ov_boundary_edge(const sd_topo *t, int ov, uint32_t e);
 /* The opposite vertices of the edges whose ring is OPPOSITE or BOUNDARY_OPPOSITE (rules er):

@@ -111,12 +111,22 @@ static inline bool ov_take(const sd_topo *t, uint8_t r, uint32_t v, uint32_t e)
     }
 }
 
-/* rho in parts (sd_options.threads): the edges, then the octahedra, are one sequence of items cut
- * into ranges. Part 0 counts into cnt_a / cnt_b, part p >= 1 into its own arrays (R->at, R->nb),
- * and the merge (per vertex) adds them up and turns R->at[p][v] into the number of v's entries
- * the parts before p give: where p's entries of v's rho start. sdi_vertex_rho_cols writes them
- * there, each part its own items in order, so a row's columns are in the serial order whatever
- * the number of parts (the golden outputs depend on it), and no counter is shared. */
+/* rho in parts (sd_options.threads). Counting: the edges, then the octahedra, are one sequence of
+ * items cut into ranges; part 0 counts into cnt_a / cnt_b, part p >= 1 into its own arrays
+ * (R->at, R->nb), and the merge (per vertex) adds them up, so no counter is shared. Writing
+ * (sdi_vertex_rho_cols): by ranges of vertices instead, each part reading every item and writing
+ * only its own vertices' rows, in item order: a row's columns are in the serial order whatever the
+ * number of parts (the golden outputs depend on it). Cut by items, the parts would write the
+ * same rows — a vertex point's half edges come before the edges inside faces — and fight over
+ * their cache lines. */
+/* Part p >= 1's counts of each vertex's entries: class A in at[p], class B in nb[p] (arrays of nv
+ * counts, so at most RHO_MAXP parts). */
+enum { RHO_MAXP = 4 };
+typedef struct rho_parts {
+    uint32_t n; /* parts (1: in order, alone) */
+    uint32_t *at[RHO_MAXP], *nb[RHO_MAXP];
+} rho_parts;
+
 typedef struct rhojob {
     const sd_topo *t;
     int scheme;
@@ -124,7 +134,7 @@ typedef struct rhojob {
     const uint8_t *vrule, *take_r;  /* (columns) */
     uint32_t *cnt_a, *cnt_b, *cur, *col;
     uint8_t *take;
-    sdi_rho_parts *R;
+    rho_parts *R;
 } rhojob;
 
 static void rho_count_part(void *arg, uint32_t part, uint32_t nparts)
@@ -173,7 +183,7 @@ static void rho_count_part(void *arg, uint32_t part, uint32_t nparts)
 static void rho_merge_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const rhojob *J = arg;
-    const sdi_rho_parts *R = J->R;
+    const rho_parts *R = J->R;
     uint64_t lo, hi;
     sdi_range(J->t->nv, part, nparts, &lo, &hi);
     if (R->n == 1) { /* the counts are all part 0's: only the flags go */
@@ -185,10 +195,8 @@ static void rho_merge_part(void *arg, uint32_t part, uint32_t nparts)
         J->vr[v] &= SDI_VR_RULE;
         uint32_t a = J->cnt_a[v], b = J->cnt_b ? J->cnt_b[v] : 0;
         for (uint32_t p = 1; p < R->n; p++) {
-            uint32_t na = R->at[p][v], nb = J->cnt_b ? R->nb[p][v] : 0;
-            R->at[p][v] = a + b;
-            a += na;
-            b += nb;
+            a += R->at[p][v];
+            b += J->cnt_b ? R->nb[p][v] : 0;
         }
         J->cnt_a[v] = a;
         if (J->cnt_b)
@@ -196,94 +204,80 @@ static void rho_merge_part(void *arg, uint32_t part, uint32_t nparts)
     }
 }
 
-/* Parts of rho at most for `threads` over t (each beyond the first an array of nv counts). */
-static int rho_threads(int threads) { return threads < SDI_RHO_MAXP ? threads : SDI_RHO_MAXP; }
-
-bool sdi_vertex_rho(sd_mem *m, const sd_topo *t, int scheme, int threads, uint8_t *vr,
-                    uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take, sdi_rho_parts *R)
+static void rho_parts_free(sd_mem *m, rho_parts *R)
 {
-    sdi_rho_parts one = {0};
-    if (!R)
-        threads = 1, R = &one;
-    threads = rho_threads(threads);
-    const uint64_t items = (uint64_t)t->ne + t->noct;
-    memset(R, 0, sizeof *R);
-    R->n = sdi_par_parts(threads, items);
-    for (uint32_t p = 1; p < R->n; p++)
-        if (!(R->at[p] = sdi_alloc(m, ((size_t)t->nv + 1) * sizeof *R->at[p])) ||
-            (cnt_b && !(R->nb[p] = sdi_alloc(m, ((size_t)t->nv + 1) * sizeof *R->nb[p])))) {
-            sdi_rho_parts_free(m, R);
-            return false;
-        }
-    rhojob J = {.t = t, .scheme = scheme, .vr = vr, .cnt_a = cnt_a, .cnt_b = cnt_b, .take = take,
-                .R = R};
-    sdi_par(threads, items, rho_count_part, &J);
-    sdi_par(threads, t->nv, rho_merge_part, &J);
-    for (uint32_t p = 1; p < R->n; p++) { /* the counts of class B are in cnt_b now */
-        sdi_free(m, R->nb[p]);
-        R->nb[p] = NULL;
-    }
-    return true;
-}
-
-void sdi_rho_parts_free(sd_mem *m, sdi_rho_parts *R)
-{
-    for (uint32_t p = 0; p < SDI_RHO_MAXP; p++) {
+    for (uint32_t p = 0; p < RHO_MAXP; p++) {
         sdi_free(m, R->at[p]);
         sdi_free(m, R->nb[p]);
     }
-    memset(R, 0, sizeof *R);
 }
 
-/* Where each part's entries go: from cur[v], after those of the parts before it. */
-static void rho_at_part(void *arg, uint32_t part, uint32_t nparts)
+bool sdi_vertex_rho(sd_mem *m, const sd_topo *t, int scheme, int threads, uint8_t *vr,
+                    uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take)
 {
-    const rhojob *J = arg;
-    uint64_t lo, hi;
-    sdi_range(J->t->nv, part, nparts, &lo, &hi);
-    for (uint32_t p = 1; p < J->R->n; p++) {
-        uint32_t *at = J->R->at[p];
-        for (uint32_t v = (uint32_t)lo; v < hi; v++)
-            at[v] += J->cur[v];
+    rho_parts R = {0};
+    threads = threads < RHO_MAXP ? threads : RHO_MAXP;
+    const uint64_t items = (uint64_t)t->ne + t->noct;
+    R.n = sdi_par_parts(threads, items);
+    for (uint32_t p = 1; p < R.n; p++)
+        if (!(R.at[p] = sdi_alloc(m, ((size_t)t->nv + 1) * sizeof *R.at[p])) ||
+            (cnt_b && !(R.nb[p] = sdi_alloc(m, ((size_t)t->nv + 1) * sizeof *R.nb[p])))) {
+            rho_parts_free(m, &R);
+            return false;
+        }
+    rhojob J = {.t = t, .scheme = scheme, .vr = vr, .cnt_a = cnt_a, .cnt_b = cnt_b, .take = take,
+                .R = &R};
+    sdi_par(threads, items, rho_count_part, &J);
+    sdi_par(threads, t->nv, rho_merge_part, &J);
+    rho_parts_free(m, &R);
+    return true;
+}
+
+/* Vertices [lo, hi); all: that is every vertex (no test per entry, the serial case). */
+static inline __attribute__((always_inline)) void rho_cols_of(const rhojob *J, uint32_t lo,
+                                                              uint32_t hi, bool all)
+{
+    const sd_topo *t = J->t;
+    const uint8_t *vr = J->vrule, *take = J->take_r;
+    uint32_t *cur = J->cur, *col = J->col;
+#define MINE(v) (all || ((v) >= lo && (v) < hi))
+    for (uint32_t e = 0; e < t->ne; e++) {
+        uint32_t a = t->ev[e][0], b = t->ev[e][1];
+        if ((take[e] & 1) && MINE(a) && vr[a] != SD_RULE_CORNER)
+            col[cur[a]++] = b;
+        if ((take[e] & 2) && MINE(b) && vr[b] != SD_RULE_CORNER)
+            col[cur[b]++] = a;
     }
+    for (uint32_t o = 0; o < t->noct; o++) {
+        const uint32_t *q = t->oct[o];
+        for (int k = 0; k < 2; k++)
+            if (MINE(q[k]) && vr[q[k]] != SD_RULE_CORNER &&
+                via_diag(t, vr[q[k]], J->scheme, q[k], q[k ^ 1]))
+                col[cur[q[k]]++] = q[k ^ 1];
+        if (J->scheme == SD_SOLID_AVERAGED)
+            for (int k = 0; k < 6; k++)
+                if (MINE(q[k]) && vr[q[k]] == SD_RULE_SOLID)
+                    col[cur[q[k]]++] = q[k ^ 1];
+    }
+#undef MINE
 }
 
 static void rho_cols_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const rhojob *J = arg;
-    const sd_topo *t = J->t;
-    const uint32_t ne = t->ne;
-    const uint8_t *vr = J->vrule, *take = J->take_r;
-    uint32_t *cur = part ? J->R->at[part] : J->cur, *col = J->col;
     uint64_t lo, hi;
-    sdi_range((uint64_t)ne + t->noct, part, nparts, &lo, &hi);
-    for (uint32_t e = (uint32_t)lo; e < hi && e < ne; e++) {
-        uint32_t a = t->ev[e][0], b = t->ev[e][1];
-        if ((take[e] & 1) && vr[a] != SD_RULE_CORNER)
-            col[cur[a]++] = b;
-        if ((take[e] & 2) && vr[b] != SD_RULE_CORNER)
-            col[cur[b]++] = a;
-    }
-    for (uint64_t i = lo > ne ? lo : ne; i < hi; i++) {
-        const uint32_t *q = t->oct[i - ne];
-        for (int k = 0; k < 2; k++)
-            if (vr[q[k]] != SD_RULE_CORNER && via_diag(t, vr[q[k]], J->scheme, q[k], q[k ^ 1]))
-                col[cur[q[k]]++] = q[k ^ 1];
-        if (J->scheme == SD_SOLID_AVERAGED)
-            for (int k = 0; k < 6; k++)
-                if (vr[q[k]] == SD_RULE_SOLID)
-                    col[cur[q[k]]++] = q[k ^ 1];
-    }
+    sdi_range(J->t->nv, part, nparts, &lo, &hi);
+    if (nparts == 1)
+        rho_cols_of(J, 0, J->t->nv, true);
+    else
+        rho_cols_of(J, (uint32_t)lo, (uint32_t)hi, false);
 }
 
-void sdi_vertex_rho_cols(const sd_topo *t, int scheme, const uint8_t *vr,
-                         const uint8_t *take, sdi_rho_parts *R, uint32_t *cur, uint32_t *col)
+void sdi_vertex_rho_cols(const sd_topo *t, int scheme, int threads, const uint8_t *vr,
+                         const uint8_t *take, uint32_t *cur, uint32_t *col)
 {
-    rhojob J = {.t = t, .scheme = scheme, .vrule = vr, .take_r = take, .cur = cur, .col = col,
-                .R = R};
-    if (R->n > 1) /* (the count's R->n parts again: sdi_par_parts(R->n, items) is R->n) */
-        sdi_par((int)R->n, t->nv, rho_at_part, &J);
-    sdi_par((int)R->n, (uint64_t)t->ne + t->noct, rho_cols_part, &J);
+    rhojob J = {.t = t, .scheme = scheme, .vrule = vr, .take_r = take, .cur = cur, .col = col};
+    sdi_par(threads, (uint64_t)t->ne + t->noct, rho_cols_part, &J);
 }
 
 /* ---- rings of edges ---------------------------------------------------------------------- */
@@ -425,16 +419,16 @@ static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
     }
 }
 
-/* The candidates in parts, as rho (above): the tetrahedra, then the octahedra, one sequence of
- * cells cut into ranges; part 0 counts into R->off, part p >= 1 into its own array, which then
- * says where its candidates of each edge go, after those of the parts before it. (The sort that
- * follows would make any order the same; the parts keep the serial one anyway.) */
+/* The candidates in parts, counted as rho is (above): the tetrahedra, then the octahedra, one
+ * sequence of cells cut into ranges; part 0 counts into R->off, part p >= 1 into its own array,
+ * which then says where its candidates of each edge go, after those of the parts before it. (The
+ * sort that follows would make any order the same; the parts keep the serial one anyway.) */
 typedef struct srjob {
     const sd_topo *t;
     const uint8_t *erule;
     bool avg;
     sdi_rings *R;
-    uint32_t *at[SDI_RHO_MAXP]; /* part 0: cur; part p >= 1: its counts, then its cursor */
+    uint32_t *at[RHO_MAXP]; /* part 0: cur; part p >= 1: its counts, then its cursor */
 } srjob;
 
 static void solid_count_part(void *arg, uint32_t part, uint32_t nparts)
@@ -523,7 +517,7 @@ bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int sche
     uint32_t ne = t->ne;
     const uint64_t cells = (uint64_t)t->ntet + t->noct;
     srjob J = {.t = t, .erule = erule, .avg = scheme == SD_SOLID_AVERAGED, .R = R};
-    const int pt = threads < SDI_RHO_MAXP ? threads : SDI_RHO_MAXP;
+    const int pt = threads < RHO_MAXP ? threads : RHO_MAXP;
     const uint32_t np = sdi_par_parts(pt, cells);
     bool ok = false;
     R->off = sdi_calloc(m, (size_t)ne + 1, sizeof *R->off);

@@ -237,7 +237,7 @@ static void degenerate_part(void *arg, uint32_t part, uint32_t nparts)
 }
 
 bool sdi_vertex_rules(sd_mem *m, const sd_topo *t, int scheme, int threads, uint8_t *vr,
-                      uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take, sdi_rho_parts *R)
+                      uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take)
 {
     const uint32_t nv = t->nv, ne = t->ne;
     vrjob J = {t, vr, cnt_a, cnt_b};
@@ -269,7 +269,7 @@ bool sdi_vertex_rules(sd_mem *m, const sd_topo *t, int scheme, int threads, uint
             }
     }
     /* rho sizes; the flags go */
-    if (!sdi_vertex_rho(m, t, scheme, threads, vr, cnt_a, cnt_b, take, R))
+    if (!sdi_vertex_rho(m, t, scheme, threads, vr, cnt_a, cnt_b, take))
         return false;
     sdi_par(threads, nv, degenerate_part, &J);
     return true;
@@ -278,7 +278,7 @@ bool sdi_vertex_rules(sd_mem *m, const sd_topo *t, int scheme, int threads, uint
 sd_result sdi_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr)
 {
     uint32_t *a = sdi_calloc(m, (size_t)t->nv + 1, sizeof *a), *b = sdi_calloc(m, (size_t)t->nv + 1, sizeof *b);
-    bool ok = a && b && sdi_vertex_rules(m, t, scheme, 1, vr, a, b, NULL, NULL);
+    bool ok = a && b && sdi_vertex_rules(m, t, scheme, 1, vr, a, b, NULL);
     sdi_free(m, a);
     sdi_free(m, b);
     return ok ? SD_OK : SD_ERR_NOMEM;

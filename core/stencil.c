@@ -32,7 +32,6 @@ typedef struct build {
     uint8_t *vr, *er;                /* the level's rules (vrule, erule) */
     uint8_t *take;                   /* per edge: which end reads the other through it */
     uint32_t *cnt_a, *cnt_b;         /* rho sizes (rings.c); cnt_a then becomes cur */
-    sdi_rho_parts rho;               /* where the parts that counted rho write it (rings.c) */
     uint32_t (*opp)[2];              /* opposite vertices of edges (rings.c) */
     uint8_t *nopp;
     sd_yzend (*gam)[2];              /* Ying-Zorin rules per edge end (rules.c) */
@@ -106,7 +105,7 @@ static bool choose(build *B, sd_complex *cx, sd_level *lv)
             return false;
     }
     /* vertex rules and rho sizes, and the edges' opposite vertices, each in parallel parts */
-    if (!sdi_vertex_rules(m, t, B->scheme, B->threads, B->vr, B->cnt_a, B->cnt_b, B->take, &B->rho))
+    if (!sdi_vertex_rules(m, t, B->scheme, B->threads, B->vr, B->cnt_a, B->cnt_b, B->take))
         return false;
     if (B->nopp)
         sdi_edge_opposites(t, B->threads, B->er, B->opp, B->nopp);
@@ -624,7 +623,7 @@ sd_result sdi_build_rules(sd_complex *cx, sd_level *lv, sd_error *err)
         B.opp = NULL;
     }
     /* the columns: vertex rows, then edge rows, each in parallel parts */
-    sdi_vertex_rho_cols(t, B.scheme, B.vr, B.take, &B.rho, B.cur, B.col);
+    sdi_vertex_rho_cols(t, B.scheme, B.threads, B.vr, B.take, B.cur, B.col);
     if (!B.stride) {
         B.S_kchk = lv->S.kchk;
         sdi_par(B.threads, B.nexp - B.ebase, erows_part, &B);
@@ -648,7 +647,6 @@ out:
     sdi_sharp_rows_free(m, &B.sh);
     sdi_free(m, B.cnt_a);
     sdi_free(m, B.cnt_b);
-    sdi_rho_parts_free(m, &B.rho);
     sdi_free(m, B.opp);
     sdi_free(m, B.nopp);
     sdi_rings_free(m, &B.sr);
