@@ -286,8 +286,9 @@ enum { M_SSURF = 4, M_LOOP = 8, M_SB = 16, M_N2 = 32 }; /* which faces give an e
                                                           * vertices */
 
 /* In parts by ranges of edges: each part reads every face but writes only its own edges, which
- * so see their faces in id order, as alone (the faces' arrays are read twice, the edges' written
- * once; the scattered writes, not the reading, are the cost). */
+ * so see their faces in id order, as alone. Every part reads the faces' arrays whole, so two
+ * parts gain 1.3x, not 2 (docs/BENCHMARKS.md "Two threads"); cut by faces, the edges two parts
+ * share would need a merge of their slots. */
 typedef struct oppjob {
     const sd_topo *t;
     const uint8_t *er;
