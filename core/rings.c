@@ -420,85 +420,68 @@ static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
     }
 }
 
-/* The candidates in parts, counted as rho is (above): the tetrahedra, then the octahedra, one
- * sequence of cells cut into ranges; part 0 counts into R->off, part p >= 1 into its own array,
- * which then says where its candidates of each edge go, after those of the parts before it. (The
- * sort that follows would make any order the same; the parts keep the serial one anyway.) */
+/* The candidates in parts by ranges of edges: each part reads every cell and counts, then
+ * gathers, only its own edges' candidates, in cell order as alone (the sort that follows would
+ * make any order the same). Cut by cells instead, two parts would write the same edges' lists. */
 typedef struct srjob {
     const sd_topo *t;
     const uint8_t *erule;
-    bool avg;
+    bool avg, fill;                  /* fill: gather (at cur), else count */
     sdi_rings *R;
-    uint32_t *at[RHO_MAXP]; /* part 0: cur; part p >= 1: its counts, then its cursor */
+    uint32_t *cur;
 } srjob;
 
-static void solid_count_part(void *arg, uint32_t part, uint32_t nparts)
+static inline __attribute__((always_inline)) void solid_cands(const srjob *J, uint32_t lo,
+                                                              uint32_t hi, bool all, bool fill)
 {
-    const srjob *J = arg;
-    const sd_topo *t = J->t;
-    const uint8_t *erule = J->erule;
-    uint32_t *cnt = part ? J->at[part] : J->R->off + 1;
-    if (part)
-        memset(cnt, 0, (size_t)t->ne * sizeof *cnt);
-    uint64_t lo, hi;
-    sdi_range((uint64_t)t->ntet + t->noct, part, nparts, &lo, &hi);
-    for (uint32_t c = (uint32_t)lo; c < hi && c < t->ntet; c++)
-        for (int k = 0; k < 6; k++)
-            if (SDI_RULE_RING[erule[t->tet_e[c][k]]] == SDI_RING_SOLID)
-                cnt[t->tet_e[c][k]] += 2;
-    for (uint64_t i = lo > t->ntet ? lo : t->ntet; i < hi; i++) {
-        const uint32_t *oe = t->oct_e[i - t->ntet];
-        for (int k = 0; k < 12; k++)
-            if (SDI_RULE_RING[erule[oe[k]]] == SDI_RING_SOLID)
-                cnt[oe[k]] += J->avg ? 4 : (k < 8 ? 3 : 2);
-    }
-}
-
-static void solid_fill_part(void *arg, uint32_t part, uint32_t nparts)
-{
-    const srjob *J = arg;
     const sd_topo *t = J->t;
     const uint8_t *erule = J->erule;
     sdi_rings *R = J->R;
-    uint32_t *cur = J->at[part];
-    uint64_t lo, hi;
-    sdi_range((uint64_t)t->ntet + t->noct, part, nparts, &lo, &hi);
+    uint32_t *cnt = R->off + 1, *cur = J->cur;
+#define MINE(e) ((all || ((e) >= lo && (e) < hi)) && SDI_RULE_RING[erule[e]] == SDI_RING_SOLID)
 #define PUSH(e, x, c)                                                                        \
     do {                                                                                     \
         R->v[cur[e]] = (x);                                                                  \
         R->cls[cur[e]++] = (c);                                                              \
     } while (0)
-    for (uint32_t c = (uint32_t)lo; c < hi && c < t->ntet; c++)
+    for (uint32_t c = 0; c < t->ntet; c++)
         for (int k = 0; k < 6; k++) {
             uint32_t e = t->tet_e[c][k];
-            if (SDI_RULE_RING[erule[e]] != SDI_RING_SOLID)
+            if (!MINE(e))
                 continue;
+            if (!fill) {
+                cnt[e] += 2;
+                continue;
+            }
             /* the two vertices not on edge k: those of the opposite edge 5-k */
             PUSH(e, t->tet[c][SDI_TET_E[5 - k][0]], 0);
             PUSH(e, t->tet[c][SDI_TET_E[5 - k][1]], 0);
         }
-    for (uint64_t i = lo > t->ntet ? lo : t->ntet; i < hi; i++) {
-        const uint32_t o = (uint32_t)(i - t->ntet);
+    for (uint32_t o = 0; o < t->noct; o++)
         for (int k = 0; k < 12; k++) {
             uint32_t e = t->oct_e[o][k];
-            if (SDI_RULE_RING[erule[e]] != SDI_RING_SOLID)
+            if (!MINE(e))
                 continue;
+            if (!fill) {
+                cnt[e] += J->avg ? 4 : (k < 8 ? 3 : 2);
+                continue;
+            }
             const uint32_t *q = t->oct[o];
-            int a = SDI_OCT_E[k][0], j = SDI_OCT_E[k][1];
+            int i = SDI_OCT_E[k][0], j = SDI_OCT_E[k][1];
             if (J->avg) {
                 /* faces of the octahedron on the edge: the two common neighbours;
                  * through the octahedron's diagonals: the opposites of both ends */
                 int com[2], nc = 0;
                 for (int w = 0; w < 6 && nc < 2; w++)
-                    if (w != a && w != j && w != (a ^ 1) && w != (j ^ 1))
+                    if (w != i && w != j && w != (i ^ 1) && w != (j ^ 1))
                         com[nc++] = w;
                 PUSH(e, q[com[0]], 0);
                 PUSH(e, q[com[1]], 0);
-                PUSH(e, q[a ^ 1], 1);
+                PUSH(e, q[i ^ 1], 1);
                 PUSH(e, q[j ^ 1], 1);
             } else if (k < 8) {
                 /* [P, x] with P on the diagonal: tets (p,q,x,prev), (p,q,x,next) */
-                int P = a, x = j;
+                int P = i, x = j;
                 PUSH(e, q[P ^ 1], 0);
                 PUSH(e, q[OCT_EQ_NB[x][0]], 0);
                 PUSH(e, q[OCT_EQ_NB[x][1]], 0);
@@ -508,52 +491,54 @@ static void solid_fill_part(void *arg, uint32_t part, uint32_t nparts)
                 PUSH(e, q[1], 0);
             }
         }
-    }
 #undef PUSH
+#undef MINE
+}
+
+static void solid_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const srjob *J = arg;
+    uint64_t lo, hi;
+    sdi_range(J->t->ne, part, nparts, &lo, &hi);
+    if (nparts == 1 && J->fill)
+        solid_cands(J, 0, J->t->ne, true, true);
+    else if (nparts == 1)
+        solid_cands(J, 0, J->t->ne, true, false);
+    else if (J->fill)
+        solid_cands(J, (uint32_t)lo, (uint32_t)hi, false, true);
+    else
+        solid_cands(J, (uint32_t)lo, (uint32_t)hi, false, false);
 }
 
 bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int scheme, int threads,
                      sdi_rings *R)
 {
     uint32_t ne = t->ne;
-    const uint64_t cells = (uint64_t)t->ntet + t->noct;
+    const uint64_t work = 8ull * t->ntet + 14ull * t->noct; /* as a split's */
     srjob J = {.t = t, .erule = erule, .avg = scheme == SD_SOLID_AVERAGED, .R = R};
-    const int pt = threads < RHO_MAXP ? threads : RHO_MAXP;
-    const uint32_t np = sdi_par_parts(pt, cells);
-    bool ok = false;
     R->off = sdi_calloc(m, (size_t)ne + 1, sizeof *R->off);
     R->len = sdi_calloc(m, ne ? ne : 1, sizeof *R->len);
-    for (uint32_t p = 0; p < np; p++)
-        if (!(J.at[p] = sdi_alloc(m, ((size_t)ne + 1) * sizeof *J.at[p])))
-            goto out;
     if (!R->off || !R->len)
-        goto out;
-    /* count */
-    sdi_par(pt, cells, solid_count_part, &J);
-    for (uint32_t e = 0; e < ne; e++) { /* where each part's candidates go, and the offsets */
-        uint32_t at = R->off[e], n = R->off[e + 1];
-        J.at[0][e] = at;
-        for (uint32_t p = 1; p < np; p++) {
-            uint32_t k = J.at[p][e];
-            J.at[p][e] = at + n;
-            n += k;
-        }
-        R->off[e + 1] = at + n;
-    }
+        return false;
+    sdi_par(threads, work, solid_part, &J); /* count */
+    for (uint32_t e = 0; e < ne; e++)
+        R->off[e + 1] += R->off[e];
     size_t total = R->off[ne];
     R->v = sdi_alloc(m, (total + 1) * sizeof *R->v);
     R->cls = sdi_alloc(m, total + 1);
-    if (!R->v || !R->cls)
-        goto out;
-    sdi_par(pt, cells, solid_fill_part, &J);
+    J.cur = sdi_alloc(m, ((size_t)ne + 1) * sizeof *J.cur);
+    if (!R->v || !R->cls || !J.cur) {
+        sdi_free(m, J.cur);
+        return false;
+    }
+    memcpy(J.cur, R->off, (size_t)ne * sizeof *J.cur);
+    J.fill = true;
+    sdi_par(threads, work, solid_part, &J);
+    sdi_free(m, J.cur);
     /* sort and deduplicate each edge's list (as (vertex, class) pairs), edges in parallel */
     ring_sort_job S = {R, ne, true};
     sdi_par(threads, R->off[ne], ring_sort_part, &S);
-    ok = S.ok;
-out:
-    for (uint32_t p = 0; p < np; p++)
-        sdi_free(m, J.at[p]);
-    return ok;
+    return S.ok;
 }
 
 /* Rings of G2 edges: the common neighbours (edges and diagonals) of both ends, filtered. The
