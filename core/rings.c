@@ -143,6 +143,7 @@ static void rho_count_part(void *arg, uint32_t part, uint32_t nparts)
     const sd_topo *t = J->t;
     const uint32_t nv = t->nv, ne = t->ne;
     const uint8_t *vr = J->vr;
+    uint8_t *take = J->take; /* (J's fields in locals: the stores below could alias them) */
     uint32_t *cnt_a = part ? J->R->at[part] : J->cnt_a, *cnt_b = part ? J->R->nb[part] : J->cnt_b;
     if (part) {
         memset(cnt_a, 0, (size_t)nv * sizeof *cnt_a);
@@ -163,8 +164,8 @@ static void rho_count_part(void *arg, uint32_t part, uint32_t nparts)
                     : (m >> SDI_RULE_RHO[rb]) & 1u;
         cnt_a[a] += ta;
         cnt_a[b] += tb;
-        if (J->take)
-            J->take[e] = (uint8_t)(ta | tb << 1);
+        if (take)
+            take[e] = (uint8_t)(ta | tb << 1);
     }
     for (uint64_t i = lo > ne ? lo : ne; i < hi; i++) {
         const uint32_t *q = t->oct[i - ne];
@@ -301,13 +302,15 @@ static inline __attribute__((always_inline)) void opp_edges(const oppjob *J, uin
                                                             uint32_t hi, bool all)
 {
     const sd_topo *t = J->t;
+    const uint8_t *er = J->er;
     uint8_t *nopp = J->nopp;
+    uint32_t (*opp)[2] = J->opp;
     for (uint32_t e = lo; e < hi; e++) {
         /* an embedded surface's edge takes its opposite vertices from tagged triangles */
         bool ss = t->eflag[e] & EF_SSURF;
         bool n2 = (t->ovmask & OVM_N2T) && nm_ov(t->enm[e]) == OV_N2 && !ss &&
                   !(t->eflag[e] & EF_CREASE);
-        uint8_t ring = SDI_RULE_RING[J->er[e]];
+        uint8_t ring = SDI_RULE_RING[er[e]];
         nopp[e] = ring == SDI_RING_OPPOSITE ? (ss ? M_SSURF : n2 ? M_N2 : M_LOOP)
                 : ring == SDI_RING_BOUNDARY_OPPOSITE && !ss ? M_SB : 0;
     }
@@ -325,7 +328,7 @@ static inline __attribute__((always_inline)) void opp_edges(const oppjob *J, uin
             if (!(n & want))
                 continue;
             if ((n & 3) < 2)
-                J->opp[e][n & 3] = t->fv[f][(j + 2) % 3];
+                opp[e][n & 3] = t->fv[f][(j + 2) % 3];
             if ((n & 3) < 3)
                 nopp[e] = (uint8_t)(n + 1);
         }
