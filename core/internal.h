@@ -58,7 +58,8 @@ void sdi_free(sd_mem *m, void *p);
 typedef void (*sd_part_fn)(void *arg, uint32_t part, uint32_t nparts);
 /* How many parts a region of `work` items is split into with `threads` threads (1 = serial). */
 uint32_t sdi_par_parts(int threads, uint64_t work);
-/* fn(arg, i, n) for every part i of n; part 0 in the calling thread. */
+/* fn(arg, i, n) for every part i of n, taken in turn by the calling thread and the region's
+ * threads (a part's outputs must not depend on which thread runs it). */
 void sdi_par(int threads, uint64_t work, sd_part_fn fn, void *arg);
 /* fn(arg, c, n) for every chunk c of n = per_thread times the parts of sdi_par, the threads
  * taking chunks in turn; fn(arg, 0, 1) if serial. Only for fn whose results do not depend on
