@@ -47,8 +47,11 @@ rm -f "$T"
 # edit_seconds_best); the daemon builds it with each level (bench --edits):
 echo "== surface, the daemon's way (edit index with the levels): warm L4, 1 thread"
 echo "warm L4  $(GLIBC_TUNABLES=$WARM build/bench --edits --reps $REPS -j 1 -w loop $D/torus.txt 4)"
-echo "== solid: box-spline scheme on 12^3 cubes (10368 tetrahedra), one thread"
+echo "== solid: box-spline scheme on 12^3 cubes (10368 tetrahedra), one thread (and two, warm)"
 for L in 1 2 3; do
     echo "cold L$L  $(build/bench --reps 1 $D/cubes12.txt $L)"
     echo "warm L$L  $(GLIBC_TUNABLES=$WARM build/bench --reps $REPS $D/cubes12.txt $L)"
+    echo "warm L$L  $(GLIBC_TUNABLES=$WARM build/bench --reps $REPS -j 2 $D/cubes12.txt $L)"
 done
+# what a second core can gain at most where the work is writing memory
+echo "== memory ceiling of two threads: $(build/bandwidth 128 10)"

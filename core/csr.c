@@ -320,13 +320,35 @@ typedef struct ajob {
     int nc;
 } ajob;
 
+/* The entries of S before row r (a multiple of SD_CHK, or nrows): the explicit columns kchk
+ * counts, the implicit ones of each block, and the edge rows' opposite vertices if kept apart. */
+static uint64_t entries_before(const sd_csrb *s, uint64_t r)
+{
+    const uint64_t nv = MINU(r, s->nvr), ne = r > s->nvr ? MINU(r - s->nvr, s->ner) : 0;
+    const uint64_t no = r > (uint64_t)s->nvr + s->ner ? r - s->nvr - s->ner : 0;
+    return s->kchk[(r + SD_CHK - 1) / SD_CHK] + nv + 2 * ne + 6 * no + (s->eopp ? 2 * ne : 0);
+}
+
+/* The first chunk of SD_CHK rows at or after which `goal` entries of S lie before. */
+static uint64_t chunk_at(const sd_csrb *s, uint64_t nchunks, uint64_t goal)
+{
+    uint64_t c = 0;
+    while (c < nchunks && entries_before(s, c * SD_CHK) < goal)
+        c++;
+    return c;
+}
+
 static void apply_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const ajob *J = arg;
     const sd_csrb *s = J->s;
-    /* whole chunks of SD_CHK rows, whose first explicit column kchk gives */
-    uint64_t c0, c1, nchunks = ((uint64_t)s->nrows + SD_CHK - 1) / SD_CHK;
-    sdi_range(nchunks, part, nparts, &c0, &c1);
+    /* whole chunks of SD_CHK rows, whose first explicit column kchk gives, cut so that each part
+     * sums about as many entries (a vertex row of Loop has 7, an edge row 4: rows alone would
+     * give the part with the vertex rows half as much again) */
+    const uint64_t nchunks = ((uint64_t)s->nrows + SD_CHK - 1) / SD_CHK;
+    const uint64_t total = entries_before(s, s->nrows);
+    uint64_t c0 = chunk_at(s, nchunks, total * part / nparts);
+    uint64_t c1 = part + 1 == nparts ? nchunks : chunk_at(s, nchunks, total * (part + 1) / nparts);
     uint32_t rlo = (uint32_t)(c0 * SD_CHK), rhi = (uint32_t)MINU(c1 * SD_CHK, (uint64_t)s->nrows);
     if (rlo >= rhi)
         return;
@@ -345,7 +367,7 @@ static void apply_part(void *arg, uint32_t part, uint32_t nparts)
 void sdi_csr_apply(const sd_csrb *s, const double *in, double *out, int nc, int threads)
 {
     ajob J = {s, in, out, nc};
-    sdi_par(threads, s->nnz, apply_part, &J);
+    sdi_par_dyn(threads, s->nnz, 4, apply_part, &J);
 }
 
 /* ---- by columns: the rows that use each column (edits) --------------------------------------- */

@@ -58,10 +58,13 @@ void sdi_free(sd_mem *m, void *p);
 typedef void (*sd_part_fn)(void *arg, uint32_t part, uint32_t nparts);
 /* How many parts a region of `work` items is split into with `threads` threads (1 = serial). */
 uint32_t sdi_par_parts(int threads, uint64_t work);
-/* fn(arg, i, n) for every part i of n; part 0 in the calling thread. */
+/* fn(arg, i, n) for every part i of n, taken in turn by the calling thread and the region's
+ * threads (a part's outputs must not depend on which thread runs it). */
 void sdi_par(int threads, uint64_t work, sd_part_fn fn, void *arg);
-/* f0(a0) and f1(a1) at once (one after the other if serial). */
-void sdi_par2(int threads, uint64_t work, void (*f0)(void *), void *a0, void (*f1)(void *), void *a1);
+/* fn(arg, c, n) for every chunk c of n = per_thread times the parts of sdi_par, the threads
+ * taking chunks in turn; fn(arg, 0, 1) if serial. Only for fn whose results do not depend on
+ * the cut (each item's outputs are its own). */
+void sdi_par_dyn(int threads, uint64_t work, uint32_t per_thread, sd_part_fn fn, void *arg);
 /* Part `part` of nparts of [0, n): [*lo, *hi). */
 void sdi_range(uint64_t n, uint32_t part, uint32_t nparts, uint64_t *lo, uint64_t *hi);
 
@@ -559,9 +562,10 @@ void sdi_edge_rules(const sd_topo *t, int threads, uint8_t *er, bool *any_g2, bo
  * the averaged scheme's octahedral opposites, NULL for the box scheme; zeroed by the caller): the
  * classification's rule, turned into a corner where its neighbourhood does not fit it (a curve or
  * surface boundary point with other than 2 neighbours, any rule with none). If `take` is not
- * NULL, take[e] gets bit 0 if ev[e][0] reads ev[e][1] through e, bit 1 for the converse. */
-void sdi_vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b,
-                      uint8_t *take);
+ * NULL, take[e] gets bit 0 if ev[e][0] reads ev[e][1] through e, bit 1 for the converse. In
+ * parallel parts (threads). false: no memory. */
+bool sdi_vertex_rules(sd_mem *m, const sd_topo *t, int scheme, int threads, uint8_t *vr,
+                      uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take);
 /* The same without rho: nv entries into vr (no stencils needed). */
 sd_result sdi_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr);
 /* The rule reported for a vertex / edge whose computed rule is r (N1, N2, G1, Ying-Zorin's where
@@ -660,18 +664,20 @@ void sdi_yzrows_free(sd_mem *m, sd_yzrows *y);
 enum { SDI_VR_RULE = 0x1f, SDI_VR_BND = 0x20, SDI_VR_OWN = 0x40, SDI_VR_SLOW = 0x80 };
 /* The sizes of every vertex's rho (see sdi_vertex_rules) for the rules in vr, flagged: SLOW, rho
  * decided per neighbour (G2, singular vertices); OWN, by the simplex's own choice. Clears the
- * flags. */
-void sdi_vertex_rho(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b,
-                    uint8_t *take);
+ * flags. In parallel parts (threads). false: no memory. */
+bool sdi_vertex_rho(sd_mem *m, const sd_topo *t, int scheme, int threads, uint8_t *vr,
+                    uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take);
 /* rho itself: vertex v's neighbours into col from cur[v] on (cur advances), in the order counted:
- * through edges (in edge order), then major diagonals, then octahedral opposites. */
-void sdi_vertex_rho_cols(const sd_topo *t, int scheme, const uint8_t *vr, const uint8_t *take,
-                         uint32_t *cur, uint32_t *col);
+ * through edges (in edge order), then major diagonals, then octahedral opposites; in parallel
+ * parts by ranges of vertices. */
+void sdi_vertex_rho_cols(const sd_topo *t, int scheme, int threads, const uint8_t *vr,
+                         const uint8_t *take, uint32_t *cur, uint32_t *col);
 /* N1 / N2 (overrides.c): is e, at a vertex with choice ov, on the boundary of the part it follows? */
 bool sdi_ov_boundary_edge(const sd_topo *t, int ov, uint32_t e);
 /* The opposite vertices of the edges whose ring is OPPOSITE or BOUNDARY_OPPOSITE (rules er):
  * opp[e], and in nopp[e] how many faces were seen (bits 0-1, saturating at 3; 2 makes a ring). */
-void sdi_edge_opposites(const sd_topo *t, const uint8_t *er, uint32_t (*opp)[2], uint8_t *nopp);
+void sdi_edge_opposites(const sd_topo *t, int threads, const uint8_t *er, uint32_t (*opp)[2],
+                        uint8_t *nopp);
 /* Per-edge variable-size rings (solid and G2 edges), CSR; class 0 = ring/face, 1 = diagonal. */
 typedef struct sdi_rings {
     uint32_t *off, *v;

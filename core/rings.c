@@ -111,11 +111,48 @@ static inline bool ov_take(const sd_topo *t, uint8_t r, uint32_t v, uint32_t e)
     }
 }
 
-void sdi_vertex_rho(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b,
-                    uint8_t *take)
+/* rho in parts (sd_options.threads). Counting: the edges, then the octahedra, are one sequence of
+ * items cut into ranges; part 0 counts into cnt_a / cnt_b, part p >= 1 into its own arrays
+ * (R->at, R->nb), and the merge (per vertex) adds them up, so no counter is shared. Writing
+ * (sdi_vertex_rho_cols): by ranges of vertices instead, each part reading every item and writing
+ * only its own vertices' rows, in item order: a row's columns are in the serial order whatever the
+ * number of parts (the golden outputs depend on it). Cut by items, the parts would write the
+ * same rows — a vertex point's half edges come before the edges inside faces — and fight over
+ * their cache lines. */
+/* Part p >= 1's counts of each vertex's entries: class A in at[p], class B in nb[p] (arrays of nv
+ * counts, so at most RHO_MAXP parts). */
+enum { RHO_MAXP = 4 };
+typedef struct rho_parts {
+    uint32_t n; /* parts (1: in order, alone) */
+    uint32_t *at[RHO_MAXP], *nb[RHO_MAXP];
+} rho_parts;
+
+typedef struct rhojob {
+    const sd_topo *t;
+    int scheme;
+    uint8_t *vr;                    /* (counting: flagged) */
+    const uint8_t *vrule, *take_r;  /* (columns) */
+    uint32_t *cnt_a, *cnt_b, *cur, *col;
+    uint8_t *take;
+    rho_parts *R;
+} rhojob;
+
+static void rho_count_part(void *arg, uint32_t part, uint32_t nparts)
 {
-    const uint32_t nv = t->nv, ne = t->ne, no = t->noct;
-    for (uint32_t e = 0; e < ne; e++) {
+    const rhojob *J = arg;
+    const sd_topo *t = J->t;
+    const uint32_t nv = t->nv, ne = t->ne;
+    const uint8_t *vr = J->vr;
+    uint8_t *take = J->take; /* (J's fields in locals: the stores below could alias them) */
+    uint32_t *cnt_a = part ? J->R->at[part] : J->cnt_a, *cnt_b = part ? J->R->nb[part] : J->cnt_b;
+    if (part) {
+        memset(cnt_a, 0, (size_t)nv * sizeof *cnt_a);
+        if (cnt_b)
+            memset(cnt_b, 0, (size_t)nv * sizeof *cnt_b);
+    }
+    uint64_t lo, hi;
+    sdi_range((uint64_t)ne + t->noct, part, nparts, &lo, &hi);
+    for (uint32_t e = (uint32_t)lo; e < hi && e < ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
         unsigned m = edge_kinds(t->efam[e], t->eflag[e]);
         uint8_t ra = vr[a], rb = vr[b];
@@ -130,41 +167,118 @@ void sdi_vertex_rho(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, 
         if (take)
             take[e] = (uint8_t)(ta | tb << 1);
     }
-    for (uint32_t v = 0; v < nv; v++)
-        vr[v] &= SDI_VR_RULE;
-    for (uint32_t o = 0; o < no; o++) {
-        uint32_t p = t->oct[o][0], q = t->oct[o][1];
-        if (via_diag(t, vr[p], scheme, p, q))
+    for (uint64_t i = lo > ne ? lo : ne; i < hi; i++) {
+        const uint32_t *q = t->oct[i - ne];
+        uint32_t p = q[0], r = q[1];
+        if (via_diag(t, vr[p] & SDI_VR_RULE, J->scheme, p, r)) /* the flags go in the merge */
             cnt_a[p]++;
-        if (via_diag(t, vr[q], scheme, q, p))
-            cnt_a[q]++;
-        if (scheme == SD_SOLID_AVERAGED)
-            for (int i = 0; i < 6; i++)
-                if (vr[t->oct[o][i]] == SD_RULE_SOLID)
-                    cnt_b[t->oct[o][i]]++;
+        if (via_diag(t, vr[r] & SDI_VR_RULE, J->scheme, r, p))
+            cnt_a[r]++;
+        if (J->scheme == SD_SOLID_AVERAGED)
+            for (int k = 0; k < 6; k++)
+                if ((vr[q[k]] & SDI_VR_RULE) == SD_RULE_SOLID)
+                    cnt_b[q[k]]++;
     }
 }
 
-void sdi_vertex_rho_cols(const sd_topo *t, int scheme, const uint8_t *vr, const uint8_t *take,
-                         uint32_t *cur, uint32_t *col)
+static void rho_merge_part(void *arg, uint32_t part, uint32_t nparts)
 {
+    const rhojob *J = arg;
+    const rho_parts *R = J->R;
+    uint64_t lo, hi;
+    sdi_range(J->t->nv, part, nparts, &lo, &hi);
+    if (R->n == 1) { /* the counts are all part 0's: only the flags go */
+        for (uint32_t v = (uint32_t)lo; v < hi; v++)
+            J->vr[v] &= SDI_VR_RULE;
+        return;
+    }
+    for (uint32_t v = (uint32_t)lo; v < hi; v++) {
+        J->vr[v] &= SDI_VR_RULE;
+        uint32_t a = J->cnt_a[v], b = J->cnt_b ? J->cnt_b[v] : 0;
+        for (uint32_t p = 1; p < R->n; p++) {
+            a += R->at[p][v];
+            b += J->cnt_b ? R->nb[p][v] : 0;
+        }
+        J->cnt_a[v] = a;
+        if (J->cnt_b)
+            J->cnt_b[v] = b;
+    }
+}
+
+static void rho_parts_free(sd_mem *m, rho_parts *R)
+{
+    for (uint32_t p = 0; p < RHO_MAXP; p++) {
+        sdi_free(m, R->at[p]);
+        sdi_free(m, R->nb[p]);
+    }
+}
+
+bool sdi_vertex_rho(sd_mem *m, const sd_topo *t, int scheme, int threads, uint8_t *vr,
+                    uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take)
+{
+    rho_parts R = {0};
+    threads = threads < RHO_MAXP ? threads : RHO_MAXP;
+    const uint64_t items = (uint64_t)t->ne + t->noct;
+    R.n = sdi_par_parts(threads, items);
+    for (uint32_t p = 1; p < R.n; p++)
+        if (!(R.at[p] = sdi_alloc(m, ((size_t)t->nv + 1) * sizeof *R.at[p])) ||
+            (cnt_b && !(R.nb[p] = sdi_alloc(m, ((size_t)t->nv + 1) * sizeof *R.nb[p])))) {
+            rho_parts_free(m, &R);
+            return false;
+        }
+    rhojob J = {.t = t, .scheme = scheme, .vr = vr, .cnt_a = cnt_a, .cnt_b = cnt_b, .take = take,
+                .R = &R};
+    sdi_par(threads, items, rho_count_part, &J);
+    sdi_par(threads, t->nv, rho_merge_part, &J);
+    rho_parts_free(m, &R);
+    return true;
+}
+
+/* Vertices [lo, hi); all: that is every vertex (no test per entry, the serial case). */
+static inline __attribute__((always_inline)) void rho_cols_of(const rhojob *J, uint32_t lo,
+                                                              uint32_t hi, bool all)
+{
+    const sd_topo *t = J->t;
+    const uint8_t *vr = J->vrule, *take = J->take_r;
+    uint32_t *cur = J->cur, *col = J->col;
+#define MINE(v) (all || ((v) >= lo && (v) < hi))
     for (uint32_t e = 0; e < t->ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
-        if ((take[e] & 1) && vr[a] != SD_RULE_CORNER)
+        if ((take[e] & 1) && MINE(a) && vr[a] != SD_RULE_CORNER)
             col[cur[a]++] = b;
-        if ((take[e] & 2) && vr[b] != SD_RULE_CORNER)
+        if ((take[e] & 2) && MINE(b) && vr[b] != SD_RULE_CORNER)
             col[cur[b]++] = a;
     }
     for (uint32_t o = 0; o < t->noct; o++) {
         const uint32_t *q = t->oct[o];
-        for (int i = 0; i < 2; i++)
-            if (vr[q[i]] != SD_RULE_CORNER && via_diag(t, vr[q[i]], scheme, q[i], q[i ^ 1]))
-                col[cur[q[i]]++] = q[i ^ 1];
-        if (scheme == SD_SOLID_AVERAGED)
-            for (int i = 0; i < 6; i++)
-                if (vr[q[i]] == SD_RULE_SOLID)
-                    col[cur[q[i]]++] = q[i ^ 1];
+        for (int k = 0; k < 2; k++)
+            if (MINE(q[k]) && vr[q[k]] != SD_RULE_CORNER &&
+                via_diag(t, vr[q[k]], J->scheme, q[k], q[k ^ 1]))
+                col[cur[q[k]]++] = q[k ^ 1];
+        if (J->scheme == SD_SOLID_AVERAGED)
+            for (int k = 0; k < 6; k++)
+                if (MINE(q[k]) && vr[q[k]] == SD_RULE_SOLID)
+                    col[cur[q[k]]++] = q[k ^ 1];
     }
+#undef MINE
+}
+
+static void rho_cols_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const rhojob *J = arg;
+    uint64_t lo, hi;
+    sdi_range(J->t->nv, part, nparts, &lo, &hi);
+    if (nparts == 1)
+        rho_cols_of(J, 0, J->t->nv, true);
+    else
+        rho_cols_of(J, (uint32_t)lo, (uint32_t)hi, false);
+}
+
+void sdi_vertex_rho_cols(const sd_topo *t, int scheme, int threads, const uint8_t *vr,
+                         const uint8_t *take, uint32_t *cur, uint32_t *col)
+{
+    rhojob J = {.t = t, .scheme = scheme, .vrule = vr, .take_r = take, .cur = cur, .col = col};
+    sdi_par(threads, (uint64_t)t->ne + t->noct, rho_cols_part, &J);
 }
 
 /* ---- rings of edges ---------------------------------------------------------------------- */
@@ -172,9 +286,26 @@ void sdi_vertex_rho_cols(const sd_topo *t, int scheme, const uint8_t *vr, const 
 enum { M_SSURF = 4, M_LOOP = 8, M_SB = 16, M_N2 = 32 }; /* which faces give an edge its opposite
                                                           * vertices */
 
-void sdi_edge_opposites(const sd_topo *t, const uint8_t *er, uint32_t (*opp)[2], uint8_t *nopp)
+/* In parts by ranges of edges: each part reads every face but writes only its own edges, which
+ * so see their faces in id order, as alone. Every part reads the faces' arrays whole, so two
+ * parts gain 1.3x, not 2 (docs/BENCHMARKS.md "Two threads"); cut by faces, the edges two parts
+ * share would need a merge of their slots. */
+typedef struct oppjob {
+    const sd_topo *t;
+    const uint8_t *er;
+    uint32_t (*opp)[2];
+    uint8_t *nopp;
+} oppjob;
+
+/* Edges [lo, hi); all: that is every edge (no test per face, the serial case). */
+static inline __attribute__((always_inline)) void opp_edges(const oppjob *J, uint32_t lo,
+                                                            uint32_t hi, bool all)
 {
-    for (uint32_t e = 0; e < t->ne; e++) {
+    const sd_topo *t = J->t;
+    const uint8_t *er = J->er;
+    uint8_t *nopp = J->nopp;
+    uint32_t (*opp)[2] = J->opp;
+    for (uint32_t e = lo; e < hi; e++) {
         /* an embedded surface's edge takes its opposite vertices from tagged triangles */
         bool ss = t->eflag[e] & EF_SSURF;
         bool n2 = (t->ovmask & OVM_N2T) && nm_ov(t->enm[e]) == OV_N2 && !ss &&
@@ -191,6 +322,8 @@ void sdi_edge_opposites(const sd_topo *t, const uint8_t *er, uint32_t (*opp)[2],
                         (ff & FF_N2SEL ? M_N2 : 0);
         for (int j = 0; j < 3; j++) {
             uint32_t e = t->fe[f][j];
+            if (!all && (e < lo || e >= hi))
+                continue;
             unsigned n = nopp[e];
             if (!(n & want))
                 continue;
@@ -200,6 +333,24 @@ void sdi_edge_opposites(const sd_topo *t, const uint8_t *er, uint32_t (*opp)[2],
                 nopp[e] = (uint8_t)(n + 1);
         }
     }
+}
+
+static void opp_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const oppjob *J = arg;
+    uint64_t lo, hi;
+    sdi_range(J->t->ne, part, nparts, &lo, &hi);
+    if (nparts == 1)
+        opp_edges(J, 0, J->t->ne, true);
+    else
+        opp_edges(J, (uint32_t)lo, (uint32_t)hi, false);
+}
+
+void sdi_edge_opposites(const sd_topo *t, int threads, const uint8_t *er, uint32_t (*opp)[2],
+                        uint8_t *nopp)
+{
+    oppjob J = {t, er, opp, nopp};
+    sdi_par(threads, t->ne, opp_part, &J);
 }
 
 /* Equator neighbours in an octahedron: cycle a(2), b(4), a2(3), b2(5). */
@@ -272,35 +423,25 @@ static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
     }
 }
 
-bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int scheme, int threads,
-                     sdi_rings *R)
+/* The candidates in parts by ranges of edges: each part reads every cell and counts, then
+ * gathers, only its own edges' candidates, in cell order as alone (the sort that follows would
+ * make any order the same). Cut by cells instead, two parts would write the same edges' lists. */
+typedef struct srjob {
+    const sd_topo *t;
+    const uint8_t *erule;
+    bool avg, fill;                  /* fill: gather (at cur), else count */
+    sdi_rings *R;
+    uint32_t *cur;
+} srjob;
+
+static inline __attribute__((always_inline)) void solid_cands(const srjob *J, uint32_t lo,
+                                                              uint32_t hi, bool all, bool fill)
 {
-    uint32_t ne = t->ne;
-    R->off = sdi_calloc(m, (size_t)ne + 1, sizeof *R->off);
-    R->len = sdi_calloc(m, ne ? ne : 1, sizeof *R->len);
-    if (!R->off || !R->len)
-        return false;
-    bool avg = scheme == SD_SOLID_AVERAGED;
-    /* count */
-    for (uint32_t c = 0; c < t->ntet; c++)
-        for (int k = 0; k < 6; k++)
-            if (SDI_RULE_RING[erule[t->tet_e[c][k]]] == SDI_RING_SOLID)
-                R->off[t->tet_e[c][k] + 1] += 2;
-    for (uint32_t o = 0; o < t->noct; o++)
-        for (int k = 0; k < 12; k++)
-            if (SDI_RULE_RING[erule[t->oct_e[o][k]]] == SDI_RING_SOLID)
-                R->off[t->oct_e[o][k] + 1] += avg ? 4 : (k < 8 ? 3 : 2);
-    for (uint32_t e = 0; e < ne; e++)
-        R->off[e + 1] += R->off[e];
-    size_t total = R->off[ne];
-    R->v = sdi_alloc(m, (total + 1) * sizeof *R->v);
-    R->cls = sdi_alloc(m, total + 1);
-    uint32_t *cur = sdi_alloc(m, ((size_t)ne + 1) * sizeof *cur);
-    if (!R->v || !R->cls || !cur) {
-        sdi_free(m, cur);
-        return false;
-    }
-    memcpy(cur, R->off, (size_t)ne * sizeof *cur);
+    const sd_topo *t = J->t;
+    const uint8_t *erule = J->erule;
+    sdi_rings *R = J->R;
+    uint32_t *cnt = R->off + 1, *cur = J->cur;
+#define MINE(e) ((all || ((e) >= lo && (e) < hi)) && SDI_RULE_RING[erule[e]] == SDI_RING_SOLID)
 #define PUSH(e, x, c)                                                                        \
     do {                                                                                     \
         R->v[cur[e]] = (x);                                                                  \
@@ -309,8 +450,12 @@ bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int sche
     for (uint32_t c = 0; c < t->ntet; c++)
         for (int k = 0; k < 6; k++) {
             uint32_t e = t->tet_e[c][k];
-            if (SDI_RULE_RING[erule[e]] != SDI_RING_SOLID)
+            if (!MINE(e))
                 continue;
+            if (!fill) {
+                cnt[e] += 2;
+                continue;
+            }
             /* the two vertices not on edge k: those of the opposite edge 5-k */
             PUSH(e, t->tet[c][SDI_TET_E[5 - k][0]], 0);
             PUSH(e, t->tet[c][SDI_TET_E[5 - k][1]], 0);
@@ -318,11 +463,15 @@ bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int sche
     for (uint32_t o = 0; o < t->noct; o++)
         for (int k = 0; k < 12; k++) {
             uint32_t e = t->oct_e[o][k];
-            if (SDI_RULE_RING[erule[e]] != SDI_RING_SOLID)
+            if (!MINE(e))
                 continue;
+            if (!fill) {
+                cnt[e] += J->avg ? 4 : (k < 8 ? 3 : 2);
+                continue;
+            }
             const uint32_t *q = t->oct[o];
             int i = SDI_OCT_E[k][0], j = SDI_OCT_E[k][1];
-            if (avg) {
+            if (J->avg) {
                 /* faces of the octahedron on the edge: the two common neighbours;
                  * through the octahedron's diagonals: the opposites of both ends */
                 int com[2], nc = 0;
@@ -346,11 +495,53 @@ bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int sche
             }
         }
 #undef PUSH
-    sdi_free(m, cur);
+#undef MINE
+}
+
+static void solid_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const srjob *J = arg;
+    uint64_t lo, hi;
+    sdi_range(J->t->ne, part, nparts, &lo, &hi);
+    if (nparts == 1 && J->fill)
+        solid_cands(J, 0, J->t->ne, true, true);
+    else if (nparts == 1)
+        solid_cands(J, 0, J->t->ne, true, false);
+    else if (J->fill)
+        solid_cands(J, (uint32_t)lo, (uint32_t)hi, false, true);
+    else
+        solid_cands(J, (uint32_t)lo, (uint32_t)hi, false, false);
+}
+
+bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int scheme, int threads,
+                     sdi_rings *R)
+{
+    uint32_t ne = t->ne;
+    const uint64_t work = 8ull * t->ntet + 14ull * t->noct; /* as a split's */
+    srjob J = {.t = t, .erule = erule, .avg = scheme == SD_SOLID_AVERAGED, .R = R};
+    R->off = sdi_calloc(m, (size_t)ne + 1, sizeof *R->off);
+    R->len = sdi_calloc(m, ne ? ne : 1, sizeof *R->len);
+    if (!R->off || !R->len)
+        return false;
+    sdi_par(threads, work, solid_part, &J); /* count */
+    for (uint32_t e = 0; e < ne; e++)
+        R->off[e + 1] += R->off[e];
+    size_t total = R->off[ne];
+    R->v = sdi_alloc(m, (total + 1) * sizeof *R->v);
+    R->cls = sdi_alloc(m, total + 1);
+    J.cur = sdi_alloc(m, ((size_t)ne + 1) * sizeof *J.cur);
+    if (!R->v || !R->cls || !J.cur) {
+        sdi_free(m, J.cur);
+        return false;
+    }
+    memcpy(J.cur, R->off, (size_t)ne * sizeof *J.cur);
+    J.fill = true;
+    sdi_par(threads, work, solid_part, &J);
+    sdi_free(m, J.cur);
     /* sort and deduplicate each edge's list (as (vertex, class) pairs), edges in parallel */
-    ring_sort_job J = {R, ne, true};
-    sdi_par(threads, R->off[ne], ring_sort_part, &J);
-    return J.ok;
+    ring_sort_job S = {R, ne, true};
+    sdi_par(threads, R->off[ne], ring_sort_part, &S);
+    return S.ok;
 }
 
 /* Rings of G2 edges: the common neighbours (edges and diagonals) of both ends, filtered. The

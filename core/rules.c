@@ -197,17 +197,54 @@ sd_rule sdi_reported_edge_rule(const sd_topo *t, uint32_t e, uint8_t r)
     return ov >= OV_N1_1 && ov <= OV_N1_3 ? SD_RULE_N1 : ov == OV_N2 ? SD_RULE_N2 : (sd_rule)r;
 }
 
-void sdi_vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a, uint32_t *cnt_b,
-                      uint8_t *take)
+/* The per-vertex steps of sdi_vertex_rules, in parallel parts (ranges of vertices). */
+typedef struct vrjob {
+    const sd_topo *t;
+    uint8_t *vr;
+    uint32_t *cnt_a, *cnt_b;
+} vrjob;
+
+static void vrule_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const vrjob *J = arg;
+    uint64_t lo, hi;
+    sdi_range(J->t->nv, part, nparts, &lo, &hi);
+    for (uint32_t v = (uint32_t)lo; v < hi; v++) {
+        uint8_t r = sdi_vertex_rule(J->t, v);
+        J->vr[v] = r | ((r == SD_RULE_G2 || (J->t->vflag[v] & VF_S_ANY)) ? SDI_VR_SLOW : 0);
+    }
+}
+
+static void degenerate_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const vrjob *J = arg;
+    uint8_t *vr = J->vr;
+    uint32_t *cnt_a = J->cnt_a, *cnt_b = J->cnt_b;
+    uint64_t lo, hi;
+    sdi_range(J->t->nv, part, nparts, &lo, &hi);
+    for (uint32_t v = (uint32_t)lo; v < hi; v++) {
+        uint8_t rho = SDI_RULE_RHO[vr[v]];
+        bool degenerate = rho == SDI_RHO_CURVE || rho == SDI_RHO_SURFACE_BOUNDARY
+                          ? cnt_a[v] != 2 /* a point of a curve: two neighbours on it */
+                          : vr[v] != SD_RULE_CORNER && cnt_a[v] == 0;
+        if (degenerate || vr[v] == SD_RULE_CORNER) {
+            vr[v] = SD_RULE_CORNER;
+            cnt_a[v] = 0;
+            if (cnt_b)
+                cnt_b[v] = 0;
+        }
+    }
+}
+
+bool sdi_vertex_rules(sd_mem *m, const sd_topo *t, int scheme, int threads, uint8_t *vr,
+                      uint32_t *cnt_a, uint32_t *cnt_b, uint8_t *take)
 {
     const uint32_t nv = t->nv, ne = t->ne;
+    vrjob J = {t, vr, cnt_a, cnt_b};
     /* in vr while rho is counted (rings.c): SDI_VR_SLOW, rho is decided per neighbour (G2,
      * singular); SDI_VR_OWN, by the simplex's own N1/N2 choice; SDI_VR_BND, such a vertex has an
      * edge of its part's boundary */
-    for (uint32_t v = 0; v < nv; v++) {
-        uint8_t r = sdi_vertex_rule(t, v);
-        vr[v] = r | ((r == SD_RULE_G2 || (t->vflag[v] & VF_S_ANY)) ? SDI_VR_SLOW : 0);
-    }
+    sdi_par(threads, nv, vrule_part, &J);
     if (t->ovmask) { /* vertices with their own N1 / N2 choice and no tag */
         for (uint32_t v = 0; v < nv; v++) {
             int ov = nm_ov(t->vnm[v]);
@@ -231,29 +268,20 @@ void sdi_vertex_rules(const sd_topo *t, int scheme, uint8_t *vr, uint32_t *cnt_a
                 vr[v] = r | SDI_VR_OWN;
             }
     }
-    sdi_vertex_rho(t, scheme, vr, cnt_a, cnt_b, take); /* rho sizes; the flags go */
-    for (uint32_t v = 0; v < nv; v++) {
-        uint8_t rho = SDI_RULE_RHO[vr[v]];
-        bool degenerate = rho == SDI_RHO_CURVE || rho == SDI_RHO_SURFACE_BOUNDARY
-                          ? cnt_a[v] != 2 /* a point of a curve: two neighbours on it */
-                          : vr[v] != SD_RULE_CORNER && cnt_a[v] == 0;
-        if (degenerate || vr[v] == SD_RULE_CORNER) {
-            vr[v] = SD_RULE_CORNER;
-            cnt_a[v] = 0;
-            if (cnt_b)
-                cnt_b[v] = 0;
-        }
-    }
+    /* rho sizes; the flags go */
+    if (!sdi_vertex_rho(m, t, scheme, threads, vr, cnt_a, cnt_b, take))
+        return false;
+    sdi_par(threads, nv, degenerate_part, &J);
+    return true;
 }
 
 sd_result sdi_vertex_rules_only(sd_mem *m, const sd_topo *t, int scheme, uint8_t *vr)
 {
     uint32_t *a = sdi_calloc(m, (size_t)t->nv + 1, sizeof *a), *b = sdi_calloc(m, (size_t)t->nv + 1, sizeof *b);
-    if (a && b)
-        sdi_vertex_rules(t, scheme, vr, a, b, NULL);
+    bool ok = a && b && sdi_vertex_rules(m, t, scheme, 1, vr, a, b, NULL);
     sdi_free(m, a);
     sdi_free(m, b);
-    return a && b ? SD_OK : SD_ERR_NOMEM;
+    return ok ? SD_OK : SD_ERR_NOMEM;
 }
 
 /* ---- Ying-Zorin petals (003 Sec. 2) --------------------------------------------------------

@@ -410,7 +410,8 @@ static void templates(tmpl tt[3], tmpl *to)
      2 * P->ne + 3 * P->nf + 12 * (o), 4 * P->nf + 4 * P->ntet + 24 * (o)}
 
 /* A split's loops run in parts (par.c): each part takes its share of every loop below and
- * writes only the children of its own parent entities. */
+ * writes only the children of its own parent entities, so they may be cut into chunks taken in
+ * turn (sdi_par_dyn). */
 typedef struct sjob {
     const sd_topo *P;
     sd_topo *C;
@@ -531,7 +532,7 @@ sd_result sdi_split_cells(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, 
     sjob J = {.P = P, .C = C};
     if (P->ntet || P->noct)
         templates(J.tt, &J.to);
-    sdi_par(threads, split_work(P), cells_part, &J);
+    sdi_par_dyn(threads, split_work(P), 4, cells_part, &J);
     return SD_OK;
 }
 
@@ -599,7 +600,7 @@ sd_result sdi_split_edges(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, 
     }
 #undef A
     sjob J = {.P = P, .C = C};
-    sdi_par(threads, split_work(P), edges_part, &J);
+    sdi_par_dyn(threads, split_work(P), 4, edges_part, &J);
     C->derived = true;
     return SD_OK;
 }
@@ -682,7 +683,7 @@ sd_result sdi_split_faces(sd_mem *m, const sd_topo *P, sd_topo *C, int threads, 
     sjob J = {.P = P, .C = C, .alias = alias};
     if (P->ntet || P->noct)
         templates(J.tt, &J.to);
-    sdi_par(threads, split_work(P), faces_part, &J);
+    sdi_par_dyn(threads, split_work(P), 4, faces_part, &J);
     C->faces = true;
     return SD_OK;
 }

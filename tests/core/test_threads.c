@@ -9,8 +9,9 @@
         return 0;                                                                                  \
     } while (0)
 
-/* Level `top` of `m` with each thread count must equal the serial result. */
-static int same_levels(const mesh *m, const sd_options *base, int top)
+/* Level `top` of `m` with each thread count must equal the serial result; prep (if not NULL)
+ * sets each complex up before its levels are computed. */
+static int same_levels_prep(const mesh *m, const sd_options *base, int top, int (*prep)(sd_complex *))
 {
     sd_complex *c[3];
     const int threads[3] = {1, 2, 3};
@@ -18,7 +19,7 @@ static int same_levels(const mesh *m, const sd_options *base, int top)
         sd_options o = *base;
         o.threads = threads[i];
         c[i] = mesh_complex(m, &o, NULL);
-        if (!c[i])
+        if (!c[i] || (prep && !prep(c[i])))
             DIFF("a level");
         double attr[2 * 64];
         for (size_t v = 0; v < 2 * 64 && v < 2 * m->nv; v++)
@@ -111,6 +112,11 @@ static int same_levels(const mesh *m, const sd_options *base, int top)
     return 1;
 }
 
+static int same_levels(const mesh *m, const sd_options *base, int top)
+{
+    return same_levels_prep(m, base, top, NULL);
+}
+
 TEST(threads_same_bytes_solid)
 {
     mesh m = {0};
@@ -140,5 +146,57 @@ TEST(threads_same_bytes_mixed_nonmanifold)
     mesh_free(&m);
     shape_edge_star(&m, 5); /* G2 rules along a non-manifold edge */
     CHECK(same_levels(&m, &o, 5));
+    mesh_free(&m);
+}
+
+/* Semi-sharp creases and corners spread over all the ids of levels whose rows are made in
+ * parallel parts (each part finds where the sorted lists of sharp rows reach its first row,
+ * stencil.c): a 128 x 128 grid of triangle pairs, every 97th diagonal and 101st vertex sharp. */
+enum { GRID = 128 };
+
+static void shape_grid(mesh *m)
+{
+    for (int y = 0; y <= GRID; y++)
+        for (int x = 0; x <= GRID; x++)
+            mesh_v(m, x, y, 0.1 * sin(x + 0.3 * y));
+    for (uint32_t y = 0; y < GRID; y++)
+        for (uint32_t x = 0; x < GRID; x++) {
+            uint32_t a = y * (GRID + 1) + x, b = a + 1, c = a + GRID + 1, d = c + 1;
+            mesh_s(m, 3, a, b, c);
+            mesh_s(m, 3, b, d, c);
+        }
+}
+
+static int sharp_grid(sd_complex *c)
+{
+    sd_sharpness s[2 * GRID * GRID / 97 + (GRID + 1) * (GRID + 1) / 101 + 2];
+    size_t n = 0;
+    for (uint32_t i = 0; i < GRID * GRID; i += 97) {
+        uint32_t a = i / GRID * (GRID + 1) + i % GRID;
+        s[n++] = (sd_sharpness){{a + 1, a + GRID + 1, 0}, 2, 3.5f}; /* the cell's diagonal */
+    }
+    for (uint32_t v = 50; v < (GRID + 1) * (GRID + 1); v += 101)
+        s[n++] = (sd_sharpness){{v, 0, 0}, 1, 2.5f};
+    return sd_complex_set_sharpness(c, s, n, SD_CREASE_CHAIKIN, NULL) == SD_OK;
+}
+
+/* ... and a sharp embedded surface: a triangle inside a solid (a face of the first cube's first
+ * two tetrahedra), an edge of its boundary and one of its corners */
+static int sharp_cube(sd_complex *c)
+{
+    const sd_sharpness s[] = {{{0, 1, 21}, 3, 5.0f}, {{0, 1, 0}, 2, 4.5f}, {{3, 0, 0}, 1, 4.0f}};
+    return sd_complex_set_sharpness(c, s, 3, SD_CREASE_UNIFORM, NULL) == SD_OK;
+}
+
+TEST(threads_same_bytes_sharp)
+{
+    mesh m = {0};
+    shape_grid(&m);
+    sd_options o = {.surface_weights = SD_WEIGHTS_LOOP};
+    CHECK(same_levels_prep(&m, &o, 2, sharp_grid));
+    mesh_free(&m);
+    shape_cube_tets(&m, 3);
+    sd_options so = {0};
+    CHECK(same_levels_prep(&m, &so, 3, sharp_cube));
     mesh_free(&m);
 }
