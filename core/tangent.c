@@ -33,15 +33,17 @@
  *   factor 1/2 (t_1^{j+1} = (t_0^j + t_1^j)/4), and is constrained from then on; the two halves
  *   of a tagged edge are tagged. The limit tangent plane at v is then the one of the curve
  *   tangent and T_0, the limit normal T_0 x (the curve tangent).
- * All the modifications of a level are computed from S's points and added together (an inner
- * point of a petal is in the 1-rings of two vertices of the curve), so the result does not
- * depend on an order. With a curve's vertices modifying the inner points they share, a_1 itself
- * also takes a part along the curve from its neighbours' modifications; the plane does not
- * change (tests/python/test_tangent_planes.py reads the limit of a_1 / lambda_1^r from levels 2
- * to 6: the error has the modes (1 - s)^r and (1 - s)^2r only, and the limit normals of two
- * petals made tangent agree to 1e-14). Inferred data (Fig. 6) is taken from level 0's
- * positions: the Loop normal of a closed petal is a_1 x a_2 there, a petal's interior tangent
- * a_1.
+ * A vertex's modification moves only the midpoints of its own level-l edges, and the block of v
+ * and its 1-ring is closed under S, so two vertices' modifications meet only at a shared point:
+ * the midpoint of a level-0 inner edge joining two constrained vertices of a curve (a curve
+ * edge's midpoint is on the curve, where x^1 vanishes). There applying them in sequence would
+ * depend on the order, so all the modifications of a level are computed from S's points and
+ * added together; elsewhere that is the same as applying them one by one. Each step takes the
+ * fraction s of a_1's difference to T, and S scales a_1 by lambda_1, so a_1 / lambda_1^r tends
+ * to T_0 with the one mode (1 - s)^r and no part along the curve
+ * (tests/python/test_tangent_planes.py checks the limits from levels 2 to 6). Inferred data
+ * (Fig. 6) is taken from level 0's positions: the Loop normal of a closed petal is a_1 x a_2
+ * there, a petal's interior tangent a_1.
  *
  * A vertex whose rule at a level is not Ying-Zorin's petal rule (a PUT /rules choice of its
  * own, chang-qin) is left alone there and its data is not carried further.

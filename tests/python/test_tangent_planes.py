@@ -15,11 +15,12 @@ Expected values are derived here from 003's statements, not from core/tangent.c:
     the prescribed tangents to have the same length as a_1 ... on the top level";
   * the tangent modification drives the petal's tangent plane to the one holding the curve and
     the prescribed tangent, with the rate 1 - s (s = 3/4); inserted vertices take the midpoint
-    of their edge's ends' tangents. (a_1 itself also takes a part along the curve: an inner point
-    is in the 1-rings of two vertices of the curve, and both modify it.)
-The limit of a_1 / lambda^r is read from the daemon's levels 2 .. 6: on such a sequence the
-error has the modes (1 - s)^r and (1 - s)^2r only (checked: the extrapolations agree to 1e-12),
-so two Richardson steps give the limit to rounding. Limit normals compared to 1e-9.
+    of their edge's ends' tangents, (T_a + T_b) / 4 at their level (003 App. B). A vertex's
+    modification moves only its own 1-ring, a block S keeps, so a_1 / lambda^r tends to the target
+    with the one mode (1 - s)^r and no part along the curve.
+The limit of a_1 / lambda^r is read from the daemon's levels 2 .. 6 by Richardson steps (the
+first gives it to rounding; the second, for a (1 - s)^2r mode, is kept as a check). Limits of
+a_1 and normals compared to 1e-9.
 """
 import math
 
