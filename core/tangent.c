@@ -2,7 +2,8 @@
  * normals of closed petals at complex singular vertices, prescribed interior tangents of open
  * petals at simple singular vertices, and their interpolation along tagged singular edges; the
  * two inferred forms of 003 Fig. 6(b) (a normal shared by closed petals) and 6(c) (two petals
- * made tangent across a singular curve).
+ * made tangent across a singular curve: t and -t along the difference of their a_1, none where
+ * that is zero or along the curve).
  *
  * The modifications act on the points of level l + 1 once S_l has made them (levels.c), each in
  * the 1-ring N_1(v) of a constrained vertex v within its petal, with s = SD_TT_S = 3/4 (003:
@@ -98,6 +99,14 @@ static inline void cross3(const double *a, const double *b, double *c)
     c[0] = a[1] * b[2] - a[2] * b[1];
     c[1] = a[2] * b[0] - a[0] * b[2];
     c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/* Whether directions a and b are parallel to 1e-9 (a zero one counts as parallel). */
+static bool parallel3(const double *a, const double *b)
+{
+    double w[3];
+    cross3(a, b, w);
+    return norm3(w) <= 1e-9 * norm3(a) * norm3(b);
 }
 
 /* ---- petals ------------------------------------------------------------------------------- */
@@ -284,12 +293,11 @@ static sd_result check_petal(const sd_complex *c, const sdi_rels *R, const uint8
     }
     const double *x = c->lv[0]->ch[0].data;
     if (g->kind == SD_TT_TANGENT) { /* not along the curve: q_0 - q_k is its direction at v */
-        double cv[3], w[3];
+        double cv[3];
         uint32_t q0 = other_end(t, S->ring[0], v), qk = other_end(t, S->ring[n - 1], v);
         for (int d = 0; d < 3; d++)
             cv[d] = x[3 * (size_t)q0 + d] - x[3 * (size_t)qk + d];
-        cross3(cv, g->vec, w);
-        if (norm3(w) <= 1e-9 * norm3(cv) * norm3(g->vec))
+        if (parallel3(cv, g->vec))
             return sdi_fail(err, SD_ERR_VALUE, (long)i, SD_TT_FIELD_VECTOR,
                             "tangent %zu: the interior tangent is along the singular curve at "
                             "vertex %u, so it spans no tangent plane with it", i, v);
@@ -517,6 +525,7 @@ static bool petal_a1(const sd_topo *t, const sdi_rel *ef, const double *x, scrat
     for (uint32_t j = 0; j < n; j++)
         S->tmp[j] = other_end(t, S->ring[j], v);
     open_a1(x, v, S->tmp, n - 1, a1);
+    S->tmp[1] = S->tmp[n - 1]; /* the curve's ends q_0, q_k, for the caller */
     return true;
 }
 
@@ -661,17 +670,20 @@ static sd_result level0(sd_complex *c, const sdi_rels *R, scratch *S, struct sdi
                     goto nomem_i;
                 continue;
             }
-            double d[3];
-            for (int k = 0; k < 3; k++)
+            /* "t and -t": P_1 takes -unit(d), P_2 unit(d), each at its |a_1| */
+            double d[3], cv[3];
+            for (int k = 0; k < 3; k++) {
                 d[k] = a[1][k] - a[0][k];
+                cv[k] = x[3 * (size_t)S->tmp[0] + k] - x[3 * (size_t)S->tmp[1] + k];
+            }
             double dl = norm3(d);
             if (!(dl > 1e-12 * (norm3(a[0]) + norm3(a[1]))))
                 continue; /* the same interior tangent: nothing to project onto */
+            if (parallel3(cv, d))
+                continue; /* along the curve: no tangent plane with it, neither constrained */
             for (int h = 0; h < 2; h++) {
-                double pr = dot3(a[h], d) / dl, len = norm3(a[h]);
-                if (pr == 0)
-                    break;
-                scale_to(T[h], d, pr < 0 ? -len : len);
+                double len = norm3(a[h]);
+                scale_to(T[h], d, (h ? 1 : -1) * (len > 0 ? len : 1));
                 sdi_tprec r = {.v = v, .f = c->tt_f[2 * i + h], .key = key[h],
                                .kind = SD_TT_TANGENT};
                 memcpy(r.d, T[h], sizeof r.d);

@@ -43,15 +43,18 @@ def daemon():
 # ---- meshes ------------------------------------------------------------------------------------
 
 SHEETS = [(0.0, 1.0, 0.25), (0.15, -1.0, 0.6), (0.0, 0.2, 1.0)]
+# sheet 1 on sheet 0's side and longer: a_1(0) . a_1(1) > |a_1(0)|^2, the projections of both
+# onto their difference point the same way
+SHEETS_SAME_SIDE = [(0.0, 1.0, 0.25), (0.1, 2.0, 1.2), (0.0, -0.3, 1.0)]
 
 
-def tjunction():
+def tjunction(sheets=SHEETS):
     """A singular curve (ids 0..4, a parabola) where three sheets of two rows meet (003 Fig. 5(c):
     two of them are the halves of a surface, the third a fin). Vertices 1, 2, 3 are simple
     singular vertices with 3 triangles per petal; 0 and 4 are complex (the sheets' sides)."""
     V = [[float(x), 0.0, 0.1 * x * x] for x in range(-2, 3)]
     T = []
-    for d in SHEETS:
+    for d in sheets:
         rows = [list(range(5))]
         for r in (1, 2):
             ids = []
@@ -263,13 +266,14 @@ def curve_vertices_level1(s, V, T):
     return mids
 
 
-def test_inferred_tangent_plane_along_curve(daemon):
+@pytest.mark.parametrize("sheets", [SHEETS, SHEETS_SAME_SIDE], ids=["apart", "same-side"])
+def test_inferred_tangent_plane_along_curve(daemon, sheets):
     """003 Fig. 6(c): the two halves of the surface (sheets 0 and 1) made tangent along the curve
     with no tangent given: at every vertex of the curve the limit normals of the two sheets are
     equal (1e-9) and the projections of the level-0 interior tangents onto their difference are
     tangent to both, the inserted vertices' interpolated ones too, and the fin (sheet 2) keeps
     its own tangent plane."""
-    V, T = tjunction()
+    V, T = tjunction(sheets)
     edges = [{"edge": [i, i + 1], "triangles": [sheet_triangle(T, 0, i), sheet_triangle(T, 1, i)]}
              for i in range(4)]
     s = session(daemon, V, T, {"tangent_edges": edges})
@@ -279,6 +283,8 @@ def test_inferred_tangent_plane_along_curve(daemon):
         # "t and -t" along d = a_1(sheet 1) - a_1(sheet 0): sheet 0 takes -unit(d), sheet 1
         # +unit(d), each at its own level-0 length (003's scaling)
         a = [a1_a2(X0, v, sheet_ring(X0, T, v, sh))[0] for sh in (0, 1)]
+        if sheets is SHEETS_SAME_SIDE:
+            assert a[0] @ a[1] > a[0] @ a[0]
         d = unit(a[1] - a[0])
         want[(v, 0)] = -np.linalg.norm(a[0]) * d
         want[(v, 1)] = np.linalg.norm(a[1]) * d
