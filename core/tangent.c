@@ -245,11 +245,11 @@ static sd_result check_petal(const sd_complex *c, const sdi_rels *R, const uint8
     uint32_t f = sdi_rels_face(R, g->triangle);
     if (f == UINT32_MAX || !(t->fflag[f] & FF_MAX))
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_TRIANGLE,
-                        "%s %zu: [%u, %u, %u] is not a surface triangle of the complex", what, i,
+                        "%s: [%u, %u, %u] is not a surface triangle of the complex", what,
                         g->triangle[0], g->triangle[1], g->triangle[2]);
     if (!sdi_face_has(t, f, v))
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_TRIANGLE,
-                        "%s %zu: the triangle does not hold vertex %u", what, i, v);
+                        "%s: the triangle does not hold vertex %u", what, v);
     uint32_t nsing = 0;
     for (uint32_t k = ve->off[v]; k < ve->off[v + 1]; k++)
         nsing += sdi_yz_counts_singular(t, ve->item[k]);
@@ -257,38 +257,38 @@ static sd_result check_petal(const sd_complex *c, const sdi_rels *R, const uint8
     const bool simple = nm && sdi_yz_simple(nm_type(t->vnm[v]), nsing);
     if (g->kind == SD_TT_NORMAL && (!nm || simple))
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_VERTEX,
-                        "normal %zu: vertex %u is not a complex singular vertex of a triangle "
+                        "normal: vertex %u is not a complex singular vertex of a triangle "
                         "mesh (a non-manifold vertex where only triangles meet, not one flower "
                         "with exactly two singular edges): prescribed normals are for its "
-                        "closed petals", i, v);
+                        "closed petals", v);
     if (g->kind == SD_TT_TANGENT && !simple)
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_VERTEX,
-                        "tangent %zu: vertex %u is not a simple singular vertex of a triangle "
+                        "tangent: vertex %u is not a simple singular vertex of a triangle "
                         "mesh (one flower with exactly two singular edges, non-manifold): "
-                        "interior tangents are for the open petals along a singular curve", i, v);
+                        "interior tangents are for the open petals along a singular curve", v);
     if (tagv[v])
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_VERTEX,
-                        "%s %zu: vertex %u %s, so its petals have no Ying-Zorin rule", what, i, v,
+                        "%s: vertex %u %s, so its petals have no Ying-Zorin rule", what, v,
                         tagv[v] == 1 ? "is tagged singular"
                                      : "lies on a tagged crease or embedded surface");
     uint32_t n, nf;
     int kind = petal_ring(t, &R->r[SDI_EF], v, f, S->ring, S->tmp, S->faces, S->cap, &n, &nf);
     if (g->kind == SD_TT_NORMAL && kind != RING_CLOSED)
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_TRIANGLE,
-                        "normal %zu: the petal of vertex %u holding this triangle is not closed "
+                        "normal: the petal of vertex %u holding this triangle is not closed "
                         "(it meets a singular edge); a normal is prescribed for a closed petal",
-                        i, v);
+                        v);
     if (g->kind == SD_TT_TANGENT && (kind != RING_OPEN || nf < 2))
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_TRIANGLE,
-                        "tangent %zu: the petal of vertex %u holding this triangle is %s; an "
-                        "interior tangent needs an open petal of 2 or more triangles", i, v,
+                        "tangent: the petal of vertex %u holding this triangle is %s; an "
+                        "interior tangent needs an open petal of 2 or more triangles", v,
                         kind == RING_OPEN ? "one triangle" : "not open");
     for (uint32_t k = 0; k < nf; k++) {
         uint32_t h = S->faces[k], slot = 3 * h + (child_at(t, h, v) & 3);
         if (owner[slot] != UINT32_MAX)
             return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_TRIANGLE,
-                            "%s %zu: entry %u already constrains this petal of vertex %u", what,
-                            i, owner[slot], v);
+                            "%s: an earlier entry already constrains this petal of vertex %u",
+                            what, v);
         owner[slot] = (uint32_t)i;
     }
     const double *x = c->lv[0]->ch[0].data;
@@ -299,8 +299,8 @@ static sd_result check_petal(const sd_complex *c, const sdi_rels *R, const uint8
             cv[d] = x[3 * (size_t)q0 + d] - x[3 * (size_t)qk + d];
         if (parallel3(cv, g->vec))
             return sdi_fail(err, SD_ERR_VALUE, (long)i, SD_TT_FIELD_VECTOR,
-                            "tangent %zu: the interior tangent is along the singular curve at "
-                            "vertex %u, so it spans no tangent plane with it", i, v);
+                            "tangent: the interior tangent is along the singular curve at "
+                            "vertex %u, so it spans no tangent plane with it", v);
     }
     return SD_OK;
 }
@@ -313,13 +313,13 @@ static sd_result check_edge(const sd_complex *c, const sdi_rels *R, const sd_tan
     uint32_t e = g->edge[0] == g->edge[1] ? UINT32_MAX : sdi_rels_edge(R, g->edge[0], g->edge[1]);
     if (e == UINT32_MAX)
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_EDGE,
-                        "tangent edge %zu: [%u, %u] is not an edge of the complex", i,
+                        "tangent edge: [%u, %u] is not an edge of the complex",
                         g->edge[0], g->edge[1]);
     if (!sdi_yz_counts_singular(t, e) || (t->eflag[e] & (EF_CREASE | EF_SSURF)))
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_EDGE,
-                        "tangent edge %zu: [%u, %u] is not a singular edge of triangles (a "
+                        "tangent edge: [%u, %u] is not a singular edge of triangles (a "
                         "non-manifold or boundary edge where only triangles meet, not tagged)",
-                        i, g->edge[0], g->edge[1]);
+                        g->edge[0], g->edge[1]);
     uint32_t a = g->edge[0] < g->edge[1] ? g->edge[0] : g->edge[1];
     *key = (uint64_t)a << 32 | (g->edge[0] ^ g->edge[1] ^ a);
     for (int h = 0; h < g->npair; h++) {
@@ -327,14 +327,14 @@ static sd_result check_edge(const sd_complex *c, const sdi_rels *R, const sd_tan
         int field = h ? SD_TT_FIELD_PAIR1 : SD_TT_FIELD_PAIR0;
         if (f == UINT32_MAX || !(t->fflag[f] & FF_MAX))
             return sdi_fail(err, SD_ERR_ARG, (long)i, field,
-                            "tangent edge %zu: [%u, %u, %u] is not a surface triangle of the "
-                            "complex", i, g->pair[h][0], g->pair[h][1], g->pair[h][2]);
+                            "tangent edge: [%u, %u, %u] is not a surface triangle of the "
+                            "complex", g->pair[h][0], g->pair[h][1], g->pair[h][2]);
         if (!sdi_face_has(t, f, g->edge[0]) || !sdi_face_has(t, f, g->edge[1]))
             return sdi_fail(err, SD_ERR_ARG, (long)i, field,
-                            "tangent edge %zu: the triangle does not hold the edge", i);
+                            "tangent edge: the triangle does not hold the edge");
         if (h && f == tt_f[2 * i])
             return sdi_fail(err, SD_ERR_ARG, (long)i, field,
-                            "tangent edge %zu: the two triangles are the same", i);
+                            "tangent edge: the two triangles are the same");
         tt_f[2 * i + h] = f;
     }
     return SD_OK;
@@ -349,38 +349,38 @@ sd_result sd_complex_set_tangents(sd_complex *c, const sd_tangent_tag *tt, size_
         const sd_tangent_tag *g = &tt[i];
         if (g->kind < SD_TT_NORMAL || g->kind > SD_TT_EDGE)
             return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_VERTEX,
-                            "tangent tag %zu: unknown kind", i);
+                            "tangent tag: unknown kind");
         if (g->kind == SD_TT_EDGE) {
             for (int j = 0; j < 2; j++)
                 if (g->edge[j] >= t->nv)
                     return sdi_fail(err, SD_ERR_INDEX, (long)i, SD_TT_FIELD_EDGE,
-                                    "tangent edge %zu: vertex %u out of range", i, g->edge[j]);
+                                    "tangent edge: vertex %u out of range", g->edge[j]);
             if (g->npair != 0 && g->npair != 2)
                 return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_PAIR0,
-                                "tangent edge %zu: a pair is two triangles", i);
+                                "tangent edge: a pair is two triangles");
             for (int h = 0; h < g->npair; h++)
                 for (int j = 0; j < 3; j++)
                     if (g->pair[h][j] >= t->nv)
                         return sdi_fail(err, SD_ERR_INDEX, (long)i,
                                         h ? SD_TT_FIELD_PAIR1 : SD_TT_FIELD_PAIR0,
-                                        "tangent edge %zu: vertex %u out of range", i,
+                                        "tangent edge: vertex %u out of range",
                                         g->pair[h][j]);
             continue;
         }
         if (g->vertex >= t->nv)
             return sdi_fail(err, SD_ERR_INDEX, (long)i, SD_TT_FIELD_VERTEX,
-                            "tangent tag %zu: vertex %u out of range", i, g->vertex);
+                            "tangent tag: vertex %u out of range", g->vertex);
         for (int j = 0; j < 3; j++)
             if (g->triangle[j] >= t->nv)
                 return sdi_fail(err, SD_ERR_INDEX, (long)i, SD_TT_FIELD_TRIANGLE,
-                                "tangent tag %zu: vertex %u out of range", i, g->triangle[j]);
+                                "tangent tag: vertex %u out of range", g->triangle[j]);
         bool shared = g->kind == SD_TT_NORMAL && isnan(g->vec[0]) && isnan(g->vec[1]) &&
                       isnan(g->vec[2]);
         double len = norm3(g->vec);
         if (!shared && !(isfinite(len) && len > 0))
             return sdi_fail(err, SD_ERR_VALUE, (long)i, SD_TT_FIELD_VECTOR,
-                            "tangent tag %zu: the %s is not a finite vector of non-zero length",
-                            i, g->kind == SD_TT_NORMAL ? "normal" : "tangent");
+                            "tangent tag: the %s is not a finite vector of non-zero length",
+                            g->kind == SD_TT_NORMAL ? "normal" : "tangent");
     }
     /* a group (consecutive entries): the petals of one vertex, with one normal or none; none
      * needs two or more petals to share */
@@ -391,13 +391,13 @@ sd_result sd_complex_set_tangents(sd_complex *c, const sd_tangent_tag *tt, size_
         while (j < n && tt[j].kind == SD_TT_NORMAL && tt[j].group == tt[i].group) {
             if (tt[j].vertex != tt[i].vertex)
                 return sdi_fail(err, SD_ERR_ARG, (long)j, SD_TT_FIELD_VERTEX,
-                                "normal %zu: the petals sharing a normal are at one vertex", j);
+                                "normal: the petals sharing a normal are at one vertex");
             j++;
         }
         if (isnan(tt[i].vec[0]) && j - i < 2)
             return sdi_fail(err, SD_ERR_VALUE, (long)i, SD_TT_FIELD_VECTOR,
-                            "normal %zu: without a normal, two or more petals share the average "
-                            "of their normals (003 Fig. 6(b)); one petal has nothing to share", i);
+                            "normal: without a normal, two or more petals share the average "
+                            "of their normals (003 Fig. 6(b)); one petal has nothing to share");
     }
     sd_result rc = SD_OK;
     sdi_rels R = {.t = t};
@@ -437,18 +437,14 @@ sd_result sd_complex_set_tangents(sd_complex *c, const sd_tangent_tag *tt, size_
     }
     if (!rc && nk > 1) { /* one entry per edge: the first repeat, by entry */
         qsort(keys, nk, 2 * sizeof *keys, cmp_u64pair);
-        size_t bad = SIZE_MAX, first = 0;
+        size_t bad = SIZE_MAX;
         for (size_t i = 1; i < nk; i++)
-            if (keys[2 * i] == keys[2 * i - 2] && keys[2 * i + 1] < bad) {
-                size_t f0 = i - 1;
-                while (f0 > 0 && keys[2 * f0 - 2] == keys[2 * i])
-                    f0--;
+            if (keys[2 * i] == keys[2 * i - 2] && keys[2 * i + 1] < bad)
                 bad = keys[2 * i + 1];
-                first = keys[2 * f0 + 1];
-            }
-        if (bad != SIZE_MAX)
+        if (bad != SIZE_MAX) /* no entry numbers: the API numbers its lists its own way */
             rc = sdi_fail(err, SD_ERR_ARG, (long)bad, SD_TT_FIELD_EDGE,
-                          "tangent edge %zu: names the same edge as entry %zu", bad, first);
+                          "tangent edge: [%u, %u] is named by an earlier entry too",
+                          tt[bad].edge[0], tt[bad].edge[1]);
     }
     if (rc)
         goto out;
