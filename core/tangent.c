@@ -2,7 +2,8 @@
  * normals of closed petals at complex singular vertices, prescribed interior tangents of open
  * petals at simple singular vertices, and their interpolation along tagged singular edges; the
  * two inferred forms of 003 Fig. 6(b) (a normal shared by closed petals) and 6(c) (two petals
- * made tangent across a singular curve).
+ * made tangent across a singular curve: t and -t along the difference of their a_1, none where
+ * that is zero or along the curve).
  *
  * The modifications act on the points of level l + 1 once S_l has made them (levels.c), each in
  * the 1-ring N_1(v) of a constrained vertex v within its petal, with s = SD_TT_S = 3/4 (003:
@@ -33,15 +34,17 @@
  *   factor 1/2 (t_1^{j+1} = (t_0^j + t_1^j)/4), and is constrained from then on; the two halves
  *   of a tagged edge are tagged. The limit tangent plane at v is then the one of the curve
  *   tangent and T_0, the limit normal T_0 x (the curve tangent).
- * All the modifications of a level are computed from S's points and added together (an inner
- * point of a petal is in the 1-rings of two vertices of the curve), so the result does not
- * depend on an order. With a curve's vertices modifying the inner points they share, a_1 itself
- * also takes a part along the curve from its neighbours' modifications; the plane does not
- * change (tests/python/test_tangent_planes.py reads the limit of a_1 / lambda_1^r from levels 2
- * to 6: the error has the modes (1 - s)^r and (1 - s)^2r only, and the limit normals of two
- * petals made tangent agree to 1e-14). Inferred data (Fig. 6) is taken from level 0's
- * positions: the Loop normal of a closed petal is a_1 x a_2 there, a petal's interior tangent
- * a_1.
+ * A vertex's modification moves only the midpoints of its own level-l edges, and the block of v
+ * and its 1-ring is closed under S, so two vertices' modifications meet only at a shared point:
+ * the midpoint of a level-0 inner edge joining two constrained vertices of a curve (a curve
+ * edge's midpoint is on the curve, where x^1 vanishes). There applying them in sequence would
+ * depend on the order, so all the modifications of a level are computed from S's points and
+ * added together; elsewhere that is the same as applying them one by one. Each step takes the
+ * fraction s of a_1's difference to T, and S scales a_1 by lambda_1, so a_1 / lambda_1^r tends
+ * to T_0 with the one mode (1 - s)^r and no part along the curve
+ * (tests/python/test_tangent_planes.py checks the limits from levels 2 to 6). Inferred data
+ * (Fig. 6) is taken from level 0's positions: the Loop normal of a closed petal is a_1 x a_2
+ * there, a petal's interior tangent a_1.
  *
  * A vertex whose rule at a level is not Ying-Zorin's petal rule (a PUT /rules choice of its
  * own, chang-qin) is left alone there and its data is not carried further.
@@ -96,6 +99,14 @@ static inline void cross3(const double *a, const double *b, double *c)
     c[0] = a[1] * b[2] - a[2] * b[1];
     c[1] = a[2] * b[0] - a[0] * b[2];
     c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/* Whether directions a and b are parallel to 1e-9 (a zero one counts as parallel). */
+static bool parallel3(const double *a, const double *b)
+{
+    double w[3];
+    cross3(a, b, w);
+    return norm3(w) <= 1e-9 * norm3(a) * norm3(b);
 }
 
 /* ---- petals ------------------------------------------------------------------------------- */
@@ -234,11 +245,11 @@ static sd_result check_petal(const sd_complex *c, const sdi_rels *R, const uint8
     uint32_t f = sdi_rels_face(R, g->triangle);
     if (f == UINT32_MAX || !(t->fflag[f] & FF_MAX))
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_TRIANGLE,
-                        "%s %zu: [%u, %u, %u] is not a surface triangle of the complex", what, i,
+                        "%s: [%u, %u, %u] is not a surface triangle of the complex", what,
                         g->triangle[0], g->triangle[1], g->triangle[2]);
     if (!sdi_face_has(t, f, v))
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_TRIANGLE,
-                        "%s %zu: the triangle does not hold vertex %u", what, i, v);
+                        "%s: the triangle does not hold vertex %u", what, v);
     uint32_t nsing = 0;
     for (uint32_t k = ve->off[v]; k < ve->off[v + 1]; k++)
         nsing += sdi_yz_counts_singular(t, ve->item[k]);
@@ -246,51 +257,50 @@ static sd_result check_petal(const sd_complex *c, const sdi_rels *R, const uint8
     const bool simple = nm && sdi_yz_simple(nm_type(t->vnm[v]), nsing);
     if (g->kind == SD_TT_NORMAL && (!nm || simple))
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_VERTEX,
-                        "normal %zu: vertex %u is not a complex singular vertex of a triangle "
+                        "normal: vertex %u is not a complex singular vertex of a triangle "
                         "mesh (a non-manifold vertex where only triangles meet, not one flower "
                         "with exactly two singular edges): prescribed normals are for its "
-                        "closed petals", i, v);
+                        "closed petals", v);
     if (g->kind == SD_TT_TANGENT && !simple)
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_VERTEX,
-                        "tangent %zu: vertex %u is not a simple singular vertex of a triangle "
+                        "tangent: vertex %u is not a simple singular vertex of a triangle "
                         "mesh (one flower with exactly two singular edges, non-manifold): "
-                        "interior tangents are for the open petals along a singular curve", i, v);
+                        "interior tangents are for the open petals along a singular curve", v);
     if (tagv[v])
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_VERTEX,
-                        "%s %zu: vertex %u %s, so its petals have no Ying-Zorin rule", what, i, v,
+                        "%s: vertex %u %s, so its petals have no Ying-Zorin rule", what, v,
                         tagv[v] == 1 ? "is tagged singular"
                                      : "lies on a tagged crease or embedded surface");
     uint32_t n, nf;
     int kind = petal_ring(t, &R->r[SDI_EF], v, f, S->ring, S->tmp, S->faces, S->cap, &n, &nf);
     if (g->kind == SD_TT_NORMAL && kind != RING_CLOSED)
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_TRIANGLE,
-                        "normal %zu: the petal of vertex %u holding this triangle is not closed "
+                        "normal: the petal of vertex %u holding this triangle is not closed "
                         "(it meets a singular edge); a normal is prescribed for a closed petal",
-                        i, v);
+                        v);
     if (g->kind == SD_TT_TANGENT && (kind != RING_OPEN || nf < 2))
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_TRIANGLE,
-                        "tangent %zu: the petal of vertex %u holding this triangle is %s; an "
-                        "interior tangent needs an open petal of 2 or more triangles", i, v,
+                        "tangent: the petal of vertex %u holding this triangle is %s; an "
+                        "interior tangent needs an open petal of 2 or more triangles", v,
                         kind == RING_OPEN ? "one triangle" : "not open");
     for (uint32_t k = 0; k < nf; k++) {
         uint32_t h = S->faces[k], slot = 3 * h + (child_at(t, h, v) & 3);
         if (owner[slot] != UINT32_MAX)
             return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_TRIANGLE,
-                            "%s %zu: entry %u already constrains this petal of vertex %u", what,
-                            i, owner[slot], v);
+                            "%s: an earlier entry already constrains this petal of vertex %u",
+                            what, v);
         owner[slot] = (uint32_t)i;
     }
     const double *x = c->lv[0]->ch[0].data;
     if (g->kind == SD_TT_TANGENT) { /* not along the curve: q_0 - q_k is its direction at v */
-        double cv[3], w[3];
+        double cv[3];
         uint32_t q0 = other_end(t, S->ring[0], v), qk = other_end(t, S->ring[n - 1], v);
         for (int d = 0; d < 3; d++)
             cv[d] = x[3 * (size_t)q0 + d] - x[3 * (size_t)qk + d];
-        cross3(cv, g->vec, w);
-        if (norm3(w) <= 1e-9 * norm3(cv) * norm3(g->vec))
+        if (parallel3(cv, g->vec))
             return sdi_fail(err, SD_ERR_VALUE, (long)i, SD_TT_FIELD_VECTOR,
-                            "tangent %zu: the interior tangent is along the singular curve at "
-                            "vertex %u, so it spans no tangent plane with it", i, v);
+                            "tangent: the interior tangent is along the singular curve at "
+                            "vertex %u, so it spans no tangent plane with it", v);
     }
     return SD_OK;
 }
@@ -303,13 +313,13 @@ static sd_result check_edge(const sd_complex *c, const sdi_rels *R, const sd_tan
     uint32_t e = g->edge[0] == g->edge[1] ? UINT32_MAX : sdi_rels_edge(R, g->edge[0], g->edge[1]);
     if (e == UINT32_MAX)
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_EDGE,
-                        "tangent edge %zu: [%u, %u] is not an edge of the complex", i,
+                        "tangent edge: [%u, %u] is not an edge of the complex",
                         g->edge[0], g->edge[1]);
     if (!sdi_yz_counts_singular(t, e) || (t->eflag[e] & (EF_CREASE | EF_SSURF)))
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_EDGE,
-                        "tangent edge %zu: [%u, %u] is not a singular edge of triangles (a "
+                        "tangent edge: [%u, %u] is not a singular edge of triangles (a "
                         "non-manifold or boundary edge where only triangles meet, not tagged)",
-                        i, g->edge[0], g->edge[1]);
+                        g->edge[0], g->edge[1]);
     uint32_t a = g->edge[0] < g->edge[1] ? g->edge[0] : g->edge[1];
     *key = (uint64_t)a << 32 | (g->edge[0] ^ g->edge[1] ^ a);
     for (int h = 0; h < g->npair; h++) {
@@ -317,14 +327,14 @@ static sd_result check_edge(const sd_complex *c, const sdi_rels *R, const sd_tan
         int field = h ? SD_TT_FIELD_PAIR1 : SD_TT_FIELD_PAIR0;
         if (f == UINT32_MAX || !(t->fflag[f] & FF_MAX))
             return sdi_fail(err, SD_ERR_ARG, (long)i, field,
-                            "tangent edge %zu: [%u, %u, %u] is not a surface triangle of the "
-                            "complex", i, g->pair[h][0], g->pair[h][1], g->pair[h][2]);
+                            "tangent edge: [%u, %u, %u] is not a surface triangle of the "
+                            "complex", g->pair[h][0], g->pair[h][1], g->pair[h][2]);
         if (!sdi_face_has(t, f, g->edge[0]) || !sdi_face_has(t, f, g->edge[1]))
             return sdi_fail(err, SD_ERR_ARG, (long)i, field,
-                            "tangent edge %zu: the triangle does not hold the edge", i);
+                            "tangent edge: the triangle does not hold the edge");
         if (h && f == tt_f[2 * i])
             return sdi_fail(err, SD_ERR_ARG, (long)i, field,
-                            "tangent edge %zu: the two triangles are the same", i);
+                            "tangent edge: the two triangles are the same");
         tt_f[2 * i + h] = f;
     }
     return SD_OK;
@@ -339,38 +349,38 @@ sd_result sd_complex_set_tangents(sd_complex *c, const sd_tangent_tag *tt, size_
         const sd_tangent_tag *g = &tt[i];
         if (g->kind < SD_TT_NORMAL || g->kind > SD_TT_EDGE)
             return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_VERTEX,
-                            "tangent tag %zu: unknown kind", i);
+                            "tangent tag: unknown kind");
         if (g->kind == SD_TT_EDGE) {
             for (int j = 0; j < 2; j++)
                 if (g->edge[j] >= t->nv)
                     return sdi_fail(err, SD_ERR_INDEX, (long)i, SD_TT_FIELD_EDGE,
-                                    "tangent edge %zu: vertex %u out of range", i, g->edge[j]);
+                                    "tangent edge: vertex %u out of range", g->edge[j]);
             if (g->npair != 0 && g->npair != 2)
                 return sdi_fail(err, SD_ERR_ARG, (long)i, SD_TT_FIELD_PAIR0,
-                                "tangent edge %zu: a pair is two triangles", i);
+                                "tangent edge: a pair is two triangles");
             for (int h = 0; h < g->npair; h++)
                 for (int j = 0; j < 3; j++)
                     if (g->pair[h][j] >= t->nv)
                         return sdi_fail(err, SD_ERR_INDEX, (long)i,
                                         h ? SD_TT_FIELD_PAIR1 : SD_TT_FIELD_PAIR0,
-                                        "tangent edge %zu: vertex %u out of range", i,
+                                        "tangent edge: vertex %u out of range",
                                         g->pair[h][j]);
             continue;
         }
         if (g->vertex >= t->nv)
             return sdi_fail(err, SD_ERR_INDEX, (long)i, SD_TT_FIELD_VERTEX,
-                            "tangent tag %zu: vertex %u out of range", i, g->vertex);
+                            "tangent tag: vertex %u out of range", g->vertex);
         for (int j = 0; j < 3; j++)
             if (g->triangle[j] >= t->nv)
                 return sdi_fail(err, SD_ERR_INDEX, (long)i, SD_TT_FIELD_TRIANGLE,
-                                "tangent tag %zu: vertex %u out of range", i, g->triangle[j]);
+                                "tangent tag: vertex %u out of range", g->triangle[j]);
         bool shared = g->kind == SD_TT_NORMAL && isnan(g->vec[0]) && isnan(g->vec[1]) &&
                       isnan(g->vec[2]);
         double len = norm3(g->vec);
         if (!shared && !(isfinite(len) && len > 0))
             return sdi_fail(err, SD_ERR_VALUE, (long)i, SD_TT_FIELD_VECTOR,
-                            "tangent tag %zu: the %s is not a finite vector of non-zero length",
-                            i, g->kind == SD_TT_NORMAL ? "normal" : "tangent");
+                            "tangent tag: the %s is not a finite vector of non-zero length",
+                            g->kind == SD_TT_NORMAL ? "normal" : "tangent");
     }
     /* a group (consecutive entries): the petals of one vertex, with one normal or none; none
      * needs two or more petals to share */
@@ -381,13 +391,13 @@ sd_result sd_complex_set_tangents(sd_complex *c, const sd_tangent_tag *tt, size_
         while (j < n && tt[j].kind == SD_TT_NORMAL && tt[j].group == tt[i].group) {
             if (tt[j].vertex != tt[i].vertex)
                 return sdi_fail(err, SD_ERR_ARG, (long)j, SD_TT_FIELD_VERTEX,
-                                "normal %zu: the petals sharing a normal are at one vertex", j);
+                                "normal: the petals sharing a normal are at one vertex");
             j++;
         }
         if (isnan(tt[i].vec[0]) && j - i < 2)
             return sdi_fail(err, SD_ERR_VALUE, (long)i, SD_TT_FIELD_VECTOR,
-                            "normal %zu: without a normal, two or more petals share the average "
-                            "of their normals (003 Fig. 6(b)); one petal has nothing to share", i);
+                            "normal: without a normal, two or more petals share the average "
+                            "of their normals (003 Fig. 6(b)); one petal has nothing to share");
     }
     sd_result rc = SD_OK;
     sdi_rels R = {.t = t};
@@ -427,18 +437,14 @@ sd_result sd_complex_set_tangents(sd_complex *c, const sd_tangent_tag *tt, size_
     }
     if (!rc && nk > 1) { /* one entry per edge: the first repeat, by entry */
         qsort(keys, nk, 2 * sizeof *keys, cmp_u64pair);
-        size_t bad = SIZE_MAX, first = 0;
+        size_t bad = SIZE_MAX;
         for (size_t i = 1; i < nk; i++)
-            if (keys[2 * i] == keys[2 * i - 2] && keys[2 * i + 1] < bad) {
-                size_t f0 = i - 1;
-                while (f0 > 0 && keys[2 * f0 - 2] == keys[2 * i])
-                    f0--;
+            if (keys[2 * i] == keys[2 * i - 2] && keys[2 * i + 1] < bad)
                 bad = keys[2 * i + 1];
-                first = keys[2 * f0 + 1];
-            }
-        if (bad != SIZE_MAX)
+        if (bad != SIZE_MAX) /* no entry numbers: the API numbers its lists its own way */
             rc = sdi_fail(err, SD_ERR_ARG, (long)bad, SD_TT_FIELD_EDGE,
-                          "tangent edge %zu: names the same edge as entry %zu", bad, first);
+                          "tangent edge: [%u, %u] is named by an earlier entry too",
+                          tt[bad].edge[0], tt[bad].edge[1]);
     }
     if (rc)
         goto out;
@@ -515,6 +521,7 @@ static bool petal_a1(const sd_topo *t, const sdi_rel *ef, const double *x, scrat
     for (uint32_t j = 0; j < n; j++)
         S->tmp[j] = other_end(t, S->ring[j], v);
     open_a1(x, v, S->tmp, n - 1, a1);
+    S->tmp[1] = S->tmp[n - 1]; /* the curve's ends q_0, q_k, for the caller */
     return true;
 }
 
@@ -659,17 +666,20 @@ static sd_result level0(sd_complex *c, const sdi_rels *R, scratch *S, struct sdi
                     goto nomem_i;
                 continue;
             }
-            double d[3];
-            for (int k = 0; k < 3; k++)
+            /* "t and -t": P_1 takes -unit(d), P_2 unit(d), each at its |a_1| */
+            double d[3], cv[3];
+            for (int k = 0; k < 3; k++) {
                 d[k] = a[1][k] - a[0][k];
+                cv[k] = x[3 * (size_t)S->tmp[0] + k] - x[3 * (size_t)S->tmp[1] + k];
+            }
             double dl = norm3(d);
             if (!(dl > 1e-12 * (norm3(a[0]) + norm3(a[1]))))
                 continue; /* the same interior tangent: nothing to project onto */
+            if (parallel3(cv, d))
+                continue; /* along the curve: no tangent plane with it, neither constrained */
             for (int h = 0; h < 2; h++) {
-                double pr = dot3(a[h], d) / dl, len = norm3(a[h]);
-                if (pr == 0)
-                    break;
-                scale_to(T[h], d, pr < 0 ? -len : len);
+                double len = norm3(a[h]);
+                scale_to(T[h], d, (h ? 1 : -1) * (len > 0 ? len : 1));
                 sdi_tprec r = {.v = v, .f = c->tt_f[2 * i + h], .key = key[h],
                                .kind = SD_TT_TANGENT};
                 memcpy(r.d, T[h], sizeof r.d);

@@ -15,11 +15,12 @@ Expected values are derived here from 003's statements, not from core/tangent.c:
     the prescribed tangents to have the same length as a_1 ... on the top level";
   * the tangent modification drives the petal's tangent plane to the one holding the curve and
     the prescribed tangent, with the rate 1 - s (s = 3/4); inserted vertices take the midpoint
-    of their edge's ends' tangents. (a_1 itself also takes a part along the curve: an inner point
-    is in the 1-rings of two vertices of the curve, and both modify it.)
-The limit of a_1 / lambda^r is read from the daemon's levels 2 .. 6: on such a sequence the
-error has the modes (1 - s)^r and (1 - s)^2r only (checked: the extrapolations agree to 1e-12),
-so two Richardson steps give the limit to rounding. Limit normals compared to 1e-9.
+    of their edge's ends' tangents, (T_a + T_b) / 4 at their level (003 App. B). A vertex's
+    modification moves only its own 1-ring, a block S keeps, so a_1 / lambda^r tends to the target
+    with the one mode (1 - s)^r and no part along the curve.
+The limit of a_1 / lambda^r is read from the daemon's levels 2 .. 6 by Richardson steps (the
+first gives it to rounding; the second, for a (1 - s)^2r mode, is kept as a check). Limits of
+a_1 and normals compared to 1e-9.
 """
 import math
 
@@ -42,15 +43,18 @@ def daemon():
 # ---- meshes ------------------------------------------------------------------------------------
 
 SHEETS = [(0.0, 1.0, 0.25), (0.15, -1.0, 0.6), (0.0, 0.2, 1.0)]
+# sheet 1 on sheet 0's side and longer: a_1(0) . a_1(1) > |a_1(0)|^2, the projections of both
+# onto their difference point the same way
+SHEETS_SAME_SIDE = [(0.0, 1.0, 0.25), (0.1, 2.0, 1.2), (0.0, -0.3, 1.0)]
 
 
-def tjunction():
+def tjunction(sheets=SHEETS):
     """A singular curve (ids 0..4, a parabola) where three sheets of two rows meet (003 Fig. 5(c):
     two of them are the halves of a surface, the third a fin). Vertices 1, 2, 3 are simple
     singular vertices with 3 triangles per petal; 0 and 4 are complex (the sheets' sides)."""
     V = [[float(x), 0.0, 0.1 * x * x] for x in range(-2, 3)]
     T = []
-    for d in SHEETS:
+    for d in sheets:
         rows = [list(range(5))]
         for r in (1, 2):
             ids = []
@@ -107,14 +111,19 @@ def l1_open(k):
     w, X = np.linalg.eig(S)
     L = np.real(np.linalg.inv(X))
     half = [i for i in range(n) if abs(w[i] - 0.5) < 1e-9]
-    assert len(half) == 2 and max(abs(w[i]) for i in range(n) if i not in half) < 0.5 + 1e-12 or \
-        sorted(abs(w))[-1] == pytest.approx(1)
+    assert len(half) == 2                                       # 1/2 is double
+    rest = sorted((abs(w[i]) for i in range(n) if i not in half), reverse=True)
+    assert rest[0] == pytest.approx(1, abs=1e-12)               # the centre's eigenvalue 1
+    assert rest[1] < 0.5 - 1e-9                                 # the rest below 1/2
     x1 = np.array([0.0] + [math.sin(j * th) for j in range(k + 1)])
     x2 = np.array([0.0, 1.0] + [math.cos(j * th) for j in range(1, k)] + [-1.0])
     Lh = L[half, :]
-    c = np.linalg.solve(np.array([Lh @ x1, Lh @ x2]).T, np.array([1.0, 0.0]))
+    assert np.allclose(S @ x1, 0.5 * x1, atol=1e-12) and np.allclose(S @ x2, 0.5 * x2, atol=1e-12)
+    # l^1 = c Lh with (l^1, x^1) = 1, (l^1, x^2) = 0: rows of the system are Lh x^1, Lh x^2
+    c = np.linalg.solve(np.array([Lh @ x1, Lh @ x2]), np.array([1.0, 0.0]))
     l1 = c @ Lh
     assert np.allclose(l1 @ S, 0.5 * l1, atol=1e-12)
+    assert abs(l1 @ x1 - 1) < 1e-12 and abs(l1 @ x2) < 1e-12
     return l1
 
 
@@ -257,23 +266,28 @@ def curve_vertices_level1(s, V, T):
     return mids
 
 
-def test_inferred_tangent_plane_along_curve(daemon):
+@pytest.mark.parametrize("sheets", [SHEETS, SHEETS_SAME_SIDE], ids=["apart", "same-side"])
+def test_inferred_tangent_plane_along_curve(daemon, sheets):
     """003 Fig. 6(c): the two halves of the surface (sheets 0 and 1) made tangent along the curve
     with no tangent given: at every vertex of the curve the limit normals of the two sheets are
     equal (1e-9) and the projections of the level-0 interior tangents onto their difference are
     tangent to both, the inserted vertices' interpolated ones too, and the fin (sheet 2) keeps
     its own tangent plane."""
-    V, T = tjunction()
+    V, T = tjunction(sheets)
     edges = [{"edge": [i, i + 1], "triangles": [sheet_triangle(T, 0, i), sheet_triangle(T, 1, i)]}
              for i in range(4)]
     s = session(daemon, V, T, {"tangent_edges": edges})
     X0 = np.array(V, float)
     want = {}
     for v in (1, 2, 3):
+        # "t and -t" along d = a_1(sheet 1) - a_1(sheet 0): sheet 0 takes -unit(d), sheet 1
+        # +unit(d), each at its own level-0 length (003's scaling)
         a = [a1_a2(X0, v, sheet_ring(X0, T, v, sh))[0] for sh in (0, 1)]
+        if sheets is SHEETS_SAME_SIDE:
+            assert a[0] @ a[1] > a[0] @ a[0]
         d = unit(a[1] - a[0])
-        for sh in (0, 1):
-            want[(v, sh)] = math.copysign(np.linalg.norm(a[sh]), a[sh] @ d) * d
+        want[(v, 0)] = -np.linalg.norm(a[0]) * d
+        want[(v, 1)] = np.linalg.norm(a[1]) * d
     lim = interior_limits(s, (1, 2, 3), (0, 1, 2))
     for v in (1, 2, 3):
         n0 = limit_normal(*lim[(v, 0)])
@@ -281,6 +295,10 @@ def test_inferred_tangent_plane_along_curve(daemon):
         assert same_plane(n0, n1), (v, n0, n1)
         for sh in (0, 1):                                        # the projection is tangent
             assert abs(n0 @ unit(want[(v, sh)])) < 1e-9, (v, sh)
+            # and is a_1's limit itself: direction, sign and length, nothing along the curve
+            assert np.linalg.norm(lim[(v, sh)][0] - want[(v, sh)]) < \
+                1e-9 * np.linalg.norm(want[(v, sh)]), (v, sh, lim[(v, sh)][0], want[(v, sh)])
+        assert unit(lim[(v, 0)][0]) @ unit(lim[(v, 1)][0]) == pytest.approx(-1, abs=1e-9)
         fin = a1_a2(X0, v, sheet_ring(X0, T, v, 2))[0]
         assert np.allclose(lim[(v, 2)][0], fin, atol=1e-10)     # untouched: a_1 scales by 1/2
     # the vertices inserted on the tagged edges: midpoint interpolation (003 App. B)
@@ -290,6 +308,11 @@ def test_inferred_tangent_plane_along_curve(daemon):
         assert same_plane(n0, n1)
         for sh in (0, 1):
             assert abs(n0 @ unit(want[(a, sh)] + want[(b, sh)])) < 1e-9
+            # the midpoint rule with App. B's factor: T = (T_a + T_b) / 4 at level 1, whose
+            # units the limit is read in; the ends' level-1 targets are T_a / 2, T_b / 2
+            mid = (want[(a, sh)] + want[(b, sh)]) / 4
+            assert np.linalg.norm(lm[(m, sh)][0] - mid) < 1e-9 * np.linalg.norm(mid), \
+                (m, sh, lm[(m, sh)][0], mid)
     s.delete()
 
 
@@ -311,10 +334,34 @@ def test_prescribed_opposite_tangents(daemon):
         n0, n1 = limit_normal(*lim[(v, 0)]), limit_normal(*lim[(v, 1)])
         assert same_plane(n0, n1)
         assert abs(n0 @ unit(t)) < 1e-9                          # the plane holds t
+        for sh, sign in ((0, 1), (1, -1)):   # a_1 2^r -> the given direction at |a_1 level 0|
+            want = sign * np.linalg.norm(a1_a2(X0, v, sheet_ring(X0, T, v, sh))[0]) * unit(t)
+            assert np.linalg.norm(lim[(v, sh)][0] - want) < 1e-9 * np.linalg.norm(want), \
+                (v, sh, lim[(v, sh)][0], want)
     # the tagged edges' inserted vertices: one plane too
     for m, _ in curve_vertices_level1(s, V, T):
         lm = interior_limits(s, (m,), (0, 1), origin_level=1)
         assert same_plane(limit_normal(*lm[(m, 0)]), limit_normal(*lm[(m, 1)]))
+    s.delete()
+
+
+def test_given_tangent_kept_the_other_petal_takes_its_opposite(daemon):
+    """003 Fig. 6(a) with one tangent given: a tagged edge's pair of petals where only sheet 0's
+    petal has a tangent t; it keeps t and sheet 1's petal takes -t, each at its level-0 length."""
+    V, T = tjunction()
+    t = np.array([0.05, 1.0, 0.4])
+    tangents = [{"vertex": v, "triangle": sheet_triangle(T, 0, v), "tangent": list(t)}
+                for v in (1, 2, 3)]
+    edges = [{"edge": [i, i + 1], "triangles": [sheet_triangle(T, 0, i), sheet_triangle(T, 1, i)]}
+             for i in (1, 2)]
+    s = session(daemon, V, T, {"tangents": tangents, "tangent_edges": edges})
+    X0 = np.array(V, float)
+    lim = interior_limits(s, (1, 2, 3), (0, 1))
+    for v in (1, 2, 3):
+        for sh, sign in ((0, 1), (1, -1)):
+            want = sign * np.linalg.norm(a1_a2(X0, v, sheet_ring(X0, T, v, sh))[0]) * unit(t)
+            assert np.linalg.norm(lim[(v, sh)][0] - want) < 1e-9 * np.linalg.norm(want), \
+                (v, sh, lim[(v, sh)][0], want)
     s.delete()
 
 
