@@ -438,6 +438,12 @@ static int parse_tangents(json_t *nm, json_t *tg, json_t *te, const api_input *i
                 return api_fail_at(p, json_is_array(trs) ? 422 : 400,
                                    json_is_array(trs) ? "invalid-tag" : "wrong-type", at,
                                    "an array of triangles, one in each closed petal");
+            if ((size_t)tags->ntt + json_array_size(trs) > most)
+                return api_fail_at(p, 422, "limit-exceeded", at,
+                                   "%zu petals in all for a complex of %u vertices and %u "
+                                   "simplices: at most %zu (one per petal or edge)",
+                                   (size_t)tags->ntt + json_array_size(trs), nv,
+                                   in ? in->ns : 0, most);
             size_t h;
             json_t *tr;
             x.group = (uint32_t)i;

@@ -584,6 +584,11 @@ def test_hostile_tangent_tags(daemon):
          "/tangent_edges/0/triangles/1/2"),
         ({"tangent_edges": [{"edge": [1, 2]}] * 600}, 422, "/tangent_edges"),  # > nv + 10 ns
     ]
+    # the petals of all normals together are bounded too (nv + 10 ns), before allocating: two
+    # entries each at the bound are refused at the second one's list
+    most = len(V) + 10 * len(T)
+    cases.append(({"normals": [{"vertex": 0, "triangles": [T[0]] * most}] * 2}, 422,
+                  "/normals/1/triangles"))
     for body, status, ptr in cases:
         refuse(s, body, status, ptr)
     assert "tangents" not in s.req("GET", "/complex").json()["tags"]   # nothing applied
