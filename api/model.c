@@ -371,9 +371,16 @@ void api_model_unref(api_model *m)
     api_free(m);
 }
 
+static _Thread_local int compute_threads = 1;
+
+void api_set_compute_threads(int n) { compute_threads = n > 1 ? n : 1; }
+
+int api_compute_threads(void) { return compute_threads; }
+
 const sd_level *api_model_level_locked(api_model *m, int level, sd_error *err)
 {
     struct timespec t0, t1;
+    sd_complex_set_threads(m->c, compute_threads);
     int before = sd_complex_levels_computed(m->c);
     clock_gettime(CLOCK_MONOTONIC, &t0);
     const sd_level *lv = NULL;

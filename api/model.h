@@ -191,8 +191,15 @@ void api_tangents_json(const api_tags *t, struct json_t *obj);
 bool api_tags_copy(api_tags *dst, const api_tags *src);
 
 /* Compute level L (under the model's lock) and record the time; NULL + err on failure. The
- * caller holds m->lock. */
+ * caller holds m->lock. The computation uses the calling thread's compute threads (below). */
 const sd_level *api_model_level_locked(api_model *m, int level, sd_error *err);
+
+/* The threads a computation started by the calling thread may use (sd_complex_set_threads):
+ * 1 unless set. The daemon sets it when a request takes a compute slot (from --level-threads
+ * and the slots busy then) and back to 1 when it gives the slot; the offline modes set it
+ * once. Thread-local. */
+void api_set_compute_threads(int n);
+int api_compute_threads(void);
 
 /* Refresh levels_cached and memory_bytes after the complex changed (caller holds m->lock). */
 void api_model_publish(api_model *m);

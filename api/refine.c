@@ -237,6 +237,8 @@ static int subdivision_positions(const api_input *in, const api_rules *rules, co
 {
     sd_error e = {0};
     api_model *tmp = model_with((api_input *)in, rules, tags, ov, nov, lim, &e);
+    if (tmp)
+        sd_complex_set_threads(tmp->c, api_compute_threads());
     const sd_level *l1 = tmp ? sd_complex_level(tmp->c, 1, &e) : NULL;
     if (!l1) {
         api_model_unref(tmp);

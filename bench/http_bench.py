@@ -23,7 +23,7 @@ SUBDIVD = os.environ.get("SUBDIVD", str(REPO / "build" / "subdivd"))
 
 
 def start_daemon():
-    p = subprocess.Popen([SUBDIVD, "--port", "0", "--log-level", os.environ.get("SUBDIVD_BENCH_LOG", "warn")], stdout=subprocess.PIPE,
+    p = subprocess.Popen([SUBDIVD, "--port", "0", "--log-level", os.environ.get("SUBDIVD_BENCH_LOG", "warn")] + os.environ.get("SUBDIVD_BENCH_ARGS", "").split(), stdout=subprocess.PIPE,
                          text=True)
     line = p.stdout.readline()
     port = int(line.split(":")[2].split("/")[0])

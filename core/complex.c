@@ -628,3 +628,5 @@ uint64_t sd_complex_estimate_bytes(const sd_complex *c, int level)
     return total;
 }
 int sd_complex_levels_computed(const sd_complex *c) { return c->nlevels; }
+
+void sd_complex_set_threads(sd_complex *c, int threads) { c->opt.threads = threads; }

@@ -203,6 +203,10 @@ uint64_t sd_complex_estimate_bytes(const sd_complex *c, int level);
  * computed or not. */
 uint64_t sd_complex_estimate_level_bytes(const sd_complex *c, int level);
 int sd_complex_levels_computed(const sd_complex *c);
+/* The threads later computations of c may use (sd_options.threads: 0 or 1 = the caller's
+ * only); results are the same bytes for any number. Call it while no other call runs on c (a
+ * service holding the complex's lock sets it per request from the cores free at the time). */
+void sd_complex_set_threads(sd_complex *c, int threads);
 
 /* ---- levels ------------------------------------------------------------------------------ */
 

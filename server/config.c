@@ -23,6 +23,9 @@ static const setting S[] = {
     {"listen", T_STR, OFF(listen), 0, 0, "address to bind (default 127.0.0.1)"},
     {"port", T_INT, OFF(port), 0, 65535, "TCP port (default 8080; 0 picks a free one)"},
     {"threads", T_INT, OFF(threads), 1, 256, "concurrent computations (default: CPU count)"},
+    {"level-threads", T_INT, OFF(level_threads), 1, 64,
+     "threads one computation may use, divided among the computations running at once "
+     "(default: CPU count, at most 8; 1: each computation on its request's thread alone)"},
     {"max-connections", T_INT, OFF(max_connections), 1, 100000, "open connections (default 256)"},
     {"max-connections-per-client", T_INT, OFF(max_connections_per_client), 0, 100000,
      "open connections of one client address (default 32; 0: no cap)"},
@@ -175,6 +178,7 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     c->port = 8080;
     long n = sysconf(_SC_NPROCESSORS_ONLN);
     c->threads = n > 0 ? (int)n : 2;
+    c->level_threads = n <= 0 ? 2 : n > 8 ? 8 : (int)n;
     c->max_connections = 256;
     c->max_connections_per_client = 32;
     c->connection_reserve = 16;

@@ -103,6 +103,10 @@ int http_take_slot(req *r, api_problem *p)
         return -1;
     }
     r->slot_t0 = mono_now();
+    /* the cores for this computation: --level-threads shared among the slots taken now (this
+     * one included), so one request alone uses them all and concurrent ones do not crowd */
+    int busy = slots_busy(r->srv->compute);
+    api_set_compute_threads(r->srv->cfg.level_threads / (busy > 0 ? busy : 1));
     if (r->s) {
         atomic_store(&r->s->busy_since, r->slot_t0);
         atomic_store(&r->s->busy_level, 0);
@@ -116,6 +120,7 @@ void http_give_slot(req *r)
     if (r->s)
         atomic_store(&r->s->busy_level, -1);
     slots_give(r->srv->compute, r->s);
+    api_set_compute_threads(1);
 }
 
 

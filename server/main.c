@@ -64,7 +64,7 @@ static int apply_file(api_model **m, const char *path, change_fn_t fn, const api
 
 /* The command line of `subdivd refine`. */
 typedef struct refine_args {
-    const char *input, *out, *tags, *rules, *level, *crease_angle;
+    const char *input, *out, *tags, *rules, *level, *crease_angle, *threads;
     int repair;               /* --repair: PUT /complex's "repair" */
     api_level_query q;        /* --format (else from -o's extension), --parts, ... */
 } refine_args;
@@ -88,6 +88,7 @@ static int parse_refine_args(int argc, char **argv, refine_args *a)
                            : !strcmp(o, "--names") ? &a->q.names
                            : !strcmp(o, "--compress") ? &a->q.compress
                            : !strcmp(o, "--crease-angle") ? &a->crease_angle
+                           : !strcmp(o, "--threads") ? &a->threads
                                                        : NULL;
         if (!strcmp(o, "--repair"))
             a->repair = 1;
@@ -167,6 +168,19 @@ static int refine_main(int argc, char **argv)
         return rc;
     api_limits lim = api_default_limits();
     lim.batch = true; /* written out, never edited: no edit index (DECISIONS 46) */
+    long nt = sysconf(_SC_NPROCESSORS_ONLN); /* --threads: the levels' threads (default: CPU
+                                              * count, at most 8; the same bytes for any) */
+    nt = nt <= 0 ? 1 : nt > 8 ? 8 : nt;
+    if (a.threads) {
+        char *end;
+        nt = strtol(a.threads, &end, 10);
+        if (!*a.threads || *end || nt < 1 || nt > 64) {
+            fprintf(stderr, "subdivd refine: --threads needs a whole number from 1 to 64, not "
+                    "%s\n", a.threads);
+            return 2;
+        }
+    }
+    api_set_compute_threads((int)nt);
     api_problem p = {0};
     int level = api_parse_level(a.level, &p);
     if (level < 0)

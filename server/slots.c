@@ -159,3 +159,11 @@ int slots_held(slots *s, const void *owner)
     pthread_mutex_unlock(&s->mu);
     return n;
 }
+
+int slots_busy(slots *s)
+{
+    pthread_mutex_lock(&s->mu);
+    int n = s->n - s->free;
+    pthread_mutex_unlock(&s->mu);
+    return n;
+}

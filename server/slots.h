@@ -23,5 +23,7 @@ int slots_take(slots *s, const void *owner, int timeout_s);
 void slots_give(slots *s, const void *owner);
 /* Slots held by `owner` now. */
 int slots_held(slots *s, const void *owner);
+/* Slots taken now, by anyone. */
+int slots_busy(slots *s);
 
 #endif
