@@ -123,7 +123,7 @@ sanitize: deps
 	$(MAKE) all $(OSD_LOOP)  # the tools the suites run from build/ (subdiv, the OpenSubdiv peer, subdivd-mpi)
 	$(MAKE) clean-build B=build-asan
 	$(MAKE) all B=build-asan CFLAGS="-O1 -g -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all" LDLIBS="$(LDLIBS) -fsanitize=address,undefined"
-	SD_SANITIZE=1 SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core SUBDIVD=build-asan/subdivd FUZZ_API=build-asan/fuzz_api FUZZ_PACKED=build-asan/fuzz_packed FUZZ_HTTP=build-asan/fuzz_http API_FAULTS=build-asan/api_faults PACKED_PARSE=build-asan/packed_parse SLOTS_TEST=build-asan/slots_test PERSIST_REDIS_TEST=build-asan/persist_redis_test sh tests/run_all.sh
+	SD_SANITIZE=1 SDLEVEL=build-asan/sdlevel TEST_CORE=build-asan/test_core SUBDIVD=build-asan/subdivd FUZZ_API=build-asan/fuzz_api FUZZ_PACKED=build-asan/fuzz_packed FUZZ_HTTP=build-asan/fuzz_http API_FAULTS=build-asan/api_faults PACKED_PARSE=build-asan/packed_parse SLOTS_TEST=build-asan/slots_test KEEP_TEST=build-asan/keep_test PERSIST_REDIS_TEST=build-asan/persist_redis_test sh tests/run_all.sh
 
 clean-build:
 	rm -rf $(B)

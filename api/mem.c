@@ -15,10 +15,14 @@
 #include "mem.h"
 #include "../core/sd.h"
 #include <jansson.h>
+#include <math.h>
+#include <pthread.h>
 #include <stdatomic.h>
 #include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
+#include <time.h>
 
 #define HDR 16
 
@@ -234,22 +238,183 @@ void api_mem_unreserve(size_t n)
         meter->moved += n;
 }
 
+/* ---- the core's big blocks, kept for the next build -------------------------------------
+ * A level's arrays are written once, front to back, and a fresh page costs more than the
+ * writing (docs/BENCHMARKS.md): a core block of KEEP_MIN bytes or more is mapped by itself, in
+ * a size class (rounded up to an eighth of its power of two, at least 2 MiB), and when freed it
+ * is kept, pages and all, for the next block of its class — the transient arrays of a build,
+ * the levels of the model a change replaced, a deleted session's — up to `keep_limit` bytes, for
+ * at most KEEP_IDLE seconds (api_mem_keep_trim, called by the daemon's main loop), so the
+ * resident size still follows what the daemon holds. Kept blocks stay counted against the
+ * budget; a reservation that would not fit drops them all first. Under AddressSanitizer every
+ * block is malloc's, so that it keeps watching them. */
+#if defined(__SANITIZE_ADDRESS__)
+#define KEEP_MIN SIZE_MAX
+#else
+#define KEEP_MIN ((size_t)2 << 20)
+#endif
+#define KEEP_SLOTS 256
+#define KEEP_IDLE 1.0
+
+typedef struct kept {
+    void *p;
+    size_t cap;
+    double t;          /* when it was given back */
+} kept;
+static pthread_mutex_t keep_mu = PTHREAD_MUTEX_INITIALIZER;
+static kept keep[KEEP_SLOTS];
+static int nkeep;                      /* oldest first */
+static size_t keep_bytes;
+static _Atomic size_t keep_limit;      /* 0: none kept */
+static _Atomic uint64_t keep_hits, keep_misses;
+static bool keep_poison; /* SUBDIVD_KEEP_POISON=1: a kept block is filled with 0xff bytes (NaN
+                          * doubles, huge ids) when taken, so tests show any reader of a block
+                          * the core did not write (tests/run_all.sh sets it) */
+
+static double mono(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + t.tv_nsec * 1e-9;
+}
+
+static size_t keep_class(size_t n)
+{
+    size_t g = (size_t)1 << (63 - __builtin_clzll((unsigned long long)n)); /* power of two <= n */
+    g = g / 8 > KEEP_MIN ? g / 8 : KEEP_MIN;
+    return n > SIZE_MAX - g ? n : (n + g - 1) / g * g;
+}
+
+/* Take out entries [0, upto) and those idle since before `older`, unmapped after the lock. */
+static void keep_drop(size_t need, double older)
+{
+    kept gone[KEEP_SLOTS];
+    int ng = 0, k = 0;
+    pthread_mutex_lock(&keep_mu);
+    for (int i = 0; i < nkeep; i++)
+        if (keep[i].t < older || keep_bytes + need > atomic_load(&keep_limit)) {
+            keep_bytes -= keep[i].cap;
+            gone[ng++] = keep[i];
+        } else
+            keep[k++] = keep[i];
+    nkeep = k;
+    pthread_mutex_unlock(&keep_mu);
+    for (int i = 0; i < ng; i++) {
+        munmap(gone[i].p, gone[i].cap);
+        api_mem_unreserve(gone[i].cap);
+    }
+}
+
+void api_mem_keep_set(size_t bytes)
+{
+    const char *poison = getenv("SUBDIVD_KEEP_POISON");
+    keep_poison = poison && *poison == '1';
+    atomic_store(&keep_limit, bytes);
+    keep_drop(0, bytes ? 0 : HUGE_VAL);
+}
+
+void api_mem_keep_trim(void) { keep_drop(0, mono() - KEEP_IDLE); }
+
+size_t api_mem_kept(void)
+{
+    pthread_mutex_lock(&keep_mu);
+    size_t n = keep_bytes;
+    pthread_mutex_unlock(&keep_mu);
+    return n;
+}
+
+void api_mem_keep_counts(uint64_t *hits, uint64_t *misses)
+{
+    *hits = atomic_load(&keep_hits);
+    *misses = atomic_load(&keep_misses);
+}
+
+/* A kept block of class cap (the latest given back), or NULL. Its reservation passes on. */
+static void *keep_take(size_t cap)
+{
+    void *p = NULL;
+    pthread_mutex_lock(&keep_mu);
+    for (int i = nkeep - 1; i >= 0; i--)
+        if (keep[i].cap == cap) {
+            p = keep[i].p;
+            keep_bytes -= cap;
+            memmove(&keep[i], &keep[i + 1], (size_t)(nkeep - i - 1) * sizeof *keep);
+            nkeep--;
+            break;
+        }
+    pthread_mutex_unlock(&keep_mu);
+    return p;
+}
+
+/* Keep block p of class cap, making room by dropping the oldest; false if it is not kept. */
+static bool keep_put(void *p, size_t cap)
+{
+    size_t limit = atomic_load(&keep_limit);
+    if (cap > limit / 2) /* one block never takes the whole room */
+        return false;
+    keep_drop(cap, mono() - KEEP_IDLE);
+    bool kept_it = false;
+    pthread_mutex_lock(&keep_mu);
+    if (nkeep < KEEP_SLOTS && keep_bytes + cap <= limit) {
+        keep[nkeep++] = (kept){p, cap, mono()};
+        keep_bytes += cap;
+        kept_it = true;
+    }
+    pthread_mutex_unlock(&keep_mu);
+    return kept_it;
+}
+
 static void *core_alloc(size_t n, void *ud)
 {
     (void)ud;
-    if (!api_mem_reserve(n))
+    if (n < KEEP_MIN) {
+        if (!api_mem_reserve(n))
+            return NULL;
+        void *p = malloc(n);
+        if (!p)
+            api_mem_unreserve(n);
+        return p;
+    }
+    size_t cap = keep_class(n);
+    void *p = keep_take(cap);
+    if (p) {
+        if (keep_poison)
+            memset(p, 0xff, n);
+        atomic_fetch_add_explicit(&keep_hits, 1, memory_order_relaxed);
+        if (meter)
+            meter->moved += cap;
+        return p;
+    }
+    atomic_fetch_add_explicit(&keep_misses, 1, memory_order_relaxed);
+    /* kept blocks give way to a reservation that would not fit beside them */
+    if (budget && api_mem_kept() && api_mem_budget_used() + cap > budget)
+        keep_drop(SIZE_MAX / 2, HUGE_VAL);
+    if (!api_mem_reserve(cap))
         return NULL;
-    void *p = malloc(n);
-    if (!p)
-        api_mem_unreserve(n);
+    p = mmap(NULL, cap, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED) {
+        api_mem_unreserve(cap);
+        return NULL;
+    }
     return p;
 }
 
 static void core_release(void *p, size_t n, void *ud)
 {
     (void)ud;
-    free(p);
-    api_mem_unreserve(n);
+    if (n < KEEP_MIN) {
+        free(p);
+        api_mem_unreserve(n);
+        return;
+    }
+    size_t cap = keep_class(n);
+    if (keep_put(p, cap)) {
+        if (meter)
+            meter->moved += cap;
+        return;
+    }
+    munmap(p, cap);
+    api_mem_unreserve(cap);
 }
 
 sd_allocator api_mem_core_allocator(void)

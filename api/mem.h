@@ -85,6 +85,16 @@ void api_mem_unreserve(size_t n);
 /* The allocator of core complexes (sd_options.allocator): C-library blocks counted against the
  * budget. */
 sd_allocator api_mem_core_allocator(void);
+/* Big core blocks given back are kept for the next block of their size class, up to `bytes`
+ * in all (0, the default: none), each for at most a second (see mem.c); they stay counted
+ * against the budget and give way to any reservation that would not fit beside them.
+ * api_mem_keep_trim drops those idle for over a second (the daemon calls it 5 times a second);
+ * api_mem_kept says how many bytes are kept; the counts say how many big blocks were taken
+ * from the kept ones and how many were mapped anew. */
+void api_mem_keep_set(size_t bytes);
+void api_mem_keep_trim(void);
+size_t api_mem_kept(void);
+void api_mem_keep_counts(uint64_t *hits, uint64_t *misses);
 
 /* Set this thread's meter (NULL: none); returns the one it replaces. */
 api_mem_meter *api_mem_meter_set(api_mem_meter *m);

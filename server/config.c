@@ -58,6 +58,9 @@ static const setting S[] = {
      "core memory per session (default 4 GiB)"},
     {"max-memory", T_U64, OFF(max_memory), 16LL << 20, 1LL << 50,
      "memory budget of all requests and sessions, bytes (default 3/4 of RAM or cgroup limit)"},
+    {"keep-memory", T_U64, OFF(keep_memory), 0, 1LL << 50,
+     "bytes of freed level arrays kept for a second for the next build, within --max-memory "
+     "(default: an eighth of it, at most 1 GiB; 0: none)"},
     {"fill-timeout", T_U32, OFF(limits.fill_seconds), 1, 86400,
      "seconds the TetGen fill of one request may take, all its entries together (default 60)"},
     {"fill-memory", T_U64, OFF(limits.fill_memory_bytes), 64LL << 20, 1LL << 46,
@@ -196,6 +199,7 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     strcpy(c->cors_origin, "*");
     strcpy(c->store, "memory");
     c->max_memory = default_max_memory();
+    c->keep_memory = UINT64_MAX; /* an eighth of --max-memory, at most 1 GiB, unless given */
     c->limits = api_default_limits();
     *exit_code = 2;
     for (size_t i = 0; i < NS; i++) {
@@ -249,5 +253,9 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
         c->connection_reserve = c->max_connections / 2;
     if (c->ttl_s > c->max_ttl_s)
         c->ttl_s = c->max_ttl_s;
+    if (c->keep_memory == UINT64_MAX)
+        c->keep_memory = c->max_memory / 8 < (1ULL << 30) ? c->max_memory / 8 : 1ULL << 30;
+    if (c->keep_memory > c->max_memory / 2)
+        c->keep_memory = c->max_memory / 2;
     return 0;
 }

@@ -11,6 +11,7 @@ typedef struct config {
     char listen[64];          /* address to bind, default 127.0.0.1 */
     int port;                 /* default 8080; 0 = any free port (printed at start) */
     int threads;              /* concurrent computations (default: CPU count) */
+    uint64_t keep_memory;     /* big freed core blocks kept for the next build (api/mem.h) */
     int level_threads;        /* threads one computation may use when the other slots are idle */
     int max_connections;
     int max_connections_per_client; /* per client address (0: no cap) */

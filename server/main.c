@@ -181,6 +181,7 @@ static int refine_main(int argc, char **argv)
         }
     }
     api_set_compute_threads((int)nt);
+    api_mem_keep_set(256u << 20); /* a build's transient arrays reuse each other's pages */
     api_problem p = {0};
     int level = api_parse_level(a.level, &p);
     if (level < 0)
@@ -441,6 +442,7 @@ int main(int argc, char **argv)
      * after the first big free and then keeps such blocks in the heap for good. */
     mallopt(M_MMAP_THRESHOLD, 256 * 1024);
     api_mem_set_budget((size_t)srv.cfg.max_memory);
+    api_mem_keep_set((size_t)srv.cfg.keep_memory);
     char perr[512];
     srv.persist = persist_open(srv.cfg.store, srv.cfg.sync_full, perr, sizeof perr);
     if (!srv.persist) {
@@ -482,6 +484,7 @@ int main(int argc, char **argv)
     double swept = mono_now();
     while (!stop_requested) {
         usleep(200 * 1000);
+        api_mem_keep_trim(); /* kept blocks idle for a second go back to the system */
         if (persist_durable(srv.persist) && mono_now() - swept > 60) {
             swept = mono_now();
             long n = persist_expire(srv.persist, (int64_t)time(NULL));

@@ -7,6 +7,7 @@
  * the caller samples them when /metrics is scraped.
  */
 #include "metrics.h"
+#include "../api/mem.h"
 #include "guard.h"
 #include <pthread.h>
 #include <stdatomic.h>
@@ -149,6 +150,13 @@ void metrics_write_budget(FILE *f, uint64_t budget, uint64_t used, uint64_t refu
            "server/ blocks, core blocks of every complex, input arrays, stream copies.", used);
     sample(f, "subdivd_memory_refusals_total", "counter",
            "Allocations the memory budget refused.", refusals);
+    uint64_t hits, misses;
+    api_mem_keep_counts(&hits, &misses);
+    sample(f, "subdivd_kept_bytes", "gauge", "Big blocks of freed levels kept for the next "
+           "build (--keep-memory), counted in subdivd_memory_used_bytes.", api_mem_kept());
+    sample(f, "subdivd_kept_reused_total", "counter",
+           "Big core blocks taken from the kept ones (no fresh pages).", hits);
+    sample(f, "subdivd_kept_mapped_total", "counter", "Big core blocks mapped anew.", misses);
 }
 
 void metrics_write_connections(FILE *f, const guard_stats *s)

@@ -1,0 +1,117 @@
+/* keep_test: the big core blocks api/mem.c keeps between builds (tests/python/test_kept_memory.py).
+ *
+ * Through api_mem_core_allocator, as a complex allocates: a block given back is kept and handed
+ * out again for the next block of its size class (the same pages, filled with 0xff bytes when
+ * SUBDIVD_KEEP_POISON=1), not for another class; the kept bytes stay within the limit (oldest
+ * dropped first) and counted against the budget; kept blocks idle for over a second go back;
+ * a reservation that would not fit beside the kept blocks drops them instead of failing. Under
+ * AddressSanitizer every block is malloc's and none is kept. Exit 0 when every check holds. */
+#include "../../api/mem.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#define MIB ((size_t)1 << 20)
+
+static int passed, failed;
+
+static void check(int ok, const char *what)
+{
+    if (ok)
+        passed++;
+    else {
+        failed++;
+        printf("FAIL: %s\n", what);
+    }
+}
+
+static uint64_t hits(void)
+{
+    uint64_t h, m;
+    api_mem_keep_counts(&h, &m);
+    return h;
+}
+
+int main(void)
+{
+    setenv("SUBDIVD_KEEP_POISON", "1", 1);
+    sd_allocator a = api_mem_core_allocator();
+    api_mem_keep_set(12 * MIB);
+    size_t base = api_mem_budget_used();
+
+    unsigned char *p = a.alloc(3 * MIB, a.ud);
+    check(p != NULL, "a 3 MiB block");
+    memset(p, 1, 3 * MIB);
+    a.release(p, 3 * MIB, a.ud);
+#if defined(__SANITIZE_ADDRESS__)
+    check(api_mem_kept() == 0, "under ASan nothing is kept");
+    check(api_mem_budget_used() == base, "under ASan the block's bytes are given back");
+#else
+    check(api_mem_kept() == 4 * MIB, "a 3 MiB block is kept in its 4 MiB class");
+    check(api_mem_budget_used() == base + 4 * MIB, "kept bytes stay counted against the budget");
+
+    /* the next block of the class gets the same pages, poisoned */
+    uint64_t h0 = hits();
+    unsigned char *q = a.alloc(3 * MIB + 12345, a.ud);
+    check(q == p, "the next block of the class reuses the kept one");
+    check(hits() == h0 + 1, "counted as reused");
+    check(api_mem_kept() == 0, "taken out of the kept ones");
+    int all = 1;
+    for (size_t i = 0; i < 3 * MIB + 12345; i += 4099)
+        all &= q[i] == 0xff;
+    check(all, "a reused block is handed out poisoned (SUBDIVD_KEEP_POISON=1)");
+    a.release(q, 3 * MIB + 12345, a.ud);
+
+    /* another class maps a block of its own */
+    unsigned char *r = a.alloc(7 * MIB, a.ud);
+    check(r != NULL && r != p, "another class is not served by the kept block");
+    check(hits() == h0 + 1, "nor counted as reused");
+    memset(r, 2, 7 * MIB);
+    a.release(r, 7 * MIB, a.ud); /* 8 MiB class: over half the room, not kept */
+    check(api_mem_kept() == 4 * MIB, "a block larger than half the room is not kept");
+
+    /* the room: three 4 MiB blocks and a 6 MiB one into 12 MiB, the oldest dropped */
+    void *b[4];
+    size_t bn[4] = {3 * MIB, 3 * MIB, 3 * MIB, 5 * MIB};
+    for (int i = 0; i < 4; i++)
+        b[i] = a.alloc(bn[i], a.ud);
+    check(api_mem_kept() == 0, "the first of them took the kept block");
+    for (int i = 0; i < 4; i++)
+        a.release(b[i], bn[i], a.ud);
+    check(api_mem_kept() == 10 * MIB, "at most the limit is kept, the oldest dropped first");
+    check(api_mem_budget_used() == base + 10 * MIB, "dropped blocks leave the budget");
+
+    /* idle blocks go back */
+    sleep(1);
+    usleep(150 * 1000);
+    api_mem_keep_trim();
+    check(api_mem_kept() == 0, "blocks idle for over a second are given back");
+    check(api_mem_budget_used() == base, "and leave the budget");
+
+    /* kept blocks give way to a reservation that would not fit beside them */
+    api_mem_set_budget(base + 20 * MIB);
+    uint64_t refused = api_mem_budget_refusals();
+    void *c1 = a.alloc(3 * MIB, a.ud), *c2 = a.alloc(3 * MIB, a.ud);
+    a.release(c1, 3 * MIB, a.ud);
+    a.release(c2, 3 * MIB, a.ud);
+    check(api_mem_kept() == 8 * MIB, "two 4 MiB blocks kept");
+    void *big = a.alloc(14 * MIB, a.ud);
+    check(big != NULL, "a 14 MiB block fits once the kept 8 MiB give way");
+    check(api_mem_budget_refusals() == refused, "without a refusal");
+    check(api_mem_kept() == 0, "the kept blocks were dropped");
+    void *over = a.alloc(8 * MIB, a.ud);
+    check(over == NULL, "a block past the budget is still refused");
+    a.release(big, 14 * MIB, a.ud);
+
+    /* off: nothing kept */
+    api_mem_keep_set(0);
+    check(api_mem_kept() == 0, "setting 0 drops what is kept");
+    void *d = a.alloc(3 * MIB, a.ud);
+    a.release(d, 3 * MIB, a.ud);
+    check(api_mem_kept() == 0, "with 0 nothing is kept");
+    check(api_mem_budget_used() == base, "every byte given back");
+#endif
+    printf("keep: %d passed, %d failed\n", passed, failed);
+    return failed != 0;
+}
