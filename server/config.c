@@ -92,7 +92,7 @@ void config_usage(FILE *f)
                "               [--repair] [--crease-angle DEG]\n"
                "               [--format F] [--parts P] [--slice nx,ny,nz,d] [--attributes A]\n"
                "               [--colormap NAME:min:max] [--octahedra tets|polyhedra]\n"
-               "               [--names true|false] [--compress none|zlib] [--limit]\n"
+               "               [--names true|false] [--compress none|zlib] [--limit] [--threads N]\n"
                "               -o OUT%s\n"
                "       subdivd deform COMPLEX.json --embed MODEL.obj|.json [--level L]\n"
                "               [--outside refuse|fixed|nearest] [--moves MOVES.json] [--tags T.json]\n"
