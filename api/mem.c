@@ -241,7 +241,8 @@ void api_mem_unreserve(size_t n)
 /* ---- the core's big blocks, kept for the next build -------------------------------------
  * A level's arrays are written once, front to back, and a fresh page costs more than the
  * writing (docs/BENCHMARKS.md): a core block of KEEP_MIN bytes or more is mapped by itself, in
- * a size class (rounded up to an eighth of its power of two, at least 2 MiB), and when freed it
+ * a size class (rounded up to an eighth of its power of two, at least 64 KiB; from 2 MiB on on
+ * a 2 MiB boundary, asking for transparent huge pages), and when freed it
  * is kept, pages and all, for the next block of its class — the transient arrays of a build,
  * the levels of the model a change replaced, a deleted session's — up to `keep_limit` bytes, for
  * at most KEEP_IDLE seconds (api_mem_keep_trim, called by the daemon's main loop), so the
@@ -251,9 +252,11 @@ void api_mem_unreserve(size_t n)
 #if defined(__SANITIZE_ADDRESS__)
 #define KEEP_MIN SIZE_MAX
 #else
-#define KEEP_MIN ((size_t)2 << 20)
+#define KEEP_MIN ((size_t)256 << 10)  /* the daemon's mmap threshold (server/main.c) */
 #endif
-#define KEEP_SLOTS 256
+#define KEEP_GRAIN ((size_t)64 << 10)
+#define THP ((size_t)2 << 20)
+#define KEEP_SLOTS 1024
 #define KEEP_IDLE 1.0
 
 typedef struct kept {
@@ -281,8 +284,30 @@ static double mono(void)
 static size_t keep_class(size_t n)
 {
     size_t g = (size_t)1 << (63 - __builtin_clzll((unsigned long long)n)); /* power of two <= n */
-    g = g / 8 > KEEP_MIN ? g / 8 : KEEP_MIN;
+    g = g / 8 > KEEP_GRAIN ? g / 8 : KEEP_GRAIN;
     return n > SIZE_MAX - g ? n : (n + g - 1) / g * g;
+}
+
+/* A mapping of cap bytes; from 2 MiB on it starts on a 2 MiB boundary and asks for transparent
+ * huge pages as a whole, so a fresh block faults in 2 MiB at a time. */
+static void *map_block(size_t cap)
+{
+    if (cap < THP) {
+        void *p = mmap(NULL, cap, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+        return p == MAP_FAILED ? NULL : p;
+    }
+    unsigned char *p = mmap(NULL, cap + THP, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS,
+                            -1, 0);
+    if (p == MAP_FAILED)
+        return NULL;
+    size_t head = (THP - (uintptr_t)p % THP) % THP;
+    if (head)
+        munmap(p, head);
+    munmap(p + head + cap, THP - head);
+#ifdef MADV_HUGEPAGE
+    (void)madvise(p + head, cap, MADV_HUGEPAGE); /* advice: refused or not, all works */
+#endif
+    return p + head;
 }
 
 /* Take out entries [0, upto) and those idle since before `older`, unmapped after the lock. */
@@ -391,11 +416,8 @@ static void *core_alloc(size_t n, void *ud)
         keep_drop(SIZE_MAX / 2, HUGE_VAL);
     if (!api_mem_reserve(cap))
         return NULL;
-    p = mmap(NULL, cap, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-    if (p == MAP_FAILED) {
+    if (!(p = map_block(cap)))
         api_mem_unreserve(cap);
-        return NULL;
-    }
     return p;
 }
 
