@@ -558,6 +558,19 @@ def test_missing_file(tmp_path):
     assert "cannot open" in r.stderr
 
 
+def test_a_piece_not_written_leaves_no_pieces(tmp_path):
+    """Rank 1 cannot write its piece (a directory stands at its name): the run stops with exit 3
+    and the other ranks remove the pieces they wrote, so no partial result is left."""
+    (tmp_path / "o_1.vtu").mkdir()
+    r = mpirun(3, "refine", REPO / "examples" / "mixed.json", "--level", 2, "-o",
+               tmp_path / "o.pvtu", "-q")
+    assert r.returncode == 3, r.stderr
+    assert "subdivd-mpi: rank 1/3: cannot rename" in r.stderr
+    assert "stopped (writing the pieces) after a failure on rank 1" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o_1.vtu"]
+    assert (tmp_path / "o_1.vtu").is_dir()
+
+
 # ---- other inputs -----------------------------------------------------------------------------
 
 def sdlevel_points(path, level):
