@@ -12,7 +12,8 @@
  *
  * Failures: every phase ends with a collective check, so a failure on any rank stops every rank
  * there; the failing rank says what failed, rank 0 says where the run stopped, and all exit with
- * the same code (1: the mesh or tags were refused, 2: usage or a file, 3: a rank failed). A rank
+ * the same code (1: the mesh or tags were refused, 2: usage or a file, 3: a rank failed); when a
+ * piece or the index cannot be written, every rank removes the piece it wrote. A rank
  * that dies outright is mpirun's to report (it then ends the others, non-zero).
  * Progress: one line per rank and phase on stderr, prefixed "subdivd-mpi: rank R/N" (-q: none
  * but errors and the summary). Test hook: SUBDIVD_MPI_FAIL_AT=R:N fails the N-th allocation of
@@ -31,6 +32,7 @@
 #include <string.h>
 #include <sys/resource.h>
 #include <time.h>
+#include <unistd.h>
 
 enum { EXIT_REFUSED = 1, EXIT_USAGE = 2, EXIT_FAILED = 3 };
 
@@ -58,8 +60,8 @@ static int parse_args(int argc, char **argv, args *a)
 {
     memset(a, 0, sizeof *a);
     a->level = -1;
-    a->halo = -1; /* DECISIONS 44: 2 rings with tetrahedra, non-manifold simplices or Ying-Zorin's
-                   * rules, else 1 */
+    a->halo = -1; /* DECISIONS 44: 3 rings with tetrahedra and a non-manifold simplex, 2 with
+                   * either or Ying-Zorin's rules, else 1 */
     const char *why = NULL;
     if (argc < 2 || strcmp(argv[1], "refine"))
         why = "the command is `refine`";
@@ -516,10 +518,12 @@ static int run(const args *a)
     } else if (!a->merge) {
         char path[4096];
         piece_path(a->out, rank_, path, sizeof path);
+        int wrote = 0;
         if (mp_write_piece(&piece, &res, path, &st.bytes, err, sizeof err)) {
             fprintf(stderr, "%s: %s\n", tag_, err);
             rc = EXIT_FAILED;
-        }
+        } else
+            wrote = 1;
         if (!(rc = checkpoint(rc, "writing the pieces")) && !rank_) {
             char **names = calloc((size_t)nranks_, sizeof *names);
             const char *slash = strrchr(a->out, '/');
@@ -535,8 +539,13 @@ static int run(const args *a)
                 free(names[r]);
             free(names);
         }
-        if ((rc = checkpoint(rc, "writing the index")))
+        if ((rc = checkpoint(rc, "writing the index"))) {
+            /* a piece without the others or the index is no result: each rank removes its own */
+            piece_path(a->out, rank_, path, sizeof path);
+            if (wrote)
+                unlink(path);
             goto done;
+        }
     } else {
         mp_buf b = {0};
         mp_merge_blob(&piece, &res, &b);

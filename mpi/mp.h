@@ -84,9 +84,8 @@ int mp_unpack(const unsigned char *data, size_t len, mp_piece *p);
  * (dual graph: simplices sharing a facet of the smaller one, or a vertex for points and curves;
  * weighted by what each becomes at `level`) and cut the pieces: pieces[r] for rank r, with
  * `halo` rings of simplices (by shared vertices) around the owned ones (-1: the default of
- * DECISIONS 44: two rings with tetrahedra, non-manifold simplices or Ying-Zorin's rules in the
- * complex, else one). `seconds` gets the time
- * of the partition alone. 0, or -1 with a message in err. */
+ * DECISIONS 44: three rings with tetrahedra and a non-manifold simplex, two with either or
+ * Ying-Zorin's rules in the complex, else one). `seconds` gets the time of the partition alone. 0, or -1 with a message in err. */
 int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces,
                  double *seconds, char *err, size_t errlen);
 

@@ -9,8 +9,8 @@
  * parts get the same refinement work rather than the same count.
  *
  * A piece is the owned simplices plus `halo` rings (ring k + 1: every simplex sharing a vertex
- * with ring k); DECISIONS 44 derives how many rings make every owned level-L point exact (two
- * with tetrahedra, non-manifold simplices or Ying-Zorin's rules, else one). The
+ * with ring k); DECISIONS 44 derives how many rings make every owned level-L point exact (three
+ * with tetrahedra and a non-manifold simplex, two with either or Ying-Zorin's rules, else one). The
  * piece's tags and per-simplex rules are those of the whole complex whose vertices are all in the
  * piece and which touch a vertex whose star is whole (`vfull`): exactly those whose
  * classification the piece reproduces; the others lie outside the owned cells' reach. Global
@@ -533,16 +533,21 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
     if (whole_classes_get(m, &whole, err, errlen))
         goto out;
     if (halo < 0) { /* DECISIONS 44: octahedra and Ying-Zorin's flattened petal rows reach two
-                     * edges of their level, G2's rows read their neighbours' classes; the
-                     * other rows one edge, of classes in their own star */
+                     * edges of their level, G2's rows read their neighbours' classes (one
+                     * level-0 edge beyond the star); the other rows one edge, of classes in their
+                     * own star. Both together (tetrahedra and a non-manifold simplex) need
+                     * three rings: 1 + sum of 2^(1-l) reaches 2 by level 2 */
         const sd_topo *t0 = &m->level0->t;
         bool nonmanifold = false;
         for (uint32_t v = 0; v < t0->nv && !nonmanifold; v++)
             nonmanifold = nm_type(t0->vnm[v]) != 0;
-        halo = sd_level_num_cells(m->level0, SD_CELL_TETRA) || nonmanifold ||
-                       m->rules.nonmanifold_surface == SD_NMSURF_YING_ZORIN
-                   ? 2
-                   : 1;
+        bool solids = sd_level_num_cells(m->level0, SD_CELL_TETRA) != 0;
+        if (solids && nonmanifold)
+            halo = 3;
+        else if (solids || nonmanifold || m->rules.nonmanifold_surface == SD_NMSURF_YING_ZORIN)
+            halo = 2;
+        else
+            halo = 1;
     }
     uint32_t nv = m->in->nv;
     ring = malloc(((size_t)c.n + 1) * sizeof *ring);

@@ -9,7 +9,8 @@ the `owner` of a point the lowest rank among the pieces using it, and the .pvtu 
 VTK's parallel reader with the level's counts. Cases: solids (both schemes), closed and open
 surfaces (both weights), curves with junctions, a mixed complex with attributes, and non-manifold
 complexes with singular tags, semi-sharp creases and per-simplex overrides; levels 1-3 on 2 and 3
-ranks (3 oversubscribed). A halo of 0 rings is shown to be wrong (the comparison sees it), and
+ranks (3 oversubscribed). Halos thinner than the default are shown to be wrong (the comparison
+sees it: no halo and one ring on solids, two rings on solids with pinched G2 edges), and
 failures stop every rank with a message and a non-zero exit.
 """
 import collections
@@ -168,6 +169,9 @@ def book(pages=3, n=4, block=True):
     return jitter(v, 7, 0.03), f + t
 
 
+PINCHED = REPO / "tests" / "cases" / "mpi_pinched_block" / "mesh.json"
+
+
 def cases():
     out = {}
     v, t = cubes(4)
@@ -216,6 +220,8 @@ def cases():
                                          [1.2, 1, 1.5], [0, -1, -1], [1, -1, -1.2]],
                             "simplices": [[0, 8, 9], [0, 1, 2], [0, 1, 3], [0, 1, 4], [0, 5, 6],
                                           [1, 5, 7]]}, None, None)
+    # non-manifold (pinched) solid edges following G2 next to tetrahedra: three rings of halo
+    out["pinched-block"] = (json.loads(PINCHED.read_text()), None, None)
     return out
 
 
@@ -361,6 +367,32 @@ def test_many_small_pieces_of_nonmanifold_complexes(tmp_path, tmp_path_factory, 
     their neighbours' classes and Ying-Zorin's petal edges their ends' rules: the default halo
     keeps every owned point exact and every checked rule the whole complex's."""
     test_pieces_equal_the_one_process_level(tmp_path, tmp_path_factory, name, nranks)
+
+
+@pytest.mark.parametrize("nranks", [4, 5])
+def test_solids_with_g2_need_three_rings(tmp_path, tmp_path_factory, nranks):
+    """tests/cases/mpi_pinched_block: a Delaunay box whose dropped boundary slivers leave pinched
+    solid edges (G2, non-manifold type 3) among tetrahedra, with triangle fins and curves. A G2
+    edge ring one ring out reads a vertex two rings out (its class is the piece's own there), and
+    an octahedron's diagonal joins an owned edge's level-1 point to that edge's: with two rings, 4
+    and 5 ranks write a level-2 point wrong by 2e-3 without a word. The default (three rings with
+    tetrahedra and a non-manifold simplex, DECISIONS 44) is exact, to level 3."""
+    mesh, extra = write_case(tmp_path, "pinched-block")
+    ref_pts, _, _ = reference(tmp_path_factory, "pinched-block", 2)
+    out = tmp_path / "h2.pvtu"
+    r = mpirun(nranks, "refine", mesh, "--level", 2, "-o", out, "--halo", 2, "-q")
+    assert r.returncode == 0, r.stderr
+    assert max_error(out, nranks, ref_pts) > 1e-3
+    for level in (2, 3):
+        ref_pts, ref_cells, _ = reference(tmp_path_factory, "pinched-block", level)
+        out = tmp_path / f"l{level}.pvtu"
+        r = mpirun(nranks, "refine", mesh, "--level", level, "-o", out, "--stats",
+                   tmp_path / "s.json")
+        assert r.returncode == 0, r.stderr
+        assert "in 3 halo rings" in r.stderr
+        assert json.loads((tmp_path / "s.json").read_text())["halo"] == 3
+        assert max_error(out, nranks, ref_pts) <= 1e-12
+        assert read(out).GetNumberOfCells() == len(ref_cells)
 
 
 def test_a_halo_too_thin_for_g2_stops(tmp_path):
@@ -524,6 +556,19 @@ def test_missing_file(tmp_path):
     r = mpirun(2, "refine", tmp_path / "none.json", "--level", 1, "-o", tmp_path / "o.pvtu")
     assert r.returncode == 2
     assert "cannot open" in r.stderr
+
+
+def test_a_piece_not_written_leaves_no_pieces(tmp_path):
+    """Rank 1 cannot write its piece (a directory stands at its name): the run stops with exit 3
+    and the other ranks remove the pieces they wrote, so no partial result is left."""
+    (tmp_path / "o_1.vtu").mkdir()
+    r = mpirun(3, "refine", REPO / "examples" / "mixed.json", "--level", 2, "-o",
+               tmp_path / "o.pvtu", "-q")
+    assert r.returncode == 3, r.stderr
+    assert "subdivd-mpi: rank 1/3: cannot rename" in r.stderr
+    assert "stopped (writing the pieces) after a failure on rank 1" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o_1.vtu"]
+    assert (tmp_path / "o_1.vtu").is_dir()
 
 
 # ---- other inputs -----------------------------------------------------------------------------
