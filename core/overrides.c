@@ -96,8 +96,8 @@ static sd_result check_override(const sdi_rels *R, const sd_override *o, size_t 
         if (type != 1)
             return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
                            "N1 is for type-1 simplices, where parts of different dimensions "
-                           "meet; %s is of type %d (use %s, G1 or G2)", name, type,
-                           type == 2 || type == 4 ? "N2" : "G2");
+                           "meet; %s is of type %d (use %sG1 or G2)", name, type,
+                           type == 2 || type == 4 ? "N2, " : "");
         int d = o->dimension;
         if (d < 1 || d > 3 || !((fam >> d) & 1)) {
             char dims[16] = "", *p = dims;
@@ -114,8 +114,8 @@ static sd_result check_override(const sdi_rels *R, const sd_override *o, size_t 
     if (type != 2 && type != 4)
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
                        "N2 is for type-2 simplices (three or more parts of one dimension sharing "
-                       "it) and their faces; %s is of type %d (use %s, G1 or G2)", name, type,
-                       type == 1 ? "N1" : "G2");
+                       "it) and their faces; %s is of type %d (use %sG1 or G2)", name, type,
+                       type == 1 ? "N1, " : "");
     bool curves = fam == FAM1;
     if (!curves && !(fam & FAM2))
         return sdi_fail(err, SD_ERR_ARG, (long)i, SD_OV_FIELD_RULE,
