@@ -2,8 +2,9 @@
  *
  * For a vertex x with 1-ring rho(x) = {x_1..x_k} (as its rule reads it: edges, and major
  * diagonals in solids) the block M is (k+1)x(k+1): row 0 is x's vertex point, row i the new point
- * between x and x_i — the edge point of [x, x_i], or, when x_i is reached through an octahedron's
- * major diagonal, that octahedron's cell point — each as a function of x and its 1-ring. The rows
+ * between x and x_i — the edge point of [x, x_i], or, when x_i is opposite x in an octahedron (its
+ * major diagonal; with the averaged scheme any opposite pair), that octahedron's cell point — each
+ * as a function of x and its 1-ring. The rows
  * are read straight out of S_l, so the analysis uses exactly the stencils the service uses.
  * For an edge [a,b] the block L is M of the edge's midpoint after one level (a vertex of valence
  * 2k+2 with skew diagonals), which is how 001 Sec. 4.1 obtains the (2k+3)x(2k+3) block.
@@ -25,11 +26,15 @@ static int cmp_eig(const void *x, const void *y)
     return a[0] < b[0] ? 1 : a[0] > b[0] ? -1 : (a[1] < b[1]) - (a[1] > b[1]);
 }
 
-static uint32_t find_diag_oct(const sd_topo *t, uint32_t a, uint32_t b)
+/* The octahedron in which a and b are opposite: its major diagonal (the box spline's rows read
+ * those) or another of its three opposite pairs (the averaged scheme's rows read those too); its
+ * cell point is the new point between a and b. */
+static uint32_t find_opposite_oct(const sd_topo *t, uint32_t a, uint32_t b)
 {
     for (uint32_t o = 0; o < t->noct; o++)
-        if ((t->oct[o][0] == a && t->oct[o][1] == b) || (t->oct[o][0] == b && t->oct[o][1] == a))
-            return o;
+        for (int j = 0; j < 6; j += 2)
+            if ((t->oct[o][j] == a && t->oct[o][j + 1] == b) || (t->oct[o][j] == b && t->oct[o][j + 1] == a))
+                return o;
     return UINT32_MAX;
 }
 
@@ -83,7 +88,7 @@ static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out,
         if (e != UINT32_MAX) {
             rows[i] = t->nv + e;
         } else {
-            uint32_t o = find_diag_oct(t, v, x);
+            uint32_t o = find_opposite_oct(t, v, x);
             rows[i] = o == UINT32_MAX ? UINT32_MAX : t->nv + t->ne + o;
         }
         i++;

@@ -82,6 +82,7 @@ typedef struct ctx {
     const sd_csrb *S;
     size_t *start;
     sdi_rels R;
+    sdi_rel vo; /* vertex -> the octahedra holding it (any of their six vertices) */
     /* surface triangles around each vertex: tri[toff[v] .. toff[v+1]) (3 ids each, oriented) */
     uint32_t *toff, *tri, *tvert;
     uint32_t ntri;
@@ -96,6 +97,7 @@ static void ctx_free(ctx *x)
 {
     sdi_free(&x->c->mem, x->start);
     sdi_rels_free(&x->c->mem, &x->R);
+    sdi_rel_free(&x->c->mem, &x->vo);
     free(x->toff);
     free(x->tri);
     free(x->tvert);
@@ -130,7 +132,8 @@ static sd_result ctx_init(ctx *x, sd_complex *c, int level, sd_error *err)
     x->tvert = malloc(((size_t)x->ntri * 3 + 1) * sizeof *x->tvert);
     x->cols = malloc(2 * ((size_t)x->S->maxlen + 8) * sizeof *x->cols);
     if (!x->start || !x->tri || !x->toff || !x->tvert || !x->cols ||
-        !sdi_rels_need(&c->mem, &x->R, SDI_REL(SDI_VE) | SDI_REL(SDI_VD))) {
+        !sdi_rels_need(&c->mem, &x->R, SDI_REL(SDI_VE)) ||
+        !sdi_rel_build(&c->mem, &x->vo, nv, x->t->noct, 6, 6, (const uint32_t *)x->t->oct)) {
         ctx_free(x);
         return sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
     }
@@ -165,17 +168,20 @@ static const double *row(const ctx *x, uint32_t r, uint32_t *cols, uint32_t *len
 }
 
 /* The row of the new point between v and x: the edge point, or the cell point of the octahedron
- * whose major diagonal is v-x; UINT32_MAX if neither. */
+ * in which v and x are opposite (its major diagonal, which the box spline's rows read, or another
+ * opposite pair, which the averaged scheme's read: the cell point is the centroid, and at the next
+ * level it is v's opposite in v's corner octahedron); UINT32_MAX if neither. */
 static uint32_t between(const ctx *x, uint32_t v, uint32_t w)
 {
     uint32_t e = sdi_rels_edge(&x->R, v, w);
     if (e != UINT32_MAX)
         return x->t->nv + e;
-    const sdi_rel *d = &x->R.r[SDI_VD];
+    const sdi_rel *d = &x->vo;
     for (uint32_t k = d->off[v]; k < d->off[v + 1]; k++) {
         const uint32_t *o = x->t->oct[d->item[k]];
-        if ((o[0] == v && o[1] == w) || (o[1] == v && o[0] == w))
-            return x->t->nv + x->t->ne + d->item[k];
+        for (int j = 0; j < 6; j++)
+            if (o[j] == v && o[j ^ 1] == w)
+                return x->t->nv + x->t->ne + d->item[k];
     }
     return UINT32_MAX;
 }

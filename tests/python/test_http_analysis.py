@@ -123,6 +123,33 @@ def test_edge_with_diagonals_toward_it_is_regular(daemon):
     np.testing.assert_allclose(sorted(j["eigenvalues"], reverse=True), want, atol=1e-9)
 
 
+@pytest.mark.parametrize("k", [4, 5])
+def test_averaged_edge_block_is_closed_for_every_diagonal(daemon, k):
+    """The averaged scheme's vertex rows read the vertices opposite across octahedra (all three
+    pairs, not only the major diagonal), and its masks do not depend on which pair is the major
+    diagonal: the edge's block (its midpoint at level 1, which lies in octahedra) holds those
+    octahedra's cell points, is closed, has the simple dominant eigenvalue 1, and has one spectrum
+    for every choice of diagonals."""
+    spectra = []
+    for pair in (0, 1, 2):
+        s = Session(daemon)
+        body = edge_star(k)
+        body["diagonals"] = [[i, pair] for i in range(k)]
+        assert s.put_complex(body).status_code == 200
+        assert s.req("PUT", "/rules", json={"solid_scheme": "averaged"}).status_code == 200
+        j = s.req("GET", "/analysis", params={"edge": "0,1"}).json()
+        assert j["closed"] is True, pair
+        L = np.array(j["matrix"])
+        np.testing.assert_allclose(L.sum(axis=1), 1, atol=1e-14)
+        ev = sorted(np.linalg.eigvals(L), key=lambda z: (-abs(z), -z.real, -z.imag))
+        assert abs(ev[0] - 1) < 1e-12 and abs(ev[1]) < 1 - 1e-6
+        spectra.append(np.array(ev))
+        assert j["limit"]["method"] == "eigenvector"
+        assert len(j["limit_mask"]) == j["size"] and abs(sum(j["limit_mask"]) - 1) < 1e-12
+    for sp in spectra[1:]:
+        np.testing.assert_allclose(sp, spectra[0], atol=1e-9)
+
+
 @pytest.mark.parametrize("diag,status,pointer", [
     ([[0, 3]], 422, "/diagonals/0/1"), ([[9, 0]], 422, "/diagonals/0/0"),
     ([[0, 1], [0, 2]], 422, "/diagonals/1/0"), ([[0]], 400, "/diagonals/0"),
