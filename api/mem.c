@@ -51,25 +51,32 @@ static bool injected(void)
     return true;
 }
 
-/* Whether n more bytes fit the budget, counted in `on` (in_use or elsewhere) when they do. */
+static bool keep_give_way(void);
+
+/* Whether n more bytes fit the budget, counted in `on` (in_use or elsewhere) when they do. Kept
+ * blocks (below) give way first: a refusal is only ever for what is really held. */
 static bool within_budget(atomic_size_t *on, size_t n)
 {
-    size_t was = atomic_fetch_add_explicit(on, n, memory_order_relaxed);
-    if (!budget)
-        return true;
-    size_t other = on == &in_use ? atomic_load_explicit(&elsewhere, memory_order_relaxed)
-                                 : atomic_load_explicit(&in_use, memory_order_relaxed);
-    size_t total = was + n + other;
-    size_t room = budget;
-    if (n <= API_MEM_SMALL)
-        room += budget / 32 > (1u << 20) ? budget / 32 : (1u << 20);
-    if (total <= room && total >= n)
-        return true;
-    atomic_fetch_sub_explicit(on, n, memory_order_relaxed);
-    atomic_fetch_add_explicit(&budget_refusals, 1, memory_order_relaxed);
-    if (meter)
-        meter->over_budget++;
-    return false;
+    for (int tries = 0;; tries++) {
+        size_t was = atomic_fetch_add_explicit(on, n, memory_order_relaxed);
+        if (!budget)
+            return true;
+        size_t other = on == &in_use ? atomic_load_explicit(&elsewhere, memory_order_relaxed)
+                                     : atomic_load_explicit(&in_use, memory_order_relaxed);
+        size_t total = was + n + other;
+        size_t room = budget;
+        if (n <= API_MEM_SMALL)
+            room += budget / 32 > (1u << 20) ? budget / 32 : (1u << 20);
+        if (total <= room && total >= n)
+            return true;
+        atomic_fetch_sub_explicit(on, n, memory_order_relaxed);
+        if (tries == 0 && keep_give_way())
+            continue;
+        atomic_fetch_add_explicit(&budget_refusals, 1, memory_order_relaxed);
+        if (meter)
+            meter->over_budget++;
+        return false;
+    }
 }
 
 /* Charge n bytes to this thread's meter; false when its limit refuses them. */
@@ -247,13 +254,11 @@ void api_mem_unreserve(size_t n)
  * the levels of the model a change replaced, a deleted session's — up to `keep_limit` bytes, for
  * at most KEEP_IDLE seconds (api_mem_keep_trim, called by the daemon's main loop), so the
  * resident size still follows what the daemon holds. Kept blocks stay counted against the
- * budget; a reservation that would not fit drops them all first. Under AddressSanitizer every
- * block is malloc's, so that it keeps watching them. */
-#if defined(__SANITIZE_ADDRESS__)
-#define KEEP_MIN SIZE_MAX
-#else
+ * budget; any allocation or reservation that would not fit drops them all first (within_budget).
+ * Under AddressSanitizer every block is malloc's, so that it keeps watching them, and none is
+ * kept. */
 #define KEEP_MIN ((size_t)256 << 10)  /* the daemon's mmap threshold (server/main.c) */
-#endif
+#ifndef SD_UNDER_ASAN
 #define KEEP_GRAIN ((size_t)64 << 10)
 #define THP ((size_t)2 << 20)
 #define KEEP_SLOTS 1024
@@ -292,6 +297,8 @@ static size_t keep_class(size_t n)
  * huge pages as a whole, so a fresh block faults in 2 MiB at a time. */
 static void *map_block(size_t cap)
 {
+    if (cap > SIZE_MAX / 2)
+        return NULL;
     if (cap < THP) {
         void *p = mmap(NULL, cap, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
         return p == MAP_FAILED ? NULL : p;
@@ -310,8 +317,9 @@ static void *map_block(size_t cap)
     return p + head;
 }
 
-/* Take out entries [0, upto) and those idle since before `older`, unmapped after the lock. */
-static void keep_drop(size_t need, double older)
+/* Take out the entries given back before `older`, and the oldest until `need` more bytes fit
+ * the limit; unmapped after the lock. How many were taken out. */
+static int keep_drop(size_t need, double older)
 {
     kept gone[KEEP_SLOTS];
     int ng = 0, k = 0;
@@ -328,7 +336,10 @@ static void keep_drop(size_t need, double older)
         munmap(gone[i].p, gone[i].cap);
         api_mem_unreserve(gone[i].cap);
     }
+    return ng;
 }
+
+static bool keep_give_way(void) { return keep_drop(SIZE_MAX / 2, HUGE_VAL) > 0; }
 
 void api_mem_keep_set(size_t bytes)
 {
@@ -410,14 +421,12 @@ static void *core_alloc(size_t n, void *ud)
             meter->moved += cap;
         return p;
     }
-    atomic_fetch_add_explicit(&keep_misses, 1, memory_order_relaxed);
-    /* kept blocks give way to a reservation that would not fit beside them */
-    if (budget && api_mem_kept() && api_mem_budget_used() + cap > budget)
-        keep_drop(SIZE_MAX / 2, HUGE_VAL);
-    if (!api_mem_reserve(cap))
+    if (!api_mem_reserve(cap)) /* kept blocks give way first (within_budget) */
         return NULL;
     if (!(p = map_block(cap)))
         api_mem_unreserve(cap);
+    else
+        atomic_fetch_add_explicit(&keep_misses, 1, memory_order_relaxed);
     return p;
 }
 
@@ -438,6 +447,36 @@ static void core_release(void *p, size_t n, void *ud)
     munmap(p, cap);
     api_mem_unreserve(cap);
 }
+#else /* AddressSanitizer: the C library's blocks, none kept */
+static bool keep_give_way(void) { return false; }
+void api_mem_keep_set(size_t bytes) { (void)bytes; }
+void api_mem_keep_trim(void) {}
+size_t api_mem_kept(void) { return 0; }
+
+void api_mem_keep_counts(uint64_t *hits, uint64_t *misses)
+{
+    *hits = 0;
+    *misses = 0;
+}
+
+static void *core_alloc(size_t n, void *ud)
+{
+    (void)ud;
+    if (!api_mem_reserve(n))
+        return NULL;
+    void *p = malloc(n);
+    if (!p)
+        api_mem_unreserve(n);
+    return p;
+}
+
+static void core_release(void *p, size_t n, void *ud)
+{
+    (void)ud;
+    free(p);
+    api_mem_unreserve(n);
+}
+#endif
 
 sd_allocator api_mem_core_allocator(void)
 {

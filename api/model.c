@@ -140,6 +140,12 @@ struct out_geometry *api_model_geometry_locked(api_model *m, int level)
     return m->geometry[level];
 }
 
+static _Thread_local int compute_threads = 1;
+
+void api_set_compute_threads(int n) { compute_threads = n > 1 ? n : 1; }
+
+int api_compute_threads(void) { return compute_threads; }
+
 api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_bytes, bool batch,
                          sd_error *err)
 {
@@ -178,7 +184,8 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
                           .reoriented = in->reoriented,
                           .classes = in->classes,
                           /* batch: levels written out, never edited (DECISIONS 46) */
-                          .edit_index = batch ? SD_EDIT_INDEX_LAZY : SD_EDIT_INDEX_WITH_LEVELS};
+                          .edit_index = batch ? SD_EDIT_INDEX_LAZY : SD_EDIT_INDEX_WITH_LEVELS,
+                          .threads = compute_threads};
         int8_t *given = NULL; /* the chosen diagonals: Algorithm 2 picks the others against them */
         if (in->ndiag) {
             if (!(given = api_malloc((size_t)in->ns + 1))) {
@@ -194,6 +201,8 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
         }
         m->c = sd_complex_new(in->xyz, in->nv, in->idx, in->size, in->ns, &opt, err);
         api_free(given);
+        if (m->c) /* later computations take the threads of the request that runs them */
+            sd_complex_set_threads(m->c, 1);
         if (!m->c) {
             api_model_unref(m);
             return NULL;
@@ -371,12 +380,6 @@ void api_model_unref(api_model *m)
     api_free(m);
 }
 
-static _Thread_local int compute_threads = 1;
-
-void api_set_compute_threads(int n) { compute_threads = n > 1 ? n : 1; }
-
-int api_compute_threads(void) { return compute_threads; }
-
 const sd_level *api_model_level_locked(api_model *m, int level, sd_error *err)
 {
     struct timespec t0, t1;
@@ -397,6 +400,7 @@ const sd_level *api_model_level_locked(api_model *m, int level, sd_error *err)
         }
         atomic_store(&m->progress, -1.0);
     }
+    sd_complex_set_threads(m->c, 1); /* edits and the rest: the caller's thread */
     clock_gettime(CLOCK_MONOTONIC, &t1);
     if (lv && before <= level) /* the time of the levels computed now goes to the highest */
         m->seconds[level] += (double)(t1.tv_sec - t0.tv_sec) + (t1.tv_nsec - t0.tv_nsec) * 1e-9;

@@ -29,7 +29,7 @@ void sdi_mem_init(sd_mem *m, const sd_allocator *a, size_t limit)
  * chunks start 16 bytes past a page, so only their aligned interior could be advised); the
  * size decides at free which way a block came. Under AddressSanitizer, malloc's, which it
  * watches. */
-#if defined(__SANITIZE_ADDRESS__) || !defined(MADV_HUGEPAGE)
+#if defined(SD_UNDER_ASAN) || !defined(MADV_HUGEPAGE)
 #define MAP_MIN SIZE_MAX
 #else
 #define MAP_MIN ((size_t)2 << 20)
@@ -59,14 +59,14 @@ static void *raw_alloc(sd_mem *m, size_t n)
 {
     if (m->a.alloc)
         return m->a.alloc(n, m->a.ud);
-    return n >= MAP_MIN ? map_huge(n) : malloc(n);
+    return n >= MAP_MIN && !m->a.release ? map_huge(n) : malloc(n);
 }
 
 static void raw_free(sd_mem *m, void *p, size_t n)
 {
     if (m->a.release)
         m->a.release(p, n, m->a.ud);
-    else if (n >= MAP_MIN)
+    else if (n >= MAP_MIN && !m->a.alloc)
         munmap(p, (n + ((size_t)2 << 20) - 1) / ((size_t)2 << 20) * ((size_t)2 << 20));
     else
         free(p);

@@ -69,6 +69,16 @@ typedef struct sd_error {
 const char *sd_result_name(sd_result r);
 
 /* A pluggable allocator (NULL functions = libc). */
+/* SD_UNDER_ASAN: built with AddressSanitizer (gcc's and clang's spellings). The allocators
+ * then use the C library's blocks, which it watches, and map none of their own. */
+#if defined(__SANITIZE_ADDRESS__)
+#define SD_UNDER_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define SD_UNDER_ASAN 1
+#endif
+#endif
+
 typedef struct sd_allocator {
     void *(*alloc)(size_t size, void *ud);
     void (*release)(void *ptr, size_t size, void *ud);

@@ -39,7 +39,8 @@ static void h_healthz(req *r) { http_reply_json(r, 200, json_pack("{s:s}", "stat
  * new work elsewhere until requests and sessions give some back); the budget in both answers. */
 static void h_readyz(req *r)
 {
-    size_t budget = api_mem_budget(), used = api_mem_budget_used();
+    size_t budget = api_mem_budget(), used = api_mem_budget_used(), kept = api_mem_kept();
+    used = used > kept ? used - kept : 0; /* kept blocks give way to any request (api/mem.h) */
     api_problem p = {0};
     char why[256];
     if (atomic_load(&r->srv->draining)) {

@@ -26,12 +26,14 @@ static void check(int ok, const char *what)
     }
 }
 
+#if !defined(SD_UNDER_ASAN)
 static uint64_t hits(void)
 {
     uint64_t h, m;
     api_mem_keep_counts(&h, &m);
     return h;
 }
+#endif
 
 int main(void)
 {
@@ -44,7 +46,7 @@ int main(void)
     check(p != NULL, "a 3 MiB block");
     memset(p, 1, 3 * MIB);
     a.release(p, 3 * MIB, a.ud);
-#if defined(__SANITIZE_ADDRESS__)
+#if defined(SD_UNDER_ASAN)
     check(api_mem_kept() == 0, "under ASan nothing is kept");
     check(api_mem_budget_used() == base, "under ASan the block's bytes are given back");
 #else
@@ -104,6 +106,24 @@ int main(void)
     void *over = a.alloc(8 * MIB, a.ud);
     check(over == NULL, "a block past the budget is still refused");
     a.release(big, 15 * MIB, a.ud);
+
+    /* ... and so do they to a reservation and to an api block */
+    void *k1 = a.alloc(3 * MIB, a.ud), *k2 = a.alloc(3 * MIB, a.ud);
+    a.release(k1, 3 * MIB, a.ud);
+    a.release(k2, 3 * MIB, a.ud);
+    check(api_mem_kept() == 6 * MIB, "6 MiB kept again");
+    refused = api_mem_budget_refusals();
+    check(api_mem_reserve(16 * MIB), "a reservation of 16 MiB fits once the kept blocks give way");
+    check(api_mem_kept() == 0 && api_mem_budget_refusals() == refused, "without a refusal");
+    api_mem_unreserve(16 * MIB);
+    k1 = a.alloc(3 * MIB, a.ud);
+    k2 = a.alloc(3 * MIB, a.ud);
+    a.release(k1, 3 * MIB, a.ud);
+    a.release(k2, 3 * MIB, a.ud);
+    void *blk = api_malloc(16 * MIB);
+    check(blk != NULL && api_mem_kept() == 0, "an api block of 16 MiB too");
+    api_free(blk);
+    api_mem_set_budget(0);
 
     /* off: nothing kept */
     api_mem_keep_set(0);

@@ -4,6 +4,7 @@ Loop surface with a crease, and bad values refused."""
 import json
 import math
 import subprocess
+import threading
 
 from daemon import SUBDIVD, Daemon, Session
 from test_kept_memory import cubes
@@ -34,6 +35,30 @@ def levels(d, body, level, tags=None, rules=None):
     return out
 
 
+def threads_while(d, fn):
+    """fn() while the daemon's thread count is sampled: (before, the most seen during)."""
+    status = f"/proc/{d.proc.pid}/status"
+
+    def count():
+        for line in open(status):
+            if line.startswith("Threads:"):
+                return int(line.split()[1])
+        return 0
+    before, most, done = count(), [0], threading.Event()
+
+    def watch():
+        while not done.is_set():
+            most[0] = max(most[0], count())
+    w = threading.Thread(target=watch)
+    w.start()
+    try:
+        out = fn()
+    finally:
+        done.set()
+        w.join()
+    return before, most[0], out
+
+
 def test_daemon_levels_are_the_same_bytes_for_any_number_of_threads():
     solid = cubes(9, 8, 8, 0.1, 5)     # level 3: 1.2 M cells, every loop cut in parts
     surf = torus()
@@ -42,7 +67,11 @@ def test_daemon_levels_are_the_same_bytes_for_any_number_of_threads():
     one = Daemon("--level-threads", "1")
     three = Daemon("--level-threads", "3")
     try:
-        assert levels(one, solid, 3) == levels(three, solid, 3)
+        b1, most1, want = threads_while(one, lambda: levels(one, solid, 3))
+        b3, most3, got = threads_while(three, lambda: levels(three, solid, 3))
+        # beyond the connections' threads, the level's loops ran on threads of their own
+        assert most3 - b3 > most1 - b1, (b1, most1, b3, most3)
+        assert want == got
         assert levels(one, surf, 4, crease, loop) == levels(three, surf, 4, crease, loop)
     finally:
         one.stop()
