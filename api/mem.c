@@ -245,6 +245,25 @@ void api_mem_unreserve(size_t n)
         meter->moved += n;
 }
 
+/* The core's blocks from the C library, reserved in the budget. */
+static void *core_alloc_plain(size_t n, void *ud)
+{
+    (void)ud;
+    if (!api_mem_reserve(n))
+        return NULL;
+    void *p = malloc(n);
+    if (!p)
+        api_mem_unreserve(n);
+    return p;
+}
+
+static void core_release_plain(void *p, size_t n, void *ud)
+{
+    (void)ud;
+    free(p);
+    api_mem_unreserve(n);
+}
+
 /* ---- the core's big blocks, kept for the next build -------------------------------------
  * A level's arrays are written once, front to back, and a fresh page costs more than the
  * writing (docs/BENCHMARKS.md): a core block of KEEP_MIN bytes or more is mapped by itself, in
@@ -293,30 +312,6 @@ static size_t keep_class(size_t n)
     return n > SIZE_MAX - g ? n : (n + g - 1) / g * g;
 }
 
-/* A mapping of cap bytes; from 2 MiB on it starts on a 2 MiB boundary and asks for transparent
- * huge pages as a whole, so a fresh block faults in 2 MiB at a time. */
-static void *map_block(size_t cap)
-{
-    if (cap > SIZE_MAX / 2)
-        return NULL;
-    if (cap < THP) {
-        void *p = mmap(NULL, cap, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-        return p == MAP_FAILED ? NULL : p;
-    }
-    unsigned char *p = mmap(NULL, cap + THP, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS,
-                            -1, 0);
-    if (p == MAP_FAILED)
-        return NULL;
-    size_t head = (THP - (uintptr_t)p % THP) % THP;
-    if (head)
-        munmap(p, head);
-    munmap(p + head + cap, THP - head);
-#ifdef MADV_HUGEPAGE
-    (void)madvise(p + head, cap, MADV_HUGEPAGE); /* advice: refused or not, all works */
-#endif
-    return p + head;
-}
-
 /* Take out the entries given back before `older`, and the oldest until `need` more bytes fit
  * the limit; unmapped after the lock. How many were taken out. */
 static int keep_drop(size_t need, double older)
@@ -333,7 +328,7 @@ static int keep_drop(size_t need, double older)
     nkeep = k;
     pthread_mutex_unlock(&keep_mu);
     for (int i = 0; i < ng; i++) {
-        munmap(gone[i].p, gone[i].cap);
+        sd_unmap_block(gone[i].p, gone[i].cap);
         api_mem_unreserve(gone[i].cap);
     }
     return ng;
@@ -402,15 +397,8 @@ static bool keep_put(void *p, size_t cap)
 
 static void *core_alloc(size_t n, void *ud)
 {
-    (void)ud;
-    if (n < KEEP_MIN) {
-        if (!api_mem_reserve(n))
-            return NULL;
-        void *p = malloc(n);
-        if (!p)
-            api_mem_unreserve(n);
-        return p;
-    }
+    if (n < KEEP_MIN)
+        return core_alloc_plain(n, ud);
     size_t cap = keep_class(n);
     void *p = keep_take(cap);
     if (p) {
@@ -423,7 +411,7 @@ static void *core_alloc(size_t n, void *ud)
     }
     if (!api_mem_reserve(cap)) /* kept blocks give way first (within_budget) */
         return NULL;
-    if (!(p = map_block(cap)))
+    if (!(p = sd_map_block(cap)))
         api_mem_unreserve(cap);
     else
         atomic_fetch_add_explicit(&keep_misses, 1, memory_order_relaxed);
@@ -432,10 +420,8 @@ static void *core_alloc(size_t n, void *ud)
 
 static void core_release(void *p, size_t n, void *ud)
 {
-    (void)ud;
     if (n < KEEP_MIN) {
-        free(p);
-        api_mem_unreserve(n);
+        core_release_plain(p, n, ud);
         return;
     }
     size_t cap = keep_class(n);
@@ -444,7 +430,7 @@ static void core_release(void *p, size_t n, void *ud)
             meter->moved += cap;
         return;
     }
-    munmap(p, cap);
+    sd_unmap_block(p, cap);
     api_mem_unreserve(cap);
 }
 #else /* AddressSanitizer: the C library's blocks, none kept */
@@ -459,23 +445,8 @@ void api_mem_keep_counts(uint64_t *hits, uint64_t *misses)
     *misses = 0;
 }
 
-static void *core_alloc(size_t n, void *ud)
-{
-    (void)ud;
-    if (!api_mem_reserve(n))
-        return NULL;
-    void *p = malloc(n);
-    if (!p)
-        api_mem_unreserve(n);
-    return p;
-}
-
-static void core_release(void *p, size_t n, void *ud)
-{
-    (void)ud;
-    free(p);
-    api_mem_unreserve(n);
-}
+#define core_alloc core_alloc_plain
+#define core_release core_release_plain
 #endif
 
 sd_allocator api_mem_core_allocator(void)

@@ -24,42 +24,53 @@ void sdi_mem_init(sd_mem *m, const sd_allocator *a, size_t limit)
     m->limit = limit;
 }
 
-/* Without an allocator of the caller's, blocks of 2 MiB and more are mapped on a 2 MiB boundary
- * and advised as huge pages whole, so a fresh block faults in 2 MiB at a time (malloc's mapped
- * chunks start 16 bytes past a page, so only their aligned interior could be advised); the
- * size decides at free which way a block came. Under AddressSanitizer, malloc's, which it
- * watches. */
+/* Without an allocator of the caller's, blocks of 2 MiB and more are sd_map_block's (below),
+ * so a fresh block faults in 2 MiB at a time (malloc's mapped chunks start 16 bytes past a page,
+ * so only their aligned interior could be advised); the size decides at free which way a block
+ * came. Under AddressSanitizer, malloc's, which it watches. */
 #if defined(SD_UNDER_ASAN) || !defined(MADV_HUGEPAGE)
 #define MAP_MIN SIZE_MAX
 #else
 #define MAP_MIN ((size_t)2 << 20)
 #endif
 
-static void *map_huge(size_t n)
+void *sd_map_block(size_t n)
 {
     const size_t thp = (size_t)2 << 20;
-    if (n > SIZE_MAX - 2 * thp)
+    if (n == 0 || n > SIZE_MAX / 2)
         return NULL;
-    size_t len = (n + thp - 1) / thp * thp;
-    unsigned char *p = mmap(NULL, len + thp, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS,
+    if (n < thp) {
+        void *p = mmap(NULL, n, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+        return p == MAP_FAILED ? NULL : p;
+    }
+    unsigned char *p = mmap(NULL, n + thp, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS,
                             -1, 0);
     if (p == MAP_FAILED)
         return NULL;
     size_t head = (thp - (uintptr_t)p % thp) % thp;
     if (head)
         munmap(p, head);
-    munmap(p + head + len, thp - head);
+    /* the rest past n, from the page after it (munmap takes whole pages) */
+    size_t page = (size_t)4096, end = (head + n + page - 1) / page * page;
+    if (end < n + thp)
+        munmap(p + end, n + thp - end);
 #ifdef MADV_HUGEPAGE
-    (void)madvise(p + head, len, MADV_HUGEPAGE); /* advice: refused or not, all works */
+    (void)madvise(p + head, n, MADV_HUGEPAGE); /* advice: refused or not, all works */
 #endif
     return p + head;
+}
+
+void sd_unmap_block(void *p, size_t n)
+{
+    if (p)
+        munmap(p, n);
 }
 
 static void *raw_alloc(sd_mem *m, size_t n)
 {
     if (m->a.alloc)
         return m->a.alloc(n, m->a.ud);
-    return n >= MAP_MIN && !m->a.release ? map_huge(n) : malloc(n);
+    return n >= MAP_MIN && !m->a.release ? sd_map_block(n) : malloc(n);
 }
 
 static void raw_free(sd_mem *m, void *p, size_t n)
@@ -67,7 +78,7 @@ static void raw_free(sd_mem *m, void *p, size_t n)
     if (m->a.release)
         m->a.release(p, n, m->a.ud);
     else if (n >= MAP_MIN && !m->a.alloc)
-        munmap(p, (n + ((size_t)2 << 20) - 1) / ((size_t)2 << 20) * ((size_t)2 << 20));
+        sd_unmap_block(p, n);
     else
         free(p);
 }

@@ -506,6 +506,12 @@ sd_result sd_complex_move(sd_complex *c, int channel, size_t n, const sd_vertex_
  * unsupported or where the memory is not anonymous). The core's allocations do this themselves,
  * also for the blocks of a plugged sd_allocator; exported for the service's own big buffers. */
 void sd_advise_huge(void *p, size_t n);
+/* A mapping of n fresh zero bytes (0 < n <= SIZE_MAX / 2) of its own, or NULL; from 2 MiB on
+ * it starts on a 2 MiB boundary and asks for transparent huge pages over all of it, so it faults
+ * in 2 MiB at a time. sd_unmap_block(p, n), with the same n, gives it back. The core's default
+ * allocator takes its blocks of 2 MiB and more so; the service's allocator its big ones. */
+void *sd_map_block(size_t n);
+void sd_unmap_block(void *p, size_t n);
 
 /* Build now what the first edit of the computed levels would build (the maps that find a level's
  * recomputed points), so that edit costs what later ones do. Optional; SD_ERR_NOMEM leaves them
