@@ -59,7 +59,7 @@ static const setting S[] = {
     {"max-memory", T_U64, OFF(max_memory), 16LL << 20, 1LL << 50,
      "memory budget of all requests and sessions, bytes (default 3/4 of RAM or cgroup limit)"},
     {"keep-memory", T_U64, OFF(keep_memory), 0, 1LL << 50,
-     "bytes of freed level arrays kept for a second for the next build, within --max-memory "
+     "bytes of freed level arrays kept about a second for the next build, within --max-memory "
      "(default: an eighth of it, at most 1 GiB; 0: none)"},
     {"fill-timeout", T_U32, OFF(limits.fill_seconds), 1, 86400,
      "seconds the TetGen fill of one request may take, all its entries together (default 60)"},
