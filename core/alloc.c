@@ -24,14 +24,15 @@ void sdi_mem_init(sd_mem *m, const sd_allocator *a, size_t limit)
     m->limit = limit;
 }
 
-/* Without an allocator of the caller's, blocks of 2 MiB and more are sd_map_block's (below),
- * so a fresh block faults in 2 MiB at a time (malloc's mapped chunks start 16 bytes past a page,
- * so only their aligned interior could be advised); the size decides at free which way a block
- * came. Under AddressSanitizer, malloc's, which it watches. */
+/* Without an allocator of the caller's, blocks of 2 MiB and more start on a 2 MiB boundary
+ * (posix_memalign) and are advised as huge pages whole, so a fresh block faults in 2 MiB at a
+ * time (malloc's own chunks start 16 bytes past a page, so only their aligned interior could
+ * be); they stay the C library's, so a process that keeps freed memory (glibc's tunables, a
+ * service's steady state) reuses them as before. Under AddressSanitizer, plain malloc's. */
 #if defined(SD_UNDER_ASAN) || !defined(MADV_HUGEPAGE)
-#define MAP_MIN SIZE_MAX
+#define ALIGN_MIN SIZE_MAX
 #else
-#define MAP_MIN ((size_t)2 << 20)
+#define ALIGN_MIN ((size_t)2 << 20)
 #endif
 
 void *sd_map_block(size_t n)
@@ -70,15 +71,16 @@ static void *raw_alloc(sd_mem *m, size_t n)
 {
     if (m->a.alloc)
         return m->a.alloc(n, m->a.ud);
-    return n >= MAP_MIN && !m->a.release ? sd_map_block(n) : malloc(n);
+    void *p = NULL;
+    if (n < ALIGN_MIN)
+        return malloc(n);
+    return posix_memalign(&p, (size_t)2 << 20, n) ? NULL : p; /* advised by sdi_alloc */
 }
 
 static void raw_free(sd_mem *m, void *p, size_t n)
 {
     if (m->a.release)
         m->a.release(p, n, m->a.ud);
-    else if (n >= MAP_MIN && !m->a.alloc)
-        sd_unmap_block(p, n);
     else
         free(p);
 }

@@ -508,8 +508,9 @@ sd_result sd_complex_move(sd_complex *c, int channel, size_t n, const sd_vertex_
 void sd_advise_huge(void *p, size_t n);
 /* A mapping of n fresh zero bytes (0 < n <= SIZE_MAX / 2) of its own, or NULL; from 2 MiB on
  * it starts on a 2 MiB boundary and asks for transparent huge pages over all of it, so it faults
- * in 2 MiB at a time. sd_unmap_block(p, n), with the same n, gives it back. The core's default
- * allocator takes its blocks of 2 MiB and more so; the service's allocator its big ones. */
+ * in 2 MiB at a time. sd_unmap_block(p, n), with the same n, gives it back. The service's
+ * allocator takes its big blocks so (api/mem.c); the core's default allocator aligns its blocks
+ * of 2 MiB and more the same way within the C library's heap. */
 void *sd_map_block(size_t n);
 void sd_unmap_block(void *p, size_t n);
 
