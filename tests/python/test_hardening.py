@@ -441,10 +441,12 @@ def test_compute_slots_are_fair_across_sessions():
     """Session A asks for its heavy uncomputed level four times at once: the requests waiting for
     A's computation hold no compute slot, so session B's small request is served while A's first
     one is still computing (before: A's waiters held both slots and B waited about 1 s for A)."""
-    d = Daemon("--threads", "2")
+    # one thread per computation, and a block big enough that A's level takes well over a
+    # second on one core (what the check below the waits needs to mean anything)
+    d = Daemon("--threads", "2", "--level-threads", "1")
     try:
         a = Session(d)
-        assert a.put_complex(block_mesh(12)).status_code == 200
+        assert a.put_complex(block_mesh(14)).status_code == 200
         b = Session(d)
         assert b.put_complex({"vertices": CUBE_V, "simplices": CUBE_S}).status_code == 200
         t0 = time.time()
