@@ -276,10 +276,9 @@ static void core_release_plain(void *p, size_t n, void *ud)
  * budget; any allocation or reservation that would not fit drops them all first (within_budget).
  * Under AddressSanitizer every block is malloc's, so that it keeps watching them, and none is
  * kept. */
-#define KEEP_MIN ((size_t)256 << 10)  /* the daemon's mmap threshold (server/main.c) */
 #ifndef SD_UNDER_ASAN
+#define KEEP_MIN ((size_t)256 << 10)  /* the daemon's mmap threshold (server/main.c) */
 #define KEEP_GRAIN ((size_t)64 << 10)
-#define THP ((size_t)2 << 20)
 #define KEEP_SLOTS 1024
 #define KEEP_IDLE 1.0
 
@@ -312,6 +311,41 @@ static size_t keep_class(size_t n)
     return n > SIZE_MAX - g ? n : (n + g - 1) / g * g;
 }
 
+/* A mapping of n fresh zero bytes of its own (0 < n <= SIZE_MAX / 2), or NULL; from 2 MiB on
+ * it starts on a 2 MiB boundary and asks for transparent huge pages over all of it, so it faults
+ * in 2 MiB at a time. unmap_block(p, n), with the same n, gives it back. */
+static void *map_block(size_t n)
+{
+    const size_t thp = (size_t)2 << 20;
+    if (n == 0 || n > SIZE_MAX / 2)
+        return NULL;
+    if (n < thp) {
+        void *p = mmap(NULL, n, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+        return p == MAP_FAILED ? NULL : p;
+    }
+    unsigned char *p = mmap(NULL, n + thp, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS,
+                            -1, 0);
+    if (p == MAP_FAILED)
+        return NULL;
+    size_t head = (thp - (uintptr_t)p % thp) % thp;
+    if (head)
+        munmap(p, head);
+    /* the rest past n, from the page after it (munmap takes whole pages) */
+    size_t page = (size_t)4096, end = (head + n + page - 1) / page * page;
+    if (end < n + thp)
+        munmap(p + end, n + thp - end);
+#ifdef MADV_HUGEPAGE
+    (void)madvise(p + head, n, MADV_HUGEPAGE); /* advice: refused or not, all works */
+#endif
+    return p + head;
+}
+
+static void unmap_block(void *p, size_t n)
+{
+    if (p)
+        munmap(p, n);
+}
+
 /* Take out the entries given back before `older`, and the oldest until `need` more bytes fit
  * the limit; unmapped after the lock. How many were taken out. */
 static int keep_drop(size_t need, double older)
@@ -328,7 +362,7 @@ static int keep_drop(size_t need, double older)
     nkeep = k;
     pthread_mutex_unlock(&keep_mu);
     for (int i = 0; i < ng; i++) {
-        sd_unmap_block(gone[i].p, gone[i].cap);
+        unmap_block(gone[i].p, gone[i].cap);
         api_mem_unreserve(gone[i].cap);
     }
     return ng;
@@ -411,7 +445,7 @@ static void *core_alloc(size_t n, void *ud)
     }
     if (!api_mem_reserve(cap)) /* kept blocks give way first (within_budget) */
         return NULL;
-    if (!(p = sd_map_block(cap)))
+    if (!(p = map_block(cap)))
         api_mem_unreserve(cap);
     else
         atomic_fetch_add_explicit(&keep_misses, 1, memory_order_relaxed);
@@ -430,7 +464,7 @@ static void core_release(void *p, size_t n, void *ud)
             meter->moved += cap;
         return;
     }
-    sd_unmap_block(p, cap);
+    unmap_block(p, cap);
     api_mem_unreserve(cap);
 }
 #else /* AddressSanitizer: the C library's blocks, none kept */

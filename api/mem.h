@@ -86,8 +86,9 @@ void api_mem_unreserve(size_t n);
  * budget. */
 sd_allocator api_mem_core_allocator(void);
 /* Big core blocks given back are kept for the next block of their size class, up to `bytes`
- * in all (0, the default: none), each for at most a second (see mem.c); they stay counted
- * against the budget and give way to any reservation that would not fit beside them.
+ * in all (0, the default: none), each for about a second (see mem.c); they stay counted
+ * against the budget and give way to any allocation or reservation that would not fit beside
+ * them.
  * api_mem_keep_trim drops those idle for over a second (the daemon calls it 5 times a second);
  * api_mem_kept says how many bytes are kept; the counts say how many big blocks were taken
  * from the kept ones and how many were mapped anew. */

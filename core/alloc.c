@@ -35,45 +35,13 @@ void sdi_mem_init(sd_mem *m, const sd_allocator *a, size_t limit)
 #define ALIGN_MIN ((size_t)2 << 20)
 #endif
 
-void *sd_map_block(size_t n)
-{
-    const size_t thp = (size_t)2 << 20;
-    if (n == 0 || n > SIZE_MAX / 2)
-        return NULL;
-    if (n < thp) {
-        void *p = mmap(NULL, n, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-        return p == MAP_FAILED ? NULL : p;
-    }
-    unsigned char *p = mmap(NULL, n + thp, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS,
-                            -1, 0);
-    if (p == MAP_FAILED)
-        return NULL;
-    size_t head = (thp - (uintptr_t)p % thp) % thp;
-    if (head)
-        munmap(p, head);
-    /* the rest past n, from the page after it (munmap takes whole pages) */
-    size_t page = (size_t)4096, end = (head + n + page - 1) / page * page;
-    if (end < n + thp)
-        munmap(p + end, n + thp - end);
-#ifdef MADV_HUGEPAGE
-    (void)madvise(p + head, n, MADV_HUGEPAGE); /* advice: refused or not, all works */
-#endif
-    return p + head;
-}
-
-void sd_unmap_block(void *p, size_t n)
-{
-    if (p)
-        munmap(p, n);
-}
-
 static void *raw_alloc(sd_mem *m, size_t n)
 {
     if (m->a.alloc)
         return m->a.alloc(n, m->a.ud);
-    void *p = NULL;
     if (n < ALIGN_MIN)
         return malloc(n);
+    void *p;
     return posix_memalign(&p, (size_t)2 << 20, n) ? NULL : p; /* advised by sdi_alloc */
 }
 

@@ -68,9 +68,8 @@ typedef struct sd_error {
 
 const char *sd_result_name(sd_result r);
 
-/* A pluggable allocator (NULL functions = libc). */
 /* SD_UNDER_ASAN: built with AddressSanitizer (gcc's and clang's spellings). The allocators
- * then use the C library's blocks, which it watches, and map none of their own. */
+ * then use the C library's blocks, which it watches, and align or map none of their own. */
 #if defined(__SANITIZE_ADDRESS__)
 #define SD_UNDER_ASAN 1
 #elif defined(__has_feature)
@@ -79,6 +78,7 @@ const char *sd_result_name(sd_result r);
 #endif
 #endif
 
+/* A pluggable allocator (NULL functions = libc). */
 typedef struct sd_allocator {
     void *(*alloc)(size_t size, void *ud);
     void (*release)(void *ptr, size_t size, void *ud);
@@ -506,13 +506,6 @@ sd_result sd_complex_move(sd_complex *c, int channel, size_t n, const sd_vertex_
  * unsupported or where the memory is not anonymous). The core's allocations do this themselves,
  * also for the blocks of a plugged sd_allocator; exported for the service's own big buffers. */
 void sd_advise_huge(void *p, size_t n);
-/* A mapping of n fresh zero bytes (0 < n <= SIZE_MAX / 2) of its own, or NULL; from 2 MiB on
- * it starts on a 2 MiB boundary and asks for transparent huge pages over all of it, so it faults
- * in 2 MiB at a time. sd_unmap_block(p, n), with the same n, gives it back. The service's
- * allocator takes its big blocks so (api/mem.c); the core's default allocator aligns its blocks
- * of 2 MiB and more the same way within the C library's heap. */
-void *sd_map_block(size_t n);
-void sd_unmap_block(void *p, size_t n);
 
 /* Build now what the first edit of the computed levels would build (the maps that find a level's
  * recomputed points), so that edit costs what later ones do. Optional; SD_ERR_NOMEM leaves them

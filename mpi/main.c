@@ -518,12 +518,11 @@ static int run(const args *a)
     } else if (!a->merge) {
         char path[4096];
         piece_path(a->out, rank_, path, sizeof path);
-        int wrote = 0;
-        if (mp_write_piece(&piece, &res, path, &st.bytes, err, sizeof err)) {
+        int wrote = !mp_write_piece(&piece, &res, path, &st.bytes, err, sizeof err);
+        if (!wrote) {
             fprintf(stderr, "%s: %s\n", tag_, err);
             rc = EXIT_FAILED;
-        } else
-            wrote = 1;
+        }
         if (!(rc = checkpoint(rc, "writing the pieces")) && !rank_) {
             char **names = calloc((size_t)nranks_, sizeof *names);
             const char *slash = strrchr(a->out, '/');
@@ -540,7 +539,8 @@ static int run(const args *a)
             free(names);
         }
         if ((rc = checkpoint(rc, "writing the index"))) {
-            /* a piece without the others or the index is no result: each rank removes its own */
+            /* a piece without the others or the index is no result: each rank removes its own
+             * (path again: rank 0 reused it for the index's names) */
             piece_path(a->out, rank_, path, sizeof path);
             if (wrote)
                 unlink(path);

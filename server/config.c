@@ -174,6 +174,12 @@ static uint64_t default_max_memory(void)
     return ram / 4 * 3;
 }
 
+int config_default_level_threads(void)
+{
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    return n <= 0 ? 1 : n > 8 ? 8 : (int)n;
+}
+
 int config_load(config *c, int argc, char **argv, int first, int *exit_code)
 {
     memset(c, 0, sizeof *c);
@@ -181,7 +187,7 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     c->port = 8080;
     long n = sysconf(_SC_NPROCESSORS_ONLN);
     c->threads = n > 0 ? (int)n : 2;
-    c->level_threads = n <= 0 ? 2 : n > 8 ? 8 : (int)n;
+    c->level_threads = config_default_level_threads();
     c->max_connections = 256;
     c->max_connections_per_client = 32;
     c->connection_reserve = 16;

@@ -37,6 +37,9 @@ typedef struct config {
 
 /* Fill from defaults, environment and argv (argv[first..]). Returns 0, or 1 after printing usage
  * (help asked: *exit_code = 0; bad flag: 2). */
+/* The threads one computation may use unless told: the CPU count, at most 8 (--level-threads,
+ * and `subdivd refine --threads`). */
+int config_default_level_threads(void);
 int config_load(config *c, int argc, char **argv, int first, int *exit_code);
 void config_usage(FILE *f);
 

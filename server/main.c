@@ -168,9 +168,7 @@ static int refine_main(int argc, char **argv)
         return rc;
     api_limits lim = api_default_limits();
     lim.batch = true; /* written out, never edited: no edit index (DECISIONS 46) */
-    long nt = sysconf(_SC_NPROCESSORS_ONLN); /* --threads: the levels' threads (default: CPU
-                                              * count, at most 8; the same bytes for any) */
-    nt = nt <= 0 ? 1 : nt > 8 ? 8 : nt;
+    long nt = config_default_level_threads(); /* --threads: the same bytes for any */
     if (a.threads) {
         char *end;
         nt = strtol(a.threads, &end, 10);
