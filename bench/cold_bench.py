@@ -20,19 +20,11 @@ import json
 import os
 import pathlib
 import statistics
-import subprocess
 import sys
 import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from http_bench import SUBDIVD, call, mesh_body  # noqa: E402
-
-
-def start(binary, args):
-    p = subprocess.Popen([str(binary), "--port", "0", "--log-level", "warn", *args],
-                         stdout=subprocess.PIPE, text=True)
-    line = p.stdout.readline()
-    return p, int(line.split(":")[2].split("/")[0])
+from http_bench import SUBDIVD, call, mesh_body, start_daemon  # noqa: E402
 
 
 def minflt(pid):
@@ -69,7 +61,7 @@ def main():
     res = {c[0]: [] for c in configs}
     for _ in range(a.rounds):
         for name, binary, args in configs:
-            p, port = start(binary, args)
+            p, port = start_daemon(binary, args)
             try:
                 conn = http.client.HTTPConnection("127.0.0.1", port, timeout=600)
                 t1, f1, c1 = one_level(conn, p.pid, body, a.level)

@@ -22,9 +22,13 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 SUBDIVD = os.environ.get("SUBDIVD", str(REPO / "build" / "subdivd"))
 
 
-def start_daemon():
-    p = subprocess.Popen([SUBDIVD, "--port", "0", "--log-level", os.environ.get("SUBDIVD_BENCH_LOG", "warn")] + os.environ.get("SUBDIVD_BENCH_ARGS", "").split(), stdout=subprocess.PIPE,
-                         text=True)
+def start_daemon(binary=SUBDIVD, args=None):
+    """A daemon on a free loopback port: (process, port). Flags: args, else SUBDIVD_BENCH_ARGS."""
+    if args is None:
+        args = os.environ.get("SUBDIVD_BENCH_ARGS", "").split()
+    p = subprocess.Popen([str(binary), "--port", "0", "--log-level",
+                          os.environ.get("SUBDIVD_BENCH_LOG", "warn"), *args],
+                         stdout=subprocess.PIPE, text=True)
     line = p.stdout.readline()
     port = int(line.split(":")[2].split("/")[0])
     return p, port
