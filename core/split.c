@@ -48,11 +48,14 @@ typedef struct tcell {
     uint8_t kind, diag; /* kind 4 = tetrahedron, 6 = octahedron */
     uint8_t v[6];
     uint16_t e[12], f[8];
+    uint8_t es[12], fs[8]; /* e, f as slots of the per-parent tables (see slots()) */
+    uint8_t bmask[256];    /* the child's boundary mask for each mask of its parent */
 } tcell;
 
 typedef struct tface {
     uint8_t v[3];
     uint16_t e[3];
+    uint8_t es[3];
 } tface;
 
 typedef struct tmpl {
@@ -304,75 +307,77 @@ static inline uint32_t half(const sd_topo *P, uint32_t e, uint32_t x)
 {
     return 2 * e + (P->ev[e][0] == x ? 0 : 1);
 }
-static inline uint32_t map_v(const ctx *x, const tmpl *T, int u)
+/* The global ids behind the template's local vertices [parent's vertices | its edge points |
+ * cell point]. */
+static inline void vertex_table(const ctx *x, const tmpl *T, uint32_t *lv)
 {
-    if (u < T->n)
-        return x->pv[u];
-    if (u < T->n + T->ne)
-        return x->P->nv + x->pe[u - T->n];
-    return x->center;
-}
-static inline uint32_t map_e(const ctx *x, uint16_t r)
-{
-    switch (RT(r)) {
-    case R_HALF:
-        return half(x->P, x->pe[RA(r)], x->pv[RB(r)]);
-    case R_FINT: {
-        uint32_t f = x->pf[RA(r)];
-        return 2 * x->P->ne + 3 * f + (uint32_t)fpos(x->P, f, x->pv[RB(r)]);
-    }
-    default:
-        return x->ibase_e + RA(r);
-    }
-}
-static inline uint32_t map_f(const ctx *x, uint16_t r)
-{
-    if (RT(r) == R_CINT)
-        return x->ibase_f + RA(r);
-    uint32_t f = x->pf[RA(r)];
-    return 4 * f + (RB(r) == MIDDLE ? 3u : (uint32_t)fpos(x->P, f, x->pv[RB(r)]));
-}
-
-/* Boundary mask of a child cell: face k lies on the solids' boundary iff it is a child of a
- * parent face that does (bit RA of the parent's mask); faces inside the parent never do. */
-static inline uint8_t child_mask(const tcell *c, unsigned pmask)
-{
-    unsigned m = 0;
-    for (int k = 0; k < (c->kind == 4 ? 4 : 8); k++)
-        if (RT(c->f[k]) == R_FCHILD)
-            m |= (pmask >> RA(c->f[k]) & 1u) << k;
-    return (uint8_t)m;
+    for (int u = 0; u < T->n; u++)
+        lv[u] = x->pv[u];
+    for (int k = 0; k < T->ne; k++)
+        lv[T->n + k] = x->P->nv + x->pe[k];
+    lv[T->n + T->ne] = x->center;
 }
 
 /* Phase A: the vertices, diagonal and boundary mask of the children of one parent cell. */
 static void emit_cells(sd_topo *C, const ctx *x, const tmpl *T, unsigned pmask, uint32_t tet_at,
                        uint32_t oct_at)
 {
+    uint32_t lv[19];
+    vertex_table(x, T, lv);
     for (int i = 0; i < T->ncell; i++) {
         const tcell *c = &T->cell[i];
         if (c->kind == 4) {
             uint32_t t = tet_at++;
             for (int k = 0; k < 4; k++)
-                C->tet[t][k] = map_v(x, T, c->v[k]);
+                C->tet[t][k] = lv[c->v[k]];
             C->tet_d[t] = c->diag;
-            C->tet_b[t] = child_mask(c, pmask);
+            C->tet_b[t] = c->bmask[pmask];
         } else {
             uint32_t o = oct_at++;
             for (int k = 0; k < 6; k++)
-                C->oct[o][k] = map_v(x, T, c->v[k]);
-            C->oct_b[o] = child_mask(c, pmask);
+                C->oct[o][k] = lv[c->v[k]];
+            C->oct_b[o] = c->bmask[pmask];
         }
     }
+}
+
+/* The per-parent edge and face tables (slots as edge_slot and face_slot number them). */
+static inline void edge_face_tables(const ctx *x, const tmpl *T, uint32_t *le, uint32_t *lf)
+{
+    const sd_topo *P = x->P;
+    for (int k = 0; k < T->ne; k++) {
+        uint32_t g = x->pe[k];
+        uint32_t s = P->ev[g][0] == x->pv[T->pe[k][0]] ? 0 : 1;
+        le[2 * k] = 2 * g + s;
+        le[2 * k + 1] = 2 * g + 1 - s;
+    }
+    for (int q = 0; q < T->nfc; q++) {
+        uint32_t f = x->pf[q];
+        for (int j = 0; j < 3; j++) {
+            uint32_t p = (uint32_t)fpos(P, f, x->pv[T->pf[q][j]]);
+            le[2 * T->ne + 3 * q + j] = 2 * P->ne + 3 * f + p;
+            lf[4 * q + j] = 4 * f + p;
+        }
+        lf[4 * q + 3] = 4 * f + 3;
+    }
+    if (T->nfc == 8)
+        for (int k = 0; k < 12; k++)
+            le[2 * T->ne + 3 * T->nfc + k] = x->ibase_e + (uint32_t)k;
+    for (int i = 0; i < T->nif; i++)
+        lf[4 * T->nfc + i] = x->ibase_f + (uint32_t)i;
 }
 
 /* Phase B: the faces inside one parent cell and the edge and face ids of its children. */
 static void emit_ids(sd_topo *C, const ctx *x, const tmpl *T, uint32_t tet_at, uint32_t oct_at)
 {
+    uint32_t lv[19], le[2 * 12 + 3 * 8 + 12], lf[4 * 8 + 24];
+    vertex_table(x, T, lv);
+    edge_face_tables(x, T, le, lf);
     for (int i = 0; i < T->nif; i++) {
         uint32_t f = x->ibase_f + (uint32_t)i;
         for (int j = 0; j < 3; j++) {
-            C->fv[f][j] = map_v(x, T, T->iface[i].v[j]);
-            C->fe[f][j] = map_e(x, T->iface[i].e[j]);
+            C->fv[f][j] = lv[T->iface[i].v[j]];
+            C->fe[f][j] = le[T->iface[i].es[j]];
         }
         C->fn3[f] = 2;
         C->fflag[f] = 0;
@@ -382,24 +387,75 @@ static void emit_ids(sd_topo *C, const ctx *x, const tmpl *T, uint32_t tet_at, u
         if (c->kind == 4) {
             uint32_t t = tet_at++;
             for (int k = 0; k < 6; k++)
-                C->tet_e[t][k] = map_e(x, c->e[k]);
+                C->tet_e[t][k] = le[c->es[k]];
             for (int k = 0; k < 4; k++)
-                C->tet_f[t][k] = map_f(x, c->f[k]);
+                C->tet_f[t][k] = lf[c->fs[k]];
         } else {
             uint32_t o = oct_at++;
             for (int k = 0; k < 12; k++)
-                C->oct_e[o][k] = map_e(x, c->e[k]);
+                C->oct_e[o][k] = le[c->es[k]];
             for (int k = 0; k < 8; k++)
-                C->oct_f[o][k] = map_f(x, c->f[k]);
+                C->oct_f[o][k] = lf[c->fs[k]];
         }
     }
 }
 
+/* Boundary mask of a child cell: face k lies on the solids' boundary iff it is a child of a
+ * parent face that does (bit RA of the parent's mask); faces inside the parent never do. */
+static uint8_t child_mask(const tcell *c, unsigned pmask)
+{
+    unsigned m = 0;
+    for (int k = 0; k < (c->kind == 4 ? 4 : 8); k++)
+        if (RT(c->f[k]) == R_FCHILD)
+            m |= (pmask >> RA(c->f[k]) & 1u) << k;
+    return (uint8_t)m;
+}
+
+/* The per-parent tables the split reads (see parent_tables): edges [2 halves per parent edge, in
+ * the template's end order | 3 per parent face, at its template vertices in order | inside the
+ * cell]; faces [4 per parent face: at its template vertices in order, middle | inside the cell]. */
+static int vslot(const uint8_t *fv, int s) { return fv[0] == s ? 0 : fv[1] == s ? 1 : 2; }
+
+static uint8_t edge_slot(const tmpl *T, uint16_t r)
+{
+    switch (RT(r)) {
+    case R_HALF: return (uint8_t)(2 * RA(r) + (T->pe[RA(r)][0] == RB(r) ? 0 : 1));
+    case R_FINT: return (uint8_t)(2 * T->ne + 3 * RA(r) + vslot(T->pf[RA(r)], RB(r)));
+    default: return (uint8_t)(2 * T->ne + 3 * T->nfc + RA(r));
+    }
+}
+
+static uint8_t face_slot(const tmpl *T, uint16_t r)
+{
+    if (RT(r) == R_CINT)
+        return (uint8_t)(4 * T->nfc + RA(r));
+    return (uint8_t)(4 * RA(r) + (RB(r) == MIDDLE ? 3 : vslot(T->pf[RA(r)], RB(r))));
+}
+
+static void slots(tmpl *T)
+{
+    for (int i = 0; i < T->ncell; i++) {
+        tcell *c = &T->cell[i];
+        for (int k = 0; k < (c->kind == 4 ? 6 : 12); k++)
+            c->es[k] = edge_slot(T, c->e[k]);
+        for (int k = 0; k < (c->kind == 4 ? 4 : 8); k++)
+            c->fs[k] = face_slot(T, c->f[k]);
+        for (unsigned m = 0; m < (T->nfc == 4 ? 16u : 256u); m++)
+            c->bmask[m] = child_mask(c, m);
+    }
+    for (int i = 0; i < T->nif; i++)
+        for (int j = 0; j < 3; j++)
+            T->iface[i].es[j] = edge_slot(T, T->iface[i].e[j]);
+}
+
 static void templates(tmpl tt[3], tmpl *to)
 {
-    for (int d = 0; d < 3; d++)
+    for (int d = 0; d < 3; d++) {
         tm_tet(&tt[d], d);
+        slots(&tt[d]);
+    }
     tm_oct(to);
+    slots(to);
 }
 
 /* Children of parent tetrahedron t: tets 4t..4t+3, octahedron t; of parent octahedron o: tets
