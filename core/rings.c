@@ -380,6 +380,7 @@ static int cmp_entry(const void *x, const void *y)
 typedef struct ring_sort_job {
     sdi_rings *R;
     uint32_t ne;
+    bool cls; /* entries have classes (else all 0, not read) */
     volatile bool ok;
 } ring_sort_job;
 
@@ -389,9 +390,41 @@ static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
     sdi_rings *R = J->R;
     uint64_t lo, hi;
     sdi_range(J->ne, part, nparts, &lo, &hi);
+    uint32_t *const rv = R->v, *const off = R->off, *const len = R->len;
+    uint8_t *const cls = R->cls;
+    if (!J->cls) { /* no second class (box scheme): the vertex ids alone, classes stay 0 */
+        uint32_t buf[256];
+        for (uint32_t e = (uint32_t)lo; e < (uint32_t)hi; e++) {
+            uint32_t b = off[e], n = off[e + 1] - b, w = 0;
+            if (n == 0)
+                continue;
+            uint32_t *s = n <= 256 ? buf : malloc(n * sizeof *s);
+            if (!s) {
+                J->ok = false;
+                return;
+            }
+            memcpy(s, rv + b, n * sizeof *s);
+            if (n <= 32)
+                for (uint32_t i = 1; i < n; i++) {
+                    uint32_t x = s[i], j = i;
+                    for (; j > 0 && s[j - 1] > x; j--)
+                        s[j] = s[j - 1];
+                    s[j] = x;
+                }
+            else
+                qsort(s, n, sizeof *s, cmp_u32);
+            for (uint32_t i = 0; i < n; i++)
+                if (i == 0 || s[i] != s[i - 1])
+                    rv[b + w++] = s[i];
+            len[e] = w;
+            if (s != buf)
+                free(s);
+        }
+        return;
+    }
     uint64_t buf[256];
     for (uint32_t e = (uint32_t)lo; e < (uint32_t)hi; e++) {
-        uint32_t b = R->off[e], n = R->off[e + 1] - b, w = 0;
+        uint32_t b = off[e], n = off[e + 1] - b, w = 0;
         if (n == 0)
             continue;
         uint64_t *s = n <= 256 ? buf : malloc(n * sizeof *s);
@@ -400,7 +433,7 @@ static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
             return;
         }
         for (uint32_t i = 0; i < n; i++)
-            s[i] = (uint64_t)R->v[b + i] << 1 | R->cls[b + i];
+            s[i] = (uint64_t)rv[b + i] << 1 | cls[b + i];
         if (n <= 32) /* the usual few candidates: insertion sort */
             for (uint32_t i = 1; i < n; i++) {
                 uint64_t x = s[i];
@@ -413,11 +446,11 @@ static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
             qsort(s, n, sizeof *s, cmp_entry);
         for (uint32_t i = 0; i < n; i++)
             if (i == 0 || s[i] != s[i - 1]) {
-                R->v[b + w] = (uint32_t)(s[i] >> 1);
-                R->cls[b + w] = (uint8_t)(s[i] & 1);
+                rv[b + w] = (uint32_t)(s[i] >> 1);
+                cls[b + w] = (uint8_t)(s[i] & 1);
                 w++;
             }
-        R->len[e] = w;
+        len[e] = w;
         if (s != buf)
             free(s);
     }
@@ -438,18 +471,26 @@ static inline __attribute__((always_inline)) void solid_cands(const srjob *J, ui
                                                               uint32_t hi, bool all, bool fill)
 {
     const sd_topo *t = J->t;
-    const uint8_t *erule = J->erule;
+    const uint8_t *const erule = J->erule;
     sdi_rings *R = J->R;
-    uint32_t *cnt = R->off + 1, *cur = J->cur;
+    uint32_t *const cnt = R->off + 1, *const cur = J->cur, *const rv = R->v;
+    uint8_t *const rcls = R->cls;
+    const bool avg = J->avg;
+    const uint32_t ntet = t->ntet, noct = t->noct;
+    const uint32_t(*const tet)[4] = t->tet, (*const tet_e)[6] = t->tet_e;
+    const uint32_t(*const oct)[6] = t->oct, (*const oct_e)[12] = t->oct_e;
 #define MINE(e) ((all || ((e) >= lo && (e) < hi)) && SDI_RULE_RING[erule[e]] == SDI_RING_SOLID)
+    /* the box scheme has one class: its entries' classes are zero from the allocation */
 #define PUSH(e, x, c)                                                                        \
     do {                                                                                     \
-        R->v[cur[e]] = (x);                                                                  \
-        R->cls[cur[e]++] = (c);                                                              \
+        uint32_t at_ = cur[e]++;                                                             \
+        rv[at_] = (x);                                                                       \
+        if (avg)                                                                             \
+            rcls[at_] = (c);                                                                 \
     } while (0)
-    for (uint32_t c = 0; c < t->ntet; c++)
+    for (uint32_t c = 0; c < ntet; c++)
         for (int k = 0; k < 6; k++) {
-            uint32_t e = t->tet_e[c][k];
+            uint32_t e = tet_e[c][k];
             if (!MINE(e))
                 continue;
             if (!fill) {
@@ -457,21 +498,21 @@ static inline __attribute__((always_inline)) void solid_cands(const srjob *J, ui
                 continue;
             }
             /* the two vertices not on edge k: those of the opposite edge 5-k */
-            PUSH(e, t->tet[c][SDI_TET_E[5 - k][0]], 0);
-            PUSH(e, t->tet[c][SDI_TET_E[5 - k][1]], 0);
+            PUSH(e, tet[c][SDI_TET_E[5 - k][0]], 0);
+            PUSH(e, tet[c][SDI_TET_E[5 - k][1]], 0);
         }
-    for (uint32_t o = 0; o < t->noct; o++)
+    for (uint32_t o = 0; o < noct; o++)
         for (int k = 0; k < 12; k++) {
-            uint32_t e = t->oct_e[o][k];
+            uint32_t e = oct_e[o][k];
             if (!MINE(e))
                 continue;
             if (!fill) {
-                cnt[e] += J->avg ? 4 : (k < 8 ? 3 : 2);
+                cnt[e] += avg ? 4 : (k < 8 ? 3 : 2);
                 continue;
             }
-            const uint32_t *q = t->oct[o];
+            const uint32_t *q = oct[o];
             int i = SDI_OCT_E[k][0], j = SDI_OCT_E[k][1];
-            if (J->avg) {
+            if (avg) {
                 /* faces of the octahedron on the edge: the two common neighbours;
                  * through the octahedron's diagonals: the opposites of both ends */
                 int com[2], nc = 0;
@@ -528,7 +569,7 @@ bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int sche
         R->off[e + 1] += R->off[e];
     size_t total = R->off[ne];
     R->v = sdi_alloc(m, (total + 1) * sizeof *R->v);
-    R->cls = sdi_alloc(m, total + 1);
+    R->cls = J.avg ? sdi_alloc(m, total + 1) : sdi_calloc(m, total + 1, 1);
     J.cur = sdi_alloc(m, ((size_t)ne + 1) * sizeof *J.cur);
     if (!R->v || !R->cls || !J.cur) {
         sdi_free(m, J.cur);
@@ -539,7 +580,7 @@ bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int sche
     sdi_par(threads, work, solid_part, &J);
     sdi_free(m, J.cur);
     /* sort and deduplicate each edge's list (as (vertex, class) pairs), edges in parallel */
-    ring_sort_job S = {R, ne, true};
+    ring_sort_job S = {R, ne, J.avg, true};
     sdi_par(threads, R->off[ne], ring_sort_part, &S);
     return S.ok;
 }
