@@ -392,33 +392,31 @@ static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
     sdi_range(J->ne, part, nparts, &lo, &hi);
     uint32_t *const rv = R->v, *const off = R->off, *const len = R->len;
     uint8_t *const cls = R->cls;
-    if (!J->cls) { /* no second class (box scheme): the vertex ids alone, classes stay 0 */
-        uint32_t buf[256];
+    if (!J->cls) { /* no second class (box scheme): the vertex ids alone, classes stay 0;
+                    * sorted in place, each candidate inserted unless already there */
         for (uint32_t e = (uint32_t)lo; e < (uint32_t)hi; e++) {
             uint32_t b = off[e], n = off[e + 1] - b, w = 0;
-            if (n == 0)
-                continue;
-            uint32_t *s = n <= 256 ? buf : malloc(n * sizeof *s);
-            if (!s) {
-                J->ok = false;
-                return;
-            }
-            memcpy(s, rv + b, n * sizeof *s);
-            if (n <= 32)
-                for (uint32_t i = 1; i < n; i++) {
-                    uint32_t x = s[i], j = i;
-                    for (; j > 0 && s[j - 1] > x; j--)
-                        s[j] = s[j - 1];
-                    s[j] = x;
-                }
-            else
+            uint32_t *s = rv + b;
+            if (n > 64) {
                 qsort(s, n, sizeof *s, cmp_u32);
-            for (uint32_t i = 0; i < n; i++)
-                if (i == 0 || s[i] != s[i - 1])
-                    rv[b + w++] = s[i];
+                for (uint32_t i = 0; i < n; i++)
+                    if (i == 0 || s[i] != s[i - 1])
+                        s[w++] = s[i];
+                len[e] = w;
+                continue;
+            }
+            for (uint32_t i = 0; i < n; i++) {
+                uint32_t x = s[i], j = w;
+                while (j > 0 && s[j - 1] > x)
+                    j--;
+                if (j > 0 && s[j - 1] == x)
+                    continue;
+                for (uint32_t k = w; k > j; k--)
+                    s[k] = s[k - 1];
+                s[j] = x;
+                w++;
+            }
             len[e] = w;
-            if (s != buf)
-                free(s);
         }
         return;
     }
