@@ -307,73 +307,131 @@ static inline uint32_t half(const sd_topo *P, uint32_t e, uint32_t x)
 {
     return 2 * e + (P->ev[e][0] == x ? 0 : 1);
 }
+/* The split of a parent tetrahedron makes 4 corner tetrahedra, then its octahedron; that of a
+ * parent octahedron 6 corner octahedra, then 8 face tetrahedra (tm_tet, tm_oct; checked by
+ * templates()). The emitters below are written for these two shapes, with constant counts. */
+#define TET_KIDS 4, 1, 4, 6, 4
+#define OCT_KIDS 8, 6, 6, 12, 24
+
 /* The global ids behind the template's local vertices [parent's vertices | its edge points |
  * cell point]. */
-static inline void vertex_table(const ctx *x, const tmpl *T, uint32_t *lv)
+static inline __attribute__((always_inline)) void vertex_table(const ctx *x, int n, int ne,
+                                                               uint32_t *lv)
 {
-    for (int u = 0; u < T->n; u++)
+    const uint32_t pnv = x->P->nv;
+    for (int u = 0; u < n; u++)
         lv[u] = x->pv[u];
-    for (int k = 0; k < T->ne; k++)
-        lv[T->n + k] = x->P->nv + x->pe[k];
-    lv[T->n + T->ne] = x->center;
+    for (int k = 0; k < ne; k++)
+        lv[n + k] = pnv + x->pe[k];
+    lv[n + ne] = x->center;
 }
 
-/* Phase A: the vertices, diagonal and boundary mask of the children of one parent cell. */
-static void emit_cells(sd_topo *C, const ctx *x, const tmpl *T, unsigned pmask, uint32_t tet_at,
-                       uint32_t oct_at)
+static inline __attribute__((always_inline)) void put_tet(sd_topo *C, const tcell *c,
+                                                          const uint32_t *lv, unsigned pmask,
+                                                          uint32_t t)
 {
+    uint32_t *d = C->tet[t];
+    d[0] = lv[c->v[0]];
+    d[1] = lv[c->v[1]];
+    d[2] = lv[c->v[2]];
+    d[3] = lv[c->v[3]];
+    C->tet_d[t] = c->diag;
+    C->tet_b[t] = c->bmask[pmask];
+}
+
+static inline __attribute__((always_inline)) void put_oct(sd_topo *C, const tcell *c,
+                                                          const uint32_t *lv, unsigned pmask,
+                                                          uint32_t o)
+{
+    uint32_t *d = C->oct[o];
+    for (int k = 0; k < 6; k++)
+        d[k] = lv[c->v[k]];
+    C->oct_b[o] = c->bmask[pmask];
+}
+
+/* Phase A: the vertices, diagonal and boundary mask of the children of one parent cell: ntk
+ * tetrahedra and nok octahedra, the octahedra first if octa_first; n, ne: the parent's vertices
+ * and edges; nif: the faces inside it. */
+static inline __attribute__((always_inline)) void
+emit_cells(sd_topo *C, const ctx *x, const tmpl *T, unsigned pmask, uint32_t tet_at,
+           uint32_t oct_at, int ntk, int nok, int n, int ne, int nif)
+{
+    (void)nif;
     uint32_t lv[19];
-    vertex_table(x, T, lv);
-    for (int i = 0; i < T->ncell; i++) {
-        const tcell *c = &T->cell[i];
-        if (c->kind == 4) {
-            uint32_t t = tet_at++;
-            for (int k = 0; k < 4; k++)
-                C->tet[t][k] = lv[c->v[k]];
-            C->tet_d[t] = c->diag;
-            C->tet_b[t] = c->bmask[pmask];
-        } else {
-            uint32_t o = oct_at++;
-            for (int k = 0; k < 6; k++)
-                C->oct[o][k] = lv[c->v[k]];
-            C->oct_b[o] = c->bmask[pmask];
-        }
-    }
+    vertex_table(x, n, ne, lv);
+    const bool octa_first = n == 6;
+    const tcell *c = T->cell;
+    if (octa_first)
+        for (int i = 0; i < nok; i++)
+            put_oct(C, c++, lv, pmask, oct_at + (uint32_t)i);
+    for (int i = 0; i < ntk; i++)
+        put_tet(C, c++, lv, pmask, tet_at + (uint32_t)i);
+    if (!octa_first)
+        for (int i = 0; i < nok; i++)
+            put_oct(C, c++, lv, pmask, oct_at + (uint32_t)i);
 }
 
 /* The per-parent edge and face tables (slots as edge_slot and face_slot number them). */
-static inline void edge_face_tables(const ctx *x, const tmpl *T, uint32_t *le, uint32_t *lf)
+static inline __attribute__((always_inline)) void edge_face_tables(const ctx *x, const tmpl *T,
+                                                                   int n, int ne, int nif,
+                                                                   uint32_t *le, uint32_t *lf)
 {
     const sd_topo *P = x->P;
-    for (int k = 0; k < T->ne; k++) {
+    const int nfc = n == 4 ? 4 : 8;
+    for (int k = 0; k < ne; k++) {
         uint32_t g = x->pe[k];
         uint32_t s = P->ev[g][0] == x->pv[T->pe[k][0]] ? 0 : 1;
         le[2 * k] = 2 * g + s;
         le[2 * k + 1] = 2 * g + 1 - s;
     }
-    for (int q = 0; q < T->nfc; q++) {
+    for (int q = 0; q < nfc; q++) {
         uint32_t f = x->pf[q];
+        const uint32_t *fv = P->fv[f];
         for (int j = 0; j < 3; j++) {
-            uint32_t p = (uint32_t)fpos(P, f, x->pv[T->pf[q][j]]);
-            le[2 * T->ne + 3 * q + j] = 2 * P->ne + 3 * f + p;
+            uint32_t v = x->pv[T->pf[q][j]];
+            uint32_t p = fv[0] == v ? 0 : fv[1] == v ? 1 : 2;
+            le[2 * ne + 3 * q + j] = 2 * P->ne + 3 * f + p;
             lf[4 * q + j] = 4 * f + p;
         }
         lf[4 * q + 3] = 4 * f + 3;
     }
-    if (T->nfc == 8)
+    if (n == 6)
         for (int k = 0; k < 12; k++)
-            le[2 * T->ne + 3 * T->nfc + k] = x->ibase_e + (uint32_t)k;
-    for (int i = 0; i < T->nif; i++)
-        lf[4 * T->nfc + i] = x->ibase_f + (uint32_t)i;
+            le[2 * ne + 3 * nfc + k] = x->ibase_e + (uint32_t)k;
+    for (int i = 0; i < nif; i++)
+        lf[4 * nfc + i] = x->ibase_f + (uint32_t)i;
 }
 
-/* Phase B: the faces inside one parent cell and the edge and face ids of its children. */
-static void emit_ids(sd_topo *C, const ctx *x, const tmpl *T, uint32_t tet_at, uint32_t oct_at)
+static inline __attribute__((always_inline)) void put_tet_ids(sd_topo *C, const tcell *c,
+                                                              const uint32_t *le,
+                                                              const uint32_t *lf, uint32_t t)
+{
+    for (int k = 0; k < 6; k++)
+        C->tet_e[t][k] = le[c->es[k]];
+    for (int k = 0; k < 4; k++)
+        C->tet_f[t][k] = lf[c->fs[k]];
+}
+
+static inline __attribute__((always_inline)) void put_oct_ids(sd_topo *C, const tcell *c,
+                                                              const uint32_t *le,
+                                                              const uint32_t *lf, uint32_t o)
+{
+    for (int k = 0; k < 12; k++)
+        C->oct_e[o][k] = le[c->es[k]];
+    for (int k = 0; k < 8; k++)
+        C->oct_f[o][k] = lf[c->fs[k]];
+}
+
+/* Phase B: the faces inside one parent cell and the edge and face ids of its children (the
+ * counts as emit_cells'). */
+static inline __attribute__((always_inline)) void
+emit_ids(sd_topo *C, const ctx *x, const tmpl *T, uint32_t tet_at, uint32_t oct_at, int ntk,
+         int nok, int n, int ne, int nif)
 {
     uint32_t lv[19], le[2 * 12 + 3 * 8 + 12], lf[4 * 8 + 24];
-    vertex_table(x, T, lv);
-    edge_face_tables(x, T, le, lf);
-    for (int i = 0; i < T->nif; i++) {
+    vertex_table(x, n, ne, lv);
+    edge_face_tables(x, T, n, ne, nif, le, lf);
+    for (int i = 0; i < nif; i++) {
         uint32_t f = x->ibase_f + (uint32_t)i;
         for (int j = 0; j < 3; j++) {
             C->fv[f][j] = lv[T->iface[i].v[j]];
@@ -382,22 +440,16 @@ static void emit_ids(sd_topo *C, const ctx *x, const tmpl *T, uint32_t tet_at, u
         C->fn3[f] = 2;
         C->fflag[f] = 0;
     }
-    for (int i = 0; i < T->ncell; i++) {
-        const tcell *c = &T->cell[i];
-        if (c->kind == 4) {
-            uint32_t t = tet_at++;
-            for (int k = 0; k < 6; k++)
-                C->tet_e[t][k] = le[c->es[k]];
-            for (int k = 0; k < 4; k++)
-                C->tet_f[t][k] = lf[c->fs[k]];
-        } else {
-            uint32_t o = oct_at++;
-            for (int k = 0; k < 12; k++)
-                C->oct_e[o][k] = le[c->es[k]];
-            for (int k = 0; k < 8; k++)
-                C->oct_f[o][k] = lf[c->fs[k]];
-        }
-    }
+    const bool octa_first = n == 6;
+    const tcell *c = T->cell;
+    if (octa_first)
+        for (int i = 0; i < nok; i++)
+            put_oct_ids(C, c++, le, lf, oct_at + (uint32_t)i);
+    for (int i = 0; i < ntk; i++)
+        put_tet_ids(C, c++, le, lf, tet_at + (uint32_t)i);
+    if (!octa_first)
+        for (int i = 0; i < nok; i++)
+            put_oct_ids(C, c++, le, lf, oct_at + (uint32_t)i);
 }
 
 /* Boundary mask of a child cell: face k lies on the solids' boundary iff it is a child of a
@@ -448,14 +500,26 @@ static void slots(tmpl *T)
             T->iface[i].es[j] = edge_slot(T, T->iface[i].e[j]);
 }
 
+/* Whether template T has the shape the emitters are written for: ntk tetrahedra and nok
+ * octahedra (the octahedra first for a parent octahedron), nif faces inside. */
+static __attribute__((unused)) bool shape(const tmpl *T, int ntk, int nok, int n, int ne, int nif)
+{
+    bool ok = T->ncell == ntk + nok && T->n == n && T->ne == ne && T->nif == nif;
+    for (int i = 0; ok && i < T->ncell; i++)
+        ok = T->cell[i].kind == (n == 6 ? (i < nok ? 6 : 4) : (i < ntk ? 4 : 6));
+    return ok;
+}
+
 static void templates(tmpl tt[3], tmpl *to)
 {
     for (int d = 0; d < 3; d++) {
         tm_tet(&tt[d], d);
         slots(&tt[d]);
+        assert(shape(&tt[d], TET_KIDS));
     }
     tm_oct(to);
     slots(to);
+    assert(shape(to, OCT_KIDS));
 }
 
 /* Children of parent tetrahedron t: tets 4t..4t+3, octahedron t; of parent octahedron o: tets
@@ -534,14 +598,14 @@ static void cells_part(void *arg, uint32_t part, uint32_t nparts)
         RANGE(P->ntet, t0, t1);
         for (uint32_t t = t0; t < t1; t++) {
             ctx x = TET_CTX(P, t);
-            emit_cells(C, &x, &J->tt[P->tet_d[t] % 3], P->tet_b[t], 4 * t, t);
+            emit_cells(C, &x, &J->tt[P->tet_d[t] % 3], P->tet_b[t], 4 * t, t, TET_KIDS);
         }
     }
     {
         RANGE(P->noct, o0, o1);
         for (uint32_t o = o0; o < o1; o++) {
             ctx x = OCT_CTX(P, o);
-            emit_cells(C, &x, &J->to, P->oct_b[o], 4 * P->ntet + 8 * o, P->ntet + 6 * o);
+            emit_cells(C, &x, &J->to, P->oct_b[o], 4 * P->ntet + 8 * o, P->ntet + 6 * o, OCT_KIDS);
         }
     }
 }
@@ -707,14 +771,14 @@ static void faces_part(void *arg, uint32_t part, uint32_t nparts)
         RANGE(P->ntet, t0, t1);
         for (uint32_t t = t0; t < t1; t++) {
             ctx x = TET_CTX(P, t);
-            emit_ids(C, &x, &J->tt[P->tet_d[t] % 3], 4 * t, t);
+            emit_ids(C, &x, &J->tt[P->tet_d[t] % 3], 4 * t, t, TET_KIDS);
         }
     }
     {
         RANGE(P->noct, o0, o1);
         for (uint32_t o = o0; o < o1; o++) {
             ctx x = OCT_CTX(P, o);
-            emit_ids(C, &x, &J->to, 4 * P->ntet + 8 * o, P->ntet + 6 * o);
+            emit_ids(C, &x, &J->to, 4 * P->ntet + 8 * o, P->ntet + 6 * o, OCT_KIDS);
         }
     }
 }
