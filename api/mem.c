@@ -1,8 +1,11 @@
 /* mem.c — the allocation wrapper of api/ and server/ (see mem.h for the contract).
  *
- * Each api_* block is the C library's block of n + HDR bytes with n stored in front, so api_free
- * knows what to subtract; HDR is 16 so the caller's pointer keeps malloc's alignment. The global
- * count is one relaxed atomic add per call (the daemon's threads share it; nothing orders
+ * Each api_* block is a block of n + HDR bytes with n stored in front, so api_free knows what to
+ * subtract, and the capacity of its mapping after it (0: the C library's block); HDR is 16 so
+ * the caller's pointer keeps malloc's alignment. While big blocks are kept (api_mem_keep_set),
+ * an api_* block of KEEP_MIN bytes or more is a mapping of its size class like the core's big
+ * blocks (below), counted in in_use by its capacity, and kept when freed; else it is malloc's.
+ * The global count is one relaxed atomic add per call (the daemon's threads share it; nothing orders
  * against it). The per-thread meter is a thread-local pointer, so metering costs nothing on
  * threads that set none. The failure hook is one relaxed load while it is off.
  *
@@ -15,6 +18,7 @@
 #include "mem.h"
 #include "../core/sd.h"
 #include <jansson.h>
+#include <malloc.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -52,6 +56,12 @@ static bool injected(void)
 }
 
 static bool keep_give_way(void);
+/* Big api blocks (see the keep below): a block of class cap for n + HDR bytes, or NULL to use
+ * malloc (nothing kept); *fresh when its bytes are a new mapping's zeros. Released with
+ * big_release(b, cap). */
+static bool big_due(size_t total); /* whether a block of total bytes is one */
+static void *big_alloc(size_t total, size_t *cap, bool *fresh);
+static void big_release(void *b, size_t cap);
 
 /* Whether n more bytes fit the budget, counted in `on` (in_use or elsewhere) when they do. Kept
  * blocks (below) give way first: a refusal is only ever for what is really held. */
@@ -104,27 +114,45 @@ static void credit(size_t n)
     }
 }
 
-void *api_malloc(size_t n)
+/* An api block of n bytes: *fresh when they are zeros already. */
+static void *api_alloc(size_t n, bool *fresh)
 {
+    *fresh = false;
     if (n > SIZE_MAX - HDR || injected() || !charge(n + HDR)) {
         refused_here++;
         return NULL;
     }
-    if (!within_budget(&in_use, n + HDR)) {
+    size_t cap = 0;
+    unsigned char *b = big_alloc(n + HDR, &cap, fresh);
+    if (!b && cap) { /* a big block was due, and the budget or the system refused it */
         credit(n + HDR);
         refused_here++;
         return NULL;
     }
-    unsigned char *b = malloc(n + HDR);
     if (!b) {
-        atomic_fetch_sub_explicit(&in_use, n + HDR, memory_order_relaxed);
-        credit(n + HDR);
-        refused_here++;
-        return NULL;
+        if (!within_budget(&in_use, n + HDR)) {
+            credit(n + HDR);
+            refused_here++;
+            return NULL;
+        }
+        b = malloc(n + HDR);
+        if (!b) {
+            atomic_fetch_sub_explicit(&in_use, n + HDR, memory_order_relaxed);
+            credit(n + HDR);
+            refused_here++;
+            return NULL;
+        }
+        sd_advise_huge(b, n + HDR); /* as the core's blocks (core/alloc.c) */
     }
-    sd_advise_huge(b, n + HDR); /* as the core's blocks (core/alloc.c) */
     memcpy(b, &n, sizeof n);
+    memcpy(b + sizeof n, &cap, sizeof cap);
     return b + HDR;
+}
+
+void *api_malloc(size_t n)
+{
+    bool fresh;
+    return api_alloc(n, &fresh);
 }
 
 void *api_calloc(size_t n, size_t size)
@@ -133,10 +161,18 @@ void *api_calloc(size_t n, size_t size)
         refused_here++;
         return NULL;
     }
-    void *p = api_malloc(n * size);
-    if (p)
+    bool fresh;
+    void *p = api_alloc(n * size, &fresh);
+    if (p && !fresh)
         memset(p, 0, n * size);
     return p;
+}
+
+static void block_head(void *p, size_t *n, size_t *cap)
+{
+    const unsigned char *b = (const unsigned char *)p - HDR;
+    memcpy(n, b, sizeof *n);
+    memcpy(cap, b + sizeof *n, sizeof *cap);
 }
 
 void api_free(void *p)
@@ -144,23 +180,47 @@ void api_free(void *p)
     if (!p)
         return;
     unsigned char *b = (unsigned char *)p - HDR;
-    size_t n;
-    memcpy(&n, b, sizeof n);
-    atomic_fetch_sub_explicit(&in_use, n + HDR, memory_order_relaxed);
+    size_t n, cap;
+    block_head(p, &n, &cap);
     credit(n + HDR);
+    if (cap) {
+        big_release(b, cap);
+        return;
+    }
+    atomic_fetch_sub_explicit(&in_use, n + HDR, memory_order_relaxed);
     free(b);
 }
 
 /* The C library's realloc on the whole block (header included), so a growing buffer is moved
- * by mremap rather than copied once it is mmapped; the meter is charged the growth first. */
+ * by mremap rather than copied once it is mmapped; the meter is charged the growth first. A
+ * mapped block (see big_alloc) grows in place within its capacity, else moves to a new block. */
 void *api_realloc(void *p, size_t n)
 {
     if (!p)
         return api_malloc(n);
     unsigned char *b = (unsigned char *)p - HDR;
-    size_t old;
-    memcpy(&old, b, sizeof old);
+    size_t old, cap;
+    block_head(p, &old, &cap);
     size_t grow = n > old ? n - old : 0;
+    if (cap && n <= SIZE_MAX - HDR && n + HDR <= cap) { /* in place */
+        if (grow && (injected() || !charge(grow))) {
+            refused_here++;
+            return NULL;
+        }
+        if (n < old)
+            credit(old - n);
+        memcpy(b, &n, sizeof n);
+        return p;
+    }
+    size_t want = n <= SIZE_MAX - HDR ? n + HDR : SIZE_MAX;
+    if (cap || big_due(want)) { /* to or from a mapped block */
+        void *q = api_malloc(n);
+        if (!q)
+            return NULL;
+        memcpy(q, p, old < n ? old : n);
+        api_free(p);
+        return q;
+    }
     if (n > SIZE_MAX - HDR || injected() || !charge(grow)) {
         refused_here++;
         return NULL;
@@ -214,6 +274,26 @@ void *api_plain_realloc(void *p, size_t n) { return plain(injected() ? NULL : re
 void api_plain_free(void *p) { free(p); }
 
 size_t api_mem_in_use(void) { return atomic_load_explicit(&in_use, memory_order_relaxed); }
+
+static _Atomic int64_t trim_asked; /* monotonic ms of the last api_mem_trim_soon; 0: none due */
+
+static int64_t mono_ms(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (int64_t)t.tv_sec * 1000 + t.tv_nsec / 1000000 + 1; /* never 0 */
+}
+
+void api_mem_trim_soon(void) { atomic_store(&trim_asked, mono_ms()); }
+
+/* The heaps' free memory back to the system if it was asked for over half a second ago. */
+static void heap_trim_due(void)
+{
+    int64_t asked = atomic_load(&trim_asked);
+    if (asked && mono_ms() - asked > 500 &&
+        atomic_compare_exchange_strong(&trim_asked, &asked, 0))
+        malloc_trim(0);
+}
 
 void api_mem_set_budget(size_t bytes) { budget = bytes; }
 
@@ -378,7 +458,11 @@ void api_mem_keep_set(size_t bytes)
     keep_drop(0, bytes ? 0 : HUGE_VAL);
 }
 
-void api_mem_keep_trim(void) { keep_drop(0, mono() - KEEP_IDLE); }
+void api_mem_keep_trim(void)
+{
+    keep_drop(0, mono() - KEEP_IDLE);
+    heap_trim_due();
+}
 
 size_t api_mem_kept(void)
 {
@@ -467,10 +551,71 @@ static void core_release(void *p, size_t n, void *ud)
     unmap_block(p, cap);
     api_mem_unreserve(cap);
 }
+/* An api block of total bytes (header included) while blocks are kept: from KEEP_MIN bytes on,
+ * a block of its class, kept or newly mapped, counted in in_use by its capacity (a kept block's
+ * reservation moves there from `elsewhere`); else NULL with *cap 0 (malloc's). NULL with *cap
+ * set: the budget or the system refused it. */
+static bool big_due(size_t total) { return total >= KEEP_MIN && atomic_load(&keep_limit); }
+
+static void *big_alloc(size_t total, size_t *cap, bool *fresh)
+{
+    *cap = 0;
+    *fresh = false;
+    if (!big_due(total))
+        return NULL;
+    *cap = keep_class(total);
+    void *p = keep_take(*cap);
+    if (p) {
+        atomic_fetch_sub_explicit(&elsewhere, *cap, memory_order_relaxed);
+        atomic_fetch_add_explicit(&in_use, *cap, memory_order_relaxed);
+        if (keep_poison)
+            memset(p, 0xff, total);
+        atomic_fetch_add_explicit(&keep_hits, 1, memory_order_relaxed);
+        return p;
+    }
+    if (!within_budget(&in_use, *cap)) /* kept blocks give way first */
+        return NULL;
+    if (!(p = map_block(*cap))) {
+        atomic_fetch_sub_explicit(&in_use, *cap, memory_order_relaxed);
+        return NULL;
+    }
+    atomic_fetch_add_explicit(&keep_misses, 1, memory_order_relaxed);
+    *fresh = true;
+    return p;
+}
+
+/* A mapped api block given back: kept (its bytes now reserved in `elsewhere`) or unmapped. */
+static void big_release(void *b, size_t cap)
+{
+    atomic_fetch_add_explicit(&elsewhere, cap, memory_order_relaxed);
+    atomic_fetch_sub_explicit(&in_use, cap, memory_order_relaxed);
+    if (keep_put(b, cap))
+        return;
+    unmap_block(b, cap);
+    api_mem_unreserve(cap);
+}
+
 #else /* AddressSanitizer: the C library's blocks, none kept */
 static bool keep_give_way(void) { return false; }
+static bool big_due(size_t total)
+{
+    (void)total;
+    return false;
+}
+static void *big_alloc(size_t total, size_t *cap, bool *fresh)
+{
+    (void)total;
+    *cap = 0;
+    *fresh = false;
+    return NULL;
+}
+static void big_release(void *b, size_t cap)
+{
+    (void)b;
+    (void)cap;
+}
 void api_mem_keep_set(size_t bytes) { (void)bytes; }
-void api_mem_keep_trim(void) {}
+void api_mem_keep_trim(void) { heap_trim_due(); }
 size_t api_mem_kept(void) { return 0; }
 
 void api_mem_keep_counts(uint64_t *hits, uint64_t *misses)

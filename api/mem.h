@@ -95,6 +95,10 @@ sd_allocator api_mem_core_allocator(void);
 void api_mem_keep_set(size_t bytes);
 void api_mem_keep_trim(void);
 size_t api_mem_kept(void);
+/* What glibc's heaps hold free goes back to the system (malloc_trim) once no request asked for
+ * it in the last half second: api_mem_trim_soon asks (after a request that moved many bytes),
+ * api_mem_keep_trim trims. Back-to-back builds so reuse their small blocks' pages. */
+void api_mem_trim_soon(void);
 void api_mem_keep_counts(uint64_t *hits, uint64_t *misses);
 
 /* Set this thread's meter (NULL: none); returns the one it replaces. */

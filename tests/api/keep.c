@@ -1,11 +1,14 @@
-/* keep_test: the big core blocks api/mem.c keeps between builds (tests/python/test_kept_memory.py).
+/* keep_test: the big core and api blocks api/mem.c keeps between builds
+ * (tests/python/test_kept_memory.py).
  *
  * Through api_mem_core_allocator, as a complex allocates: a block given back is kept and handed
  * out again for the next block of its size class (the same pages, filled with 0xff bytes when
  * SUBDIVD_KEEP_POISON=1), not for another class; the kept bytes stay within the limit (oldest
  * dropped first) and counted against the budget; kept blocks idle for over a second go back;
- * a reservation that would not fit beside the kept blocks drops them instead of failing. Under
- * AddressSanitizer every block is malloc's and none is kept. Exit 0 when every check holds. */
+ * a reservation that would not fit beside the kept blocks drops them instead of failing. Big
+ * api_* blocks are kept blocks too (zeroed by api_calloc, grown in place within their class).
+ * Under AddressSanitizer every block is malloc's and none is kept. Exit 0 when every check
+ * holds. */
 #include "../../api/mem.h"
 #include <stdio.h>
 #include <stdlib.h>
@@ -123,6 +126,53 @@ int main(void)
     void *blk = api_malloc(16 * MIB);
     check(blk != NULL && api_mem_kept() == 0, "an api block of 16 MiB too");
     api_free(blk);
+    api_mem_set_budget(0);
+
+    /* api blocks of 256 KiB and more are kept blocks too (what a build's outputs, normals and
+     * edit maps take), counted in api_mem_in_use by their class */
+    size_t in0 = api_mem_in_use(), used0 = api_mem_budget_used(), kept0 = api_mem_kept();
+    unsigned char *x = api_malloc(3 * MIB - 100);
+    check(x != NULL && api_mem_in_use() == in0 + 3 * MIB, "a big api block counts its class");
+    memset(x, 7, 3 * MIB - 100);
+    api_free(x);
+    check(api_mem_in_use() == in0 && api_mem_kept() == kept0 + 3 * MIB,
+          "a big api block is kept when freed");
+    check(api_mem_budget_used() == used0 + 3 * MIB, "its bytes stay counted as kept ones");
+    h0 = hits();
+    unsigned char *y = api_calloc(1, 3 * MIB - 200);
+    check(y == x && hits() == h0 + 1, "the next api block of the class reuses it");
+    all = 1;
+    for (size_t i = 0; i < 3 * MIB - 200; i++)
+        all &= y[i] == 0;
+    check(all, "api_calloc on a reused (poisoned) block gives zeros");
+    for (size_t i = 0; i < 3 * MIB - 200; i += 997)
+        y[i] = (unsigned char)(i / 997);
+    unsigned char *z = api_realloc(y, 3 * MIB - 50);
+    check(z == y, "it grows in place within its class");
+    unsigned char *w = api_realloc(z, 5 * MIB);
+    check(w != NULL && w != z, "and moves past it");
+    all = 1;
+    for (size_t i = 0; i < 3 * MIB - 200; i += 997)
+        all &= w[i] == (unsigned char)(i / 997);
+    check(all, "with its bytes");
+    check(api_mem_kept() == kept0 + 3 * MIB, "the block it left is kept");
+    unsigned char *v = api_realloc(w, 1000);
+    check(v == w && v[997] == 1, "shrinking keeps the block and its bytes");
+    api_free(v);
+    char *sm = api_malloc(1000);
+    memset(sm, 'a', 1000);
+    char *grown = api_realloc(sm, 4 * MIB);
+    check(grown != NULL && grown[0] == 'a' && grown[999] == 'a',
+          "a small block grows into a big one");
+    api_free(grown);
+    check(api_mem_in_use() == in0, "every api byte given back");
+    api_mem_keep_set(0);
+    api_mem_keep_set(12 * MIB);
+    api_mem_set_budget(api_mem_budget_used() + 2 * MIB);
+    refused = api_mem_budget_refusals();
+    check(api_malloc(4 * MIB) == NULL && api_mem_budget_refusals() == refused + 1,
+          "a big api block past the budget is refused");
+    check(api_mem_in_use() == in0, "and counts nothing");
     api_mem_set_budget(0);
 
     /* off: nothing kept */
