@@ -29,6 +29,8 @@
 #include <time.h>
 
 #define HDR 16
+#define KEEP_MIN ((size_t)256 << 10) /* big blocks (below): the daemon's mmap threshold */
+_Static_assert(2 * sizeof(size_t) <= HDR, "a block's header holds its size and capacity");
 
 static atomic_size_t in_use;
 static atomic_size_t elsewhere;        /* core blocks and reservations */
@@ -62,6 +64,7 @@ static bool keep_give_way(void);
 static bool big_due(size_t total); /* whether a block of total bytes is one */
 static void *big_alloc(size_t total, size_t *cap, bool *fresh);
 static void big_release(void *b, size_t cap);
+static void *big_resize(void *b, size_t *cap, size_t total);
 
 /* Whether n more bytes fit the budget, counted in `on` (in_use or elsewhere) when they do. Kept
  * blocks (below) give way first: a refusal is only ever for what is really held. */
@@ -124,9 +127,8 @@ static void *api_alloc(size_t n, bool *fresh)
     }
     size_t cap = 0;
     unsigned char *b = big_alloc(n + HDR, &cap, fresh);
-    if (!b && cap) { /* a big block was due, and the budget or the system refused it */
+    if (!b && cap) { /* a big block was due, and the budget or the system refused it (counted) */
         credit(n + HDR);
-        refused_here++;
         return NULL;
     }
     if (!b) {
@@ -193,7 +195,8 @@ void api_free(void *p)
 
 /* The C library's realloc on the whole block (header included), so a growing buffer is moved
  * by mremap rather than copied once it is mmapped; the meter is charged the growth first. A
- * mapped block (see big_alloc) grows in place within its capacity, else moves to a new block. */
+ * block of a size class (big_alloc) is remapped to the new size's class, or moved to a C-library
+ * block below KEEP_MIN bytes. */
 void *api_realloc(void *p, size_t n)
 {
     if (!p)
@@ -202,28 +205,50 @@ void *api_realloc(void *p, size_t n)
     size_t old, cap;
     block_head(p, &old, &cap);
     size_t grow = n > old ? n - old : 0;
-    if (cap && n <= SIZE_MAX - HDR && n + HDR <= cap) { /* in place */
-        if (grow && (injected() || !charge(grow))) {
-            refused_here++;
-            return NULL;
-        }
-        if (n < old)
-            credit(old - n);
-        memcpy(b, &n, sizeof n);
-        return p;
-    }
-    size_t want = n <= SIZE_MAX - HDR ? n + HDR : SIZE_MAX;
-    if (cap || big_due(want)) { /* to or from a mapped block */
-        void *q = api_malloc(n);
-        if (!q)
-            return NULL;
-        memcpy(q, p, old < n ? old : n);
-        api_free(p);
-        return q;
-    }
     if (n > SIZE_MAX - HDR || injected() || !charge(grow)) {
         refused_here++;
         return NULL;
+    }
+    if (cap && n + HDR < KEEP_MIN) { /* below the big blocks: a C-library block */
+        bool counted = within_budget(&in_use, n + HDR);
+        unsigned char *q = counted ? malloc(n + HDR) : NULL;
+        if (n < old)
+            credit(old - n);
+        if (!q) { /* this never fails: the block (capacity cap > n + HDR) stays as it is */
+            if (counted)
+                atomic_fetch_sub_explicit(&in_use, n + HDR, memory_order_relaxed);
+            memcpy(b, &n, sizeof n);
+            return p;
+        }
+        memcpy(q + HDR, p, old < n ? old : n);
+        memcpy(q, &n, sizeof n);
+        memset(q + sizeof n, 0, sizeof cap);
+        big_release(b, cap);
+        return q + HDR;
+    }
+    if (cap) {
+        unsigned char *q = big_resize(b, &cap, n + HDR);
+        if (!q) {
+            if (grow) {
+                credit(grow);
+                return NULL;
+            }
+            q = b; /* a shrink that could not be remapped stays as it is */
+        }
+        if (n < old)
+            credit(old - n);
+        memcpy(q, &n, sizeof n);
+        memcpy(q + sizeof n, &cap, sizeof cap);
+        return q + HDR;
+    }
+    if (big_due(n + HDR)) { /* a C-library block grown into a big one */
+        credit(grow);
+        void *q = api_malloc(n);
+        if (!q)
+            return NULL;
+        memcpy(q, p, old);
+        api_free(p);
+        return q;
     }
     if (grow && !within_budget(&in_use, grow)) {
         credit(grow);
@@ -275,22 +300,22 @@ void api_plain_free(void *p) { free(p); }
 
 size_t api_mem_in_use(void) { return atomic_load_explicit(&in_use, memory_order_relaxed); }
 
-static _Atomic int64_t trim_asked; /* monotonic ms of the last api_mem_trim_soon; 0: none due */
-
-static int64_t mono_ms(void)
+static double mono(void)
 {
     struct timespec t;
     clock_gettime(CLOCK_MONOTONIC, &t);
-    return (int64_t)t.tv_sec * 1000 + t.tv_nsec / 1000000 + 1; /* never 0 */
+    return (double)t.tv_sec + t.tv_nsec * 1e-9;
 }
 
-void api_mem_trim_soon(void) { atomic_store(&trim_asked, mono_ms()); }
+static _Atomic int64_t trim_asked; /* ms (monotonic, + 1) of the last api_mem_trim_soon; 0: none */
+
+void api_mem_trim_soon(void) { atomic_store(&trim_asked, (int64_t)(mono() * 1000) + 1); }
 
 /* The heaps' free memory back to the system if it was asked for over half a second ago. */
 static void heap_trim_due(void)
 {
     int64_t asked = atomic_load(&trim_asked);
-    if (asked && mono_ms() - asked > 500 &&
+    if (asked && (int64_t)(mono() * 1000) + 1 - asked > 500 &&
         atomic_compare_exchange_strong(&trim_asked, &asked, 0))
         malloc_trim(0);
 }
@@ -357,7 +382,6 @@ static void core_release_plain(void *p, size_t n, void *ud)
  * Under AddressSanitizer every block is malloc's, so that it keeps watching them, and none is
  * kept. */
 #ifndef SD_UNDER_ASAN
-#define KEEP_MIN ((size_t)256 << 10)  /* the daemon's mmap threshold (server/main.c) */
 #define KEEP_GRAIN ((size_t)64 << 10)
 #define KEEP_SLOTS 1024
 #define KEEP_IDLE 1.0
@@ -376,13 +400,6 @@ static _Atomic uint64_t keep_hits, keep_misses;
 static bool keep_poison; /* SUBDIVD_KEEP_POISON=1: a kept block is filled with 0xff bytes (NaN
                           * doubles, huge ids) when taken, so tests show any reader of a block
                           * the core did not write (tests/run_all.sh sets it) */
-
-static double mono(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + t.tv_nsec * 1e-9;
-}
 
 static size_t keep_class(size_t n)
 {
@@ -513,26 +530,60 @@ static bool keep_put(void *p, size_t cap)
     return kept_it;
 }
 
+/* A block of class cap: a kept one (its reservation moved from `elsewhere` to `on`) or a new
+ * mapping (*fresh) counted in `on`; NULL when the budget (kept blocks giving way first) or the
+ * system refuses it. `used` bytes of a kept one are poisoned under SUBDIVD_KEEP_POISON=1. */
+static void *class_block(size_t cap, atomic_size_t *on, size_t used, bool *fresh)
+{
+    *fresh = false;
+    void *p = keep_take(cap);
+    if (p) {
+        if (on != &elsewhere) { /* added first: the total never dips below what is held */
+            atomic_fetch_add_explicit(on, cap, memory_order_relaxed);
+            atomic_fetch_sub_explicit(&elsewhere, cap, memory_order_relaxed);
+        }
+        if (keep_poison)
+            memset(p, 0xff, used);
+        atomic_fetch_add_explicit(&keep_hits, 1, memory_order_relaxed);
+        return p;
+    }
+    if (!within_budget(on, cap)) {
+        refused_here++;
+        return NULL;
+    }
+    if (!(p = map_block(cap))) {
+        atomic_fetch_sub_explicit(on, cap, memory_order_relaxed);
+        refused_here++;
+        return NULL;
+    }
+    atomic_fetch_add_explicit(&keep_misses, 1, memory_order_relaxed);
+    *fresh = true;
+    return p;
+}
+
+/* Block p of class cap given back, counted in `on` till now: kept (its bytes reserved in
+ * `elsewhere`), or unmapped and uncounted. */
+static void class_release(void *p, size_t cap, atomic_size_t *on)
+{
+    if (on != &elsewhere) {
+        atomic_fetch_add_explicit(&elsewhere, cap, memory_order_relaxed);
+        atomic_fetch_sub_explicit(on, cap, memory_order_relaxed);
+    }
+    if (keep_put(p, cap))
+        return;
+    unmap_block(p, cap);
+    atomic_fetch_sub_explicit(&elsewhere, cap, memory_order_relaxed);
+}
+
 static void *core_alloc(size_t n, void *ud)
 {
     if (n < KEEP_MIN)
         return core_alloc_plain(n, ud);
     size_t cap = keep_class(n);
-    void *p = keep_take(cap);
-    if (p) {
-        if (keep_poison)
-            memset(p, 0xff, n);
-        atomic_fetch_add_explicit(&keep_hits, 1, memory_order_relaxed);
-        if (meter)
-            meter->moved += cap;
-        return p;
-    }
-    if (!api_mem_reserve(cap)) /* kept blocks give way first (within_budget) */
-        return NULL;
-    if (!(p = map_block(cap)))
-        api_mem_unreserve(cap);
-    else
-        atomic_fetch_add_explicit(&keep_misses, 1, memory_order_relaxed);
+    bool fresh;
+    void *p = class_block(cap, &elsewhere, n, &fresh);
+    if (p && meter)
+        meter->moved += cap;
     return p;
 }
 
@@ -543,20 +594,19 @@ static void core_release(void *p, size_t n, void *ud)
         return;
     }
     size_t cap = keep_class(n);
-    if (keep_put(p, cap)) {
-        if (meter)
-            meter->moved += cap;
-        return;
-    }
-    unmap_block(p, cap);
-    api_mem_unreserve(cap);
+    if (meter)
+        meter->moved += cap;
+    class_release(p, cap, &elsewhere);
 }
-/* An api block of total bytes (header included) while blocks are kept: from KEEP_MIN bytes on,
- * a block of its class, kept or newly mapped, counted in in_use by its capacity (a kept block's
- * reservation moves there from `elsewhere`); else NULL with *cap 0 (malloc's). NULL with *cap
- * set: the budget or the system refused it. */
+
+/* ---- the api's big blocks ---------------------------------------------------------------
+ * While blocks are kept (keep_limit > 0), an api_* block of KEEP_MIN bytes or more, header
+ * included, is a block of its size class like the core's, counted in in_use by its capacity and
+ * kept when freed; its header says the capacity (0: malloc's block). */
 static bool big_due(size_t total) { return total >= KEEP_MIN && atomic_load(&keep_limit); }
 
+/* A block for total bytes: of its class when big_due (*cap set; NULL if refused), else NULL
+ * with *cap 0 (the caller takes malloc's). */
 static void *big_alloc(size_t total, size_t *cap, bool *fresh)
 {
     *cap = 0;
@@ -564,35 +614,35 @@ static void *big_alloc(size_t total, size_t *cap, bool *fresh)
     if (!big_due(total))
         return NULL;
     *cap = keep_class(total);
-    void *p = keep_take(*cap);
-    if (p) {
-        atomic_fetch_sub_explicit(&elsewhere, *cap, memory_order_relaxed);
-        atomic_fetch_add_explicit(&in_use, *cap, memory_order_relaxed);
-        if (keep_poison)
-            memset(p, 0xff, total);
-        atomic_fetch_add_explicit(&keep_hits, 1, memory_order_relaxed);
-        return p;
-    }
-    if (!within_budget(&in_use, *cap)) /* kept blocks give way first */
-        return NULL;
-    if (!(p = map_block(*cap))) {
-        atomic_fetch_sub_explicit(&in_use, *cap, memory_order_relaxed);
-        return NULL;
-    }
-    atomic_fetch_add_explicit(&keep_misses, 1, memory_order_relaxed);
-    *fresh = true;
-    return p;
+    return class_block(*cap, &in_use, total, fresh);
 }
 
-/* A mapped api block given back: kept (its bytes now reserved in `elsewhere`) or unmapped. */
-static void big_release(void *b, size_t cap)
+static void big_release(void *b, size_t cap) { class_release(b, cap, &in_use); }
+
+/* Block b of capacity *cap resized to hold total (>= KEEP_MIN) bytes: remapped to total's class
+ * (the kernel moves the pages, nothing is copied), the difference counted in in_use; NULL (b
+ * left as it was) when the budget or the system refuses the growth. */
+static void *big_resize(void *b, size_t *cap, size_t total)
 {
-    atomic_fetch_add_explicit(&elsewhere, cap, memory_order_relaxed);
-    atomic_fetch_sub_explicit(&in_use, cap, memory_order_relaxed);
-    if (keep_put(b, cap))
-        return;
-    unmap_block(b, cap);
-    api_mem_unreserve(cap);
+    size_t want = keep_class(total);
+    if (want == *cap)
+        return b;
+    if (want > *cap && !within_budget(&in_use, want - *cap)) {
+        refused_here++;
+        return NULL;
+    }
+    void *q = mremap(b, *cap, want, MREMAP_MAYMOVE);
+    if (q == MAP_FAILED) {
+        if (want > *cap)
+            atomic_fetch_sub_explicit(&in_use, want - *cap, memory_order_relaxed);
+        refused_here++;
+        return NULL;
+    }
+    if (want < *cap)
+        atomic_fetch_sub_explicit(&in_use, *cap - want, memory_order_relaxed);
+    sd_advise_huge(q, want);
+    *cap = want;
+    return q;
 }
 
 #else /* AddressSanitizer: the C library's blocks, none kept */
@@ -613,6 +663,13 @@ static void big_release(void *b, size_t cap)
 {
     (void)b;
     (void)cap;
+}
+static void *big_resize(void *b, size_t *cap, size_t total)
+{
+    (void)b;
+    (void)cap;
+    (void)total;
+    return NULL;
 }
 void api_mem_keep_set(size_t bytes) { (void)bytes; }
 void api_mem_keep_trim(void) { heap_trim_due(); }

@@ -3,7 +3,8 @@
  * Every block api/ and server/ allocate goes through api_malloc and its siblings, and so does
  * jansson (json_set_alloc_funcs, installed before main): a 16-byte header keeps each block's
  * size, so frees are counted too. What it gives:
- *   - api_mem_in_use(): the bytes of live blocks, headers included (exported on /metrics as
+ *   - api_mem_in_use(): the bytes of live blocks, headers included, a big block's by its size
+ *     class while big blocks are kept (see api_mem_keep_set; exported on /metrics as
  *     subdivd_api_bytes);
  *   - a per-thread meter (api_mem_meter_set): what one thread — one request, the daemon being
  *     one thread per connection — allocates while it is set, with an optional limit past which
@@ -85,20 +86,20 @@ void api_mem_unreserve(size_t n);
 /* The allocator of core complexes (sd_options.allocator): C-library blocks counted against the
  * budget. */
 sd_allocator api_mem_core_allocator(void);
-/* Big core blocks given back are kept for the next block of their size class, up to `bytes`
- * in all (0, the default: none), each for about a second (see mem.c); they stay counted
- * against the budget and give way to any allocation or reservation that would not fit beside
- * them.
- * api_mem_keep_trim drops those idle for over a second (the daemon calls it 5 times a second);
+/* Big blocks (256 KiB and more: the core's, and while blocks are kept the api_* ones too,
+ * mapped in size classes) given back are kept for the next block of their size class, up to
+ * `bytes` in all (0, the default: none), each for about a second (see mem.c); they stay
+ * counted against the budget and give way to any allocation or reservation that would not fit
+ * beside them.
+ * api_mem_keep_trim drops those idle for over a second (the daemon calls it 5 times a second),
+ * and trims glibc's heaps (malloc_trim) when api_mem_trim_soon asked for it (after a request
+ * that moved many bytes) over half a second before: back-to-back builds reuse those pages.
  * api_mem_kept says how many bytes are kept; the counts say how many big blocks were taken
  * from the kept ones and how many were mapped anew. */
 void api_mem_keep_set(size_t bytes);
 void api_mem_keep_trim(void);
-size_t api_mem_kept(void);
-/* What glibc's heaps hold free goes back to the system (malloc_trim) once no request asked for
- * it in the last half second: api_mem_trim_soon asks (after a request that moved many bytes),
- * api_mem_keep_trim trims. Back-to-back builds so reuse their small blocks' pages. */
 void api_mem_trim_soon(void);
+size_t api_mem_kept(void);
 void api_mem_keep_counts(uint64_t *hits, uint64_t *misses);
 
 /* Set this thread's meter (NULL: none); returns the one it replaces. */

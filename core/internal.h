@@ -681,7 +681,7 @@ void sdi_edge_opposites(const sd_topo *t, int threads, const uint8_t *er, uint32
 /* Per-edge variable-size rings (solid and G2 edges), CSR; class 0 = ring/face, 1 = diagonal. */
 typedef struct sdi_rings {
     uint32_t *off, *v;
-    uint8_t *cls;
+    uint8_t *cls;  /* 1: through an octahedron's diagonal (averaged scheme; else NULL) */
     uint32_t *len; /* after dedup */
 } sdi_rings;
 bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int scheme, int threads,

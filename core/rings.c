@@ -380,7 +380,7 @@ static int cmp_entry(const void *x, const void *y)
 typedef struct ring_sort_job {
     sdi_rings *R;
     uint32_t ne;
-    bool cls; /* entries have classes (else all 0, not read) */
+    bool classes; /* entries have classes (R->cls; else NULL) */
     volatile bool ok;
 } ring_sort_job;
 
@@ -392,8 +392,8 @@ static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
     sdi_range(J->ne, part, nparts, &lo, &hi);
     uint32_t *const rv = R->v, *const off = R->off, *const len = R->len;
     uint8_t *const cls = R->cls;
-    if (!J->cls) { /* no second class (box scheme): the vertex ids alone, classes stay 0;
-                    * sorted in place, each candidate inserted unless already there */
+    if (!J->classes) { /* one class (box scheme): the vertex ids alone, sorted in place, each
+                        * candidate inserted unless already there */
         for (uint32_t e = (uint32_t)lo; e < (uint32_t)hi; e++) {
             uint32_t b = off[e], n = off[e + 1] - b, w = 0;
             uint32_t *s = rv + b;
@@ -478,7 +478,7 @@ static inline __attribute__((always_inline)) void solid_cands(const srjob *J, ui
     const uint32_t(*const tet)[4] = t->tet, (*const tet_e)[6] = t->tet_e;
     const uint32_t(*const oct)[6] = t->oct, (*const oct_e)[12] = t->oct_e;
 #define MINE(e) ((all || ((e) >= lo && (e) < hi)) && SDI_RULE_RING[erule[e]] == SDI_RING_SOLID)
-    /* the box scheme has one class: its entries' classes are zero from the allocation */
+    /* the box scheme has one class: its entries have none (R->cls is NULL) */
 #define PUSH(e, x, c)                                                                        \
     do {                                                                                     \
         uint32_t at_ = cur[e]++;                                                             \
@@ -567,9 +567,9 @@ bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int sche
         R->off[e + 1] += R->off[e];
     size_t total = R->off[ne];
     R->v = sdi_alloc(m, (total + 1) * sizeof *R->v);
-    R->cls = J.avg ? sdi_alloc(m, total + 1) : sdi_calloc(m, total + 1, 1);
+    R->cls = J.avg ? sdi_alloc(m, total + 1) : NULL; /* the box scheme has one class */
     J.cur = sdi_alloc(m, ((size_t)ne + 1) * sizeof *J.cur);
-    if (!R->v || !R->cls || !J.cur) {
+    if (!R->v || (J.avg && !R->cls) || !J.cur) {
         sdi_free(m, J.cur);
         return false;
     }
@@ -577,7 +577,8 @@ bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int sche
     J.fill = true;
     sdi_par(threads, work, solid_part, &J);
     sdi_free(m, J.cur);
-    /* sort and deduplicate each edge's list (as (vertex, class) pairs), edges in parallel */
+    /* sort and deduplicate each edge's list (as (vertex, class) pairs in the averaged scheme),
+     * edges in parallel */
     ring_sort_job S = {R, ne, J.avg, true};
     sdi_par(threads, R->off[ne], ring_sort_part, &S);
     return S.ok;

@@ -299,10 +299,6 @@ typedef struct ctx {
     uint32_t center, ibase_e, ibase_f;
 } ctx;
 
-static inline int fpos(const sd_topo *P, uint32_t f, uint32_t x)
-{
-    return P->fv[f][0] == x ? 0 : P->fv[f][1] == x ? 1 : 2;
-}
 static inline uint32_t half(const sd_topo *P, uint32_t e, uint32_t x)
 {
     return 2 * e + (P->ev[e][0] == x ? 0 : 1);
@@ -310,6 +306,8 @@ static inline uint32_t half(const sd_topo *P, uint32_t e, uint32_t x)
 /* The split of a parent tetrahedron makes 4 corner tetrahedra, then its octahedron; that of a
  * parent octahedron 6 corner octahedra, then 8 face tetrahedra (tm_tet, tm_oct; checked by
  * templates()). The emitters below are written for these two shapes, with constant counts. */
+/* the emitters' shape arguments: child tetrahedra, child octahedra, the parent's vertices and
+ * edges, the faces inside it */
 #define TET_KIDS 4, 1, 4, 6, 4
 #define OCT_KIDS 8, 6, 6, 12, 24
 
@@ -463,9 +461,10 @@ static uint8_t child_mask(const tcell *c, unsigned pmask)
     return (uint8_t)m;
 }
 
-/* The per-parent tables the split reads (see parent_tables): edges [2 halves per parent edge, in
- * the template's end order | 3 per parent face, at its template vertices in order | inside the
- * cell]; faces [4 per parent face: at its template vertices in order, middle | inside the cell]. */
+/* The slots of the per-parent tables the split reads (vertex_table, edge_face_tables): edges [2
+ * halves per parent edge, in the template's end order | 3 per parent face, at its template
+ * vertices in order | inside the cell]; faces [4 per parent face: at its template vertices in
+ * order, middle | inside the cell]. */
 static int vslot(const uint8_t *fv, int s) { return fv[0] == s ? 0 : fv[1] == s ? 1 : 2; }
 
 static uint8_t edge_slot(const tmpl *T, uint16_t r)

@@ -29,7 +29,6 @@
 #include "metrics.h"
 #include <arpa/inet.h>
 #include <errno.h>
-#include <malloc.h>
 #include <microhttpd.h>
 #include <poll.h>
 #include <sys/socket.h>
@@ -73,10 +72,10 @@ static const char *intern_method(const char *m)
 }
 
 /* A request that took or gave back this much (its body, parse, levels, a model it freed) asks
- * for malloc_trim once the daemon is idle for half a second (api_mem_trim_soon): what glibc
- * keeps in its heaps below the mmap threshold goes back to the system, so the resident size
- * follows what the daemon holds, while back-to-back builds reuse those pages (a fresh page
- * costs ~15 µs on a virtual machine). */
+ * for malloc_trim half a second after the last such request (api_mem_trim_soon; the main loop
+ * trims): what glibc keeps in its heaps below the mmap threshold goes back to the system, so the
+ * resident size follows what the daemon holds, while back-to-back builds reuse those pages (a
+ * fresh page costs ~15 µs on a virtual machine). */
 #define TRIM_AFTER_BYTES (32u << 20)
 
 void http_req_unref(req *r)

@@ -6,7 +6,7 @@
  * SUBDIVD_KEEP_POISON=1), not for another class; the kept bytes stay within the limit (oldest
  * dropped first) and counted against the budget; kept blocks idle for over a second go back;
  * a reservation that would not fit beside the kept blocks drops them instead of failing. Big
- * api_* blocks are kept blocks too (zeroed by api_calloc, grown in place within their class).
+ * api_* blocks are kept blocks too (zeroed by api_calloc, remapped by api_realloc).
  * Under AddressSanitizer every block is malloc's and none is kept. Exit 0 when every check
  * holds. */
 #include "../../api/mem.h"
@@ -150,14 +150,21 @@ int main(void)
     unsigned char *z = api_realloc(y, 3 * MIB - 50);
     check(z == y, "it grows in place within its class");
     unsigned char *w = api_realloc(z, 5 * MIB);
-    check(w != NULL && w != z, "and moves past it");
+    check(w != NULL, "and is remapped past it");
     all = 1;
     for (size_t i = 0; i < 3 * MIB - 200; i += 997)
         all &= w[i] == (unsigned char)(i / 997);
     check(all, "with its bytes");
-    check(api_mem_kept() == kept0 + 3 * MIB, "the block it left is kept");
-    unsigned char *v = api_realloc(w, 1000);
-    check(v == w && v[997] == 1, "shrinking keeps the block and its bytes");
+    check(api_mem_in_use() == in0 + 5 * MIB + MIB / 2, "counted by its new class (5.5 MiB)");
+    check(api_mem_kept() == kept0, "nothing copied, nothing left behind");
+    unsigned char *u = api_realloc(w, MIB);
+    check(u != NULL && api_mem_in_use() == in0 + MIB + MIB / 8,
+          "shrinking remaps it to the smaller class (1.125 MiB)");
+    check(u[997] == 1, "with its bytes");
+    unsigned char *v = api_realloc(u, 1000);
+    check(v != NULL && v != u && v[997] == 1, "below 256 KiB it moves to a C-library block");
+    check(api_mem_in_use() == in0 + 1000 + 16, "counted by its size");
+    check(api_mem_kept() == kept0 + MIB + MIB / 8, "the block it left is kept");
     api_free(v);
     char *sm = api_malloc(1000);
     memset(sm, 'a', 1000);
@@ -166,6 +173,33 @@ int main(void)
           "a small block grows into a big one");
     api_free(grown);
     check(api_mem_in_use() == in0, "every api byte given back");
+
+    /* each allocation of a sequence through every big-block path failed in turn: what
+     * succeeded is given back, nothing stays counted but the kept blocks */
+    int walk_ok = 1;
+    for (uint64_t nth = 1; nth <= 8; nth++) {
+        size_t u0 = api_mem_in_use(), b0 = api_mem_budget_used() - api_mem_kept();
+        api_mem_fail_at(nth, 0);
+        unsigned char *f1 = api_malloc(3 * MIB);
+        unsigned char *f2 = f1 ? api_realloc(f1, 5 * MIB) : NULL;
+        if (f2)
+            f1 = f2;
+        unsigned char *f3 = f1 ? api_realloc(f1, 1000) : NULL;
+        if (f3)
+            f1 = f3;
+        unsigned char *f4 = api_calloc(1, 2 * MIB);
+        unsigned char *f5 = api_malloc(100);
+        unsigned char *f6 = f5 ? api_realloc(f5, MIB) : NULL;
+        if (f6)
+            f5 = f6;
+        api_mem_fail_at(0, 0);
+        api_free(f1);
+        api_free(f4);
+        api_free(f5);
+        walk_ok &= api_mem_in_use() == u0 && api_mem_budget_used() - api_mem_kept() == b0;
+    }
+    check(walk_ok, "failures on the big-block paths leave nothing counted");
+
     api_mem_keep_set(0);
     api_mem_keep_set(12 * MIB);
     api_mem_set_budget(api_mem_budget_used() + 2 * MIB);
