@@ -640,7 +640,11 @@ static void *big_resize(void *b, size_t *cap, size_t total)
     }
     if (want < *cap)
         atomic_fetch_sub_explicit(&in_use, *cap - want, memory_order_relaxed);
-    sd_advise_huge(q, want);
+#ifdef MADV_HUGEPAGE
+    /* the whole mapping, as map_block: advice on a part would split it in two mappings, and a
+     * later mremap of the block (which must lie in one) would fail */
+    (void)madvise(q, want, MADV_HUGEPAGE);
+#endif
     *cap = want;
     return q;
 }

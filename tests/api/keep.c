@@ -166,6 +166,22 @@ int main(void)
     check(api_mem_in_use() == in0 + 1000 + 16, "counted by its size");
     check(api_mem_kept() == kept0 + MIB + MIB / 8, "the block it left is kept");
     api_free(v);
+    /* a buffer doubling from 300 KiB, as a body or an output grows: each remap may move it off
+     * a 2 MiB boundary, and every later one must still find it one mapping */
+    unsigned char *gb = api_malloc(300 << 10);
+    memset(gb, 9, 300 << 10);
+    int grown_ok = gb != NULL;
+    for (size_t sz = 600 << 10; grown_ok && sz <= 40 * MIB; sz *= 2) {
+        unsigned char *g2 = api_realloc(gb, sz);
+        grown_ok = g2 != NULL && g2[0] == 9 && g2[(300 << 10) - 1] == 9;
+        if (g2) {
+            gb = g2;
+            memset(gb, 9, sz);
+        }
+    }
+    check(grown_ok, "a doubling buffer is remapped at every size");
+    api_free(gb);
+    check(api_mem_in_use() == in0, "and given back");
     char *sm = api_malloc(1000);
     memset(sm, 'a', 1000);
     char *grown = api_realloc(sm, 4 * MIB);
