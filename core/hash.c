@@ -66,15 +66,3 @@ uint32_t sdi_hash_get(const sd_hash *h, const uint32_t k[4])
         i = (i + 1) & (h->cap - 1);
     }
 }
-
-void sdi_key(uint32_t k[4], const uint32_t *ids, int n)
-{
-    for (int i = 0; i < 4; i++)
-        k[i] = i < n ? ids[i] : UINT32_MAX;
-    for (int i = 1; i < n; i++)
-        for (int j = i; j > 0 && k[j - 1] > k[j]; j--) {
-            uint32_t t = k[j];
-            k[j] = k[j - 1];
-            k[j - 1] = t;
-        }
-}

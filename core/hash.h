@@ -17,6 +17,27 @@ void sdi_hash_free(sd_mem *m, sd_hash *h);
  * return UINT32_MAX; if present return its value. */
 uint32_t sdi_hash_get_or_put(sd_hash *h, const uint32_t k[4], uint32_t v);
 uint32_t sdi_hash_get(const sd_hash *h, const uint32_t k[4]);
-/* Sort n (<= 4) ids into k, padding with UINT32_MAX. */
-void sdi_key(uint32_t k[4], const uint32_t *ids, int n);
+/* Sort n (1..4) ids into k, padding with UINT32_MAX (ids may be k itself). Inline, with no
+ * data-dependent branch: level 0 makes a key for every edge and face of every simplex. */
+static inline void sdi_sort2(uint32_t *a, uint32_t *b)
+{
+    uint32_t x = *a < *b ? *a : *b, y = *a < *b ? *b : *a;
+    *a = x;
+    *b = y;
+}
+
+static inline void sdi_key(uint32_t k[4], const uint32_t *ids, int n)
+{
+    uint32_t a = ids[0], b = n > 1 ? ids[1] : UINT32_MAX, c = n > 2 ? ids[2] : UINT32_MAX,
+             d = n > 3 ? ids[3] : UINT32_MAX;
+    sdi_sort2(&a, &b); /* a sorting network of four (padding sorts last) */
+    sdi_sort2(&c, &d);
+    sdi_sort2(&a, &c);
+    sdi_sort2(&b, &d);
+    sdi_sort2(&b, &c);
+    k[0] = a;
+    k[1] = b;
+    k[2] = c;
+    k[3] = d;
+}
 #endif
