@@ -220,8 +220,8 @@ sd_result sd_refine_carry(const sd_refinement *r, const sd_tag_set *in, sd_tag_s
                           sd_error *err)
 {
     memset(out, 0, sizeof *out);
-    step s;
-    if (!step_build(r, &s))
+    step s = {0}; /* nothing to carry (the usual refinement): no faces to sort */
+    if ((in->ntags || in->npetals || in->noverrides) && !step_build(r, &s))
         return sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory carrying tags and rules");
     /* room for the most each can become: an edge 2 halves, a triangle 4 children (12 ids); an
      * override its 2 halves and the midpoint */
