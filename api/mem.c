@@ -117,6 +117,23 @@ static void credit(size_t n)
     }
 }
 
+/* A C-library block of total bytes counted in in_use, or NULL (refused, counted as such). */
+static unsigned char *small_alloc(size_t total)
+{
+    if (!within_budget(&in_use, total)) {
+        refused_here++;
+        return NULL;
+    }
+    unsigned char *b = malloc(total);
+    if (!b) {
+        atomic_fetch_sub_explicit(&in_use, total, memory_order_relaxed);
+        refused_here++;
+        return NULL;
+    }
+    sd_advise_huge(b, total); /* as the core's blocks (core/alloc.c) */
+    return b;
+}
+
 /* An api block of n bytes: *fresh when they are zeros already. */
 static void *api_alloc(size_t n, bool *fresh)
 {
@@ -125,26 +142,13 @@ static void *api_alloc(size_t n, bool *fresh)
         refused_here++;
         return NULL;
     }
-    size_t cap = 0;
+    size_t cap = 0; /* set by big_alloc when the block is a big one, refused or not */
     unsigned char *b = big_alloc(n + HDR, &cap, fresh);
-    if (!b && cap) { /* a big block was due, and the budget or the system refused it (counted) */
+    if (!b && !cap)
+        b = small_alloc(n + HDR);
+    if (!b) {
         credit(n + HDR);
         return NULL;
-    }
-    if (!b) {
-        if (!within_budget(&in_use, n + HDR)) {
-            credit(n + HDR);
-            refused_here++;
-            return NULL;
-        }
-        b = malloc(n + HDR);
-        if (!b) {
-            atomic_fetch_sub_explicit(&in_use, n + HDR, memory_order_relaxed);
-            credit(n + HDR);
-            refused_here++;
-            return NULL;
-        }
-        sd_advise_huge(b, n + HDR); /* as the core's blocks (core/alloc.c) */
     }
     memcpy(b, &n, sizeof n);
     memcpy(b + sizeof n, &cap, sizeof cap);

@@ -380,7 +380,6 @@ static int cmp_entry(const void *x, const void *y)
 typedef struct ring_sort_job {
     sdi_rings *R;
     uint32_t ne;
-    bool classes; /* entries have classes (R->cls; else NULL) */
     volatile bool ok;
 } ring_sort_job;
 
@@ -392,8 +391,8 @@ static void ring_sort_part(void *arg, uint32_t part, uint32_t nparts)
     sdi_range(J->ne, part, nparts, &lo, &hi);
     uint32_t *const rv = R->v, *const off = R->off, *const len = R->len;
     uint8_t *const cls = R->cls;
-    if (!J->classes) { /* one class (box scheme): the vertex ids alone, sorted in place, each
-                        * candidate inserted unless already there */
+    if (!cls) { /* one class (box scheme): the vertex ids alone, sorted in place, each candidate
+                 * inserted unless already there */
         for (uint32_t e = (uint32_t)lo; e < (uint32_t)hi; e++) {
             uint32_t b = off[e], n = off[e + 1] - b, w = 0;
             uint32_t *s = rv + b;
@@ -579,7 +578,7 @@ bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int sche
     sdi_free(m, J.cur);
     /* sort and deduplicate each edge's list (as (vertex, class) pairs in the averaged scheme),
      * edges in parallel */
-    ring_sort_job S = {R, ne, J.avg, true};
+    ring_sort_job S = {R, ne, true};
     sdi_par(threads, R->off[ne], ring_sort_part, &S);
     return S.ok;
 }

@@ -347,9 +347,32 @@ static inline __attribute__((always_inline)) void put_oct(sd_topo *C, const tcel
     C->oct_b[o] = c->bmask[pmask];
 }
 
-/* Phase A: the vertices, diagonal and boundary mask of the children of one parent cell: ntk
- * tetrahedra and nok octahedra, the octahedra first if octa_first; n, ne: the parent's vertices
- * and edges; nif: the faces inside it. */
+/* Phase A (ids false) writes a child's vertices, diagonal and boundary mask, phase B (ids true)
+ * its edge and face ids. */
+static inline __attribute__((always_inline)) void
+put_child(sd_topo *C, const tcell *c, bool oct, bool ids, const uint32_t *lv, const uint32_t *le,
+          const uint32_t *lf, unsigned pmask, uint32_t at);
+
+/* The children of one parent cell in template order: ntk tetrahedra and nok octahedra, the
+ * octahedra first for a parent octahedron (n, its vertices, is 6). */
+static inline __attribute__((always_inline)) void
+put_children(sd_topo *C, const tmpl *T, bool ids, const uint32_t *lv, const uint32_t *le,
+             const uint32_t *lf, unsigned pmask, uint32_t tet_at, uint32_t oct_at, int ntk,
+             int nok, int n)
+{
+    const bool octa_first = n == 6;
+    const tcell *c = T->cell;
+    if (octa_first)
+        for (int i = 0; i < nok; i++)
+            put_child(C, c++, true, ids, lv, le, lf, pmask, oct_at + (uint32_t)i);
+    for (int i = 0; i < ntk; i++)
+        put_child(C, c++, false, ids, lv, le, lf, pmask, tet_at + (uint32_t)i);
+    if (!octa_first)
+        for (int i = 0; i < nok; i++)
+            put_child(C, c++, true, ids, lv, le, lf, pmask, oct_at + (uint32_t)i);
+}
+
+/* Phase A for one parent cell (the shape arguments as TET_KIDS / OCT_KIDS). */
 static inline __attribute__((always_inline)) void
 emit_cells(sd_topo *C, const ctx *x, const tmpl *T, unsigned pmask, uint32_t tet_at,
            uint32_t oct_at, int ntk, int nok, int n, int ne, int nif)
@@ -357,16 +380,7 @@ emit_cells(sd_topo *C, const ctx *x, const tmpl *T, unsigned pmask, uint32_t tet
     (void)nif;
     uint32_t lv[19];
     vertex_table(x, n, ne, lv);
-    const bool octa_first = n == 6;
-    const tcell *c = T->cell;
-    if (octa_first)
-        for (int i = 0; i < nok; i++)
-            put_oct(C, c++, lv, pmask, oct_at + (uint32_t)i);
-    for (int i = 0; i < ntk; i++)
-        put_tet(C, c++, lv, pmask, tet_at + (uint32_t)i);
-    if (!octa_first)
-        for (int i = 0; i < nok; i++)
-            put_oct(C, c++, lv, pmask, oct_at + (uint32_t)i);
+    put_children(C, T, false, lv, NULL, NULL, pmask, tet_at, oct_at, ntk, nok, n);
 }
 
 /* The per-parent edge and face tables (slots as edge_slot and face_slot number them). */
@@ -420,8 +434,7 @@ static inline __attribute__((always_inline)) void put_oct_ids(sd_topo *C, const 
         C->oct_f[o][k] = lf[c->fs[k]];
 }
 
-/* Phase B: the faces inside one parent cell and the edge and face ids of its children (the
- * counts as emit_cells'). */
+/* Phase B for one parent cell: the faces inside it and the edge and face ids of its children. */
 static inline __attribute__((always_inline)) void
 emit_ids(sd_topo *C, const ctx *x, const tmpl *T, uint32_t tet_at, uint32_t oct_at, int ntk,
          int nok, int n, int ne, int nif)
@@ -438,16 +451,21 @@ emit_ids(sd_topo *C, const ctx *x, const tmpl *T, uint32_t tet_at, uint32_t oct_
         C->fn3[f] = 2;
         C->fflag[f] = 0;
     }
-    const bool octa_first = n == 6;
-    const tcell *c = T->cell;
-    if (octa_first)
-        for (int i = 0; i < nok; i++)
-            put_oct_ids(C, c++, le, lf, oct_at + (uint32_t)i);
-    for (int i = 0; i < ntk; i++)
-        put_tet_ids(C, c++, le, lf, tet_at + (uint32_t)i);
-    if (!octa_first)
-        for (int i = 0; i < nok; i++)
-            put_oct_ids(C, c++, le, lf, oct_at + (uint32_t)i);
+    put_children(C, T, true, lv, le, lf, 0, tet_at, oct_at, ntk, nok, n);
+}
+
+static inline __attribute__((always_inline)) void
+put_child(sd_topo *C, const tcell *c, bool oct, bool ids, const uint32_t *lv, const uint32_t *le,
+          const uint32_t *lf, unsigned pmask, uint32_t at)
+{
+    if (ids && oct)
+        put_oct_ids(C, c, le, lf, at);
+    else if (ids)
+        put_tet_ids(C, c, le, lf, at);
+    else if (oct)
+        put_oct(C, c, lv, pmask, at);
+    else
+        put_tet(C, c, lv, pmask, at);
 }
 
 /* Boundary mask of a child cell: face k lies on the solids' boundary iff it is a child of a
