@@ -690,6 +690,15 @@ bool sdi_solid_rings(sd_mem *m, const sd_topo *t, const uint8_t *erule, int sche
 bool sdi_g2_rings(sd_mem *m, sdi_rels *rel, const uint8_t *erule, sdi_rings *R);
 void sdi_rings_free(sd_mem *m, sdi_rings *r);
 
+/* ---- direct.c: S applied without being made (batch refinement) ------------------------------ */
+/* Whether level p's next level may be computed without S: batch refinement (edit_index LAZY,
+ * nothing edited), no rules built, no solids, Ying-Zorin rows, semi-sharp creases or
+ * tangent-plane constraints. */
+bool sdi_direct_ok(const sd_complex *c, const sd_level *p);
+/* lv's channels (allocated) from p's (faces built) as S_p would make them, the same bytes; *done
+ * false if the level has rows direct.c does not make (G2 rings): then nothing was written. */
+sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, bool *done, sd_error *err);
+
 /* ---- masks.c: the weights of the rules ------------------------------------------------------ */
 /* A vertex mask: the centre, each of rho (class A), each octahedral opposite (class B). */
 typedef struct sdi_vmask {

@@ -123,10 +123,12 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
 {
     sd_mem *m = &c->mem;
     sd_level *p = c->lv[l];
-    sd_result r = rules_keep_faces(c, l, err);
+    /* batch refinement of a level whose rows are plain masks: S applied without being made */
+    const bool direct = sdi_direct_ok(c, p);
+    sd_result r = direct ? SD_OK : rules_keep_faces(c, l, err);
     if (!r)
         r = ensure_faces(c, l, err); /* the rules may have been built before, the faces dropped */
-    if (!r && (c->opt.edit_index != SD_EDIT_INDEX_LAZY || c->edit_indexed))
+    if (!r && !direct && (c->opt.edit_index != SD_EDIT_INDEX_LAZY || c->edit_indexed))
         r = sdi_csrb_index(m, &p->S, err); /* kept with S, so it may exist from before */
     if (r)
         return r;
@@ -151,7 +153,20 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
             sdi_level_free(m, lv);
             return sdi_fail_nomem(err, m);
         }
-        sdi_csr_apply(&p->S, p->ch[i].data, lv->ch[i].data, nc, c->opt.threads);
+    }
+    bool applied = false;
+    if (direct && (r = sdi_direct_apply(c, p, lv, &applied, err))) {
+        sdi_level_free(m, lv);
+        return r;
+    }
+    if (!applied && (r = rules_keep_faces(c, l, err))) { /* (direct.c declined: S after all) */
+        sdi_level_free(m, lv);
+        return r;
+    }
+    for (int i = 0; i < p->nch; i++) {
+        int nc = p->ch[i].ncomp;
+        if (!applied)
+            sdi_csr_apply(&p->S, p->ch[i].data, lv->ch[i].data, nc, c->opt.threads);
         /* the tangent-plane constraints move positions after S, before the offsets (003 Sec. 3) */
         if (i == 0 && c->ntt && (r = sdi_tp_step(c, l, lv, lv->ch[0].data, err))) {
             sdi_level_free(m, lv);

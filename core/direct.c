@@ -1,0 +1,309 @@
+/* direct.c — S_l applied without being made: level l+1's points straight from level l's rules
+ * and neighbourhoods, for batch refinement (sd_options.edit_index LAZY, nothing edited yet).
+ *
+ * Where every row of S_l is its rule's mask over rho or over the edge's ends and opposite
+ * vertices — a level without solids, G2 rings, Ying-Zorin rows, semi-sharp creases or
+ * tangent-plane constraints — a row's weights depend on its rule and size only, and its columns
+ * are the ones stencil.c would write: a vertex row is [self, rho in edge order], an edge row
+ * [end 0, end 1, the opposite vertices in face order]. So each point is summed here term by term
+ * in its row's order, with the weights sdi_vertex_mask and sdi_edge_mask give: a vertex point
+ * starts from its own term and each edge that feeds it adds its neighbour's term in edge order (a
+ * scatter in which every point's sums keep the row's order), an edge point sums its row in
+ * place. The bytes are those of S applied (tests/core/test_direct.c compares every level with the
+ * path through S), without the patterns, rho's columns and the matrix itself; the rules, rho's
+ * sizes and the opposite vertices are computed as stencil.c does, and the vertex rules kept
+ * (vrule_only: what sd_level_vertex_rule reads). S is made later if anything asks for it
+ * (sdi_ensure_rules: classes, the matrix, limits, edits).
+ */
+#include "internal.h"
+#include <string.h>
+
+bool sdi_direct_ok(const sd_complex *c, const sd_level *p)
+{
+    const sd_topo *t = &p->t;
+    return c->opt.edit_index == SD_EDIT_INDEX_LAZY && !c->edit_indexed && !p->have_rules &&
+           !t->ntet && !t->noct && !(t->ovmask & OVM_YZ) && !c->ntt && !c->sh.ne && !c->sh.nv &&
+           !c->sh.nf;
+}
+
+enum { MEMO = SDI_LOOP_CACHE }; /* vertex weights memoized by rule and rho's size below this */
+
+typedef struct dweights {
+    double w0, w1, wr;
+    bool set;
+} dweights;
+
+typedef struct djob {
+    const sd_topo *t;
+    int weights, scheme;
+    const uint8_t *vr, *er, *take, *nopp;
+    const uint32_t *cnt;
+    const uint32_t (*opp)[2];
+    const double *loopc;
+    double *wa;               /* per vertex: the weight of each of its rho */
+    const double *in;
+    double *out;
+    int nc;
+} djob;
+
+/* The weights of a vertex row of rule r and rho of na: self and each of rho. */
+static sdi_vmask vmask(const djob *J, uint8_t r, uint32_t na)
+{
+    sdi_vnb nbh = {na, 0, J->weights, J->scheme, J->loopc};
+    return sdi_vertex_mask(r, &nbh);
+}
+
+/* Vertex points' first term (their own) and each vertex's rho weight, by ranges of vertices. */
+static void init_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const djob *J = arg;
+    const int nc = J->nc;
+    const double *in = J->in;
+    double *out = J->out, *wa = J->wa;
+    uint64_t lo, hi;
+    sdi_range(J->t->nv, part, nparts, &lo, &hi);
+    double ms[SD_RULE_COUNT][MEMO], ma[SD_RULE_COUNT][MEMO];
+    bool have[SD_RULE_COUNT][MEMO];
+    memset(have, 0, sizeof have);
+    for (uint32_t v = (uint32_t)lo; v < hi; v++) {
+        uint8_t r = J->vr[v];
+        uint32_t na = J->cnt[v];
+        double s, a;
+        if (na < MEMO && have[r][na]) {
+            s = ms[r][na];
+            a = ma[r][na];
+        } else {
+            sdi_vmask w = vmask(J, r, na);
+            s = w.self;
+            a = w.a;
+            if (na < MEMO) {
+                ms[r][na] = s;
+                ma[r][na] = a;
+                have[r][na] = true;
+            }
+        }
+        wa[v] = a;
+        for (int j = 0; j < nc; j++) {
+            double x = 0; /* as a row sums: from 0, its terms in order */
+            x += s * in[(size_t)nc * v + j];
+            out[(size_t)nc * v + j] = x;
+        }
+    }
+}
+
+/* The ring size of edge e's row (the opposite vertices when two faces gave them). */
+static inline uint32_t ring_k(const djob *J, uint32_t e)
+{
+    uint8_t ring = SDI_RULE_RING[J->er[e]];
+    return (ring == SDI_RING_OPPOSITE || ring == SDI_RING_BOUNDARY_OPPOSITE) &&
+           (J->nopp[e] & 3) == 2 ? 2u : 0u;
+}
+
+static inline __attribute__((always_inline)) void
+edge_row(const djob *J, dweights (*memo)[3], uint32_t e, uint32_t a, uint32_t b, int nc)
+{
+    uint8_t r = J->er[e];
+    uint32_t k = ring_k(J, e);
+    dweights *w = &memo[r][k];
+    if (!w->set) {
+        sdi_enb nbh = {k, NULL};
+        sdi_emask m = sdi_edge_mask(r, &nbh);
+        *w = (dweights){m.end[0], m.end[1], m.ring, true};
+    }
+    const double *in = J->in, *pa = in + (size_t)nc * a, *pb = in + (size_t)nc * b;
+    double *o = J->out + (size_t)nc * (J->t->nv + e);
+    if (k) {
+        const double *p0 = in + (size_t)nc * J->opp[e][0], *p1 = in + (size_t)nc * J->opp[e][1];
+        for (int j = 0; j < nc; j++) {
+            double x = 0;
+            x += w->w0 * pa[j];
+            x += w->w1 * pb[j];
+            x += w->wr * p0[j];
+            x += w->wr * p1[j];
+            o[j] = x;
+        }
+    } else {
+        for (int j = 0; j < nc; j++) {
+            double x = 0;
+            x += w->w0 * pa[j];
+            x += w->w1 * pb[j];
+            o[j] = x;
+        }
+    }
+}
+
+/* Three components: x and y in one SSE2 register, z apart (the same operations per component,
+ * so the same bytes as the scalar sums). */
+#ifdef __SSE2__
+#include <emmintrin.h>
+typedef struct p3 {
+    __m128d xy;
+    double z;
+} p3;
+static inline p3 p3_load(const double *p) { return (p3){_mm_loadu_pd(p), p[2]}; }
+static inline void p3_store(double *p, p3 a)
+{
+    _mm_storeu_pd(p, a.xy);
+    p[2] = a.z;
+}
+static inline p3 p3_zero(void) { return (p3){_mm_setzero_pd(), 0.0}; }
+/* a + w b */
+static inline p3 p3_madd(p3 a, double w, p3 b)
+{
+    return (p3){_mm_add_pd(a.xy, _mm_mul_pd(_mm_set1_pd(w), b.xy)), a.z + w * b.z};
+}
+#else
+typedef struct p3 {
+    double x, y, z;
+} p3;
+static inline p3 p3_load(const double *p) { return (p3){p[0], p[1], p[2]}; }
+static inline void p3_store(double *p, p3 a)
+{
+    p[0] = a.x;
+    p[1] = a.y;
+    p[2] = a.z;
+}
+static inline p3 p3_zero(void) { return (p3){0.0, 0.0, 0.0}; }
+static inline p3 p3_madd(p3 a, double w, p3 b)
+{
+    return (p3){a.x + w * b.x, a.y + w * b.y, a.z + w * b.z};
+}
+#endif
+
+/* edges_of for three components and every vertex and edge (one part). */
+static void edges_all3(const djob *J)
+{
+    const sd_topo *t = J->t;
+    const uint8_t *vr = J->vr, *take = J->take, *er = J->er, *nopp = J->nopp;
+    const double *in = J->in, *wa = J->wa;
+    const uint32_t(*opp)[2] = J->opp;
+    double *out = J->out, *eout = J->out + 3 * (size_t)t->nv;
+    dweights memo[SD_RULE_COUNT][3];
+    memset(memo, 0, sizeof memo);
+    for (uint32_t e = 0; e < t->ne; e++) {
+        uint32_t a = t->ev[e][0], b = t->ev[e][1];
+        p3 pa = p3_load(in + 3 * (size_t)a), pb = p3_load(in + 3 * (size_t)b);
+        if ((take[e] & 1) && vr[a] != SD_RULE_CORNER)
+            p3_store(out + 3 * (size_t)a, p3_madd(p3_load(out + 3 * (size_t)a), wa[a], pb));
+        if ((take[e] & 2) && vr[b] != SD_RULE_CORNER)
+            p3_store(out + 3 * (size_t)b, p3_madd(p3_load(out + 3 * (size_t)b), wa[b], pa));
+        uint8_t r = er[e], ring = SDI_RULE_RING[r];
+        uint32_t k = (ring == SDI_RING_OPPOSITE || ring == SDI_RING_BOUNDARY_OPPOSITE) &&
+                     (nopp[e] & 3) == 2 ? 2u : 0u;
+        dweights *w = &memo[r][k];
+        if (!w->set) {
+            sdi_enb nbh = {k, NULL};
+            sdi_emask m = sdi_edge_mask(r, &nbh);
+            *w = (dweights){m.end[0], m.end[1], m.ring, true};
+        }
+        p3 x = p3_madd(p3_madd(p3_zero(), w->w0, pa), w->w1, pb);
+        if (k)
+            x = p3_madd(p3_madd(x, w->wr, p3_load(in + 3 * (size_t)opp[e][0])), w->wr,
+                        p3_load(in + 3 * (size_t)opp[e][1]));
+        p3_store(eout + 3 * (size_t)e, x);
+    }
+}
+
+/* Every edge in order adds to its ends' vertex points (those in [vlo, vhi), or all) the terms of
+ * the neighbours they read through it; edge points of [elo, ehi) are summed on the way. */
+static inline __attribute__((always_inline)) void
+edges_of(const djob *J, uint32_t vlo, uint32_t vhi, uint32_t elo, uint32_t ehi, bool all, int nc)
+{
+    const sd_topo *t = J->t;
+    const uint8_t *vr = J->vr, *take = J->take;
+    const double *in = J->in, *wa = J->wa;
+    double *out = J->out;
+    dweights memo[SD_RULE_COUNT][3];
+    memset(memo, 0, sizeof memo);
+#define MINE(v) (all || ((v) >= vlo && (v) < vhi))
+    for (uint32_t e = 0; e < t->ne; e++) {
+        uint32_t a = t->ev[e][0], b = t->ev[e][1];
+        if ((take[e] & 1) && MINE(a) && vr[a] != SD_RULE_CORNER)
+            for (int j = 0; j < nc; j++)
+                out[(size_t)nc * a + j] += wa[a] * in[(size_t)nc * b + j];
+        if ((take[e] & 2) && MINE(b) && vr[b] != SD_RULE_CORNER)
+            for (int j = 0; j < nc; j++)
+                out[(size_t)nc * b + j] += wa[b] * in[(size_t)nc * a + j];
+        if (all || (e >= elo && e < ehi))
+            edge_row(J, memo, e, a, b, nc);
+    }
+#undef MINE
+}
+
+static void edges_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const djob *J = arg;
+    if (nparts == 1) {
+        if (J->nc == 3)
+            edges_all3(J);
+        else
+            edges_of(J, 0, 0, 0, 0, true, J->nc);
+        return;
+    }
+    uint64_t vlo, vhi, elo, ehi;
+    sdi_range(J->t->nv, part, nparts, &vlo, &vhi);
+    sdi_range(J->t->ne, part, nparts, &elo, &ehi);
+    edges_of(J, (uint32_t)vlo, (uint32_t)vhi, (uint32_t)elo, (uint32_t)ehi, false, J->nc);
+}
+
+sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, bool *done, sd_error *err)
+{
+    sd_mem *m = &c->mem;
+    const sd_topo *t = &p->t;
+    const uint32_t nv = t->nv, ne = t->ne;
+    const int threads = c->opt.threads;
+    double loopc[SDI_LOOP_CACHE];
+    for (uint32_t k = 1; k < SDI_LOOP_CACHE; k++)
+        loopc[k] = sdi_loop_weight(c->opt.surface_weights, k);
+    loopc[0] = 0;
+    *done = false;
+    uint8_t *er = sdi_alloc(m, (size_t)ne + 1), *vr = NULL, *take = NULL, *nopp = NULL;
+    uint32_t *cnt = NULL, (*opp)[2] = NULL;
+    double *wa = NULL;
+    sd_result rc = SD_OK;
+    if (!er)
+        goto nomem;
+    bool any_g2e, any_opp;
+    sdi_edge_rules(t, threads, er, &any_g2e, &any_opp);
+    if (any_g2e) /* rings of G2 edges: through S */
+        goto out;
+    vr = sdi_alloc(m, (size_t)nv + 1);
+    cnt = sdi_calloc(m, (size_t)nv + 1, sizeof *cnt);
+    take = sdi_alloc(m, (size_t)ne + 1);
+    wa = sdi_alloc(m, ((size_t)nv + 1) * sizeof *wa);
+    nopp = sdi_calloc(m, (size_t)ne + 1, 1);
+    if (any_opp)
+        opp = sdi_alloc(m, ((size_t)ne + 1) * sizeof *opp);
+    if (!vr || !cnt || !take || !wa || !nopp || (any_opp && !opp) ||
+        !sdi_vertex_rules(m, t, c->opt.solid_scheme, threads, vr, cnt, NULL, take))
+        goto nomem;
+    if (any_opp)
+        sdi_edge_opposites(t, threads, er, opp, nopp);
+    djob J = {.t = t, .weights = c->opt.surface_weights, .scheme = c->opt.solid_scheme, .vr = vr,
+              .er = er, .take = take, .nopp = nopp, .cnt = cnt, .opp = (const uint32_t(*)[2])opp,
+              .loopc = loopc, .wa = wa};
+    for (int i = 0; i < p->nch; i++) {
+        J.in = p->ch[i].data;
+        J.out = lv->ch[i].data;
+        J.nc = p->ch[i].ncomp;
+        sdi_par(threads, nv, init_part, &J);
+        sdi_par(threads, ne, edges_part, &J);
+    }
+    *done = true;
+    if (!p->vrule_only) { /* the rules are exact now (sd_level_vertex_rule): kept */
+        p->vrule_only = vr;
+        vr = NULL;
+    }
+    goto out;
+nomem:
+    rc = sdi_fail_nomem(err, m);
+out:
+    sdi_free(m, er);
+    sdi_free(m, vr);
+    sdi_free(m, cnt);
+    sdi_free(m, take);
+    sdi_free(m, wa);
+    sdi_free(m, nopp);
+    sdi_free(m, opp);
+    return rc;
+}
