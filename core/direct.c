@@ -14,6 +14,13 @@
  * sizes and the opposite vertices are computed as stencil.c does, and the vertex rules kept
  * (vrule_only: what sd_level_vertex_rule reads). S is made later if anything asks for it
  * (sdi_ensure_rules: classes, the matrix, limits, edits).
+ *
+ * A plain level — a closed surface of triangles, no tags or per-simplex rules, every vertex and
+ * edge following Loop's rule over all its neighbours and every edge between two triangles —
+ * splits into a plain level whose rules need not be found again: every rule is Loop's, a vertex
+ * point has its vertex's valence and an edge point 6, and an edge's opposite vertices are the
+ * third vertices of its two faces in face order. A plain level's valences go to the next level
+ * (sdi_plain) while one sd_complex_level call makes both.
  */
 #include "internal.h"
 #include <string.h>
@@ -41,6 +48,7 @@ typedef struct djob {
     const uint32_t (*opp)[2];
     const double *loopc;
     double *wa;               /* per vertex: the weight of each of its rho */
+    bool plain;               /* every take 3, rule Loop, ring two opposite vertices */
     const double *in;
     double *out;
     int nc;
@@ -102,8 +110,8 @@ static inline uint32_t ring_k(const djob *J, uint32_t e)
 static inline __attribute__((always_inline)) void
 edge_row(const djob *J, dweights (*memo)[3], uint32_t e, uint32_t a, uint32_t b, int nc)
 {
-    uint8_t r = J->er[e];
-    uint32_t k = ring_k(J, e);
+    uint8_t r = J->plain ? (uint8_t)SD_RULE_LOOP : J->er[e];
+    uint32_t k = J->plain ? 2u : ring_k(J, e);
     dweights *w = &memo[r][k];
     if (!w->set) {
         sdi_enb nbh = {k, NULL};
@@ -170,8 +178,8 @@ static inline p3 p3_madd(p3 a, double w, p3 b)
 }
 #endif
 
-/* edges_of for three components and every vertex and edge (one part). */
-static void edges_all3(const djob *J)
+/* edges_of for three components and every vertex and edge (one part); plain: see the top. */
+static inline __attribute__((always_inline)) void edges_all3(const djob *J, bool plain)
 {
     const sd_topo *t = J->t;
     const uint8_t *vr = J->vr, *take = J->take, *er = J->er, *nopp = J->nopp;
@@ -183,13 +191,13 @@ static void edges_all3(const djob *J)
     for (uint32_t e = 0; e < t->ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
         p3 pa = p3_load(in + 3 * (size_t)a), pb = p3_load(in + 3 * (size_t)b);
-        if ((take[e] & 1) && vr[a] != SD_RULE_CORNER)
+        if (plain || ((take[e] & 1) && vr[a] != SD_RULE_CORNER))
             p3_store(out + 3 * (size_t)a, p3_madd(p3_load(out + 3 * (size_t)a), wa[a], pb));
-        if ((take[e] & 2) && vr[b] != SD_RULE_CORNER)
+        if (plain || ((take[e] & 2) && vr[b] != SD_RULE_CORNER))
             p3_store(out + 3 * (size_t)b, p3_madd(p3_load(out + 3 * (size_t)b), wa[b], pa));
-        uint8_t r = er[e], ring = SDI_RULE_RING[r];
-        uint32_t k = (ring == SDI_RING_OPPOSITE || ring == SDI_RING_BOUNDARY_OPPOSITE) &&
-                     (nopp[e] & 3) == 2 ? 2u : 0u;
+        uint8_t r = plain ? (uint8_t)SD_RULE_LOOP : er[e], ring = SDI_RULE_RING[r];
+        uint32_t k = plain || ((ring == SDI_RING_OPPOSITE || ring == SDI_RING_BOUNDARY_OPPOSITE) &&
+                               (nopp[e] & 3) == 2) ? 2u : 0u;
         dweights *w = &memo[r][k];
         if (!w->set) {
             sdi_enb nbh = {k, NULL};
@@ -209,6 +217,7 @@ static void edges_all3(const djob *J)
 static inline __attribute__((always_inline)) void
 edges_of(const djob *J, uint32_t vlo, uint32_t vhi, uint32_t elo, uint32_t ehi, bool all, int nc)
 {
+    const bool plain = J->plain; /* (no er or take for an inherited plain level) */
     const sd_topo *t = J->t;
     const uint8_t *vr = J->vr, *take = J->take;
     const double *in = J->in, *wa = J->wa;
@@ -218,10 +227,10 @@ edges_of(const djob *J, uint32_t vlo, uint32_t vhi, uint32_t elo, uint32_t ehi, 
 #define MINE(v) (all || ((v) >= vlo && (v) < vhi))
     for (uint32_t e = 0; e < t->ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
-        if ((take[e] & 1) && MINE(a) && vr[a] != SD_RULE_CORNER)
+        if (MINE(a) && (plain || ((take[e] & 1) && vr[a] != SD_RULE_CORNER)))
             for (int j = 0; j < nc; j++)
                 out[(size_t)nc * a + j] += wa[a] * in[(size_t)nc * b + j];
-        if ((take[e] & 2) && MINE(b) && vr[b] != SD_RULE_CORNER)
+        if (MINE(b) && (plain || ((take[e] & 2) && vr[b] != SD_RULE_CORNER)))
             for (int j = 0; j < nc; j++)
                 out[(size_t)nc * b + j] += wa[b] * in[(size_t)nc * a + j];
         if (all || (e >= elo && e < ehi))
@@ -234,8 +243,10 @@ static void edges_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const djob *J = arg;
     if (nparts == 1) {
-        if (J->nc == 3)
-            edges_all3(J);
+        if (J->nc == 3 && J->plain)
+            edges_all3(J, true);
+        else if (J->nc == 3)
+            edges_all3(J, false);
         else
             edges_of(J, 0, 0, 0, 0, true, J->nc);
         return;
@@ -246,7 +257,64 @@ static void edges_part(void *arg, uint32_t part, uint32_t nparts)
     edges_of(J, (uint32_t)vlo, (uint32_t)vhi, (uint32_t)elo, (uint32_t)ehi, false, J->nc);
 }
 
-sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, bool *done, sd_error *err)
+/* Conditions of a plain level the rules do not show: no tags, per-simplex rules or petals, no
+ * curves or points. */
+static bool complex_plain(const sd_complex *c, const sd_topo *t)
+{
+    return !c->ntags && !c->nov && !c->npet && !t->ovmask && !t->ncu && !t->npt;
+}
+
+/* ... and those they show (found by the general path). */
+static bool rules_plain(const sd_topo *t, const uint8_t *vr, const uint8_t *er, const uint8_t *take,
+                        const uint8_t *nopp, bool any_opp)
+{
+    if (!any_opp)
+        return false;
+    for (uint32_t v = 0; v < t->nv; v++)
+        if (vr[v] != SD_RULE_LOOP)
+            return false;
+    for (uint32_t e = 0; e < t->ne; e++)
+        if (er[e] != SD_RULE_LOOP || take[e] != 3 || (nopp[e] & 3) != 2)
+            return false;
+    return true;
+}
+
+/* A plain level's opposite vertices: the faces in order, each giving its third vertex to each of
+ * its edges (every edge has two), in parts by ranges of edges as sdi_edge_opposites. */
+typedef struct popp {
+    const sd_topo *t;
+    uint32_t (*opp)[2];
+    uint8_t *nopp;
+} popp;
+
+static inline __attribute__((always_inline)) void
+plain_opp_of(const popp *J, uint32_t lo, uint32_t hi, bool all)
+{
+    const sd_topo *t = J->t;
+    uint32_t(*opp)[2] = J->opp;
+    uint8_t *nopp = J->nopp;
+    for (uint32_t f = 0; f < t->nf; f++)
+        for (int j = 0; j < 3; j++) {
+            uint32_t e = t->fe[f][j];
+            if (!all && (e < lo || e >= hi))
+                continue;
+            opp[e][nopp[e]++ & 1] = t->fv[f][j == 0 ? 2 : j - 1];
+        }
+}
+
+static void plain_opp_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const popp *J = arg;
+    uint64_t lo, hi;
+    sdi_range(J->t->ne, part, nparts, &lo, &hi);
+    if (nparts == 1)
+        plain_opp_of(J, 0, J->t->ne, true);
+    else
+        plain_opp_of(J, (uint32_t)lo, (uint32_t)hi, false);
+}
+
+sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *pl, bool *done,
+                           sd_error *err)
 {
     sd_mem *m = &c->mem;
     const sd_topo *t = &p->t;
@@ -257,31 +325,51 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, bool *done,
         loopc[k] = sdi_loop_weight(c->opt.surface_weights, k);
     loopc[0] = 0;
     *done = false;
-    uint8_t *er = sdi_alloc(m, (size_t)ne + 1), *vr = NULL, *take = NULL, *nopp = NULL;
+    /* a plain parent (pp) makes this level plain: its rules from pp's valences */
+    const sd_level *pp = p->index > 0 ? c->lv[p->index - 1] : NULL;
+    const bool inherit = pp && pl->cnt && pl->level == pp->index && complex_plain(c, t) &&
+                         nv == (uint64_t)pp->t.nv + pp->t.ne;
+    const bool plain_er = inherit; /* er, take and nopp are not needed by the plain passes */
+    uint8_t *er = plain_er ? NULL : sdi_alloc(m, (size_t)ne + 1), *vr = NULL, *take = NULL,
+            *nopp = NULL;
     uint32_t *cnt = NULL, (*opp)[2] = NULL;
     double *wa = NULL;
+    bool any_g2e = false, any_opp = true, plain = inherit;
     sd_result rc = SD_OK;
-    if (!er)
+    if (!plain_er && !er)
         goto nomem;
-    bool any_g2e, any_opp;
-    sdi_edge_rules(t, threads, er, &any_g2e, &any_opp);
-    if (any_g2e) /* rings of G2 edges: through S */
-        goto out;
+    if (!inherit) {
+        sdi_edge_rules(t, threads, er, &any_g2e, &any_opp);
+        if (any_g2e) /* rings of G2 edges: through S */
+            goto out;
+    }
     vr = sdi_alloc(m, (size_t)nv + 1);
     cnt = sdi_calloc(m, (size_t)nv + 1, sizeof *cnt);
-    take = sdi_alloc(m, (size_t)ne + 1);
+    take = inherit ? NULL : sdi_alloc(m, (size_t)ne + 1);
     wa = sdi_alloc(m, ((size_t)nv + 1) * sizeof *wa);
     nopp = sdi_calloc(m, (size_t)ne + 1, 1);
     if (any_opp)
         opp = sdi_alloc(m, ((size_t)ne + 1) * sizeof *opp);
-    if (!vr || !cnt || !take || !wa || !nopp || (any_opp && !opp) ||
-        !sdi_vertex_rules(m, t, c->opt.solid_scheme, threads, vr, cnt, NULL, take))
+    if (!vr || !cnt || (!inherit && !take) || !wa || !nopp || (any_opp && !opp))
         goto nomem;
-    if (any_opp)
-        sdi_edge_opposites(t, threads, er, opp, nopp);
+    if (inherit) {
+        memset(vr, SD_RULE_LOOP, nv);
+        const uint32_t npv = pp->t.nv;
+        memcpy(cnt, pl->cnt, (size_t)npv * sizeof *cnt); /* vertex points */
+        for (uint32_t v = npv; v < nv; v++)
+            cnt[v] = 6; /* edge points: the two halves and two per triangle */
+        popp P = {t, opp, nopp};
+        sdi_par(threads, t->ne, plain_opp_part, &P);
+    } else {
+        if (!sdi_vertex_rules(m, t, c->opt.solid_scheme, threads, vr, cnt, NULL, take))
+            goto nomem;
+        if (any_opp)
+            sdi_edge_opposites(t, threads, er, opp, nopp);
+        plain = complex_plain(c, t) && rules_plain(t, vr, er, take, nopp, any_opp);
+    }
     djob J = {.t = t, .weights = c->opt.surface_weights, .scheme = c->opt.solid_scheme, .vr = vr,
               .er = er, .take = take, .nopp = nopp, .cnt = cnt, .opp = (const uint32_t(*)[2])opp,
-              .loopc = loopc, .wa = wa};
+              .loopc = loopc, .wa = wa, .plain = plain};
     for (int i = 0; i < p->nch; i++) {
         J.in = p->ch[i].data;
         J.out = lv->ch[i].data;
@@ -293,6 +381,13 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, bool *done,
     if (!p->vrule_only) { /* the rules are exact now (sd_level_vertex_rule): kept */
         p->vrule_only = vr;
         vr = NULL;
+    }
+    sdi_free(m, pl->cnt); /* the parent's valences have served */
+    pl->cnt = NULL;
+    if (plain) { /* for the next level's rules */
+        pl->cnt = cnt;
+        pl->level = p->index;
+        cnt = NULL;
     }
     goto out;
 nomem:

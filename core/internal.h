@@ -695,9 +695,17 @@ void sdi_rings_free(sd_mem *m, sdi_rings *r);
  * nothing edited), no rules built, no solids, Ying-Zorin rows, semi-sharp creases or
  * tangent-plane constraints. */
 bool sdi_direct_ok(const sd_complex *c, const sd_level *p);
+/* The valences of a plain level (direct.c), handed from one level to the next within one
+ * sd_complex_level call (cnt: NULL or the caller frees it). */
+typedef struct sdi_plain {
+    uint32_t *cnt;
+    int level;
+} sdi_plain;
 /* lv's channels (allocated) from p's (faces built) as S_p would make them, the same bytes; *done
- * false if the level has rows direct.c does not make (G2 rings): then nothing was written. */
-sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, bool *done, sd_error *err);
+ * false if the level has rows direct.c does not make (G2 rings): then nothing was written. pl:
+ * the plain valences of p's parent if known, replaced by p's if p is plain. */
+sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *pl, bool *done,
+                           sd_error *err);
 
 /* ---- masks.c: the weights of the rules ------------------------------------------------------ */
 /* A vertex mask: the centre, each of rho (class A), each octahedral opposite (class B). */

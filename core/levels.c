@@ -119,7 +119,7 @@ sd_result sdi_ensure_rules(sd_complex *c, int level, sd_error *err)
 /* Compute level l+1 from level l: its topology, then every channel as S_l p^l plus the channel's
  * detail offsets at level l+1 (details.c), and S_l's column index for later edits (csr.c). The
  * positions take the tangent-plane constraints' modifications (tangent.c) between the two. */
-static sd_result next_level(sd_complex *c, int l, sd_error *err)
+static sd_result next_level(sd_complex *c, int l, sdi_plain *pl, sd_error *err)
 {
     sd_mem *m = &c->mem;
     sd_level *p = c->lv[l];
@@ -155,7 +155,7 @@ static sd_result next_level(sd_complex *c, int l, sd_error *err)
         }
     }
     bool applied = false;
-    if (direct && (r = sdi_direct_apply(c, p, lv, &applied, err))) {
+    if (direct && (r = sdi_direct_apply(c, p, lv, pl, &applied, err))) {
         sdi_level_free(m, lv);
         return r;
     }
@@ -185,11 +185,14 @@ const sd_level *sd_complex_level(sd_complex *c, int level, sd_error *err)
         sdi_fail(err, SD_ERR_ARG, level, -1, "level %d out of range 0..%d", level, SD_MAX_LEVEL);
         return NULL;
     }
+    sdi_plain pl = {0}; /* direct.c's valences of a plain level, from one level to the next */
     while (c->nlevels <= level)
-        if (next_level(c, c->nlevels - 1, err)) {
+        if (next_level(c, c->nlevels - 1, &pl, err)) {
+            sdi_free(&c->mem, pl.cnt);
             drop_faces(c);
             return NULL;
         }
+    sdi_free(&c->mem, pl.cnt);
     drop_faces(c);
     return c->lv[level];
 }

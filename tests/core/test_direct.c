@@ -163,6 +163,35 @@ TEST(direct_loop_and_warren)
     mesh_free(&m);
 }
 
+/* A closed n x m torus of triangle pairs: plain levels, whose rules come from the level before
+ * (direct.c), and from level 2 on cut into parts. */
+static void shape_torus(mesh *m, int n, int k)
+{
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < k; j++) {
+            double u = 2 * M_PI * i / n, v = 2 * M_PI * j / k, r = 1 + 0.3 * cos(v) + 0.05 * sin(3 * u);
+            mesh_v(m, r * cos(u), r * sin(u), 0.3 * sin(v));
+        }
+    for (uint32_t i = 0; i < (uint32_t)n; i++)
+        for (uint32_t j = 0; j < (uint32_t)k; j++) {
+            uint32_t a = i * k + j, b = ((i + 1) % n) * k + j, c = i * k + (j + 1) % k,
+                     d = ((i + 1) % n) * k + (j + 1) % k;
+            mesh_s(m, 3, a, b, d);
+            mesh_s(m, 3, a, d, c);
+        }
+}
+
+TEST(direct_plain_closed_surface)
+{
+    mesh m = {0};
+    shape_torus(&m, 40, 37);
+    sd_options o = {.surface_weights = SD_WEIGHTS_LOOP};
+    CHECK(all_threads(&m, &o, 3, NULL));
+    o.surface_weights = SD_WEIGHTS_WARREN;
+    CHECK(same_both_ways(&m, &o, 3, 2, NULL));
+    mesh_free(&m);
+}
+
 TEST(direct_boundary_parallel)
 {
     mesh m = {0};
