@@ -33,6 +33,9 @@
  * type 4 inside a type-2 face; everything inside a cell is interior and manifold.
  */
 #include "internal.h"
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 #include <assert.h>
 #include <string.h>
 
@@ -578,16 +581,17 @@ static void cells_part(void *arg, uint32_t part, uint32_t nparts)
         memcpy(C->vflag + v0, P->vflag + v0, v1 - v0);
         memcpy(C->vnm + v0, P->vnm + v0, v1 - v0);
     }
-    {
+    {   /* (the arrays in locals: a byte store could alias C's and P's fields) */
         RANGE(pne, e0, e1);
+        uint8_t *vfam = C->vfam + pnv, *vflag = C->vflag + pnv, *vnm = C->vnm + pnv;
+        const uint8_t *efam = P->efam, *eflag = P->eflag, *enm = P->enm;
         for (uint32_t e = e0; e < e1; e++) {
-            uint32_t v = pnv + e;
-            C->vfam[v] = P->efam[e];
-            uint8_t pf = P->eflag[e];
-            C->vflag[v] = ((pf & EF_DC) ? VF_DC : 0) | ((pf & EF_CREASE) ? VF_SCREASE : 0) |
-                          ((pf & EF_SSURF) ? VF_SSURF : 0) | ((pf & EF_SBND) ? VF_SBND : 0);
-            uint8_t pt = (uint8_t)nm_type(P->enm[e]);
-            C->vnm[v] = (uint8_t)((pt == 1 ? 1 : pt ? 4 : 0) | (P->enm[e] & (NM_OV | NM_G1)));
+            vfam[e] = efam[e];
+            uint8_t pf = eflag[e];
+            vflag[e] = ((pf & EF_DC) ? VF_DC : 0) | ((pf & EF_CREASE) ? VF_SCREASE : 0) |
+                       ((pf & EF_SSURF) ? VF_SSURF : 0) | ((pf & EF_SBND) ? VF_SBND : 0);
+            uint8_t pt = (uint8_t)nm_type(enm[e]);
+            vnm[e] = (uint8_t)((pt == 1 ? 1 : pt ? 4 : 0) | (enm[e] & (NM_OV | NM_G1)));
         }
     }
     {
@@ -602,6 +606,17 @@ static void cells_part(void *arg, uint32_t part, uint32_t nparts)
             uint32_t f = sdi_tr(P, i);
             const uint32_t *x = P->fv[f], *fe = P->fe[f];
             uint32_t(*c)[3] = C->trv + 4 * (size_t)i;
+#ifdef __SSE2__
+            if (((uintptr_t)c & 15) == 0) { /* 48 bytes written past the caches: the level's
+                                               * cells are not read while it is made */
+                const uint32_t m0 = pnv + fe[0], m1 = pnv + fe[1], m2 = pnv + fe[2];
+                __m128i *q = (__m128i *)c;
+                _mm_stream_si128(q, _mm_set_epi32((int)x[1], (int)m2, (int)m0, (int)x[0]));
+                _mm_stream_si128(q + 1, _mm_set_epi32((int)m2, (int)x[2], (int)m0, (int)m1));
+                _mm_stream_si128(q + 2, _mm_set_epi32((int)m2, (int)m1, (int)m0, (int)m1));
+                continue;
+            }
+#endif
             for (int j = 0; j < 3; j++) {
                 int jp = (j + 2) % 3;
                 c[j][0] = x[j];
@@ -610,6 +625,9 @@ static void cells_part(void *arg, uint32_t part, uint32_t nparts)
                 c[3][j] = pnv + fe[j];
             }
         }
+#ifdef __SSE2__
+        _mm_sfence(); /* the streamed stores seen before the region ends */
+#endif
     }
     {   /* solid cells */
         RANGE(P->ntet, t0, t1);
@@ -679,37 +697,44 @@ static void edges_part(void *arg, uint32_t part, uint32_t nparts)
     const sd_topo *P = J->P;
     sd_topo *C = J->C;
     const uint32_t pnv = P->nv, pne = P->ne, pnf = P->nf;
+    /* (the arrays in locals: a byte store could alias C's and P's fields) */
+    uint32_t(*cev)[2] = C->ev;
+    uint8_t *cefam = C->efam, *ceflag = C->eflag, *cenm = C->enm;
     {   /* halves */
         RANGE(pne, e0, e1);
+        const uint32_t(*pev)[2] = P->ev;
+        const uint8_t *efam = P->efam, *eflag = P->eflag, *enm = P->enm;
         for (uint32_t e = e0; e < e1; e++) {
             uint32_t mid = pnv + e;
-            C->ev[2 * e][0] = P->ev[e][0];
-            C->ev[2 * e][1] = mid;
-            C->ev[2 * e + 1][0] = mid;
-            C->ev[2 * e + 1][1] = P->ev[e][1];
+            cev[2 * e][0] = pev[e][0];
+            cev[2 * e][1] = mid;
+            cev[2 * e + 1][0] = mid;
+            cev[2 * e + 1][1] = pev[e][1];
             for (int k = 0; k < 2; k++) {
-                C->efam[2 * e + k] = P->efam[e];
-                C->eflag[2 * e + k] = P->eflag[e];
-                C->enm[2 * e + k] = P->enm[e];
+                cefam[2 * e + k] = efam[e];
+                ceflag[2 * e + k] = eflag[e];
+                cenm[2 * e + k] = enm[e];
             }
         }
     }
     {   /* inside faces: cutting the corners */
         RANGE(pnf, f0, f1);
+        const uint32_t(*pfe)[3] = P->fe;
+        const uint8_t *fflag = P->fflag, *fn3 = P->fn3;
         for (uint32_t f = f0; f < f1; f++) {
-            const uint32_t *fe = P->fe[f];
-            uint8_t fam = (P->fflag[f] & FF_MAX) ? FAM2 : FAM3;
-            uint8_t flag = ((P->fflag[f] & FF_BND3) ? EF_DC : 0) |
-                           ((P->fflag[f] & FF_SING) ? EF_SSURF : 0) | /* inside an embedded surface */
-                           ((P->fflag[f] & FF_N2SEL) ? EF_N2SEL : 0); /* ... a chosen triangle */
-            uint8_t nm = P->fn3[f] >= 3 ? 4 : 0;
+            const uint32_t *fe = pfe[f];
+            uint8_t fam = (fflag[f] & FF_MAX) ? FAM2 : FAM3;
+            uint8_t flag = ((fflag[f] & FF_BND3) ? EF_DC : 0) |
+                           ((fflag[f] & FF_SING) ? EF_SSURF : 0) | /* inside an embedded surface */
+                           ((fflag[f] & FF_N2SEL) ? EF_N2SEL : 0); /* ... a chosen triangle */
+            uint8_t nm = fn3[f] >= 3 ? 4 : 0;
             for (int j = 0; j < 3; j++) {
                 uint32_t e = 2 * pne + 3 * f + j;
-                C->ev[e][0] = pnv + fe[(j + 2) % 3];
-                C->ev[e][1] = pnv + fe[j];
-                C->efam[e] = fam;
-                C->eflag[e] = flag;
-                C->enm[e] = nm;
+                cev[e][0] = pnv + fe[(j + 2) % 3];
+                cev[e][1] = pnv + fe[j];
+                cefam[e] = fam;
+                ceflag[e] = flag;
+                cenm[e] = nm;
             }
         }
     }
