@@ -302,6 +302,65 @@ plain_opp_of(const popp *J, uint32_t lo, uint32_t hi, bool all)
         }
 }
 
+/* The same from the faces of the level before (P, whose split this level is: split.c's
+ * numbering), a quarter of the faces to read: parent face f with corners x and edge points m_j
+ * (on its edge j, from x_j to x_j+1) has corner children 4f+j = (x_j, m_j, m_j+2) and middle
+ * child (m_0, m_1, m_2). Its inside edge j, m_j+2 - m_j, lies in corner child j, then in the middle
+ * one: opposite x_j, then m_j+1. The half of its edge j at x_j lies in corner child j (opposite
+ * m_j+2), the half at x_j+1 in corner child j+1 (opposite m_j+1); each half has one child face in
+ * each of the two parent faces of its edge, in their order (slot: those seen so far). In parts:
+ * each part the inside edges of its range of faces and the halves of its range of parent edges
+ * (reading every face). */
+typedef struct pderiv {
+    const sd_topo *P;
+    uint32_t (*opp)[2];
+    uint8_t *slot; /* per parent edge, zeroed */
+} pderiv;
+
+static inline __attribute__((always_inline)) void
+derive_opp_of(const pderiv *J, uint32_t f0, uint32_t f1, uint32_t lo, uint32_t hi, bool all)
+{
+    const sd_topo *P = J->P;
+    const uint32_t pnv = P->nv, pne = P->ne, nf = P->nf;
+    const uint32_t(*fv)[3] = P->fv, (*fe)[3] = P->fe, (*ev)[2] = P->ev;
+    uint32_t(*opp)[2] = J->opp;
+    uint8_t *slot = J->slot;
+    for (uint32_t f = all ? 0 : f0; f < (all ? nf : f1); f++) {
+        const uint32_t *x = fv[f];
+        const uint32_t m[3] = {pnv + fe[f][0], pnv + fe[f][1], pnv + fe[f][2]};
+        for (int j = 0; j < 3; j++) {
+            uint32_t e = 2 * pne + 3 * f + (uint32_t)j;
+            opp[e][0] = x[j];
+            opp[e][1] = m[j == 2 ? 0 : j + 1];
+        }
+    }
+    for (uint32_t f = 0; f < nf; f++) {
+        const uint32_t *x = fv[f];
+        for (int j = 0; j < 3; j++) {
+            uint32_t pe = fe[f][j];
+            if (!all && (pe < lo || pe >= hi))
+                continue;
+            int j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
+            uint32_t s = slot[pe]++ & 1, at0 = ev[pe][0] == x[j] ? 0 : 1; /* x_j's half */
+            opp[2 * pe + at0][s] = pnv + fe[f][j2];
+            opp[2 * pe + (at0 ^ 1)][s] = pnv + fe[f][j1];
+        }
+    }
+}
+
+static void derive_opp_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const pderiv *J = arg;
+    if (nparts == 1) {
+        derive_opp_of(J, 0, 0, 0, 0, true);
+        return;
+    }
+    uint64_t f0, f1, lo, hi;
+    sdi_range(J->P->nf, part, nparts, &f0, &f1);
+    sdi_range(J->P->ne, part, nparts, &lo, &hi);
+    derive_opp_of(J, (uint32_t)f0, (uint32_t)f1, (uint32_t)lo, (uint32_t)hi, false);
+}
+
 static void plain_opp_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const popp *J = arg;
@@ -358,8 +417,18 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
         memcpy(cnt, pl->cnt, (size_t)npv * sizeof *cnt); /* vertex points */
         for (uint32_t v = npv; v < nv; v++)
             cnt[v] = 6; /* edge points: the two halves and two per triangle */
-        popp P = {t, opp, nopp};
-        sdi_par(threads, t->ne, plain_opp_part, &P);
+        if (pp->t.fv && pp->t.fe && pp->t.nf == pp->t.ntr && ne == 2ull * pp->t.ne + 3ull * pp->t.nf) {
+            /* from the parent's faces (still there while this call makes its levels) */
+            uint8_t *slot = sdi_calloc(m, (size_t)pp->t.ne + 1, 1);
+            if (!slot)
+                goto nomem;
+            pderiv D = {&pp->t, opp, slot};
+            sdi_par(threads, pp->t.ne, derive_opp_part, &D);
+            sdi_free(m, slot);
+        } else {
+            popp P = {t, opp, nopp};
+            sdi_par(threads, t->ne, plain_opp_part, &P);
+        }
     } else {
         if (!sdi_vertex_rules(m, t, c->opt.solid_scheme, threads, vr, cnt, NULL, take))
             goto nomem;
