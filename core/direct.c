@@ -49,6 +49,11 @@ typedef struct djob {
     const double *loopc;
     double *wa;               /* per vertex: the weight of each of its rho */
     bool plain;               /* every take 3, rule Loop, ring two opposite vertices */
+    /* a plain level split from a plain parent P whose faces are known (structured passes): per
+     * parent edge, the inside-edge neighbours of its edge point, two per parent face in order */
+    const sd_topo *P;
+    const uint32_t (*enb)[4];
+    uint32_t ninit;           /* vertices init_part starts (all, or P's vertex points) */
     const double *in;
     double *out;
     int nc;
@@ -69,7 +74,7 @@ static void init_part(void *arg, uint32_t part, uint32_t nparts)
     const double *in = J->in;
     double *out = J->out, *wa = J->wa;
     uint64_t lo, hi;
-    sdi_range(J->t->nv, part, nparts, &lo, &hi);
+    sdi_range(J->ninit, part, nparts, &lo, &hi);
     double ms[SD_RULE_COUNT][MEMO], ma[SD_RULE_COUNT][MEMO];
     bool have[SD_RULE_COUNT][MEMO];
     memset(have, 0, sizeof have);
@@ -178,8 +183,9 @@ static inline p3 p3_madd(p3 a, double w, p3 b)
 }
 #endif
 
-/* edges_of for three components and every vertex and edge (one part); plain: see the top. */
-static inline __attribute__((always_inline)) void edges_all3(const djob *J, bool plain)
+/* edges_of for three components (all: every vertex and edge, one part); plain: see the top. */
+static inline __attribute__((always_inline)) void
+edges3(const djob *J, bool plain, uint32_t vlo, uint32_t vhi, uint32_t elo, uint32_t ehi, bool all)
 {
     const sd_topo *t = J->t;
     const uint8_t *vr = J->vr, *take = J->take, *er = J->er, *nopp = J->nopp;
@@ -191,10 +197,14 @@ static inline __attribute__((always_inline)) void edges_all3(const djob *J, bool
     for (uint32_t e = 0; e < t->ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
         p3 pa = p3_load(in + 3 * (size_t)a), pb = p3_load(in + 3 * (size_t)b);
-        if (plain || ((take[e] & 1) && vr[a] != SD_RULE_CORNER))
+#define MINE(v) (all || ((v) >= vlo && (v) < vhi))
+        if (MINE(a) && (plain || ((take[e] & 1) && vr[a] != SD_RULE_CORNER)))
             p3_store(out + 3 * (size_t)a, p3_madd(p3_load(out + 3 * (size_t)a), wa[a], pb));
-        if (plain || ((take[e] & 2) && vr[b] != SD_RULE_CORNER))
+        if (MINE(b) && (plain || ((take[e] & 2) && vr[b] != SD_RULE_CORNER)))
             p3_store(out + 3 * (size_t)b, p3_madd(p3_load(out + 3 * (size_t)b), wa[b], pa));
+#undef MINE
+        if (!all && (e < elo || e >= ehi))
+            continue;
         uint8_t r = plain ? (uint8_t)SD_RULE_LOOP : er[e], ring = SDI_RULE_RING[r];
         uint32_t k = plain || ((ring == SDI_RING_OPPOSITE || ring == SDI_RING_BOUNDARY_OPPOSITE) &&
                                (nopp[e] & 3) == 2) ? 2u : 0u;
@@ -244,9 +254,9 @@ static void edges_part(void *arg, uint32_t part, uint32_t nparts)
     const djob *J = arg;
     if (nparts == 1) {
         if (J->nc == 3 && J->plain)
-            edges_all3(J, true);
+            edges3(J, true, 0, 0, 0, 0, true);
         else if (J->nc == 3)
-            edges_all3(J, false);
+            edges3(J, false, 0, 0, 0, 0, true);
         else
             edges_of(J, 0, 0, 0, 0, true, J->nc);
         return;
@@ -254,7 +264,107 @@ static void edges_part(void *arg, uint32_t part, uint32_t nparts)
     uint64_t vlo, vhi, elo, ehi;
     sdi_range(J->t->nv, part, nparts, &vlo, &vhi);
     sdi_range(J->t->ne, part, nparts, &elo, &ehi);
-    edges_of(J, (uint32_t)vlo, (uint32_t)vhi, (uint32_t)elo, (uint32_t)ehi, false, J->nc);
+    if (J->nc == 3 && J->plain)
+        edges3(J, true, (uint32_t)vlo, (uint32_t)vhi, (uint32_t)elo, (uint32_t)ehi, false);
+    else
+        edges_of(J, (uint32_t)vlo, (uint32_t)vhi, (uint32_t)elo, (uint32_t)ehi, false, J->nc);
+}
+
+/* The structured passes of a plain level split from a plain parent P (pnv vertices, pne edges):
+ * its vertex points' rows read the edge points of P's edges at them, in P's edge order (their
+ * halves come in that order); an edge point's row reads the ends of its edge (halves 2e, 2e+1),
+ * then two points per face of its edge (enb): summed whole in place. Parts: edge points and the
+ * rows of this level's edges by ranges, vertex points by ranges reading all of P's edges. */
+static inline __attribute__((always_inline)) void
+points3(const djob *J, uint32_t e0, uint32_t e1, uint32_t vlo, uint32_t vhi, bool all, int nc)
+{
+    const sd_topo *P = J->P;
+    const uint32_t pnv = P->nv, pne = P->ne;
+    const uint32_t(*pev)[2] = P->ev, (*enb)[4] = J->enb;
+    const double *in = J->in, *wa = J->wa;
+    double *out = J->out;
+    const sdi_vmask w6 = vmask(J, SD_RULE_LOOP, 6); /* every edge point's */
+    const double s6 = w6.self, a6 = w6.a;
+    for (uint32_t pe = all ? 0 : e0; pe < (all ? pne : e1); pe++) { /* edge points */
+        const uint32_t m = pnv + pe, *q = enb[pe];
+        const double *pm = in + (size_t)nc * m, *pa = in + (size_t)nc * pev[pe][0],
+                     *pb = in + (size_t)nc * pev[pe][1], *q0 = in + (size_t)nc * q[0],
+                     *q1 = in + (size_t)nc * q[1], *q2 = in + (size_t)nc * q[2],
+                     *q3 = in + (size_t)nc * q[3];
+        double *o = out + (size_t)nc * m;
+        for (int j = 0; j < nc; j++) {
+            double x = 0;
+            x += s6 * pm[j];
+            x += a6 * pa[j];
+            x += a6 * pb[j];
+            x += a6 * q0[j];
+            x += a6 * q1[j];
+            x += a6 * q2[j];
+            x += a6 * q3[j];
+            o[j] = x;
+        }
+    }
+    for (uint32_t pe = 0; pe < pne; pe++) { /* vertex points, started by init_part */
+        const double *pm = in + (size_t)nc * (pnv + pe);
+        for (int k = 0; k < 2; k++) {
+            uint32_t v = pev[pe][k];
+            if (!all && (v < vlo || v >= vhi))
+                continue;
+            for (int j = 0; j < nc; j++)
+                out[(size_t)nc * v + j] += wa[v] * pm[j];
+        }
+    }
+}
+
+static void points_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const djob *J = arg;
+    if (nparts == 1) {
+        if (J->nc == 3)
+            points3(J, 0, 0, 0, 0, true, 3);
+        else
+            points3(J, 0, 0, 0, 0, true, J->nc);
+        return;
+    }
+    uint64_t e0, e1, v0, v1;
+    sdi_range(J->P->ne, part, nparts, &e0, &e1);
+    sdi_range(J->P->nv, part, nparts, &v0, &v1);
+    points3(J, (uint32_t)e0, (uint32_t)e1, (uint32_t)v0, (uint32_t)v1, false, J->nc);
+}
+
+/* The rows of this level's edges: ends and opposite vertices. */
+static void erows_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const djob *J = arg;
+    const sd_topo *t = J->t;
+    const int nc = J->nc;
+    const uint32_t(*ev)[2] = t->ev, (*opp)[2] = J->opp;
+    const double *in = J->in;
+    double *eout = J->out + (size_t)nc * t->nv;
+    sdi_enb nbh = {2, NULL};
+    const sdi_emask w = sdi_edge_mask(SD_RULE_LOOP, &nbh);
+    uint64_t lo, hi;
+    sdi_range(t->ne, part, nparts, &lo, &hi);
+    for (uint32_t e = (uint32_t)lo; e < hi; e++) {
+        if (nc == 3) {
+            p3 x = p3_madd(p3_madd(p3_zero(), w.end[0], p3_load(in + 3 * (size_t)ev[e][0])), w.end[1],
+                           p3_load(in + 3 * (size_t)ev[e][1]));
+            x = p3_madd(p3_madd(x, w.ring, p3_load(in + 3 * (size_t)opp[e][0])), w.ring,
+                        p3_load(in + 3 * (size_t)opp[e][1]));
+            p3_store(eout + 3 * (size_t)e, x);
+            continue;
+        }
+        const double *pa = in + (size_t)nc * ev[e][0], *pb = in + (size_t)nc * ev[e][1],
+                     *p0 = in + (size_t)nc * opp[e][0], *p1 = in + (size_t)nc * opp[e][1];
+        for (int j = 0; j < nc; j++) {
+            double x = 0;
+            x += w.end[0] * pa[j];
+            x += w.end[1] * pb[j];
+            x += w.ring * p0[j];
+            x += w.ring * p1[j];
+            eout[(size_t)nc * e + j] = x;
+        }
+    }
 }
 
 /* Conditions of a plain level the rules do not show: no tags, per-simplex rules or petals, no
@@ -315,6 +425,8 @@ typedef struct pderiv {
     const sd_topo *P;
     uint32_t (*opp)[2];
     uint8_t *slot; /* per parent edge, zeroed */
+    uint32_t (*enb)[4]; /* per parent edge: see djob (inside edge j' = j of face f reads m_j+2,
+                         * j' = j+1 reads m_j+1, in the order of the ids 3f + j') */
 } pderiv;
 
 static inline __attribute__((always_inline)) void
@@ -344,6 +456,8 @@ derive_opp_of(const pderiv *J, uint32_t f0, uint32_t f1, uint32_t lo, uint32_t h
             uint32_t s = slot[pe]++ & 1, at0 = ev[pe][0] == x[j] ? 0 : 1; /* x_j's half */
             opp[2 * pe + at0][s] = pnv + fe[f][j2];
             opp[2 * pe + (at0 ^ 1)][s] = pnv + fe[f][j1];
+            J->enb[pe][2 * s] = pnv + fe[f][j == 2 ? j1 : j2];
+            J->enb[pe][2 * s + 1] = pnv + fe[f][j == 2 ? j2 : j1];
         }
     }
 }
@@ -391,7 +505,7 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
     const bool plain_er = inherit; /* er, take and nopp are not needed by the plain passes */
     uint8_t *er = plain_er ? NULL : sdi_alloc(m, (size_t)ne + 1), *vr = NULL, *take = NULL,
             *nopp = NULL;
-    uint32_t *cnt = NULL, (*opp)[2] = NULL;
+    uint32_t *cnt = NULL, (*opp)[2] = NULL, (*enb)[4] = NULL;
     double *wa = NULL;
     bool any_g2e = false, any_opp = true, plain = inherit;
     sd_result rc = SD_OK;
@@ -420,9 +534,12 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
         if (pp->t.fv && pp->t.fe && pp->t.nf == pp->t.ntr && ne == 2ull * pp->t.ne + 3ull * pp->t.nf) {
             /* from the parent's faces (still there while this call makes its levels) */
             uint8_t *slot = sdi_calloc(m, (size_t)pp->t.ne + 1, 1);
-            if (!slot)
+            enb = sdi_alloc(m, ((size_t)pp->t.ne + 1) * sizeof *enb);
+            if (!slot || !enb) {
+                sdi_free(m, slot);
                 goto nomem;
-            pderiv D = {&pp->t, opp, slot};
+            }
+            pderiv D = {&pp->t, opp, slot, enb};
             sdi_par(threads, pp->t.ne, derive_opp_part, &D);
             sdi_free(m, slot);
         } else {
@@ -438,13 +555,19 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
     }
     djob J = {.t = t, .weights = c->opt.surface_weights, .scheme = c->opt.solid_scheme, .vr = vr,
               .er = er, .take = take, .nopp = nopp, .cnt = cnt, .opp = (const uint32_t(*)[2])opp,
-              .loopc = loopc, .wa = wa, .plain = plain};
+              .loopc = loopc, .wa = wa, .plain = plain, .P = enb ? &pp->t : NULL,
+              .enb = (const uint32_t(*)[4])enb, .ninit = enb ? pp->t.nv : nv};
     for (int i = 0; i < p->nch; i++) {
         J.in = p->ch[i].data;
         J.out = lv->ch[i].data;
         J.nc = p->ch[i].ncomp;
-        sdi_par(threads, nv, init_part, &J);
-        sdi_par(threads, ne, edges_part, &J);
+        sdi_par(threads, J.ninit, init_part, &J);
+        if (enb) { /* structured */
+            sdi_par(threads, pp->t.ne, points_part, &J);
+            sdi_par_dyn(threads, ne, 4, erows_part, &J);
+        } else {
+            sdi_par(threads, ne, edges_part, &J);
+        }
     }
     *done = true;
     if (!p->vrule_only) { /* the rules are exact now (sd_level_vertex_rule): kept */
@@ -469,5 +592,6 @@ out:
     sdi_free(m, wa);
     sdi_free(m, nopp);
     sdi_free(m, opp);
+    sdi_free(m, enb);
     return rc;
 }
