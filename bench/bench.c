@@ -3,15 +3,16 @@
  *   bench [--reps N] [-j THREADS] [-w warren|loop] [-s box|averaged] [--edits] MESH LEVEL
  *
  * Times N complete runs (build the complex from arrays, compute levels 1..LEVEL: topology,
- * classification, stencil matrices and positions; file reading excluded) and prints one line:
- * best and median seconds, output cells of the finest level per second, and bytes per finest
- * cell (everything the complex holds: all levels, cached matrices, positions).
+ * classification, rules and positions; file reading excluded) and prints one line: best and
+ * median seconds, output cells of the finest level per second, and bytes per finest cell
+ * (everything the complex holds: all levels, cached matrices, positions).
  *
  * By default the levels are built as batch refinement builds them (sd_options.edit_index
- * LAZY), and what edits need (the by-column index of each S, the edit maps:
+ * LAZY: no edit index, and no S where direct.c computes a level without it, DECISIONS 50), and
+ * what edits need (each level's S if not made, the by-column index of each S, the edit maps:
  * sd_complex_prepare_edits) is timed apart after it: edit_seconds_best, and
- * bytes_per_cell_edits with it. --edits builds the index with the levels instead, as the
- * daemon does (then the seconds include it). */
+ * bytes_per_cell_edits with it. --edits builds S and the index with the levels instead, as
+ * the daemon does (then the seconds include them). */
 #define _POSIX_C_SOURCE 200809L
 #include "../core/sd.h"
 #include "../tests/tools/textmesh.h"

@@ -145,7 +145,10 @@ typedef struct sd_level0_classes {
 /* SD_EDIT_INDEX_WITH_LEVELS (the default): with each level, so the first edit costs what later
  * ones do (a service's live editing). SD_EDIT_INDEX_LAZY: by sd_complex_prepare_edits or the
  * first edit, whichever comes first — batch refinement that never edits skips its time and
- * memory (docs/BENCHMARKS.md). Levels and edits give the same bytes either way. */
+ * memory (docs/BENCHMARKS.md); until then a level without solids, G2 rings, Ying-Zorin rows,
+ * semi-sharp creases or tangent-plane constraints computes the next one without making its S at
+ * all (made when asked for: classes, matrices, limits, edits; docs/DECISIONS.md 50). Levels
+ * and edits give the same bytes either way. */
 enum { SD_EDIT_INDEX_WITH_LEVELS = 0, SD_EDIT_INDEX_LAZY = 1 };
 
 typedef struct sd_complex sd_complex;
