@@ -389,31 +389,8 @@ static bool rules_plain(const sd_topo *t, const uint8_t *vr, const uint8_t *er, 
     return true;
 }
 
-/* A plain level's opposite vertices: the faces in order, each giving its third vertex to each of
- * its edges (every edge has two), in parts by ranges of edges as sdi_edge_opposites. */
-typedef struct popp {
-    const sd_topo *t;
-    uint32_t (*opp)[2];
-    uint8_t *nopp;
-} popp;
-
-static inline __attribute__((always_inline)) void
-plain_opp_of(const popp *J, uint32_t lo, uint32_t hi, bool all)
-{
-    const sd_topo *t = J->t;
-    uint32_t(*opp)[2] = J->opp;
-    uint8_t *nopp = J->nopp;
-    for (uint32_t f = 0; f < t->nf; f++)
-        for (int j = 0; j < 3; j++) {
-            uint32_t e = t->fe[f][j];
-            if (!all && (e < lo || e >= hi))
-                continue;
-            opp[e][nopp[e]++ & 1] = t->fv[f][j == 0 ? 2 : j - 1];
-        }
-}
-
-/* The same from the faces of the level before (P, whose split this level is: split.c's
- * numbering), a quarter of the faces to read: parent face f with corners x and edge points m_j
+/* A plain level's opposite vertices, from the faces of the level before (P, whose split this
+ * level is: split.c's numbering), a quarter of this level's faces to read: parent face f with corners x and edge points m_j
  * (on its edge j, from x_j to x_j+1) has corner children 4f+j = (x_j, m_j, m_j+2) and middle
  * child (m_0, m_1, m_2). Its inside edge j, m_j+2 - m_j, lies in corner child j, then in the middle
  * one: opposite x_j, then m_j+1. The half of its edge j at x_j lies in corner child j (opposite
@@ -475,16 +452,6 @@ static void derive_opp_part(void *arg, uint32_t part, uint32_t nparts)
     derive_opp_of(J, (uint32_t)f0, (uint32_t)f1, (uint32_t)lo, (uint32_t)hi, false);
 }
 
-static void plain_opp_part(void *arg, uint32_t part, uint32_t nparts)
-{
-    const popp *J = arg;
-    uint64_t lo, hi;
-    sdi_range(J->t->ne, part, nparts, &lo, &hi);
-    if (nparts == 1)
-        plain_opp_of(J, 0, J->t->ne, true);
-    else
-        plain_opp_of(J, (uint32_t)lo, (uint32_t)hi, false);
-}
 
 sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *pl, bool *done,
                            sd_error *err)
@@ -501,7 +468,8 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
     /* a plain parent (pp) makes this level plain: its rules from pp's valences */
     const sd_level *pp = p->index > 0 ? c->lv[p->index - 1] : NULL;
     const bool inherit = pp && pl->cnt && pl->level == pp->index && complex_plain(c, t) &&
-                         nv == (uint64_t)pp->t.nv + pp->t.ne;
+                         nv == (uint64_t)pp->t.nv + pp->t.ne && pp->t.fv && pp->t.fe &&
+                         pp->t.nf == pp->t.ntr && ne == 2ull * pp->t.ne + 3ull * pp->t.nf;
     const bool plain_er = inherit; /* er, take and nopp are not needed by the plain passes */
     uint8_t *er = plain_er ? NULL : sdi_alloc(m, (size_t)ne + 1), *vr = NULL, *take = NULL,
             *nopp = NULL;
@@ -520,10 +488,10 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
     cnt = sdi_calloc(m, (size_t)nv + 1, sizeof *cnt);
     take = inherit ? NULL : sdi_alloc(m, (size_t)ne + 1);
     wa = sdi_alloc(m, ((size_t)nv + 1) * sizeof *wa);
-    nopp = sdi_calloc(m, (size_t)ne + 1, 1);
+    nopp = inherit ? NULL : sdi_calloc(m, (size_t)ne + 1, 1);
     if (any_opp)
         opp = sdi_alloc(m, ((size_t)ne + 1) * sizeof *opp);
-    if (!vr || !cnt || (!inherit && !take) || !wa || !nopp || (any_opp && !opp))
+    if (!vr || !cnt || (!inherit && (!take || !nopp)) || !wa || (any_opp && !opp))
         goto nomem;
     if (inherit) {
         memset(vr, SD_RULE_LOOP, nv);
@@ -531,27 +499,42 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
         memcpy(cnt, pl->cnt, (size_t)npv * sizeof *cnt); /* vertex points */
         for (uint32_t v = npv; v < nv; v++)
             cnt[v] = 6; /* edge points: the two halves and two per triangle */
-        if (pp->t.fv && pp->t.fe && pp->t.nf == pp->t.ntr && ne == 2ull * pp->t.ne + 3ull * pp->t.nf) {
-            /* from the parent's faces (still there while this call makes its levels) */
-            uint8_t *slot = sdi_calloc(m, (size_t)pp->t.ne + 1, 1);
-            enb = sdi_alloc(m, ((size_t)pp->t.ne + 1) * sizeof *enb);
-            if (!slot || !enb) {
-                sdi_free(m, slot);
-                goto nomem;
-            }
-            pderiv D = {&pp->t, opp, slot, enb};
-            sdi_par(threads, pp->t.ne, derive_opp_part, &D);
+        /* from the parent's faces (there while the call that made the parent makes this) */
+        uint8_t *slot = sdi_calloc(m, (size_t)pp->t.ne + 1, 1);
+        enb = sdi_alloc(m, ((size_t)pp->t.ne + 1) * sizeof *enb);
+        if (!slot || !enb) {
             sdi_free(m, slot);
-        } else {
-            popp P = {t, opp, nopp};
-            sdi_par(threads, t->ne, plain_opp_part, &P);
+            goto nomem;
         }
+        pderiv D = {&pp->t, opp, slot, enb};
+        sdi_par(threads, pp->t.ne, derive_opp_part, &D);
+        sdi_free(m, slot);
     } else {
         if (!sdi_vertex_rules(m, t, c->opt.solid_scheme, threads, vr, cnt, NULL, take))
             goto nomem;
         if (any_opp)
             sdi_edge_opposites(t, threads, er, opp, nopp);
         plain = complex_plain(c, t) && rules_plain(t, vr, er, take, nopp, any_opp);
+    }
+    /* the limits S would have (stencil.c), so that a level is refused alike either way: its
+     * entries are nv + ne implicit ones, rho's (at most two per edge) and the rings (at most 2) */
+    if ((uint64_t)nv + ne >= UINT32_MAX) {
+        rc = sdi_fail(err, SD_ERR_LIMIT, -1, -1, "too many points for 32-bit ids");
+        goto out;
+    }
+    if ((uint64_t)nv + 6ull * ne >= UINT32_MAX) {
+        uint64_t nnz = (uint64_t)nv + 2ull * ne;
+        for (uint32_t v = 0; v < nv; v++)
+            nnz += cnt[v];
+        for (uint32_t e = 0; e < ne; e++) {
+            uint8_t ring = inherit ? SDI_RING_OPPOSITE : SDI_RULE_RING[er[e]];
+            nnz += (ring == SDI_RING_OPPOSITE || ring == SDI_RING_BOUNDARY_OPPOSITE) &&
+                   (inherit || (nopp[e] & 3) == 2) ? 2 : 0;
+        }
+        if (nnz >= UINT32_MAX) {
+            rc = sdi_fail(err, SD_ERR_LIMIT, -1, -1, "subdivision matrix too large for 32-bit offsets");
+            goto out;
+        }
     }
     djob J = {.t = t, .weights = c->opt.surface_weights, .scheme = c->opt.solid_scheme, .vr = vr,
               .er = er, .take = take, .nopp = nopp, .cnt = cnt, .opp = (const uint32_t(*)[2])opp,

@@ -35,6 +35,7 @@
 #include "internal.h"
 #ifdef __SSE2__
 #include <emmintrin.h>
+enum { STREAM_MIN = 8 << 20 }; /* bytes of a level's triangles written past the caches */
 #endif
 #include <assert.h>
 #include <string.h>
@@ -602,13 +603,17 @@ static void cells_part(void *arg, uint32_t part, uint32_t nparts)
     }
     {
         RANGE(P->ntr, i0, i1);
+#ifdef __SSE2__
+        /* a level's cells are read again by the next split; past the caches only where they
+         * would not stay in them anyway */
+        const bool stream = (uint64_t)P->ntr * 48 >= STREAM_MIN;
+#endif
         for (uint32_t i = i0; i < i1; i++) { /* the children of face f, as fv[4f..4f+3] below */
             uint32_t f = sdi_tr(P, i);
             const uint32_t *x = P->fv[f], *fe = P->fe[f];
             uint32_t(*c)[3] = C->trv + 4 * (size_t)i;
 #ifdef __SSE2__
-            if (((uintptr_t)c & 15) == 0) { /* 48 bytes written past the caches: the level's
-                                               * cells are not read while it is made */
+            if (stream && ((uintptr_t)c & 15) == 0) { /* 48 bytes written past the caches */
                 const uint32_t m0 = pnv + fe[0], m1 = pnv + fe[1], m2 = pnv + fe[2];
                 __m128i *q = (__m128i *)c;
                 _mm_stream_si128(q, _mm_set_epi32((int)x[1], (int)m2, (int)m0, (int)x[0]));
@@ -626,7 +631,8 @@ static void cells_part(void *arg, uint32_t part, uint32_t nparts)
             }
         }
 #ifdef __SSE2__
-        _mm_sfence(); /* the streamed stores seen before the region ends */
+        if (stream)
+            _mm_sfence(); /* the streamed stores seen before the region ends */
 #endif
     }
     {   /* solid cells */

@@ -187,6 +187,22 @@ TEST(direct_plain_closed_surface)
     shape_torus(&m, 40, 37);
     sd_options o = {.surface_weights = SD_WEIGHTS_LOOP};
     CHECK(all_threads(&m, &o, 3, NULL));
+    /* level 4: the parent's 71 040 edges are cut into parts too (derived opposite vertices, the
+     * edge and vertex points); the points alone, each way, 2 and 3 threads */
+    for (int th = 2; th <= 3; th++) {
+        sd_complex *c[2];
+        for (int i = 0; i < 2; i++) {
+            sd_options oi = o;
+            oi.threads = th;
+            oi.edit_index = i ? SD_EDIT_INDEX_LAZY : SD_EDIT_INDEX_WITH_LEVELS;
+            c[i] = mesh_complex(&m, &oi, NULL);
+            CHECK(c[i] && sd_complex_level(c[i], 4, NULL));
+        }
+        for (int l = 1; l <= 4; l++)
+            CHECK(same_channels(sd_complex_level(c[0], l, NULL), sd_complex_level(c[1], l, NULL)));
+        sd_complex_free(c[0]);
+        sd_complex_free(c[1]);
+    }
     o.surface_weights = SD_WEIGHTS_WARREN;
     CHECK(same_both_ways(&m, &o, 3, 2, NULL));
     mesh_free(&m);
