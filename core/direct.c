@@ -104,47 +104,6 @@ static void init_part(void *arg, uint32_t part, uint32_t nparts)
     }
 }
 
-/* The ring size of edge e's row (the opposite vertices when two faces gave them). */
-static inline uint32_t ring_k(const djob *J, uint32_t e)
-{
-    uint8_t ring = SDI_RULE_RING[J->er[e]];
-    return (ring == SDI_RING_OPPOSITE || ring == SDI_RING_BOUNDARY_OPPOSITE) &&
-           (J->nopp[e] & 3) == 2 ? 2u : 0u;
-}
-
-static inline __attribute__((always_inline)) void
-edge_row(const djob *J, dweights (*memo)[3], uint32_t e, uint32_t a, uint32_t b, int nc)
-{
-    uint8_t r = J->plain ? (uint8_t)SD_RULE_LOOP : J->er[e];
-    uint32_t k = J->plain ? 2u : ring_k(J, e);
-    dweights *w = &memo[r][k];
-    if (!w->set) {
-        sdi_enb nbh = {k, NULL};
-        sdi_emask m = sdi_edge_mask(r, &nbh);
-        *w = (dweights){m.end[0], m.end[1], m.ring, true};
-    }
-    const double *in = J->in, *pa = in + (size_t)nc * a, *pb = in + (size_t)nc * b;
-    double *o = J->out + (size_t)nc * (J->t->nv + e);
-    if (k) {
-        const double *p0 = in + (size_t)nc * J->opp[e][0], *p1 = in + (size_t)nc * J->opp[e][1];
-        for (int j = 0; j < nc; j++) {
-            double x = 0;
-            x += w->w0 * pa[j];
-            x += w->w1 * pb[j];
-            x += w->wr * p0[j];
-            x += w->wr * p1[j];
-            o[j] = x;
-        }
-    } else {
-        for (int j = 0; j < nc; j++) {
-            double x = 0;
-            x += w->w0 * pa[j];
-            x += w->w1 * pb[j];
-            o[j] = x;
-        }
-    }
-}
-
 /* Three components: x and y in one SSE2 register, z apart (the same operations per component,
  * so the same bytes as the scalar sums). */
 #ifdef __SSE2__
@@ -183,91 +142,109 @@ static inline p3 p3_madd(p3 a, double w, p3 b)
 }
 #endif
 
-/* edges_of for three components (all: every vertex and edge, one part); plain: see the top. */
-static inline __attribute__((always_inline)) void
-edges3(const djob *J, bool plain, uint32_t vlo, uint32_t vhi, uint32_t elo, uint32_t ehi, bool all)
+/* A row's terms in order, as csr.c sums them: o += w p (three components in SSE2). */
+static inline __attribute__((always_inline)) void add_term(double *o, double w, const double *p,
+                                                            int nc)
 {
-    const sd_topo *t = J->t;
-    const uint8_t *vr = J->vr, *take = J->take, *er = J->er, *nopp = J->nopp;
-    const double *in = J->in, *wa = J->wa;
-    const uint32_t(*opp)[2] = J->opp;
-    double *out = J->out, *eout = J->out + 3 * (size_t)t->nv;
-    dweights memo[SD_RULE_COUNT][3];
-    memset(memo, 0, sizeof memo);
-    for (uint32_t e = 0; e < t->ne; e++) {
-        uint32_t a = t->ev[e][0], b = t->ev[e][1];
-        p3 pa = p3_load(in + 3 * (size_t)a), pb = p3_load(in + 3 * (size_t)b);
-#define MINE(v) (all || ((v) >= vlo && (v) < vhi))
-        if (MINE(a) && (plain || ((take[e] & 1) && vr[a] != SD_RULE_CORNER)))
-            p3_store(out + 3 * (size_t)a, p3_madd(p3_load(out + 3 * (size_t)a), wa[a], pb));
-        if (MINE(b) && (plain || ((take[e] & 2) && vr[b] != SD_RULE_CORNER)))
-            p3_store(out + 3 * (size_t)b, p3_madd(p3_load(out + 3 * (size_t)b), wa[b], pa));
-#undef MINE
-        if (!all && (e < elo || e >= ehi))
-            continue;
-        uint8_t r = plain ? (uint8_t)SD_RULE_LOOP : er[e], ring = SDI_RULE_RING[r];
-        uint32_t k = plain || ((ring == SDI_RING_OPPOSITE || ring == SDI_RING_BOUNDARY_OPPOSITE) &&
-                               (nopp[e] & 3) == 2) ? 2u : 0u;
-        dweights *w = &memo[r][k];
-        if (!w->set) {
-            sdi_enb nbh = {k, NULL};
-            sdi_emask m = sdi_edge_mask(r, &nbh);
-            *w = (dweights){m.end[0], m.end[1], m.ring, true};
+    if (nc == 3) {
+        p3_store(o, p3_madd(p3_load(o), w, p3_load(p)));
+        return;
+    }
+    for (int j = 0; j < nc; j++)
+        o[j] += w * p[j];
+}
+
+/* An edge row: o = 0 + w0 a + w1 b, then + wr c + wr d where the ring is c, d (c not NULL). */
+static inline __attribute__((always_inline)) void
+edge_sum(double *o, const dweights *w, const double *a, const double *b, const double *c,
+         const double *d, int nc)
+{
+    if (nc == 3) {
+        p3 x = p3_madd(p3_madd(p3_zero(), w->w0, p3_load(a)), w->w1, p3_load(b));
+        if (c)
+            x = p3_madd(p3_madd(x, w->wr, p3_load(c)), w->wr, p3_load(d));
+        p3_store(o, x);
+        return;
+    }
+    for (int j = 0; j < nc; j++) {
+        double x = 0;
+        x += w->w0 * a[j];
+        x += w->w1 * b[j];
+        if (c) {
+            x += w->wr * c[j];
+            x += w->wr * d[j];
         }
-        p3 x = p3_madd(p3_madd(p3_zero(), w->w0, pa), w->w1, pb);
-        if (k)
-            x = p3_madd(p3_madd(x, w->wr, p3_load(in + 3 * (size_t)opp[e][0])), w->wr,
-                        p3_load(in + 3 * (size_t)opp[e][1]));
-        p3_store(eout + 3 * (size_t)e, x);
+        o[j] = x;
     }
 }
 
-/* Every edge in order adds to its ends' vertex points (those in [vlo, vhi), or all) the terms of
- * the neighbours they read through it; edge points of [elo, ehi) are summed on the way. */
-static inline __attribute__((always_inline)) void
-edges_of(const djob *J, uint32_t vlo, uint32_t vhi, uint32_t elo, uint32_t ehi, bool all, int nc)
+/* The weights of an edge row of rule r and ring size k (memo: per rule and k, unset first). */
+static inline const dweights *edge_weights(dweights (*memo)[3], uint8_t r, uint32_t k)
 {
-    const bool plain = J->plain; /* (no er or take for an inherited plain level) */
+    dweights *w = &memo[r][k];
+    if (!w->set) {
+        sdi_enb nbh = {k, NULL};
+        sdi_emask m = sdi_edge_mask(r, &nbh);
+        *w = (dweights){m.end[0], m.end[1], m.ring, true};
+    }
+    return w;
+}
+
+/* Every edge in order adds to its ends' vertex points (those in [vlo, vhi), or all) the terms of
+ * the neighbours they read through it; edge points of [elo, ehi) are summed on the way. plain:
+ * see the top (no er, take or nopp read). */
+static inline __attribute__((always_inline)) void
+edges_of(const djob *J, bool plain, uint32_t vlo, uint32_t vhi, uint32_t elo, uint32_t ehi,
+         bool all, int nc)
+{
     const sd_topo *t = J->t;
-    const uint8_t *vr = J->vr, *take = J->take;
+    const uint8_t *vr = J->vr, *take = J->take, *er = J->er, *nopp = J->nopp;
+    const uint32_t(*opp)[2] = J->opp;
     const double *in = J->in, *wa = J->wa;
-    double *out = J->out;
+    double *out = J->out, *eout = J->out + (size_t)nc * t->nv;
     dweights memo[SD_RULE_COUNT][3];
     memset(memo, 0, sizeof memo);
 #define MINE(v) (all || ((v) >= vlo && (v) < vhi))
     for (uint32_t e = 0; e < t->ne; e++) {
         uint32_t a = t->ev[e][0], b = t->ev[e][1];
+        const double *pa = in + (size_t)nc * a, *pb = in + (size_t)nc * b;
         if (MINE(a) && (plain || ((take[e] & 1) && vr[a] != SD_RULE_CORNER)))
-            for (int j = 0; j < nc; j++)
-                out[(size_t)nc * a + j] += wa[a] * in[(size_t)nc * b + j];
+            add_term(out + (size_t)nc * a, wa[a], pb, nc);
         if (MINE(b) && (plain || ((take[e] & 2) && vr[b] != SD_RULE_CORNER)))
-            for (int j = 0; j < nc; j++)
-                out[(size_t)nc * b + j] += wa[b] * in[(size_t)nc * a + j];
-        if (all || (e >= elo && e < ehi))
-            edge_row(J, memo, e, a, b, nc);
+            add_term(out + (size_t)nc * b, wa[b], pa, nc);
+        if (!all && (e < elo || e >= ehi))
+            continue;
+        uint8_t r = plain ? (uint8_t)SD_RULE_LOOP : er[e];
+        uint32_t k = plain ? 2u : sdi_opp_ring_len(r, nopp[e]);
+        edge_sum(eout + (size_t)nc * e, edge_weights(memo, r, k), pa, pb,
+                 k ? in + (size_t)nc * opp[e][0] : NULL, k ? in + (size_t)nc * opp[e][1] : NULL, nc);
     }
 #undef MINE
+}
+
+/* edges_of written for three components, plain or not, and for any other count. */
+static inline __attribute__((always_inline)) void
+edges_run(const djob *J, uint32_t vlo, uint32_t vhi, uint32_t elo, uint32_t ehi, bool all)
+{
+    if (J->nc == 3 && J->plain)
+        edges_of(J, true, vlo, vhi, elo, ehi, all, 3);
+    else if (J->nc == 3)
+        edges_of(J, false, vlo, vhi, elo, ehi, all, 3);
+    else
+        edges_of(J, J->plain, vlo, vhi, elo, ehi, all, J->nc);
 }
 
 static void edges_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const djob *J = arg;
     if (nparts == 1) {
-        if (J->nc == 3 && J->plain)
-            edges3(J, true, 0, 0, 0, 0, true);
-        else if (J->nc == 3)
-            edges3(J, false, 0, 0, 0, 0, true);
-        else
-            edges_of(J, 0, 0, 0, 0, true, J->nc);
+        edges_run(J, 0, 0, 0, 0, true);
         return;
     }
     uint64_t vlo, vhi, elo, ehi;
     sdi_range(J->t->nv, part, nparts, &vlo, &vhi);
     sdi_range(J->t->ne, part, nparts, &elo, &ehi);
-    if (J->nc == 3 && J->plain)
-        edges3(J, true, (uint32_t)vlo, (uint32_t)vhi, (uint32_t)elo, (uint32_t)ehi, false);
-    else
-        edges_of(J, (uint32_t)vlo, (uint32_t)vhi, (uint32_t)elo, (uint32_t)ehi, false, J->nc);
+    edges_run(J, (uint32_t)vlo, (uint32_t)vhi, (uint32_t)elo, (uint32_t)ehi, false);
 }
 
 /* The structured passes of a plain level split from a plain parent P (pnv vertices, pne edges):
@@ -341,29 +318,18 @@ static void erows_part(void *arg, uint32_t part, uint32_t nparts)
     const uint32_t(*ev)[2] = t->ev, (*opp)[2] = J->opp;
     const double *in = J->in;
     double *eout = J->out + (size_t)nc * t->nv;
-    sdi_enb nbh = {2, NULL};
-    const sdi_emask w = sdi_edge_mask(SD_RULE_LOOP, &nbh);
+    dweights memo[SD_RULE_COUNT][3];
+    memset(memo, 0, sizeof memo);
+    const dweights *w = edge_weights(memo, SD_RULE_LOOP, 2);
     uint64_t lo, hi;
     sdi_range(t->ne, part, nparts, &lo, &hi);
     for (uint32_t e = (uint32_t)lo; e < hi; e++) {
-        if (nc == 3) {
-            p3 x = p3_madd(p3_madd(p3_zero(), w.end[0], p3_load(in + 3 * (size_t)ev[e][0])), w.end[1],
-                           p3_load(in + 3 * (size_t)ev[e][1]));
-            x = p3_madd(p3_madd(x, w.ring, p3_load(in + 3 * (size_t)opp[e][0])), w.ring,
-                        p3_load(in + 3 * (size_t)opp[e][1]));
-            p3_store(eout + 3 * (size_t)e, x);
-            continue;
-        }
         const double *pa = in + (size_t)nc * ev[e][0], *pb = in + (size_t)nc * ev[e][1],
                      *p0 = in + (size_t)nc * opp[e][0], *p1 = in + (size_t)nc * opp[e][1];
-        for (int j = 0; j < nc; j++) {
-            double x = 0;
-            x += w.end[0] * pa[j];
-            x += w.end[1] * pb[j];
-            x += w.ring * p0[j];
-            x += w.ring * p1[j];
-            eout[(size_t)nc * e + j] = x;
-        }
+        if (nc == 3)
+            edge_sum(eout + 3 * (size_t)e, w, pa, pb, p0, p1, 3);
+        else
+            edge_sum(eout + (size_t)nc * e, w, pa, pb, p0, p1, nc);
     }
 }
 
@@ -470,14 +436,14 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
     const bool inherit = pp && pl->cnt && pl->level == pp->index && complex_plain(c, t) &&
                          nv == (uint64_t)pp->t.nv + pp->t.ne && pp->t.fv && pp->t.fe &&
                          pp->t.nf == pp->t.ntr && ne == 2ull * pp->t.ne + 3ull * pp->t.nf;
-    const bool plain_er = inherit; /* er, take and nopp are not needed by the plain passes */
-    uint8_t *er = plain_er ? NULL : sdi_alloc(m, (size_t)ne + 1), *vr = NULL, *take = NULL,
+    /* (er, take and nopp are not needed by the plain passes) */
+    uint8_t *er = inherit ? NULL : sdi_alloc(m, (size_t)ne + 1), *vr = NULL, *take = NULL,
             *nopp = NULL;
     uint32_t *cnt = NULL, (*opp)[2] = NULL, (*enb)[4] = NULL;
     double *wa = NULL;
     bool any_g2e = false, any_opp = true, plain = inherit;
     sd_result rc = SD_OK;
-    if (!plain_er && !er)
+    if (!inherit && !er)
         goto nomem;
     if (!inherit) {
         sdi_edge_rules(t, threads, er, &any_g2e, &any_opp);
@@ -526,11 +492,8 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
         uint64_t nnz = (uint64_t)nv + 2ull * ne;
         for (uint32_t v = 0; v < nv; v++)
             nnz += cnt[v];
-        for (uint32_t e = 0; e < ne; e++) {
-            uint8_t ring = inherit ? SDI_RING_OPPOSITE : SDI_RULE_RING[er[e]];
-            nnz += (ring == SDI_RING_OPPOSITE || ring == SDI_RING_BOUNDARY_OPPOSITE) &&
-                   (inherit || (nopp[e] & 3) == 2) ? 2 : 0;
-        }
+        for (uint32_t e = 0; e < ne; e++)
+            nnz += inherit ? 2 : sdi_opp_ring_len(er[e], nopp[e]);
         if (nnz >= UINT32_MAX) {
             rc = sdi_fail(err, SD_ERR_LIMIT, -1, -1, "subdivision matrix too large for 32-bit offsets");
             goto out;

@@ -246,12 +246,10 @@ static bool reserve_lists(sd_mem *m, sdi_escratch *s, uint32_t cap, int nc)
 /* The by-column index of every computed level's S (sd_options.edit_index LAZY leaves it to here). */
 static sd_result ensure_index(sd_complex *c, sd_error *err)
 {
-    sd_result r = SD_OK;
-    for (int l = 0; !r && l + 1 < c->nlevels; l++) { /* (S made first if direct.c did without) */
-        r = sdi_ensure_rules(c, l, err);
-        if (!r)
-            r = sdi_csrb_index(&c->mem, &c->lv[l]->S, err);
-    }
+    /* (S made first where direct.c did without) */
+    sd_result r = sdi_ensure_rules_below(c, c->nlevels - 1, err);
+    for (int l = 0; !r && l + 1 < c->nlevels; l++)
+        r = sdi_csrb_index(&c->mem, &c->lv[l]->S, err);
     if (!r)
         c->edit_indexed = true; /* and levels made from now on index theirs (levels.c) */
     return r;

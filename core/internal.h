@@ -524,6 +524,8 @@ void sdi_drop_levels(sd_complex *c, int from); /* levels from.. (they are recomp
 /* Build level `level`'s rules and stencils if they are not yet (faces made on the way are
  * dropped again). */
 sd_result sdi_ensure_rules(sd_complex *cx, int level, sd_error *err);
+/* ... of levels 0 .. n-1 (the faces dropped once, at the end). */
+sd_result sdi_ensure_rules_below(sd_complex *cx, int n, sd_error *err);
 /* Build level `level`'s edges if they are not yet (under the caller's lock; faces made on the way
  * are dropped again). */
 sd_result sdi_ensure_derived(sd_complex *cx, int level, sd_error *err);
@@ -678,6 +680,14 @@ bool sdi_ov_boundary_edge(const sd_topo *t, int ov, uint32_t e);
  * opp[e], and in nopp[e] how many faces were seen (bits 0-1, saturating at 3; 2 makes a ring). */
 void sdi_edge_opposites(const sd_topo *t, int threads, const uint8_t *er, uint32_t (*opp)[2],
                         uint8_t *nopp);
+/* The ring size of an edge of rule r if its ring is its opposite vertices: 2 where two faces gave
+ * them (nopp as above), else 0; 0 for the other rings too. */
+static inline uint32_t sdi_opp_ring_len(uint8_t r, uint8_t nopp)
+{
+    uint8_t ring = SDI_RULE_RING[r];
+    return (ring == SDI_RING_OPPOSITE || ring == SDI_RING_BOUNDARY_OPPOSITE) && (nopp & 3) == 2
+           ? 2u : 0u;
+}
 /* Per-edge variable-size rings (solid and G2 edges), CSR; class 0 = ring/face, 1 = diagonal. */
 typedef struct sdi_rings {
     uint32_t *off, *v;

@@ -116,20 +116,37 @@ sd_result sdi_ensure_rules(sd_complex *c, int level, sd_error *err)
     return r;
 }
 
+sd_result sdi_ensure_rules_below(sd_complex *c, int n, sd_error *err)
+{
+    sd_result r = SD_OK;
+    for (int l = 0; !r && l < n; l++)
+        r = rules_keep_faces(c, l, err);
+    drop_faces(c);
+    return r;
+}
+
 /* Compute level l+1 from level l: its topology, then every channel as S_l p^l plus the channel's
  * detail offsets at level l+1 (details.c), and S_l's column index for later edits (csr.c). The
- * positions take the tangent-plane constraints' modifications (tangent.c) between the two. */
+ * positions take the tangent-plane constraints' modifications (tangent.c) between the two.
+ * Batch refinement of a level whose rows are plain masks applies S without making it
+ * (direct.c). */
+/* S_l, and its column index unless batch refinement leaves it to edits (DECISIONS 46). */
+static sd_result make_S(sd_complex *c, int l, sd_error *err)
+{
+    sd_result r = rules_keep_faces(c, l, err);
+    if (!r && (c->opt.edit_index != SD_EDIT_INDEX_LAZY || c->edit_indexed))
+        r = sdi_csrb_index(&c->mem, &c->lv[l]->S, err); /* kept with S, so it may exist from before */
+    return r;
+}
+
 static sd_result next_level(sd_complex *c, int l, sdi_plain *pl, sd_error *err)
 {
     sd_mem *m = &c->mem;
     sd_level *p = c->lv[l];
-    /* batch refinement of a level whose rows are plain masks: S applied without being made */
     const bool direct = sdi_direct_ok(c, p);
-    sd_result r = direct ? SD_OK : rules_keep_faces(c, l, err);
+    sd_result r = direct ? SD_OK : make_S(c, l, err); /* (its scratch freed before the split) */
     if (!r)
         r = ensure_faces(c, l, err); /* the rules may have been built before, the faces dropped */
-    if (!r && !direct && (c->opt.edit_index != SD_EDIT_INDEX_LAZY || c->edit_indexed))
-        r = sdi_csrb_index(m, &p->S, err); /* kept with S, so it may exist from before */
     if (r)
         return r;
     sd_level *lv = sdi_calloc(m, 1, sizeof *lv);
@@ -154,18 +171,16 @@ static sd_result next_level(sd_complex *c, int l, sdi_plain *pl, sd_error *err)
             return sdi_fail_nomem(err, m);
         }
     }
-    bool applied = false;
-    if (direct && (r = sdi_direct_apply(c, p, lv, pl, &applied, err))) {
-        sdi_level_free(m, lv);
-        return r;
-    }
-    if (!applied && (r = rules_keep_faces(c, l, err))) { /* (direct.c declined: S after all) */
+    bool summed = false; /* by direct.c, unless it declines: then through S after all */
+    if (direct && !(r = sdi_direct_apply(c, p, lv, pl, &summed, err)) && !summed)
+        r = make_S(c, l, err);
+    if (r) {
         sdi_level_free(m, lv);
         return r;
     }
     for (int i = 0; i < p->nch; i++) {
         int nc = p->ch[i].ncomp;
-        if (!applied)
+        if (!summed)
             sdi_csr_apply(&p->S, p->ch[i].data, lv->ch[i].data, nc, c->opt.threads);
         /* the tangent-plane constraints move positions after S, before the offsets (003 Sec. 3) */
         if (i == 0 && c->ntt && (r = sdi_tp_step(c, l, lv, lv->ch[0].data, err))) {

@@ -53,7 +53,7 @@ static inline uint32_t ring_len(const build *B, uint32_t e)
     switch (SDI_RULE_RING[B->er[e]]) {
     case SDI_RING_OPPOSITE:
     case SDI_RING_BOUNDARY_OPPOSITE:
-        return (B->nopp[e] & 3) == 2 ? 2u : 0u;
+        return sdi_opp_ring_len(B->er[e], B->nopp[e]);
     case SDI_RING_SOLID:
         return B->sr.len[e];
     case SDI_RING_G2:
