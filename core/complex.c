@@ -190,11 +190,9 @@ sd_result sd_complex_check(const double *xyz, size_t nv, const uint32_t *idx, co
     return validate(&m, xyz, (uint32_t)nv, idx, size, (uint32_t)ns, why, of, err);
 }
 
-static uint32_t edge_id(sd_hash *h, sd_topo *t, uint32_t a, uint32_t b)
+static uint32_t edge_id(sd_ehash *h, sd_topo *t, uint32_t a, uint32_t b)
 {
-    uint32_t ids[2] = {a, b}, k[4];
-    sdi_key(k, ids, 2);
-    uint32_t e = sdi_hash_get_or_put(h, k, t->ne);
+    uint32_t e = sdi_ehash_get_or_put(h, a, b, t->ne);
     if (e != UINT32_MAX)
         return e;
     t->ev[t->ne][0] = a;
@@ -215,11 +213,22 @@ static uint32_t face_id(sd_hash *h, sd_topo *t, const uint32_t v[3], bool *isnew
     return t->nf++;
 }
 
+/* The tetrahedron's edge (index into SDI_TET_E) between its vertices x and y. */
+static int tet_edge(int x, int y)
+{
+    int k = 0;
+    while (!((SDI_TET_E[k][0] == x && SDI_TET_E[k][1] == y) ||
+             (SDI_TET_E[k][0] == y && SDI_TET_E[k][1] == x)))
+        k++;
+    return k;
+}
+
 /* The input's simplices into level 0 (arrays allocated for them): tetrahedra first, so that
  * faces of tets are known before triangles are looked at, then triangles, curve segments and
- * points, each absorbed when it is a face of one before; then every face's edge ids. used: per
- * vertex, scratch (zeroed). */
-static void add_simplices(sd_complex *c, sd_topo *t, sd_hash *he, sd_hash *hf, const double *xyz,
+ * points, each absorbed when it is a face of one before. A face's edge ids (fe[f][j], the edge
+ * from fv[f][j] to fv[f][j + 1]) are set when the face is made. used: per vertex, scratch
+ * (zeroed). */
+static void add_simplices(sd_complex *c, sd_topo *t, sd_ehash *he, sd_hash *hf, const double *xyz,
                           const uint32_t *idx, const uint8_t *size, uint32_t ns, uint8_t *used)
 {
     size_t off = 0;
@@ -242,6 +251,8 @@ static void add_simplices(sd_complex *c, sd_topo *t, sd_hash *he, sd_hash *hf, c
                 bool isnew;
                 uint32_t f = face_id(hf, t, fv, &isnew);
                 t->tet_f[t->ntet][i] = f;
+                for (int j = 0; isnew && j < 3; j++)
+                    t->fe[f][j] = t->tet_e[t->ntet][tet_edge(SDI_TET_F[i][j], SDI_TET_F[i][(j + 1) % 3])];
                 if (t->fn3[f] < 255)
                     t->fn3[f]++;
             }
@@ -264,7 +275,7 @@ static void add_simplices(sd_complex *c, sd_topo *t, sd_hash *he, sd_hash *hf, c
                 c->in_src[SD_CELL_TRIANGLE][t->ntr] = s;
                 t->tr[t->ntr++] = f;
                 for (int k = 0; k < 3; k++)
-                    edge_id(he, t, q[k], q[(k + 1) % 3]);
+                    t->fe[f][k] = edge_id(he, t, q[k], q[(k + 1) % 3]);
                 for (int i = 0; i < 3; i++)
                     used[q[i]] = 1;
             }
@@ -296,13 +307,6 @@ static void add_simplices(sd_complex *c, sd_topo *t, sd_hash *he, sd_hash *hf, c
         }
         off += size[s];
     }
-    /* face -> edge ids */
-    for (uint32_t f = 0; f < t->nf; f++)
-        for (int j = 0; j < 3; j++) {
-            uint32_t ids[2] = {t->fv[f][j], t->fv[f][(j + 1) % 3]}, k[4];
-            sdi_key(k, ids, 2);
-            t->fe[f][j] = sdi_hash_get(he, k);
-        }
 }
 
 sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const uint32_t *idx,
@@ -325,7 +329,8 @@ sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const 
     if (!lv)
         return sdi_fail_nomem(err, m);
     sd_topo *t = &lv->t;
-    sd_hash he = {0}, hf = {0};
+    sd_ehash he = {0};
+    sd_hash hf = {0};
     uint8_t *used = NULL;
     t->nv = nv;
     t->ev = sdi_alloc(m, (emax ? emax : 1) * sizeof *t->ev);
@@ -352,12 +357,12 @@ sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const 
     used = sdi_calloc(m, nv, 1);
     if (!t->ev || !t->fv || !t->fe || !t->fflag || !t->fn3 || !t->pt || !t->cu || !t->tr ||
         !t->tet || !t->tet_e || !t->tet_f || !t->tet_d || !t->tet_b || !c->in_tet || !c->in_src[SD_CELL_TETRA] || !c->tet_swapped ||
-        !used || !sdi_hash_init(m, &he, emax) || !sdi_hash_init(m, &hf, fmax))
+        !used || !sdi_ehash_init(m, &he, emax) || !sdi_hash_init(m, &hf, fmax))
         goto nomem;
     c->nin = ns;
 
     add_simplices(c, t, &he, &hf, xyz, idx, size, ns, used);
-    sdi_hash_free(m, &he);
+    sdi_ehash_free(m, &he);
     sdi_hash_free(m, &hf);
     sdi_free(m, used);
     used = NULL;
@@ -407,7 +412,7 @@ sd_result sdi_level0_build(sd_complex *c, const double *xyz, uint32_t nv, const 
     return SD_OK;
 
 nomem:
-    sdi_hash_free(m, &he);
+    sdi_ehash_free(m, &he);
     sdi_hash_free(m, &hf);
     sdi_free(m, used);
     sdi_level_free(m, lv);

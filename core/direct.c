@@ -367,10 +367,26 @@ static bool rules_plain(const sd_topo *t, const uint8_t *vr, const uint8_t *er, 
 typedef struct pderiv {
     const sd_topo *P;
     uint32_t (*opp)[2];
-    uint8_t *slot; /* per parent edge, zeroed */
+    uint8_t *slot; /* per parent edge (each part zeroes its range) */
     uint32_t (*enb)[4]; /* per parent edge: see djob (inside edge j' = j of face f reads m_j+2,
                          * j' = j+1 reads m_j+1, in the order of the ids 3f + j') */
+    uint8_t *vr;        /* this level's vertex rules and valences, filled by ranges too */
+    uint32_t *cnt;
+    const uint32_t *pcnt; /* P's valences */
 } pderiv;
+
+/* This level's vertex rules (all Loop's) and valences, for vertices [v0, v1): a vertex point
+ * keeps its vertex's valence, an edge point has 6 (the two halves and two per triangle). */
+static void derive_valences(const pderiv *J, uint32_t v0, uint32_t v1)
+{
+    const uint32_t pnv = J->P->nv;
+    memset(J->vr + v0, SD_RULE_LOOP, v1 - v0);
+    uint32_t vm = v1 < pnv ? v1 : pnv;
+    if (v0 < vm)
+        memcpy(J->cnt + v0, J->pcnt + v0, (size_t)(vm - v0) * sizeof *J->cnt);
+    for (uint32_t v = v0 > pnv ? v0 : pnv; v < v1; v++)
+        J->cnt[v] = 6;
+}
 
 static inline __attribute__((always_inline)) void
 derive_opp_of(const pderiv *J, uint32_t f0, uint32_t f1, uint32_t lo, uint32_t hi, bool all)
@@ -408,13 +424,19 @@ derive_opp_of(const pderiv *J, uint32_t f0, uint32_t f1, uint32_t lo, uint32_t h
 static void derive_opp_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const pderiv *J = arg;
+    const uint64_t nv = (uint64_t)J->P->nv + J->P->ne;
     if (nparts == 1) {
+        derive_valences(J, 0, (uint32_t)nv);
+        memset(J->slot, 0, J->P->ne);
         derive_opp_of(J, 0, 0, 0, 0, true);
         return;
     }
-    uint64_t f0, f1, lo, hi;
+    uint64_t f0, f1, lo, hi, v0, v1;
     sdi_range(J->P->nf, part, nparts, &f0, &f1);
     sdi_range(J->P->ne, part, nparts, &lo, &hi);
+    sdi_range(nv, part, nparts, &v0, &v1);
+    derive_valences(J, (uint32_t)v0, (uint32_t)v1);
+    memset(J->slot + lo, 0, hi - lo);
     derive_opp_of(J, (uint32_t)f0, (uint32_t)f1, (uint32_t)lo, (uint32_t)hi, false);
 }
 
@@ -451,7 +473,8 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
             goto out;
     }
     vr = sdi_alloc(m, (size_t)nv + 1);
-    cnt = sdi_calloc(m, (size_t)nv + 1, sizeof *cnt);
+    cnt = inherit ? sdi_alloc(m, ((size_t)nv + 1) * sizeof *cnt)
+                  : sdi_calloc(m, (size_t)nv + 1, sizeof *cnt);
     take = inherit ? NULL : sdi_alloc(m, (size_t)ne + 1);
     wa = sdi_alloc(m, ((size_t)nv + 1) * sizeof *wa);
     nopp = inherit ? NULL : sdi_calloc(m, (size_t)ne + 1, 1);
@@ -460,19 +483,15 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
     if (!vr || !cnt || (!inherit && (!take || !nopp)) || !wa || (any_opp && !opp))
         goto nomem;
     if (inherit) {
-        memset(vr, SD_RULE_LOOP, nv);
-        const uint32_t npv = pp->t.nv;
-        memcpy(cnt, pl->cnt, (size_t)npv * sizeof *cnt); /* vertex points */
-        for (uint32_t v = npv; v < nv; v++)
-            cnt[v] = 6; /* edge points: the two halves and two per triangle */
         /* from the parent's faces (there while the call that made the parent makes this) */
-        uint8_t *slot = sdi_calloc(m, (size_t)pp->t.ne + 1, 1);
+        uint8_t *slot = sdi_alloc(m, (size_t)pp->t.ne + 1);
         enb = sdi_alloc(m, ((size_t)pp->t.ne + 1) * sizeof *enb);
         if (!slot || !enb) {
             sdi_free(m, slot);
             goto nomem;
         }
-        pderiv D = {&pp->t, opp, slot, enb};
+        cnt[nv] = 0;
+        pderiv D = {&pp->t, opp, slot, enb, vr, cnt, pl->cnt};
         sdi_par(threads, pp->t.ne, derive_opp_part, &D);
         sdi_free(m, slot);
     } else {

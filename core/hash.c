@@ -66,3 +66,40 @@ uint32_t sdi_hash_get(const sd_hash *h, const uint32_t k[4])
         i = (i + 1) & (h->cap - 1);
     }
 }
+
+bool sdi_ehash_init(sd_mem *m, sd_ehash *h, size_t expected)
+{
+    size_t cap = 16;
+    unsigned bits = 4;
+    while (cap < 2 * expected + 16)
+        cap <<= 1, bits++;
+    h->cap = cap;
+    h->shift = 64 - bits;
+    if (!(h->s = sdi_alloc(m, cap * sizeof *h->s)))
+        return false;
+    memset(h->s, 0xff, cap * sizeof *h->s);
+    return true;
+}
+
+void sdi_ehash_free(sd_mem *m, sd_ehash *h)
+{
+    sdi_free(m, h->s);
+    h->s = NULL;
+}
+
+uint32_t sdi_ehash_get_or_put(sd_ehash *h, uint32_t a, uint32_t b, uint32_t v)
+{
+    uint64_t k = a < b ? (uint64_t)a << 32 | b : (uint64_t)b << 32 | a;
+    size_t i = (size_t)((k * 0x9E3779B97F4A7C15ull) >> h->shift);
+    for (;;) {
+        struct sd_eslot *s = &h->s[i];
+        if (s->k == k)
+            return s->v;
+        if (s->k == UINT64_MAX) {
+            s->k = k;
+            s->v = v;
+            return UINT32_MAX;
+        }
+        i = (i + 1) & (h->cap - 1);
+    }
+}

@@ -17,6 +17,22 @@ void sdi_hash_free(sd_mem *m, sd_hash *h);
  * return UINT32_MAX; if present return its value. */
 uint32_t sdi_hash_get_or_put(sd_hash *h, const uint32_t k[4], uint32_t v);
 uint32_t sdi_hash_get(const sd_hash *h, const uint32_t k[4]);
+
+/* The same for edges (two ids), a key and its value in one 16-byte slot, so a probe reads one
+ * cache line: level 0 looks up every edge of every simplex. */
+typedef struct sd_ehash {
+    unsigned shift; /* 64 - log2(capacity) */
+    size_t cap;
+    struct sd_eslot {
+        uint64_t k; /* min id << 32 | max id; UINT64_MAX: empty */
+        uint32_t v, pad;
+    } *s;
+} sd_ehash;
+
+bool sdi_ehash_init(sd_mem *m, sd_ehash *h, size_t expected);
+void sdi_ehash_free(sd_mem *m, sd_ehash *h);
+/* The value of edge {a, b}; if absent, it is inserted with `v` and UINT32_MAX returned. */
+uint32_t sdi_ehash_get_or_put(sd_ehash *h, uint32_t a, uint32_t b, uint32_t v);
 /* Sort n (1..4) ids into k, padding with UINT32_MAX (ids may be k itself). Inline, with no
  * data-dependent branch: level 0 makes a key for every edge and face of every simplex. */
 static inline void sdi_sort2(uint32_t *a, uint32_t *b)

@@ -54,6 +54,7 @@ void sdi_free(sd_mem *m, void *p);
 
 /* ---- parallel regions (par.c) ------------------------------------------------------------ */
 #define SD_PAR_MIN 65536   /* items of work below which a region runs serially */
+#define SD_PAR_MIN_POOL 16384 /* the same within sdi_pool_begin / end (no threads to create) */
 #define SD_PAR_MAXT 64     /* parts at most */
 typedef void (*sd_part_fn)(void *arg, uint32_t part, uint32_t nparts);
 /* How many parts a region of `work` items is split into with `threads` threads (1 = serial). */
@@ -65,6 +66,10 @@ void sdi_par(int threads, uint64_t work, sd_part_fn fn, void *arg);
  * taking chunks in turn; fn(arg, 0, 1) if serial. Only for fn whose results do not depend on
  * the cut (each item's outputs are its own). */
 void sdi_par_dyn(int threads, uint64_t work, uint32_t per_thread, sd_part_fn fn, void *arg);
+/* Brackets a run of regions (one sd_complex_level call): their helper threads are started once
+ * by the outermost begin and joined by its end; nests; a no-op with threads <= 1. */
+void sdi_pool_begin(int threads);
+void sdi_pool_end(void);
 /* Part `part` of nparts of [0, n): [*lo, *hi). */
 void sdi_range(uint64_t n, uint32_t part, uint32_t nparts, uint64_t *lo, uint64_t *hi);
 

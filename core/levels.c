@@ -201,15 +201,16 @@ const sd_level *sd_complex_level(sd_complex *c, int level, sd_error *err)
         return NULL;
     }
     sdi_plain pl = {0}; /* direct.c's valences of a plain level, from one level to the next */
-    while (c->nlevels <= level)
-        if (next_level(c, c->nlevels - 1, &pl, err)) {
-            sdi_free(&c->mem, pl.cnt);
-            drop_faces(c);
-            return NULL;
-        }
+    sd_result r = SD_OK;
+    if (c->nlevels <= level) {
+        sdi_pool_begin(c->opt.threads); /* the levels' regions share their helper threads */
+        while (!r && c->nlevels <= level)
+            r = next_level(c, c->nlevels - 1, &pl, err);
+        sdi_pool_end();
+    }
     sdi_free(&c->mem, pl.cnt);
     drop_faces(c);
-    return c->lv[level];
+    return r ? NULL : c->lv[level];
 }
 
 uint32_t sd_level_index(const sd_level *lv) { return (uint32_t)lv->index; }

@@ -3,23 +3,33 @@
  * A parallel region splits its work into `n` parts by fixed rules (contiguous ranges) and each
  * part writes its own disjoint outputs with the very arithmetic the serial code uses, so results
  * are the same bytes whatever the number of threads. The parts are taken in turn by the calling
- * thread and the threads created for the region (joined at its end; a region is a level's loop
- * over millions of items: creating a thread costs ~20 us): which thread runs a part does not
- * matter, and on a shared machine a thread that starts late or a core another process holds
- * leaves its parts to the others instead of the region waiting for it. If a thread cannot be
- * created the others take its parts. No state outlives a call. Loops whose results do not depend
- * on where they are cut (each item's outputs its own) may be cut into more parts than threads
+ * thread and the region's helper threads: which thread runs a part does not matter, and on a
+ * shared machine a thread that starts late or a core another process holds leaves its parts to
+ * the others instead of the region waiting for it. Loops whose results do not depend on where
+ * they are cut (each item's outputs its own) may be cut into more parts than threads
  * (sdi_par_dyn), so the parts balance too.
+ *
+ * The helpers: a call that runs many regions in a row (sd_complex_level: about ten a level)
+ * brackets them with sdi_pool_begin / sdi_pool_end, and its regions are run by helpers started
+ * once for the call, which wait for the next region by spinning a while, then sleeping on a
+ * condition variable. A region outside such a bracket creates its helpers and joins them at its
+ * end (~20-60 us a thread here). If a thread cannot be created the others take its parts. The
+ * pool belongs to the calling thread (thread-local), so concurrent calls from other threads
+ * (the daemon's requests) each have their own, and nothing outlives the bracket.
  */
 #include "internal.h"
 #include <pthread.h>
 #include <stdatomic.h>
+#include <sched.h>
+#include <stdlib.h>
+
+static _Thread_local uint32_t par_min = SD_PAR_MIN;
 
 uint32_t sdi_par_parts(int threads, uint64_t work)
 {
-    if (threads <= 1 || work < SD_PAR_MIN)
+    if (threads <= 1 || work < par_min)
         return 1;
-    uint64_t n = work / (SD_PAR_MIN / 2), t = threads < SD_PAR_MAXT ? (uint64_t)threads : SD_PAR_MAXT;
+    uint64_t n = work / (par_min / 2), t = threads < SD_PAR_MAXT ? (uint64_t)threads : SD_PAR_MAXT;
     return (uint32_t)(n < t ? n : t);
 }
 
@@ -43,11 +53,157 @@ static void *run_thread(void *p)
     return NULL;
 }
 
-/* nthreads threads (the caller and nthreads - 1 created) take the nparts parts in turn. */
+/* ---- the helpers of a bracket ------------------------------------------------------------
+ * A region of the pool is published as a generation: its function and argument in the pool,
+ * then `claim` = generation << 32 | part count << 16 | next part. A part is claimed by a
+ * compare-and-swap of `claim`, so only while that generation is current: a helper that wakes
+ * late for a region that is over claims nothing, and the caller never waits for a helper to
+ * wake, only for the parts being run (`done`). */
+#define SPIN_ROUNDS 4000     /* pauses a waiting thread spins before it sleeps (helpers) or yields */
+#define POOL_MAXPARTS 0xffff /* parts of a pool region (the width of claim's fields) */
+
+typedef struct pool {
+    uint32_t nhelpers, depth;
+    bool running;        /* a region is being run (one called from its parts creates threads) */
+    uint32_t gen;        /* the caller's count of regions */
+    sd_part_fn fn;       /* the current region's (read only by a thread holding one of its parts) */
+    void *arg;
+    _Atomic uint64_t claim;
+    atomic_uint pub;     /* the generation helpers wait for; UINT32_MAX: stop */
+    atomic_uint done;    /* parts of the current region finished */
+    atomic_uint sleepers;
+    pthread_t tid[SD_PAR_MAXT];
+    pthread_mutex_t mu;
+    pthread_cond_t cv;
+} pool;
+
+static _Thread_local pool *cur_pool;
+
+static inline void cpu_relax(void)
+{
+#if defined(__x86_64__) || defined(__i386__)
+    __builtin_ia32_pause();
+#endif
+}
+
+/* Runs parts of generation g while it is current and has parts left. */
+static void take_gen(pool *q, uint32_t g)
+{
+    uint64_t c = atomic_load_explicit(&q->claim, memory_order_acquire);
+    for (;;) {
+        uint32_t next = (uint32_t)c & POOL_MAXPARTS, n = (uint32_t)(c >> 16) & POOL_MAXPARTS;
+        if ((uint32_t)(c >> 32) != g || next >= n)
+            return;
+        if (atomic_compare_exchange_weak_explicit(&q->claim, &c, c + 1, memory_order_acquire,
+                                                  memory_order_acquire)) {
+            q->fn(q->arg, next, n);
+            atomic_fetch_add_explicit(&q->done, 1, memory_order_release);
+            c = atomic_load_explicit(&q->claim, memory_order_acquire);
+        }
+    }
+}
+
+static void *helper(void *p)
+{
+    pool *q = p;
+    uint32_t seen = 0;
+    for (;;) {
+        uint32_t g = atomic_load_explicit(&q->pub, memory_order_acquire);
+        for (int i = 0; g == seen && i < SPIN_ROUNDS; i++) {
+            cpu_relax();
+            g = atomic_load_explicit(&q->pub, memory_order_acquire);
+        }
+        if (g == seen) {
+            pthread_mutex_lock(&q->mu);
+            atomic_fetch_add(&q->sleepers, 1);
+            while ((g = atomic_load(&q->pub)) == seen)
+                pthread_cond_wait(&q->cv, &q->mu);
+            atomic_fetch_sub(&q->sleepers, 1);
+            pthread_mutex_unlock(&q->mu);
+        }
+        if (g == UINT32_MAX)
+            return NULL;
+        seen = g;
+        take_gen(q, g);
+    }
+}
+
+/* Publishes generation g (a region, or UINT32_MAX: stop) and wakes the helpers that sleep. */
+static void publish(pool *q, uint32_t g)
+{
+    atomic_store(&q->pub, g);
+    if (atomic_load(&q->sleepers)) {
+        pthread_mutex_lock(&q->mu);
+        pthread_cond_broadcast(&q->cv);
+        pthread_mutex_unlock(&q->mu);
+    }
+}
+
+void sdi_pool_begin(int threads)
+{
+    pool *q = cur_pool;
+    if (q) {
+        q->depth++;
+        return;
+    }
+    if (threads <= 1 || !(q = calloc(1, sizeof *q)))
+        return;
+    pthread_mutex_init(&q->mu, NULL);
+    pthread_cond_init(&q->cv, NULL);
+    q->depth = 1;
+    par_min = SD_PAR_MIN_POOL;
+    uint32_t want = (uint32_t)(threads < SD_PAR_MAXT ? threads : SD_PAR_MAXT) - 1;
+    while (q->nhelpers < want && pthread_create(&q->tid[q->nhelpers], NULL, helper, q) == 0)
+        q->nhelpers++;
+    cur_pool = q;
+}
+
+void sdi_pool_end(void)
+{
+    pool *q = cur_pool;
+    if (!q || --q->depth)
+        return;
+    publish(q, UINT32_MAX);
+    for (uint32_t i = 0; i < q->nhelpers; i++)
+        pthread_join(q->tid[i], NULL);
+    pthread_cond_destroy(&q->cv);
+    pthread_mutex_destroy(&q->mu);
+    free(q);
+    cur_pool = NULL;
+    par_min = SD_PAR_MIN;
+}
+
+/* A region run by the pool's helpers and the caller. */
+static void pool_region(pool *q, uint32_t nparts, sd_part_fn fn, void *arg)
+{
+    q->running = true;
+    uint32_t g = ++q->gen;
+    if (g == UINT32_MAX) /* the stop value: skip it (after 2^32 regions) */
+        g = q->gen = 1;
+    q->fn = fn;
+    q->arg = arg;
+    atomic_store_explicit(&q->done, 0, memory_order_relaxed);
+    atomic_store_explicit(&q->claim, (uint64_t)g << 32 | (uint64_t)nparts << 16, memory_order_release);
+    publish(q, g);
+    take_gen(q, g);
+    for (int i = 0; atomic_load_explicit(&q->done, memory_order_acquire) < nparts; i++)
+        if (i < SPIN_ROUNDS)
+            cpu_relax();
+        else
+            sched_yield();
+    q->running = false;
+}
+
+/* nthreads threads (the caller and nthreads - 1 helpers) take the nparts parts in turn. */
 static void run_region(uint32_t nthreads, uint32_t nparts, sd_part_fn fn, void *arg)
 {
     if (nparts == 1) {
         fn(arg, 0, 1);
+        return;
+    }
+    pool *q = cur_pool;
+    if (q && q->nhelpers && !q->running && nparts <= POOL_MAXPARTS) {
+        pool_region(q, nparts, fn, arg);
         return;
     }
     region g = {fn, arg, nparts, 0};
