@@ -251,18 +251,19 @@ static void edges_part(void *arg, uint32_t part, uint32_t nparts)
  * its vertex points' rows read the edge points of P's edges at them, in P's edge order (their
  * halves come in that order); an edge point's row reads the ends of its edge (halves 2e, 2e+1),
  * then two points per face of its edge (enb): summed whole in place. Parts: edge points and the
- * rows of this level's edges by ranges, vertex points by ranges reading all of P's edges. */
+ * rows of this level's edges by ranges (cut anywhere, so in more parts than threads: a thread on
+ * a busier core takes fewer), vertex points by ranges reading all of P's edges. */
 static inline __attribute__((always_inline)) void
-points3(const djob *J, uint32_t e0, uint32_t e1, uint32_t vlo, uint32_t vhi, bool all, int nc)
+epoints(const djob *J, uint32_t e0, uint32_t e1, int nc)
 {
     const sd_topo *P = J->P;
-    const uint32_t pnv = P->nv, pne = P->ne;
+    const uint32_t pnv = P->nv;
     const uint32_t(*pev)[2] = P->ev, (*enb)[4] = J->enb;
-    const double *in = J->in, *wa = J->wa;
+    const double *in = J->in;
     double *out = J->out;
     const sdi_vmask w6 = vmask(J, SD_RULE_LOOP, 6); /* every edge point's */
     const double s6 = w6.self, a6 = w6.a;
-    for (uint32_t pe = all ? 0 : e0; pe < (all ? pne : e1); pe++) { /* edge points */
+    for (uint32_t pe = e0; pe < e1; pe++) { /* edge points */
         const uint32_t m = pnv + pe, *q = enb[pe];
         const double *pm = in + (size_t)nc * m, *pa = in + (size_t)nc * pev[pe][0],
                      *pb = in + (size_t)nc * pev[pe][1], *q0 = in + (size_t)nc * q[0],
@@ -281,6 +282,28 @@ points3(const djob *J, uint32_t e0, uint32_t e1, uint32_t vlo, uint32_t vhi, boo
             o[j] = x;
         }
     }
+}
+
+/* Edge points by ranges of P's edges (any cut: each row its own). */
+static void epoints_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const djob *J = arg;
+    uint64_t e0, e1;
+    sdi_range(J->P->ne, part, nparts, &e0, &e1);
+    if (J->nc == 3)
+        epoints(J, (uint32_t)e0, (uint32_t)e1, 3);
+    else
+        epoints(J, (uint32_t)e0, (uint32_t)e1, J->nc);
+}
+
+static inline __attribute__((always_inline)) void
+vpoints(const djob *J, uint32_t vlo, uint32_t vhi, bool all, int nc)
+{
+    const sd_topo *P = J->P;
+    const uint32_t pnv = P->nv, pne = P->ne;
+    const uint32_t(*pev)[2] = P->ev;
+    const double *in = J->in, *wa = J->wa;
+    double *out = J->out;
     for (uint32_t pe = 0; pe < pne; pe++) { /* vertex points, started by init_part */
         const double *pm = in + (size_t)nc * (pnv + pe);
         for (int k = 0; k < 2; k++) {
@@ -293,20 +316,21 @@ points3(const djob *J, uint32_t e0, uint32_t e1, uint32_t vlo, uint32_t vhi, boo
     }
 }
 
-static void points_part(void *arg, uint32_t part, uint32_t nparts)
+/* Vertex points by ranges of vertices, each part reading all of P's edges (in their order: the
+ * order of the rows' terms), so in as many parts as threads. */
+static void vpoints_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const djob *J = arg;
     if (nparts == 1) {
         if (J->nc == 3)
-            points3(J, 0, 0, 0, 0, true, 3);
+            vpoints(J, 0, 0, true, 3);
         else
-            points3(J, 0, 0, 0, 0, true, J->nc);
+            vpoints(J, 0, 0, true, J->nc);
         return;
     }
-    uint64_t e0, e1, v0, v1;
-    sdi_range(J->P->ne, part, nparts, &e0, &e1);
+    uint64_t v0, v1;
     sdi_range(J->P->nv, part, nparts, &v0, &v1);
-    points3(J, (uint32_t)e0, (uint32_t)e1, (uint32_t)v0, (uint32_t)v1, false, J->nc);
+    vpoints(J, (uint32_t)v0, (uint32_t)v1, false, J->nc);
 }
 
 /* The rows of this level's edges: ends and opposite vertices. */
@@ -388,15 +412,14 @@ static void derive_valences(const pderiv *J, uint32_t v0, uint32_t v1)
         J->cnt[v] = 6;
 }
 
-static inline __attribute__((always_inline)) void
-derive_opp_of(const pderiv *J, uint32_t f0, uint32_t f1, uint32_t lo, uint32_t hi, bool all)
+/* The inside edges' opposite vertices, faces [f0, f1) of P. */
+static void derive_inside(const pderiv *J, uint32_t f0, uint32_t f1)
 {
     const sd_topo *P = J->P;
-    const uint32_t pnv = P->nv, pne = P->ne, nf = P->nf;
-    const uint32_t(*fv)[3] = P->fv, (*fe)[3] = P->fe, (*ev)[2] = P->ev;
+    const uint32_t pnv = P->nv, pne = P->ne;
+    const uint32_t(*fv)[3] = P->fv, (*fe)[3] = P->fe;
     uint32_t(*opp)[2] = J->opp;
-    uint8_t *slot = J->slot;
-    for (uint32_t f = all ? 0 : f0; f < (all ? nf : f1); f++) {
+    for (uint32_t f = f0; f < f1; f++) {
         const uint32_t *x = fv[f];
         const uint32_t m[3] = {pnv + fe[f][0], pnv + fe[f][1], pnv + fe[f][2]};
         for (int j = 0; j < 3; j++) {
@@ -405,6 +428,28 @@ derive_opp_of(const pderiv *J, uint32_t f0, uint32_t f1, uint32_t lo, uint32_t h
             opp[e][1] = m[j == 2 ? 0 : j + 1];
         }
     }
+}
+
+/* Inside edges by ranges of faces and the valences by ranges of vertices (any cut). */
+static void inside_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const pderiv *J = arg;
+    uint64_t f0, f1, v0, v1;
+    sdi_range(J->P->nf, part, nparts, &f0, &f1);
+    sdi_range((uint64_t)J->P->nv + J->P->ne, part, nparts, &v0, &v1);
+    derive_valences(J, (uint32_t)v0, (uint32_t)v1);
+    derive_inside(J, (uint32_t)f0, (uint32_t)f1);
+}
+
+/* The halves' opposite vertices and enb, P's edges [lo, hi) (every face read). */
+static inline __attribute__((always_inline)) void derive_halves(const pderiv *J, uint32_t lo,
+                                                                uint32_t hi, bool all)
+{
+    const sd_topo *P = J->P;
+    const uint32_t pnv = P->nv, nf = P->nf;
+    const uint32_t(*fv)[3] = P->fv, (*fe)[3] = P->fe, (*ev)[2] = P->ev;
+    uint32_t(*opp)[2] = J->opp;
+    uint8_t *slot = J->slot;
     for (uint32_t f = 0; f < nf; f++) {
         const uint32_t *x = fv[f];
         for (int j = 0; j < 3; j++) {
@@ -421,25 +466,20 @@ derive_opp_of(const pderiv *J, uint32_t f0, uint32_t f1, uint32_t lo, uint32_t h
     }
 }
 
-static void derive_opp_part(void *arg, uint32_t part, uint32_t nparts)
+/* Halves by ranges of P's edges, each part reading every face: as many parts as threads. */
+static void halves_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const pderiv *J = arg;
-    const uint64_t nv = (uint64_t)J->P->nv + J->P->ne;
     if (nparts == 1) {
-        derive_valences(J, 0, (uint32_t)nv);
         memset(J->slot, 0, J->P->ne);
-        derive_opp_of(J, 0, 0, 0, 0, true);
+        derive_halves(J, 0, 0, true);
         return;
     }
-    uint64_t f0, f1, lo, hi, v0, v1;
-    sdi_range(J->P->nf, part, nparts, &f0, &f1);
+    uint64_t lo, hi;
     sdi_range(J->P->ne, part, nparts, &lo, &hi);
-    sdi_range(nv, part, nparts, &v0, &v1);
-    derive_valences(J, (uint32_t)v0, (uint32_t)v1);
     memset(J->slot + lo, 0, hi - lo);
-    derive_opp_of(J, (uint32_t)f0, (uint32_t)f1, (uint32_t)lo, (uint32_t)hi, false);
+    derive_halves(J, (uint32_t)lo, (uint32_t)hi, false);
 }
-
 
 sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *pl, bool *done,
                            sd_error *err)
@@ -492,7 +532,8 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
         }
         cnt[nv] = 0;
         pderiv D = {&pp->t, opp, slot, enb, vr, cnt, pl->cnt};
-        sdi_par(threads, pp->t.ne, derive_opp_part, &D);
+        sdi_par_dyn(threads, pp->t.ne, 4, inside_part, &D);
+        sdi_par(threads, pp->t.ne, halves_part, &D);
         sdi_free(m, slot);
     } else {
         if (!sdi_vertex_rules(m, t, c->opt.solid_scheme, threads, vr, cnt, NULL, take))
@@ -526,9 +567,10 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
         J.in = p->ch[i].data;
         J.out = lv->ch[i].data;
         J.nc = p->ch[i].ncomp;
-        sdi_par(threads, J.ninit, init_part, &J);
+        sdi_par_dyn(threads, J.ninit, 4, init_part, &J);
         if (enb) { /* structured */
-            sdi_par(threads, pp->t.ne, points_part, &J);
+            sdi_par_dyn(threads, pp->t.ne, 4, epoints_part, &J);
+            sdi_par(threads, pp->t.ne, vpoints_part, &J);
             sdi_par_dyn(threads, ne, 4, erows_part, &J);
         } else {
             sdi_par(threads, ne, edges_part, &J);
