@@ -53,6 +53,10 @@ typedef struct djob {
      * parent edge, the inside-edge neighbours of its edge point, two per parent face in order */
     const sd_topo *P;
     const uint32_t (*enb)[4];
+    /* and when P is itself the split of a plain level PP whose edges' faces are known (efpp:
+     * 3 f + j per face of the edge, in face order): P's edge points' vertex rows gathered */
+    const sd_topo *PP;
+    const uint32_t (*efpp)[2];
     uint32_t ninit;           /* vertices init_part starts (all, or P's vertex points) */
     const double *in;
     double *out;
@@ -316,6 +320,70 @@ vpoints(const djob *J, uint32_t vlo, uint32_t vhi, bool all, int nc)
     }
 }
 
+/* With PP known, P's vertices are PP's vertices and PP's edge points. The edges of P at the edge
+ * point m of PP's edge e, in P's edge order: the halves 2e, 2e+1, then per face f of e (in
+ * order; e its edge j) the inside edges 3f + j and 3f + j+1 (mod 3) after PP's halves. Their
+ * vertex points' rows are gathered in that order, by ranges of edge points (any cut). */
+static inline __attribute__((always_inline)) void vgather(const djob *J, uint32_t e0, uint32_t e1,
+                                                          int nc)
+{
+    const uint32_t pnv = J->P->nv, qnv = J->PP->nv, qne = J->PP->ne;
+    const uint32_t(*efpp)[2] = J->efpp;
+    const double *in = J->in + (size_t)nc * pnv, *wa = J->wa; /* in: P's edge points */
+    double *out = J->out;
+    for (uint32_t e = e0; e < e1; e++) {
+        const uint32_t v = qnv + e;
+        uint32_t id[6] = {2 * e, 2 * e + 1};
+        for (int s = 0; s < 2; s++) {
+            uint32_t f = efpp[e][s] / 3, j = efpp[e][s] % 3, b = 2 * qne + 3 * f;
+            id[2 + 2 * s] = b + (j == 2 ? 0 : j);
+            id[3 + 2 * s] = b + (j == 2 ? 2 : j + 1);
+        }
+        const double w = wa[v];
+        double *o = out + (size_t)nc * v;
+        for (int j = 0; j < nc; j++) {
+            double x = o[j];
+            for (int k = 0; k < 6; k++)
+                x += w * in[(size_t)nc * id[k] + j];
+            o[j] = x;
+        }
+    }
+}
+
+static void vgather_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const djob *J = arg;
+    uint64_t e0, e1;
+    sdi_range(J->PP->ne, part, nparts, &e0, &e1);
+    if (J->nc == 3)
+        vgather(J, (uint32_t)e0, (uint32_t)e1, 3);
+    else
+        vgather(J, (uint32_t)e0, (uint32_t)e1, J->nc);
+}
+
+/* ... and PP's vertices' rows: their edges of P are the halves 2e + k of PP's edges e at them
+ * (k: which end), in that order; by ranges of vertices, each part reading PP's edges. */
+static void vscan_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const djob *J = arg;
+    const int nc = J->nc;
+    const uint32_t pnv = J->P->nv, qne = J->PP->ne;
+    const uint32_t(*qev)[2] = J->PP->ev;
+    const double *in = J->in + (size_t)nc * pnv, *wa = J->wa;
+    double *out = J->out;
+    uint64_t v0, v1;
+    sdi_range(J->PP->nv, part, nparts, &v0, &v1);
+    for (uint32_t e = 0; e < qne; e++)
+        for (int k = 0; k < 2; k++) {
+            uint32_t v = qev[e][k];
+            if (v < v0 || v >= v1)
+                continue;
+            const double *pm = in + (size_t)nc * (2 * e + (uint32_t)k);
+            for (int j = 0; j < nc; j++)
+                out[(size_t)nc * v + j] += wa[v] * pm[j];
+        }
+}
+
 /* Vertex points by ranges of vertices, each part reading all of P's edges (in their order: the
  * order of the rows' terms), so in as many parts as threads. */
 static void vpoints_part(void *arg, uint32_t part, uint32_t nparts)
@@ -391,6 +459,8 @@ static bool rules_plain(const sd_topo *t, const uint8_t *vr, const uint8_t *er, 
 typedef struct pderiv {
     const sd_topo *P;
     uint32_t (*opp)[2];
+    uint32_t (*ef)[2];  /* per parent edge, its faces f (edge j of f) as 3 f + j, in face order */
+    uint32_t (*efc)[2]; /* the same for this level's edges (NULL: not wanted) */
     uint8_t *slot; /* per parent edge (each part zeroes its range) */
     uint32_t (*enb)[4]; /* per parent edge: see djob (inside edge j' = j of face f reads m_j+2,
                          * j' = j+1 reads m_j+1, in the order of the ids 3f + j') */
@@ -430,7 +500,9 @@ static void derive_inside(const pderiv *J, uint32_t f0, uint32_t f1)
     }
 }
 
-/* Inside edges by ranges of faces and the valences by ranges of vertices (any cut). */
+/* Inside edges by ranges of faces and the valences by ranges of vertices (any cut). The faces
+ * of inside edge j of f: corner child 4f + j (its edge 1), the middle child 4f + 3 (its edge
+ * j + 2 mod 3). */
 static void inside_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const pderiv *J = arg;
@@ -439,46 +511,85 @@ static void inside_part(void *arg, uint32_t part, uint32_t nparts)
     sdi_range((uint64_t)J->P->nv + J->P->ne, part, nparts, &v0, &v1);
     derive_valences(J, (uint32_t)v0, (uint32_t)v1);
     derive_inside(J, (uint32_t)f0, (uint32_t)f1);
-}
-
-/* The halves' opposite vertices and enb, P's edges [lo, hi) (every face read). */
-static inline __attribute__((always_inline)) void derive_halves(const pderiv *J, uint32_t lo,
-                                                                uint32_t hi, bool all)
-{
-    const sd_topo *P = J->P;
-    const uint32_t pnv = P->nv, nf = P->nf;
-    const uint32_t(*fv)[3] = P->fv, (*fe)[3] = P->fe, (*ev)[2] = P->ev;
-    uint32_t(*opp)[2] = J->opp;
-    uint8_t *slot = J->slot;
-    for (uint32_t f = 0; f < nf; f++) {
-        const uint32_t *x = fv[f];
-        for (int j = 0; j < 3; j++) {
-            uint32_t pe = fe[f][j];
-            if (!all && (pe < lo || pe >= hi))
-                continue;
-            int j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
-            uint32_t s = slot[pe]++ & 1, at0 = ev[pe][0] == x[j] ? 0 : 1; /* x_j's half */
-            opp[2 * pe + at0][s] = pnv + fe[f][j2];
-            opp[2 * pe + (at0 ^ 1)][s] = pnv + fe[f][j1];
-            J->enb[pe][2 * s] = pnv + fe[f][j == 2 ? j1 : j2];
-            J->enb[pe][2 * s + 1] = pnv + fe[f][j == 2 ? j2 : j1];
-        }
+    if (J->efc) {
+        const uint32_t pne = J->P->ne;
+        for (uint32_t f = (uint32_t)f0; f < f1; f++)
+            for (uint32_t j = 0; j < 3; j++) {
+                uint32_t e = 2 * pne + 3 * f + j;
+                J->efc[e][0] = 3 * (4 * f + j) + 1;
+                J->efc[e][1] = 3 * (4 * f + 3) + (j + 2) % 3;
+            }
     }
 }
 
-/* Halves by ranges of P's edges, each part reading every face: as many parts as threads. */
-static void halves_part(void *arg, uint32_t part, uint32_t nparts)
+/* P's edges' faces, [lo, hi) (every face read; slot: those seen so far). */
+static inline __attribute__((always_inline)) void scan_ef(const pderiv *J, uint32_t lo, uint32_t hi,
+                                                          bool all)
+{
+    const sd_topo *P = J->P;
+    const uint32_t nf = P->nf;
+    const uint32_t(*fe)[3] = P->fe;
+    uint32_t(*ef)[2] = J->ef;
+    uint8_t *slot = J->slot;
+    for (uint32_t f = 0; f < nf; f++)
+        for (uint32_t j = 0; j < 3; j++) {
+            uint32_t pe = fe[f][j];
+            if (!all && (pe < lo || pe >= hi))
+                continue;
+            ef[pe][slot[pe]++ & 1] = 3 * f + j;
+        }
+}
+
+/* ... by ranges of P's edges, each part reading every face: as many parts as threads. */
+static void scan_ef_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const pderiv *J = arg;
     if (nparts == 1) {
         memset(J->slot, 0, J->P->ne);
-        derive_halves(J, 0, 0, true);
+        scan_ef(J, 0, 0, true);
         return;
     }
     uint64_t lo, hi;
     sdi_range(J->P->ne, part, nparts, &lo, &hi);
     memset(J->slot + lo, 0, hi - lo);
-    derive_halves(J, (uint32_t)lo, (uint32_t)hi, false);
+    scan_ef(J, (uint32_t)lo, (uint32_t)hi, false);
+}
+
+/* The halves' opposite vertices, enb and faces, by ranges of P's edges (any cut). The half of
+ * edge j of f at x_j lies in corner child 4f + j (its edge 0), the half at x_j+1 in corner child
+ * 4f + j+1 (its edge 2). */
+static void halves_part(void *arg, uint32_t part, uint32_t nparts)
+{
+    const pderiv *J = arg;
+    const sd_topo *P = J->P;
+    const uint32_t pnv = P->nv;
+    const uint32_t(*fv)[3] = P->fv, (*fe)[3] = P->fe, (*ev)[2] = P->ev, (*ef)[2] = J->ef;
+    uint32_t(*opp)[2] = J->opp, (*enb)[4] = J->enb, (*efc)[2] = J->efc;
+    uint64_t lo, hi;
+    sdi_range(P->ne, part, nparts, &lo, &hi);
+    for (uint32_t pe = (uint32_t)lo; pe < hi; pe++)
+        for (uint32_t s = 0; s < 2; s++) {
+            uint32_t f = ef[pe][s] / 3, j = ef[pe][s] % 3;
+            uint32_t j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
+            uint32_t at0 = ev[pe][0] == fv[f][j] ? 0 : 1; /* x_j's half */
+            opp[2 * pe + at0][s] = pnv + fe[f][j2];
+            opp[2 * pe + (at0 ^ 1)][s] = pnv + fe[f][j1];
+            enb[pe][2 * s] = pnv + fe[f][j == 2 ? j1 : j2];
+            enb[pe][2 * s + 1] = pnv + fe[f][j == 2 ? j2 : j1];
+            if (efc) {
+                efc[2 * pe + at0][s] = 3 * (4 * f + j);
+                efc[2 * pe + (at0 ^ 1)][s] = 3 * (4 * f + j1) + 2;
+            }
+        }
+}
+
+void sdi_plain_free(sd_mem *m, sdi_plain *pl)
+{
+    sdi_free(m, pl->cnt);
+    sdi_free(m, pl->ef[0]);
+    sdi_free(m, pl->ef[1]);
+    pl->cnt = NULL;
+    pl->ef[0] = pl->ef[1] = NULL;
 }
 
 sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *pl, bool *done,
@@ -501,7 +612,8 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
     /* (er, take and nopp are not needed by the plain passes) */
     uint8_t *er = inherit ? NULL : sdi_alloc(m, (size_t)ne + 1), *vr = NULL, *take = NULL,
             *nopp = NULL;
-    uint32_t *cnt = NULL, (*opp)[2] = NULL, (*enb)[4] = NULL;
+    uint32_t *cnt = NULL, (*opp)[2] = NULL, (*enb)[4] = NULL, (*ef)[2] = NULL, (*efc)[2] = NULL;
+    const uint32_t(*efpp)[2] = NULL; /* the faces of the edges of pp's parent, if known */
     double *wa = NULL;
     bool any_g2e = false, any_opp = true, plain = inherit;
     sd_result rc = SD_OK;
@@ -523,18 +635,38 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
     if (!vr || !cnt || (!inherit && (!take || !nopp)) || !wa || (any_opp && !opp))
         goto nomem;
     if (inherit) {
-        /* from the parent's faces (there while the call that made the parent makes this) */
-        uint8_t *slot = sdi_alloc(m, (size_t)pp->t.ne + 1);
+        /* from the parent's faces (there while the call that made the parent makes this): its
+         * edges' faces handed on from the level before, or found by reading them; this level's
+         * made too if another level follows (and their ids hold 3 f + j) */
+        for (int k = 0; k < 2; k++)
+            if (pl->ef[k] && pl->ef_level[k] == pp->index) {
+                ef = pl->ef[k];
+                pl->ef[k] = NULL;
+            } else if (pl->ef[k] && pl->ef_level[k] == pp->index - 1 && pp->index > 0) {
+                efpp = (const uint32_t(*)[2])pl->ef[k];
+            }
         enb = sdi_alloc(m, ((size_t)pp->t.ne + 1) * sizeof *enb);
-        if (!slot || !enb) {
-            sdi_free(m, slot);
+        if (!enb)
             goto nomem;
-        }
         cnt[nv] = 0;
-        pderiv D = {&pp->t, opp, slot, enb, vr, cnt, pl->cnt};
+        pderiv D = {&pp->t, opp, NULL, NULL, NULL, enb, vr, cnt, pl->cnt};
+        if (!ef) {
+            ef = sdi_alloc(m, ((size_t)pp->t.ne + 1) * sizeof *ef);
+            D.slot = sdi_alloc(m, (size_t)pp->t.ne + 1);
+            if (!ef || !D.slot) {
+                sdi_free(m, D.slot);
+                goto nomem;
+            }
+            D.ef = ef;
+            sdi_par(threads, pp->t.ne, scan_ef_part, &D);
+            sdi_free(m, D.slot);
+        }
+        D.ef = ef;
+        if (lv->index < pl->top && 3ull * t->nf < UINT32_MAX &&
+            !(efc = D.efc = sdi_alloc(m, ((size_t)ne + 1) * sizeof *efc)))
+            goto nomem;
         sdi_par_dyn(threads, pp->t.ne, 4, inside_part, &D);
-        sdi_par(threads, pp->t.ne, halves_part, &D);
-        sdi_free(m, slot);
+        sdi_par_dyn(threads, pp->t.ne, 4, halves_part, &D);
     } else {
         if (!sdi_vertex_rules(m, t, c->opt.solid_scheme, threads, vr, cnt, NULL, take))
             goto nomem;
@@ -562,7 +694,8 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
     djob J = {.t = t, .weights = c->opt.surface_weights, .scheme = c->opt.solid_scheme, .vr = vr,
               .er = er, .take = take, .nopp = nopp, .cnt = cnt, .opp = (const uint32_t(*)[2])opp,
               .loopc = loopc, .wa = wa, .plain = plain, .P = enb ? &pp->t : NULL,
-              .enb = (const uint32_t(*)[4])enb, .ninit = enb ? pp->t.nv : nv};
+              .enb = (const uint32_t(*)[4])enb, .PP = efpp ? &c->lv[pp->index - 1]->t : NULL,
+              .efpp = efpp, .ninit = enb ? pp->t.nv : nv};
     for (int i = 0; i < p->nch; i++) {
         J.in = p->ch[i].data;
         J.out = lv->ch[i].data;
@@ -570,7 +703,12 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
         sdi_par_dyn(threads, J.ninit, 4, init_part, &J);
         if (enb) { /* structured */
             sdi_par_dyn(threads, pp->t.ne, 4, epoints_part, &J);
-            sdi_par(threads, pp->t.ne, vpoints_part, &J);
+            if (efpp) {
+                sdi_par_dyn(threads, J.PP->ne, 4, vgather_part, &J);
+                sdi_par(threads, J.PP->ne, vscan_part, &J);
+            } else {
+                sdi_par(threads, pp->t.ne, vpoints_part, &J);
+            }
             sdi_par_dyn(threads, ne, 4, erows_part, &J);
         } else {
             sdi_par(threads, ne, edges_part, &J);
@@ -581,12 +719,18 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
         p->vrule_only = vr;
         vr = NULL;
     }
-    sdi_free(m, pl->cnt); /* the parent's valences have served */
-    pl->cnt = NULL;
+    sdi_plain_free(m, pl); /* the parent's valences and the edges' faces before pp's have served */
     if (plain) { /* for the next level's rules */
         pl->cnt = cnt;
         pl->level = p->index;
         cnt = NULL;
+        if (efc) { /* pp's edges' faces and this level's, for the next level */
+            pl->ef[0] = ef;
+            pl->ef_level[0] = pp->index;
+            pl->ef[1] = efc;
+            pl->ef_level[1] = p->index;
+            ef = efc = NULL;
+        }
     }
     goto out;
 nomem:
@@ -600,5 +744,7 @@ out:
     sdi_free(m, nopp);
     sdi_free(m, opp);
     sdi_free(m, enb);
+    sdi_free(m, ef);
+    sdi_free(m, efc);
     return rc;
 }

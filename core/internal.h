@@ -711,11 +711,16 @@ void sdi_rings_free(sd_mem *m, sdi_rings *r);
  * tangent-plane constraints. */
 bool sdi_direct_ok(const sd_complex *c, const sd_level *p);
 /* The valences of a plain level (direct.c), handed from one level to the next within one
- * sd_complex_level call (cnt: NULL or the caller frees it). */
+ * sd_complex_level call, and the faces of the edges of the last two plain levels split (ef[k]
+ * of level ef_level[k]: per edge, 3 f + j for its faces f in order, the edge being f's edge j);
+ * top: the level the call makes. Freed by sdi_plain_free. */
 typedef struct sdi_plain {
     uint32_t *cnt;
-    int level;
+    int level, top;
+    uint32_t (*ef[2])[2];
+    int ef_level[2];
 } sdi_plain;
+void sdi_plain_free(sd_mem *m, sdi_plain *pl);
 /* lv's channels (allocated) from p's (faces built) as S_p would make them, the same bytes; *done
  * false if the level has rows direct.c does not make (G2 rings): then nothing was written. pl:
  * the plain valences of p's parent if known, replaced by p's if p is plain. */

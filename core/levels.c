@@ -200,7 +200,7 @@ const sd_level *sd_complex_level(sd_complex *c, int level, sd_error *err)
         sdi_fail(err, SD_ERR_ARG, level, -1, "level %d out of range 0..%d", level, SD_MAX_LEVEL);
         return NULL;
     }
-    sdi_plain pl = {0}; /* direct.c's valences of a plain level, from one level to the next */
+    sdi_plain pl = {.top = level}; /* direct.c's, from one level to the next */
     sd_result r = SD_OK;
     if (c->nlevels <= level) {
         sdi_pool_begin(c->opt.threads); /* the levels' regions share their helper threads */
@@ -208,7 +208,7 @@ const sd_level *sd_complex_level(sd_complex *c, int level, sd_error *err)
             r = next_level(c, c->nlevels - 1, &pl, err);
         sdi_pool_end();
     }
-    sdi_free(&c->mem, pl.cnt);
+    sdi_plain_free(&c->mem, &pl);
     drop_faces(c);
     return r ? NULL : c->lv[level];
 }
