@@ -662,9 +662,8 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
             sdi_free(m, D.slot);
         }
         D.ef = ef;
-        if (lv->index < pl->top && 3ull * t->nf < UINT32_MAX &&
-            !(efc = D.efc = sdi_alloc(m, ((size_t)ne + 1) * sizeof *efc)))
-            goto nomem;
+        if (lv->index < pl->top && 3ull * t->nf < UINT32_MAX) /* (without: read again then) */
+            efc = D.efc = sdi_alloc(m, ((size_t)ne + 1) * sizeof *efc);
         sdi_par_dyn(threads, pp->t.ne, 4, inside_part, &D);
         sdi_par_dyn(threads, pp->t.ne, 4, halves_part, &D);
     } else {

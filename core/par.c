@@ -11,8 +11,9 @@
  *
  * The helpers: a call that runs many regions in a row (sd_complex_level: about ten a level)
  * brackets them with sdi_pool_begin / sdi_pool_end, and its regions are run by helpers started
- * once for the call, which wait for the next region by spinning a while, then sleeping on a
- * condition variable. A region outside such a bracket creates its helpers and joins them at its
+ * once for the call (at its first region with parts to share), which wait for the next region
+ * by spinning a while, then sleeping on a condition variable; such a region is cut from fewer
+ * items (SD_PAR_MIN_POOL). A region outside a bracket creates its helpers and joins them at its
  * end (~20-60 us a thread here). If a thread cannot be created the others take its parts. The
  * pool belongs to the calling thread (thread-local), so concurrent calls from other threads
  * (the daemon's requests) each have their own, and nothing outlives the bracket.
@@ -20,7 +21,7 @@
 #include "internal.h"
 #include <pthread.h>
 #include <stdatomic.h>
-#include <sched.h>
+#include <stdalign.h>
 #include <stdlib.h>
 
 static _Thread_local uint32_t par_min = SD_PAR_MIN;
@@ -59,22 +60,25 @@ static void *run_thread(void *p)
  * compare-and-swap of `claim`, so only while that generation is current: a helper that wakes
  * late for a region that is over claims nothing, and the caller never waits for a helper to
  * wake, only for the parts being run (`done`). */
-#define SPIN_ROUNDS 4000     /* pauses a waiting thread spins before it sleeps (helpers) or yields */
+#define SPIN_ROUNDS 4000     /* pauses (~80 us here) a waiting thread spins before it sleeps */
 #define POOL_MAXPARTS 0xffff /* parts of a pool region (the width of claim's fields) */
 
 typedef struct pool {
-    uint32_t nhelpers, depth;
-    bool running;        /* a region is being run (one called from its parts creates threads) */
-    uint32_t gen;        /* the caller's count of regions */
-    sd_part_fn fn;       /* the current region's (read only by a thread holding one of its parts) */
+    uint32_t want, nhelpers, depth; /* helpers wanted (started at the first parallel region) */
+    bool started, running;          /* running: a region is being run (one called from its parts
+                                     * creates threads) */
+    uint32_t gen;                   /* the caller's count of regions */
+    sd_part_fn fn; /* the current region's (read only by a thread holding one of its parts) */
     void *arg;
     _Atomic uint64_t claim;
-    atomic_uint pub;     /* the generation helpers wait for; UINT32_MAX: stop */
-    atomic_uint done;    /* parts of the current region finished */
+    atomic_uint done;     /* parts of the current region finished */
+    atomic_bool waiting;  /* the caller sleeps until the last part is done */
+    alignas(64) atomic_uint pub; /* the generation helpers wait for (UINT32_MAX: stop), on a line
+                                  * of its own, away from the claims */
     atomic_uint sleepers;
     pthread_t tid[SD_PAR_MAXT];
     pthread_mutex_t mu;
-    pthread_cond_t cv;
+    pthread_cond_t cv, cv_done;
 } pool;
 
 static _Thread_local pool *cur_pool;
@@ -86,7 +90,8 @@ static inline void cpu_relax(void)
 #endif
 }
 
-/* Runs parts of generation g while it is current and has parts left. */
+/* Runs parts of generation g while it is current and has parts left; the thread that finishes
+ * the last part wakes the caller if it sleeps. */
 static void take_gen(pool *q, uint32_t g)
 {
     uint64_t c = atomic_load_explicit(&q->claim, memory_order_acquire);
@@ -97,7 +102,11 @@ static void take_gen(pool *q, uint32_t g)
         if (atomic_compare_exchange_weak_explicit(&q->claim, &c, c + 1, memory_order_acquire,
                                                   memory_order_acquire)) {
             q->fn(q->arg, next, n);
-            atomic_fetch_add_explicit(&q->done, 1, memory_order_release);
+            if (atomic_fetch_add(&q->done, 1) + 1 == n && atomic_load(&q->waiting)) {
+                pthread_mutex_lock(&q->mu);
+                pthread_cond_signal(&q->cv_done);
+                pthread_mutex_unlock(&q->mu);
+            }
             c = atomic_load_explicit(&q->claim, memory_order_acquire);
         }
     }
@@ -150,12 +159,22 @@ void sdi_pool_begin(int threads)
         return;
     pthread_mutex_init(&q->mu, NULL);
     pthread_cond_init(&q->cv, NULL);
+    pthread_cond_init(&q->cv_done, NULL);
     q->depth = 1;
+    q->want = (uint32_t)(threads < SD_PAR_MAXT ? threads : SD_PAR_MAXT) - 1;
     par_min = SD_PAR_MIN_POOL;
-    uint32_t want = (uint32_t)(threads < SD_PAR_MAXT ? threads : SD_PAR_MAXT) - 1;
-    while (q->nhelpers < want && pthread_create(&q->tid[q->nhelpers], NULL, helper, q) == 0)
-        q->nhelpers++;
     cur_pool = q;
+}
+
+/* The helpers, when a region first has parts to share (a small complex starts none). If none
+ * can be started, regions are cut as outside a bracket again. */
+static void start_helpers(pool *q)
+{
+    q->started = true;
+    while (q->nhelpers < q->want && pthread_create(&q->tid[q->nhelpers], NULL, helper, q) == 0)
+        q->nhelpers++;
+    if (!q->nhelpers)
+        par_min = SD_PAR_MIN;
 }
 
 void sdi_pool_end(void)
@@ -167,13 +186,15 @@ void sdi_pool_end(void)
     for (uint32_t i = 0; i < q->nhelpers; i++)
         pthread_join(q->tid[i], NULL);
     pthread_cond_destroy(&q->cv);
+    pthread_cond_destroy(&q->cv_done);
     pthread_mutex_destroy(&q->mu);
     free(q);
     cur_pool = NULL;
     par_min = SD_PAR_MIN;
 }
 
-/* A region run by the pool's helpers and the caller. */
+/* A region run by the pool's helpers and the caller, who spins a while for the parts still
+ * being run, then sleeps until the last is done. */
 static void pool_region(pool *q, uint32_t nparts, sd_part_fn fn, void *arg)
 {
     q->running = true;
@@ -186,11 +207,16 @@ static void pool_region(pool *q, uint32_t nparts, sd_part_fn fn, void *arg)
     atomic_store_explicit(&q->claim, (uint64_t)g << 32 | (uint64_t)nparts << 16, memory_order_release);
     publish(q, g);
     take_gen(q, g);
-    for (int i = 0; atomic_load_explicit(&q->done, memory_order_acquire) < nparts; i++)
-        if (i < SPIN_ROUNDS)
-            cpu_relax();
-        else
-            sched_yield();
+    for (int i = 0; i < SPIN_ROUNDS && atomic_load_explicit(&q->done, memory_order_acquire) < nparts; i++)
+        cpu_relax();
+    if (atomic_load_explicit(&q->done, memory_order_acquire) < nparts) {
+        atomic_store(&q->waiting, true);
+        pthread_mutex_lock(&q->mu);
+        while (atomic_load(&q->done) < nparts)
+            pthread_cond_wait(&q->cv_done, &q->mu);
+        pthread_mutex_unlock(&q->mu);
+        atomic_store(&q->waiting, false);
+    }
     q->running = false;
 }
 
@@ -202,6 +228,8 @@ static void run_region(uint32_t nthreads, uint32_t nparts, sd_part_fn fn, void *
         return;
     }
     pool *q = cur_pool;
+    if (q && !q->started && !q->running)
+        start_helpers(q);
     if (q && q->nhelpers && !q->running && nparts <= POOL_MAXPARTS) {
         pool_region(q, nparts, fn, arg);
         return;
