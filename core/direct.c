@@ -20,7 +20,9 @@
  * splits into a plain level whose rules need not be found again: every rule is Loop's, a vertex
  * point has its vertex's valence and an edge point 6, and an edge's opposite vertices are the
  * third vertices of its two faces in face order. A plain level's valences go to the next level
- * (sdi_plain) while one sd_complex_level call makes both.
+ * (sdi_plain) while one sd_complex_level call makes both, and so do the faces of its edges
+ * (split.c's numbering gives the child's from them): the passes then work by ranges of items,
+ * those whose results do not depend on the cut in more parts than threads (DECISIONS 51).
  */
 #include "internal.h"
 #include <string.h>
@@ -448,14 +450,15 @@ static bool rules_plain(const sd_topo *t, const uint8_t *vr, const uint8_t *er, 
 }
 
 /* A plain level's opposite vertices, from the faces of the level before (P, whose split this
- * level is: split.c's numbering), a quarter of this level's faces to read: parent face f with corners x and edge points m_j
- * (on its edge j, from x_j to x_j+1) has corner children 4f+j = (x_j, m_j, m_j+2) and middle
- * child (m_0, m_1, m_2). Its inside edge j, m_j+2 - m_j, lies in corner child j, then in the middle
- * one: opposite x_j, then m_j+1. The half of its edge j at x_j lies in corner child j (opposite
- * m_j+2), the half at x_j+1 in corner child j+1 (opposite m_j+1); each half has one child face in
- * each of the two parent faces of its edge, in their order (slot: those seen so far). In parts:
- * each part the inside edges of its range of faces and the halves of its range of parent edges
- * (reading every face). */
+ * level is: split.c's numbering), a quarter of this level's faces to read: parent face f with
+ * corners x and edge points m_j (on its edge j, from x_j to x_j+1) has corner children
+ * 4f+j = (x_j, m_j, m_j+2) and middle child (m_0, m_1, m_2). Its inside edge j, m_j+2 - m_j, lies
+ * in corner child j, then in the middle one: opposite x_j, then m_j+1. The half of its edge j at
+ * x_j lies in corner child j (opposite m_j+2), the half at x_j+1 in corner child j+1 (opposite
+ * m_j+1); each half has one child face in each of the two parent faces of its edge, in their
+ * order: the faces of P's edges (ef) come from the level before or are found by reading every
+ * face once (scan_ef). In parts: the inside edges by ranges of faces, the halves by ranges of
+ * P's edges. */
 typedef struct pderiv {
     const sd_topo *P;
     uint32_t (*opp)[2];
