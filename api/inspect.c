@@ -7,6 +7,7 @@
  */
 #include "handlers.h"
 #include "internal.h"
+#include "mem.h"
 #include <ctype.h>
 #include <errno.h>
 #include <math.h>
@@ -54,7 +55,7 @@ static const char *limit_method_name(int method)
 static json_t *limit_mask_json(const sd_analysis *an, const sd_limit_mask *lm, json_t **info)
 {
     *info = json_null();
-    double *w = calloc((size_t)an->size * 3, sizeof *w);
+    double *w = api_calloc((size_t)an->size * 3, sizeof *w);
     if (!w)
         return NULL;
     json_t *extra = json_array();
@@ -85,7 +86,7 @@ static json_t *limit_mask_json(const sd_analysis *an, const sd_limit_mask *lm, j
         j = NULL;
     }
     *info = j;
-    free(w);
+    api_free(w);
     return mask;
 }
 
