@@ -54,4 +54,5 @@ for L in 1 2 3; do
     echo "warm L$L  $(GLIBC_TUNABLES=$WARM build/bench --reps $REPS -j 2 $D/cubes12.txt $L)"
 done
 # what a second core can gain at most where the work is writing memory
-echo "== memory ceiling of two threads: $(build/bandwidth 128 10)"
+echo "== memory ceiling of two threads, and what a first touch costs:"
+build/bandwidth 128 10
