@@ -259,6 +259,9 @@ static void edges_part(void *arg, uint32_t part, uint32_t nparts)
  * then two points per face of its edge (enb): summed whole in place. Parts: edge points and the
  * rows of this level's edges by ranges (cut anywhere, so in more parts than threads: a thread on
  * a busier core takes fewer), vertex points by ranges reading all of P's edges. */
+/* f(..., nc) compiled for three components apart (the usual positions) and for any count. */
+#define BY_NC(nc, f, ...) ((nc) == 3 ? f(__VA_ARGS__, 3) : f(__VA_ARGS__, (nc)))
+
 static inline __attribute__((always_inline)) void
 epoints(const djob *J, uint32_t e0, uint32_t e1, int nc)
 {
@@ -296,30 +299,7 @@ static void epoints_part(void *arg, uint32_t part, uint32_t nparts)
     const djob *J = arg;
     uint64_t e0, e1;
     sdi_range(J->P->ne, part, nparts, &e0, &e1);
-    if (J->nc == 3)
-        epoints(J, (uint32_t)e0, (uint32_t)e1, 3);
-    else
-        epoints(J, (uint32_t)e0, (uint32_t)e1, J->nc);
-}
-
-static inline __attribute__((always_inline)) void
-vpoints(const djob *J, uint32_t vlo, uint32_t vhi, bool all, int nc)
-{
-    const sd_topo *P = J->P;
-    const uint32_t pnv = P->nv, pne = P->ne;
-    const uint32_t(*pev)[2] = P->ev;
-    const double *in = J->in, *wa = J->wa;
-    double *out = J->out;
-    for (uint32_t pe = 0; pe < pne; pe++) { /* vertex points, started by init_part */
-        const double *pm = in + (size_t)nc * (pnv + pe);
-        for (int k = 0; k < 2; k++) {
-            uint32_t v = pev[pe][k];
-            if (!all && (v < vlo || v >= vhi))
-                continue;
-            for (int j = 0; j < nc; j++)
-                out[(size_t)nc * v + j] += wa[v] * pm[j];
-        }
-    }
+    BY_NC(J->nc, epoints, J, (uint32_t)e0, (uint32_t)e1);
 }
 
 /* With PP known, P's vertices are PP's vertices and PP's edge points. The edges of P at the edge
@@ -357,50 +337,40 @@ static void vgather_part(void *arg, uint32_t part, uint32_t nparts)
     const djob *J = arg;
     uint64_t e0, e1;
     sdi_range(J->PP->ne, part, nparts, &e0, &e1);
-    if (J->nc == 3)
-        vgather(J, (uint32_t)e0, (uint32_t)e1, 3);
-    else
-        vgather(J, (uint32_t)e0, (uint32_t)e1, J->nc);
+    BY_NC(J->nc, vgather, J, (uint32_t)e0, (uint32_t)e1);
 }
 
-/* ... and PP's vertices' rows: their edges of P are the halves 2e + k of PP's edges e at them
- * (k: which end), in that order; by ranges of vertices, each part reading PP's edges. */
-static void vscan_part(void *arg, uint32_t part, uint32_t nparts)
+/* Vertex points' rows by scattering, in edge order, the edge points of the edges at them: P's
+ * vertices' from P's edges (edge e's own point), or, with PP known, only PP's vertices' from
+ * PP's edges (at end k of edge e, the point of P's half 2e + k: a vertex of PP is on halves
+ * only). By ranges of vertices, each part reading all of those edges, so in as many parts as
+ * threads. */
+static inline __attribute__((always_inline)) void vscatter(const djob *J, uint32_t v0, uint32_t v1,
+                                                           bool all, int nc)
 {
-    const djob *J = arg;
-    const int nc = J->nc;
-    const uint32_t pnv = J->P->nv, qne = J->PP->ne;
-    const uint32_t(*qev)[2] = J->PP->ev;
-    const double *in = J->in + (size_t)nc * pnv, *wa = J->wa;
+    const bool halves = J->PP != NULL;
+    const sd_topo *S = halves ? J->PP : J->P;
+    const uint32_t ne = S->ne;
+    const uint32_t(*ev)[2] = S->ev;
+    const double *in = J->in + (size_t)nc * J->P->nv, *wa = J->wa; /* in: P's edge points */
     double *out = J->out;
-    uint64_t v0, v1;
-    sdi_range(J->PP->nv, part, nparts, &v0, &v1);
-    for (uint32_t e = 0; e < qne; e++)
-        for (int k = 0; k < 2; k++) {
-            uint32_t v = qev[e][k];
-            if (v < v0 || v >= v1)
+    for (uint32_t e = 0; e < ne; e++)
+        for (uint32_t k = 0; k < 2; k++) {
+            uint32_t v = ev[e][k];
+            if (!all && (v < v0 || v >= v1))
                 continue;
-            const double *pm = in + (size_t)nc * (2 * e + (uint32_t)k);
+            const double *pm = in + (size_t)nc * (halves ? 2 * e + k : e);
             for (int j = 0; j < nc; j++)
                 out[(size_t)nc * v + j] += wa[v] * pm[j];
         }
 }
 
-/* Vertex points by ranges of vertices, each part reading all of P's edges (in their order: the
- * order of the rows' terms), so in as many parts as threads. */
-static void vpoints_part(void *arg, uint32_t part, uint32_t nparts)
+static void vscatter_part(void *arg, uint32_t part, uint32_t nparts)
 {
     const djob *J = arg;
-    if (nparts == 1) {
-        if (J->nc == 3)
-            vpoints(J, 0, 0, true, 3);
-        else
-            vpoints(J, 0, 0, true, J->nc);
-        return;
-    }
     uint64_t v0, v1;
-    sdi_range(J->P->nv, part, nparts, &v0, &v1);
-    vpoints(J, (uint32_t)v0, (uint32_t)v1, false, J->nc);
+    sdi_range((J->PP ? J->PP : J->P)->nv, part, nparts, &v0, &v1);
+    BY_NC(J->nc, vscatter, J, (uint32_t)v0, (uint32_t)v1, nparts == 1);
 }
 
 /* The rows of this level's edges: ends and opposite vertices. */
@@ -705,12 +675,9 @@ sd_result sdi_direct_apply(sd_complex *c, sd_level *p, sd_level *lv, sdi_plain *
         sdi_par_dyn(threads, J.ninit, 4, init_part, &J);
         if (enb) { /* structured */
             sdi_par_dyn(threads, pp->t.ne, 4, epoints_part, &J);
-            if (efpp) {
+            if (efpp)
                 sdi_par_dyn(threads, J.PP->ne, 4, vgather_part, &J);
-                sdi_par(threads, J.PP->ne, vscan_part, &J);
-            } else {
-                sdi_par(threads, pp->t.ne, vpoints_part, &J);
-            }
+            sdi_par(threads, (efpp ? J.PP : J.P)->ne, vscatter_part, &J);
             sdi_par_dyn(threads, ne, 4, erows_part, &J);
         } else {
             sdi_par(threads, ne, edges_part, &J);

@@ -13,8 +13,9 @@
  * brackets them with sdi_pool_begin / sdi_pool_end, and its regions are run by helpers started
  * once for the call (at its first region with parts to share), which wait for the next region
  * by spinning a while, then sleeping on a condition variable; such a region is cut from fewer
- * items (SD_PAR_MIN_POOL). A region outside a bracket creates its helpers and joins them at its
- * end (~20-60 us a thread here). If a thread cannot be created the others take its parts. The
+ * items (SD_PAR_MIN_POOL). A region outside a bracket (or called from a part) has a pool of its
+ * own, its helpers started and joined with it (~20-60 us a thread here): one way to share parts
+ * either way. If a thread cannot be created the others take its parts. The
  * pool belongs to the calling thread (thread-local), so concurrent calls from other threads
  * (the daemon's requests) each have their own, and nothing outlives the bracket.
  */
@@ -32,26 +33,6 @@ uint32_t sdi_par_parts(int threads, uint64_t work)
         return 1;
     uint64_t n = work / (par_min / 2), t = threads < SD_PAR_MAXT ? (uint64_t)threads : SD_PAR_MAXT;
     return (uint32_t)(n < t ? n : t);
-}
-
-/* A region's parts, claimed one at a time (one atomic add per part, not per item). */
-typedef struct region {
-    sd_part_fn fn;
-    void *arg;
-    uint32_t nparts;
-    atomic_uint next;
-} region;
-
-static void take_parts(region *g)
-{
-    for (uint32_t p; (p = atomic_fetch_add_explicit(&g->next, 1, memory_order_relaxed)) < g->nparts;)
-        g->fn(g->arg, p, g->nparts);
-}
-
-static void *run_thread(void *p)
-{
-    take_parts(p);
-    return NULL;
 }
 
 /* ---- the helpers of a bracket ------------------------------------------------------------
@@ -148,39 +129,29 @@ static void publish(pool *q, uint32_t g)
     }
 }
 
-void sdi_pool_begin(int threads)
+/* A pool for up to `want` helpers (none started yet); NULL without memory. */
+static pool *pool_new(uint32_t want)
 {
-    pool *q = cur_pool;
-    if (q) {
-        q->depth++;
-        return;
-    }
-    if (threads <= 1 || !(q = calloc(1, sizeof *q)))
-        return;
+    pool *q = calloc(1, sizeof *q);
+    if (!q)
+        return NULL;
     pthread_mutex_init(&q->mu, NULL);
     pthread_cond_init(&q->cv, NULL);
     pthread_cond_init(&q->cv_done, NULL);
-    q->depth = 1;
-    q->want = (uint32_t)(threads < SD_PAR_MAXT ? threads : SD_PAR_MAXT) - 1;
-    par_min = SD_PAR_MIN_POOL;
-    cur_pool = q;
+    q->want = want < SD_PAR_MAXT ? want : SD_PAR_MAXT - 1;
+    return q;
 }
 
-/* The helpers, when a region first has parts to share (a small complex starts none). If none
- * can be started, regions are cut as outside a bracket again. */
 static void start_helpers(pool *q)
 {
     q->started = true;
     while (q->nhelpers < q->want && pthread_create(&q->tid[q->nhelpers], NULL, helper, q) == 0)
         q->nhelpers++;
-    if (!q->nhelpers)
-        par_min = SD_PAR_MIN;
 }
 
-void sdi_pool_end(void)
+static void pool_free(pool *q)
 {
-    pool *q = cur_pool;
-    if (!q || --q->depth)
+    if (!q)
         return;
     publish(q, UINT32_MAX);
     for (uint32_t i = 0; i < q->nhelpers; i++)
@@ -189,6 +160,25 @@ void sdi_pool_end(void)
     pthread_cond_destroy(&q->cv_done);
     pthread_mutex_destroy(&q->mu);
     free(q);
+}
+
+void sdi_pool_begin(int threads)
+{
+    if (cur_pool) {
+        cur_pool->depth++;
+        return;
+    }
+    if (threads <= 1 || !(cur_pool = pool_new((uint32_t)threads - 1)))
+        return;
+    cur_pool->depth = 1;
+    par_min = SD_PAR_MIN_POOL;
+}
+
+void sdi_pool_end(void)
+{
+    if (!cur_pool || --cur_pool->depth)
+        return;
+    pool_free(cur_pool);
     cur_pool = NULL;
     par_min = SD_PAR_MIN;
 }
@@ -220,29 +210,33 @@ static void pool_region(pool *q, uint32_t nparts, sd_part_fn fn, void *arg)
     q->running = false;
 }
 
-/* nthreads threads (the caller and nthreads - 1 helpers) take the nparts parts in turn. */
+/* nthreads threads (the caller and nthreads - 1 helpers) take the nparts parts in turn: the
+ * helpers of the caller's bracket, started at its first region with parts to share (if none
+ * could be, regions are cut as outside a bracket again), or else — outside a bracket, or in a
+ * region called from a part — helpers started for this region alone. Without any, the caller
+ * runs every part. */
 static void run_region(uint32_t nthreads, uint32_t nparts, sd_part_fn fn, void *arg)
 {
     if (nparts == 1) {
         fn(arg, 0, 1);
         return;
     }
-    pool *q = cur_pool;
-    if (q && !q->started && !q->running)
+    pool *q = cur_pool, *own = NULL;
+    if (q && !q->running && !q->started) {
         start_helpers(q);
-    if (q && q->nhelpers && !q->running && nparts <= POOL_MAXPARTS) {
-        pool_region(q, nparts, fn, arg);
-        return;
+        if (!q->nhelpers)
+            par_min = SD_PAR_MIN;
     }
-    region g = {fn, arg, nparts, 0};
-    pthread_t tid[SD_PAR_MAXT];
-    bool started[SD_PAR_MAXT] = {false};
-    for (uint32_t i = 1; i < nthreads; i++)
-        started[i] = pthread_create(&tid[i], NULL, run_thread, &g) == 0;
-    take_parts(&g);
-    for (uint32_t i = 1; i < nthreads; i++)
-        if (started[i])
-            pthread_join(tid[i], NULL);
+    if (!q || q->running || !q->nhelpers) {
+        if ((q = own = pool_new(nthreads - 1)))
+            start_helpers(q);
+    }
+    if (q && q->nhelpers)
+        pool_region(q, nparts, fn, arg);
+    else
+        for (uint32_t p = 0; p < nparts; p++)
+            fn(arg, p, nparts);
+    pool_free(own);
 }
 
 void sdi_par(int threads, uint64_t work, sd_part_fn fn, void *arg)
@@ -254,6 +248,8 @@ void sdi_par(int threads, uint64_t work, sd_part_fn fn, void *arg)
 void sdi_par_dyn(int threads, uint64_t work, uint32_t per_thread, sd_part_fn fn, void *arg)
 {
     uint32_t n = sdi_par_parts(threads, work);
+    if (per_thread > POOL_MAXPARTS / SD_PAR_MAXT) /* (such a region's cut does not matter) */
+        per_thread = POOL_MAXPARTS / SD_PAR_MAXT;
     run_region(n, n == 1 ? 1 : n * per_thread, fn, arg);
 }
 
