@@ -24,6 +24,7 @@
 #include <stdatomic.h>
 #include <stdalign.h>
 #include <stdlib.h>
+#include <string.h>
 
 static _Thread_local uint32_t par_min = SD_PAR_MIN;
 
@@ -132,9 +133,12 @@ static void publish(pool *q, uint32_t g)
 /* A pool for up to `want` helpers (none started yet); NULL without memory. */
 static pool *pool_new(uint32_t want)
 {
-    pool *q = calloc(1, sizeof *q);
+    /* (aligned as its type asks: pub has a cache line of its own) */
+    const size_t a = alignof(pool), n = (sizeof(pool) + a - 1) / a * a;
+    pool *q = aligned_alloc(a, n);
     if (!q)
         return NULL;
+    memset(q, 0, sizeof *q);
     pthread_mutex_init(&q->mu, NULL);
     pthread_cond_init(&q->cv, NULL);
     pthread_cond_init(&q->cv_done, NULL);
