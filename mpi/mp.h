@@ -126,7 +126,7 @@ int mp_refine(const mp_piece *p, uint64_t max_bytes, int quiet, const char *tag,
 void mp_result_free(mp_result *r);
 
 /* vtu.c. The rank's owned cells as one VTU piece (appended raw binary): the points they use with
- * point data global_id, owner and the attributes, cell data kind, cell_id (the one-process index
+ * point data global_id, owner, rule and the attributes, cell data kind, cell_id (the one-process index
  * within its kind) and control_cell (the input simplex). An octahedron is written as its 4
  * tetrahedra around the major diagonal, as `subdivd refine` writes VTU. 0 or -1 + err. */
 int mp_write_piece(const mp_piece *p, const mp_result *r, const char *path, uint64_t *bytes,

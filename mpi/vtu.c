@@ -4,8 +4,9 @@
  * its bytes), the cell layout of api/out_vtk.c: vertices (1), lines (3), triangles (5),
  * tetrahedra (10), then each octahedron as its 4 tetrahedra around the major diagonal
  * (sd_octa_tet). Point data: global_id (Int64, the point's index in the one-process level),
- * owner (Int32, the lowest rank among the pieces whose cells use the point) and every attribute
- * (Float64). Cell data: kind (UInt8, sd_cell_kind), cell_id (Int64, the cell's index among the
+ * owner (Int32, the lowest rank among the pieces whose cells use the point), rule (UInt8, the
+ * point's sd_rule at level L, as `subdivd refine`'s VTU has it; "rule_2", ... if an attribute is
+ * called "rule") and every attribute (Float64). Cell data: kind (UInt8, sd_cell_kind), cell_id (Int64, the cell's index among the
  * level's cells of its kind in the one-process level; an octahedron's 4 tetrahedra share it) and
  * control_cell (Int64, the posted simplex it descends from). A file is written as PATH.part and
  * renamed at the end.
@@ -120,13 +121,22 @@ static int vtu_file(const char *path, uint64_t npts, const double *xyz, const va
 static int vtk_cells(int kind) { return kind == SD_CELL_OCTA ? 4 : 1; }
 static int vtk_size(int kind) { return kind == SD_CELL_OCTA ? 4 : sd_cell_size((sd_cell_kind)kind); }
 
-/* The point data arrays: global_id, owner, the attributes (by name). */
+/* The point data arrays: global_id, owner, rule, the attributes (by name). The rule array is
+ * named as api/out_vtk.c names it: "rule", or "rule_2", ... if an attribute is called that. */
 static int point_arrays(const mp_piece *p, varr *pd, const int64_t *gid, const int32_t *own,
-                        double *const *attr)
+                        const uint8_t *rule, double *const *attr)
 {
     int n = 0;
     pd[n++] = (varr){"global_id", "Int64", 1, 8, gid};
-    pd[n] = (varr){"owner", "Int32", 1, 4, own};
+    pd[n++] = (varr){"owner", "Int32", 1, 4, own};
+    pd[n] = (varr){"rule", "UInt8", 1, 1, rule};
+    for (int suffix = 2, clash = 1; clash; suffix++) {
+        clash = 0;
+        for (int a = 0; a < p->nattrs && !clash; a++)
+            clash = !strcmp(p->attrs[a].name, pd[n].name);
+        if (clash)
+            snprintf(pd[n].name, sizeof pd[n].name, "rule_%d", suffix);
+    }
     n++;
     for (int a = 0; a < p->nattrs; a++) {
         pd[n] = (varr){"", "Float64", p->attrs[a].ncomp, 8, attr ? attr[a] : NULL};
@@ -165,11 +175,12 @@ int mp_write_piece(const mp_piece *p, const mp_result *r, const char *path, uint
     double *xyz = malloc((size_t)npts * 24 + 8);
     int64_t *gid = malloc((size_t)npts * 8 + 8);
     int32_t *own = malloc((size_t)npts * 4 + 8);
+    uint8_t *rule = malloc((size_t)npts + 8);
     int64_t *conn = malloc((size_t)nconn * 8 + 8), *offs = malloc((size_t)ncells * 8 + 8);
     int64_t *cid = malloc((size_t)ncells * 8 + 8), *ctrl = malloc((size_t)ncells * 8 + 8);
     uint8_t *types = malloc((size_t)ncells + 8), *kinds = malloc((size_t)ncells + 8);
     double *attr[API_MAX_ATTRIBUTES] = {0};
-    int ok = xyz && gid && own && conn && offs && cid && ctrl && types && kinds;
+    int ok = xyz && gid && own && rule && conn && offs && cid && ctrl && types && kinds;
     for (int a = 0; a < na && ok; a++)
         ok = (attr[a] = malloc((size_t)npts * (size_t)p->attrs[a].ncomp * 8 + 8)) != NULL;
     int rc = -1;
@@ -185,6 +196,7 @@ int mp_write_piece(const mp_piece *p, const mp_result *r, const char *path, uint
             memcpy(xyz + 3 * (size_t)s, pos + 3 * (size_t)v, 24);
             gid[s] = (int64_t)mp_vgid(r, v);
             own[s] = r->vowner[v];
+            rule[s] = (uint8_t)sd_level_vertex_rule(r->lv, v);
             for (int a = 0; a < na; a++) {
                 int nc;
                 const double *d = sd_level_channel(r->lv, r->m->channel[a], &nc);
@@ -215,16 +227,17 @@ int mp_write_piece(const mp_piece *p, const mp_result *r, const char *path, uint
                 c++;
             }
         }
-    varr pd[2 + API_MAX_ATTRIBUTES], cd[3] = {{"kind", "UInt8", 1, 1, kinds},
+    varr pd[3 + API_MAX_ATTRIBUTES], cd[3] = {{"kind", "UInt8", 1, 1, kinds},
                                                  {"cell_id", "Int64", 1, 8, cid},
                                                  {"control_cell", "Int64", 1, 8, ctrl}};
-    int npd = point_arrays(p, pd, gid, own, attr);
+    int npd = point_arrays(p, pd, gid, own, rule, attr);
     rc = vtu_file(path, npts, xyz, pd, npd, ncells, conn, offs, types, cd, 3, bytes, err, errlen);
 out:
     free(slot);
     free(xyz);
     free(gid);
     free(own);
+    free(rule);
     free(conn);
     free(offs);
     free(cid);
@@ -249,8 +262,8 @@ int mp_write_pvtu(const char *path, const mp_piece *p, int nparts, char **piece_
     fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"PUnstructuredGrid\" version=\"1.0\" "
                "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n"
                "<PUnstructuredGrid GhostLevel=\"0\">\n<PPointData>\n");
-    varr pd[2 + API_MAX_ATTRIBUTES];
-    int npd = point_arrays(p, pd, NULL, NULL, NULL);
+    varr pd[3 + API_MAX_ATTRIBUTES];
+    int npd = point_arrays(p, pd, NULL, NULL, NULL, NULL);
     for (int i = 0; i < npd; i++)
         fprintf(f, "<PDataArray type=\"%s\" Name=\"%s\" NumberOfComponents=\"%d\"/>\n", pd[i].type,
                 pd[i].name, pd[i].ncomp);
@@ -303,8 +316,10 @@ void mp_merge_blob(const mp_piece *p, const mp_result *r, mp_buf *b)
     for (uint32_t v = 0; v < nv; v++)
         if (used[v] && r->vowner[v] == p->rank) {
             uint64_t gv = mp_vgid(r, v);
+            uint8_t rule = (uint8_t)sd_level_vertex_rule(r->lv, v);
             mp_buf_put(b, &gv, 8);
             mp_buf_put(b, pos + 3 * (size_t)v, 24);
+            mp_buf_put(b, &rule, 1);
             for (int a = 0; a < p->nattrs; a++) {
                 int nc;
                 const double *d = sd_level_channel(r->lv, r->m->channel[a], &nc);
@@ -353,13 +368,14 @@ int mp_merge_write(const char *path, const mp_piece *p0, const unsigned char *co
     double *xyz = malloc((size_t)npts * 24 + 8);
     int64_t *gid = malloc((size_t)npts * 8 + 8);
     int32_t *own = malloc((size_t)npts * 4 + 8);
+    uint8_t *rule = malloc((size_t)npts + 8);
     uint8_t *seen = calloc((size_t)npts + 1, 1);
     int64_t *conn = malloc((size_t)nconn * 8 + 8), *offs = malloc((size_t)ncells * 8 + 8);
     int64_t *cid = malloc((size_t)ncells * 8 + 8), *ctrl = malloc((size_t)ncells * 8 + 8);
     uint8_t *types = malloc((size_t)ncells + 8), *kinds = malloc((size_t)ncells + 8);
     uint8_t *cseen = calloc((size_t)ncells + 1, 1);
     double *attr[API_MAX_ATTRIBUTES] = {0};
-    int ok = xyz && gid && own && seen && conn && offs && cid && ctrl && types && kinds && cseen;
+    int ok = xyz && gid && own && rule && seen && conn && offs && cid && ctrl && types && kinds && cseen;
     for (int a = 0; a < na && ok; a++)
         ok = (attr[a] = malloc((size_t)npts * (size_t)p0->attrs[a].ncomp * 8 + 8)) != NULL;
     if (!ok) {
@@ -391,6 +407,7 @@ int mp_merge_write(const char *path, const mp_piece *p0, const unsigned char *co
                 goto out;
             }
             TAKE(xyz + 3 * g, 24);
+            TAKE(rule + g, 1);
             gid[g] = (int64_t)g;
             own[g] = r;
             for (int a = 0; a < na; a++) {
@@ -459,10 +476,10 @@ int mp_merge_write(const char *path, const mp_piece *p0, const unsigned char *co
                 offs[first[k] + i * (uint64_t)vtk_cells(k) + (uint64_t)q] = (int64_t)o;
             }
         }
-    varr pd[2 + API_MAX_ATTRIBUTES], cd[3] = {{"kind", "UInt8", 1, 1, kinds},
+    varr pd[3 + API_MAX_ATTRIBUTES], cd[3] = {{"kind", "UInt8", 1, 1, kinds},
                                                  {"cell_id", "Int64", 1, 8, cid},
                                                  {"control_cell", "Int64", 1, 8, ctrl}};
-    int npd = point_arrays(p0, pd, gid, own, attr);
+    int npd = point_arrays(p0, pd, gid, own, rule, attr);
     rc = vtu_file(path, npts, xyz, pd, npd, ncells, conn, offs, types, cd, 3, bytes, err, errlen);
     goto out;
 short_blob:
@@ -471,6 +488,7 @@ out:
     free(xyz);
     free(gid);
     free(own);
+    free(rule);
     free(seen);
     free(conn);
     free(offs);

@@ -271,6 +271,7 @@ def cells_of(g):
 
 
 _refs = {}
+_ref_rules = {}
 
 
 def reference(tmp_path_factory, name, level):
@@ -284,10 +285,17 @@ def reference(tmp_path_factory, name, level):
                             str(out), *extra], capture_output=True, text=True, timeout=300)
         assert r.returncode == 0, r.stderr
         g = read(out)
+        _ref_rules[key] = arr(g, "rule").copy()
         _refs[key] = (vtk_to_numpy(g.GetPoints().GetData()).copy(), cells_of(g),
                       vtk_to_numpy(g.GetCellData().GetArray("kind")).copy()
                       if g.GetCellData().GetArray("kind") is not None else None)
     return _refs[key]
+
+
+def reference_rules(tmp_path_factory, name, level):
+    """The one-process level's per-point rule ids (its VTU's "rule" array)."""
+    reference(tmp_path_factory, name, level)
+    return _ref_rules[(name, level)]
 
 
 def pieces_of(pvtu, n):
@@ -320,6 +328,9 @@ def test_pieces_equal_the_one_process_level(tmp_path, tmp_path_factory, name, nr
             assert (gid >= 0).all() and (gid < len(ref_pts)).all()
             err = np.abs(pts - ref_pts[gid]).max() if len(gid) else 0.0
             assert err <= 1e-12, f"{name} level {level} rank {k}: max error {err}"
+            if len(gid):   # every written point follows the one-process level's rule
+                ref_rule = reference_rules(tmp_path_factory, name, level)
+                assert (arr(g, "rule") == ref_rule[gid]).all(), f"{name} level {level} rank {k}"
             for x in gid.tolist():
                 users.setdefault(x, set()).add(k)
             if g.GetNumberOfCells():
@@ -425,6 +436,7 @@ def test_merged_vtu_is_the_one_process_vtu(tmp_path, tmp_path_factory, name):
     assert pts.shape == ref_pts.shape
     assert np.abs(pts - ref_pts).max() <= 1e-12
     assert (arr(g, "global_id") == np.arange(len(ref_pts))).all()
+    assert (arr(g, "rule") == reference_rules(tmp_path_factory, name, 2)).all()
     assert cells_of(g) == ref_cells
     if ref_kind is not None:
         assert (arr(g, "kind", cell=True) == ref_kind).all()
@@ -450,6 +462,29 @@ def test_attributes_match_one_process(tmp_path):
         for a in ("height", "uv"):
             want = vtk_to_numpy(g0.GetPointData().GetArray(a))[gid]
             assert np.abs(arr(g, a) - want).max() <= 1e-12
+
+
+def test_an_attribute_called_rule_moves_the_rule_array(tmp_path):
+    """The pieces name the rule array as subdivd refine's VTU does: "rule_2" when an attribute
+    is called "rule" (docs/OUTPUTS.md), the attribute keeping its name."""
+    body = mixed()
+    body["attributes"] = {"rule": body["attributes"]["height"]}
+    mesh = tmp_path / "m.json"
+    mesh.write_text(json.dumps(body))
+    ref = tmp_path / "ref.vtu"
+    r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", "1", "-o", str(ref),
+                        "--attributes", "rule"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    g0 = read(ref)
+    out = tmp_path / "o.pvtu"
+    r = mpirun(2, "refine", mesh, "--level", 1, "-o", out)
+    assert r.returncode == 0, r.stderr
+    assert '<PDataArray type="UInt8" Name="rule_2"' in out.read_text()
+    for g in pieces_of(out, 2):
+        gid = arr(g, "global_id")
+        assert (arr(g, "rule_2") == vtk_to_numpy(g0.GetPointData().GetArray("rule_2"))[gid]).all()
+        want = vtk_to_numpy(g0.GetPointData().GetArray("rule"))[gid]
+        assert np.abs(arr(g, "rule") - want).max() <= 1e-12
 
 
 @pytest.mark.parametrize("halo,level,nranks", [(0, 2, 2), (1, 3, 3)])
