@@ -78,16 +78,18 @@ static int parse_simplices(json_t *v, const api_packs *packs, const api_limits *
     char ptr[96];
     size_t total = 0;
     api_row s;
+    /* (the pointers of the errors are written only when one is reported) */
     for (size_t i = 0; api_rows_next(&rows, &s); i++) { /* shapes first: the index array is sized exactly */
-        api_ptr_index(ptr, sizeof ptr, "/simplices", i);
-        if (!api_row_is_array(&s))
-            return api_fail_at(p, 400, "wrong-type", ptr,
-                               "a simplex is an array of 1 to 4 vertex indices");
-        size_t k = api_row_size(&s);
-        if (k < 1 || k > 4)
+        size_t k = api_row_is_array(&s) ? api_row_size(&s) : 0;
+        if (k < 1 || k > 4) {
+            api_ptr_index(ptr, sizeof ptr, "/simplices", i);
+            if (!api_row_is_array(&s))
+                return api_fail_at(p, 400, "wrong-type", ptr,
+                                   "a simplex is an array of 1 to 4 vertex indices");
             return api_fail_at(p, 422, "invalid-complex", ptr,
                                "simplex %zu has %zu vertices; a simplex has 1 to 4 (point, edge, "
                                "triangle, tetrahedron)", i, k);
+        }
         total += k;
     }
     size_t bytes = (n ? n : 1) + (total ? total : 1) * sizeof *in->idx;
@@ -104,16 +106,18 @@ static int parse_simplices(json_t *v, const api_packs *packs, const api_limits *
         size_t k = api_row_size(&s);
         in->size[i] = (uint8_t)k;
         for (size_t j = 0; j < k; j++) {
-            char at[96];
-            api_ptr_index(ptr, sizeof ptr, "/simplices", i);
-            api_ptr_index(at, sizeof at, ptr, j);
             api_num e = api_row_get(&s, j);
-            if (!api_num_is_integer(e))
-                return api_fail_at(p, 400, "wrong-type", at, "a vertex index must be an integer");
-            long long x = api_num_integer(e);
-            if (x < 0 || x >= (long long)in->nv)
+            long long x = api_num_is_integer(e) ? api_num_integer(e) : -1;
+            if (x < 0 || x >= (long long)in->nv) {
+                char at[96];
+                api_ptr_index(ptr, sizeof ptr, "/simplices", i);
+                api_ptr_index(at, sizeof at, ptr, j);
+                if (!api_num_is_integer(e))
+                    return api_fail_at(p, 400, "wrong-type", at,
+                                       "a vertex index must be an integer");
                 return api_fail_at(p, 422, "invalid-complex", at,
                                    "index %lld out of range (%u vertices)", x, in->nv);
+            }
             in->idx[off++] = (uint32_t)x;
         }
     }

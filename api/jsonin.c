@@ -198,7 +198,23 @@ int api_get_number(json_t *v, const char *ptr, double maxabs, double *out, api_p
 
 void api_ptr_index(char *dst, size_t cap, const char *base, size_t i)
 {
-    snprintf(dst, cap, "%s/%zu", base, i);
+    /* what snprintf(dst, cap, "%s/%zu", base, i) writes, without a formatted print: the readers
+     * of big arrays name every element they look at */
+    if (!cap)
+        return;
+    char digits[24];
+    int nd = 0;
+    do
+        digits[nd++] = (char)('0' + i % 10);
+    while ((i /= 10) != 0);
+    size_t n = 0;
+    for (; *base && n + 1 < cap; base++)
+        dst[n++] = *base;
+    if (n + 1 < cap)
+        dst[n++] = '/';
+    while (nd && n + 1 < cap)
+        dst[n++] = digits[--nd];
+    dst[n] = 0;
 }
 
 void api_ptr_key(char *dst, size_t cap, const char *base, const char *key)

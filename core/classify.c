@@ -458,7 +458,20 @@ static void pair_key(const sd_topo *t, uint32_t c, int p, uint32_t k[4])
  *
  * `fixed` (NULL, or per tetrahedron a pair in stored order, -1 where none): those pairs are kept
  * (a refinement keeps its untouched tetrahedra's), and the search starts from their neighbours,
- * so the new choices are made against them (001 Alg. 2 seeded with the visited set). */
+ * so the new choices are made against them (001 Alg. 2 seeded with the visited set).
+ *
+ * The start of a component. Where the choice is proper, every tetrahedron around an edge
+ * interior to the solids crosses its faces there or none does, so a level-1 point at the
+ * midpoint of an edge with n tetrahedra around has valence 2 + 2n + (n or 0), and the first
+ * tetrahedron's pair decides, face by face, the whole component's. The regular value is 14
+ * (001 Sec. 3: 12 edges and 2 major diagonals): an edge with 4 tetrahedra around wants the
+ * diagonals, one with 6 does not; on the box spline's own lattice (cubes of 6 tetrahedra
+ * around a main diagonal) only one of the three starts gives every such point 14 — the mask of
+ * 001 eq. 3.2 — and the start of smallest key may give 10 and 20. So a component without given
+ * pairs is searched from each of its first tetrahedron's three pairs, and the search kept is the
+ * one with the fewest conflicts, then the smallest sum over its interior edges of
+ * |valence - 14| at their midpoints, then the start pair of smallest key (which is the plain
+ * search's choice: meshes where all three tie, e.g. without interior edges, keep it). */
 typedef struct diag_search {
     sd_topo *t;
     const sdi_rel *ft;
@@ -466,6 +479,9 @@ typedef struct diag_search {
     uint32_t (*order)[5];
     uint8_t *state;           /* 0 new, 1 queued, 2 visited */
     uint32_t head, tail;
+    uint32_t force_tet;       /* takes force_pair whatever its conflicts (UINT32_MAX: none) */
+    int force_pair;
+    uint64_t conflicts;       /* improper shared faces met by the search */
 } diag_search;
 
 /* Queue tetrahedron c's new face neighbours in ascending key order. */
@@ -522,9 +538,84 @@ static void search(diag_search *S)
                 memcpy(bkey, key, sizeof key);
             }
         }
+        if (c == S->force_tet)
+            best = S->force_pair;
+        S->conflicts += (uint64_t)conflicts[best];
         t->tet_d[c] = (uint8_t)best;
         S->state[c] = 2;
     }
+}
+
+/* Per edge, the number of tetrahedra around it (at most 255) where the edge is interior to the
+ * solids — every face of a tetrahedron around it is shared by exactly two — else 0. NULL for
+ * lack of memory. */
+static uint8_t *interior_rings(sd_mem *m, const sd_topo *t, const sdi_rel *ft, bool *any)
+{
+    uint8_t *ring = sdi_calloc(m, (size_t)t->ne + 1, 1);
+    uint8_t *open = sdi_calloc(m, (size_t)t->ne + 1, 1);
+    if (!ring || !open) {
+        sdi_free(m, ring);
+        sdi_free(m, open);
+        return NULL;
+    }
+    for (uint32_t c = 0; c < t->ntet; c++)
+        for (int k = 0; k < 6; k++) {
+            uint32_t e = t->tet_e[c][k];
+            ring[e] += ring[e] < 255;
+        }
+    for (uint32_t c = 0; c < t->ntet; c++)
+        for (int i = 0; i < 4; i++) {
+            uint32_t f = t->tet_f[c][i];
+            if (ft->off[f + 1] - ft->off[f] == 2)
+                continue;
+            for (int k = 0; k < 6; k++) /* face i holds the edges without vertex i */
+                if (SDI_TET_E[k][0] != i && SDI_TET_E[k][1] != i)
+                    open[t->tet_e[c][k]] = 1;
+        }
+    *any = false;
+    for (uint32_t e = 0; e < t->ne; e++) {
+        if (open[e])
+            ring[e] = 0;
+        *any |= ring[e] != 0;
+    }
+    sdi_free(m, open);
+    return ring;
+}
+
+/* Sum over the interior edges of the tetrahedra queue[first, last) of |valence - 14| of their
+ * midpoints at level 1 with the pairs chosen (2 + 2 n + the pairs that hold the edge). `held`
+ * (zero on entry and on return) and `seen` (stamps, `stamp` unused so far) are per edge. */
+static uint64_t valence_deviation(const diag_search *S, uint32_t first, uint32_t last,
+                                  const uint8_t *ring, uint16_t *held, uint32_t *seen,
+                                  uint32_t stamp)
+{
+    const sd_topo *t = S->t;
+    for (uint32_t q = first; q < last; q++) {
+        uint32_t c = S->queue[q];
+        int p = t->tet_d[c];
+        held[t->tet_e[c][p]]++;
+        held[t->tet_e[c][5 - p]]++;
+    }
+    uint64_t dev = 0;
+    for (uint32_t q = first; q < last; q++) {
+        uint32_t c = S->queue[q];
+        for (int k = 0; k < 6; k++) {
+            uint32_t e = t->tet_e[c][k];
+            if (seen[e] == stamp)
+                continue;
+            seen[e] = stamp;
+            if (ring[e]) {
+                int64_t v = 2 + 2 * (int64_t)ring[e] + held[e] - 14;
+                dev += (uint64_t)(v < 0 ? -v : v);
+            }
+        }
+    }
+    for (uint32_t q = first; q < last; q++) {
+        uint32_t c = S->queue[q];
+        for (int k = 0; k < 6; k++)
+            held[t->tet_e[c][k]] = 0;
+    }
+    return dev;
 }
 
 sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, const int8_t *fixed,
@@ -533,7 +624,7 @@ sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, const int8_t 
     const uint32_t n = t->ntet;
     if (n == 0)
         return SD_OK;
-    diag_search S = {.t = t};
+    diag_search S = {.t = t, .force_tet = UINT32_MAX};
     S.queue = sdi_alloc(m, (size_t)n * sizeof *S.queue);
     S.rank = sdi_alloc(m, (size_t)n * sizeof *S.rank);
     S.order = sdi_alloc(m, (size_t)n * sizeof *S.order); /* (key, tet) by key */
@@ -567,14 +658,78 @@ sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, const int8_t 
         }
         search(&S);
     }
+    bool any = false;
+    uint8_t *ring = interior_rings(m, t, S.ft, &any), *kept = NULL;
+    uint16_t *held = NULL;
+    uint32_t *seen = NULL, stamp = 0;
+    if (ring && any) {
+        kept = sdi_alloc(m, n);
+        held = sdi_calloc(m, (size_t)t->ne + 1, sizeof *held);
+        seen = sdi_calloc(m, (size_t)t->ne + 1, sizeof *seen);
+    }
+    if (!ring || (any && (!kept || !held || !seen))) {
+        sdi_free(m, ring);
+        sdi_free(m, kept);
+        sdi_free(m, held);
+        sdi_free(m, seen);
+        sdi_free(m, S.queue);
+        sdi_free(m, S.rank);
+        sdi_free(m, S.order);
+        sdi_free(m, S.state);
+        return sdi_fail_nomem(err, m);
+    }
     for (uint32_t r0 = 0; r0 < n; r0++) {
         uint32_t start = S.order[r0][4];
         if (S.state[start])
             continue;
-        S.queue[S.tail++] = start;
-        S.state[start] = 1;
-        search(&S);
+        uint32_t first = S.tail;
+        if (!any) { /* no interior edge anywhere: the plain search */
+            S.queue[S.tail++] = start;
+            S.state[start] = 1;
+            search(&S);
+            continue;
+        }
+        int pairs[3] = {0, 1, 2}; /* the start's pairs by key */
+        uint32_t ka[4], kb[4];
+        for (int i = 1; i < 3; i++)
+            for (int j = i; j > 0; j--) {
+                pair_key(t, start, pairs[j - 1], ka);
+                pair_key(t, start, pairs[j], kb);
+                if (cmp_u32x4(kb, ka) >= 0)
+                    break;
+                int x = pairs[j];
+                pairs[j] = pairs[j - 1];
+                pairs[j - 1] = x;
+            }
+        uint64_t best_conf = UINT64_MAX, best_dev = UINT64_MAX;
+        uint32_t last = first;
+        for (int run = 0; run < 3; run++) {
+            for (uint32_t q = first; q < last; q++) /* the previous run's component, unvisited */
+                S.state[S.queue[q]] = 0;
+            S.head = S.tail = first;
+            S.queue[S.tail++] = start;
+            S.state[start] = 1;
+            S.force_tet = start;
+            S.force_pair = pairs[run];
+            S.conflicts = 0;
+            search(&S);
+            last = S.tail;
+            uint64_t dev = valence_deviation(&S, first, last, ring, held, seen, ++stamp);
+            if (S.conflicts < best_conf || (S.conflicts == best_conf && dev < best_dev)) {
+                best_conf = S.conflicts;
+                best_dev = dev;
+                for (uint32_t q = first; q < last; q++)
+                    kept[q] = t->tet_d[S.queue[q]];
+            }
+        }
+        S.force_tet = UINT32_MAX;
+        for (uint32_t q = first; q < last; q++)
+            t->tet_d[S.queue[q]] = kept[q];
     }
+    sdi_free(m, ring);
+    sdi_free(m, kept);
+    sdi_free(m, held);
+    sdi_free(m, seen);
     sdi_free(m, S.queue);
     sdi_free(m, S.rank);
     sdi_free(m, S.order);

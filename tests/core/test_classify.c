@@ -455,6 +455,55 @@ TEST(diagonal_choice_ignores_input_order)
     mesh_free(&m);
 }
 
+/* The box spline's own lattice (cubes of 6 tetrahedra around a main diagonal, 001 Sec. 3):
+ * with the default diagonals every interior vertex of levels 1 and 2 has the regular valence 14
+ * (001 Sec. 3: 12 edges and 2 major diagonals), and the lattice is reproduced — the regular
+ * masks are symmetric, so away from the boundary (whose rules move the boundary points from
+ * level 1 on) the points of level L sit exactly on the lattice of spacing 2^-L (at level 1:
+ * vertex points at their vertex, edge points at the midpoints). The start of smallest key alone
+ * gave valences 10 and 20 here, and points off the lattice. */
+TEST(diagonal_choice_is_regular_on_the_box_spline_lattice)
+{
+    mesh m = {0};
+    shape_cube_tets(&m, 3);
+    sd_complex *c = mesh_complex(&m, NULL, NULL);
+    CHECK(c);
+    for (int L = 1; c && L <= 2; L++) {
+        sd_error e = {0};
+        const sd_level *lv = sd_complex_level(c, L, &e);
+        CHECK(lv);
+        if (!lv)
+            break;
+        const double *x = sd_level_channel(lv, 0, NULL);
+        uint32_t nv = sd_level_num_vertices(lv), interior = 0, regular = 0, inner = 0;
+        uint32_t on_lattice = 0;
+        for (uint32_t v = 0; v < nv; v++) {
+            sd_class k = vclass(c, L, v);
+            if (k.boundary || k.rule != SD_RULE_SOLID)
+                continue;
+            interior++;
+            regular += k.valence == 14;
+            int far = 1, ok = 1; /* far: in the middle cube [1, 2]^3 */
+            for (int d = 0; d < 3; d++) {
+                double q = x[3 * (size_t)v + d], s = q * (double)(1 << L);
+                far &= q > 1 - 1e-3 && q < 2 + 1e-3;
+                ok &= fabs(s - nearbyint(s)) < 1e-12;
+            }
+            inner += far;
+            on_lattice += far && ok;
+        }
+        /* (3 2^L - 1)^3 interior vertices (125, 1331), (2^L + 1)^3 in the middle cube (27, 125) */
+        uint32_t want = (uint32_t)((3 << L) - 1) * (uint32_t)((3 << L) - 1) * (uint32_t)((3 << L) - 1);
+        uint32_t mid = (uint32_t)((1 << L) + 1) * (uint32_t)((1 << L) + 1) * (uint32_t)((1 << L) + 1);
+        CHECK(interior == want);
+        CHECK(regular == interior);
+        CHECK(inner == mid);
+        CHECK(on_lattice == inner);
+    }
+    sd_complex_free(c);
+    mesh_free(&m);
+}
+
 /* Classes computed elsewhere (sd_options.classes, what subdivd-mpi ships its pieces): the codes
  * of a complex given back to the same complex change nothing; given to a piece that lacks part of
  * a vertex's star, the vertex takes the whole complex's class and rule; an edge that is not in

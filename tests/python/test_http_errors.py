@@ -67,6 +67,13 @@ CASES = [
     # --- semantic mesh errors ---
     ("index-out-of-range", "PUT", "/complex", cx(simplices=[[0, 1, 2, 17]]), None, 422, "/simplices/0/3"),
     ("index-negative", "PUT", "/complex", cx(simplices=[[0, 1, -2, 3]]), None, 422, "/simplices/0/2"),
+    ("index-late", "PUT", "/complex", cx(simplices=[[0, 1, 2, 3]] * 1203 + [[0, 1, 2, 4]]), None,
+     422, "/simplices/1203/3"),
+    ("simplex-size-late", "PUT", "/complex", cx(simplices=[[0, 1, 2, 3]] * 120 + [[0, 1, 2, 3, 0]]),
+     None, 422, "/simplices/120"),
+    ("coord-late", "PUT", "/complex", cx(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]] * 26
+                                          + [[0, 0, "z"]], simplices=[[0, 1, 2, 3]]), None, 400,
+     "/vertices/104/2"),
     ("index-2-32", "PUT", "/complex", cx(simplices=[[0, 1, 2, 2 ** 32]]), None, 422, "/simplices/0/3"),
     ("repeated-vertex", "PUT", "/complex", cx(simplices=[[0, 1, 1, 3]]), None, 422, "/simplices/0/2"),
     ("duplicate-simplex", "PUT", "/complex", cx(simplices=[[0, 1, 2, 3], [3, 2, 1, 0]]), None, 422, "/simplices/1"),
