@@ -166,7 +166,13 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
     sd_analysis an, fa = {0};
     sd_limit_mask lm = {0};
     sd_error e = {0}, fe = {0};
+    /* the eigen-decompositions are compute like a level's: in a slot (the core refuses blocks
+     * over SD_ANALYSIS_MAX_POINTS before making them, which bounds the time held) */
     pthread_mutex_lock(&m->lock);
+    if (slot && slot->take(slot->ud, 1, p)) {
+        pthread_mutex_unlock(&m->lock);
+        return NULL;
+    }
     sd_result r = b < 0 ? sd_analyze_vertex(m->c, (uint32_t)a, &an, &e)
                         : sd_analyze_edge(m->c, (uint32_t)a, (uint32_t)b, &an, &e);
     if (!r && with_limit && (r = sd_limit_mask_of(m->c, an.level, an.points[0], &lm, &e)))
@@ -175,16 +181,19 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
     if (!r && with_full) {
         fr = b < 0 ? sd_analyze_full_vertex(m->c, (uint32_t)a, &fa, &fe)
                    : sd_analyze_full_edge(m->c, (uint32_t)a, (uint32_t)b, &fa, &fe);
-        if (fr && fr != SD_ERR_ARG) { /* not invariant is no error: "full" is null then */
+        /* not invariant, or over SD_ANALYSIS_MAX_POINTS, is no error: "full" is null then */
+        if (fr && fr != SD_ERR_ARG && fr != SD_ERR_LIMIT) {
             r = fr;
             e = fe;
             sd_analysis_free(&an);
             sd_limit_mask_free(&lm);
         }
     }
+    if (slot)
+        slot->give(slot->ud);
     pthread_mutex_unlock(&m->lock);
     if (r) {
-        if (r == SD_ERR_ARG)
+        if (r == SD_ERR_ARG || r == SD_ERR_LIMIT) /* the block itself: not invariant or too big */
             api_fail_at(p, 422, "not-analysable", b < 0 ? "vertex" : "edge", "%s", e.message);
         else
             api_fail_core(p, &e, NULL, NULL);

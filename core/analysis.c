@@ -59,6 +59,14 @@ static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out,
     for (uint32_t k = 0; k < vn; k++)
         n += vcols[k] != v;
     memset(out, 0, sizeof *out);
+    if (n > SD_ANALYSIS_MAX_POINTS) {
+        free(vcols);
+        sdi_free(&c->mem, start);
+        return sdi_fail(err, SD_ERR_LIMIT, -1, -1,
+                        "the block has %d points; analysis is offered up to %d (a vertex or edge "
+                        "of valence up to about %d)", n, SD_ANALYSIS_MAX_POINTS,
+                        SD_ANALYSIS_MAX_POINTS - 1);
+    }
     out->size = n;
     out->level = level;
     out->rule = (sd_rule)lv->vrule[v];
@@ -254,8 +262,9 @@ static sd_result full(sd_complex *c, uint32_t a, uint32_t b, const sd_analysis *
             }
         }
     }
-    if (n >= CAP) {
-        r = sdi_fail(err, SD_ERR_LIMIT, -1, -1, "the neighbourhood has more than %d points", CAP);
+    if (n >= CAP || n > SD_ANALYSIS_MAX_POINTS) {
+        r = sdi_fail(err, SD_ERR_LIMIT, -1, -1,
+                     "the invariant neighbourhood has more than %d points", SD_ANALYSIS_MAX_POINTS);
         goto done;
     }
     /* the rest by id */

@@ -359,6 +359,8 @@ static int position_mask(ctx *x, uint32_t v, int *np, uint32_t *pts, double *l, 
     int how = closed_form(x, v, n, pts, vw, l); /* writes l only when it succeeds */
     if (how >= 0)
         return how;
+    if (n > SD_ANALYSIS_MAX_POINTS) /* (sd.h: the eigenvectors of a larger block are not sought) */
+        return SD_LIMIT_NONE;
     if (!block(x, v, n, pts, vw, m))
         return SD_LIMIT_NONE;
     uint64_t h = hash_block(m, n);

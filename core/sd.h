@@ -618,6 +618,12 @@ typedef struct sd_analysis {
     int closed;               /* every row's support lies inside the block */
 } sd_analysis;
 
+/* The most points a block or an invariant neighbourhood may have: larger ones are refused with
+ * SD_ERR_LIMIT before any matrix is made (an eigen-decomposition costs the cube of the size; a
+ * regular solid vertex's neighbourhood has 65 points, a valence-k surface vertex's block k + 1).
+ * A limit mask that would need the eigenvectors of a larger block has method SD_LIMIT_NONE. */
+#define SD_ANALYSIS_MAX_POINTS 256
+
 /* The 1-ring block M ((k+1)x(k+1)) of control vertex v: its vertex point and the edge points
  * of its k edges as functions of v and its 1-ring. */
 sd_result sd_analyze_vertex(sd_complex *c, uint32_t v, sd_analysis *out, sd_error *err);
@@ -639,8 +645,9 @@ void sd_analysis_free(sd_analysis *a);
 /* How a limit mask was found: the point is fixed, the cubic B-spline's (2/3 centre, 1/6 each
  * of its two curve neighbours), Loop's (1 - n chi) centre + chi each of its n neighbours with
  * chi = 1 / (n + 3 / (8 beta)), beta the vertex row's (Loop's or Warren's) — or the dominant left
- * eigenvector of the point's 1-ring block of S (analysis.c's), or none (the block is not closed
- * or has no simple dominant eigenvalue 1: the point itself is returned). */
+ * eigenvector of the point's 1-ring block of S (analysis.c's), or none (the block is not closed,
+ * has no simple dominant eigenvalue 1 or more than SD_ANALYSIS_MAX_POINTS points: the point
+ * itself is returned). */
 enum { SD_LIMIT_NONE = -1, SD_LIMIT_FIXED = 0, SD_LIMIT_BSPLINE, SD_LIMIT_LOOP, SD_LIMIT_EIGEN };
 
 /* The level whose 1-ring blocks give the limits of level `level`'s points: the finest of

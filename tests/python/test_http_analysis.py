@@ -167,3 +167,36 @@ def test_diagonal_on_a_triangle(daemon):
     body = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "simplices": [[0, 1, 2]], "diagonals": [[0, 0]]}
     r = s.put_complex(body)
     assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/diagonals/0/0"
+
+
+def disk_fan(k):
+    """A flat disk of k triangles around vertex 0: its 1-ring block has k + 1 points (Loop)."""
+    v = [[0, 0, 0]] + [[math.cos(2 * math.pi * i / k), math.sin(2 * math.pi * i / k), 0]
+                       for i in range(k)]
+    return {"vertices": v, "simplices": [[0, 1 + i, 1 + (i + 1) % k] for i in range(k)]}
+
+
+def test_analysis_size_is_bounded_before_the_work(daemon):
+    """docs/API.md: a block of more than 256 points is a 422 naming the vertex, refused before any
+    matrix is made; at 256 points it is answered, its Loop block being (k+1)x(k+1) with the
+    dominant eigenvalue 1, and "full" (the 2-ring, over 256 points) is null."""
+    s = Session(daemon)
+    assert s.put_complex(disk_fan(255)).status_code == 200
+    r = s.req("GET", "/analysis", params={"vertex": 0})
+    assert r.status_code == 200, r.text
+    j = r.json()
+    assert j["size"] == 256 and j["rule"] == "loop"
+    assert abs(j["eigenvalues"][0] - 1) < 1e-9
+    assert j["full"] is None
+    s2 = Session(daemon)
+    assert s2.put_complex(disk_fan(400)).status_code == 200
+    r = s2.req("GET", "/analysis", params={"vertex": 0})
+    assert r.status_code == 422, r.text
+    p = r.json()
+    assert p["type"].endswith("/not-analysable") and p["errors"][0]["pointer"] == "vertex", p
+    assert "401 points" in p["detail"] and "256" in p["detail"]
+    # the session is untouched: a rim vertex of it (a boundary vertex: itself and its two boundary
+    # neighbours) is still analysable
+    r = s2.req("GET", "/analysis", params={"vertex": 1})
+    assert r.status_code == 200, r.text
+    assert r.json()["size"] == 3 and r.json()["rule"] == "loop-boundary", r.text
