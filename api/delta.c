@@ -376,11 +376,11 @@ static int parse_query(const api_model *m, const api_delta_query *q, uint64_t *s
         if (k < 0)
             return api_fail_at(p, 422, "unknown-attribute", "attributes",
                                "no attribute \"%.40s\" in this complex", name);
-        int dup = 0;
         for (int i = 0; i < *nattrs; i++)
-            dup |= attrs[i] == k;
-        if (!dup)
-            attrs[(*nattrs)++] = k;
+            if (attrs[i] == k) /* as GET /levels: docs/OUTPUTS.md */
+                return api_fail_at(p, 422, "repeated-attribute", "attributes",
+                                   "attributes: \"%.40s\" is named twice", name);
+        attrs[(*nattrs)++] = k;
         a = e ? e + 1 : a + n;
     }
     return 0;

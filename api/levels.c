@@ -147,6 +147,10 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
             if (a < 0)
                 return api_fail_at(p, 422, "unknown-attribute", "attributes",
                                    "no attribute \"%.40s\" in this complex", item);
+            for (int i = 0; i < rq->nattrs; i++)
+                if (rq->attrs[i].channel == m->channel[a]) /* docs/OUTPUTS.md */
+                    return api_fail_at(p, 422, "repeated-attribute", "attributes",
+                                       "attributes: \"%.40s\" is named twice", item);
             add_attr(m, rq, a);
         }
     } else
@@ -179,6 +183,10 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
         else if (strcmp(q->octahedra, "tets"))
             return api_fail_at(p, 422, "unknown-value", "octahedra",
                                "octahedra is \"tets\" (4 tetrahedra each) or \"polyhedra\"");
+        if (strcmp((*fmt)->name, "vtu") && strcmp((*fmt)->name, "vtk"))
+            return api_fail_at(p, 422, "not-applicable", "octahedra",
+                               "octahedra applies to format vtu and vtk only, not %s",
+                               (*fmt)->name);
     }
     if (q->limit) {
         if (!strcmp(q->limit, "true"))

@@ -302,6 +302,11 @@ def test_delta_410_paths(daemon):
     assert s.req("GET", "/levels/2/delta", params={"since": "x"}).status_code == 400
     assert s.req("GET", "/levels/2/delta", params={"since": 1, "format": "xml"}).status_code == 422
     assert s.req("GET", "/levels/2/delta", params={"since": 1, "attributes": "nope"}).status_code == 422
+    for path in ("/levels/2/delta", "/levels/2"):   # a repeated name (docs/OUTPUTS.md)
+        r = s.req("GET", path, params={"since": 1, "attributes": "t,v,t"} if "delta" in path
+                  else {"attributes": "t,v,t"})
+        assert r.status_code == 422 and r.json()["type"].endswith("/repeated-attribute"), r.text
+        assert r.json()["errors"][0]["pointer"] == "attributes"
     assert s.req("GET", "/levels/2/delta", params={"since": 1, "what": 1}).status_code == 400
     s.delete()
 

@@ -174,6 +174,10 @@ def test_bad_parameters(session):
     p = problem(session.level(1, format="vtk", compress="zlib"), 422, "compress")
     assert "vtu" in p["detail"]
     problem(session.level(1, format="json", compress="zlib"), 422, "compress")
+    for fmt in ("glb", "gltf", "json"):   # a VTK option with another format (docs/API.md)
+        p = problem(session.level(1, format=fmt, octahedra="polyhedra"), 422, "octahedra")
+        assert fmt in p["detail"]
+    problem(session.level(1, format="glb", octahedra="tets"), 422, "octahedra")
     assert session.level(1, format="vtk", compress="none").status_code == 200
 
 
