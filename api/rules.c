@@ -662,6 +662,46 @@ static int parse_sharpness(json_t *a, const api_input *in, api_tags *tags, api_p
     return sharpness_repeat(tags, p);
 }
 
+/* A singular simplex listed twice (in any vertex order): 422 at the later entry, as the other
+ * lists refuse their repeats. Keys: the sorted ids (UINT32_MAX padded) and the entry. */
+static int cmp_tag_key(const void *x, const void *y)
+{
+    return memcmp(x, y, 4 * sizeof(uint32_t));
+}
+
+static int singular_repeats(const api_tags *tags, api_problem *p)
+{
+    uint32_t (*key)[4] = api_plain_malloc((size_t)tags->n * sizeof *key);
+    if (!key)
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    size_t off = 0;
+    for (size_t i = 0; i < tags->n; i++) {
+        uint32_t k[3] = {UINT32_MAX, UINT32_MAX, UINT32_MAX};
+        for (int j = 0; j < tags->size[i]; j++) { /* insertion into ascending order */
+            uint32_t x = tags->idx[off + j];
+            int q = j;
+            for (; q > 0 && k[q - 1] > x; q--)
+                k[q] = k[q - 1];
+            k[q] = x;
+        }
+        off += tags->size[i];
+        memcpy(key[i], k, sizeof k);
+        key[i][3] = (uint32_t)i;
+    }
+    qsort(key, tags->n, sizeof *key, cmp_tag_key);
+    int rc = 0;
+    for (size_t i = 1; i < tags->n && !rc; i++)
+        if (!memcmp(key[i - 1], key[i], 3 * sizeof(uint32_t))) {
+            char ptr[96];
+            api_ptr_index(ptr, sizeof ptr, "/singular", key[i][3]);
+            rc = api_fail_at(p, 422, "invalid-tag", ptr,
+                             "the same simplex as /singular/%u: each simplex is tagged once",
+                             key[i - 1][3]);
+        }
+    api_plain_free(key);
+    return rc;
+}
+
 const char *const api_tags_packed[] = {"/singular", NULL};
 
 int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
@@ -736,6 +776,8 @@ int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *pac
         off += k;
         tags.n++;
     }
+    if (!rc && tags.n > 1)
+        rc = singular_repeats(&tags, p);
     if (!rc && pe)
         rc = parse_petals(pe, cur->in ? cur->in->nv : 0, &tags, p);
     if (!rc && sh)

@@ -640,6 +640,8 @@ def test_many_query_parameters_get_400(daemon):
 def test_long_path_gets_414(daemon):
     r = requests.get(daemon.url + "/v1/" + "a" * 300, timeout=5)
     assert r.status_code == 414
+    p = r.json()   # a problem like every other: the status phrase as its title (RFC 9110)
+    assert p["title"] == "URI Too Long" and p["type"].endswith("/uri-too-long"), p
 
 
 def test_subnormal_slice_numbers_are_finite(daemon):

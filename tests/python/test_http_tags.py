@@ -61,6 +61,8 @@ def test_tags_survive_rules_not_a_new_complex(daemon):
     ([[1, 2]], "/singular/0"),            # 1-2 is not an edge of the cube's tetrahedra
     ([[0, 1], [1, 2, 4]], "/singular/1"),  # not a triangle
     ([[0, 0]], "/singular/0/1"),           # repeated vertex
+    ([[0, 1], [3], [1, 0]], "/singular/2"),  # the same edge twice (docs/API.md: each once)
+    ([[0, 1, 3], [3], [3, 1, 0]], "/singular/2"),
 ])
 def test_tags_must_name_simplices(daemon, tags, pointer):
     s = Session(daemon)
@@ -68,3 +70,24 @@ def test_tags_must_name_simplices(daemon, tags, pointer):
     r = s.req("PUT", "/tags", json={"singular": tags})
     assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == pointer
     assert s.req("GET").json()["version"] == 1
+
+
+def test_import_takes_a_repeated_tag_once(daemon):
+    """Documents exported before repeats were refused may hold one: an import (and so a stored
+    session's restore) takes each singular simplex once, and the levels are those of the tags
+    given once."""
+    s = Session(daemon)
+    assert s.put_complex({"vertices": CUBE_V, "simplices": CUBE_T}).status_code == 200
+    assert s.req("PUT", "/tags", json={"singular": [[0, 1], [3]]}).status_code == 200
+    doc = s.req("GET", "/export").json()
+    want = s.level(2, format="json").json()["vertices"]
+    doc["tags"]["singular"] = [[0, 1], [3], [1, 0], [3]]
+    r = s.http.post(daemon.url + "/v1/sessions", json={"import": doc})
+    assert r.status_code == 201, r.text
+    j = r.json()
+    t = Session.__new__(Session)   # the session the import made (as test_persist.adopt)
+    t.d, t.http, t.id, t.token = daemon, s.http, j["id"], j["token"]
+    t.base = f"{daemon.url}/v1/sessions/{t.id}"
+    t.auth = {"Authorization": f"Bearer {t.token}"}
+    assert sorted(map(sorted, t.req("GET", "/complex").json()["tags"]["singular"])) == [[0, 1], [3]]
+    assert t.level(2, format="json").json()["vertices"] == want
