@@ -7,6 +7,7 @@
  */
 #include "events.h"
 #include "../api/mem.h"
+#include <poll.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdbool.h>
@@ -237,7 +238,14 @@ ev_listener *ev_listen(ev_hub *h, int has_last, uint64_t last, uint64_t current_
     return l;
 }
 
-ssize_t ev_read(ev_listener *l, char *buf, size_t max, double heartbeat_s)
+/* The peer closed its side (or the socket failed): poll without waiting. */
+static bool peer_gone(int fd)
+{
+    struct pollfd p = {.fd = fd, .events = POLLRDHUP};
+    return fd >= 0 && poll(&p, 1, 0) == 1 && (p.revents & (POLLRDHUP | POLLHUP | POLLERR));
+}
+
+ssize_t ev_read(ev_listener *l, char *buf, size_t max, double heartbeat_s, int fd)
 {
     ev_hub *h = l->h;
     pthread_mutex_lock(&h->mu);
@@ -268,6 +276,10 @@ ssize_t ev_read(ev_listener *l, char *buf, size_t max, double heartbeat_s)
             l->last_send = t;
             pthread_mutex_unlock(&h->mu);
             return (ssize_t)n;
+        }
+        if (peer_gone(fd)) {
+            pthread_mutex_unlock(&h->mu);
+            return -1;
         }
         double wait = due - t < 0.5 ? due - t : 0.5;
         struct timespec until;

@@ -44,8 +44,10 @@ ev_listener *ev_listen(ev_hub *h, int has_last, uint64_t last, uint64_t current_
                        unsigned max, int *full);
 /* Up to max bytes of the stream into buf, waiting for something to send (an event, a heartbeat
  * comment after heartbeat_s seconds of silence, or the end). Returns the bytes, or -1 at the end
- * of the stream (closed, dropped, or the daemon stopping: ev_stop_all). */
-ssize_t ev_read(ev_listener *l, char *buf, size_t max, double heartbeat_s);
+ * of the stream (closed, dropped, the daemon stopping: ev_stop_all, or the client gone: `fd`, the
+ * connection's socket or -1, hung up — looked at every half second while waiting, so a listener
+ * that went away frees its place within a second instead of at the next writes). */
+ssize_t ev_read(ev_listener *l, char *buf, size_t max, double heartbeat_s, int fd);
 void ev_unlisten(ev_listener *l);
 
 /* Listeners now open, and dropped ones since the start (metrics). */

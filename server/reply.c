@@ -250,6 +250,7 @@ void http_reply_stream(req *r, api_model *m, http_source src, uint64_t size, con
 typedef struct events_ctx {
     req *r;
     struct ev_listener *l;
+    int fd;                   /* the connection's socket (-1: not known), to see the client go */
 } events_ctx;
 
 /* Blocks in the connection's own thread until there is something to send (DECISIONS 33). */
@@ -257,7 +258,7 @@ static ssize_t events_read(void *cls, uint64_t pos, char *buf, size_t max)
 {
     (void)pos;
     events_ctx *ec = cls;
-    ssize_t n = ev_read(ec->l, buf, max, ec->r->srv->cfg.sse_heartbeat_s);
+    ssize_t n = ev_read(ec->l, buf, max, ec->r->srv->cfg.sse_heartbeat_s, ec->fd);
     if (n <= 0)
         return MHD_CONTENT_READER_END_OF_STREAM;
     atomic_fetch_add(&ec->r->bytes, (uint64_t)n);
@@ -278,7 +279,9 @@ void http_reply_events(req *r, struct ev_listener *l)
     events_ctx *ec = api_malloc(sizeof *ec);
     struct MHD_Response *resp = NULL;
     if (ec) {
-        *ec = (events_ctx){r, l};
+        const union MHD_ConnectionInfo *fi =
+            MHD_get_connection_info(r->conn, MHD_CONNECTION_INFO_CONNECTION_FD);
+        *ec = (events_ctx){r, l, fi ? fi->connect_fd : -1};
         atomic_fetch_add(&r->refs, 1);
         resp = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 4096, events_read, ec,
                                                  events_free);

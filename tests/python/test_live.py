@@ -520,6 +520,36 @@ def test_events_access_token_and_heartbeat():
         assert d.stop() == 0
 
 
+def test_a_closed_listener_frees_its_place():
+    """A client that closes its event stream frees its place among --max-listeners within a
+    second or so (the stream's thread sees the socket hung up while it waits), not only after
+    events or heartbeats are written to it (docs/API.md "Live edits")."""
+    d = Daemon("--max-listeners", "2", "--sse-heartbeat", "60")
+    try:
+        s = new_session(d, complex_from_text(MIXED))
+        socks = [stuck_listener(s, rcvbuf=65536) for _ in range(2)]
+        for k in socks:   # both streams are open: their first bytes came
+            k.settimeout(5)
+            assert b"200" in k.recv(4096)
+        r = s.req("GET", "/events", stream=True)
+        assert r.status_code == 429
+        r.close()
+        for k in socks:
+            k.close()
+        t0, status = time.time(), None
+        while time.time() - t0 < 5 * SLOW:
+            r = s.req("GET", "/events", stream=True)
+            status = r.status_code
+            r.close()
+            if status == 200:
+                break
+            time.sleep(0.1)
+        assert status == 200, "the closed streams still hold their places"
+        assert time.time() - t0 < 3 * SLOW
+    finally:
+        assert d.stop() == 0
+
+
 def stuck_listener(s, rcvbuf=1024):
     """An event stream whose socket is never read."""
     host, port = s.d.url.rsplit("/", 1)[1].split(":")
