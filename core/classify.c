@@ -586,7 +586,7 @@ static uint8_t *interior_rings(sd_mem *m, const sd_topo *t, const sdi_rel *ft, b
  * midpoints at level 1 with the pairs chosen (2 + 2 n + the pairs that hold the edge). `held`
  * (zero on entry and on return) and `seen` (stamps, `stamp` unused so far) are per edge. */
 static uint64_t valence_deviation(const diag_search *S, uint32_t first, uint32_t last,
-                                  const uint8_t *ring, uint16_t *held, uint32_t *seen,
+                                  const uint8_t *ring, uint32_t *held, uint32_t *seen,
                                   uint32_t stamp)
 {
     const sd_topo *t = S->t;
@@ -660,7 +660,7 @@ sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, const int8_t 
     }
     bool any = false;
     uint8_t *ring = interior_rings(m, t, S.ft, &any), *kept = NULL;
-    uint16_t *held = NULL;
+    uint32_t *held = NULL;
     uint32_t *seen = NULL, stamp = 0;
     if (ring && any) {
         kept = sdi_alloc(m, n);
