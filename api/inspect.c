@@ -182,7 +182,7 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
         fr = b < 0 ? sd_analyze_full_vertex(m->c, (uint32_t)a, &fa, &fe)
                    : sd_analyze_full_edge(m->c, (uint32_t)a, (uint32_t)b, &fa, &fe);
         /* not invariant, or over SD_ANALYSIS_MAX_POINTS, is no error: "full" is null then */
-        if (fr && fr != SD_ERR_ARG && fr != SD_ERR_LIMIT) {
+        if (fr && fr != SD_ERR_ARG) {
             r = fr;
             e = fe;
             sd_analysis_free(&an);
@@ -193,7 +193,7 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
         slot->give(slot->ud);
     pthread_mutex_unlock(&m->lock);
     if (r) {
-        if (r == SD_ERR_ARG || r == SD_ERR_LIMIT) /* the block itself: not invariant or too big */
+        if (r == SD_ERR_ARG) /* the block itself: not invariant, or over SD_ANALYSIS_MAX_POINTS */
             api_fail_at(p, 422, "not-analysable", b < 0 ? "vertex" : "edge", "%s", e.message);
         else
             api_fail_core(p, &e, NULL, NULL);

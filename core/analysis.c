@@ -62,10 +62,9 @@ static sd_result analyze(sd_complex *c, int level, uint32_t v, sd_analysis *out,
     if (n > SD_ANALYSIS_MAX_POINTS) {
         free(vcols);
         sdi_free(&c->mem, start);
-        return sdi_fail(err, SD_ERR_LIMIT, -1, -1,
-                        "the block has %d points; analysis is offered up to %d (a vertex or edge "
-                        "of valence up to about %d)", n, SD_ANALYSIS_MAX_POINTS,
-                        SD_ANALYSIS_MAX_POINTS - 1);
+        return sdi_fail(err, SD_ERR_ARG, -1, -1,
+                        "the block has %d points; analysis is offered for blocks of at most %d",
+                        n, SD_ANALYSIS_MAX_POINTS);
     }
     out->size = n;
     out->level = level;
@@ -262,8 +261,8 @@ static sd_result full(sd_complex *c, uint32_t a, uint32_t b, const sd_analysis *
             }
         }
     }
-    if (n >= CAP || n > SD_ANALYSIS_MAX_POINTS) {
-        r = sdi_fail(err, SD_ERR_LIMIT, -1, -1,
+    if (n >= CAP || n > SD_ANALYSIS_MAX_POINTS) { /* (not analysed: "full" is null) */
+        r = sdi_fail(err, SD_ERR_ARG, -1, -1,
                      "the invariant neighbourhood has more than %d points", SD_ANALYSIS_MAX_POINTS);
         goto done;
     }

@@ -547,8 +547,9 @@ static void search(diag_search *S)
 }
 
 /* Per edge, the number of tetrahedra around it (at most 255) where the edge is interior to the
- * solids — every face of a tetrahedron around it is shared by exactly two — else 0. NULL for
- * lack of memory. */
+ * solids — every face of a tetrahedron around it is shared by exactly two, and its class is a
+ * manifold solid edge's (only in C_3: no triangle or curve on it, one ring of tetrahedra: a
+ * pinched edge's rings would be counted as one) — else 0. NULL for lack of memory. */
 static uint8_t *interior_rings(sd_mem *m, const sd_topo *t, const sdi_rel *ft, bool *any)
 {
     uint8_t *ring = sdi_calloc(m, (size_t)t->ne + 1, 1);
@@ -574,7 +575,7 @@ static uint8_t *interior_rings(sd_mem *m, const sd_topo *t, const sdi_rel *ft, b
         }
     *any = false;
     for (uint32_t e = 0; e < t->ne; e++) {
-        if (open[e])
+        if (open[e] || (t->efam && (t->efam[e] != FAM3 || nm_type(t->enm[e]))))
             ring[e] = 0;
         *any |= ring[e] != 0;
     }

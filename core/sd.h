@@ -619,7 +619,7 @@ typedef struct sd_analysis {
 } sd_analysis;
 
 /* The most points a block or an invariant neighbourhood may have: larger ones are refused with
- * SD_ERR_LIMIT before any matrix is made (an eigen-decomposition costs the cube of the size; a
+ * SD_ERR_ARG (not analysable) before any matrix is made (an eigen-decomposition costs the cube of the size; a
  * regular solid vertex's neighbourhood has 65 points, a valence-k surface vertex's block k + 1).
  * A limit mask that would need the eigenvectors of a larger block has method SD_LIMIT_NONE. */
 #define SD_ANALYSIS_MAX_POINTS 256

@@ -663,9 +663,6 @@ int mp_refine(const mp_piece *p, uint64_t max_bytes, int quiet, const char *tag,
                     (unsigned long long)cells, mp_now() - tl);
         }
     }
-    /* the vertex rules of level L, which the VTU's "rule" array gives (as `subdivd refine`'s) */
-    if (lv && sd_complex_prepare_vertex_rules(r->m->c, p->level, &e))
-        lv = NULL;
     if (!lv) {
         snprintf(err, errlen, "level %d failed: %s (%s)", p->level, e.message,
                  sd_result_name(e.code));

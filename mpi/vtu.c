@@ -146,9 +146,23 @@ static int point_arrays(const mp_piece *p, varr *pd, const int64_t *gid, const i
     return n;
 }
 
+/* The vertex rules of level L, which the "rule" array gives (as `subdivd refine`'s VTU): made
+ * when written, so that --no-write does not time them. 0, or -1 with a message in err. */
+static int prepare_rules(const mp_result *r, char *err, size_t errlen)
+{
+    sd_error e = {0};
+    if (r->lv && sd_complex_prepare_vertex_rules(r->m->c, r->p->level, &e)) {
+        snprintf(err, errlen, "the rules of level %d: %s", r->p->level, e.message);
+        return -1;
+    }
+    return 0;
+}
+
 int mp_write_piece(const mp_piece *p, const mp_result *r, const char *path, uint64_t *bytes,
                    char *err, size_t errlen)
 {
+    if (prepare_rules(r, err, errlen))
+        return -1;
     uint32_t nv = r->lv ? sd_level_num_vertices(r->lv) : 0;
     uint32_t *slot = malloc(((size_t)nv + 1) * sizeof *slot);
     if (!slot) {
@@ -288,11 +302,16 @@ int mp_write_pvtu(const char *path, const mp_piece *p, int nparts, char **piece_
 }
 
 /* ---- merged output -------------------------------------------------------------------------
- * Blob: [npoints u64] then per point gid u64, xyz 3 f64, the attributes' values; then per kind
+ * Blob: [npoints u64] then per point gid u64, xyz 3 f64, rule u8, the attributes' values; then per kind
  * [ncells u64] and per cell gid u64, control cell u64, the vertices' gids u64 each. */
 
 void mp_merge_blob(const mp_piece *p, const mp_result *r, mp_buf *b)
 {
+    char why[256];
+    if (prepare_rules(r, why, sizeof why)) {
+        b->failed = 1;
+        return;
+    }
     uint32_t nv = r->lv ? sd_level_num_vertices(r->lv) : 0;
     uint8_t *used = calloc((size_t)nv + 1, 1);
     if (!used) {

@@ -200,3 +200,36 @@ def test_analysis_size_is_bounded_before_the_work(daemon):
     r = s2.req("GET", "/analysis", params={"vertex": 1})
     assert r.status_code == 200, r.text
     assert r.json()["size"] == 3 and r.json()["rule"] == "loop-boundary", r.text
+
+
+def kuhn_block(n):
+    """n^3 cubes of 6 tetrahedra around their main diagonals (vertex id x + (n+1) y + (n+1)^2 z)."""
+    m = n + 1
+    v = [[x, y, z] for z in range(m) for y in range(m) for x in range(m)]
+    perms = [(0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)]
+    s = []
+    for z in range(n):
+        for y in range(n):
+            for x in range(n):
+                for p in perms:
+                    c = [x, y, z]
+                    t = [c[0] + m * c[1] + m * m * c[2]]
+                    for k in p:
+                        c[k] += 1
+                        t.append(c[0] + m * c[1] + m * m * c[2])
+                    s.append(t)
+    return {"vertices": v, "simplices": s}
+
+
+def test_analysis_over_the_session_memory_is_413():
+    """The session's memory limit reached while the analysis computes is the limit it is (413
+    limit-exceeded naming it), not a block that cannot be analysed."""
+    d = Daemon("--max-session-bytes", "1048576")
+    try:
+        s = Session(d)
+        assert s.put_complex(kuhn_block(5)).status_code == 200
+        r = s.req("GET", "/analysis", params={"edge": "37,38"})
+        assert r.status_code == 413, r.text
+        assert r.json()["type"].endswith("/limit-exceeded"), r.text
+    finally:
+        assert d.stop() == 0
