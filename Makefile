@@ -100,7 +100,7 @@ DATA ?= data
 run: deps
 	$(MAKE) all
 	@mkdir -p $(DATA)
-	@echo "subdivd: open http://127.0.0.1:8080/ (API: http://127.0.0.1:8080/v1/openapi.json); sessions in $(DATA)/sessions.db; Ctrl-C stops it"
+	@echo "subdivd: sessions in $(DATA)/sessions.db; open the address it prints below (http://127.0.0.1:8080/ unless ARGS says otherwise; the API document at /v1/openapi.json); Ctrl-C stops it"
 	./$(B)/subdivd --store sqlite:$(DATA)/sessions.db $(ARGS)
 
 # Runs every suite and ends with one line: "N passed, N failed".

@@ -55,12 +55,14 @@ CHECKS = [
     "file_stl_msh",      # STL and Gmsh .msh from disk; the model selector shows the file
     "level_note",        # the note under the slider says why it stops (the cell limit)
     "session_recovery",  # an expired session is replaced with the same model, and the user told
+    "session_recovery_drag",  # the same when the 404 comes to a drag: the new level drawn, = refetch
     "default_rules",     # the default-rule list is G2, G1 (N1/N2 only as overrides of one simplex)
     "occlusion",         # 10³ cubes at level 3: an interior point is not picked nor drawn, unless asked
     "live_drag_1m",      # a drag on >= 1 M cells: PATCH + delta only, one PATCH in flight, buffers = refetch
     "second_tab",        # a second tab on the session follows by events + deltas, buffers = refetch
     "delta_410",         # a change behind the page's back: 412, 410, the level fetched again, = refetch
     "level_moves",       # level-3 handles; a drag PATCHes "level": 3; buffers = refetch
+    "second_tab_close",  # closing the tab that joined leaves the session open for the first
     "console_clean",     # no console errors but the refusals the test provokes
 ]
 

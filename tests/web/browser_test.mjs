@@ -804,6 +804,39 @@ watch(page, 'page');
 const fullLevel = (e) => e.method === 'GET' && /\/levels\/\d+$/.test(new URL(e.url).pathname);
 const statsReq = (e) => /\/stats$/.test(new URL(e.url).pathname);
 
+// 13b. the same when the 404 comes to a drag: the new session's level is drawn and follows the
+// drag, and the header names the new session
+await step('session_recovery_drag', async () => {
+  await page.check('input[name=tool][value=move]');
+  const before = await snap();
+  const n = before.messages.length;
+  expectedFailures.push([before.session, 404]);
+  const del = await page.evaluate(async (id) => (await fetch(`/v1/sessions/${id}`, {
+    method: 'DELETE', headers: { Authorization: `Bearer ${window.subdivd.session.token}` } })).status, before.session);
+  const pick = await pickableVertex(() => true);
+  if (!pick) throw new Error('no pickable control point on screen');
+  await page.mouse.move(pick.at.x, pick.at.y);
+  await page.mouse.down();
+  for (let k = 1; k <= 6; k++) await page.mouse.move(pick.at.x + 5 * k, pick.at.y - 4 * k);
+  await page.mouse.up();
+  await idle(`(() => { const s = window.subdivd.snapshot(); return s.session !== ${JSON.stringify(before.session)} && ` +
+    `s.shown && s.shown.version === s.version; })()`);
+  const after = await snap();
+  const header = await page.$eval('#session', (e) => e.textContent);
+  const hint = await page.$eval('#hint', (e) => e.textContent).catch(() => '');
+  const said = (await messagesSince(n)).map((m) => `${m.kind}: ${m.text}`).join(' | ');
+  const cmp = await compareWithRefetch(page, after.shown.level);
+  const p0 = before.controlPoints[pick.index], p1 = after.controlPoints[pick.index];
+  const moved = Math.hypot(p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]);
+  // (positions only: this model's first primitive may have no NORMAL)
+  check('session_recovery_drag', del === 204 && after.session !== before.session && /expired/.test(said) &&
+    header.includes(after.session.slice(0, 8)) && !/Moving/.test(hint) && moved > 0 &&
+    cmp.position === 0 && cmp.etag === `"${cmp.shownVersion}"` && !/error:/.test(said),
+    `DELETE ${del}; session ${before.session.slice(0, 8)} -> ${after.session?.slice(0, 8)}; point moved ${moved}; header "${header}"; ` +
+    `hint "${hint}"; drawn v${after.shown?.version} of v${after.version}, vs refetch ${cmp.position} position, ` +
+    `${cmp.normal} normal floats differ; said: ${said}`);
+});
+
 // 14. the default-rule list: G2 and G1 only (N1/N2 are overrides of one simplex)
 await step('default_rules', async () => {
   const opts = await page.$$eval('#rule-default option', (os) => os.map((o) => o.value));
@@ -965,7 +998,20 @@ await step('level_moves', async () => {
     `${s.handles.count} level-3 handles; PATCH ${JSON.stringify(body?.moves?.[0] ?? null)}; point ${pick.i} at the wanted position ` +
     `(float32): ${atWanted}; buffers vs refetch: ${cmp.position} position, ${cmp.normal} normal floats differ`);
 });
-if (page2) await page2.close();
+// 16b. closing the tab that joined leaves the session open for the tab that started it
+if (page2) {
+  await step('second_tab_close', async () => {
+    const b = await snap();
+    await page2.close();
+    page2 = null;
+    await new Promise((r) => setTimeout(r, 1000));
+    const s = await snap();
+    const status = await page.evaluate(async () => (await fetch(`/v1/sessions/${window.subdivd.session.id}`, {
+      headers: { Authorization: `Bearer ${window.subdivd.session.token}` }, cache: 'no-store' })).status);
+    check('second_tab_close', status === 200 && s.session === b.session && s.listening === b.listening,
+      `GET the session: ${status}; session ${b.session.slice(0, 8)} -> ${s.session.slice(0, 8)}; listening: ${b.listening} -> ${s.listening}`);
+  });
+}
 
 // 19. no console errors other than the refusals provoked above
 check('console_clean', consoleErrors.length === 0, consoleErrors.join(' | '));

@@ -44,6 +44,7 @@ export class Session {
     this.id = null;
     this.token = null;
     this.version = 0;
+    this.owned = false; // started by this page (open), not joined: only then closed at exit
   }
 
   async open(ttl_s = 3600) {
@@ -54,12 +55,14 @@ export class Session {
     this.id = j.id;
     this.token = j.token;
     this.version = j.version ?? 0;
+    this.owned = true;
     return j;
   }
 
-  // Best effort at page exit (keepalive survives the unload); the TTL frees it otherwise.
+  // Best effort at page exit (keepalive survives the unload); the TTL frees it otherwise. A
+  // session another tab started (joined by its link) is that tab's: left open.
   closeOnExit() {
-    if (!this.id) return;
+    if (!this.id || !this.owned) return;
     fetch(`${this.base}/v1/sessions/${this.id}`, {
       method: 'DELETE', keepalive: true, headers: { Authorization: `Bearer ${this.token}` },
     }).catch(() => {}); // the page is going away: there is no one left to tell
@@ -162,7 +165,15 @@ export class Session {
       handlers.version?.(data, Number(ev.lastEventId || data.version));
     });
     es.addEventListener('resync', () => handlers.resync?.());
-    es.addEventListener('deleted', () => handlers.deleted?.());
+    es.addEventListener('deleted', (ev) => {
+      let data = {};
+      try {
+        data = JSON.parse(ev.data);
+      } catch {
+        data = {};
+      }
+      handlers.deleted?.(data);
+    });
     es.onerror = (ev) => handlers.error?.(ev, es);
     return es;
   }

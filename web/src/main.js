@@ -137,7 +137,8 @@ class App {
     }
   }
 
-  // A session that expired (404 no-session) is replaced by a new one holding the same model.
+  // A session that expired or was closed elsewhere (404 no-session) is replaced by a new one
+  // holding the same model; what was drawn from the old one is fetched again from it.
   async #withSession(fn) {
     try {
       return await fn();
@@ -152,8 +153,12 @@ class App {
       await this.#refreshComplex();
       this.#listen();
       this.shown = null; // the new session has no level yet
-      this.info('The session had expired; a new one was started with the same model.');
-      return fn();
+      this.handleLevel = null;
+      this.#updateSession();
+      this.info('The session had expired or was closed elsewhere; a new one was started with the same model.');
+      const r = await fn();
+      this.requestLevel(); // the level drawn was the old session's: fetched from the new one
+      return r;
     }
   }
 
@@ -491,7 +496,7 @@ class App {
   #showStats() {
     const s = this.shown.stats, c = s.counts || {};
     const rows = [
-      ['level', s.level], ['version', s.version ?? this.shown.version],
+      ['level', s.level], ['fetched at version', s.version ?? this.shown.version],
       ['vertices', c.vertices], ['edges', c.edges], ['faces', c.faces],
       ['points', c.points], ['curve segments', c.curves], ['surface triangles', c.triangles],
       ['tetrahedra', c.tetrahedra], ['octahedra', c.octahedra],
@@ -535,6 +540,7 @@ class App {
         this.session.id = id;
         this.session.token = token;
         this.session.version = 0;
+        this.session.owned = false; // the tab that started it closes it
         const complex = await this.session.getComplex();
         const summary = { simplices: {} };
         for (const s of complex.simplices) summary.simplices[s.length - 1] = (summary.simplices[s.length - 1] || 0) + 1;
@@ -570,8 +576,13 @@ class App {
     } catch (e) {
       this.error(e);
     }
-    this.#hint(l === 0 ? `${TOOL_HINTS.move}.` :
-      `Drag a point of level ${l}: it stores a detail offset there (coarser edits keep it).`);
+    this.#hint(this.#moveHint());
+  }
+
+  #moveHint() {
+    const l = this.editLevel;
+    return l === 0 ? `${TOOL_HINTS.move}.` :
+      `Drag a point of level ${l}: it stores a detail offset there (coarser edits keep it).`;
   }
 
   // The handles of the edit level: the cage, the shown level's own vertices, or a level fetched
@@ -744,8 +755,12 @@ class App {
         }).catch((e) => this.error(e));
       },
       resync: () => this.resync(),
-      deleted: () => {
-        if (this.session.id === id) this.events?.close();
+      deleted: (data) => {
+        if (this.session.id !== id) return;
+        this.events?.close();
+        const why = data?.reason === 'expired' ? 'expired' : data?.reason === 'evicted' ? 'was evicted'
+          : 'was closed (by the tab that started it, or a client)';
+        this.info(`The session ${why}; the next change starts a new one with the same model.`);
       },
     });
   }
@@ -1204,6 +1219,7 @@ class App {
       const d = this.drag;
       this.drag = null;
       this.viewer.controls.enabled = true;
+      this.#hint(this.#moveHint()); // not "Moving …" any more
       if (this.viewer.canvas.hasPointerCapture(ev.pointerId)) this.viewer.canvas.releasePointerCapture(ev.pointerId);
       if (d.to && d.to.distanceTo(d.from) > 0) {
         this.undoStack.push({ level: d.level, index: d.index, from: d.start, to: d.to.toArray() });
