@@ -759,7 +759,7 @@ class App {
         if (this.session.id !== id) return;
         this.events?.close();
         const why = data?.reason === 'expired' ? 'expired' : data?.reason === 'evicted' ? 'was evicted'
-          : 'was closed (by the tab that started it, or a client)';
+          : this.session.owned ? 'was closed by another client' : 'was closed (by the tab that started it)';
         this.info(`The session ${why}; the next change starts a new one with the same model.`);
       },
     });
