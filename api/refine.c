@@ -229,17 +229,47 @@ static api_model *model_with(api_input *in, const api_rules *rules, const api_ta
     return m;
 }
 
+/* Whether the session's own level 1 is the one a model of its complex would make: computed,
+ * and without detail offsets at level 1 (S p alone, as a fresh model's). Under cur->lock. */
+static bool level1_reusable(const api_model *cur)
+{
+    if (!cur->c || atomic_load(&cur->levels_cached) < 2)
+        return false;
+    for (int t = -1; t < cur->in->nattrs; t++)
+        if (sd_complex_details(cur->c, t < 0 ? 0 : cur->channel[t], 1, NULL, NULL))
+            return false;
+    return true;
+}
+
 /* Place the new vertices of one refinement step by the subdivision rules: the level-1 edge
- * points of the complex before the step (positions and attributes alike). */
-static int subdivision_positions(const api_input *in, const api_rules *rules, const api_tags *tags,
+ * points of the complex before the step (positions and attributes alike). The first step's
+ * complex is the session's (`cur`, else NULL): its cached level 1 serves when reusable, and no
+ * model is made. */
+static int subdivision_positions(const api_model *cur, const api_input *in,
+                                 const api_rules *rules, const api_tags *tags,
                                  sd_override *ov, uint32_t nov, sd_refinement *r,
                                  double **attr_new, const api_limits *lim, api_problem *p)
 {
     sd_error e = {0};
-    api_model *tmp = model_with((api_input *)in, rules, tags, ov, nov, lim, &e);
-    if (tmp)
-        sd_complex_set_threads(tmp->c, api_compute_threads());
-    const sd_level *l1 = tmp ? sd_complex_level(tmp->c, 1, &e) : NULL;
+    api_model *tmp = NULL, *held = NULL;
+    const sd_level *l1 = NULL;
+    if (cur) { /* the lock that computation and edits take: level 1 is read whole below */
+        held = (api_model *)cur;
+        pthread_mutex_lock(&held->lock);
+        if (level1_reusable(cur))
+            l1 = sd_complex_level(cur->c, 1, &e);
+        if (!l1) {
+            pthread_mutex_unlock(&held->lock);
+            held = NULL;
+        }
+    }
+    if (!l1) {
+        tmp = model_with((api_input *)in, rules, tags, ov, nov, lim, &e);
+        if (tmp)
+            sd_complex_set_threads(tmp->c, api_compute_threads());
+        l1 = tmp ? sd_complex_level(tmp->c, 1, &e) : NULL;
+    }
+    const api_model *src = held ? held : tmp;
     if (!l1) {
         api_model_unref(tmp);
         return api_fail_core(p, &e, "/simplices", "/vertices");
@@ -247,6 +277,8 @@ static int subdivision_positions(const api_input *in, const api_rules *rules, co
     /* sorted (a<b, new id) so each level-1 edge point finds its new vertex */
     uint32_t (*key)[3] = malloc((r->nsplit + 1) * sizeof *key);
     if (!key) {
+        if (held)
+            pthread_mutex_unlock(&held->lock);
         api_model_unref(tmp);
         return api_fail(p, 503, "out-of-memory", "out of memory");
     }
@@ -271,11 +303,13 @@ static int subdivision_positions(const api_input *in, const api_rules *rules, co
         memcpy(r->xyz + 3 * (size_t)id, x1 + 3 * (size_t)v, 3 * sizeof *x1);
         for (int t = 0; t < in->nattrs; t++) {
             int nc = in->attrs[t].ncomp;
-            const double *a1 = sd_level_channel(l1, tmp->channel[t], NULL);
+            const double *a1 = sd_level_channel(l1, src->channel[t], NULL);
             memcpy(attr_new[t] + (size_t)id * nc, a1 + (size_t)v * nc, nc * sizeof *a1);
         }
     }
     free(key);
+    if (held)
+        pthread_mutex_unlock(&held->lock);
     api_model_unref(tmp);
     return 0;
 }
@@ -487,7 +521,8 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
                 rc = api_fail(p, 503, "out-of-memory", "out of memory");
             else {
                 memcpy(ovc, ov, nov * sizeof *ov);
-                rc = subdivision_positions(in, &cur->rules, &tags, ovc, nov, &r, attr_new, lim, p);
+                rc = subdivision_positions(step == 0 ? cur : NULL, in, &cur->rules, &tags, ovc,
+                                           nov, &r, attr_new, lim, p);
                 free(ovc);
             }
         }

@@ -196,3 +196,58 @@ def test_refine_keeps_the_choices_of_untouched_tetrahedra(daemon):
             a, b, cc, d = p[t]
             assert (i in reor) == (np.dot(np.cross(b - a, cc - a), d - a) < 0), (i, t)
     assert kept and new
+
+
+@pytest.mark.parametrize("case", ["cube", "mixed-attributes-edited", "tagged-surface", "offsets"])
+def test_refine_from_the_cached_level_equals_refine_from_a_fresh_model(daemon, case):
+    """POST /refine places its first step's points from the session's level 1 when it is cached
+    (and holds no detail offsets), else from a model it makes: both give the same refined
+    complex, bit for bit (GET /complex), for solids, attributes after an edit, tags and
+    rules, and a session with level-1 offsets (which must not move the new points)."""
+    if case == "cube":
+        body, sel = complex_from_text(CUBE), {"sphere": {"center": [0, 0, 0], "radius": 0.3}}
+    elif case == "tagged-surface":
+        V = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1.3], [0, 0, -1]]
+        T = [[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]]
+        body, sel = {"vertices": V, "simplices": T}, {"simplices": [[0, 2, 4]]}
+    else:
+        body = complex_from_text(MIXED)
+        body["attributes"] = {"h": [v[2] * v[0] for v in body["vertices"]],
+                              "uv": [[v[0], v[1] * v[1]] for v in body["vertices"]]}
+        sel = {"box": {"min": [-1, -1, -1], "max": [2, 2, 2]}}
+
+    def prepare(s, offsets):
+        assert s.put_complex(body).status_code == 200
+        if case == "tagged-surface":
+            assert s.req("PUT", "/tags", json={"singular": [[0, 2]], "sharpness": [
+                {"simplex": [2, 4], "value": 1.5}]}).status_code == 200
+            assert s.req("PUT", "/rules", json={"crease_method": "chaikin"}).status_code == 200
+        if case != "cube":
+            v = s.req("GET").json()["version"]
+            r = s.req("PATCH", "/control-points", headers={"If-Match": f'"{v}"'},
+                      json={"moves": [{"index": 1, "position": [0.31, -0.2, 0.45]}],
+                            "attributes": {"h": [{"index": 2, "value": 7.5}]} if "attributes" in case else {}})
+            assert r.status_code == 200, r.text
+        if offsets:   # every level-1 edge point gets an offset
+            l1 = s.level(1, format="json").json()
+            moves = [{"index": i, "level": 1, "position": [x + 0.01, y - 0.02, z + 0.03]}
+                     for i, ((x, y, z), e) in enumerate(zip(l1["vertices"], l1["origin"]["edge_of"]))
+                     if e]
+            v = s.req("GET").json()["version"]
+            r = s.req("PATCH", "/control-points", headers={"If-Match": f'"{v}"'}, json={"moves": moves})
+            assert r.status_code == 200, r.text
+
+    # the first with level 1 (and 2) cached; the second computes no level (a PUT and level-0
+    # edits), and has no offsets: the new points are S p's, whatever offsets the first holds
+    cached, fresh = Session(daemon), Session(daemon)
+    prepare(cached, case == "offsets")
+    assert cached.level(2, format="json").status_code == 200
+    prepare(fresh, False)
+    got = []
+    for s in (cached, fresh):
+        r = s.req("POST", "/refine", json={"select": sel})
+        assert r.status_code == 200, r.text
+        c = s.req("GET", "/complex").json()
+        got.append((c["vertices"], c.get("attributes"), c["simplices"]))
+    assert got[0] == got[1]
+    assert len(got[0][0]) > len(body["vertices"])
