@@ -70,55 +70,6 @@ static bool tags_empty(json_t *t)
            (!s || json_is_array(s)) && (!pe || json_is_array(pe)) && (!sh || json_is_array(sh));
 }
 
-/* The tags with each singular simplex once: PUT /tags refuses a repeat, which daemons before
- * 2026-12-07 took (a tag is tagged or not), and kept in what they export and store. A new
- * reference (the tags themselves when nothing repeats), or NULL for lack of memory. */
-static json_t *singular_once(json_t *tags)
-{
-    json_t *s = json_object_get(tags, "singular");
-    if (!json_is_array(s) || json_array_size(s) < 2)
-        return json_incref(tags);
-    json_t *seen = json_object(), *keep = json_array();
-    bool dropped = false, ok = seen && keep;
-    for (size_t i = 0; ok && i < json_array_size(s); i++) {
-        json_t *t = json_array_get(s, i);
-        long long v[3];
-        size_t k = json_array_size(t);
-        bool plain = json_is_array(t) && k >= 1 && k <= 3;
-        for (size_t j = 0; plain && j < k; j++) {
-            json_t *x = json_array_get(t, j);
-            plain = json_is_integer(x);
-            v[j] = plain ? json_integer_value(x) : 0;
-        }
-        if (plain) { /* the key: the ids ascending */
-            for (size_t a = 1; a < k; a++)
-                for (size_t b = a; b > 0 && v[b - 1] > v[b]; b--) {
-                    long long w = v[b];
-                    v[b] = v[b - 1];
-                    v[b - 1] = w;
-                }
-            char key[80];
-            snprintf(key, sizeof key, "%lld,%lld,%lld", v[0], k > 1 ? v[1] : -1, k > 2 ? v[2] : -1);
-            if (json_object_get(seen, key)) {
-                dropped = true;
-                continue;
-            }
-            ok = !json_object_set_new(seen, key, json_true());
-        }
-        ok = ok && !json_array_append(keep, t); /* anything else: PUT /tags says what is wrong */
-    }
-    json_t *r = NULL;
-    if (ok && !dropped)
-        r = json_incref(tags);
-    else if (ok && (r = json_copy(tags)) && json_object_set(r, "singular", keep)) {
-        json_decref(r);
-        r = NULL;
-    }
-    json_decref(seen);
-    json_decref(keep);
-    return r;
-}
-
 int api_import(json_t *doc, const char *base, const api_limits *lim, api_model **out,
                uint64_t *version, api_problem *p)
 {
@@ -195,10 +146,7 @@ int api_import(json_t *doc, const char *base, const api_limits *lim, api_model *
     }
     if (!rc && tags && !tags_empty(tags)) {
         snprintf(at, sizeof at, "%s/tags", base);
-        json_t *once = singular_once(tags);
-        rc = once ? step(api_put_tags, &m, once, lim, at, p)
-                  : api_fail(p, 503, "out-of-memory", "out of memory");
-        json_decref(once);
+        rc = step(api_import_tags, &m, tags, lim, at, p);
     }
     if (!rc && emb && json_object_size(emb)) { /* bound to the imported levels */
         atomic_store(&m->version, (uint64_t)v);

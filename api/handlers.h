@@ -41,6 +41,10 @@ int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_
 /* The same with "singular" packed beside the tree (api_tags_packed: the patterns). */
 int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *packs,
                         const api_limits *lim, api_model **out, api_problem *p);
+/* The tags of an imported document (api/export.c): as PUT /tags, but a singular simplex listed
+ * twice, which daemons before 2026-12-07 took and exported, is taken once. */
+int api_import_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
+                    api_problem *p);
 extern const char *const api_tags_packed[];
 /* The offline modes' change (api/offline.c): fn applied to the text buf (len bytes; NULL: an empty
  * object) parsed as the daemon parses that body, or to `body` (stolen) when not NULL, with the

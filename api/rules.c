@@ -669,11 +669,15 @@ static int cmp_tag_key(const void *x, const void *y)
     return memcmp(x, y, 4 * sizeof(uint32_t));
 }
 
-static int singular_repeats(const api_tags *tags, api_problem *p)
+static int singular_repeats(api_tags *tags, bool drop, api_problem *p)
 {
     uint32_t (*key)[4] = api_plain_malloc((size_t)tags->n * sizeof *key);
-    if (!key)
+    uint8_t *gone = drop ? api_plain_malloc(tags->n) : NULL;
+    if (!key || (drop && !gone)) {
+        api_plain_free(key);
+        api_plain_free(gone);
         return api_fail(p, 503, "out-of-memory", "out of memory");
+    }
     size_t off = 0;
     for (size_t i = 0; i < tags->n; i++) {
         uint32_t k[3] = {UINT32_MAX, UINT32_MAX, UINT32_MAX};
@@ -690,28 +694,66 @@ static int singular_repeats(const api_tags *tags, api_problem *p)
     }
     qsort(key, tags->n, sizeof *key, cmp_tag_key);
     int rc = 0;
-    for (size_t i = 1; i < tags->n && !rc; i++)
-        if (!memcmp(key[i - 1], key[i], 3 * sizeof(uint32_t))) {
-            char ptr[96];
-            api_ptr_index(ptr, sizeof ptr, "/singular", key[i][3]);
-            rc = api_fail_at(p, 422, "invalid-tag", ptr,
-                             "the same simplex as /singular/%u: each simplex is tagged once",
-                             key[i - 1][3]);
+    if (drop)
+        memset(gone, 0, tags->n);
+    for (size_t i = 1; i < tags->n && !rc; i++) {
+        if (memcmp(key[i - 1], key[i], 3 * sizeof(uint32_t)))
+            continue;
+        if (drop) { /* equal keys are by entry: the first stays */
+            gone[key[i][3]] = 1;
+            continue;
         }
+        char ptr[96];
+        api_ptr_index(ptr, sizeof ptr, "/singular", key[i][3]);
+        rc = api_fail_at(p, 422, "invalid-tag", ptr,
+                         "the same simplex as /singular/%u: each simplex is tagged once",
+                         key[i - 1][3]);
+    }
+    if (drop) { /* the entries kept, in their order */
+        uint32_t n = 0;
+        size_t from = 0, to = 0;
+        for (uint32_t i = 0; i < tags->n; i++) {
+            uint8_t k = tags->size[i];
+            if (!gone[i]) {
+                memmove(tags->idx + to, tags->idx + from, k * sizeof *tags->idx);
+                tags->size[n++] = k;
+                to += k;
+            }
+            from += k;
+        }
+        tags->n = n;
+    }
     api_plain_free(key);
+    api_plain_free(gone);
     return rc;
 }
 
 const char *const api_tags_packed[] = {"/singular", NULL};
 
+static int put_tags(const api_model *cur, json_t *body, const api_packs *packs,
+                    const api_limits *lim, bool drop_repeats, api_model **out, api_problem *p);
+
 int api_put_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                  api_problem *p)
 {
-    return api_put_tags_packed(cur, body, NULL, lim, out, p);
+    return put_tags(cur, body, NULL, lim, false, out, p);
 }
 
 int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *packs,
                         const api_limits *lim, api_model **out, api_problem *p)
+{
+    return put_tags(cur, body, packs, lim, false, out, p);
+}
+
+int api_import_tags(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
+                    api_problem *p)
+{
+    return put_tags(cur, body, NULL, lim, true, out, p);
+}
+
+/* PUT /tags; an import (drop_repeats) takes a singular simplex listed twice once. */
+static int put_tags(const api_model *cur, json_t *body, const api_packs *packs,
+                    const api_limits *lim, bool drop_repeats, api_model **out, api_problem *p)
 {
     static const char *const keys[] = {"singular", "petals", "sharpness", "crease_angle",
                                        "normals", "tangents", "tangent_edges", NULL};
@@ -777,7 +819,7 @@ int api_put_tags_packed(const api_model *cur, json_t *body, const api_packs *pac
         tags.n++;
     }
     if (!rc && tags.n > 1)
-        rc = singular_repeats(&tags, p);
+        rc = singular_repeats(&tags, drop_repeats, p);
     if (!rc && pe)
         rc = parse_petals(pe, cur->in ? cur->in->nv : 0, &tags, p);
     if (!rc && sh)

@@ -619,23 +619,82 @@ static uint64_t valence_deviation(const diag_search *S, uint32_t first, uint32_t
     return dev;
 }
 
+/* The scratch of the starts' comparison: per edge the interior ring (interior_rings), the pairs
+ * holding it and a stamp (valence_deviation), per queue position the best run's pairs. */
+typedef struct diag_starts {
+    const uint8_t *ring;
+    uint32_t *held, *seen, stamp;
+    uint8_t *kept;
+} diag_starts;
+
+/* The component of `start` searched from each of its three pairs (smallest key first), keeping
+ * the fewest conflicts, then the least valence deviation, then the earlier start. */
+static void search_best_start(diag_search *S, diag_starts *D, uint32_t start)
+{
+    sd_topo *t = S->t;
+    uint32_t key[3][4];
+    int pairs[3] = {0, 1, 2};
+    for (int p = 0; p < 3; p++)
+        pair_key(t, start, p, key[p]);
+    for (int i = 1; i < 3; i++) /* by key */
+        for (int j = i; j > 0 && cmp_u32x4(key[pairs[j]], key[pairs[j - 1]]) < 0; j--) {
+            int x = pairs[j];
+            pairs[j] = pairs[j - 1];
+            pairs[j - 1] = x;
+        }
+    const uint32_t first = S->tail;
+    uint32_t last = first;
+    uint64_t best_conf = UINT64_MAX, best_dev = UINT64_MAX;
+    for (int run = 0; run < 3; run++) {
+        for (uint32_t q = first; q < last; q++) /* the previous run's component, unvisited */
+            S->state[S->queue[q]] = 0;
+        S->head = S->tail = first;
+        S->queue[S->tail++] = start;
+        S->state[start] = 1;
+        S->force_tet = start;
+        S->force_pair = pairs[run];
+        S->conflicts = 0;
+        search(S);
+        last = S->tail;
+        uint64_t dev = valence_deviation(S, first, last, D->ring, D->held, D->seen, ++D->stamp);
+        if (S->conflicts < best_conf || (S->conflicts == best_conf && dev < best_dev)) {
+            best_conf = S->conflicts;
+            best_dev = dev;
+            for (uint32_t q = first; q < last; q++)
+                D->kept[q] = t->tet_d[S->queue[q]];
+        }
+    }
+    S->force_tet = UINT32_MAX;
+    for (uint32_t q = first; q < last; q++)
+        t->tet_d[S->queue[q]] = D->kept[q];
+}
+
 sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, const int8_t *fixed,
                                sd_error *err)
 {
     const uint32_t n = t->ntet;
     if (n == 0)
         return SD_OK;
+    sd_result r = SD_OK;
     diag_search S = {.t = t, .force_tet = UINT32_MAX};
+    diag_starts D = {0};
+    uint8_t *ring = NULL;
+    bool any = false;
     S.queue = sdi_alloc(m, (size_t)n * sizeof *S.queue);
     S.rank = sdi_alloc(m, (size_t)n * sizeof *S.rank);
     S.order = sdi_alloc(m, (size_t)n * sizeof *S.order); /* (key, tet) by key */
     S.state = sdi_calloc(m, n, 1);
-    if (!S.queue || !S.rank || !S.order || !S.state || !sdi_rels_need(m, R, SDI_REL(SDI_FT))) {
-        sdi_free(m, S.queue);
-        sdi_free(m, S.rank);
-        sdi_free(m, S.order);
-        sdi_free(m, S.state);
-        return sdi_fail_nomem(err, m);
+    if (!S.queue || !S.rank || !S.order || !S.state || !sdi_rels_need(m, R, SDI_REL(SDI_FT)))
+        goto nomem;
+    S.ft = &R->r[SDI_FT];
+    if (!(ring = interior_rings(m, t, S.ft, &any)))
+        goto nomem;
+    if (any) {
+        D = (diag_starts){.ring = ring, .kept = sdi_alloc(m, n),
+                          .held = sdi_calloc(m, (size_t)t->ne + 1, sizeof *D.held),
+                          .seen = sdi_calloc(m, (size_t)t->ne + 1, sizeof *D.seen)};
+        if (!D.kept || !D.held || !D.seen)
+            goto nomem;
     }
     for (uint32_t c = 0; c < n; c++) {
         memcpy(S.order[c], t->tet[c], 4 * sizeof **S.order);
@@ -643,9 +702,8 @@ sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, const int8_t 
         S.order[c][4] = c;
     }
     qsort(S.order, n, sizeof *S.order, cmp_keyrow);
-    for (uint32_t r = 0; r < n; r++)
-        S.rank[S.order[r][4]] = r;
-    S.ft = &R->r[SDI_FT];
+    for (uint32_t q = 0; q < n; q++)
+        S.rank[S.order[q][4]] = q;
     if (fixed) { /* the given pairs first; the search starts from their neighbours, in key order */
         for (uint32_t c = 0; c < n; c++)
             if (fixed[c] >= 0 && fixed[c] <= 2) {
@@ -659,81 +717,29 @@ sd_result sdi_choose_diagonals(sd_mem *m, sd_topo *t, sdi_rels *R, const int8_t 
         }
         search(&S);
     }
-    bool any = false;
-    uint8_t *ring = interior_rings(m, t, S.ft, &any), *kept = NULL;
-    uint32_t *held = NULL;
-    uint32_t *seen = NULL, stamp = 0;
-    if (ring && any) {
-        kept = sdi_alloc(m, n);
-        held = sdi_calloc(m, (size_t)t->ne + 1, sizeof *held);
-        seen = sdi_calloc(m, (size_t)t->ne + 1, sizeof *seen);
-    }
-    if (!ring || (any && (!kept || !held || !seen))) {
-        sdi_free(m, ring);
-        sdi_free(m, kept);
-        sdi_free(m, held);
-        sdi_free(m, seen);
-        sdi_free(m, S.queue);
-        sdi_free(m, S.rank);
-        sdi_free(m, S.order);
-        sdi_free(m, S.state);
-        return sdi_fail_nomem(err, m);
-    }
     for (uint32_t r0 = 0; r0 < n; r0++) {
         uint32_t start = S.order[r0][4];
         if (S.state[start])
             continue;
-        uint32_t first = S.tail;
-        if (!any) { /* no interior edge anywhere: the plain search */
-            S.queue[S.tail++] = start;
-            S.state[start] = 1;
-            search(&S);
+        if (any) {
+            search_best_start(&S, &D, start);
             continue;
         }
-        int pairs[3] = {0, 1, 2}; /* the start's pairs by key */
-        uint32_t ka[4], kb[4];
-        for (int i = 1; i < 3; i++)
-            for (int j = i; j > 0; j--) {
-                pair_key(t, start, pairs[j - 1], ka);
-                pair_key(t, start, pairs[j], kb);
-                if (cmp_u32x4(kb, ka) >= 0)
-                    break;
-                int x = pairs[j];
-                pairs[j] = pairs[j - 1];
-                pairs[j - 1] = x;
-            }
-        uint64_t best_conf = UINT64_MAX, best_dev = UINT64_MAX;
-        uint32_t last = first;
-        for (int run = 0; run < 3; run++) {
-            for (uint32_t q = first; q < last; q++) /* the previous run's component, unvisited */
-                S.state[S.queue[q]] = 0;
-            S.head = S.tail = first;
-            S.queue[S.tail++] = start;
-            S.state[start] = 1;
-            S.force_tet = start;
-            S.force_pair = pairs[run];
-            S.conflicts = 0;
-            search(&S);
-            last = S.tail;
-            uint64_t dev = valence_deviation(&S, first, last, ring, held, seen, ++stamp);
-            if (S.conflicts < best_conf || (S.conflicts == best_conf && dev < best_dev)) {
-                best_conf = S.conflicts;
-                best_dev = dev;
-                for (uint32_t q = first; q < last; q++)
-                    kept[q] = t->tet_d[S.queue[q]];
-            }
-        }
-        S.force_tet = UINT32_MAX;
-        for (uint32_t q = first; q < last; q++)
-            t->tet_d[S.queue[q]] = kept[q];
+        S.queue[S.tail++] = start; /* no interior edge anywhere: the plain search */
+        S.state[start] = 1;
+        search(&S);
     }
+    goto out;
+nomem:
+    r = sdi_fail_nomem(err, m);
+out:
     sdi_free(m, ring);
-    sdi_free(m, kept);
-    sdi_free(m, held);
-    sdi_free(m, seen);
+    sdi_free(m, D.kept);
+    sdi_free(m, D.held);
+    sdi_free(m, D.seen);
     sdi_free(m, S.queue);
     sdi_free(m, S.rank);
     sdi_free(m, S.order);
     sdi_free(m, S.state);
-    return SD_OK;
+    return r;
 }

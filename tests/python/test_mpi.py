@@ -445,18 +445,23 @@ def test_merged_vtu_is_the_one_process_vtu(tmp_path, tmp_path_factory, name):
         assert g.GetPointData().GetArray("uv").GetNumberOfComponents() == 2
 
 
-def test_attributes_match_one_process(tmp_path):
-    body = mixed()
+def one_process_and_pieces(tmp_path, body, level, attributes):
+    """`body` refined to `level` by `subdivd refine` (with those attributes) and by 2 ranks: the
+    one-process VTU and the .pvtu's path."""
     mesh = tmp_path / "m.json"
     mesh.write_text(json.dumps(body))
     ref = tmp_path / "ref.vtu"
-    r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", "2", "-o", str(ref),
-                        "--attributes", "height,uv"], capture_output=True, text=True)
+    r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", str(level), "-o", str(ref),
+                        "--attributes", attributes], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    g0 = read(ref)
     out = tmp_path / "o.pvtu"
-    r = mpirun(2, "refine", mesh, "--level", 2, "-o", out)
+    r = mpirun(2, "refine", mesh, "--level", level, "-o", out)
     assert r.returncode == 0, r.stderr
+    return read(ref), out
+
+
+def test_attributes_match_one_process(tmp_path):
+    g0, out = one_process_and_pieces(tmp_path, mixed(), 2, "height,uv")
     for g in pieces_of(out, 2):
         gid = arr(g, "global_id")
         for a in ("height", "uv"):
@@ -469,16 +474,7 @@ def test_an_attribute_called_rule_moves_the_rule_array(tmp_path):
     is called "rule" (docs/OUTPUTS.md), the attribute keeping its name."""
     body = mixed()
     body["attributes"] = {"rule": body["attributes"]["height"]}
-    mesh = tmp_path / "m.json"
-    mesh.write_text(json.dumps(body))
-    ref = tmp_path / "ref.vtu"
-    r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", "1", "-o", str(ref),
-                        "--attributes", "rule"], capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
-    g0 = read(ref)
-    out = tmp_path / "o.pvtu"
-    r = mpirun(2, "refine", mesh, "--level", 1, "-o", out)
-    assert r.returncode == 0, r.stderr
+    g0, out = one_process_and_pieces(tmp_path, body, 1, "rule")
     assert '<PDataArray type="UInt8" Name="rule_2"' in out.read_text()
     for g in pieces_of(out, 2):
         gid = arr(g, "global_id")

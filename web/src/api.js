@@ -155,25 +155,19 @@ export class Session {
   events(handlers) {
     const q = new URLSearchParams({ access_token: this.token });
     const es = new EventSource(`${this.base}/v1/sessions/${this.id}/events?${q}`);
-    es.addEventListener('version', (ev) => {
-      let data = {};
+    const dataOf = (ev) => {
       try {
-        data = JSON.parse(ev.data);
+        return JSON.parse(ev.data) ?? {};
       } catch {
-        data = {};
+        return {};
       }
+    };
+    es.addEventListener('version', (ev) => {
+      const data = dataOf(ev);
       handlers.version?.(data, Number(ev.lastEventId || data.version));
     });
     es.addEventListener('resync', () => handlers.resync?.());
-    es.addEventListener('deleted', (ev) => {
-      let data = {};
-      try {
-        data = JSON.parse(ev.data);
-      } catch {
-        data = {};
-      }
-      handlers.deleted?.(data);
-    });
+    es.addEventListener('deleted', (ev) => handlers.deleted?.(dataOf(ev)));
     es.onerror = (ev) => handlers.error?.(ev, es);
     return es;
   }
