@@ -118,6 +118,22 @@ static json_t *full_json(const sd_analysis *a)
                      "eigenvalues", eig_json(a), "points", "level", a->level, "ids", pts);
 }
 
+/* The block of vertex a (b < 0) or of edge a-b. */
+static sd_result analyze_block(sd_complex *c, long a, long b, sd_analysis *an, sd_error *e)
+{
+    return b < 0 ? sd_analyze_vertex(c, (uint32_t)a, an, e)
+                 : sd_analyze_edge(c, (uint32_t)a, (uint32_t)b, an, e);
+}
+
+static json_t *block_failed(sd_result r, const sd_error *e, long b, api_problem *p)
+{
+    if (r == SD_ERR_ARG) /* the block itself: not invariant, or over SD_ANALYSIS_MAX_POINTS */
+        api_fail_at(p, 422, "not-analysable", b < 0 ? "vertex" : "edge", "%s", e->message);
+    else
+        api_fail_core(p, e, NULL, NULL);
+    return NULL;
+}
+
 json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const api_limits *lim,
                      const api_slot *slot,
                      api_problem *p)
@@ -152,6 +168,24 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
     }
     if (api_level_compute(m, 1, slot, p)) /* an edge's block lives at level 1 */
         return NULL;
+    /* the block first: one the core refuses (not invariant, over SD_ANALYSIS_MAX_POINTS) is
+     * answered before the finer levels below are made for it. Its eigen-decomposition is compute
+     * like a level's: in a slot (its size bounds the time held). */
+    sd_analysis an, fa = {0};
+    sd_limit_mask lm = {0};
+    sd_error e = {0}, fe = {0};
+    pthread_mutex_lock(&m->lock);
+    if (slot && slot->take(slot->ud, 1, p)) {
+        pthread_mutex_unlock(&m->lock);
+        return NULL;
+    }
+    sd_result r = analyze_block(m->c, a, b, &an, &e);
+    uint64_t seen = atomic_load(&m->version);
+    if (slot)
+        slot->give(slot->ud);
+    pthread_mutex_unlock(&m->lock);
+    if (r)
+        return block_failed(r, &e, b, p);
     /* the limit mask is read at the limit level of the block's level (core/limit.c), the full
      * matrix at levels 1 and 2; each only within the limits (else null) */
     pthread_mutex_lock(&m->lock);
@@ -161,20 +195,22 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
     bool with_limit = !api_check_level_limits(m, ll, lim, &skip);
     bool with_full = !api_check_level_limits(m, 2, lim, &skip);
     if ((with_limit && api_level_compute(m, ll, slot, p)) ||
-        (with_full && api_level_compute(m, 2, slot, p)))
+        (with_full && api_level_compute(m, 2, slot, p))) {
+        sd_analysis_free(&an);
         return NULL;
-    sd_analysis an, fa = {0};
-    sd_limit_mask lm = {0};
-    sd_error e = {0}, fe = {0};
-    /* the eigen-decompositions are compute like a level's: in a slot (the core refuses blocks
-     * over SD_ANALYSIS_MAX_POINTS before making them, which bounds the time held) */
+    }
     pthread_mutex_lock(&m->lock);
     if (slot && slot->take(slot->ud, 1, p)) {
         pthread_mutex_unlock(&m->lock);
+        sd_analysis_free(&an);
         return NULL;
     }
-    sd_result r = b < 0 ? sd_analyze_vertex(m->c, (uint32_t)a, &an, &e)
-                        : sd_analyze_edge(m->c, (uint32_t)a, (uint32_t)b, &an, &e);
+    /* an edit in between may have changed the rules (a moved corner's angle): the block again,
+     * so that every part of the answer is of one version */
+    if (atomic_load(&m->version) != seen) {
+        sd_analysis_free(&an);
+        r = analyze_block(m->c, a, b, &an, &e);
+    }
     if (!r && with_limit && (r = sd_limit_mask_of(m->c, an.level, an.points[0], &lm, &e)))
         sd_analysis_free(&an);
     sd_result fr = SD_ERR_ARG;
@@ -192,13 +228,8 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
     if (slot)
         slot->give(slot->ud);
     pthread_mutex_unlock(&m->lock);
-    if (r) {
-        if (r == SD_ERR_ARG) /* the block itself: not invariant, or over SD_ANALYSIS_MAX_POINTS */
-            api_fail_at(p, 422, "not-analysable", b < 0 ? "vertex" : "edge", "%s", e.message);
-        else
-            api_fail_core(p, &e, NULL, NULL);
-        return NULL;
-    }
+    if (r)
+        return block_failed(r, &e, b, p);
     json_t *mat = json_array(), *eig = json_array(), *pts = json_array();
     for (int i = 0; i < an.size; i++) {
         json_array_append_new(mat, api_json_doubles(an.matrix + (size_t)i * an.size, (size_t)an.size));

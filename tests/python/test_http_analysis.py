@@ -195,6 +195,9 @@ def test_analysis_size_is_bounded_before_the_work(daemon):
     p = r.json()
     assert p["type"].endswith("/not-analysable") and p["errors"][0]["pointer"] == "vertex", p
     assert "401 points" in p["detail"] and "256" in p["detail"]
+    # refused before the finer levels the limit mask and the full matrix read were made: levels 0
+    # and 1 only (the block's own)
+    assert s2.req("GET", "").json()["levels_cached"] == 2
     # the session is untouched: a rim vertex of it (a boundary vertex: itself and its two boundary
     # neighbours) is still analysable
     r = s2.req("GET", "/analysis", params={"vertex": 1})
