@@ -673,7 +673,9 @@ static int singular_repeats(api_tags *tags, bool drop, api_problem *p)
 {
     uint32_t (*key)[4] = api_plain_malloc((size_t)tags->n * sizeof *key);
     uint8_t *gone = drop ? api_plain_malloc(tags->n) : NULL;
-    if (!key || (drop && !gone)) {
+    if (drop)
+        tags->from = api_plain_malloc((size_t)tags->n * sizeof *tags->from);
+    if (!key || (drop && (!gone || !tags->from))) {
         api_plain_free(key);
         api_plain_free(gone);
         return api_fail(p, 503, "out-of-memory", "out of memory");
@@ -709,13 +711,14 @@ static int singular_repeats(api_tags *tags, bool drop, api_problem *p)
                          "the same simplex as /singular/%u: each simplex is tagged once",
                          key[i - 1][3]);
     }
-    if (drop) { /* the entries kept, in their order */
+    if (drop) { /* the entries kept, in their order, each with the entry it was */
         uint32_t n = 0;
         size_t from = 0, to = 0;
         for (uint32_t i = 0; i < tags->n; i++) {
             uint8_t k = tags->size[i];
             if (!gone[i]) {
                 memmove(tags->idx + to, tags->idx + from, k * sizeof *tags->idx);
+                tags->from[n] = i;
                 tags->size[n++] = k;
                 to += k;
             }
@@ -832,6 +835,7 @@ static int put_tags(const api_model *cur, json_t *body, const api_packs *packs,
         rc = build_from_copy(cur, &cur->rules, &tags, lim, out, p);
     api_plain_free(tags.size);
     api_plain_free(tags.idx);
+    api_plain_free(tags.from);
     api_plain_free(tags.pet);
     api_plain_free(tags.sh);
     api_plain_free(tags.tt);

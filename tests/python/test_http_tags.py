@@ -91,3 +91,16 @@ def test_import_takes_a_repeated_tag_once(daemon):
     t.auth = {"Authorization": f"Bearer {t.token}"}
     assert sorted(map(sorted, t.req("GET", "/complex").json()["tags"]["singular"])) == [[0, 1], [3]]
     assert t.level(2, format="json").json()["vertices"] == want
+
+
+def test_import_error_names_the_entry_after_dropped_repeats(daemon):
+    """An import that drops a repeated singular simplex still names, in an error about a later
+    tag, that tag's entry in the document (not its place among the tags kept)."""
+    s = Session(daemon)
+    assert s.put_complex({"vertices": CUBE_V, "simplices": CUBE_T}).status_code == 200
+    doc = s.req("GET", "/export").json()
+    # entry 2 repeats entry 0 and is dropped; entry 3 (1-2) is no edge of the cube's tetrahedra
+    doc["tags"] = {"singular": [[0, 1], [3], [1, 0], [1, 2]]}
+    r = s.http.post(daemon.url + "/v1/sessions", json={"import": doc})
+    assert r.status_code == 422, r.text
+    assert r.json()["errors"][0]["pointer"] == "/import/tags/singular/3", r.json()
