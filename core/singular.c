@@ -54,8 +54,10 @@ sd_result sd_complex_set_singular(sd_complex *c, const uint32_t *idx, const uint
         kind[i] = (uint8_t)k;
         where[i] = k == 1 ? v[0] : k == 2 ? sdi_rels_edge(R, v[0], v[1]) : sdi_rels_face(R, v);
         if (where[i] == UINT32_MAX)
-            rc = sdi_fail(err, SD_ERR_ARG, (long)i, -1, "tag %zu is not %s of the complex", i,
-                         k == 2 ? "an edge" : "a triangle");
+            rc = k == 2 ? sdi_fail(err, SD_ERR_ARG, (long)i, -1,
+                                   "%u-%u is not an edge of the complex", v[0], v[1])
+                        : sdi_fail(err, SD_ERR_ARG, (long)i, -1,
+                                   "%u-%u-%u is not a triangle of the complex", v[0], v[1], v[2]);
     }
     if (rc) {
         sdi_rels_free(m, R);

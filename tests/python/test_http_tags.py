@@ -104,3 +104,4 @@ def test_import_error_names_the_entry_after_dropped_repeats(daemon):
     r = s.http.post(daemon.url + "/v1/sessions", json={"import": doc})
     assert r.status_code == 422, r.text
     assert r.json()["errors"][0]["pointer"] == "/import/tags/singular/3", r.json()
+    assert "1-2 is not an edge" in r.json()["detail"], r.json()
