@@ -258,6 +258,13 @@ bool api_tags_copy(api_tags *dst, const api_tags *src)
     return true;
 }
 
+/* Whether a sharpness is infinitely sharp: 10 or more as the 32-bit float the core (and
+ * OpenSubdiv) holds, so that a value just below 10 that rounds to 10.0f is one. */
+static bool sharp_infinite(double s)
+{
+    return s >= 10 || (float)s >= 10.0f; /* (the cast only of values in float's range) */
+}
+
 /* The singular tags with the infinitely sharp sharpness after them (s >= 10 is a singular tag:
  * docs/API.md "Creases"), and the finite sharpness for the core; then all three lists. */
 int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, int *which)
@@ -274,7 +281,7 @@ int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, int *whic
     for (uint32_t i = 0; i < t->n; i++)
         nidx += t->size[i];
     for (uint32_t i = 0; i < t->nsh; i++)
-        ninf += t->sh[i].value >= 10;
+        ninf += sharp_infinite(t->sh[i].value);
     uint8_t *size = api_plain_malloc(t->n + ninf + 1);
     uint32_t *idx = api_plain_malloc((nidx + 3 * ninf + 1) * sizeof *idx);
     uint32_t *from = api_plain_malloc((ninf + 1) * sizeof *from); /* sharpness entry of each */
@@ -294,7 +301,7 @@ int api_model_set_tags(api_model *m, const api_tags *t, sd_error *err, int *whic
     size_t ns = t->n, nf = 0;
     for (uint32_t i = 0; i < t->nsh; i++) {
         const api_sharp *x = &t->sh[i];
-        if (x->value >= 10) {
+        if (sharp_infinite(x->value)) {
             from[ns - t->n] = i;
             for (int j = 0; j < x->nverts; j++)
                 idx[nidx++] = x->v[j];
