@@ -26,6 +26,7 @@
  */
 #include "delta.h"
 #include "buf.h"
+#include "handlers.h"
 #include "mem.h"
 #include "out_internal.h"
 #include <ctype.h>
@@ -347,7 +348,7 @@ static int since_ok(api_model *m, int level, uint64_t since, api_problem *p)
 
 /* The query: since, format (0 bin, 1 json), the attributes. 0 or the problem's status. */
 static int parse_query(const api_model *m, const api_delta_query *q, uint64_t *since, int *json,
-                       int *attrs, int *nattrs, api_problem *p)
+                       int *attrs, int *nattrs, unsigned *parts, api_problem *p)
 {
     const char *s = q->since;
     if (!s)
@@ -383,14 +384,15 @@ static int parse_query(const api_model *m, const api_delta_query *q, uint64_t *s
         attrs[(*nattrs)++] = k;
         a = e ? e + 1 : a + n;
     }
-    return 0;
+    return api_parse_parts(q->parts, parts, p);
 }
 
 int api_delta_check(const api_model *m, const api_delta_query *q, api_problem *p)
 {
     uint64_t since;
     int json, attrs[API_MAX_ATTRIBUTES], nattrs;
-    return parse_query(m, q, &since, &json, attrs, &nattrs, p);
+    unsigned parts;
+    return parse_query(m, q, &since, &json, attrs, &nattrs, &parts, p);
 }
 
 /* Append to *a (k of cap) the points whose stamp st[v] is after `since`. false: no memory. */
@@ -445,16 +447,44 @@ static bool collect(dlevel *L, const sd_level *lv, const out_geometry *g, bool n
     return true;
 }
 
+/* The normals of points ids (n) over the drawn triangles of one kind — the surface triangles
+ * (surf) or the solids' boundary — as out_normals computes them for a GLB of those parts alone
+ * (that kind's triangles in order): n rows, a new block, or NULL without memory. */
+static float *parts_normals(const sd_level *lv, const dlevel *L, const out_geometry *g, bool surf,
+                            const uint32_t *ids, size_t n)
+{
+    float *out = api_malloc((3 * n + 1) * sizeof *out);
+    if (!out)
+        return NULL;
+    const double *xyz = sd_level_channel(lv, 0, NULL);
+    for (size_t i = 0; i < n; i++) {
+        float acc[3] = {0, 0, 0}, t[3];
+        uint32_t v[3];
+        for (uint32_t j = L->first[ids[i]]; j < L->first[ids[i] + 1]; j++) {
+            if ((L->tri[j] < L->ntr) != surf)
+                continue;
+            drawn(lv, L, g, L->tri[j], v);
+            out_triangle_normal(xyz, v, t);
+            for (int k = 0; k < 3; k++)
+                acc[k] += t[k];
+        }
+        out_normal_unit(acc);
+        memcpy(out + 3 * i, acc, sizeof acc);
+    }
+    return out;
+}
+
 int api_level_delta(api_model *m, int level, const api_delta_query *q, char **body, size_t *len,
               const char **ctype, char *components, size_t ccap, uint64_t *version,
               api_problem *p)
 {
     uint64_t since = 0;
     int json = 0, attrs[API_MAX_ATTRIBUTES], nattrs = 0;
+    unsigned parts = OUT_PART_ALL;
     *body = NULL;
     if (!m->c)
         return api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
-    if (parse_query(m, q, &since, &json, attrs, &nattrs, p))
+    if (parse_query(m, q, &since, &json, attrs, &nattrs, &parts, p))
         return p->status;
     components[0] = 0;
     for (int i = 0; i < nattrs; i++) {
@@ -473,15 +503,22 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
     sd_error e = {0};
     const sd_level *lv = sd_complex_level(m->c, level, &e);
     const out_geometry *g = api_model_geometry_locked(m, level);
-    bool normals = g && sd_level_num_cells(lv, SD_CELL_TRIANGLE) + (uint64_t)g->nbnd > 0;
+    /* the drawn triangles of the parts the client holds (its GLB's NORMAL accessor): the
+     * cached normals are those of both kinds; one kind alone has its own (parts_normals) */
+    bool surf = parts & OUT_PART_SURFACES, sol = parts & OUT_PART_SOLIDS;
+    bool normals = g && ((surf && sd_level_num_cells(lv, SD_CELL_TRIANGLE)) || (sol && g->nbnd));
     uint32_t *ids = NULL;
     size_t n = 0;
+    float *own = NULL;
     if (!g || (normals && !ensure_incidence(L, lv, g)) ||
-        !collect(L, lv, g, normals, since, attrs, nattrs, &ids, &n)) {
+        !collect(L, lv, g, normals, since, attrs, nattrs, &ids, &n) ||
+        (normals && !(surf && sol) && !(own = parts_normals(lv, L, g, surf, ids, n)))) {
+        api_free(ids);
         api_model_publish(m);
         pthread_mutex_unlock(&m->lock);
         return api_fail(p, 503, "out-of-memory", "out of memory building the delta; retry later");
     }
+    const float *nrm = own; /* n rows; without it the cache's, a row per point */
     const double *xyz = sd_level_channel(lv, 0, NULL);
     api_buf o = {0};
     size_t per = 12 + (normals ? 12 : 0);
@@ -500,7 +537,7 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
             for (int k = 0; k < 3; k++)
                 api_buf_f32(&o, xyz[3 * (size_t)ids[i] + k]);
         for (size_t i = 0; normals && i < n; i++)
-            api_buf_put(&o, g->normals + 3 * (size_t)ids[i], 12);
+            api_buf_put(&o, nrm ? nrm + 3 * i : g->normals + 3 * (size_t)ids[i], 12);
         for (int a = 0; a < nattrs; a++) {
             int nc;
             const double *x = sd_level_channel(lv, m->channel[attrs[a]], &nc);
@@ -528,7 +565,7 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
         if (normals) {
             api_buf_put(&o, ",\"normals\":[", 12);
             for (size_t i = 0; i < n; i++) {
-                const float *f = g->normals + 3 * (size_t)ids[i];
+                const float *f = nrm ? nrm + 3 * i : g->normals + 3 * (size_t)ids[i];
                 api_buf_put(&o, i ? ",[" : "[", i ? 2 : 1);
                 for (int k = 0; k < 3; k++)
                     api_buf_printf(&o, k ? ",%.9g" : "%.9g", (double)f[k]);
@@ -555,6 +592,7 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
     api_model_publish(m); /* the incidence and the geometry count as session memory */
     pthread_mutex_unlock(&m->lock);
     api_free(ids);
+    api_free(own);
     if (o.failed || !o.b) {
         api_free(o.b);
         return api_fail(p, 503, "out-of-memory", "out of memory writing the delta; retry later");
@@ -568,11 +606,12 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
 int api_delta_moved(api_model *m, int level, const char *since_text, uint64_t *since,
                     int *json, const char *format, uint32_t **ids, size_t *n, api_problem *p)
 {
-    api_delta_query q = {since_text, format, NULL};
+    api_delta_query q = {since_text, format, NULL, NULL};
     int attrs[API_MAX_ATTRIBUTES], nattrs;
+    unsigned parts;
     *ids = NULL;
     *n = 0;
-    if (parse_query(m, &q, since, json, attrs, &nattrs, p))
+    if (parse_query(m, &q, since, json, attrs, &nattrs, &parts, p))
         return p->status;
     if (since_ok(m, level, *since, p))
         return p->status;

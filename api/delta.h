@@ -54,6 +54,8 @@ void api_delta_end_edit(api_model *m);
 /* The query of GET /levels/{L}/delta (NULL = absent). */
 typedef struct api_delta_query {
     const char *since, *format, *attributes;
+    const char *parts;   /* the GLB's parts= the client holds: the normals are those of its
+                          * drawn triangles (NULL: all parts) */
 } api_delta_query;
 
 /* The delta of level L since q->since as a complete body (an api_malloc block the caller owns),

@@ -154,6 +154,9 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
 
 /* Level from a path segment: 0..SD_MAX_LEVEL, else -1 + problem (400 not a number, 422 range). */
 int api_parse_level(const char *s, api_problem *p);
+/* parts=points,curves,surfaces,solids (a comma list; NULL: all) into an OUT_PART_* mask: 0, or
+ * the status of the problem (422 naming "parts"). */
+int api_parse_parts(const char *text, unsigned *parts, api_problem *p);
 /* Estimated core bytes needed to hold levels up to `level` (limits check before computing). */
 uint64_t api_estimate_bytes(const sd_complex *c, int level);
 

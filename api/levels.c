@@ -95,6 +95,29 @@ static int add_attr(const api_model *m, out_request *rq, int a)
     return rq->nattrs++;
 }
 
+int api_parse_parts(const char *text, unsigned *parts, api_problem *p)
+{
+    static const char *const names[] = {"points", "curves", "surfaces", "solids"};
+    char item[64];
+    *parts = OUT_PART_ALL;
+    if (!text)
+        return 0;
+    *parts = 0;
+    while (next_item(&text, item, sizeof item)) {
+        int k = 0;
+        while (k < 4 && strcmp(item, names[k]))
+            k++;
+        if (k == 4)
+            return api_fail_at(p, 422, "unknown-value", "parts",
+                               "part \"%.20s\" is not one of points, curves, surfaces, solids",
+                               item);
+        *parts |= 1u << k;
+    }
+    if (!*parts)
+        return api_fail_at(p, 422, "unknown-value", "parts", "parts must name at least one part");
+    return 0;
+}
+
 static int parse_query(const api_model *m, const api_level_query *q, out_request *rq,
                        const out_format **fmt, api_problem *p)
 {
@@ -105,24 +128,8 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
         return api_fail_at(p, 422, "unknown-value", "format", "format \"%.20s\" is not one of %s",
                            q->format, out_format_list(names, sizeof names, false, ", ", ", "));
     }
-    rq->parts = OUT_PART_ALL;
-    if (q->parts) {
-        static const char *const names[] = {"points", "curves", "surfaces", "solids"};
-        const char *s = q->parts;
-        rq->parts = 0;
-        while (next_item(&s, item, sizeof item)) {
-            int k = 0;
-            while (k < 4 && strcmp(item, names[k]))
-                k++;
-            if (k == 4)
-                return api_fail_at(p, 422, "unknown-value", "parts",
-                                   "part \"%.20s\" is not one of points, curves, surfaces, solids",
-                                   item);
-            rq->parts |= 1u << k;
-        }
-        if (!rq->parts)
-            return api_fail_at(p, 422, "unknown-value", "parts", "parts must name at least one part");
-    }
+    if (api_parse_parts(q->parts, &rq->parts, p))
+        return p->status;
     if (q->slice) {
         const char *s = q->slice;
         int k = 0;

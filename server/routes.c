@@ -642,7 +642,7 @@ static void h_put_tags(req *r) { change(r, op_tags, api_tags_packed, "tags"); }
 static void h_put_rules(req *r) { change(r, op_rules, NULL, "rules"); }
 static void h_refine(req *r) { change(r, op_refine, NULL, "refine"); }
 
-static const char *const EDIT_KEYS[] = {"delta", "format", "attributes", NULL};
+static const char *const EDIT_KEYS[] = {"delta", "format", "attributes", "parts", NULL};
 
 /* PATCH ?delta=L (docs/API.md "Live edits", DECISIONS 38): the edit answers with the delta of
  * level L it made, so a dragging client needs one round trip, not two. */
@@ -662,11 +662,13 @@ static int edit_query(req *r, edit_delta *d, api_problem *p)
 {
     const char *lv = http_arg(r, "delta");
     d->level = -1;
-    d->q = (api_delta_query){d->since, http_arg(r, "format"), http_arg(r, "attributes")};
+    d->q = (api_delta_query){d->since, http_arg(r, "format"), http_arg(r, "attributes"),
+                             http_arg(r, "parts")};
     if (!lv) {
-        if (d->q.format || d->q.attributes)
-            return api_fail_at(p, 400, "bad-parameter", d->q.format ? "format" : "attributes",
-                               "format and attributes of a PATCH go with delta=<level>");
+        if (d->q.format || d->q.attributes || d->q.parts)
+            return api_fail_at(p, 400, "bad-parameter",
+                               d->q.format ? "format" : d->q.attributes ? "attributes" : "parts",
+                               "format, attributes and parts of a PATCH go with delta=<level>");
         return 0;
     }
     api_problem lp = {0};
@@ -950,13 +952,15 @@ static void matrix(req *r, api_model *m, int level)
 static void h_matrix(req *r) { with_level(r, matrix); }
 
 static const char *const DELTA_KEYS[] = {"since", "format", "attributes", NULL};
+static const char *const LEVEL_DELTA_KEYS[] = {"since", "format", "attributes", "parts", NULL};
 
 /* GET /levels/{L}/delta: the points of a level the client holds that changed since a version
  * (api/delta.h), a body of its own; no compute slot (a level not computed is a 410). */
 static void delta(req *r, api_model *m, int level)
 {
     api_problem p = {0};
-    api_delta_query q = {http_arg(r, "since"), http_arg(r, "format"), http_arg(r, "attributes")};
+    api_delta_query q = {http_arg(r, "since"), http_arg(r, "format"), http_arg(r, "attributes"),
+                         http_arg(r, "parts")};
     char *body, comp[1024];
     size_t len;
     const char *ctype;
@@ -1217,7 +1221,7 @@ static const route ROUTES[] = {
     {"PUT", "/v1/sessions/{id}/rules", h_put_rules, 1, 1, NULL},
     {"GET", "/v1/sessions/{id}/levels/{L}", h_get_level, 1, 0, LEVEL_KEYS},
     {"GET", "/v1/sessions/{id}/levels/{L}/stats", h_level_stats, 1, 0, NULL},
-    {"GET", "/v1/sessions/{id}/levels/{L}/delta", h_delta, 1, 0, DELTA_KEYS},
+    {"GET", "/v1/sessions/{id}/levels/{L}/delta", h_delta, 1, 0, LEVEL_DELTA_KEYS},
     {"GET", "/v1/sessions/{id}/events", h_events, 1, 0, EVENTS_KEYS},
     {"GET", "/v1/sessions/{id}/embedded", h_list_embedded, 1, 0, NULL},
     {"PUT", "/v1/sessions/{id}/embedded/{name}", h_put_embedded, 1, 2, EMBED_PUT_KEYS},

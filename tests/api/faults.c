@@ -161,8 +161,8 @@ static void edit_and_refine(api_model **m)
         same_as_input(rebuilt ? rebuilt : *m, "a failed api_edit");
     } else if (b) {
         oks++;
-        for (int k = 0; k < 2; k++) { /* the edit's delta of the level the streams computed */
-            api_delta_query q = {"1", k ? "json" : "bin", "h,v"};
+        for (int k = 0; k < 3; k++) { /* the edit's delta of the level the streams computed */
+            api_delta_query q = {"1", k == 1 ? "json" : "bin", "h,v", k == 2 ? "solids" : NULL};
             char *text = NULL, comp[64];
             size_t len;
             const char *ctype;
@@ -285,8 +285,9 @@ static void meter_limit(void)
 int main(int argc, char **argv)
 {
     uint64_t max = argc > 1 ? strtoull(argv[1], NULL, 10) : 0, runs = 0;
-    int want = 5 + 1 + 3 + 2 + 2; /* changes (a repair among them), stats, views, edit and
-                                   * refine, the edit's two deltas; and a level per format */
+    int want = 5 + 1 + 3 + 2 + 3; /* changes (a repair among them), stats, views, edit and
+                                   * refine, the edit's three deltas (one of one kind of
+                                   * parts); and a level per format */
     for (const out_format *f = out_formats; f->name; f++)
         want++;
     run(0, 0); /* the scenario must pass as it is */

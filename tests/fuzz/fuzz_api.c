@@ -173,13 +173,15 @@ static void drain_levels(api_model *m, const api_limits *lim)
         }
 }
 
-/* The deltas of levels 0-2 since the edit's version and the one before, both formats. */
+/* The deltas of levels 0-2 since the edit's version and the one before, both formats, all parts
+ * or one kind of drawn triangles. */
 static void drain_deltas(api_model *m)
 {
     static const char *const since[] = {"0", "1"};
     for (int level = 0; level <= 2; level++)
-        for (int k = 0; k < 4; k++) {
-            api_delta_query q = {since[k & 1], k & 2 ? "json" : "bin", k == 3 ? "h" : NULL};
+        for (int k = 0; k < 6; k++) {
+            api_delta_query q = {since[k & 1], k & 2 ? "json" : "bin", k == 3 ? "h" : NULL,
+                                 k < 4 ? NULL : k == 4 ? "surfaces" : "solids"};
             api_problem p = {0};
             char *body = NULL, comp[256];
             size_t len;

@@ -374,6 +374,54 @@ def test_patch_answers_with_its_delta(daemon, mesh):
     s.delete()
 
 
+def test_delta_for_a_glb_of_some_parts(daemon):
+    """A client holding a GLB of some parts (parts=surfaces: normals over the surface triangles
+    alone) follows it with deltas of the same parts=: positions and normals applied equal a
+    refetch of that GLB. The mixed complex's fins meet its solid, so their shared points' normals
+    differ between the parts. PATCH ?delta= takes parts= too; a bad one is a 422 naming it."""
+    body = complex_from_text(MIXED)
+    s = new_session(daemon, body)
+    V, n = body["vertices"], len(body["vertices"])
+    full = glb_arrays(s.level(LEVEL).content)["NORMAL"]
+    differ = False
+    for parts in ("surfaces", "solids", "curves,solids", "surfaces,solids", "points,curves"):
+        g0 = glb_arrays(s.level(LEVEL, parts=parts).content)
+        if g0["NORMAL"] is not None and parts in ("surfaces", "solids"):
+            differ |= not np.array_equal(g0["NORMAL"], full)
+        v = version_of(s)
+        k = (7 * len(parts)) % n
+        mv = {"moves": [{"index": k, "position": moved(V[k], len(parts))}]}
+        r = s.req("PATCH", "/control-points", json=mv, headers={"If-Match": f'"{v}"'},
+                  params={"delta": LEVEL, "parts": parts})
+        assert r.status_code == 200, r.text
+        got = s.req("GET", f"/levels/{LEVEL}/delta", params={"since": v, "parts": parts})
+        assert got.status_code == 200 and got.content == r.content, parts
+        d = parse_sdd1(got.content, [])
+        g1 = glb_arrays(s.level(LEVEL, parts=parts).content)
+        pos = g0["POSITION"].copy()
+        pos[d["indices"]] = d["positions"]
+        np.testing.assert_array_equal(pos, g1["POSITION"])
+        drawn = any(x in parts for x in ("surfaces", "solids"))
+        assert bool(d["flags"] & 1) == drawn, parts
+        if drawn:
+            nrm = g0["NORMAL"].copy()
+            nrm[d["indices"]] = d["normals"]
+            np.testing.assert_array_equal(nrm, g1["NORMAL"], err_msg=parts)
+            j = s.req("GET", f"/levels/{LEVEL}/delta",
+                      params={"since": v, "parts": parts, "format": "json"}).json()
+            np.testing.assert_array_equal(np.asarray(j["normals"], np.float32), d["normals"])
+    assert differ   # the case is one where the parts' normals are not the whole level's
+    for params, status in [({"since": 1, "parts": "fins"}, 422), ({"since": 1, "parts": ""}, 422)]:
+        r = s.req("GET", f"/levels/{LEVEL}/delta", params=params)
+        assert r.status_code == status and r.json()["errors"][0]["pointer"] == "parts", r.text
+    v = version_of(s)
+    r = s.req("PATCH", "/control-points", json={"moves": [{"index": 0, "position": V[0]}]},
+              headers={"If-Match": f'"{v}"'}, params={"parts": "surfaces"})
+    assert r.status_code == 400 and r.json()["errors"][0]["pointer"] == "parts"
+    assert version_of(s) == v
+    s.delete()
+
+
 def test_patch_delta_query_checked_before_the_edit(daemon):
     """A bad ?delta query is refused with nothing applied; a delta the daemon cannot make (a level
     not computed, an edit that rebuilt rules) leaves the edit applied and says why in the
@@ -819,4 +867,12 @@ def test_client_edit_with_its_delta(daemon):
     np.testing.assert_array_equal(r["delta"]["positions"], j["positions"])
     r = c.edit(moves=[{"index": 1, "position": [1.0, 0.01, 0]}], delta=4)
     assert r["delta"] is None and r["gone"]["status"] == 410 and r["version"] == v + 3 == c.version
+    # parts=: the normals of a GLB of those parts (test_delta_for_a_glb_of_some_parts)
+    g0 = glb_arrays(s.level(2, parts="surfaces").content)
+    r = c.edit(moves=[{"index": 1, "position": [1.02, 0.0, 0]}], delta=2, delta_parts=["surfaces"])
+    d = c.delta(2, since=v + 3, parts="surfaces")
+    np.testing.assert_array_equal(r["delta"]["normals"], d["normals"])
+    nrm = g0["NORMAL"].copy()
+    nrm[d["indices"]] = d["normals"]
+    np.testing.assert_array_equal(nrm, glb_arrays(s.level(2, parts="surfaces").content)["NORMAL"])
     s.delete()

@@ -341,14 +341,16 @@ class Session:
     def edit(self, moves: Optional[Sequence[JSON]] = None, attributes: Optional[JSON] = None, *,
              if_match: Union[bool, Version, None] = True, delta: Optional[int] = None,
              delta_format: str = "bin",
-             delta_attributes: Union[str, Sequence[str], None] = None) -> JSON:
+             delta_attributes: Union[str, Sequence[str], None] = None,
+             delta_parts: Union[str, Sequence[str], None] = None) -> JSON:
         """PATCH /control-points; If-Match is the session's known version unless given. A move
         is {"index", "position"} with an optional "level" (default 0): a point of a finer level
         moved there keeps a detail offset (GET /complex lists them as "details").
         With `delta=L` the answer carries the edit's delta of level L (PATCH ?delta=, one round
         trip): {"version", "updated_points", "delta"} where "delta" is what delta() returns for
         the version the edit was made on, or None when the daemon could not make it ("gone" then
-        holds its problem: the edit stands; fetch the level)."""
+        holds its problem: the edit stands; fetch the level). `delta_parts` as delta()'s
+        `parts`."""
         body = {}
         if moves is not None:
             body["moves"] = moves
@@ -356,7 +358,8 @@ class Session:
             body["attributes"] = attributes
         if delta is None:
             return self._change("PATCH", "/control-points", body, if_match, None)
-        params, names = self._delta_params({"delta": int(delta)}, delta_format, delta_attributes)
+        params, names = self._delta_params({"delta": int(delta)}, delta_format, delta_attributes,
+                                           delta_parts)
         r = self._call("PATCH", "/control-points", json_body=body, if_match=if_match,
                        params=params)
         if r.headers.get("Content-Type", "").startswith("application/octet-stream"):
@@ -496,7 +499,8 @@ class Session:
                            cell_data={"kind": kinds, "source_cell": sources})
 
     def delta(self, level: int, since: int, format: str = "bin",
-              attributes: Union[str, Sequence[str], None] = None) -> JSON:
+              attributes: Union[str, Sequence[str], None] = None,
+              parts: Union[str, Sequence[str], None] = None) -> JSON:
         """GET /levels/{L}/delta?since=V: the points of `level` that changed since version
         `since` (the version of the level you hold), as a dict: "level", "since", "version" (the
         version the delta brings you to) and numpy arrays "indices" (uint32: level vertex
@@ -505,16 +509,19 @@ class Session:
         ncomp}. `format="bin"` reads the compact "SDD1" layout (positions float32, as the GLB),
         `format="json"` the JSON one (positions as doubles, as format=json). Raises Gone (410)
         when the delta is not available (a change since then was not an edit, the level is not
-        computed, ...): fetch the level again."""
-        params, names = self._delta_params({"since": int(since)}, format, attributes)
+        computed, ...): fetch the level again. `parts`: those of the GLB you hold (level(...,
+        parts=...)), whose normals are over its own drawn triangles; default all."""
+        params, names = self._delta_params({"since": int(since)}, format, attributes, parts)
         r = self._call("GET", f"/levels/{int(level)}/delta", params=params)
         if format == "json":
             return self._parse_delta_json(r.json())
         return self._parse_delta_bin(r, names)
 
     @staticmethod
-    def _delta_params(params, format, attributes):
+    def _delta_params(params, format, attributes, parts=None):
         params["format"] = format
+        if parts is not None:
+            params["parts"] = parts if isinstance(parts, str) else ",".join(parts)
         names = []
         if attributes is not None:
             names = attributes.split(",") if isinstance(attributes, str) else list(attributes)
