@@ -50,8 +50,8 @@ static const char *limit_method_name(int method)
 
 /* "limit_mask": the weights on points.ids (0 where the mask does not read a point); into *info
  * ("limit"): what found them and at which level, the tangent masks on the same points where the
- * point has one tangent plane, and the points of the mask outside points.ids (none for a closed
- * block) */
+ * point has one tangent plane, the points of the mask outside points.ids (none for a closed
+ * block), and what the detail offsets of finer levels add (the constant terms) */
 static json_t *limit_mask_json(const sd_analysis *an, const sd_limit_mask *lm, json_t **info)
 {
     *info = json_null();
@@ -76,12 +76,16 @@ static json_t *limit_mask_json(const sd_analysis *an, const sd_limit_mask *lm, j
         }
     }
     json_t *mask = api_json_doubles(w, (size_t)an->size);
-    json_t *j = json_pack("{s:s, s:i, s:o}", "method", limit_method_name(lm->method), "level",
-                          lm->eval_level, "outside", extra);
+    json_t *j = json_pack("{s:s, s:i, s:o, s:o}", "method", limit_method_name(lm->method),
+                          "level", lm->eval_level, "outside", extra, "offset",
+                          api_json_doubles(lm->offset, 3));
     if (j && lm->t1 &&
-        json_object_set_new(j, "tangents",
-                            json_pack("[o, o]", api_json_doubles(w + an->size, (size_t)an->size),
-                                      api_json_doubles(w + 2 * (size_t)an->size, (size_t)an->size)))) {
+        (json_object_set_new(j, "tangents",
+                             json_pack("[o, o]", api_json_doubles(w + an->size, (size_t)an->size),
+                                       api_json_doubles(w + 2 * (size_t)an->size, (size_t)an->size))) |
+         json_object_set_new(j, "tangent_offsets",
+                             json_pack("[o, o]", api_json_doubles(lm->t_offset[0], 3),
+                                       api_json_doubles(lm->t_offset[1], 3))))) {
         json_decref(j);
         j = NULL;
     }

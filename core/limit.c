@@ -677,6 +677,12 @@ sd_result sd_complex_limit(sd_complex *c, int level, int channel, double *out, d
 }
 
 /* A sparse vector on one level's points (sorted insert, small). */
+static int cmp_u32(const void *a, const void *b)
+{
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return (x > y) - (x < y);
+}
+
 typedef struct svec {
     uint32_t n, cap;
     uint32_t *id;
@@ -764,8 +770,19 @@ sd_result sd_limit_mask_of(sd_complex *c, int level, uint32_t v, sd_limit_mask *
         }
     scratch_free(&s);
     ctx_free(&X);
-    /* compose down to `level`: a point of level l + 1 is its row of S_l on level l's points */
+    /* compose down to `level`: a point of level l + 1 is its row of S_l on level l's points
+     * plus its detail offset, which goes to the constant terms */
+    double *cst[3] = {out->offset, out->t_offset[0], out->t_offset[1]};
     for (int l = e - 1; l >= level && ok; l--) {
+        const uint32_t *didx;
+        const double *doff;
+        size_t nd = sd_complex_details(c, 0, l + 1, &didx, &doff);
+        for (int q = 0; q < 3 && nd; q++)
+            for (uint32_t i = 0; i < vec[q].n; i++) {
+                const uint32_t *hit = bsearch(&vec[q].id[i], didx, nd, sizeof *didx, cmp_u32);
+                for (int k = 0; hit && k < 3; k++)
+                    cst[q][k] += vec[q].w[i] * doff[3 * (size_t)(hit - didx) + k];
+            }
         ctx Y;
         if ((r = ctx_init(&Y, c, l, err))) {
             for (int q = 0; q < 3; q++)

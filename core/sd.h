@@ -676,6 +676,10 @@ typedef struct sd_limit_mask {
     double *t1, *t2;           /* tangent weights on the same points (sum 0), or NULL */
     int level, eval_level;     /* the level of `points`; the level the mask was taken at */
     int method;                /* SD_LIMIT_* */
+    /* what the detail offsets of the levels between (level, eval_level] add (channel 0): the
+     * limit position is sum w p + offset, the tangents sum t1 p + t_offset[0] and sum t2 p +
+     * t_offset[1] (all 0 without offsets there) */
+    double offset[3], t_offset[2][3];
 } sd_limit_mask;
 sd_result sd_limit_mask_of(sd_complex *c, int level, uint32_t v, sd_limit_mask *out,
                            sd_error *err);

@@ -628,7 +628,8 @@ def test_limit_bad_value(daemon, value):
 def test_limit_includes_detail_offsets(daemon):
     """A detail offset at level 2: ?limit=true at level 1 takes the limit from level 2 (the
     finest level with offsets), so a level-1 vertex's limit equals that of the same vertex at
-    level 2, and the offset moves it."""
+    level 2, and the offset moves it; GET /analysis's limit mask and tangents carry the offset's
+    part as constant terms."""
     body, _ = surface_body("torus", 4)
     s = session(daemon, body, {"surface_weights": "loop"})
     before = np.array(s.level(1, format="json", limit="true").json()["vertices"])
@@ -640,6 +641,30 @@ def test_limit_includes_detail_offsets(daemon):
     l2 = np.array(s.level(2, format="json", limit="true").json()["vertices"])
     np.testing.assert_allclose(l1, l2[:len(l1)], atol=1e-12)
     assert np.abs(l1[5] - before[5]).max() > 1e-3
+    # the limit is Loop's closed form at level 2 (the limit level) on level 2's points, the
+    # offset among them; GET /analysis's mask on the control points plus its offset is that
+    lv2 = s.level(2, format="json").json()
+    p2 = np.array(lv2["vertices"])
+    ring = sorted({v for tri in lv2["cells"]["triangles"] if 5 in tri for v in tri} - {5})
+    n = len(ring)
+    beta = (5 / 8 - (3 / 8 + math.cos(2 * math.pi / n) / 4) ** 2) / n
+    chi = 1 / (n + 3 / (8 * beta))
+    want = (1 - n * chi) * p2[5] + chi * p2[ring].sum(axis=0)
+    np.testing.assert_allclose(l2[5], want, atol=1e-12)
+    j = s.req("GET", "/analysis", params={"vertex": 5}).json()
+    assert j["limit"]["level"] == 2 and j["points"]["level"] == 0
+    x0 = np.array(body["vertices"])
+    got = np.array(j["limit_mask"]) @ x0[j["points"]["ids"]]
+    got += sum((o["weight"] * x0[o["id"]] for o in j["limit"]["outside"]), np.zeros(3))
+    assert np.abs(j["limit"]["offset"]).max() > 1e-3
+    np.testing.assert_allclose(got + j["limit"]["offset"], want, atol=1e-12)
+    # the tangents likewise: their cross product is along the limit normal ?limit=true serves
+    t1, t2 = (np.array(w) @ x0[j["points"]["ids"]] + np.array(o)
+              for w, o in zip(j["limit"]["tangents"], j["limit"]["tangent_offsets"]))
+    from test_live import glb_arrays
+    nrm = glb_arrays(s.level(0, limit="true").content)["NORMAL"][5]
+    cr = np.cross(t1, t2)
+    np.testing.assert_allclose(cr / np.linalg.norm(cr), nrm, atol=1e-6)
 
 
 @pytest.mark.parametrize("scheme", ["box", "averaged"])
