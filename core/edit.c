@@ -855,16 +855,31 @@ sd_result sd_complex_check_moves(sd_complex *c, size_t n, const uint32_t *idx, c
     for (size_t i = 0; i < n; i++)
         if (idx[i] < nv)
             mark[idx[i]] = (int32_t)i + 1;
+    /* the bounding boxes of the moved complex and of the complex as it is */
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    double lo0[3] = {INFINITY, INFINITY, INFINITY}, hi0[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (uint32_t v = 0; v < nv; v++) {
         const double *x = mark[v] ? xyz + 3 * (size_t)(mark[v] - 1) : p + 3 * (size_t)v;
+        const double *x0 = p + 3 * (size_t)v;
         for (int k = 0; k < 3; k++) {
             lo[k] = fmin(lo[k], x[k]);
             hi[k] = fmax(hi[k], x[k]);
+            lo0[k] = fmin(lo0[k], x0[k]);
+            hi0[k] = fmax(hi0[k], x0[k]);
         }
     }
     double diag = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
                        (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    double diag0 = sqrt((hi0[0] - lo0[0]) * (hi0[0] - lo0[0]) + (hi0[1] - lo0[1]) * (hi0[1] - lo0[1]) +
+                        (hi0[2] - lo0[2]) * (hi0[2] - lo0[2]));
+    /* a larger box makes the edge test stricter for every simplex, moved or not (the test of
+     * sd_complex_new, which an import of the session makes): those without a moved point are
+     * then tested too, and blamed on the first move out of the box as it was */
+    int grew = 0;
+    for (size_t i = 0; diag > diag0 && i < n && !grew; i++)
+        for (int k = 0; k < 3 && !grew; k++)
+            if (idx[i] < nv && (xyz[3 * i + k] < lo0[k] || xyz[3 * i + k] > hi0[k]))
+                grew = (int)i + 1;
     static const char *const kind[] = {"", "", "edge", "triangle", "tetrahedron"};
     static const char *const measure[] = {"", "", "length", "area", "volume"};
     sd_result rc = SD_OK;
@@ -881,14 +896,21 @@ sd_result sd_complex_check_moves(sd_complex *c, size_t n, const uint32_t *idx, c
                 const double *x = mark[v[j]] ? xyz + 3 * (size_t)(mark[v[j]] - 1) : p + 3 * (size_t)v[j];
                 memcpy(at + 3 * j, x, 3 * sizeof *x);
             }
-            if (last && sdi_simplex_degenerate(at, local, size, diag)) {
+            if ((last || grew) && sdi_simplex_degenerate(at, local, size, diag)) {
                 char vs[64];
                 int w = 0;
                 for (int j = 0; j < size; j++)
                     w += snprintf(vs + w, sizeof vs - (size_t)w, j ? ", %u" : "%u", v[j]);
-                rc = sdi_fail(err, SD_ERR_DEGENERATE, last - 1, -1,
-                              "moving point %u there makes the %s [%s] degenerate (zero or "
-                              "near-zero %s)", idx[last - 1], kind[size], vs, measure[size]);
+                if (last)
+                    rc = sdi_fail(err, SD_ERR_DEGENERATE, last - 1, -1,
+                                  "moving point %u there makes the %s [%s] degenerate (zero or "
+                                  "near-zero %s)", idx[last - 1], kind[size], vs, measure[size]);
+                else
+                    rc = sdi_fail(err, SD_ERR_DEGENERATE, grew - 1, -1,
+                                  "moving point %u there makes the bounding box so large that the "
+                                  "%s [%s] is degenerate beside it (its %s below 1e-12 of the "
+                                  "box's diagonal)", idx[grew - 1], kind[size], vs,
+                                  size == 2 ? "length" : "shortest edge");
             }
         }
     }

@@ -138,3 +138,34 @@ def test_edit_then_glb_and_rules(daemon, tmp_path):
     assert fresh.put_complex(body).status_code == 200
     np.testing.assert_allclose(s.level(1, format="json").json()["vertices"],
                                fresh.level(1, format="json").json()["vertices"], atol=1e-12)
+
+
+def test_a_move_that_grows_the_box_keeps_the_complex_importable(daemon):
+    """The degeneracy test of PUT /complex (and so of an import and of a stored session's
+    restore) is relative to the bounding box's diagonal (docs/API.md): an edge shorter than 1e-12
+    of it is degenerate. A move that grows the box so far that an untouched simplex fails that
+    test is refused (422 at the move's position, nothing changed), as PUT /complex refuses the
+    complex it would make; a move that stays within the test is taken, and the session's export
+    imports."""
+    s = Session(daemon)
+    tet = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    assert s.put_complex({"vertices": tet + [[5, 5, 5]],
+                          "simplices": [[0, 1, 2, 3], [4]]}).status_code == 200
+    far = [1e13, 0, 0]
+    assert s.put_complex({"vertices": tet + [far],
+                          "simplices": [[0, 1, 2, 3], [4]]}).status_code == 422  # the rule
+    assert s.put_complex({"vertices": tet + [[5, 5, 5]],
+                          "simplices": [[0, 1, 2, 3], [4]]}).status_code == 200
+    v = s.req("GET").json()["version"]
+    r = s.req("PATCH", "/control-points", json={"moves": [{"index": 4, "position": far}]},
+              headers={"If-Match": f'"{v}"'})
+    assert r.status_code == 422, r.text
+    assert r.json()["errors"][0]["pointer"] == "/moves/0/position"
+    assert "bounding box" in r.json()["detail"]
+    assert s.req("GET").json()["version"] == v
+    r = s.req("PATCH", "/control-points", json={"moves": [{"index": 4, "position": [1e9, 0, 0]}]},
+              headers={"If-Match": f'"{v}"'})
+    assert r.status_code == 200, r.text
+    doc = s.req("GET", "/export").json()
+    r = s.http.post(daemon.url + "/v1/sessions", json={"import": doc})
+    assert r.status_code == 201, r.text
