@@ -70,8 +70,8 @@ static bool tags_empty(json_t *t)
            (!s || json_is_array(s)) && (!pe || json_is_array(pe)) && (!sh || json_is_array(sh));
 }
 
-int api_import(json_t *doc, const char *base, const api_limits *lim, api_model **out,
-               uint64_t *version, api_problem *p)
+int api_import(json_t *doc, const char *base, const api_limits *lim, long long max_version,
+               api_model **out, uint64_t *version, api_problem *p)
 {
     static const char *const keys[] = {"format", "format_version", "version", "complex", "tags",
                                        "rules", "embedded", NULL};
@@ -94,7 +94,7 @@ int api_import(json_t *doc, const char *base, const api_limits *lim, api_model *
     snprintf(at, sizeof at, "%s/version", base);
     if (!vj)
         return api_fail_at(p, 400, "missing-field", at, "\"version\" is required");
-    if (api_get_int(vj, at, 0, (long long)1 << 53, &v, p))
+    if (api_get_int(vj, at, 0, max_version, &v, p))
         return p->status;
     json_t *emb = json_object_get(doc, "embedded");
     snprintf(at, sizeof at, "%s/embedded", base);

@@ -66,9 +66,13 @@ json_t *api_rules_json(const api_model *m);
 json_t *api_export(api_model *m, uint64_t version);
 /* The model of an export document (POST /v1/sessions {"import"}, the durable store's
  * snapshots); `base` is the document's JSON pointer in the request ("/import"), prefixed to
- * every problem's pointer. *version is the document's. */
-int api_import(json_t *doc, const char *base, const api_limits *lim, api_model **out,
-               uint64_t *version, api_problem *p);
+ * every problem's pointer. *version is the document's, at most max_version: a client's import
+ * API_IMPORT_MAX_VERSION, which leaves room for more changes than a session can see while every
+ * version stays exact as a JSON number (2^53); a restore from the store whatever the daemon
+ * wrote (LLONG_MAX). */
+#define API_IMPORT_MAX_VERSION ((long long)1 << 52)
+int api_import(json_t *doc, const char *base, const api_limits *lim, long long max_version,
+               api_model **out, uint64_t *version, api_problem *p);
 /* GET /complex as a stream (api/complex_stream.h): the same bytes as json_dumps(JSON_COMPACT) of
  * api_get_complex's document with "version" added last, which is *version, the version of the
  * points and attributes it copied. Keep a reference on m until api_cstream_free. NULL + 409 or

@@ -345,7 +345,8 @@ static void h_create_session(req *r)
     if ((imp = json_object_get(b, "import"))) {
         int rc = http_take_slot(r, &p);
         if (!rc) {
-            rc = api_import(imp, "/import", &r->srv->cfg.limits, &imported, &imported_version, &p);
+            rc = api_import(imp, "/import", &r->srv->cfg.limits, API_IMPORT_MAX_VERSION, &imported,
+                            &imported_version, &p);
             http_give_slot(r);
         }
         if (rc) {

@@ -13,6 +13,7 @@
 #include "../api/embedded.h"
 #include "../api/handlers.h"
 #include "../api/mem.h"
+#include <limits.h>
 #include <math.h>
 #include <nettle/sha2.h>
 #include <stdio.h>
@@ -277,7 +278,7 @@ static api_model *rebuild(const persist_loaded *l, const api_limits *lim, char *
                      (unsigned long long)l->snapshot_version, je.text);
             return NULL;
         }
-        int rc = api_import(doc, "", lim, &m, &v, &p);
+        int rc = api_import(doc, "", lim, LLONG_MAX, &m, &v, &p);
         json_decref(doc);
         if (rc) {
             snprintf(why, cap, "the snapshot of version %llu cannot be imported: %.160s%s%.60s",

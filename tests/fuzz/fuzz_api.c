@@ -232,7 +232,7 @@ static void check_export_roundtrip(api_model *m, const api_limits *lim)
     api_problem p = {0};
     api_model *back = NULL;
     uint64_t v = 0;
-    int rc = doc ? api_import(doc, "/import", lim, &back, &v, &p) : -1;
+    int rc = doc ? api_import(doc, "/import", lim, API_IMPORT_MAX_VERSION, &back, &v, &p) : -1;
     json_decref(doc);
     if (rc && p.status == 503) { /* out of memory is the one excuse */
         api_free(text);
@@ -314,7 +314,7 @@ static int one(const char *buf, size_t len, const api_limits *lim)
                 drain_deltas(cur);
         } else if (which == 5) { /* an import document: a new model, or a problem */
             uint64_t v;
-            if (api_import(b, "/import", lim, &next, &v, &p))
+            if (api_import(b, "/import", lim, API_IMPORT_MAX_VERSION, &next, &v, &p))
                 check_problem(&p, "api_import");
             else {
                 accepted = 1;

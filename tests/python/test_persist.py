@@ -166,6 +166,7 @@ def test_import_errors_point_into_the_document(daemon):
              "/import/complex/simplices/0/0"),
             (lambda d: d["rules"].update(solid_scheme="cubic"), 422, "/import/rules/solid_scheme"),
             (lambda d: d.update(extra=1), 400, "/import/extra"),
+            (lambda d: d.update(version=2 ** 52 + 1), 422, "/import/version"),
             (lambda d: d.update(embedded={"m": {}}), 400, "/import/embedded/m/vertices")]:
         d = __import__("copy").deepcopy(doc)
         change(d)
@@ -240,6 +241,34 @@ def test_restart_brings_sessions_back(store):
         # the delta history did not survive: a since= before the restart is 410
         assert t.req("GET", "/levels/2/delta", params={"since": v - 1}).status_code == 410
         assert edit(t, [{"index": 0, "position": [0.02, 0, 0]}], v) == v + 1
+    finally:
+        d.stop()
+
+
+def test_an_import_at_the_largest_version_restores_after_changes(tmp_path):
+    """An import takes a version up to 2^52 (docs/API.md); the changes after it take the
+    version past what an import takes, and the stored session still restores after a restart
+    (the store's snapshots are read whatever version the daemon wrote)."""
+    db = tmp_path / "v.db"
+    d = store_daemon(db)
+    try:
+        doc = {"format": "subdivd-session", "format_version": 1, "version": 2 ** 52,
+               "complex": {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "simplices": [[0, 1, 2]]}}
+        r = requests.post(d.url + "/v1/sessions", json={"import": doc})
+        assert r.status_code == 201, r.text
+        s = adopt(d, requests.Session(), r.json())
+        for w in ("loop", "warren", "loop"):   # a snapshot per change of rules
+            assert s.req("PUT", "/rules", json={"surface_weights": w}).status_code == 200
+        want = s.level(2, format="json").json()["vertices"]
+    finally:
+        kill9(d)
+    d = store_daemon(db)
+    try:
+        t = on(d, s)
+        r = t.req("GET", "")
+        assert r.status_code == 200, r.text
+        assert r.json()["version"] == 2 ** 52 + 3
+        assert t.level(2, format="json").json()["vertices"] == want
     finally:
         d.stop()
 
