@@ -93,6 +93,16 @@ void store_free(store *st)
 
 static int remove_at(store *st, int i, const char *why);
 
+/* How often a session's expiry is written to the durable store for reads alone: a tenth of its
+ * TTL, at most a minute. The stored expiry carries as much slack, so the store never forgets a
+ * session before the resident copy would expire. (s->ttl_s is constant.) */
+static double slack_of(int ttl_s)
+{
+    return ttl_s / 10.0 < 60 ? ttl_s / 10.0 : 60;
+}
+
+static double touch_every(const session *s) { return slack_of(s->ttl_s); }
+
 /* Remove the sessions idle past their TTL (none computing). Caller holds st->mu. */
 static int expire_locked(store *st, double now)
 {
@@ -131,6 +141,17 @@ static int evict_empty_locked(store *st)
             best_used = used;
         }
     }
+    if (best >= 0 && any) { /* a use since the last stored expiry: stored now, so that the
+                             * session is not taken for expired when it is loaded again */
+        session *s = st->s[best];
+        pthread_mutex_lock(&s->mu);
+        bool due = s->last_used > s->touched;
+        double idle = mono_now() - s->last_used;
+        pthread_mutex_unlock(&s->mu);
+        if (due)
+            persist_touch(st->p, s->id, (int64_t)time(NULL) - (int64_t)idle + s->ttl_s +
+                                            (int64_t)ceil(touch_every(s)));
+    }
     return best >= 0 ? remove_at(st, best, any ? "reload" : "evicted") : 0;
 }
 
@@ -150,13 +171,7 @@ static int soonest_expiry_locked(store *st, double now)
     return c < 1 ? 1 : c > 1e9 ? 1000000000 : (int)c;
 }
 
-/* How often a session's expiry is written to the durable store for reads alone: a tenth of its
- * TTL, at most a minute. The stored expiry carries as much slack, so the store never forgets a
- * session before the resident copy would expire. (s->ttl_s is constant.) */
-static double touch_every(const session *s)
-{
-    return s->ttl_s / 10.0 < 60 ? s->ttl_s / 10.0 : 60;
-}
+
 
 /* A session struct (reference 1) with an empty model, or NULL for lack of memory. */
 static session *session_alloc(const char *id, const unsigned char hash[32], int ttl_s, time_t created)
@@ -364,6 +379,14 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
             *miss = STORE_UNAUTHORIZED;
             return NULL;
         }
+    }
+    /* the stored expiry carries the touches' slack (touch_every): past the expiry the last
+     * write knew of, the session had expired (its resident copy, gone now, was the one to
+     * touch it again); it is not brought back, and the store forgets it in its own time */
+    if (rc == PERSIST_OK &&
+        (int64_t)time(NULL) > l.meta.expires_at - (int64_t)ceil(slack_of(l.meta.ttl_s))) {
+        persist_loaded_free(&l);
+        rc = PERSIST_ABSENT;
     }
     if (rc == PERSIST_OK) {
         api_model *m = rebuild(&l, &st->lim, reason, sizeof reason);

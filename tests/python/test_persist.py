@@ -273,6 +273,41 @@ def test_an_import_at_the_largest_version_restores_after_changes(tmp_path):
         d.stop()
 
 
+def test_an_expired_session_is_not_brought_back(store):
+    """docs/API.md: an expired session is a 404. The store keeps a session a little past its TTL
+    (the slack of its touches, docs/SERVICE.md "Persistence"); a request in that window does not
+    load it back, on the daemon that held it nor after a restart. A session used within its TTL
+    comes back (after a restart, and after its resident copy left memory to make room)."""
+    d = store_daemon(store)
+    try:
+        gone = Session(d, ttl_s=2)
+        assert gone.put_complex(TETS).status_code == 200
+        kept = Session(d, ttl_s=60)
+        assert kept.put_complex(TETS).status_code == 200
+        time.sleep(3.2)                     # past gone's TTL, within its stored slack (1 s)
+        assert gone.req("GET").status_code == 404
+        assert kept.req("GET").status_code == 200
+        late = Session(d, ttl_s=2)
+        assert late.put_complex(TETS).status_code == 200
+    finally:
+        kill9(d)
+    time.sleep(3.2)
+    d = store_daemon(store)
+    try:
+        assert on(d, late).req("GET").status_code == 404
+        assert on(d, kept).req("GET").status_code == 200
+    finally:
+        d.stop()
+    d = store_daemon(store, "--max-sessions", "1")
+    try:   # kept leaves memory for another session after a read; it comes back on use
+        t = on(d, kept)
+        assert t.req("GET").status_code == 200
+        other = Session(d)
+        assert t.req("GET").status_code == 200 and other.req("GET").status_code == 200
+    finally:
+        d.stop()
+
+
 def reference_level(daemon, complex_body, moves_list, level=2):
     """Level bytes of a fresh in-memory session given the same complex and edits."""
     s = Session(daemon)
