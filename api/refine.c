@@ -489,6 +489,12 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
         uint64_t nmarked = 0;
         for (uint32_t s = 0; s < in->ns; s++)
             nmarked += marked[s] = marked[s] && in->size[s] >= 2;
+        if (!nmarked && step == 0) { /* nothing to refine: no new version of the same complex */
+            rc = api_fail_at(p, 422, "empty-selection", "/select",
+                             "the selection holds no edge, triangle or tetrahedron of the complex "
+                             "(isolated points are not refined): nothing to refine");
+            break;
+        }
         if (!nmarked)
             break;
         sd_refinement r;

@@ -141,6 +141,10 @@ def test_box_on_mixed_complex(daemon):
     ({"select": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}, "depth": 5}, 422, "/depth"),
     ({"select": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}, "positions": "cubic"}, 422, "/positions"),
     ({"select": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}, "colour": 1}, 400, "/colour"),
+    # nothing selected: no new version of the same complex (its offsets and deltas stay)
+    ({"select": {"simplices": []}}, 422, "/select"),
+    ({"select": {"sphere": {"center": [50, 50, 50], "radius": 1}}}, 422, "/select"),
+    ({"select": {"box": {"min": [50, 50, 50], "max": [51, 51, 51]}}, "depth": 2}, 422, "/select"),
 ])
 def test_refine_errors(daemon, body, status, pointer):
     s = Session(daemon)
