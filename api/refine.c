@@ -497,9 +497,25 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
         }
         if (!nmarked)
             break;
+        /* a tetrahedron split red cuts its octahedron along its diagonal: the session's for the
+         * posted tetrahedra (those of later steps that are still one of them included); the
+         * first pair for the children of an earlier step, whose diagonals Algorithm 2 chooses
+         * when the refined model is made */
+        uint8_t *diag = malloc((size_t)in->ns + 1);
+        if (!diag) {
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
+            break;
+        }
+        for (uint32_t s = 0; s < in->ns; s++) {
+            uint32_t o = step == 0 ? s : orig ? orig[s] : UINT32_MAX;
+            int d = in->size[s] == 4 && o != UINT32_MAX ? sd_complex_diagonal(cur->c, o) : 0;
+            diag[s] = (uint8_t)(d >= 0 && d < 3 ? d : 0);
+        }
         sd_refinement r;
         sd_error e = {0};
-        if (sd_refine(in->xyz, in->nv, in->idx, in->size, in->ns, marked, &r, &e)) {
+        int refined = sd_refine(in->xyz, in->nv, in->idx, in->size, in->ns, marked, diag, &r, &e);
+        free(diag);
+        if (refined) {
             rc = api_fail_core(p, &e, "/select", NULL);
             break;
         }

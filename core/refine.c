@@ -1,7 +1,9 @@
 /* refine.c — local red-green refinement of a control complex (000 Sec. 4.2, 002).
  *
  * Marked simplices are split red (segment -> 2, triangle -> 4, tetrahedron -> 4 corner tets + its
- * octahedron cut into 4 tets along the diagonal joining the midpoints of edges 01 and 23). The
+ * octahedron cut into 4 tets along the tetrahedron's diagonal: pair k of SDI_TET_E's edges
+ * (e_k, e_(5-k)) gives the axis joining their midpoints, pair 0 — 01 and 23 — when none is
+ * given). The
  * closure then makes the result conforming, deciding every simplex by the set of its edges that
  * are split (shared edges are split for all their simplices at once, so faces always match):
  *   triangle: none -> kept; one -> green (2 triangles); three -> red; two -> upgraded to red;
@@ -187,7 +189,8 @@ static void split_triangle(emitter *E, const uint32_t *v, const uint32_t *M, con
 }
 
 /* A tetrahedron with n split edges (st): Green-I, Green-III or red. */
-static void split_tetra(emitter *E, const uint32_t *v, const uint32_t *M, const uint8_t *st, int n)
+static void split_tetra(emitter *E, const uint32_t *v, const uint32_t *M, const uint8_t *st, int n,
+                        int pair)
 {
     int face = -1;
     if (tet_pattern(st, &face) == 1) {
@@ -218,22 +221,26 @@ static void split_tetra(emitter *E, const uint32_t *v, const uint32_t *M, const 
         EMIT(4, fm[2], fm[1], f[2], apex);
         EMIT(4, fm[0], fm[1], fm[2], apex);
         E->out->green++;
-    } else { /* red: 4 corners + the octahedron around the diagonal m01-m23 */
+    } else { /* red: 4 corners + the octahedron around the diagonal's axis */
         uint32_t m01 = M[0], m02 = M[1], m03 = M[2], m12 = M[3], m13 = M[4], m23 = M[5];
         EMIT(4, v[0], m01, m02, m03);
         EMIT(4, m01, v[1], m12, m13);
         EMIT(4, m02, m12, v[2], m23);
         EMIT(4, m03, m13, m23, v[3]);
-        const uint32_t eq[4] = {m02, m03, m13, m12}; /* the equator around m01-m23, a cycle */
+        /* the axis (midpoints of the pair's edges) and the equator around it, a cycle of the
+         * other four (opposite midpoints are never neighbours on it) */
+        static const uint8_t AX[3][2] = {{0, 5}, {1, 4}, {2, 3}};
+        static const uint8_t EQ[3][4] = {{1, 2, 4, 3}, {0, 2, 5, 3}, {0, 1, 5, 4}};
+        int k = pair >= 0 && pair < 3 ? pair : 0;
         for (int i = 0; i < 4; i++)
-            EMIT(4, m01, m23, eq[i], eq[(i + 1) % 4]);
+            EMIT(4, M[AX[k][0]], M[AX[k][1]], M[EQ[k][i]], M[EQ[k][(i + 1) % 4]]);
         E->out->red++;
     }
 }
 
 /* Every input simplex: kept as it is, or its children. */
 static void emit_children(const ref *r, const uint32_t *idx, const uint8_t *size, size_t ns,
-                          const uint8_t *red, sd_refinement *out)
+                          const uint8_t *red, const uint8_t *diag, sd_refinement *out)
 {
     emitter E = {out, 0, 0};
     out->ns = 0;
@@ -257,14 +264,15 @@ static void emit_children(const ref *r, const uint32_t *idx, const uint8_t *size
         } else if (k == 3) {
             split_triangle(&E, v, M, st, n);
         } else {
-            split_tetra(&E, v, M, st, n);
+            split_tetra(&E, v, M, st, n, diag ? diag[s] : 0);
         }
     }
 }
 #undef EMIT
 
 sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
-                    size_t ns, const uint8_t *marked, sd_refinement *out, sd_error *err)
+                    size_t ns, const uint8_t *marked, const uint8_t *diag, sd_refinement *out,
+                    sd_error *err)
 {
     memset(out, 0, sizeof *out);
     sd_mem mem;
@@ -290,7 +298,7 @@ sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uin
         rc = sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
         goto done;
     }
-    emit_children(&r, idx, size, ns, red, out);
+    emit_children(&r, idx, size, ns, red, diag, out);
 done:
     free(r.eids);
     free(r.split);

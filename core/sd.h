@@ -573,11 +573,14 @@ typedef struct sd_refinement {
 } sd_refinement;
 
 /* Refine a control complex (arrays as for sd_complex_new) red where marked[s] != 0 and green
- * around, so the result is conforming (see core/refine.c for the patterns). Untouched simplices
- * keep their vertex lists and order; new vertices follow the old ones, at edge midpoints (move
- * them as you like). Free the result with sd_refine_free (it uses the C library's allocator). */
+ * around, so the result is conforming (see core/refine.c for the patterns). A tetrahedron split
+ * red cuts its octahedron along its diagonal: diag[s] (0..2, as sd_complex_diagonal gives it for
+ * the posted vertex order; diag NULL: pair 0 for all). Untouched simplices keep their vertex
+ * lists and order; new vertices follow the old ones, at edge midpoints (move them as you like).
+ * Free the result with sd_refine_free (it uses the C library's allocator). */
 sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
-                    size_t ns, const uint8_t *marked, sd_refinement *out, sd_error *err);
+                    size_t ns, const uint8_t *marked, const uint8_t *diag, sd_refinement *out,
+                    sd_error *err);
 void sd_refine_free(sd_refinement *r);
 
 /* The tags and per-simplex rules of a complex, in the forms sd_complex_set_singular (idx, size,

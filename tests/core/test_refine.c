@@ -91,7 +91,7 @@ TEST(refine_random_selections_conform)
         for (int i = 0; i < k; i++)
             marked[rnd((uint32_t)m.ns)] = 1;
         sd_refinement r;
-        CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, &r, NULL) == SD_OK);
+        CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, &r, NULL) == SD_OK);
         CHECK(r.red >= (uint64_t)1 && r.nv == m.nv + r.nsplit);
         /* no simplex uses an edge that was split */
         size_t off = 0;
@@ -138,7 +138,7 @@ TEST(refine_mixed_patterns)
     uint8_t marked[16] = {0};
     marked[0] = 1; /* the tetrahedron */
     sd_refinement r;
-    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, &r, NULL) == SD_OK);
+    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, &r, NULL) == SD_OK);
     CHECK(r.nsplit == 6 && r.red == 1 && r.green == 1);
     size_t tets = 0, tris = 0;
     for (size_t s = 0; s < r.ns; s++) {
@@ -150,7 +150,7 @@ TEST(refine_mixed_patterns)
     memset(marked, 0, sizeof marked);
     for (size_t s = 0; s < m.ns; s++)
         marked[s] = m.sz[s] == 2;
-    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, &r, NULL) == SD_OK);
+    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, &r, NULL) == SD_OK);
     size_t segs = 0;
     for (size_t s = 0; s < r.ns; s++)
         segs += r.size[s] == 2;

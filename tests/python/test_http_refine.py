@@ -255,3 +255,30 @@ def test_refine_from_the_cached_level_equals_refine_from_a_fresh_model(daemon, c
         got.append((c["vertices"], c.get("attributes"), c["simplices"]))
     assert got[0] == got[1]
     assert len(got[0][0]) > len(body["vertices"])
+
+
+@pytest.mark.parametrize("order", [[0, 1, 2, 3], [0, 1, 3, 2]])   # positive, and reoriented
+@pytest.mark.parametrize("pair", [0, 1, 2])
+def test_red_split_cuts_the_octahedron_along_the_diagonal(daemon, order, pair):
+    """docs/SPEC: a red tetrahedron becomes 4 corners and its octahedron split into 4 tetrahedra
+    along its diagonal — pair k of the posted tetrahedron's edges (01,23), (02,13), (03,12). The
+    4 inner tetrahedra share one edge: the segment between the midpoints of the pair's edges."""
+    V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    t = order
+    s = Session(daemon)
+    r = s.put_complex({"vertices": V, "simplices": [t], "diagonals": [[0, pair]]})
+    assert r.status_code == 200, r.text
+    r = s.req("POST", "/refine", json={"select": {"simplices": [t]}, "positions": "midpoint"})
+    assert r.status_code == 200, r.text
+    c = s.req("GET", "/complex").json()
+    p = np.array(c["vertices"])
+    count = {}
+    for tet in tets_of(c):
+        for e in itertools.combinations(sorted(tet), 2):
+            count[e] = count.get(e, 0) + 1
+    axis = [e for e, n in count.items() if n == 4]
+    assert len(axis) == 1, count
+    got = {tuple(np.round(p[v], 12)) for v in axis[0]}
+    ends = {0: ((0, 1), (2, 3)), 1: ((0, 2), (1, 3)), 2: ((0, 3), (1, 2))}[pair]
+    want = {tuple(np.round((p[t[a]] + p[t[b]]) / 2, 12)) for a, b in ends}
+    assert got == want
