@@ -79,16 +79,54 @@ static int check_counts(size_t nv, size_t nt, const api_limits *lim, api_problem
     return 0;
 }
 
-static int check_triangles(const api_embed_def *d, api_problem *p)
+static int cmp_tri_key(const void *x, const void *y) /* sorted ids, then the entry */
 {
-    for (size_t i = 0; i < 3 * (size_t)d->nt; i++)
-        if (d->tri[i] >= d->nv) {
-            char ptr[96];
-            snprintf(ptr, sizeof ptr, "/triangles/%zu/%zu", i / 3, i % 3);
-            return api_fail_at(p, 422, "invalid-complex", ptr, "vertex %u out of range (%u vertices)",
-                               d->tri[i], d->nv);
-        }
+    const uint32_t *a = x, *b = y;
+    for (int k = 0; k < 4; k++)
+        if (a[k] != b[k])
+            return a[k] < b[k] ? -1 : 1;
     return 0;
+}
+
+/* The triangles of a definition (pointers under `base`): every index in range, no vertex twice
+ * in one, no triangle twice (in any vertex order), as the control complex's simplices. */
+static int check_triangles(const api_embed_def *d, const char *base, api_problem *p)
+{
+    char ptr[192];
+    for (size_t i = 0; i < 3 * (size_t)d->nt; i++) {
+        const uint32_t *t = d->tri + 3 * (i / 3);
+        int k = (int)(i % 3);
+        snprintf(ptr, sizeof ptr, "%s/triangles/%zu/%d", base, i / 3, k);
+        if (t[k] >= d->nv)
+            return api_fail_at(p, 422, "invalid-complex", ptr, "vertex %u out of range (%u vertices)",
+                               t[k], d->nv);
+        for (int j = 0; j < k; j++)
+            if (t[j] == t[k])
+                return api_fail_at(p, 422, "invalid-complex", ptr,
+                                   "vertex %u appears twice in the triangle", t[k]);
+    }
+    if (d->nt < 2)
+        return 0;
+    uint32_t (*key)[4] = api_plain_malloc((size_t)d->nt * sizeof *key);
+    if (!key)
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    for (uint32_t i = 0; i < d->nt; i++) {
+        uint32_t a = d->tri[3 * i], b = d->tri[3 * i + 1], c = d->tri[3 * i + 2], x;
+        if (a > b) x = a, a = b, b = x;
+        if (b > c) x = b, b = c, c = x;
+        if (a > b) x = a, a = b, b = x;
+        key[i][0] = a, key[i][1] = b, key[i][2] = c, key[i][3] = i;
+    }
+    qsort(key, d->nt, sizeof *key, cmp_tri_key); /* equal triples by entry: the earlier first */
+    int rc = 0;
+    for (uint32_t i = 1; i < d->nt && !rc; i++)
+        if (!memcmp(key[i - 1], key[i], 3 * sizeof(uint32_t))) {
+            snprintf(ptr, sizeof ptr, "%s/triangles/%u", base, key[i][3]);
+            rc = api_fail_at(p, 422, "invalid-complex", ptr,
+                             "the same triangle as %s/triangles/%u", base, key[i - 1][3]);
+        }
+    api_plain_free(key);
+    return rc;
 }
 
 static int parse_options(json_t *lv, json_t *out, const char *base, api_embed_def *d,
@@ -163,6 +201,9 @@ static int parse_def(json_t *body, const char *name, const char *base, const api
                 d->tri[3 * i + k] = (uint32_t)x;
         }
     }
+    if (!rc && !base[0]) /* a PUT; an import takes the models its export held (documents
+                          * written before repeats were refused may hold some) */
+        rc = check_triangles(d, base, p);
     if (rc) {
         api_embed_def_unref(d);
         return rc;
@@ -233,7 +274,7 @@ int api_embed_parse_binary(const char *body, size_t len, const char *name, const
         }
     for (size_t i = 0; i < 3 * (size_t)nt; i++)
         d->tri[i] = get_u32(b + 8 + 24 * (size_t)nv + 4 * i);
-    if (check_triangles(d, p)) {
+    if (check_triangles(d, "", p)) {
         api_embed_def_unref(d);
         return p->status;
     }

@@ -211,8 +211,16 @@ def test_formats_list_delete_and_errors(daemon, tmp_path):
     assert s.req("GET", "/embedded/bin").json()["vertices"] == pts[:3]
     bad = s.req("PUT", "/embedded/bin", data=blob[:-2], headers={"Content-Type": "application/octet-stream"})
     assert bad.status_code == 400
+    # a triangle naming a vertex twice, as in the binary layout, is refused as in JSON below
+    rep = blob[:-12] + struct.pack("<3I", 0, 1, 1)
+    bad = s.req("PUT", "/embedded/bin", data=rep, headers={"Content-Type": "application/octet-stream"})
+    assert bad.status_code == 422 and bad.json()["errors"][0]["pointer"] == "/triangles/0/2", bad.text
     for body, status, ptr in [({"vertices": [[0, 0]]}, 400, "/vertices/0"),
                               ({"vertices": pts, "triangles": [[0, 1, 99]]}, 422, "/triangles/0/2"),
+                              # a vertex twice, a triangle twice (any order): as for simplices
+                              ({"vertices": pts, "triangles": [[0, 0, 1]]}, 422, "/triangles/0/1"),
+                              ({"vertices": pts, "triangles": [[0, 1, 2], [3, 4, 5], [2, 1, 0]]},
+                               422, "/triangles/2"),
                               ({"vertices": pts, "level": 99}, 422, "/level"),
                               ({"vertices": pts, "outside": "ignore"}, 422, "/outside"),
                               ({"vertices": pts, "colour": 1}, 400, "/colour")]:
