@@ -242,10 +242,12 @@ static int store_refused(req *r, persist_rc rc, bool drop, api_problem *p)
 }
 
 /* Store model m as the session's content at `version` (the stored one is `expect`): its export
- * document as the snapshot. 0 or the status of the problem. */
-static int store_snapshot(req *r, api_model *m, uint64_t expect, uint64_t version, api_problem *p)
+ * document as the snapshot. 0 or the status of the problem; *stored what the store said. */
+static int store_snapshot_rc(req *r, api_model *m, uint64_t expect, uint64_t version,
+                             persist_rc *stored, api_problem *p)
 {
     persist *ps = store_persist(r->srv->st);
+    *stored = PERSIST_OK;
     if (!persist_durable(ps))
         return 0;
     json_t *doc = api_export(m, version);
@@ -256,9 +258,16 @@ static int store_snapshot(req *r, api_model *m, uint64_t expect, uint64_t versio
     persist_rc rc = persist_snapshot(ps, r->s->id, expect, version, session_stored_expiry(r->s),
                                      text, strlen(text));
     api_free(text);
+    *stored = rc;
     if (rc == PERSIST_OK)
         r->s->journal_len = 0;
     return rc == PERSIST_OK ? 0 : store_refused(r, rc, rc == PERSIST_CONFLICT || rc == PERSIST_ABSENT, p);
+}
+
+static int store_snapshot(req *r, api_model *m, uint64_t expect, uint64_t version, api_problem *p)
+{
+    persist_rc stored;
+    return store_snapshot_rc(r, m, expect, version, &stored, p);
 }
 
 /* A journal this long is folded into a snapshot after the next edit. */
@@ -534,9 +543,20 @@ static api_slot slot_of(req *r)
 typedef int (*change_op)(const api_model *cur, json_t *body, const api_packs *packs,
                          const api_limits *lim, api_model **next, json_t *answer, api_problem *p);
 
+/* Whether the request's If-Match names no version: absent, or "*" (any). */
+static bool unconditional(req *r)
+{
+    const char *h = http_header(r, "If-Match");
+    while (h && (*h == ' ' || *h == '\t'))
+        h++;
+    return !h || (h[0] == '*' && !h[1 + strspn(h + 1, " \t")]);
+}
+
 /* PUT complex / tags / rules, POST refine: parse, check If-Match, build the new model in a
  * compute slot, publish, tell the listeners (`kind`). The session's write lock makes concurrent
- * changes of one session sequential. */
+ * changes of one session sequential. With several daemons on one store, another daemon's change
+ * can come first: the store refuses ours (the resident copy is dropped); a change that named no
+ * version is then made again once on the session as stored (one that did is a 412). */
 static void change(req *r, change_op op, const char *const *packed, const char *kind)
 {
     api_problem p = {0};
@@ -544,33 +564,51 @@ static void change(req *r, change_op op, const char *const *packed, const char *
     json_t *b = body_or_answer(r, packed, &packs);
     if (!b)
         return;
-    pthread_mutex_lock(&r->s->write);
+    json_t *answer = NULL;
+    api_model *next = NULL;
     uint64_t version;
-    api_model *cur = session_model(r->s, &version), *next = NULL;
-    json_t *answer = json_object();
     int rc;
-    if (!(rc = if_match(r, version, &p)) && !(rc = http_take_slot(r, &p))) {
-        rc = op(cur, b, &packs, &r->srv->cfg.limits, &next, answer, &p);
-        /* the embedded models, their rest shapes bound to the new model (all or nothing) */
-        if (!rc && (rc = api_embed_rebind(cur, next, &r->srv->cfg.limits, NULL, &p))) {
+    for (int attempt = 0;; attempt++) {
+        pthread_mutex_lock(&r->s->write);
+        api_model *cur = session_model(r->s, &version);
+        answer = json_object();
+        next = NULL;
+        if (!(rc = if_match(r, version, &p)) && !(rc = http_take_slot(r, &p))) {
+            rc = op(cur, b, &packs, &r->srv->cfg.limits, &next, answer, &p);
+            /* the embedded models, their rest shapes bound to the new model (all or nothing) */
+            if (!rc && (rc = api_embed_rebind(cur, next, &r->srv->cfg.limits, NULL, &p))) {
+                api_model_unref(next);
+                next = NULL;
+            }
+            http_give_slot(r);
+        }
+        api_model_unref(cur);
+        persist_rc stored = PERSIST_OK;
+        if (!rc && (rc = store_snapshot_rc(r, next, version, version + 1, &stored, &p))) {
             api_model_unref(next);
             next = NULL;
         }
-        http_give_slot(r);
+        if (!rc)
+            break;
+        pthread_mutex_unlock(&r->s->write);
+        json_decref(answer);
+        session *again = NULL;
+        if (stored == PERSIST_CONFLICT && attempt == 0 && unconditional(r)) {
+            store_miss miss;
+            again = store_get(r->srv->st, r->s->id, NULL, &miss, NULL, 0);
+        }
+        if (!again) {
+            json_decref(b);
+            api_packs_free(&packs);
+            http_reply_problem(r, &p);
+            return;
+        }
+        session_unref(r->s); /* the request's reference moves to the session as stored */
+        r->s = again;
+        memset(&p, 0, sizeof p);
     }
     json_decref(b);
     api_packs_free(&packs);
-    api_model_unref(cur);
-    if (!rc && (rc = store_snapshot(r, next, version, version + 1, &p))) {
-        api_model_unref(next);
-        next = NULL;
-    }
-    if (rc) {
-        pthread_mutex_unlock(&r->s->write);
-        json_decref(answer);
-        http_reply_problem(r, &p);
-        return;
-    }
     version = session_publish(r->s, next);
     notify(r, version, kind, NULL);
     pthread_mutex_unlock(&r->s->write);

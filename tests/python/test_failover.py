@@ -5,7 +5,8 @@
 - Failover: a session edited 20 times through HAProxy; the daemon that served it is killed
   (SIGKILL); the next requests through HAProxy reach the other daemon, which loads the session
   from redis: the last acknowledged positions and version, and level 2 exactly as before.
-- Two daemons, same session, the same If-Match at the same moment: exactly one 200, one 412.
+- Two daemons, same session, the same If-Match at the same moment: exactly one 200, one 412;
+  changes that name no version at the same moment: both made, one after the other.
 
 The store tests need `subdivd --store` (the persistence integration); they skip while the daemon
 does not offer it. HAProxy's configuration is deploy/haproxy.cfg with only its `bind` line and
@@ -264,6 +265,52 @@ def test_two_daemons_one_if_match_one_winner(tmp_path):
         assert [d.status_code for d in docs] == [200, 200]
         assert docs[0].json()["vertices"] == docs[1].json()["vertices"]
         assert docs[0].headers["ETag"] == docs[1].headers["ETag"] == f'"{version}"'
+    finally:
+        for d in daemons:
+            d.stop()
+        redis.stop()
+
+
+@needs_store
+def test_two_daemons_changes_without_if_match_are_both_made(tmp_path):
+    """docs/API.md: a change without If-Match is not checked against a version. Two such changes
+    of one session through two daemons at the same moment are both made (200, versions v+1 and
+    v+2): the one the store refuses first is made again on the session as stored, never a 412."""
+    redis = RedisServer(tmp_path).start()
+    daemons = []
+    try:
+        daemons = [Daemon("--store", redis.url) for _ in range(2)]
+        http = [requests.Session(), requests.Session()]
+        r = http[0].post(daemons[0].url + "/v1/sessions", json={}, timeout=10)
+        assert r.status_code == 201, r.text
+        sid, token = r.json()["id"], r.json()["token"]
+        auth = {"Authorization": f"Bearer {token}"}
+        r = http[0].put(f"{daemons[0].url}/v1/sessions/{sid}/complex", json=TWO_TETS,
+                        headers=auth, timeout=60)
+        version = r.json()["version"]
+        weights = ["warren", "loop"]
+        for rnd in range(12):
+            start = threading.Barrier(2)
+            out = [None, None]
+
+            def put(k):
+                start.wait()
+                out[k] = http[k].put(f"{daemons[k].url}/v1/sessions/{sid}/rules", headers=auth,
+                                     json={"surface_weights": weights[k]}, timeout=60)
+            th = [threading.Thread(target=put, args=(k,)) for k in range(2)]
+            for t in th:
+                t.start()
+            for t in th:
+                t.join(60)
+            assert [o.status_code for o in out] == [200, 200], [(o.status_code, o.text) for o in out]
+            assert sorted(o.json()["version"] for o in out) == [version + 1, version + 2]
+            version += 2
+            last = max(range(2), key=lambda k: out[k].json()["version"])
+            for k in range(2):   # both daemons show the later change
+                c = http[k].get(f"{daemons[k].url}/v1/sessions/{sid}/complex", headers=auth,
+                                timeout=60)
+                assert c.headers["ETag"] == f'"{version}"'
+                assert c.json()["rules"]["surface_weights"] == weights[last]
     finally:
         for d in daemons:
             d.stop()
