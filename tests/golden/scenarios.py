@@ -141,7 +141,7 @@ def scenarios():
              ("PATCH", "/control-points", {"moves": [{"index": 13, "position": [1.1, 1.0, 0.9]},
                                                      {"index": 0, "position": [-0.1, 0, 0]}]}),
              ("GET", "/levels/3", {"format": "vtu"}),
-             ("REFINE", "/refine", {"select": {"sphere": {"center": [0, 0, 0], "radius": 0.8}},
+             ("REFINE", "/refine", {"select": {"sphere": {"center": [0, 0, 0], "radius": 1.0}},
                                     "depth": 1, "positions": "midpoint"}),
              ("GET", "/levels/1", {"format": "json"}),
          ])},
