@@ -284,3 +284,23 @@ def test_fill_warning_is_shown(tmp_path):
             "-o", tmp_path / "t.vtu", "--spawn", "-q", env=env)
     assert r.returncode == 0, r.stderr
     assert "fill: max_volume is not met" in r.stderr
+
+
+def test_mesh_file_meshio_cannot_read(daemon, tmp_path):
+    """A file meshio refuses with its ReadError (for which meshio.read prints and calls
+    sys.exit(1)) is an unreadable mesh file: exit 2 from refine, and in a batch a failed job
+    after which the next one runs (clients/README.md)."""
+    bad = tmp_path / "bad.vtk"
+    bad.write_text("this is not a VTK file\n")
+    r = run("refine", bad, "--level", 1, "-o", tmp_path / "b.vtu", "--url", daemon.url, "--progress", "none")
+    assert r.returncode == 2 and "bad.vtk" in r.stderr, (r.returncode, r.stdout, r.stderr)
+    assert not (tmp_path / "b.vtu").exists()
+    v, f = surface("icosphere", 1)
+    (tmp_path / "s.json").write_text(json.dumps({"vertices": v, "simplices": f}))
+    (tmp_path / "jobs.json").write_text(json.dumps(
+        {"defaults": {"level": 1, "outputs": ["out/{name}.vtu"]},
+         "jobs": [{"input": "bad.vtk"}, {"input": "s.json"}]}))
+    r = run("batch", tmp_path / "jobs.json", "--url", daemon.url, "--progress", "none")
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert "job 1 (bad.vtk)" in r.stderr and "2 job(s): 1 done, 1 failed" in r.stderr
+    assert (tmp_path / "out" / "s.vtu").exists() and not (tmp_path / "out" / "bad.vtu").exists()

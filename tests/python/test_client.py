@@ -411,6 +411,18 @@ def test_client_imports_without_numpy_scipy_meshio():
     assert r.returncode == 0 and r.stdout.strip() == "level_mesh", r.stderr
 
 
+def test_meshes_read_unreadable_file_is_mesh_error(tmp_path, capsys):
+    """Every file meshio cannot read raises MeshError (docs: clients/README.md), also the ones
+    meshio refuses with its ReadError, for which meshio.read prints and calls sys.exit(1)."""
+    from subdiv import meshes
+    for name, text in (("bad.vtk", "this is not a VTK file\n"), ("bad.vtu", "<not xml\n"),
+                       ("bad.msh", "$MeshFormat\nnonsense\n"), ("bad.stl", "garbage\n")):
+        (tmp_path / name).write_text(text)
+        with pytest.raises(meshes.MeshError, match=name):
+            meshes.read(tmp_path / name)
+    assert capsys.readouterr().out == ""      # meshio's message is in the MeshError, not printed
+
+
 def test_meshes_read_returns_what_its_docstring_says(tmp_path):
     """meshes.read: (body, tags) — vertices in file order, quads split into triangles, point data
     as attributes, tags None without chosen groups; with fill the triangles move into "fill"."""

@@ -17,6 +17,8 @@ simplices of PUT /tags — points are corners, lines creases, triangles embedded
 With fill, the triangles become the surface of a "fill" entry (TetGen tetrahedralizes what they
 enclose) instead of simplices.
 """
+import contextlib
+import io
 import json
 import math
 import pathlib
@@ -83,9 +85,17 @@ def read(path, *, fill=None, singular_groups=None):
         import meshio
     except ImportError as e:  # pragma: no cover - Debian python3-meshio is in tools/packages.txt
         raise MeshError("reading mesh files needs meshio (Debian: python3-meshio)") from e
+    # meshio raises many kinds (ValueError, KeyError ...); and for its own ReadError, meshio.read
+    # prints the message and calls sys.exit(1) (meshio._helpers._read_file). Its output is
+    # captured, so that the message becomes the MeshError's and nothing else is printed.
+    said = io.StringIO()
     try:
-        m = meshio.read(str(p), file_format=kind)
-    except Exception as e:  # meshio raises many kinds (ReadError, ValueError, KeyError ...)
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            m = meshio.read(str(p), file_format=kind)
+    except SystemExit as e:
+        why = " ".join(said.getvalue().split()) or f"exit status {e.code}"
+        raise MeshError(f"{path}: meshio could not read it as {kind}: {why}") from None
+    except Exception as e:
         raise MeshError(f"{path}: meshio could not read it as {kind}: {type(e).__name__}: {e}") from e
     return from_meshio(m, path=str(path), fill=fill, singular_groups=singular_groups)
 
