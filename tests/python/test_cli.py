@@ -111,6 +111,19 @@ def write_inputs(d):
     quads = [(1, 3, 4, 2), (5, 6, 8, 7), (1, 2, 6, 5), (3, 7, 8, 4), (1, 5, 7, 3), (2, 4, 8, 6)]
     (d / "box.obj").write_text("\n".join(obj + ["f %d %d %d %d" % q for q in quads]) + "\n")
     out["box.obj"] = ({"triangle": 12}, [])
+    (d / "box.off").write_text("OFF\n8 6 0\n" + "".join("%g %g %g\n" % tuple(p) for p in CUBE)
+                               + "".join("4 %d %d %d %d\n" % tuple(i - 1 for i in q) for q in quads))
+    out["box.off"] = ({"triangle": 12}, [])
+    # points, polylines and polygons: a square (2 triangles), a fin triangle on its edge 0-1, a
+    # curve of 2 segments from vertex 2 and an isolated point; OBJ p/l/f records, OFF faces of
+    # 1, 2, 3 and 4 vertices
+    pts = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, -1, 0.5], [1.5, 1.5, 1.5], [2, 2, 2.5], [3, 0, 0]]
+    vs = ["v %g %g %g" % tuple(p) for p in pts]
+    (d / "wire.obj").write_text("\n".join(vs + ["f 1/1 2/2 3/3 4/4", "f 1//1 2//1 5//1", "l 3 6 7", "p -1"]) + "\n")
+    out["wire.obj"] = ({"triangle": 3, "line": 2, "vertex": 1}, [])
+    (d / "wire.off").write_text("OFF\n# comment\n8 5 0\n" + "".join("%g %g %g\n" % tuple(p) for p in pts)
+                                + "4 0 1 2 3\n3 0 1 4 255 0 0\n2 2 5\n2 5 6\n1 7\n")
+    out["wire.off"] = ({"triangle": 3, "line": 2, "vertex": 1}, [])
     body = {"vertices": MIXED_PTS, "simplices": TETS + MIXED["triangle"] + MIXED["line"] + MIXED["vertex"]}
     (d / "mixed.json").write_text(json.dumps(body))
     out["mixed.json"] = (mixed_counts, [])

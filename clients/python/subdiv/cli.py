@@ -13,7 +13,7 @@ Every command takes --url URL (default $SUBDIV_URL, else http://127.0.0.1:8080) 
 a private daemon on a free loopback port for the run: --subdivd PATH, default $SUBDIVD, else the
 subdivd beside this program, else on PATH), and --progress auto|bar|lines|none.
 
-INPUT: OBJ, OFF, STL, Gmsh .msh, VTK .vtk/.vtu, TetGen .node/.ele (meshio) or a PUT /complex body
+INPUT: OBJ, OFF, STL, Gmsh .msh, VTK .vtk/.vtu, TetGen .node/.ele or a PUT /complex body
 (.json). OUT: .glb, .gltf, .vtu, .vtk or .json (the level's format). --pvd DIR writes the levels
 0..L as DIR/level_K.vtu and the ParaView time series DIR/levels.pvd (timestep K = level K). The job file format and the
 exit codes are in clients/README.md; exit codes: 0 done, 1 the daemon refused the input (4xx),
