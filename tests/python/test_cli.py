@@ -317,3 +317,40 @@ def test_mesh_file_meshio_cannot_read(daemon, tmp_path):
     assert r.returncode == 2, (r.stdout, r.stderr)
     assert "job 1 (bad.vtk)" in r.stderr and "2 job(s): 1 done, 1 failed" in r.stderr
     assert (tmp_path / "out" / "s.vtu").exists() and not (tmp_path / "out" / "bad.vtu").exists()
+
+
+def test_level_options_go_to_the_outputs_they_apply_to(daemon, tmp_path):
+    """octahedra and names apply to VTU and VTK, compress to VTU only (docs/OUTPUTS.md): with
+    several -o and --pvd (clients/README.md) each output gets the options of its format; an
+    option that applies to none of the outputs is a usage error."""
+    import vtk
+    (tmp_path / "cube.json").write_text(json.dumps({"vertices": CUBE, "simplices": TETS}))
+    ok = ["--url", daemon.url, "--progress", "none"]
+
+    def cell_types(path):
+        rd = vtk.vtkXMLUnstructuredGridReader()
+        rd.SetFileName(str(path))
+        rd.Update()
+        g = rd.GetOutput()
+        return {g.GetCellType(i) for i in range(g.GetNumberOfCells())}
+
+    r = run("refine", tmp_path / "cube.json", "--level", 2, "-o", tmp_path / "a.glb", "--pvd", tmp_path / "D",
+            "--compress", "zlib", *ok)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "a.glb").read_bytes()[:4] == b"glTF"
+    for k in range(3):
+        head = (tmp_path / "D" / f"level_{k}.vtu").read_bytes()[:400]
+        assert b'compressor="vtkZLibDataCompressor"' in head, (k, head)
+    r = run("refine", tmp_path / "cube.json", "--level", 2, "-o", tmp_path / "b.glb", "-o", tmp_path / "b.vtu",
+            "-o", tmp_path / "b.vtk", "--octahedra", "polyhedra", "--names", "true", *ok)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "b.glb").read_bytes()[:4] == b"glTF"
+    assert cell_types(tmp_path / "b.vtu") == {10, 42}        # tetrahedra and polyhedra
+    assert b"rule_names" in (tmp_path / "b.vtu").read_bytes()
+    assert b"rule_names" in (tmp_path / "b.vtk").read_bytes()
+    for opt, value in (("--compress", "zlib"), ("--octahedra", "polyhedra"), ("--names", "true")):
+        r = run("refine", tmp_path / "cube.json", "--level", 1, "-o", tmp_path / "c.glb", "-o", tmp_path / "c.json",
+                opt, value, *ok)
+        assert r.returncode == 2 and opt[2:] + " applies to vtu" in r.stderr, (opt, r.stderr)
+        assert not (tmp_path / "c.glb").exists() and not (tmp_path / "c.json").exists()
+
