@@ -354,3 +354,17 @@ def test_level_options_go_to_the_outputs_they_apply_to(daemon, tmp_path):
         assert r.returncode == 2 and opt[2:] + " applies to vtu" in r.stderr, (opt, r.stderr)
         assert not (tmp_path / "c.glb").exists() and not (tmp_path / "c.json").exists()
 
+
+def test_pvd_result_lines_name_each_files_level(daemon, tmp_path):
+    """--pvd writes level_K.vtu for K = 0..L: each result line names the level its file holds."""
+    (tmp_path / "cube.json").write_text(json.dumps({"vertices": CUBE, "simplices": TETS}))
+    d = tmp_path / "D"
+    r = run("refine", tmp_path / "cube.json", "--level", 2, "--pvd", d, "-o", tmp_path / "a.vtu",
+            "--url", daemon.url, "--progress", "none")
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.splitlines()
+    assert f"cube.json: level 2 -> {tmp_path / 'a.vtu'} (" in r.stderr
+    for k in range(3):
+        mine = [ln for ln in lines if f"-> {d / f'level_{k}.vtu'} (" in ln]
+        assert len(mine) == 1 and mine[0].startswith(f"cube.json: level {k} -> "), lines
+    assert any(ln.startswith(f"cube.json: levels 0..2 -> {d / 'levels.pvd'} (") for ln in lines), lines

@@ -261,7 +261,8 @@ def pvd_text(files):
 
 def write_pvd(s, level, directory, options, progress, name):
     """Levels 0..level of session s as DIR/level_K.vtu, then DIR/levels.pvd (written last, as
-    .part renamed: it exists only once every level is there). Returns [(path, bytes)]."""
+    .part renamed: it exists only once every level is there). Returns [(path, bytes, what)],
+    `what` the level of the file ("level K", "levels 0..L" for the .pvd)."""
     d = pathlib.Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     results, files = [], []
@@ -270,13 +271,13 @@ def write_pvd(s, level, directory, options, progress, name):
         progress.begin(f"{name} -> {out.name}")
         n = s.level(k, format="vtu", out=str(out), progress=progress, **options_for(options, "vtu"))
         progress.done("download", n)
-        results.append((str(out), n))
+        results.append((str(out), n, f"level {k}"))
         files.append(out.name)
     text = pvd_text(files).encode()
     part = d / (PVD_NAME + ".part")
     part.write_bytes(text)
     os.replace(part, d / PVD_NAME)
-    results.append((str(d / PVD_NAME), len(text)))
+    results.append((str(d / PVD_NAME), len(text), f"levels 0..{level}"))
     return results
 
 
@@ -343,19 +344,19 @@ def run_job(client, job, progress, base=pathlib.Path(".")):
             fmt = _output_format(out)
             n = s.level(level, format=fmt, out=out, progress=progress, **options_for(options, fmt))
             progress.done("download", n)
-            results.append((out, n))
+            results.append((out, n, f"level {level}"))
         if pvd is not None:
             results += write_pvd(s, level, pvd, options, progress, name)
     progress.finish()
     extra = ""
     if fills:
         extra = ", filled: " + ", ".join(f"{f['tets']} tets" for f in fills)
-    for out, n in results:
-        progress.note(f"{name}: level {level} -> {out} ({_size(n)}{extra})")
+    for out, n, what in results:
+        progress.note(f"{name}: {what} -> {out} ({_size(n)}{extra})")
     for f in fills or []:   # e.g. max_volume not met on a coarse surface (docs/SERVICE.md, fill)
         if f.get("warning"):
             print(f"subdiv: {name}: fill: {f['warning']}", file=sys.stderr)
-    return results
+    return [(out, n) for out, n, _ in results]
 
 
 def _exit_code(e):
