@@ -111,6 +111,19 @@ def write_inputs(d):
     quads = [(1, 3, 4, 2), (5, 6, 8, 7), (1, 2, 6, 5), (3, 7, 8, 4), (1, 5, 7, 3), (2, 4, 8, 6)]
     (d / "box.obj").write_text("\n".join(obj + ["f %d %d %d %d" % q for q in quads]) + "\n")
     out["box.obj"] = ({"triangle": 12}, [])
+    (d / "box.off").write_text("OFF\n8 6 0\n" + "".join("%g %g %g\n" % tuple(p) for p in CUBE)
+                               + "".join("4 %d %d %d %d\n" % tuple(i - 1 for i in q) for q in quads))
+    out["box.off"] = ({"triangle": 12}, [])
+    # points, polylines and polygons: a square (2 triangles), a fin triangle on its edge 0-1, a
+    # curve of 2 segments from vertex 2 and an isolated point; OBJ p/l/f records, OFF faces of
+    # 1, 2, 3 and 4 vertices
+    pts = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, -1, 0.5], [1.5, 1.5, 1.5], [2, 2, 2.5], [3, 0, 0]]
+    vs = ["v %g %g %g" % tuple(p) for p in pts]
+    (d / "wire.obj").write_text("\n".join(vs + ["f 1/1 2/2 3/3 4/4", "f 1//1 2//1 5//1", "l 3 6 7", "p -1"]) + "\n")
+    out["wire.obj"] = ({"triangle": 3, "line": 2, "vertex": 1}, [])
+    (d / "wire.off").write_text("OFF\n# comment\n8 5 0\n" + "".join("%g %g %g\n" % tuple(p) for p in pts)
+                                + "4 0 1 2 3\n3 0 1 4 255 0 0\n2 2 5\n2 5 6\n1 7\n")
+    out["wire.off"] = ({"triangle": 3, "line": 2, "vertex": 1}, [])
     body = {"vertices": MIXED_PTS, "simplices": TETS + MIXED["triangle"] + MIXED["line"] + MIXED["vertex"]}
     (d / "mixed.json").write_text(json.dumps(body))
     out["mixed.json"] = (mixed_counts, [])
@@ -284,3 +297,74 @@ def test_fill_warning_is_shown(tmp_path):
             "-o", tmp_path / "t.vtu", "--spawn", "-q", env=env)
     assert r.returncode == 0, r.stderr
     assert "fill: max_volume is not met" in r.stderr
+
+
+def test_mesh_file_meshio_cannot_read(daemon, tmp_path):
+    """A file meshio refuses with its ReadError (for which meshio.read prints and calls
+    sys.exit(1)) is an unreadable mesh file: exit 2 from refine, and in a batch a failed job
+    after which the next one runs (clients/README.md)."""
+    bad = tmp_path / "bad.vtk"
+    bad.write_text("this is not a VTK file\n")
+    r = run("refine", bad, "--level", 1, "-o", tmp_path / "b.vtu", "--url", daemon.url, "--progress", "none")
+    assert r.returncode == 2 and "bad.vtk" in r.stderr, (r.returncode, r.stdout, r.stderr)
+    assert not (tmp_path / "b.vtu").exists()
+    v, f = surface("icosphere", 1)
+    (tmp_path / "s.json").write_text(json.dumps({"vertices": v, "simplices": f}))
+    (tmp_path / "jobs.json").write_text(json.dumps(
+        {"defaults": {"level": 1, "outputs": ["out/{name}.vtu"]},
+         "jobs": [{"input": "bad.vtk"}, {"input": "s.json"}]}))
+    r = run("batch", tmp_path / "jobs.json", "--url", daemon.url, "--progress", "none")
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert "job 1 (bad.vtk)" in r.stderr and "2 job(s): 1 done, 1 failed" in r.stderr
+    assert (tmp_path / "out" / "s.vtu").exists() and not (tmp_path / "out" / "bad.vtu").exists()
+
+
+def test_level_options_go_to_the_outputs_they_apply_to(daemon, tmp_path):
+    """octahedra and names apply to VTU and VTK, compress to VTU only (docs/OUTPUTS.md): with
+    several -o and --pvd (clients/README.md) each output gets the options of its format; an
+    option that applies to none of the outputs is a usage error."""
+    import vtk
+    (tmp_path / "cube.json").write_text(json.dumps({"vertices": CUBE, "simplices": TETS}))
+    ok = ["--url", daemon.url, "--progress", "none"]
+
+    def cell_types(path):
+        rd = vtk.vtkXMLUnstructuredGridReader()
+        rd.SetFileName(str(path))
+        rd.Update()
+        g = rd.GetOutput()
+        return {g.GetCellType(i) for i in range(g.GetNumberOfCells())}
+
+    r = run("refine", tmp_path / "cube.json", "--level", 2, "-o", tmp_path / "a.glb", "--pvd", tmp_path / "D",
+            "--compress", "zlib", *ok)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "a.glb").read_bytes()[:4] == b"glTF"
+    for k in range(3):
+        head = (tmp_path / "D" / f"level_{k}.vtu").read_bytes()[:400]
+        assert b'compressor="vtkZLibDataCompressor"' in head, (k, head)
+    r = run("refine", tmp_path / "cube.json", "--level", 2, "-o", tmp_path / "b.glb", "-o", tmp_path / "b.vtu",
+            "-o", tmp_path / "b.vtk", "--octahedra", "polyhedra", "--names", "true", *ok)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "b.glb").read_bytes()[:4] == b"glTF"
+    assert cell_types(tmp_path / "b.vtu") == {10, 42}        # tetrahedra and polyhedra
+    assert b"rule_names" in (tmp_path / "b.vtu").read_bytes()
+    assert b"rule_names" in (tmp_path / "b.vtk").read_bytes()
+    for opt, value in (("--compress", "zlib"), ("--octahedra", "polyhedra"), ("--names", "true")):
+        r = run("refine", tmp_path / "cube.json", "--level", 1, "-o", tmp_path / "c.glb", "-o", tmp_path / "c.json",
+                opt, value, *ok)
+        assert r.returncode == 2 and opt[2:] + " applies to vtu" in r.stderr, (opt, r.stderr)
+        assert not (tmp_path / "c.glb").exists() and not (tmp_path / "c.json").exists()
+
+
+def test_pvd_result_lines_name_each_files_level(daemon, tmp_path):
+    """--pvd writes level_K.vtu for K = 0..L: each result line names the level its file holds."""
+    (tmp_path / "cube.json").write_text(json.dumps({"vertices": CUBE, "simplices": TETS}))
+    d = tmp_path / "D"
+    r = run("refine", tmp_path / "cube.json", "--level", 2, "--pvd", d, "-o", tmp_path / "a.vtu",
+            "--url", daemon.url, "--progress", "none")
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.splitlines()
+    assert f"cube.json: level 2 -> {tmp_path / 'a.vtu'} (" in r.stderr
+    for k in range(3):
+        mine = [ln for ln in lines if f"-> {d / f'level_{k}.vtu'} (" in ln]
+        assert len(mine) == 1 and mine[0].startswith(f"cube.json: level {k} -> "), lines
+    assert any(ln.startswith(f"cube.json: levels 0..2 -> {d / 'levels.pvd'} (") for ln in lines), lines

@@ -411,6 +411,59 @@ def test_client_imports_without_numpy_scipy_meshio():
     assert r.returncode == 0 and r.stdout.strip() == "level_mesh", r.stderr
 
 
+def test_meshes_read_unreadable_file_is_mesh_error(tmp_path, capsys):
+    """Every file meshio cannot read raises MeshError (docs: clients/README.md), also the ones
+    meshio refuses with its ReadError, for which meshio.read prints and calls sys.exit(1)."""
+    from subdiv import meshes
+    for name, text in (("bad.vtk", "this is not a VTK file\n"), ("bad.vtu", "<not xml\n"),
+                       ("bad.msh", "$MeshFormat\nnonsense\n"), ("bad.stl", "garbage\n")):
+        (tmp_path / name).write_text(text)
+        with pytest.raises(meshes.MeshError, match=name):
+            meshes.read(tmp_path / name)
+    assert capsys.readouterr().out == ""      # meshio's message is in the MeshError, not printed
+
+
+def test_meshes_read_obj_and_off_records(tmp_path):
+    """OBJ points, polylines and polygons and OFF polygons are posted (clients/README.md:
+    vertices, lines, triangles and tetrahedra as they are, quads and polygons split into
+    triangles around their first vertex), in file order; bad indices are MeshErrors."""
+    from subdiv import meshes
+    obj = tmp_path / "a.obj"
+    obj.write_text("# points, a polyline, a triangle, a pentagon\n"
+                   "v 0 0 0\nv 1 0 0\nv 1 1 0 1.0\nv 0 1 0\nv 0 0 1 0.5 0.5 0.5\n"
+                   "vn 0 0 1\nvt 0 0\ng part\nusemtl m\ns off\n"
+                   "p 5 -4\nl 1 5 -2\nf 1/1 2/1/1 3//1\nf -1 -2 -3 -4 -5\n")
+    body, tags = meshes.read(obj)
+    assert tags is None and set(body) == {"vertices", "simplices"}
+    assert body["vertices"] == [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1]]
+    assert body["simplices"] == [[4], [1], [0, 4], [4, 3], [0, 1, 2],
+                                 [4, 3, 2], [4, 2, 1], [4, 1, 0]]
+    body, _ = meshes.read(obj, fill={})           # the triangle cell is the surface
+    assert body["fill"] == [{"surface": [[0, 1, 2]]}]
+    assert body["simplices"] == [[4], [1], [0, 4], [4, 3], [4, 3, 2], [4, 2, 1], [4, 1, 0]]
+    off = tmp_path / "a.off"
+    off.write_text("OFF # a header comment\n\n# counts\n5 5 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n"
+                   "0 0 1\n4 0 1 2 3\n3 0 1 4 1.0 0.0 0.0\n5 0 1 2 3 4\n2 2 4\n1 4\n")
+    body, _ = meshes.read(off)
+    assert body["vertices"] == [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1]]
+    assert body["simplices"] == [[0, 1, 2], [0, 2, 3], [0, 1, 4], [0, 1, 2], [0, 2, 3],
+                                 [0, 3, 4], [2, 4], [4]]
+    off.write_text("COFF\n3 1\n0 0 0 1 0 0 1\n1 0 0 1 0 0 1\n0 1 0 1 0 0 1\n3 0 1 2\n")
+    assert meshes.read(off)[0] == {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "simplices": [[0, 1, 2]]}
+    for name, text, msg in (
+            ("b.obj", "v 0 0 0\nv 1 0 0\nf 1 2 3\n", "line 3: vertex index 3"),
+            ("c.obj", "v 0 0 0\nl 1\n", "at least 2"),
+            ("d.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "vertex index 0"),
+            ("e.obj", "v 0 0\n", "line 1"),
+            ("b.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n", "line 6"),
+            ("c.off", "OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "2 faces announced"),
+            ("d.off", "OFF BINARY\n", "binary"),
+            ("e.off", "ply\n", "not an OFF file")):
+        (tmp_path / name).write_text(text)
+        with pytest.raises(meshes.MeshError, match=msg):
+            meshes.read(tmp_path / name)
+
+
 def test_meshes_read_returns_what_its_docstring_says(tmp_path):
     """meshes.read: (body, tags) — vertices in file order, quads split into triangles, point data
     as attributes, tags None without chosen groups; with fill the triangles move into "fill"."""

@@ -13,8 +13,9 @@ Every command takes --url URL (default $SUBDIV_URL, else http://127.0.0.1:8080) 
 a private daemon on a free loopback port for the run: --subdivd PATH, default $SUBDIVD, else the
 subdivd beside this program, else on PATH), and --progress auto|bar|lines|none.
 
-INPUT: OBJ, OFF, STL, Gmsh .msh, VTK .vtk/.vtu, TetGen .node/.ele (meshio) or a PUT /complex body
-(.json). OUT: .glb, .gltf, .vtu, .vtk or .json (the level's format). --pvd DIR writes the levels
+INPUT: OBJ, OFF, STL, Gmsh .msh, VTK .vtk/.vtu, TetGen .node/.ele or a PUT /complex body
+(.json). OUT: .glb, .gltf, .vtu, .vtk or .json (the level's format); each output gets the level
+options that apply to its format (--octahedra and --names VTU and VTK, --compress VTU). --pvd DIR writes the levels
 0..L as DIR/level_K.vtu and the ParaView time series DIR/levels.pvd (timestep K = level K). The job file format and the
 exit codes are in clients/README.md; exit codes: 0 done, 1 the daemon refused the input (4xx),
 2 usage, file or mesh error, 3 the daemon failed or could not be reached, 4 the daemon does not
@@ -38,6 +39,9 @@ from .errors import ProblemError, SubdivError, TransportError
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_DAEMON, EXIT_NOT_IMPLEMENTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
 LEVEL_OPTS = ("parts", "slice", "attributes", "colormap", "octahedra", "names", "compress",
               "limit")
+# Level options that apply to some formats only (docs/OUTPUTS.md; the daemon refuses them with
+# any other format): each output is sent the options that apply to its format.
+FORMAT_OPTS = {"octahedra": ("vtu", "vtk"), "names": ("vtu", "vtk"), "compress": ("vtu",)}
 JOB_KEYS = {"input", "output", "outputs", "level", "tags", "rules", "fill", "singular_groups", "options",
             "name", "save_complex", "pvd", "repair", "crease_angle"}
 
@@ -229,6 +233,20 @@ def _output_format(path):
     return ext
 
 
+def options_for(options, fmt):
+    """The level options that apply to format `fmt` (FORMAT_OPTS)."""
+    return {k: v for k, v in options.items() if fmt in FORMAT_OPTS.get(k, (fmt,))}
+
+
+def check_options(options, formats):
+    """A format-specific level option that applies to none of the outputs' formats is a usage
+    error (it would be dropped from every request)."""
+    for k in options:
+        if k in FORMAT_OPTS and not set(FORMAT_OPTS[k]) & set(formats):
+            raise UsageError(f"{k} applies to {' and '.join(FORMAT_OPTS[k])} outputs only "
+                             f"(docs/OUTPUTS.md); none of the outputs is one")
+
+
 PVD_NAME = "levels.pvd"
 
 
@@ -243,28 +261,30 @@ def pvd_text(files):
 
 def write_pvd(s, level, directory, options, progress, name):
     """Levels 0..level of session s as DIR/level_K.vtu, then DIR/levels.pvd (written last, as
-    .part renamed: it exists only once every level is there). Returns [(path, bytes)]."""
+    .part renamed: it exists only once every level is there). Returns [(path, bytes, what)],
+    `what` the level of the file ("level K", "levels 0..L" for the .pvd)."""
     d = pathlib.Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     results, files = [], []
     for k in range(level + 1):
         out = d / f"level_{k}.vtu"
         progress.begin(f"{name} -> {out.name}")
-        n = s.level(k, format="vtu", out=str(out), progress=progress, **options)
+        n = s.level(k, format="vtu", out=str(out), progress=progress, **options_for(options, "vtu"))
         progress.done("download", n)
-        results.append((str(out), n))
+        results.append((str(out), n, f"level {k}"))
         files.append(out.name)
     text = pvd_text(files).encode()
     part = d / (PVD_NAME + ".part")
     part.write_bytes(text)
     os.replace(part, d / PVD_NAME)
-    results.append((str(d / PVD_NAME), len(text)))
+    results.append((str(d / PVD_NAME), len(text), f"levels 0..{level}"))
     return results
 
 
 def run_job(client, job, progress, base=pathlib.Path(".")):
     """One input through one session: rules, complex, tags, then every output (and with "pvd"
-    the time series of levels 0..L). Returns a list of (output path, bytes)."""
+    the time series of levels 0..L), each sent the level options that apply to its format.
+    Returns a list of (output path, bytes)."""
     inp = str(base / job["input"]) if not os.path.isabs(job["input"]) else job["input"]
     level = job["level"]
     outputs = [o if os.path.isabs(o) else str(base / o) for o in job.get("outputs") or []]
@@ -273,8 +293,9 @@ def run_job(client, job, progress, base=pathlib.Path(".")):
         pvd = pvd if os.path.isabs(pvd) else str(base / pvd)
     if not outputs and pvd is None:
         raise UsageError("give an output (-o) or --pvd DIR")
-    for o in outputs:
-        _output_format(o)
+    formats = [_output_format(o) for o in outputs] + (["vtu"] if pvd is not None else [])
+    options = job.get("options", {})
+    check_options(options, formats)
     fill = job.get("fill")
     if fill is True:
         fill = {}
@@ -320,22 +341,22 @@ def run_job(client, job, progress, base=pathlib.Path(".")):
         for out in outputs:
             pathlib.Path(out).parent.mkdir(parents=True, exist_ok=True)
             progress.begin(f"{name} -> {pathlib.Path(out).name}")
-            n = s.level(level, format=_output_format(out), out=out, progress=progress,
-                        **job.get("options", {}))
+            fmt = _output_format(out)
+            n = s.level(level, format=fmt, out=out, progress=progress, **options_for(options, fmt))
             progress.done("download", n)
-            results.append((out, n))
+            results.append((out, n, f"level {level}"))
         if pvd is not None:
-            results += write_pvd(s, level, pvd, job.get("options", {}), progress, name)
+            results += write_pvd(s, level, pvd, options, progress, name)
     progress.finish()
     extra = ""
     if fills:
         extra = ", filled: " + ", ".join(f"{f['tets']} tets" for f in fills)
-    for out, n in results:
-        progress.note(f"{name}: level {level} -> {out} ({_size(n)}{extra})")
+    for out, n, what in results:
+        progress.note(f"{name}: {what} -> {out} ({_size(n)}{extra})")
     for f in fills or []:   # e.g. max_volume not met on a coarse surface (docs/SERVICE.md, fill)
         if f.get("warning"):
             print(f"subdiv: {name}: fill: {f['warning']}", file=sys.stderr)
-    return results
+    return [(out, n) for out, n, _ in results]
 
 
 def _exit_code(e):

@@ -1,11 +1,13 @@
 """Mesh files -> PUT /complex bodies (clients read mesh files, the daemon takes JSON: docs/API.md).
 
-Formats: OBJ, OFF, STL, Gmsh .msh (2.2 and 4.1, ASCII or binary), VTK legacy .vtk, VTK XML .vtu,
-TetGen .node/.ele, all read with meshio (Debian python3-meshio); plus .json, a PUT /complex body
-used as it is. Cells become simplices: vertex, line, triangle and tetra as they are; quads and
-polygons are split into triangles around their first vertex; other cell kinds (hexahedra,
-wedges, pyramids, quadratic cells) are refused with MeshError, since the daemon's complex is
-simplicial. Every point is posted in the file's order (as meshio reads it; STL points are merged),
+Formats: OBJ and OFF, read here (_read_obj, _read_off: OBJ points, polylines and faces, OFF faces
+of any size, which meshio's readers drop or refuse); STL, Gmsh .msh (2.2 and 4.1, ASCII or
+binary), VTK legacy .vtk, VTK XML .vtu, TetGen .node/.ele, read with meshio (Debian
+python3-meshio); plus .json, a PUT /complex body used as it is. Cells become simplices: vertex,
+line, triangle and tetra as they are; quads and polygons are split into triangles around their
+first vertex; other cell kinds (hexahedra, wedges, pyramids, quadratic cells) are refused with
+MeshError, since the daemon's complex is simplicial. Every point is posted in the file's order
+(as meshio reads it; STL points are merged),
 so indices in a tags file are the file's point numbers, 0-based. Numeric point data become
 attributes (names outside [A-Za-z0-9_-] are rewritten with "_"; meshio's own "gmsh:", "obj:" ...
 arrays are left out).
@@ -17,10 +19,13 @@ simplices of PUT /tags — points are corners, lines creases, triangles embedded
 With fill, the triangles become the surface of a "fill" entry (TetGen tetrahedralizes what they
 enclose) instead of simplices.
 """
+import contextlib
+import io
 import json
 import math
 import pathlib
 import re
+import types
 
 FORMATS = {".obj": "obj", ".off": "off", ".stl": "stl", ".msh": "gmsh", ".vtk": "vtk",
            ".vtu": "vtu", ".node": "tetgen", ".ele": "tetgen", ".json": "json"}
@@ -79,15 +84,156 @@ def read(path, *, fill=None, singular_groups=None):
             body["simplices"] = [s for s in body.get("simplices", []) if len(s) != 3]
             body.setdefault("fill", []).append(dict(fill, surface=tris))
         return body, None
+    if kind in ("obj", "off"):
+        try:
+            text = p.read_text()
+        except UnicodeDecodeError as e:
+            raise MeshError(f"{path}: not a text {kind.upper()} file: {e}") from e
+        m = (_read_obj if kind == "obj" else _read_off)(text, str(path))
+        return from_meshio(m, path=str(path), fill=fill, singular_groups=singular_groups)
     try:
         import meshio
     except ImportError as e:  # pragma: no cover - Debian python3-meshio is in tools/packages.txt
         raise MeshError("reading mesh files needs meshio (Debian: python3-meshio)") from e
+    # meshio raises many kinds (ValueError, KeyError ...); and for its own ReadError, meshio.read
+    # prints the message and calls sys.exit(1) (meshio._helpers._read_file). Its output is
+    # captured, so that the message becomes the MeshError's and nothing else is printed.
+    said = io.StringIO()
     try:
-        m = meshio.read(str(p), file_format=kind)
-    except Exception as e:  # meshio raises many kinds (ReadError, ValueError, KeyError ...)
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            m = meshio.read(str(p), file_format=kind)
+    except SystemExit as e:
+        why = " ".join(said.getvalue().split()) or f"exit status {e.code}"
+        raise MeshError(f"{path}: meshio could not read it as {kind}: {why}") from None
+    except Exception as e:
         raise MeshError(f"{path}: meshio could not read it as {kind}: {type(e).__name__}: {e}") from e
     return from_meshio(m, path=str(path), fill=fill, singular_groups=singular_groups)
+
+
+class _Block:
+    """A run of cells of one kind, as a meshio CellBlock (.type, .data)."""
+
+    def __init__(self, type_):
+        self.type, self.data = type_, []
+
+
+def _mesh(points, cells):
+    """What from_meshio reads of a meshio.Mesh: points, cell blocks (consecutive cells of one
+    kind, in file order) and no data."""
+    blocks = []
+    for kind, c in cells:
+        if not blocks or blocks[-1].type != kind:
+            blocks.append(_Block(kind))
+        blocks[-1].data.append(c)
+    return types.SimpleNamespace(points=points, cells=blocks, cell_data={}, field_data={},
+                                 point_data={})
+
+
+def _face_kind(n):
+    return {1: "vertex", 2: "line", 3: "triangle", 4: "quad"}.get(n, "polygon")
+
+
+def _read_obj(text, path):
+    """Wavefront OBJ: "v x y z" points (further numbers, w or a colour, ignored), "p i j ..."
+    points, "l i j k ..." polylines (a segment per consecutive pair), "f i j k ..." faces
+    (triangles, quads, polygons); an index is 1-based, negative counts back from the last "v",
+    and "i/t/n" forms keep i. Normals, texture coordinates, groups, objects, smoothing and
+    materials are ignored; free-form geometry is refused."""
+    points, cells = [], []
+    lines = text.replace("\\\n", " ").splitlines()
+    for no, line in enumerate(lines, 1):
+        w = line.split("#", 1)[0].split()
+        if not w:
+            continue
+        key, args = w[0], w[1:]
+        where = f"{path}: line {no}"
+        if key == "v":
+            try:
+                xyz = [float(x) for x in args[:3]]
+            except ValueError:
+                xyz = []
+            if len(xyz) != 3:
+                raise MeshError(f"{where}: a vertex is \"v x y z\"")
+            points.append(xyz)
+        elif key in ("p", "l", "f"):
+            idx = []
+            for a in args:
+                try:
+                    i = int(a.split("/", 1)[0])
+                except ValueError:
+                    raise MeshError(f"{where}: {a!r} is not a vertex index") from None
+                j = i - 1 if i > 0 else len(points) + i
+                if i == 0 or not 0 <= j < len(points):
+                    raise MeshError(f"{where}: vertex index {i} is not one of the "
+                                    f"{len(points)} vertices before it")
+                idx.append(j)
+            need = {"p": 1, "l": 2, "f": 3}[key]
+            if len(idx) < need:
+                raise MeshError(f"{where}: \"{key}\" needs at least {need} vertex indices")
+            if key == "p":
+                cells += [("vertex", [i]) for i in idx]
+            elif key == "l":
+                cells += [("line", idx[k:k + 2]) for k in range(len(idx) - 1)]
+            else:
+                cells.append((_face_kind(len(idx)), idx))
+        elif key in ("curv", "curv2", "surf", "cstype"):
+            raise MeshError(f"{where}: free-form geometry ({key}) is not supported; "
+                            "export the mesh as polygons")
+    if not points:
+        raise MeshError(f"{path}: no \"v\" records: not an OBJ mesh")
+    return _mesh(points, cells)
+
+
+def _read_off(text, path):
+    """OFF (Geomview): a header "OFF" (or COFF, NOFF, STOFF ...: extra vertex numbers
+    ignored), the counts "V F [E]", V lines "x y z ...", F lines "n i1 ... in [colour]" with
+    0-based indices: a face of 1 or 2 vertices is a point or a segment, 3 a triangle, more a
+    polygon. Comments start with "#"; each vertex and face is on a line of its own."""
+    rows = []
+    for no, line in enumerate(text.splitlines(), 1):
+        w = line.split("#", 1)[0].split()
+        if w:
+            rows.append((no, w))
+    if not rows or not rows[0][1][0].endswith("OFF") \
+            or rows[0][1][0][:-3] not in ("", "C", "N", "CN", "ST", "STC", "STN", "STCN"):
+        raise MeshError(f"{path}: not an OFF file (the first line is not \"OFF\"; "
+                        "4OFF, nOFF and binary OFF are not supported)")
+    head = rows[0][1][1:]
+    if head == ["BINARY"] or (head and head[0] == "BINARY"):
+        raise MeshError(f"{path}: binary OFF is not supported")
+    at = 1
+    if not head:
+        if len(rows) < 2:
+            raise MeshError(f"{path}: no vertex and face counts")
+        head, at = rows[1][1], 2
+    try:
+        nv, nf = int(head[0]), int(head[1])
+    except (ValueError, IndexError):
+        raise MeshError(f"{path}: the counts line is \"vertices faces [edges]\"") from None
+    if nv < 0 or nf < 0 or len(rows) < at + nv + nf:
+        raise MeshError(f"{path}: {nv} vertices and {nf} faces announced, the file has "
+                        f"{max(len(rows) - at, 0)} lines of them")
+    points, cells = [], []
+    for no, w in rows[at:at + nv]:
+        try:
+            xyz = [float(x) for x in w[:3]]
+        except ValueError:
+            xyz = []
+        if len(xyz) != 3:
+            raise MeshError(f"{path}: line {no}: a vertex is \"x y z\"")
+        points.append(xyz)
+    for no, w in rows[at + nv:at + nv + nf]:
+        try:
+            n = int(w[0])
+            idx = [int(x) for x in w[1:1 + n]]
+        except ValueError:
+            raise MeshError(f"{path}: line {no}: a face is \"n i1 ... in\"") from None
+        if n < 1 or len(idx) != n:
+            raise MeshError(f"{path}: line {no}: a face is \"n i1 ... in\" with n >= 1")
+        if any(not 0 <= i < nv for i in idx):
+            raise MeshError(f"{path}: line {no}: a vertex index is not one of 0..{nv - 1}")
+        cells.append((_face_kind(n), idx))
+    return _mesh(points, cells)
 
 
 def _split(kind, cells, path):
