@@ -347,9 +347,9 @@ static void plan(out_stream *s, gstate *g, layout *L)
         L->scol = out_section_add(&g->sec, G_SCOLOR, 0, 3, 4, 3ull * nst);
     attribute_names(s, g);
     if (nst) {
-        double l = sqrt(s->rq.slice[0] * s->rq.slice[0] + s->rq.slice[1] * s->rq.slice[1] +
-                        s->rq.slice[2] * s->rq.slice[2]);
-        float f[3] = {(float)(s->rq.slice[0] / l), (float)(s->rq.slice[1] / l), (float)(s->rq.slice[2] / l)};
+        double n[3], d;
+        out_slice_plane(s->rq.slice, n, &d);
+        float f[3] = {(float)n[0], (float)n[1], (float)n[2]};
         double fl = sqrt((double)f[0] * f[0] + (double)f[1] * f[1] + (double)f[2] * f[2]);
         for (int k = 0; k < 3; k++)
             g->nrm_plane[k] = (float)(f[k] / fl);

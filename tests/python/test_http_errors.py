@@ -188,6 +188,20 @@ def test_bystander_unchanged(daemon, bystander):
     assert now == snap
 
 
+def test_slice_normal_of_any_magnitude(daemon):
+    """slice=nx,ny,nz,d with n far from unit (docs/OUTPUTS.md: n need not be unit) is the plane
+    of the unit n: n = 2^-700 (0, not a zero normal, and whose square underflows) and 2^600
+    (whose square overflows) answer what n = 1 does."""
+    s = Session(daemon)
+    assert s.put_complex(TET).status_code == 200
+    want = s.level(1, format="json", slice="1,0,0,0.3")
+    assert want.status_code == 200 and want.json()["slice"]["triangles"]
+    for k in (2.0 ** -700, 2.0 ** 600):
+        r = s.level(1, format="json", slice=f"{k!r},0,0,{0.3 * k!r}")
+        assert r.status_code == 200, r.text
+        assert r.content == want.content
+
+
 def test_refused_change_keeps_state(daemon):
     s = Session(daemon)
     assert s.put_complex(FIN).status_code == 200
