@@ -70,10 +70,16 @@ static void put_index(out_stream *s, int width, uint32_t i)
         out_put(s, &i, 4);
 }
 
-/* Position of value x in the colour map's range (out_viridis clamps it to [0,1]). */
+/* Position of value x in the colour map's range (out_viridis clamps it to [0,1]). A range
+ * wider than the largest double (-1e308:1e308) is taken in halves, which neither overflow nor,
+ * for such a range, lose anything that shows: (x - min)/(max - min) as written would be x/inf,
+ * 0 for every x. A finite width keeps the plain quotient, bit for bit as before. */
 static double colormap_t(const out_stream *s, double x)
 {
-    return (x - s->rq.colormap_min) / (s->rq.colormap_max - s->rq.colormap_min);
+    double lo = s->rq.colormap_min, hi = s->rq.colormap_max;
+    if (isfinite(hi - lo))
+        return (x - lo) / (hi - lo);
+    return (x / 2 - lo / 2) / (hi / 2 - lo / 2);
 }
 
 /* The accessor of a section. */

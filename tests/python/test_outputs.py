@@ -786,6 +786,19 @@ def test_colormap_viridis(tmp_path, meshes):
     assert (np.diff(lum[order]) >= -1e-6).all()
 
 
+def test_colormap_range_wider_than_a_double(tmp_path, meshes):
+    """t = (v - min)/(max - min) (docs/OUTPUTS.md) for a range whose width exceeds the largest
+    double: values near 0 in -1e308:1e308 are at t = 0.5, in -1.7e308:1e-300 at t = 1 and in
+    -1e-300:1.7e308 at t = 0 (to far below float precision), whatever the size of max - min."""
+    mesh = meshes["surface"]
+    f = tmp_path / "c.glb"
+    for rng, want in (("-1e308:1e308", LIN_HALF), ("-1.7e308:1e-300", LIN_1), ("-1e-300:1.7e308", LIN_0)):
+        outwrite(mesh, 1, "glb", f, "--xattr", "t", "--colormap", "t:" + rng)
+        doc, acc = read_glb(f)
+        col = acc(doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"])
+        np.testing.assert_allclose(col, np.tile(want, (len(col), 1)), atol=1e-6, err_msg=rng)
+
+
 def test_attribute_names(tmp_path, meshes):
     """glTF names are `_` + upper case, unique (`_RULE` stays the rule's); VTK keeps the posted
     names and renames its own rule array on a clash; JSON keeps the posted names."""
