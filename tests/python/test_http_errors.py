@@ -202,6 +202,40 @@ def test_slice_normal_of_any_magnitude(daemon):
         assert r.content == want.content
 
 
+# a bad level option and the option its problem names (pointer, and what detail starts with)
+LEVEL_OPTION_CASES = [
+    ({"parts": "volumes"}, "parts"),
+    ({"parts": ""}, "parts"),
+    ({"slice": "1,2,3"}, "slice"),
+    ({"slice": "0,0,0,1"}, "slice"),
+    ({"slice": "nan,0,1,0"}, "slice"),
+    ({"colormap": "t"}, "colormap"),
+    ({"colormap": "t:5:1"}, "colormap"),
+    ({"colormap": "nope:0:1"}, "colormap"),
+    ({"attributes": "nope"}, "attributes"),
+    ({"attributes": "t,t"}, "attributes"),
+    ({"format": "vtu", "octahedra": "cubes"}, "octahedra"),
+    ({"format": "glb", "octahedra": "tets"}, "octahedra"),
+    ({"format": "vtu", "names": "yes"}, "names"),
+    ({"format": "json", "names": "false"}, "names"),
+    ({"format": "vtu", "compress": "gzip"}, "compress"),
+    ({"format": "json", "compress": "zlib"}, "compress"),
+    ({"limit": "yes"}, "limit"),
+]
+
+
+@pytest.mark.parametrize("params,option", LEVEL_OPTION_CASES,
+                         ids=["-".join(f"{k}={v}" for k, v in c[0].items()) for c in LEVEL_OPTION_CASES])
+def test_level_option_problem_names_the_option(daemon, params, option):
+    """docs/OUTPUTS.md: a bad level option is refused with a message that starts with the
+    option's name and a colon, with the parameter as errors[0].pointer."""
+    s = Session(daemon)
+    assert s.put_complex(cx(attributes={"t": [0, 1, 2, 3]})).status_code == 200
+    r = s.level(1, **params)
+    check_problem(r, 422, option)
+    assert r.json()["detail"].startswith(option + ":"), r.json()
+
+
 def test_refused_change_keeps_state(daemon):
     s = Session(daemon)
     assert s.put_complex(FIN).status_code == 200
