@@ -217,7 +217,7 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
         else if (strcmp(q->compress, "none"))
             return api_fail_at(p, 422, "unknown-value", "compress",
                                "compress: \"none\" or \"zlib\"");
-        if (rq->compress && strcmp((*fmt)->name, "vtu"))
+        if (strcmp((*fmt)->name, "vtu")) /* none as well: like names=false, docs/OUTPUTS.md */
             return api_fail_at(p, 422, "not-applicable", "compress",
                                "compress: applies to format vtu only, not %s", (*fmt)->name);
     }
