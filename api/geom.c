@@ -137,14 +137,26 @@ static void slice_tet(slicer *sl, const uint32_t t[4], uint32_t cell, uint8_t ki
 #undef CUT
 }
 
+void out_slice_plane(const double p[4], double n[3], double *d)
+{
+    /* scalbn by a power of 2 is exact (barring a component 2^1022 times smaller than the
+     * largest, which does not count next to it), so u/|u| is n/|n| rounded once, as before */
+    int e = ilogb(fmax(fabs(p[0]), fmax(fabs(p[1]), fabs(p[2]))));
+    double u[3], len2 = 0;
+    for (int k = 0; k < 3; k++) {
+        u[k] = scalbn(p[k], -e);
+        len2 += u[k] * u[k];
+    }
+    double len = sqrt(len2); /* in [1, 2 sqrt 3) */
+    for (int k = 0; k < 3; k++)
+        n[k] = u[k] / len;
+    *d = scalbn(p[3] / len, -e);
+}
+
 bool out_compute_slice(out_stream *s)
 {
     slicer sl = {.s = s};
-    double len = sqrt(s->rq.slice[0] * s->rq.slice[0] + s->rq.slice[1] * s->rq.slice[1] +
-                      s->rq.slice[2] * s->rq.slice[2]);
-    for (int k = 0; k < 3; k++)
-        sl.n[k] = s->rq.slice[k] / len;
-    sl.d = s->rq.slice[3] / len;
+    out_slice_plane(s->rq.slice, sl.n, &sl.d);
     uint32_t v[6], t[4];
     uint32_t nt = sd_level_num_cells(s->lv, SD_CELL_TETRA), no = sd_level_num_cells(s->lv, SD_CELL_OCTA);
     for (uint32_t i = 0; i < nt && !sl.failed; i++) {

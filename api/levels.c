@@ -109,12 +109,12 @@ int api_parse_parts(const char *text, unsigned *parts, api_problem *p)
             k++;
         if (k == 4)
             return api_fail_at(p, 422, "unknown-value", "parts",
-                               "part \"%.20s\" is not one of points, curves, surfaces, solids",
+                               "parts: \"%.20s\" is not one of points, curves, surfaces, solids",
                                item);
         *parts |= 1u << k;
     }
     if (!*parts)
-        return api_fail_at(p, 422, "unknown-value", "parts", "parts must name at least one part");
+        return api_fail_at(p, 422, "unknown-value", "parts", "parts: name at least one part");
     return 0;
 }
 
@@ -136,13 +136,13 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
         while (next_item(&s, item, sizeof item)) {
             if (k == 4 || !parse_double(item, &rq->slice[k]))
                 return api_fail_at(p, 422, "bad-slice", "slice",
-                                   "slice is nx,ny,nz,d: four finite numbers");
+                                   "slice: nx,ny,nz,d, four finite numbers");
             k++;
         }
         if (k != 4)
-            return api_fail_at(p, 422, "bad-slice", "slice", "slice is nx,ny,nz,d: four finite numbers");
+            return api_fail_at(p, 422, "bad-slice", "slice", "slice: nx,ny,nz,d, four finite numbers");
         if (rq->slice[0] == 0 && rq->slice[1] == 0 && rq->slice[2] == 0)
-            return api_fail_at(p, 422, "bad-slice", "slice", "the slice normal must not be zero");
+            return api_fail_at(p, 422, "bad-slice", "slice", "slice: the normal must not be zero");
         rq->has_slice = 1;
     }
     rq->colormap_attr = -1;
@@ -153,7 +153,7 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
             int a = api_input_find_attr(in, item);
             if (a < 0)
                 return api_fail_at(p, 422, "unknown-attribute", "attributes",
-                                   "no attribute \"%.40s\" in this complex", item);
+                                   "attributes: no attribute \"%.40s\" in this complex", item);
             for (int i = 0; i < rq->nattrs; i++)
                 if (rq->attrs[i].channel == m->channel[a]) /* docs/OUTPUTS.md */
                     return api_fail_at(p, 422, "repeated-attribute", "attributes",
@@ -170,16 +170,16 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
         char num[40];
         if (!c1 || !c2 || (size_t)(c1 - q->colormap) > API_MAX_ATTRIBUTE_NAME ||
             (size_t)(c2 - c1 - 1) >= sizeof num)
-            return api_fail_at(p, 422, "bad-colormap", "colormap", "colormap is NAME:min:max");
+            return api_fail_at(p, 422, "bad-colormap", "colormap", "colormap: NAME:min:max");
         snprintf(name, sizeof name, "%.*s", (int)(c1 - q->colormap), q->colormap);
         snprintf(num, sizeof num, "%.*s", (int)(c2 - c1 - 1), c1 + 1);
         if (!parse_double(num, &lo) || !parse_double(c2 + 1, &hi) || !(lo < hi))
             return api_fail_at(p, 422, "bad-colormap", "colormap",
-                               "colormap min and max must be finite numbers with min < max");
+                               "colormap: min and max must be finite numbers with min < max");
         int a = api_input_find_attr(in, name);
         if (a < 0)
             return api_fail_at(p, 422, "unknown-attribute", "colormap",
-                               "no attribute \"%.40s\" in this complex", name);
+                               "colormap: no attribute \"%.40s\" in this complex", name);
         rq->colormap_attr = add_attr(m, rq, a);
         rq->colormap_min = lo;
         rq->colormap_max = hi;
@@ -189,37 +189,37 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
             rq->octahedra_as_polyhedra = 1;
         else if (strcmp(q->octahedra, "tets"))
             return api_fail_at(p, 422, "unknown-value", "octahedra",
-                               "octahedra is \"tets\" (4 tetrahedra each) or \"polyhedra\"");
+                               "octahedra: \"tets\" (4 tetrahedra each) or \"polyhedra\"");
         if (strcmp((*fmt)->name, "vtu") && strcmp((*fmt)->name, "vtk"))
             return api_fail_at(p, 422, "not-applicable", "octahedra",
-                               "octahedra applies to format vtu and vtk only, not %s",
+                               "octahedra: applies to format vtu and vtk only, not %s",
                                (*fmt)->name);
     }
     if (q->limit) {
         if (!strcmp(q->limit, "true"))
             rq->limit = true;
         else if (strcmp(q->limit, "false"))
-            return api_fail_at(p, 422, "unknown-value", "limit", "limit is \"true\" or \"false\"");
+            return api_fail_at(p, 422, "unknown-value", "limit", "limit: \"true\" or \"false\"");
     }
     bool vtk = !strcmp((*fmt)->name, "vtu") || !strcmp((*fmt)->name, "vtk");
     if (q->names) {
         if (!strcmp(q->names, "true"))
             rq->field_names = 1;
         else if (strcmp(q->names, "false"))
-            return api_fail_at(p, 422, "unknown-value", "names", "names is \"true\" or \"false\"");
+            return api_fail_at(p, 422, "unknown-value", "names", "names: \"true\" or \"false\"");
         if (!vtk)
             return api_fail_at(p, 422, "not-applicable", "names",
-                               "names applies to format vtu and vtk only, not %s", (*fmt)->name);
+                               "names: applies to format vtu and vtk only, not %s", (*fmt)->name);
     }
     if (q->compress) {
         if (!strcmp(q->compress, "zlib"))
             rq->compress = OUT_COMPRESS_ZLIB;
         else if (strcmp(q->compress, "none"))
             return api_fail_at(p, 422, "unknown-value", "compress",
-                               "compress is \"none\" or \"zlib\"");
-        if (rq->compress && strcmp((*fmt)->name, "vtu"))
+                               "compress: \"none\" or \"zlib\"");
+        if (strcmp((*fmt)->name, "vtu")) /* none as well: like names=false, docs/OUTPUTS.md */
             return api_fail_at(p, 422, "not-applicable", "compress",
-                               "compress=zlib applies to format vtu only, not %s", (*fmt)->name);
+                               "compress: applies to format vtu only, not %s", (*fmt)->name);
     }
     return 0;
 }

@@ -217,13 +217,11 @@ out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err)
                 return fail(NULL, err, SD_ERR_ARG, "attributes: a name is given twice");
     }
     if (rq->has_slice) {
-        double n2 = 0;
         for (int k = 0; k < 4; k++)
             if (!isfinite(rq->slice[k]))
                 return fail(NULL, err, SD_ERR_ARG, "slice: the plane must be finite");
-        for (int k = 0; k < 3; k++)
-            n2 += rq->slice[k] * rq->slice[k];
-        if (!(n2 > 0))
+        /* a component, not the sum of squares, which underflows for |n| below 1e-154 */
+        if (rq->slice[0] == 0 && rq->slice[1] == 0 && rq->slice[2] == 0)
             return fail(NULL, err, SD_ERR_ARG, "slice: the normal must not be zero");
     }
     if (rq->colormap_attr < -1 || rq->colormap_attr >= rq->nattrs)

@@ -70,10 +70,16 @@ static void put_index(out_stream *s, int width, uint32_t i)
         out_put(s, &i, 4);
 }
 
-/* Position of value x in the colour map's range (out_viridis clamps it to [0,1]). */
+/* Position of value x in the colour map's range (out_viridis clamps it to [0,1]). A range
+ * wider than the largest double (-1e308:1e308) is taken in halves, which neither overflow nor,
+ * for such a range, lose anything that shows: (x - min)/(max - min) as written would be x/inf,
+ * 0 for every x. A finite width keeps the plain quotient, bit for bit as before. */
 static double colormap_t(const out_stream *s, double x)
 {
-    return (x - s->rq.colormap_min) / (s->rq.colormap_max - s->rq.colormap_min);
+    double lo = s->rq.colormap_min, hi = s->rq.colormap_max;
+    if (isfinite(hi - lo))
+        return (x - lo) / (hi - lo);
+    return (x / 2 - lo / 2) / (hi / 2 - lo / 2);
 }
 
 /* The accessor of a section. */
@@ -347,9 +353,9 @@ static void plan(out_stream *s, gstate *g, layout *L)
         L->scol = out_section_add(&g->sec, G_SCOLOR, 0, 3, 4, 3ull * nst);
     attribute_names(s, g);
     if (nst) {
-        double l = sqrt(s->rq.slice[0] * s->rq.slice[0] + s->rq.slice[1] * s->rq.slice[1] +
-                        s->rq.slice[2] * s->rq.slice[2]);
-        float f[3] = {(float)(s->rq.slice[0] / l), (float)(s->rq.slice[1] / l), (float)(s->rq.slice[2] / l)};
+        double n[3], d;
+        out_slice_plane(s->rq.slice, n, &d);
+        float f[3] = {(float)n[0], (float)n[1], (float)n[2]};
         double fl = sqrt((double)f[0] * f[0] + (double)f[1] * f[1] + (double)f[2] * f[2]);
         for (int k = 0; k < 3; k++)
             g->nrm_plane[k] = (float)(f[k] / fl);

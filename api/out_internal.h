@@ -110,6 +110,11 @@ void out_normal_unit(float f[3]);
  * s->normals, borrowed from rq.geometry when given; else the boundary is computed into
  * s->own_bnd (the normals are left to the writer). false: out of memory. */
 bool out_solid_boundary(out_stream *s);
+/* The plane p = (nx, ny, nz, d), n·x = d with n finite and not zero, as unit n and d: n is
+ * first scaled by the power of 2 nearest below its largest |component| (exact), so that no
+ * square over- or underflows, whatever the magnitude (1e200,0,0,0.5e200 is x = 0.5); for an n
+ * whose squares do not over- or underflow the result is bit for bit that of n/|n|, d/|n|. */
+void out_slice_plane(const double p[4], double n[3], double *d);
 /* s->slice: the cross-section of the shown solids by rq.slice. false: out of memory. */
 bool out_compute_slice(out_stream *s);
 /* Free what out_compute_slice allocated. */

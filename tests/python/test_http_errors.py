@@ -188,6 +188,54 @@ def test_bystander_unchanged(daemon, bystander):
     assert now == snap
 
 
+def test_slice_normal_of_any_magnitude(daemon):
+    """slice=nx,ny,nz,d with n far from unit (docs/OUTPUTS.md: n need not be unit) is the plane
+    of the unit n: n = 2^-700 (0, not a zero normal, and whose square underflows) and 2^600
+    (whose square overflows) answer what n = 1 does."""
+    s = Session(daemon)
+    assert s.put_complex(TET).status_code == 200
+    want = s.level(1, format="json", slice="1,0,0,0.3")
+    assert want.status_code == 200 and want.json()["slice"]["triangles"]
+    for k in (2.0 ** -700, 2.0 ** 600):
+        r = s.level(1, format="json", slice=f"{k!r},0,0,{0.3 * k!r}")
+        assert r.status_code == 200, r.text
+        assert r.content == want.content
+
+
+# a bad level option and the option its problem names (pointer, and what detail starts with)
+LEVEL_OPTION_CASES = [
+    ({"parts": "volumes"}, "parts"),
+    ({"parts": ""}, "parts"),
+    ({"slice": "1,2,3"}, "slice"),
+    ({"slice": "0,0,0,1"}, "slice"),
+    ({"slice": "nan,0,1,0"}, "slice"),
+    ({"colormap": "t"}, "colormap"),
+    ({"colormap": "t:5:1"}, "colormap"),
+    ({"colormap": "nope:0:1"}, "colormap"),
+    ({"attributes": "nope"}, "attributes"),
+    ({"attributes": "t,t"}, "attributes"),
+    ({"format": "vtu", "octahedra": "cubes"}, "octahedra"),
+    ({"format": "glb", "octahedra": "tets"}, "octahedra"),
+    ({"format": "vtu", "names": "yes"}, "names"),
+    ({"format": "json", "names": "false"}, "names"),
+    ({"format": "vtu", "compress": "gzip"}, "compress"),
+    ({"format": "json", "compress": "none"}, "compress"),
+    ({"limit": "yes"}, "limit"),
+]
+
+
+@pytest.mark.parametrize("params,option", LEVEL_OPTION_CASES,
+                         ids=["-".join(f"{k}={v}" for k, v in c[0].items()) for c in LEVEL_OPTION_CASES])
+def test_level_option_problem_names_the_option(daemon, params, option):
+    """docs/OUTPUTS.md: a bad level option is refused with a message that starts with the
+    option's name and a colon, with the parameter as errors[0].pointer."""
+    s = Session(daemon)
+    assert s.put_complex(cx(attributes={"t": [0, 1, 2, 3]})).status_code == 200
+    r = s.level(1, **params)
+    check_problem(r, 422, option)
+    assert r.json()["detail"].startswith(option + ":"), r.json()
+
+
 def test_refused_change_keeps_state(daemon):
     s = Session(daemon)
     assert s.put_complex(FIN).status_code == 200

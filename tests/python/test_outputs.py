@@ -724,6 +724,28 @@ def test_slice_area_of_the_unit_cube(tmp_path, meshes):
     assert abs(area - 1) < 1e-12 and np.allclose(sv[:, 0], 0.37, atol=1e-15)
 
 
+def test_slice_normal_of_any_magnitude(tmp_path, meshes):
+    """n need not be unit (docs/OUTPUTS.md), however large or small: the plane scaled by 2^600
+    or 2^-600 (exact, so the same doubles once made unit) gives the same file in every format,
+    and one scaled by 1e200 or 1e-200 (not a power of 2) the same number of triangles, that
+    of the plane itself recomputed here from the level's cells."""
+    mesh, plane = meshes["cube"], SLICES["cube"]
+    lv = sdlevel(mesh, 1)
+    ns = slice_count(lv, plane)
+    assert ns > 0
+    for fmt in FORMATS:
+        outwrite(mesh, 1, fmt, tmp_path / f"u.{fmt}", "--slice", ",".join(map(repr, plane)))
+        for e in (600, -600):
+            arg = ",".join(repr(x * 2.0 ** e) for x in plane)
+            outwrite(mesh, 1, fmt, tmp_path / f"s.{fmt}", "--slice", arg)
+            assert (tmp_path / f"s.{fmt}").read_bytes() == (tmp_path / f"u.{fmt}").read_bytes(), (fmt, arg)
+    for scale in (1e200, 1e-200):
+        arg = ",".join(repr(x * scale) for x in plane)
+        outwrite(mesh, 1, "json", tmp_path / "s.json", "--slice", arg)
+        j = json.loads((tmp_path / "s.json").read_text())
+        assert len(j["slice"]["triangles"]) == ns, arg
+
+
 def test_slice_without_solids(tmp_path, meshes):
     """No solid cut: an empty slice (JSON), no slice primitive/cells."""
     for name in ("surface", "curves"):
@@ -762,6 +784,19 @@ def test_colormap_viridis(tmp_path, meshes):
     lum = col @ np.array([0.2126, 0.7152, 0.0722])
     order = np.argsort(x)
     assert (np.diff(lum[order]) >= -1e-6).all()
+
+
+def test_colormap_range_wider_than_a_double(tmp_path, meshes):
+    """t = (v - min)/(max - min) (docs/OUTPUTS.md) for a range whose width exceeds the largest
+    double: values near 0 in -1e308:1e308 are at t = 0.5, in -1.7e308:1e-300 at t = 1 and in
+    -1e-300:1.7e308 at t = 0 (to far below float precision), whatever the size of max - min."""
+    mesh = meshes["surface"]
+    f = tmp_path / "c.glb"
+    for rng, want in (("-1e308:1e308", LIN_HALF), ("-1.7e308:1e-300", LIN_1), ("-1e-300:1.7e308", LIN_0)):
+        outwrite(mesh, 1, "glb", f, "--xattr", "t", "--colormap", "t:" + rng)
+        doc, acc = read_glb(f)
+        col = acc(doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"])
+        np.testing.assert_allclose(col, np.tile(want, (len(col), 1)), atol=1e-6, err_msg=rng)
 
 
 def test_attribute_names(tmp_path, meshes):

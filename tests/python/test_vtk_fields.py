@@ -178,7 +178,12 @@ def test_bad_parameters(session):
         p = problem(session.level(1, format=fmt, octahedra="polyhedra"), 422, "octahedra")
         assert fmt in p["detail"]
     problem(session.level(1, format="glb", octahedra="tets"), 422, "octahedra")
-    assert session.level(1, format="vtk", compress="none").status_code == 200
+    # an option with a format it does not apply to, whatever its value (docs/OUTPUTS.md)
+    for fmt in ("glb", "gltf", "vtk", "json"):
+        p = problem(session.level(1, format=fmt, compress="none"), 422, "compress")
+        assert p["type"] == "/errors/not-applicable" and p["detail"].startswith("compress:"), p
+    problem(session.level(1, format="glb", names="false"), 422, "names")
+    assert session.level(1, format="vtu", compress="none").status_code == 200
 
 
 def arrays(g):
