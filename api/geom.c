@@ -6,7 +6,9 @@
  * Arrays here are proportional to the boundary, the slice or the vertex count, never to the
  * output. The slice cuts each tetrahedron (and each of an octahedron's 4 tetrahedra) by the plane
  * n.x = d with n made unit: one triangle where one corner is apart, two where two are, each facing
- * +n, its point data interpolated along the cut edges. Nothing here writes bytes.
+ * +n, its point data interpolated along the cut edges; a corner on the plane counts as below it,
+ * and a triangle that would have two corners at one point (the plane through a vertex) is not
+ * made. Nothing here writes bytes.
  */
 #include "out_internal.h"
 #include "mem.h"
@@ -82,6 +84,12 @@ static void slice_tri(slicer *sl, const cut *c0, const cut *c1, const cut *c2, u
     for (int i = 0; i < 3; i++)
         slice_point(sl, c[i]->a, c[i]->b, c[i]->t, i);
     double *p = o->xyz + 9 * (size_t)o->ntri, u[3], v[3];
+    /* two corners at one point (cuts at a vertex on the plane, or rounded onto one): no area,
+     * and its two other sides are one segment both ways, so leaving it out leaves the section
+     * as closed as it was; what was written in this slot is overwritten by the next one */
+    if (!memcmp(p, p + 3, 3 * sizeof *p) || !memcmp(p + 3, p + 6, 3 * sizeof *p) ||
+        !memcmp(p + 6, p, 3 * sizeof *p))
+        return;
     for (int k = 0; k < 3; k++) {
         u[k] = p[3 + k] - p[k];
         v[k] = p[6 + k] - p[k];
@@ -122,7 +130,13 @@ static void slice_tet(slicer *sl, const uint32_t t[4], uint32_t cell, uint8_t ki
     }
     if (np == 0 || nn == 0)
         return;
-#define CUT(i, j) ((cut){t[i], t[j], f[i] / (f[i] - f[j])})
+    /* the cut of edge i-j (i above the plane, j below, or the other way round); a corner on the
+     * plane (f = 0, counted below) is the cut of each of its edges that reaches above, exactly
+     * its own point: the triangles that meet there share that point bit for bit, and one with
+     * two corners there (a 2|2 cut through a vertex, a lone corner on the plane) is left out */
+#define CUT(i, j) (f[j] == 0   ? (cut){t[j], t[j], 0}                                          \
+                   : f[i] == 0 ? (cut){t[i], t[i], 0}                                          \
+                               : (cut){t[i], t[j], f[i] / (f[i] - f[j])})
     if (np == 1 || nn == 1) {
         int lone = np == 1 ? pos[0] : neg[0];
         int *others = np == 1 ? neg : pos;

@@ -10,6 +10,7 @@ Meshes: a mixed complex (examples/mixed.txt), a TetGen cube (pure tets), a block
 closed triangle surface, and curves + points only; levels 0..2; every format.
 """
 import base64
+import collections
 import functools
 import itertools
 import json
@@ -744,6 +745,66 @@ def test_slice_normal_of_any_magnitude(tmp_path, meshes):
         outwrite(mesh, 1, "json", tmp_path / "s.json", "--slice", arg)
         j = json.loads((tmp_path / "s.json").read_text())
         assert len(j["slice"]["triangles"]) == ns, arg
+
+
+def read_slice(tmp_path, mesh, level, plane):
+    outwrite(mesh, level, "json", tmp_path / "v.json", "--slice", ",".join(map(repr, plane)))
+    j = json.loads((tmp_path / "v.json").read_text())
+    sv = np.array(j["slice"]["vertices"], dtype=float).reshape(-1, 3)
+    st = np.array(j["slice"]["triangles"], dtype=np.int64).reshape(-1, 3)
+    return sv[st]
+
+
+@pytest.mark.parametrize("plane,want", [
+    # through corner 0 only, 1 and 2 above, 3 below: the triangle 0, cut 1-3 at 1/3, cut 2-3
+    ((1, 1, -2, 0), [[(0, 0, 0), (2 / 3, 0, 1 / 3), (0, 2 / 3, 1 / 3)]]),
+    ((1, 1, 1, 0), []),        # through corner 0, the others above: only a point
+    ((1, 1, 0, 0), []),        # through the edge 0-3, the others above: only a segment
+    ((1, -1, 0, 0), [[(0, 0, 0), (0, 0, 1), (0.5, 0.5, 0)]]),  # through 0-3 between 1 and 2
+    ((0, 0, 1, 0), [[(0, 0, 0), (1, 0, 0), (0, 1, 0)]]),        # the face 0 1 2, 3 above
+])
+def test_slice_through_a_vertex(tmp_path, plane, want):
+    """A plane through a corner of the tetrahedron (0,0,0),(1,0,0),(0,1,0),(0,0,1): the section
+    worked out by hand, as triangles facing +n and without two corners at one point."""
+    mesh = tmp_path / "tet.txt"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\ns 0 1 2 3\n")
+    tri = read_slice(tmp_path, mesh, 0, plane)
+    assert len(tri) == len(want)
+    n = np.array(plane[:3], float)
+    for got, w in zip(tri, want):
+        w = np.array(w, float)
+        assert np.cross(got[1] - got[0], got[2] - got[0]) @ n > 0  # facing +n, not degenerate
+        # the same corners (in some rotation of the order that faces +n)
+        assert any(np.allclose(np.roll(got, k, axis=0), w, atol=1e-15) or
+                   np.allclose(np.roll(got, k, axis=0), w[[0, 2, 1]], atol=1e-15) for k in range(3))
+
+
+@pytest.mark.parametrize("level", [0, 1, 2])
+def test_slice_through_vertices_is_a_closed_section(tmp_path, meshes, level):
+    """The block [0,2]^3 of 8 cubes cut at x = 1, through vertices of every level (and near
+    none): no triangle with two corners at one point, every one facing +x, the area of the
+    section that the solid's outward boundary encloses (at level 0 the 2 x 2 square), and at
+    level 0 every side shared with another triangle the other way round or on the square's
+    border."""
+    lv = sdlevel(meshes["blocks"], level)
+    x = lv["verts"][:, 0]
+    assert (x == 1).any() and not ((np.abs(x - 1) < 1e-9) & (x != 1)).any()
+    tri = read_slice(tmp_path, meshes["blocks"], level, (1, 0, 0, 1))
+    assert len(tri) and (tri[:, :, 0] == 1).all()
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        assert (np.linalg.norm(tri[:, i] - tri[:, j], axis=1) > 1e-9).all()
+    cr = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    assert (cr[:, 0] > 1e-12).all()
+    area = cr[:, 0].sum() / 2
+    ref = boundary_section_area(lv, np.array([1.0, 0, 0]), 1.0)
+    assert abs(area - ref) <= 1e-9 * ref, (area, ref)
+    if level == 0:
+        assert abs(area - 4) < 1e-12
+        key = [[tuple(p) for p in t] for t in tri]
+        sides = collections.Counter((a, b) for t in key for a, b in zip(t, t[1:] + t[:1]))
+        for (a, b), k in sides.items():
+            on_border = any(a[c] == b[c] in (0, 2) for c in (1, 2))
+            assert on_border or sides[(b, a)] == k, (a, b)
 
 
 def test_slice_without_solids(tmp_path, meshes):
