@@ -97,7 +97,7 @@ def test_openapi_matches_routes(daemon):
     r = requests.get(daemon.url + "/v1/openapi.json")
     assert r.status_code == 200 and r.headers["Content-Type"].startswith("application/json")
     doc = r.json()
-    assert doc == json.loads((REPO / "api" / "openapi.json").read_text())
+    assert doc == json.loads((REPO / "api" / "openapi.json").read_text(encoding="utf-8"))
     assert doc["openapi"] == "3.1.0"
     routes = subprocess.run([str(SUBDIVD), "--list-routes"], check=True, capture_output=True,
                             text=True).stdout.split("\n")
@@ -393,7 +393,7 @@ def test_format_table_is_what_everything_reads(daemon):
     table = [line.split(" ") for line in out.splitlines()]
     assert table and all(len(row) == 4 for row in table)
     names = [row[0] for row in table]
-    doc = json.loads((REPO / "api" / "openapi.json").read_text())
+    doc = json.loads((REPO / "api" / "openapi.json").read_text(encoding="utf-8"))
     level = doc["paths"]["/v1/sessions/{id}/levels/{L}"]["get"]
     param = next(p for p in level["parameters"] if p["name"] == "format")
     assert param["schema"]["enum"] == names and param["schema"]["default"] == names[0]
