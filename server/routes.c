@@ -552,6 +552,22 @@ static bool unconditional(req *r)
     return !h || (h[0] == '*' && !h[1 + strspn(h + 1, " \t")]);
 }
 
+/* After the store refused a change because another daemon's came first (the resident copy is
+ * dropped): for a change that named no version, the session as stored takes the request's
+ * reference and true is returned (make the change again); else false. */
+static bool reload_unconditional(req *r)
+{
+    if (!unconditional(r))
+        return false;
+    store_miss miss;
+    session *again = store_get(r->srv->st, r->s->id, NULL, &miss, NULL, 0);
+    if (!again)
+        return false;
+    session_unref(r->s);
+    r->s = again;
+    return true;
+}
+
 /* PUT complex / tags / rules, POST refine: parse, check If-Match, build the new model in a
  * compute slot, publish, tell the listeners (`kind`). The session's write lock makes concurrent
  * changes of one session sequential. With several daemons on one store, another daemon's change
@@ -592,19 +608,12 @@ static void change(req *r, change_op op, const char *const *packed, const char *
             break;
         pthread_mutex_unlock(&r->s->write);
         json_decref(answer);
-        session *again = NULL;
-        if (stored == PERSIST_CONFLICT && attempt == 0 && unconditional(r)) {
-            store_miss miss;
-            again = store_get(r->srv->st, r->s->id, NULL, &miss, NULL, 0);
-        }
-        if (!again) {
+        if (!(stored == PERSIST_CONFLICT && attempt == 0 && reload_unconditional(r))) {
             json_decref(b);
             api_packs_free(&packs);
             http_reply_problem(r, &p);
             return;
         }
-        session_unref(r->s); /* the request's reference moves to the session as stored */
-        r->s = again;
         memset(&p, 0, sizeof p);
     }
     json_decref(b);
@@ -1034,12 +1043,13 @@ typedef struct embed_commit {
     req *r;
     api_model *m;
     uint64_t version;
+    persist_rc stored;        /* what the store said */
 } embed_commit;
 
 static int commit_embed(void *ud, api_problem *p)
 {
     embed_commit *c = ud;
-    return store_snapshot(c->r, c->m, c->version - 1, c->version, p);
+    return store_snapshot_rc(c->r, c->m, c->version - 1, c->version, &c->stored, p);
 }
 
 /* PUT or DELETE of an embedded model: a change of the current model in place (api/embedded.h)
@@ -1054,24 +1064,30 @@ typedef struct embed_op {
 
 static int embed_change(req *r, embed_op *op, uint64_t *version, api_problem *p)
 {
-    pthread_mutex_lock(&r->s->write);
-    api_model *m = session_model(r->s, version);
-    api_slot slot = slot_of(r);
-    embed_commit ec = {r, m, *version + 1};
-    api_edit_commit commit = {commit_embed, &ec};
-    int rc = if_match(r, *version, p);
-    if (!rc && op->kind == EMBED_PUT)
-        rc = api_embed_put(m, op->def, *version + 1, &r->srv->cfg.limits, &slot, &commit,
-                           &op->summary, p);
-    else if (!rc)
-        rc = api_embed_delete(m, op->name, *version + 1, &commit, p);
-    if (!rc) {
-        *version = session_bump(r->s);
-        notify(r, *version, "embedded", NULL);
+    for (int attempt = 0;; attempt++) { /* again once on a compare-and-set lost (change()) */
+        pthread_mutex_lock(&r->s->write);
+        api_model *m = session_model(r->s, version);
+        api_slot slot = slot_of(r);
+        embed_commit ec = {r, m, *version + 1, PERSIST_OK};
+        api_edit_commit commit = {commit_embed, &ec};
+        int rc = if_match(r, *version, p);
+        if (!rc && op->kind == EMBED_PUT)
+            rc = api_embed_put(m, op->def, *version + 1, &r->srv->cfg.limits, &slot, &commit,
+                               &op->summary, p);
+        else if (!rc)
+            rc = api_embed_delete(m, op->name, *version + 1, &commit, p);
+        if (!rc) {
+            *version = session_bump(r->s);
+            notify(r, *version, "embedded", NULL);
+        }
+        pthread_mutex_unlock(&r->s->write);
+        api_model_unref(m);
+        if (!rc || !(ec.stored == PERSIST_CONFLICT && attempt == 0 && reload_unconditional(r)))
+            return rc;
+        json_decref(op->summary);
+        op->summary = NULL;
+        memset(p, 0, sizeof *p);
     }
-    pthread_mutex_unlock(&r->s->write);
-    api_model_unref(m);
-    return rc;
 }
 
 /* A body the handler answers itself (api_malloc'd), with the version as ETag. */

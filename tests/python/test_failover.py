@@ -311,6 +311,33 @@ def test_two_daemons_changes_without_if_match_are_both_made(tmp_path):
                                 timeout=60)
                 assert c.headers["ETag"] == f'"{version}"'
                 assert c.json()["rules"]["surface_weights"] == weights[last]
+        # embedded models too: each daemon puts one of its own, both are kept
+        model = {"vertices": [[0.2, 0.2, 0.2], [0.3, 0.2, 0.25]], "level": 1}
+        for rnd in range(6):
+            start = threading.Barrier(2)
+            out = [None, None]
+
+            def put_model(k):
+                start.wait()
+                out[k] = http[k].put(f"{daemons[k].url}/v1/sessions/{sid}/embedded/m{rnd}_{k}",
+                                     headers=auth, json=model, timeout=60)
+            th = [threading.Thread(target=put_model, args=(k,)) for k in range(2)]
+            for t in th:
+                t.start()
+            for t in th:
+                t.join(60)
+            assert [o.status_code for o in out] == [200, 200], [(o.status_code, o.text) for o in out]
+            version += 2
+            for k in range(2):
+                r = http[k].get(f"{daemons[k].url}/v1/sessions/{sid}/embedded", headers=auth,
+                                timeout=60)
+                names = {e["name"] for e in r.json()["embedded"]}
+                assert {f"m{rnd}_0", f"m{rnd}_1"} <= names, names
+            if rnd % 2:   # at most 8 models: the two of this round and the one before go
+                for n in (f"m{rnd}_0", f"m{rnd}_1", f"m{rnd - 1}_0", f"m{rnd - 1}_1"):
+                    assert http[0].delete(f"{daemons[0].url}/v1/sessions/{sid}/embedded/{n}",
+                                          headers=auth, timeout=60).status_code == 204
+                version += 4
     finally:
         for d in daemons:
             d.stop()
