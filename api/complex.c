@@ -322,7 +322,7 @@ int api_build_model(api_input *in, const api_rules *rules, const api_tags *tags,
         if (e.code == SD_ERR_NOMEM)
             return api_fail(p, 503, "out-of-memory", "out of memory");
         char ptr[96];
-        if (which == API_TAG_SINGULAR && tags->from && e.item >= 0 && (uint32_t)e.item < tags->n)
+        if (which == API_TAG_SINGULAR && tags->from && e.item >= 0 && (uint32_t)e.item < tags->nfrom)
             e.item = tags->from[e.item]; /* the request's entry (an import's repeats dropped) */
         static const char *const lists[] = {"/singular", "/petals", "/sharpness", ""};
         api_ptr_index(ptr, sizeof ptr, lists[which], (size_t)(e.item < 0 ? 0 : e.item));

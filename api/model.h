@@ -105,9 +105,11 @@ typedef struct api_tags {
     uint32_t n;
     uint8_t *size;
     uint32_t *idx;
-    uint32_t *from;           /* the request's entry of each singular tag where an import dropped
-                               * repeats (NULL: entry i is tag i); an error names that entry. Not
-                               * part of a model's copy. */
+    uint32_t *from;           /* the request's entry of each of the first nfrom singular tags
+                               * where an import dropped repeats (NULL: entry i is tag i; tags
+                               * crease_angle adds after them have no entry); an error names
+                               * that entry. Not part of a model's copy. */
+    uint32_t nfrom;
     uint32_t npet;
     sd_petal_tag *pet;
     uint32_t nsh;

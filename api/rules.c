@@ -724,7 +724,7 @@ static int singular_repeats(api_tags *tags, bool drop, api_problem *p)
             }
             from += k;
         }
-        tags->n = n;
+        tags->n = tags->nfrom = n;
     }
     api_plain_free(key);
     api_plain_free(gone);

@@ -552,6 +552,11 @@ static bool unconditional(req *r)
     return !h || (h[0] == '*' && !h[1 + strspn(h + 1, " \t")]);
 }
 
+/* How many times a change that named no version is made again after losing a compare-and-set
+ * to other daemons' changes (each attempt reads the stored session anew, so only a session
+ * changed elsewhere that often meanwhile gets the 412). */
+#define RELOAD_TRIES 8
+
 /* After the store refused a change because another daemon's came first (the resident copy is
  * dropped): for a change that named no version, the session as stored takes the request's
  * reference and true is returned (make the change again); else false. */
@@ -572,7 +577,8 @@ static bool reload_unconditional(req *r)
  * compute slot, publish, tell the listeners (`kind`). The session's write lock makes concurrent
  * changes of one session sequential. With several daemons on one store, another daemon's change
  * can come first: the store refuses ours (the resident copy is dropped); a change that named no
- * version is then made again once on the session as stored (one that did is a 412). */
+ * version is then made again on the session as stored, up to RELOAD_TRIES times (one that did
+ * is a 412). */
 static void change(req *r, change_op op, const char *const *packed, const char *kind)
 {
     api_problem p = {0};
@@ -608,7 +614,7 @@ static void change(req *r, change_op op, const char *const *packed, const char *
             break;
         pthread_mutex_unlock(&r->s->write);
         json_decref(answer);
-        if (!(stored == PERSIST_CONFLICT && attempt == 0 && reload_unconditional(r))) {
+        if (!(stored == PERSIST_CONFLICT && attempt < RELOAD_TRIES && reload_unconditional(r))) {
             json_decref(b);
             api_packs_free(&packs);
             http_reply_problem(r, &p);
@@ -1064,7 +1070,7 @@ typedef struct embed_op {
 
 static int embed_change(req *r, embed_op *op, uint64_t *version, api_problem *p)
 {
-    for (int attempt = 0;; attempt++) { /* again once on a compare-and-set lost (change()) */
+    for (int attempt = 0;; attempt++) { /* again on a compare-and-set lost (change()) */
         pthread_mutex_lock(&r->s->write);
         api_model *m = session_model(r->s, version);
         api_slot slot = slot_of(r);
@@ -1082,7 +1088,7 @@ static int embed_change(req *r, embed_op *op, uint64_t *version, api_problem *p)
         }
         pthread_mutex_unlock(&r->s->write);
         api_model_unref(m);
-        if (!rc || !(ec.stored == PERSIST_CONFLICT && attempt == 0 && reload_unconditional(r)))
+        if (!rc || !(ec.stored == PERSIST_CONFLICT && attempt < RELOAD_TRIES && reload_unconditional(r)))
             return rc;
         json_decref(op->summary);
         op->summary = NULL;

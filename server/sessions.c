@@ -21,10 +21,18 @@
 #include <string.h>
 #include <sys/random.h>
 
+/* A session's last use to write to the durable store once st->mu is released. */
+typedef struct pending_touch {
+    char id[33];
+    int64_t expires_at;
+} pending_touch;
+
 struct store {
     pthread_mutex_t mu;
     int cap, n;
     session **s;
+    pending_touch pend[4];    /* made under mu by evictions, written by unlock_store */
+    int npend;
     persist *p;               /* the durable store (borrowed) */
     api_limits lim;           /* what a replayed journal may compute */
     pthread_mutex_t load[16]; /* loads from the durable store: one at a time per stripe of ids */
@@ -78,12 +86,19 @@ store *store_new(int max_sessions, persist *p, const api_limits *lim)
 
 persist *store_persist(store *st) { return st->p; }
 
+static double touch_every(const struct session *s);
+
 void store_free(store *st)
 {
     if (!st)
         return;
-    for (int i = 0; i < st->n; i++)
-        session_unref(st->s[i]);
+    for (int i = 0; i < st->n; i++) {
+        session *s = st->s[i]; /* a use since the last stored expiry: stored before stopping */
+        if (persist_durable(st->p) && s->last_used > s->touched)
+            persist_touch(st->p, s->id, (int64_t)time(NULL) - (int64_t)(mono_now() - s->last_used) +
+                                            s->ttl_s + (int64_t)ceil(touch_every(s)));
+        session_unref(s);
+    }
     pthread_mutex_destroy(&st->mu);
     for (int i = 0; i < 16; i++)
         pthread_mutex_destroy(&st->load[i]);
@@ -92,6 +107,19 @@ void store_free(store *st)
 }
 
 static int remove_at(store *st, int i, const char *why);
+
+/* Release st->mu, then write the last uses the evictions made under it left (store I/O is never
+ * done under st->mu, which every request takes). */
+static void unlock_store(store *st)
+{
+    pending_touch pend[sizeof st->pend / sizeof *st->pend];
+    int n = st->npend;
+    memcpy(pend, st->pend, (size_t)n * sizeof *pend);
+    st->npend = 0;
+    pthread_mutex_unlock(&st->mu);
+    for (int i = 0; i < n; i++)
+        persist_touch(st->p, pend[i].id, pend[i].expires_at);
+}
 
 /* How often a session's expiry is written to the durable store for reads alone: a tenth of its
  * TTL, at most a minute. The stored expiry carries as much slack, so the store never forgets a
@@ -148,9 +176,12 @@ static int evict_empty_locked(store *st)
         bool due = s->last_used > s->touched;
         double idle = mono_now() - s->last_used;
         pthread_mutex_unlock(&s->mu);
-        if (due)
-            persist_touch(st->p, s->id, (int64_t)time(NULL) - (int64_t)idle + s->ttl_s +
-                                            (int64_t)ceil(touch_every(s)));
+        if (due && st->npend < (int)(sizeof st->pend / sizeof *st->pend)) {
+            pending_touch *t = &st->pend[st->npend++];
+            memcpy(t->id, s->id, sizeof t->id);
+            t->expires_at = (int64_t)time(NULL) - (int64_t)idle + s->ttl_s +
+                            (int64_t)ceil(touch_every(s));
+        }
     }
     return best >= 0 ? remove_at(st, best, any ? "reload" : "evicted") : 0;
 }
@@ -250,10 +281,11 @@ session *store_create(store *st, int ttl_s, store_admission *a)
     }
     pthread_mutex_lock(&st->mu);
     bool ok = room_locked(st, a);
-    pthread_mutex_unlock(&st->mu);
+    unlock_store(st);
     if (ok && persist_durable(st->p)) { /* in the store before anyone learns the id */
         persist_meta m = {.ttl_s = ttl_s, .created = s->created,
-                          .expires_at = (int64_t)time(NULL) + ttl_s};
+                          .expires_at = (int64_t)time(NULL) + ttl_s +
+                                        (int64_t)ceil(slack_of(ttl_s))}; /* as every touch */
         memcpy(m.id, s->id, sizeof m.id);
         memcpy(m.token_hash, hash, sizeof hash);
         if ((a->stored = persist_create(st->p, &m)) != PERSIST_OK)
@@ -267,7 +299,7 @@ session *store_create(store *st, int ttl_s, store_admission *a)
             atomic_fetch_add(&s->refs, 1); /* the store's and the caller's */
             st->s[st->n++] = s;
         }
-        pthread_mutex_unlock(&st->mu);
+        unlock_store(st);
         if (!ok && a->stored == PERSIST_OK && persist_durable(st->p))
             persist_delete(st->p, s->id);
     }
@@ -358,7 +390,7 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
     store_admission room = {0};
     pthread_mutex_lock(&st->mu); /* room first: a rebuild that cannot be kept is not made */
     bool space = room_locked(st, &room);
-    pthread_mutex_unlock(&st->mu);
+    unlock_store(st);
     if (!space) {
         pthread_mutex_unlock(lk);
         *miss = STORE_FULL;
@@ -406,7 +438,7 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
                 atomic_fetch_add(&s->refs, 1);
                 st->s[st->n++] = s;
             }
-            pthread_mutex_unlock(&st->mu);
+            unlock_store(st);
             if (!ok) {
                 session_unref(s);
                 s = NULL;

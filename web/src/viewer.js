@@ -665,7 +665,7 @@ export class Viewer {
     const semi = (complex.tags?.sharpness || []).filter((e) => e.value > 0);
     const tags = [...singular, ...semi.map((e) => e.simplex)];
     const sharp = new Map();
-    for (const e of semi) sharp.set(simplexKey(e.simplex), e.value >= 10 ? Infinity : e.value);
+    for (const e of semi) sharp.set(simplexKey(e.simplex), Math.fround(e.value) >= 10 ? Infinity : e.value);
     for (const t of singular) sharp.set(simplexKey(t), Infinity);
     this.cage = { pos, vrule, edges, faces: [...faces.values()], tags, sharp };
 
