@@ -439,8 +439,203 @@ static bool keep_choices(const api_model *cur, api_input *in, const uint32_t *or
     return true;
 }
 
+/* The input of one refinement step, kept so that the step can be made again (red-green: a green
+ * cell of a step that the next step would split is taken back, its parent split red instead). */
+typedef struct rstep {
+    api_input *in;            /* a reference */
+    api_tags tags;            /* the C library's blocks (sd_refine_carry's) */
+    sd_override *ov;
+    uint32_t nov;
+    uint32_t *orig;           /* per simplex: the posted simplex it still is, or UINT32_MAX (NULL
+                               * at step 0: the identity) */
+    uint8_t *sel;             /* per simplex: selected, or a child of a selected one (a selection
+                               * of simplices; NULL: by region) */
+    uint32_t *gparent;        /* per simplex: its parent in the step before when that parent was
+                               * split green, else UINT32_MAX (NULL at step 0) */
+    uint8_t *up;              /* per simplex: split red for a green cell the next step splits */
+    uint64_t red, green;      /* what the step before split to make this input */
+} rstep;
+
+static void rstep_clear(rstep *s)
+{
+    if (s->in)
+        api_input_unref(s->in);
+    free(s->tags.size);
+    free(s->tags.idx);
+    free(s->tags.tt);
+    free(s->tags.pet);
+    free(s->tags.sh);
+    free(s->ov);
+    free(s->orig);
+    free(s->sel);
+    free(s->gparent);
+    free(s->up);
+    memset(s, 0, sizeof *s);
+}
+
+/* One step from S (step j): the simplices marked — the selection's, those S->up names — split
+ * red and green around, the new points placed, attributes, tags and overrides carried; the next
+ * step's input into *nx, and into *touched which of S's simplices the step split. *none when
+ * nothing is marked (no step). 0 or the status of the problem. */
+static int run_step(const api_model *cur, const rstep *S, int j, const selection *sel, int place,
+                    const api_limits *lim, rstep *nx, uint8_t **touched, bool *none,
+                    api_problem *p)
+{
+    const api_input *in = S->in;
+    *touched = NULL;
+    *none = false;
+    memset(nx, 0, sizeof *nx);
+    uint8_t *marked = S->sel ? NULL : mark_selection(sel, in);
+    uint8_t *diag = malloc((size_t)in->ns + 1);
+    if ((!S->sel && !marked) || !diag) {
+        free(marked);
+        free(diag);
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    }
+    if (S->sel)
+        marked = S->sel; /* borrowed below, not freed */
+    uint8_t *mk = malloc((size_t)in->ns + 1);
+    uint64_t nmarked = 0;
+    for (uint32_t s = 0; mk && s < in->ns; s++)
+        nmarked += mk[s] = (marked[s] || (S->up && S->up[s])) && in->size[s] >= 2;
+    if (!S->sel)
+        free(marked);
+    if (!mk) {
+        free(diag);
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    }
+    if (!nmarked) {
+        free(mk);
+        free(diag);
+        *none = true;
+        return 0;
+    }
+    /* a tetrahedron split red cuts its octahedron along its diagonal: the session's for the
+     * posted tetrahedra (those of later steps that are still one of them included); the first
+     * pair for the children of an earlier step, whose diagonals Algorithm 2 chooses when the
+     * refined model is made */
+    for (uint32_t s = 0; s < in->ns; s++) {
+        uint32_t o = j == 0 ? s : S->orig ? S->orig[s] : UINT32_MAX;
+        int d = in->size[s] == 4 && o != UINT32_MAX ? sd_complex_diagonal(cur->c, o) : 0;
+        diag[s] = (uint8_t)(d >= 0 && d < 3 ? d : 0);
+    }
+    sd_refinement r;
+    sd_error e = {0};
+    int refined = sd_refine(in->xyz, in->nv, in->idx, in->size, in->ns, mk, diag, &r, &e);
+    free(diag);
+    free(mk);
+    if (refined)
+        return api_fail_core(p, &e, "/select", NULL);
+    if (r.nv > lim->max_vertices || r.ns > lim->max_simplices) {
+        int rc = r.nv > lim->max_vertices
+                     ? api_fail_limit(p, "max_vertices", lim->max_vertices, r.nv,
+                                      "the refined complex would have %zu vertices; refine a "
+                                      "smaller region or less deep", r.nv)
+                     : api_fail_limit(p, "max_simplices", lim->max_simplices, r.ns,
+                                      "the refined complex would have %zu simplices; refine a "
+                                      "smaller region or less deep", r.ns);
+        sd_refine_free(&r);
+        return rc;
+    }
+    nx->red = r.red;
+    nx->green = r.green;
+    int rc = 0;
+    /* new attribute arrays: old values, then the new points at midpoints */
+    double *attr_new[API_MAX_ATTRIBUTES] = {0};
+    if (!midpoint_attributes(in, &r, attr_new))
+        rc = api_fail(p, 503, "out-of-memory", "out of memory");
+    /* or where the subdivision rules put them: level-1 edge points of the step's input */
+    if (!rc && place == 0) {
+        sd_override *ovc = malloc((S->nov + 1) * sizeof *ovc); /* model_with may drop some */
+        if (!ovc)
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
+        else {
+            memcpy(ovc, S->ov, S->nov * sizeof *ovc);
+            rc = subdivision_positions(j == 0 ? cur : NULL, in, &cur->rules, &S->tags, ovc,
+                                       S->nov, &r, attr_new, lim, p);
+            free(ovc);
+        }
+    }
+    if (!rc) { /* the step's tags and overrides, carried to the children (core) */
+        sd_tag_set was = {S->tags.idx, S->tags.size, S->tags.n, S->tags.pet, S->tags.npet, S->ov,
+                          S->nov, NULL}, now;
+        if (sd_refine_carry(&r, &was, &now, &e)) {
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
+        } else {
+            uint32_t nsh = S->tags.nsh;
+            api_sharp *sh = carry_sharpness(&r, S->tags.sh, S->tags.nsh, &nsh);
+            /* tangent-plane constraints act on the first step, not carried */
+            nx->tags = (api_tags){.n = (uint32_t)now.ntags, .size = now.size, .idx = now.idx,
+                                  .npet = (uint32_t)now.npetals, .pet = now.petals,
+                                  .nsh = sh ? nsh : 0, .sh = sh};
+            if (!sh)
+                rc = api_fail(p, 503, "out-of-memory", "out of memory");
+            nx->ov = now.overrides;
+            nx->nov = (uint32_t)now.noverrides;
+            free(now.from);
+        }
+    }
+    api_input *next = rc ? NULL : api_input_new();
+    if (!rc && !next)
+        rc = api_fail(p, 503, "out-of-memory", "out of memory");
+    /* what the step split, which children are selected, which come from a green split */
+    uint32_t *children = rc ? NULL : calloc((size_t)in->ns + 1, sizeof *children);
+    if (!rc) {
+        nx->orig = untouched_origins(in, &r, S->orig); /* before r's arrays move */
+        nx->sel = sel->kind == 0 ? calloc(r.ns + 1, 1) : NULL;
+        nx->gparent = malloc((r.ns + 1) * sizeof *nx->gparent);
+        *touched = calloc((size_t)in->ns + 1, 1);
+        if (!children || !nx->orig || (sel->kind == 0 && !nx->sel) || !nx->gparent || !*touched)
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
+    }
+    if (rc) {
+        for (int t = 0; t < in->nattrs; t++)
+            free(attr_new[t]);
+        free(children);
+        free(*touched);
+        *touched = NULL;
+        if (next)
+            api_input_unref(next);
+        rstep_clear(nx);
+        sd_refine_free(&r);
+        return rc;
+    }
+    for (size_t i = 0; i < r.ns; i++)
+        children[r.parent[i]]++;
+    for (size_t i = 0; i < r.ns; i++) {
+        uint32_t q = r.parent[i];
+        bool green = (in->size[q] == 4 && (children[q] == 2 || children[q] == 4)) ||
+                     (in->size[q] == 3 && children[q] == 2);
+        nx->gparent[i] = green ? q : UINT32_MAX;
+        if (nx->sel)
+            nx->sel[i] = S->sel[q]; /* the children of the selection (not of upgrades) */
+    }
+    for (uint32_t q = 0; q < in->ns; q++)
+        (*touched)[q] = children[q] != 1;
+    for (size_t i = 0; i < r.ns; i++) /* one child of another shape: split too */
+        if (r.size[i] != in->size[r.parent[i]])
+            (*touched)[r.parent[i]] = 1;
+    free(children);
+    adopt_step(next, in, &r, attr_new);
+    sd_refine_free(&r);
+    nx->in = next;
+    if (!api_input_account(next)) { /* the adopted arrays count against the memory budget */
+        free(*touched);
+        *touched = NULL;
+        rstep_clear(nx);
+        return api_fail(p, 503, "out-of-memory", "out of memory");
+    }
+    return 0;
+}
+
+/* The most steps made (again) in one refinement: past it, the green cells left are kept. */
+#define RG_MAX_RUNS 64
+
 /* POST /refine: `depth` steps of sd_refine on the working input, each with its new points placed,
- * its attributes and its tags and overrides carried; then one model from the result. */
+ * its attributes and its tags and overrides carried; then one model from the result. A green
+ * cell of a step that the next step would split is taken back: its parent is split red in that
+ * step, which is made again (classic red-green refinement), so cells keep their shape however
+ * deep the refinement goes. */
 int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
                uint64_t *red, uint64_t *green, api_problem *p)
 {
@@ -464,158 +659,74 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
         return api_fail_at(p, 400, "missing-field", "/select", "\"select\" is required");
     selection sel = {0};
     int rc = parse_selection(v, cur->in, &sel, p);
-    /* the working complex: starts as the posted one, replaced after every step, with its tags
-     * and overrides */
-    api_input *in = cur->in;
-    api_tags tags = {0};
-    uint32_t nov = cur->rules.noverrides;
-    sd_override *ov = malloc((nov + 1) * sizeof *ov);
-    bool copied = api_tags_copy(&tags, &cur->tags);
-    if (!ov || !copied)
-        rc = rc ? rc : api_fail(p, 503, "out-of-memory", "out of memory");
-    else if (nov)
-        memcpy(ov, cur->rules.overrides, nov * sizeof *ov);
-    atomic_fetch_add(&in->refs, 1);
-    uint8_t *marked = NULL;
-    uint32_t *orig = NULL; /* per working simplex: the posted simplex it still is, or UINT32_MAX */
-    for (int step = 0; !rc && step < depth; step++) {
-        if (step == 0 || sel.kind != 0) { /* later steps of a simplex selection: its children */
-            free(marked);
-            if (!(marked = mark_selection(&sel, in))) {
+    rstep st[5] = {{0}}; /* the input of each step (depth <= 4) */
+    if (!rc) {
+        st[0].in = cur->in;
+        atomic_fetch_add(&cur->in->refs, 1);
+        st[0].nov = cur->rules.noverrides;
+        st[0].ov = malloc((st[0].nov + 1) * sizeof *st[0].ov);
+        bool copied = api_tags_copy(&st[0].tags, &cur->tags);
+        st[0].sel = sel.kind == 0 ? mark_selection(&sel, cur->in) : NULL;
+        if (!st[0].ov || !copied || (sel.kind == 0 && !st[0].sel))
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
+        else if (st[0].nov)
+            memcpy(st[0].ov, cur->rules.overrides, st[0].nov * sizeof *st[0].ov);
+    }
+    int j = 0, runs = 0;
+    while (!rc && j < depth) {
+        rstep nx;
+        uint8_t *touched;
+        bool none;
+        if ((rc = run_step(cur, &st[j], j, &sel, place, lim, &nx, &touched, &none, p)))
+            break;
+        runs++;
+        if (none) { /* nothing (left) to refine */
+            if (j == 0 && runs == 1) /* no new version of the same complex */
+                rc = api_fail_at(p, 422, "empty-selection", "/select",
+                                 "the selection holds no edge, triangle or tetrahedron of the "
+                                 "complex (isolated points are not refined): nothing to refine");
+            break;
+        }
+        /* green cells of the step before that this step splits: their parents go red there */
+        bool again = false;
+        for (uint32_t s = 0; j > 0 && runs < RG_MAX_RUNS && s < st[j].in->ns; s++) {
+            uint32_t g = st[j].gparent[s];
+            if (!touched[s] || g == UINT32_MAX)
+                continue;
+            if (!st[j - 1].up && !(st[j - 1].up = calloc((size_t)st[j - 1].in->ns + 1, 1))) {
                 rc = api_fail(p, 503, "out-of-memory", "out of memory");
                 break;
             }
+            st[j - 1].up[g] = 1;
+            again = true;
         }
-        uint64_t nmarked = 0;
-        for (uint32_t s = 0; s < in->ns; s++)
-            nmarked += marked[s] = marked[s] && in->size[s] >= 2;
-        if (!nmarked && step == 0) { /* nothing to refine: no new version of the same complex */
-            rc = api_fail_at(p, 422, "empty-selection", "/select",
-                             "the selection holds no edge, triangle or tetrahedron of the complex "
-                             "(isolated points are not refined): nothing to refine");
-            break;
+        free(touched);
+        if (rc || again) {
+            rstep_clear(&nx);
+            if (!rc) /* step j - 1 again, with its new red cells */
+                rstep_clear(&st[j--]);
+            continue;
         }
-        if (!nmarked)
-            break;
-        /* a tetrahedron split red cuts its octahedron along its diagonal: the session's for the
-         * posted tetrahedra (those of later steps that are still one of them included); the
-         * first pair for the children of an earlier step, whose diagonals Algorithm 2 chooses
-         * when the refined model is made */
-        uint8_t *diag = malloc((size_t)in->ns + 1);
-        if (!diag) {
-            rc = api_fail(p, 503, "out-of-memory", "out of memory");
-            break;
-        }
-        for (uint32_t s = 0; s < in->ns; s++) {
-            uint32_t o = step == 0 ? s : orig ? orig[s] : UINT32_MAX;
-            int d = in->size[s] == 4 && o != UINT32_MAX ? sd_complex_diagonal(cur->c, o) : 0;
-            diag[s] = (uint8_t)(d >= 0 && d < 3 ? d : 0);
-        }
-        sd_refinement r;
-        sd_error e = {0};
-        int refined = sd_refine(in->xyz, in->nv, in->idx, in->size, in->ns, marked, diag, &r, &e);
-        free(diag);
-        if (refined) {
-            rc = api_fail_core(p, &e, "/select", NULL);
-            break;
-        }
-        if (r.nv > lim->max_vertices || r.ns > lim->max_simplices) {
-            rc = r.nv > lim->max_vertices
-                     ? api_fail_limit(p, "max_vertices", lim->max_vertices, r.nv,
-                                      "the refined complex would have %zu vertices; refine a "
-                                      "smaller region or less deep", r.nv)
-                     : api_fail_limit(p, "max_simplices", lim->max_simplices, r.ns,
-                                      "the refined complex would have %zu simplices; refine a "
-                                      "smaller region or less deep", r.ns);
-            sd_refine_free(&r);
-            break;
-        }
-        *red += r.red;
-        *green += r.green;
-        /* new attribute arrays: old values, then the new points at midpoints */
-        double *attr_new[API_MAX_ATTRIBUTES] = {0};
-        if (!midpoint_attributes(in, &r, attr_new))
-            rc = api_fail(p, 503, "out-of-memory", "out of memory");
-        /* or where the subdivision rules put them: level-1 edge points of the step's input */
-        if (!rc && place == 0) {
-            sd_override *ovc = malloc((nov + 1) * sizeof *ovc); /* model_with may drop some */
-            if (!ovc)
-                rc = api_fail(p, 503, "out-of-memory", "out of memory");
-            else {
-                memcpy(ovc, ov, nov * sizeof *ov);
-                rc = subdivision_positions(step == 0 ? cur : NULL, in, &cur->rules, &tags, ovc,
-                                           nov, &r, attr_new, lim, p);
-                free(ovc);
-            }
-        }
-        if (!rc) { /* the step's tags and overrides, carried to the children (core) */
-            sd_tag_set was = {tags.idx, tags.size, tags.n, tags.pet, tags.npet, ov, nov, NULL}, now;
-            if (sd_refine_carry(&r, &was, &now, &e)) {
-                rc = api_fail(p, 503, "out-of-memory", "out of memory");
-            } else {
-                sd_tag_set_free(&was); /* malloc'ed, as the carried ones */
-                api_sharp *sh = carry_sharpness(&r, tags.sh, tags.nsh, &tags.nsh);
-                free(tags.sh);
-                free(tags.tt); /* tangent-plane constraints act on the first step, not carried */
-                tags = (api_tags){.n = (uint32_t)now.ntags, .size = now.size, .idx = now.idx,
-                                  .npet = (uint32_t)now.npetals, .pet = now.petals,
-                                  .nsh = sh ? tags.nsh : 0, .sh = sh};
-                if (!sh)
-                    rc = api_fail(p, 503, "out-of-memory", "out of memory");
-                ov = now.overrides;
-                nov = (uint32_t)now.noverrides;
-                free(now.from);
-            }
-        }
-        api_input *nx = rc ? NULL : api_input_new();
-        if (!rc && !nx)
-            rc = api_fail(p, 503, "out-of-memory", "out of memory");
-        if (rc) {
-            for (int t = 0; t < in->nattrs; t++)
-                free(attr_new[t]);
-            sd_refine_free(&r);
-            break;
-        }
-        uint32_t *next_orig = untouched_origins(in, &r, orig); /* before r's arrays move */
-        adopt_step(nx, in, &r, attr_new);
-        free(orig);
-        orig = next_orig;
-        if (!orig)
-            rc = api_fail(p, 503, "out-of-memory", "out of memory");
-        uint8_t *next_marked = calloc(r.ns + 1, 1); /* children of selected simplices */
-        if (next_marked)
-            for (size_t i = 0; i < r.ns; i++)
-                next_marked[i] = marked[r.parent[i]];
-        free(marked);
-        marked = next_marked;
-        sd_refine_free(&r);
-        api_input_unref(in);
-        in = nx;
-        if (!api_input_account(in)) /* the adopted arrays count against the memory budget */
-            rc = api_fail(p, 503, "out-of-memory", "out of memory");
-        else if (!marked && step + 1 < depth && sel.kind == 0)
-            rc = api_fail(p, 503, "out-of-memory", "out of memory");
+        st[++j] = nx;
     }
-    free(marked);
     free(sel.keys);
-    if (!rc && in != cur->in && !keep_choices(cur, in, orig))
+    for (int k = 1; !rc && k <= j; k++) {
+        *red += st[k].red;
+        *green += st[k].green;
+    }
+    rstep *fin = &st[j];
+    if (!rc && fin->in != cur->in && !keep_choices(cur, fin->in, fin->orig))
         rc = api_fail(p, 503, "out-of-memory", "out of memory");
-    free(orig);
     if (!rc) { /* with the carried tags and overrides (those that no longer fit are dropped) */
         sd_error e = {0};
-        api_model *m = model_with(in, &cur->rules, &tags, ov, nov, lim, &e);
+        api_model *m = model_with(fin->in, &cur->rules, &fin->tags, fin->ov, fin->nov, lim, &e);
         api_rules keep = cur->rules;
         keep.overrides = m ? m->rules.overrides : NULL;
         keep.noverrides = m ? m->rules.noverrides : 0;
-        rc = build_model(in, &keep, &tags, lim, out, p);
+        rc = build_model(fin->in, &keep, &fin->tags, lim, out, p);
         api_model_unref(m);
     }
-    free(ov);
-    free(tags.size);
-    free(tags.idx);
-    free(tags.tt);
-    free(tags.pet);
-    free(tags.sh);
-    api_input_unref(in);
+    for (int k = 0; k <= 4; k++)
+        rstep_clear(&st[k]);
     return rc;
 }

@@ -36,7 +36,8 @@ static const char REPAIR[] =
 static const char EDIT[] = "{\"moves\":[{\"index\":1,\"position\":[1,0.1,0]},{\"level\":1,"
                            "\"index\":9,\"position\":[0.5,0.2,0]}],\"attributes\":"
                            "{\"h\":[{\"index\":2,\"value\":5}]}}";
-static const char REFINE[] = "{\"select\":{\"simplices\":[[0,1,2,3]]},\"depth\":1}";
+static const char REFINE[] = "{\"select\":{\"simplices\":[[0,1,2,3]]},\"depth\":2}"; /* a green
+                                                                                 * triangle taken back */
 
 static int bad, oks;   /* failed checks; calls that succeeded in this run */
 static uint64_t run_n; /* the failing allocation of this run, for messages */
