@@ -448,8 +448,8 @@ typedef struct rstep {
     uint32_t nov;
     uint32_t *orig;           /* per simplex: the posted simplex it still is, or UINT32_MAX (NULL
                                * at step 0: the identity) */
-    uint8_t *sel;             /* per simplex: selected, or a child of a selected one (a selection
-                               * of simplices; NULL: by region) */
+    uint8_t *sel;             /* per simplex: selected (at step 0: by vertex list or by centroid in
+                               * the region), or a child of a selected one */
     uint32_t *gparent;        /* per simplex: its parent in the step before when that parent was
                                * split green, else UINT32_MAX (NULL at step 0) */
     uint8_t *up;              /* per simplex: split red for a green cell the next step splits */
@@ -473,11 +473,12 @@ static void rstep_clear(rstep *s)
     memset(s, 0, sizeof *s);
 }
 
-/* One step from S (step j): the simplices marked — the selection's, those S->up names — split
+/* One step from S (step j): the simplices marked — the selection's (at step 0) or its children,
+ * those S->up names — split
  * red and green around, the new points placed, attributes, tags and overrides carried; the next
  * step's input into *nx, and into *touched which of S's simplices the step split. *none when
  * nothing is marked (no step). 0 or the status of the problem. */
-static int run_step(const api_model *cur, const rstep *S, int j, const selection *sel, int place,
+static int run_step(const api_model *cur, const rstep *S, int j, int place,
                     const api_limits *lim, rstep *nx, uint8_t **touched, bool *none,
                     api_problem *p)
 {
@@ -485,25 +486,16 @@ static int run_step(const api_model *cur, const rstep *S, int j, const selection
     *touched = NULL;
     *none = false;
     memset(nx, 0, sizeof *nx);
-    uint8_t *marked = S->sel ? NULL : mark_selection(sel, in);
     uint8_t *diag = malloc((size_t)in->ns + 1);
-    if ((!S->sel && !marked) || !diag) {
-        free(marked);
-        free(diag);
-        return api_fail(p, 503, "out-of-memory", "out of memory");
-    }
-    if (S->sel)
-        marked = S->sel; /* borrowed below, not freed */
     uint8_t *mk = malloc((size_t)in->ns + 1);
-    uint64_t nmarked = 0;
-    for (uint32_t s = 0; mk && s < in->ns; s++)
-        nmarked += mk[s] = (marked[s] || (S->up && S->up[s])) && in->size[s] >= 2;
-    if (!S->sel)
-        free(marked);
-    if (!mk) {
+    if (!diag || !mk) {
         free(diag);
+        free(mk);
         return api_fail(p, 503, "out-of-memory", "out of memory");
     }
+    uint64_t nmarked = 0;
+    for (uint32_t s = 0; s < in->ns; s++)
+        nmarked += mk[s] = (S->sel[s] || (S->up && S->up[s])) && in->size[s] >= 2;
     if (!nmarked) {
         free(mk);
         free(diag);
@@ -582,10 +574,10 @@ static int run_step(const api_model *cur, const rstep *S, int j, const selection
     uint32_t *children = rc ? NULL : calloc((size_t)in->ns + 1, sizeof *children);
     if (!rc) {
         nx->orig = untouched_origins(in, &r, S->orig); /* before r's arrays move */
-        nx->sel = sel->kind == 0 ? calloc(r.ns + 1, 1) : NULL;
+        nx->sel = calloc(r.ns + 1, 1);
         nx->gparent = malloc((r.ns + 1) * sizeof *nx->gparent);
         *touched = calloc((size_t)in->ns + 1, 1);
-        if (!children || !nx->orig || (sel->kind == 0 && !nx->sel) || !nx->gparent || !*touched)
+        if (!children || !nx->orig || !nx->sel || !nx->gparent || !*touched)
             rc = api_fail(p, 503, "out-of-memory", "out of memory");
     }
     if (rc) {
@@ -607,8 +599,7 @@ static int run_step(const api_model *cur, const rstep *S, int j, const selection
         bool green = (in->size[q] == 4 && (children[q] == 2 || children[q] == 4)) ||
                      (in->size[q] == 3 && children[q] == 2);
         nx->gparent[i] = green ? q : UINT32_MAX;
-        if (nx->sel)
-            nx->sel[i] = S->sel[q]; /* the children of the selection (not of upgrades) */
+        nx->sel[i] = S->sel[q]; /* the children of the selection (not of upgrades) */
     }
     for (uint32_t q = 0; q < in->ns; q++)
         (*touched)[q] = children[q] != 1;
@@ -666,8 +657,8 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
         st[0].nov = cur->rules.noverrides;
         st[0].ov = malloc((st[0].nov + 1) * sizeof *st[0].ov);
         bool copied = api_tags_copy(&st[0].tags, &cur->tags);
-        st[0].sel = sel.kind == 0 ? mark_selection(&sel, cur->in) : NULL;
-        if (!st[0].ov || !copied || (sel.kind == 0 && !st[0].sel))
+        st[0].sel = mark_selection(&sel, cur->in); /* later steps: its children */
+        if (!st[0].ov || !copied || !st[0].sel)
             rc = api_fail(p, 503, "out-of-memory", "out of memory");
         else if (st[0].nov)
             memcpy(st[0].ov, cur->rules.overrides, st[0].nov * sizeof *st[0].ov);
@@ -677,7 +668,7 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
         rstep nx;
         uint8_t *touched;
         bool none;
-        if ((rc = run_step(cur, &st[j], j, &sel, place, lim, &nx, &touched, &none, p)))
+        if ((rc = run_step(cur, &st[j], j, place, lim, &nx, &touched, &none, p)))
             break;
         runs++;
         if (none) { /* nothing (left) to refine */

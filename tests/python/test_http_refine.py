@@ -341,3 +341,20 @@ def test_deep_refinement_keeps_the_cells_shape(daemon, place):
             assert np.dot(np.cross(b - a, cc - a), d - a) > 0, t
         s.delete()
     assert worst[4] > 0.2 * worst[1], worst
+
+
+@pytest.mark.parametrize("select", [{"box": {"min": [0.3, -1, -1], "max": [0.7, 1, 1]}},
+                                    {"sphere": {"center": [0.4, 0, 0], "radius": 0.5}},
+                                    {"simplices": [[0, 1]]}])
+def test_depth_follows_the_children_of_a_region(daemon, select):
+    """docs/SERVICE.md: `depth` repeats the refinement on the children of the selection — a box
+    or a sphere selects by centroid once, and its simplices' children are refined on, wherever
+    their own centroids fall. A segment selected, depth 4: 16 equal segments."""
+    s = Session(daemon)
+    assert s.put_complex({"vertices": [[0, 0, 0], [1, 0, 0]], "simplices": [[0, 1]]}).status_code == 200
+    r = s.req("POST", "/refine", json={"select": select, "depth": 4, "positions": "midpoint"})
+    assert r.status_code == 200, r.text
+    c = s.req("GET", "/complex").json()
+    p = np.array(c["vertices"])
+    lengths = sorted(np.linalg.norm(p[a] - p[b]) for a, b in c["simplices"])
+    assert lengths == pytest.approx([1 / 16] * 16, abs=1e-15)
