@@ -536,17 +536,32 @@ static int run_step(const api_model *cur, const rstep *S, int j, int place,
     double *attr_new[API_MAX_ATTRIBUTES] = {0};
     if (!midpoint_attributes(in, &r, attr_new))
         rc = api_fail(p, 503, "out-of-memory", "out of memory");
-    /* or where the subdivision rules put them: level-1 edge points of the step's input */
+    /* or where the subdivision rules put them: level-1 edge points of the step's input; a
+     * tetrahedron they would turn inside out (against the midpoints' placement, which keeps
+     * every child's orientation) refuses the placement */
     if (!rc && place == 0) {
         sd_override *ovc = malloc((S->nov + 1) * sizeof *ovc); /* model_with may drop some */
-        if (!ovc)
+        double *mid = malloc((3 * r.nv + 1) * sizeof *mid);
+        if (!ovc || !mid)
             rc = api_fail(p, 503, "out-of-memory", "out of memory");
         else {
+            memcpy(mid, r.xyz, 3 * r.nv * sizeof *mid);
             memcpy(ovc, S->ov, S->nov * sizeof *ovc);
             rc = subdivision_positions(j == 0 ? cur : NULL, in, &cur->rules, &S->tags, ovc,
                                        S->nov, &r, attr_new, lim, p);
-            free(ovc);
         }
+        size_t folded = 0;
+        for (size_t i = 0, off = 0; !rc && i < r.ns; off += r.size[i++])
+            if (r.size[i] == 4 && !(vol6(mid, r.idx + off) * vol6(r.xyz, r.idx + off) > 0))
+                folded++;
+        if (folded)
+            rc = api_fail_at(p, 422, "folded-placement", "/positions",
+                             "placing the new points by the subdivision rules turns %zu "
+                             "tetrahedra of refinement step %d inside out here (the control "
+                             "complex is too irregular around the selection for it); "
+                             "\"positions\": \"midpoint\" keeps them", folded, j + 1);
+        free(ovc);
+        free(mid);
     }
     if (!rc) { /* the step's tags and overrides, carried to the children (core) */
         sd_tag_set was = {S->tags.idx, S->tags.size, S->tags.n, S->tags.pet, S->tags.npet, S->ov,

@@ -358,3 +358,46 @@ def test_depth_follows_the_children_of_a_region(daemon, select):
     p = np.array(c["vertices"])
     lengths = sorted(np.linalg.norm(p[a] - p[b]) for a, b in c["simplices"])
     assert lengths == pytest.approx([1 / 16] * 16, abs=1e-15)
+
+
+def five_tet_grid(n, jitter, seed):
+    """n^3 jittered cubes, each cut into 5 tetrahedra (alternating by parity)."""
+    rng = np.random.default_rng(seed)
+    vid = lambda i, j, k: (i * (n + 1) + j) * (n + 1) + k
+    V = np.array([[i, j, k] for i in range(n + 1) for j in range(n + 1) for k in range(n + 1)], float)
+    V += rng.uniform(-jitter, jitter, V.shape)
+    A = [[1, 2, 4, 7], [0, 1, 2, 4], [3, 1, 2, 7], [5, 1, 4, 7], [6, 2, 4, 7]]
+    B = [[0, 3, 5, 6], [1, 0, 3, 5], [2, 0, 3, 6], [4, 0, 5, 6], [7, 3, 5, 6]]
+    T = []
+    for i, j, k in itertools.product(range(n), repeat=3):
+        c = [vid(i + (b & 1), j + (b >> 1 & 1), k + (b >> 2 & 1)) for b in range(8)]
+        T += [[c[x] for x in t] for t in (A if (i + j + k) % 2 == 0 else B)]
+    return {"vertices": V.tolist(), "simplices": T}
+
+
+def test_a_placement_that_folds_the_complex_is_refused(daemon):
+    """New points placed by the subdivision rules (the level-1 edge points of each step's complex)
+    move off the midpoints; on an irregular complex refined deep, that can turn tetrahedra inside
+    out against the midpoints' placement, which keeps every child's orientation. Such a
+    placement is a 422 at /positions naming the step (nothing changed); midpoints refine the same
+    selection, and every tetrahedron of a taken refinement keeps its orientation."""
+    body = five_tet_grid(2, 0.2, 2)
+    t = [9, 3, 1, 13]
+    assert t in body["simplices"]
+    for depth, place, status in [(1, "subdivision", 200), (3, "subdivision", 422),
+                                 (3, "midpoint", 200)]:
+        s = Session(daemon)
+        assert s.put_complex(body).status_code == 200
+        r = s.req("POST", "/refine", json={"select": {"simplices": [t]}, "depth": depth,
+                                          "positions": place})
+        assert r.status_code == status, r.text
+        if status == 422:
+            assert r.json()["errors"][0]["pointer"] == "/positions"
+            assert s.req("GET").json()["version"] == 1
+        else:
+            j = s.level(1, format="json").json()
+            p = np.array(j["vertices"])
+            for c in j["cells"]["tetrahedra"]:
+                a, b, cc, d = p[c]
+                assert np.dot(np.cross(b - a, cc - a), d - a) > 0, c
+        s.delete()
