@@ -455,6 +455,9 @@ def test_meshes_read_obj_and_off_records(tmp_path):
             ("c.obj", "v 0 0 0\nl 1\n", "at least 2"),
             ("d.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "vertex index 0"),
             ("e.obj", "v 0 0\n", "line 1"),
+            # a record continued with a backslash: errors name the line a record starts on
+            ("f.obj", "v 0 0 \\\n0\nv 1 0 0\nv 0 1 0\nf 1 2 \\\n 3\nf 1 2 4\n",
+             "line 7: vertex index 4"),
             ("b.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n", "line 6"),
             ("c.off", "OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "2 faces announced"),
             ("d.off", "OFF BINARY\n", "binary"),

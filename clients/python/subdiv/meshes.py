@@ -140,8 +140,17 @@ def _read_obj(text, path):
     and "i/t/n" forms keep i. Normals, texture coordinates, groups, objects, smoothing and
     materials are ignored; free-form geometry is refused."""
     points, cells = [], []
-    lines = text.replace("\\\n", " ").splitlines()
-    for no, line in enumerate(lines, 1):
+    lines, part, first = [], "", None  # (the line a record starts on, the record)
+    for no, raw in enumerate(text.splitlines(), 1):
+        first = first or no
+        if raw.endswith("\\"):  # continued on the next line
+            part += raw[:-1] + " "
+            continue
+        lines.append((first, part + raw))
+        part, first = "", None
+    if first:
+        lines.append((first, part))
+    for no, line in lines:
         w = line.split("#", 1)[0].split()
         if not w:
             continue
