@@ -25,6 +25,7 @@ struct ev_listener {
     ev_hub *h;
     ev_listener *next;
     bool dropped;            /* its buffer overflowed: end the stream */
+    bool counted;            /* counts among the hub's listeners (not once dropped) */
     bool ending;             /* the hub closed: end after the buffer is sent */
     double last_send;
     size_t start, len;       /* unread bytes: buf[start, len) */
@@ -89,6 +90,17 @@ void ev_hub_unref(ev_hub *h)
     api_free(h);
 }
 
+/* A dropped or leaving listener stops counting against --max-listeners and in the gauge: a
+ * client that does not read holds no place another listener could take. mu held. */
+static void uncount(ev_listener *l)
+{
+    if (!l->counted)
+        return;
+    l->counted = false;
+    l->h->nlisteners--;
+    atomic_fetch_sub(&nlisteners, 1);
+}
+
 /* Append text to a listener's buffer, or drop the listener when it does not fit. mu held. */
 static void deliver(ev_listener *l, const char *text, size_t n)
 {
@@ -102,6 +114,7 @@ static void deliver(ev_listener *l, const char *text, size_t n)
     if (l->len + n > sizeof l->buf) {
         l->dropped = true;
         atomic_fetch_add(&ndropped, 1);
+        uncount(l);
         return;
     }
     memcpy(l->buf + l->len, text, n);
@@ -135,6 +148,7 @@ void ev_publish(ev_hub *h, uint64_t version, const char *name, const char *data)
             if (!l->dropped) {
                 l->dropped = true;
                 atomic_fetch_add(&ndropped, 1);
+                uncount(l);
             }
         pthread_cond_broadcast(&h->cv);
         pthread_mutex_unlock(&h->mu);
@@ -232,9 +246,12 @@ ev_listener *ev_listen(ev_hub *h, int has_last, uint64_t last, uint64_t current_
     }
     l->next = h->listeners;
     h->listeners = l;
-    h->nlisteners++;
+    if (!l->dropped) { /* (a replay that did not fit ends the stream at once) */
+        l->counted = true;
+        h->nlisteners++;
+        atomic_fetch_add(&nlisteners, 1);
+    }
     pthread_mutex_unlock(&h->mu);
-    atomic_fetch_add(&nlisteners, 1);
     return l;
 }
 
@@ -300,11 +317,10 @@ void ev_unlisten(ev_listener *l)
     for (ev_listener **p = &h->listeners; *p; p = &(*p)->next)
         if (*p == l) {
             *p = l->next;
-            h->nlisteners--;
+            uncount(l);
             break;
         }
     pthread_mutex_unlock(&h->mu);
-    atomic_fetch_sub(&nlisteners, 1);
     api_free(l);
     ev_hub_unref(h);
 }

@@ -645,6 +645,10 @@ def test_a_stuck_listener_does_not_slow_edits(daemon):
     metrics = requests.get(daemon.url + "/metrics", timeout=5).text
     dropped = [l for l in metrics.splitlines() if l.startswith("subdivd_event_listeners_dropped")]
     assert dropped and float(dropped[0].split()[-1]) >= 2, dropped
+    # dropped, they no longer count (their sockets still open): only the live listener does, so
+    # a stuck client holds no --max-listeners place
+    gauge = [l for l in metrics.splitlines() if l.startswith("subdivd_event_listeners ")]
+    assert gauge and float(gauge[0].split()[-1]) == 1, gauge
     for k in stuck:
         k.close()
     s.delete()
