@@ -518,7 +518,8 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
         pthread_mutex_unlock(&m->lock);
         return api_fail(p, 503, "out-of-memory", "out of memory building the delta; retry later");
     }
-    const float *nrm = own; /* n rows; without it the cache's, a row per point */
+/* the normal of the delta's i-th point: own's row i, else the cached one of the point */
+#define NORMAL_AT(i) (own ? own + 3 * (i) : g->normals + 3 * (size_t)ids[i])
     const double *xyz = sd_level_channel(lv, 0, NULL);
     api_buf o = {0};
     size_t per = 12 + (normals ? 12 : 0);
@@ -537,7 +538,7 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
             for (int k = 0; k < 3; k++)
                 api_buf_f32(&o, xyz[3 * (size_t)ids[i] + k]);
         for (size_t i = 0; normals && i < n; i++)
-            api_buf_put(&o, nrm ? nrm + 3 * i : g->normals + 3 * (size_t)ids[i], 12);
+            api_buf_put(&o, NORMAL_AT(i), 12);
         for (int a = 0; a < nattrs; a++) {
             int nc;
             const double *x = sd_level_channel(lv, m->channel[attrs[a]], &nc);
@@ -565,7 +566,7 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
         if (normals) {
             api_buf_put(&o, ",\"normals\":[", 12);
             for (size_t i = 0; i < n; i++) {
-                const float *f = nrm ? nrm + 3 * i : g->normals + 3 * (size_t)ids[i];
+                const float *f = NORMAL_AT(i);
                 api_buf_put(&o, i ? ",[" : "[", i ? 2 : 1);
                 for (int k = 0; k < 3; k++)
                     api_buf_printf(&o, k ? ",%.9g" : "%.9g", (double)f[k]);
@@ -589,6 +590,7 @@ int api_level_delta(api_model *m, int level, const api_delta_query *q, char **bo
         }
         api_buf_put(&o, "}}", 2);
     }
+#undef NORMAL_AT
     api_model_publish(m); /* the incidence and the geometry count as session memory */
     pthread_mutex_unlock(&m->lock);
     api_free(ids);

@@ -88,15 +88,15 @@ static int cmp_tri_key(const void *x, const void *y) /* sorted ids, then the ent
     return 0;
 }
 
-/* The triangles of a definition (pointers under `base`): every index in range, no vertex twice
- * in one, no triangle twice (in any vertex order), as the control complex's simplices. */
-static int check_triangles(const api_embed_def *d, const char *base, api_problem *p)
+/* The triangles of a PUT's definition: every index in range, no vertex twice in one, no
+ * triangle twice (in any vertex order), as the control complex's simplices. */
+static int check_triangles(const api_embed_def *d, api_problem *p)
 {
     char ptr[192];
     for (size_t i = 0; i < 3 * (size_t)d->nt; i++) {
         const uint32_t *t = d->tri + 3 * (i / 3);
         int k = (int)(i % 3);
-        snprintf(ptr, sizeof ptr, "%s/triangles/%zu/%d", base, i / 3, k);
+        snprintf(ptr, sizeof ptr, "/triangles/%zu/%d", i / 3, k);
         if (t[k] >= d->nv)
             return api_fail_at(p, 422, "invalid-complex", ptr, "vertex %u out of range (%u vertices)",
                                t[k], d->nv);
@@ -121,9 +121,9 @@ static int check_triangles(const api_embed_def *d, const char *base, api_problem
     int rc = 0;
     for (uint32_t i = 1; i < d->nt && !rc; i++)
         if (!memcmp(key[i - 1], key[i], 3 * sizeof(uint32_t))) {
-            snprintf(ptr, sizeof ptr, "%s/triangles/%u", base, key[i][3]);
-            rc = api_fail_at(p, 422, "invalid-complex", ptr,
-                             "the same triangle as %s/triangles/%u", base, key[i - 1][3]);
+            snprintf(ptr, sizeof ptr, "/triangles/%u", key[i][3]);
+            rc = api_fail_at(p, 422, "invalid-complex", ptr, "the same triangle as /triangles/%u",
+                             key[i - 1][3]);
         }
     api_plain_free(key);
     return rc;
@@ -203,7 +203,7 @@ static int parse_def(json_t *body, const char *name, const char *base, const api
     }
     if (!rc && !base[0]) /* a PUT; an import takes the models its export held (documents
                           * written before repeats were refused may hold some) */
-        rc = check_triangles(d, base, p);
+        rc = check_triangles(d, p);
     if (rc) {
         api_embed_def_unref(d);
         return rc;
@@ -274,7 +274,7 @@ int api_embed_parse_binary(const char *body, size_t len, const char *name, const
         }
     for (size_t i = 0; i < 3 * (size_t)nt; i++)
         d->tri[i] = get_u32(b + 8 + 24 * (size_t)nv + 4 * i);
-    if (check_triangles(d, "", p)) {
+    if (check_triangles(d, p)) {
         api_embed_def_unref(d);
         return p->status;
     }

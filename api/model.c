@@ -222,6 +222,17 @@ api_model *api_model_new(api_input *in, const api_rules *rules, uint64_t max_byt
     return m;
 }
 
+void api_tags_free(api_tags *t)
+{
+    api_plain_free(t->size);
+    api_plain_free(t->idx);
+    api_plain_free(t->from);
+    api_plain_free(t->pet);
+    api_plain_free(t->sh);
+    api_plain_free(t->tt);
+    *t = (api_tags){0};
+}
+
 bool api_tags_copy(api_tags *dst, const api_tags *src)
 {
     size_t nidx = 0;
@@ -236,12 +247,8 @@ bool api_tags_copy(api_tags *dst, const api_tags *src)
     t.sh = api_plain_malloc((src->nsh + 1) * sizeof *t.sh);
     t.tt = api_plain_malloc((src->ntt + 1) * sizeof *t.tt);
     if (!t.size || !t.idx || !t.pet || !t.sh || !t.tt) {
-        api_plain_free(t.tt);
-        api_plain_free(t.size);
-        api_plain_free(t.idx);
-        api_plain_free(t.pet);
-        api_plain_free(t.sh);
-        *dst = (api_tags){0};
+        api_tags_free(&t);
+        *dst = t;
         return false;
     }
     if (src->n) {
@@ -369,11 +376,7 @@ void api_model_unref(api_model *m)
 {
     if (!m || atomic_fetch_sub(&m->refs, 1) != 1)
         return;
-    api_plain_free(m->tags.size);
-    api_plain_free(m->tags.idx);
-    api_plain_free(m->tags.pet);
-    api_plain_free(m->tags.sh);
-    api_plain_free(m->tags.tt);
+    api_tags_free(&m->tags);
     api_plain_free(m->rules.overrides);
     json_decref(m->summary);
     for (int l = 0; l <= SD_MAX_LEVEL; l++)

@@ -194,6 +194,8 @@ void api_tangent_ptr(const api_tags *t, long item, int field, char *ptr, size_t 
 void api_tangents_json(const api_tags *t, struct json_t *obj);
 /* A deep copy of src into *dst (arrays never NULL); false (dst empty) for lack of memory. */
 bool api_tags_copy(api_tags *dst, const api_tags *src);
+/* Free t's arrays (the C library's blocks) and empty it. */
+void api_tags_free(api_tags *t);
 
 /* Compute level L (under the model's lock) and record the time; NULL + err on failure. The
  * caller holds m->lock. The computation uses the calling thread's compute threads (below). */

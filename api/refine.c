@@ -377,28 +377,6 @@ static void adopt_step(api_input *nx, const api_input *in, sd_refinement *r,
     }
 }
 
-/* After a step from `in` (whose simplices are the posted ones `orig`, NULL: the identity): which
- * posted simplex each new simplex still is — an untouched one (its parent's only child, same
- * vertex list) — or UINT32_MAX. NULL for lack of memory. */
-static uint32_t *untouched_origins(const api_input *in, const sd_refinement *r, const uint32_t *orig)
-{
-    uint32_t *children = calloc((size_t)in->ns + 1, sizeof *children);
-    uint32_t *out = malloc((r->ns + 1) * sizeof *out);
-    if (!children || !out) {
-        free(children);
-        free(out);
-        return NULL;
-    }
-    for (size_t i = 0; i < r->ns; i++)
-        children[r->parent[i]]++;
-    for (size_t i = 0; i < r->ns; i++) {
-        uint32_t q = r->parent[i];
-        out[i] = children[q] == 1 && r->size[i] == in->size[q] ? (orig ? orig[q] : q) : UINT32_MAX;
-    }
-    free(children);
-    return out;
-}
-
 static double vol6(const double *xyz, const uint32_t *t)
 {
     const double *a = xyz + 3 * (size_t)t[0], *b = xyz + 3 * (size_t)t[1], *c = xyz + 3 * (size_t)t[2],
@@ -460,11 +438,7 @@ static void rstep_clear(rstep *s)
 {
     if (s->in)
         api_input_unref(s->in);
-    free(s->tags.size);
-    free(s->tags.idx);
-    free(s->tags.tt);
-    free(s->tags.pet);
-    free(s->tags.sh);
+    api_tags_free(&s->tags);
     free(s->ov);
     free(s->orig);
     free(s->sel);
@@ -507,7 +481,7 @@ static int run_step(const api_model *cur, const rstep *S, int j, int place,
      * pair for the children of an earlier step, whose diagonals Algorithm 2 chooses when the
      * refined model is made */
     for (uint32_t s = 0; s < in->ns; s++) {
-        uint32_t o = j == 0 ? s : S->orig ? S->orig[s] : UINT32_MAX;
+        uint32_t o = S->orig ? S->orig[s] : s;
         int d = in->size[s] == 4 && o != UINT32_MAX ? sd_complex_diagonal(cur->c, o) : 0;
         diag[s] = (uint8_t)(d >= 0 && d < 3 ? d : 0);
     }
@@ -585,10 +559,12 @@ static int run_step(const api_model *cur, const rstep *S, int j, int place,
     api_input *next = rc ? NULL : api_input_new();
     if (!rc && !next)
         rc = api_fail(p, 503, "out-of-memory", "out of memory");
-    /* what the step split, which children are selected, which come from a green split */
+    /* what the step split, which children are selected, which come from a green split, which
+     * posted simplex each new one still is (an untouched one: its parent's only child, the same
+     * vertex list) */
     uint32_t *children = rc ? NULL : calloc((size_t)in->ns + 1, sizeof *children);
     if (!rc) {
-        nx->orig = untouched_origins(in, &r, S->orig); /* before r's arrays move */
+        nx->orig = malloc((r.ns + 1) * sizeof *nx->orig);
         nx->sel = calloc(r.ns + 1, 1);
         nx->gparent = malloc((r.ns + 1) * sizeof *nx->gparent);
         *touched = calloc((size_t)in->ns + 1, 1);
@@ -611,16 +587,14 @@ static int run_step(const api_model *cur, const rstep *S, int j, int place,
         children[r.parent[i]]++;
     for (size_t i = 0; i < r.ns; i++) {
         uint32_t q = r.parent[i];
+        bool kept = children[q] == 1 && r.size[i] == in->size[q];
         bool green = (in->size[q] == 4 && (children[q] == 2 || children[q] == 4)) ||
                      (in->size[q] == 3 && children[q] == 2);
+        nx->orig[i] = kept ? (S->orig ? S->orig[q] : q) : UINT32_MAX;
+        (*touched)[q] = !kept;
         nx->gparent[i] = green ? q : UINT32_MAX;
         nx->sel[i] = S->sel[q]; /* the children of the selection (not of upgrades) */
     }
-    for (uint32_t q = 0; q < in->ns; q++)
-        (*touched)[q] = children[q] != 1;
-    for (size_t i = 0; i < r.ns; i++) /* one child of another shape: split too */
-        if (r.size[i] != in->size[r.parent[i]])
-            (*touched)[r.parent[i]] = 1;
     free(children);
     adopt_step(next, in, &r, attr_new);
     sd_refine_free(&r);

@@ -833,11 +833,6 @@ static int put_tags(const api_model *cur, json_t *body, const api_packs *packs,
         rc = api_crease_tags(cur, ca, &tags, p);
     if (!rc) /* the core checks each tag is a vertex, edge or triangle of the complex */
         rc = build_from_copy(cur, &cur->rules, &tags, lim, out, p);
-    api_plain_free(tags.size);
-    api_plain_free(tags.idx);
-    api_plain_free(tags.from);
-    api_plain_free(tags.pet);
-    api_plain_free(tags.sh);
-    api_plain_free(tags.tt);
+    api_tags_free(&tags);
     return keep_details(cur, rc, out, p);
 }

@@ -86,7 +86,7 @@ store *store_new(int max_sessions, persist *p, const api_limits *lim)
 
 persist *store_persist(store *st) { return st->p; }
 
-static double touch_every(const struct session *s);
+static bool unstored_use(session *s, int64_t *expires_at);
 
 void store_free(store *st)
 {
@@ -94,9 +94,9 @@ void store_free(store *st)
         return;
     for (int i = 0; i < st->n; i++) {
         session *s = st->s[i]; /* a use since the last stored expiry: stored before stopping */
-        if (persist_durable(st->p) && s->last_used > s->touched)
-            persist_touch(st->p, s->id, (int64_t)time(NULL) - (int64_t)(mono_now() - s->last_used) +
-                                            s->ttl_s + (int64_t)ceil(touch_every(s)));
+        int64_t exp;
+        if (persist_durable(st->p) && unstored_use(s, &exp))
+            persist_touch(st->p, s->id, exp);
         session_unref(s);
     }
     pthread_mutex_destroy(&st->mu);
@@ -130,6 +130,24 @@ static double slack_of(int ttl_s)
 }
 
 static double touch_every(const session *s) { return slack_of(s->ttl_s); }
+
+/* The expiry the store is given for a session of TTL ttl_s last used at wall time `used`: the
+ * TTL after that use, plus the touches' slack. */
+static int64_t stored_expiry(int ttl_s, int64_t used)
+{
+    return used + ttl_s + (int64_t)ceil(slack_of(ttl_s));
+}
+
+/* Whether s was used since its expiry was last stored; *expires_at that use's stored expiry. */
+static bool unstored_use(session *s, int64_t *expires_at)
+{
+    pthread_mutex_lock(&s->mu);
+    bool due = s->last_used > s->touched;
+    double idle = mono_now() - s->last_used;
+    pthread_mutex_unlock(&s->mu);
+    *expires_at = stored_expiry(s->ttl_s, (int64_t)time(NULL) - (int64_t)idle);
+    return due;
+}
 
 /* Remove the sessions idle past their TTL (none computing). Caller holds st->mu. */
 static int expire_locked(store *st, double now)
@@ -172,15 +190,11 @@ static int evict_empty_locked(store *st)
     if (best >= 0 && any) { /* a use since the last stored expiry: stored now, so that the
                              * session is not taken for expired when it is loaded again */
         session *s = st->s[best];
-        pthread_mutex_lock(&s->mu);
-        bool due = s->last_used > s->touched;
-        double idle = mono_now() - s->last_used;
-        pthread_mutex_unlock(&s->mu);
-        if (due && st->npend < (int)(sizeof st->pend / sizeof *st->pend)) {
+        int64_t exp;
+        if (unstored_use(s, &exp) && st->npend < (int)(sizeof st->pend / sizeof *st->pend)) {
             pending_touch *t = &st->pend[st->npend++];
             memcpy(t->id, s->id, sizeof t->id);
-            t->expires_at = (int64_t)time(NULL) - (int64_t)idle + s->ttl_s +
-                            (int64_t)ceil(touch_every(s));
+            t->expires_at = exp;
         }
     }
     return best >= 0 ? remove_at(st, best, any ? "reload" : "evicted") : 0;
@@ -284,8 +298,7 @@ session *store_create(store *st, int ttl_s, store_admission *a)
     unlock_store(st);
     if (ok && persist_durable(st->p)) { /* in the store before anyone learns the id */
         persist_meta m = {.ttl_s = ttl_s, .created = s->created,
-                          .expires_at = (int64_t)time(NULL) + ttl_s +
-                                        (int64_t)ceil(slack_of(ttl_s))}; /* as every touch */
+                          .expires_at = stored_expiry(ttl_s, (int64_t)time(NULL))};
         memcpy(m.id, s->id, sizeof m.id);
         memcpy(m.token_hash, hash, sizeof hash);
         if ((a->stored = persist_create(st->p, &m)) != PERSIST_OK)
@@ -622,11 +635,7 @@ uint64_t session_bump(session *s)
 
 int64_t session_stored_expiry(session *s)
 {
-    pthread_mutex_lock(&s->mu);
-    int ttl = s->ttl_s;
-    double slack = touch_every(s);
-    pthread_mutex_unlock(&s->mu);
-    return (int64_t)time(NULL) + ttl + (int64_t)ceil(slack);
+    return stored_expiry(s->ttl_s, (int64_t)time(NULL)); /* (ttl_s is constant) */
 }
 
 time_t session_expires_at(session *s)

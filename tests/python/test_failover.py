@@ -12,6 +12,7 @@ The store tests need `subdivd --store` (the persistence integration); they skip 
 does not offer it. HAProxy's configuration is deploy/haproxy.cfg with only its `bind` line and
 its `server` addresses rewritten, so the test checks the file that is shipped.
 """
+import contextlib
 import pathlib
 import re
 import shutil
@@ -224,36 +225,14 @@ def test_failover_keeps_every_acknowledged_edit(cluster):
 
 @needs_store
 def test_two_daemons_one_if_match_one_winner(tmp_path):
-    redis = RedisServer(tmp_path).start()
-    daemons = []
-    try:
-        daemons = [Daemon("--store", redis.url) for _ in range(2)]
-        http = [requests.Session(), requests.Session()]
-        r = http[0].post(daemons[0].url + "/v1/sessions", json={}, timeout=10)
-        assert r.status_code == 201, r.text
-        sid, token = r.json()["id"], r.json()["token"]
-        auth = {"Authorization": f"Bearer {token}"}
-        r = http[0].put(f"{daemons[0].url}/v1/sessions/{sid}/complex", json=TWO_TETS,
-                        headers=auth, timeout=60)
-        assert r.status_code == 200, r.text
-        version = r.json()["version"]
+    with two_daemons(tmp_path) as (daemons, http, sid, token, auth, version):
         # the other daemon knows the session (from redis)
         r = http[1].get(f"{daemons[1].url}/v1/sessions/{sid}", headers=auth, timeout=10)
         assert r.status_code == 200 and r.json()["version"] == version, r.text
         for rnd in range(10):
-            start = threading.Barrier(2)
-            out = [None, None]
-
-            def edit(k):
-                move = [{"index": 4, "position": [1 + 0.01 * rnd, 1 + 0.02 * k, 1]}]
-                start.wait()
-                out[k] = _patch(http[k], f"{daemons[k].url}/v1/sessions/{sid}", token, version,
-                                move)
-            th = [threading.Thread(target=edit, args=(k,)) for k in range(2)]
-            for t in th:
-                t.start()
-            for t in th:
-                t.join(60)
+            out = at_once(lambda k: _patch(
+                http[k], f"{daemons[k].url}/v1/sessions/{sid}", token, version,
+                [{"index": 4, "position": [1 + 0.01 * rnd, 1 + 0.02 * k, 1]}]))
             codes = sorted(o.status_code for o in out)
             assert codes == [200, 412], (rnd, [(o.status_code, o.text) for o in out])
             winner = next(o for o in out if o.status_code == 200)
@@ -265,10 +244,6 @@ def test_two_daemons_one_if_match_one_winner(tmp_path):
         assert [d.status_code for d in docs] == [200, 200]
         assert docs[0].json()["vertices"] == docs[1].json()["vertices"]
         assert docs[0].headers["ETag"] == docs[1].headers["ETag"] == f'"{version}"'
-    finally:
-        for d in daemons:
-            d.stop()
-        redis.stop()
 
 
 @needs_store
@@ -276,32 +251,12 @@ def test_two_daemons_changes_without_if_match_are_both_made(tmp_path):
     """docs/API.md: a change without If-Match is not checked against a version. Two such changes
     of one session through two daemons at the same moment are both made (200, versions v+1 and
     v+2): the one the store refuses first is made again on the session as stored, never a 412."""
-    redis = RedisServer(tmp_path).start()
-    daemons = []
-    try:
-        daemons = [Daemon("--store", redis.url) for _ in range(2)]
-        http = [requests.Session(), requests.Session()]
-        r = http[0].post(daemons[0].url + "/v1/sessions", json={}, timeout=10)
-        assert r.status_code == 201, r.text
-        sid, token = r.json()["id"], r.json()["token"]
-        auth = {"Authorization": f"Bearer {token}"}
-        r = http[0].put(f"{daemons[0].url}/v1/sessions/{sid}/complex", json=TWO_TETS,
-                        headers=auth, timeout=60)
-        version = r.json()["version"]
+    with two_daemons(tmp_path) as (daemons, http, sid, token, auth, version):
         weights = ["warren", "loop"]
         for rnd in range(12):
-            start = threading.Barrier(2)
-            out = [None, None]
-
-            def put(k):
-                start.wait()
-                out[k] = http[k].put(f"{daemons[k].url}/v1/sessions/{sid}/rules", headers=auth,
-                                     json={"surface_weights": weights[k]}, timeout=60)
-            th = [threading.Thread(target=put, args=(k,)) for k in range(2)]
-            for t in th:
-                t.start()
-            for t in th:
-                t.join(60)
+            out = at_once(lambda k: http[k].put(f"{daemons[k].url}/v1/sessions/{sid}/rules",
+                                                headers=auth, timeout=60,
+                                                json={"surface_weights": weights[k]}))
             assert [o.status_code for o in out] == [200, 200], [(o.status_code, o.text) for o in out]
             assert sorted(o.json()["version"] for o in out) == [version + 1, version + 2]
             version += 2
@@ -314,18 +269,9 @@ def test_two_daemons_changes_without_if_match_are_both_made(tmp_path):
         # embedded models too: each daemon puts one of its own, both are kept
         model = {"vertices": [[0.2, 0.2, 0.2], [0.3, 0.2, 0.25]], "level": 1}
         for rnd in range(6):
-            start = threading.Barrier(2)
-            out = [None, None]
-
-            def put_model(k):
-                start.wait()
-                out[k] = http[k].put(f"{daemons[k].url}/v1/sessions/{sid}/embedded/m{rnd}_{k}",
-                                     headers=auth, json=model, timeout=60)
-            th = [threading.Thread(target=put_model, args=(k,)) for k in range(2)]
-            for t in th:
-                t.start()
-            for t in th:
-                t.join(60)
+            out = at_once(lambda k: http[k].put(
+                f"{daemons[k].url}/v1/sessions/{sid}/embedded/m{rnd}_{k}", headers=auth,
+                json=model, timeout=60))
             assert [o.status_code for o in out] == [200, 200], [(o.status_code, o.text) for o in out]
             version += 2
             for k in range(2):
@@ -338,7 +284,41 @@ def test_two_daemons_changes_without_if_match_are_both_made(tmp_path):
                     assert http[0].delete(f"{daemons[0].url}/v1/sessions/{sid}/embedded/{n}",
                                           headers=auth, timeout=60).status_code == 204
                 version += 4
+
+
+@contextlib.contextmanager
+def two_daemons(tmp_path):
+    """Two daemons on one redis and a session with TWO_TETS made through the first:
+    (daemons, their HTTP sessions, id, token, auth header, version)."""
+    redis = RedisServer(tmp_path).start()
+    daemons = []
+    try:
+        daemons = [Daemon("--store", redis.url) for _ in range(2)]
+        http = [requests.Session(), requests.Session()]
+        r = http[0].post(daemons[0].url + "/v1/sessions", json={}, timeout=10)
+        assert r.status_code == 201, r.text
+        sid, token = r.json()["id"], r.json()["token"]
+        auth = {"Authorization": f"Bearer {token}"}
+        r = http[0].put(f"{daemons[0].url}/v1/sessions/{sid}/complex", json=TWO_TETS,
+                        headers=auth, timeout=60)
+        assert r.status_code == 200, r.text
+        yield daemons, http, sid, token, auth, r.json()["version"]
     finally:
         for d in daemons:
             d.stop()
         redis.stop()
+
+
+def at_once(call, n=2):
+    """call(k) for k < n from n threads let go at the same moment; their results in order."""
+    start, out = threading.Barrier(n), [None] * n
+
+    def run(k):
+        start.wait()
+        out[k] = call(k)
+    th = [threading.Thread(target=run, args=(k,)) for k in range(n)]
+    for t in th:
+        t.start()
+    for t in th:
+        t.join(60)
+    return out

@@ -299,6 +299,15 @@ def kuhn_block(n):
     return {"vertices": V, "simplices": T}
 
 
+def level1_positive(s):
+    """Every tetrahedron of the session's level 1 is positively oriented (none inverted)."""
+    j = s.level(1, format="json").json()
+    p = np.array(j["vertices"])
+    for t in j["cells"]["tetrahedra"]:
+        a, b, cc, d = p[t]
+        assert np.dot(np.cross(b - a, cc - a), d - a) > 0, t
+
+
 def min_quality(c):
     """The smallest 6 V / (longest edge)^3 over the tetrahedra."""
     p = np.array(c["vertices"])
@@ -334,11 +343,7 @@ def test_deep_refinement_keeps_the_cells_shape(daemon, place):
             vol, area = volume_and_boundary(c)
             assert abs(vol - vol0) < 1e-12 * vol0 and abs(area - area0) < 1e-12 * area0
             no_hanging_vertex(c)
-        j = s.level(1, format="json").json()
-        p = np.array(j["vertices"])
-        for t in j["cells"]["tetrahedra"]:
-            a, b, cc, d = p[t]
-            assert np.dot(np.cross(b - a, cc - a), d - a) > 0, t
+        level1_positive(s)
         s.delete()
     assert worst[4] > 0.2 * worst[1], worst
 
@@ -395,9 +400,5 @@ def test_a_placement_that_folds_the_complex_is_refused(daemon):
             assert r.json()["errors"][0]["pointer"] == "/positions"
             assert s.req("GET").json()["version"] == 1
         else:
-            j = s.level(1, format="json").json()
-            p = np.array(j["vertices"])
-            for c in j["cells"]["tetrahedra"]:
-                a, b, cc, d = p[c]
-                assert np.dot(np.cross(b - a, cc - a), d - a) > 0, c
+            level1_positive(s)
         s.delete()

@@ -129,6 +129,17 @@ def _mesh(points, cells):
                                  point_data={})
 
 
+def _xyz(words, error):
+    """The first three words as a point (further ones ignored), or MeshError(error)."""
+    try:
+        xyz = [float(x) for x in words[:3]]
+    except ValueError:
+        xyz = []
+    if len(xyz) != 3:
+        raise MeshError(error)
+    return xyz
+
+
 def _face_kind(n):
     return {1: "vertex", 2: "line", 3: "triangle", 4: "quad"}.get(n, "polygon")
 
@@ -157,13 +168,7 @@ def _read_obj(text, path):
         key, args = w[0], w[1:]
         where = f"{path}: line {no}"
         if key == "v":
-            try:
-                xyz = [float(x) for x in args[:3]]
-            except ValueError:
-                xyz = []
-            if len(xyz) != 3:
-                raise MeshError(f"{where}: a vertex is \"v x y z\"")
-            points.append(xyz)
+            points.append(_xyz(args, f"{where}: a vertex is \"v x y z\""))
         elif key in ("p", "l", "f"):
             idx = []
             for a in args:
@@ -224,13 +229,7 @@ def _read_off(text, path):
                         f"{max(len(rows) - at, 0)} lines of them")
     points, cells = [], []
     for no, w in rows[at:at + nv]:
-        try:
-            xyz = [float(x) for x in w[:3]]
-        except ValueError:
-            xyz = []
-        if len(xyz) != 3:
-            raise MeshError(f"{path}: line {no}: a vertex is \"x y z\"")
-        points.append(xyz)
+        points.append(_xyz(w, f"{path}: line {no}: a vertex is \"x y z\""))
     for no, w in rows[at + nv:at + nv + nf]:
         try:
             n = int(w[0])
