@@ -27,13 +27,15 @@ int api_parse_level(const char *s, api_problem *p)
     char *end;
     errno = 0;
     if (!s || !*s || !isdigit((unsigned char)*s))
-        return -(api_fail(p, 400, "bad-level", "the level must be a non-negative integer") != 0);
+        return -(api_fail_at(p, 400, "bad-level", "level",
+                             "the level must be a non-negative integer") != 0);
     long l = strtol(s, &end, 10);
     if (*end)
-        return -(api_fail(p, 400, "bad-level", "the level must be a non-negative integer") != 0);
+        return -(api_fail_at(p, 400, "bad-level", "level",
+                             "the level must be a non-negative integer") != 0);
     if (errno || l > SD_MAX_LEVEL)
-        return -(api_fail(p, 422, "level-out-of-range",
-                          "level %.20s is out of range 0..%d", s, SD_MAX_LEVEL) != 0);
+        return -(api_fail_at(p, 422, "level-out-of-range", "level",
+                             "level %.20s is out of range 0..%d", s, SD_MAX_LEVEL) != 0);
     return (int)l;
 }
 

@@ -106,9 +106,9 @@ CASES = [
     ("tags-type", "PUT", "/tags", {"singular": [[0, "1"]]}, None, 400, "/singular/0/1"),
     ("tags-missing", "PUT", "/tags", {}, None, 400, "/singular"),
     # --- levels ---
-    ("level-letters", "GET", "/levels/abc", None, None, 400, None),
-    ("level-negative", "GET", "/levels/-1", None, None, 400, None),
-    ("level-13", "GET", "/levels/13", None, None, 422, None),
+    ("level-letters", "GET", "/levels/abc", None, None, 400, "level"),
+    ("level-negative", "GET", "/levels/-1", None, None, 400, "level"),
+    ("level-13", "GET", "/levels/13", None, None, 422, "level"),
     ("level-huge", "GET", "/levels/99999999999999999999", None, None, 422, None),
     ("level-unknown-param", "GET", "/levels/1?colour=red", None, None, 400, "colour"),
     ("level-bad-format", "GET", "/levels/1?format=obj", None, None, 422, "format"),
