@@ -368,3 +368,27 @@ def test_pvd_result_lines_name_each_files_level(daemon, tmp_path):
         mine = [ln for ln in lines if f"-> {d / f'level_{k}.vtu'} (" in ln]
         assert len(mine) == 1 and mine[0].startswith(f"cube.json: level {k} -> "), lines
     assert any(ln.startswith(f"cube.json: levels 0..2 -> {d / 'levels.pvd'} (") for ln in lines), lines
+
+
+def test_fill_takes_quads(tmp_path):
+    """--fill takes every 2-D cell as the surface: a cube of six quad faces (OBJ) is filled, and
+    its tetrahedra fill the unit cube (their volumes sum to 1, computed here from the complex)."""
+    (tmp_path / "cube.obj").write_text(
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+        "f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n")
+    env = {k: x for k, x in ENV.items() if k != "SUBDIVD"}
+    r = run("refine", tmp_path / "cube.obj", "--fill", "--level", 0, "-o", tmp_path / "c.vtu",
+            "--save-complex", tmp_path / "c.json", "--spawn", "-q", env=env)
+    assert r.returncode == 0, r.stderr
+    cx = json.loads((tmp_path / "c.json").read_text())
+    tets = [s for s in cx["simplices"] if len(s) == 4]
+    assert tets and all(len(s) == 4 for s in cx["simplices"])
+    v = cx["vertices"]
+
+    def vol(t):
+        a, b, c, d = (v[i] for i in t)
+        u, w, x = ([b[k] - a[k] for k in range(3)], [c[k] - a[k] for k in range(3)],
+                   [d[k] - a[k] for k in range(3)])
+        return abs(u[0] * (w[1] * x[2] - w[2] * x[1]) - u[1] * (w[0] * x[2] - w[2] * x[0])
+                   + u[2] * (w[0] * x[1] - w[1] * x[0])) / 6
+    assert abs(sum(vol(t) for t in tets) - 1.0) < 1e-12

@@ -438,9 +438,9 @@ def test_meshes_read_obj_and_off_records(tmp_path):
     assert body["vertices"] == [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1]]
     assert body["simplices"] == [[4], [1], [0, 4], [4, 3], [0, 1, 2],
                                  [4, 3, 2], [4, 2, 1], [4, 1, 0]]
-    body, _ = meshes.read(obj, fill={})           # the triangle cell is the surface
-    assert body["fill"] == [{"surface": [[0, 1, 2]]}]
-    assert body["simplices"] == [[4], [1], [0, 4], [4, 3], [4, 3, 2], [4, 2, 1], [4, 1, 0]]
+    body, _ = meshes.read(obj, fill={})           # every 2-D cell, the pentagon split, is the surface
+    assert body["fill"] == [{"surface": [[0, 1, 2], [4, 3, 2], [4, 2, 1], [4, 1, 0]]}]
+    assert body["simplices"] == [[4], [1], [0, 4], [4, 3]]
     off = tmp_path / "a.off"
     off.write_text("OFF # a header comment\n\n# counts\n5 5 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n"
                    "0 0 1\n4 0 1 2 3\n3 0 1 4 1.0 0.0 0.0\n5 0 1 2 3 4\n2 2 4\n1 4\n")
@@ -469,7 +469,7 @@ def test_meshes_read_obj_and_off_records(tmp_path):
 
 def test_meshes_read_returns_what_its_docstring_says(tmp_path):
     """meshes.read: (body, tags) — vertices in file order, quads split into triangles, point data
-    as attributes, tags None without chosen groups; with fill the triangles move into "fill"."""
+    as attributes, tags None without chosen groups; with fill the 2-D cells move into "fill"."""
     from subdiv import meshes
     obj = tmp_path / "q.obj"
     obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nf 1 2 3 4\nf 1 2 5\n")
@@ -477,9 +477,9 @@ def test_meshes_read_returns_what_its_docstring_says(tmp_path):
     assert tags is None and set(body) == {"vertices", "simplices"}
     assert body["vertices"] == [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1]]
     assert body["simplices"] == [[0, 1, 2], [0, 2, 3], [0, 1, 4]]
-    body, tags = meshes.read(obj, fill={"max_volume": 0.1})   # triangle cells -> the surface
-    assert tags is None and body["simplices"] == [[0, 1, 2], [0, 2, 3]]
-    assert body["fill"] == [{"max_volume": 0.1, "surface": [[0, 1, 4]]}]
+    body, tags = meshes.read(obj, fill={"max_volume": 0.1})   # every 2-D cell -> the surface
+    assert tags is None and "simplices" not in body
+    assert body["fill"] == [{"max_volume": 0.1, "surface": [[0, 1, 2], [0, 2, 3], [0, 1, 4]]}]
     obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
     body, _ = meshes.read(obj, fill={})
     assert "simplices" not in body and len(body["fill"][0]["surface"]) == 4

@@ -627,7 +627,7 @@ def build_parser():
     g.add_argument("-q", "--quiet", action="store_true", help="no result lines (errors still)")
     mesh = argparse.ArgumentParser(add_help=False)
     m = mesh.add_argument_group("mesh")
-    m.add_argument("--fill", action="store_true", help="post the triangles as a TetGen fill surface")
+    m.add_argument("--fill", action="store_true", help="post the 2-D cells (triangles, split quads and polygons) as a TetGen fill surface")
     m.add_argument("--max-volume", type=float, help="fill: TetGen's largest tetrahedron volume")
     m.add_argument("--min-ratio", type=float, help="fill: TetGen's radius-edge ratio bound (quality)")
     m.add_argument("--singular-groups", help="Gmsh physical groups that are singular tags, "

@@ -16,7 +16,7 @@ Gmsh physical groups name tags: the cells of the groups chosen as singular (by d
 whose name starts with "singular", "crease" or "corner", case-insensitive) become singular
 simplices of PUT /tags — points are corners, lines creases, triangles embedded surfaces.
 
-With fill, the triangles become the surface of a "fill" entry (TetGen tetrahedralizes what they
+With fill, the 2-D cells (triangles, split quads and polygons) become the surface of a "fill" entry (TetGen tetrahedralizes what they
 enclose) instead of simplices.
 """
 import contextlib
@@ -46,10 +46,10 @@ def read(path, *, fill=None, singular_groups=None):
                     get z = 0);
       "simplices"   [[i], [i, j], [i, j, k], [i, j, k, l], ...] 0-based point indices, the
                     file's vertex, line, triangle and tetra cells (quads and polygons split into
-                    triangles); with `fill` without the triangle cells, and left out when
-                    there is nothing else;
+                    triangles); with `fill` without the 2-D cells, and left out when there
+                    is nothing else;
       "fill"        only with `fill`: [dict(fill, surface=[[i, j, k], ...])], the file's
-                    triangle cells (split quads and polygons stay in "simplices");
+                    2-D cells: triangles, and quads and polygons split into triangles;
       "attributes"  only when the file has numeric point data: {name: [v, ...]} for one
                     component, {name: [[v0, v1, ...], ...]} for more (at most 16 arrays).
     A .json file is its own body (with `fill`, its triangles moved into a "fill" entry).
@@ -61,7 +61,7 @@ def read(path, *, fill=None, singular_groups=None):
     file, no group with a default prefix, `singular_groups=[]`, or a .json file).
 
     `fill`: None, or a dict of fill switches ({"max_volume": v, "min_ratio": r}) to post the
-    triangles as a fill surface. `singular_groups`: names of the physical groups that are tags
+    2-D cells as a fill surface. `singular_groups`: names of the physical groups that are tags
     (None: the groups whose names start with "singular", "crease" or "corner", case-insensitive;
     a name the file lacks raises MeshError). Raises MeshError when the file cannot be read or is
     not simplicial."""
@@ -284,7 +284,7 @@ def from_meshio(m, *, path="mesh", fill=None, singular_groups=None):
     dims = {"vertex": 0, "line": 1, "triangle": 2, "tetra": 3}
     for b, block in enumerate(m.cells):
         s = _split(block.type, block.data, path)
-        if fill is not None and block.type == "triangle":
+        if fill is not None and (block.type in ("triangle", "quad") or block.type.startswith("polygon")):
             surface += s
         else:
             simplices += s
@@ -298,7 +298,7 @@ def from_meshio(m, *, path="mesh", fill=None, singular_groups=None):
         body["simplices"] = simplices
     if fill is not None:
         if not surface:
-            raise MeshError(f"{path}: fill needs triangles (a closed surface), and the mesh has none")
+            raise MeshError(f"{path}: fill needs 2-D cells (a closed surface), and the mesh has none")
         body["fill"] = [dict(fill, surface=surface)]
     attrs = {}
     for name, data in (m.point_data or {}).items():
