@@ -445,6 +445,42 @@ def test_merged_vtu_is_the_one_process_vtu(tmp_path, tmp_path_factory, name):
         assert g.GetPointData().GetArray("uv").GetNumberOfComponents() == 2
 
 
+@pytest.mark.parametrize("nranks", [1, 3])
+def test_merge_keeps_the_vertices_of_no_simplex(tmp_path, nranks):
+    """A posted vertex of no simplex is a point of every level, carried unchanged (DECISIONS 41):
+    the merged VTU has it at its one-process index, as subdivd refine's VTU has; no piece's cells
+    use it, so the merge used to stop with "no rank sent point 5" and exit 3."""
+    v, t = cubes(2, seed=7)
+    body = {"vertices": v[:5] + [[9, 9, 9]] + v[5:] + [[-3, 2, 1]],
+            "simplices": [[i + (i >= 5) for i in s] for s in t],
+            "attributes": {"h": list(range(len(v) + 2))}}
+    mesh = tmp_path / "m.json"
+    mesh.write_text(json.dumps(body))
+    ref = tmp_path / "ref.vtu"
+    r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", "2", "-o", str(ref)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    g0 = read(ref)
+    out = tmp_path / "merged.vtu"
+    r = mpirun(nranks, "refine", mesh, "--level", 2, "-o", out)
+    assert r.returncode == 0, r.stderr
+    g = read(out)
+    pts, ref_pts = vtk_to_numpy(g.GetPoints().GetData()), vtk_to_numpy(g0.GetPoints().GetData())
+    assert pts.shape == ref_pts.shape
+    assert np.abs(pts - ref_pts).max() <= 1e-12
+    assert pts[5].tolist() == [9, 9, 9] and pts[len(v) + 1].tolist() == [-3, 2, 1]
+    assert (arr(g, "global_id") == np.arange(len(ref_pts))).all()
+    assert (arr(g, "rule") == arr(g0, "rule")).all()
+    assert np.abs(arr(g, "h") - arr(g0, "h")).max() <= 1e-12
+    assert cells_of(g) == cells_of(g0)
+    # the pieces still write only the points their cells use, and equal the one-process points
+    r = mpirun(nranks, "refine", mesh, "--level", 2, "-o", tmp_path / "o.pvtu")
+    assert r.returncode == 0, r.stderr
+    assert max_error(tmp_path / "o.pvtu", nranks, ref_pts) <= 1e-12
+    assert sum(p.GetNumberOfCells() for p in pieces_of(tmp_path / "o.pvtu", nranks)) == \
+        g0.GetNumberOfCells()
+
+
 def one_process_and_pieces(tmp_path, body, level, attributes):
     """`body` refined to `level` by `subdivd refine` (with those attributes) and by 2 ranks: the
     one-process VTU and the .pvtu's path."""
