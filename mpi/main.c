@@ -20,6 +20,7 @@
  * rank R from the refinement on (api_mem_fail_at), to test one rank failing alone.
  */
 #include "../api/buf.h"
+#include "../api/details.h"
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
 #include "../api/mem.h"
@@ -407,6 +408,11 @@ static int run(const args *a)
         if (!rc && m->tags.ntt) { /* the modifications read whole curves and petals (DECISIONS 47) */
             fprintf(stderr, "%s: tangent-plane constraints (normals, tangents, tangent_edges) are "
                             "not offered across ranks; use subdivd refine\n", tag_);
+            rc = EXIT_REFUSED;
+        }
+        if (!rc && api_details_count(m)) { /* offsets of level-l points by one-process index */
+            fprintf(stderr, "%s: detail offsets (PUT /complex \"details\") are not applied across "
+                            "ranks; use subdivd refine\n", tag_);
             rc = EXIT_REFUSED;
         }
         if (!rc) {

@@ -577,6 +577,21 @@ def test_refused_mesh_stops_every_rank(tmp_path):
     assert not list(tmp_path.glob("o*"))
 
 
+def test_detail_offsets_are_refused(tmp_path):
+    """PUT /complex's "details" (offsets of level-l points, docs/API.md) are not applied by the
+    pieces: refused with a message naming them (exit 1, nothing written), where they used to be
+    dropped without a word and every level >= 1 came out without the offsets, exit 0."""
+    v, t = cubes(2, seed=7)
+    mesh = tmp_path / "m.json"
+    mesh.write_text(json.dumps({"vertices": v, "simplices": t, "details": [
+        {"level": 1, "index": 5, "offset": [0.3, 0.2, 0.1]}]}))
+    for out in ("o.pvtu", "o.vtu"):
+        r = mpirun(2, "refine", mesh, "--level", 2, "-o", tmp_path / out)
+        assert r.returncode == 1, r.stderr
+        assert "detail offsets" in r.stderr and "subdivd refine" in r.stderr, r.stderr
+        assert not list(tmp_path.glob("o*"))
+
+
 def test_a_failing_rank_stops_all(tmp_path):
     """A memory cap per rank that the level does not fit in: the ranks that hit it say so, the
     run stops before writing and exits 3."""
