@@ -640,6 +640,16 @@ def test_missing_file(tmp_path):
     assert "cannot open" in r.stderr
 
 
+def test_stats_not_written_is_a_failure(tmp_path):
+    """--stats S.json that cannot be written: a message and exit 2 (a file), where the run said
+    "cannot write" and exited 0, so a script reading S.json next found none or an old one."""
+    mesh, extra = write_case(tmp_path, "curves")
+    r = mpirun(2, "refine", mesh, "--level", 1, "-o", tmp_path / "o.pvtu", *extra,
+               "--stats", tmp_path / "none" / "s.json")
+    assert r.returncode == 2, r.stderr
+    assert "cannot write" in r.stderr and "s.json" in r.stderr
+
+
 def test_a_piece_not_written_leaves_no_pieces(tmp_path):
     """Rank 1 cannot write its piece (a directory stands at its name): the run stops with exit 3
     and the other ranks remove the pieces they wrote, so no partial result is left."""
