@@ -20,6 +20,7 @@
  * rank R from the refinement on (api_mem_fail_at), to test one rank failing alone.
  */
 #include "../api/buf.h"
+#include "../api/details.h"
 #include "../api/handlers.h"
 #include "../api/jsonin.h"
 #include "../api/mem.h"
@@ -358,7 +359,7 @@ static void piece_path(const char *out, int r, char *path, size_t n)
     snprintf(path, n, "%.*s_%d.vtu", (int)l, out, r);
 }
 
-static void write_stats(const args *a, const rstat *st, const mp_piece *p)
+static int write_stats(const args *a, const rstat *st, const mp_piece *p)
 {
     json_t *ranks = json_array();
     for (int r = 0; r < nranks_; r++) {
@@ -386,9 +387,13 @@ static void write_stats(const args *a, const rstat *st, const mp_piece *p)
                           (json_int_t)G->curves, "triangles", (json_int_t)G->triangles,
                           "tetrahedra", (json_int_t)G->tetrahedra, "octahedra",
                           (json_int_t)G->octahedra, "per_rank", ranks);
-    if (json_dump_file(j, a->stats, JSON_INDENT(1)))
+    int rc = 0;
+    if (!j || json_dump_file(j, a->stats, JSON_INDENT(1))) {
         fprintf(stderr, "subdivd-mpi: cannot write %s\n", a->stats);
+        rc = EXIT_USAGE;
+    }
     json_decref(j);
+    return rc;
 }
 
 static int run(const args *a)
@@ -407,6 +412,11 @@ static int run(const args *a)
         if (!rc && m->tags.ntt) { /* the modifications read whole curves and petals (DECISIONS 47) */
             fprintf(stderr, "%s: tangent-plane constraints (normals, tangents, tangent_edges) are "
                             "not offered across ranks; use subdivd refine\n", tag_);
+            rc = EXIT_REFUSED;
+        }
+        if (!rc && api_details_count(m)) { /* offsets of level-l points by one-process index */
+            fprintf(stderr, "%s: detail offsets (PUT /complex \"details\") are not applied across "
+                            "ranks; use subdivd refine\n", tag_);
             rc = EXIT_REFUSED;
         }
         if (!rc) {
@@ -611,8 +621,8 @@ static int run(const args *a)
                 a->level, nranks_, comp, cpu, all[0].t_read, wr, rss / 1024.0,
                 local ? 100.0 * (double)(local - owned) / (double)local : 0.0,
                 a->nowrite ? "(not written)" : a->out);
-        if (a->stats)
-            write_stats(a, all, &piece);
+        if (a->stats && write_stats(a, all, &piece) && !rc)
+            rc = EXIT_USAGE; /* "a file" (docs/BATCH.md): the pieces stay, the stats are not */
     }
     free(all);
 done:

@@ -285,6 +285,19 @@ static int cut_piece(const api_model *m, const cells *c, const whole_classes *w,
             for (int j = 0; j < k; j++)
                 lid[v[j]] = 0;
         }
+    /* posted vertices of no simplex are points of every level, carried unchanged (DECISIONS 41):
+     * the lowest rank with simplices holds them, so that its merge data have them (no cell uses
+     * them, so no piece's VTU does) */
+    if (ns) {
+        int32_t lowest = INT32_MAX;
+        for (uint32_t i = 0; i < c->n; i++)
+            if (part[i] < lowest)
+                lowest = part[i];
+        if (lowest == r)
+            for (uint32_t v = 0; v < in->nv; v++)
+                if (c->vc_ptr[v] == c->vc_ptr[v + 1])
+                    lid[v] = 0;
+    }
     uint32_t nv = 0;
     for (uint32_t v = 0; v < in->nv; v++)
         if (lid[v] != UINT32_MAX)

@@ -326,14 +326,18 @@ void mp_merge_blob(const mp_piece *p, const mp_result *r, mp_buf *b)
                 for (int j = 0; j < sd_cell_size((sd_cell_kind)k); j++)
                     used[v[j]] = 1;
             }
+    /* a point no cell of the piece uses descends from a posted vertex of no simplex: the piece
+     * holding those (part.c) sends them */
+    for (uint32_t v = 0; v < nv; v++)
+        used[v] |= r->vowner[v] == INT32_MAX;
     uint64_t n = 0;
     for (uint32_t v = 0; v < nv; v++)
-        n += used[v] && r->vowner[v] == p->rank;
+        n += used[v] && (r->vowner[v] == p->rank || r->vowner[v] == INT32_MAX);
     mp_buf_put(b, &n, 8);
     int nc3;
     const double *pos = r->lv ? sd_level_channel(r->lv, 0, &nc3) : NULL;
     for (uint32_t v = 0; v < nv; v++)
-        if (used[v] && r->vowner[v] == p->rank) {
+        if (used[v] && (r->vowner[v] == p->rank || r->vowner[v] == INT32_MAX)) {
             uint64_t gv = mp_vgid(r, v);
             uint8_t rule = (uint8_t)sd_level_vertex_rule(r->lv, v);
             mp_buf_put(b, &gv, 8);

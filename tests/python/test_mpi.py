@@ -445,6 +445,42 @@ def test_merged_vtu_is_the_one_process_vtu(tmp_path, tmp_path_factory, name):
         assert g.GetPointData().GetArray("uv").GetNumberOfComponents() == 2
 
 
+@pytest.mark.parametrize("nranks", [1, 3])
+def test_merge_keeps_the_vertices_of_no_simplex(tmp_path, nranks):
+    """A posted vertex of no simplex is a point of every level, carried unchanged (DECISIONS 41):
+    the merged VTU has it at its one-process index, as subdivd refine's VTU has; no piece's cells
+    use it, so the merge used to stop with "no rank sent point 5" and exit 3."""
+    v, t = cubes(2, seed=7)
+    body = {"vertices": v[:5] + [[9, 9, 9]] + v[5:] + [[-3, 2, 1]],
+            "simplices": [[i + (i >= 5) for i in s] for s in t],
+            "attributes": {"h": list(range(len(v) + 2))}}
+    mesh = tmp_path / "m.json"
+    mesh.write_text(json.dumps(body))
+    ref = tmp_path / "ref.vtu"
+    r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", "2", "-o", str(ref)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    g0 = read(ref)
+    out = tmp_path / "merged.vtu"
+    r = mpirun(nranks, "refine", mesh, "--level", 2, "-o", out)
+    assert r.returncode == 0, r.stderr
+    g = read(out)
+    pts, ref_pts = vtk_to_numpy(g.GetPoints().GetData()), vtk_to_numpy(g0.GetPoints().GetData())
+    assert pts.shape == ref_pts.shape
+    assert np.abs(pts - ref_pts).max() <= 1e-12
+    assert pts[5].tolist() == [9, 9, 9] and pts[len(v) + 1].tolist() == [-3, 2, 1]
+    assert (arr(g, "global_id") == np.arange(len(ref_pts))).all()
+    assert (arr(g, "rule") == arr(g0, "rule")).all()
+    assert np.abs(arr(g, "h") - arr(g0, "h")).max() <= 1e-12
+    assert cells_of(g) == cells_of(g0)
+    # the pieces still write only the points their cells use, and equal the one-process points
+    r = mpirun(nranks, "refine", mesh, "--level", 2, "-o", tmp_path / "o.pvtu")
+    assert r.returncode == 0, r.stderr
+    assert max_error(tmp_path / "o.pvtu", nranks, ref_pts) <= 1e-12
+    assert sum(p.GetNumberOfCells() for p in pieces_of(tmp_path / "o.pvtu", nranks)) == \
+        g0.GetNumberOfCells()
+
+
 def one_process_and_pieces(tmp_path, body, level, attributes):
     """`body` refined to `level` by `subdivd refine` (with those attributes) and by 2 ranks: the
     one-process VTU and the .pvtu's path."""
@@ -541,6 +577,21 @@ def test_refused_mesh_stops_every_rank(tmp_path):
     assert not list(tmp_path.glob("o*"))
 
 
+def test_detail_offsets_are_refused(tmp_path):
+    """PUT /complex's "details" (offsets of level-l points, docs/API.md) are not applied by the
+    pieces: refused with a message naming them (exit 1, nothing written), where they used to be
+    dropped without a word and every level >= 1 came out without the offsets, exit 0."""
+    v, t = cubes(2, seed=7)
+    mesh = tmp_path / "m.json"
+    mesh.write_text(json.dumps({"vertices": v, "simplices": t, "details": [
+        {"level": 1, "index": 5, "offset": [0.3, 0.2, 0.1]}]}))
+    for out in ("o.pvtu", "o.vtu"):
+        r = mpirun(2, "refine", mesh, "--level", 2, "-o", tmp_path / out)
+        assert r.returncode == 1, r.stderr
+        assert "detail offsets" in r.stderr and "subdivd refine" in r.stderr, r.stderr
+        assert not list(tmp_path.glob("o*"))
+
+
 def test_a_failing_rank_stops_all(tmp_path):
     """A memory cap per rank that the level does not fit in: the ranks that hit it say so, the
     run stops before writing and exits 3."""
@@ -587,6 +638,16 @@ def test_missing_file(tmp_path):
     r = mpirun(2, "refine", tmp_path / "none.json", "--level", 1, "-o", tmp_path / "o.pvtu")
     assert r.returncode == 2
     assert "cannot open" in r.stderr
+
+
+def test_stats_not_written_is_a_failure(tmp_path):
+    """--stats S.json that cannot be written: a message and exit 2 (a file), where the run said
+    "cannot write" and exited 0, so a script reading S.json next found none or an old one."""
+    mesh, extra = write_case(tmp_path, "curves")
+    r = mpirun(2, "refine", mesh, "--level", 1, "-o", tmp_path / "o.pvtu", *extra,
+               "--stats", tmp_path / "none" / "s.json")
+    assert r.returncode == 2, r.stderr
+    assert "cannot write" in r.stderr and "s.json" in r.stderr
 
 
 def test_a_piece_not_written_leaves_no_pieces(tmp_path):
