@@ -22,7 +22,7 @@ def test_session_and_offline_blocks_run(tmp_path):
     if not shutil.which("curl"):
         pytest.skip("curl is not installed (tools/packages.txt lists it)")
     blocks = sh_blocks()
-    session = [b for b in blocks if "$U/v1/sessions" in b]
+    session = [b for b in blocks if "$U/v1/sessions" in b and "embedded" not in b]
     offline = [b for b in blocks if "subdivd refine examples/" in b]
     assert len(session) == 1 and len(offline) == 1
     assert not [b for b in session + offline if "..." in b.split("#")[0]], "placeholders left"
@@ -46,3 +46,26 @@ def test_session_and_offline_blocks_run(tmp_path):
     # the same bytes but for the version the file carries (2 in the session, 1 offline)
     diff = [i for i, (a, b) in enumerate(zip(online, offline_bytes)) if a != b]
     assert len(diff) <= 2, diff
+
+
+def test_embedded_block_runs(tmp_path):
+    """The HTTP example of "Embedded models" runs as written after the walkthrough's `U=`: no
+    placeholders (a `$S` that is not the session id, `$T`, a fixed localhost:8080)."""
+    if not shutil.which("curl"):
+        pytest.skip("curl is not installed (tools/packages.txt lists it)")
+    blocks = sh_blocks()
+    emb = [b for b in blocks if "$U/v1/sessions" in b and "/embedded/" in b]
+    assert len(emb) == 1
+    assert "localhost:8080" not in emb[0] and "$T" not in emb[0]
+    (tmp_path / "examples").symlink_to(REPO / "examples")
+    script = tmp_path / "embedded.sh"
+    script.write_text("set -eu\nU=${SUBDIV_URL:-http://127.0.0.1:8080}\n" + emb[0], encoding="utf-8")
+    d = Daemon()
+    try:
+        r = subprocess.run(["sh", str(script)], cwd=tmp_path, env=dict(os.environ, SUBDIV_URL=d.url),
+                           capture_output=True, encoding="utf-8", timeout=120)
+    finally:
+        d.stop()
+    assert r.returncode == 0, r.stdout + r.stderr
+    faces = [ln for ln in r.stdout.splitlines() if ln.startswith(("v ", "f "))]
+    assert len(faces) == 4, r.stdout   # the model's 3 vertices and 1 triangle, as OBJ

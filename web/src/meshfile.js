@@ -175,8 +175,8 @@ export function parseStl(data, name = 'STL') {
 
 // Gmsh .msh, ASCII 2.2 or 4.1 ($MeshFormat, $Nodes, $Elements; other sections skipped). Element
 // types: 15 point, 1 line, 2 triangle, 3 quadrangle (fanned), 4 tetrahedron; any other type is
-// refused (the daemon takes simplices). Physical groups are not read here (the CLI, `subdiv put`,
-// reads them as tags).
+// refused (the daemon takes simplices). Physical groups are not read here (the CLI, `subdiv refine` and
+// `subdiv convert --tags-out`, reads them as tags).
 export function parseMsh(data, name = 'MSH') {
   const text = typeof data === 'string' ? data : new TextDecoder().decode(new Uint8Array(data));
   const lines = text.split(/\r?\n/);
@@ -198,7 +198,7 @@ export function parseMsh(data, name = 'MSH') {
   section('$MeshFormat');
   const [fmt, fln] = row();
   const version = fmt[0];
-  if (fmt[1] === 1) fail(name, fln, 'binary .msh is not read in the browser (save it as ASCII, or use `subdiv put`)');
+  if (fmt[1] === 1) fail(name, fln, 'binary .msh is not read in the browser (save it as ASCII, or convert it with `subdiv convert FILE.msh -o BODY.json` and open the JSON)');
   if (!(version >= 2 && version < 3) && version !== 4.1) fail(name, fln, `format ${version}: only 2.2 and 4.1 are read`);
   const index = new Map(), vertices = [];
   section('$Nodes');
