@@ -205,7 +205,7 @@ bool out_solid_boundary(out_stream *s)
     if (s->rq.geometry) { /* precomputed with every part: reuse what applies */
         s->nbnd = s->rq.geometry->nbnd;
         s->bnd = s->rq.geometry->bnd;
-        if (s->rq.parts == OUT_PART_ALL)
+        if ((s->rq.parts & OUT_PART_ALL) == OUT_PART_ALL)
             s->normals = s->rq.geometry->normals;
         return true;
     }

@@ -10,8 +10,10 @@
  * writers also read, stay as they are while the model lives: api/edit.c). Formats come from the table of api/formats.c; the glTF ones get the per-level cached
  * geometry. api_estimate_bytes is the core's estimate the session memory limit is checked with.
  */
+#include "embedded.h"
 #include "handlers.h"
 #include "internal.h"
+#include "mem.h"
 #include <ctype.h>
 #include <errno.h>
 #include <float.h>
@@ -99,7 +101,7 @@ static int add_attr(const api_model *m, out_request *rq, int a)
 
 int api_parse_parts(const char *text, unsigned *parts, api_problem *p)
 {
-    static const char *const names[] = {"points", "curves", "surfaces", "solids"};
+    static const char *const names[] = {"points", "curves", "surfaces", "solids", "embedded"};
     char item[64];
     *parts = OUT_PART_ALL;
     if (!text)
@@ -107,13 +109,13 @@ int api_parse_parts(const char *text, unsigned *parts, api_problem *p)
     *parts = 0;
     while (next_item(&text, item, sizeof item)) {
         int k = 0;
-        while (k < 4 && strcmp(item, names[k]))
+        while (k < 5 && strcmp(item, names[k]))
             k++;
-        if (k == 4)
+        if (k == 5)
             return api_fail_at(p, 422, "unknown-value", "parts",
-                               "parts: \"%.20s\" is not one of points, curves, surfaces, solids",
-                               item);
-        *parts |= 1u << k;
+                               "parts: \"%.20s\" is not one of points, curves, surfaces, solids, "
+                               "embedded", item);
+        *parts |= 1u << k; /* 1 << 4 is OUT_PART_EMBEDDED */
     }
     if (!*parts)
         return api_fail_at(p, 422, "unknown-value", "parts", "parts: name at least one part");
@@ -132,6 +134,10 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
     }
     if (api_parse_parts(q->parts, &rq->parts, p))
         return p->status;
+    if ((rq->parts & OUT_PART_EMBEDDED) && strcmp((*fmt)->name, "glb") && strcmp((*fmt)->name, "gltf"))
+        return api_fail_at(p, 422, "not-applicable", "parts",
+                           "parts: embedded applies to format glb and gltf only, not %s",
+                           (*fmt)->name);
     if (q->slice) {
         const char *s = q->slice;
         int k = 0;
@@ -246,6 +252,29 @@ int api_level_compute(api_model *m, int level, const api_slot *slot, api_problem
     return rc;
 }
 
+/* The session's embedded models as they are drawn now (each at its own level, m->lock held), into
+ * mesh and rq->meshes; the positions are the caller's to free (rq->nmeshes of them). */
+static bool embedded_meshes(api_model *m, out_mesh *mesh, out_request *rq, sd_error *e)
+{
+    rq->meshes = mesh;
+    rq->nmeshes = 0;
+    for (int i = 0; i < m->nembed; i++) {
+        const api_embed *em = &m->embed[i];
+        const sd_level *lv = sd_complex_level(m->c, em->def->level, e);
+        double *x = lv ? api_malloc(3 * sizeof *x * ((size_t)em->def->nv + 1)) : NULL;
+        if (!x) {
+            if (lv) {
+                e->code = SD_ERR_NOMEM;
+                snprintf(e->message, sizeof e->message, "out of memory placing the embedded models");
+            }
+            return false;
+        }
+        sd_embed_positions(em->bind, lv, x);
+        mesh[rq->nmeshes++] = (out_mesh){em->def->name, em->def->nv, em->def->nt, x, em->def->tri};
+    }
+    return true;
+}
+
 int api_level_open(api_model *m, int level, const api_level_query *q, const api_limits *lim,
                    const api_slot *slot, out_stream **out, const out_format **fmt,
                    uint64_t *version, api_problem *p)
@@ -271,16 +300,22 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
     rq.level = level;
     rq.snapshot = true;
     sd_error e = {0};
-    /* under the lock that edits take: the points, the channels, the normals and the version
-     * are of one moment; then the stream holds no lock while the client reads */
+    /* under the lock that edits take: the points, the channels, the normals, the embedded
+     * models and the version are of one moment; then the stream holds no lock while the client
+     * reads */
+    out_mesh mesh[API_MAX_EMBEDDED];
+    _Static_assert(API_MAX_EMBEDDED <= OUT_MAX_MESHES, "a GLB holds every embedded model");
     pthread_mutex_lock(&m->lock);
-    if (api_model_level_locked(m, level, &e)) {
+    if (api_model_level_locked(m, level, &e) &&
+        (!(rq.parts & OUT_PART_EMBEDDED) || embedded_meshes(m, mesh, &rq, &e))) {
         if ((*fmt)->geometry && !rq.limit)
             rq.geometry = api_model_geometry_locked(m, level);
         rq.version = atomic_load(&m->version);
         *out = out_open(&rq, *fmt, &e);
         api_model_publish(m); /* the writer may have built the level's vertex rules */
     }
+    for (int i = 0; i < rq.nmeshes; i++)
+        api_free((void *)mesh[i].xyz);
     pthread_mutex_unlock(&m->lock);
     if (!*out)
         return e.code == SD_ERR_ARG ? api_fail(p, 422, "invalid-argument", "%s", e.message)

@@ -117,6 +117,11 @@ void out_close(out_stream *s)
     api_free(s->own_xyz);
     for (int a = 0; a < OUT_MAX_ATTRS; a++)
         api_free(s->own_attr[a]);
+    for (int i = 0; i < s->nmesh; i++) {
+        api_free((void *)s->mesh[i].name);
+        api_free((void *)s->mesh[i].xyz);
+        api_free((void *)s->mesh[i].tri);
+    }
     out_geometry_free(s->rq.geometry);
     out_slice_free(&s->slice);
     api_free(s);
@@ -151,6 +156,15 @@ static bool valid_name(const char *name)
                          (name[n] >= '0' && name[n] <= '9') || name[n] == '_' || name[n] == '-'))
             return false;
     return n > 0;
+}
+
+/* A copy of n bytes at p (none: a block of one byte, p may be NULL), or NULL. */
+static void *copy(const void *p, size_t n)
+{
+    void *c = api_malloc(n + 1);
+    if (c && n)
+        memcpy(c, p, n);
+    return c;
 }
 
 /* The stream's own copies of the positions and the requested channels (rq.snapshot). */
@@ -202,8 +216,25 @@ out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err)
 {
     if (!f || !f->init)
         return fail(NULL, err, SD_ERR_ARG, "format: unknown output format");
-    if (rq->parts & ~(unsigned)OUT_PART_ALL)
+    if (rq->parts & ~(unsigned)(OUT_PART_ALL | OUT_PART_EMBEDDED))
         return fail(NULL, err, SD_ERR_ARG, "parts: unknown part (mask 0x%x)", rq->parts);
+    bool gltf = !strcmp(f->name, "glb") || !strcmp(f->name, "gltf");
+    if ((rq->parts & OUT_PART_EMBEDDED) && !gltf)
+        return fail(NULL, err, SD_ERR_ARG, "parts: embedded applies to format glb and gltf only, "
+                    "not %s", f->name);
+    int nmeshes = (rq->parts & OUT_PART_EMBEDDED) ? rq->nmeshes : 0;
+    if (nmeshes < 0 || nmeshes > OUT_MAX_MESHES)
+        return fail(NULL, err, SD_ERR_ARG, "parts: %d embedded meshes; at most %d", nmeshes,
+                    OUT_MAX_MESHES);
+    for (int i = 0; i < nmeshes; i++) {
+        const out_mesh *q = &rq->meshes[i];
+        if (!valid_name(q->name) || !q->xyz || (q->nt && !q->tri))
+            return fail(NULL, err, SD_ERR_ARG, "parts: embedded mesh %d is not valid", i);
+        for (size_t j = 0; j < 3 * (size_t)q->nt; j++)
+            if (q->tri[j] >= q->nv)
+                return fail(NULL, err, SD_ERR_ARG, "parts: embedded mesh %s: a vertex id is out "
+                            "of range", q->name);
+    }
     if (rq->nattrs < 0 || rq->nattrs > OUT_MAX_ATTRS)
         return fail(NULL, err, SD_ERR_ARG, "attributes: %d; at most %d", rq->nattrs, OUT_MAX_ATTRS);
     for (int a = 0; a < rq->nattrs; a++) {
@@ -240,7 +271,20 @@ out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err)
     if (!s)
         return fail(NULL, err, SD_ERR_NOMEM, "out of memory");
     s->rq = *rq;
+    s->rq.meshes = NULL;
+    s->rq.nmeshes = 0;
     out_geometry_ref(s->rq.geometry);
+    for (int i = 0; i < nmeshes; i++) { /* the stream's own copies: read after the caller's lock */
+        const out_mesh *q = &rq->meshes[i];
+        out_mesh *c = &s->mesh[s->nmesh++];
+        c->nv = q->nv;
+        c->nt = q->nt;
+        c->name = api_memdup(q->name, strlen(q->name) + 1);
+        c->xyz = copy(q->xyz, (size_t)q->nv * 3 * sizeof *q->xyz);
+        c->tri = copy(q->tri, (size_t)q->nt * 3 * sizeof *q->tri);
+        if (!c->name || !c->xyz || !c->tri)
+            return fail(s, err, SD_ERR_NOMEM, "out of memory copying the embedded models");
+    }
     if (!s->rq.parts)
         s->rq.parts = OUT_PART_ALL;
     s->fmt = f;

@@ -53,8 +53,19 @@ enum {
     OUT_PART_CURVES = 2,
     OUT_PART_SURFACES = 4,
     OUT_PART_SOLIDS = 8,
-    OUT_PART_ALL = 15
+    OUT_PART_ALL = 15,       /* the level's parts; 0 in out_request.parts means these */
+    OUT_PART_EMBEDDED = 16   /* glTF: also out_request.meshes (not part of OUT_PART_ALL) */
 };
+
+/* An extra mesh a glTF writes after the level's parts when parts has OUT_PART_EMBEDDED: an
+ * embedded model, deformed (api/embedded.c). out_open copies it; it is not a level's. */
+#define OUT_MAX_MESHES 8
+typedef struct out_mesh {
+    const char *name;        /* node and mesh "embedded/<name>": letters, digits, '_', '-' */
+    uint32_t nv, nt;         /* vertices; triangles (none: the vertices are drawn as points) */
+    const double *xyz;       /* 3 per vertex */
+    const uint32_t *tri;     /* 3 per triangle, vertex ids < nv */
+} out_mesh;
 
 #define OUT_MAX_ATTRS 32
 
@@ -71,7 +82,10 @@ typedef struct out_request {
     sd_complex *complex;     /* the level is computed already; the writer may ensure its rules */
     int level;
     uint64_t version;        /* written into JSON output ("version") and glTF asset.extras */
-    unsigned parts;          /* OUT_PART_* mask; 0 means all */
+    unsigned parts;          /* OUT_PART_* mask; 0 means OUT_PART_ALL; OUT_PART_EMBEDDED alone:
+                              * none of the level's parts, only the meshes */
+    int nmeshes;             /* with OUT_PART_EMBEDDED (glb and gltf only): these meshes too */
+    const out_mesh *meshes;
     int has_slice;           /* cross-section of the solids by the plane n.x = d */
     double slice[4];         /* nx, ny, nz, d (n need not be unit; must be non-zero) */
     int nattrs;

@@ -5,7 +5,9 @@
  *   points (mode 0, isolated points), curves (mode 1, curve segments), surfaces (mode 4, surface
  *   triangles), solids (mode 4, the outward boundary of the tetrahedra and octahedra), and the
  *   optional slice (mode 4, non-indexed, its own POSITION, NORMAL, `_<NAME>` and COLOR_0: the
- *   cross-section of the solids by the plane, facing +n, attributes interpolated on the cut edges).
+ *   cross-section of the solids by the plane, facing +n, attributes interpolated on the cut edges),
+ *   and with parts=embedded one node "embedded/<name>" per embedded model (out_request.meshes:
+ *   its own POSITION and u32 indices, mode 4; mode 0 for a model of points).
  * The first four share the level's vertex accessors, in level vertex order (live edits write
  * deltas straight into them): POSITION (float32, min/max from the written floats), NORMAL
  * (area-weighted, unit; (0,0,1) where a vertex has no triangle; triangle primitives only),
@@ -28,8 +30,10 @@
 
 typedef enum { /* in buffer order; the index sections are G_IPT..G_IBD */
     G_POS, G_NRM, G_ATTR, G_RULE, G_COLOR, G_IPT, G_ILN, G_ITR, G_IBD, G_SPOS, G_SNRM, G_SATTR,
-    G_SCOLOR
+    G_SCOLOR, G_EPOS, G_EIDX /* an embedded model's (arg: which) positions and indices */
 } gsec_id;
+
+static bool is_index(int id) { return (id >= G_IPT && id <= G_IBD) || id == G_EIDX; }
 
 /* Sections (out_section): id a gsec_id, arg the attribute, width 4 (float, u32) or 2 (u16),
  * bytes unpadded, offset in the buffer; section i is accessor i and buffer view i. */
@@ -139,6 +143,11 @@ static void put_item(out_stream *s, gstate *g, const gsec *c, uint64_t i)
         out_put(s, rgb, 12);
         break;
     }
+    case G_EPOS:
+        for (int k = 0; k < 3; k++)
+            put_f(s, s->mesh[c->arg].xyz[3 * i + k]);
+        break;
+    case G_EIDX: out_put(s, s->mesh[c->arg].tri + 3 * i, 12); break;
     }
 }
 
@@ -316,6 +325,8 @@ static void attribute_names(const out_stream *s, gstate *g)
 /* The accessors the JSON part names (NULL: absent). */
 typedef struct layout {
     const gsec *pos, *nrm, *rule, *col, *prim[4], *spos, *snrm, *scol;
+    const gsec *epos[OUT_MAX_MESHES], *eidx[OUT_MAX_MESHES]; /* embedded models (eidx: NULL
+                                                                * for points) */
     int first_attr, first_sattr;   /* accessors of the first `_<NAME>` of the level and slice */
 } layout;
 
@@ -325,14 +336,17 @@ static void plan(out_stream *s, gstate *g, layout *L)
     uint32_t ntr = s->ncells[SD_CELL_TRIANGLE], nst = s->slice.ntri;
     int iw = s->nv <= 65535 ? 2 : 4;
     memset(L, 0, sizeof *L);
-    L->pos = out_section_add(&g->sec, G_POS, 0, 3, 4, s->nv);
+    bool level = s->rq.parts & OUT_PART_ALL; /* parts=embedded alone: none of the level's data */
+    if (level)
+        L->pos = out_section_add(&g->sec, G_POS, 0, 3, 4, s->nv);
     if (ntr || s->nbnd)
         L->nrm = out_section_add(&g->sec, G_NRM, 0, 3, 4, s->nv);
     L->first_attr = g->sec.n;
-    for (int a = 0; a < s->rq.nattrs; a++)
+    for (int a = 0; level && a < s->rq.nattrs; a++)
         out_section_add(&g->sec, G_ATTR, a, s->rq.attrs[a].ncomp < 4 ? s->rq.attrs[a].ncomp : 4, 4, s->nv);
-    L->rule = out_section_add(&g->sec, G_RULE, 0, 1, 4, s->nv);
-    if (s->rq.colormap_attr >= 0)
+    if (level)
+        L->rule = out_section_add(&g->sec, G_RULE, 0, 1, 4, s->nv);
+    if (level && s->rq.colormap_attr >= 0)
         L->col = out_section_add(&g->sec, G_COLOR, 0, 3, 4, s->nv);
     if (s->ncells[SD_CELL_POINT])
         L->prim[0] = out_section_add(&g->sec, G_IPT, 0, 1, iw, s->ncells[SD_CELL_POINT]);
@@ -351,6 +365,11 @@ static void plan(out_stream *s, gstate *g, layout *L)
         out_section_add(&g->sec, G_SATTR, a, s->rq.attrs[a].ncomp < 4 ? s->rq.attrs[a].ncomp : 4, 4, 3ull * nst);
     if (nst && L->col)
         L->scol = out_section_add(&g->sec, G_SCOLOR, 0, 3, 4, 3ull * nst);
+    for (int m = 0; m < s->nmesh; m++) {
+        L->epos[m] = out_section_add(&g->sec, G_EPOS, m, 3, 4, s->mesh[m].nv);
+        if (s->mesh[m].nt)
+            L->eidx[m] = out_section_add(&g->sec, G_EIDX, m, 3, 4, s->mesh[m].nt);
+    }
     attribute_names(s, g);
     if (nst) {
         double n[3], d;
@@ -374,7 +393,7 @@ static const int PART_MODE[5] = {0, 1, 4, 4, 4};
 
 /* The accessor's name: the attribute's glTF name (`POSITION`, `_TEMP`, ...), prefixed with
  * "slice " for the slice's own ones; "<part> indices" for index accessors. */
-static void accessor_name(FILE *f, const gstate *g, const gsec *c)
+static void accessor_name(FILE *f, const out_stream *s, const gstate *g, const gsec *c)
 {
     switch (c->id) {
     case G_POS: fprintf(f, "POSITION"); break;
@@ -390,6 +409,8 @@ static void accessor_name(FILE *f, const gstate *g, const gsec *c)
     case G_SNRM: fprintf(f, "slice NORMAL"); break;
     case G_SATTR: fprintf(f, "slice %s", g->name[c->arg]); break;
     case G_SCOLOR: fprintf(f, "slice COLOR_0"); break;
+    case G_EPOS: fprintf(f, "embedded/%s POSITION", s->mesh[c->arg].name); break;
+    case G_EIDX: fprintf(f, "embedded/%s indices", s->mesh[c->arg].name); break;
     }
 }
 
@@ -400,7 +421,7 @@ static void json_accessors(FILE *f, const out_stream *s, const gstate *g)
     fprintf(f, "\"bufferViews\":[");
     for (int i = 0; i < g->sec.n; i++) {
         const gsec *c = &g->sec.s[i];
-        bool index = c->id >= G_IPT && c->id <= G_IBD;
+        bool index = is_index(c->id);
         fprintf(f, "%s{\"buffer\":0,\"byteOffset\":%llu,\"byteLength\":%llu,\"target\":%d}",
                 i ? "," : "", (unsigned long long)c->offset, (unsigned long long)c->bytes,
                 index ? 34963 : 34962);
@@ -408,17 +429,18 @@ static void json_accessors(FILE *f, const out_stream *s, const gstate *g)
     fprintf(f, "],\"accessors\":[");
     for (int i = 0; i < g->sec.n; i++) {
         const gsec *c = &g->sec.s[i];
-        bool index = c->id >= G_IPT && c->id <= G_IBD;
+        bool index = is_index(c->id);
         static const char *const vt[] = {"", "SCALAR", "VEC2", "VEC3", "VEC4"};
         uint64_t count = index ? c->count * (uint64_t)c->ncomp : c->count;
         fprintf(f, "%s{\"name\":\"", i ? "," : "");
-        accessor_name(f, g, c);
+        accessor_name(f, s, g, c);
         fprintf(f, "\",\"bufferView\":%d,\"componentType\":%d,\"count\":%llu,\"type\":\"%s\"",
                 i, index ? (c->width == 2 ? 5123 : 5125) : 5126,
                 (unsigned long long)count, index ? "SCALAR" : vt[c->ncomp]);
-        if (c->id == G_POS || c->id == G_SPOS) {
+        if (c->id == G_POS || c->id == G_SPOS || c->id == G_EPOS) {
             float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-            const double *x = c->id == G_POS ? s->xyz : s->slice.xyz;
+            const double *x = c->id == G_POS ? s->xyz : c->id == G_SPOS ? s->slice.xyz
+                                                                         : s->mesh[c->arg].xyz;
             for (uint64_t j = 0; j < c->count; j++)
                 for (int k = 0; k < 3; k++) {
                     float v = (float)x[3 * j + k];
@@ -435,19 +457,31 @@ static void json_accessors(FILE *f, const out_stream *s, const gstate *g)
 
 /* "meshes" (one per part shown, named after it, with its one primitive) and "nodes" (node 0
  * "level L" with a child node per part, named after it); the number of parts. With no part to
- * draw the "meshes" member is left out and node 0 has no children. */
+ * draw the "meshes" member is left out and node 0 has no children. Parts 0-3 are the level's,
+ * 4 the slice, 5 + m embedded model m. */
 static int json_meshes(FILE *f, const out_stream *s, const gstate *g, const layout *L)
 {
-    int part[5], nparts = 0;
+    int part[5 + OUT_MAX_MESHES], nparts = 0;
     for (int p = 0; p < 4; p++)
         if (L->prim[p])
             part[nparts++] = p;
     if (L->spos)
         part[nparts++] = 4;
+    for (int m = 0; m < s->nmesh; m++)
+        part[nparts++] = 5 + m;
     if (nparts)
         fprintf(f, "\"meshes\":[");
     for (int m = 0; m < nparts; m++) {
         int p = part[m];
+        if (p >= 5) { /* an embedded model: its own POSITION, its triangles (or its points) */
+            const out_mesh *e = &s->mesh[p - 5];
+            fprintf(f, "%s{\"name\":\"embedded/%s\",\"primitives\":[{\"attributes\":{"
+                       "\"POSITION\":%d}", m ? "," : "", e->name, acc(g, L->epos[p - 5]));
+            if (L->eidx[p - 5])
+                fprintf(f, ",\"indices\":%d", acc(g, L->eidx[p - 5]));
+            fprintf(f, ",\"mode\":%d,\"material\":0}]}", L->eidx[p - 5] ? 4 : 0);
+            continue;
+        }
         fprintf(f, "%s{\"name\":\"%s\",\"primitives\":[{\"attributes\":{", m ? "," : "",
                 PART_NAME[p]);
         if (p < 4) { /* the shared vertex accessors, in level vertex order */
@@ -481,7 +515,10 @@ static int json_meshes(FILE *f, const out_stream *s, const gstate *g, const layo
     }
     fprintf(f, "}");
     for (int m = 0; m < nparts; m++)
-        fprintf(f, ",{\"name\":\"%s\",\"mesh\":%d}", PART_NAME[part[m]], m);
+        if (part[m] >= 5)
+            fprintf(f, ",{\"name\":\"embedded/%s\",\"mesh\":%d}", s->mesh[part[m] - 5].name, m);
+        else
+            fprintf(f, ",{\"name\":\"%s\",\"mesh\":%d}", PART_NAME[part[m]], m);
     fprintf(f, "],");
     return nparts;
 }

@@ -39,7 +39,7 @@ typedef struct out_section {
     const char *tail;      /* text after the items (JSON) */
 } out_section;
 
-#define OUT_MAX_SECTIONS (16 + 2 * OUT_MAX_ATTRS)
+#define OUT_MAX_SECTIONS (16 + 2 * OUT_MAX_ATTRS + 2 * OUT_MAX_MESHES)
 
 /* A writer's sections in output order. */
 typedef struct out_sections {
@@ -66,6 +66,8 @@ struct out_stream {
     float *own_normals;
     double *own_xyz;           /* the snapshot (rq.snapshot) */
     double *own_attr[OUT_MAX_ATTRS];
+    out_mesh mesh[OUT_MAX_MESHES]; /* copies of rq.meshes (their arrays and names owned) */
+    int nmesh;
     out_slice slice;
     uint64_t size;             /* total bytes, or UINT64_MAX */
     /* generator */

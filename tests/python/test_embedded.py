@@ -418,3 +418,65 @@ def test_an_edit_that_builds_rules_again_keeps_the_models_where_they_are(daemon)
     assert np.array_equal(deformed(s), moved)
     edit(s, [{"index": c, "position": [11.0, 1.0, 1.0]}], v)   # back where it was posted
     assert np.abs(deformed(s) - np.array(pts)).max() <= 1e-12
+
+
+def test_level_glb_with_parts_embedded(daemon, tmp_path):
+    """GET /levels/L?parts=…,embedded: each embedded model as its own node and mesh
+    "embedded/<name>" (its own POSITION, u32 indices, points drawn as points) after the level's
+    parts, with the positions GET /embedded/{name} gives (as float32) after an edit; the level's
+    parts unchanged; parts=embedded alone holds the models only; not without it; glb and gltf only."""
+    from test_outputs import accessor_reader, split_glb, validate
+    pts = model_points(30)
+    tris = [[i, i + 1, i + 2] for i in range(0, 27, 3)]
+    s, v = session_with_model(daemon, pts, triangles=tris)
+    r = s.req("PUT", "/embedded/cloud", json={"vertices": model_points(7, seed=3), "level": 1})
+    assert r.status_code == 200, r.text
+    edit(s, [{"index": 4, "position": [1.2, 0.9, 1.4]}], r.json()["version"])
+    want = {n: (np.array(s.req("GET", f"/embedded/{n}").json()["vertices"], dtype=np.float32), t)
+            for n, t in (("m", tris), ("cloud", None))}
+    assert not np.allclose(want["m"][0], np.array(pts, dtype=np.float32))   # the edit moved it
+    plain = s.level(2, parts="surfaces,solids").content
+    for parts, level_nodes in (("surfaces,solids,embedded", ["solids"]), ("embedded", [])):
+        glb = s.level(2, parts=parts)
+        assert glb.status_code == 200, glb.text
+        (tmp_path / "l.glb").write_bytes(glb.content)
+        validate(tmp_path / "l.glb")
+        doc, bin_ = split_glb(glb.content)
+        acc = accessor_reader(doc, bin_)
+        root = doc["nodes"][0]
+        names = [doc["nodes"][i]["name"] for i in root["children"]]
+        assert names == level_nodes + ["embedded/m", "embedded/cloud"]
+        for i in root["children"]:
+            node = doc["nodes"][i]
+            mesh = doc["meshes"][node["mesh"]]
+            assert mesh["name"] == node["name"] and len(mesh["primitives"]) == 1
+            prim = mesh["primitives"][0]
+            if not node["name"].startswith("embedded/"):
+                continue
+            x, t = want[node["name"][len("embedded/"):]]
+            assert np.array_equal(acc(prim["attributes"]["POSITION"]), x)
+            if t is None:
+                assert prim["mode"] == 0 and "indices" not in prim
+            else:
+                assert prim["mode"] == 4
+                assert acc(prim["indices"]).reshape(-1, 3).tolist() == t
+        if level_nodes:   # the level's own part is what the GLB without models holds
+            pd, pb = split_glb(plain)
+            pacc = accessor_reader(pd, pb)
+            sol = doc["meshes"][doc["nodes"][root["children"][0]]["mesh"]]["primitives"][0]
+            psol = pd["meshes"][pd["nodes"][pd["nodes"][0]["children"][0]]["mesh"]]["primitives"][0]
+            for key in ("POSITION", "NORMAL"):
+                assert np.array_equal(acc(sol["attributes"][key]), pacc(psol["attributes"][key]))
+            assert np.array_equal(acc(sol["indices"]), pacc(psol["indices"]))
+        else:             # nothing of the level: only the models' accessors
+            assert len(doc["accessors"]) == 3
+    gltf = s.level(2, format="gltf", parts="embedded")
+    assert gltf.status_code == 200 and [n["name"] for n in gltf.json()["nodes"]][1:] == \
+        ["embedded/m", "embedded/cloud"]
+    default = s.level(2)
+    assert b"embedded/" not in default.content[:default.content.index(b"BIN\x00")]
+    for fmt in ("vtu", "vtk", "json"):
+        r = s.level(2, format=fmt, parts="solids,embedded")
+        assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "parts", r.text
+    r = s.level(2, parts="solids,embedded,models")
+    assert r.status_code == 422 and "embedded" in r.json()["detail"]

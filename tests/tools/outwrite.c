@@ -84,7 +84,15 @@ static int check_errors(sd_complex *c)
         (void)r;                                                                                   \
     } while (0)
     CASE("format", NULL);
-    CASE("parts-unknown", out_format_find("glb"), r->parts = 16);
+    CASE("parts-unknown", out_format_find("glb"), r->parts = 32);
+    CASE("parts-embedded-vtu", out_format_find("vtu"), r->parts = OUT_PART_EMBEDDED);
+    static const double mesh_xyz[3] = {0, 0, 0};
+    static const uint32_t mesh_tri[3] = {0, 0, 1};
+    static const out_mesh bad_mesh = {"m", 1, 1, mesh_xyz, mesh_tri};
+    CASE("parts-embedded-range", out_format_find("glb"), r->parts = OUT_PART_EMBEDDED,
+         r->nmeshes = 1, r->meshes = &bad_mesh);
+    CASE("parts-embedded-many", out_format_find("glb"), r->parts = OUT_PART_EMBEDDED,
+         r->nmeshes = OUT_MAX_MESHES + 1, r->meshes = &bad_mesh);
     CASE("slice-zero", out_format_find("glb"), r->has_slice = 1, r->slice[3] = 1);
     CASE("slice-nan", out_format_find("vtu"), r->has_slice = 1, r->slice[0] = 1, r->slice[1] = NAN);
     CASE("slice-inf-d", out_format_find("json"), r->has_slice = 1, r->slice[2] = 1, r->slice[3] = INFINITY);
