@@ -14,6 +14,7 @@
  * Prints one line "api_faults: N runs, F failures injected, no leaks" and exits 0, else 1.
  */
 #include "../../api/delta.h"
+#include "../../api/embedded.h"
 #include "../../api/handlers.h"
 #include "../../api/jsonin.h"
 #include "../../api/mem.h"
@@ -96,6 +97,42 @@ static void drain(out_stream *os)
     static char buf[8192];
     while (out_read(os, buf, sizeof buf) > 0)
         ;
+}
+
+/* An embedded model (a triangle and a point inside the tetrahedron, bound to level 1), then the
+ * level's GLB with it (parts=solids,embedded). */
+static void embedded(api_model *m)
+{
+    static const char MODEL[] = "{\"vertices\":[[0.2,0.2,0.2],[0.3,0.2,0.2],[0.2,0.3,0.2],"
+                                "[0.25,0.25,0.3]],\"triangles\":[[0,1,2]],\"level\":1,"
+                                "\"outside\":\"fixed\"}";
+    api_limits lim = api_default_limits();
+    api_problem p = {0};
+    json_t *b = body(MODEL, &p), *summary = NULL;
+    api_embed_def *d = NULL;
+    if (b && api_embed_parse(b, "model", &lim, &d, &p))
+        refused(&p, "api_embed_parse");
+    json_decref(b);
+    if (!d)
+        return;
+    if (api_embed_put(m, d, atomic_load(&m->version) + 1, &lim, NULL, NULL, &summary, &p))
+        refused(&p, "api_embed_put");
+    else
+        oks++;
+    json_decref(summary);
+    api_embed_def_unref(d);
+    api_level_query q = {.format = "glb", .parts = "solids,embedded"};
+    out_stream *os = NULL;
+    const out_format *fmt;
+    uint64_t version;
+    memset(&p, 0, sizeof p);
+    if (api_level_open(m, 1, &q, &lim, NULL, &os, &fmt, &version, &p))
+        refused(&p, "api_level_open (embedded)");
+    else {
+        drain(os);
+        out_close(os);
+        oks++;
+    }
 }
 
 static void levels(api_model *m)
@@ -214,6 +251,7 @@ static void scenario(void)
         change(&m, RULES, api_put_rules, "api_put_rules");
         change(&m, TAGS, api_put_tags, "api_put_tags");
         levels(m);
+        embedded(m);
         views(m);
         edit_and_refine(&m);
     }
@@ -286,9 +324,10 @@ static void meter_limit(void)
 int main(int argc, char **argv)
 {
     uint64_t max = argc > 1 ? strtoull(argv[1], NULL, 10) : 0, runs = 0;
-    int want = 5 + 1 + 3 + 2 + 3; /* changes (a repair among them), stats, views, edit and
-                                   * refine, the edit's three deltas (one of one kind of
-                                   * parts); and a level per format */
+    int want = 5 + 1 + 3 + 2 + 3 + 2; /* changes (a repair among them), stats, views, edit
+                                       * and refine, the edit's three deltas (one of one kind
+                                       * of parts), the embedded model and its GLB; and a
+                                       * level per format */
     for (const out_format *f = out_formats; f->name; f++)
         want++;
     run(0, 0); /* the scenario must pass as it is */
