@@ -188,6 +188,10 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
         if (a < 0)
             return api_fail_at(p, 422, "unknown-attribute", "colormap",
                                "colormap: no attribute \"%.40s\" in this complex", name);
+        if (strcmp((*fmt)->name, "glb") && strcmp((*fmt)->name, "gltf")) /* COLOR_0 is glTF's */
+            return api_fail_at(p, 422, "not-applicable", "colormap",
+                               "colormap: applies to format glb and gltf only, not %s (VTK and "
+                               "JSON carry the attribute itself)", (*fmt)->name);
         rq->colormap_attr = add_attr(m, rq, a);
         rq->colormap_min = lo;
         rq->colormap_max = hi;

@@ -508,12 +508,14 @@ def test_offline_refine_same_bytes(daemon, tmp_path, fmt):
     inp = tmp_path / "in.json"
     inp.write_text(json.dumps(body))
     out = tmp_path / f"out.{fmt}"
+    cmap = {"colormap": "t:0:7"} if fmt in ("glb", "gltf") else {}   # COLOR_0 is glTF's
     r = subprocess.run([str(SUBDIVD), "refine", str(inp), "--level", "2", "--slice", "0,0,1,0.3",
-                        "--colormap", "t:0:7", "-o", str(out)], capture_output=True, text=True)
+                        *(a for k, v in cmap.items() for a in (f"--{k}", v)), "-o", str(out)],
+                       capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     s = Session(daemon)
     assert s.put_complex(body).status_code == 200
-    http = s.level(2, format=fmt, slice="0,0,1,0.3", colormap="t:0:7")
+    http = s.level(2, format=fmt, slice="0,0,1,0.3", **cmap)
     assert http.status_code == 200
     assert out.read_bytes() == http.content
     if fmt in ("glb", "gltf"):

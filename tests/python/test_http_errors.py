@@ -212,6 +212,8 @@ LEVEL_OPTION_CASES = [
     ({"colormap": "t"}, "colormap"),
     ({"colormap": "t:5:1"}, "colormap"),
     ({"colormap": "nope:0:1"}, "colormap"),
+    ({"format": "vtu", "colormap": "t:0:1"}, "colormap"),
+    ({"format": "json", "colormap": "t:0:1"}, "colormap"),
     ({"attributes": "nope"}, "attributes"),
     ({"attributes": "t,t"}, "attributes"),
     ({"format": "vtu", "octahedra": "cubes"}, "octahedra"),

@@ -15,7 +15,8 @@ subdivd beside this program, else on PATH), and --progress auto|bar|lines|none.
 
 INPUT: OBJ, OFF, STL, Gmsh .msh, VTK .vtk/.vtu, TetGen .node/.ele or a PUT /complex body
 (.json). OUT: .glb, .gltf, .vtu, .vtk or .json (the level's format); each output gets the level
-options that apply to its format (--octahedra and --names VTU and VTK, --compress VTU). --pvd DIR writes the levels
+options that apply to its format (--octahedra and --names VTU and VTK, --compress VTU,
+--colormap GLB and glTF). --pvd DIR writes the levels
 0..L as DIR/level_K.vtu and the ParaView time series DIR/levels.pvd (timestep K = level K). The job file format and the
 exit codes are in clients/README.md; exit codes: 0 done, 1 the daemon refused the input (4xx),
 2 usage, file or mesh error, 3 the daemon failed or could not be reached, 4 the daemon does not
@@ -41,7 +42,8 @@ LEVEL_OPTS = ("parts", "slice", "attributes", "colormap", "octahedra", "names", 
               "limit")
 # Level options that apply to some formats only (docs/OUTPUTS.md; the daemon refuses them with
 # any other format): each output is sent the options that apply to its format.
-FORMAT_OPTS = {"octahedra": ("vtu", "vtk"), "names": ("vtu", "vtk"), "compress": ("vtu",)}
+FORMAT_OPTS = {"octahedra": ("vtu", "vtk"), "names": ("vtu", "vtk"), "compress": ("vtu",),
+               "colormap": ("glb", "gltf")}
 JOB_KEYS = {"input", "output", "outputs", "level", "tags", "rules", "fill", "singular_groups", "options",
             "name", "save_complex", "pvd", "repair", "crease_angle"}
 
