@@ -396,13 +396,41 @@ static int write_stats(const args *a, const rstat *st, const mp_piece *p)
     return rc;
 }
 
+/* Whether the directory of file `path` takes new files; says so when not. */
+static bool dir_writable(const char *path)
+{
+    const char *slash = strrchr(path, '/');
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%.*s", !slash ? 1 : slash == path ? 1 : (int)(slash - path),
+             slash ? path : ".");
+    if (!access(dir, W_OK | X_OK))
+        return true;
+    fprintf(stderr, "%s: cannot write into %s: %s\n", tag_, dir, strerror(errno));
+    return false;
+}
+
+/* EXIT_USAGE ("a file") when this rank is to write into the directory of OUT (every rank for
+ * pieces, rank 0 for a merged VTU) or of --stats (rank 0) and cannot: found before the work,
+ * not after it. */
+static int check_output_dir(const args *a)
+{
+    bool ok = true;
+    if (!a->nowrite && !(a->merge && rank_))
+        ok = dir_writable(a->out);
+    if (ok && a->stats && !rank_)
+        ok = dir_writable(a->stats);
+    return ok ? 0 : EXIT_USAGE;
+}
+
 static int run(const args *a)
 {
     rstat st = {0};
     char err[512] = "";
     mp_piece *pieces = NULL, piece = {0};
     mp_result res = {0};
-    int rc = 0;
+    int rc = checkpoint(check_output_dir(a), "checking the output directory");
+    if (rc)
+        return rc;
     double t = mp_now();
     /* 1. rank 0 reads, partitions and cuts */
     if (!rank_) {

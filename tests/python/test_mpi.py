@@ -644,8 +644,9 @@ def test_stats_not_written_is_a_failure(tmp_path):
     """--stats S.json that cannot be written: a message and exit 2 (a file), where the run said
     "cannot write" and exited 0, so a script reading S.json next found none or an old one."""
     mesh, extra = write_case(tmp_path, "curves")
+    (tmp_path / "s.json").mkdir()   # its directory takes files; the name does not (a directory)
     r = mpirun(2, "refine", mesh, "--level", 1, "-o", tmp_path / "o.pvtu", *extra,
-               "--stats", tmp_path / "none" / "s.json")
+               "--stats", tmp_path / "s.json")
     assert r.returncode == 2, r.stderr
     assert "cannot write" in r.stderr and "s.json" in r.stderr
 
@@ -779,3 +780,18 @@ def test_level_4_solid_averaged(tmp_path, tmp_path_factory):
     assert r.returncode == 0, r.stderr
     assert max_error(out, 3, ref_pts) <= 1e-12
     assert read(out).GetNumberOfCells() == len(ref_cells)
+
+
+@pytest.mark.parametrize("out,stats", [("none/o.pvtu", None), ("none/o.vtu", None),
+                                       ("o.pvtu", "none/s.json")])
+def test_an_unwritable_output_is_found_before_the_work(tmp_path, out, stats):
+    """-o (pieces or merged) or --stats in a directory that is not there: exit 2 (a file) with a
+    message naming the directory, before anything is read or refined (no summary line, no
+    files), where the run used to compute the whole level and fail when writing (exit 3)."""
+    extra = ["--stats", tmp_path / stats] if stats else []
+    r = mpirun(2, "refine", REPO / "examples" / "mixed.json", "--level", 2, "-o", tmp_path / out,
+               *extra)
+    assert r.returncode == 2, r.stderr
+    assert f"cannot write into {tmp_path / 'none'}: No such file or directory" in r.stderr
+    assert "read " not in r.stderr and "level 2 on 2 ranks" not in r.stderr
+    assert list(tmp_path.iterdir()) == []
