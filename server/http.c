@@ -458,8 +458,12 @@ static int early_body(req *r)
                   "or chunked", te0);
         return 1;
     }
-    const char *cl = MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
-                                                 MHD_HTTP_HEADER_CONTENT_LENGTH);
+    /* with Transfer-Encoding: chunked libmicrohttpd frames the body by the chunks and ignores
+     * Content-Length (RFC 9112 6.3), so a "Content-Length: 0" beside it must not pass for no
+     * body (it skipped the media type and the guard's body deadline) */
+    const char *cl = te0 ? NULL
+                         : MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
+                                                       MHD_HTTP_HEADER_CONTENT_LENGTH);
     if (cl) {
         char *end;
         errno = 0;
@@ -501,10 +505,10 @@ static int early_body(req *r)
 /* The body the request announces: Content-Length, UINT64_MAX when chunked, 0 for none. */
 static uint64_t body_announced(req *r)
 {
+    if (http_header(r, MHD_HTTP_HEADER_TRANSFER_ENCODING)) /* chunked wins (early_body) */
+        return UINT64_MAX;
     const char *cl = http_header(r, MHD_HTTP_HEADER_CONTENT_LENGTH);
-    if (cl)
-        return strtoull(cl, NULL, 10);
-    return http_header(r, MHD_HTTP_HEADER_TRANSFER_ENCODING) ? UINT64_MAX : 0;
+    return cl ? strtoull(cl, NULL, 10) : 0;
 }
 
 /* Every check that needs no body, in order. Returns 1 when a response was queued. */

@@ -690,3 +690,48 @@ def test_level_memory_estimate_is_close_to_the_real_cost():
         assert s.level(3, format="json", parts="points").status_code == 200
     finally:
         d.stop()
+
+
+def test_chunked_body_with_content_length_zero_is_still_timed():
+    # Content-Length: 0 beside Transfer-Encoding: chunked: libmicrohttpd reads the chunked body
+    # (RFC 9112 6.3), so the guard must time it as a body, not as a request being handled
+    d = Daemon("--header-timeout", "2", "--body-min-rate", "100000")
+    try:
+        s = Session(d)
+        k = raw_socket(d)
+        k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
+                   f"Authorization: Bearer {s.token}\r\nContent-Type: application/json\r\n"
+                   "Content-Length: 0\r\nTransfer-Encoding: chunked\r\n\r\n").encode())
+        t0 = time.time()
+        closed = False
+        while time.time() - t0 < 12:
+            try:
+                k.send(b"1\r\n \r\n")
+            except OSError:
+                closed = True
+                break
+            if closed_by_peer(k, 0.5):
+                closed = True
+                break
+        assert closed and time.time() - t0 < 12, "a trickling chunked body must be closed"
+        k.close()
+    finally:
+        d.stop()
+
+
+def test_chunked_body_with_content_length_zero_needs_json(daemon):
+    s = Session(daemon)
+    body = json.dumps({"vertices": CUBE_V, "simplices": CUBE_S}).encode()
+    k = raw_socket(daemon)
+    k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\nConnection: close\r\n"
+               f"Authorization: Bearer {s.token}\r\nContent-Type: text/plain\r\n"
+               f"Content-Length: 0\r\nTransfer-Encoding: chunked\r\n\r\n"
+               f"{len(body):x}\r\n").encode() + body + b"\r\n0\r\n\r\n")
+    out = b""
+    while True:
+        c = k.recv(65536)
+        if not c:
+            break
+        out += c
+    k.close()
+    assert out.startswith(b"HTTP/1.1 415"), out[:200]
