@@ -487,22 +487,19 @@ static int run_step(const api_model *cur, const rstep *S, int j, int place,
     }
     sd_refinement r;
     sd_error e = {0};
-    int refined = sd_refine(in->xyz, in->nv, in->idx, in->size, in->ns, mk, diag, &r, &e);
+    /* the limits before the result is allocated, the working arrays within the memory budget */
+    sd_allocator budget = api_mem_core_allocator();
+    sd_refine_limits rl = {lim->max_vertices, lim->max_simplices, &budget};
+    int refined = sd_refine(in->xyz, in->nv, in->idx, in->size, in->ns, mk, diag, &rl, &r, &e);
     free(diag);
     free(mk);
+    if (refined == SD_ERR_LIMIT && e.item >= 0) /* counted before the result was made */
+        return api_fail_limit(p, e.field == 0 ? "max_vertices" : "max_simplices",
+                              e.field == 0 ? lim->max_vertices : lim->max_simplices,
+                              (uint64_t)e.item, "%s; refine a smaller region or less deep",
+                              e.message);
     if (refined)
         return api_fail_core(p, &e, "/select", NULL);
-    if (r.nv > lim->max_vertices || r.ns > lim->max_simplices) {
-        int rc = r.nv > lim->max_vertices
-                     ? api_fail_limit(p, "max_vertices", lim->max_vertices, r.nv,
-                                      "the refined complex would have %zu vertices; refine a "
-                                      "smaller region or less deep", r.nv)
-                     : api_fail_limit(p, "max_simplices", lim->max_simplices, r.ns,
-                                      "the refined complex would have %zu simplices; refine a "
-                                      "smaller region or less deep", r.ns);
-        sd_refine_free(&r);
-        return rc;
-    }
     nx->red = r.red;
     nx->green = r.green;
     int rc = 0;

@@ -122,9 +122,33 @@ static void closure(ref *r, const uint8_t *size, size_t ns, const uint8_t *marke
     }
 }
 
+/* The number of children of every simplex after the closure, and of their vertex ids (as
+ * emit_children makes them). */
+static void count_children(const ref *r, const uint8_t *size, size_t ns, size_t *nout, size_t *nids)
+{
+    size_t c = 0, ids = 0;
+    for (size_t s = 0; s < ns; s++) {
+        int k = size[s], n = 0, face = -1, kids = 1;
+        uint8_t st[6] = {0};
+        for (int e = 0; k >= 2 && e < NEDGES[k]; e++)
+            n += st[e] = r->split[r->eids[6 * s + e]];
+        if (n && k == 2)
+            kids = 2;
+        else if (n && k == 3)
+            kids = n == 1 ? 2 : 4;
+        else if (n && k == 4)
+            kids = tet_pattern(st, &face) == 1 ? 2 : n == 3 && face >= 0 ? 4 : 8;
+        c += (size_t)kids;
+        ids += (size_t)kids * (size_t)k;
+    }
+    *nout = c;
+    *nids = ids;
+}
+
 /* One new vertex per split edge, after the old ones, at its midpoint; out's arrays allocated
- * (at most 8 children of 4 ids per simplex). false: no memory. */
-static bool new_vertices(ref *r, const double *xyz, size_t nv, size_t ns, sd_refinement *out)
+ * for nout children of nids vertex ids in all. false: no memory. */
+static bool new_vertices(ref *r, const double *xyz, size_t nv, size_t nout, size_t nids,
+                         sd_refinement *out)
 {
     uint32_t nsplit = 0;
     for (uint32_t e = 0; e < r->ne; e++)
@@ -133,9 +157,9 @@ static bool new_vertices(ref *r, const double *xyz, size_t nv, size_t ns, sd_ref
     out->nv = nv + nsplit;
     out->xyz = malloc(out->nv * 3 * sizeof *out->xyz);
     out->split = malloc(((size_t)nsplit + 1) * sizeof *out->split);
-    out->idx = malloc((32 * ns + 1) * sizeof *out->idx);
-    out->size = malloc(8 * ns + 1);
-    out->parent = malloc((8 * ns + 1) * sizeof *out->parent);
+    out->idx = malloc((nids + 1) * sizeof *out->idx);
+    out->size = malloc(nout + 1);
+    out->parent = malloc((nout + 1) * sizeof *out->parent);
     if (!out->xyz || !out->split || !out->idx || !out->size || !out->parent)
         return false;
     memcpy(out->xyz, xyz, nv * 3 * sizeof *xyz);
@@ -271,39 +295,60 @@ static void emit_children(const ref *r, const uint32_t *idx, const uint8_t *size
 #undef EMIT
 
 sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
-                    size_t ns, const uint8_t *marked, const uint8_t *diag, sd_refinement *out,
-                    sd_error *err)
+                    size_t ns, const uint8_t *marked, const uint8_t *diag,
+                    const sd_refine_limits *lim, sd_refinement *out, sd_error *err)
 {
     memset(out, 0, sizeof *out);
     sd_mem mem;
-    sdi_mem_init(&mem, NULL, 0);
+    sdi_mem_init(&mem, lim ? lim->allocator : NULL, 0);
     ref r = {.m = &mem};
     sd_result rc = SD_OK;
-    for (size_t s = 0; s < ns; s++)
+    size_t least = 0; /* simplices at least: a marked one's red children, one for the others */
+    for (size_t s = 0; s < ns; s++) {
         if (size[s] < 1 || size[s] > 4)
             return sdi_fail(err, SD_ERR_ARITY, (long)s, -1, "simplex %zu has %d vertices", s, size[s]);
+        static const uint8_t RED[5] = {1, 1, 2, 4, 8};
+        least += marked[s] ? RED[size[s]] : 1;
+    }
+    if (lim && lim->max_simplices && least > lim->max_simplices) /* before any work */
+        return sdi_fail(err, SD_ERR_LIMIT, (long)least, 1, "the refined complex would have at "
+                        "least %zu simplices (at most %zu)", least, lim->max_simplices);
     if (!sdi_hash_init(&mem, &r.h, 6 * ns + 16))
         return sdi_fail_nomem(err, &mem);
-    r.eids = malloc((6 * ns + 1) * sizeof *r.eids);
-    r.split = calloc(6 * ns + 1, 1);
-    r.mid = malloc((6 * ns + 1) * sizeof *r.mid);
-    uint8_t *red = calloc(ns + 1, 1);
+    r.eids = sdi_alloc(&mem, (6 * ns + 1) * sizeof *r.eids);
+    r.split = sdi_calloc(&mem, 6 * ns + 1, 1);
+    r.mid = sdi_alloc(&mem, (6 * ns + 1) * sizeof *r.mid);
+    uint8_t *red = sdi_calloc(&mem, ns + 1, 1);
+    size_t nout, nids, nsplit = 0;
     if (!r.eids || !r.split || !r.mid || !red) {
-        rc = sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
+        rc = sdi_fail_nomem(err, &mem);
         goto done;
     }
     edge_ids(&r, idx, size, ns);
     closure(&r, size, ns, marked, red);
-    if (!new_vertices(&r, xyz, nv, ns, out)) {
+    count_children(&r, size, ns, &nout, &nids);
+    for (uint32_t e = 0; e < r.ne; e++)
+        nsplit += r.split[e];
+    if (lim && lim->max_vertices && nv + nsplit > lim->max_vertices) {
+        rc = sdi_fail(err, SD_ERR_LIMIT, (long)(nv + nsplit), 0, "the refined complex would have "
+                      "%zu vertices (at most %zu)", nv + nsplit, lim->max_vertices);
+        goto done;
+    }
+    if (lim && lim->max_simplices && nout > lim->max_simplices) {
+        rc = sdi_fail(err, SD_ERR_LIMIT, (long)nout, 1, "the refined complex would have %zu "
+                      "simplices (at most %zu)", nout, lim->max_simplices);
+        goto done;
+    }
+    if (!new_vertices(&r, xyz, nv, nout, nids, out)) {
         rc = sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
         goto done;
     }
     emit_children(&r, idx, size, ns, red, diag, out);
 done:
-    free(r.eids);
-    free(r.split);
-    free(r.mid);
-    free(red);
+    sdi_free(&mem, r.eids);
+    sdi_free(&mem, r.split);
+    sdi_free(&mem, r.mid);
+    sdi_free(&mem, red);
     sdi_hash_free(&mem, &r.h);
     if (rc)
         sd_refine_free(out);

@@ -577,10 +577,20 @@ typedef struct sd_refinement {
  * red cuts its octahedron along its diagonal: diag[s] (0..2, as sd_complex_diagonal gives it for
  * the posted vertex order; diag NULL: pair 0 for all). Untouched simplices keep their vertex
  * lists and order; new vertices follow the old ones, at edge midpoints (move them as you like).
- * Free the result with sd_refine_free (it uses the C library's allocator). */
+ * Free the result with sd_refine_free (it uses the C library's allocator).
+ * lim (NULL: none): the result's sizes are counted before it is allocated, and one past
+ * max_vertices or max_simplices (0: no limit) fails with SD_ERR_LIMIT, err->field 0 (vertices)
+ * or 1 (simplices) and err->item the count it would have (for simplices, when the marked ones'
+ * red children alone pass the limit, that lower bound, found before any work); the working arrays (edges, marks:
+ * about 100 bytes per input simplex) come from lim->allocator (NULL: the C library's), whose
+ * refusal is SD_ERR_NOMEM. */
+typedef struct sd_refine_limits {
+    size_t max_vertices, max_simplices;
+    const sd_allocator *allocator;
+} sd_refine_limits;
 sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uint8_t *size,
-                    size_t ns, const uint8_t *marked, const uint8_t *diag, sd_refinement *out,
-                    sd_error *err);
+                    size_t ns, const uint8_t *marked, const uint8_t *diag,
+                    const sd_refine_limits *lim, sd_refinement *out, sd_error *err);
 void sd_refine_free(sd_refinement *r);
 
 /* The tags and per-simplex rules of a complex, in the forms sd_complex_set_singular (idx, size,

@@ -28,7 +28,7 @@ TEST(carry_through_red_green)
     const uint8_t size[] = {3, 3}, marked[] = {1, 0};
     sd_refinement r;
     sd_error err;
-    CHECK(sd_refine(xyz, 4, idx, size, 2, marked, NULL, &r, &err) == SD_OK);
+    CHECK(sd_refine(xyz, 4, idx, size, 2, marked, NULL, NULL, &r, &err) == SD_OK);
     uint32_t m02 = mid_of(&r, 0, 2), m01 = mid_of(&r, 0, 1);
     CHECK(m02 != UINT32_MAX && m01 != UINT32_MAX && mid_of(&r, 2, 3) == UINT32_MAX);
 
@@ -90,7 +90,7 @@ TEST(carry_nothing)
     const uint8_t size[] = {3}, marked[] = {1};
     sd_refinement r;
     sd_error err;
-    CHECK(sd_refine(xyz, 3, idx, size, 1, marked, NULL, &r, &err) == SD_OK);
+    CHECK(sd_refine(xyz, 3, idx, size, 1, marked, NULL, NULL, &r, &err) == SD_OK);
     sd_tag_set in = {0}, out;
     CHECK(sd_refine_carry(&r, &in, &out, &err) == SD_OK);
     CHECK(out.ntags == 0 && out.npetals == 0 && out.noverrides == 0);

@@ -91,7 +91,7 @@ TEST(refine_random_selections_conform)
         for (int i = 0; i < k; i++)
             marked[rnd((uint32_t)m.ns)] = 1;
         sd_refinement r;
-        CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, &r, NULL) == SD_OK);
+        CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, NULL, &r, NULL) == SD_OK);
         CHECK(r.red >= (uint64_t)1 && r.nv == m.nv + r.nsplit);
         /* no simplex uses an edge that was split */
         size_t off = 0;
@@ -138,7 +138,7 @@ TEST(refine_mixed_patterns)
     uint8_t marked[16] = {0};
     marked[0] = 1; /* the tetrahedron */
     sd_refinement r;
-    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, &r, NULL) == SD_OK);
+    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, NULL, &r, NULL) == SD_OK);
     CHECK(r.nsplit == 6 && r.red == 1 && r.green == 1);
     size_t tets = 0, tris = 0;
     for (size_t s = 0; s < r.ns; s++) {
@@ -150,11 +150,76 @@ TEST(refine_mixed_patterns)
     memset(marked, 0, sizeof marked);
     for (size_t s = 0; s < m.ns; s++)
         marked[s] = m.sz[s] == 2;
-    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, &r, NULL) == SD_OK);
+    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, NULL, &r, NULL) == SD_OK);
     size_t segs = 0;
     for (size_t s = 0; s < r.ns; s++)
         segs += r.size[s] == 2;
     CHECK(segs == 4 && r.nsplit == 2);
     sd_refine_free(&r);
+    mesh_free(&m);
+}
+
+/* An allocator that counts its live bytes and refuses past `cap` (0: never). */
+typedef struct counted {
+    size_t live, peak, cap;
+} counted;
+static void *counted_alloc(size_t n, void *ud)
+{
+    counted *c = ud;
+    if (c->cap && c->live + n > c->cap)
+        return NULL;
+    c->live += n;
+    c->peak = c->live > c->peak ? c->live : c->peak;
+    return malloc(n);
+}
+static void counted_release(void *p, size_t n, void *ud)
+{
+    ((counted *)ud)->live -= n;
+    free(p);
+}
+
+TEST(refine_limits_before_the_result)
+{
+    /* a red tetrahedron makes 8 and 6 new vertices; a marked cube of 5 tetrahedra its children
+     * and its neighbours' greens: the limits at the exact counts pass with the same result, one
+     * below fails with SD_ERR_LIMIT naming what and how many; the working arrays come from the
+     * allocator given, all of them given back */
+    mesh m = {0};
+    shape_cube_tets(&m, 3);
+    uint8_t *marked = calloc(m.ns, 1);
+    marked[0] = marked[m.ns / 2] = 1;
+    sd_refinement a, b;
+    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, NULL, &a, NULL) == SD_OK);
+    CHECK(a.ns > m.ns + 14 && a.nv >= m.nv + 12);
+    counted cnt = {0};
+    sd_allocator al = {counted_alloc, counted_release, &cnt};
+    sd_refine_limits lim = {a.nv, a.ns, &al};
+    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, &lim, &b, NULL) == SD_OK);
+    CHECK(b.ns == a.ns && b.nv == a.nv && !memcmp(a.idx, b.idx, sizeof *a.idx * 4 * a.ns) &&
+          !memcmp(a.size, b.size, a.ns));
+    CHECK(cnt.live == 0 && cnt.peak >= 6 * m.ns * sizeof(uint32_t));
+    sd_refine_free(&b);
+    sd_error e = {0};
+    lim.max_simplices = a.ns - 1;
+    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, &lim, &b, &e) == SD_ERR_LIMIT);
+    CHECK(e.field == 1 && e.item == (long)a.ns && !b.idx && !b.xyz && cnt.live == 0);
+    lim.max_simplices = a.ns;
+    lim.max_vertices = a.nv - 1;
+    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, &lim, &b, &e) == SD_ERR_LIMIT);
+    CHECK(e.field == 0 && e.item == (long)a.nv && !b.idx && cnt.live == 0);
+    /* every simplex marked: its red children alone pass the limit, found before any work */
+    memset(marked, 1, m.ns);
+    lim.max_vertices = 0;
+    lim.max_simplices = 8 * m.ns - 1;
+    cnt.peak = 0;
+    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, &lim, &b, &e) == SD_ERR_LIMIT);
+    CHECK(e.field == 1 && e.item == (long)(8 * m.ns) && cnt.peak == 0);
+    /* the allocator's refusal of the working arrays */
+    lim.max_simplices = 0;
+    cnt.cap = 1024;
+    CHECK(sd_refine(m.xyz, m.nv, m.idx, m.sz, m.ns, marked, NULL, &lim, &b, &e) == SD_ERR_NOMEM);
+    CHECK(cnt.live == 0 && !b.idx);
+    sd_refine_free(&a);
+    free(marked);
     mesh_free(&m);
 }

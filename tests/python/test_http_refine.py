@@ -402,3 +402,45 @@ def test_a_placement_that_folds_the_complex_is_refused(daemon):
         else:
             level1_positive(s)
         s.delete()
+
+
+def edges_of(simplices):
+    return {tuple(sorted((t[a], t[b]))) for t in simplices for a in range(len(t))
+            for b in range(a + 1, len(t))}
+
+
+@pytest.mark.parametrize("limit,depth,requested,name", [
+    ({"--max-simplices": 20000}, 3, 48 * 8 ** 3, "max_simplices"),   # step 3: 8 x step 2's
+    ({"--max-simplices": 20000}, 2, 48 * 8 ** 2, None),               # within it
+    ({"--max-vertices": None}, 2, None, "max_vertices"),
+])
+def test_refine_limits_are_counted_before_the_result(daemon, limit, depth, requested, name):
+    """POST /refine of every tetrahedron of a 2^3 Kuhn block (48) to a depth: the result's size
+    is counted before it is made (the marked tetrahedra's red children alone at once), so a step
+    past --max-simplices or --max-vertices is a 413 naming that limit with the count, and the
+    session is as it was. Every simplex split red splits every edge: step 2 has the vertices
+    and the edges of step 1's complex, counted here from a refinement of depth 1."""
+    box = {"select": {"box": {"min": [-1, -1, -1], "max": [3, 3, 3]}}, "positions": "midpoint"}
+    if name == "max_vertices":
+        one = Session(daemon)
+        assert one.put_complex(kuhn_block(2)).status_code == 200
+        assert one.req("POST", "/refine", json=box).status_code == 200
+        c = one.req("GET", "/complex").json()
+        requested = len(c["vertices"]) + len(edges_of(c["simplices"]))
+        limit = {"--max-vertices": requested - 1}
+    d = Daemon(*[str(x) for kv in limit.items() for x in kv])
+    try:
+        s = Session(d)
+        assert s.put_complex(kuhn_block(2)).status_code == 200
+        r = s.req("POST", "/refine", json=dict(box, depth=depth))
+        if name is None:
+            assert r.status_code == 200, r.text
+            assert len(s.req("GET", "/complex").json()["simplices"]) == requested
+            return
+        assert r.status_code == 413, r.text
+        j = r.json()
+        assert (j["limit_name"], j["limit"], j["requested"]) == \
+            (name, next(iter(limit.values())), requested), j
+        assert s.req("GET").json()["version"] == 1
+    finally:
+        d.stop()
