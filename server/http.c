@@ -443,6 +443,27 @@ static int reserve_body(req *r, size_t n)
     return 0;
 }
 
+/* MHD_get_connection_values iterator: counts the Content-Length headers and whether any differs
+ * from the first. */
+typedef struct lengths {
+    int n;
+    bool differ;
+    const char *first;
+} lengths;
+static enum MHD_Result count_length(void *cls, enum MHD_ValueKind kind, const char *key,
+                                    const char *value)
+{
+    lengths *l = cls;
+    (void)kind;
+    if (key && !strcasecmp(key, MHD_HTTP_HEADER_CONTENT_LENGTH)) {
+        if (l->n++ == 0)
+            l->first = value;
+        else if (!value || !l->first || strcmp(value, l->first))
+            l->differ = true;
+    }
+    return MHD_YES;
+}
+
 /* What can be said of the body before reading it: a transfer coding MHD can frame (501), a
  * Content-Length within max_body_bytes (413, before anything is allocated), no body where the
  * route takes none (400), JSON where it takes one (415). 1 when a response was queued. */
@@ -456,6 +477,15 @@ static int early_body(req *r)
         http_fail(r, 501, "unsupported-transfer-encoding",
                   "Transfer-Encoding \"%.40s\" is not supported; send the body with Content-Length "
                   "or chunked", te0);
+        return 1;
+    }
+    /* two Content-Length values that differ leave the body's end in doubt (RFC 9112 6.3: an
+     * unrecoverable framing error; a proxy in front may have read the other one) */
+    lengths ls = {0};
+    MHD_get_connection_values(r->conn, MHD_HEADER_KIND, count_length, &ls);
+    if (ls.differ) {
+        http_fail(r, 400, "bad-framing", "the request has %d Content-Length headers that differ; "
+                  "send one", ls.n);
         return 1;
     }
     /* with Transfer-Encoding: chunked libmicrohttpd frames the body by the chunks and ignores

@@ -735,3 +735,36 @@ def test_chunked_body_with_content_length_zero_needs_json(daemon):
         out += c
     k.close()
     assert out.startswith(b"HTTP/1.1 415"), out[:200]
+
+
+def test_content_lengths_that_differ_are_refused(daemon):
+    """Two Content-Length headers that differ (RFC 9112 6.3, a request-smuggling shape behind a
+    proxy): 400 bad-framing and the connection closed, the session unchanged; the same length
+    twice is one length."""
+    s = Session(daemon)
+    body = json.dumps({"vertices": CUBE_V, "simplices": CUBE_S}).encode()
+
+    def put(lengths):
+        k = raw_socket(daemon)
+        k.settimeout(10)
+        k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
+                   f"Authorization: Bearer {s.token}\r\nContent-Type: application/json\r\n"
+                   + "".join(f"Content-Length: {n}\r\n" for n in lengths) + "\r\n").encode()
+                  + body)
+        out = b""
+        try:
+            while True:
+                c = k.recv(65536)
+                if not c:
+                    return out, True        # closed by the daemon
+                out += c
+                if out.startswith(b"HTTP/1.1 200") and out.endswith(b"}"):
+                    return out, False
+        finally:
+            k.close()
+    out, closed = put([len(body), 5])
+    assert out.startswith(b"HTTP/1.1 400") and b"/errors/bad-framing" in out and closed, out[:300]
+    assert s.req("GET").json()["version"] == 0
+    out, closed = put([len(body), len(body)])
+    assert out.startswith(b"HTTP/1.1 200"), out[:300]
+    assert s.req("GET").json()["version"] == 1
