@@ -115,6 +115,9 @@ int api_parse_parts(const char *text, unsigned *parts, api_problem *p)
             return api_fail_at(p, 422, "unknown-value", "parts",
                                "parts: \"%.20s\" is not one of points, curves, surfaces, solids, "
                                "embedded", item);
+        if (*parts & (1u << k)) /* as attributes= and its repeated names */
+            return api_fail_at(p, 422, "unknown-value", "parts", "parts: \"%s\" is named twice",
+                               names[k]);
         *parts |= 1u << k; /* 1 << 4 is OUT_PART_EMBEDDED */
     }
     if (!*parts)

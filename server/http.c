@@ -28,6 +28,7 @@
 #include "guard.h"
 #include "metrics.h"
 #include <arpa/inet.h>
+#include <ctype.h>
 #include <errno.h>
 #include <microhttpd.h>
 #include <poll.h>
@@ -344,7 +345,8 @@ static int early_match(req *r)
         r->route_name = "static";
         if (strcmp(m, "GET") && strcmp(m, "HEAD") && strcmp(m, "OPTIONS")) {
             api_problem p = {0};
-            api_fail(&p, 405, "method-not-allowed", "%s is not allowed on %.100s", m, r->path);
+            api_fail(&p, 405, "method-not-allowed", "%s is not allowed on %.100s", r->method_sent,
+                     r->path);
             method_not_allowed(r, &p, "GET, HEAD");
             return 1;
         }
@@ -366,8 +368,8 @@ static int early_match(req *r)
     if (!r->rt) {
         r->route_name = route_name_of(r->path, r);
         api_problem p = {0};
-        api_fail(&p, 405, "method-not-allowed", "%s is not allowed on %.100s (allowed: %s)", m,
-                 r->path, allow);
+        api_fail(&p, 405, "method-not-allowed", "%s is not allowed on %.100s (allowed: %s)",
+                 r->method_sent, r->path, allow);
         method_not_allowed(r, &p, allow);
         return 1;
     }
@@ -589,6 +591,12 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
     if (!r->started) { /* the first call: headers complete, no body read yet */
         r->started = 1;
         r->method = intern_method(method);
+        size_t k = 0; /* RFC 9110 token characters only: the detail is JSON and the method free */
+        const char *c = method;
+        for (; *c && k < 20; c++)
+            if (isalnum((unsigned char)*c) || strchr("!#$%&'*+-.^_`|~", *c))
+                r->method_sent[k++] = *c;
+        strcpy(r->method_sent + k, *c ? "..." : "");
         snprintf(r->path, sizeof r->path, "%s", url);
         r->gk = guard_conn_of(r->conn);
         /* an answer queued now makes libmicrohttpd discard any body and close */

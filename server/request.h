@@ -45,7 +45,8 @@ struct req {
     server *srv;
     struct MHD_Connection *conn;
     struct guard_conn *gk;            /* the connection's record in the guard (or NULL) */
-    const char *method;
+    const char *method;               /* one of the known methods or "OTHER" (metrics, logs) */
+    char method_sent[24];             /* the method as sent (token characters, cut at 20): 405s */
     char path[API_MAX_PATH_BYTES];   /* decoded, without the query; longer is a 414 */
     char *query;                      /* the raw query (api_malloc), decoded into params */
     parse_param params[API_MAX_QUERY_PARAMS];

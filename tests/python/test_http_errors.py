@@ -206,6 +206,7 @@ def test_slice_normal_of_any_magnitude(daemon):
 LEVEL_OPTION_CASES = [
     ({"parts": "volumes"}, "parts"),
     ({"parts": ""}, "parts"),
+    ({"parts": "points,points"}, "parts"),
     ({"slice": "1,2,3"}, "slice"),
     ({"slice": "0,0,0,1"}, "slice"),
     ({"slice": "nan,0,1,0"}, "slice"),
@@ -285,6 +286,11 @@ def test_paths_and_methods(daemon):
     assert "POST" in r.headers["Allow"]
     check_problem(requests.put(daemon.url + "/healthz"), 405, None)
     check_problem(requests.post(daemon.url + "/", data=b"x"), 405, None)
+    # the detail names the method sent, an unknown one too (its token characters, cut at 20)
+    for method, said in (("FOO", "FOO"), ("TRACE", "TRACE"), ("X" * 30, "X" * 20 + "...")):
+        r = requests.request(method, daemon.url + "/v1/sessions")
+        check_problem(r, 405, None)
+        assert r.json()["detail"].startswith(said + " is not allowed on /v1/sessions"), r.text
 
 
 def raw(daemon, request_bytes):
