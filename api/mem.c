@@ -86,8 +86,14 @@ static bool within_budget(atomic_size_t *on, size_t n)
         if (tries == 0 && keep_give_way())
             continue;
         atomic_fetch_add_explicit(&budget_refusals, 1, memory_order_relaxed);
-        if (meter)
+        if (meter) {
             meter->over_budget++;
+            /* what the request holds and asked for passes the whole budget: waiting for others
+             * to give some back cannot help */
+            uint64_t need = (uint64_t)(meter->net > 0 ? meter->net : 0) + n;
+            if (need > budget && need > meter->beyond)
+                meter->beyond = need;
+        }
         return false;
     }
 }

@@ -123,11 +123,20 @@ void http_reply_json(req *r, int status, json_t *body, uint64_t version)
 }
 
 /* Memory the budget refused during the request (api/mem.h) is not the machine's: the request
- * may succeed once others give some back, so say so (memory-budget, with Retry-After). */
+ * may succeed once others give some back, so say so (memory-budget, with Retry-After) — unless
+ * what it held and asked for passed the whole budget, which no retry changes (413 naming
+ * max_memory). */
 static const api_problem *budget_problem(req *r, const api_problem *p, api_problem *q)
 {
     if (p->status != 503 || !p->slug || strcmp(p->slug, "out-of-memory") || !r->mem.over_budget)
         return p;
+    if (r->mem.beyond) {
+        api_fail_limit(q, "max_memory", api_mem_budget(), r->mem.beyond,
+                       "the request needs over %llu bytes, more than the daemon's memory budget "
+                       "(--max-memory, %zu bytes) holds; send less or raise --max-memory",
+                       (unsigned long long)r->mem.beyond, api_mem_budget());
+        return q;
+    }
     api_fail(q, 503, "memory-budget", "the daemon's memory budget (--max-memory, %zu bytes) is in "
              "use by other requests and sessions; retry later (%s)", api_mem_budget(), p->detail);
     q->retry_after = 2;
@@ -155,8 +164,10 @@ struct MHD_Response *http_problem_response(req *r, const api_problem *p0)
     return resp;
 }
 
-void http_reply_problem(req *r, const api_problem *p)
+void http_reply_problem(req *r, const api_problem *p0)
 {
+    api_problem q = {0};
+    const api_problem *p = budget_problem(r, p0, &q); /* its status is the answer's */
     http_queue(r, p->status ? p->status : 500, http_problem_response(r, p));
 }
 

@@ -768,3 +768,24 @@ def test_content_lengths_that_differ_are_refused(daemon):
     out, closed = put([len(body), len(body)])
     assert out.startswith(b"HTTP/1.1 200"), out[:300]
     assert s.req("GET").json()["version"] == 1
+
+
+def test_a_request_larger_than_the_whole_budget_is_a_413():
+    """A body that only the tree parse can read (a vertex that is a string) of 2 M vertices needs
+    more than a 400 MB budget on its own: 413 naming max_memory with what it needed (no
+    Retry-After: waiting cannot help), where it was a 503 memory-budget asking to retry; a
+    request that fits is served after it."""
+    d = Daemon("--max-memory", str(400_000_000))
+    try:
+        s = Session(d)
+        n = 2_000_000
+        body = '{"vertices":[' + ",".join(["[0.123456,0.234567,0.345678]"] * n) + ',"x"],' \
+               '"simplices":[[0,1]]}'
+        r = s.req("PUT", "/complex", data=body.encode(), headers={"Content-Type": "application/json"})
+        assert r.status_code == 413, r.text[:300]
+        j = r.json()
+        assert j["limit_name"] == "max_memory" and j["limit"] == 400_000_000, j
+        assert j["requested"] > j["limit"] and "Retry-After" not in r.headers
+        assert s.put_complex({"vertices": CUBE_V, "simplices": CUBE_S}).status_code == 200
+    finally:
+        d.stop()
