@@ -58,6 +58,9 @@ static const setting S[] = {
      "core memory per session (default 4 GiB)"},
     {"max-memory", T_U64, OFF(max_memory), 16LL << 20, 1LL << 50,
      "memory budget of all requests and sessions, bytes (default 3/4 of RAM or cgroup limit)"},
+    {"max-client-body-bytes", T_U64, OFF(max_client_body_bytes), 0, 1LL << 50,
+     "bytes of request bodies one client address may hold while they arrive (default: a "
+     "quarter of --max-memory, at least --max-body-bytes; 0: no cap; 429 beyond)"},
     {"keep-memory", T_U64, OFF(keep_memory), 0, 1LL << 50,
      "bytes of freed level arrays kept about a second for the next build, within --max-memory "
      "(default: an eighth of it, at most 1 GiB; 0: none)"},
@@ -206,6 +209,7 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     strcpy(c->store, "memory");
     c->max_memory = default_max_memory();
     c->keep_memory = UINT64_MAX; /* an eighth of --max-memory, at most 1 GiB, unless given */
+    c->max_client_body_bytes = UINT64_MAX; /* a quarter of --max-memory, unless given */
     c->limits = api_default_limits();
     *exit_code = 2;
     for (size_t i = 0; i < NS; i++) {
@@ -259,6 +263,11 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
         c->connection_reserve = c->max_connections / 2;
     if (c->ttl_s > c->max_ttl_s)
         c->ttl_s = c->max_ttl_s;
+    if (c->max_client_body_bytes == UINT64_MAX) {
+        c->max_client_body_bytes = c->max_memory / 4;
+        if (c->max_client_body_bytes <= c->limits.max_body_bytes) /* one largest body always */
+            c->max_client_body_bytes = c->limits.max_body_bytes + 1;
+    }
     if (c->keep_memory == UINT64_MAX)
         c->keep_memory = c->max_memory / 8 < (1ULL << 30) ? c->max_memory / 8 : 1ULL << 30;
     if (c->keep_memory > c->max_memory / 2)

@@ -32,6 +32,8 @@ typedef struct config {
     char store[512];          /* the durable session store: memory | sqlite:PATH | redis://HOST:PORT */
     int sync_full;            /* --sync full: fsync every commit of the store (power loss) */
     uint64_t max_memory;      /* the memory budget of every request (api/mem.h), bytes */
+    uint64_t max_client_body_bytes; /* bodies one client address may hold while they arrive
+                                     * (server/holds.h; 0: no cap) */
     api_limits limits;
 } config;
 

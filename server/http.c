@@ -26,6 +26,7 @@
 #include "../api/handlers.h"
 #include "events.h"
 #include "guard.h"
+#include "holds.h"
 #include "metrics.h"
 #include <arpa/inet.h>
 #include <ctype.h>
@@ -85,6 +86,8 @@ void http_req_unref(req *r)
         return;
     api_mem_meter *prev = api_mem_meter_set(&r->mem);
     session_unref(r->s);
+    if (r->held)
+        holds_give(r->srv->bodies, &r->client, r->held);
     api_free(r->body);
     api_free(r->query);
     api_mem_meter_set(prev);
@@ -433,8 +436,35 @@ static int early_auth(req *r)
 /* The whole buffer of a body whose Content-Length is known, taken before it is read: one block
  * of the exact size (no doubling), and a body that does not fit the memory budget is refused
  * before a byte of it arrives. 1 when a response was queued. */
+/* Hold n more body bytes for the request's client (holds.h): false past its cap. */
+static bool hold_body(req *r, size_t n)
+{
+    if (!r->held)
+        r->client = rate_key_of(http_client_address(r));
+    if (!holds_take(r->srv->bodies, &r->client, n))
+        return false;
+    r->held += n;
+    return true;
+}
+
+/* 429: the client's bodies in flight hold --max-client-body-bytes. */
+static void client_bodies_full(req *r, size_t n)
+{
+    api_problem p = {0};
+    p.retry_after = 5;
+    api_fail(&p, 429, "client-bodies", "this client's request bodies being sent already hold "
+             "about %zu bytes, and %zu more would pass --max-client-body-bytes (%zu); send fewer "
+             "at once or retry when they are done", holds_held(r->srv->bodies, &r->client), n,
+             holds_cap(r->srv->bodies));
+    http_reply_problem(r, &p);
+}
+
 static int reserve_body(req *r, size_t n)
 {
+    if (!hold_body(r, n + 1)) {
+        client_bodies_full(r, n + 1);
+        return 1;
+    }
     r->body = api_malloc(n + 1);
     if (!r->body) {
         http_fail(r, 503, "out-of-memory", "no memory for a body of %zu bytes; retry later", n);
@@ -615,12 +645,16 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
         *upload_size = 0;
         if (r->len + n > srv->cfg.limits.max_body_bytes) /* chunked: Content-Length was checked */
             return refuse_body_now(r);
-        if (r->too_big)
+        if (r->too_big || r->client_full)
             return MHD_YES;
         if (r->len + n + 1 > r->cap) {
             size_t cap = r->cap ? r->cap : 4096;
             while (cap < r->len + n + 1)
                 cap *= 2;
+            if (!hold_body(r, cap - r->cap)) { /* discard the rest, answer 429 at the end */
+                r->client_full = 1;
+                return MHD_YES;
+            }
             char *b = api_realloc(r->body, cap);
             if (!b) { /* discard the rest, answer 503 at the end */
                 r->too_big = 1;
@@ -635,6 +669,10 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
         return MHD_YES;
     }
     guard_request_work(srv->guard, r->gk); /* the body is complete */
+    if (r->client_full) {
+        client_bodies_full(r, r->len);
+        return MHD_YES;
+    }
     if (r->too_big) {
         api_problem p = {0};
         p.retry_after = 5;

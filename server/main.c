@@ -11,6 +11,7 @@
 #include "../api/mem.h"
 #include "../api/jsonin.h"
 #include "metrics.h"
+#include "holds.h"
 #include "probe.h"
 #include "rate.h"
 #include "server.h"
@@ -450,7 +451,8 @@ int main(int argc, char **argv)
     srv.st = store_new(srv.cfg.max_sessions, srv.persist, &srv.cfg.limits);
     srv.session_rate = rate_new(srv.cfg.session_rate, srv.cfg.session_rate, API_RATE_CLIENTS);
     srv.compute = slots_new(srv.cfg.threads);
-    if (!srv.st || !srv.session_rate || !srv.compute) {
+    srv.bodies = holds_new((size_t)srv.cfg.max_client_body_bytes, (size_t)srv.cfg.max_connections + 1);
+    if (!srv.st || !srv.session_rate || !srv.compute || !srv.bodies) {
         fprintf(stderr, "subdivd: out of memory\n");
         return 1;
     }
@@ -501,6 +503,7 @@ int main(int argc, char **argv)
     store_free(srv.st);
     persist_close(srv.persist);
     rate_free(srv.session_rate);
+    holds_free(srv.bodies);
     slots_free(srv.compute);
     log_line(&srv, LOG_INFO, "stopped");
     return 0;

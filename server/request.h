@@ -13,6 +13,7 @@
 
 #include "server.h"
 #include "parse.h"
+#include "rate.h"
 #include "../api/limits.h"
 #include "../api/mem.h"
 #include "../api/out.h"
@@ -60,6 +61,9 @@ struct req {
     char *body;
     size_t len, cap;
     int too_big;              /* the body could not be kept (out of memory): refused at its end */
+    int client_full;          /* it would pass --max-client-body-bytes: 429 at its end */
+    size_t held;              /* body bytes held for the client (server/holds.h) */
+    rate_key client;          /* the client's key, set when `held` first grows */
     int answered_raw;         /* answered on the socket itself (a chunked body over the limit) */
     double t0;
     session *s;

@@ -16,6 +16,7 @@ typedef struct server {
     store *st;
     persist *persist;         /* the durable session store (persist.h) */
     struct rate *session_rate; /* session creations per client (rate.h) */
+    struct holds *bodies;     /* body bytes held per client (holds.h) */
     slots *compute;           /* cfg.threads slots for computations, fair between sessions */
     atomic_int draining;      /* /readyz answers 503 while starting or stopping */
     struct MHD_Daemon *mhd;

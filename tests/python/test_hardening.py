@@ -789,3 +789,58 @@ def test_a_request_larger_than_the_whole_budget_is_a_413():
         assert s.put_complex({"vertices": CUBE_V, "simplices": CUBE_S}).status_code == 200
     finally:
         d.stop()
+
+
+def test_one_client_cannot_hold_the_budget_with_slow_bodies():
+    """--max-client-body-bytes: bodies one address is sending hold at most that much. Two slow
+    bodies of 400 kB from 127.0.0.2 fit a cap of 1 MB, a third is 429 client-bodies at once
+    (Retry-After), while 127.0.0.3 still sends its own; once the first is complete, 127.0.0.2
+    may send another. The held bytes follow the bodies (nothing is left held after them)."""
+    d = Daemon("--max-client-body-bytes", "1000000", "--body-min-rate", "0")
+    try:
+        s = Session(d)
+        body = json.dumps({"vertices": CUBE_V, "simplices": CUBE_S}).encode()
+        body = body[:-1] + b" " * (400_000 - len(body)) + b"}"
+
+        def start(src):
+            k = raw_socket(d, src, timeout=10)
+            k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
+                       f"Authorization: Bearer {s.token}\r\nContent-Type: application/json\r\n"
+                       f"Content-Length: {len(body)}\r\n\r\n").encode() + body[:1000])
+            return k
+
+        def answer(k):
+            out = b""
+            while b"\r\n\r\n" not in out:
+                c = k.recv(65536)
+                if not c:
+                    break
+                out += c
+            return out
+        a, b = start("127.0.0.2"), start("127.0.0.2")
+        time.sleep(0.3)                      # both bodies' buffers are held
+        c = start("127.0.0.2")
+        got = b""
+        while True:                          # answered at once, and closed
+            part = c.recv(65536)
+            if not part:
+                break
+            got += part
+        assert got.startswith(b"HTTP/1.1 429") and b"Retry-After: 5" in got, got[:300]
+        assert b"/errors/client-bodies" in got, got
+        c.close()
+        other = start("127.0.0.3")           # another address is not held back
+        other.sendall(body[1000:])
+        assert answer(other).startswith(b"HTTP/1.1 200")
+        other.close()
+        a.sendall(body[1000:])               # the first body completes: its bytes come back
+        assert answer(a).startswith(b"HTTP/1.1 200")
+        a.close()
+        time.sleep(0.3)
+        e = start("127.0.0.2")
+        e.sendall(body[1000:])
+        assert answer(e).startswith(b"HTTP/1.1 200")
+        e.close()
+        b.close()
+    finally:
+        d.stop()
