@@ -384,7 +384,13 @@ static int parse_query(const api_model *m, const api_delta_query *q, uint64_t *s
         attrs[(*nattrs)++] = k;
         a = e ? e + 1 : a + n;
     }
-    return api_parse_parts(q->parts, parts, p);
+    if (api_parse_parts(q->parts, parts, p))
+        return p->status;
+    *parts &= OUT_PART_ALL; /* the GLB's embedded models have deltas of their own */
+    if (!*parts)
+        return api_fail_at(p, 422, "unknown-value", "parts", "parts: name at least one part of "
+                           "the level (an embedded model's delta: GET .../embedded/{name}/delta)");
+    return 0;
 }
 
 int api_delta_check(const api_model *m, const api_delta_query *q, api_problem *p)

@@ -116,7 +116,7 @@ int api_parse_parts(const char *text, unsigned *parts, api_problem *p)
                                "parts: \"%.20s\" is not one of points, curves, surfaces, solids, "
                                "embedded", item);
         if (*parts & (1u << k)) /* as attributes= and its repeated names */
-            return api_fail_at(p, 422, "unknown-value", "parts", "parts: \"%s\" is named twice",
+            return api_fail_at(p, 422, "repeated-part", "parts", "parts: \"%s\" is named twice",
                                names[k]);
         *parts |= 1u << k; /* 1 << 4 is OUT_PART_EMBEDDED */
     }
@@ -294,6 +294,9 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
     if (parse_query(m, q, &rq, fmt, p) || api_check_level_limits(m, level, lim, p) ||
         api_level_compute(m, level, slot, p))
         return p->status;
+    bool drawn = rq.parts & OUT_PART_ALL; /* parts=embedded alone writes nothing of the level */
+    if (!drawn)
+        rq.limit = false;
     if (rq.limit) {
         /* limits are read at the limit level (offsets, sharpness, solids: core/limit.c), which
          * is computed like any level the client asks for */
@@ -305,7 +308,7 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
     }
     rq.complex = m->c;
     rq.level = level;
-    rq.snapshot = true;
+    rq.snapshot = drawn;
     sd_error e = {0};
     /* under the lock that edits take: the points, the channels, the normals, the embedded
      * models and the version are of one moment; then the stream holds no lock while the client
@@ -315,7 +318,7 @@ int api_level_open(api_model *m, int level, const api_level_query *q, const api_
     pthread_mutex_lock(&m->lock);
     if (api_model_level_locked(m, level, &e) &&
         (!(rq.parts & OUT_PART_EMBEDDED) || embedded_meshes(m, mesh, &rq, &e))) {
-        if ((*fmt)->geometry && !rq.limit)
+        if ((*fmt)->geometry && !rq.limit && drawn)
             rq.geometry = api_model_geometry_locked(m, level);
         rq.version = atomic_load(&m->version);
         *out = out_open(&rq, *fmt, &e);

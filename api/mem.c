@@ -90,7 +90,8 @@ static bool within_budget(atomic_size_t *on, size_t n)
             meter->over_budget++;
             /* what the request holds and asked for passes the whole budget: waiting for others
              * to give some back cannot help */
-            uint64_t need = (uint64_t)(meter->net > 0 ? meter->net : 0) + n;
+            uint64_t need = (uint64_t)(meter->net > 0 ? meter->net : 0) +
+                            (uint64_t)(meter->held_elsewhere > 0 ? meter->held_elsewhere : 0) + n;
             if (need > budget && need > meter->beyond)
                 meter->beyond = need;
         }
@@ -348,16 +349,20 @@ bool api_mem_reserve(size_t n)
         refused_here++;
         return false;
     }
-    if (meter)
+    if (meter) {
         meter->moved += n;
+        meter->held_elsewhere += (int64_t)n;
+    }
     return true;
 }
 
 void api_mem_unreserve(size_t n)
 {
     atomic_fetch_sub_explicit(&elsewhere, n, memory_order_relaxed);
-    if (meter)
+    if (meter) {
         meter->moved += n;
+        meter->held_elsewhere -= (int64_t)n;
+    }
 }
 
 /* The core's blocks from the C library, reserved in the budget. */
@@ -592,8 +597,10 @@ static void *core_alloc(size_t n, void *ud)
     size_t cap = keep_class(n);
     bool fresh;
     void *p = class_block(cap, &elsewhere, n, &fresh);
-    if (p && meter)
+    if (p && meter) {
         meter->moved += cap;
+        meter->held_elsewhere += (int64_t)cap;
+    }
     return p;
 }
 
@@ -604,8 +611,10 @@ static void core_release(void *p, size_t n, void *ud)
         return;
     }
     size_t cap = keep_class(n);
-    if (meter)
+    if (meter) {
         meter->moved += cap;
+        meter->held_elsewhere -= (int64_t)cap;
+    }
     class_release(p, cap, &elsewhere);
 }
 

@@ -58,8 +58,11 @@ typedef struct api_mem_meter {
     uint64_t limit;     /* > 0: an allocation that would take `net` above it fails */
     uint64_t refused;   /* allocations the limit refused */
     uint64_t over_budget; /* allocations and reservations the memory budget refused */
-    uint64_t beyond;    /* the largest of those refused where the thread's own net plus the
-                         * request passed the whole budget (bytes: what it needed), else 0 */
+    int64_t held_elsewhere; /* core blocks and reservations taken minus given back (can go
+                         * below 0 when older ones are given back) */
+    uint64_t beyond;    /* the largest of those refused where the thread's own api and core
+                         * blocks and reservations plus the request passed the whole budget
+                         * (bytes: what it needed), else 0 */
     uint64_t moved;     /* bytes taken and given back in all, core blocks and reservations too */
 } api_mem_meter;
 

@@ -17,6 +17,7 @@
  * (one per split edge, placed at the midpoint — the caller may move them) follow the old ones.
  */
 #include "hash.h"
+#include <assert.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -344,6 +345,7 @@ sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uin
         goto done;
     }
     emit_children(&r, idx, size, ns, red, diag, out);
+    assert(out->ns == nout); /* count_children and emit_children agree: the arrays are exact */
 done:
     sdi_free(&mem, r.eids);
     sdi_free(&mem, r.split);

@@ -433,9 +433,6 @@ static int early_auth(req *r)
     return 1;
 }
 
-/* The whole buffer of a body whose Content-Length is known, taken before it is read: one block
- * of the exact size (no doubling), and a body that does not fit the memory budget is refused
- * before a byte of it arrives. 1 when a response was queued. */
 /* Hold n more body bytes for the request's client (holds.h): false past its cap. */
 static bool hold_body(req *r, size_t n)
 {
@@ -447,18 +444,29 @@ static bool hold_body(req *r, size_t n)
     return true;
 }
 
-/* 429: the client's bodies in flight hold --max-client-body-bytes. */
+/* A body of n bytes (its buffer) does not fit the client's --max-client-body-bytes: 413 when it
+ * alone passes it (waiting cannot help), else 429 (the client's other bodies hold the rest). */
 static void client_bodies_full(req *r, size_t n)
 {
     api_problem p = {0};
+    size_t cap = holds_cap(r->srv->bodies);
+    if (n > cap) {
+        api_fail_limit(&p, "max_client_body_bytes", cap, n, "a body of %zu bytes is more than "
+                       "one client may send at once (--max-client-body-bytes %zu)", n, cap);
+        http_reply_problem(r, &p);
+        return;
+    }
     p.retry_after = 5;
-    api_fail(&p, 429, "client-bodies", "this client's request bodies being sent already hold "
-             "about %zu bytes, and %zu more would pass --max-client-body-bytes (%zu); send fewer "
-             "at once or retry when they are done", holds_held(r->srv->bodies, &r->client), n,
-             holds_cap(r->srv->bodies));
+    size_t mine = r->held, all = holds_held(r->srv->bodies, &r->client);
+    api_fail(&p, 429, "client-bodies", "this client's other request bodies being sent hold about "
+             "%zu bytes, and this one's %zu would pass --max-client-body-bytes (%zu); send fewer "
+             "at once or retry when they are done", all - (mine < all ? mine : all), n, cap);
     http_reply_problem(r, &p);
 }
 
+/* The whole buffer of a body whose Content-Length is known, taken before it is read: one block
+ * of the exact size (no doubling), and a body that does not fit the memory budget is refused
+ * before a byte of it arrives. 1 when a response was queued. */
 static int reserve_body(req *r, size_t n)
 {
     if (!hold_body(r, n + 1)) {
@@ -643,15 +651,18 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
     if (*upload_size) {
         size_t n = *upload_size;
         *upload_size = 0;
-        if (r->len + n > srv->cfg.limits.max_body_bytes) /* chunked: Content-Length was checked */
+        /* chunked: Content-Length was checked; bytes discarded below count too */
+        if (r->received + n > srv->cfg.limits.max_body_bytes)
             return refuse_body_now(r);
+        r->received += n;
         if (r->too_big || r->client_full)
             return MHD_YES;
         if (r->len + n + 1 > r->cap) {
-            size_t cap = r->cap ? r->cap : 4096;
+            size_t cap = r->cap ? r->cap : 4096, most = srv->cfg.limits.max_body_bytes + 1;
             while (cap < r->len + n + 1)
                 cap *= 2;
-            if (!hold_body(r, cap - r->cap)) { /* discard the rest, answer 429 at the end */
+            cap = cap < most ? cap : most; /* r->len + n + 1 <= most (checked above) */
+            if (!hold_body(r, cap - r->cap)) { /* discard the rest, answer at the end */
                 r->client_full = 1;
                 return MHD_YES;
             }
@@ -670,7 +681,7 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
     }
     guard_request_work(srv->guard, r->gk); /* the body is complete */
     if (r->client_full) {
-        client_bodies_full(r, r->len);
+        client_bodies_full(r, r->received + 1);
         return MHD_YES;
     }
     if (r->too_big) {

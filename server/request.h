@@ -61,7 +61,8 @@ struct req {
     char *body;
     size_t len, cap;
     int too_big;              /* the body could not be kept (out of memory): refused at its end */
-    int client_full;          /* it would pass --max-client-body-bytes: 429 at its end */
+    int client_full;          /* it would pass --max-client-body-bytes: refused at its end */
+    size_t received;          /* body bytes received, kept or discarded */
     size_t held;              /* body bytes held for the client (server/holds.h) */
     rate_key client;          /* the client's key, set when `held` first grows */
     int answered_raw;         /* answered on the socket itself (a chunked body over the limit) */

@@ -480,3 +480,14 @@ def test_level_glb_with_parts_embedded(daemon, tmp_path):
         assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "parts", r.text
     r = s.level(2, parts="solids,embedded,models")
     assert r.status_code == 422 and "embedded" in r.json()["detail"]
+    r = s.level(2, parts="solids,embedded,embedded")
+    assert r.status_code == 422 and r.json()["type"].endswith("/repeated-part"), r.text
+    # a level delta with embedded in parts= is that of the level's parts named; embedded alone
+    # names none of them (a model's delta is its own)
+    since = v
+    d1 = s.req("GET", "/levels/2/delta", params={"since": since, "format": "json", "parts": "solids"})
+    d2 = s.req("GET", "/levels/2/delta", params={"since": since, "format": "json",
+                                                 "parts": "solids,embedded"})
+    assert d1.status_code == 200 and d1.json()["indices"] and d1.content == d2.content
+    r = s.req("GET", "/levels/2/delta", params={"since": since, "parts": "embedded"})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "parts", r.text

@@ -844,3 +844,59 @@ def test_one_client_cannot_hold_the_budget_with_slow_bodies():
         b.close()
     finally:
         d.stop()
+
+
+def test_client_body_cap_with_chunked_and_single_bodies():
+    """--max-client-body-bytes with chunked bodies: the buffer grows to --max-body-bytes + 1 at
+    most, so a chunked body within --max-body-bytes fits a cap of that size (it held its doubled
+    buffer: 429); a chunked body refused by the cap still counts against --max-body-bytes (413
+    once past it, not after reading it all); a body alone larger than the cap is 413
+    max_client_body_bytes (waiting cannot help), not 429."""
+    d = Daemon("--max-body-bytes", "3000000", "--max-client-body-bytes", "3000001",
+               "--body-min-rate", "0")
+    try:
+        s = Session(d)
+        body = json.dumps({"vertices": CUBE_V, "simplices": CUBE_S}).encode()
+        body = body[:-1] + b" " * (2_500_000 - len(body)) + b"}"
+        r = s.req("PUT", "/complex", data=iter([body[i:i + 65536] for i in range(0, len(body), 65536)]),
+                  headers={"Content-Type": "application/json"})   # chunked
+        assert r.status_code == 200, r.text[:300]
+    finally:
+        d.stop()
+    d = Daemon("--max-body-bytes", "1000000", "--max-client-body-bytes", "600000")
+    try:
+        s = Session(d)
+        k = raw_socket(d, "127.0.0.2", timeout=10)
+        k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
+                   f"Authorization: Bearer {s.token}\r\nContent-Type: application/json\r\n"
+                   "Transfer-Encoding: chunked\r\n\r\n").encode())
+        chunk = b"%x\r\n" % 65536 + b" " * 65536 + b"\r\n"
+        sent, answer = 0, b""
+        k.settimeout(0.05)
+        while sent < (8 << 20) and not answer:
+            try:
+                k.sendall(chunk)
+                sent += 65536
+            except OSError:
+                break
+            try:
+                answer = k.recv(4096)
+            except socket.timeout:
+                pass
+        k.settimeout(5)
+        try:
+            while b"\r\n\r\n" not in answer:
+                more = k.recv(4096)
+                if not more:
+                    break
+                answer += more
+        except OSError:
+            pass
+        k.close()
+        assert answer.startswith(b"HTTP/1.1 413") and sent < (3 << 20), (sent, answer[:200])
+        r = s.req("PUT", "/complex", data=b"{" + b" " * 700_000 + b"}",
+                  headers={"Content-Type": "application/json"})
+        assert r.status_code == 413 and r.json()["limit_name"] == "max_client_body_bytes", r.text
+        assert "Retry-After" not in r.headers
+    finally:
+        d.stop()
