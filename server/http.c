@@ -701,6 +701,13 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
     r->rt->fn(r);
     if (!r->queued)
         http_fail(r, 500, "internal", "the handler produced no response");
+    /* an answer made whole (no stream holds the request) needs the session no more: let it go
+     * now, before libmicrohttpd sends the answer, so that a client's next request, or another
+     * client's, never finds it still in use (a full session table would turn that one away) */
+    if (atomic_load(&r->refs) == 1) {
+        session_unref(r->s);
+        r->s = NULL;
+    }
     return MHD_YES;
 }
 

@@ -562,3 +562,19 @@ def test_redis_down_refuses_changes_and_keeps_reading(tmp_path):
     finally:
         d.stop()
         r.stop()
+
+
+def test_a_session_is_free_once_its_answer_is_made(tmp_path):
+    """--max-sessions 1 on a durable store: two sessions with a complex take turns in memory.
+    Each request's session is let go when its answer is complete, before it is sent, so the
+    other session's request right after the answer never finds the table full (429); it did
+    about one time in ten when the session stayed in use until the request's end."""
+    d = store_daemon(tmp_path / "s.db", "--max-sessions", "1")
+    try:
+        a, b = Session(d), Session(d)
+        for s in (a, b):
+            assert s.put_complex(TETS).status_code == 200
+        codes = [s.req("GET").status_code for _ in range(60) for s in (a, b)]
+        assert set(codes) == {200}, codes
+    finally:
+        d.stop()
