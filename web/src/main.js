@@ -105,6 +105,8 @@ class App {
     this.updateWaiters = []; // whenUpdates()
     this.patching = false; // a PATCH is under way
     this.heard = 0; // the newest edit event heard while a PATCH was under way
+    this.embedding = 0; // our own embedded-model changes under way
+    this.ownEmbedded = new Set(); // versions of our own embedded-model changes
     this.selected = null;
     this.messages = [];
     this.ready = false;
@@ -342,7 +344,14 @@ class App {
     try {
       await this.run(async () => {
         // "nearest": subdivision shrinks the solid, so a model near the cage's boundary binds too
-        const put = await this.session.putEmbedded('model', { vertices: body.vertices, triangles, level, outside: 'nearest' });
+        this.embedding++;
+        let put;
+        try {
+          put = await this.session.putEmbedded('model', { vertices: body.vertices, triangles, level, outside: 'nearest' });
+          this.ownEmbedded.add(put.version);
+        } finally {
+          this.embedding--;
+        }
         this.known = Math.max(this.known, put.version);
         if (this.cageVersion === put.version - 1) this.cageVersion = put.version; // points as they were
         if (this.complexVersion === put.version - 1) this.complexVersion = put.version;
@@ -365,7 +374,13 @@ class App {
 
   async #dropEmbedded() {
     const before = this.session.version;
-    await this.session.deleteEmbedded('model');
+    this.embedding++;
+    try {
+      await this.session.deleteEmbedded('model');
+      this.ownEmbedded.add(this.session.version);
+    } finally {
+      this.embedding--;
+    }
     if (this.cageVersion === before) this.cageVersion = this.session.version;
     if (this.complexVersion === before) this.complexVersion = this.session.version;
     this.embedded = null;
@@ -733,6 +748,12 @@ class App {
           this.known = Math.max(this.known, v);
           if (this.complexVersion === v - 1) this.complexVersion = v;
           if (this.cageVersion === v - 1) this.cageVersion = v;
+          // ours (under way, or answered): the drawn level is that version's, nothing to fetch
+          // (a delta asked now could meet the change that follows, a new complex: 410)
+          if (this.embedding || this.ownEmbedded.delete(v)) {
+            if (this.shown && this.shown.version === v - 1) this.shown.version = v;
+            return;
+          }
           if (this.shown && this.shown.version < v) this.requestSync();
           return;
         }
@@ -1119,6 +1140,7 @@ class App {
     } catch (e) {
       this.error(e);
       this.#syncRuleControls(); // back to what the daemon has
+      if (this.selected && !$('override').hidden) this.#showOverride(this.selected);
       return;
     }
     await this.requestLevel();
@@ -1137,6 +1159,11 @@ class App {
       : name;
     const cur = (c.rules.overrides || []).find((o) => key(o.simplex) === key(simplex));
     $('override-rule').value = cur?.rule || '';
+    // the daemon takes a rule choice only where parts meet (docs/SERVICE.md, invalid-override)
+    const manifold = cls?.nonmanifold === 0;
+    for (const opt of $('override-rule').options) opt.disabled = manifold && opt.value !== '';
+    $('override-apply').disabled = manifold && !cur;
+    if (manifold) $('override-what').textContent += ' — manifold: its part\'s own rule applies';
     const dims = cls?.family || [];
     $('override-dim').replaceChildren(...dims.map((d) => new Option(`${d}`, d)));
     if (cur?.dimension !== undefined) $('override-dim').value = cur.dimension;
