@@ -158,15 +158,6 @@ static bool valid_name(const char *name)
     return n > 0;
 }
 
-/* A copy of n bytes at p (none: a block of one byte, p may be NULL), or NULL. */
-static void *copy(const void *p, size_t n)
-{
-    void *c = api_malloc(n + 1);
-    if (c && n)
-        memcpy(c, p, n);
-    return c;
-}
-
 /* The stream's own copies of the positions and the requested channels (rq.snapshot). */
 static bool snapshot(out_stream *s)
 {
@@ -279,9 +270,9 @@ out_stream *out_open(const out_request *rq, const out_format *f, sd_error *err)
         out_mesh *c = &s->mesh[s->nmesh++];
         c->nv = q->nv;
         c->nt = q->nt;
-        c->name = api_memdup(q->name, strlen(q->name) + 1);
-        c->xyz = copy(q->xyz, (size_t)q->nv * 3 * sizeof *q->xyz);
-        c->tri = copy(q->tri, (size_t)q->nt * 3 * sizeof *q->tri);
+        c->name = api_strdup(q->name);
+        c->xyz = api_memdup(q->xyz, (size_t)q->nv * 3 * sizeof *q->xyz);
+        c->tri = api_memdup(q->tri, (size_t)q->nt * 3 * sizeof *q->tri);
         if (!c->name || !c->xyz || !c->tri)
             return fail(s, err, SD_ERR_NOMEM, "out of memory copying the embedded models");
     }

@@ -146,15 +146,21 @@ static void count_children(const ref *r, const uint8_t *size, size_t ns, size_t 
     *nids = ids;
 }
 
-/* One new vertex per split edge, after the old ones, at its midpoint; out's arrays allocated
- * for nout children of nids vertex ids in all. false: no memory. */
-static bool new_vertices(ref *r, const double *xyz, size_t nv, size_t nout, size_t nids,
-                         sd_refinement *out)
+/* The new vertices' ids, one per split edge after the old ones (r->mid); returns their number. */
+static uint32_t number_splits(ref *r, size_t nv)
 {
     uint32_t nsplit = 0;
     for (uint32_t e = 0; e < r->ne; e++)
         if (r->split[e])
             r->mid[e] = (uint32_t)nv + nsplit++;
+    return nsplit;
+}
+
+/* The nsplit new vertices at their edges' midpoints; out's arrays allocated for nout children
+ * of nids vertex ids in all. false: no memory. */
+static bool new_vertices(ref *r, const double *xyz, size_t nv, uint32_t nsplit, size_t nout,
+                         size_t nids, sd_refinement *out)
+{
     out->nv = nv + nsplit;
     out->xyz = malloc(out->nv * 3 * sizeof *out->xyz);
     out->split = malloc(((size_t)nsplit + 1) * sizeof *out->split);
@@ -320,7 +326,7 @@ sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uin
     r.split = sdi_calloc(&mem, 6 * ns + 1, 1);
     r.mid = sdi_alloc(&mem, (6 * ns + 1) * sizeof *r.mid);
     uint8_t *red = sdi_calloc(&mem, ns + 1, 1);
-    size_t nout, nids, nsplit = 0;
+    size_t nout, nids, nsplit;
     if (!r.eids || !r.split || !r.mid || !red) {
         rc = sdi_fail_nomem(err, &mem);
         goto done;
@@ -328,8 +334,7 @@ sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uin
     edge_ids(&r, idx, size, ns);
     closure(&r, size, ns, marked, red);
     count_children(&r, size, ns, &nout, &nids);
-    for (uint32_t e = 0; e < r.ne; e++)
-        nsplit += r.split[e];
+    nsplit = number_splits(&r, nv);
     if (lim && lim->max_vertices && nv + nsplit > lim->max_vertices) {
         rc = sdi_fail(err, SD_ERR_LIMIT, (long)(nv + nsplit), 0, "the refined complex would have "
                       "%zu vertices (at most %zu)", nv + nsplit, lim->max_vertices);
@@ -340,7 +345,7 @@ sd_result sd_refine(const double *xyz, size_t nv, const uint32_t *idx, const uin
                       "simplices (at most %zu)", nout, lim->max_simplices);
         goto done;
     }
-    if (!new_vertices(&r, xyz, nv, nout, nids, out)) {
+    if (!new_vertices(&r, xyz, nv, (uint32_t)nsplit, nout, nids, out)) {
         rc = sdi_fail(err, SD_ERR_NOMEM, -1, -1, "out of memory");
         goto done;
     }

@@ -11,7 +11,7 @@ typedef struct hold {
 
 struct holds {
     pthread_mutex_t mu;
-    size_t cap, n, max, total;
+    size_t cap, n, max;
     hold *h;
 };
 
@@ -59,10 +59,8 @@ bool holds_take(holds *h, const rate_key *key, size_t n)
             e->bytes = 0;
         }
     }
-    if (ok) {
+    if (ok)
         e->bytes += n;
-        h->total += n;
-    }
     pthread_mutex_unlock(&h->mu);
     return ok;
 }
@@ -74,7 +72,6 @@ void holds_give(holds *h, const rate_key *key, size_t n)
     if (e) {
         n = n < e->bytes ? n : e->bytes;
         e->bytes -= n;
-        h->total -= n;
         if (!e->bytes)
             *e = h->h[--h->n]; /* the last entry takes its place */
     }
@@ -90,12 +87,4 @@ size_t holds_held(holds *h, const rate_key *key)
     size_t n = e ? e->bytes : 0;
     pthread_mutex_unlock(&h->mu);
     return n;
-}
-
-size_t holds_total(holds *h)
-{
-    pthread_mutex_lock(&h->mu);
-    size_t t = h->total;
-    pthread_mutex_unlock(&h->mu);
-    return t;
 }

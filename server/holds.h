@@ -25,9 +25,8 @@ void holds_free(holds *h);
 bool holds_take(holds *h, const rate_key *key, size_t n);
 /* Give n bytes of key's hold back (the entry goes with its last byte). */
 void holds_give(holds *h, const rate_key *key, size_t n);
-/* The cap, the bytes key holds now, and the bytes held by all clients now. */
+/* The cap, and the bytes key holds now. */
 size_t holds_cap(const holds *h);
 size_t holds_held(holds *h, const rate_key *key);
-size_t holds_total(holds *h);
 
 #endif

@@ -457,10 +457,10 @@ static void client_bodies_full(req *r, size_t n)
         return;
     }
     p.retry_after = 5;
-    size_t mine = r->held, all = holds_held(r->srv->bodies, &r->client);
+    size_t others = holds_held(r->srv->bodies, &r->client) - r->held; /* r->held is in it */
     api_fail(&p, 429, "client-bodies", "this client's other request bodies being sent hold about "
              "%zu bytes, and this one's %zu would pass --max-client-body-bytes (%zu); send fewer "
-             "at once or retry when they are done", all - (mine < all ? mine : all), n, cap);
+             "at once or retry when they are done", others, n, cap);
     http_reply_problem(r, &p);
 }
 

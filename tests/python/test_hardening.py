@@ -47,6 +47,66 @@ def closed_by_peer(s, within):
     return False
 
 
+def put_head(s, *headers, ctype="application/json"):
+    """The head of a PUT /complex to session s with more header lines ("Name: value" each)."""
+    return (f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
+            f"Authorization: Bearer {s.token}\r\nContent-Type: {ctype}\r\n"
+            + "".join(h + "\r\n" for h in headers) + "\r\n").encode()
+
+
+def read_head(k, until_close=False):
+    """What the daemon answers on k: up to the end of the head, or all until it closes."""
+    out = b""
+    try:
+        while until_close or b"\r\n\r\n" not in out:
+            c = k.recv(65536)
+            if not c:
+                break
+            out += c
+    except OSError:
+        pass
+    return out
+
+
+def trickle_until_closed(k, piece, within):
+    """Send `piece` again and again until the daemon closes k: the seconds that took, or None
+    when it was still open after `within` seconds."""
+    t0 = time.time()
+    while time.time() - t0 < within:
+        try:
+            k.send(piece)
+        except OSError:
+            return time.time() - t0
+        if closed_by_peer(k, 0.5):
+            return time.time() - t0
+    return None
+
+
+CHUNK = b"%x\r\n" % 65536 + b" " * 65536 + b"\r\n"
+
+
+def chunks_until_answered(k, most, within=20):
+    """Send 64 KiB chunks on k until the daemon answers (or closes), `most` bytes or `within`
+    seconds at most: (bytes sent, the answer's head)."""
+    sent, answer = 0, b""
+    k.settimeout(0.01)
+    t0 = time.time()
+    while sent < most and time.time() - t0 < within and not answer:
+        try:
+            k.sendall(CHUNK)
+            sent += 65536
+        except OSError:
+            break
+        try:
+            answer = k.recv(4096) or b"<closed>"
+        except socket.timeout:
+            pass
+    k.settimeout(2)
+    if answer != b"<closed>":
+        answer += read_head(k)
+    return sent, answer
+
+
 def timed_get(url, **kw):
     t = time.time()
     r = requests.get(url, timeout=10, **kw)
@@ -158,22 +218,9 @@ def test_body_deadline_closes_a_trickling_upload():
     try:
         s = Session(d)
         k = raw_socket(d)
-        k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
-                   f"Authorization: Bearer {s.token}\r\nContent-Type: application/json\r\n"
-                   "Content-Length: 1000000\r\n\r\n").encode())
-        t0 = time.time()
-        closed = False
-        while time.time() - t0 < 12:
-            try:
-                k.send(b" ")
-            except OSError:
-                closed = True
-                break
-            if closed_by_peer(k, 0.5):
-                closed = True
-                break
+        k.sendall(put_head(s, "Content-Length: 1000000"))
         # 1 MB at >= 100 kB/s: about 2 s + 10 s, then closed
-        assert closed and time.time() - t0 < 12
+        assert trickle_until_closed(k, b" ", 12) is not None
         k.close()
     finally:
         d.stop()
@@ -333,37 +380,9 @@ def test_chunked_body_over_the_limit_is_refused_early():
     try:
         s = Session(d)
         k = raw_socket(d, "127.0.0.1", timeout=10)
-        k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
-                   f"Authorization: Bearer {s.token}\r\nContent-Type: application/json\r\n"
-                   "Transfer-Encoding: chunked\r\n\r\n").encode())
-        chunk = b"%x\r\n" % 65536 + b" " * 65536 + b"\r\n"
-        sent = 0
-        answer = b""
-        k.settimeout(0.01)
-        t0 = time.time()
-        while sent < (300 << 20) and time.time() - t0 < 20:
-            try:
-                k.sendall(chunk)
-                sent += 65536
-            except OSError:
-                break
-            try:
-                got = k.recv(4096)
-                if got == b"" or got:
-                    answer += got
-                    break
-            except socket.timeout:
-                pass
+        k.sendall(put_head(s, "Transfer-Encoding: chunked"))
+        sent, answer = chunks_until_answered(k, 300 << 20)
         assert sent < (16 << 20), f"{sent} bytes were read before the refusal"
-        k.settimeout(2)
-        try:
-            while b"\r\n" not in answer:
-                got = k.recv(4096)
-                if not got:
-                    break
-                answer += got
-        except OSError:
-            pass
         assert answer.startswith(b"HTTP/1.1 413"), answer[:80]
         k.close()
     finally:
@@ -699,21 +718,9 @@ def test_chunked_body_with_content_length_zero_is_still_timed():
     try:
         s = Session(d)
         k = raw_socket(d)
-        k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
-                   f"Authorization: Bearer {s.token}\r\nContent-Type: application/json\r\n"
-                   "Content-Length: 0\r\nTransfer-Encoding: chunked\r\n\r\n").encode())
-        t0 = time.time()
-        closed = False
-        while time.time() - t0 < 12:
-            try:
-                k.send(b"1\r\n \r\n")
-            except OSError:
-                closed = True
-                break
-            if closed_by_peer(k, 0.5):
-                closed = True
-                break
-        assert closed and time.time() - t0 < 12, "a trickling chunked body must be closed"
+        k.sendall(put_head(s, "Content-Length: 0", "Transfer-Encoding: chunked"))
+        assert trickle_until_closed(k, b"1\r\n \r\n", 12) is not None, \
+            "a trickling chunked body must be closed"
         k.close()
     finally:
         d.stop()
@@ -723,16 +730,9 @@ def test_chunked_body_with_content_length_zero_needs_json(daemon):
     s = Session(daemon)
     body = json.dumps({"vertices": CUBE_V, "simplices": CUBE_S}).encode()
     k = raw_socket(daemon)
-    k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\nConnection: close\r\n"
-               f"Authorization: Bearer {s.token}\r\nContent-Type: text/plain\r\n"
-               f"Content-Length: 0\r\nTransfer-Encoding: chunked\r\n\r\n"
-               f"{len(body):x}\r\n").encode() + body + b"\r\n0\r\n\r\n")
-    out = b""
-    while True:
-        c = k.recv(65536)
-        if not c:
-            break
-        out += c
+    k.sendall(put_head(s, "Connection: close", "Content-Length: 0", "Transfer-Encoding: chunked",
+                       ctype="text/plain") + f"{len(body):x}\r\n".encode() + body + b"\r\n0\r\n\r\n")
+    out = read_head(k, until_close=True)
     k.close()
     assert out.startswith(b"HTTP/1.1 415"), out[:200]
 
@@ -745,12 +745,8 @@ def test_content_lengths_that_differ_are_refused(daemon):
     body = json.dumps({"vertices": CUBE_V, "simplices": CUBE_S}).encode()
 
     def put(lengths):
-        k = raw_socket(daemon)
-        k.settimeout(10)
-        k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
-                   f"Authorization: Bearer {s.token}\r\nContent-Type: application/json\r\n"
-                   + "".join(f"Content-Length: {n}\r\n" for n in lengths) + "\r\n").encode()
-                  + body)
+        k = raw_socket(daemon, timeout=10)
+        k.sendall(put_head(s, *(f"Content-Length: {n}" for n in lengths)) + body)
         out = b""
         try:
             while True:
@@ -804,42 +800,26 @@ def test_one_client_cannot_hold_the_budget_with_slow_bodies():
 
         def start(src):
             k = raw_socket(d, src, timeout=10)
-            k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
-                       f"Authorization: Bearer {s.token}\r\nContent-Type: application/json\r\n"
-                       f"Content-Length: {len(body)}\r\n\r\n").encode() + body[:1000])
+            k.sendall(put_head(s, f"Content-Length: {len(body)}") + body[:1000])
             return k
-
-        def answer(k):
-            out = b""
-            while b"\r\n\r\n" not in out:
-                c = k.recv(65536)
-                if not c:
-                    break
-                out += c
-            return out
         a, b = start("127.0.0.2"), start("127.0.0.2")
         time.sleep(0.3)                      # both bodies' buffers are held
         c = start("127.0.0.2")
-        got = b""
-        while True:                          # answered at once, and closed
-            part = c.recv(65536)
-            if not part:
-                break
-            got += part
+        got = read_head(c, until_close=True)  # answered at once, and closed
         assert got.startswith(b"HTTP/1.1 429") and b"Retry-After: 5" in got, got[:300]
         assert b"/errors/client-bodies" in got, got
         c.close()
         other = start("127.0.0.3")           # another address is not held back
         other.sendall(body[1000:])
-        assert answer(other).startswith(b"HTTP/1.1 200")
+        assert read_head(other).startswith(b"HTTP/1.1 200")
         other.close()
         a.sendall(body[1000:])               # the first body completes: its bytes come back
-        assert answer(a).startswith(b"HTTP/1.1 200")
+        assert read_head(a).startswith(b"HTTP/1.1 200")
         a.close()
         time.sleep(0.3)
         e = start("127.0.0.2")
         e.sendall(body[1000:])
-        assert answer(e).startswith(b"HTTP/1.1 200")
+        assert read_head(e).startswith(b"HTTP/1.1 200")
         e.close()
         b.close()
     finally:
@@ -867,31 +847,8 @@ def test_client_body_cap_with_chunked_and_single_bodies():
     try:
         s = Session(d)
         k = raw_socket(d, "127.0.0.2", timeout=10)
-        k.sendall((f"PUT /v1/sessions/{s.id}/complex HTTP/1.1\r\nHost: x\r\n"
-                   f"Authorization: Bearer {s.token}\r\nContent-Type: application/json\r\n"
-                   "Transfer-Encoding: chunked\r\n\r\n").encode())
-        chunk = b"%x\r\n" % 65536 + b" " * 65536 + b"\r\n"
-        sent, answer = 0, b""
-        k.settimeout(0.05)
-        while sent < (8 << 20) and not answer:
-            try:
-                k.sendall(chunk)
-                sent += 65536
-            except OSError:
-                break
-            try:
-                answer = k.recv(4096)
-            except socket.timeout:
-                pass
-        k.settimeout(5)
-        try:
-            while b"\r\n\r\n" not in answer:
-                more = k.recv(4096)
-                if not more:
-                    break
-                answer += more
-        except OSError:
-            pass
+        k.sendall(put_head(s, "Transfer-Encoding: chunked"))
+        sent, answer = chunks_until_answered(k, 8 << 20)
         k.close()
         assert answer.startswith(b"HTTP/1.1 413") and sent < (3 << 20), (sent, answer[:200])
         r = s.req("PUT", "/complex", data=b"{" + b" " * 700_000 + b"}",
