@@ -140,7 +140,12 @@ persist_rc persist_append(persist *p, const char *id, uint64_t expect, uint64_t 
 
 persist_rc persist_touch(persist *p, const char *id, int64_t expires_at)
 {
-    return p->ops ? noted(p, p->ops->touch(p->b, id, expires_at)) : PERSIST_OK;
+    return p->ops ? noted(p, p->ops->touch(p->b, id, 0, expires_at)) : PERSIST_OK;
+}
+
+persist_rc persist_retime(persist *p, const char *id, int ttl_s, int64_t expires_at)
+{
+    return p->ops ? noted(p, p->ops->touch(p->b, id, ttl_s > 0 ? ttl_s : 1, expires_at)) : PERSIST_OK;
 }
 
 persist_rc persist_delete(persist *p, const char *id)

@@ -89,6 +89,8 @@ persist_rc persist_append(persist *p, const char *id, uint64_t expect, uint64_t 
                           int64_t expires_at, const char *entry, size_t len);
 /* Move the expiry (the session was used). */
 persist_rc persist_touch(persist *p, const char *id, int64_t expires_at);
+/* A new TTL (PATCH /v1/sessions/{id}) and the expiry it gives. */
+persist_rc persist_retime(persist *p, const char *id, int ttl_s, int64_t expires_at);
 persist_rc persist_delete(persist *p, const char *id);
 /* The stored version (shared stores call it per request); PERSIST_ABSENT when gone. */
 persist_rc persist_version(persist *p, const char *id, uint64_t *version);

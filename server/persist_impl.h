@@ -11,7 +11,8 @@ typedef struct persist_ops {
                            int64_t expires_at, const char *doc, size_t len);
     persist_rc (*append)(void *b, const char *id, uint64_t expect, uint64_t version,
                          int64_t expires_at, const char *entry, size_t len);
-    persist_rc (*touch)(void *b, const char *id, int64_t expires_at);
+    /* ttl_s > 0: the record's TTL becomes it too */
+    persist_rc (*touch)(void *b, const char *id, int ttl_s, int64_t expires_at);
     persist_rc (*del)(void *b, const char *id);
     persist_rc (*version)(void *b, const char *id, uint64_t *version);
     persist_rc (*load)(void *b, const char *id, persist_loaded *out);

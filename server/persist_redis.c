@@ -78,10 +78,11 @@ static const char LUA_APPEND[] =
     "for i = 1, 3 do redis.call('EXPIREAT', KEYS[i], ARGV[3]) end\n"
     "return 1\n";
 
-/* KEYS: hash, snapshot, journal. ARGV: expires_at. */
+/* KEYS: hash, snapshot, journal. ARGV: expires_at[, ttl_s]. */
 static const char LUA_TOUCH[] =
     "if redis.call('EXISTS', KEYS[1]) == 0 then return -1 end\n"
     "redis.call('HSET', KEYS[1], 'expires_at', ARGV[1])\n"
+    "if ARGV[2] then redis.call('HSET', KEYS[1], 'ttl_s', ARGV[2]) end\n"
     "for i = 1, 3 do redis.call('EXPIREAT', KEYS[i], ARGV[1]) end\n"
     "return 1\n";
 
@@ -344,16 +345,17 @@ static persist_rc r_append(void *vb, const char *id, uint64_t expect, uint64_t v
     return write_cas(b, S_APPEND, id, expect, version, expires_at, entry, len);
 }
 
-static persist_rc r_touch(void *vb, const char *id, int64_t expires_at)
+static persist_rc r_touch(void *vb, const char *id, int ttl_s, int64_t expires_at)
 {
     redis_backend *b = vb;
     if (!id_ok(b, id))
         return PERSIST_ABSENT;
-    char x[24];
+    char x[24], t[16];
     snprintf(x, sizeof x, "%" PRId64, expires_at);
-    const char *args[1] = {x};
+    snprintf(t, sizeof t, "%d", ttl_s);
+    const char *args[2] = {x, t};
     pthread_mutex_lock(&b->mu);
-    persist_rc rc = cas_rc(b, eval_locked(b, S_TOUCH, id, 1, args, NULL));
+    persist_rc rc = cas_rc(b, eval_locked(b, S_TOUCH, id, ttl_s > 0 ? 2 : 1, args, NULL));
     pthread_mutex_unlock(&b->mu);
     return rc;
 }

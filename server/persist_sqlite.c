@@ -44,7 +44,7 @@ static const char *const SQL[NQ] = {
     [Q_DEL_JOURNAL] = "DELETE FROM journal WHERE id = ?1",
     [Q_ADD_ENTRY] = "INSERT INTO journal(id, version, entry, crc) VALUES (?1, ?2, ?3, ?4)",
     [Q_VERSION] = "SELECT version, expires_at FROM sessions WHERE id = ?1",
-    [Q_TOUCH] = "UPDATE sessions SET expires_at = ?2 WHERE id = ?1",
+    [Q_TOUCH] = "UPDATE sessions SET expires_at = ?2, ttl_s = coalesce(?3, ttl_s) WHERE id = ?1",
     [Q_DELETE] = "DELETE FROM sessions WHERE id = ?1",
     [Q_LOAD] = "SELECT token_hash, ttl_s, created, expires_at, version, snapshot_version, snapshot, "
                "snapshot_crc FROM sessions WHERE id = ?1",
@@ -257,13 +257,17 @@ static persist_rc sq_append(void *b, const char *id, uint64_t expect, uint64_t v
     return r;
 }
 
-static persist_rc sq_touch(void *b, const char *id, int64_t expires_at)
+static persist_rc sq_touch(void *b, const char *id, int ttl_s, int64_t expires_at)
 {
     sqlite_store *s = b;
     pthread_mutex_lock(&s->mu);
     sqlite3_stmt *q = s->q[Q_TOUCH];
     sqlite3_bind_text(q, 1, id, -1, SQLITE_STATIC);
     sqlite3_bind_int64(q, 2, expires_at);
+    if (ttl_s > 0)
+        sqlite3_bind_int(q, 3, ttl_s);
+    else
+        sqlite3_bind_null(q, 3);
     int rc = run(s, Q_TOUCH);
     persist_rc r = rc != SQLITE_DONE ? failed(s, "moving an expiry", rc)
                    : sqlite3_changes(s->db) ? PERSIST_OK : PERSIST_ABSENT;

@@ -449,6 +449,46 @@ static void h_get_session(req *r)
     http_reply_json(r, 200, j, version);
 }
 
+/* PATCH /v1/sessions/{id} {"ttl_s": n}: a new idle TTL, counted from now and capped at --max-ttl
+ * as at creation (the web front end shortens its session's when its page goes, so that a reload
+ * finds the session and a closed tab frees it soon). Not a change of the session's content: no
+ * version, no If-Match, no event. With a durable store the record is changed first: a refusal
+ * changes nothing. */
+static void h_patch_session(req *r)
+{
+    api_problem p = {0};
+    json_t *b = body_or_answer(r, NULL, NULL), *t;
+    if (!b)
+        return;
+    static const char *const keys[] = {"ttl_s", NULL};
+    long long ttl = 0;
+    if (!api_only_keys(b, "", keys, &p)) {
+        if (!(t = json_object_get(b, "ttl_s")))
+            api_fail_at(&p, 400, "missing-field", "/ttl_s", "give \"ttl_s\": the new idle TTL in seconds");
+        else
+            api_get_int(t, "/ttl_s", 1, API_MAX_TTL_S, &ttl, &p);
+    }
+    json_decref(b);
+    if (!p.status) {
+        if (ttl > r->srv->cfg.max_ttl_s)
+            ttl = r->srv->cfg.max_ttl_s;
+        persist_rc rc = store_retime(r->srv->st, r->s, (int)ttl);
+        if (rc != PERSIST_OK)
+            store_refused(r, rc, false, &p);
+    }
+    if (p.status) {
+        http_reply_problem(r, &p);
+        return;
+    }
+    uint64_t version;
+    api_model_unref(session_model(r->s, &version));
+    char exp[32];
+    iso_time(exp, sizeof exp, session_expires_at(r->s));
+    json_t *j = json_pack("{s:s, s:s, s:I, s:I}", "id", r->s->id, "expires_at", exp, "ttl_s",
+                          (json_int_t)ttl, "version", (json_int_t)version);
+    http_reply_json(r, 200, j, version);
+}
+
 /* GET /export: the session's control data as one document (api/export.c), under the write lock
  * so that its content and version are those of one moment between changes. */
 static void h_export(req *r)
@@ -1272,6 +1312,7 @@ static void h_analysis(req *r)
 static const route ROUTES[] = {
     {"POST", "/v1/sessions", h_create_session, 0, 1, NULL},
     {"GET", "/v1/sessions/{id}", h_get_session, 1, 0, NULL},
+    {"PATCH", "/v1/sessions/{id}", h_patch_session, 1, 1, NULL},
     {"DELETE", "/v1/sessions/{id}", h_delete_session, 1, 0, NULL},
     {"PUT", "/v1/sessions/{id}/complex", h_put_complex, 1, 1, NULL},
     {"GET", "/v1/sessions/{id}/complex", h_get_complex, 1, 0, NULL},

@@ -123,7 +123,7 @@ static void unlock_store(store *st)
 
 /* How often a session's expiry is written to the durable store for reads alone: a tenth of its
  * TTL, at most a minute. The stored expiry carries as much slack, so the store never forgets a
- * session before the resident copy would expire. (s->ttl_s is constant.) */
+ * session before the resident copy would expire. */
 static double slack_of(int ttl_s)
 {
     return ttl_s / 10.0 < 60 ? ttl_s / 10.0 : 60;
@@ -635,7 +635,21 @@ uint64_t session_bump(session *s)
 
 int64_t session_stored_expiry(session *s)
 {
-    return stored_expiry(s->ttl_s, (int64_t)time(NULL)); /* (ttl_s is constant) */
+    return stored_expiry(s->ttl_s, (int64_t)time(NULL));
+}
+
+persist_rc store_retime(store *st, session *s, int ttl_s)
+{
+    if (persist_durable(st->p)) {
+        persist_rc rc = persist_retime(st->p, s->id, ttl_s, stored_expiry(ttl_s, (int64_t)time(NULL)));
+        if (rc != PERSIST_OK)
+            return rc;
+    }
+    pthread_mutex_lock(&s->mu);
+    s->ttl_s = ttl_s;
+    s->last_used = s->touched = mono_now();
+    pthread_mutex_unlock(&s->mu);
+    return PERSIST_OK;
 }
 
 time_t session_expires_at(session *s)

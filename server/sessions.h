@@ -29,7 +29,7 @@ typedef struct session {
     pthread_mutex_t write;    /* serialises changes */
     api_model *model;
     uint64_t version;
-    int ttl_s;
+    _Atomic int ttl_s;        /* idle TTL, seconds (store_retime changes it) */
     double last_used;         /* monotonic seconds */
     time_t created;
     struct ev_hub *events;    /* its Server-Sent Events (events.h), told when it leaves the store */
@@ -103,6 +103,9 @@ uint64_t session_bump(session *s);
 time_t session_expires_at(session *s);
 /* The expiry to store with a change made now: now + TTL (wall clock). */
 int64_t session_stored_expiry(session *s);
+/* A new idle TTL for s, counted from now: the durable store's record first (its ttl_s and
+ * expiry), then the resident session. Not PERSIST_OK: nothing changed. */
+persist_rc store_retime(store *st, session *s, int ttl_s);
 
 /* Constant-time comparison of a presented token with the session's. */
 int session_token_ok(const session *s, const char *presented);

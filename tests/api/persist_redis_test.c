@@ -164,7 +164,7 @@ static void test_lifecycle(void *b)
 
     /* touch moves the expiry of all three keys */
     CHECK_RC(b, ops->append(b, m.id, 4, 5, t + 3600, "e5", 2), PERSIST_OK);
-    CHECK_RC(b, ops->touch(b, m.id, t + 7200), PERSIST_OK);
+    CHECK_RC(b, ops->touch(b, m.id, 0, t + 7200), PERSIST_OK);
     CHECK(raw_ttl("TTL subdivd:s:{%s}", m.id) > 7000, "record TTL after touch");
     CHECK(raw_ttl("TTL subdivd:snap:{%s}", m.id) > 7000, "snapshot TTL after touch");
     CHECK(raw_ttl("TTL subdivd:j:{%s}", m.id) > 7000, "journal TTL after touch");
@@ -188,11 +188,17 @@ static void test_lifecycle(void *b)
     doc[big] = '\0';
     CHECK_RC(b, ops->snapshot(b, m.id, 7, 8, t + 7200, doc, big), PERSIST_OK);
     CHECK_RC(b, ops->load(b, m.id, &l), PERSIST_OK);
+    CHECK(l.meta.ttl_s == m.ttl_s, "a touch without a TTL keeps it: %d", l.meta.ttl_s);
+    loaded_free(&l);
+    CHECK_RC(b, ops->touch(b, m.id, 90, t + 7300), PERSIST_OK); /* PATCH /v1/sessions/{id} */
+    CHECK_RC(b, ops->load(b, m.id, &l), PERSIST_OK);
+    CHECK(l.meta.ttl_s == 90 && l.meta.expires_at == t + 7300, "retimed: ttl %d, expiry %lld",
+          l.meta.ttl_s, (long long)(l.meta.expires_at - t));
     CHECK(l.snapshot_len == big && !memcmp(l.snapshot, doc, big), "3 MiB snapshot round trip");
     loaded_free(&l);
     free(doc);
 
-    CHECK_RC(b, ops->touch(b, "00000000000000000000000000000000", t + 60), PERSIST_ABSENT);
+    CHECK_RC(b, ops->touch(b, "00000000000000000000000000000000", 0, t + 60), PERSIST_ABSENT);
 
     /* delete: everything is ABSENT after */
     CHECK_RC(b, ops->del(b, m.id), PERSIST_OK);
@@ -200,7 +206,7 @@ static void test_lifecycle(void *b)
     CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_ABSENT);
     CHECK_RC(b, ops->snapshot(b, m.id, 8, 9, t + 60, "x", 1), PERSIST_ABSENT);
     CHECK_RC(b, ops->append(b, m.id, 8, 9, t + 60, "x", 1), PERSIST_ABSENT);
-    CHECK_RC(b, ops->touch(b, m.id, t + 60), PERSIST_ABSENT);
+    CHECK_RC(b, ops->touch(b, m.id, 0, t + 60), PERSIST_ABSENT);
     CHECK_RC(b, ops->del(b, m.id), PERSIST_ABSENT);
     CHECK(raw_ttl("EXISTS subdivd:snap:{%s}", m.id) == 0, "snapshot key gone after delete");
 }
@@ -263,7 +269,7 @@ static void test_expired(void *b)
     /* touched into the past */
     new_meta(&m, t + 600);
     CHECK_RC(b, ops->create(b, &m), PERSIST_OK);
-    CHECK_RC(b, ops->touch(b, m.id, t - 1), PERSIST_OK);
+    CHECK_RC(b, ops->touch(b, m.id, 0, t - 1), PERSIST_OK);
     CHECK_RC(b, ops->load(b, m.id, &l), PERSIST_ABSENT);
 }
 

@@ -3,6 +3,7 @@
 Expected values come from the papers' split table, from the independent text tool `sdlevel`
 (a separate client of core/ with its own output path), or from counting in Python — never from
 the daemon's own earlier answers."""
+import datetime
 import json
 import pathlib
 import re
@@ -158,6 +159,38 @@ def test_ttl_expiry():
         assert s.req("GET").status_code == 200
         time.sleep(2.6)
         assert s.req("GET").status_code == 404
+    finally:
+        assert d.stop() == 0
+
+
+def test_a_session_ttl_can_be_changed():
+    """PATCH /v1/sessions/{id} {"ttl_s"}: a new idle TTL from now, capped at --max-ttl like
+    POST's, validated like POST's; not a change of the content (no version, no If-Match)."""
+    d = Daemon("--max-ttl", "100")
+    try:
+        s = Session(d, ttl_s=60)
+        patch = lambda body, **kw: s.req("PATCH", json=body, **kw)
+        r = patch({"ttl_s": 1000})
+        assert r.status_code == 200, r.text
+        j = r.json()
+        assert j["id"] == s.id and j["ttl_s"] == 100 and j["version"] == 0   # capped
+        left = (datetime.datetime.strptime(j["expires_at"], "%Y-%m-%dT%H:%M:%SZ")
+                .replace(tzinfo=datetime.timezone.utc).timestamp() - time.time())
+        assert 97 <= left <= 101, left
+        for body, status, ptr in (({}, 400, "/ttl_s"), ({"ttl_s": 0}, 422, "/ttl_s"),
+                                  ({"ttl_s": 10 ** 12}, 422, "/ttl_s"), ({"ttl_s": "5"}, 400, "/ttl_s"),
+                                  ({"ttl_s": 5, "x": 1}, 400, "/x")):
+            r = patch(body)
+            assert r.status_code == status, (body, r.text)
+            assert r.headers["Content-Type"] == "application/problem+json"
+            assert [e["pointer"] for e in r.json()["errors"]] == [ptr], (body, r.text)
+        assert patch({"ttl_s": 5}, headers={"Authorization": "Bearer nope"}).status_code == 401
+        assert s.req("GET").json()["version"] == 0            # nothing of the content changed
+        # shortened: the session goes after the new TTL of idleness, not the old one
+        assert patch({"ttl_s": 1}).json()["ttl_s"] == 1
+        time.sleep(2.6)
+        assert s.req("GET").status_code == 404
+        assert patch({"ttl_s": 60}).status_code == 404
     finally:
         assert d.stop() == 0
 

@@ -273,6 +273,30 @@ def test_an_import_at_the_largest_version_restores_after_changes(tmp_path):
         d.stop()
 
 
+def test_a_changed_ttl_is_stored(store):
+    """PATCH /v1/sessions/{id} {"ttl_s"} changes the stored record too: after a restart the
+    session keeps its new TTL (it expires after 2 s of idleness, not the 600 it was created
+    with), and one lengthened from 2 s outlives its old TTL."""
+    d = store_daemon(store)
+    try:
+        short = Session(d, ttl_s=600)
+        assert short.put_complex(TETS).status_code == 200
+        assert short.req("PATCH", json={"ttl_s": 2}).json()["ttl_s"] == 2
+        long = Session(d, ttl_s=2)
+        assert long.put_complex(TETS).status_code == 200
+        assert long.req("PATCH", json={"ttl_s": 600}).json()["ttl_s"] == 600
+    finally:
+        kill9(d)
+    d = store_daemon(store)
+    try:
+        time.sleep(4.5)     # past 2 s and its stored slack (1 s)
+        assert on(d, short).req("GET").status_code == 404
+        assert on(d, long).req("GET").status_code == 200
+        assert on(d, long).req("GET", "/complex").json()["vertices"] == TETS["vertices"]
+    finally:
+        d.stop()
+
+
 def test_an_expired_session_is_not_brought_back(store):
     """docs/API.md: an expired session is a 404. The store keeps a session a little past its TTL
     (the slack of its touches, docs/SERVICE.md "Persistence"); a request in that window does not

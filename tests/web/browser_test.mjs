@@ -1018,6 +1018,48 @@ if (page2) {
   });
 }
 
+// 16c. a reload of the tab that started the session opens it again, with every edit (the level-3
+// offset above included) and the model's name, and gives it its hour back; a tab closed gives
+// its own session the short TTL of a page that went (PATCH {"ttl_s": 120} at pagehide)
+const expiresIn = (pg, who) => pg.evaluate(async ({ id, token }) => {
+  const r = await fetch(`/v1/sessions/${id}`, { headers: { Authorization: `Bearer ${token}` }, cache: 'no-store' });
+  return r.ok ? (Date.parse((await r.json()).expires_at) - Date.now()) / 1000 : -r.status;
+}, who);
+await step(['tab_reload', 'tab_close_ttl'], async () => {
+  const b = await snap();
+  const bCmp = await page.evaluate(async () => {
+    const s = window.subdivd.session;
+    return (await (await fetch(`/v1/sessions/${s.id}/complex`, { headers: { Authorization: `Bearer ${s.token}` }, cache: 'no-store' })).json()).details;
+  });
+  await page.reload();
+  await idle('window.subdivd.snapshot().shown');
+  const s = await snap();
+  const who = await page.evaluate(() => ({ id: window.subdivd.session.id, token: window.subdivd.session.token }));
+  const left = await expiresIn(page, who);
+  const said = s.messages.map((m) => `${m.kind}: ${m.text}`).join(' | ');
+  const sameCage = JSON.stringify(s.controlPoints) === JSON.stringify(b.controlPoints);
+  const cmp = await compareWithRefetch(page, s.shown.level);
+  check('tab_reload', s.session === b.session && s.model === b.model && sameCage && s.version === b.version &&
+    (bCmp?.length ?? 0) > 0 && left > 3500 && equalToRefetch(cmp) && !/error:/.test(said),
+    `session ${b.session?.slice(0, 8)} -> ${s.session?.slice(0, 8)}; model ${b.model} -> ${s.model}; v${b.version} -> v${s.version}; ` +
+    `control points kept: ${sameCage}; ${bCmp?.length ?? 0} detail offsets; expires in ${left} s; ` +
+    `buffers vs refetch: ${cmp.position} position floats differ; said: ${said}`);
+  const p3 = await browser.newPage({ viewport: { width: 800, height: 600 } });
+  p3.on('console', (m) => { if (m.type() === 'error') consoleErrors.push(`third tab: ${m.text()}`); });
+  await p3.goto(url);
+  await p3.waitForFunction('window.subdivd && window.subdivd.ready && window.subdivd.idle() && window.subdivd.snapshot().shown', null, { timeout: TIMEOUT });
+  const own = await p3.evaluate(() => ({ id: window.subdivd.session.id, token: window.subdivd.session.token }));
+  const open = await expiresIn(page, own);
+  await p3.close({ runBeforeUnload: true });
+  let closed = open;
+  for (let k = 0; k < 20 && closed > 200; k++) {
+    await new Promise((r) => setTimeout(r, 250));
+    closed = await expiresIn(page, own);
+  }
+  check('tab_close_ttl', own.id !== s.session && open > 3500 && closed > 100 && closed <= 121,
+    `a tab's own session ${own.id?.slice(0, 8)}: expires in ${open} s while open, ${closed} s after the tab closed`);
+});
+
 // 19. no console errors other than the refusals provoked above
 check('console_clean', consoleErrors.length === 0, consoleErrors.join(' | '));
 

@@ -38,16 +38,22 @@ async function problemOf(res) {
   }
 }
 
+// The tab's own session, kept over a reload: sessionStorage is per tab and outlives a reload,
+// not the tab.
+const KEPT = 'subdivd.session';
+export const TTL_S = 3600; // idle TTL while the page is open
+export const AWAY_TTL_S = 120; // after the page went: long enough for a reload, short after a close
+
 export class Session {
   constructor(base = '') {
     this.base = base; // '' = the origin that served the page
     this.id = null;
     this.token = null;
     this.version = 0;
-    this.owned = false; // started by this page (open), not joined: only then closed at exit
+    this.owned = false; // started by this tab (open), not joined: only then its TTL is this tab's
   }
 
-  async open(ttl_s = 3600) {
+  async open(ttl_s = TTL_S) {
     const res = await this.#fetch('Starting a session', '/v1/sessions', {
       method: 'POST', headers: { 'Content-Type': 'application/json' }, body: JSON.stringify({ ttl_s }),
     });
@@ -56,15 +62,46 @@ export class Session {
     this.token = j.token;
     this.version = j.version ?? 0;
     this.owned = true;
+    this.keep();
     return j;
   }
 
-  // Best effort at page exit (keepalive survives the unload); the TTL frees it otherwise. A
-  // session another tab started (joined by its link) is that tab's: left open.
-  closeOnExit() {
+  // The session this tab started before a reload ({id, token, name}), or null.
+  static kept() {
+    try {
+      const j = JSON.parse(sessionStorage.getItem(KEPT));
+      return typeof j?.id === 'string' && typeof j?.token === 'string' ? j : null;
+    } catch {
+      return null; // storage off or damaged: nothing kept
+    }
+  }
+
+  // Remember this tab's own session (and the name of its model) for a reload.
+  keep(name) {
+    if (!this.owned) return;
+    const was = Session.kept();
+    try {
+      sessionStorage.setItem(KEPT, JSON.stringify({ id: this.id, token: this.token, name: name ?? (was?.id === this.id ? was.name : undefined) }));
+    } catch { /* storage off: a reload starts afresh */ }
+  }
+
+  static forget() {
+    try { sessionStorage.removeItem(KEPT); } catch { /* storage off */ }
+  }
+
+  // PATCH /v1/sessions/{id} {"ttl_s"}: the session's idle TTL from now.
+  setTtl(ttl_s) {
+    return this.json('Keeping the session', 'PATCH', '', { body: { ttl_s } });
+  }
+
+  // At page exit the tab's own session gets a short TTL instead of a delete (keepalive survives
+  // the unload): a reload finds it and sets the TTL back, a closed tab's goes 2 minutes later.
+  // A session another tab started (joined by its link) is that tab's: left as it is.
+  shortenOnExit() {
     if (!this.id || !this.owned) return;
     fetch(`${this.base}/v1/sessions/${this.id}`, {
-      method: 'DELETE', keepalive: true, headers: { Authorization: `Bearer ${this.token}` },
+      method: 'PATCH', keepalive: true, body: JSON.stringify({ ttl_s: AWAY_TTL_S }),
+      headers: { Authorization: `Bearer ${this.token}`, 'Content-Type': 'application/json' },
     }).catch(() => {}); // the page is going away: there is no one left to tell
   }
 

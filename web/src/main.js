@@ -15,7 +15,7 @@
 import './style.css';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import * as THREE from 'three';
-import { Session, ApiError } from './api.js';
+import { Session, ApiError, TTL_S } from './api.js';
 import { EXAMPLES } from './examples.js';
 import { parseMeshFile, BINARY_TYPES } from './meshfile.js';
 import { Viewer } from './viewer.js';
@@ -238,6 +238,7 @@ class App {
     const solidBox = inSolids.length ? new THREE.Box3().setFromPoints(inSolids.map((i) => new THREE.Vector3(...complex.vertices[i]))) : bbox;
     const range = levelRange(summary);
     this.model = { name, complex, summary, ranges, bbox, solidBox, maxLevel: range.max };
+    this.session.keep(name); // a reload of this tab opens it again, by this name
     this.undoStack = [];
     this.redoStack = [];
     this.selected = null;
@@ -549,22 +550,31 @@ class App {
   }
 
   // Open a session another tab started (/#session=ID&token=TOKEN): its model, then follow it.
-  async join(id, token) {
+  // With `owned`, the session this tab started before a reload (Session.kept()): its TTL is set
+  // back from the short one the page gave it as it went, and a session gone meanwhile is said
+  // as such, not as an error.
+  async join(id, token, { owned = false, name } = {}) {
     try {
       await this.run(async () => {
         this.session.id = id;
         this.session.token = token;
         this.session.version = 0;
-        this.session.owned = false; // the tab that started it closes it
+        this.session.owned = owned;
+        if (owned) await this.session.setTtl(TTL_S);
         const complex = await this.session.getComplex();
         const summary = { simplices: {} };
         for (const s of complex.simplices) summary.simplices[s.length - 1] = (summary.simplices[s.length - 1] || 0) + 1;
-        this.#setModel(`session ${id.slice(0, 8)}`, complex, summary);
+        this.#setModel(name || `session ${id.slice(0, 8)}`, complex, summary);
         this.complexVersion = this.cageVersion = this.known = this.session.version;
         this.#listen();
       });
     } catch (e) {
-      this.error(e);
+      this.session.id = this.session.token = null;
+      this.session.owned = false;
+      if (owned && e instanceof ApiError && [401, 404, 409].includes(e.status)) {
+        Session.forget();
+        this.info(`The session of this tab is gone (${e.status === 409 ? 'it held no model' : 'it expired'}); starting again.`);
+      } else this.error(e);
       return false;
     }
     await this.requestLevel();
@@ -780,7 +790,7 @@ class App {
         if (this.session.id !== id) return;
         this.events?.close();
         const why = data?.reason === 'expired' ? 'expired' : data?.reason === 'evicted' ? 'was evicted'
-          : this.session.owned ? 'was closed by another client' : 'was closed (by the tab that started it)';
+          : 'was closed by another client';
         this.info(`The session ${why}; the next change starts a new one with the same model.`);
       },
     });
@@ -1399,7 +1409,11 @@ class App {
         this.redo();
       }
     });
-    window.addEventListener('pagehide', () => this.session.closeOnExit());
+    window.addEventListener('pagehide', () => this.session.shortenOnExit());
+    // back from the back/forward cache: the page lives on, so its session gets its TTL back
+    window.addEventListener('pageshow', (ev) => {
+      if (ev.persisted && this.session.owned) this.session.setTtl(TTL_S).catch((e) => this.error(e));
+    });
     window.addEventListener('error', (ev) => this.error(ev.error || ev.message));
     window.addEventListener('unhandledrejection', (ev) => this.error(ev.reason));
   }
@@ -1480,10 +1494,16 @@ class App {
     window.subdivd = this;
     $('range').hidden = true;
     const ex = EXAMPLES[0];
-    const frag = new URLSearchParams(location.hash.slice(1));
+    const frag = new URLSearchParams(location.hash.slice(1)), kept = Session.kept();
     if (frag.get('session') && frag.get('token')) {
       this.#hint('Joining the session…');
       if (await this.join(frag.get('session'), frag.get('token'))) {
+        this.ready = true;
+        return;
+      }
+    } else if (kept) { // this tab was reloaded: its session and model, as they were
+      this.#hint('Opening this tab\'s session again…');
+      if (await this.join(kept.id, kept.token, { owned: true, name: kept.name })) {
         this.ready = true;
         return;
       }

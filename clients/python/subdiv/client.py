@@ -265,12 +265,17 @@ class Session:
         self.version = j.get("version", self.version)
         return j
 
-    # GET/DELETE /v1/sessions/{id}
+    # GET/PATCH/DELETE /v1/sessions/{id}
     def info(self) -> JSON:
         """GET /v1/sessions/{id}: version, levels_cached, memory_bytes, summary, progress."""
         j = self._call("GET").json()
         self.version = j.get("version", self.version)
         return j
+
+    def set_ttl(self, ttl_s: int) -> JSON:
+        """PATCH /v1/sessions/{id} {"ttl_s"}: a new idle TTL from now (capped at the daemon's
+        --max-ttl): {"id", "ttl_s" granted, "expires_at", "version"}. The version is unchanged."""
+        return self._call("PATCH", json_body={"ttl_s": ttl_s}).json()
 
     def delete(self) -> None:
         """DELETE /v1/sessions/{id}."""
@@ -713,6 +718,7 @@ class Session:
 ROUTES = {
     ("POST", "/v1/sessions"): "Client.create_session",
     ("GET", "/v1/sessions/{id}"): "Session.info",
+    ("PATCH", "/v1/sessions/{id}"): "Session.set_ttl",
     ("DELETE", "/v1/sessions/{id}"): "Session.delete",
     ("PUT", "/v1/sessions/{id}/complex"): "Session.put_complex",
     ("GET", "/v1/sessions/{id}/complex"): "Session.get_complex",
