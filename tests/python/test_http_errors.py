@@ -124,7 +124,8 @@ CASES = [
     ("wrong-content-type", "PUT", "/complex", json.dumps(TET).encode(), {"Content-Type": "text/plain"}, 415, None),
     ("body-on-get", "GET", "/complex", b'{"a":1}', J, 400, None),
     ("wrong-method", "POST", "/complex", TET, None, 405, None),
-    ("patch-session", "PATCH", "", {}, None, 405, None),
+    ("patch-session-no-ttl", "PATCH", "", {}, None, 400, "/ttl_s"),
+    ("put-session", "PUT", "", {}, None, 405, None),
     ("unknown-subpath", "GET", "/nothing", None, None, 404, None),
     ("stale-if-match", "PUT", "/complex", TET, {"If-Match": '"999"'}, 412, None),
 ]

@@ -394,7 +394,7 @@ CASES = [
     # --- methods (405 + Allow) ---
     C("method-post-complex", "POST", "{s}/complex", 405, body=VICTIM, allow="PUT, GET, HEAD"),
     C("method-delete-complex", "DELETE", "{s}/complex", 405, allow="PUT, GET, HEAD"),
-    C("method-patch-session", "PATCH", "{s}", 405, body={}, allow="GET, HEAD, DELETE"),
+    C("method-put-session", "PUT", "{s}", 405, body={}, allow="GET, HEAD, PATCH, DELETE"),
     C("method-get-sessions", "GET", "/v1/sessions", 405, allow="POST"),
     C("method-delete-sessions", "DELETE", "/v1/sessions", 405, allow="POST"),
     C("method-put-level", "PUT", "{s}/levels/1", 405, body={}, allow="GET, HEAD"),
