@@ -216,6 +216,7 @@ def garbage(d, stop, st, base):
 
 def main():
     flags = ["--max-body-bytes", str(MAX_BODY), "--max-sessions", str(SESSIONS + 8),
+             "--max-sessions-per-client", str(SESSIONS + 8),
              "--log-level", "warn"] + sys.argv[1:]
     d = Daemon(*flags)
     st = Stats()

@@ -41,6 +41,8 @@ static const setting S[] = {
     {"queue-timeout", T_INT, OFF(queue_timeout_s), 0, 3600,
      "seconds a computation waits for a free thread before 429 (default 30)"},
     {"max-sessions", T_INT, OFF(max_sessions), 1, 1000000, "live sessions (default 64)"},
+    {"max-sessions-per-client", T_INT, OFF(max_sessions_per_client), 0, 1000000,
+     "resident sessions one client address may have created (default: a quarter of --max-sessions, at least 1; 0: no cap; 429 beyond)"},
     {"ttl", T_INT, OFF(ttl_s), 1, API_MAX_TTL_S, "default session idle TTL in seconds (3600)"},
     {"max-ttl", T_INT, OFF(max_ttl_s), 1, API_MAX_TTL_S,
      "largest session TTL granted, seconds (default 86400; a larger ttl_s is clamped)"},
@@ -201,6 +203,7 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     c->sse_heartbeat_s = 15;
     c->max_listeners = 16;
     c->max_sessions = API_DEFAULT_MAX_SESSIONS;
+    c->max_sessions_per_client = -1; /* a quarter of --max-sessions, unless given */
     c->ttl_s = API_DEFAULT_TTL_S;
     c->max_ttl_s = API_DEFAULT_MAX_TTL_S;
     c->session_rate = API_DEFAULT_SESSION_RATE;
@@ -263,6 +266,8 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
         c->connection_reserve = c->max_connections / 2;
     if (c->ttl_s > c->max_ttl_s)
         c->ttl_s = c->max_ttl_s;
+    if (c->max_sessions_per_client < 0)
+        c->max_sessions_per_client = c->max_sessions / 4 > 1 ? c->max_sessions / 4 : 1;
     if (c->max_client_body_bytes == UINT64_MAX) {
         c->max_client_body_bytes = c->max_memory / 4;
         if (c->max_client_body_bytes <= c->limits.max_body_bytes) /* one largest body always */

@@ -21,6 +21,7 @@ typedef struct config {
     int body_min_rate;        /* bytes/s a request body must average after header_timeout_s */
     int queue_timeout_s;      /* how long a computation waits for a slot before 429 */
     int max_sessions;         /* resident sessions */
+    int max_sessions_per_client; /* resident sessions one client address created (0: any) */
     int ttl_s;                /* default session idle TTL */
     int max_ttl_s;            /* a larger ttl_s asked for is granted as this */
     int session_rate;         /* sessions one client may create per minute (burst as many) */

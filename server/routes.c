@@ -368,7 +368,7 @@ static void h_create_session(req *r)
     if (ttl > r->srv->cfg.max_ttl_s)
         ttl = r->srv->cfg.max_ttl_s;
     store_admission adm;
-    session *s = store_create(r->srv->st, (int)ttl, &adm);
+    session *s = store_create_for(r->srv->st, (int)ttl, &key, r->srv->cfg.max_sessions_per_client, &adm);
     if (adm.evicted)
         log_line(r->srv, LOG_INFO, "the session table was full: an empty idle session went");
     if (s && imported) {
@@ -395,6 +395,15 @@ static void h_create_session(req *r)
     }
     if (!s && !adm.retry_after_s) {
         http_fail(r, 503, "out-of-memory", "out of memory");
+        return;
+    }
+    if (!s && adm.client_full) {
+        p.retry_after = adm.retry_after_s;
+        api_fail(&p, 429, "client-sessions",
+                 "this client address holds %d sessions, its maximum (--max-sessions-per-client), each "
+                 "with a complex or in use; delete one, or retry in %d s when the first expires",
+                 r->srv->cfg.max_sessions_per_client, adm.retry_after_s);
+        http_reply_problem(r, &p);
         return;
     }
     if (!s) {

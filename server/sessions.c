@@ -166,17 +166,24 @@ static int expire_locked(store *st, double now)
     return gone;
 }
 
-/* Remove the least recently used session that never received a complex (with a durable store:
- * any session, since the store has it) and that nobody else holds (no request or stream in
- * flight: store_get takes its reference under st->mu, which the caller holds). 1 if one went. */
-static int evict_empty_locked(store *st)
+/* Whether s was created by the client `owner` (NULL: any session). */
+static bool owned_by(const session *s, const rate_key *owner)
+{
+    return !owner || (s->has_owner && !memcmp(&s->owner, owner, sizeof *owner));
+}
+
+/* Remove the least recently used session (of `owner`, unless NULL) that never received a complex
+ * (with a durable store: any session, since the store has it) and that nobody else holds (no
+ * request or stream in flight: store_get takes its reference under st->mu, which the caller
+ * holds). 1 if one went. */
+static int evict_empty_locked(store *st, const rate_key *owner)
 {
     bool any = persist_durable(st->p);
     int best = -1;
     double best_used = 0;
     for (int i = 0; i < st->n; i++) {
         session *s = st->s[i];
-        if (atomic_load(&s->refs) != 1 || atomic_load(&s->busy_level) >= 0)
+        if (!owned_by(s, owner) || atomic_load(&s->refs) != 1 || atomic_load(&s->busy_level) >= 0)
             continue;
         pthread_mutex_lock(&s->mu);
         int empty = any || !s->model->c;
@@ -200,12 +207,15 @@ static int evict_empty_locked(store *st)
     return best >= 0 ? remove_at(st, best, any ? "reload" : "evicted") : 0;
 }
 
-/* Seconds until the soonest expiry of a resident session (>= 1). Caller holds st->mu. */
-static int soonest_expiry_locked(store *st, double now)
+/* Seconds until the soonest expiry of a resident session (of `owner`, unless NULL; >= 1).
+ * Caller holds st->mu. */
+static int soonest_expiry_locked(store *st, double now, const rate_key *owner)
 {
     double soonest = -1;
     for (int i = 0; i < st->n; i++) {
         session *s = st->s[i];
+        if (!owned_by(s, owner))
+            continue;
         pthread_mutex_lock(&s->mu);
         double left = s->ttl_s - (now - s->last_used);
         pthread_mutex_unlock(&s->mu);
@@ -248,21 +258,45 @@ static session *session_alloc(const char *id, const unsigned char hash[32], int 
 /* Make room for one more resident session (expired ones first, then an idle one that can go).
  * Caller holds st->mu; false when the table stays full (*retry_after_s then says when the
  * soonest expiry is). */
-static bool room_locked(store *st, store_admission *a)
+static int count_owned_locked(store *st, const rate_key *owner)
+{
+    int n = 0;
+    for (int i = 0; i < st->n; i++)
+        n += owned_by(st->s[i], owner);
+    return n;
+}
+
+static bool room_locked(store *st, const rate_key *owner, int per_client, store_admission *a)
 {
     double now = mono_now();
+    if (owner && per_client > 0 && count_owned_locked(st, owner) >= per_client) {
+        expire_locked(st, now);
+        if (count_owned_locked(st, owner) >= per_client)
+            a->evicted = evict_empty_locked(st, owner);
+        if (count_owned_locked(st, owner) >= per_client) {
+            a->client_full = 1;
+            a->retry_after_s = soonest_expiry_locked(st, now, owner);
+            return false;
+        }
+    }
     if (st->n >= st->cap)
         expire_locked(st, now);
     if (st->n >= st->cap)
-        a->evicted = evict_empty_locked(st);
+        a->evicted = evict_empty_locked(st, NULL);
     if (st->n >= st->cap) {
-        a->retry_after_s = soonest_expiry_locked(st, now);
+        a->retry_after_s = soonest_expiry_locked(st, now, NULL);
         return false;
     }
     return true;
 }
 
 session *store_create(store *st, int ttl_s, store_admission *a)
+{
+    return store_create_for(st, ttl_s, NULL, 0, a);
+}
+
+session *store_create_for(store *st, int ttl_s, const rate_key *owner, int per_client,
+                          store_admission *a)
 {
     memset(a, 0, sizeof *a);
     unsigned char rid[16], rtok[32], hash[32];
@@ -287,6 +321,10 @@ session *store_create(store *st, int ttl_s, store_admission *a)
         return NULL;
     memcpy(s->token, token, sizeof token);
     explicit_bzero(token, sizeof token);
+    if (owner) {
+        s->owner = *owner;
+        s->has_owner = true;
+    }
     char why[8];
     if (persist_durable(st->p) && !persist_healthy(st->p, why, sizeof why)) {
         a->stored = PERSIST_UNAVAILABLE; /* refused before anything resident makes room */
@@ -294,7 +332,7 @@ session *store_create(store *st, int ttl_s, store_admission *a)
         return NULL;
     }
     pthread_mutex_lock(&st->mu);
-    bool ok = room_locked(st, a);
+    bool ok = room_locked(st, owner, per_client, a);
     unlock_store(st);
     if (ok && persist_durable(st->p)) { /* in the store before anyone learns the id */
         persist_meta m = {.ttl_s = ttl_s, .created = s->created,
@@ -307,7 +345,7 @@ session *store_create(store *st, int ttl_s, store_admission *a)
     s->touched = mono_now(); /* the store has its expiry */
     if (ok) {
         pthread_mutex_lock(&st->mu);
-        ok = room_locked(st, a);
+        ok = room_locked(st, owner, per_client, a);
         if (ok) {
             atomic_fetch_add(&s->refs, 1); /* the store's and the caller's */
             st->s[st->n++] = s;
@@ -402,7 +440,7 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
     }
     store_admission room = {0};
     pthread_mutex_lock(&st->mu); /* room first: a rebuild that cannot be kept is not made */
-    bool space = room_locked(st, &room);
+    bool space = room_locked(st, NULL, 0, &room);
     unlock_store(st);
     if (!space) {
         pthread_mutex_unlock(lk);
@@ -446,7 +484,7 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
             s->journal_len = (uint32_t)l.njournal;
             store_admission a = {0};
             pthread_mutex_lock(&st->mu);
-            bool ok = room_locked(st, &a);
+            bool ok = room_locked(st, NULL, 0, &a);
             if (ok) {
                 atomic_fetch_add(&s->refs, 1);
                 st->s[st->n++] = s;

@@ -15,6 +15,7 @@
 #include "../api/limits.h"
 #include "../api/model.h"
 #include "persist.h"
+#include "rate.h"
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdint.h>
@@ -32,6 +33,8 @@ typedef struct session {
     _Atomic int ttl_s;        /* idle TTL, seconds (store_retime changes it) */
     double last_used;         /* monotonic seconds */
     time_t created;
+    rate_key owner;           /* the client address that created it (has_owner) */
+    bool has_owner;           /* created here (a session loaded from the store has none) */
     struct ev_hub *events;    /* its Server-Sent Events (events.h), told when it leaves the store */
     uint32_t journal_len;     /* edits in the durable store's journal since its snapshot (write lock) */
     double touched;           /* monotonic time the durable store last got its expiry (mu) */
@@ -53,6 +56,8 @@ void store_free(store *st);
 typedef struct store_admission {
     int evicted;              /* an empty idle session went to make room */
     int retry_after_s;        /* refused, the table full: seconds until the soonest expiry (>= 1) */
+    int client_full;          /* refused: the creating client holds its maximum of sessions
+                                 (retry_after_s: until the soonest of theirs expires) */
     persist_rc stored;        /* refused by the durable store (PERSIST_UNAVAILABLE ...), else OK */
 } store_admission;
 
@@ -61,6 +66,12 @@ typedef struct store_admission {
  * or a stream in flight: the store holds its only reference); NULL when none can go (or out of
  * memory: then retry_after_s is 0). */
 session *store_create(store *st, int ttl_s, store_admission *a);
+/* The same for a client (`owner`) that may hold at most `per_client` resident sessions (0: any
+ * number): its own sessions past their TTL go first, then (with a durable store) its least
+ * recently used idle one leaves memory, or (memory store) its least recently used idle one
+ * that never received a complex; else refused with client_full. */
+session *store_create_for(store *st, int ttl_s, const rate_key *owner, int per_client,
+                          store_admission *a);
 /* Why store_get found nothing. */
 typedef enum store_miss {
     STORE_NONE = 0,           /* no such session (never, expired, deleted) */

@@ -33,6 +33,8 @@ class Daemon:
         e.update(env or {})
         if not any(str(f).startswith("--session-rate") for f in flags):
             flags = ("--session-rate", "1000000", *flags)
+        if not any(str(f).startswith("--max-sessions-per-client") for f in flags):
+            flags = ("--max-sessions-per-client", "0", *flags)
         self.proc = subprocess.Popen([str(SUBDIVD), "--port", "0", "--log-level", "info", *flags],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                      env=e)
