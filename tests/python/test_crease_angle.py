@@ -217,6 +217,16 @@ def test_crease_angle_validation(daemon, value, status):
     assert s.req("GET").json()["version"] == 2
 
 
+def test_crease_angle_just_outside_names_the_value(daemon):
+    """A value just above 180 is refused with the value as sent, not rounded onto the bound."""
+    v, tris = cube_surface()
+    s = Session(daemon)
+    assert s.put_complex({"vertices": v, "simplices": tris}).status_code == 200
+    r = s.req("PUT", "/tags", json={"crease_angle": 180.0000001})
+    assert r.status_code == 422
+    assert r.json()["detail"].endswith("not 180.0000001")
+
+
 def test_crease_angle_before_a_complex(daemon):
     s = Session(daemon)
     r = s.req("PUT", "/tags", json={"crease_angle": 30})
