@@ -15,6 +15,7 @@
 #include "crease.h"
 #include "mem.h"
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -125,9 +126,18 @@ int api_crease_tags(const api_model *cur, json_t *v, api_tags *tags, api_problem
     if (!json_is_number(v))
         return api_fail_at(p, 400, "wrong-type", "/crease_angle", "must be a number of degrees");
     double d = json_number_value(v);
-    if (!(d >= 0 && d <= 180))
+    if (!(d >= 0 && d <= 180)) {
+        /* the value as sent: the fewest digits that read back as d (%g would print 180.0000001
+         * as the bound itself) */
+        char num[32];
+        for (int digits = 6; digits <= 17; digits++) {
+            snprintf(num, sizeof num, "%.*g", digits, d);
+            if (strtod(num, NULL) == d)
+                break;
+        }
         return api_fail_at(p, 422, "out-of-range", "/crease_angle",
-                           "the crease angle is between 0 and 180 degrees, not %g", d);
+                           "the crease angle is between 0 and 180 degrees, not %s", num);
+    }
     if (!cur->in || !cur->level0)
         return api_fail_at(p, 409, "no-complex", "/crease_angle",
                            "the crease angle tags edges of the complex; PUT the complex first");

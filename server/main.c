@@ -17,6 +17,7 @@
 #include "server.h"
 #include <errno.h>
 #include <malloc.h>
+#include <math.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -193,12 +194,13 @@ static int refine_main(int argc, char **argv)
     if (a.crease_angle) { /* a number here; its range is PUT /tags's (422) */
         char *end;
         double deg = strtod(a.crease_angle, &end);
-        if (!*a.crease_angle || *end) {
+        /* strtod also reads nan, inf and overflows to inf: JSON has no such number */
+        if (!*a.crease_angle || *end || !isfinite(deg)) {
             fprintf(stderr, "subdivd refine: --crease-angle needs a number of degrees, not %s\n",
                     a.crease_angle);
             rc = 2;
-        }
-        crease = json_pack("{s:f}", "crease_angle", deg);
+        } else
+            crease = json_pack("{s:f}", "crease_angle", deg);
     }
     /* the complex first: per-simplex overrides in --rules name its simplices */
     if (!rc)

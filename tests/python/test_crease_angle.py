@@ -217,6 +217,16 @@ def test_crease_angle_validation(daemon, value, status):
     assert s.req("GET").json()["version"] == 2
 
 
+def test_crease_angle_just_outside_names_the_value(daemon):
+    """A value just above 180 is refused with the value as sent, not rounded onto the bound."""
+    v, tris = cube_surface()
+    s = Session(daemon)
+    assert s.put_complex({"vertices": v, "simplices": tris}).status_code == 200
+    r = s.req("PUT", "/tags", json={"crease_angle": 180.0000001})
+    assert r.status_code == 422
+    assert r.json()["detail"].endswith("not 180.0000001")
+
+
 def test_crease_angle_before_a_complex(daemon):
     s = Session(daemon)
     r = s.req("PUT", "/tags", json={"crease_angle": 30})
@@ -240,6 +250,11 @@ def test_offline_crease_angle(tmp_path):
     r = subprocess.run([str(SUBDIVD), "refine", str(src), "--level", "1", "--crease-angle", "181",
                         "-o", str(out)], capture_output=True, text=True)
     assert r.returncode == 1 and "/crease_angle" in r.stderr
+    # a value strtod reads but JSON cannot carry is refused, not silently dropped
+    for bad in ("nan", "inf", "-inf", "1e999"):
+        r = subprocess.run([str(SUBDIVD), "refine", str(src), "--level", "1", "--crease-angle", bad,
+                            "-o", str(out)], capture_output=True, text=True)
+        assert r.returncode == 2 and "--crease-angle" in r.stderr, (bad, r.returncode, r.stderr)
 
 
 def test_python_client_and_cli(daemon, tmp_path):
@@ -259,5 +274,11 @@ def test_python_client_and_cli(daemon, tmp_path):
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert "cube.json: crease angle 45: 12 edges tagged" in r.stderr
+    for bad in ("nan", "inf"):  # refused before anything is sent
+        r = subprocess.run([str(REPO / "build" / "subdiv"), "refine", str(src), "--url", daemon.url,
+                            "--level", "1", "--crease-angle", bad, "-o", str(tmp_path / "b.json")],
+                           capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and "crease_angle" in r.stderr, (bad, r.returncode, r.stderr)
+        assert not (tmp_path / "b.json").exists()
     p = np.array(json.loads((tmp_path / "a.json").read_text())["vertices"])
     np.testing.assert_array_equal(p[:8], np.array(v, dtype=float))  # corners fixed

@@ -25,6 +25,7 @@ first failed job.
 """
 import argparse
 import json
+import math
 import os
 import pathlib
 import shutil
@@ -316,8 +317,9 @@ def run_job(client, job, progress, base=pathlib.Path(".")):
         body["repair"] = True
     crease = job.get("crease_angle")
     if crease is not None:
-        if isinstance(crease, bool) or not isinstance(crease, (int, float)):
-            raise UsageError("crease_angle is a number of degrees")
+        if (isinstance(crease, bool) or not isinstance(crease, (int, float))
+                or not math.isfinite(crease)):
+            raise UsageError("crease_angle is a finite number of degrees")
         tags = dict(tags or {})
         tags["crease_angle"] = crease
     name = job.get("name") or pathlib.Path(inp).name
