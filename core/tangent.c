@@ -94,6 +94,19 @@ static inline double norm3(const double *a)
     return hypot(hypot(a[0], a[1]), a[2]);
 }
 
+/* a scaled by a power of two (exact) so that its largest component is in [1/2, 1): a direction
+ * given with subnormal components (the API takes any finite non-zero vector) keeps its bits, and
+ * its length and cross products neither lose precision nor underflow; a zero vector stays zero */
+static inline void rescale3(const double *a, double *o)
+{
+    double m = fmax(fmax(fabs(a[0]), fabs(a[1])), fabs(a[2]));
+    int e = 0;
+    if (m > 0 && isfinite(m))
+        frexp(m, &e);
+    for (int k = 0; k < 3; k++)
+        o[k] = ldexp(a[k], -e);
+}
+
 static inline void cross3(const double *a, const double *b, double *c)
 {
     c[0] = a[1] * b[2] - a[2] * b[1];
@@ -102,9 +115,11 @@ static inline void cross3(const double *a, const double *b, double *c)
 }
 
 /* Whether directions a and b are parallel to 1e-9 (a zero one counts as parallel). */
-static bool parallel3(const double *a, const double *b)
+static bool parallel3(const double *a0, const double *b0)
 {
-    double w[3];
+    double a[3], b[3], w[3];
+    rescale3(a0, a);
+    rescale3(b0, b);
     cross3(a, b, w);
     return norm3(w) <= 1e-9 * norm3(a) * norm3(b);
 }
@@ -539,8 +554,10 @@ static const sdi_tprec *find_rec(const tplist *L, uint32_t v, uint32_t key)
     return lo < L->n && L->r[lo].v == v && L->r[lo].key == key ? &L->r[lo] : NULL;
 }
 
-static void scale_to(double *d, const double *dir, double len)
+static void scale_to(double *d, const double *dir0, double len)
 {
+    double dir[3];
+    rescale3(dir0, dir);
     double l = norm3(dir);
     for (int k = 0; k < 3; k++)
         d[k] = l > 0 ? dir[k] / l * len : 0;

@@ -537,6 +537,31 @@ def test_refine_says_it_drops_the_constraints(daemon):
         x.delete()
 
 
+def test_subnormal_directions_are_directions(daemon):
+    """A given normal or tangent is a direction (any finite vector of non-zero length is taken):
+    with subnormal components it makes the same level as the same direction at unit scale (its
+    length was once taken from the subnormals, so (5e-324, 5e-324, 0) became (1, 1, 0), not unit,
+    and a subnormal tangent was refused as along the curve)."""
+    def level3(V, T, tags):
+        s = session(daemon, V, T, tags)
+        X, _ = level(s, 3)
+        s.delete()
+        return X
+
+    V, T = fans()
+    want = level3(V, T, {"normals": [{"vertex": 0, "triangles": [T[0], T[5]],
+                                      "normal": [1.0, 1.0, 0.0]}]})
+    got = level3(V, T, {"normals": [{"vertex": 0, "triangles": [T[0], T[5]],
+                                     "normal": [5e-324, 5e-324, 0.0]}]})
+    assert np.abs(got - want).max() < 1e-12
+    V, T = tjunction()
+    tri = sheet_triangle(T, 0, 2)
+    want = level3(V, T, {"tangents": [{"vertex": 2, "triangle": tri, "tangent": [0.0, 1.0, 1.0]}]})
+    got = level3(V, T, {"tangents": [{"vertex": 2, "triangle": tri,
+                                      "tangent": [0.0, 5e-324, 5e-324]}]})
+    assert np.abs(got - want).max() < 1e-12
+
+
 def refuse(s, body, status, pointer):
     r = s.req("PUT", "/tags", json=body)
     assert r.status_code == status, (body, r.text)
