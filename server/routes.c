@@ -276,7 +276,8 @@ static int store_snapshot(req *r, api_model *m, uint64_t expect, uint64_t versio
 /* Store the edit `body` that made `version` in the journal (0, or the status of the problem:
  * the edit is then not made). A store that holds another version, or none, means the resident
  * copy is stale: it is dropped, and the next request loads the stored one. */
-static int store_journal(req *r, json_t *body, uint64_t version, api_problem *p)
+static int store_journal(req *r, json_t *body, uint64_t version, persist_rc *stored,
+                         api_problem *p)
 {
     persist *ps = store_persist(r->srv->st);
     if (!persist_durable(ps))
@@ -286,6 +287,8 @@ static int store_journal(req *r, json_t *body, uint64_t version, api_problem *p)
                                           session_stored_expiry(r->s), text, strlen(text))
                          : PERSIST_UNAVAILABLE;
     api_free(text);
+    if (stored)
+        *stored = rc;
     if (rc != PERSIST_OK)
         return store_refused(r, rc, rc == PERSIST_CONFLICT || rc == PERSIST_ABSENT, p);
     r->s->journal_len++;
@@ -297,12 +300,13 @@ typedef struct edit_commit {
     req *r;
     json_t *body;
     uint64_t version;
+    persist_rc stored;        /* what the store said */
 } edit_commit;
 
 static int commit_edit(void *ud, api_problem *p)
 {
     edit_commit *c = ud;
-    return store_journal(c->r, c->body, c->version, p);
+    return store_journal(c->r, c->body, c->version, &c->stored, p);
 }
 
 /* After JOURNAL_COMPACT edits the journal becomes a snapshot of the published model (under the
@@ -847,58 +851,66 @@ static void h_edit(req *r)
     json_t *b = body_or_answer(r, NULL, NULL);
     if (!b)
         return;
-    pthread_mutex_lock(&r->s->write);
     uint64_t version;
-    api_model *m = session_model(r->s, &version), *rebuilt = NULL;
-    uint64_t counts[SD_MAX_LEVEL + 1];
-    int levels = 0, rc;
-    api_slot slot = slot_of(r);
-    snprintf(d.since, sizeof d.since, "%llu", (unsigned long long)version);
-    /* changes are sequential (the write lock): the edit's version is the next one */
-    if (!(rc = if_match(r, version, &p)) && (d.level < 0 || !(rc = api_delta_check(m, &d.q, &p))))
-    {
-        edit_commit ec = {r, b, version + 1};
-        api_edit_commit commit = {commit_edit, &ec};
-        rc = api_edit_commit_by(m, b, version + 1, &r->srv->cfg.limits, &slot, &commit, counts,
-                                &levels, &rebuilt, &p);
-    }
-    char up[512] = "{";
-    for (int l = 0; !rc && l < levels; l++) {
-        size_t u = strlen(up);
-        snprintf(up + u, sizeof up - u, "%s\"%d\":%llu", l ? "," : "", l,
-                 (unsigned long long)counts[l]);
-    }
-    strcat(up, "}");
-    if (!rc && rebuilt && (rc = api_embed_carry(m, rebuilt, &r->srv->cfg.limits, &p))) {
-        api_model_unref(rebuilt);
-        rebuilt = NULL;
-    }
-    if (!rc && rebuilt && (rc = store_journal(r, b, version + 1, &p))) {
-        api_model_unref(rebuilt); /* a new model (nothing changed in place): not published */
-        rebuilt = NULL;
-    }
-    if (!rc) { /* the version api_edit stamped: the write lock is held */
-        version = rebuilt ? session_publish(r->s, rebuilt) : session_bump(r->s);
-        store_compact(r, version);
-        notify(r, version, "edit", up);
-        if (d.level >= 0) {
-            api_model *now = session_model(r->s, NULL);
-            uint64_t dv;
-            api_level_delta(now, d.level, &d.q, &d.body, &d.len, &d.ctype, d.comp,
-                            sizeof d.comp, &dv, &d.p);
-            api_model_unref(now);
+    int rc;
+    char up[512];
+    /* again on a compare-and-set lost to another daemon when If-Match is "*" (change()) */
+    for (int attempt = 0;; attempt++) {
+        pthread_mutex_lock(&r->s->write);
+        api_model *m = session_model(r->s, &version), *rebuilt = NULL;
+        uint64_t counts[SD_MAX_LEVEL + 1];
+        int levels = 0;
+        api_slot slot = slot_of(r);
+        edit_commit ec = {r, b, version + 1, PERSIST_OK};
+        snprintf(d.since, sizeof d.since, "%llu", (unsigned long long)version);
+        /* changes are sequential (the write lock): the edit's version is the next one */
+        if (!(rc = if_match(r, version, &p)) && (d.level < 0 || !(rc = api_delta_check(m, &d.q, &p))))
+        {
+            api_edit_commit commit = {commit_edit, &ec};
+            rc = api_edit_commit_by(m, b, version + 1, &r->srv->cfg.limits, &slot, &commit, counts,
+                                    &levels, &rebuilt, &p);
         }
-    } else if (rebuilt && persist_durable(store_persist(r->srv->st))) {
-        api_model_unref(rebuilt); /* a failed edit whose undo failed: the store has the content */
-        store_drop(r->srv->st, r->s);
-    } else if (rebuilt) { /* a failed edit whose undo failed: the content before it, rebuilt */
-        api_problem q = {0};
-        api_embed_carry(m, rebuilt, &r->srv->cfg.limits, &q); /* what fits goes on */
-        notify(r, session_publish(r->s, rebuilt), "complex", NULL);
+        snprintf(up, sizeof up, "{");
+        for (int l = 0; !rc && l < levels; l++) {
+            size_t u = strlen(up);
+            snprintf(up + u, sizeof up - u, "%s\"%d\":%llu", l ? "," : "", l,
+                     (unsigned long long)counts[l]);
+        }
+        strcat(up, "}");
+        if (!rc && rebuilt && (rc = api_embed_carry(m, rebuilt, &r->srv->cfg.limits, &p))) {
+            api_model_unref(rebuilt);
+            rebuilt = NULL;
+        }
+        if (!rc && rebuilt && (rc = store_journal(r, b, version + 1, &ec.stored, &p))) {
+            api_model_unref(rebuilt); /* a new model (nothing changed in place): not published */
+            rebuilt = NULL;
+        }
+        if (!rc) { /* the version api_edit stamped: the write lock is held */
+            version = rebuilt ? session_publish(r->s, rebuilt) : session_bump(r->s);
+            store_compact(r, version);
+            notify(r, version, "edit", up);
+            if (d.level >= 0) {
+                api_model *now = session_model(r->s, NULL);
+                uint64_t dv;
+                api_level_delta(now, d.level, &d.q, &d.body, &d.len, &d.ctype, d.comp,
+                                sizeof d.comp, &dv, &d.p);
+                api_model_unref(now);
+            }
+        } else if (rebuilt && persist_durable(store_persist(r->srv->st))) {
+            api_model_unref(rebuilt); /* a failed edit whose undo failed: the store has the content */
+            store_drop(r->srv->st, r->s);
+        } else if (rebuilt) { /* a failed edit whose undo failed: the content before it, rebuilt */
+            api_problem q = {0};
+            api_embed_carry(m, rebuilt, &r->srv->cfg.limits, &q); /* what fits goes on */
+            notify(r, session_publish(r->s, rebuilt), "complex", NULL);
+        }
+        pthread_mutex_unlock(&r->s->write);
+        api_model_unref(m);
+        if (!rc || !(ec.stored == PERSIST_CONFLICT && attempt < RELOAD_TRIES && reload_unconditional(r)))
+            break;
+        memset(&p, 0, sizeof p);
     }
-    pthread_mutex_unlock(&r->s->write);
     json_decref(b);
-    api_model_unref(m);
     if (rc) {
         http_reply_problem(r, &p);
         return;

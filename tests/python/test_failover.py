@@ -286,6 +286,29 @@ def test_two_daemons_changes_without_if_match_are_both_made(tmp_path):
                 version += 4
 
 
+@needs_store
+def test_two_daemons_edits_with_if_match_star_are_both_made(tmp_path):
+    """docs/DEPLOY.md: a change sent with `If-Match: *` names no version, so one whose
+    compare-and-set another daemon's change won is made again on the session as stored. An edit
+    (PATCH, which takes `*` in place of a version) too: two sent at once through two daemons are
+    both answered 200 (versions v+1 and v+2) and both moves are kept, as on one daemon."""
+    with two_daemons(tmp_path) as (daemons, http, sid, token, auth, version):
+        star = dict(auth, **{"If-Match": "*"})
+        for rnd in range(16):
+            spots = [[0.01 * rnd, -0.01 * rnd, 0], [1 + 0.01 * rnd, 1, 1 - 0.01 * rnd]]
+            out = at_once(lambda k: http[k].patch(
+                f"{daemons[k].url}/v1/sessions/{sid}/control-points", headers=star, timeout=60,
+                json={"moves": [{"index": 4 * k, "position": spots[k]}]}))
+            assert [o.status_code for o in out] == [200, 200], [(o.status_code, o.text) for o in out]
+            assert sorted(o.json()["version"] for o in out) == [version + 1, version + 2]
+            version += 2
+            for k in range(2):   # both daemons hold both moves
+                c = http[k].get(f"{daemons[k].url}/v1/sessions/{sid}/complex", headers=auth,
+                                timeout=60)
+                assert c.headers["ETag"] == f'"{version}"'
+                assert [c.json()["vertices"][i] for i in (0, 4)] == spots
+
+
 @contextlib.contextmanager
 def two_daemons(tmp_path):
     """Two daemons on one redis and a session with TWO_TETS made through the first:
