@@ -17,12 +17,16 @@
  * plus that many pages, so a test can fill "the disk" (SQLITE_FULL) without filling one.
  */
 #include "persist_impl.h"
+#include <errno.h>
+#include <fcntl.h>
 #include <pthread.h>
 #include <sqlite3.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <time.h>
+#include <unistd.h>
 #include <zlib.h>
 
 enum {
@@ -73,6 +77,7 @@ typedef struct sqlite_store {
     sqlite3_stmt *q[NQ];
     char path[512];
     char err[640];
+    int lock_fd;              /* the file, flock()ed: one daemon per SQLite file */
 } sqlite_store;
 
 static void note(sqlite_store *s, const char *what)
@@ -88,6 +93,7 @@ void *persist_sqlite_open(const char *path, bool sync_full, char *err, size_t ca
         return NULL;
     }
     snprintf(s->path, sizeof s->path, "%s", path);
+    s->lock_fd = -1;
     int rc = sqlite3_open_v2(path, &s->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE |
                                                SQLITE_OPEN_NOMUTEX, NULL);
     char pragmas[160];
@@ -112,8 +118,25 @@ void *persist_sqlite_open(const char *path, bool sync_full, char *err, size_t ca
         snprintf(q, sizeof q, "PRAGMA max_page_count=%lld", have + atoll(cap_pages));
         rc = sqlite3_exec(s->db, q, NULL, NULL, &msg);
     }
+    /* Only a shared store (redis) tells a daemon that another one changed a session; two daemons
+     * on one SQLite file would each serve their own resident copies, so the second is refused
+     * (an flock, which the kernel drops with the process, kill -9 included). */
+    bool busy = false;
+    if (rc == SQLITE_OK) {
+        s->lock_fd = open(path, O_RDONLY | O_CLOEXEC);
+        busy = s->lock_fd < 0 || flock(s->lock_fd, LOCK_EX | LOCK_NB) != 0;
+        if (busy) {
+            snprintf(err, cap, "sqlite %.200s: %s", path, errno == EWOULDBLOCK
+                     ? "in use by another daemon (one daemon per SQLite file; several daemons share "
+                       "a redis store, docs/DEPLOY.md)" : strerror(errno));
+            rc = SQLITE_BUSY;
+        }
+    }
     if (rc != SQLITE_OK) {
-        snprintf(err, cap, "sqlite %.200s: %s", path, msg ? msg : s->db ? sqlite3_errmsg(s->db) : "cannot open");
+        if (!busy)
+            snprintf(err, cap, "sqlite %.200s: %s", path, msg ? msg : s->db ? sqlite3_errmsg(s->db) : "cannot open");
+        if (s->lock_fd >= 0)
+            close(s->lock_fd);
         sqlite3_free(msg);
         for (int i = 0; i < NQ; i++)
             sqlite3_finalize(s->q[i]);
@@ -131,6 +154,8 @@ static void sq_close(void *b)
     for (int i = 0; i < NQ; i++)
         sqlite3_finalize(s->q[i]);
     sqlite3_close(s->db);
+    if (s->lock_fd >= 0)
+        close(s->lock_fd); /* the flock goes with it */
     pthread_mutex_destroy(&s->mu);
     free(s);
 }

@@ -273,6 +273,28 @@ def test_an_import_at_the_largest_version_restores_after_changes(tmp_path):
         d.stop()
 
 
+def test_one_daemon_per_sqlite_file(tmp_path):
+    """Only a shared store (redis) tells a daemon of another's changes: a second daemon on the same
+    SQLite file would serve its own stale copies, so it is refused at start (exit 1, the reason on
+    stderr); the file is free again once the first has gone, even by kill -9."""
+    db = tmp_path / "one.db"
+    d = store_daemon(db)
+    try:
+        s = Session(d)
+        assert s.put_complex(TETS).status_code == 200
+        p = subprocess.run([str(SUBDIVD), "--port", "0", "--store", f"sqlite:{db}"],
+                           capture_output=True, text=True, timeout=30)
+        assert p.returncode == 1, (p.returncode, p.stdout, p.stderr)
+        assert "in use by another daemon" in p.stderr, p.stderr
+    finally:
+        kill9(d)
+    d = store_daemon(db)
+    try:
+        assert on(d, s).req("GET", "/complex").json()["vertices"] == TETS["vertices"]
+    finally:
+        d.stop()
+
+
 def test_a_changed_ttl_is_stored(store):
     """PATCH /v1/sessions/{id} {"ttl_s"} changes the stored record too: after a restart the
     session keeps its new TTL (it expires after 2 s of idleness, not the 600 it was created
