@@ -146,8 +146,15 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
         api_fail(p, 409, "no-complex", "no complex has been posted to this session yet");
         return NULL;
     }
-    if (!vertex == !edge) {
-        api_fail(p, 400, "missing-field", "give exactly one of vertex=i or edge=i,j");
+    if (!vertex && !edge) {
+        api_fail_at(p, 400, "missing-field", "vertex", "give exactly one of vertex=i or edge=i,j");
+        api_add_error(p, "edge", "or this one");
+        return NULL;
+    }
+    if (vertex && edge) {
+        api_fail_at(p, 400, "wrong-type", "vertex",
+                    "give exactly one of vertex=i or edge=i,j, not both");
+        api_add_error(p, "edge", "given with vertex");
         return NULL;
     }
     long a, b = -1;
@@ -157,7 +164,7 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
     } else {
         char first[24];
         const char *comma = strchr(edge, ',');
-        if (!comma || (size_t)(comma - edge) >= sizeof first) {
+        if (!comma || (size_t)(comma - edge) >= sizeof first || strchr(comma + 1, ',')) {
             api_fail_at(p, 400, "wrong-type", "edge", "edge is two vertex indices: edge=i,j");
             return NULL;
         }

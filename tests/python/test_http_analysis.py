@@ -75,8 +75,9 @@ def test_edge_block(daemon, k):
 
 
 @pytest.mark.parametrize("params,status,pointer", [
-    ({}, 400, None), ({"vertex": 0, "edge": "0,1"}, 400, None), ({"vertex": "x"}, 400, "vertex"),
-    ({"vertex": 99}, 422, "vertex"), ({"edge": "0"}, 400, "edge"), ({"edge": "1,5"}, 422, "edge"),
+    ({}, 400, "vertex"), ({"vertex": 0, "edge": "0,1"}, 400, "vertex"), ({"vertex": "x"}, 400, "vertex"),
+    ({"vertex": 99}, 422, "vertex"), ({"edge": "0"}, 400, "edge"), ({"edge": "1,2,3"}, 400, "edge"),
+    ({"edge": "1,5"}, 422, "edge"),
     ({"edge": "0,99"}, 422, "edge"), ({"node": 1}, 400, "node")])
 def test_analysis_errors(daemon, params, status, pointer):
     s = Session(daemon)
@@ -84,8 +85,12 @@ def test_analysis_errors(daemon, params, status, pointer):
     r = s.req("GET", "/analysis", params=params)
     assert r.status_code == status, r.text
     assert r.headers["Content-Type"] == "application/problem+json"
-    if pointer:
-        assert r.json()["errors"][0]["pointer"] == pointer
+    pointers = [e["pointer"] for e in r.json()["errors"]]
+    assert pointers[0] == pointer, r.text
+    if "vertex" in params and "edge" in params or not params:   # both named: one of each is wrong
+        assert pointers == ["vertex", "edge"], r.text
+    if params.get("edge") == "1,2,3":
+        assert "two vertex indices" in r.json()["detail"], r.text
 
 
 def test_analysis_needs_complex(daemon):
