@@ -408,6 +408,23 @@ static int early_auth(req *r)
                   r->seg_id);
         return 1;
     }
+    if (!r->s && miss == STORE_DAMAGED && !strcmp(r->rt->method, "DELETE") &&
+        !strcmp(r->rt->pattern, "/v1/sessions/{id}")) { /* its holder may still let it go */
+        persist_rc rc = persist_delete(store_persist(r->srv->st), r->seg_id);
+        if (rc == PERSIST_OK || rc == PERSIST_ABSENT) {
+            log_line(r->srv, LOG_WARN, "session %.40s: deleted with its damaged data (%s)",
+                     r->seg_id, why);
+            http_queue(r, 204, http_empty());
+            return 1;
+        }
+        api_fail(&p, 503, "store-unavailable", "the session could not be deleted from the store");
+        p.retry_after = 5;
+        http_reply_problem(r, &p);
+        return 1;
+    }
+    bool damaged = miss == STORE_DAMAGED;
+    if (damaged)
+        miss = STORE_CORRUPT;
     if (!r->s && miss != STORE_UNAUTHORIZED) { /* the details go to the log, not to the client */
         p.retry_after = miss == STORE_CORRUPT ? 0 : 5;
         if (miss == STORE_FULL)
@@ -415,7 +432,8 @@ static int early_auth(req *r)
                      "session is in use; retry in a few seconds", r->seg_id);
         else if (miss == STORE_CORRUPT)
             api_fail(&p, 503, "store-corrupt", "session %.40s cannot be rebuilt from the store "
-                     "(damaged data; the daemon's log says where)", r->seg_id);
+                     "(damaged data; the daemon's log says where)%s", r->seg_id,
+                     damaged ? "; DELETE it to start afresh" : "");
         else
             api_fail(&p, 503, "store-unavailable", "the session store cannot be read now");
         if (miss != STORE_FULL)

@@ -58,6 +58,9 @@ typedef struct persist_loaded {
     persist_entry *journal;       /* malloc'd array */
     size_t njournal;
     char why[320];                /* after a failure: what the back end said */
+    bool record_ok;               /* the record (token hash, expiry) was read whole and is not
+                                     expired, even when the content is damaged (PERSIST_CORRUPT):
+                                     the holder of the token may still delete the session */
 } persist_loaded;
 
 typedef enum persist_kind { PERSIST_MEMORY, PERSIST_SQLITE, PERSIST_REDIS } persist_kind;

@@ -416,13 +416,17 @@ static char *copy_text(const char *s, size_t n)
     return t;
 }
 
+/* Free what was read of the content; the record (meta, record_ok) stays. */
 static void free_partial(persist_loaded *l)
 {
     free(l->snapshot);
     for (size_t i = 0; i < l->njournal; i++)
         free(l->journal[i].text);
     free(l->journal);
-    memset(l, 0, sizeof *l);
+    l->snapshot = NULL;
+    l->journal = NULL;
+    l->snapshot_len = l->njournal = 0;
+    l->snapshot_version = 0;
 }
 
 static persist_rc corrupt(const redis_backend *b, persist_loaded *out, const char *id,
@@ -462,6 +466,7 @@ static persist_rc parse_loaded(const redis_backend *b, const char *id, const red
         set_err(b, "session %s expired", id);
         return PERSIST_ABSENT;
     }
+    out->record_ok = true; /* what follows is the content */
     if (out->snapshot_version > m->version)
         return corrupt(b, out, id, "snapshot_version after version");
     if (snap->type == REDIS_REPLY_STRING) {

@@ -366,6 +366,7 @@ static persist_rc load_locked(sqlite_store *s, const char *id, persist_loaded *o
     out->snapshot_version = (uint64_t)sqlite3_column_int64(q, 5);
     if (r == PERSIST_OK && m->expires_at < (int64_t)time(NULL))
         r = PERSIST_ABSENT;
+    out->record_ok = r == PERSIST_OK; /* what follows is the content */
     if (r == PERSIST_OK && sqlite3_column_type(q, 6) != SQLITE_NULL) {
         size_t n = (size_t)sqlite3_column_bytes(q, 6);
         const void *doc = sqlite3_column_blob(q, 6);

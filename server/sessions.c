@@ -451,7 +451,8 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
     persist_rc rc = persist_load(st->p, id, &l);
     char reason[320] = "";
     unsigned char h[32];
-    if (rc == PERSIST_OK && token) {
+    bool record = rc == PERSIST_OK || (rc == PERSIST_CORRUPT && l.record_ok);
+    if (record && token) { /* a damaged content is said only to the holder of the token */
         token_hash(token, h);
         unsigned char d = 0;
         for (int i = 0; i < 32; i++)
@@ -474,7 +475,7 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
     if (rc == PERSIST_OK) {
         api_model *m = rebuild(&l, &st->lim, reason, sizeof reason);
         if (!m)
-            rc = PERSIST_CORRUPT;
+            rc = PERSIST_CORRUPT; /* the record is whole: record stays true */
         else if (!(s = session_alloc(id, l.meta.token_hash, l.meta.ttl_s, (time_t)l.meta.created))) {
             api_model_unref(m);
             rc = PERSIST_UNAVAILABLE;
@@ -501,8 +502,8 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
         snprintf(reason, sizeof reason, "%s", l.why);
     pthread_mutex_unlock(lk);
     if (!s && rc != PERSIST_OK)
-        *miss = rc == PERSIST_CORRUPT ? STORE_CORRUPT : rc == PERSIST_UNAVAILABLE ? STORE_UNAVAILABLE
-                                                                                : STORE_NONE;
+        *miss = rc == PERSIST_CORRUPT ? (record ? STORE_DAMAGED : STORE_CORRUPT)
+                : rc == PERSIST_UNAVAILABLE ? STORE_UNAVAILABLE : STORE_NONE;
     if (why && cap)
         snprintf(why, cap, "%s", reason);
     return s;

@@ -64,3 +64,13 @@ class RedisServer:
     @property
     def url(self):
         return f"redis://127.0.0.1:{self.port}"
+
+    def command(self, *args, timeout=5):
+        """One command in RESP (for tests that damage what the daemon stored): its raw reply."""
+        import socket
+        req = b"*%d\r\n" % len(args) + b"".join(
+            b"$%d\r\n%s\r\n" % (len(a), a) for a in (x if isinstance(x, bytes) else str(x).encode()
+                                                       for x in args))
+        with socket.create_connection(("127.0.0.1", self.port), timeout=timeout) as c:
+            c.sendall(req)
+            return c.recv(65536)

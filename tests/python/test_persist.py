@@ -465,8 +465,50 @@ def test_a_damaged_journal_entry_is_refused_not_replayed(tmp_path):
         assert "sqlite" not in r.json()["detail"]      # where the file is: for the log only
         assert on(d, other).req("GET", "").status_code == 200   # the others are served
         assert any("store-corrupt" in l and "version %d" % (v - 1) in l for l in d.log_lines)
+        assert "DELETE it" in r.json()["detail"]
+        # its holder may still delete it (the record and token are whole); nobody else may
+        stranger = requests.delete(on(d, s).base, headers={"Authorization": "Bearer " + "x" * 43})
+        assert stranger.status_code == 401, stranger.text
+        assert on(d, s).req("DELETE").status_code == 204
+        assert on(d, s).req("GET", "").status_code == 404
+        assert on(d, other).req("GET", "").status_code == 200
     finally:
         d.stop()
+    con = sqlite3.connect(db)
+    assert con.execute("SELECT count(*) FROM sessions WHERE id = ?", (s.id,)).fetchone() == (0,)
+    assert con.execute("SELECT count(*) FROM journal WHERE id = ?", (s.id,)).fetchone() == (0,)
+    con.close()
+
+
+def test_a_damaged_session_can_be_deleted_on_redis(tmp_path):
+    """The same on redis: a journal entry that is not one (LSET over it) makes the session
+    503 store-corrupt; its holder's DELETE removes every key of it, a stranger's is a 401."""
+    if not REDIS_SERVER:
+        pytest.skip("redis-server is not installed (tools/packages.txt lists it)")
+    red = RedisServer(tmp_path).start()
+    try:
+        d = store_daemon(red)
+        try:
+            s = Session(d)
+            v = s.put_complex(TETS).json()["version"]
+            edit(s, [{"index": 4, "position": [1, 1, 1.5]}], v)
+        finally:
+            kill9(d)
+        assert red.command("LSET", f"subdivd:j:{{{s.id}}}", 0, "garbage").startswith(b"+OK")
+        d = store_daemon(red)
+        try:
+            r = on(d, s).req("GET", "")
+            assert r.status_code == 503 and r.json()["type"] == "/errors/store-corrupt", r.text
+            stranger = requests.delete(on(d, s).base, headers={"Authorization": "Bearer " + "x" * 43})
+            assert stranger.status_code == 401, stranger.text
+            assert on(d, s).req("DELETE").status_code == 204
+            assert on(d, s).req("GET", "").status_code == 404
+        finally:
+            d.stop()
+        for key in (f"subdivd:s:{{{s.id}}}", f"subdivd:snap:{{{s.id}}}", f"subdivd:j:{{{s.id}}}"):
+            assert red.command("EXISTS", key) == b":0\r\n", key
+    finally:
+        red.stop()
 
 
 def test_a_full_disk_refuses_writes_and_loses_nothing(tmp_path):
