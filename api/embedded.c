@@ -366,6 +366,9 @@ static int bind(api_model *m, api_embed_def *d, const api_limits *lim, const api
             return api_fail_limit(p, "max_session_bytes", lim->max_session_bytes,
                                   (uint64_t)used + 80ull * d->nv, "model \"%s\": %s (the session "
                                   "holds %zu bytes; --max-session-bytes)", d->name, err.message, used);
+        if (err.code == SD_ERR_VALUE && err.field == SD_EMBED_TOO_FAR)
+            return api_fail_at(p, 422, "outside", "/outside", "model \"%s\": %s", d->name,
+                               err.message);
         if (rep.outside) {
             char first[160] = "";
             for (int i = 0; i < rep.nfirst; i++) {

@@ -56,6 +56,12 @@
 #define IN_TOL 1e-12   /* distance to a face plane, relative to the cell's longest edge */
 #define BOX_TOL 1e-6   /* box widening, relative to the cell's longest edge */
 #define NONE UINT32_MAX
+/* The nearest-cell search of the vertices outside ("nearest") looks at most at this many bucket
+ * entries in all, per vertex outside and once: a vertex near the solid takes tens to hundreds;
+ * one far from a curved boundary can take every cell (the cells within reach of its distance
+ * widen as sqrt(distance)), which this bounds */
+#define NEAREST_WORK_PER_VERTEX 2048u
+#define NEAREST_WORK_BASE (1u << 24)
 
 struct sd_embedding {
     sd_mem mem;
@@ -475,13 +481,18 @@ static double box_dist2(const grid *g, uint32_t c, const double *p)
     return s;
 }
 
-/* The nearest cell to p (lowest index among equals): shells of buckets around p's. */
-static uint32_t nearest(const cells *C, const grid *g, const double *p)
+/* The nearest cell to p (lowest index among equals): shells of buckets around p's. Each
+ * bucket entry looked at takes one unit of *work; NONE when it runs out first. */
+static uint32_t nearest(const cells *C, const grid *g, const double *p, uint64_t *work)
 {
     int64_t b[3], d[3];
+    double out2 = 0, out[3]; /* how far p is outside the grid's box, per axis */
     for (int a = 0; a < 3; a++) {
         b[a] = axis_of(g, a, quant(g, a, p[a]));
         d[a] = g->dim[a];
+        double l = g->lo[a], h = g->lo[a] + (QMAX + 1.0) * g->quantum[a];
+        out[a] = p[a] < l ? l - p[a] : p[a] > h ? p[a] - h : 0;
+        out2 += out[a] * out[a];
     }
     double best = DBL_MAX;
     uint32_t bc = NONE;
@@ -501,6 +512,10 @@ static uint32_t nearest(const cells *C, const grid *g, const double *p)
                         continue;
                     }
                     size_t k = ((size_t)z * g->dim[1] + (size_t)y) * g->dim[0] + (size_t)x;
+                    uint32_t entries = g->start[k + 1] - g->start[k];
+                    if (entries > *work)
+                        return NONE;
+                    *work -= entries;
                     for (uint32_t j = g->start[k]; j < g->start[k + 1]; j++) {
                         uint32_t c = g->cell[j];
                         if (box_dist2(g, c, p) > best)
@@ -515,25 +530,30 @@ static uint32_t nearest(const cells *C, const grid *g, const double *p)
                     }
                 }
             }
-        /* what the buckets beyond the shell can offer: per axis, the gap to the first of them
-         * (bucket i starts at quantized value ceil(i 2^16 / dim)), less a quantum for rounding */
+        /* what the buckets beyond the shell can offer (squared): a point there is beyond the
+         * shell along some axis a — the gap to the first bucket past it (bucket i starts at
+         * quantized value ceil(i 2^16 / dim)), less a quantum for rounding — and inside the
+         * grid's box along the others, so at least as far as p is outside it along those */
         double bound = DBL_MAX;
         bool more = false;
         for (int a = 0; a < 3; a++) {
+            double rest = out2 - out[a] * out[a];
             if (b[a] + r + 1 < d[a]) {
                 double q0 = ceil((double)(b[a] + r + 1) * (QMAX + 1.0) / (double)d[a]) - 1;
                 double e = g->lo[a] + q0 * g->quantum[a] - p[a];
-                bound = fmin(bound, e > 0 ? e : 0);
+                e = e > 0 ? e : 0;
+                bound = fmin(bound, e * e + rest);
                 more = true;
             }
             if (b[a] - r - 1 >= 0) {
                 double q1 = ceil((double)(b[a] - r) * (QMAX + 1.0) / (double)d[a]) + 1;
                 double e = p[a] - (g->lo[a] + q1 * g->quantum[a]);
-                bound = fmin(bound, e > 0 ? e : 0);
+                e = e > 0 ? e : 0;
+                bound = fmin(bound, e * e + rest);
                 more = true;
             }
         }
-        if (!more || (bc != NONE && best < bound * bound))
+        if (!more || (bc != NONE && best < bound))
             return bc;
     }
 }
@@ -687,6 +707,11 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
         cell_verts(&C, c, e->idx + 4 * j);
         memcpy(e->w + 4 * j, lam, sizeof lam);
     }
+    size_t nout = 0;
+    for (size_t j = 0; j < n; j++)
+        nout += e->idx[4 * j] == NONE;
+    const uint64_t budget = NEAREST_WORK_BASE + (uint64_t)NEAREST_WORK_PER_VERTEX * nout;
+    uint64_t work = budget;
     for (size_t i = 0; i < n; i++) {
         size_t j = e->slot[i];
         if (e->idx[4 * j] != NONE)
@@ -696,7 +721,15 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
             memcpy(e->w + 4 * j, xyz + 3 * i, 3 * sizeof *e->w);
             e->w[4 * j + 3] = 0;
         } else if (mode == SD_OUTSIDE_NEAREST) {
-            uint32_t c = nearest(&C, &g, xyz + 3 * i);
+            uint32_t c = nearest(&C, &g, xyz + 3 * i, &work);
+            if (c == NONE) {
+                r = sdi_fail(err, SD_ERR_VALUE, (long)i, SD_EMBED_TOO_FAR,
+                             "vertex %zu is too far outside level %u for \"nearest\" (its "
+                             "search passed the budget of %llu cell tests); move the model "
+                             "closer or give \"outside\": \"fixed\"",
+                             i, sd_level_index(lv), (unsigned long long)budget);
+                goto fail;
+            }
             const double *P[4];
             cell_pts(&C, c, P);
             cell_verts(&C, c, e->idx + 4 * j);

@@ -731,10 +731,14 @@ typedef struct sd_bind_report {
  * exists. Errors: SD_ERR_ARG (no lv, out or xyz, an unknown mode), SD_ERR_VALUE (a coordinate
  * not finite: item = the vertex, field = the coordinate; a level without solid cells; refused
  * vertices), SD_ERR_LIMIT (over max_bytes, more than 2^30 vertices or 2^32 cells), SD_ERR_NOMEM,
- * SD_ERR_DEGENERATE (a nearest cell of zero volume: not in a level of a valid complex).
+ * SD_ERR_DEGENERATE (a nearest cell of zero volume: not in a level of a valid complex);
+ * SD_ERR_VALUE with field SD_EMBED_TOO_FAR (item = the vertex) when the nearest-cell searches
+ * of the vertices outside pass their budget (2048 bucket entries a vertex outside, plus 2^24:
+ * vertices far from a curved solid; the work of a bind stays bounded).
  * rep (optional) is filled in every mode. On success *out is the caller's, freed with
  * sd_embed_free; it borrows nothing (lv is passed again to read positions). Const on the level:
  * may run beside readers of the complex, not beside an edit. */
+#define SD_EMBED_TOO_FAR 3 /* sd_error.field: a "nearest" vertex past the search budget */
 sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outside mode,
                         const sd_allocator *alloc, size_t max_bytes, sd_embedding **out,
                         sd_bind_report *rep, sd_error *err);

@@ -185,6 +185,65 @@ def test_outside_vertices(daemon):
     assert np.abs(deformed(t, "n") - (np.array(pts) + [0.5, 0, 0])).max() <= 1e-9
 
 
+def test_nearest_is_the_nearest_cell_and_its_search_is_bounded(daemon):
+    """"nearest" binds a vertex outside to the cell nearest to it, however far (the search stops
+    once no unexplored bucket can be nearer, counting how far the vertex is outside the grid),
+    and the search is bounded: vertices far outside a curved solid of many cells are a 422
+    naming the first one past the budget, in seconds, not a bind of hours."""
+    s = Session(daemon)
+    assert s.put_complex(BLOCK).status_code == 200
+    x, tets = level_cells(s, 1)
+    # feet on the flat middle of the top face (z = 1 near (1, 1) stays planar at level 1), the
+    # vertices straight above them: the nearest cell is the one under the foot, alone
+    rnd = np.random.default_rng(5)
+    feet = np.column_stack([rnd.uniform(0.75, 1.25, 12), rnd.uniform(0.75, 1.25, 12), np.ones(12)])
+    top = x[(np.abs(x[:, :2] - 1).max(axis=1) <= 0.5) & (x[:, 2] > 0.75)]
+    assert len(top) >= 5 and np.abs(top[:, 2] - 1).max() < 1e-15
+    heights = [0.01, 0.3, 2, 7, 40, 300, 1e3, 5e3, 1e4, 3e4, 1e5, 1e6]
+    pts = feet + np.column_stack([np.zeros(12), np.zeros(12), heights])
+    r = s.req("PUT", "/embedded/n", json={"vertices": pts.tolist(), "level": 1, "outside": "nearest"})
+    assert r.status_code == 200, r.text
+    assert r.json()["embedded"]["outside_vertices"] == 12
+    v = r.json()["version"]
+    rest = x.copy()
+    moves = [{"index": i, "position": [a + 0.1 * b * b, b + 0.05 * a, c * (1 + 0.1 * a)]}
+             for i, (a, b, c) in enumerate(BLOCK["vertices"])]
+    edit(s, moves, v)
+    moved, _ = level_cells(s, 1)
+    want = []
+    for f, p in zip(feet, pts):
+        c, _ = locate(rest, tets, f - [0, 0, 1e-9])
+        P = rest[tets[c]]
+        lam = np.linalg.solve(np.vstack([P.T, np.ones(4)]), np.append(p, 1.0))
+        want.append(lam @ moved[tets[c]])
+    got = deformed(s, "n")
+    assert np.abs(got - np.array(want)).max() <= 1e-9 * np.abs(want).max(), np.abs(got - want).max()
+
+    # far outside a curved solid of ~70 000 cells, straight above it: every such vertex's nearest
+    # cell is a search of nearly all of them (a curved top within reach of its distance is
+    # ~sqrt(2 distance bend) wide); 1000 of them pass the budget (2^24 + 2048 a vertex outside).
+    # Far in a direction off the axes, the grid's box bounds the search (a few cells).
+    big = cubes(6, 6, 6)
+    bend = np.random.default_rng(9).uniform(-0.15, 0.15, size=(len(big["vertices"]), 3))
+    big["vertices"] = (np.array(big["vertices"]) + bend).tolist()
+    t = Session(daemon)
+    assert t.put_complex(big).status_code == 200
+    rnd = np.random.default_rng(3)
+    off = np.random.default_rng(4).normal(size=(64, 3)) * 1e4 + 3
+    r = t.req("PUT", "/embedded/off", json={"vertices": off.tolist(), "level": 2, "outside": "nearest"})
+    assert r.status_code == 200 and r.json()["embedded"]["outside_vertices"] == 64, r.text
+    far = np.column_stack([rnd.uniform(0, 6, 1000), rnd.uniform(0, 6, 1000),
+                           1e4 + rnd.uniform(0, 1, 1000)]).tolist()
+    r = t.req("PUT", "/embedded/far", json={"vertices": far, "level": 2, "outside": "nearest"})
+    assert r.status_code == 422, r.text
+    j = r.json()
+    assert j["type"].endswith("/outside") and j["errors"][0]["pointer"] == "/outside", j
+    assert "too far outside" in j["detail"] and "\"fixed\"" in j["detail"], j
+    assert t.req("GET", "/embedded/far").status_code == 404
+    r = t.req("PUT", "/embedded/far", json={"vertices": far, "level": 2, "outside": "fixed"})
+    assert r.status_code == 200, r.text
+
+
 def test_formats_list_delete_and_errors(daemon, tmp_path):
     pts = model_points(30)
     tris = [[i, i + 1, i + 2] for i in range(0, 27, 3)]
