@@ -824,8 +824,8 @@ static void reply_edit_delta(req *r, edit_delta *d, uint64_t version, const char
     atomic_store(&r->bytes, n);
     http_set_etag(resp, version);
     http_add_header(resp, "X-Updated-Points", up);
-    if (bin && d->comp[0])
-        http_add_header(resp, "X-Attribute-Components", d->comp); /* the binary layout's */
+    if (d->comp[0]) /* the binary layout's, and a JSON delta's shapes (an empty one has none) */
+        http_add_header(resp, "X-Attribute-Components", d->comp);
     http_queue(r, 200, resp);
 }
 

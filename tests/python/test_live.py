@@ -848,6 +848,26 @@ def test_client_delta_reads_both_layouts(daemon):
     s.delete()
 
 
+def test_client_empty_json_delta_with_attributes(daemon):
+    """An empty delta (since = the current version, or an edit that moved nothing) read as JSON
+    with attributes: arrays of shape (0, ncomp), as the binary layout gives, from the
+    X-Attribute-Components header (GET /delta and PATCH ?delta= both send it)."""
+    body = with_attrs(complex_from_text(MIXED))
+    s = new_session(daemon, body)
+    c = subdiv.Client(daemon.url, timeout=30).session(s.id, s.token)
+    v = snapshot(s, 2)[1]["version"]
+    for fmt in ("json", "bin"):
+        d = c.delta(2, since=v, format=fmt, attributes="t,v")
+        assert len(d["indices"]) == 0 and d["positions"].shape == (0, 3), fmt
+        assert {k: a.shape for k, a in d["attributes"].items()} == {"t": (0, 1), "v": (0, 2)}, fmt
+    r = s.req("PATCH", "/control-points", params={"delta": 2, "format": "json", "attributes": "t,v"},
+              json={"moves": []}, headers={"If-Match": f'"{v}"'})
+    assert r.status_code == 200 and r.headers["X-Attribute-Components"] == "t=1,v=2"
+    r = c.edit(moves=[], delta=2, delta_format="json", delta_attributes=["t", "v"], if_match=v + 1)
+    assert {k: a.shape for k, a in r["delta"]["attributes"].items()} == {"t": (0, 1), "v": (0, 2)}
+    s.delete()
+
+
 def test_client_edit_with_its_delta(daemon):
     """Session.edit(delta=L): the edit's delta in the PATCH answer, as delta() reads it, both
     layouts; None with the problem when the level is not computed (the edit stands)."""

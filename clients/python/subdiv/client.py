@@ -376,7 +376,7 @@ class Session:
         out = {"version": j["version"], "updated_points": j["updated_points"], "delta": None}
         d = j.get("delta")
         if d is not None and "indices" in d:
-            out["delta"] = self._parse_delta_json(d)
+            out["delta"] = self._parse_delta_json(d, self._components(r))
         else:
             out["gone"] = d
         return out
@@ -519,7 +519,7 @@ class Session:
         params, names = self._delta_params({"since": int(since)}, format, attributes, parts)
         r = self._call("GET", f"/levels/{int(level)}/delta", params=params)
         if format == "json":
-            return self._parse_delta_json(r.json())
+            return self._parse_delta_json(r.json(), self._components(r))
         return self._parse_delta_bin(r, names)
 
     @staticmethod
@@ -534,7 +534,13 @@ class Session:
         return params, names
 
     @staticmethod
-    def _parse_delta_json(j):
+    def _components(r):
+        """X-Attribute-Components ("t=1,v=2") as {name: ncomp}."""
+        return {k: int(v) for k, v in (c.split("=") for c in
+                r.headers.get("X-Attribute-Components", "").split(",") if c)}
+
+    @staticmethod
+    def _parse_delta_json(j, comps=None):
         import numpy as np
         out = {k: j[k] for k in ("level", "since", "version")}
         out["indices"] = np.asarray(j["indices"], dtype=np.uint32)
@@ -544,7 +550,9 @@ class Session:
         out["attributes"] = {}
         for name, vals in j["attributes"].items():
             a = np.asarray(vals, dtype=np.float64)
-            out["attributes"][name] = a.reshape(len(out["indices"]), -1)
+            n = len(out["indices"])  # an empty delta: the components from the header
+            out["attributes"][name] = (a.reshape(n, -1) if n else
+                                       a.reshape(0, (comps or {}).get(name, 1)))
         return out
 
     @staticmethod
@@ -564,8 +572,8 @@ class Session:
         out["indices"] = take(n, "<u4", (n,))
         out["positions"] = take(3 * n, "<f4", (n, 3))
         out["normals"] = take(3 * n, "<f4", (n, 3)) if flags & 1 else None
-        comps = dict(c.split("=") for c in r.headers.get("X-Attribute-Components", "").split(",") if c)
-        out["attributes"] = {name: take(n * int(comps[name]), "<f4", (n, int(comps[name])))
+        comps = Session._components(r)
+        out["attributes"] = {name: take(n * comps[name], "<f4", (n, comps[name]))
                              for name in names if flags & 2}
         if off != len(data):
             raise TransportError(f"the delta has {len(data)} bytes, its header says {off}")
