@@ -388,11 +388,14 @@ static int deform_main(int argc, char **argv)
             rc = p.status ? report(&p, embed) : 2;
     }
     api_free(text);
+    int lvl = rc ? 0 : api_parse_level(level, &p);
+    if (lvl < 0)
+        rc = report(&p, "--level");
     api_embed_def *d = NULL;
     uint64_t version = 1;
     atomic_store(&m->version, version);
     if (!rc) {
-        json_t *lv = json_integer(strtol(level, NULL, 10)), *os = json_string(outside);
+        json_t *lv = json_integer(lvl), *os = json_string(outside);
         json_object_set_new(body, "level", lv);
         json_object_set_new(body, "outside", os);
         if (api_embed_parse(body, "model", &lim, &d, &p))

@@ -215,6 +215,13 @@ def test_formats_list_delete_and_errors(daemon, tmp_path):
     rep = blob[:-12] + struct.pack("<3I", 0, 1, 1)
     bad = s.req("PUT", "/embedded/bin", data=rep, headers={"Content-Type": "application/octet-stream"})
     assert bad.status_code == 422 and bad.json()["errors"][0]["pointer"] == "/triangles/0/2", bad.text
+    # the query's level as GET /levels reads one: not a number 400 bad-level, past 12 a 422
+    for lv, status, slug in (("x", 400, "bad-level"), ("2x", 400, "bad-level"),
+                             ("13", 422, "level-out-of-range")):
+        bad = s.req("PUT", "/embedded/bin", data=blob, params={"level": lv},
+                    headers={"Content-Type": "application/octet-stream"})
+        assert bad.status_code == status and bad.json()["type"] == "/errors/" + slug, bad.text
+        assert bad.json()["errors"][0]["pointer"] == "level", bad.text
     for body, status, ptr in [({"vertices": [[0, 0]]}, 400, "/vertices/0"),
                               ({"vertices": pts, "triangles": [[0, 1, 99]]}, 422, "/triangles/0/2"),
                               # a vertex twice, a triangle twice (any order): as for simplices
@@ -350,7 +357,7 @@ def test_offline_deform_equals_the_daemon(daemon, tmp_path):
 
 def test_offline_deform_reads_obj_records_exactly(tmp_path):
     """`subdivd deform`'s OBJ reader keeps every vertex in place or refuses the file with its
-    line: tab-separated and indented records, comments after a face, "i/t/n" and negative
+    line (and --level is a level or a refusal): tab-separated and indented records, comments after a face, "i/t/n" and negative
     indices, polygons as fans (OBJ); a non-finite coordinate, a non-numeric or missing index is
     refused (a vertex silently left out would shift every later index)."""
     import json
@@ -380,6 +387,13 @@ def test_offline_deform_reads_obj_records_exactly(tmp_path):
                       (f"v {v[0]}\nv 0.5 0.5 0.5q\n", "m.obj:2: a vertex is")):
         r, _ = run(text)
         assert r.returncode == 2 and why in r.stderr, (text, r.returncode, r.stderr)
+    # --level is read as `subdivd refine` reads it (it was strtol: "abc" bound to level 0)
+    (tmp_path / "m.obj").write_text(f"v {v[0]}\n")
+    for lv, why in (("abc", "bad-level"), ("2x", "bad-level"), ("13", "level-out-of-range")):
+        r = subprocess.run([str(SUBDIVD), "deform", str(cx), "--embed", str(tmp_path / "m.obj"),
+                            "--level", lv, "-o", str(tmp_path / "l.json")], capture_output=True,
+                           text=True, timeout=60)
+        assert r.returncode == 1 and why in r.stderr and not (tmp_path / "l.json").exists(), r.stderr
 
 
 def test_models_count_against_the_session_memory_limit():
