@@ -245,11 +245,9 @@ int api_embed_parse_binary(const char *body, size_t len, const char *name, const
                            "not %zu", nv, nt, want, len);
     long long lv = 2;
     if (level) {
-        char *end;
-        errno = 0;
-        lv = strtoll(level, &end, 10);
-        if (!isdigit((unsigned char)*level) || *end || errno || lv > SD_MAX_LEVEL)
-            return api_fail_at(p, 422, "out-of-range", "level", "level must be 0..%d", SD_MAX_LEVEL);
+        lv = api_parse_level(level, p); /* 400 bad-level, 422 level-out-of-range: as GET /levels */
+        if (lv < 0)
+            return p->status;
     }
     int mode = 0;
     if (outside) {

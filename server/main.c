@@ -239,7 +239,12 @@ static int refine_main(int argc, char **argv)
 /* ---- subdivd deform: an embedded model through edits, offline ---------------------------- */
 
 /* A Wavefront OBJ's vertices and faces (polygons as fans) as the body of PUT /embedded/{name}:
- * {"vertices", "triangles"}; NULL (said why) when it cannot be read. */
+ * {"vertices", "triangles"}; NULL (said why) when it cannot be read. Records are "v x y z"
+ * (a w or a colour after them ignored) and "f i j k ..." (1-based, negative counting back from
+ * the last "v", "i/t/n" forms keep i), their key followed by a space or a tab; "#" starts a
+ * comment; other records (vn, vt, o, g, s, usemtl, ...) are skipped. A coordinate that is not a
+ * finite number, or an index that is not one, is refused with its line: a vertex silently left
+ * out would shift every later index. */
 static json_t *obj_model(const char *text, size_t len, const char *path)
 {
     json_t *vs = json_array(), *ts = json_array();
@@ -256,34 +261,68 @@ static json_t *obj_model(const char *text, size_t len, const char *path)
         memcpy(buf, s, n);
         buf[n] = 0;
         s += n + 1;
-        if (buf[0] == 'v' && buf[1] == ' ') {
-            double x, y, z;
-            if (sscanf(buf + 2, "%lf %lf %lf", &x, &y, &z) != 3) {
-                fprintf(stderr, "subdivd deform: %s:%d: a vertex is \"v x y z\"\n", path, line);
-                goto bad;
+        char *hash = strchr(buf, '#');
+        if (hash)
+            *hash = 0;
+        char *b = buf + strspn(buf, " \t\r");
+        bool vert = b[0] == 'v' && (b[1] == ' ' || b[1] == '\t');
+        bool face = b[0] == 'f' && (b[1] == ' ' || b[1] == '\t');
+        if (vert) {
+            double x[3];
+            char *t = b + 2;
+            for (int k = 0; k < 3; k++) {
+                char *te;
+                errno = 0;
+                x[k] = strtod(t, &te);
+                if (te == t || (*te && !strchr(" \t\r", *te))) {
+                    fprintf(stderr, "subdivd deform: %s:%d: a vertex is \"v x y z\"\n", path, line);
+                    goto bad;
+                }
+                if (!isfinite(x[k]) || errno == ERANGE) {
+                    fprintf(stderr, "subdivd deform: %s:%d: coordinate %d of the vertex is not a "
+                            "finite number\n", path, line, k + 1);
+                    goto bad;
+                }
+                t = te;
             }
-            json_array_append_new(vs, json_pack("[f, f, f]", x, y, z));
+            if (json_array_append_new(vs, json_pack("[f, f, f]", x[0], x[1], x[2])))
+                goto nomem;
             nv++;
-        } else if (buf[0] == 'f' && buf[1] == ' ') {
-            long idx[64];
+        } else if (face) {
+            long first = -1, prev = -1;
             int k = 0;
-            for (char *t = strtok(buf + 2, " \t\r"); t && k < 64; t = strtok(NULL, " \t\r")) {
-                long i = strtol(t, NULL, 10); /* "i", "i/t", "i//n", "i/t/n"; negative: relative */
-                idx[k++] = i < 0 ? (long)nv + i : i - 1;
-            }
-            for (int j = 1; j + 1 < k; j++) {
-                if (idx[0] < 0 || idx[j] < 0 || idx[j + 1] < 0 || (size_t)idx[0] >= nv ||
-                    (size_t)idx[j] >= nv || (size_t)idx[j + 1] >= nv) {
+            for (char *t = strtok(b + 2, " \t\r"); t; t = strtok(NULL, " \t\r"), k++) {
+                char *te;
+                errno = 0;
+                long i = strtol(t, &te, 10); /* "i", "i/t", "i//n", "i/t/n"; negative: relative */
+                if (te == t || (*te && *te != '/') || errno == ERANGE) {
+                    fprintf(stderr, "subdivd deform: %s:%d: \"%s\" is not a vertex index\n", path,
+                            line, t);
+                    goto bad;
+                }
+                long j = i < 0 ? (long)nv + i : i - 1;
+                if (i == 0 || j < 0 || (size_t)j >= nv) {
                     fprintf(stderr, "subdivd deform: %s:%d: a face names a vertex not defined "
                             "before it\n", path, line);
                     goto bad;
                 }
-                json_array_append_new(ts, json_pack("[I, I, I]", (json_int_t)idx[0],
-                                                    (json_int_t)idx[j], (json_int_t)idx[j + 1]));
+                if (k >= 2 && json_array_append_new(ts, json_pack("[I, I, I]", (json_int_t)first,
+                                                                  (json_int_t)prev, (json_int_t)j)))
+                    goto nomem;
+                first = k == 0 ? j : first;
+                prev = j;
+            }
+            if (k < 3) {
+                fprintf(stderr, "subdivd deform: %s:%d: a face needs at least 3 vertices\n", path,
+                        line);
+                goto bad;
             }
         }
     }
-    return json_pack("{s:o, s:o}", "vertices", vs, "triangles", ts);
+    if (vs && ts)
+        return json_pack("{s:o, s:o}", "vertices", vs, "triangles", ts);
+nomem:
+    fprintf(stderr, "subdivd deform: %s: out of memory\n", path);
 bad:
     json_decref(vs);
     json_decref(ts);
@@ -349,11 +388,14 @@ static int deform_main(int argc, char **argv)
             rc = p.status ? report(&p, embed) : 2;
     }
     api_free(text);
+    int lvl = rc ? 0 : api_parse_level(level, &p);
+    if (lvl < 0)
+        rc = report(&p, "--level");
     api_embed_def *d = NULL;
     uint64_t version = 1;
     atomic_store(&m->version, version);
     if (!rc) {
-        json_t *lv = json_integer(strtol(level, NULL, 10)), *os = json_string(outside);
+        json_t *lv = json_integer(lvl), *os = json_string(outside);
         json_object_set_new(body, "level", lv);
         json_object_set_new(body, "outside", os);
         if (api_embed_parse(body, "model", &lim, &d, &p))

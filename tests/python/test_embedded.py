@@ -274,6 +274,13 @@ def test_formats_list_delete_and_errors(daemon, tmp_path):
     rep = blob[:-12] + struct.pack("<3I", 0, 1, 1)
     bad = s.req("PUT", "/embedded/bin", data=rep, headers={"Content-Type": "application/octet-stream"})
     assert bad.status_code == 422 and bad.json()["errors"][0]["pointer"] == "/triangles/0/2", bad.text
+    # the query's level as GET /levels reads one: not a number 400 bad-level, past 12 a 422
+    for lv, status, slug in (("x", 400, "bad-level"), ("2x", 400, "bad-level"),
+                             ("13", 422, "level-out-of-range")):
+        bad = s.req("PUT", "/embedded/bin", data=blob, params={"level": lv},
+                    headers={"Content-Type": "application/octet-stream"})
+        assert bad.status_code == status and bad.json()["type"] == "/errors/" + slug, bad.text
+        assert bad.json()["errors"][0]["pointer"] == "level", bad.text
     for body, status, ptr in [({"vertices": [[0, 0]]}, 400, "/vertices/0"),
                               ({"vertices": pts, "triangles": [[0, 1, 99]]}, 422, "/triangles/0/2"),
                               # a vertex twice, a triangle twice (any order): as for simplices
@@ -405,6 +412,47 @@ def test_offline_deform_equals_the_daemon(daemon, tmp_path):
                         "--url", daemon.url, "-q"], capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 0, r.stderr
     assert json.loads(cli.read_text())["vertices"] == offline["vertices"]
+
+
+def test_offline_deform_reads_obj_records_exactly(tmp_path):
+    """`subdivd deform`'s OBJ reader keeps every vertex in place or refuses the file with its
+    line (and --level is a level or a refusal): tab-separated and indented records, comments after a face, "i/t/n" and negative
+    indices, polygons as fans (OBJ); a non-finite coordinate, a non-numeric or missing index is
+    refused (a vertex silently left out would shift every later index)."""
+    import json
+    import subprocess
+    from daemon import SUBDIVD
+    cx = tmp_path / "block.json"
+    cx.write_text(json.dumps(BLOCK))
+    pts = model_points(5, seed=4)
+
+    def run(text):
+        obj, out = tmp_path / "m.obj", tmp_path / "m.json"
+        obj.write_text(text)
+        out.unlink(missing_ok=True)
+        r = subprocess.run([str(SUBDIVD), "deform", str(cx), "--embed", str(obj), "--level", "2",
+                            "-o", str(out)], capture_output=True, text=True, timeout=60)
+        return r, (json.loads(out.read_text()) if r.returncode == 0 else None)
+    v = ["%r %r %r" % tuple(p) for p in pts]
+    r, got = run(f"v {v[0]}\nv\t{v[1]}\n  v {v[2]} 1.0\nv {v[3]}\r\nv {v[4]}\n"
+                 "vn 0 0 1\nf 1/1/1 2//1 -3 # a comment\nf\t1 2 4 5\n")
+    assert r.returncode == 0, r.stderr
+    assert np.abs(np.array(got["vertices"]) - np.array(pts)).max() <= 1e-12
+    assert got["triangles"] == [[0, 1, 2], [0, 1, 3], [0, 3, 4]]
+    for text, why in ((f"v {v[0]}\nv 0.5 nan 0.5\nv {v[2]}\n", "m.obj:2: coordinate 2"),
+                      (f"v {v[0]}\nv 0.5 0.5 1e400\n", "m.obj:2: coordinate 3"),
+                      (f"v {v[0]}\nv {v[1]}\nv {v[2]}\nf 1 2\n", "m.obj:4: a face needs"),
+                      (f"v {v[0]}\nv {v[1]}\nv {v[2]}\nf 1 2 x\n", "m.obj:4: \"x\" is not"),
+                      (f"v {v[0]}\nv 0.5 0.5 0.5q\n", "m.obj:2: a vertex is")):
+        r, _ = run(text)
+        assert r.returncode == 2 and why in r.stderr, (text, r.returncode, r.stderr)
+    # --level is read as `subdivd refine` reads it (it was strtol: "abc" bound to level 0)
+    (tmp_path / "m.obj").write_text(f"v {v[0]}\n")
+    for lv, why in (("abc", "bad-level"), ("2x", "bad-level"), ("13", "level-out-of-range")):
+        r = subprocess.run([str(SUBDIVD), "deform", str(cx), "--embed", str(tmp_path / "m.obj"),
+                            "--level", lv, "-o", str(tmp_path / "l.json")], capture_output=True,
+                           text=True, timeout=60)
+        assert r.returncode == 1 and why in r.stderr and not (tmp_path / "l.json").exists(), r.stderr
 
 
 def test_models_count_against_the_session_memory_limit():
