@@ -24,10 +24,18 @@
 /* ---- rho(x) ------------------------------------------------------------------------------ */
 
 /* G2's relieved ring: keep neighbour n of a junction c unless c lies on dC (or outside solids)
- * and n is strictly inside a solid. `inside` tells whether the centre is strictly inside. */
+ * and n is strictly inside a solid. `inside` tells whether the centre is inside a solid: in C_3
+ * and off dC, whatever other parts meet there (a curve or a fin reaching into a solid's interior
+ * is a junction inside it, which keeps the solid's points around it, as the control vertex did
+ * at level 0 whose neighbours were all on dC). A neighbour is strictly inside when it is a
+ * solid's point alone, off dC. */
 static inline bool strictly_inside(const sd_topo *t, uint32_t v)
 {
     return t->vfam[v] == FAM3 && !(t->vflag[v] & VF_DC);
+}
+static inline bool centre_inside(const sd_topo *t, uint32_t v)
+{
+    return (t->vfam[v] & FAM3) && !(t->vflag[v] & VF_DC);
 }
 static inline bool g2_keep(const sd_topo *t, bool centre_inside, uint32_t n)
 {
@@ -61,7 +69,7 @@ static inline bool via_edge(const sd_topo *t, uint8_t r, uint32_t c, uint32_t n,
                : r == SD_RULE_LOOP ? (t->eflag[e] & EF_SSURF) != 0
                : r == SD_RULE_LOOP_BOUNDARY && (t->eflag[e] & EF_SBND);
     if (SDI_RULE_RHO[r] == SDI_RHO_G2)
-        return g2_keep(t, strictly_inside(t, c), n);
+        return g2_keep(t, centre_inside(t, c), n);
     return (edge_kinds(t->efam[e], t->eflag[e]) >> SDI_RULE_RHO[r]) & 1u;
 }
 /* ... and through an octahedron's major diagonal c-n? */
@@ -70,7 +78,7 @@ static inline bool via_diag(const sd_topo *t, uint8_t r, int scheme, uint32_t c,
     if (r == SD_RULE_SOLID)
         return scheme == SD_SOLID_BOX;
     if (r == SD_RULE_G2)
-        return g2_keep(t, strictly_inside(t, c), n);
+        return g2_keep(t, centre_inside(t, c), n);
     return false;
 }
 
@@ -620,7 +628,7 @@ bool sdi_g2_rings(sd_mem *m, sdi_rels *rel, const uint8_t *erule, sdi_rings *R)
             if (SDI_RULE_RING[erule[e]] != SDI_RING_G2)
                 continue;
             uint32_t a = t->ev[e][0], b = t->ev[e][1], n = 0;
-            bool inside = (t->efam[e] == FAM3) && !(t->eflag[e] & EF_DC);
+            bool inside = (t->efam[e] & FAM3) && !(t->eflag[e] & EF_DC);
             uint32_t i = off[a], j = off[b];
             while (i < off[a + 1] && j < off[b + 1]) {
                 if (adj[i] < adj[j])

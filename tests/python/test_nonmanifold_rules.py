@@ -384,6 +384,29 @@ def test_fig15a_curve_meets_solid_g2(daemon):
     np.testing.assert_allclose(level(s, 1)["vertices"][3], [7 / 64, 7 / 64, 9 / 16 + 14 / 64], atol=1e-15)
 
 
+def test_g2_junction_inside_a_solid_keeps_the_solid_ring(daemon):
+    """A curve from the centre 0 of an octahedron of 8 tets to p7 = (0.2, 0.3, 0.1): vertex 0 is a
+    type-1 junction inside the solid, off dC, so G2's relief (which drops points strictly inside
+    a solid only where the junction lies on dC, DECISIONS 5) leaves its ring whole at every level.
+    Level 1: the solid edges (0, i) have 4 tets around them, so their points are 1/4 p_i + 1/8 of
+    the 4 others, = p_i / 4 (the octahedron's vertices sum to 0); the curve's point is p7 / 2;
+    vertex 0 = 9/16 * 0 + 7/(16*7) (sum p_i + p7) = p7 / 16. Level 2: vertex 0's ring is those 7
+    points: 9/16 p7/16 + 1/16 (0 + p7/2) = 17/256 p7 (dropping the 6 solid points, as the ring did
+    when only a junction in C_3 alone counted as inside, gave 9/256 + 7/32 = 65/256 p7)."""
+    p7 = [0.2, 0.3, 0.1]
+    body = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, 1],
+                         [0, 0, -1], p7],
+            "simplices": [[0, 1, 2, 5], [0, 2, 3, 5], [0, 3, 4, 5], [0, 4, 1, 5],
+                          [0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 4, 6], [0, 4, 1, 6], [0, 7]]}
+    s = session(daemon, body)
+    c = s.req("GET", "/complex").json()["classes"]["vertices"][0]
+    assert c["nonmanifold"] == 1 and not c["boundary"] and c["rule"] == "G2"
+    np.testing.assert_allclose(level(s, 1)["vertices"][0], np.array(p7) / 16, atol=1e-15)
+    j = level(s, 2)
+    assert j["rules"][0] == "G2"
+    np.testing.assert_allclose(j["vertices"][0], np.array(p7) * 17 / 256, atol=1e-15)
+
+
 def test_fig15b_four_surfaces_on_a_line_g2(daemon):
     """000 Fig. 15(b): four surfaces meeting along edge 0-1 (type 2), rule G2. Edge: its ring is
     the 4 tips, so 1/4 (a+b) + 1/8 each (docs/RULES.md: |rho(e)| = 4): 1/4 (0,0,1) + 1/8 (0,-1,2).
