@@ -368,7 +368,9 @@ static int parse_query(const api_model *m, const api_delta_query *q, uint64_t *s
         return api_fail_at(p, 422, "unknown-value", "format",
                            "format \"%.20s\" is not one of bin, json", q->format);
     *nattrs = 0;
-    for (const char *a = q->attributes; a && *a;) {
+    /* as GET /levels: an empty text names none, and after a comma comes a name ("t," ends in an
+     * empty one, refused) */
+    for (const char *a = q->attributes && *q->attributes ? q->attributes : NULL; a;) {
         const char *e = strchr(a, ',');
         size_t n = e ? (size_t)(e - a) : strlen(a);
         char name[API_MAX_ATTRIBUTE_NAME + 2];
@@ -382,7 +384,7 @@ static int parse_query(const api_model *m, const api_delta_query *q, uint64_t *s
                 return api_fail_at(p, 422, "repeated-attribute", "attributes",
                                    "attributes: \"%.40s\" is named twice", name);
         attrs[(*nattrs)++] = k;
-        a = e ? e + 1 : a + n;
+        a = e ? e + 1 : NULL;
     }
     if (api_parse_parts(q->parts, parts, p))
         return p->status;

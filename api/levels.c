@@ -65,26 +65,39 @@ int api_check_level_limits(api_model *m, int level, const api_limits *lim, api_p
     return 0;
 }
 
-/* Comma-separated list item iteration: copies the next item into buf; returns 0 at the end. */
+/* Comma-separated list item iteration: copies the next item into buf; returns 0 at the end, 1
+ * for an item, 2 for an item longer than buf holds (refused by the callers: a cut item would
+ * name another part or attribute, or another number). An empty text has no items; after a comma
+ * there is always one more (possibly empty: "a," is "a" and "", refused like ",a"). */
 static int next_item(const char **s, char *buf, size_t cap)
 {
-    if (!*s || !**s)
+    if (!*s)
         return 0;
     const char *e = strchr(*s, ',');
     size_t n = e ? (size_t)(e - *s) : strlen(*s);
     snprintf(buf, cap, "%.*s", (int)(n < cap ? n : cap - 1), *s);
-    *s = e ? e + 1 : *s + n;
-    return 1;
+    *s = e ? e + 1 : NULL;
+    return n < cap ? 1 : 2;
 }
 
-/* A finite number; strtod's ERANGE on underflow (1e-320: a subnormal or 0) is not an error,
- * only overflow is (C11 7.22.1.3: HUGE_VAL then). */
+/* A list's start for next_item: none for an absent or empty text. */
+static const char *list_start(const char *text)
+{
+    return text && *text ? text : NULL;
+}
+
+/* A finite number written in decimal: [+-]digits[.digits][e[+-]digits] as strtod reads it, but
+ * none of what strtod also takes (leading blanks, hexadecimal, inf, nan); strtod's ERANGE on
+ * underflow (1e-320: a subnormal or 0) is not an error, only overflow is (C11 7.22.1.3: HUGE_VAL
+ * then). */
 static int parse_double(const char *s, double *x)
 {
     char *end;
+    if (!*s || strspn(s, "0123456789+-.eE") != strlen(s))
+        return 0;
     errno = 0;
     *x = strtod(s, &end);
-    return *s && !*end && (!errno || (errno == ERANGE && fabs(*x) <= DBL_MIN)) && isfinite(*x);
+    return !*end && (!errno || (errno == ERANGE && fabs(*x) <= DBL_MIN)) && isfinite(*x);
 }
 
 static int add_attr(const api_model *m, out_request *rq, int a)
@@ -107,9 +120,10 @@ int api_parse_parts(const char *text, unsigned *parts, api_problem *p)
     if (!text)
         return 0;
     *parts = 0;
-    while (next_item(&text, item, sizeof item)) {
+    text = list_start(text);
+    for (int r; (r = next_item(&text, item, sizeof item));) {
         int k = 0;
-        while (k < 5 && strcmp(item, names[k]))
+        while (r == 1 && k < 5 && strcmp(item, names[k]))
             k++;
         if (k == 5)
             return api_fail_at(p, 422, "unknown-value", "parts",
@@ -142,10 +156,10 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
                            "parts: embedded applies to format glb and gltf only, not %s",
                            (*fmt)->name);
     if (q->slice) {
-        const char *s = q->slice;
+        const char *s = list_start(q->slice);
         int k = 0;
-        while (next_item(&s, item, sizeof item)) {
-            if (k == 4 || !parse_double(item, &rq->slice[k]))
+        for (int r; (r = next_item(&s, item, sizeof item));) {
+            if (k == 4 || r != 1 || !parse_double(item, &rq->slice[k]))
                 return api_fail_at(p, 422, "bad-slice", "slice",
                                    "slice: nx,ny,nz,d, four finite numbers");
             k++;
@@ -159,9 +173,9 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
     rq->colormap_attr = -1;
     const api_input *in = m->in;
     if (q->attributes) {
-        const char *s = q->attributes;
-        while (next_item(&s, item, sizeof item)) {
-            int a = api_input_find_attr(in, item);
+        const char *s = list_start(q->attributes);
+        for (int r; (r = next_item(&s, item, sizeof item));) {
+            int a = r == 1 ? api_input_find_attr(in, item) : -1;
             if (a < 0)
                 return api_fail_at(p, 422, "unknown-attribute", "attributes",
                                    "attributes: no attribute \"%.40s\" in this complex", item);

@@ -225,6 +225,18 @@ LEVEL_OPTION_CASES = [
     ({"format": "vtu", "compress": "gzip"}, "compress"),
     ({"format": "json", "compress": "none"}, "compress"),
     ({"limit": "yes"}, "limit"),
+    # a list ending in a comma ends in an empty item, refused as one at the start is
+    ({"parts": "points,"}, "parts"),
+    ({"attributes": "t,"}, "attributes"),
+    ({"slice": "1,0,0,0.3,"}, "slice"),
+    # numbers in decimal only: strtod would also take blanks before them and hexadecimal
+    ({"slice": " 1,0,0,0.3"}, "slice"),
+    ({"slice": "1,0,0,0x1p-2"}, "slice"),
+    ({"colormap": "t: 0:1"}, "colormap"),
+    ({"colormap": "t:0:0x10"}, "colormap"),
+    # an item longer than the parser holds is refused, not cut: cut after 63 characters this d
+    # (0.5e5) would be read as 0.5, another plane
+    ({"slice": "1,0,0,0.5" + "0" * 62 + "e5"}, "slice"),
 ]
 
 

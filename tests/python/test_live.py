@@ -307,6 +307,10 @@ def test_delta_410_paths(daemon):
                   else {"attributes": "t,v,t"})
         assert r.status_code == 422 and r.json()["type"].endswith("/repeated-attribute"), r.text
         assert r.json()["errors"][0]["pointer"] == "attributes"
+    for path in ("/levels/2/delta", "/levels/2"):   # a trailing comma is an empty name
+        for q in ({"attributes": "t,"}, {"parts": "points,"}):
+            r = s.req("GET", path, params={"since": 1, **q} if "delta" in path else q)
+            assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == next(iter(q)), r.text
     assert s.req("GET", "/levels/2/delta", params={"since": 1, "what": 1}).status_code == 400
     s.delete()
 

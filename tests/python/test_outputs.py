@@ -847,6 +847,34 @@ def test_colormap_viridis(tmp_path, meshes):
     assert (np.diff(lum[order]) >= -1e-6).all()
 
 
+def test_colormap_viridis_every_stop(tmp_path, meshes):
+    """Between the end and middle colours too: COLOR_0 is piecewise linear in sRGB through
+    matplotlib's viridis at t = k/8, i.e. entries 0, 32, 64, ..., 224 and 255 of its 256-entry
+    table (lib/matplotlib/_cm_listed.py; t = 1/8 is entry 32 = #472d7b), then made linear."""
+    stops = np.array([
+        (0.267004, 0.004874, 0.329415),  # 0
+        (0.278826, 0.175490, 0.483397),  # 32
+        (0.229739, 0.322361, 0.545706),  # 64
+        (0.172719, 0.448791, 0.557885),  # 96
+        (0.127568, 0.566949, 0.550556),  # 128
+        (0.157851, 0.683765, 0.501686),  # 160
+        (0.369214, 0.788888, 0.382914),  # 192
+        (0.678489, 0.863742, 0.189503),  # 224
+        (0.993248, 0.906157, 0.143936),  # 255
+    ])
+    mesh = meshes["surface"]
+    lv = sdlevel(mesh, 1)
+    x = lv["verts"][:, 0]
+    f = tmp_path / "c.glb"
+    outwrite(mesh, 1, "glb", f, "--xattr", "t", "--colormap", "t:-1:1")
+    doc, acc = read_glb(f)
+    col = acc(doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"])
+    t = np.clip((x + 1) / 2, 0, 1)
+    assert ((t > 0.02) & (t < 0.23)).sum() >= 3  # the first interval, where entry 32 matters
+    want = srgb_to_linear(np.column_stack([np.interp(t, np.arange(9) / 8, stops[:, k]) for k in range(3)]))
+    np.testing.assert_allclose(col, want, atol=2e-6)
+
+
 def test_colormap_range_wider_than_a_double(tmp_path, meshes):
     """t = (v - min)/(max - min) (docs/OUTPUTS.md) for a range whose width exceeds the largest
     double: values near 0 in -1e308:1e308 are at t = 0.5, in -1.7e308:1e-300 at t = 1 and in
