@@ -122,8 +122,8 @@ int api_parse_parts(const char *text, unsigned *parts, api_problem *p)
     *parts = 0;
     text = list_start(text);
     for (int r; (r = next_item(&text, item, sizeof item));) {
-        int k = 0;
-        while (r == 1 && k < 5 && strcmp(item, names[k]))
+        int k = r == 1 ? 0 : 5; /* 2: an item too long to be a name */
+        while (k < 5 && strcmp(item, names[k]))
             k++;
         if (k == 5)
             return api_fail_at(p, 422, "unknown-value", "parts",

@@ -56,8 +56,8 @@
 #define IN_TOL 1e-12   /* distance to a face plane, relative to the cell's longest edge */
 #define BOX_TOL 1e-6   /* box widening, relative to the cell's longest edge */
 #define NONE UINT32_MAX
-/* The nearest-cell search of the vertices outside ("nearest") looks at most at this many bucket
- * entries in all, per vertex outside and once: a vertex near the solid takes tens to hundreds;
+/* The nearest-cell search of the vertices outside ("nearest") looks at most at this many buckets
+ * and bucket entries in all, per vertex outside and once: a vertex near the solid takes tens to hundreds;
  * one far from a curved boundary can take every cell (the cells within reach of its distance
  * widen as sqrt(distance)), which this bounds */
 #define NEAREST_WORK_PER_VERTEX 2048u
@@ -482,7 +482,7 @@ static double box_dist2(const grid *g, uint32_t c, const double *p)
 }
 
 /* The nearest cell to p (lowest index among equals): shells of buckets around p's. Each
- * bucket entry looked at takes one unit of *work; NONE when it runs out first. */
+ * bucket looked at takes one unit of *work and one per entry; NONE when it runs out first. */
 static uint32_t nearest(const cells *C, const grid *g, const double *p, uint64_t *work)
 {
     int64_t b[3], d[3];
@@ -512,10 +512,11 @@ static uint32_t nearest(const cells *C, const grid *g, const double *p, uint64_t
                         continue;
                     }
                     size_t k = ((size_t)z * g->dim[1] + (size_t)y) * g->dim[0] + (size_t)x;
-                    uint32_t entries = g->start[k + 1] - g->start[k];
-                    if (entries > *work)
+                    uint64_t cost = (uint64_t)(g->start[k + 1] - g->start[k]) + 1; /* an empty
+                                                                     * bucket costs a look too */
+                    if (cost > *work)
                         return NONE;
-                    *work -= entries;
+                    *work -= cost;
                     for (uint32_t j = g->start[k]; j < g->start[k + 1]; j++) {
                         uint32_t c = g->cell[j];
                         if (box_dist2(g, c, p) > best)

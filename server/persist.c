@@ -3,6 +3,7 @@
  * here too: it has nothing to write, so every call succeeds and loads find nothing.
  */
 #include "persist_impl.h"
+#include <assert.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -145,7 +146,8 @@ persist_rc persist_touch(persist *p, const char *id, int64_t expires_at)
 
 persist_rc persist_retime(persist *p, const char *id, int ttl_s, int64_t expires_at)
 {
-    return p->ops ? noted(p, p->ops->touch(p->b, id, ttl_s > 0 ? ttl_s : 1, expires_at)) : PERSIST_OK;
+    assert(ttl_s > 0); /* 0 means "keep" to the back ends */
+    return p->ops ? noted(p, p->ops->touch(p->b, id, ttl_s, expires_at)) : PERSIST_OK;
 }
 
 persist_rc persist_delete(persist *p, const char *id)

@@ -93,7 +93,22 @@ void *persist_sqlite_open(const char *path, bool sync_full, char *err, size_t ca
         return NULL;
     }
     snprintf(s->path, sizeof s->path, "%s", path);
-    s->lock_fd = -1;
+    /* Only a shared store (redis) tells a daemon that another one changed a session; two daemons
+     * on one SQLite file would each serve their own resident copies, so the second is refused,
+     * before it touches the file (an flock, which the kernel drops with the process, kill -9
+     * included; SQLite's own locks are POSIX ones, which an flock does not meet). */
+    s->lock_fd = open(path, O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    bool busy = s->lock_fd < 0 || flock(s->lock_fd, LOCK_EX | LOCK_NB) != 0;
+    if (busy) {
+        int e = errno;
+        snprintf(err, cap, "sqlite %.200s: %s", path, e == EWOULDBLOCK
+                 ? "in use by another daemon (one daemon per SQLite file; several daemons share "
+                   "a redis store, docs/DEPLOY.md)" : strerror(e));
+        if (s->lock_fd >= 0)
+            close(s->lock_fd);
+        free(s);
+        return NULL;
+    }
     int rc = sqlite3_open_v2(path, &s->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE |
                                                SQLITE_OPEN_NOMUTEX, NULL);
     char pragmas[160];
@@ -118,29 +133,13 @@ void *persist_sqlite_open(const char *path, bool sync_full, char *err, size_t ca
         snprintf(q, sizeof q, "PRAGMA max_page_count=%lld", have + atoll(cap_pages));
         rc = sqlite3_exec(s->db, q, NULL, NULL, &msg);
     }
-    /* Only a shared store (redis) tells a daemon that another one changed a session; two daemons
-     * on one SQLite file would each serve their own resident copies, so the second is refused
-     * (an flock, which the kernel drops with the process, kill -9 included). */
-    bool busy = false;
-    if (rc == SQLITE_OK) {
-        s->lock_fd = open(path, O_RDONLY | O_CLOEXEC);
-        busy = s->lock_fd < 0 || flock(s->lock_fd, LOCK_EX | LOCK_NB) != 0;
-        if (busy) {
-            snprintf(err, cap, "sqlite %.200s: %s", path, errno == EWOULDBLOCK
-                     ? "in use by another daemon (one daemon per SQLite file; several daemons share "
-                       "a redis store, docs/DEPLOY.md)" : strerror(errno));
-            rc = SQLITE_BUSY;
-        }
-    }
     if (rc != SQLITE_OK) {
-        if (!busy)
-            snprintf(err, cap, "sqlite %.200s: %s", path, msg ? msg : s->db ? sqlite3_errmsg(s->db) : "cannot open");
-        if (s->lock_fd >= 0)
-            close(s->lock_fd);
+        snprintf(err, cap, "sqlite %.200s: %s", path, msg ? msg : s->db ? sqlite3_errmsg(s->db) : "cannot open");
         sqlite3_free(msg);
         for (int i = 0; i < NQ; i++)
             sqlite3_finalize(s->q[i]);
         sqlite3_close(s->db);
+        close(s->lock_fd);
         free(s);
         return NULL;
     }

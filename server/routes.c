@@ -372,9 +372,11 @@ static void h_create_session(req *r)
     if (ttl > r->srv->cfg.max_ttl_s)
         ttl = r->srv->cfg.max_ttl_s;
     store_admission adm;
-    session *s = store_create_for(r->srv->st, (int)ttl, &key, r->srv->cfg.max_sessions_per_client, &adm);
+    session *s = store_create(r->srv->st, (int)ttl, &key, r->srv->cfg.max_sessions_per_client, &adm);
     if (adm.evicted)
-        log_line(r->srv, LOG_INFO, "the session table was full: an empty idle session went");
+        log_line(r->srv, LOG_INFO, "%s: an idle session went",
+                 adm.evicted_own ? "the client held its share of the sessions"
+                                 : "the session table was full");
     if (s && imported) {
         session_adopt(s, imported, imported_version);
         r->s = s; /* the snapshot is the new session's (a create request has no session) */
@@ -486,8 +488,8 @@ static void h_patch_session(req *r)
         if (ttl > r->srv->cfg.max_ttl_s)
             ttl = r->srv->cfg.max_ttl_s;
         persist_rc rc = store_retime(r->srv->st, r->s, (int)ttl);
-        if (rc != PERSIST_OK)
-            store_refused(r, rc, false, &p);
+        if (rc != PERSIST_OK) /* gone from the store meanwhile: the resident copy goes too */
+            store_refused(r, rc, rc == PERSIST_ABSENT, &p);
     }
     if (p.status) {
         http_reply_problem(r, &p);

@@ -255,9 +255,7 @@ static session *session_alloc(const char *id, const unsigned char hash[32], int 
     return s;
 }
 
-/* Make room for one more resident session (expired ones first, then an idle one that can go).
- * Caller holds st->mu; false when the table stays full (*retry_after_s then says when the
- * soonest expiry is). */
+/* How many resident sessions `owner` created. Caller holds st->mu. */
 static int count_owned_locked(store *st, const rate_key *owner)
 {
     int n = 0;
@@ -266,13 +264,19 @@ static int count_owned_locked(store *st, const rate_key *owner)
     return n;
 }
 
+/* Make room for one more resident session (expired ones first, then an idle one that can go),
+ * created by `owner` (NULL: a load from the store, which counts for nobody) when that client may
+ * hold at most per_client (> 0) of them: beyond, expired sessions go, then its own least
+ * recently used idle one, else refused with client_full. Caller holds st->mu; false when there
+ * is no room (*retry_after_s then says when the soonest expiry, of the table or of the
+ * client's sessions, is). */
 static bool room_locked(store *st, const rate_key *owner, int per_client, store_admission *a)
 {
     double now = mono_now();
     if (owner && per_client > 0 && count_owned_locked(st, owner) >= per_client) {
         expire_locked(st, now);
         if (count_owned_locked(st, owner) >= per_client)
-            a->evicted = evict_empty_locked(st, owner);
+            a->evicted = a->evicted_own = evict_empty_locked(st, owner);
         if (count_owned_locked(st, owner) >= per_client) {
             a->client_full = 1;
             a->retry_after_s = soonest_expiry_locked(st, now, owner);
@@ -290,12 +294,7 @@ static bool room_locked(store *st, const rate_key *owner, int per_client, store_
     return true;
 }
 
-session *store_create(store *st, int ttl_s, store_admission *a)
-{
-    return store_create_for(st, ttl_s, NULL, 0, a);
-}
-
-session *store_create_for(store *st, int ttl_s, const rate_key *owner, int per_client,
+session *store_create(store *st, int ttl_s, const rate_key *owner, int per_client,
                           store_admission *a)
 {
     memset(a, 0, sizeof *a);
@@ -679,16 +678,25 @@ int64_t session_stored_expiry(session *s)
 
 persist_rc store_retime(store *st, session *s, int ttl_s)
 {
-    if (persist_durable(st->p)) {
-        persist_rc rc = persist_retime(st->p, s->id, ttl_s, stored_expiry(ttl_s, (int64_t)time(NULL)));
-        if (rc != PERSIST_OK)
-            return rc;
-    }
+    /* under s->write, as every change: no journal write or snapshot of this session stores an
+     * expiry meanwhile. The resident TTL first, so that a touch from a read in between stores
+     * the new one (the store's record is written next, and is what counts after a restart). */
+    pthread_mutex_lock(&s->write);
     pthread_mutex_lock(&s->mu);
+    int was = s->ttl_s;
     s->ttl_s = ttl_s;
     s->last_used = s->touched = mono_now();
     pthread_mutex_unlock(&s->mu);
-    return PERSIST_OK;
+    persist_rc rc = persist_durable(st->p)
+                        ? persist_retime(st->p, s->id, ttl_s, stored_expiry(ttl_s, (int64_t)time(NULL)))
+                        : PERSIST_OK;
+    if (rc != PERSIST_OK) { /* refused: nothing changed */
+        pthread_mutex_lock(&s->mu);
+        s->ttl_s = was;
+        pthread_mutex_unlock(&s->mu);
+    }
+    pthread_mutex_unlock(&s->write);
+    return rc;
 }
 
 time_t session_expires_at(session *s)

@@ -55,22 +55,21 @@ void store_free(store *st);
 /* What store_create did to find room, or why there was none. */
 typedef struct store_admission {
     int evicted;              /* an empty idle session went to make room */
+    int evicted_own;          /* ... one of the creating client's, for its share */
     int retry_after_s;        /* refused, the table full: seconds until the soonest expiry (>= 1) */
     int client_full;          /* refused: the creating client holds its maximum of sessions
                                  (retry_after_s: until the soonest of theirs expires) */
     persist_rc stored;        /* refused by the durable store (PERSIST_UNAVAILABLE ...), else OK */
 } store_admission;
 
-/* Create a session (new reference). When the table is full, sessions past their TTL go first,
- * then the least recently used idle session that never received a complex (none with a request
- * or a stream in flight: the store holds its only reference); NULL when none can go (or out of
- * memory: then retry_after_s is 0). */
-session *store_create(store *st, int ttl_s, store_admission *a);
-/* The same for a client (`owner`) that may hold at most `per_client` resident sessions (0: any
- * number): its own sessions past their TTL go first, then (with a durable store) its least
- * recently used idle one leaves memory, or (memory store) its least recently used idle one
- * that never received a complex; else refused with client_full. */
-session *store_create_for(store *st, int ttl_s, const rate_key *owner, int per_client,
+/* Create a session (new reference) for a client (`owner`, may be NULL) that may hold at most
+ * `per_client` resident sessions (0: any number). When the table is full, sessions past their
+ * TTL go first, then the least recently used idle session that never received a complex (none
+ * with a request or a stream in flight: the store holds its only reference; with a durable
+ * store any idle one, the store keeps it); NULL when none can go (or out of memory: then
+ * retry_after_s is 0). When the client holds its maximum, expired sessions go, then its own
+ * least recently used idle one (as above), else refused with client_full. */
+session *store_create(store *st, int ttl_s, const rate_key *owner, int per_client,
                           store_admission *a);
 /* Why store_get found nothing. */
 typedef enum store_miss {

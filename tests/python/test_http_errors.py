@@ -237,6 +237,7 @@ LEVEL_OPTION_CASES = [
     # an item longer than the parser holds is refused, not cut: cut after 63 characters this d
     # (0.5e5) would be read as 0.5, another plane
     ({"slice": "1,0,0,0.5" + "0" * 62 + "e5"}, "slice"),
+    ({"parts": "s" * 70}, "parts"),
 ]
 
 
