@@ -1060,8 +1060,11 @@ static void matrix(req *r, api_model *m, int level)
         stream_refused(r, m, &p);
         return;
     }
+    /* The from-level as parsed (api_matrix_open accepted only digits below the level), not the
+     * query text: "from=01" names S_1_2, and a long run of zeros cannot cut the header short. */
     char disp[96];
-    snprintf(disp, sizeof disp, "attachment; filename=\"S_%s_%d.%s\"", from ? from : "0", level,
+    snprintf(disp, sizeof disp, "attachment; filename=\"S_%ld_%d.%s\"",
+             from ? strtol(from, NULL, 10) : 0L, level,
              fmt && !strcmp(fmt, "json") ? "json" : "mtx");
     http_reply_stream(r, m, out_source(os), UINT64_MAX, ctype, disp, atomic_load(&m->version));
 }

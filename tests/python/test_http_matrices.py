@@ -62,3 +62,17 @@ def test_matrix_errors(daemon, path, params, status):
     r = s.req("GET", path, params=params)
     assert r.status_code == status, r.text
     assert r.headers["Content-Type"] == "application/problem+json"
+
+
+@pytest.mark.parametrize("frm,name", [(None, "S_0_2"), ("1", "S_1_2"), ("01", "S_1_2"),
+                                      ("0" * 120 + "1", "S_1_2")])
+def test_attachment_names_the_parsed_levels(daemon, frm, name):
+    """The file name carries the from-level as a number, not the query text: a long run of
+    leading zeros used to overflow the header buffer and cut the quoted file name short."""
+    s = Session(daemon)
+    assert s.put_complex(complex_from_text(MIXED)).status_code == 200
+    for fmt in ("mtx", "json"):
+        params = {"format": fmt} if frm is None else {"from": frm, "format": fmt}
+        r = s.req("GET", "/matrices/2", params=params)
+        assert r.status_code == 200, r.text
+        assert r.headers["Content-Disposition"] == f'attachment; filename="{name}.{fmt}"'
