@@ -64,6 +64,7 @@ CHECKS = [
     "level_moves",       # level-3 handles; a drag PATCHes "level": 3; buffers = refetch
     "second_tab_close",  # closing the tab that joined leaves the session open for the first
     "tab_reload",        # a reload opens the tab's session again: same model, edits, offsets, TTL back to 1 h
+    "tab_duplicate",     # a duplicated tab joins the session without owning it; closing it keeps the TTL
     "tab_close_ttl",     # a closed tab gives its own session the short TTL (PATCH ttl_s 120 at pagehide)
     "console_clean",     # no console errors but the refusals the test provokes
 ]

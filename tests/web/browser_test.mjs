@@ -1025,7 +1025,7 @@ const expiresIn = (pg, who) => pg.evaluate(async ({ id, token }) => {
   const r = await fetch(`/v1/sessions/${id}`, { headers: { Authorization: `Bearer ${token}` }, cache: 'no-store' });
   return r.ok ? (Date.parse((await r.json()).expires_at) - Date.now()) / 1000 : -r.status;
 }, who);
-await step(['tab_reload', 'tab_close_ttl'], async () => {
+await step(['tab_reload', 'tab_duplicate', 'tab_close_ttl'], async () => {
   const b = await snap();
   const bCmp = await page.evaluate(async () => {
     const s = window.subdivd.session;
@@ -1044,6 +1044,27 @@ await step(['tab_reload', 'tab_close_ttl'], async () => {
     `session ${b.session?.slice(0, 8)} -> ${s.session?.slice(0, 8)}; model ${b.model} -> ${s.model}; v${b.version} -> v${s.version}; ` +
     `control points kept: ${sameCage}; ${bCmp?.length ?? 0} detail offsets; expires in ${left} s; ` +
     `buffers vs refetch: ${cmp.position} position floats differ; said: ${said}`);
+  // a duplicated tab (its sessionStorage a copy of this tab's, the session marked as shown):
+  // it joins the session as a tab opened by its link, and closing it leaves the session's TTL
+  const kept = await page.evaluate(() => [sessionStorage.getItem('subdivd.session'), sessionStorage.getItem('subdivd.live')]);
+  const dup = await browser.newPage({ viewport: { width: 800, height: 600 } });
+  dup.on('console', (m) => { if (m.type() === 'error') consoleErrors.push(`duplicate tab: ${m.text()}`); });
+  await dup.addInitScript(([k, l]) => {
+    if (!sessionStorage.getItem('subdivd.session')) {
+      sessionStorage.setItem('subdivd.session', k);
+      sessionStorage.setItem('subdivd.live', l);
+    }
+  }, kept);
+  await dup.goto(url);
+  await dup.waitForFunction('window.subdivd && window.subdivd.ready && window.subdivd.idle() && window.subdivd.snapshot().shown', null, { timeout: TIMEOUT });
+  const d = await dup.evaluate(() => ({ session: window.subdivd.session.id, owned: window.subdivd.session.owned, hash: location.hash, model: window.subdivd.snapshot().model }));
+  await dup.close({ runBeforeUnload: true });
+  await new Promise((r) => setTimeout(r, 1000));
+  const leftAfterDup = await expiresIn(page, who);
+  check('tab_duplicate', kept[1] === who.id && d.session === who.id && !d.owned && d.hash.includes(`session=${who.id}`) &&
+    d.model === s.model && leftAfterDup > 3500,
+    `live mark ${kept[1]?.slice(0, 8)}; duplicate on ${d.session?.slice(0, 8)}, owned ${d.owned}, address ${d.hash.slice(0, 20)}…, model ${d.model}; ` +
+    `the session expires in ${leftAfterDup} s after the duplicate closed`);
   const p3 = await browser.newPage({ viewport: { width: 800, height: 600 } });
   p3.on('console', (m) => { if (m.type() === 'error') consoleErrors.push(`third tab: ${m.text()}`); });
   await p3.goto(url);

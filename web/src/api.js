@@ -41,6 +41,10 @@ async function problemOf(res) {
 // The tab's own session, kept over a reload: sessionStorage is per tab and outlives a reload,
 // not the tab.
 const KEPT = 'subdivd.session';
+// Set while the tab that started the session shows it, cleared as its page goes: a tab that
+// finds it set at load is a duplicate (a duplicated tab gets a copy of sessionStorage), and the
+// session is the other tab's.
+const LIVE = 'subdivd.live';
 export const TTL_S = 3600; // idle TTL while the page is open
 export const AWAY_TTL_S = 120; // after the page went: long enough for a reload, short after a close
 
@@ -63,17 +67,25 @@ export class Session {
     this.version = j.version ?? 0;
     this.owned = true;
     this.keep();
+    this.markLive();
     return j;
   }
 
-  // The session this tab started before a reload ({id, token, name}), or null.
+  // The session this tab started before a reload ({id, token, name, live}), or null; `live`:
+  // still marked as shown (this tab is a duplicate of the one that shows it).
   static kept() {
     try {
       const j = JSON.parse(sessionStorage.getItem(KEPT));
-      return typeof j?.id === 'string' && typeof j?.token === 'string' ? j : null;
+      if (typeof j?.id !== 'string' || typeof j?.token !== 'string') return null;
+      return { ...j, live: sessionStorage.getItem(LIVE) === j.id };
     } catch {
       return null; // storage off or damaged: nothing kept
     }
+  }
+
+  markLive() {
+    if (!this.owned) return;
+    try { sessionStorage.setItem(LIVE, this.id); } catch { /* storage off */ }
   }
 
   // Remember this tab's own session (and the name of its model) for a reload.
@@ -86,7 +98,10 @@ export class Session {
   }
 
   static forget() {
-    try { sessionStorage.removeItem(KEPT); } catch { /* storage off */ }
+    try {
+      sessionStorage.removeItem(KEPT);
+      sessionStorage.removeItem(LIVE);
+    } catch { /* storage off */ }
   }
 
   // PATCH /v1/sessions/{id} {"ttl_s"}: the session's idle TTL from now.
@@ -99,6 +114,7 @@ export class Session {
   // A session another tab started (joined by its link) is that tab's: left as it is.
   shortenOnExit() {
     if (!this.id || !this.owned) return;
+    try { sessionStorage.removeItem(LIVE); } catch { /* storage off */ }
     fetch(`${this.base}/v1/sessions/${this.id}`, {
       method: 'PATCH', keepalive: true, body: JSON.stringify({ ttl_s: AWAY_TTL_S }),
       headers: { Authorization: `Bearer ${this.token}`, 'Content-Type': 'application/json' },

@@ -560,7 +560,15 @@ class App {
         this.session.token = token;
         this.session.version = 0;
         this.session.owned = owned;
-        if (owned) await this.session.setTtl(TTL_S);
+        if (owned) {
+          await this.session.setTtl(TTL_S);
+          this.session.markLive();
+          // the page that went sent its short TTL with keepalive: should it arrive after ours,
+          // ours again once it has surely arrived
+          setTimeout(() => {
+            if (this.session.owned && this.session.id === id) this.session.setTtl(TTL_S).catch((e) => this.error(e));
+          }, 3000);
+        }
         const complex = await this.session.getComplex();
         const summary = { simplices: {} };
         for (const s of complex.simplices) summary.simplices[s.length - 1] = (summary.simplices[s.length - 1] || 0) + 1;
@@ -1412,7 +1420,9 @@ class App {
     window.addEventListener('pagehide', () => this.session.shortenOnExit());
     // back from the back/forward cache: the page lives on, so its session gets its TTL back
     window.addEventListener('pageshow', (ev) => {
-      if (ev.persisted && this.session.owned) this.session.setTtl(TTL_S).catch((e) => this.error(e));
+      if (!ev.persisted || !this.session.owned) return;
+      this.session.markLive();
+      this.session.setTtl(TTL_S).catch((e) => this.error(e));
     });
     window.addEventListener('error', (ev) => this.error(ev.error || ev.message));
     window.addEventListener('unhandledrejection', (ev) => this.error(ev.reason));
@@ -1498,6 +1508,16 @@ class App {
     if (frag.get('session') && frag.get('token')) {
       this.#hint('Joining the session…');
       if (await this.join(frag.get('session'), frag.get('token'))) {
+        this.ready = true;
+        return;
+      }
+    } else if (kept && kept.live) {
+      // a duplicate of the tab that shows this session: join it as a tab opened by its link
+      // would (the session stays the other tab's), with the link in the address for a reload
+      Session.forget();
+      history.replaceState(null, '', `${location.pathname}#session=${kept.id}&token=${kept.token}`);
+      this.#hint('Joining the session…');
+      if (await this.join(kept.id, kept.token, { name: kept.name })) {
         this.ready = true;
         return;
       }
