@@ -103,6 +103,38 @@ static int parse_entry(json_t *e, size_t k, const api_packs *packs, const api_in
     return 0;
 }
 
+/* TetGen's quality measure of a tetrahedron (-q): its circumradius over its shortest edge. */
+static double radius_edge_ratio(const double *const q[4])
+{
+    double a[3], b[3], c[3], bc[3], ca[3], ab[3], x[3];
+    for (int k = 0; k < 3; k++) {
+        a[k] = q[1][k] - q[0][k];
+        b[k] = q[2][k] - q[0][k];
+        c[k] = q[3][k] - q[0][k];
+    }
+#define CROSS(r, u, v)                                                                            \
+    (r[0] = u[1] * v[2] - u[2] * v[1], r[1] = u[2] * v[0] - u[0] * v[2], r[2] = u[0] * v[1] - u[1] * v[0])
+    CROSS(bc, b, c);
+    CROSS(ca, c, a);
+    CROSS(ab, a, b);
+#undef CROSS
+    double aa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2], bb = b[0] * b[0] + b[1] * b[1] + b[2] * b[2],
+           cc = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+    double d = 2 * (a[0] * bc[0] + a[1] * bc[1] + a[2] * bc[2]);
+    for (int k = 0; k < 3; k++) /* the circumcentre relative to q[0] */
+        x[k] = (aa * bc[k] + bb * ca[k] + cc * ab[k]) / d;
+    double shortest = INFINITY;
+    for (int i = 0; i < 4; i++)
+        for (int j = i + 1; j < 4; j++) {
+            double e = 0;
+            for (int k = 0; k < 3; k++)
+                e += (q[j][k] - q[i][k]) * (q[j][k] - q[i][k]);
+            shortest = e < shortest ? e : shortest;
+        }
+    double r = sqrt((x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) / shortest);
+    return isfinite(r) ? r : INFINITY; /* a flat tetrahedron: no finite ratio */
+}
+
 /* ---- appending ------------------------------------------------------------------------------ */
 
 /* Values of attribute `a` at the new points: the discrete harmonic extension of the surface
@@ -227,7 +259,7 @@ static int append(api_input *in, const surface *s, const helper_out *h, api_prob
     if (!xyz || !size || !idx || !st)
         return api_fail(p, 503, "out-of-memory", "out of memory adding TetGen's tetrahedra");
     memcpy(in->xyz + 3 * (size_t)nv0, pts + 3 * (size_t)s->nloc, 3 * (size_t)added * sizeof *pts);
-    double vol = 0, largest = 0;
+    double vol = 0, largest = 0, worst = 0;
     for (size_t t = 0; t < nt; t++) {
         in->size[ns0 + t] = 4;
         for (int i = 0; i < 4; i++) {
@@ -240,6 +272,8 @@ static int append(api_input *in, const surface *s, const helper_out *h, api_prob
         double v = fabs(api_fill_det3(q[1], q[2], q[3], q[0])) / 6;
         vol += v;
         largest = v > largest ? v : largest;
+        double r = radius_edge_ratio(q);
+        worst = r > worst ? r : worst;
     }
     for (int a = 0; a < in->nattrs; a++) {
         api_attribute *at = &in->attrs[a];
@@ -255,7 +289,7 @@ static int append(api_input *in, const surface *s, const helper_out *h, api_prob
     if (!api_input_account(in)) /* the grown arrays count against the memory budget */
         return api_fail(p, 503, "out-of-memory", "out of memory adding TetGen's tetrahedra");
     in->fill[in->nfill++] =
-        (api_fill_stats){s->nt, nt, added, nv0, ns0, vol, largest, s->max_volume};
+        (api_fill_stats){s->nt, nt, added, nv0, ns0, vol, largest, s->max_volume, worst, s->min_ratio};
     return 0;
 }
 
@@ -367,12 +401,30 @@ json_t *api_fill_summary(const api_input *in)
                               "largest_tet_volume", f->largest,
                               "first_vertex", (json_int_t)f->first_vertex,
                               "first_simplex", (json_int_t)f->first_simplex);
-        /* the surface is kept (no points on it), so TetGen may not reach max_volume: say so */
-        if (f->max_volume > 0 && f->largest > f->max_volume * (1 + 1e-9))
-            json_object_set_new(o, "warning", json_string(
-                "max_volume is not met: the surface is kept as posted (no points are added on "
-                "it), and TetGen could not split the largest tetrahedra further; refine the "
-                "surface's triangles to get smaller tetrahedra"));
+        /* JSON has no infinity: a flat tetrahedron (none from TetGen) leaves the ratio out */
+        if (isfinite(f->largest_ratio))
+            json_object_set_new(o, "largest_ratio", json_real(f->largest_ratio));
+        /* the surface is kept (no points on it), so TetGen may reach neither max_volume nor
+         * min_ratio: say which was not met */
+        int vol_unmet = f->max_volume > 0 && f->largest > f->max_volume * (1 + 1e-9);
+        int ratio_unmet = f->min_ratio > 0 && !(f->largest_ratio <= f->min_ratio * (1 + 1e-9));
+        if (vol_unmet || ratio_unmet) {
+            char w[512];
+            snprintf(w, sizeof w,
+                     "%s not met: the surface is kept as posted (no points are added on it), and "
+                     "TetGen could not %s further; refine the surface's triangles to get %s "
+                     "tetrahedra",
+                     vol_unmet && ratio_unmet ? "max_volume and min_ratio are"
+                     : vol_unmet              ? "max_volume is"
+                                              : "min_ratio is",
+                     vol_unmet && ratio_unmet ? "split the largest and the worst-shaped tetrahedra"
+                     : vol_unmet              ? "split the largest tetrahedra"
+                                              : "split the worst-shaped tetrahedra",
+                     vol_unmet && ratio_unmet ? "smaller and better-shaped"
+                     : vol_unmet              ? "smaller"
+                                              : "better-shaped");
+            json_object_set_new(o, "warning", json_string(w));
+        }
         json_array_append_new(a, o);
     }
     return a;

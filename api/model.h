@@ -43,6 +43,8 @@ typedef struct api_fill_stats {
     double volume;            /* of the tetrahedra */
     double largest;           /* volume of the largest tetrahedron */
     double max_volume;        /* as asked (0: none) */
+    double largest_ratio;     /* largest radius-edge ratio (circumradius / shortest edge) */
+    double min_ratio;         /* as asked (0: none) */
 } api_fill_stats;
 
 typedef struct api_input {

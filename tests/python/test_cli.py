@@ -198,7 +198,7 @@ def test_gmsh_physical_groups_are_tags(daemon, tmp_path):
 
 
 def test_job_file(daemon, tmp_path):
-    """Several meshes in one job file: defaults, {name} outputs, inline and file tags/rules,
+    """Several meshes in one job file: defaults, {name} outputs and save_complex, inline and file tags/rules,
     fill, and a failing job that makes the exit code 1 without stopping the others."""
     import meshio
     import numpy as np
@@ -213,7 +213,7 @@ def test_job_file(daemon, tmp_path):
             "jobs": [{"input": "in/ball.stl", "fill": {"min_ratio": 1.5}, "save_complex": "ball.json"},
                      {"input": "in/open.off", "fill": True},
                      {"input": "in/shell.obj", "level": 2, "tags": {"singular": [f[0][:2]]},
-                      "save_complex": "shell.json", "options": {"parts": "surfaces"}}]}
+                      "save_complex": "{name}-L{level}.json", "options": {"parts": "surfaces"}}]}
     (tmp_path / "jobs.json").write_text(json.dumps(jobs))
     r = run("batch", tmp_path / "jobs.json", "--url", daemon.url, "--progress", "lines", cwd="/")
     assert r.returncode == 1, r.stderr                                   # the open surface: 422
@@ -224,7 +224,7 @@ def test_job_file(daemon, tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["ball-L1.glb", "ball.vtu", "shell-L2.glb", "shell.vtu"]
     ball = json.loads((tmp_path / "ball.json").read_text())
     assert ball["summary"]["fill"][0]["tets"] > 0 and ball["rules"]["surface_weights"] == "loop"
-    shell = json.loads((tmp_path / "shell.json").read_text())
+    shell = json.loads((tmp_path / "shell-L2.json").read_text())   # {name} and {level} expanded
     assert shell["tags"]["singular"] == [sorted(f[0][:2])]
     r = run("batch", tmp_path / "jobs.json", "--url", daemon.url, "--fail-fast", "--progress", "none")
     assert r.returncode == 1 and "3 job(s): 1 done, 1 failed, 1 not run" in r.stderr
@@ -285,6 +285,21 @@ def test_spawn_progress_bar_and_convert(tmp_path):
                         str(tmp_path / "b.vtu")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "a.vtu").read_bytes() == (tmp_path / "b.vtu").read_bytes()
+
+
+def test_spawn_uses_the_named_subdivd_or_refuses(tmp_path):
+    """--subdivd PATH (or $SUBDIVD) names the daemon --spawn starts: one that is not an executable
+    file is a usage error, not silently replaced by the subdivd beside the launcher."""
+    (tmp_path / "t.json").write_text(json.dumps({"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
+                                                 "simplices": [[0, 1, 2, 3]]}))
+    args = ("refine", tmp_path / "t.json", "--level", 1, "-o", tmp_path / "t.vtu", "--spawn", "-q")
+    r = run(*args, "--subdivd", tmp_path / "no-such-subdivd")
+    assert r.returncode == 2 and "--subdivd" in r.stderr and "no-such-subdivd" in r.stderr, r.stderr
+    assert not (tmp_path / "t.vtu").exists()
+    r = run(*args, env=dict(ENV, SUBDIVD=str(tmp_path)))            # a directory
+    assert r.returncode == 2 and "SUBDIVD" in r.stderr, r.stderr
+    r = run(*args, "--subdivd", SUBDIVD, env=dict(ENV, SUBDIVD=str(tmp_path / "x")))
+    assert r.returncode == 0 and (tmp_path / "t.vtu").exists(), r.stderr
 
 
 def test_fill_warning_is_shown(tmp_path):

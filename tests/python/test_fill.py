@@ -54,6 +54,16 @@ def tets_volume(v, tets):
     return math.fsum(abs(det(v[b], v[c], v[d], v[a])) for a, b, c, d in tets) / 6
 
 
+def radius_edge_ratio(p):
+    """Circumradius over shortest edge of the tetrahedron with corners p (4 x 3): the centre c
+    solves 2 (p_i - p_0) . c = |p_i|^2 - |p_0|^2, i = 1..3."""
+    A = 2 * (p[1:] - p[0])
+    b = (p[1:] ** 2).sum(axis=1) - (p[0] ** 2).sum()
+    c = np.linalg.solve(A, b)
+    shortest = min(np.linalg.norm(p[i] - p[j]) for i in range(4) for j in range(i + 1, 4))
+    return np.linalg.norm(c - p[0]) / shortest
+
+
 def face_counts(tets):
     c = Counter()
     for t in tets:
@@ -104,7 +114,14 @@ def test_fill_keeps_volume_and_surface(daemon, kind, args, switches):
     P = np.array(verts, dtype=float)
     vols = [abs(np.linalg.det(P[t[1:]] - P[t[0]])) / 6 for t in simp]
     assert abs(fs["largest_tet_volume"] - max(vols)) <= 1e-12 * max(vols)
-    assert ("warning" in fs) == ("max_volume" in switches and max(vols) > switches["max_volume"] * (1 + 1e-9))
+    # the worst radius-edge ratio (TetGen's -q measure), computed here too
+    ratios = [radius_edge_ratio(P[t]) for t in simp]
+    assert abs(fs["largest_ratio"] - max(ratios)) <= 1e-12 * max(ratios)
+    vol_unmet = "max_volume" in switches and max(vols) > switches["max_volume"] * (1 + 1e-9)
+    ratio_unmet = "min_ratio" in switches and max(ratios) > switches["min_ratio"] * (1 + 1e-9)
+    assert ("warning" in fs) == (vol_unmet or ratio_unmet)
+    assert ("max_volume" in fs.get("warning", "")) == vol_unmet
+    assert ("min_ratio" in fs.get("warning", "")) == ratio_unmet
     # boundary: the faces used once are exactly the input triangles; the others twice
     fc = face_counts(simp)
     assert {k for k, n in fc.items() if n == 1} == {tuple(sorted(t)) for t in f}
@@ -447,4 +464,35 @@ def test_unmet_max_volume_is_reported(daemon):
     assert "max_volume is not met" in fs["warning"]
     r = s.put_complex({"vertices": v, "fill": [{"surface": f}]})
     assert "warning" not in r.json()["summary"]["fill"][0]
+    s.delete()
+
+
+def test_unmet_min_ratio_is_reported(daemon):
+    """A coarse torus (12 x 8 quads split in two, radii 2 and 0.7) with min_ratio 1.2: the surface
+    is kept, so tetrahedra next to it keep ratios far above 1.2 (8.6 with Debian's TetGen 1.5).
+    The summary's largest_ratio is the worst one, computed here, and a warning names min_ratio
+    (and not max_volume); a bound it meets (100) gives no warning."""
+    n, m, R, r = 12, 8, 2.0, 0.7
+    v = [[(R + r * math.cos(2 * math.pi * j / m)) * math.cos(2 * math.pi * i / n),
+          (R + r * math.cos(2 * math.pi * j / m)) * math.sin(2 * math.pi * i / n),
+          r * math.sin(2 * math.pi * j / m)] for i in range(n) for j in range(m)]
+    f = []
+    for i in range(n):
+        for j in range(m):
+            a, b = i * m + j, (i + 1) % n * m + j
+            c, d = (i + 1) % n * m + (j + 1) % m, i * m + (j + 1) % m
+            f += [[a, b, c], [a, c, d]]
+    s = Session(daemon)
+    r = s.put_complex({"vertices": v, "fill": [{"surface": f, "min_ratio": 1.2}]})
+    assert r.status_code == 200, r.text
+    (fs,) = r.json()["summary"]["fill"]
+    c = s.req("GET", "/complex").json()
+    P = np.array(c["vertices"], dtype=float)
+    worst = max(radius_edge_ratio(P[t]) for t in c["simplices"])
+    assert worst > 2 * 1.2
+    assert abs(fs["largest_ratio"] - worst) <= 1e-12 * worst
+    assert fs["warning"].startswith("min_ratio is not met") and "max_volume" not in fs["warning"]
+    r = s.put_complex({"vertices": v, "fill": [{"surface": f, "min_ratio": 100}]})
+    (fs,) = r.json()["summary"]["fill"]
+    assert fs["largest_ratio"] <= 100 and "warning" not in fs
     s.delete()

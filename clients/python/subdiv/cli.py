@@ -145,11 +145,19 @@ class Progress:
 # ---- the daemon ------------------------------------------------------------------------------
 
 def find_subdivd(explicit=None):
+    """The daemon for --spawn: --subdivd PATH, else $SUBDIVD, else the subdivd beside the launcher,
+    else on PATH. A binary the user named (--subdivd or $SUBDIVD) is used or refused, never
+    replaced by another one found further down the list."""
+    def runnable(cand):
+        return os.access(cand, os.X_OK) and not os.path.isdir(cand)
+    for what, cand in (("--subdivd", explicit), ("SUBDIVD", os.environ.get("SUBDIVD"))):
+        if cand:
+            if not runnable(cand):
+                raise UsageError(f"--spawn: {what} {cand} is not an executable file")
+            return cand
     launcher = os.environ.get("SUBDIV_LAUNCHER") or sys.argv[0]
-    for cand in (explicit, os.environ.get("SUBDIVD"),
-                 str(pathlib.Path(launcher).resolve().parent / "subdivd"),
-                 shutil.which("subdivd")):
-        if cand and os.access(cand, os.X_OK) and not os.path.isdir(cand):
+    for cand in (str(pathlib.Path(launcher).resolve().parent / "subdivd"), shutil.which("subdivd")):
+        if cand and runnable(cand):
             return cand
     raise UsageError("--spawn: cannot find subdivd; give --subdivd PATH or set SUBDIVD")
 
@@ -527,8 +535,9 @@ def parse_jobs(path):
                              f"{sorted(set(job['options']) - set(LEVEL_OPTS))[0]!r}")
         stem = pathlib.Path(job["input"]).stem
         job["outputs"] = [str(o).format(name=stem, level=job["level"]) for o in job["outputs"]]
-        if job.get("pvd") is not None:
-            job["pvd"] = str(job["pvd"]).format(name=stem, level=job["level"])
+        for k in ("pvd", "save_complex"):
+            if job.get(k) is not None:
+                job[k] = str(job[k]).format(name=stem, level=job["level"])
         jobs.append(job)
     return base, jobs
 
