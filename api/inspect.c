@@ -290,9 +290,12 @@ int api_matrix_open(api_model *m, int level, const char *from, const char *forma
         if (f < 0 || *end || errno)
             return api_fail_at(p, 400, "wrong-type", "from", "from must be a level number");
     }
-    if (level < 1 || f >= level)
+    if (level < 1)
         return api_fail_at(p, 422, "out-of-range", "from",
-                           "from (%ld) must be below the level (%d); level 0 has no matrix", f, level);
+                           "level 0 has no matrix: ask for a level of 1 or more");
+    if (f >= level)
+        return api_fail_at(p, 422, "out-of-range", "from",
+                           "from (%ld) must be below the level (%d)", f, level);
     if (api_check_level_limits(m, level, lim, p) || api_level_compute(m, level, slot, p))
         return p->status;
     sd_error e = {0};

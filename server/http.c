@@ -242,7 +242,7 @@ static enum MHD_Result refuse_body_now(req *r)
     size_t max = r->srv->cfg.limits.max_body_bytes;
     api_problem p = {0};
     api_fail_limit(&p, "max_body_bytes", max, max + 1,
-                   "the body exceeds the limit of %zu bytes; send a smaller complex or raise "
+                   "the body exceeds the limit of %zu bytes; send a smaller one or raise "
                    "--max-body-bytes", max);
     json_t *j = api_problem_json(&p);
     char *body = j ? json_dumps(j, JSON_COMPACT) : NULL;
