@@ -615,10 +615,20 @@ static bool unconditional(req *r)
 /* After the store refused a change because another daemon's came first (the resident copy is
  * dropped): for a change that named no version, the session as stored takes the request's
  * reference and true is returned (make the change again); else false. */
-static bool reload_unconditional(req *r)
+static bool reload_unconditional(req *r, int attempt)
 {
     if (!unconditional(r))
         return false;
+    /* the daemons that lost the same race would all try again at once and collide again: wait
+     * a random 0 .. 2^attempt ms first (1, 2, 4 ... at most 64 ms) */
+    static _Thread_local unsigned short seed[3];
+    if (!seed[0] && !seed[1] && !seed[2]) {
+        uint64_t t = (uint64_t)(mono_now() * 1e9) ^ (uint64_t)(uintptr_t)&seed;
+        seed[0] = (unsigned short)t, seed[1] = (unsigned short)(t >> 16), seed[2] = (unsigned short)(t >> 32);
+    }
+    long span = 1L << (attempt < 6 ? attempt : 6);
+    struct timespec ts = {0, (nrand48(seed) % (span * 1000 + 1)) * 1000};
+    nanosleep(&ts, NULL);
     store_miss miss;
     session *again = store_get(r->srv->st, r->s->id, NULL, &miss, NULL, 0);
     if (!again)
@@ -669,7 +679,7 @@ static void change(req *r, change_op op, const char *const *packed, const char *
             break;
         pthread_mutex_unlock(&r->s->write);
         json_decref(answer);
-        if (!(stored == PERSIST_CONFLICT && attempt < RELOAD_TRIES && reload_unconditional(r))) {
+        if (!(stored == PERSIST_CONFLICT && attempt < RELOAD_TRIES && reload_unconditional(r, attempt))) {
             json_decref(b);
             api_packs_free(&packs);
             http_reply_problem(r, &p);
@@ -908,7 +918,7 @@ static void h_edit(req *r)
         }
         pthread_mutex_unlock(&r->s->write);
         api_model_unref(m);
-        if (!rc || !(ec.stored == PERSIST_CONFLICT && attempt < RELOAD_TRIES && reload_unconditional(r)))
+        if (!rc || !(ec.stored == PERSIST_CONFLICT && attempt < RELOAD_TRIES && reload_unconditional(r, attempt)))
             break;
         memset(&p, 0, sizeof p);
     }
@@ -1154,7 +1164,7 @@ static int embed_change(req *r, embed_op *op, uint64_t *version, api_problem *p)
         }
         pthread_mutex_unlock(&r->s->write);
         api_model_unref(m);
-        if (!rc || !(ec.stored == PERSIST_CONFLICT && attempt < RELOAD_TRIES && reload_unconditional(r)))
+        if (!rc || !(ec.stored == PERSIST_CONFLICT && attempt < RELOAD_TRIES && reload_unconditional(r, attempt)))
             return rc;
         json_decref(op->summary);
         op->summary = NULL;
