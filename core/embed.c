@@ -201,8 +201,29 @@ static bool holds(const double *const P[4], double L, const double *p, double la
     return true;
 }
 
+/* Squared distance from p to segment xy, the same bits whichever way round and whichever
+ * triangle it is an edge of (its ends taken in lexicographic order of their coordinates): cells
+ * that share the edge nearest to p are then exactly as near, and the lowest index wins. */
+static double seg_dist2(const double *p, const double *x, const double *y)
+{
+    if (x[0] > y[0] || (x[0] == y[0] && (x[1] > y[1] || (x[1] == y[1] && x[2] > y[2])))) {
+        const double *t = x;
+        x = y;
+        y = t;
+    }
+    double e[3], xp[3], q[3], d[3];
+    sub3(y, x, e);
+    sub3(p, x, xp);
+    double ee = dot3(e, e), t = ee > 0 ? dot3(e, xp) / ee : 0;
+    t = t < 0 ? 0 : t > 1 ? 1 : t;
+    for (int k = 0; k < 3; k++)
+        q[k] = x[k] + t * e[k];
+    sub3(p, q, d);
+    return dot3(d, d);
+}
+
 /* Closest point to p on triangle abc, squared distance (Ericson, Real-Time Collision Detection
- * 5.1.5: Voronoi regions of the vertices, edges and face). */
+ * 5.1.5: Voronoi regions of the vertices, edges and face; an edge's distance by seg_dist2). */
 static double tri_dist2(const double *p, const double *a, const double *b, const double *c)
 {
     double ab[3], ac[3], ap[3], q[3];
@@ -222,12 +243,8 @@ static double tri_dist2(const double *p, const double *a, const double *b, const
         goto done;
     }
     double vc = d1 * d4 - d3 * d2;
-    if (vc <= 0 && d1 >= 0 && d3 <= 0) {
-        double t = d1 / (d1 - d3);
-        for (int k = 0; k < 3; k++)
-            q[k] = a[k] + t * ab[k];
-        goto done;
-    }
+    if (vc <= 0 && d1 >= 0 && d3 <= 0)
+        return seg_dist2(p, a, b);
     double cp[3];
     sub3(p, c, cp);
     double d5 = dot3(ab, cp), d6 = dot3(ac, cp);
@@ -236,19 +253,11 @@ static double tri_dist2(const double *p, const double *a, const double *b, const
         goto done;
     }
     double vb = d5 * d2 - d1 * d6;
-    if (vb <= 0 && d2 >= 0 && d6 <= 0) {
-        double t = d2 / (d2 - d6);
-        for (int k = 0; k < 3; k++)
-            q[k] = a[k] + t * ac[k];
-        goto done;
-    }
+    if (vb <= 0 && d2 >= 0 && d6 <= 0)
+        return seg_dist2(p, a, c);
     double va = d3 * d6 - d5 * d4;
-    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
-        double t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        for (int k = 0; k < 3; k++)
-            q[k] = b[k] + t * (c[k] - b[k]);
-        goto done;
-    }
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+        return seg_dist2(p, b, c);
     double den = 1 / (va + vb + vc), v = vb * den, w = vc * den;
     for (int k = 0; k < 3; k++)
         q[k] = a[k] + ab[k] * v + ac[k] * w;

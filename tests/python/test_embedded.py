@@ -244,6 +244,62 @@ def test_nearest_is_the_nearest_cell_and_its_search_is_bounded(daemon):
     assert r.status_code == 200, r.text
 
 
+def test_nearest_ties_go_to_the_lowest_cell(daemon):
+    """A vertex outside whose nearest point is on a boundary edge is equally near every cell with
+    that edge: it goes to the lowest-numbered of them (docs: "the lowest index among equals"),
+    whichever face of which cell its distance was computed through. Bent block, level 1: a
+    vertex 0.05 off the middle of each convex boundary edge, along the bisector of the two
+    faces' normals; after an edit each equals the extrapolation of the lowest cell holding that
+    middle, found here (cells numbered as the level's JSON gives them: tetrahedra, then each
+    octahedron's 4 around its major diagonal)."""
+    import itertools
+    blk = cubes(2, 2, 1)
+    bend = np.random.default_rng(11).uniform(-0.08, 0.08, size=(len(blk["vertices"]), 3))
+    blk["vertices"] = (np.array(blk["vertices"]) + bend).tolist()
+    s = Session(daemon)
+    assert s.put_complex(blk).status_code == 200
+    x, tets = level_cells(s, 1)
+    faces = {}
+    for c, t in enumerate(tets):
+        for i in range(4):
+            faces.setdefault(tuple(sorted(t[j] for j in range(4) if j != i)), []).append(t[i])
+    boundary = {f: o[0] for f, o in faces.items() if len(o) == 1}
+
+    def outward(f, opposite):
+        a, b, c = x[list(f)]
+        n = np.cross(b - a, c - a)
+        n /= np.linalg.norm(n)
+        return -n if np.dot(n, x[opposite] - a) > 0 else n
+    edges = {}
+    for f, o in boundary.items():
+        for e in itertools.combinations(f, 2):
+            edges.setdefault(e, []).append((f, o))
+    mids, pts = [], []
+    for e, ((f1, o1), (f2, o2)) in ((e, fo) for e, fo in edges.items() if len(fo) == 2):
+        n1, n2 = outward(f1, o1), outward(f2, o2)
+        w = next(v for v in f2 if v not in e)
+        if np.dot(x[w] - x[e[0]], n1) >= -1e-9 or np.dot(n1, n2) > 0.999:
+            continue                                   # flat or concave: no unique nearest edge
+        m, n = (x[e[0]] + x[e[1]]) / 2, n1 + n2
+        mids.append(m)
+        pts.append(m + 0.05 * n / np.linalg.norm(n))
+    assert len(pts) > 100
+    r = s.req("PUT", "/embedded/n", json={"vertices": np.array(pts).tolist(), "level": 1,
+                                          "outside": "nearest"})
+    assert r.status_code == 200, r.text
+    edit(s, [{"index": i, "position": [a + 0.1 * b * b, b + 0.05 * a, c * (1 + 0.1 * a)]}
+             for i, (a, b, c) in enumerate(blk["vertices"])], r.json()["version"])
+    moved, _ = level_cells(s, 1)
+    want = []
+    for m, p in zip(mids, pts):
+        c, _ = locate(x, tets, m)                      # the lowest cell with the edge's middle
+        P = x[tets[c]]
+        lam = np.linalg.solve(np.vstack([P.T, np.ones(4)]), np.append(p, 1.0))
+        want.append(lam @ moved[tets[c]])
+    off = np.abs(deformed(s, "n") - np.array(want)).max(axis=1)
+    assert (off <= 1e-9).all(), f"{(off > 1e-9).sum()} of {len(off)} bound to another cell"
+
+
 def test_formats_list_delete_and_errors(daemon, tmp_path):
     pts = model_points(30)
     tris = [[i, i + 1, i + 2] for i in range(0, 27, 3)]
