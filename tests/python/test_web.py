@@ -66,6 +66,10 @@ CHECKS = [
     "tab_reload",        # a reload opens the tab's session again: same model, edits, offsets, TTL back to 1 h
     "tab_duplicate",     # a duplicated tab joins the session without owning it; closing it keeps the TTL
     "tab_close_ttl",     # a closed tab gives its own session the short TTL (PATCH ttl_s 120 at pagehide)
+    "reload_embedded",   # a reload draws the session's embedded model again, = the daemon's
+    "second_tab_embedded",  # a tab opened by the link draws it, and takes it away when the first removes it
+    "link_replaced",     # a link's tab whose session went: a session of its own, the address follows, a reload opens it
+    "bfcache_gone",      # back from the back/forward cache with the session gone: replaced, said as info
     "console_clean",     # no console errors but the refusals the test provokes
 ]
 

@@ -1081,6 +1081,100 @@ await step(['tab_reload', 'tab_duplicate', 'tab_close_ttl'], async () => {
     `a tab's own session ${own.id?.slice(0, 8)}: expires in ${open} s while open, ${closed} s after the tab closed`);
 });
 
+// 16d. the embedded model comes back with the session: a reload draws it as it was (float32 for
+// float32 the daemon's), a tab opened by the link draws it and follows its removal; a tab opened
+// by the link whose session went gets a session of its own, and its address no longer names the
+// old one, so a reload opens the new; a page back from the back/forward cache whose session
+// expired meanwhile replaces it (said as info, not as a failure)
+await step(['reload_embedded', 'second_tab_embedded', 'link_replaced', 'bfcache_gone'], async () => {
+  const quiet = (pg, tag) => { // a gone session's 404s are provoked here; anything else counts
+    pg.on('console', (m) => { if (m.type() === 'error' && !m.text().includes('status of 404')) consoleErrors.push(`${tag}: ${m.text()}`); });
+    pg.on('pageerror', (e) => consoleErrors.push(`${tag}: uncaught: ${e.message}`));
+  };
+  const ready = (pg, extra = 'true') => pg.waitForFunction(
+    `window.subdivd && window.subdivd.ready && window.subdivd.idle() && window.subdivd.snapshot().shown && (${extra})`, null, { timeout: TIMEOUT });
+  const snapOf = (pg) => pg.evaluate(() => window.subdivd.snapshot());
+  const errorsOf = (s, from = 0) => s.messages.slice(from).filter((m) => m.kind === 'error').map((m) => m.text);
+  const drawnVsDaemon = (pg) => pg.evaluate(() => window.subdivd.embeddedCompare().catch((e) => ({ drawn: 0, differ: -1, version: -1, error: e.message })));
+  const within = async (pg, cond, ms = 5000) => { // cond came true within ms (a check, not a wait that fails the step)
+    try {
+      await pg.waitForFunction(`window.subdivd.idle() && (${cond})`, null, { timeout: ms });
+      return true;
+    } catch {
+      return false;
+    }
+  };
+  const p4 = await browser.newPage({ viewport: { width: 800, height: 600 } });
+  quiet(p4, 'embedding tab');
+  await p4.goto(url);
+  await ready(p4);
+  // an octahedron around the middle of the tetrahedra's vertices
+  const c = await p4.evaluate(() => {
+    const s = window.subdivd.model.complex, ids = [...new Set(s.simplices.filter((t) => t.length === 4).flat())];
+    return [0, 1, 2].map((k) => ids.reduce((a, i) => a + s.vertices[i][k], 0) / ids.length);
+  });
+  const r = 0.1, pts = [[r, 0, 0], [-r, 0, 0], [0, r, 0], [0, -r, 0], [0, 0, r], [0, 0, -r]];
+  const file = path.join(outdir, 'reload-octahedron.obj');
+  fs.writeFileSync(file, pts.map((p) => `v ${p.map((x, k) => (x + c[k]).toFixed(6)).join(' ')}`).join('\n') +
+    '\nf 1 3 5\nf 3 2 5\nf 2 4 5\nf 4 1 5\nf 3 1 6\nf 2 3 6\nf 4 2 6\nf 1 4 6\n');
+  await p4.setInputFiles('#embed-file', file);
+  await ready(p4, 'window.subdivd.snapshot().embedded');
+  const mine = await p4.evaluate(() => ({ id: window.subdivd.session.id, token: window.subdivd.session.token }));
+  const b = await p4.evaluate(() => window.subdivd.embeddedCompare());
+  await p4.reload();
+  await ready(p4);
+  await within(p4, 'window.subdivd.snapshot().embedded');
+  const a = await drawnVsDaemon(p4);
+  const s4 = await snapOf(p4);
+  const removable = !(await p4.isDisabled('#embed-remove'));
+  check('reload_embedded', s4.session === mine.id && a.drawn === 6 && a.differ === 0 && a.version === b.version &&
+    s4.embedded?.file === 'reload-octahedron.obj' && removable && !errorsOf(s4).length,
+    `before the reload: ${b.drawn} vertices drawn at v${b.version}; after: session kept ${s4.session === mine.id}, ` +
+    `${a.drawn} drawn, ${a.differ} floats differ from GET /embedded/model, v${a.version}, named ${s4.embedded?.file}, ` +
+    `removable ${removable}; errors: ${errorsOf(s4).join(' | ')}`);
+  // a tab opened by the link draws it; the first tab removes it, and the second follows
+  const link = await p4.getAttribute('#share', 'href');
+  const p5 = await browser.newPage({ viewport: { width: 800, height: 600 } });
+  quiet(p5, 'link tab');
+  await p5.goto(new URL(link, url).href);
+  await ready(p5);
+  await within(p5, 'window.subdivd.snapshot().embedded');
+  const j = await drawnVsDaemon(p5);
+  if (removable) await p4.click('#embed-remove');
+  else await p4.evaluate(async (w) => fetch(`/v1/sessions/${w.id}/embedded/model`, { method: 'DELETE', headers: { Authorization: `Bearer ${w.token}` } }), mine);
+  await ready(p4, '!window.subdivd.snapshot().embedded');
+  const followed = await within(p5, '!window.subdivd.snapshot().embedded');
+  check('second_tab_embedded', j.drawn === 6 && j.differ === 0 && followed,
+    `the link's tab draws ${j.drawn} vertices, ${j.differ} floats differ from the daemon's; it took the removal away: ${followed}`);
+  // the session goes (deleted behind both tabs' backs); the link's tab changes a rule: a new
+  // session of its own, the address without the old link, and a reload opens the new session
+  const del = await p4.evaluate(async (w) => (await fetch(`/v1/sessions/${w.id}`, { method: 'DELETE', headers: { Authorization: `Bearer ${w.token}` } })).status, mine);
+  await p5.waitForFunction('!window.subdivd.snapshot().listening', null, { timeout: TIMEOUT });
+  await p5.selectOption('#rule-solid', 'averaged');
+  await ready(p5, `window.subdivd.session.id && window.subdivd.session.id !== '${mine.id}'`);
+  const fresh = await p5.evaluate(() => ({ id: window.subdivd.session.id, hash: location.hash, model: window.subdivd.snapshot().model }));
+  await p5.reload();
+  await ready(p5);
+  const s5 = await snapOf(p5);
+  check('link_replaced', del === 204 && fresh.hash === '' && s5.session === fresh.id && s5.model === fresh.model &&
+    s5.rules.solid_scheme === 'averaged' && !errorsOf(s5).length,
+    `DELETE ${del}; new session ${fresh.id?.slice(0, 8)}, address '${fresh.hash.slice(0, 20)}'; after a reload: session ` +
+    `${s5.session?.slice(0, 8)}, model ${s5.model}, solid scheme ${s5.rules.solid_scheme}; errors: ${errorsOf(s5).join(' | ')}`);
+  await p5.close();
+  // back from the back/forward cache (the pageshow event a restored page gets) with the session
+  // gone meanwhile: replaced with the same model, said as info
+  const n = (await snapOf(p4)).messages.length;
+  await p4.evaluate(() => window.dispatchEvent(new PageTransitionEvent('pageshow', { persisted: true })));
+  await within(p4, `window.subdivd.session.id !== '${mine.id}'`);
+  const s6 = await snapOf(p4);
+  const said = s6.messages.slice(n).map((m) => `${m.kind}: ${m.text}`);
+  const left = await expiresIn(p4, { id: s6.session, token: await p4.evaluate(() => window.subdivd.session.token) });
+  check('bfcache_gone', !errorsOf(s6, n).length && said.some((m) => m.startsWith('info:') && m.includes('new one')) && left > 3500 &&
+    s6.model === s4.model,
+    `session ${mine.id.slice(0, 8)} -> ${s6.session?.slice(0, 8)} (expires in ${left} s), model ${s6.model}; said: ${said.join(' | ')}`);
+  await p4.close({ runBeforeUnload: true });
+});
+
 // 19. no console errors other than the refusals provoked above
 check('console_clean', consoleErrors.length === 0, consoleErrors.join(' | '));
 

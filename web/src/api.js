@@ -97,6 +97,19 @@ export class Session {
     } catch { /* storage off: a reload starts afresh */ }
   }
 
+  // The name of the file embedded in this tab's session (null: none), kept for a reload.
+  keepEmbedded(file) {
+    const was = Session.kept();
+    if (!this.owned || was?.id !== this.id) return;
+    try {
+      sessionStorage.setItem(KEPT, JSON.stringify({ ...was, live: undefined, embedded: file ?? undefined }));
+    } catch { /* storage off */ }
+  }
+
+  listEmbedded() {
+    return this.json('Reading the embedded models', 'GET', '/embedded');
+  }
+
   static forget() {
     try {
       sessionStorage.removeItem(KEPT);

@@ -148,16 +148,29 @@ class App {
       if (!(e instanceof ApiError && e.status === 404 && e.type.endsWith('no-session') && this.model)) throw e;
       const c = this.model.complex;
       await this.session.open();
+      this.session.keep(this.model.name); // a reload of this tab opens the new one, by this name
       await this.session.putComplex({ vertices: c.vertices, simplices: c.simplices, attributes: c.attributes });
       const t = tagsOf(c);
       if (t.singular.length || t.petals || t.sharpness) await this.session.putTags(t, 'Restoring the tags');
       await this.session.putRules(c.rules, 'Restoring the rules');
+      let lost = '';
+      const emb = this.embedded;
+      if (emb?.body) { // this tab's own model: bound again (its rest shape), as after a change of rules
+        const put = await this.session.putEmbedded('model', emb.body);
+        this.ownEmbedded.add(put.version);
+        await this.#fetchEmbedded(emb.file, put.embedded, emb.body);
+      } else if (emb) {
+        this.#clearEmbedded();
+        lost = ` The embedded model ${emb.file} was not kept: embed it again.`;
+      }
+      // a tab opened by a link now has a session of its own: a reload opens it, not the old one
+      if (location.hash) history.replaceState(null, '', location.pathname + location.search);
       await this.#refreshComplex();
       this.#listen();
       this.shown = null; // the new session has no level yet
       this.handleLevel = null;
       this.#updateSession();
-      this.info('The session had expired or was closed elsewhere; a new one was started with the same model.');
+      this.info(`The session had expired or was closed elsewhere; a new one was started with the same model.${lost}`);
       const r = await fn();
       this.requestLevel(); // the level drawn was the old session's: fetched from the new one
       return r;
@@ -356,7 +369,7 @@ class App {
         this.known = Math.max(this.known, put.version);
         if (this.cageVersion === put.version - 1) this.cageVersion = put.version; // points as they were
         if (this.complexVersion === put.version - 1) this.complexVersion = put.version;
-        await this.#fetchEmbedded(file.name, put.embedded);
+        await this.#fetchEmbedded(file.name, put.embedded, { vertices: body.vertices, triangles, level, outside: 'nearest' });
         this.requestSync();
       });
     } catch (e) {
@@ -364,10 +377,12 @@ class App {
     }
   }
 
-  async #fetchEmbedded(name = this.embedded?.file, summary = this.embedded?.summary) {
+  // body: what was put (this tab's own model; a session that is gone is given it again)
+  async #fetchEmbedded(name = this.embedded?.file, summary = this.embedded?.summary, body = this.embedded?.body) {
     const j = await this.session.getEmbedded('model');
     this.viewer.setEmbedded(new Float32Array(j.vertices.flat()), new Uint32Array(j.triangles.flat()));
-    this.embedded = { file: name, summary, version: j.version, level: j.level, busy: false, again: false, deltas: 0 };
+    this.embedded = { file: name, summary, body, version: j.version, level: j.level, busy: false, again: false, deltas: 0 };
+    this.session.keepEmbedded(name); // a reload of this tab names it again
     const out = summary?.outside_vertices ? `, ${summary.outside_vertices} bound to the nearest cell` : '';
     $('embed-note').textContent = `${name}: ${j.vertices.length} vertices bound to level ${j.level}${out}; it follows the solid.`;
     $('embed-remove').disabled = false;
@@ -384,10 +399,33 @@ class App {
     }
     if (this.cageVersion === before) this.cageVersion = this.session.version;
     if (this.complexVersion === before) this.complexVersion = this.session.version;
+    this.#clearEmbedded();
+  }
+
+  // No embedded model drawn (it is not in the session).
+  #clearEmbedded() {
     this.embedded = null;
     this.viewer.setEmbedded(null);
     $('embed-note').textContent = '';
     $('embed-remove').disabled = true;
+    this.session.keepEmbedded(null);
+  }
+
+  // The session's embedded model as it is now (GET /embedded): drawn, or taken away when there
+  // is none — a tab that opened the session (a reload, the link) or heard another tab change it.
+  async #loadEmbedded(name = this.embedded?.file) {
+    const list = await this.session.listEmbedded();
+    const it = (list.embedded || []).find((m) => m.name === 'model');
+    if (!it) {
+      if (this.embedded) this.#clearEmbedded();
+      return;
+    }
+    try {
+      await this.#fetchEmbedded(name || 'model', it, this.embedded?.body);
+    } catch (e) {
+      if (!(e instanceof ApiError && e.status === 404 && !e.type.endsWith('no-session'))) throw e;
+      this.#clearEmbedded(); // removed meanwhile
+    }
   }
 
   removeEmbedded() {
@@ -553,7 +591,7 @@ class App {
   // With `owned`, the session this tab started before a reload (Session.kept()): its TTL is set
   // back from the short one the page gave it as it went, and a session gone meanwhile is said
   // as such, not as an error.
-  async join(id, token, { owned = false, name } = {}) {
+  async join(id, token, { owned = false, name, embedded } = {}) {
     try {
       await this.run(async () => {
         this.session.id = id;
@@ -574,14 +612,16 @@ class App {
         for (const s of complex.simplices) summary.simplices[s.length - 1] = (summary.simplices[s.length - 1] || 0) + 1;
         this.#setModel(name || `session ${id.slice(0, 8)}`, complex, summary);
         this.complexVersion = this.cageVersion = this.known = this.session.version;
+        await this.#loadEmbedded(embedded); // drawn as the tab that embedded it drew it
         this.#listen();
       });
     } catch (e) {
       this.session.id = this.session.token = null;
       this.session.owned = false;
-      if (owned && e instanceof ApiError && [401, 404, 409].includes(e.status)) {
-        Session.forget();
-        this.info(`The session of this tab is gone (${e.status === 409 ? 'it held no model' : 'it expired'}); starting again.`);
+      if (e instanceof ApiError && [401, 404, 409].includes(e.status) && (owned || e.status !== 409)) {
+        if (owned) Session.forget();
+        else history.replaceState(null, '', location.pathname + location.search); // a reload starts afresh
+        this.info(`The session of ${owned ? 'this tab' : 'the link'} is gone (${e.status === 409 ? 'it held no model' : 'it expired or was closed'}); starting again.`);
       } else this.error(e);
       return false;
     }
@@ -773,6 +813,8 @@ class App {
             return;
           }
           if (this.shown && this.shown.version < v) this.requestSync();
+          // another tab embedded, replaced or removed the model: drawn as the session has it
+          this.run(() => this.#loadEmbedded()).catch((e) => this.error(e));
           return;
         }
         if (data.kind === 'edit') {
@@ -1422,7 +1464,8 @@ class App {
     window.addEventListener('pageshow', (ev) => {
       if (!ev.persisted || !this.session.owned) return;
       this.session.markLive();
-      this.session.setTtl(TTL_S).catch((e) => this.error(e));
+      // gone while the page was away (its 2 minutes passed): replaced, as at the next change
+      this.run(() => this.session.setTtl(TTL_S)).catch((e) => this.error(e));
     });
     window.addEventListener('error', (ev) => this.error(ev.error || ev.message));
     window.addEventListener('unhandledrejection', (ev) => this.error(ev.reason));
@@ -1517,13 +1560,13 @@ class App {
       Session.forget();
       history.replaceState(null, '', `${location.pathname}#session=${kept.id}&token=${kept.token}`);
       this.#hint('Joining the session…');
-      if (await this.join(kept.id, kept.token, { name: kept.name })) {
+      if (await this.join(kept.id, kept.token, { name: kept.name, embedded: kept.embedded })) {
         this.ready = true;
         return;
       }
     } else if (kept) { // this tab was reloaded: its session and model, as they were
       this.#hint('Opening this tab\'s session again…');
-      if (await this.join(kept.id, kept.token, { owned: true, name: kept.name })) {
+      if (await this.join(kept.id, kept.token, { owned: true, name: kept.name, embedded: kept.embedded })) {
         this.ready = true;
         return;
       }
