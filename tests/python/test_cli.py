@@ -245,6 +245,8 @@ def test_exit_codes(daemon, tmp_path):
     assert r.returncode == 2 and "cannot tell the format" in r.stderr
     r = run("refine", tmp_path / "missing.stl", "--level", 1, "-o", tmp_path / "m.vtu", *ok)
     assert r.returncode == 2 and "no such file" in r.stderr
+    r = run("refine", tmp_path / "s.json", "--level", -1, "-o", tmp_path / "m.vtu", *ok)
+    assert r.returncode == 2 and "a level is 0 or more" in r.stderr                     # not sent
     (tmp_path / "hex.vtu").write_bytes(b"")
     import meshio
     import numpy as np

@@ -55,6 +55,17 @@ class UsageError(Exception):
 
 # ---- progress ---------------------------------------------------------------------------------
 
+def level_number(text):
+    """A level as --level takes it: a whole number from 0 (argparse says which option, exit 2)."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a level: {text!r}") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"a level is 0 or more, not {n}")
+    return n
+
+
 def _size(n):
     for unit in ("B", "kB", "MB", "GB"):
         if n < 1000 or unit == "GB":
@@ -653,7 +664,7 @@ def build_parser():
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("refine", parents=[common, mesh], help="one mesh to one or more outputs")
     r.add_argument("input")
-    r.add_argument("--level", "-l", type=int, required=True)
+    r.add_argument("--level", "-l", type=level_number, required=True)
     r.add_argument("-o", "--output", action="append",
                    help="an output file: .glb .gltf .vtu .vtk .json (repeatable; or --pvd)")
     r.add_argument("--pvd", metavar="DIR", help="levels 0..L as DIR/level_K.vtu and the time "
@@ -678,7 +689,7 @@ def build_parser():
                        "deformed by moves (free-form deformation)")
     d.add_argument("input", help="the solid: any mesh file of refine")
     d.add_argument("--embed", required=True, help="the model: OBJ, OFF, STL (its triangles) or JSON")
-    d.add_argument("--level", "-l", type=int, default=2, help="the level it is bound to (default 2)")
+    d.add_argument("--level", "-l", type=level_number, default=2, help="the level it is bound to (default 2)")
     d.add_argument("--outside", choices=("refuse", "fixed", "nearest"), default="refuse")
     d.add_argument("--moves", help="a PATCH /control-points body, or a list of them (JSON file)")
     d.add_argument("-o", "--output", required=True, help="the deformed model: .obj .json .glb")
