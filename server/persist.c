@@ -155,9 +155,9 @@ persist_rc persist_delete(persist *p, const char *id)
     return p->ops ? noted(p, p->ops->del(p->b, id)) : PERSIST_OK;
 }
 
-persist_rc persist_version(persist *p, const char *id, uint64_t *version)
+persist_rc persist_version(persist *p, const char *id, uint64_t *version, int *ttl_s)
 {
-    return p->ops ? noted_read(p, p->ops->version(p->b, id, version)) : PERSIST_ABSENT;
+    return p->ops ? noted_read(p, p->ops->version(p->b, id, version, ttl_s)) : PERSIST_ABSENT;
 }
 
 persist_rc persist_load(persist *p, const char *id, persist_loaded *out)

@@ -95,8 +95,9 @@ persist_rc persist_touch(persist *p, const char *id, int64_t expires_at);
 /* A new TTL (PATCH /v1/sessions/{id}) and the expiry it gives. */
 persist_rc persist_retime(persist *p, const char *id, int ttl_s, int64_t expires_at);
 persist_rc persist_delete(persist *p, const char *id);
-/* The stored version (shared stores call it per request); PERSIST_ABSENT when gone. */
-persist_rc persist_version(persist *p, const char *id, uint64_t *version);
+/* The stored version and (unless NULL) TTL (shared stores call it per request: another daemon
+ * may have changed either); PERSIST_ABSENT when gone. */
+persist_rc persist_version(persist *p, const char *id, uint64_t *version, int *ttl_s);
 /* Everything needed to rebuild the session (free with persist_loaded_free). An expired session
  * is PERSIST_ABSENT. */
 persist_rc persist_load(persist *p, const char *id, persist_loaded *out);

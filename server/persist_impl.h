@@ -14,7 +14,8 @@ typedef struct persist_ops {
     /* ttl_s > 0: the record's TTL becomes it too */
     persist_rc (*touch)(void *b, const char *id, int ttl_s, int64_t expires_at);
     persist_rc (*del)(void *b, const char *id);
-    persist_rc (*version)(void *b, const char *id, uint64_t *version);
+    /* *ttl_s (unless NULL): the record's TTL */
+    persist_rc (*version)(void *b, const char *id, uint64_t *version, int *ttl_s);
     persist_rc (*load)(void *b, const char *id, persist_loaded *out);
     long (*expire)(void *b, int64_t now);
     /* a real write that names no session (it allocates space, as a change would): does the

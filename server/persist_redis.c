@@ -520,38 +520,42 @@ static persist_rc r_load(void *vb, const char *id, persist_loaded *out)
     return rc;
 }
 
-static persist_rc r_version(void *vb, const char *id, uint64_t *version)
+static persist_rc r_version(void *vb, const char *id, uint64_t *version, int *ttl_s)
 {
     redis_backend *b = vb;
     if (!id_ok(b, id))
         return PERSIST_ABSENT;
     char kh[KEY_CAP];
     snprintf(kh, sizeof kh, "subdivd:s:{%s}", id);
-    const char *argv[4] = {"HMGET", kh, "version", "expires_at"};
-    size_t len[4] = {5, strlen(kh), 7, 10};
+    const char *argv[5] = {"HMGET", kh, "version", "expires_at", "ttl_s"};
+    size_t len[5] = {5, strlen(kh), 7, 10, 5};
     pthread_mutex_lock(&b->mu);
-    redisReply *r = exec_locked(b, 4, argv, len);
+    redisReply *r = exec_locked(b, 5, argv, len);
     pthread_mutex_unlock(&b->mu);
     if (!r)
         return PERSIST_UNAVAILABLE;
     persist_rc rc;
-    int64_t exp;
+    int64_t exp, ttl = 0;
     if (r->type == REDIS_REPLY_ERROR)
         rc = error_reply(b, id, r);
-    else if (r->type != REDIS_REPLY_ARRAY || r->elements != 2) {
+    else if (r->type != REDIS_REPLY_ARRAY || r->elements != 3) {
         set_err(b, "unexpected reply type %d", r->type);
         rc = PERSIST_UNAVAILABLE;
     } else if (r->element[0]->type == REDIS_REPLY_NIL) {
         set_err(b, "no such session");
         rc = PERSIST_ABSENT;
-    } else if (!parse_version(r->element[0], version) || !parse_i64(r->element[1], &exp)) {
+    } else if (!parse_version(r->element[0], version) || !parse_i64(r->element[1], &exp) ||
+               !parse_i64(r->element[2], &ttl) || ttl < 0 || ttl > INT32_MAX) {
         set_err(b, "session %s: unreadable record field", id);
         rc = PERSIST_CORRUPT;
     } else if (exp < (int64_t)time(NULL)) {
         set_err(b, "session %s expired", id);
         rc = PERSIST_ABSENT;
-    } else
+    } else {
         rc = PERSIST_OK;
+        if (ttl_s)
+            *ttl_s = (int)ttl;
+    }
     freeReplyObject(r);
     return rc;
 }

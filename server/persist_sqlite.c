@@ -47,7 +47,7 @@ static const char *const SQL[NQ] = {
     [Q_CAS_APPEND] = "UPDATE sessions SET version = ?3, expires_at = ?4 WHERE id = ?1 AND version = ?2",
     [Q_DEL_JOURNAL] = "DELETE FROM journal WHERE id = ?1",
     [Q_ADD_ENTRY] = "INSERT INTO journal(id, version, entry, crc) VALUES (?1, ?2, ?3, ?4)",
-    [Q_VERSION] = "SELECT version, expires_at FROM sessions WHERE id = ?1",
+    [Q_VERSION] = "SELECT version, expires_at, ttl_s FROM sessions WHERE id = ?1",
     [Q_TOUCH] = "UPDATE sessions SET expires_at = ?2, ttl_s = coalesce(?3, ttl_s) WHERE id = ?1",
     [Q_DELETE] = "DELETE FROM sessions WHERE id = ?1",
     [Q_LOAD] = "SELECT token_hash, ttl_s, created, expires_at, version, snapshot_version, snapshot, "
@@ -310,7 +310,7 @@ static persist_rc sq_delete(void *b, const char *id)
     return r;
 }
 
-static persist_rc sq_version(void *b, const char *id, uint64_t *version)
+static persist_rc sq_version(void *b, const char *id, uint64_t *version, int *ttl_s)
 {
     sqlite_store *s = b;
     pthread_mutex_lock(&s->mu);
@@ -320,6 +320,8 @@ static persist_rc sq_version(void *b, const char *id, uint64_t *version)
     persist_rc r = PERSIST_ABSENT;
     if (rc == SQLITE_ROW && sqlite3_column_int64(q, 1) >= (sqlite3_int64)time(NULL)) {
         *version = (uint64_t)sqlite3_column_int64(q, 0);
+        if (ttl_s)
+            *ttl_s = sqlite3_column_int(q, 2);
         r = PERSIST_OK;
     } else if (rc != SQLITE_ROW && rc != SQLITE_DONE)
         r = failed(s, "reading a version", rc);

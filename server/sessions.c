@@ -534,9 +534,12 @@ session *store_get(store *st, const char *id, const char *token, store_miss *mis
     if (found && persist_shared(st->p) && !pthread_mutex_trylock(&found->write)) {
         /* another daemon may have changed it (a change of our own in flight holds the lock) */
         uint64_t stored = 0;
-        persist_rc rc = persist_version(st->p, id, &stored);
+        int ttl = 0;
+        persist_rc rc = persist_version(st->p, id, &stored, &ttl);
         pthread_mutex_lock(&found->mu);
         uint64_t mine = found->version;
+        if (rc == PERSIST_OK && ttl > 0 && ttl != found->ttl_s)
+            found->ttl_s = ttl; /* given by another daemon (PATCH): not a change of content */
         pthread_mutex_unlock(&found->mu);
         pthread_mutex_unlock(&found->write);
         if (rc == PERSIST_ABSENT || (rc == PERSIST_OK && stored != mine)) {

@@ -116,7 +116,7 @@ static void test_lifecycle(void *b)
 
     CHECK_RC(b, ops->create(b, &m), PERSIST_OK);
     CHECK_RC(b, ops->create(b, &m), PERSIST_CONFLICT);
-    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_OK);
+    CHECK_RC(b, ops->version(b, m.id, &v, NULL), PERSIST_OK);
     CHECK(v == 0, "version %" PRIu64, v);
 
     CHECK_RC(b, ops->load(b, m.id, &l), PERSIST_OK);
@@ -138,7 +138,7 @@ static void test_lifecycle(void *b)
         CHECK_RC(b, ops->append(b, m.id, 1 + i, 2 + i, t + 3600, edits[i], strlen(edits[i])),
                  PERSIST_OK);
     CHECK_RC(b, ops->append(b, m.id, 3, 4, t + 3600, "late", 4), PERSIST_CONFLICT);
-    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_OK);
+    CHECK_RC(b, ops->version(b, m.id, &v, NULL), PERSIST_OK);
     CHECK(v == 4, "version %" PRIu64 " after three appends", v);
 
     CHECK_RC(b, ops->load(b, m.id, &l), PERSIST_OK);
@@ -194,6 +194,9 @@ static void test_lifecycle(void *b)
     CHECK_RC(b, ops->load(b, m.id, &l), PERSIST_OK);
     CHECK(l.meta.ttl_s == 90 && l.meta.expires_at == t + 7300, "retimed: ttl %d, expiry %lld",
           l.meta.ttl_s, (long long)(l.meta.expires_at - t));
+    int vttl = 0;
+    CHECK_RC(b, ops->version(b, m.id, &v, &vttl), PERSIST_OK);
+    CHECK(vttl == 90, "the version read gives the TTL too: %d", vttl);
     CHECK(l.snapshot_len == big && !memcmp(l.snapshot, doc, big), "3 MiB snapshot round trip");
     loaded_free(&l);
     free(doc);
@@ -203,7 +206,7 @@ static void test_lifecycle(void *b)
     /* delete: everything is ABSENT after */
     CHECK_RC(b, ops->del(b, m.id), PERSIST_OK);
     CHECK_RC(b, ops->load(b, m.id, &l), PERSIST_ABSENT);
-    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_ABSENT);
+    CHECK_RC(b, ops->version(b, m.id, &v, NULL), PERSIST_ABSENT);
     CHECK_RC(b, ops->snapshot(b, m.id, 8, 9, t + 60, "x", 1), PERSIST_ABSENT);
     CHECK_RC(b, ops->append(b, m.id, 8, 9, t + 60, "x", 1), PERSIST_ABSENT);
     CHECK_RC(b, ops->touch(b, m.id, 0, t + 60), PERSIST_ABSENT);
@@ -255,7 +258,7 @@ static void test_expired(void *b)
     new_meta(&m, t - 10);
     CHECK_RC(b, ops->create(b, &m), PERSIST_OK);
     CHECK_RC(b, ops->load(b, m.id, &l), PERSIST_ABSENT);
-    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_ABSENT);
+    CHECK_RC(b, ops->version(b, m.id, &v, NULL), PERSIST_ABSENT);
     /* the record says it is past although redis still holds the keys */
     new_meta(&m, t + 600);
     CHECK_RC(b, ops->create(b, &m), PERSIST_OK);
@@ -264,7 +267,7 @@ static void test_expired(void *b)
     freeReplyObject(rawcmd("HSET subdivd:s:{%s} expires_at %s", m.id, past));
     CHECK_RC(b, ops->load(b, m.id, &l), PERSIST_ABSENT);
     CHECK(l.snapshot == NULL && l.njournal == 0, "expired: nothing handed out");
-    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_ABSENT);
+    CHECK_RC(b, ops->version(b, m.id, &v, NULL), PERSIST_ABSENT);
     ops->del(b, m.id);
     /* touched into the past */
     new_meta(&m, t + 600);
@@ -309,7 +312,7 @@ static void test_unavailable(void)
     const char *e = ops->last_error(d);
     CHECK(!strncmp(e, want, strlen(want)) && strstr(e, "Connection refused"), "last_error %s", e);
     CHECK_RC(d, ops->load(d, m.id, &l), PERSIST_UNAVAILABLE);
-    CHECK_RC(d, ops->version(d, m.id, &v), PERSIST_UNAVAILABLE);
+    CHECK_RC(d, ops->version(d, m.id, &v, NULL), PERSIST_UNAVAILABLE);
     CHECK_RC(d, ops->snapshot(d, m.id, 0, 1, 0, "{}", 2), PERSIST_UNAVAILABLE);
     CHECK_RC(d, ops->append(d, m.id, 0, 1, 0, "{}", 2), PERSIST_UNAVAILABLE);
     CHECK(ops->count(d, 0) == -1, "count without a server");
@@ -329,12 +332,12 @@ static void test_timeout(void *b)
     CHECK_RC(b, ops->create(b, &m), PERSIST_OK);
     freeReplyObject(rawcmd("CLIENT PAUSE 2600 ALL", NULL, NULL));
     double t0 = now_s();
-    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_UNAVAILABLE);
+    CHECK_RC(b, ops->version(b, m.id, &v, NULL), PERSIST_UNAVAILABLE);
     double dt = now_s() - t0;
     CHECK(dt > 1.5 && dt < 2.6, "timed out after %.2f s", dt);
     CHECK(strstr(ops->last_error(b), "timed out") != NULL, "last_error %s", ops->last_error(b));
     printf("timeout: %.2f s: %s\n", dt, ops->last_error(b));
-    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_OK);
+    CHECK_RC(b, ops->version(b, m.id, &v, NULL), PERSIST_OK);
     CHECK(v == 0, "version %" PRIu64 " after the pause", v);
     ops->del(b, m.id);
 }
@@ -392,7 +395,7 @@ static void test_race(void *b)
     }
     CHECK(bad == 0, "%d of %d rounds without exactly one winner", bad, ROUNDS);
     uint64_t v = 0;
-    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_OK);
+    CHECK_RC(b, ops->version(b, m.id, &v, NULL), PERSIST_OK);
     CHECK(v == ROUNDS, "version %" PRIu64 " after the race", v);
     printf("race: %d rounds, one winner each (connection 1 won %d, connection 2 won %d)\n",
            ROUNDS - bad, wins[0], wins[1]);
@@ -422,15 +425,15 @@ static void test_recover(void *b)
     wait_line("RESTART");   /* under the connection persist_redis_open made */
     CHECK_RC(b, ops->create(b, &m), PERSIST_OK);
     wait_line("RESTART");
-    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_ABSENT);   /* a new, empty server */
+    CHECK_RC(b, ops->version(b, m.id, &v, NULL), PERSIST_ABSENT);   /* a new, empty server */
     wait_line("STOP");
     double t0 = now_s();
-    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_UNAVAILABLE);
+    CHECK_RC(b, ops->version(b, m.id, &v, NULL), PERSIST_UNAVAILABLE);
     CHECK(now_s() - t0 < 3.0, "refused after %.2f s", now_s() - t0);
     printf("down: %s\n", ops->last_error(b));
     wait_line("START");
     CHECK_RC(b, ops->create(b, &m), PERSIST_OK);
-    CHECK_RC(b, ops->version(b, m.id, &v), PERSIST_OK);
+    CHECK_RC(b, ops->version(b, m.id, &v, NULL), PERSIST_OK);
 }
 
 int main(int argc, char **argv)

@@ -309,6 +309,30 @@ def test_two_daemons_edits_with_if_match_star_are_both_made(tmp_path):
                 assert [c.json()["vertices"][i] for i in (0, 4)] == spots
 
 
+@needs_store
+def test_a_ttl_given_through_one_daemon_holds_on_the_other(tmp_path):
+    """PATCH /v1/sessions/{id} {"ttl_s"} through one daemon: the other, which holds the session
+    resident with its old TTL, takes the new one at its next request (as it takes a newer
+    version), so it neither keeps the session beyond it nor lets it go before."""
+    import datetime
+    with two_daemons(tmp_path) as (daemons, http, sid, token, auth, version):
+        url = [f"{d.url}/v1/sessions/{sid}" for d in daemons]
+
+        def expires_in(k):
+            r = http[k].get(url[k], headers=auth, timeout=10)
+            assert r.status_code == 200, r.text
+            at = datetime.datetime.strptime(r.json()["expires_at"], "%Y-%m-%dT%H:%M:%SZ")
+            return at.replace(tzinfo=datetime.timezone.utc).timestamp() - time.time()
+        assert expires_in(1) > 3000                      # resident on the second, TTL 3600
+        r = http[0].patch(url[0], json={"ttl_s": 2}, headers=auth, timeout=10)
+        assert r.status_code == 200 and r.json()["ttl_s"] == 2, r.text
+        assert expires_in(1) <= 3                        # the second has the new TTL
+        time.sleep(3.5)
+        assert http[1].get(url[1], headers=auth, timeout=10).status_code == 404
+        r = http[0].patch(url[0], json={"ttl_s": 600}, headers=auth, timeout=10)
+        assert r.status_code == 404, r.text
+
+
 @contextlib.contextmanager
 def two_daemons(tmp_path):
     """Two daemons on one redis and a session with TWO_TETS made through the first:
