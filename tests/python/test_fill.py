@@ -435,7 +435,7 @@ def test_several_surfaces_and_summary_without_fill(daemon):
 def test_fill_matches_openapi(daemon):
     """The request and answer of a fill validate against api/openapi.json's schemas."""
     jsonschema = pytest.importorskip("jsonschema")
-    doc = json.loads((REPO / "api" / "openapi.json").read_text())
+    doc = json.loads((REPO / "api" / "openapi.json").read_text(encoding="utf-8"))
 
     def check(name, value):
         schema = dict(doc["components"]["schemas"][name], components=doc["components"])
