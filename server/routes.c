@@ -403,21 +403,18 @@ static void h_create_session(req *r)
         http_fail(r, 503, "out-of-memory", "out of memory");
         return;
     }
-    if (!s && adm.client_full) {
+    if (!s) { /* the client's share of the table, or the table, is full */
         p.retry_after = adm.retry_after_s;
-        api_fail(&p, 429, "client-sessions",
-                 "this client address holds %d sessions, its maximum (--max-sessions-per-client), each "
-                 "with a complex or in use; delete one, or retry in %d s when the first expires",
-                 r->srv->cfg.max_sessions_per_client, adm.retry_after_s);
-        http_reply_problem(r, &p);
-        return;
-    }
-    if (!s) {
-        p.retry_after = adm.retry_after_s;
-        api_fail(&p, 429, "too-many-sessions",
-                 "the daemon holds its maximum of %d sessions, each with a complex or in use; "
-                 "delete unused sessions, or retry in %d s when the first expires",
-                 r->srv->cfg.max_sessions, adm.retry_after_s);
+        if (adm.client_full)
+            api_fail(&p, 429, "client-sessions",
+                     "this client address holds %d sessions, its maximum (--max-sessions-per-client), "
+                     "each with a complex or in use; delete one, or retry in %d s when the first "
+                     "expires", r->srv->cfg.max_sessions_per_client, adm.retry_after_s);
+        else
+            api_fail(&p, 429, "too-many-sessions",
+                     "the daemon holds its maximum of %d sessions, each with a complex or in use; "
+                     "delete unused sessions, or retry in %d s when the first expires",
+                     r->srv->cfg.max_sessions, adm.retry_after_s);
         http_reply_problem(r, &p);
         return;
     }

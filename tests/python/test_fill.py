@@ -472,16 +472,9 @@ def test_unmet_min_ratio_is_reported(daemon):
     is kept, so tetrahedra next to it keep ratios far above 1.2 (8.6 with Debian's TetGen 1.5).
     The summary's largest_ratio is the worst one, computed here, and a warning names min_ratio
     (and not max_volume); a bound it meets (100) gives no warning."""
-    n, m, R, r = 12, 8, 2.0, 0.7
-    v = [[(R + r * math.cos(2 * math.pi * j / m)) * math.cos(2 * math.pi * i / n),
-          (R + r * math.cos(2 * math.pi * j / m)) * math.sin(2 * math.pi * i / n),
-          r * math.sin(2 * math.pi * j / m)] for i in range(n) for j in range(m)]
-    f = []
-    for i in range(n):
-        for j in range(m):
-            a, b = i * m + j, (i + 1) % n * m + j
-            c, d = (i + 1) % n * m + (j + 1) % m, i * m + (j + 1) % m
-            f += [[a, b, c], [a, c, d]]
+    from test_level_threads import torus
+    t = torus(12, 8)
+    v, f = t["vertices"], t["simplices"]
     s = Session(daemon)
     r = s.put_complex({"vertices": v, "fill": [{"surface": f, "min_ratio": 1.2}]})
     assert r.status_code == 200, r.text

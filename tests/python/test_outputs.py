@@ -819,16 +819,19 @@ def test_slice_without_solids(tmp_path, meshes):
 # ---- colour map and names -------------------------------------------------------------------
 
 
+def colours(tmp_path, mesh, rng):
+    """Level 1 of mesh as GLB coloured by the attribute t (its x) over rng ("min:max"): the
+    level points' x and their COLOR_0."""
+    f = tmp_path / "c.glb"
+    outwrite(mesh, 1, "glb", f, "--xattr", "t", "--colormap", "t:" + rng)
+    doc, acc = read_glb(f)
+    return sdlevel(mesh, 1)["verts"][:, 0], acc(doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"])
+
+
 def test_colormap_viridis(tmp_path, meshes):
     """COLOR_0 = viridis((t - min) / (max - min)) clamped: the published end and middle colours,
     converted from sRGB to linear as glTF requires."""
-    mesh = meshes["surface"]
-    lv = sdlevel(mesh, 1)
-    x = lv["verts"][:, 0]
-    f = tmp_path / "c.glb"
-    outwrite(mesh, 1, "glb", f, "--xattr", "t", "--colormap", "t:-0.5:0.5")
-    doc, acc = read_glb(f)
-    col = acc(doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"])
+    x, col = colours(tmp_path, meshes["surface"], "-0.5:0.5")
     assert ((col >= 0) & (col <= 1)).all()
     np.testing.assert_allclose(col[x <= -0.5], np.tile(LIN_0, ((x <= -0.5).sum(), 1)), atol=1e-6)
     np.testing.assert_allclose(col[x >= 0.5], np.tile(LIN_1, ((x >= 0.5).sum(), 1)), atol=1e-6)
@@ -862,13 +865,7 @@ def test_colormap_viridis_every_stop(tmp_path, meshes):
         (0.678489, 0.863742, 0.189503),  # 224
         (0.993248, 0.906157, 0.143936),  # 255
     ])
-    mesh = meshes["surface"]
-    lv = sdlevel(mesh, 1)
-    x = lv["verts"][:, 0]
-    f = tmp_path / "c.glb"
-    outwrite(mesh, 1, "glb", f, "--xattr", "t", "--colormap", "t:-1:1")
-    doc, acc = read_glb(f)
-    col = acc(doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"])
+    x, col = colours(tmp_path, meshes["surface"], "-1:1")
     t = np.clip((x + 1) / 2, 0, 1)
     assert ((t > 0.02) & (t < 0.23)).sum() >= 3  # the first interval, where entry 32 matters
     want = srgb_to_linear(np.column_stack([np.interp(t, np.arange(9) / 8, stops[:, k]) for k in range(3)]))
@@ -879,12 +876,8 @@ def test_colormap_range_wider_than_a_double(tmp_path, meshes):
     """t = (v - min)/(max - min) (docs/OUTPUTS.md) for a range whose width exceeds the largest
     double: values near 0 in -1e308:1e308 are at t = 0.5, in -1.7e308:1e-300 at t = 1 and in
     -1e-300:1.7e308 at t = 0 (to far below float precision), whatever the size of max - min."""
-    mesh = meshes["surface"]
-    f = tmp_path / "c.glb"
     for rng, want in (("-1e308:1e308", LIN_HALF), ("-1.7e308:1e-300", LIN_1), ("-1e-300:1.7e308", LIN_0)):
-        outwrite(mesh, 1, "glb", f, "--xattr", "t", "--colormap", "t:" + rng)
-        doc, acc = read_glb(f)
-        col = acc(doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"])
+        _, col = colours(tmp_path, meshes["surface"], rng)
         np.testing.assert_allclose(col, np.tile(want, (len(col), 1)), atol=1e-6, err_msg=rng)
 
 
