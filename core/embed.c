@@ -29,11 +29,9 @@
  * edge so that such points are in the cell's buckets (exact for cells whose corners are not
  * sharper than that).
  * A vertex in no cell is, by mode, refused, fixed (kept at its rest position, stored in place of
- * its weights), or bound to the nearest cell: buckets are searched in growing shells around its
- * own (clamped to the grid) until the best distance is below what the unexplored buckets can
- * offer (per axis, the gap to the first bucket outside the shell); the distance is the exact
- * point-tetrahedron distance (closest point on its faces), skipped for cells whose box is
- * farther than the best so far. Its coordinates then extrapolate.
+ * its weights), or bound to the nearest cell, found through a tree of the cells' boxes (below);
+ * the distance is the exact point-tetrahedron distance (closest point on its faces), skipped
+ * for cells whose box is farther than the best so far. Its coordinates then extrapolate.
  *
  * Bindings are stored by slot, the model's vertices in bucket order, so that the vertices an edit
  * moves (near each other in space) are near each other in memory whatever the model's order.
@@ -44,7 +42,8 @@
  * indices ascending.
  *
  * Memory: the embedding's own sd_mem (allocator and cap as sd_options'), counting the locating
- * grid while it exists (~16 bytes a cell + 4 per entry, ~50 per cell in all); sd_embed_memory
+ * grid while it exists (~16 bytes a cell + 4 per entry, ~50 per cell in all) and, with vertices
+ * outside in "nearest", the tree of boxes (~36 bytes a cell with a boundary vertex); sd_embed_memory
  * is what stays (80 bytes per model vertex plus 4 per level vertex).
  */
 #include "internal.h"
@@ -56,10 +55,10 @@
 #define IN_TOL 1e-12   /* distance to a face plane, relative to the cell's longest edge */
 #define BOX_TOL 1e-6   /* box widening, relative to the cell's longest edge */
 #define NONE UINT32_MAX
-/* The nearest-cell search of the vertices outside ("nearest") looks at most at this many buckets
- * and bucket entries in all, per vertex outside and once: a vertex near the solid takes tens to hundreds;
- * one far from a curved boundary can take every cell (the cells within reach of its distance
- * widen as sqrt(distance)), which this bounds */
+/* The nearest-cell searches of the vertices outside ("nearest") look at most at this many tree
+ * nodes and cells in all, per vertex outside and once: a vertex near the solid or far from it
+ * takes tens; one that many cells are almost equally near (the centre of a hollow sphere) takes
+ * them all, which this bounds */
 #define NEAREST_WORK_PER_VERTEX 2048u
 #define NEAREST_WORK_BASE (1u << 24)
 
@@ -477,7 +476,7 @@ static uint32_t locate(const cells *C, const grid *g, const uint32_t q[3], const
 }
 
 /* A lower bound on the squared distance from p to cell c (its quantized box, one quantum wider
- * on each side against rounding). */
+ * on each side against rounding): a cheap test before the exact distance. */
 static double box_dist2(const grid *g, uint32_t c, const double *p)
 {
     double s = 0;
@@ -490,82 +489,247 @@ static double box_dist2(const grid *g, uint32_t c, const double *p)
     return s;
 }
 
-/* The nearest cell to p (lowest index among equals): shells of buckets around p's. Each
- * bucket looked at takes one unit of *work and one per entry; NONE when it runs out first. */
-static uint32_t nearest(const cells *C, const grid *g, const double *p, uint64_t *work)
+/* ---- the nearest cell: a bounding-volume tree ---------------------------------------------- */
+
+/* For a vertex outside every cell ("nearest"): a tree of boxes over the cells (median splits of
+ * the cells' centroids along the widest axis, leaves of at most 4 cells; the boxes in float,
+ * rounded outward), searched depth first, nearer child first, skipping a subtree whose box is
+ * farther than the best cell so far (with a relative slack of 1e-12 for rounding, so every cell
+ * as near as the best one is tested and the lowest index among equals wins, whatever the order
+ * of the search). The distance to a box bounds the distance to its cells from below, so the
+ * search is exact; far from the solid only the cells whose boxes reach toward the vertex are
+ * looked at. ~36 bytes a cell of the tree, made only when a vertex is outside. */
+typedef struct bnode {
+    float lo[3], hi[3];
+    uint32_t first, n;   /* a leaf: cells ids[first .. first + n); n = 0: children node + 1 and
+                          * node `first` */
+} bnode;
+
+typedef struct bvh {
+    bnode *node;
+    uint32_t nnode, nids;
+    uint32_t *ids;
+    float (*cen)[3];     /* while building: the centroid of the cell ids[i] */
+} bvh;
+
+static inline float f_down(double x)
 {
-    int64_t b[3], d[3];
-    double out2 = 0, out[3]; /* how far p is outside the grid's box, per axis */
-    for (int a = 0; a < 3; a++) {
-        b[a] = axis_of(g, a, quant(g, a, p[a]));
-        d[a] = g->dim[a];
-        double l = g->lo[a], h = g->lo[a] + (QMAX + 1.0) * g->quantum[a];
-        out[a] = p[a] < l ? l - p[a] : p[a] > h ? p[a] - h : 0;
-        out2 += out[a] * out[a];
+    float f = (float)x;
+    return (double)f > x ? nextafterf(f, -FLT_MAX) : f;
+}
+
+static inline float f_up(double x)
+{
+    float f = (float)x;
+    return (double)f < x ? nextafterf(f, FLT_MAX) : f;
+}
+
+static void bvh_free(sd_mem *m, bvh *b)
+{
+    sdi_free(m, b->node);
+    sdi_free(m, b->ids);
+    sdi_free(m, b->cen);
+    memset(b, 0, sizeof *b);
+}
+
+/* Reorder ids[lo, hi) so that ids[k] has the k-th smallest centroid along axis a, the smaller
+ * ones before it (Hoare's selection; ties by id so the tree does not depend on the order). */
+static void bvh_select(const bvh *b, uint32_t lo, uint32_t hi, uint32_t k, int a)
+{
+    uint32_t *id = b->ids;
+    while (hi - lo > 1) {
+        uint32_t mid = lo + (hi - lo - 1) / 2; /* the lower middle: j < hi - 1 after */
+        float pv = b->cen[mid][a];
+        uint32_t pid = id[mid];
+        uint32_t i = lo, j = hi - 1;
+        for (;;) {
+            while (b->cen[i][a] < pv || (b->cen[i][a] == pv && id[i] < pid))
+                i++;
+            while (b->cen[j][a] > pv || (b->cen[j][a] == pv && id[j] > pid))
+                j--;
+            if (i >= j)
+                break;
+            uint32_t t = id[i];
+            id[i] = id[j];
+            id[j] = t;
+            float c[3];
+            memcpy(c, b->cen[i], sizeof c);
+            memcpy(b->cen[i], b->cen[j], sizeof c);
+            memcpy(b->cen[j], c, sizeof c);
+            i++;
+            j--;
+        }
+        /* [lo, j] <= pivot <= [j + 1, hi) */
+        if (k <= j)
+            hi = j + 1;
+        else
+            lo = j + 1;
     }
+}
+
+static uint32_t bvh_make(const cells *C, bvh *b, uint32_t lo, uint32_t hi)
+{
+    uint32_t at = b->nnode++;
+    bnode *nd = &b->node[at];
+    float clo[3] = {FLT_MAX, FLT_MAX, FLT_MAX}, chi[3] = {-FLT_MAX, -FLT_MAX, -FLT_MAX};
+    for (int a = 0; a < 3; a++) {
+        nd->lo[a] = FLT_MAX;
+        nd->hi[a] = -FLT_MAX;
+    }
+    for (uint32_t i = lo; i < hi; i++) {
+        const double *P[4];
+        cell_pts(C, b->ids[i], P);
+        for (int k = 0; k < 4; k++)
+            for (int a = 0; a < 3; a++) {
+                float l = f_down(P[k][a]), h = f_up(P[k][a]);
+                nd->lo[a] = l < nd->lo[a] ? l : nd->lo[a];
+                nd->hi[a] = h > nd->hi[a] ? h : nd->hi[a];
+            }
+        for (int a = 0; a < 3; a++) {
+            float c = b->cen[i][a];
+            clo[a] = c < clo[a] ? c : clo[a];
+            chi[a] = c > chi[a] ? c : chi[a];
+        }
+    }
+    if (hi - lo <= 4) {
+        nd->first = lo;
+        nd->n = hi - lo;
+        return at;
+    }
+    int a = 0;
+    for (int k = 1; k < 3; k++)
+        if (chi[k] - clo[k] > chi[a] - clo[a])
+            a = k;
+    uint32_t mid = lo + (hi - lo) / 2;
+    bvh_select(b, lo, hi, mid, a);
+    nd->n = 0;
+    bvh_make(C, b, lo, mid); /* node at + 1 */
+    uint32_t right = bvh_make(C, b, mid, hi);
+    b->node[at].first = right;
+    return at;
+}
+
+/* The tree holds the cells with a vertex on the solids' boundary only: the point of the solid
+ * nearest to a vertex outside lies on a boundary face, and a cell holding it holds the face,
+ * edge or vertex of that face it lies inside of (a conforming complex; an octahedron's 4
+ * tetrahedra conform too), so has a boundary vertex. The other cells are never nearest. */
+static sd_result bvh_build(sd_mem *m, const cells *C, bvh *b, sd_error *err)
+{
+    memset(b, 0, sizeof *b);
+    const sd_topo *t = &C->lv->t;
+    uint8_t *on = sdi_calloc(m, C->nv ? C->nv : 1, 1);
+    if (!on)
+        return sdi_fail_nomem(err, m);
+    for (uint32_t c = 0; c < t->ntet; c++)
+        for (int i = 0; t->tet_b[c] && i < 4; i++)
+            if (t->tet_b[c] >> i & 1)
+                for (int k = 0; k < 3; k++)
+                    on[t->tet[c][SDI_TET_F[i][k]]] = 1;
+    for (uint32_t c = 0; c < t->noct; c++)
+        for (int i = 0; t->oct_b[c] && i < 8; i++)
+            if (t->oct_b[c] >> i & 1)
+                for (int k = 0; k < 3; k++)
+                    on[t->oct[c][SDI_OCT_F[i][k]]] = 1;
+    uint32_t n = 0;
+    for (uint32_t c = 0; c < C->nc; c++) {
+        uint32_t v[4];
+        cell_verts(C, c, v);
+        n += (on[v[0]] | on[v[1]] | on[v[2]] | on[v[3]]) != 0;
+    }
+    /* leaves hold 2 to 4 cells (halves of more than 4 have at least 2), so fewer than n nodes */
+    size_t nn = n < 2 ? 1 : n;
+    b->ids = sdi_alloc(m, nn * sizeof *b->ids);
+    b->cen = b->ids ? sdi_alloc(m, nn * sizeof *b->cen) : NULL;
+    b->node = b->cen ? sdi_alloc(m, nn * sizeof *b->node) : NULL;
+    if (!b->node) {
+        sdi_free(m, on);
+        bvh_free(m, b);
+        return sdi_fail_nomem(err, m);
+    }
+    n = 0;
+    for (uint32_t c = 0; c < C->nc; c++) {
+        uint32_t v[4];
+        cell_verts(C, c, v);
+        if (!(on[v[0]] | on[v[1]] | on[v[2]] | on[v[3]]))
+            continue;
+        const double *P[4];
+        cell_pts(C, c, P);
+        for (int a = 0; a < 3; a++)
+            b->cen[n][a] = (float)(0.25 * (P[0][a] + P[1][a] + P[2][a] + P[3][a]));
+        b->ids[n++] = c;
+    }
+    sdi_free(m, on);
+    b->nids = n;
+    if (n) /* a solid has boundary faces */
+        bvh_make(C, b, 0, n);
+    sdi_free(m, b->cen);
+    b->cen = NULL;
+    return SD_OK;
+}
+
+static inline double node_dist2(const bnode *nd, const double *p)
+{
+    double s = 0;
+    for (int a = 0; a < 3; a++) {
+        double d = p[a] < nd->lo[a] ? nd->lo[a] - p[a] : p[a] > nd->hi[a] ? p[a] - nd->hi[a] : 0;
+        s += d * d;
+    }
+    return s;
+}
+
+#define SLACK (1 + 1e-12)
+
+/* The nearest cell to p (lowest index among equals). Each node looked at and each cell tested
+ * takes one unit of *work; NONE when it runs out first. */
+static uint32_t nearest(const cells *C, const grid *g, const bvh *b, const double *p,
+                        uint64_t *work)
+{
+    uint32_t stack[128];
+    double sd[128];
+    int top = 0;
     double best = DBL_MAX;
     uint32_t bc = NONE;
-    for (int64_t r = 0;; r++) {
-        int64_t l[3], h[3];
-        for (int a = 0; a < 3; a++) {
-            l[a] = b[a] - r < 0 ? 0 : b[a] - r;
-            h[a] = b[a] + r >= d[a] ? d[a] - 1 : b[a] + r;
-        }
-        for (int64_t z = l[2]; z <= h[2]; z++)
-            for (int64_t y = l[1]; y <= h[1]; y++) {
-                bool edge = llabs(z - b[2]) == r || llabs(y - b[1]) == r;
-                for (int64_t x = l[0]; x <= h[0]; x++) {
-                    if (!edge && llabs(x - b[0]) != r) { /* inside the shell: jump across */
-                        if (x < b[0] + r)
-                            x = b[0] + r - 1;
-                        continue;
-                    }
-                    size_t k = ((size_t)z * g->dim[1] + (size_t)y) * g->dim[0] + (size_t)x;
-                    uint64_t cost = (uint64_t)(g->start[k + 1] - g->start[k]) + 1; /* an empty
-                                                                     * bucket costs a look too */
-                    if (cost > *work)
-                        return NONE;
-                    *work -= cost;
-                    for (uint32_t j = g->start[k]; j < g->start[k + 1]; j++) {
-                        uint32_t c = g->cell[j];
-                        if (box_dist2(g, c, p) > best)
-                            continue;
-                        const double *P[4];
-                        cell_pts(C, c, P);
-                        double q = tet_dist2(P, p);
-                        if (q < best || (q == best && c < bc)) {
-                            best = q;
-                            bc = c;
-                        }
-                    }
+    if (!b->nids)
+        return NONE;
+    stack[top] = 0;
+    sd[top++] = node_dist2(&b->node[0], p);
+    while (top > 0) {
+        top--;
+        if (sd[top] > best * SLACK)
+            continue;
+        uint32_t at = stack[top];
+        const bnode *nd = &b->node[at];
+        uint64_t cost = 1 + nd->n;
+        if (cost > *work)
+            return NONE;
+        *work -= cost;
+        if (nd->n) {
+            for (uint32_t i = nd->first; i < nd->first + nd->n; i++) {
+                uint32_t c = b->ids[i];
+                if (box_dist2(g, c, p) > best)
+                    continue;
+                const double *P[4];
+                cell_pts(C, c, P);
+                double q = tet_dist2(P, p);
+                if (q < best || (q == best && c < bc)) {
+                    best = q;
+                    bc = c;
                 }
             }
-        /* what the buckets beyond the shell can offer (squared): a point there is beyond the
-         * shell along some axis a — the gap to the first bucket past it (bucket i starts at
-         * quantized value ceil(i 2^16 / dim)), less a quantum for rounding — and inside the
-         * grid's box along the others, so at least as far as p is outside it along those */
-        double bound = DBL_MAX;
-        bool more = false;
-        for (int a = 0; a < 3; a++) {
-            double rest = out2 - out[a] * out[a];
-            if (b[a] + r + 1 < d[a]) {
-                double q0 = ceil((double)(b[a] + r + 1) * (QMAX + 1.0) / (double)d[a]) - 1;
-                double e = g->lo[a] + q0 * g->quantum[a] - p[a];
-                e = e > 0 ? e : 0;
-                bound = fmin(bound, e * e + rest);
-                more = true;
-            }
-            if (b[a] - r - 1 >= 0) {
-                double q1 = ceil((double)(b[a] - r) * (QMAX + 1.0) / (double)d[a]) + 1;
-                double e = p[a] - (g->lo[a] + q1 * g->quantum[a]);
-                e = e > 0 ? e : 0;
-                bound = fmin(bound, e * e + rest);
-                more = true;
-            }
+            continue;
         }
-        if (!more || (bc != NONE && best < bound))
-            return bc;
+        uint32_t l = at + 1, r = nd->first;
+        double dl = node_dist2(&b->node[l], p), dr = node_dist2(&b->node[r], p);
+        /* the nearer one on top; depth is at most ~log2(cells) + 1, one slot a level plus one */
+        if (dl <= dr) {
+            stack[top] = r, sd[top++] = dr;
+            stack[top] = l, sd[top++] = dl;
+        } else {
+            stack[top] = l, sd[top++] = dl;
+            stack[top] = r, sd[top++] = dr;
+        }
     }
+    return bc;
 }
 
 /* ---- binding ------------------------------------------------------------------------------- */
@@ -673,6 +837,7 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     e->scratch = e->stamp ? sdi_alloc(&m, (n ? n : 1) * sizeof *e->scratch) : NULL;
     sd_result r = SD_OK;
     grid g = {0};
+    bvh tree = {0};
     uint32_t *ord = e->model, *cnt = NULL;
     if (!e->scratch) {
         r = sdi_fail_nomem(err, &m);
@@ -722,6 +887,8 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
         nout += e->idx[4 * j] == NONE;
     const uint64_t budget = NEAREST_WORK_BASE + (uint64_t)NEAREST_WORK_PER_VERTEX * nout;
     uint64_t work = budget;
+    if (nout && mode == SD_OUTSIDE_NEAREST && (r = bvh_build(&m, &C, &tree, err)))
+        goto fail;
     for (size_t i = 0; i < n; i++) {
         size_t j = e->slot[i];
         if (e->idx[4 * j] != NONE)
@@ -731,12 +898,13 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
             memcpy(e->w + 4 * j, xyz + 3 * i, 3 * sizeof *e->w);
             e->w[4 * j + 3] = 0;
         } else if (mode == SD_OUTSIDE_NEAREST) {
-            uint32_t c = nearest(&C, &g, xyz + 3 * i, &work);
+            uint32_t c = nearest(&C, &g, &tree, xyz + 3 * i, &work);
             if (c == NONE) {
                 r = sdi_fail(err, SD_ERR_VALUE, (long)i, SD_EMBED_TOO_FAR,
-                             "vertex %zu is too far outside level %u for \"nearest\" (its "
-                             "search passed the budget of %llu cell tests); move the model "
-                             "closer or give \"outside\": \"fixed\"",
+                             "vertex %zu: too many cells of level %u are about as near to it "
+                             "for \"nearest\" (the searches passed their budget of %llu boxes "
+                             "and cells looked at); move the model or give \"outside\": "
+                             "\"fixed\"",
                              i, sd_level_index(lv), (unsigned long long)budget);
                 goto fail;
             }
@@ -758,6 +926,7 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
     }
     grid_free(&m, &g);
     memset(&g, 0, sizeof g);
+    bvh_free(&m, &tree);
     e->mem = m; /* from here on the embedding counts itself */
     memset(e->stamp, 0, (n ? n : 1) * sizeof *e->stamp); /* pages written now, not by updates */
     if (!build_inverse(e)) {
@@ -772,6 +941,7 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
 fail:
     sdi_free(&m, cnt);
     grid_free(&m, &g);
+    bvh_free(&m, &tree);
     e->mem = m;
     sd_embed_free(e);
     return r;
