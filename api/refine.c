@@ -109,7 +109,10 @@ static int parse_selection(json_t *sel, const api_input *in, selection *s, api_p
                 break;
             sort_key(s->keys[s->n], ids, (int)k);
             if (!bsearch(s->keys[s->n], all, in->ns, sizeof *all, cmp_key4)) {
-                rc = api_fail_at(p, 422, "no-such-simplex", ptr, "not a simplex of the complex");
+                rc = api_fail_at(p, 422, "no-such-simplex", ptr,
+                                 "not one of the complex's simplices as GET /complex lists them "
+                                 "(a face of one, such as an edge of a tetrahedron, is not "
+                                 "selected on its own)");
                 break;
             }
             s->n++;

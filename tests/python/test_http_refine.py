@@ -155,6 +155,23 @@ def test_refine_errors(daemon, body, status, pointer):
     assert s.req("GET").json()["version"] == 1
 
 
+def test_a_face_of_a_listed_simplex_is_named_as_such(daemon):
+    """An edge or a triangle of a tetrahedron is a simplex of the complex (000 Sec. 2), but the
+    selection names listed simplices: the refusal says so rather than that it is not a simplex."""
+    s = Session(daemon)
+    body = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [3, 3, 3]],
+            "simplices": [[0, 1, 2, 3], [3, 4]]}
+    assert s.put_complex(body).status_code == 200
+    for face in ([1, 0], [2, 1, 3]):
+        r = s.req("POST", "/refine", json={"select": {"simplices": [[3, 4], face]}})
+        assert r.status_code == 422, r.text
+        assert r.json()["type"] == "/errors/no-such-simplex"
+        err = r.json()["errors"][0]
+        assert err["pointer"] == "/select/simplices/1"
+        assert "face" in err["message"] and "not a simplex" not in err["message"], err
+    assert s.req("GET").json()["version"] == 1
+
+
 def test_refine_needs_complex(daemon):
     r = Session(daemon).req("POST", "/refine", json={"select": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}})
     assert r.status_code == 409
