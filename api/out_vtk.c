@@ -9,7 +9,9 @@
  * Point data: every requested attribute (Float64; slice points interpolated along the cut edge)
  * and "rule" (the sd_rule id; 255 for slice points; "rule_2" if an attribute is called "rule"). Cell data: "dimension" (0..3; 2 for the
  * slice), "kind" (sd_cell_kind; 5 for the slice), "source_cell" (the cell's index within its
- * kind at this level; for an octahedron's tets and a slice triangle, the cut/split cell's) and
+ * kind at this level; for an octahedron's tets and a slice triangle, the cut/split cell's), with
+ * a slice "source_kind" (the kind source_cell counts in: a slice triangle's cut cell's, 3 or 4;
+ * any other cell's own kind) and
  * "control_cell" (the posted simplex it descends from, sd_level_control_cell). FieldData: "level",
  * "version", and on request the names of the rule and kind values (string arrays).
  *
@@ -33,7 +35,7 @@ enum { VT_VERTEX = 1, VT_LINE = 3, VT_TRIANGLE = 5, VT_TETRA = 10, VT_POLYHEDRON
 enum { SLICE_KIND = 5 };
 
 typedef enum {
-    A_ATTR, A_RULE, A_DIM, A_KIND, A_SRC, A_CTRL, A_POINTS, A_CONN, A_OFFS, A_TYPES, A_FACES, A_FOFFS
+    A_ATTR, A_RULE, A_DIM, A_KIND, A_SRC, A_SKIND, A_CTRL, A_POINTS, A_CONN, A_OFFS, A_TYPES, A_FACES, A_FOFFS
 } arr_id;
 
 /* Arrays (out_section): id an arr_id, arg the attribute (A_ATTR), width the bytes per component
@@ -179,6 +181,10 @@ static void put_item(out_stream *s, const vstate *st, const arr *a, uint64_t i)
         cell_at(s, st, i, &c);
         put_num(s, st, a->width, 0,
                 a->id == A_DIM ? c.dim : a->id == A_KIND ? c.kind : a->id == A_SRC ? c.src : c.type);
+        break;
+    case A_SKIND: /* with a slice: the kind source_cell counts in (a slice triangle's cut cell's) */
+        cell_at(s, st, i, &c);
+        put_num(s, st, a->width, 0, c.kind == SLICE_KIND ? s->slice.kind[i - st->r_sl] : c.kind);
         break;
     case A_CTRL: { /* a slice triangle: the cut cell's (src names it, slice.kind its kind) */
         cell_at(s, st, i, &c);
@@ -471,14 +477,18 @@ static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
                  (unsigned long long)(st->nconn + st->ncell));
         a = out_section_add(&st->a, A_TYPES, 0, 1, 4, st->ncell);
         snprintf(a->head, sizeof a->head, "CELL_TYPES %llu\n", (unsigned long long)st->ncell);
-        static const char *const cnames[] = {"dimension", "kind", "source_cell", "control_cell"};
-        static const arr_id cids[] = {A_DIM, A_KIND, A_SRC, A_CTRL};
-        for (int k = 0; k < 4; k++) {
+        static const char *const cnames[] = {"dimension", "kind", "source_cell", "source_kind",
+                                             "control_cell"};
+        static const arr_id cids[] = {A_DIM, A_KIND, A_SRC, A_SKIND, A_CTRL};
+        const int ncd = s->rq.has_slice ? 5 : 4;
+        for (int k = 0; k < 5; k++) {
+            if (cids[k] == A_SKIND && !s->rq.has_slice)
+                continue;
             a = out_section_add(&st->a, cids[k], 0, 1, 4, st->ncell);
             char first[64] = "";
             if (k == 0) /* the block header comes with the first array */
-                snprintf(first, sizeof first, "CELL_DATA %llu\nFIELD FieldData 4\n",
-                         (unsigned long long)st->ncell);
+                snprintf(first, sizeof first, "CELL_DATA %llu\nFIELD FieldData %d\n",
+                         (unsigned long long)st->ncell, ncd);
             snprintf(a->head, sizeof a->head, "%s%s 1 %llu int\n", first, cnames[k],
                      (unsigned long long)st->ncell);
         }
@@ -507,6 +517,8 @@ static int setup(out_stream *s, vstate *st, bool legacy, sd_error *err)
         a->bytes = 4 * st->nconn;
         out_section_add(&st->a, A_POINTS, 0, 3, 8, st->npts);
         out_section_add(&st->a, A_CTRL, 0, 1, 4, st->ncell);
+        if (s->rq.has_slice)
+            out_section_add(&st->a, A_SKIND, 0, 1, 1, st->ncell);
         out_section_add(&st->a, A_SRC, 0, 1, 4, st->ncell);
         out_section_add(&st->a, A_KIND, 0, 1, 1, st->ncell);
         out_section_add(&st->a, A_DIM, 0, 1, 1, st->ncell);
@@ -634,6 +646,8 @@ static int build_header(out_stream *s, vstate *st, sd_error *err)
         DA("dimension", "");
         DA("kind", "");
         DA("source_cell", "");
+        if (s->rq.has_slice)
+            DA("source_kind", "");
         DA("control_cell", "");
         fprintf(f, "      </CellData>\n      <Points>\n");
         DA("Points", " NumberOfComponents=\"3\"");

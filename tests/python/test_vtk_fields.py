@@ -5,6 +5,7 @@ Expected values: the version is the ETag the daemon answers with; the rule names
 of docs/OUTPUTS.md; control_cell is derived here from the JSON output alone — each cell's parent
 is the cell of the previous level whose vertices its vertices come from (`origin`), composed
 down to level 0, whose cells are matched to the posted simplices by their vertex sets."""
+import numpy as np
 import pytest
 
 from daemon import Daemon, Session
@@ -138,17 +139,33 @@ def test_control_cell(session, tmp_path, level):
         cd = g.GetCellData()
         kind = vtk_to_numpy(cd.GetArray("kind"))
         src = vtk_to_numpy(cd.GetArray("source_cell"))
+        skind = vtk_to_numpy(cd.GetArray("source_kind"))
         got = vtk_to_numpy(cd.GetArray("control_cell"))
-        want = []
-        for k, s in zip(kind, src):
-            if k == 5:  # a slice triangle: source_cell is the cut tet or octahedron
-                want.append(None)
-            else:
-                want.append(ctrl[k][s])
-        assert [g for g, w in zip(got, want) if w is not None] == [w for w in want if w is not None]
+        # a slice triangle's source_cell counts in its source_kind (the cut tetrahedron or
+        # octahedron); every other cell's source_kind is its kind
+        assert (skind[kind != 5] == kind[kind != 5]).all()
+        assert set(skind[kind == 5].tolist()) == ({3} if level == 0 else {3, 4})
+        assert [ctrl[k][s] for k, s in zip(skind, src)] == got.tolist()
         # slice triangles descend from a posted tetrahedron (3 or 7)
         assert set(got[kind == 5].tolist()) <= {3, 7}
         assert (kind == 5).any()
+        # and each lies in the cell it names (a tetrahedron, or one of the 4 tetrahedra of an
+        # octahedron (p, q, a, a2, b, b2) around its major diagonal p-q)
+        j = session.level(level, format="json").json()
+        x = np.array(j["vertices"])
+        pts = vtk_to_numpy(g.GetPoints().GetData())
+        for c in np.flatnonzero(kind == 5):
+            cell = j["cells"][KIND_KEYS[skind[c]]][src[c]]
+            if skind[c] == 3:
+                parts = [cell]
+            else:
+                p, q, a, a2, b, b2 = cell
+                parts = [[p, q, a, b], [p, q, b, a2], [p, q, a2, b2], [p, q, b2, a]]
+            for v in range(3):
+                y = pts[g.GetCell(int(c)).GetPointId(v)]
+                inside = [np.linalg.solve(np.vstack([x[t].T, np.ones(4)]), np.append(y, 1.0)).min()
+                          >= -1e-9 for t in parts]
+                assert any(inside), (c, skind[c], src[c], y)
         m = meshio.read(str(f))
         mc = [x for block in m.cell_data["control_cell"] for x in block.tolist()]
         assert mc == got.tolist()
