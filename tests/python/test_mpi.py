@@ -664,6 +664,23 @@ def test_a_piece_not_written_leaves_no_pieces(tmp_path):
     assert (tmp_path / "o_1.vtu").is_dir()
 
 
+def test_a_failed_run_leaves_no_index_of_an_earlier_one(tmp_path):
+    """A complete result of an earlier run at the same name, then a run whose rank 1 cannot
+    write its piece (a directory stands at its temporary name): the earlier o.pvtu must not stay
+    behind naming pieces that were removed or belong to the other run (VTK would open it as a
+    result, or fail on its missing pieces); nothing of either run is left."""
+    mesh = REPO / "examples" / "mixed.json"
+    r = mpirun(3, "refine", mesh, "--level", 1, "-o", tmp_path / "o.pvtu", "-q")
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.pvtu", "o_0.vtu", "o_1.vtu",
+                                                          "o_2.vtu"]
+    (tmp_path / "o_1.vtu.part").mkdir()
+    r = mpirun(3, "refine", mesh, "--level", 2, "-o", tmp_path / "o.pvtu", "-q")
+    assert r.returncode == 3, r.stderr
+    assert "stopped (writing the pieces) after a failure on rank 1" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o_1.vtu.part"]
+
+
 # ---- other inputs -----------------------------------------------------------------------------
 
 def sdlevel_points(path, level):
