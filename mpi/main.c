@@ -33,6 +33,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -404,7 +405,10 @@ static bool dir_writable(const char *path)
     char dir[4096];
     snprintf(dir, sizeof dir, "%.*s", !slash ? 1 : slash == path ? 1 : (int)(slash - path),
              slash ? path : ".");
-    if (!access(dir, W_OK | X_OK))
+    struct stat sb;
+    if (!stat(dir, &sb) && !S_ISDIR(sb.st_mode))
+        errno = ENOTDIR; /* access() would say "Permission denied" (no search bit), even to root */
+    else if (!access(dir, W_OK | X_OK))
         return true;
     fprintf(stderr, "%s: cannot write into %s: %s\n", tag_, dir, strerror(errno));
     return false;

@@ -812,3 +812,16 @@ def test_an_unwritable_output_is_found_before_the_work(tmp_path, out, stats):
     assert f"cannot write into {tmp_path / 'none'}: No such file or directory" in r.stderr
     assert "read " not in r.stderr and "level 2 on 2 ranks" not in r.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("out", ["afile/o.pvtu", "afile/o.vtu"])
+def test_an_output_under_a_file_says_not_a_directory(tmp_path, out):
+    """-o under a path that is a regular file: exit 2 before the work, saying it is not a
+    directory (access() on a file without the search bit said "Permission denied", which is not
+    what is wrong, least of all to root)."""
+    (tmp_path / "afile").write_text("")
+    r = mpirun(2, "refine", REPO / "examples" / "mixed.json", "--level", 2, "-o", tmp_path / out)
+    assert r.returncode == 2, r.stderr
+    assert f"cannot write into {tmp_path / 'afile'}: Not a directory" in r.stderr, r.stderr
+    assert "level 2 on 2 ranks" not in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
