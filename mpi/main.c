@@ -12,8 +12,9 @@
  *
  * Failures: every phase ends with a collective check, so a failure on any rank stops every rank
  * there; the failing rank says what failed, rank 0 says where the run stopped, and all exit with
- * the same code (1: the mesh or tags were refused, 2: usage or a file, 3: a rank failed); when a
- * piece or the index cannot be written, every rank removes the piece it wrote. A rank
+ * the same code (1: the mesh or tags were refused, 2: usage or a file, 3: a rank failed); rank 0
+ * removes an index an earlier run left at OUT.pvtu before the pieces are written, and when a
+ * piece or the index cannot be written, every rank removes the piece at its name. A rank
  * that dies outright is mpirun's to report (it then ends the others, non-zero).
  * Progress: one line per rank and phase on stderr, prefixed "subdivd-mpi: rank R/N" (-q: none
  * but errors and the summary). Test hook: SUBDIVD_MPI_FAIL_AT=R:N fails the N-th allocation of
@@ -32,6 +33,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -403,7 +405,10 @@ static bool dir_writable(const char *path)
     char dir[4096];
     snprintf(dir, sizeof dir, "%.*s", !slash ? 1 : slash == path ? 1 : (int)(slash - path),
              slash ? path : ".");
-    if (!access(dir, W_OK | X_OK))
+    struct stat sb;
+    if (!stat(dir, &sb) && !S_ISDIR(sb.st_mode))
+        errno = ENOTDIR; /* access() would say "Permission denied" (no search bit), even to root */
+    else if (!access(dir, W_OK | X_OK))
         return true;
     fprintf(stderr, "%s: cannot write into %s: %s\n", tag_, dir, strerror(errno));
     return false;
@@ -555,6 +560,10 @@ static int run(const args *a)
         /* benchmarks: nothing written */
     } else if (!a->merge) {
         char path[4096];
+        /* an index left by an earlier run names pieces about to be replaced (or removed, if this
+         * write fails): it goes first, so a failure leaves no index that opens as a result */
+        if (!rank_ && unlink(a->out) && errno != ENOENT)
+            fprintf(stderr, "%s: cannot remove the old %s: %s\n", tag_, a->out, strerror(errno));
         piece_path(a->out, rank_, path, sizeof path);
         int wrote = !mp_write_piece(&piece, &res, path, &st.bytes, err, sizeof err);
         if (!wrote) {
@@ -578,10 +587,10 @@ static int run(const args *a)
         }
         if ((rc = checkpoint(rc, "writing the index"))) {
             /* a piece without the others or the index is no result: each rank removes its own
-             * (path again: rank 0 reused it for the index's names) */
+             * (path again: rank 0 reused it for the index's names), or the one an earlier run
+             * left at its name when it could not write (a file: unlink leaves a directory) */
             piece_path(a->out, rank_, path, sizeof path);
-            if (wrote)
-                unlink(path);
+            unlink(path);
             goto done;
         }
     } else {

@@ -5,8 +5,8 @@
  * tetrahedra (10), then each octahedron as its 4 tetrahedra around the major diagonal
  * (sd_octa_tet). Point data: global_id (Int64, the point's index in the one-process level),
  * owner (Int32, the lowest rank among the pieces whose cells use the point), rule (UInt8, the
- * point's sd_rule at level L, as `subdivd refine`'s VTU has it; "rule_2", ... if an attribute is
- * called "rule") and every attribute (Float64). Cell data: kind (UInt8, sd_cell_kind), cell_id (Int64, the cell's index among the
+ * point's sd_rule at level L, as `subdivd refine`'s VTU has it) and every attribute (Float64);
+ * each of the first three is "NAME_2", ... if an attribute is called NAME. Cell data: kind (UInt8, sd_cell_kind), cell_id (Int64, the cell's index among the
  * level's cells of its kind in the one-process level; an octahedron's 4 tetrahedra share it) and
  * control_cell (Int64, the posted simplex it descends from). A file is written as PATH.part and
  * renamed at the end.
@@ -121,23 +121,33 @@ static int vtu_file(const char *path, uint64_t npts, const double *xyz, const va
 static int vtk_cells(int kind) { return kind == SD_CELL_OCTA ? 4 : 1; }
 static int vtk_size(int kind) { return kind == SD_CELL_OCTA ? 4 : sd_cell_size((sd_cell_kind)kind); }
 
-/* The point data arrays: global_id, owner, rule, the attributes (by name). The rule array is
- * named as api/out_vtk.c names it: "rule", or "rule_2", ... if an attribute is called that. */
+/* `base`, or "base_2", "base_3", ... when an attribute is called that: as api/out_vtk.c names
+ * its rule array, so an attribute keeps its name and no two point arrays share one (VTK's
+ * readers and meshio keep one array of a name: an attribute called "global_id" hid the ids). */
+static void unclashed(const mp_piece *p, char *name, size_t n, const char *base)
+{
+    snprintf(name, n, "%s", base);
+    for (int suffix = 2, clash = 1; clash; suffix++) {
+        clash = 0;
+        for (int a = 0; a < p->nattrs && !clash; a++)
+            clash = !strcmp(p->attrs[a].name, name);
+        if (clash)
+            snprintf(name, n, "%s_%d", base, suffix);
+    }
+}
+
+/* The point data arrays: global_id, owner, rule, the attributes (by name); the first three
+ * named by unclashed(). */
 static int point_arrays(const mp_piece *p, varr *pd, const int64_t *gid, const int32_t *own,
                         const uint8_t *rule, double *const *attr)
 {
     int n = 0;
-    pd[n++] = (varr){"global_id", "Int64", 1, 8, gid};
-    pd[n++] = (varr){"owner", "Int32", 1, 4, own};
-    pd[n] = (varr){"rule", "UInt8", 1, 1, rule};
-    for (int suffix = 2, clash = 1; clash; suffix++) {
-        clash = 0;
-        for (int a = 0; a < p->nattrs && !clash; a++)
-            clash = !strcmp(p->attrs[a].name, pd[n].name);
-        if (clash)
-            snprintf(pd[n].name, sizeof pd[n].name, "rule_%d", suffix);
-    }
-    n++;
+    pd[n] = (varr){"", "Int64", 1, 8, gid};
+    unclashed(p, pd[n++].name, sizeof pd->name, "global_id");
+    pd[n] = (varr){"", "Int32", 1, 4, own};
+    unclashed(p, pd[n++].name, sizeof pd->name, "owner");
+    pd[n] = (varr){"", "UInt8", 1, 1, rule};
+    unclashed(p, pd[n++].name, sizeof pd->name, "rule");
     for (int a = 0; a < p->nattrs; a++) {
         pd[n] = (varr){"", "Float64", p->attrs[a].ncomp, 8, attr ? attr[a] : NULL};
         xml_name(pd[n].name, sizeof pd[n].name, p->attrs[a].name);

@@ -519,6 +519,41 @@ def test_an_attribute_called_rule_moves_the_rule_array(tmp_path):
         assert np.abs(arr(g, "rule") - want).max() <= 1e-12
 
 
+@pytest.mark.parametrize("out", ["o.pvtu", "m.vtu"])
+def test_attributes_called_global_id_and_owner_move_those_arrays(tmp_path, out):
+    """Attributes called "global_id", "owner" and "global_id_2": the id and owner arrays become
+    "global_id_3" and "owner_2" (as the rule array does, docs/OUTPUTS.md), so no two point arrays
+    share a name (VTK's parallel reader and meshio keep one of a name: the ids were lost behind
+    the attribute), and the attributes keep theirs."""
+    v = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1.2]]
+    body = {"vertices": v, "simplices": [[0, 1, 2, 3], [1, 2, 3, 4]],
+            "attributes": {"global_id": [10.0, 11, 12, 13, 14], "owner": [5.0] * 5,
+                           "global_id_2": [1.0] * 5}}
+    mesh = tmp_path / "m.json"
+    mesh.write_text(json.dumps(body))
+    ref = tmp_path / "ref.vtu"
+    r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", "2", "-o", str(ref)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    g0 = read(ref)
+    want_attr = vtk_to_numpy(g0.GetPointData().GetArray("global_id"))
+    r = mpirun(2, "refine", mesh, "--level", 2, "-o", tmp_path / out, "-q")
+    assert r.returncode == 0, r.stderr
+    graphs = [read(tmp_path / out)] if out.endswith(".vtu") else pieces_of(tmp_path / out, 2)
+    if out.endswith(".pvtu"):
+        graphs.append(read(tmp_path / out))  # the parallel reader, all pieces as one
+    for g in graphs:
+        pd = g.GetPointData()
+        names = [pd.GetArrayName(i) for i in range(pd.GetNumberOfArrays())]
+        assert len(names) == len(set(names)), names
+        assert sorted(names) == ["global_id", "global_id_2", "global_id_3", "owner", "owner_2",
+                                 "rule"], names
+        gid = arr(g, "global_id_3")
+        assert pd.GetArray("global_id_3").GetDataTypeAsString() in ("long", "long long")
+        assert np.abs(arr(g, "global_id") - want_attr[gid]).max() <= 1e-12
+        assert (arr(g, "owner") == 5).all() and set(arr(g, "owner_2").tolist()) <= {0, 1}
+
+
 @pytest.mark.parametrize("halo,level,nranks", [(0, 2, 2), (1, 3, 3)])
 def test_thinner_halos_are_wrong_for_solids(tmp_path, tmp_path_factory, halo, level, nranks):
     """Without a halo the pieces' rims are false boundaries, and one ring is too thin for the
@@ -664,6 +699,23 @@ def test_a_piece_not_written_leaves_no_pieces(tmp_path):
     assert (tmp_path / "o_1.vtu").is_dir()
 
 
+def test_a_failed_run_leaves_no_index_of_an_earlier_one(tmp_path):
+    """A complete result of an earlier run at the same name, then a run whose rank 1 cannot
+    write its piece (a directory stands at its temporary name): the earlier o.pvtu must not stay
+    behind naming pieces that were removed or belong to the other run (VTK would open it as a
+    result, or fail on its missing pieces); nothing of either run is left."""
+    mesh = REPO / "examples" / "mixed.json"
+    r = mpirun(3, "refine", mesh, "--level", 1, "-o", tmp_path / "o.pvtu", "-q")
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.pvtu", "o_0.vtu", "o_1.vtu",
+                                                          "o_2.vtu"]
+    (tmp_path / "o_1.vtu.part").mkdir()
+    r = mpirun(3, "refine", mesh, "--level", 2, "-o", tmp_path / "o.pvtu", "-q")
+    assert r.returncode == 3, r.stderr
+    assert "stopped (writing the pieces) after a failure on rank 1" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o_1.vtu.part"]
+
+
 # ---- other inputs -----------------------------------------------------------------------------
 
 def sdlevel_points(path, level):
@@ -795,3 +847,16 @@ def test_an_unwritable_output_is_found_before_the_work(tmp_path, out, stats):
     assert f"cannot write into {tmp_path / 'none'}: No such file or directory" in r.stderr
     assert "read " not in r.stderr and "level 2 on 2 ranks" not in r.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("out", ["afile/o.pvtu", "afile/o.vtu"])
+def test_an_output_under_a_file_says_not_a_directory(tmp_path, out):
+    """-o under a path that is a regular file: exit 2 before the work, saying it is not a
+    directory (access() on a file without the search bit said "Permission denied", which is not
+    what is wrong, least of all to root)."""
+    (tmp_path / "afile").write_text("")
+    r = mpirun(2, "refine", REPO / "examples" / "mixed.json", "--level", 2, "-o", tmp_path / out)
+    assert r.returncode == 2, r.stderr
+    assert f"cannot write into {tmp_path / 'afile'}: Not a directory" in r.stderr, r.stderr
+    assert "level 2 on 2 ranks" not in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
