@@ -814,6 +814,34 @@ def test_content_lengths_that_differ_are_refused(daemon):
     assert s.req("GET").json()["version"] == 1
 
 
+def test_chunked_beside_content_length_closes_the_connection(daemon):
+    """Transfer-Encoding: chunked beside a Content-Length (RFC 9112 6.3, the classic smuggling
+    shape behind a proxy that frames by the length): the body is framed by the chunks, and the
+    connection is closed after the answer, so bytes after the chunked body are never read as a
+    request of their own (they were: a GET /healthz tucked behind it was answered 200)."""
+    s = Session(daemon)
+    body = json.dumps({"vertices": CUBE_V, "simplices": CUBE_S}).encode()
+    tail = b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n"
+    for good in (True, False):
+        payload = body if good else b"{}"
+        k = raw_socket(daemon, timeout=5)
+        k.sendall(put_head(s, f"Content-Length: {len(payload) + 200}", "Transfer-Encoding: chunked")
+                  + f"{len(payload):x}\r\n".encode() + payload + b"\r\n0\r\n\r\n" + tail)
+        out = read_head(k, until_close=True)
+        k.close()
+        assert out.startswith(b"HTTP/1.1 200" if good else b"HTTP/1.1 400"), out[:300]
+        assert b"connection: close" in out.lower(), out[:600]
+        assert out.count(b"HTTP/1.1 ") == 1, out
+    assert s.req("GET").json()["version"] == 1
+    # a Content-Length alone keeps the connection: two requests on it are both answered
+    k = raw_socket(daemon, timeout=5)
+    k.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n" + tail + b"GET /healthz HTTP/1.1\r\n"
+              b"Host: x\r\nConnection: close\r\n\r\n")
+    out = read_head(k, until_close=True)
+    k.close()
+    assert out.count(b"HTTP/1.1 200") == 3, out
+
+
 def test_a_request_larger_than_the_whole_budget_is_a_413():
     """A body that only the tree parse can read (a vertex that is a string) of 2 M vertices needs
     more than a 400 MB budget on its own: 413 naming max_memory with what it needed (no
