@@ -863,6 +863,50 @@ def test_a_request_larger_than_the_whole_budget_is_a_413():
         d.stop()
 
 
+def tet_grid(n):
+    """n^3 unit cubes, each as the 6 tetrahedra around its main diagonal."""
+    import itertools
+    vid = lambda x, y, z: x + (n + 1) * (y + (n + 1) * z)
+    verts = [[x, y, z] for z in range(n + 1) for y in range(n + 1) for x in range(n + 1)]
+    tets = []
+    for x, y, z in itertools.product(range(n), repeat=3):
+        for perm in itertools.permutations(range(3)):
+            c = [x, y, z]
+            t = [vid(*c)]
+            for a in perm:
+                c[a] += 1
+                t.append(vid(*c))
+            tets.append(t)
+    return verts, tets
+
+
+def test_a_level_larger_than_the_whole_budget_is_refused_before_it_is_built():
+    """Level 3 of 24 576 tetrahedra (6.4 M cells, under --max-cells) needs some 440 MB by the
+    core's estimate, more than a 300 MB budget holds even with nothing else in it: 413 naming
+    max_memory before any of it is built (the daemon's RSS stays small), where it was built until
+    the budget ran out and answered 503 memory-budget, \"retry later\", which no retry changes.
+    Level 2 (about 55 MB) is served."""
+    d = Daemon("--max-memory", str(300_000_000))
+    try:
+        s = Session(d)
+        v, t = tet_grid(16)
+        assert s.put_complex({"vertices": v, "simplices": t}).status_code == 200
+        before = d.rss_bytes()
+        for path in ("/levels/3/stats", "/levels/3?format=glb"):
+            t0 = time.time()
+            r = s.req("GET", path)
+            assert r.status_code == 413, r.text[:300]
+            j = r.json()
+            assert j["limit_name"] == "max_memory" and j["limit"] == 300_000_000, j
+            assert j["requested"] > j["limit"] and "Retry-After" not in r.headers, j
+            assert time.time() - t0 < 0.5
+        if not daemon_mod.SANITIZED:   # under ASan the resident size is its allocator's
+            assert d.rss_bytes() - before < (50 << 20)
+        assert s.req("GET", "/levels/2/stats").status_code == 200
+    finally:
+        d.stop()
+
+
 def test_one_client_cannot_hold_the_budget_with_slow_bodies():
     """--max-client-body-bytes: bodies one address is sending hold at most that much. Two slow
     bodies of 400 kB from 127.0.0.2 fit a cap of 1 MB, a third is 429 client-bodies at once
