@@ -401,6 +401,15 @@ int api_embed_put(api_model *m, api_embed_def *d, uint64_t version, const api_li
                   api_problem *p)
 {
     *summary = NULL;
+    /* a new name in a session already holding the most models is refused before the binding
+     * (seconds and hundreds of MB for a big model), as it is after it (changes of one session
+     * run one after the other; the check below stays for the list as it is then) */
+    pthread_mutex_lock(&m->lock);
+    int full = find(m, d->name) < 0 && m->nembed >= API_MAX_EMBEDDED;
+    pthread_mutex_unlock(&m->lock);
+    if (full)
+        return api_fail_at(p, 422, "limit-exceeded", "name", "a session holds at most %d embedded "
+                           "models; DELETE one first", API_MAX_EMBEDDED);
     struct timespec t0, t1;
     clock_gettime(CLOCK_MONOTONIC, &t0);
     api_embed e;

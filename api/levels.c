@@ -62,6 +62,14 @@ int api_check_level_limits(api_model *m, int level, const api_limits *lim, api_p
                               "level %d needs about %llu bytes, over the session limit of %llu; "
                               "ask for a lower level", level, (unsigned long long)need,
                               (unsigned long long)lim->max_session_bytes);
+    /* a level the whole memory budget cannot hold is refused before any of it is built: no
+     * retry helps (it was built until the budget ran out, then answered 503 memory-budget) */
+    size_t budget = api_mem_budget();
+    if (budget && need > budget)
+        return api_fail_limit(p, "max_memory", budget, need,
+                              "level %d needs about %llu bytes, more than the daemon's memory "
+                              "budget (--max-memory, %zu bytes) holds; ask for a lower level or "
+                              "raise --max-memory", level, (unsigned long long)need, budget);
     return 0;
 }
 

@@ -548,7 +548,12 @@ static int early_body(req *r)
     }
     /* with Transfer-Encoding: chunked libmicrohttpd frames the body by the chunks and ignores
      * Content-Length (RFC 9112 6.3), so a "Content-Length: 0" beside it must not pass for no
-     * body (it skipped the media type and the guard's body deadline) */
+     * body (it skipped the media type and the guard's body deadline); and since a proxy in
+     * front may have framed it by the Content-Length, what follows on the connection may not
+     * be the next request it meant: the connection is closed after the answer (6.3: "the
+     * server MUST close the connection after responding to such a request") */
+    if (te0 && ls.n > 0)
+        r->close_after = 1;
     const char *cl = te0 ? NULL
                          : MHD_lookup_connection_value(r->conn, MHD_HEADER_KIND,
                                                        MHD_HTTP_HEADER_CONTENT_LENGTH);

@@ -51,6 +51,8 @@ static void common_headers(req *r, struct MHD_Response *resp)
 void http_queue(req *r, int status, struct MHD_Response *resp)
 {
     common_headers(r, resp);
+    if (r->close_after) /* libmicrohttpd closes the connection after an answer saying so */
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONNECTION, "close");
     r->status = status;
     r->queued = 1;
     MHD_queue_response(r->conn, (unsigned)status, resp);

@@ -73,6 +73,7 @@ struct req {
     int status;
     atomic_uint_fast64_t bytes;
     int queued;
+    int close_after;          /* Transfer-Encoding beside Content-Length: close after answering */
     atomic_int refs;          /* the connection and a streaming response */
     api_mem_meter mem;        /* what the request's callbacks allocate (api/mem.h) */
 };

@@ -7,6 +7,7 @@ eq. 13) with numpy's solver, and the deformed position is that combination of th
 points after the edit; affine maps of every control point must carry the model by the same map
 (subdivision reproduces affine functions)."""
 import struct
+import time
 
 import numpy as np
 import pytest
@@ -762,3 +763,30 @@ def test_level_glb_with_parts_embedded(daemon, tmp_path):
     assert d1.status_code == 200 and d1.json()["indices"] and d1.content == d2.content
     r = s.req("GET", "/levels/2/delta", params={"since": since, "parts": "embedded"})
     assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "parts", r.text
+
+
+def test_a_model_past_the_eighth_is_refused_before_it_is_bound(daemon):
+    """A session holds 8 models: a ninth name is refused (422 at the path parameter `name`)
+    before the model is bound, so no level is computed for it and a big one costs no binding
+    (a ninth of 1 M vertices at level 3 was bound — level 3 computed, seconds of a compute slot,
+    hundreds of MB — and only then refused). Replacing one of the 8 is still a change."""
+    s = Session(daemon)
+    assert s.put_complex(BLOCK).status_code == 200
+    for i in range(8):
+        r = s.req("PUT", f"/embedded/m{i}", json={"vertices": model_points(4, seed=i), "level": 1})
+        assert r.status_code == 200, r.text
+    before = s.req("GET", "").json()
+    pts = np.array(model_points(1_000_000, seed=9))
+    blob = struct.pack("<II", len(pts), 0) + pts.astype("<f8").tobytes()
+    t0 = time.time()
+    r = s.req("PUT", "/embedded/ninth", data=blob, params={"level": 3, "outside": "fixed"},
+              headers={"Content-Type": "application/octet-stream"})
+    took = time.time() - t0
+    assert r.status_code == 422 and r.json()["type"] == "/errors/limit-exceeded", r.text
+    assert r.json()["errors"][0]["pointer"] == "name", r.text
+    after = s.req("GET", "").json()
+    assert after["version"] == before["version"]
+    assert after["levels_cached"] == before["levels_cached"], (before, after)
+    assert took < 1.0, took
+    r = s.req("PUT", "/embedded/m3", json={"vertices": model_points(5, seed=3), "level": 1})
+    assert r.status_code == 200 and r.json()["version"] == before["version"] + 1, r.text

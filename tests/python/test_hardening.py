@@ -814,6 +814,34 @@ def test_content_lengths_that_differ_are_refused(daemon):
     assert s.req("GET").json()["version"] == 1
 
 
+def test_chunked_beside_content_length_closes_the_connection(daemon):
+    """Transfer-Encoding: chunked beside a Content-Length (RFC 9112 6.3, the classic smuggling
+    shape behind a proxy that frames by the length): the body is framed by the chunks, and the
+    connection is closed after the answer, so bytes after the chunked body are never read as a
+    request of their own (they were: a GET /healthz tucked behind it was answered 200)."""
+    s = Session(daemon)
+    body = json.dumps({"vertices": CUBE_V, "simplices": CUBE_S}).encode()
+    tail = b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n"
+    for good in (True, False):
+        payload = body if good else b"{}"
+        k = raw_socket(daemon, timeout=5)
+        k.sendall(put_head(s, f"Content-Length: {len(payload) + 200}", "Transfer-Encoding: chunked")
+                  + f"{len(payload):x}\r\n".encode() + payload + b"\r\n0\r\n\r\n" + tail)
+        out = read_head(k, until_close=True)
+        k.close()
+        assert out.startswith(b"HTTP/1.1 200" if good else b"HTTP/1.1 400"), out[:300]
+        assert b"connection: close" in out.lower(), out[:600]
+        assert out.count(b"HTTP/1.1 ") == 1, out
+    assert s.req("GET").json()["version"] == 1
+    # a Content-Length alone keeps the connection: two requests on it are both answered
+    k = raw_socket(daemon, timeout=5)
+    k.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n" + tail + b"GET /healthz HTTP/1.1\r\n"
+              b"Host: x\r\nConnection: close\r\n\r\n")
+    out = read_head(k, until_close=True)
+    k.close()
+    assert out.count(b"HTTP/1.1 200") == 3, out
+
+
 def test_a_request_larger_than_the_whole_budget_is_a_413():
     """A body that only the tree parse can read (a vertex that is a string) of 2 M vertices needs
     more than a 400 MB budget on its own: 413 naming max_memory with what it needed (no
@@ -831,6 +859,50 @@ def test_a_request_larger_than_the_whole_budget_is_a_413():
         assert j["limit_name"] == "max_memory" and j["limit"] == 400_000_000, j
         assert j["requested"] > j["limit"] and "Retry-After" not in r.headers
         assert s.put_complex({"vertices": CUBE_V, "simplices": CUBE_S}).status_code == 200
+    finally:
+        d.stop()
+
+
+def tet_grid(n):
+    """n^3 unit cubes, each as the 6 tetrahedra around its main diagonal."""
+    import itertools
+    vid = lambda x, y, z: x + (n + 1) * (y + (n + 1) * z)
+    verts = [[x, y, z] for z in range(n + 1) for y in range(n + 1) for x in range(n + 1)]
+    tets = []
+    for x, y, z in itertools.product(range(n), repeat=3):
+        for perm in itertools.permutations(range(3)):
+            c = [x, y, z]
+            t = [vid(*c)]
+            for a in perm:
+                c[a] += 1
+                t.append(vid(*c))
+            tets.append(t)
+    return verts, tets
+
+
+def test_a_level_larger_than_the_whole_budget_is_refused_before_it_is_built():
+    """Level 3 of 24 576 tetrahedra (6.4 M cells, under --max-cells) needs some 440 MB by the
+    core's estimate, more than a 300 MB budget holds even with nothing else in it: 413 naming
+    max_memory before any of it is built (the daemon's RSS stays small), where it was built until
+    the budget ran out and answered 503 memory-budget, \"retry later\", which no retry changes.
+    Level 2 (about 55 MB) is served."""
+    d = Daemon("--max-memory", str(300_000_000))
+    try:
+        s = Session(d)
+        v, t = tet_grid(16)
+        assert s.put_complex({"vertices": v, "simplices": t}).status_code == 200
+        before = d.rss_bytes()
+        for path in ("/levels/3/stats", "/levels/3?format=glb"):
+            t0 = time.time()
+            r = s.req("GET", path)
+            assert r.status_code == 413, r.text[:300]
+            j = r.json()
+            assert j["limit_name"] == "max_memory" and j["limit"] == 300_000_000, j
+            assert j["requested"] > j["limit"] and "Retry-After" not in r.headers, j
+            assert time.time() - t0 < 0.5
+        if not daemon_mod.SANITIZED:   # under ASan the resident size is its allocator's
+            assert d.rss_bytes() - before < (50 << 20)
+        assert s.req("GET", "/levels/2/stats").status_code == 200
     finally:
         d.stop()
 
