@@ -408,7 +408,7 @@ int api_embed_put(api_model *m, api_embed_def *d, uint64_t version, const api_li
     int full = find(m, d->name) < 0 && m->nembed >= API_MAX_EMBEDDED;
     pthread_mutex_unlock(&m->lock);
     if (full)
-        return api_fail_at(p, 422, "limit-exceeded", "name", "a session holds at most %d embedded "
+        return api_fail_at(p, 422, "too-many-entries", "name", "a session holds at most %d embedded "
                            "models; DELETE one first", API_MAX_EMBEDDED);
     struct timespec t0, t1;
     clock_gettime(CLOCK_MONOTONIC, &t0);
@@ -419,7 +419,7 @@ int api_embed_put(api_model *m, api_embed_def *d, uint64_t version, const api_li
     pthread_mutex_lock(&m->lock);
     int at = find(m, d->name), rc = 0;
     if (at < 0 && m->nembed >= API_MAX_EMBEDDED)
-        rc = api_fail_at(p, 422, "limit-exceeded", "name", "a session holds at most %d embedded "
+        rc = api_fail_at(p, 422, "too-many-entries", "name", "a session holds at most %d embedded "
                          "models; DELETE one first", API_MAX_EMBEDDED);
     else if (!ensure_list(m))
         rc = api_fail(p, 503, "out-of-memory", "out of memory");
@@ -797,7 +797,7 @@ static int adopt_binding(api_model *m, api_embed_def *d, const uint32_t *idx, co
     if (!ensure_list(m))
         return api_fail(p, 503, "out-of-memory", "out of memory");
     if (find(m, d->name) >= 0 || m->nembed >= API_MAX_EMBEDDED)
-        return api_fail_at(p, 422, "limit-exceeded", at, "model \"%s\" twice, or too many", d->name);
+        return api_fail_at(p, 422, "too-many-entries", at, "model \"%s\" twice, or too many", d->name);
     if (api_check_level_limits(m, d->level, lim, p) || api_level_compute(m, d->level, NULL, p))
         return p->status;
     api_embed e = {0};
@@ -899,7 +899,7 @@ int api_embed_import(api_model *m, json_t *emb, const char *base, const api_limi
     const char *name;
     json_t *v;
     if (json_object_size(emb) > API_MAX_EMBEDDED)
-        return api_fail_at(p, 422, "limit-exceeded", base, "at most %d embedded models",
+        return api_fail_at(p, 422, "too-many-entries", base, "at most %d embedded models",
                            API_MAX_EMBEDDED);
     json_object_foreach(emb, name, v) {
         char at[160];
@@ -909,7 +909,7 @@ int api_embed_import(api_model *m, json_t *emb, const char *base, const api_limi
         json_t *def = json_is_object(v) ? json_copy(v) : json_incref(v), *binding = NULL;
         if (json_is_object(def) && (binding = json_object_get(def, "binding")))
             json_incref(binding), json_object_del(def, "binding");
-        int rc = name_ok(name, &q) ? api_fail_at(p, 422, "bad-parameter", at, "%s", q.detail)
+        int rc = name_ok(name, &q) ? api_fail_at(p, 422, "invalid-name", at, "%s", q.detail)
                                    : parse_def(def, name, at, lim, &d, p);
         json_decref(def);
         json_t *unused = NULL;

@@ -184,7 +184,7 @@ int api_put_rules(const api_model *cur, json_t *body, const api_limits *lim, api
         return api_fail_at(p, 409, "no-complex", "/overrides",
                            "overrides name simplices of the complex; PUT the complex first");
     if (nov && nov > (size_t)cur->in->nv + 6 * (size_t)cur->in->ns) /* > vertices + edges */
-        return api_fail_at(p, 422, "limit-exceeded", "/overrides",
+        return api_fail_at(p, 422, "too-many-entries", "/overrides",
                            "%zu overrides for a complex of %u vertices and %u simplices: at most "
                            "one per vertex or edge", nov, cur->in->nv, cur->in->ns);
     sd_override *list = api_calloc(nov + 1, sizeof *list);
@@ -363,7 +363,7 @@ static int parse_tangents(json_t *nm, json_t *tg, json_t *te, const api_input *i
             return api_fail_at(p, 400, "wrong-type", lists[L], "must be an array of %s",
                                shapes[L]);
         if (json_array_size(a) > most)
-            return api_fail_at(p, 422, "limit-exceeded", lists[L],
+            return api_fail_at(p, 422, "too-many-entries", lists[L],
                                "%zu entries for a complex of %u vertices and %u simplices: at "
                                "most one per petal or edge", json_array_size(a), nv,
                                in ? in->ns : 0);
@@ -439,7 +439,7 @@ static int parse_tangents(json_t *nm, json_t *tg, json_t *te, const api_input *i
                                    json_is_array(trs) ? "invalid-tag" : "wrong-type", at,
                                    "an array of triangles, one in each closed petal");
             if ((size_t)tags->ntt + json_array_size(trs) > most)
-                return api_fail_at(p, 422, "limit-exceeded", at,
+                return api_fail_at(p, 422, "too-many-entries", at,
                                    "%zu petals in all for a complex of %u vertices and %u "
                                    "simplices: at most %zu (one per petal or edge)",
                                    (size_t)tags->ntt + json_array_size(trs), nv,
@@ -608,7 +608,7 @@ static int parse_sharpness(json_t *a, const api_input *in, api_tags *tags, api_p
                                "sharpness names simplices of the complex; PUT the complex first")
                  : 0;
     if (n > (size_t)in->nv + 10 * (size_t)in->ns) /* > vertices + edges + faces: before allocating */
-        return api_fail_at(p, 422, "limit-exceeded", "/sharpness",
+        return api_fail_at(p, 422, "too-many-entries", "/sharpness",
                            "%zu sharpness values for a complex of %u vertices and %u simplices: "
                            "at most one per vertex, edge or triangle", n, in->nv, in->ns);
     tags->sh = api_plain_malloc((n + 1) * sizeof *tags->sh);

@@ -782,7 +782,7 @@ def test_a_model_past_the_eighth_is_refused_before_it_is_bound(daemon):
     r = s.req("PUT", "/embedded/ninth", data=blob, params={"level": 3, "outside": "fixed"},
               headers={"Content-Type": "application/octet-stream"})
     took = time.time() - t0
-    assert r.status_code == 422 and r.json()["type"] == "/errors/limit-exceeded", r.text
+    assert r.status_code == 422 and r.json()["type"] == "/errors/too-many-entries", r.text
     assert r.json()["errors"][0]["pointer"] == "name", r.text
     after = s.req("GET", "").json()
     assert after["version"] == before["version"]

@@ -45,6 +45,19 @@ def test_the_table_names_every_slug_of_the_code():
     assert not missing, f"slugs reported by the code without a row in docs/SERVICE.md: {missing}"
 
 
+def test_the_code_answers_each_slug_with_the_status_of_its_row():
+    """A slug is one kind of problem with one status (its row, its /errors/ page): a call that
+    reports it with another status contradicts the page a client is sent to."""
+    table, wrong = table_slugs(), []
+    for path in list((REPO / "api").glob("*.c")) + list((REPO / "server").glob("*.c")):
+        src = path.read_text(encoding="utf-8")
+        for m in re.finditer(r"(?:api_fail(?:_at)?|http_fail)\([^,]+,\s*(\d{3}),\s*\"([a-z-]+)\"", src):
+            if m.group(2) in table and table[m.group(2)] != int(m.group(1)):
+                wrong.append(f"{path.name}:{src[:m.start()].count(chr(10)) + 1} {m.group(1)} "
+                             f"{m.group(2)} (its row: {table[m.group(2)]})")
+    assert not wrong, wrong
+
+
 def test_every_type_resolves():
     d = Daemon()
     try:
