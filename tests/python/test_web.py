@@ -49,11 +49,14 @@ CHECKS = [
     "solid_scheme",      # a rule the daemon has (averaged) changes the level
     "drag_point",        # dragging a control point: version advances, GLB and picture change
     "undo_redo",         # Ctrl+Z puts it back exactly, Redo moves it again
+    "slice_follows_edits",  # the cut = the daemon's after a drag, an undo, a redo, an edit elsewhere
+    "level_back",        # a level that cannot be fetched is said; the slider goes back to the level drawn
     "embed_model",       # an OBJ embedded in the solid follows a drag by its deltas, drawn = the daemon's
     "file_open",         # an OBJ from disk
     "file_errors",       # a broken file and a refused one are explained
     "file_stl_msh",      # STL and Gmsh .msh from disk; the model selector shows the file
     "level_note",        # the note under the slider says why it stops (the cell limit)
+    "keyboard_files",    # Open file… and Embed a model… reached by Tab; Space opens the file chooser
     "session_recovery",  # an expired session is replaced with the same model, and the user told
     "session_recovery_drag",  # the same when the 404 comes to a drag: the new level drawn, = refetch
     "default_rules",     # the default-rule list is G2, G1 (N1/N2 only as overrides of one simplex)
@@ -70,6 +73,7 @@ CHECKS = [
     "second_tab_embedded",  # a tab opened by the link draws it, and takes it away when the first removes it
     "link_replaced",     # a link's tab whose session went: a session of its own, the address follows, a reload opens it
     "bfcache_gone",      # back from the back/forward cache with the session gone: replaced, said as info
+    "events_refused",    # an event stream answered 404 (session gone) / 429: replaced and said / said
     "console_clean",     # no console errors but the refusals the test provokes
 ]
 

@@ -270,11 +270,18 @@ await step('attribute_colour', async () => {
   const legend = await page.textContent('#legend');
   const after = await pixels();
   await shot('05-attribute-colour.png');
+  // an emptied min field is refused in words, not read as 0
+  const n = s.messages.length;
+  await page.fill('#color-min', '');
+  await page.dispatchEvent('#color-min', 'change');
+  await idle();
+  const emptied = await snap();
+  const said = (await errorsSince(n)).map((m) => m.text).join(' | ');
   await page.selectOption('#color-mode', 'rule');
   await idle('window.subdivd.snapshot().shown.query.colormap === undefined');
   check('attribute_colour', /^\w+:-?[\d.e-]+:-?[\d.e-]+$/.test(s.shown.query.colormap) && legend.includes(opt.slice(5)) &&
-    sigDiff(before.signature, after.signature) > 0,
-    `colormap=${s.shown.query.colormap}; legend "${legend.trim().slice(0, 80)}"`);
+    sigDiff(before.signature, after.signature) > 0 && emptied.shown.query.colormap === s.shown.query.colormap && /min < max/.test(said),
+    `colormap=${s.shown.query.colormap}; legend "${legend.trim().slice(0, 80)}"; min emptied: colormap=${emptied.shown.query.colormap}, said: ${said}`);
 });
 
 // 7b. the level GLB through three.js's own GLTFLoader (the page's instance): a named node and
@@ -634,6 +641,91 @@ await step(['drag_point', 'undo_redo'], async () => {
     `undo -> ${undone.controlPoints[pick.index]}, redo -> ${redone.controlPoints[pick.index]}; versions ${undone.version}, ${redone.version}`);
 });
 
+// 11a. the cut follows every move, not only this tab's drags (the slice is not part of a
+// delta): after an undo, a redo and an edit made elsewhere (a PATCH behind the page's back,
+// heard by its events) the drawn slice triangles are the daemon's (GET ?format=json&slice=,
+// float32), and a drag fetches the level once as it ends
+const sliceVsDaemon = () => page.evaluate(async () => {
+  const app = window.subdivd;
+  const q = new URLSearchParams({ format: 'json', slice: app.shown.query.slice });
+  const res = await fetch(`/v1/sessions/${app.session.id}/levels/${app.shown.level}?${q}`, {
+    headers: { Authorization: `Bearer ${app.session.token}` } });
+  const j = await res.json();
+  const key = (pts) => pts.map((p) => p.join(',')).sort().join(';');
+  const tris = (j.slice?.triangles ?? []).map((t) => key(t.map((i) => j.slice.vertices[i].map(Math.fround))));
+  const want = new Set(tris);
+  const g = app.viewer.parts.slice?.geometry;
+  let drawn = 0, foreign = 0;
+  if (g) {
+    const pos = g.attributes.position, idx = g.index, n = idx ? idx.count : pos.count;
+    for (let k = 0; k < n; k += 3, drawn++) {
+      const t = [0, 1, 2].map((m) => { const i = idx ? idx.getX(k + m) : k + m; return [pos.getX(i), pos.getY(i), pos.getZ(i)]; });
+      if (!want.has(key(t))) foreign++;
+    }
+  }
+  return { want: tris.length, drawn, foreign, version: res.headers.get('ETag'), shown: app.shown.version };
+});
+const sliceOk = (c) => c.want > 0 && c.drawn === c.want && c.foreign === 0 && c.version === `"${c.shown}"`;
+await step('slice_follows_edits', async () => {
+  await page.check('#xsec');
+  await idle('window.subdivd.snapshot().shown.query.slice !== undefined');
+  const pick = await pickableVertex(() => true);
+  if (!pick) throw new Error('no clickable control vertex on screen');
+  const before = await snap();
+  await page.mouse.move(pick.at.x, pick.at.y);
+  await page.mouse.down();
+  for (let k = 1; k <= 8; k++) await page.mouse.move(pick.at.x, pick.at.y + 6 * k);
+  await page.mouse.up();
+  await idle(`window.subdivd.snapshot().undo === ${before.undo + 1}`);
+  const dragged = await snap();
+  const afterDrag = await sliceVsDaemon();
+  await page.keyboard.press('Control+z');
+  await idle(`window.subdivd.snapshot().redo === 1`);
+  const afterUndo = await sliceVsDaemon();
+  await page.click('#redo');
+  await idle(`window.subdivd.snapshot().redo === 0`);
+  const afterRedo = await sliceVsDaemon();
+  // an edit made elsewhere: another point moved by a PATCH the page did not send
+  const v = await page.evaluate(async (i) => {
+    const app = window.subdivd, p = app.snapshot().controlPoints[i];
+    const r = await fetch(`/v1/sessions/${app.session.id}/control-points`, { method: 'PATCH',
+      headers: { Authorization: `Bearer ${app.session.token}`, 'Content-Type': 'application/json', 'If-Match': `"${app.session.version}"` },
+      body: JSON.stringify({ moves: [{ index: i, position: [p[0], p[1], p[2] + 0.3] }] }) });
+    return (await r.json()).version;
+  }, (pick.index + 1) % dragged.controlPoints.length);
+  await idle(`window.subdivd.snapshot().shown.version >= ${v}`);
+  const afterOther = await sliceVsDaemon();
+  await page.uncheck('#xsec');
+  await idle('window.subdivd.snapshot().shown.query.slice === undefined');
+  check('slice_follows_edits', sliceOk(afterDrag) && sliceOk(afterUndo) && sliceOk(afterRedo) && sliceOk(afterOther) &&
+    dragged.shown.fetches === before.shown.fetches + 1,
+    `drawn slice triangles vs the daemon's (drawn/wanted/not the daemon's, version): after the drag ${JSON.stringify(afterDrag)} ` +
+    `(${dragged.shown.fetches - before.shown.fetches} level fetches), undo ${JSON.stringify(afterUndo)}, redo ${JSON.stringify(afterRedo)}, ` +
+    `an edit elsewhere ${JSON.stringify(afterOther)}`);
+});
+
+// 11a'. a level that cannot be fetched (here its stats answered 503, as by a daemon out of
+// memory; a daemon out of reach is alike) is said, and the slider goes back to the level drawn
+await step('level_back', async () => {
+  const before = await snap();
+  const L = before.shown.level, n = before.messages.length;
+  const bad = `/levels/${L - 1}/stats`;
+  expectedFailures.push([bad, 503]);
+  await page.route(`**${bad}`, (r) => r.fulfill({ status: 503, contentType: 'application/problem+json',
+    body: JSON.stringify({ type: '/errors/out-of-memory', title: 'Service Unavailable', status: 503, detail: 'no memory for it now' }) }));
+  await page.focus('#level');
+  await page.keyboard.press('ArrowLeft');
+  await page.waitForFunction(`window.subdivd.snapshot().messages.length > ${n}`, null, { timeout: TIMEOUT });
+  await idle();
+  await page.unroute(`**${bad}`);
+  const after = await snap();
+  const slider = await page.$eval('#level', (e) => Number(e.value)), label = (await page.textContent('#level-value')).trim();
+  const said = (await errorsSince(n)).map((m) => m.text).join(' | ');
+  check('level_back', after.shown.level === L && after.level === L && slider === L && label === String(L) &&
+    /503/.test(said) && /no memory for it now/.test(said),
+    `drawn level ${after.shown.level}, slider ${slider}, label ${label}, wanted ${after.level}; said: ${said}`);
+});
+
 // 11b. an embedded model (free-form deformation): an OBJ bound to the shown level, drawn in its own
 // colour, follows a drag by its own deltas; what is drawn equals the daemon's model (float32)
 await step('embed_model', async () => {
@@ -744,6 +836,35 @@ await step(['file_stl_msh', 'level_note'], async () => {
   // back to the model the next steps had before
   await page.setInputFiles('#file', path.join(outdir, 'tetra_with_tail.obj'));
   await idle(`window.subdivd.snapshot().model === 'tetra_with_tail.obj'`);
+});
+
+// 12c. the file inputs are in the tab order (drawn as their labels): from "Load example", Tab
+// reaches "Open file…", whose focus the label shows, and Space opens the file chooser; the
+// next Tab reaches "Embed a model…"
+await step('keyboard_files', async () => {
+  await page.focus('#load-example');
+  await page.keyboard.press('Tab');
+  const first = await page.evaluate(() => document.activeElement.id);
+  const outline = await page.$eval('label[for=file]', (l) => getComputedStyle(l).outlineStyle);
+  const chooser = page.waitForEvent('filechooser', { timeout: 5000 }).catch(() => null);
+  await page.keyboard.press('Space');
+  const fc = await chooser;
+  const good = path.join(outdir, 'keyboard.obj'), tetra = path.join(outdir, 'tetra_with_tail.obj');
+  if (!fs.existsSync(tetra)) fs.writeFileSync(tetra, 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv -1 -1 -1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\nl 1 5\n');
+  fs.writeFileSync(good, 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n');
+  if (fc) {
+    await fc.setFiles(good);
+    await idle(`window.subdivd.snapshot().model === 'keyboard.obj'`);
+  }
+  const loaded = (await snap()).model;
+  await page.focus('#file');
+  await page.keyboard.press('Tab');
+  const second = await page.evaluate(() => document.activeElement.id);
+  // back to the model the next steps had before
+  await page.setInputFiles('#file', tetra);
+  await idle(`window.subdivd.snapshot().model === 'tetra_with_tail.obj'`);
+  check('keyboard_files', first === 'file' && outline === 'solid' && !!fc && loaded === 'keyboard.obj' && second === 'embed-file',
+    `Tab from "Load example" -> #${first} (label outline ${outline}); Space: ${fc ? 'a file chooser' : 'no file chooser'}; loaded ${loaded}; next Tab -> #${second}`);
 });
 
 // 13. a session that expired (deleted here behind the page's back) is replaced, and the user told
@@ -1173,6 +1294,50 @@ await step(['reload_embedded', 'second_tab_embedded', 'link_replaced', 'bfcache_
     s6.model === s4.model,
     `session ${mine.id.slice(0, 8)} -> ${s6.session?.slice(0, 8)} (expires in ${left} s), model ${s6.model}; said: ${said.join(' | ')}`);
   await p4.close({ runBeforeUnload: true });
+});
+
+// 18b. an event stream the daemon answers with an error closes the EventSource for good: a
+// session gone without a `deleted` event (as when a daemon without a durable store restarts) is
+// replaced with the same model and said, and the new one is listened to; a stream refused while
+// the session lives (429: too many listeners) is said
+await step('events_refused', async () => {
+  const waitFor = (pg, cond) => pg.waitForFunction(cond, null, { timeout: TIMEOUT });
+  const px = await browser.newPage({ viewport: { width: 900, height: 600 } });
+  let phase = 0, first = null;
+  await px.route('**/events?*', async (r) => {
+    const u = new URL(r.request().url());
+    if (phase === 0) { // a stream that ends at once: the browser reconnects 200 ms later
+      phase = 1;
+      return r.fulfill({ status: 200, contentType: 'text/event-stream', body: 'retry: 200\n: version 1\n\n' });
+    }
+    if (phase === 1) { // meanwhile the session went, with no listener to tell: the daemon answers 404
+      phase = 2;
+      first = u.pathname.split('/')[3];
+      await fetch(new URL(`/v1/sessions/${first}`, url), { method: 'DELETE',
+        headers: { Authorization: `Bearer ${u.searchParams.get('access_token')}` } });
+    }
+    return r.continue();
+  });
+  await px.goto(url);
+  for (let t = Date.now(); phase < 2 && Date.now() - t < TIMEOUT;) await px.waitForTimeout(50);
+  await waitFor(px, `window.subdivd && window.subdivd.ready && window.subdivd.session.id !== ${JSON.stringify(first)} && ` +
+    `window.subdivd.snapshot().messages.length > 0 && window.subdivd.snapshot().listening`);
+  const sx = await px.evaluate(() => window.subdivd.snapshot());
+  const saidX = sx.messages.map((m) => `${m.kind}: ${m.text}`);
+  // a stream refused while the session lives
+  const py = await browser.newPage({ viewport: { width: 900, height: 600 } });
+  await py.route('**/events?*', (r) => r.fulfill({ status: 429, contentType: 'application/problem+json',
+    body: JSON.stringify({ type: '/errors/too-many-listeners', title: 'Too Many Requests', status: 429, detail: 'too many event streams' }) }));
+  await py.goto(url);
+  await waitFor(py, `window.subdivd && window.subdivd.ready && window.subdivd.snapshot().messages.length > 0`);
+  const sy = await py.evaluate(() => window.subdivd.snapshot());
+  const saidY = sy.messages.map((m) => `${m.kind}: ${m.text}`);
+  await px.close();
+  await py.close();
+  check('events_refused', phase === 2 && first && sx.session !== first && sx.listening && sx.model && saidX.some((m) => m.startsWith('info:') && m.includes('new one')) &&
+    !saidX.some((m) => m.startsWith('error:')) && saidY.some((m) => m.startsWith('error:') && /no longer follows/.test(m)) && !sy.listening,
+    `gone: session ${first?.slice(0, 8)} -> ${sx.session?.slice(0, 8)}, listening ${sx.listening}, said ${saidX.join(' | ')}; ` +
+    `refused: listening ${sy.listening}, said ${saidY.join(' | ')}`);
 });
 
 // 19. no console errors other than the refusals provoked above

@@ -179,7 +179,7 @@ class App {
 
   idle() {
     return this.pending === 0 && !this.levelPromise && !this.movePromise && !this.levelWanted &&
-      !this.syncPromise && !this.pendingMoves.size;
+      !this.syncPromise && !this.pendingMoves.size && !this.recutTimer;
   }
 
   // ---- messages ---------------------------------------------------------------------------
@@ -303,9 +303,9 @@ class App {
   // The daemon refused a level by one of its limits (413 with `limit`: max_cells, its cell
   // count estimate, or max_session_bytes): the slider stops below it and says why.
   #levelRefused(e) {
-    if (!(e instanceof ApiError && e.status === 413 && e.problem.limit !== undefined && this.model)) return;
+    if (!(e instanceof ApiError && e.status === 413 && e.problem.limit !== undefined && this.model)) return false;
     const L = this.level;
-    if (L < 1) return;
+    if (L < 1) return false;
     this.model.maxLevel = Math.min(this.model.maxLevel, L - 1);
     this.level = Math.min(this.shown?.level ?? L - 1, this.model.maxLevel);
     $('level').max = this.model.maxLevel;
@@ -313,6 +313,16 @@ class App {
     $('level-value').textContent = this.level;
     const what = e.problem.limit_name || e.problem.name || 'its limit';
     this.#levelNote(`The slider stops at level ${this.model.maxLevel}: the daemon refuses level ${L} (${what}: ${e.problem.detail || e.message}).`);
+    return true;
+  }
+
+  // A level that could not be fetched (the daemon unreachable, busy, …; the message says): the
+  // slider goes back to the level drawn, so that it does not claim one that is not shown.
+  #levelBack() {
+    if (!this.shown || this.level === this.shown.level) return;
+    this.level = this.shown.level;
+    $('level').value = this.level;
+    $('level-value').textContent = this.level;
   }
 
   // Why the level slider stops where it does (under the slider).
@@ -501,7 +511,7 @@ class App {
       } catch (e) {
         this.levelWanted = false;
         this.error(e);
-        this.#levelRefused(e);
+        if (!this.#levelRefused(e)) this.#levelBack();
       } finally {
         this.levelPromise = null;
       }
@@ -519,7 +529,7 @@ class App {
     this.viewer.setLevel(gltf, stats);
     this.known = Math.max(this.known, version);
     this.shown = {
-      level: L, version, query, stats, bytes: buf.byteLength,
+      level: L, version, cut: version, query, stats, bytes: buf.byteLength,
       hash: fnv1a(buf), ms: performance.now() - t0, parts: Object.keys(this.viewer.parts),
       rules: this.#levelRuleCounts(), deltas: 0, fetches: (this.shown?.fetches ?? 0) + 1,
     };
@@ -737,10 +747,25 @@ class App {
     this.viewer.applyDelta(d);
     this.#followEmbedded();
     this.shown.version = d.version;
+    this.#recutSoon();
     this.shown.deltas++;
     this.perf.deltas++;
     this.perf.deltaBytes += d.bytes;
     this.#updatesDone(d);
+  }
+
+  // The slice primitive is not part of a delta: with the cut on, a level that deltas moved is
+  // fetched again once they pause — after an undo or redo, another tab's edits (a drag of this
+  // tab fetches it as the drag ends, onPointerUp).
+  #recutSoon() {
+    if (!this.slice.on) return;
+    clearTimeout(this.recutTimer);
+    this.recutTimer = setTimeout(() => {
+      this.recutTimer = 0;
+      if (!this.slice.on || !this.shown) return;
+      if (this.drag || this.levelPromise || this.movePromise || this.syncPromise) return this.#recutSoon();
+      if (this.shown.version > this.shown.cut) this.requestLevel();
+    }, 250);
   }
 
   // The control points changed elsewhere: a JSON delta of level 0 (exact doubles).
@@ -836,6 +861,18 @@ class App {
         }).catch((e) => this.error(e));
       },
       resync: () => this.resync(),
+      // an answer other than the stream (404: the session went without a `deleted` event, as
+      // in a restart of a daemon without a durable store; 429: too many listeners) closes an
+      // EventSource for good (a daemon out of reach is retried by the browser): the complex is
+      // read again — a gone session is replaced by a new one, which is listened to, and said —
+      // and a tab that no longer hears the changes says so
+      error: (ev, es) => {
+        if (es.readyState !== 2 || this.events !== es || this.session.id !== id) return;
+        this.resync().then(() => {
+          if (this.events === es && this.session.id === id)
+            this.error('This tab no longer follows the changes made elsewhere (the daemon refused its event stream); reload the page to follow them again.');
+        });
+      },
       deleted: (data) => {
         if (this.session.id !== id) return;
         this.events?.close();
@@ -1401,7 +1438,7 @@ class App {
     for (const id of ['color-min', 'color-max'])
       $(id).addEventListener('change', () => {
         const lo = Number($('color-min').value), hi = Number($('color-max').value);
-        if (!(Number.isFinite(lo) && Number.isFinite(hi) && hi > lo)) {
+        if (!(Number.isFinite(lo) && Number.isFinite(hi) && hi > lo) || !$('color-min').value.trim() || !$('color-max').value.trim()) {
           this.error(`The colour range needs min < max (got ${$('color-min').value} and ${$('color-max').value}).`);
           return;
         }
