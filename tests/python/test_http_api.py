@@ -152,6 +152,28 @@ def test_session_lifecycle(daemon):
     assert requests.get(f"{daemon.url}/v1/sessions/{j['id']}", headers=auth).status_code == 404
 
 
+def test_session_answers_carry_the_version_as_etag_from_0(daemon):
+    """Every answer that carries the session's version sends it as a strong ETag (docs/API.md,
+    the OpenAPI document's ETag headers), a new session's version 0 too: POST /v1/sessions (and
+    an import, at the version it continues from), GET and PATCH /v1/sessions/{id}, GET /export."""
+    r = requests.post(daemon.url + "/v1/sessions", json={})
+    assert r.status_code == 201 and r.json()["version"] == 0
+    assert r.headers.get("ETag") == '"0"'
+    base = f"{daemon.url}/v1/sessions/{r.json()['id']}"
+    auth = {"Authorization": f"Bearer {r.json()['token']}"}
+    for method, path, body in (("GET", "", None), ("PATCH", "", {"ttl_s": 300}),
+                               ("GET", "/export", None)):
+        a = requests.request(method, base + path, headers=auth, json=body)
+        assert a.status_code == 200 and a.json()["version"] == 0, a.text
+        assert a.headers.get("ETag") == '"0"', (method, path, dict(a.headers))
+    assert requests.put(base + "/complex", headers={**auth, "If-Match": '"0"'},
+                        json=TET).status_code == 200
+    doc = requests.get(base + "/export", headers=auth)
+    assert doc.headers["ETag"] == '"1"'
+    i = requests.post(daemon.url + "/v1/sessions", json={"import": doc.json()})
+    assert i.status_code == 201 and i.headers["ETag"] == '"1"' and i.json()["version"] == 1
+
+
 def test_ttl_expiry():
     d = Daemon()
     try:
