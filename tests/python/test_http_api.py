@@ -46,6 +46,13 @@ def test_health_ready(daemon):
         assert r.status_code == 200 and r.json() == {"status": "ok"}
     r = requests.get(daemon.url + "/readyz")
     assert r.status_code == 200 and r.json()["status"] == "ready"
+    # the members the OpenAPI document declares, no more, no fewer
+    doc = json.loads((REPO / "api" / "openapi.json").read_text(encoding="utf-8"))
+    schema = doc["paths"]["/readyz"]["get"]["responses"]["200"]["content"]["application/json"]["schema"]
+    j = r.json()
+    assert set(j) == set(schema["properties"]) == set(schema["required"])
+    assert set(j["memory"]) == set(schema["properties"]["memory"]["properties"])
+    assert j["store"] == "memory"   # the default --store
 
 
 def test_metrics_exposition(daemon):
