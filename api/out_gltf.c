@@ -251,7 +251,7 @@ static int produce(out_stream *s)
     gstate *g = s->fmt_state;
     if (g->phase == 0) {
         out_put(s, g->json, g->json_len);
-        if (g->glb) {
+        if (g->glb && g->sec.n) { /* no BIN chunk without a buffer */
             uint32_t hdr[2] = {(uint32_t)g->bin_len, 0x004E4942};
             out_put(s, hdr, 8);
         }
@@ -279,7 +279,7 @@ static int produce(out_stream *s)
             return 1;
         g->phase = 2;
     }
-    if (g->phase == 2 && !g->glb)
+    if (g->phase == 2 && !g->glb && g->sec.n)
         out_printf(s, "\"}]}");
     g->phase = 3;
     return 0;
@@ -418,6 +418,8 @@ static void accessor_name(FILE *f, const out_stream *s, const gstate *g, const g
  * of the float32 values written. */
 static void json_accessors(FILE *f, const out_stream *s, const gstate *g)
 {
+    if (!g->sec.n)
+        return; /* nothing to store: no buffer, views or accessors (glTF forbids empty arrays) */
     fprintf(f, "\"bufferViews\":[");
     for (int i = 0; i < g->sec.n; i++) {
         const gsec *c = &g->sec.s[i];
@@ -519,7 +521,7 @@ static int json_meshes(FILE *f, const out_stream *s, const gstate *g, const layo
             fprintf(f, ",{\"name\":\"embedded/%s\",\"mesh\":%d}", s->mesh[part[m] - 5].name, m);
         else
             fprintf(f, ",{\"name\":\"%s\",\"mesh\":%d}", PART_NAME[part[m]], m);
-    fprintf(f, "],");
+    fprintf(f, "]");
     return nparts;
 }
 
@@ -539,10 +541,13 @@ static char *json_part(const out_stream *s, const gstate *g, const layout *L, si
     fprintf(f, "\"materials\":[{\"name\":\"subdivd\",\"pbrMetallicRoughness\":{\"baseColorFactor\":"
                "[0.8,0.8,0.8,1],\"metallicFactor\":0,\"roughnessFactor\":0.8},\"doubleSided\":true}],");
     json_meshes(f, s, g, L);
-    if (g->glb)
-        fprintf(f, "\"buffers\":[{\"byteLength\":%llu}]}", (unsigned long long)g->bin_len);
+    if (!g->sec.n) /* parts=embedded without models: no data at all, so no buffer (a buffer's
+                    * byteLength is at least 1) */
+        fprintf(f, "}");
+    else if (g->glb)
+        fprintf(f, ",\"buffers\":[{\"byteLength\":%llu}]}", (unsigned long long)g->bin_len);
     else
-        fprintf(f, "\"buffers\":[{\"byteLength\":%llu,\"uri\":\"data:application/octet-stream;base64,",
+        fprintf(f, ",\"buffers\":[{\"byteLength\":%llu,\"uri\":\"data:application/octet-stream;base64,",
                 (unsigned long long)g->bin_len);
     if (fclose(f)) {
         free(text); /* open_memstream's buffer belongs to the C library */
@@ -567,7 +572,7 @@ static int frame(out_stream *s, gstate *g, const char *text, size_t n, sd_error 
     if (!j)
         return out_nomem(err);
     if (g->glb) {
-        uint32_t total = (uint32_t)(12 + 8 + n + pad + 8 + g->bin_len);
+        uint32_t total = (uint32_t)(12 + 8 + n + pad + (g->sec.n ? 8 + g->bin_len : 0));
         uint32_t hdr[5] = {0x46546C67, 2, total, (uint32_t)(n + pad), 0x4E4F534A};
         memcpy(j, hdr, 20);
     }
@@ -575,7 +580,8 @@ static int frame(out_stream *s, gstate *g, const char *text, size_t n, sd_error 
     memset(j + head + n, ' ', pad);
     g->json = j;
     g->json_len = head + n + pad;
-    s->size = g->glb ? g->json_len + 8 + g->bin_len : n + (g->bin_len + 2) / 3 * 4 + 4;
+    s->size = !g->sec.n ? g->json_len
+              : g->glb ? g->json_len + 8 + g->bin_len : n + (g->bin_len + 2) / 3 * 4 + 4;
     return 0;
 }
 

@@ -109,7 +109,19 @@ static struct MHD_Response *text_response(req *r, const char *ctype, char *text,
     return http_buffer_response(ctype, text, n);
 }
 
+static void reply_json(req *r, int status, json_t *body, uint64_t version, bool tag);
+
 void http_reply_json(req *r, int status, json_t *body, uint64_t version)
+{
+    reply_json(r, status, body, version, version != 0);
+}
+
+void http_reply_session_json(req *r, int status, json_t *body, uint64_t version)
+{
+    reply_json(r, status, body, version, true);
+}
+
+static void reply_json(req *r, int status, json_t *body, uint64_t version, bool tag)
 {
     char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
     json_decref(body);
@@ -119,7 +131,7 @@ void http_reply_json(req *r, int status, json_t *body, uint64_t version)
         r, status >= 400 ? "application/problem+json" : "application/json", text,
         "{\"type\":\"/errors/internal\",\"title\":\"Internal Server Error\",\"status\":500,"
         "\"detail\":\"could not render the response\"}");
-    if (version)
+    if (tag)
         http_set_etag(resp, version);
     http_queue(r, status, resp);
 }

@@ -114,6 +114,9 @@ void http_set_etag(struct MHD_Response *resp, uint64_t version);
 void http_queue(req *r, int status, struct MHD_Response *resp);
 /* A JSON body (steals `body`); version > 0 adds an ETag. */
 void http_reply_json(req *r, int status, json_t *body, uint64_t version);
+/* The same for an answer about the session itself (GET, PATCH /sessions/{id}, GET /export): its
+ * version goes out as the ETag even when it is 0, a session that has not changed yet. */
+void http_reply_session_json(req *r, int status, json_t *body, uint64_t version);
 void http_reply_problem(req *r, const api_problem *p);
 /* A JSON answer that carries the session version (member and ETag), or the problem if none. */
 void http_reply_versioned(req *r, json_t *j, uint64_t version, const api_problem *p);

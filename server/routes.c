@@ -434,6 +434,7 @@ static void h_create_session(req *r)
     atomic_store(&r->bytes, n);
     struct MHD_Response *resp = http_buffer_response("application/json", text, n);
     http_add_header(resp, "Location", loc);
+    http_set_etag(resp, imported_version); /* "0", or the version an import continues from */
     http_queue(r, 201, resp);
 }
 
@@ -458,7 +459,7 @@ static void h_get_session(req *r)
                           "memory_bytes", (json_int_t)atomic_load(&m->memory_bytes), "summary",
                           summary, "expires_at", exp, "progress", progress);
     api_model_unref(m);
-    http_reply_json(r, 200, j, version);
+    http_reply_session_json(r, 200, j, version);
 }
 
 /* PATCH /v1/sessions/{id} {"ttl_s": n}: a new idle TTL, counted from now and capped at --max-ttl
@@ -498,7 +499,7 @@ static void h_patch_session(req *r)
     iso_time(exp, sizeof exp, session_expires_at(r->s));
     json_t *j = json_pack("{s:s, s:s, s:I, s:I}", "id", r->s->id, "expires_at", exp, "ttl_s",
                           (json_int_t)ttl, "version", (json_int_t)version);
-    http_reply_json(r, 200, j, version);
+    http_reply_session_json(r, 200, j, version);
 }
 
 /* GET /export: the session's control data as one document (api/export.c), under the write lock
@@ -515,7 +516,7 @@ static void h_export(req *r)
         http_fail(r, 503, "out-of-memory", "out of memory");
         return;
     }
-    http_reply_json(r, 200, j, version);
+    http_reply_session_json(r, 200, j, version);
 }
 
 static void h_delete_session(req *r)

@@ -6,6 +6,7 @@ tetrahedra, and its octahedra split into the 4 tetrahedra around their major dia
 eq. 13) with numpy's solver, and the deformed position is that combination of the level's
 points after the edit; affine maps of every control point must carry the model by the same map
 (subdivision reproduces affine functions)."""
+import json
 import struct
 import time
 
@@ -790,3 +791,29 @@ def test_a_model_past_the_eighth_is_refused_before_it_is_bound(daemon):
     assert took < 1.0, took
     r = s.req("PUT", "/embedded/m3", json={"vertices": model_points(5, seed=3), "level": 1})
     assert r.status_code == 200 and r.json()["version"] == before["version"] + 1, r.text
+
+
+def test_level_parts_embedded_without_models_validates(daemon, tmp_path):
+    """parts=embedded on a session without embedded models has nothing to store: the file has
+    no buffer, buffer views or accessors (glTF 2.0 forbids empty arrays and a zero byteLength;
+    the Khronos validator reports EMPTY_ENTITY and VALUE_NOT_IN_RANGE for them), no BIN chunk,
+    and validates (docs/OUTPUTS.md: "the file still validates")."""
+    from test_outputs import validate
+    s = Session(daemon)
+    assert s.put_complex(BLOCK).status_code == 200
+    for fmt in ("glb", "gltf"):
+        r = s.level(1, format=fmt, parts="embedded")
+        assert r.status_code == 200, r.text
+        assert int(r.headers["Content-Length"]) == len(r.content)
+        f = tmp_path / f"e.{fmt}"
+        f.write_bytes(r.content)
+        validate(f)
+        if fmt == "glb":
+            magic, version, length = struct.unpack_from("<III", r.content, 0)
+            jlen, _ = struct.unpack_from("<II", r.content, 12)
+            assert length == len(r.content) == 20 + jlen   # one chunk: JSON
+            doc = json.loads(r.content[20:])
+        else:
+            doc = r.json()
+        assert not {"buffers", "bufferViews", "accessors", "meshes"} & set(doc)
+        assert doc["nodes"] == [{"name": "level 1 (empty)"}]

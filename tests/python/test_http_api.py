@@ -46,6 +46,13 @@ def test_health_ready(daemon):
         assert r.status_code == 200 and r.json() == {"status": "ok"}
     r = requests.get(daemon.url + "/readyz")
     assert r.status_code == 200 and r.json()["status"] == "ready"
+    # the members the OpenAPI document declares, no more, no fewer
+    doc = json.loads((REPO / "api" / "openapi.json").read_text(encoding="utf-8"))
+    schema = doc["paths"]["/readyz"]["get"]["responses"]["200"]["content"]["application/json"]["schema"]
+    j = r.json()
+    assert set(j) == set(schema["properties"]) == set(schema["required"])
+    assert set(j["memory"]) == set(schema["properties"]["memory"]["properties"])
+    assert j["store"] == "memory"   # the default --store
 
 
 def test_metrics_exposition(daemon):
@@ -150,6 +157,28 @@ def test_session_lifecycle(daemon):
     d = requests.delete(f"{daemon.url}/v1/sessions/{j['id']}", headers=auth)
     assert d.status_code == 204 and d.content == b""
     assert requests.get(f"{daemon.url}/v1/sessions/{j['id']}", headers=auth).status_code == 404
+
+
+def test_session_answers_carry_the_version_as_etag_from_0(daemon):
+    """Every answer that carries the session's version sends it as a strong ETag (docs/API.md,
+    the OpenAPI document's ETag headers), a new session's version 0 too: POST /v1/sessions (and
+    an import, at the version it continues from), GET and PATCH /v1/sessions/{id}, GET /export."""
+    r = requests.post(daemon.url + "/v1/sessions", json={})
+    assert r.status_code == 201 and r.json()["version"] == 0
+    assert r.headers.get("ETag") == '"0"'
+    base = f"{daemon.url}/v1/sessions/{r.json()['id']}"
+    auth = {"Authorization": f"Bearer {r.json()['token']}"}
+    for method, path, body in (("GET", "", None), ("PATCH", "", {"ttl_s": 300}),
+                               ("GET", "/export", None)):
+        a = requests.request(method, base + path, headers=auth, json=body)
+        assert a.status_code == 200 and a.json()["version"] == 0, a.text
+        assert a.headers.get("ETag") == '"0"', (method, path, dict(a.headers))
+    assert requests.put(base + "/complex", headers={**auth, "If-Match": '"0"'},
+                        json=TET).status_code == 200
+    doc = requests.get(base + "/export", headers=auth)
+    assert doc.headers["ETag"] == '"1"'
+    i = requests.post(daemon.url + "/v1/sessions", json={"import": doc.json()})
+    assert i.status_code == 201 and i.headers["ETag"] == '"1"' and i.json()["version"] == 1
 
 
 def test_ttl_expiry():
