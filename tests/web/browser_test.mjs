@@ -1056,8 +1056,10 @@ await step('second_tab', async () => {
   const p1 = (await snap()).controlPoints;
   const sameCage = JSON.stringify(p1) === JSON.stringify(a2.controlPoints);
   const full2 = a2.shown.fetches - b2.shown.fetches;
-  check('second_tab', b2.session === a2.session && a2.shown.deltas > b2.shown.deltas && !full2 && sameCage && equalToRefetch(cmp),
-    `tab 2 joined ${b2.session?.slice(0, 8)} at level ${a2.shown.level} v${b2.shown.version}, followed to v${a2.shown.version} by ` +
+  const name1 = (await snap()).model;
+  check('second_tab', b2.session === a2.session && a2.shown.deltas > b2.shown.deltas && !full2 && sameCage && equalToRefetch(cmp) &&
+    a2.model === name1,
+    `tab 2 joined ${b2.session?.slice(0, 8)} (model “${a2.model}”, tab 1's “${name1}”) at level ${a2.shown.level} v${b2.shown.version}, followed to v${a2.shown.version} by ` +
     `${a2.shown.deltas - b2.shown.deltas} deltas, ${full2} level fetches; control points as in tab 1: ${sameCage}; ` +
     `buffers vs refetch: ${cmp.position} position, ${cmp.normal} normal floats differ`);
 });

@@ -282,6 +282,7 @@ class App {
     this.#syncRuleControls();
     this.#syncUndo();
     this.#tagsNote();
+    this.#updateSession(); // the link names the new model
   }
 
   // The model selector shows what is loaded: the example of that name, else the file's name
@@ -593,8 +594,10 @@ class App {
   #showSession() {
     const s = this.session;
     $('session').textContent = s.id ? `session ${s.id.slice(0, 8)} · v${s.version}` : 'no session';
-    // the fragment never reaches a server (nor its logs)
-    $('share').href = s.id ? `${location.pathname}#session=${s.id}&token=${s.token}` : '#';
+    // the fragment never reaches a server (nor its logs); the model's name goes with it, so the
+    // other tab names the model as this one does
+    const name = this.model?.name ? `&name=${encodeURIComponent(this.model.name)}` : '';
+    $('share').href = s.id ? `${location.pathname}#session=${s.id}&token=${s.token}${name}` : '#';
   }
 
   // Open a session another tab started (/#session=ID&token=TOKEN): its model, then follow it.
@@ -1587,7 +1590,7 @@ class App {
     const frag = new URLSearchParams(location.hash.slice(1)), kept = Session.kept();
     if (frag.get('session') && frag.get('token')) {
       this.#hint('Joining the session…');
-      if (await this.join(frag.get('session'), frag.get('token'))) {
+      if (await this.join(frag.get('session'), frag.get('token'), { name: frag.get('name') || undefined })) {
         this.ready = true;
         return;
       }
@@ -1595,7 +1598,8 @@ class App {
       // a duplicate of the tab that shows this session: join it as a tab opened by its link
       // would (the session stays the other tab's), with the link in the address for a reload
       Session.forget();
-      history.replaceState(null, '', `${location.pathname}#session=${kept.id}&token=${kept.token}`);
+      const name = kept.name ? `&name=${encodeURIComponent(kept.name)}` : '';
+      history.replaceState(null, '', `${location.pathname}#session=${kept.id}&token=${kept.token}${name}`);
       this.#hint('Joining the session…');
       if (await this.join(kept.id, kept.token, { name: kept.name, embedded: kept.embedded })) {
         this.ready = true;
