@@ -29,9 +29,12 @@
  * edge so that such points are in the cell's buckets (exact for cells whose corners are not
  * sharper than that).
  * A vertex in no cell is, by mode, refused, fixed (kept at its rest position, stored in place of
- * its weights), or bound to the nearest cell, found through a tree of the cells' boxes (below);
- * the distance is the exact point-tetrahedron distance (closest point on its faces), skipped
- * for cells whose box is farther than the best so far. Its coordinates then extrapolate.
+ * its weights), or bound to the nearest cell: searched in the grid (shells of buckets around
+ * the vertex's) while each vertex finds it within its share of the work, through a tree of the
+ * boxes of the cells at the boundary from the first one that does not (a vertex far from a
+ * curved solid) on; the distance is the exact point-tetrahedron distance (closest point on its
+ * faces), skipped for cells whose box is farther than the best so far. Its coordinates then
+ * extrapolate.
  *
  * Bindings are stored by slot, the model's vertices in bucket order, so that the vertices an edit
  * moves (near each other in space) are near each other in memory whatever the model's order.
@@ -60,6 +63,9 @@
  * takes tens; one that many cells are almost equally near (the centre of a hollow sphere) takes
  * them all, which this bounds */
 #define NEAREST_WORK_PER_VERTEX 2048u
+/* what a vertex outside may look at in the grid before the tree takes over (a vertex near the
+ * solid looks at 200 to 2000 buckets and entries there) */
+#define NEAREST_GRID_WORK NEAREST_WORK_PER_VERTEX
 #define NEAREST_WORK_BASE (1u << 24)
 
 struct sd_embedding {
@@ -489,6 +495,87 @@ static double box_dist2(const grid *g, uint32_t c, const double *p)
     return s;
 }
 
+/* The nearest cell to p (lowest index among equals) by the grid: shells of buckets around p's
+ * until no unexplored bucket can be nearer than the best cell. Each bucket looked at takes one
+ * unit of *work and one per entry; NONE when it runs out first. Quick for a vertex near the
+ * solid; one far from a curved boundary would look at most of the grid, so the bind gives it
+ * a small allowance and goes to the tree (below) when it runs out. */
+static uint32_t nearest_grid(const cells *C, const grid *g, const double *p, uint64_t *work)
+{
+    int64_t b[3], d[3];
+    double out2 = 0, out[3]; /* how far p is outside the grid's box, per axis */
+    for (int a = 0; a < 3; a++) {
+        b[a] = axis_of(g, a, quant(g, a, p[a]));
+        d[a] = g->dim[a];
+        double l = g->lo[a], h = g->lo[a] + (QMAX + 1.0) * g->quantum[a];
+        out[a] = p[a] < l ? l - p[a] : p[a] > h ? p[a] - h : 0;
+        out2 += out[a] * out[a];
+    }
+    double best = DBL_MAX;
+    uint32_t bc = NONE;
+    for (int64_t r = 0;; r++) {
+        int64_t l[3], h[3];
+        for (int a = 0; a < 3; a++) {
+            l[a] = b[a] - r < 0 ? 0 : b[a] - r;
+            h[a] = b[a] + r >= d[a] ? d[a] - 1 : b[a] + r;
+        }
+        for (int64_t z = l[2]; z <= h[2]; z++)
+            for (int64_t y = l[1]; y <= h[1]; y++) {
+                bool edge = llabs(z - b[2]) == r || llabs(y - b[1]) == r;
+                for (int64_t x = l[0]; x <= h[0]; x++) {
+                    if (!edge && llabs(x - b[0]) != r) { /* inside the shell: jump across */
+                        if (x < b[0] + r)
+                            x = b[0] + r - 1;
+                        continue;
+                    }
+                    size_t k = ((size_t)z * g->dim[1] + (size_t)y) * g->dim[0] + (size_t)x;
+                    uint64_t cost = (uint64_t)(g->start[k + 1] - g->start[k]) + 1; /* an empty
+                                                                     * bucket costs a look too */
+                    if (cost > *work)
+                        return NONE;
+                    *work -= cost;
+                    for (uint32_t j = g->start[k]; j < g->start[k + 1]; j++) {
+                        uint32_t c = g->cell[j];
+                        if (box_dist2(g, c, p) > best)
+                            continue;
+                        const double *P[4];
+                        cell_pts(C, c, P);
+                        double q = tet_dist2(P, p);
+                        if (q < best || (q == best && c < bc)) {
+                            best = q;
+                            bc = c;
+                        }
+                    }
+                }
+            }
+        /* what the buckets beyond the shell can offer (squared): a point there is beyond the
+         * shell along some axis a — the gap to the first bucket past it (bucket i starts at
+         * quantized value ceil(i 2^16 / dim)), less a quantum for rounding — and inside the
+         * grid's box along the others, so at least as far as p is outside it along those */
+        double bound = DBL_MAX;
+        bool more = false;
+        for (int a = 0; a < 3; a++) {
+            double rest = out2 - out[a] * out[a];
+            if (b[a] + r + 1 < d[a]) {
+                double q0 = ceil((double)(b[a] + r + 1) * (QMAX + 1.0) / (double)d[a]) - 1;
+                double e = g->lo[a] + q0 * g->quantum[a] - p[a];
+                e = e > 0 ? e : 0;
+                bound = fmin(bound, e * e + rest);
+                more = true;
+            }
+            if (b[a] - r - 1 >= 0) {
+                double q1 = ceil((double)(b[a] - r) * (QMAX + 1.0) / (double)d[a]) + 1;
+                double e = p[a] - (g->lo[a] + q1 * g->quantum[a]);
+                e = e > 0 ? e : 0;
+                bound = fmin(bound, e * e + rest);
+                more = true;
+            }
+        }
+        if (!more || (bc != NONE && best < bound))
+            return bc;
+    }
+}
+
 /* ---- the nearest cell: a bounding-volume tree ---------------------------------------------- */
 
 /* For a vertex outside every cell ("nearest"): a tree of boxes over the cells (median splits of
@@ -498,7 +585,7 @@ static double box_dist2(const grid *g, uint32_t c, const double *p)
  * as near as the best one is tested and the lowest index among equals wins, whatever the order
  * of the search). The distance to a box bounds the distance to its cells from below, so the
  * search is exact; far from the solid only the cells whose boxes reach toward the vertex are
- * looked at. ~36 bytes a cell of the tree, made only when a vertex is outside. */
+ * looked at. ~36 bytes a cell of the tree, made only when a vertex outside needs it. */
 typedef struct bnode {
     float lo[3], hi[3];
     uint32_t first, n;   /* a leaf: cells ids[first .. first + n); n = 0: children node + 1 and
@@ -679,10 +766,10 @@ static inline double node_dist2(const bnode *nd, const double *p)
 
 #define SLACK (1 + 1e-12)
 
-/* The nearest cell to p (lowest index among equals). Each node looked at and each cell tested
- * takes one unit of *work; NONE when it runs out first. */
-static uint32_t nearest(const cells *C, const grid *g, const bvh *b, const double *p,
-                        uint64_t *work)
+/* The nearest cell to p (lowest index among equals) by the tree. Each node looked at and each
+ * cell tested takes one unit of *work; NONE when it runs out first. */
+static uint32_t nearest_tree(const cells *C, const grid *g, const bvh *b, const double *p,
+                             uint64_t *work)
 {
     uint32_t stack[128];
     double sd[128];
@@ -887,8 +974,6 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
         nout += e->idx[4 * j] == NONE;
     const uint64_t budget = NEAREST_WORK_BASE + (uint64_t)NEAREST_WORK_PER_VERTEX * nout;
     uint64_t work = budget;
-    if (nout && mode == SD_OUTSIDE_NEAREST && (r = bvh_build(&m, &C, &tree, err)))
-        goto fail;
     for (size_t i = 0; i < n; i++) {
         size_t j = e->slot[i];
         if (e->idx[4 * j] != NONE)
@@ -898,7 +983,23 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
             memcpy(e->w + 4 * j, xyz + 3 * i, 3 * sizeof *e->w);
             e->w[4 * j + 3] = 0;
         } else if (mode == SD_OUTSIDE_NEAREST) {
-            uint32_t c = nearest(&C, &g, &tree, xyz + 3 * i, &work);
+            /* the grid (vertices near the solid) with its share of the work, until a vertex
+             * runs out of it; the tree from then on (made then: quick for near and far vertices
+             * alike, but its making costs more than the grid's searches of a few thousand near
+             * ones). The same cell either way: both search exhaustively what could be as near
+             * as the best. */
+            uint32_t c = NONE;
+            if (!tree.node) {
+                uint64_t grid_work = work < NEAREST_GRID_WORK ? work : NEAREST_GRID_WORK;
+                uint64_t left = grid_work;
+                c = nearest_grid(&C, &g, xyz + 3 * i, &left);
+                work -= grid_work - left;
+            }
+            if (c == NONE && work) {
+                if (!tree.node && (r = bvh_build(&m, &C, &tree, err)))
+                    goto fail;
+                c = nearest_tree(&C, &g, &tree, xyz + 3 * i, &work);
+            }
             if (c == NONE) {
                 r = sdi_fail(err, SD_ERR_VALUE, (long)i, SD_EMBED_TOO_FAR,
                              "vertex %zu: too many cells of level %u are about as near to it "
