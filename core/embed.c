@@ -1003,8 +1003,8 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
             if (c == NONE) {
                 r = sdi_fail(err, SD_ERR_VALUE, (long)i, SD_EMBED_TOO_FAR,
                              "vertex %zu: too many cells of level %u are about as near to it "
-                             "for \"nearest\" (the searches passed their budget of %llu boxes "
-                             "and cells looked at); move the model or give \"outside\": "
+                             "for \"nearest\" (the searches passed their budget of %llu "
+                             "buckets, boxes and cells looked at); move the model or give \"outside\": "
                              "\"fixed\"",
                              i, sd_level_index(lv), (unsigned long long)budget);
                 goto fail;

@@ -733,7 +733,7 @@ typedef struct sd_bind_report {
  * vertices), SD_ERR_LIMIT (over max_bytes, more than 2^30 vertices or 2^32 cells), SD_ERR_NOMEM,
  * SD_ERR_DEGENERATE (a nearest cell of zero volume: not in a level of a valid complex);
  * SD_ERR_VALUE with field SD_EMBED_TOO_FAR (item = the vertex) when the nearest-cell searches
- * of the vertices outside pass their budget (2048 tree boxes and cells a vertex outside, plus
+ * of the vertices outside pass their budget (2048 buckets, boxes and cells looked at a vertex outside, plus
  * 2^24: vertices that thousands of cells are about equally near, such as the centre of a hollow
  * sphere; a vertex near the solid or far from it takes tens; the work of a bind stays bounded).
  * rep (optional) is filled in every mode. On success *out is the caller's, freed with
