@@ -40,6 +40,9 @@ static const setting S[] = {
      "bytes/s a request body must average after --header-timeout (default 65536; 0: any)"},
     {"queue-timeout", T_INT, OFF(queue_timeout_s), 0, 3600,
      "seconds a computation waits for a free thread before 429 (default 30)"},
+    {"drain-timeout", T_INT, OFF(drain_timeout_s), 0, 86400,
+     "on SIGTERM or SIGINT, seconds the requests in flight may take to finish while no new "
+     "connection is taken (default 60; 0: cut them at once; a second signal cuts them)"},
     {"max-sessions", T_INT, OFF(max_sessions), 1, 1000000, "live sessions (default 64)"},
     {"max-sessions-per-client", T_INT, OFF(max_sessions_per_client), 0, 1000000,
      "resident sessions one client address may have created (default: a quarter of --max-sessions, at least 1; 0: no cap; 429 beyond)"},
@@ -200,6 +203,7 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     c->header_timeout_s = 10;
     c->body_min_rate = 65536;
     c->queue_timeout_s = 30;
+    c->drain_timeout_s = 60;
     c->sse_heartbeat_s = 15;
     c->max_listeners = 16;
     c->max_sessions = API_DEFAULT_MAX_SESSIONS;

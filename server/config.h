@@ -20,6 +20,7 @@ typedef struct config {
     int header_timeout_s;     /* a new connection's request headers */
     int body_min_rate;        /* bytes/s a request body must average after header_timeout_s */
     int queue_timeout_s;      /* how long a computation waits for a slot before 429 */
+    int drain_timeout_s;      /* on SIGTERM/SIGINT, how long requests in flight may finish */
     int max_sessions;         /* resident sessions */
     int max_sessions_per_client; /* resident sessions one client address created (0: any) */
     int ttl_s;                /* default session idle TTL */

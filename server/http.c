@@ -40,6 +40,7 @@
 #include <string.h>
 #include <strings.h>
 #include <time.h>
+#include <unistd.h>
 
 /* ---- logging -------------------------------------------------------------------------------- */
 
@@ -626,6 +627,10 @@ static void *on_uri(void *cls, const char *uri, struct MHD_Connection *conn)
     if (r) {
         atomic_init(&r->refs, 1);
         r->srv = cls;
+        /* in flight until on_completed (libmicrohttpd calls it for every request whose URI
+         * callback it called): a stop waits for it (http_in_flight) */
+        atomic_fetch_add(&r->srv->in_flight, 1);
+        r->in_flight = 1;
         r->conn = conn;
         r->t0 = mono_now();
         r->method = "OTHER";
@@ -772,6 +777,8 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
     }
     log_line(srv, LOG_DEBUG, "%s %s: at most %lld bytes held by the request", r->method, path,
              (long long)r->mem.peak);
+    if (r->in_flight)
+        atomic_fetch_sub(&srv->in_flight, 1);
     *con_cls = NULL;
     http_req_unref(r);
 }
@@ -805,7 +812,9 @@ int http_start(server *srv)
 {
     struct sockaddr_storage ss;
     memset(&ss, 0, sizeof ss);
-    unsigned flags = MHD_USE_AUTO_INTERNAL_THREAD | MHD_USE_THREAD_PER_CONNECTION | MHD_USE_ERROR_LOG;
+    /* MHD_USE_ITC: what MHD_quiesce_daemon needs in this mode (http_quiesce) */
+    unsigned flags = MHD_USE_AUTO_INTERNAL_THREAD | MHD_USE_THREAD_PER_CONNECTION |
+                     MHD_USE_ERROR_LOG | MHD_USE_ITC;
     if (strchr(srv->cfg.listen, ':')) {
         struct sockaddr_in6 *a = (struct sockaddr_in6 *)&ss;
         a->sin6_family = AF_INET6;
@@ -852,6 +861,21 @@ bad_addr:
     log_line(srv, LOG_ERROR, "--listen %s is not an IP address", srv->cfg.listen);
     return -1;
 }
+
+void http_quiesce(server *srv)
+{
+    atomic_store(&srv->draining, 1); /* answers now close their connection (http_queue) */
+    ev_stop_all(); /* event streams end: they would hold the stop for ever */
+    if (!srv->mhd)
+        return;
+    MHD_socket ls = MHD_quiesce_daemon(srv->mhd);
+    if (ls != MHD_INVALID_SOCKET)
+        close(ls);
+    else
+        log_line(srv, LOG_WARN, "cannot stop listening before the requests in flight finish");
+}
+
+int http_in_flight(server *srv) { return atomic_load(&srv->in_flight); }
 
 void http_stop(server *srv)
 {

@@ -24,8 +24,13 @@
 #include <string.h>
 #include <unistd.h>
 
-static volatile sig_atomic_t stop_requested;
-static void on_signal(int sig) { (void)sig; stop_requested = 1; }
+static volatile sig_atomic_t stop_requested; /* signals received: 1 drains, 2 cuts short */
+static void on_signal(int sig)
+{
+    (void)sig;
+    if (stop_requested < 2)
+        stop_requested++;
+}
 
 /* ---- offline mode ------------------------------------------------------------------------- */
 
@@ -541,8 +546,17 @@ int main(int argc, char **argv)
             malloc_trim(0); /* what their models held goes back to the system */
         }
     }
-    atomic_store(&srv.draining, 1);
-    log_line(&srv, LOG_INFO, "shutting down");
+    /* drain: no new connection; what is in flight finishes (--drain-timeout, or a second
+     * signal), then every connection closes */
+    log_line(&srv, LOG_INFO, "shutting down: %d request(s) in flight", http_in_flight(&srv));
+    http_quiesce(&srv);
+    double drain_end = mono_now() + srv.cfg.drain_timeout_s;
+    while (http_in_flight(&srv) > 0 && mono_now() < drain_end && stop_requested < 2)
+        usleep(20 * 1000);
+    int cut = http_in_flight(&srv);
+    if (cut > 0)
+        log_line(&srv, LOG_WARN, "%d request(s) still in flight are cut short (%s)", cut,
+                 stop_requested > 1 ? "a second signal" : "--drain-timeout");
     http_stop(&srv);
     store_free(srv.st);
     persist_close(srv.persist);

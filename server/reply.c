@@ -51,7 +51,9 @@ static void common_headers(req *r, struct MHD_Response *resp)
 void http_queue(req *r, int status, struct MHD_Response *resp)
 {
     common_headers(r, resp);
-    if (r->close_after) /* libmicrohttpd closes the connection after an answer saying so */
+    /* libmicrohttpd closes the connection after an answer saying so; a stopping daemon closes
+     * every connection it answers on, so no client sends it another request */
+    if (r->close_after || atomic_load(&r->srv->draining))
         MHD_add_response_header(resp, MHD_HTTP_HEADER_CONNECTION, "close");
     r->status = status;
     r->queued = 1;

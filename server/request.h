@@ -74,6 +74,7 @@ struct req {
     atomic_uint_fast64_t bytes;
     int queued;
     int close_after;          /* Transfer-Encoding beside Content-Length: close after answering */
+    int in_flight;            /* counted in server.in_flight until on_completed */
     atomic_int refs;          /* the connection and a streaming response */
     api_mem_meter mem;        /* what the request's callbacks allocate (api/mem.h) */
 };

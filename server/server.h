@@ -19,6 +19,7 @@ typedef struct server {
     struct holds *bodies;     /* body bytes held per client (holds.h) */
     slots *compute;           /* cfg.threads slots for computations, fair between sessions */
     atomic_int draining;      /* /readyz answers 503 while starting or stopping */
+    atomic_int in_flight;     /* requests begun (request line read) and not yet completed */
     struct MHD_Daemon *mhd;
     struct guard *guard;      /* connection slots: deadlines, eviction (guard.h) */
     int port;                 /* the bound port */
@@ -26,6 +27,13 @@ typedef struct server {
 
 /* Start listening (0) or print why not (-1). */
 int http_start(server *srv);
+/* The first step of a clean stop: event streams end, the listening socket closes (new
+ * connections are refused, so a balancer's next check fails and its retries go elsewhere) and
+ * every answer from now on closes its connection. Requests in flight go on. */
+void http_quiesce(server *srv);
+/* Requests in flight (read the request line, not yet completed). */
+int http_in_flight(server *srv);
+/* Close every connection (what is still in flight is cut short) and stop. */
 void http_stop(server *srv);
 /* The connection guard's figures in Prometheus text (for /metrics). */
 void http_write_connection_metrics(server *srv, FILE *f);

@@ -5,6 +5,7 @@
 - Failover: a session edited 20 times through HAProxy; the daemon that served it is killed
   (SIGKILL); the next requests through HAProxy reach the other daemon, which loads the session
   from redis: the last acknowledged positions and version, and level 2 exactly as before.
+- SIGTERM while a download is in flight: the download finishes, the session moves on.
 - Two daemons, same session, the same If-Match at the same moment: exactly one 200, one 412;
   changes that name no version at the same moment: both made, one after the other.
 
@@ -157,9 +158,40 @@ def test_session_paths_hash_on_the_id(tmp_path):
                    for _ in range(4)}
         assert created == {"n1", "n2"}, created
         # HAProxy limits new sessions per client address (the daemons see only its address)
-        codes = [http.post(hap.url + "/v1/sessions", json={}, timeout=10).status_code
-                 for _ in range(28)]
+        out = [http.post(hap.url + "/v1/sessions", json={}, timeout=10) for _ in range(28)]
+        codes = [r.status_code for r in out]
         assert codes[:26] == [201] * 26 and codes[-1] == 429, codes
+        # in the daemons' form (docs/SERVICE.md "Errors"): a problem with Retry-After
+        last = out[-1]
+        assert last.headers["Content-Type"] == "application/problem+json", last.headers
+        assert last.json()["type"] == "/errors/session-rate" and last.json()["status"] == 429
+        assert int(last.headers["Retry-After"]) > 0
+    finally:
+        if hap:
+            hap.stop()
+        for d in daemons:
+            d.stop()
+
+
+@needs_haproxy
+def test_no_daemon_up_is_a_problem_with_retry_after(tmp_path):
+    """With no daemon up (all stopped, or all not ready: redis down), HAProxy answers itself:
+    503 in the daemons' form, a problem+json with Retry-After, which clients retry."""
+    daemons = [Daemon() for _ in range(2)]
+    hap = None
+    try:
+        hap = HAProxy(tmp_path, [_addr(d) for d in daemons])
+        for d in daemons:
+            assert d.stop() == 0
+        time.sleep(2.5)   # fall 2, inter 1s: both marked down
+        for method, path in (("POST", "/v1/sessions"), ("GET", "/v1/sessions/" + "ab" * 16),
+                             ("GET", "/healthz")):
+            r = requests.request(method, hap.url + path, json={} if method == "POST" else None,
+                                 timeout=10)
+            assert r.status_code == 503, (path, r.status_code, r.text)
+            assert r.headers["Content-Type"] == "application/problem+json", r.headers
+            assert r.json()["status"] == 503 and r.json()["type"] == "/errors/not-ready"
+            assert int(r.headers["Retry-After"]) > 0
     finally:
         if hap:
             hap.stop()
@@ -221,6 +253,54 @@ def test_failover_keeps_every_acknowledged_edit(cluster):
     r = _patch(http, base, token, version, [{"index": 0, "position": [0.5, 0.5, -0.5]}])
     assert r.status_code == 200, r.text
     assert r.json()["version"] == version + 1
+
+
+# a cube cut into the 6 tetrahedra around its diagonal 0-7: level 6 is 6 * 8^6 tetrahedra, a
+# download of about 55 MB in VTU, more than the socket buffers between the daemon, HAProxy and
+# the client hold, so the daemon is still sending it while the client does not read
+KUHN_CUBE = {"vertices": [[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)],
+             "simplices": [[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7],
+                           [0, 4, 6, 7]]}
+
+
+@needs_haproxy
+@needs_store
+def test_sigterm_drains_behind_haproxy(cluster):
+    """docs/DEPLOY.md "Stopping a daemon": SIGTERM on the daemon serving a session while a
+    download of it is in flight. The daemon stops listening (HAProxy sends the session's next
+    requests to the other daemon, which loads it from redis: edits go on, 200), the download
+    finishes whole, and only then the daemon exits, 0, with nothing cut short."""
+    hap, daemons, _redis = cluster
+    http = requests.Session()
+    r = http.post(hap.url + "/v1/sessions", json={}, timeout=10)
+    sid, token = r.json()["id"], r.json()["token"]
+    auth = {"Authorization": f"Bearer {token}"}
+    base = f"{hap.url}/v1/sessions/{sid}"
+    r = http.put(base + "/complex", json=KUHN_CUBE, headers=auth, timeout=60)
+    assert r.status_code == 200, r.text
+    version, node = r.json()["version"], r.headers["X-Subdivd-Node"]
+    victim = daemons[int(node[1:]) - 1]
+
+    download = requests.get(base + "/levels/6", params={"format": "vtu"}, headers=auth,
+                            stream=True, timeout=120)
+    assert download.status_code == 200 and download.headers["X-Subdivd-Node"] == node
+    length = int(download.headers["Content-Length"])
+    first = download.raw.read(65536)   # the rest waits in the daemon until it is read
+    victim.proc.terminate()
+    time.sleep(0.5)
+    assert victim.alive(), "SIGTERM did not wait for the download in flight:\n" + \
+        "\n".join(victim.log_lines[-5:])
+    for i in range(6):   # meanwhile the session is served (by the other daemon)
+        r = _patch(http, base, token, version, [{"index": 7, "position": [1, 1, 1 + 0.01 * i]}])
+        assert r.status_code == 200, (i, r.status_code, r.text)
+        version = r.json()["version"]
+    assert r.headers["X-Subdivd-Node"] != node
+    body = first + download.raw.read()
+    assert len(body) == length, f"the download was cut at {len(body)} of {length} bytes"
+    assert victim.proc.wait(30) == 0
+    victim.stop()
+    assert not any("cut short" in line for line in victim.log_lines), victim.log_lines[-5:]
+    assert any(line.endswith(" stopped") for line in victim.log_lines)
 
 
 @needs_store
