@@ -475,7 +475,9 @@ static int keep_drop(size_t need, double older)
     pthread_mutex_unlock(&keep_mu);
     for (int i = 0; i < ng; i++) {
         unmap_block(gone[i].p, gone[i].cap);
-        api_mem_unreserve(gone[i].cap);
+        /* the reservation only: the meter of whoever gave the block back counted that already,
+         * and the thread dropping it (a request making room, the main loop) never held it */
+        atomic_fetch_sub_explicit(&elsewhere, gone[i].cap, memory_order_relaxed);
     }
     return ng;
 }

@@ -907,6 +907,33 @@ def test_a_level_larger_than_the_whole_budget_is_refused_before_it_is_built():
         d.stop()
 
 
+def test_a_refinement_larger_than_the_whole_budget_is_a_413():
+    """Refining all 24 576 tetrahedra of a grid (196 608 new ones, their level-1 placement) needs
+    more than a 150 MB budget holds with nothing else in it: 413 naming max_memory, no Retry-After
+    (waiting cannot help), where it was a 503 memory-budget "retry later": blocks the request
+    had given back to the kept set and that were then dropped to make room were taken off its
+    meter a second time, so it looked as if others held the memory. The session is unchanged and
+    a refinement of one tetrahedron is served."""
+    d = Daemon("--max-memory", str(150_000_000))
+    try:
+        s = Session(d)
+        v, t = tet_grid(16)
+        r = s.put_complex({"vertices": v, "simplices": t})
+        assert r.status_code == 200
+        version = r.json()["version"]
+        r = s.req("POST", "/refine", json={"select": {"box": {"min": [-1, -1, -1],
+                                                               "max": [17, 17, 17]}}})
+        assert r.status_code == 413, r.text[:300]
+        j = r.json()
+        assert j["limit_name"] == "max_memory" and j["limit"] == 150_000_000, j
+        assert j["requested"] > j["limit"] and "Retry-After" not in r.headers, j
+        assert s.req("GET", "").json()["version"] == version
+        r = s.req("POST", "/refine", json={"select": {"simplices": [t[100]]}})
+        assert r.status_code == 200, r.text[:300]
+    finally:
+        d.stop()
+
+
 def test_one_client_cannot_hold_the_budget_with_slow_bodies():
     """--max-client-body-bytes: bodies one address is sending hold at most that much. Two slow
     bodies of 400 kB from 127.0.0.2 fit a cap of 1 MB, a third is 429 client-bodies at once
