@@ -462,6 +462,8 @@ int api_embed_put(api_model *m, api_embed_def *d, uint64_t version, const api_li
 int api_embed_delete(api_model *m, const char *name, uint64_t version,
                      const api_edit_commit *commit, api_problem *p)
 {
+    if (name_ok(name, p)) /* no model can have it: the name is what is wrong */
+        return p->status;
     pthread_mutex_lock(&m->lock);
     int at = find(m, name), rc = 0;
     if (at < 0) {
@@ -612,6 +614,8 @@ int api_embed_get(api_model *m, const char *name, const char *format, char **bod
                                         "model/gltf-binary"};
     int f = 0;
     *body = NULL;
+    if (name_ok(name, p)) /* no model can have it: the name is what is wrong */
+        return p->status;
     if (format) {
         for (f = 0; formats[f] && strcmp(formats[f], format); f++)
             ;
@@ -659,6 +663,8 @@ int api_embed_delta(api_model *m, const char *name, const char *since, const cha
                     api_problem *p)
 {
     *body = NULL;
+    if (name_ok(name, p)) /* no model can have it: the name is what is wrong */
+        return p->status;
     pthread_mutex_lock(&m->lock);
     int at = find(m, name);
     if (at < 0) {

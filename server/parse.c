@@ -22,10 +22,14 @@ int parse_route(const char *pattern, const char *path, char *id, size_t id_cap, 
             int is_id = p[1] == 'i' || p[1] == 's'; /* {id}, {slug}; {L} and {name}: the other */
             char *dst = is_id ? id : level;
             size_t cap = is_id ? id_cap : level_cap;
-            if (n >= cap)
+            if (n >= cap && (is_id || cap < sizeof ROUTE_TOO_LONG))
                 return 0;
-            memcpy(dst, s, n);
-            dst[n] = 0;
+            if (n >= cap)
+                memcpy(dst, ROUTE_TOO_LONG, sizeof ROUTE_TOO_LONG);
+            else {
+                memcpy(dst, s, n);
+                dst[n] = 0;
+            }
             p = pe + 1;
             s += n;
             continue;

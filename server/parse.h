@@ -14,9 +14,11 @@
 #include <stddef.h>
 
 /* Match `path` against a route pattern whose segments are literal or a capture ("{id}", "{L}",
- * "{slug}", "{name}": one non-empty segment). "{id}" and "{slug}" go into id, any other capture
- * ("{L}", an embedded model's "{name}") into level, each only if it fits its capacity with its
- * NUL (else no match). 1 on a match. */
+ * "{slug}", "{name}": one non-empty segment). "{id}" and "{slug}" go into id, only if it fits its
+ * capacity with its NUL (else no match: no such session or page); any other capture ("{L}", an
+ * embedded model's "{name}") into level — one too long for it matches as ROUTE_TOO_LONG, which
+ * no level or name is, so that the handler refuses it naming the parameter. 1 on a match. */
+#define ROUTE_TOO_LONG "\x01"
 int parse_route(const char *pattern, const char *path, char *id, size_t id_cap, char *level,
                 size_t level_cap);
 
