@@ -768,7 +768,11 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
     parse_log_escape(path, sizeof path, r->path);
     if (r->queued) {
         metrics_request(r->route_name, r->method, r->status, ms / 1e3);
-        log_line(srv, LOG_INFO, "%s %s %d %lluB %.2fms route=%s%s%s%s", r->method, path,
+        /* a load balancer's health checks that pass (every second, per daemon) at debug: the
+         * info log stays the clients' requests; a check that fails is news */
+        bool probe = r->route_name && r->status < 300 &&
+                     (!strcmp(r->route_name, "/healthz") || !strcmp(r->route_name, "/readyz"));
+        log_line(srv, probe ? LOG_DEBUG : LOG_INFO, "%s %s %d %lluB %.2fms route=%s%s%s%s", r->method, path,
                  r->status, (unsigned long long)atomic_load(&r->bytes), ms,
                  r->route_name ? r->route_name : "unknown", r->problem ? " type=/errors/" : "",
                  r->problem ? r->problem : "",

@@ -112,6 +112,15 @@ def test_log_lines_and_metrics():
             " 400 " + bad[0].split(" 400 ")[1].split(" route=")[0]
             + " route=/v1/sessions/{id}/levels/{L}/stats type=/errors/unknown-parameter"), bad
         assert "?" not in "".join(lines) and s.token not in "\n".join(d.log_lines)
+        # health checks that pass are not logged at info (a balancer sends one a second)
+        for path in ("/healthz", "/readyz"):
+            assert requests.get(d.url + path, timeout=10).status_code == 200
+        assert requests.get(d.url + "/v1/sessions/" + s.id + "/nothing", timeout=10).status_code
+        deadline = time.time() + 5
+        while time.time() < deadline and not any("/nothing" in l for l in d.log_lines):
+            time.sleep(0.02)
+        assert any("/nothing" in l for l in d.log_lines)     # logged after the two checks
+        assert not [l for l in d.log_lines if " /healthz " in l or " /readyz " in l], d.log_lines
         text = requests.get(d.url + "/metrics", timeout=10).text
         lab = 'route="/v1/sessions/{id}/levels/{L}",method="GET",status="200"'
         assert re.search(r'^subdivd_request_duration_seconds_bucket\{' + re.escape(lab)
