@@ -1092,6 +1092,25 @@ await step('delta_410', async () => {
     `buffers vs refetch: ${cmp.position} position, ${cmp.normal} normal floats differ` + (errs.length ? `; errors: ${errs.join(' | ')}` : ''));
 });
 
+// 17b. the same message again counts up on the one shown instead of pushing the others out
+await step('messages_coalesce', async () => {
+  const n = (await snap()).messages.length;
+  const out = await page.evaluate(() => {
+    const a = window.subdivd;
+    a.info('first of its kind');
+    for (let k = 0; k < 3; k++) a.error(new Error('the daemon did not answer'));
+    a.info('first of its kind');
+    return [...document.querySelectorAll('#messages .message')].map((m) => m.querySelector('.text').textContent);
+  });
+  const said = (await snap()).messages.length - n;
+  const err = out.filter((t) => t.startsWith('the daemon did not answer'));
+  const inf = out.filter((t) => t.startsWith('first of its kind'));
+  check('messages_coalesce', said === 5 && err.length === 1 && err[0].endsWith('(×3)') && inf.length === 1 &&
+    inf[0].endsWith('(×2)') && out[out.length - 1] === inf[0],
+    `5 messages said (${said} recorded), shown: ${out.join(' | ')}`);
+  for (const b of await page.$$('#messages .message button')) await b.click();
+});
+
 // 18. moves at a finer level: the handles become level-3 points, a drag PATCHes "level": 3
 await step('level_moves', async () => {
   await page.selectOption('#edit-level', '3');

@@ -196,21 +196,39 @@ class App {
   #message(kind, text) {
     this.messages.push({ kind, text, at: Date.now() });
     const box = $('messages');
-    const el = document.createElement('div');
-    el.className = `message ${kind}`;
-    el.setAttribute('role', kind === 'error' ? 'alert' : 'status');
-    const t = document.createElement('span');
-    t.className = 'text';
-    t.textContent = text;
-    const x = document.createElement('button');
-    x.type = 'button';
-    x.title = 'dismiss';
-    x.textContent = '×';
-    x.onclick = () => el.remove();
-    el.append(t, x);
-    box.append(el);
+    // the same message again (a drag while the daemon is down fails at every move) counts up
+    // on the one shown, moved last, instead of pushing the others out
+    let el = [...box.children].find((m) => m.dataset.kind === kind && m.dataset.text === text);
+    if (el) {
+      el.dataset.count = String(Number(el.dataset.count) + 1);
+      el.querySelector('.count').textContent = ` (×${el.dataset.count})`;
+      box.append(el);
+    } else {
+      el = document.createElement('div');
+      el.className = `message ${kind}`;
+      el.dataset.kind = kind;
+      el.dataset.text = text;
+      el.dataset.count = '1';
+      el.setAttribute('role', kind === 'error' ? 'alert' : 'status');
+      const t = document.createElement('span');
+      t.className = 'text';
+      t.textContent = text;
+      const c = document.createElement('span');
+      c.className = 'count';
+      const x = document.createElement('button');
+      x.type = 'button';
+      x.title = 'dismiss';
+      x.textContent = '×';
+      x.onclick = () => el.remove();
+      t.append(c);
+      el.append(t, x);
+      box.append(el);
+    }
     while (box.children.length > 4) box.firstChild.remove();
-    if (kind === 'info') setTimeout(() => el.remove(), 6000);
+    if (kind === 'info') {
+      clearTimeout(el.timer);
+      el.timer = setTimeout(() => el.remove(), 6000);
+    }
   }
 
   #hint(text) {
