@@ -28,10 +28,6 @@ int api_parse_level(const char *s, api_problem *p)
 {
     char *end;
     errno = 0;
-    if (s && *s == '\x01') /* the router's mark of a path segment too long to hold (server/parse.h) */
-        return -(api_fail_at(p, 400, "bad-level", "level",
-                             "the level must be a non-negative integer (this one is 64 characters "
-                             "or more)") != 0);
     if (!s || !*s || !isdigit((unsigned char)*s))
         return -(api_fail_at(p, 400, "bad-level", "level",
                              "the level must be a non-negative integer") != 0);

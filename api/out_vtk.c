@@ -182,14 +182,14 @@ static void put_item(out_stream *s, const vstate *st, const arr *a, uint64_t i)
         put_num(s, st, a->width, 0,
                 a->id == A_DIM ? c.dim : a->id == A_KIND ? c.kind : a->id == A_SRC ? c.src : c.type);
         break;
-    case A_SKIND: /* with a slice: the kind source_cell counts in (a slice triangle's cut cell's) */
+    case A_SKIND: /* with a slice: the kind source_cell counts in */
+    case A_CTRL: {
         cell_at(s, st, i, &c);
-        put_num(s, st, a->width, 0, c.kind == SLICE_KIND ? s->slice.kind[i - st->r_sl] : c.kind);
-        break;
-    case A_CTRL: { /* a slice triangle: the cut cell's (src names it, slice.kind its kind) */
-        cell_at(s, st, i, &c);
+        /* a slice triangle's: the cut cell's (src names it, slice.kind its kind) */
         int k = c.kind == SLICE_KIND ? s->slice.kind[i - st->r_sl] : c.kind;
-        put_num(s, st, a->width, 0, sd_level_control_cell(s->lv, (sd_cell_kind)k, (uint32_t)c.src));
+        put_num(s, st, a->width, 0, a->id == A_SKIND ? (long long)k
+                                    : (long long)sd_level_control_cell(s->lv, (sd_cell_kind)k,
+                                                                       (uint32_t)c.src));
         break;
     }
     case A_CONN:

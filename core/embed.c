@@ -58,14 +58,12 @@
 #define IN_TOL 1e-12   /* distance to a face plane, relative to the cell's longest edge */
 #define BOX_TOL 1e-6   /* box widening, relative to the cell's longest edge */
 #define NONE UINT32_MAX
-/* The nearest-cell searches of the vertices outside ("nearest") look at most at this many tree
- * nodes and cells in all, per vertex outside and once: a vertex near the solid or far from it
- * takes tens; one that many cells are almost equally near (the centre of a hollow sphere) takes
- * them all, which this bounds */
+/* The nearest-cell searches of the vertices outside ("nearest") look at most at this many grid
+ * buckets and entries, tree nodes and cells in all, per vertex outside and once. A vertex near
+ * the solid takes 200 to 2000 in the grid, and this is also what one may take there before the
+ * tree takes over; in the tree a vertex near or far takes tens; one that many cells are almost
+ * equally near (the centre of a hollow sphere) takes them all, which this bounds */
 #define NEAREST_WORK_PER_VERTEX 2048u
-/* what a vertex outside may look at in the grid before the tree takes over (a vertex near the
- * solid looks at 200 to 2000 buckets and entries there) */
-#define NEAREST_GRID_WORK NEAREST_WORK_PER_VERTEX
 #define NEAREST_WORK_BASE (1u << 24)
 
 struct sd_embedding {
@@ -495,6 +493,22 @@ static double box_dist2(const grid *g, uint32_t c, const double *p)
     return s;
 }
 
+/* Cell c as a candidate nearest to p: the best so far (*best, *bc) if nearer, or as near with a
+ * lower index; its quantized box first, a cheap bound. */
+static inline void consider(const cells *C, const grid *g, const double *p, uint32_t c,
+                            double *best, uint32_t *bc)
+{
+    if (box_dist2(g, c, p) > *best)
+        return;
+    const double *P[4];
+    cell_pts(C, c, P);
+    double q = tet_dist2(P, p);
+    if (q < *best || (q == *best && c < *bc)) {
+        *best = q;
+        *bc = c;
+    }
+}
+
 /* The nearest cell to p (lowest index among equals) by the grid: shells of buckets around p's
  * until no unexplored bucket can be nearer than the best cell. Each bucket looked at takes one
  * unit of *work and one per entry; NONE when it runs out first. Quick for a vertex near the
@@ -534,18 +548,8 @@ static uint32_t nearest_grid(const cells *C, const grid *g, const double *p, uin
                     if (cost > *work)
                         return NONE;
                     *work -= cost;
-                    for (uint32_t j = g->start[k]; j < g->start[k + 1]; j++) {
-                        uint32_t c = g->cell[j];
-                        if (box_dist2(g, c, p) > best)
-                            continue;
-                        const double *P[4];
-                        cell_pts(C, c, P);
-                        double q = tet_dist2(P, p);
-                        if (q < best || (q == best && c < bc)) {
-                            best = q;
-                            bc = c;
-                        }
-                    }
+                    for (uint32_t j = g->start[k]; j < g->start[k + 1]; j++)
+                        consider(C, g, p, g->cell[j], &best, &bc);
                 }
             }
         /* what the buckets beyond the shell can offer (squared): a point there is beyond the
@@ -654,45 +658,51 @@ static void bvh_select(const bvh *b, uint32_t lo, uint32_t hi, uint32_t k, int a
     }
 }
 
+/* The node of cells ids[lo, hi) and those below it (depth first: its first child is the next
+ * node); a leaf's box is its cells' corners', a node's the union of its children's. */
 static uint32_t bvh_make(const cells *C, bvh *b, uint32_t lo, uint32_t hi)
 {
     uint32_t at = b->nnode++;
     bnode *nd = &b->node[at];
-    float clo[3] = {FLT_MAX, FLT_MAX, FLT_MAX}, chi[3] = {-FLT_MAX, -FLT_MAX, -FLT_MAX};
     for (int a = 0; a < 3; a++) {
         nd->lo[a] = FLT_MAX;
         nd->hi[a] = -FLT_MAX;
     }
-    for (uint32_t i = lo; i < hi; i++) {
-        const double *P[4];
-        cell_pts(C, b->ids[i], P);
-        for (int k = 0; k < 4; k++)
-            for (int a = 0; a < 3; a++) {
-                float l = f_down(P[k][a]), h = f_up(P[k][a]);
-                nd->lo[a] = l < nd->lo[a] ? l : nd->lo[a];
-                nd->hi[a] = h > nd->hi[a] ? h : nd->hi[a];
-            }
-        for (int a = 0; a < 3; a++) {
-            float c = b->cen[i][a];
-            clo[a] = c < clo[a] ? c : clo[a];
-            chi[a] = c > chi[a] ? c : chi[a];
-        }
-    }
     if (hi - lo <= 4) {
         nd->first = lo;
         nd->n = hi - lo;
+        for (uint32_t i = lo; i < hi; i++) {
+            const double *P[4];
+            cell_pts(C, b->ids[i], P);
+            for (int k = 0; k < 4; k++)
+                for (int a = 0; a < 3; a++) {
+                    nd->lo[a] = fminf(nd->lo[a], f_down(P[k][a]));
+                    nd->hi[a] = fmaxf(nd->hi[a], f_up(P[k][a]));
+                }
+        }
         return at;
     }
+    /* split at the median centroid along the axis the centroids spread widest */
+    float clo[3] = {FLT_MAX, FLT_MAX, FLT_MAX}, chi[3] = {-FLT_MAX, -FLT_MAX, -FLT_MAX};
+    for (uint32_t i = lo; i < hi; i++)
+        for (int a = 0; a < 3; a++) {
+            clo[a] = fminf(clo[a], b->cen[i][a]);
+            chi[a] = fmaxf(chi[a], b->cen[i][a]);
+        }
     int a = 0;
     for (int k = 1; k < 3; k++)
         if (chi[k] - clo[k] > chi[a] - clo[a])
             a = k;
     uint32_t mid = lo + (hi - lo) / 2;
     bvh_select(b, lo, hi, mid, a);
+    uint32_t left = bvh_make(C, b, lo, mid), right = bvh_make(C, b, mid, hi);
+    nd = &b->node[at];
     nd->n = 0;
-    bvh_make(C, b, lo, mid); /* node at + 1 */
-    uint32_t right = bvh_make(C, b, mid, hi);
-    b->node[at].first = right;
+    nd->first = right; /* the left child is at + 1 */
+    for (int k = 0; k < 3; k++) {
+        nd->lo[k] = fminf(b->node[left].lo[k], b->node[right].lo[k]);
+        nd->hi[k] = fmaxf(b->node[left].hi[k], b->node[right].hi[k]);
+    }
     return at;
 }
 
@@ -703,20 +713,17 @@ static uint32_t bvh_make(const cells *C, bvh *b, uint32_t lo, uint32_t hi)
 static sd_result bvh_build(sd_mem *m, const cells *C, bvh *b, sd_error *err)
 {
     memset(b, 0, sizeof *b);
-    const sd_topo *t = &C->lv->t;
+    uint32_t nb = sd_level_solid_boundary(C->lv, NULL);
     uint8_t *on = sdi_calloc(m, C->nv ? C->nv : 1, 1);
-    if (!on)
+    uint32_t *tri = on ? sdi_alloc(m, (3 * (size_t)nb + 1) * sizeof *tri) : NULL;
+    if (!tri) {
+        sdi_free(m, on);
         return sdi_fail_nomem(err, m);
-    for (uint32_t c = 0; c < t->ntet; c++)
-        for (int i = 0; t->tet_b[c] && i < 4; i++)
-            if (t->tet_b[c] >> i & 1)
-                for (int k = 0; k < 3; k++)
-                    on[t->tet[c][SDI_TET_F[i][k]]] = 1;
-    for (uint32_t c = 0; c < t->noct; c++)
-        for (int i = 0; t->oct_b[c] && i < 8; i++)
-            if (t->oct_b[c] >> i & 1)
-                for (int k = 0; k < 3; k++)
-                    on[t->oct[c][SDI_OCT_F[i][k]]] = 1;
+    }
+    sd_level_solid_boundary(C->lv, tri);
+    for (size_t i = 0; i < 3 * (size_t)nb; i++)
+        on[tri[i]] = 1;
+    sdi_free(m, tri);
     uint32_t n = 0;
     for (uint32_t c = 0; c < C->nc; c++) {
         uint32_t v[4];
@@ -791,18 +798,8 @@ static uint32_t nearest_tree(const cells *C, const grid *g, const bvh *b, const 
             return NONE;
         *work -= cost;
         if (nd->n) {
-            for (uint32_t i = nd->first; i < nd->first + nd->n; i++) {
-                uint32_t c = b->ids[i];
-                if (box_dist2(g, c, p) > best)
-                    continue;
-                const double *P[4];
-                cell_pts(C, c, P);
-                double q = tet_dist2(P, p);
-                if (q < best || (q == best && c < bc)) {
-                    best = q;
-                    bc = c;
-                }
-            }
+            for (uint32_t i = nd->first; i < nd->first + nd->n; i++)
+                consider(C, g, p, b->ids[i], &best, &bc);
             continue;
         }
         uint32_t l = at + 1, r = nd->first;
@@ -990,7 +987,7 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
              * as the best. */
             uint32_t c = NONE;
             if (!tree.node) {
-                uint64_t grid_work = work < NEAREST_GRID_WORK ? work : NEAREST_GRID_WORK;
+                uint64_t grid_work = work < NEAREST_WORK_PER_VERTEX ? work : NEAREST_WORK_PER_VERTEX;
                 uint64_t left = grid_work;
                 c = nearest_grid(&C, &g, xyz + 3 * i, &left);
                 work -= grid_work - left;

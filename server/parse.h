@@ -17,7 +17,8 @@
  * "{slug}", "{name}": one non-empty segment). "{id}" and "{slug}" go into id, only if it fits its
  * capacity with its NUL (else no match: no such session or page); any other capture ("{L}", an
  * embedded model's "{name}") into level — one too long for it matches as ROUTE_TOO_LONG, which
- * no level or name is, so that the handler refuses it naming the parameter. 1 on a match. */
+ * is neither a number nor a name, so that the handler's own check refuses it naming the
+ * parameter. 1 on a match. */
 #define ROUTE_TOO_LONG "\x01"
 int parse_route(const char *pattern, const char *path, char *id, size_t id_cap, char *level,
                 size_t level_cap);

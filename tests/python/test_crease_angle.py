@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from daemon import SUBDIVD, Daemon, Session
+from meshes import icosphere
 
 
 @pytest.fixture(scope="module")
@@ -139,32 +140,6 @@ def test_cube_surface_exact_count(daemon):
     # tags of a later PUT /tags without crease_angle replace them (no re-evaluation)
     assert s.req("PUT", "/tags", json={"singular": []}).status_code == 200
     assert s.req("GET", "/complex").json()["tags"] == {"singular": []}
-
-
-def icosphere(levels):
-    t = (1 + 5 ** 0.5) / 2
-    v = [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t],
-         [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]]
-    f = [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-         [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
-         [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
-    v = [list(np.array(p) / np.linalg.norm(p)) for p in v]
-    for _ in range(levels):
-        mid = {}
-
-        def m(a, b):
-            k = (min(a, b), max(a, b))
-            if k not in mid:
-                p = (np.array(v[a]) + np.array(v[b])) / 2
-                mid[k] = len(v)
-                v.append(list(p / np.linalg.norm(p)))
-            return mid[k]
-        g = []
-        for a, b, c in f:
-            ab, bc, ca = m(a, b), m(b, c), m(c, a)
-            g += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-        f = g
-    return [list(map(float, p)) for p in v], f
 
 
 def test_sphere_tags_nothing(daemon):

@@ -15,6 +15,7 @@ import pytest
 import requests
 
 from daemon import Daemon, Session
+from meshes import icosphere
 from test_persist import adopt, edit, on, store_daemon
 
 # a block of 2 x 2 x 1 cubes, 5 tetrahedra each (so the solid has room inside at level 2)
@@ -79,6 +80,16 @@ def level_cells(s, level):
     for p, q, a, a2, b, b2 in j["cells"]["octahedra"]:     # around the major diagonal (p, q)
         tets += [[p, q, a, b], [p, q, b, a2], [p, q, a2, b2], [p, q, b2, a]]
     return x, np.array(tets)
+
+
+def bent(daemon, blk, amount, seed, level):
+    """blk with its vertices moved by up to `amount` at random, posted to a new session: the
+    session, the complex and level `level`'s points and cells (level_cells)."""
+    rnd = np.random.default_rng(seed).uniform(-amount, amount, size=(len(blk["vertices"]), 3))
+    blk["vertices"] = (np.array(blk["vertices"]) + rnd).tolist()
+    s = Session(daemon)
+    assert s.put_complex(blk).status_code == 200
+    return s, blk, *level_cells(s, level)
 
 
 def locate(x, tets, p, tol=1e-12):
@@ -258,25 +269,7 @@ def nearest_cell(x, tets, p):
 def icosphere_shell(k, r0=1.0, r1=1.2):
     """A hollow sphere: the triangles of an icosahedron split k times, on radii r0 and r1, each
     pair a prism of 3 tetrahedra (diagonals from the lowest vertex, so neighbours agree)."""
-    t = (1 + 5 ** 0.5) / 2
-    v = [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t],
-         [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]]
-    f = [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-         [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
-         [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
-    v = [np.array(p) / np.linalg.norm(p) for p in v]
-    for _ in range(k):
-        mid, nf = {}, []
-
-        def m(a, b):
-            if (min(a, b), max(a, b)) not in mid:
-                mid[(min(a, b), max(a, b))] = len(v)
-                v.append((v[a] + v[b]) / np.linalg.norm(v[a] + v[b]))
-            return mid[(min(a, b), max(a, b))]
-        for a, b, c in f:
-            ab, bc, ca = m(a, b), m(b, c), m(c, a)
-            nf += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-        f = nf
+    v, f = icosphere(k)
     v, n = np.array(v), len(v)
     tets = []
     for tri in f:
@@ -292,12 +285,7 @@ def test_nearest_far_from_a_curved_solid_and_its_bounded_search(daemon):
     search is bounded: vertices that thousands of cells are about equally near (the centre of a
     hollow sphere) are a 422 naming the first one past the budget, in seconds, not a bind of
     hours; one of them alone binds, to its nearest cell."""
-    big = cubes(6, 6, 6)
-    bend = np.random.default_rng(9).uniform(-0.15, 0.15, size=(len(big["vertices"]), 3))
-    big["vertices"] = (np.array(big["vertices"]) + bend).tolist()
-    t = Session(daemon)
-    assert t.put_complex(big).status_code == 200
-    x, tets = level_cells(t, 2)
+    t, big, x, tets = bent(daemon, cubes(6, 6, 6), 0.15, 9, 2)
     assert len(tets) > 60000
     rnd = np.random.default_rng(3)
     far = np.column_stack([rnd.uniform(0, 6, 1000), rnd.uniform(0, 6, 1000),
@@ -363,12 +351,7 @@ def test_nearest_ties_go_to_the_lowest_cell(daemon):
     middle, found here (cells numbered as the level's JSON gives them: tetrahedra, then each
     octahedron's 4 around its major diagonal)."""
     import itertools
-    blk = cubes(2, 2, 1)
-    bend = np.random.default_rng(11).uniform(-0.08, 0.08, size=(len(blk["vertices"]), 3))
-    blk["vertices"] = (np.array(blk["vertices"]) + bend).tolist()
-    s = Session(daemon)
-    assert s.put_complex(blk).status_code == 200
-    x, tets = level_cells(s, 1)
+    s, blk, x, tets = bent(daemon, cubes(2, 2, 1), 0.08, 11, 1)
     faces = {}
     for c, t in enumerate(tets):
         for i in range(4):

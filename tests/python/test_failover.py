@@ -162,15 +162,20 @@ def test_session_paths_hash_on_the_id(tmp_path):
         codes = [r.status_code for r in out]
         assert codes[:26] == [201] * 26 and codes[-1] == 429, codes
         # in the daemons' form (docs/SERVICE.md "Errors"): a problem with Retry-After
-        last = out[-1]
-        assert last.headers["Content-Type"] == "application/problem+json", last.headers
-        assert last.json()["type"] == "/errors/session-rate" and last.json()["status"] == 429
-        assert int(last.headers["Retry-After"]) > 0
+        assert_retry_problem(out[-1], 429, "session-rate")
     finally:
         if hap:
             hap.stop()
         for d in daemons:
             d.stop()
+
+
+def assert_retry_problem(r, status, slug):
+    """An answer of HAProxy's own in the daemons' form (docs/SERVICE.md "Errors"): a
+    problem+json of that status and type, with Retry-After."""
+    assert r.headers["Content-Type"] == "application/problem+json", r.headers
+    assert r.json()["status"] == status and r.json()["type"] == f"/errors/{slug}", r.text
+    assert int(r.headers["Retry-After"]) > 0
 
 
 @needs_haproxy
@@ -189,9 +194,7 @@ def test_no_daemon_up_is_a_problem_with_retry_after(tmp_path):
             r = requests.request(method, hap.url + path, json={} if method == "POST" else None,
                                  timeout=10)
             assert r.status_code == 503, (path, r.status_code, r.text)
-            assert r.headers["Content-Type"] == "application/problem+json", r.headers
-            assert r.json()["status"] == 503 and r.json()["type"] == "/errors/not-ready"
-            assert int(r.headers["Retry-After"]) > 0
+            assert_retry_problem(r, 503, "not-ready")
     finally:
         if hap:
             hap.stop()

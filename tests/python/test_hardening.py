@@ -18,6 +18,7 @@ import requests
 
 import daemon as daemon_mod
 from daemon import SLOW, Daemon, Session
+from meshes import kuhn_grid
 
 CUBE_V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]]
 CUBE_S = [[0, 1, 2, 3], [1, 2, 3, 4]]
@@ -863,23 +864,6 @@ def test_a_request_larger_than_the_whole_budget_is_a_413():
         d.stop()
 
 
-def tet_grid(n):
-    """n^3 unit cubes, each as the 6 tetrahedra around its main diagonal."""
-    import itertools
-    vid = lambda x, y, z: x + (n + 1) * (y + (n + 1) * z)
-    verts = [[x, y, z] for z in range(n + 1) for y in range(n + 1) for x in range(n + 1)]
-    tets = []
-    for x, y, z in itertools.product(range(n), repeat=3):
-        for perm in itertools.permutations(range(3)):
-            c = [x, y, z]
-            t = [vid(*c)]
-            for a in perm:
-                c[a] += 1
-                t.append(vid(*c))
-            tets.append(t)
-    return verts, tets
-
-
 def test_a_level_larger_than_the_whole_budget_is_refused_before_it_is_built():
     """Level 3 of 24 576 tetrahedra (6.4 M cells, under --max-cells) needs some 440 MB by the
     core's estimate, more than a 300 MB budget holds even with nothing else in it: 413 naming
@@ -889,7 +873,7 @@ def test_a_level_larger_than_the_whole_budget_is_refused_before_it_is_built():
     d = Daemon("--max-memory", str(300_000_000))
     try:
         s = Session(d)
-        v, t = tet_grid(16)
+        v, t = kuhn_grid(16)
         assert s.put_complex({"vertices": v, "simplices": t}).status_code == 200
         before = d.rss_bytes()
         for path in ("/levels/3/stats", "/levels/3?format=glb"):
@@ -917,7 +901,7 @@ def test_a_refinement_larger_than_the_whole_budget_is_a_413():
     d = Daemon("--max-memory", str(150_000_000))
     try:
         s = Session(d)
-        v, t = tet_grid(16)
+        v, t = kuhn_grid(16)
         r = s.put_complex({"vertices": v, "simplices": t})
         assert r.status_code == 200
         version = r.json()["version"]

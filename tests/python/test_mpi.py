@@ -481,16 +481,16 @@ def test_merge_keeps_the_vertices_of_no_simplex(tmp_path, nranks):
         g0.GetNumberOfCells()
 
 
-def one_process_and_pieces(tmp_path, body, level, attributes):
-    """`body` refined to `level` by `subdivd refine` (with those attributes) and by 2 ranks: the
-    one-process VTU and the .pvtu's path."""
+def one_process_and_pieces(tmp_path, body, level, attributes, out="o.pvtu"):
+    """`body` refined to `level` by `subdivd refine` (with those attributes) and by 2 ranks into
+    `out` (pieces and a .pvtu, or one merged .vtu): the one-process VTU and out's path."""
     mesh = tmp_path / "m.json"
     mesh.write_text(json.dumps(body))
     ref = tmp_path / "ref.vtu"
     r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", str(level), "-o", str(ref),
                         "--attributes", attributes], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    out = tmp_path / "o.pvtu"
+    out = tmp_path / out
     r = mpirun(2, "refine", mesh, "--level", level, "-o", out)
     assert r.returncode == 0, r.stderr
     return read(ref), out
@@ -529,19 +529,11 @@ def test_attributes_called_global_id_and_owner_move_those_arrays(tmp_path, out):
     body = {"vertices": v, "simplices": [[0, 1, 2, 3], [1, 2, 3, 4]],
             "attributes": {"global_id": [10.0, 11, 12, 13, 14], "owner": [5.0] * 5,
                            "global_id_2": [1.0] * 5}}
-    mesh = tmp_path / "m.json"
-    mesh.write_text(json.dumps(body))
-    ref = tmp_path / "ref.vtu"
-    r = subprocess.run([str(SUBDIVD), "refine", str(mesh), "--level", "2", "-o", str(ref)],
-                       capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
-    g0 = read(ref)
+    g0, path = one_process_and_pieces(tmp_path, body, 2, "global_id,owner,global_id_2", out)
     want_attr = vtk_to_numpy(g0.GetPointData().GetArray("global_id"))
-    r = mpirun(2, "refine", mesh, "--level", 2, "-o", tmp_path / out, "-q")
-    assert r.returncode == 0, r.stderr
-    graphs = [read(tmp_path / out)] if out.endswith(".vtu") else pieces_of(tmp_path / out, 2)
+    graphs = [read(path)] if out.endswith(".vtu") else pieces_of(path, 2)
     if out.endswith(".pvtu"):
-        graphs.append(read(tmp_path / out))  # the parallel reader, all pieces as one
+        graphs.append(read(path))  # the parallel reader, all pieces as one
     for g in graphs:
         pd = g.GetPointData()
         names = [pd.GetArrayName(i) for i in range(pd.GetNumberOfArrays())]

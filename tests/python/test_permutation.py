@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from daemon import Daemon, Session
+from meshes import kuhn_grid
 
 LEVELS = (1, 2, 3)
 
@@ -24,25 +25,13 @@ def block_complex():
     hinged on edges of the block's boundary and a free apex; a 3-segment curve from a corner."""
     rng = random.Random(7)
     n = 2
-    verts = []
-    for z in range(n + 1):
-        for y in range(n + 1):
-            for x in range(n + 1):
-                verts.append([x + rng.uniform(-0.1, 0.1), y + rng.uniform(-0.1, 0.1),
-                              z + rng.uniform(-0.1, 0.1)])
+    grid, simplices = kuhn_grid(n)
+    verts = [[x + rng.uniform(-0.1, 0.1), y + rng.uniform(-0.1, 0.1), z + rng.uniform(-0.1, 0.1)]
+             for x, y, z in grid]
 
     def vid(x, y, z):
         return z * (n + 1) ** 2 + y * (n + 1) + x
 
-    simplices = []
-    for z, y, x in itertools.product(range(n), repeat=3):
-        for perm in itertools.permutations(range(3)):
-            c = [x, y, z]
-            tet = [vid(*c)]
-            for axis in perm:
-                c[axis] += 1
-                tet.append(vid(*c))
-            simplices.append(tet)
     h = len(verts)
     verts.append([1.0, -0.8, 2.6])
     top = [vid(0, 0, 2), vid(1, 0, 2), vid(2, 0, 2), vid(2, 1, 2)]

@@ -28,12 +28,20 @@ def table_slugs():
     return out
 
 
+FAIL_CALL = re.compile(r"(?:api_fail(?:_at)?|http_fail)\([^,]+,\s*(\d{3}),\s*\"([a-z-]+)\"")
+
+
+def c_sources():
+    """(path, text) of the C sources that answer requests (api/, server/)."""
+    for path in list((REPO / "api").glob("*.c")) + list((REPO / "server").glob("*.c")):
+        yield path, path.read_text(encoding="utf-8")
+
+
 def code_slugs():
     """The slugs the C sources report: api_fail*/http_fail calls and literal /errors/ types."""
     found = set()
-    for path in list((REPO / "api").glob("*.c")) + list((REPO / "server").glob("*.c")):
-        src = path.read_text(encoding="utf-8")
-        found |= set(re.findall(r"(?:api_fail(?:_at)?|http_fail)\([^,]+,\s*\d{3},\s*\"([a-z-]+)\"", src))
+    for path, src in c_sources():
+        found |= {m.group(2) for m in FAIL_CALL.finditer(src)}
         found |= set(re.findall(r"/errors/([a-z][a-z-]+)", src))
         if "api_fail_limit(" in src:
             found.add("limit-exceeded")
@@ -49,9 +57,8 @@ def test_the_code_answers_each_slug_with_the_status_of_its_row():
     """A slug is one kind of problem with one status (its row, its /errors/ page): a call that
     reports it with another status contradicts the page a client is sent to."""
     table, wrong = table_slugs(), []
-    for path in list((REPO / "api").glob("*.c")) + list((REPO / "server").glob("*.c")):
-        src = path.read_text(encoding="utf-8")
-        for m in re.finditer(r"(?:api_fail(?:_at)?|http_fail)\([^,]+,\s*(\d{3}),\s*\"([a-z-]+)\"", src):
+    for path, src in c_sources():
+        for m in FAIL_CALL.finditer(src):
             if m.group(2) in table and table[m.group(2)] != int(m.group(1)):
                 wrong.append(f"{path.name}:{src[:m.start()].count(chr(10)) + 1} {m.group(1)} "
                              f"{m.group(2)} (its row: {table[m.group(2)]})")

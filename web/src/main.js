@@ -62,6 +62,11 @@ function levelRange(summary) {
   return { max: MAX_LEVEL, next: null };
 }
 
+// The address of a session for another tab: a fragment, which never reaches a server (nor its
+// logs); the model's name goes with it, so that tab names the model as this one does.
+const sessionLink = (id, token, name) =>
+  `${location.pathname}#session=${id}&token=${token}${name ? `&name=${encodeURIComponent(name)}` : ''}`;
+
 const millions = (n) => `${(n / 1e6).toPrecision(3)} M`;
 
 function fnv1a(buf) {
@@ -612,10 +617,7 @@ class App {
   #showSession() {
     const s = this.session;
     $('session').textContent = s.id ? `session ${s.id.slice(0, 8)} · v${s.version}` : 'no session';
-    // the fragment never reaches a server (nor its logs); the model's name goes with it, so the
-    // other tab names the model as this one does
-    const name = this.model?.name ? `&name=${encodeURIComponent(this.model.name)}` : '';
-    $('share').href = s.id ? `${location.pathname}#session=${s.id}&token=${s.token}${name}` : '#';
+    $('share').href = s.id ? sessionLink(s.id, s.token, this.model?.name) : '#';
   }
 
   // Open a session another tab started (/#session=ID&token=TOKEN): its model, then follow it.
@@ -1616,8 +1618,7 @@ class App {
       // a duplicate of the tab that shows this session: join it as a tab opened by its link
       // would (the session stays the other tab's), with the link in the address for a reload
       Session.forget();
-      const name = kept.name ? `&name=${encodeURIComponent(kept.name)}` : '';
-      history.replaceState(null, '', `${location.pathname}#session=${kept.id}&token=${kept.token}${name}`);
+      history.replaceState(null, '', sessionLink(kept.id, kept.token, kept.name));
       this.#hint('Joining the session…');
       if (await this.join(kept.id, kept.token, { name: kept.name, embedded: kept.embedded })) {
         this.ready = true;
