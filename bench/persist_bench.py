@@ -33,7 +33,8 @@ from redisd import REDIS_SERVER, RedisServer  # noqa: E402
 
 def start(store):
     p = subprocess.Popen([SUBDIVD, "--port", "0", "--log-level", "warn", "--store", store,
-                          "--session-rate", "1000000", "--max-sessions", "64"],
+                          "--session-rate", "1000000", "--max-sessions", "64",
+                          "--max-stored-sessions-per-client", "0"],
                          stdout=subprocess.PIPE, text=True)
     line = p.stdout.readline()
     return p, int(line.split(":")[2].split("/")[0])

@@ -46,6 +46,8 @@ static const setting S[] = {
     {"max-sessions", T_INT, OFF(max_sessions), 1, 1000000, "live sessions (default 64)"},
     {"max-sessions-per-client", T_INT, OFF(max_sessions_per_client), 0, 1000000,
      "resident sessions one client address may have created (default: a quarter of --max-sessions, at least 1; 0: no cap; 429 beyond)"},
+    {"max-stored-sessions-per-client", T_INT, OFF(max_stored_sessions_per_client), 0, 1000000,
+     "unexpired sessions one client address may have created in a durable --store, resident or not (default: --max-sessions; 0: no cap; 429 beyond)"},
     {"ttl", T_INT, OFF(ttl_s), 1, API_MAX_TTL_S, "default session idle TTL in seconds (3600)"},
     {"max-ttl", T_INT, OFF(max_ttl_s), 1, API_MAX_TTL_S,
      "largest session TTL granted, seconds (default 86400; a larger ttl_s is clamped)"},
@@ -208,6 +210,7 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
     c->max_listeners = 16;
     c->max_sessions = API_DEFAULT_MAX_SESSIONS;
     c->max_sessions_per_client = -1; /* a quarter of --max-sessions, unless given */
+    c->max_stored_sessions_per_client = -1; /* --max-sessions, unless given */
     c->ttl_s = API_DEFAULT_TTL_S;
     c->max_ttl_s = API_DEFAULT_MAX_TTL_S;
     c->session_rate = API_DEFAULT_SESSION_RATE;
@@ -270,6 +273,8 @@ int config_load(config *c, int argc, char **argv, int first, int *exit_code)
         c->connection_reserve = c->max_connections / 2;
     if (c->ttl_s > c->max_ttl_s)
         c->ttl_s = c->max_ttl_s;
+    if (c->max_stored_sessions_per_client < 0)
+        c->max_stored_sessions_per_client = c->max_sessions;
     if (c->max_sessions_per_client < 0)
         c->max_sessions_per_client = c->max_sessions / 4 > 1 ? c->max_sessions / 4 : 1;
     if (c->max_client_body_bytes == UINT64_MAX) {

@@ -23,6 +23,7 @@ typedef struct config {
     int drain_timeout_s;      /* on SIGTERM/SIGINT, how long requests in flight may finish */
     int max_sessions;         /* resident sessions */
     int max_sessions_per_client; /* resident sessions one client address created (0: any) */
+    int max_stored_sessions_per_client; /* unexpired ones in a durable store (0: any) */
     int ttl_s;                /* default session idle TTL */
     int max_ttl_s;            /* a larger ttl_s asked for is granted as this */
     int session_rate;         /* sessions one client may create per minute (burst as many) */

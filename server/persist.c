@@ -185,6 +185,14 @@ void persist_loaded_free(persist_loaded *l)
 long persist_expire(persist *p, int64_t now) { return p->ops ? p->ops->expire(p->b, now) : 0; }
 long persist_count(persist *p, int64_t now) { return p->ops ? p->ops->count(p->b, now) : 0; }
 
+persist_rc persist_owned(persist *p, const char *owner, int64_t now, long enough, long *n,
+                         int64_t *soonest)
+{
+    *n = 0;
+    *soonest = 0;
+    return p->ops ? noted_read(p, p->ops->owned(p->b, owner, now, enough, n, soonest)) : PERSIST_OK;
+}
+
 void persist_last_failure(persist *p, char *why, size_t cap)
 {
     pthread_mutex_lock(&p->mu);

@@ -2,7 +2,7 @@
  * resident sessions (sessions.h).
  *
  * What is stored per session is its control data, never its levels: a small record (id, the
- * SHA-256 of its token, TTL, creation and expiry times, version) and the session's content as a
+ * SHA-256 of its token, TTL, creation and expiry times, version, the client that created it) and the session's content as a
  * *snapshot* (the export document of api/export.c at some version) followed by a *journal*:
  * the bodies of the edits (PATCH control-points) answered since, one entry per version. Any
  * change other than an edit writes a new snapshot and empties the journal; the daemon also
@@ -32,6 +32,8 @@ typedef enum persist_rc {
     PERSIST_CORRUPT       /* what is stored cannot be read back (a damaged record or entry) */
 } persist_rc;
 
+#define PERSIST_OWNER_CAP 40 /* 34 hex digits and the NUL, with room */
+
 typedef struct persist_meta {
     char id[33];
     unsigned char token_hash[32]; /* SHA-256 of the bearer token */
@@ -39,6 +41,9 @@ typedef struct persist_meta {
     int64_t created;              /* wall clock, seconds since the epoch */
     int64_t expires_at;           /* wall clock; the store forgets the session after it */
     uint64_t version;
+    /* the client address that created it (rate.h's key in hex; "" when none is known: a session
+     * stored before owners were kept): a client's stored sessions are counted by it */
+    char owner[PERSIST_OWNER_CAP];
 } persist_meta;
 
 /* One journal entry: the edit that made `version`. */
@@ -104,6 +109,11 @@ persist_rc persist_load(persist *p, const char *id, persist_loaded *out);
 void persist_loaded_free(persist_loaded *l);
 /* Forget sessions whose expiry is before `now`; returns how many went (or -1). */
 long persist_expire(persist *p, int64_t now);
+/* How many unexpired stored sessions `owner` created (*n), and the soonest expiry among them
+ * (*soonest, wall clock; 0 when none). The count stops at `enough` (> 0) when the store would
+ * have to look further (redis checks each session it counts). */
+persist_rc persist_owned(persist *p, const char *owner, int64_t now, long enough, long *n,
+                         int64_t *soonest);
 /* Stored unexpired sessions (-1 if the store cannot say). */
 long persist_count(persist *p, int64_t now);
 /* Can the store be written? false with the reason (the last failure) in why: after a write or

@@ -22,6 +22,8 @@ typedef struct persist_ops {
      * store take writes again? */
     persist_rc (*probe)(void *b);
     long (*count)(void *b, int64_t now);
+    persist_rc (*owned)(void *b, const char *owner, int64_t now, long enough, long *n,
+                        int64_t *soonest);
     /* the back end's own description of its last failure (after a non-OK return) */
     const char *(*last_error)(void *b);
     void (*close)(void *b);

@@ -5,11 +5,18 @@
  * expired session by itself; the braces are a Redis Cluster hash tag: a session's three keys are
  * in one slot, as a multi-key script needs):
  *   subdivd:s:{ID}     hash   token_hash (32 raw bytes), ttl_s, created, expires_at, version,
- *                             snapshot_version (decimal integers)
+ *                             snapshot_version (decimal integers), owner (the client that
+ *                             created it, hex; absent when unknown)
  *   subdivd:snap:{ID}  string the snapshot document (absent while snapshot_version is 0 and no
  *                             snapshot was written)
  *   subdivd:j:{ID}     list   the journal after the snapshot, oldest first, each entry
  *                             "<version> <text>" (decimal version, one space, the edit's body)
+ *
+ * and per client that created sessions (its own slot, so never inside a session's script):
+ *   subdivd:o:{OWNER}  zset   the ids of its sessions, each scored with an expiry it had (added
+ *                             at creation, removed at deletion; EXPIREAT the latest score). A
+ *                             touch does not update it: r_owned checks each member's record, drops
+ *                             the gone ones and rescores the others, so the count is exact.
  *
  * Every write that depends on the stored version is one Lua script (atomic on the server): it
  * reads the hash's version, answers -1 when the hash is gone (PERSIST_ABSENT), 0 when the version
@@ -44,14 +51,16 @@
 
 #define CONNECT_TIMEOUT_S 1
 #define COMMAND_TIMEOUT_S 2
-#define KEY_CAP 64          /* "subdivd:snap:{" + 32 + "}" */
+#define KEY_CAP 64          /* "subdivd:snap:{" + 32 + "}", "subdivd:o:{" + 39 + "}" */
 
-/* KEYS: hash, snapshot, journal. ARGV: token_hash, ttl_s, created, expires_at, version. */
+/* KEYS: hash, snapshot, journal. ARGV: token_hash, ttl_s, created, expires_at, version, owner
+ * ("" when none). */
 static const char LUA_CREATE[] =
     "if redis.call('EXISTS', KEYS[1]) == 1 then return 0 end\n"
     "redis.call('DEL', KEYS[2], KEYS[3])\n"
     "redis.call('HSET', KEYS[1], 'token_hash', ARGV[1], 'ttl_s', ARGV[2], 'created', ARGV[3],\n"
     "           'expires_at', ARGV[4], 'version', ARGV[5], 'snapshot_version', '0')\n"
+    "if ARGV[6] ~= '' then redis.call('HSET', KEYS[1], 'owner', ARGV[6]) end\n"
     "redis.call('EXPIREAT', KEYS[1], ARGV[4])\n"
     "return 1\n";
 
@@ -96,7 +105,7 @@ static const char LUA_DELETE[] =
 /* KEYS: hash, snapshot, journal. Answers -1 (no record) or {fields, snapshot or nil, journal}. */
 static const char LUA_LOAD[] =
     "local h = redis.call('HMGET', KEYS[1], 'token_hash', 'ttl_s', 'created', 'expires_at',\n"
-    "                     'version', 'snapshot_version')\n"
+    "                     'version', 'snapshot_version', 'owner')\n"
     "if not h[5] then return -1 end\n"
     "return {h, redis.call('GET', KEYS[2]), redis.call('LRANGE', KEYS[3], 0, -1)}\n";
 
@@ -284,6 +293,46 @@ static bool id_ok(const redis_backend *b, const char *id)
 
 /* ---- the operations ---- */
 
+static bool parse_i64(const redisReply *r, int64_t *out);
+
+/* Add id (expiring at exp) to its client's set, and let the set expire with the latest of its
+ * members (read back: another daemon may have given a later one). Caller holds b->mu. */
+static persist_rc index_locked(redis_backend *b, const char *owner, const char *id, const char *exp)
+{
+    char ko[KEY_CAP];
+    snprintf(ko, sizeof ko, "subdivd:o:{%s}", owner);
+    const char *za[4] = {"ZADD", ko, exp, id}, *last[5] = {"ZRANGE", ko, "-1", "-1", "WITHSCORES"};
+    size_t zl[4] = {4, strlen(ko), strlen(exp), strlen(id)}, ll[5] = {6, strlen(ko), 2, 2, 10};
+    persist_rc rc = PERSIST_OK;
+    redisReply *r = exec_locked(b, 4, za, zl);
+    if (r && r->type != REDIS_REPLY_ERROR) {
+        freeReplyObject(r);
+        r = exec_locked(b, 5, last, ll);
+    }
+    int64_t latest;
+    if (!r)
+        return PERSIST_UNAVAILABLE;
+    if (r->type == REDIS_REPLY_ERROR)
+        rc = error_reply(b, id, r);
+    else if (r->type != REDIS_REPLY_ARRAY || r->elements != 2 || !parse_i64(r->element[1], &latest)) {
+        set_err(b, "unexpected ZRANGE reply");
+        rc = PERSIST_UNAVAILABLE;
+    }
+    freeReplyObject(r);
+    if (rc != PERSIST_OK)
+        return rc;
+    char x[24];
+    snprintf(x, sizeof x, "%" PRId64, latest);
+    const char *xa[3] = {"EXPIREAT", ko, x};
+    size_t xl[3] = {8, strlen(ko), strlen(x)};
+    if (!(r = exec_locked(b, 3, xa, xl)))
+        return PERSIST_UNAVAILABLE;
+    if (r->type == REDIS_REPLY_ERROR)
+        rc = error_reply(b, id, r);
+    freeReplyObject(r);
+    return rc;
+}
+
 static persist_rc r_create(void *vb, const persist_meta *m)
 {
     redis_backend *b = vb;
@@ -294,10 +343,20 @@ static persist_rc r_create(void *vb, const persist_meta *m)
     snprintf(created, sizeof created, "%" PRId64, m->created);
     snprintf(exp, sizeof exp, "%" PRId64, m->expires_at);
     snprintf(ver, sizeof ver, "%" PRIu64, m->version);
-    const char *args[5] = {(const char *)m->token_hash, ttl, created, exp, ver};
-    size_t lens[5] = {32, strlen(ttl), strlen(created), strlen(exp), strlen(ver)};
+    const char *args[6] = {(const char *)m->token_hash, ttl, created, exp, ver, m->owner};
+    size_t lens[6] = {32, strlen(ttl), strlen(created), strlen(exp), strlen(ver), strlen(m->owner)};
     pthread_mutex_lock(&b->mu);
-    persist_rc rc = cas_rc(b, eval_locked(b, S_CREATE, m->id, 5, args, lens));
+    persist_rc rc = cas_rc(b, eval_locked(b, S_CREATE, m->id, 6, args, lens));
+    if (rc == PERSIST_OK && m->owner[0]) /* counted for its client, or not created */
+        rc = index_locked(b, m->owner, m->id, exp);
+    if (rc != PERSIST_OK && rc != PERSIST_CONFLICT && m->owner[0]) {
+        char keep[sizeof last_err];
+        memcpy(keep, last_err, sizeof keep);
+        redisReply *r = eval_locked(b, S_DELETE, m->id, 0, NULL, NULL);
+        if (r)
+            freeReplyObject(r);
+        memcpy(last_err, keep, sizeof keep);
+    }
     pthread_mutex_unlock(&b->mu);
     if (rc == PERSIST_CONFLICT)
         set_err(b, "session %s exists", m->id);
@@ -360,13 +419,117 @@ static persist_rc r_touch(void *vb, const char *id, int ttl_s, int64_t expires_a
     return rc;
 }
 
+/* The record's owner field into owner (cap bytes; "" when none or unreadable). Caller holds
+ * b->mu. */
+static void owner_locked(redis_backend *b, const char *id, char *owner, size_t cap)
+{
+    char kh[KEY_CAP];
+    snprintf(kh, sizeof kh, "subdivd:s:{%s}", id);
+    const char *argv[3] = {"HGET", kh, "owner"};
+    size_t len[3] = {4, strlen(kh), 5};
+    redisReply *r = exec_locked(b, 3, argv, len);
+    owner[0] = '\0';
+    if (r && r->type == REDIS_REPLY_STRING && r->len < cap) {
+        memcpy(owner, r->str, r->len);
+        owner[r->len] = '\0';
+    }
+    if (r)
+        freeReplyObject(r);
+}
+
+/* Take id out of its client's set (a failure leaves it to r_owned, which finds it gone). */
+static void unindex_locked(redis_backend *b, const char *owner, const char *id)
+{
+    char ko[KEY_CAP];
+    snprintf(ko, sizeof ko, "subdivd:o:{%s}", owner);
+    const char *argv[3] = {"ZREM", ko, id};
+    size_t len[3] = {4, strlen(ko), strlen(id)};
+    redisReply *r = exec_locked(b, 3, argv, len);
+    if (r)
+        freeReplyObject(r);
+}
+
 static persist_rc r_delete(void *vb, const char *id)
 {
     redis_backend *b = vb;
     if (!id_ok(b, id))
         return PERSIST_ABSENT;
+    char owner[PERSIST_OWNER_CAP];
     pthread_mutex_lock(&b->mu);
+    owner_locked(b, id, owner, sizeof owner);
     persist_rc rc = cas_rc(b, eval_locked(b, S_DELETE, id, 0, NULL, NULL));
+    if (rc == PERSIST_OK && owner[0]) {
+        char keep[sizeof last_err];
+        memcpy(keep, last_err, sizeof keep);
+        unindex_locked(b, owner, id);
+        memcpy(last_err, keep, sizeof keep);
+    }
+    pthread_mutex_unlock(&b->mu);
+    return rc;
+}
+
+/* The members of the client's set, each checked against its record (the set's scores lag
+ * touches and PATCHed TTLs): gone or expired ones are dropped, the others rescored with their
+ * record's expiry and counted, until `enough`. */
+static persist_rc r_owned(void *vb, const char *owner, int64_t now, long enough, long *n,
+                          int64_t *soonest)
+{
+    redis_backend *b = vb;
+    char ko[KEY_CAP];
+    if (strlen(owner) + 12 >= sizeof ko) {
+        set_err(b, "bad client key");
+        return PERSIST_UNAVAILABLE;
+    }
+    snprintf(ko, sizeof ko, "subdivd:o:{%s}", owner);
+    const char *argv[4] = {"ZRANGE", ko, "0", "-1"};
+    size_t len[4] = {6, strlen(ko), 1, 2};
+    pthread_mutex_lock(&b->mu);
+    redisReply *ids = exec_locked(b, 4, argv, len);
+    persist_rc rc = PERSIST_OK;
+    if (!ids)
+        rc = PERSIST_UNAVAILABLE;
+    else if (ids->type == REDIS_REPLY_ERROR)
+        rc = error_reply(b, NULL, ids);
+    else if (ids->type != REDIS_REPLY_ARRAY) {
+        set_err(b, "unexpected ZRANGE reply");
+        rc = PERSIST_UNAVAILABLE;
+    }
+    for (size_t i = 0; rc == PERSIST_OK && i < ids->elements && (enough <= 0 || *n < enough); i++) {
+        const redisReply *e = ids->element[i];
+        char id[40], kh[KEY_CAP];
+        if (e->type != REDIS_REPLY_STRING || e->len == 0 || e->len > 32)
+            continue;
+        memcpy(id, e->str, e->len);
+        id[e->len] = '\0';
+        snprintf(kh, sizeof kh, "subdivd:s:{%s}", id);
+        const char *hg[3] = {"HGET", kh, "expires_at"};
+        size_t hl[3] = {4, strlen(kh), 10};
+        redisReply *r = exec_locked(b, 3, hg, hl);
+        int64_t exp = 0;
+        if (!r) {
+            rc = PERSIST_UNAVAILABLE;
+            break;
+        }
+        bool live = r->type == REDIS_REPLY_STRING && parse_i64(r, &exp) && exp >= now;
+        if (r->type == REDIS_REPLY_ERROR)
+            rc = error_reply(b, id, r);
+        freeReplyObject(r);
+        if (rc != PERSIST_OK)
+            break;
+        char x[24];
+        snprintf(x, sizeof x, "%" PRId64, exp);
+        const char *w[4] = {live ? "ZADD" : "ZREM", ko, live ? x : id, id};
+        size_t wl[4] = {4, strlen(ko), strlen(w[2]), strlen(id)};
+        if ((r = exec_locked(b, live ? 4 : 3, w, wl)))
+            freeReplyObject(r);
+        if (live) {
+            ++*n;
+            if (!*soonest || exp < *soonest)
+                *soonest = exp;
+        }
+    }
+    if (ids)
+        freeReplyObject(ids);
     pthread_mutex_unlock(&b->mu);
     return rc;
 }
@@ -446,7 +609,7 @@ static persist_rc parse_loaded(const redis_backend *b, const char *id, const red
         return PERSIST_ABSENT;
     }
     if (r->type != REDIS_REPLY_ARRAY || r->elements != 3 || r->element[0]->type != REDIS_REPLY_ARRAY
-        || r->element[0]->elements != 6 || r->element[2]->type != REDIS_REPLY_ARRAY)
+        || r->element[0]->elements != 7 || r->element[2]->type != REDIS_REPLY_ARRAY)
         return corrupt(b, out, id, "unexpected reply shape");
     redisReply **h = r->element[0]->element;
     const redisReply *snap = r->element[1], *j = r->element[2];
@@ -461,6 +624,10 @@ static persist_rc parse_loaded(const redis_backend *b, const char *id, const red
         || !parse_version(h[5], &out->snapshot_version))
         return corrupt(b, out, id, "unreadable record field");
     m->ttl_s = (int)ttl;
+    if (h[6]->type == REDIS_REPLY_STRING && h[6]->len < sizeof m->owner) {
+        memcpy(m->owner, h[6]->str, h[6]->len);
+        m->owner[h[6]->len] = '\0';
+    }
     if (m->expires_at < (int64_t)time(NULL)) {
         memset(out, 0, sizeof *out);
         set_err(b, "session %s expired", id);
@@ -671,6 +838,7 @@ const persist_ops persist_redis_ops = {
     .load = r_load,
     .expire = r_expire,
     .count = r_count,
+    .owned = r_owned,
     .probe = r_probe,
     .last_error = r_last_error,
     .close = r_close,

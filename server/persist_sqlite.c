@@ -1,7 +1,7 @@
 /* persist_sqlite.c — the SQLite back end of persist.h: one file, WAL mode, for one daemon.
  *
  *   sessions(id PRIMARY KEY, token_hash, ttl_s, created, expires_at, version,
- *            snapshot_version, snapshot, snapshot_crc)
+ *            snapshot_version, snapshot, snapshot_crc, owner)
  *   journal(id, version, entry, crc; PRIMARY KEY (id, version))
  *
  * A write is one transaction (BEGIN IMMEDIATE … COMMIT) whose first statement is the
@@ -11,6 +11,9 @@
  * the daemon's crash (kill -9), not a power cut (that is `--sync full`). Every snapshot and
  * journal entry carries its CRC-32 (zlib), so damaged bytes are found when the session is loaded
  * (PERSIST_CORRUPT) instead of being replayed.
+ *
+ * `owner` (the client that created the session, NULL when unknown) came later: a file written
+ * before has the column added when it is opened (its sessions count for nobody).
  *
  * One connection, serialised by a mutex: the statements are prepared once and each write is tens
  * of microseconds. SUBDIVD_SQLITE_MAX_PAGES (a test hook) caps the file at its size when opened
@@ -32,7 +35,7 @@
 enum {
     Q_BEGIN, Q_COMMIT, Q_ROLLBACK, Q_BEGIN_READ, Q_CREATE, Q_CAS_SNAP, Q_CAS_APPEND, Q_DEL_JOURNAL,
     Q_ADD_ENTRY, Q_VERSION, Q_TOUCH, Q_DELETE, Q_LOAD, Q_LOAD_JOURNAL, Q_EXPIRE_J, Q_EXPIRE_S,
-    Q_COUNT, Q_PROBE_PUT, Q_PROBE_DEL, NQ
+    Q_COUNT, Q_OWNED, Q_PROBE_PUT, Q_PROBE_DEL, NQ
 };
 
 static const char *const SQL[NQ] = {
@@ -41,7 +44,7 @@ static const char *const SQL[NQ] = {
     [Q_ROLLBACK] = "ROLLBACK",
     [Q_BEGIN_READ] = "BEGIN",
     [Q_CREATE] = "INSERT INTO sessions(id, token_hash, ttl_s, created, expires_at, version, "
-                 "snapshot_version) VALUES (?1, ?2, ?3, ?4, ?5, ?6, 0)",
+                 "snapshot_version, owner) VALUES (?1, ?2, ?3, ?4, ?5, ?6, 0, ?7)",
     [Q_CAS_SNAP] = "UPDATE sessions SET version = ?3, snapshot_version = ?3, snapshot = ?4, "
                    "snapshot_crc = ?5, expires_at = ?6 WHERE id = ?1 AND version = ?2",
     [Q_CAS_APPEND] = "UPDATE sessions SET version = ?3, expires_at = ?4 WHERE id = ?1 AND version = ?2",
@@ -51,12 +54,13 @@ static const char *const SQL[NQ] = {
     [Q_TOUCH] = "UPDATE sessions SET expires_at = ?2, ttl_s = coalesce(?3, ttl_s) WHERE id = ?1",
     [Q_DELETE] = "DELETE FROM sessions WHERE id = ?1",
     [Q_LOAD] = "SELECT token_hash, ttl_s, created, expires_at, version, snapshot_version, snapshot, "
-               "snapshot_crc FROM sessions WHERE id = ?1",
+               "snapshot_crc, owner FROM sessions WHERE id = ?1",
     [Q_LOAD_JOURNAL] = "SELECT version, entry, crc FROM journal WHERE id = ?1 AND version > ?2 "
                        "ORDER BY version",
     [Q_EXPIRE_J] = "DELETE FROM journal WHERE id IN (SELECT id FROM sessions WHERE expires_at < ?1)",
     [Q_EXPIRE_S] = "DELETE FROM sessions WHERE expires_at < ?1",
     [Q_COUNT] = "SELECT count(*) FROM sessions WHERE expires_at >= ?1",
+    [Q_OWNED] = "SELECT count(*), min(expires_at) FROM sessions WHERE owner = ?1 AND expires_at >= ?2",
     [Q_PROBE_PUT] = "INSERT OR REPLACE INTO probe(k, v) VALUES (1, zeroblob(65536))",
     [Q_PROBE_DEL] = "DELETE FROM probe",
 };
@@ -65,7 +69,7 @@ static const char SCHEMA[] =
     "CREATE TABLE IF NOT EXISTS sessions(id TEXT PRIMARY KEY, token_hash BLOB NOT NULL, "
     "ttl_s INTEGER NOT NULL, created INTEGER NOT NULL, expires_at INTEGER NOT NULL, "
     "version INTEGER NOT NULL, snapshot_version INTEGER NOT NULL, snapshot BLOB, "
-    "snapshot_crc INTEGER);"
+    "snapshot_crc INTEGER, owner TEXT);"
     "CREATE TABLE IF NOT EXISTS journal(id TEXT NOT NULL, version INTEGER NOT NULL, "
     "entry BLOB NOT NULL, crc INTEGER NOT NULL, PRIMARY KEY (id, version)) WITHOUT ROWID;"
     "CREATE INDEX IF NOT EXISTS sessions_expiry ON sessions(expires_at);"
@@ -118,6 +122,15 @@ void *persist_sqlite_open(const char *path, bool sync_full, char *err, size_t ca
     char *msg = NULL;
     if (rc == SQLITE_OK && (rc = sqlite3_exec(s->db, pragmas, NULL, NULL, &msg)) == SQLITE_OK)
         rc = sqlite3_exec(s->db, SCHEMA, NULL, NULL, &msg);
+    if (rc == SQLITE_OK) { /* a file from before owners were kept */
+        sqlite3_stmt *probe = NULL;
+        if (sqlite3_prepare_v2(s->db, "SELECT owner FROM sessions LIMIT 0", -1, &probe, NULL))
+            rc = sqlite3_exec(s->db, "ALTER TABLE sessions ADD COLUMN owner TEXT", NULL, NULL, &msg);
+        sqlite3_finalize(probe);
+    }
+    if (rc == SQLITE_OK)
+        rc = sqlite3_exec(s->db, "CREATE INDEX IF NOT EXISTS sessions_owner ON "
+                                 "sessions(owner, expires_at)", NULL, NULL, &msg);
     for (int i = 0; rc == SQLITE_OK && i < NQ; i++)
         rc = sqlite3_prepare_v3(s->db, SQL[i], -1, SQLITE_PREPARE_PERSISTENT, &s->q[i], NULL);
     const char *cap_pages = getenv("SUBDIVD_SQLITE_MAX_PAGES");
@@ -204,6 +217,8 @@ static persist_rc sq_create(void *b, const persist_meta *m)
     sqlite3_bind_int64(q, 4, m->created);
     sqlite3_bind_int64(q, 5, m->expires_at);
     sqlite3_bind_int64(q, 6, (sqlite3_int64)m->version);
+    if (m->owner[0])
+        sqlite3_bind_text(q, 7, m->owner, -1, SQLITE_STATIC);
     int rc = run(s, Q_CREATE);
     persist_rc r = rc == SQLITE_DONE ? PERSIST_OK
                    : (rc & 0xff) == SQLITE_CONSTRAINT ? PERSIST_CONFLICT
@@ -365,6 +380,9 @@ static persist_rc load_locked(sqlite_store *s, const char *id, persist_loaded *o
     m->expires_at = sqlite3_column_int64(q, 3);
     m->version = (uint64_t)sqlite3_column_int64(q, 4);
     out->snapshot_version = (uint64_t)sqlite3_column_int64(q, 5);
+    const unsigned char *owner = sqlite3_column_text(q, 8);
+    if (owner && strlen((const char *)owner) < sizeof m->owner)
+        strcpy(m->owner, (const char *)owner);
     if (r == PERSIST_OK && m->expires_at < (int64_t)time(NULL))
         r = PERSIST_ABSENT;
     out->record_ok = r == PERSIST_OK; /* what follows is the content */
@@ -478,6 +496,28 @@ static long sq_count(void *b, int64_t now)
     return n;
 }
 
+static persist_rc sq_owned(void *b, const char *owner, int64_t now, long enough, long *n,
+                           int64_t *soonest)
+{
+    (void)enough; /* one indexed query counts them all */
+    sqlite_store *s = b;
+    pthread_mutex_lock(&s->mu);
+    sqlite3_stmt *q = s->q[Q_OWNED];
+    sqlite3_bind_text(q, 1, owner, -1, SQLITE_STATIC);
+    sqlite3_bind_int64(q, 2, now);
+    int rc = sqlite3_step(q);
+    persist_rc r = PERSIST_OK;
+    if (rc == SQLITE_ROW) {
+        *n = (long)sqlite3_column_int64(q, 0);
+        *soonest = sqlite3_column_int64(q, 1); /* NULL (none) reads as 0 */
+    } else
+        r = failed(s, "counting a client's sessions", rc);
+    sqlite3_reset(q);
+    sqlite3_clear_bindings(q);
+    pthread_mutex_unlock(&s->mu);
+    return r;
+}
+
 /* 64 KiB written and committed, then deleted: a full disk (or a file at its page cap) refuses it. */
 static persist_rc sq_probe(void *b)
 {
@@ -502,6 +542,7 @@ const persist_ops persist_sqlite_ops = {
     .load = sq_load,
     .expire = sq_expire,
     .count = sq_count,
+    .owned = sq_owned,
     .probe = sq_probe,
     .last_error = sq_last_error,
     .close = sq_close,

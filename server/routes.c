@@ -372,7 +372,8 @@ static void h_create_session(req *r)
     if (ttl > r->srv->cfg.max_ttl_s)
         ttl = r->srv->cfg.max_ttl_s;
     store_admission adm;
-    session *s = store_create(r->srv->st, (int)ttl, &key, r->srv->cfg.max_sessions_per_client, &adm);
+    session *s = store_create(r->srv->st, (int)ttl, &key, r->srv->cfg.max_sessions_per_client,
+                              r->srv->cfg.max_stored_sessions_per_client, &adm);
     if (adm.evicted)
         log_line(r->srv, LOG_INFO, "%s: an idle session went",
                  adm.evicted_own ? "the client held its share of the sessions"
@@ -405,7 +406,13 @@ static void h_create_session(req *r)
     }
     if (!s) { /* the client's share of the table, or the table, is full */
         p.retry_after = adm.retry_after_s;
-        if (adm.client_full)
+        if (adm.client_stored_full)
+            api_fail(&p, 429, "client-sessions",
+                     "this client address has %d unexpired sessions in the store, its maximum "
+                     "(--max-stored-sessions-per-client); delete one, or retry in %d s when the "
+                     "first expires", r->srv->cfg.max_stored_sessions_per_client,
+                     adm.retry_after_s);
+        else if (adm.client_full)
             api_fail(&p, 429, "client-sessions",
                      "this client address holds %d sessions, its maximum (--max-sessions-per-client), "
                      "each with a complex or in use; delete one, or retry in %d s when the first "

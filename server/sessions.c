@@ -275,8 +275,9 @@ static bool room_locked(store *st, const rate_key *owner, int per_client, store_
     double now = mono_now();
     if (owner && per_client > 0 && count_owned_locked(st, owner) >= per_client) {
         expire_locked(st, now);
-        if (count_owned_locked(st, owner) >= per_client)
-            a->evicted = a->evicted_own = evict_empty_locked(st, owner);
+        /* sessions loaded back count for their client too: it may hold more than its share */
+        while (count_owned_locked(st, owner) >= per_client && evict_empty_locked(st, owner))
+            a->evicted = a->evicted_own = 1;
         if (count_owned_locked(st, owner) >= per_client) {
             a->client_full = 1;
             a->retry_after_s = soonest_expiry_locked(st, now, owner);
@@ -294,8 +295,28 @@ static bool room_locked(store *st, const rate_key *owner, int per_client, store_
     return true;
 }
 
+/* A client's key as the store records it (hex). */
+static void owner_hex(const rate_key *k, char out[PERSIST_OWNER_CAP])
+{
+    for (size_t i = 0; i < sizeof k->b; i++)
+        sprintf(out + 2 * i, "%02x", k->b[i]);
+}
+
+/* The client key a stored owner names (false when it names none, or not one of ours). */
+static bool owner_of_hex(const char *hex, rate_key *k)
+{
+    if (strlen(hex) != 2 * sizeof k->b || strspn(hex, "0123456789abcdef") != 2 * sizeof k->b)
+        return false;
+    for (size_t i = 0; i < sizeof k->b; i++) {
+        unsigned v;
+        sscanf(hex + 2 * i, "%2x", &v);
+        k->b[i] = (uint8_t)v;
+    }
+    return true;
+}
+
 session *store_create(store *st, int ttl_s, const rate_key *owner, int per_client,
-                          store_admission *a)
+                          int stored_per_client, store_admission *a)
 {
     memset(a, 0, sizeof *a);
     unsigned char rid[16], rtok[32], hash[32];
@@ -330,6 +351,24 @@ session *store_create(store *st, int ttl_s, const rate_key *owner, int per_clien
         session_unref(s);
         return NULL;
     }
+    char ohex[PERSIST_OWNER_CAP] = "";
+    if (owner)
+        owner_hex(owner, ohex);
+    if (owner && stored_per_client > 0 && persist_durable(st->p)) {
+        /* idle sessions leave memory for the store, so the table's share alone does not bound
+         * what one client keeps: the store counts its unexpired ones */
+        long n;
+        int64_t soonest, now = (int64_t)time(NULL);
+        a->stored = persist_owned(st->p, ohex, now, stored_per_client, &n, &soonest);
+        if (a->stored != PERSIST_OK || n >= stored_per_client) {
+            if (a->stored == PERSIST_OK) {
+                a->client_stored_full = 1;
+                a->retry_after_s = soonest > now ? (int)(soonest - now) : 1;
+            }
+            session_unref(s);
+            return NULL;
+        }
+    }
     pthread_mutex_lock(&st->mu);
     bool ok = room_locked(st, owner, per_client, a);
     unlock_store(st);
@@ -337,6 +376,7 @@ session *store_create(store *st, int ttl_s, const rate_key *owner, int per_clien
         persist_meta m = {.ttl_s = ttl_s, .created = s->created,
                           .expires_at = stored_expiry(ttl_s, (int64_t)time(NULL))};
         memcpy(m.id, s->id, sizeof m.id);
+        memcpy(m.owner, ohex, sizeof m.owner);
         memcpy(m.token_hash, hash, sizeof hash);
         if ((a->stored = persist_create(st->p, &m)) != PERSIST_OK)
             ok = false;
@@ -482,6 +522,7 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
         } else {
             session_adopt(s, m, l.meta.version);
             s->journal_len = (uint32_t)l.njournal;
+            s->has_owner = owner_of_hex(l.meta.owner, &s->owner); /* it counts for its client */
             store_admission a = {0};
             pthread_mutex_lock(&st->mu);
             bool ok = room_locked(st, NULL, 0, &a);

@@ -59,6 +59,8 @@ typedef struct store_admission {
     int retry_after_s;        /* refused, the table full: seconds until the soonest expiry (>= 1) */
     int client_full;          /* refused: the creating client holds its maximum of sessions
                                  (retry_after_s: until the soonest of theirs expires) */
+    int client_stored_full;   /* refused: the durable store holds the client's maximum of
+                                 stored sessions (retry_after_s likewise) */
     persist_rc stored;        /* refused by the durable store (PERSIST_UNAVAILABLE ...), else OK */
 } store_admission;
 
@@ -68,9 +70,11 @@ typedef struct store_admission {
  * with a request or a stream in flight: the store holds its only reference; with a durable
  * store any idle one, the store keeps it); NULL when none can go (or out of memory: then
  * retry_after_s is 0). When the client holds its maximum, expired sessions go, then its own
- * least recently used idle one (as above), else refused with client_full. */
+ * least recently used idle one (as above), else refused with client_full. With a durable store
+ * the client may also have at most `stored_per_client` unexpired sessions in the store (0: any
+ * number; idle ones leave memory but stay there), else refused with client_stored_full. */
 session *store_create(store *st, int ttl_s, const rate_key *owner, int per_client,
-                          store_admission *a);
+                          int stored_per_client, store_admission *a);
 /* Why store_get found nothing. */
 typedef enum store_miss {
     STORE_NONE = 0,           /* no such session (never, expired, deleted) */

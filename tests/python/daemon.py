@@ -4,7 +4,7 @@ SUBDIVD may point at another build of the daemon (make sanitize uses the ASan on
 
 The suites create many sessions quickly, all from 127.0.0.1, so a Daemon passes
 `--session-rate 1000000` unless its flags set --session-rate themselves (the hardening tests of
-the per-client rate do)."""
+the per-client rate do), and lifts the per-client caps of the table and the store likewise."""
 import os
 import pathlib
 import re
@@ -35,6 +35,8 @@ class Daemon:
             flags = ("--session-rate", "1000000", *flags)
         if not any(str(f).startswith("--max-sessions-per-client") for f in flags):
             flags = ("--max-sessions-per-client", "0", *flags)
+        if not any(str(f).startswith("--max-stored-sessions-per-client") for f in flags):
+            flags = ("--max-stored-sessions-per-client", "0", *flags)
         self.proc = subprocess.Popen([str(SUBDIVD), "--port", "0", "--log-level", "info", *flags],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                      env=e)

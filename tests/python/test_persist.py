@@ -5,6 +5,9 @@ what the daemon does when the store fails.
 Expected level bytes never come from the persistence path itself: they are fetched from the live
 session before the save, or computed by a second daemon with the in-memory store to which the
 same acknowledged requests were sent."""
+import hashlib
+import http.client
+import json
 import os
 import random
 import sqlite3
@@ -604,6 +607,89 @@ def test_resident_and_stored_sessions_are_counted_apart(tmp_path):
             assert c.json()["vertices"][0][0] == float(i)
     finally:
         d.stop()
+
+
+def create_from(d, src, ttl_s=600):
+    """POST /v1/sessions from the loopback address src: (status, Retry-After, body)."""
+    host, port = d.url.split("//")[1].split(":")
+    c = http.client.HTTPConnection(host, int(port), timeout=10, source_address=(src, 0))
+    c.request("POST", "/v1/sessions", json.dumps({"ttl_s": ttl_s}),
+              {"Content-Type": "application/json"})
+    r = c.getresponse()
+    out = (r.status, r.getheader("Retry-After"), json.loads(r.read() or b"null"))
+    c.close()
+    return out
+
+
+def test_one_client_cannot_fill_the_store(store):
+    """Idle sessions leave memory for the store, so the table's per-client share does not bound
+    what a client keeps: --max-stored-sessions-per-client counts its unexpired stored sessions
+    (docs/SERVICE.md "A session, step by step"). Beyond, 429 client-sessions with Retry-After;
+    other addresses are not affected; a delete frees a place; the count survives a restart
+    (the record keeps its client)."""
+    flags = ("--max-sessions", "8", "--session-rate", "1000", "--max-sessions-per-client", "2",
+             "--max-stored-sessions-per-client", "4")
+    d = store_daemon(store, *flags)
+    try:
+        mine = []
+        for i in range(4):
+            st, _, j = create_from(d, "127.0.0.7", 600 - i)
+            assert st == 201, j
+            mine.append(adopt(d, requests.Session(), j))
+            assert mine[-1].put_complex(TETS).status_code == 200
+        st, ra, j = create_from(d, "127.0.0.7")
+        assert st == 429 and j["type"].endswith("/client-sessions"), j
+        assert "max-stored-sessions-per-client" in j["detail"], j
+        assert 500 <= int(ra) <= 900, ra          # the soonest of its four (TTL 597 + slack)
+        assert create_from(d, "127.0.0.8")[0] == 201
+        for s in mine:                            # two were resident, all four are kept
+            assert s.req("GET", "/complex").status_code == 200
+        assert mine[0].delete().status_code == 204
+        st, _, j = create_from(d, "127.0.0.7")
+        assert st == 201, j
+        mine[0] = adopt(d, requests.Session(), j)
+        assert create_from(d, "127.0.0.7")[0] == 429
+    finally:
+        kill9(d)
+    d = store_daemon(store, *flags)
+    try:
+        st, _, j = create_from(d, "127.0.0.7")
+        assert st == 429 and "max-stored-sessions-per-client" in j["detail"], j
+        assert on(d, mine[1]).delete().status_code == 204
+        assert create_from(d, "127.0.0.7")[0] == 201
+    finally:
+        d.stop()
+
+
+def test_a_store_written_before_owners_is_opened(tmp_path):
+    """An SQLite file of the schema before records kept their client: opened, its sessions
+    served (they count for nobody), and new ones counted."""
+    db = tmp_path / "old.db"
+    c = sqlite3.connect(db)
+    c.executescript(
+        "CREATE TABLE sessions(id TEXT PRIMARY KEY, token_hash BLOB NOT NULL, "
+        "ttl_s INTEGER NOT NULL, created INTEGER NOT NULL, expires_at INTEGER NOT NULL, "
+        "version INTEGER NOT NULL, snapshot_version INTEGER NOT NULL, snapshot BLOB, "
+        "snapshot_crc INTEGER);"
+        "CREATE TABLE journal(id TEXT NOT NULL, version INTEGER NOT NULL, "
+        "entry BLOB NOT NULL, crc INTEGER NOT NULL, PRIMARY KEY (id, version)) WITHOUT ROWID;")
+    token = "t" * 43
+    c.execute("INSERT INTO sessions VALUES (?, ?, 600, ?, ?, 0, 0, NULL, NULL)",
+              ("ab" * 16, hashlib.sha256(token.encode()).digest(), int(time.time()),
+               int(time.time()) + 600))
+    c.commit()
+    c.close()
+    d = store_daemon(db, "--max-stored-sessions-per-client", "1")
+    try:
+        old = requests.get(f"{d.url}/v1/sessions/{'ab' * 16}",
+                           headers={"Authorization": f"Bearer {token}"})
+        assert old.status_code == 200, old.text
+        assert create_from(d, "127.0.0.9")[0] == 201
+        assert create_from(d, "127.0.0.9")[0] == 429
+    finally:
+        d.stop()
+    cols = [r[1] for r in sqlite3.connect(db).execute("PRAGMA table_info(sessions)")]
+    assert "owner" in cols
 
 
 def test_store_flag_is_checked():
