@@ -18,7 +18,8 @@ struct persist {
     pthread_mutex_t mu;       /* the health fields */
     bool failing;
     double failed_at;         /* monotonic seconds of the last failure */
-    char why[256];
+    char why[256];            /* where and what (the log) */
+    char what[256];           /* what alone (answers: a client is not told the file or server) */
 };
 
 static double mono(void)
@@ -99,6 +100,10 @@ void persist_close(persist *p)
 }
 
 persist_kind persist_kind_of(const persist *p) { return p->kind; }
+const char *persist_kind_name(const persist *p)
+{
+    return p->kind == PERSIST_SQLITE ? "sqlite" : p->kind == PERSIST_REDIS ? "redis" : "memory";
+}
 const char *persist_name(const persist *p) { return p->name; }
 bool persist_shared(const persist *p) { return p->kind == PERSIST_REDIS; }
 bool persist_durable(const persist *p) { return p->kind != PERSIST_MEMORY; }
@@ -112,6 +117,7 @@ static persist_rc noted_as(persist *p, persist_rc rc, bool write)
         p->failing = true;
         p->failed_at = mono();
         snprintf(p->why, sizeof p->why, "%s", p->ops->last_error(p->b));
+        snprintf(p->what, sizeof p->what, "%s", p->ops->last_what(p->b));
     } else if (write && rc == PERSIST_OK)
         p->failing = false;
     pthread_mutex_unlock(&p->mu);
@@ -200,6 +206,13 @@ void persist_last_failure(persist *p, char *why, size_t cap)
     pthread_mutex_unlock(&p->mu);
 }
 
+void persist_last_failure_what(persist *p, char *what, size_t cap)
+{
+    pthread_mutex_lock(&p->mu);
+    snprintf(what, cap, "%s", p->what);
+    pthread_mutex_unlock(&p->mu);
+}
+
 bool persist_healthy(persist *p, char *why, size_t cap)
 {
     pthread_mutex_lock(&p->mu);
@@ -214,7 +227,7 @@ bool persist_healthy(persist *p, char *why, size_t cap)
     pthread_mutex_lock(&p->mu);
     bool ok = !p->failing;
     if (!ok)
-        snprintf(why, cap, "%s", p->why);
+        snprintf(why, cap, "%s", p->what);
     pthread_mutex_unlock(&p->mu);
     return ok;
 }

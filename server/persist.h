@@ -78,8 +78,10 @@ typedef struct persist persist;
 persist *persist_open(const char *spec, bool sync_full, char *err, size_t cap);
 void persist_close(persist *p);
 persist_kind persist_kind_of(const persist *p);
-/* The spec as given, for the log and /readyz (a redis URL without credentials). */
+/* The spec as given, for the log (a redis URL without credentials). */
 const char *persist_name(const persist *p);
+/* "memory", "sqlite" or "redis": what answers say (/readyz), never the file or the server. */
+const char *persist_kind_name(const persist *p);
 /* Several daemons may share it: every request checks the stored version (persist_version). */
 bool persist_shared(const persist *p);
 /* Anything is written at all (not the memory store). */
@@ -121,8 +123,10 @@ long persist_count(persist *p, int64_t now);
  * (tried at most every PERSIST_PROBE_AFTER_S seconds). */
 #define PERSIST_PROBE_AFTER_S 5.0
 bool persist_healthy(persist *p, char *why, size_t cap);
-/* What the last failure was (for an error answer). */
+/* The last failure: where and what (for the log), and what alone (for an answer: a client is
+ * not told the store's file or server). persist_healthy's `why` is the latter. */
 void persist_last_failure(persist *p, char *why, size_t cap);
+void persist_last_failure_what(persist *p, char *what, size_t cap);
 /* "ok", "conflict", … (the log). */
 const char *persist_rc_name(persist_rc rc);
 

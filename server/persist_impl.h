@@ -24,8 +24,10 @@ typedef struct persist_ops {
     long (*count)(void *b, int64_t now);
     persist_rc (*owned)(void *b, const char *owner, int64_t now, long enough, long *n,
                         int64_t *soonest);
-    /* the back end's own description of its last failure (after a non-OK return) */
+    /* the back end's own description of its last failure (after a non-OK return), "<where>:
+     * <what>" (the file or the server, then what happened); last_what is the <what> alone */
     const char *(*last_error)(void *b);
+    const char *(*last_what)(void *b);
     void (*close)(void *b);
 } persist_ops;
 

@@ -794,6 +794,14 @@ static const char *r_last_error(void *vb)
     return last_err;
 }
 
+/* Every message starts "redis HOST:PORT: " (set_err). */
+static const char *r_last_what(void *vb)
+{
+    const redis_backend *b = vb;
+    int at = snprintf(NULL, 0, "redis %s:%d: ", b->host, b->port);
+    return at > 0 && (size_t)at <= strlen(last_err) ? last_err + at : last_err;
+}
+
 static void r_close(void *vb)
 {
     redis_backend *b = vb;
@@ -841,5 +849,6 @@ const persist_ops persist_redis_ops = {
     .owned = r_owned,
     .probe = r_probe,
     .last_error = r_last_error,
+    .last_what = r_last_what,
     .close = r_close,
 };

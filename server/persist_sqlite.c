@@ -174,6 +174,14 @@ static void sq_close(void *b)
 
 static const char *sq_last_error(void *b) { return ((sqlite_store *)b)->err; }
 
+/* Every message starts "sqlite PATH: ". */
+static const char *sq_last_what(void *b)
+{
+    sqlite_store *s = b;
+    int at = snprintf(NULL, 0, "sqlite %.200s: ", s->path);
+    return at > 0 && (size_t)at <= strlen(s->err) ? s->err + at : s->err;
+}
+
 /* Step a statement that returns no rows, then reset it; the sqlite result code. */
 static int run(sqlite_store *s, int q)
 {
@@ -545,5 +553,6 @@ const persist_ops persist_sqlite_ops = {
     .owned = sq_owned,
     .probe = sq_probe,
     .last_error = sq_last_error,
+    .last_what = sq_last_what,
     .close = sq_close,
 };

@@ -53,7 +53,7 @@ static void h_readyz(req *r)
     } else if (!persist_healthy(store_persist(r->srv->st), why, sizeof why)) {
         p.retry_after = 5;
         api_fail(&p, 503, "store-unavailable", "the session store (%s) cannot be written: %s",
-                 persist_name(store_persist(r->srv->st)), why);
+                 persist_kind_name(store_persist(r->srv->st)), why);
     }
     if (p.status) {
         http_reply_problem(r, &p);
@@ -61,7 +61,7 @@ static void h_readyz(req *r)
     }
     http_reply_json(r, 200, json_pack("{s:s, s:{s:I, s:I}, s:s}", "status", "ready", "memory",
                                       "budget_bytes", (json_int_t)budget, "used_bytes",
-                                      (json_int_t)used, "store", persist_name(store_persist(r->srv->st))), 0);
+                                      (json_int_t)used, "store", persist_kind_name(store_persist(r->srv->st))), 0);
 }
 
 typedef struct gauges {
@@ -235,6 +235,7 @@ static int store_refused(req *r, persist_rc rc, bool drop, api_problem *p)
         persist_last_failure(ps, why, sizeof why);
         log_line(r->srv, LOG_ERROR, "session %s: the store refused a change (%s): %s", r->s->id,
                  persist_rc_name(rc), why);
+        persist_last_failure_what(ps, why, sizeof why); /* the file or server stays in the log */
         p->retry_after = 5;
         return api_fail(p, 503, "store-unavailable", "the change could not be stored, so it was "
                         "not made: %s", why);
@@ -396,6 +397,8 @@ static void h_create_session(req *r)
         p.retry_after = 5;
         char why[256] = "";
         persist_last_failure(store_persist(r->srv->st), why, sizeof why);
+        log_line(r->srv, LOG_ERROR, "a new session could not be stored: %s", why);
+        persist_last_failure_what(store_persist(r->srv->st), why, sizeof why);
         api_fail(&p, 503, "store-unavailable", "the session could not be stored: %s", why);
         http_reply_problem(r, &p);
         return;

@@ -530,12 +530,16 @@ def test_a_full_disk_refuses_writes_and_loses_nothing(tmp_path):
         assert r.json()["type"] == "/errors/store-unavailable"
         assert "full" in r.json()["detail"]
         assert r.headers.get("Retry-After")
+        # answers say what happened, not where: the file is named in the log only
+        assert str(db) not in r.text and str(tmp_path) not in r.text, r.text
+        assert any(str(db) in l and "full" in l for l in d.log_lines)
         # nothing of it is visible: the session is as it was
         c = on(d, s).req("GET", "/complex")
         assert c.status_code == 200 and c.json()["version"] == v
         assert len(c.json()["vertices"]) == len(TETS["vertices"])
         ready = requests.get(d.url + "/readyz")
         assert ready.status_code == 503 and "store" in ready.json()["detail"]
+        assert str(tmp_path) not in ready.text, ready.text
         assert on(d, s).level(2).status_code == 200        # reads go on
     finally:
         kill9(d)
@@ -631,6 +635,8 @@ def test_one_client_cannot_fill_the_store(store):
              "--max-stored-sessions-per-client", "4")
     d = store_daemon(store, *flags)
     try:
+        ready = requests.get(d.url + "/readyz").json()   # the kind, never the file or server
+        assert ready["store"] == ("redis" if isinstance(store, RedisServer) else "sqlite"), ready
         mine = []
         for i in range(4):
             st, _, j = create_from(d, "127.0.0.7", 600 - i)
@@ -723,6 +729,10 @@ def test_redis_down_refuses_changes_and_keeps_reading(tmp_path):
         ready = requests.get(d.url + "/readyz")
         assert ready.status_code == 503 and ready.json()["type"] == "/errors/store-unavailable"
         assert any("store refused" in l or "store cannot be written" in l for l in d.log_lines)
+        where = f"127.0.0.1:{r.port}"          # the server is named in the log, not to clients
+        assert any(where in l for l in d.log_lines)
+        for answer in (p, ready, requests.post(d.url + "/v1/sessions", json={})):
+            assert where not in answer.text and "refused" in answer.json()["detail"], answer.text
         during = s.level(2)                   # the resident copy is still read
         assert during.status_code == 200 and during.content == before
         r.start()   # the same port; an empty redis: the old session is gone from it
