@@ -147,12 +147,12 @@ json_t *api_analysis(api_model *m, const char *vertex, const char *edge, const a
         return NULL;
     }
     if (!vertex && !edge) {
-        api_fail_at(p, 400, "missing-field", "vertex", "give exactly one of vertex=i or edge=i,j");
+        api_fail_at(p, 400, "missing-parameter", "vertex", "give exactly one of vertex=i or edge=i,j");
         api_add_error(p, "edge", "or this one");
         return NULL;
     }
     if (vertex && edge) {
-        api_fail_at(p, 400, "wrong-type", "vertex",
+        api_fail_at(p, 400, "bad-parameter", "vertex",
                     "give exactly one of vertex=i or edge=i,j, not both");
         api_add_error(p, "edge", "given with vertex");
         return NULL;

@@ -89,6 +89,9 @@ def test_analysis_errors(daemon, params, status, pointer):
     assert pointers[0] == pointer, r.text
     if "vertex" in params and "edge" in params or not params:   # both named: one of each is wrong
         assert pointers == ["vertex", "edge"], r.text
+        # query parameters, not body fields: neither is a missing parameter, both a bad one
+        want = "missing-parameter" if not params else "bad-parameter"
+        assert r.json()["type"] == f"/errors/{want}", r.text
     if params.get("edge") == "1,2,3":
         assert "two vertex indices" in r.json()["detail"], r.text
 
