@@ -666,7 +666,11 @@ static int parse_sharpness(json_t *a, const api_input *in, api_tags *tags, api_p
  * lists refuse their repeats. Keys: the sorted ids (UINT32_MAX padded) and the entry. */
 static int cmp_tag_key(const void *x, const void *y)
 {
-    return memcmp(x, y, 4 * sizeof(uint32_t));
+    const uint32_t *a = x, *b = y;
+    for (int i = 0; i < 4; i++) /* numerically: equal simplices then come by entry */
+        if (a[i] != b[i])
+            return a[i] < b[i] ? -1 : 1;
+    return 0;
 }
 
 static int singular_repeats(api_tags *tags, bool drop, api_problem *p)
@@ -698,18 +702,24 @@ static int singular_repeats(api_tags *tags, bool drop, api_problem *p)
     int rc = 0;
     if (drop)
         memset(gone, 0, tags->n);
-    for (size_t i = 1; i < tags->n && !rc; i++) {
-        if (memcmp(key[i - 1], key[i], 3 * sizeof(uint32_t)))
-            continue;
-        if (drop) { /* equal keys are by entry: the first stays */
-            gone[key[i][3]] = 1;
+    uint32_t repeat = UINT32_MAX, first = 0; /* the earliest repeat in the body, and its first */
+    for (size_t i = 1, run = 0; i < tags->n; i++) {
+        if (memcmp(key[i - 1], key[i], 3 * sizeof(uint32_t))) {
+            run = i;
             continue;
         }
+        if (drop) /* equal keys are by entry: the first stays */
+            gone[key[i][3]] = 1;
+        else if (key[i][3] < repeat) {
+            repeat = key[i][3];
+            first = key[run][3];
+        }
+    }
+    if (repeat != UINT32_MAX) {
         char ptr[96];
-        api_ptr_index(ptr, sizeof ptr, "/singular", key[i][3]);
+        api_ptr_index(ptr, sizeof ptr, "/singular", repeat);
         rc = api_fail_at(p, 422, "invalid-tag", ptr,
-                         "the same simplex as /singular/%u: each simplex is tagged once",
-                         key[i - 1][3]);
+                         "the same simplex as /singular/%u: each simplex is tagged once", first);
     }
     if (drop) { /* the entries kept, in their order, each with the entry it was */
         uint32_t n = 0;

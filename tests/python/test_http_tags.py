@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from daemon import Daemon, Session
+from meshes import kuhn_grid
 
 # the unit cube as 6 tetrahedra around its main diagonal 0-7 (vertex id = x + 2y + 4z)
 CUBE_V = [[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)]
@@ -63,6 +64,7 @@ def test_tags_survive_rules_not_a_new_complex(daemon):
     ([[0, 0]], "/singular/0/1"),           # repeated vertex
     ([[0, 1], [3], [1, 0]], "/singular/2"),  # the same edge twice (docs/API.md: each once)
     ([[0, 1, 3], [3], [3, 1, 0]], "/singular/2"),
+    ([[1, 3], [0, 1], [3, 1], [1, 0]], "/singular/2"),  # two repeats: the earlier one is named
 ])
 def test_tags_must_name_simplices(daemon, tags, pointer):
     s = Session(daemon)
@@ -105,3 +107,21 @@ def test_import_error_names_the_entry_after_dropped_repeats(daemon):
     assert r.status_code == 422, r.text
     assert r.json()["errors"][0]["pointer"] == "/import/tags/singular/3", r.json()
     assert "1-2 is not an edge" in r.json()["detail"], r.json()
+
+
+def test_an_import_keeps_the_first_of_a_repeated_tag_in_its_place(daemon):
+    """Of a simplex tagged twice, an import keeps the first entry where it is, wherever the
+    repeat is in the list (entries 1 and 256: their numbers' bytes order them the other way)."""
+    verts, tets = kuhn_grid(7)                       # 512 vertices
+    s = Session(daemon)
+    assert s.put_complex({"vertices": verts, "simplices": tets}).status_code == 200
+    doc = s.req("GET", "/export").json()
+    tags = [[i] for i in range(300)]
+    tags[256] = [1]
+    doc["tags"] = {"singular": tags}
+    r = s.http.post(daemon.url + "/v1/sessions", json={"import": doc})
+    assert r.status_code == 201, r.text
+    j = r.json()
+    got = s.http.get(f"{daemon.url}/v1/sessions/{j['id']}/complex",
+                     headers={"Authorization": f"Bearer {j['token']}"}).json()["tags"]["singular"]
+    assert got == tags[:256] + tags[257:]
