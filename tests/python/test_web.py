@@ -31,6 +31,7 @@ BROWSER_TEST = REPO / "tests" / "web" / "browser_test.mjs"
 CHECKS = [
     "first_load",        # an example at level 2 within seconds, with a hint, no interaction
     "messages_coalesce",  # the same message again counts up on the one shown
+    "canvas_a11y",       # the view: role img, a current label, tab order, arrow keys pan
     "examples",          # the three built-in examples are accepted and drawn
     "level_slider",      # the slider (keyboard) moves to 0 and back to 2
     "canvas_geometry",   # non-blank pixels (screenshot and read back)

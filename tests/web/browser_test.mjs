@@ -1111,6 +1111,22 @@ await step('messages_coalesce', async () => {
   for (const b of await page.$$('#messages .message button')) await b.click();
 });
 
+// 17c. the view is an image with a current description for assistive technology, in the tab
+// order, and focused the arrow keys pan it
+await step('canvas_a11y', async () => {
+  const sn = await snap();
+  const a = await page.$eval('#view canvas', (c) => ({ role: c.getAttribute('role'), label: c.getAttribute('aria-label'), tab: c.tabIndex }));
+  await page.focus('#view canvas');
+  const before = await page.evaluate(() => window.subdivd.viewer.controls.target.toArray());
+  await page.keyboard.press('ArrowUp');
+  const after = await page.evaluate(() => window.subdivd.viewer.controls.target.toArray());
+  await page.evaluate((t) => { const v = window.subdivd.viewer; v.controls.target.fromArray(t); v.controls.update(); }, before);
+  const moved = before.some((x, i) => Math.abs(x - after[i]) > 1e-9);
+  check('canvas_a11y', a.role === 'img' && a.tab === 0 && a.label.includes(String(sn.model)) &&
+    a.label.includes(`level ${sn.level}`) && moved,
+    `role ${a.role}, tabIndex ${a.tab}, label "${a.label}" (model ${sn.model}, level ${sn.level}); ArrowUp moved the target: ${moved}`);
+});
+
 // 18. moves at a finer level: the handles become level-3 points, a drag PATCHes "level": 3
 await step('level_moves', async () => {
   await page.selectOption('#edit-level', '3');

@@ -603,6 +603,11 @@ class App {
       dl.append(dt, dd);
     }
     $('stats').replaceChildren(dl);
+    const cells = ['points', 'curves', 'triangles', 'tetrahedra', 'octahedra']
+      .reduce((n, k) => n + (c[k] || 0), 0);
+    this.viewer.canvas.setAttribute('aria-label', `3D view: ${this.model?.name ?? 'model'}, level ` +
+      `${s.level}, ${fmt(c.vertices ?? 0)} vertices, ${fmt(cells)} cells; drag to orbit, ` +
+      `arrow keys to pan, wheel to zoom`);
   }
 
   // At most 4 times a second (a drag changes the version at every update).

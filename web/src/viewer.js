@@ -114,6 +114,11 @@ export class Viewer {
     this.renderer.localClippingEnabled = true;
     container.appendChild(this.renderer.domElement);
     this.canvas = this.renderer.domElement;
+    // for assistive technology an image with a description (kept current by the page), and in
+    // the tab order: focused, the arrow keys pan the view (OrbitControls' keys)
+    this.canvas.setAttribute('role', 'img');
+    this.canvas.setAttribute('aria-label', '3D view: no model yet');
+    this.canvas.tabIndex = 0;
 
     this.scene = new THREE.Scene();
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.01, 100);
@@ -126,6 +131,7 @@ export class Viewer {
     this.camera.add(head);
 
     this.controls = new OrbitControls(this.camera, this.canvas);
+    this.controls.listenToKeyEvents(this.canvas);
     this.controls.addEventListener('change', () => {
       this.#orientClip();
       this.render();
