@@ -6,22 +6,31 @@
  * in one slot, as a multi-key script needs):
  *   subdivd:s:{ID}     hash   token_hash (32 raw bytes), ttl_s, created, expires_at, version,
  *                             snapshot_version (decimal integers), owner (the client that
- *                             created it, hex; absent when unknown)
+ *                             created it, hex; absent when unknown), counted_until (with an
+ *                             owner: the id's score in its client's set, never before expires_at)
  *   subdivd:snap:{ID}  string the snapshot document (absent while snapshot_version is 0 and no
  *                             snapshot was written)
  *   subdivd:j:{ID}     list   the journal after the snapshot, oldest first, each entry
  *                             "<version> <text>" (decimal version, one space, the edit's body)
  *
  * and per client that created sessions (its own slot, so never inside a session's script):
- *   subdivd:o:{OWNER}  zset   the ids of its sessions, each scored with an expiry it had (added
- *                             at creation, removed at deletion; EXPIREAT the latest score). A
- *                             touch does not update it: r_owned checks each member's record, drops
- *                             the gone ones and rescores the others, so the count is exact.
+ *   subdivd:o:{OWNER}  zset   the ids of its sessions, each scored with a time its record does
+ *                             not outlive (counted_until), EXPIREAT the highest score: the set
+ *                             outlives every session it names. A write that takes expires_at past
+ *                             counted_until gives the record a new one, the expiry plus its TTL
+ *                             (at least a minute: a session in use raises it about once a TTL),
+ *                             which its script answers ({owner, counted_until}, not 1) and the
+ *                             caller then writes to the set (LUA_INDEX). A member whose score is
+ *                             past is an expired session and is dropped whenever the set is
+ *                             written or counted; r_owned also checks each remaining member
+ *                             against its record (deleted without the set being told, or a TTL
+ *                             PATCHed shorter), so the count is exact.
  *
  * Every write that depends on the stored version is one Lua script (atomic on the server): it
  * reads the hash's version, answers -1 when the hash is gone (PERSIST_ABSENT), 0 when the version
- * is not `expect` (PERSIST_CONFLICT), else writes and answers 1. Versions are compared as the
- * decimal strings this file writes, never as Lua numbers (doubles: exact only up to 2^53). The
+ * is not `expect` (PERSIST_CONFLICT), else writes and answers 1 (or {owner, counted_until}, as
+ * above). Versions are compared as the decimal strings this file writes, never as Lua numbers
+ * (doubles: exact only up to 2^53; an expiry is a Lua number, exact). The
  * scripts are loaded (SCRIPT LOAD) at every connect and called by EVALSHA; a NOSCRIPT answer
  * (SCRIPT FLUSH, a failover to a replica that never saw them) falls back to EVAL, which also
  * caches the script again. Loading is one script too, so the record, the snapshot and the journal
@@ -53,14 +62,26 @@
 #define COMMAND_TIMEOUT_S 2
 #define KEY_CAP 64          /* "subdivd:snap:{" + 32 + "}", "subdivd:o:{" + 39 + "}" */
 
+/* The end of a script that wrote expires_at = X on success: {owner, counted_until} when the
+ * record has an owner and X passed its counted_until (raised here to X + max(ttl_s, 60); the
+ * caller writes it to the client's set), else 1. */
+#define LUA_RECOUNT(X)                                                                            \
+    "local o = redis.call('HGET', KEYS[1], 'owner')\n"                                            \
+    "if not o then return 1 end\n"                                                                \
+    "local x = tonumber(" X ")\n"                                                                 \
+    "if x <= tonumber(redis.call('HGET', KEYS[1], 'counted_until') or '0') then return 1 end\n"   \
+    "local u = string.format('%d', x + math.max(tonumber(redis.call('HGET', KEYS[1], 'ttl_s')), 60))\n" \
+    "redis.call('HSET', KEYS[1], 'counted_until', u)\n"                                           \
+    "return {o, u}\n"
+
 /* KEYS: hash, snapshot, journal. ARGV: token_hash, ttl_s, created, expires_at, version, owner
- * ("" when none). */
+ * ("" when none), counted_until (with an owner). */
 static const char LUA_CREATE[] =
     "if redis.call('EXISTS', KEYS[1]) == 1 then return 0 end\n"
     "redis.call('DEL', KEYS[2], KEYS[3])\n"
     "redis.call('HSET', KEYS[1], 'token_hash', ARGV[1], 'ttl_s', ARGV[2], 'created', ARGV[3],\n"
     "           'expires_at', ARGV[4], 'version', ARGV[5], 'snapshot_version', '0')\n"
-    "if ARGV[6] ~= '' then redis.call('HSET', KEYS[1], 'owner', ARGV[6]) end\n"
+    "if ARGV[6] ~= '' then redis.call('HSET', KEYS[1], 'owner', ARGV[6], 'counted_until', ARGV[7]) end\n"
     "redis.call('EXPIREAT', KEYS[1], ARGV[4])\n"
     "return 1\n";
 
@@ -75,7 +96,7 @@ static const char LUA_SNAPSHOT[] =
     "           'expires_at', ARGV[3])\n"
     "redis.call('EXPIREAT', KEYS[1], ARGV[3])\n"
     "redis.call('EXPIREAT', KEYS[2], ARGV[3])\n"
-    "return 1\n";
+    LUA_RECOUNT("ARGV[3]");
 
 /* KEYS: hash, snapshot, journal. ARGV: expect, version, expires_at, entry. */
 static const char LUA_APPEND[] =
@@ -85,7 +106,7 @@ static const char LUA_APPEND[] =
     "redis.call('RPUSH', KEYS[3], ARGV[2] .. ' ' .. ARGV[4])\n"
     "redis.call('HSET', KEYS[1], 'version', ARGV[2], 'expires_at', ARGV[3])\n"
     "for i = 1, 3 do redis.call('EXPIREAT', KEYS[i], ARGV[3]) end\n"
-    "return 1\n";
+    LUA_RECOUNT("ARGV[3]");
 
 /* KEYS: hash, snapshot, journal. ARGV: expires_at[, ttl_s]. */
 static const char LUA_TOUCH[] =
@@ -93,7 +114,7 @@ static const char LUA_TOUCH[] =
     "redis.call('HSET', KEYS[1], 'expires_at', ARGV[1])\n"
     "if ARGV[2] then redis.call('HSET', KEYS[1], 'ttl_s', ARGV[2]) end\n"
     "for i = 1, 3 do redis.call('EXPIREAT', KEYS[i], ARGV[1]) end\n"
-    "return 1\n";
+    LUA_RECOUNT("ARGV[1]");
 
 /* KEYS: hash, snapshot, journal. */
 static const char LUA_DELETE[] =
@@ -109,9 +130,22 @@ static const char LUA_LOAD[] =
     "if not h[5] then return -1 end\n"
     "return {h, redis.call('GET', KEYS[2]), redis.call('LRANGE', KEYS[3], 0, -1)}\n";
 
-enum { S_CREATE, S_SNAPSHOT, S_APPEND, S_TOUCH, S_DELETE, S_LOAD, NSCRIPTS };
-static const char *const SCRIPTS[NSCRIPTS] = {LUA_CREATE, LUA_SNAPSHOT, LUA_APPEND,
-                                              LUA_TOUCH, LUA_DELETE, LUA_LOAD};
+/* KEYS: a client's set. ARGV: id, counted_until, now. Drops the members whose score is before
+ * now (their sessions expired), scores id with counted_until unless it has a later score (two
+ * daemons' writes may arrive in either order), and lets the set expire with its highest score. */
+static const char LUA_INDEX[] =
+    "redis.call('ZREMRANGEBYSCORE', KEYS[1], '-inf', '(' .. ARGV[3])\n"
+    "local s = redis.call('ZSCORE', KEYS[1], ARGV[1])\n"
+    "if not s or tonumber(s) < tonumber(ARGV[2]) then\n"
+    "  redis.call('ZADD', KEYS[1], ARGV[2], ARGV[1])\n"
+    "end\n"
+    "local top = redis.call('ZRANGE', KEYS[1], -1, -1, 'WITHSCORES')\n"
+    "redis.call('EXPIREAT', KEYS[1], top[2])\n"
+    "return 1\n";
+
+enum { S_CREATE, S_SNAPSHOT, S_APPEND, S_TOUCH, S_DELETE, S_LOAD, S_INDEX, NSCRIPTS };
+static const char *const SCRIPTS[NSCRIPTS] = {LUA_CREATE, LUA_SNAPSHOT, LUA_APPEND, LUA_TOUCH,
+                                              LUA_DELETE, LUA_LOAD,   LUA_INDEX};
 
 typedef struct redis_backend {
     pthread_mutex_t mu;
@@ -221,40 +255,49 @@ static persist_rc error_reply(const redis_backend *b, const char *id, const redi
     return r->str && strstr(r->str, "WRONGTYPE") ? PERSIST_CORRUPT : PERSIST_UNAVAILABLE;
 }
 
-/* EVALSHA script (EVAL on NOSCRIPT) with the session's three keys and nargs arguments. */
-static redisReply *eval_locked(redis_backend *b, int script, const char *id, int nargs,
-                               const char **args, const size_t *lens)
+/* EVALSHA script (EVAL on NOSCRIPT) with nkeys (1 to 3) keys and nargs arguments. */
+static redisReply *eval_keys_locked(redis_backend *b, int script, int nkeys, const char **keys,
+                                    int nargs, const char **args, const size_t *lens)
 {
-    char kh[KEY_CAP], ks[KEY_CAP], kj[KEY_CAP];
-    const char *argv[12];
-    size_t len[12];
-    snprintf(kh, sizeof kh, "subdivd:s:{%s}", id);
-    snprintf(ks, sizeof ks, "subdivd:snap:{%s}", id);
-    snprintf(kj, sizeof kj, "subdivd:j:{%s}", id);
+    const char *argv[14];
+    size_t len[14];
     if (!b->c && connect_locked(b) < 0)
         return NULL;
+    char nk[2] = {(char)('0' + nkeys), 0};
     argv[0] = "EVALSHA";
     argv[1] = b->sha[script];
-    argv[2] = "3";
-    argv[3] = kh;
-    argv[4] = ks;
-    argv[5] = kj;
-    for (int i = 0; i < 6; i++)
+    argv[2] = nk;
+    for (int i = 0; i < nkeys; i++)
+        argv[3 + i] = keys[i];
+    for (int i = 0; i < 3 + nkeys; i++)
         len[i] = strlen(argv[i]);
     for (int i = 0; i < nargs; i++) {
-        argv[6 + i] = args[i];
-        len[6 + i] = lens ? lens[i] : strlen(args[i]);
+        argv[3 + nkeys + i] = args[i];
+        len[3 + nkeys + i] = lens ? lens[i] : strlen(args[i]);
     }
-    redisReply *r = exec_locked(b, 6 + nargs, argv, len);
+    int argc = 3 + nkeys + nargs;
+    redisReply *r = exec_locked(b, argc, argv, len);
     if (r && r->type == REDIS_REPLY_ERROR && r->str && !strncmp(r->str, "NOSCRIPT", 8)) {
         freeReplyObject(r);
         argv[0] = "EVAL";
         argv[1] = SCRIPTS[script];
         len[0] = 4;
         len[1] = strlen(SCRIPTS[script]);
-        r = exec_locked(b, 6 + nargs, argv, len);
+        r = exec_locked(b, argc, argv, len);
     }
     return r;
+}
+
+/* The same with the session's three keys. */
+static redisReply *eval_locked(redis_backend *b, int script, const char *id, int nargs,
+                               const char **args, const size_t *lens)
+{
+    char kh[KEY_CAP], ks[KEY_CAP], kj[KEY_CAP];
+    snprintf(kh, sizeof kh, "subdivd:s:{%s}", id);
+    snprintf(ks, sizeof ks, "subdivd:snap:{%s}", id);
+    snprintf(kj, sizeof kj, "subdivd:j:{%s}", id);
+    const char *keys[3] = {kh, ks, kj};
+    return eval_keys_locked(b, script, 3, keys, nargs, args, lens);
 }
 
 /* The answer of a compare-and-set script: 1 written, 0 conflict, -1 absent. */
@@ -295,42 +338,58 @@ static bool id_ok(const redis_backend *b, const char *id)
 
 static bool parse_i64(const redisReply *r, int64_t *out);
 
-/* Add id (expiring at exp) to its client's set, and let the set expire with the latest of its
- * members (read back: another daemon may have given a later one). Caller holds b->mu. */
-static persist_rc index_locked(redis_backend *b, const char *owner, const char *id, const char *exp)
+/* Score id in its client's set with `until` (LUA_INDEX). Caller holds b->mu. */
+static persist_rc index_locked(redis_backend *b, const char *owner, const char *id,
+                               const char *until)
 {
-    char ko[KEY_CAP];
+    char ko[KEY_CAP], now[24];
     snprintf(ko, sizeof ko, "subdivd:o:{%s}", owner);
-    const char *za[4] = {"ZADD", ko, exp, id}, *last[5] = {"ZRANGE", ko, "-1", "-1", "WITHSCORES"};
-    size_t zl[4] = {4, strlen(ko), strlen(exp), strlen(id)}, ll[5] = {6, strlen(ko), 2, 2, 10};
+    snprintf(now, sizeof now, "%" PRId64, (int64_t)time(NULL));
+    const char *keys[1] = {ko}, *args[3] = {id, until, now};
+    redisReply *r = eval_keys_locked(b, S_INDEX, 1, keys, 3, args, NULL);
     persist_rc rc = PERSIST_OK;
-    redisReply *r = exec_locked(b, 4, za, zl);
-    if (r && r->type != REDIS_REPLY_ERROR) {
-        freeReplyObject(r);
-        r = exec_locked(b, 5, last, ll);
-    }
-    int64_t latest;
     if (!r)
         return PERSIST_UNAVAILABLE;
     if (r->type == REDIS_REPLY_ERROR)
         rc = error_reply(b, id, r);
-    else if (r->type != REDIS_REPLY_ARRAY || r->elements != 2 || !parse_i64(r->element[1], &latest)) {
-        set_err(b, "unexpected ZRANGE reply");
+    else if (r->type != REDIS_REPLY_INTEGER) {
+        set_err(b, "unexpected reply type %d", r->type);
         rc = PERSIST_UNAVAILABLE;
     }
     freeReplyObject(r);
-    if (rc != PERSIST_OK)
-        return rc;
-    char x[24];
-    snprintf(x, sizeof x, "%" PRId64, latest);
-    const char *xa[3] = {"EXPIREAT", ko, x};
-    size_t xl[3] = {8, strlen(ko), strlen(x)};
-    if (!(r = exec_locked(b, 3, xa, xl)))
-        return PERSIST_UNAVAILABLE;
-    if (r->type == REDIS_REPLY_ERROR)
-        rc = error_reply(b, id, r);
-    freeReplyObject(r);
     return rc;
+}
+
+/* The answer of a script ending in LUA_RECOUNT: {owner, counted_until} is success, and the id's
+ * score in its client's set is raised to it here. Should that fail, the write stands (it is
+ * made) and the record forgets its counted_until (when redis still answers), so that its next
+ * write raises it again. Caller holds b->mu. */
+static persist_rc recount_rc(redis_backend *b, const char *id, redisReply *r)
+{
+    if (!r || r->type != REDIS_REPLY_ARRAY)
+        return cas_rc(b, r);
+    char owner[PERSIST_OWNER_CAP], until[24];
+    bool ok = r->elements == 2 && r->element[0]->type == REDIS_REPLY_STRING
+              && r->element[0]->len > 0 && r->element[0]->len < sizeof owner
+              && r->element[1]->type == REDIS_REPLY_STRING && r->element[1]->len > 0
+              && r->element[1]->len < sizeof until;
+    if (ok) {
+        memcpy(owner, r->element[0]->str, r->element[0]->len);
+        owner[r->element[0]->len] = '\0';
+        memcpy(until, r->element[1]->str, r->element[1]->len);
+        until[r->element[1]->len] = '\0';
+    }
+    freeReplyObject(r);
+    if (ok && index_locked(b, owner, id, until) == PERSIST_OK)
+        return PERSIST_OK;
+    char kh[KEY_CAP];
+    snprintf(kh, sizeof kh, "subdivd:s:{%s}", id);
+    const char *argv[3] = {"HDEL", kh, "counted_until"};
+    size_t len[3] = {4, strlen(kh), 13};
+    if ((r = exec_locked(b, 3, argv, len)))
+        freeReplyObject(r);
+    set_err(b, "session %s: written, not yet counted for its client", id);
+    return PERSIST_OK;
 }
 
 static persist_rc r_create(void *vb, const persist_meta *m)
@@ -338,17 +397,19 @@ static persist_rc r_create(void *vb, const persist_meta *m)
     redis_backend *b = vb;
     if (!id_ok(b, m->id))
         return PERSIST_ABSENT;
-    char ttl[24], created[24], exp[24], ver[24];
+    char ttl[24], created[24], exp[24], ver[24], until[24];
     snprintf(ttl, sizeof ttl, "%d", m->ttl_s);
     snprintf(created, sizeof created, "%" PRId64, m->created);
     snprintf(exp, sizeof exp, "%" PRId64, m->expires_at);
     snprintf(ver, sizeof ver, "%" PRIu64, m->version);
-    const char *args[6] = {(const char *)m->token_hash, ttl, created, exp, ver, m->owner};
-    size_t lens[6] = {32, strlen(ttl), strlen(created), strlen(exp), strlen(ver), strlen(m->owner)};
+    snprintf(until, sizeof until, "%" PRId64, m->expires_at + (m->ttl_s > 60 ? m->ttl_s : 60));
+    const char *args[7] = {(const char *)m->token_hash, ttl, created, exp, ver, m->owner, until};
+    size_t lens[7] = {32, strlen(ttl), strlen(created), strlen(exp), strlen(ver), strlen(m->owner),
+                      strlen(until)};
     pthread_mutex_lock(&b->mu);
-    persist_rc rc = cas_rc(b, eval_locked(b, S_CREATE, m->id, 6, args, lens));
+    persist_rc rc = cas_rc(b, eval_locked(b, S_CREATE, m->id, 7, args, lens));
     if (rc == PERSIST_OK && m->owner[0]) /* counted for its client, or not created */
-        rc = index_locked(b, m->owner, m->id, exp);
+        rc = index_locked(b, m->owner, m->id, until);
     if (rc != PERSIST_OK && rc != PERSIST_CONFLICT && m->owner[0]) {
         char keep[sizeof last_err];
         memcpy(keep, last_err, sizeof keep);
@@ -375,7 +436,7 @@ static persist_rc write_cas(redis_backend *b, int script, const char *id, uint64
     const char *args[4] = {e, v, x, data ? data : ""};
     size_t lens[4] = {strlen(e), strlen(v), strlen(x), data ? len : 0};
     pthread_mutex_lock(&b->mu);
-    persist_rc rc = cas_rc(b, eval_locked(b, script, id, 4, args, lens));
+    persist_rc rc = recount_rc(b, id, eval_locked(b, script, id, 4, args, lens));
     pthread_mutex_unlock(&b->mu);
     return rc;
 }
@@ -414,7 +475,7 @@ static persist_rc r_touch(void *vb, const char *id, int ttl_s, int64_t expires_a
     snprintf(t, sizeof t, "%d", ttl_s);
     const char *args[2] = {x, t};
     pthread_mutex_lock(&b->mu);
-    persist_rc rc = cas_rc(b, eval_locked(b, S_TOUCH, id, ttl_s > 0 ? 2 : 1, args, NULL));
+    persist_rc rc = recount_rc(b, id, eval_locked(b, S_TOUCH, id, ttl_s > 0 ? 2 : 1, args, NULL));
     pthread_mutex_unlock(&b->mu);
     return rc;
 }
@@ -468,64 +529,124 @@ static persist_rc r_delete(void *vb, const char *id)
     return rc;
 }
 
-/* The members of the client's set, each checked against its record (the set's scores lag
- * touches and PATCHed TTLs): gone or expired ones are dropped, the others rescored with their
- * record's expiry and counted, until `enough`. */
+/* HGET `field` of each of n hashes in one round trip (pipelined), the replies into out[]; false
+ * when the store cannot be read (last_err; out[] then holds nothing). The reconnect policy of
+ * exec_locked, but these are reads: retried after any failure on a reused connection. Caller
+ * holds b->mu. */
+static bool hget_many_locked(redis_backend *b, size_t n, char (*keys)[KEY_CAP], const char *field,
+                             redisReply **out)
+{
+    for (int attempt = 0;; attempt++) {
+        if (!b->c && connect_locked(b) < 0)
+            return false;
+        bool fresh = b->fresh;
+        b->fresh = false;
+        size_t got = 0;
+        bool ok = true;
+        for (size_t i = 0; ok && i < n; i++) {
+            const char *argv[3] = {"HGET", keys[i], field};
+            size_t len[3] = {4, strlen(keys[i]), strlen(field)};
+            ok = redisAppendCommandArgv(b->c, 3, argv, len) == REDIS_OK;
+        }
+        while (ok && got < n) {
+            void *r = NULL;
+            if ((ok = redisGetReply(b->c, &r) == REDIS_OK && r))
+                out[got++] = r;
+        }
+        if (ok)
+            return true;
+        for (size_t i = 0; i < got; i++)
+            freeReplyObject(out[i]);
+        set_err(b, "%s", is_timeout(b->c) ? "command timed out" : b->c->errstr[0] ? b->c->errstr
+                                                                                : "I/O error");
+        disconnect(b);
+        if (fresh || attempt > 0)
+            return false;
+    }
+}
+
+/* One command whose answer is only checked for an error. Caller holds b->mu. */
+static persist_rc command_locked(redis_backend *b, int argc, const char **argv, const size_t *len)
+{
+    redisReply *r = exec_locked(b, argc, argv, len);
+    if (!r)
+        return PERSIST_UNAVAILABLE;
+    persist_rc rc = r->type == REDIS_REPLY_ERROR ? error_reply(b, NULL, r) : PERSIST_OK;
+    freeReplyObject(r);
+    return rc;
+}
+
+#define OWNED_BATCH 64
+
+/* The client's set without the members whose score is past (expired sessions), the others each
+ * checked against its record, OWNED_BATCH records a round trip: a gone or expired one (deleted
+ * without the set being told, or its TTL PATCHed shorter) is dropped, a live one counted, until
+ * `enough`. */
 static persist_rc r_owned(void *vb, const char *owner, int64_t now, long enough, long *n,
                           int64_t *soonest)
 {
     redis_backend *b = vb;
-    char ko[KEY_CAP];
+    char ko[KEY_CAP], before[24];
     if (strlen(owner) + 12 >= sizeof ko) {
         set_err(b, "bad client key");
         return PERSIST_UNAVAILABLE;
     }
     snprintf(ko, sizeof ko, "subdivd:o:{%s}", owner);
+    snprintf(before, sizeof before, "(%" PRId64, now);
+    const char *prune[4] = {"ZREMRANGEBYSCORE", ko, "-inf", before};
+    size_t prl[4] = {16, strlen(ko), 4, strlen(before)};
     const char *argv[4] = {"ZRANGE", ko, "0", "-1"};
     size_t len[4] = {6, strlen(ko), 1, 2};
     pthread_mutex_lock(&b->mu);
-    redisReply *ids = exec_locked(b, 4, argv, len);
-    persist_rc rc = PERSIST_OK;
-    if (!ids)
+    redisReply *ids = NULL;
+    persist_rc rc = command_locked(b, 4, prune, prl);
+    if (rc == PERSIST_OK && !(ids = exec_locked(b, 4, argv, len)))
         rc = PERSIST_UNAVAILABLE;
-    else if (ids->type == REDIS_REPLY_ERROR)
+    else if (ids && ids->type == REDIS_REPLY_ERROR)
         rc = error_reply(b, NULL, ids);
-    else if (ids->type != REDIS_REPLY_ARRAY) {
+    else if (ids && ids->type != REDIS_REPLY_ARRAY) {
         set_err(b, "unexpected ZRANGE reply");
         rc = PERSIST_UNAVAILABLE;
     }
-    for (size_t i = 0; rc == PERSIST_OK && i < ids->elements && (enough <= 0 || *n < enough); i++) {
-        const redisReply *e = ids->element[i];
-        char id[40], kh[KEY_CAP];
-        if (e->type != REDIS_REPLY_STRING || e->len == 0 || e->len > 32)
-            continue;
-        memcpy(id, e->str, e->len);
-        id[e->len] = '\0';
-        snprintf(kh, sizeof kh, "subdivd:s:{%s}", id);
-        const char *hg[3] = {"HGET", kh, "expires_at"};
-        size_t hl[3] = {4, strlen(kh), 10};
-        redisReply *r = exec_locked(b, 3, hg, hl);
-        int64_t exp = 0;
-        if (!r) {
+    for (size_t at = 0; rc == PERSIST_OK && at < ids->elements && (enough <= 0 || *n < enough);) {
+        char keys[OWNED_BATCH][KEY_CAP];
+        const redisReply *member[OWNED_BATCH];
+        const char *gone[2 + OWNED_BATCH] = {"ZREM", ko};
+        size_t gl[2 + OWNED_BATCH] = {4, strlen(ko)}, k = 0;
+        int ngone = 0;
+        redisReply *r[OWNED_BATCH];
+        for (; at < ids->elements && k < OWNED_BATCH; at++) {
+            const redisReply *e = ids->element[at];
+            if (e->type == REDIS_REPLY_STRING && e->len > 0 && e->len <= 32) {
+                member[k] = e;
+                snprintf(keys[k++], KEY_CAP, "subdivd:s:{%.*s}", (int)e->len, e->str);
+            }
+        }
+        if (!hget_many_locked(b, k, keys, "expires_at", r)) {
             rc = PERSIST_UNAVAILABLE;
             break;
         }
-        bool live = r->type == REDIS_REPLY_STRING && parse_i64(r, &exp) && exp >= now;
-        if (r->type == REDIS_REPLY_ERROR)
-            rc = error_reply(b, id, r);
-        freeReplyObject(r);
-        if (rc != PERSIST_OK)
-            break;
-        char x[24];
-        snprintf(x, sizeof x, "%" PRId64, exp);
-        const char *w[4] = {live ? "ZADD" : "ZREM", ko, live ? x : id, id};
-        size_t wl[4] = {4, strlen(ko), strlen(w[2]), strlen(id)};
-        if ((r = exec_locked(b, live ? 4 : 3, w, wl)))
-            freeReplyObject(r);
-        if (live) {
-            ++*n;
-            if (!*soonest || exp < *soonest)
-                *soonest = exp;
+        for (size_t i = 0; i < k; i++) {
+            int64_t exp = 0;
+            if (r[i]->type == REDIS_REPLY_ERROR && rc == PERSIST_OK)
+                rc = error_reply(b, NULL, r[i]);
+            else if (r[i]->type != REDIS_REPLY_STRING || !parse_i64(r[i], &exp) || exp < now) {
+                gone[2 + ngone] = member[i]->str;
+                gl[2 + ngone++] = member[i]->len;
+            } else if (enough <= 0 || *n < enough) {
+                ++*n;
+                if (!*soonest || exp < *soonest)
+                    *soonest = exp;
+            }
+            freeReplyObject(r[i]);
+        }
+        if (rc == PERSIST_OK && ngone) {
+            char keep[sizeof last_err]; /* a failure leaves them to the next count */
+            memcpy(keep, last_err, sizeof keep);
+            redisReply *z = exec_locked(b, 2 + ngone, gone, gl);
+            if (z)
+                freeReplyObject(z);
+            memcpy(last_err, keep, sizeof keep);
         }
     }
     if (ids)

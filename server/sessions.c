@@ -36,6 +36,9 @@ struct store {
     persist *p;               /* the durable store (borrowed) */
     api_limits lim;           /* what a replayed journal may compute */
     pthread_mutex_t load[16]; /* loads from the durable store: one at a time per stripe of ids */
+    /* a durable store's count of a client's sessions and the creation it admits, one client at a
+     * time per stripe of client keys (two creates counting at once would both see room) */
+    pthread_mutex_t admit[16];
 };
 
 static void token_hash(const char *token, unsigned char out[32])
@@ -79,8 +82,10 @@ store *store_new(int max_sessions, persist *p, const api_limits *lim)
         return NULL;
     }
     pthread_mutex_init(&st->mu, NULL);
-    for (int i = 0; i < 16; i++)
+    for (int i = 0; i < 16; i++) {
         pthread_mutex_init(&st->load[i], NULL);
+        pthread_mutex_init(&st->admit[i], NULL);
+    }
     return st;
 }
 
@@ -100,8 +105,10 @@ void store_free(store *st)
         session_unref(s);
     }
     pthread_mutex_destroy(&st->mu);
-    for (int i = 0; i < 16; i++)
+    for (int i = 0; i < 16; i++) {
         pthread_mutex_destroy(&st->load[i]);
+        pthread_mutex_destroy(&st->admit[i]);
+    }
     api_free(st->s);
     api_free(st);
 }
@@ -354,16 +361,25 @@ session *store_create(store *st, int ttl_s, const rate_key *owner, int per_clien
     char ohex[PERSIST_OWNER_CAP] = "";
     if (owner)
         owner_hex(owner, ohex);
+    pthread_mutex_t *admit = NULL;
     if (owner && stored_per_client > 0 && persist_durable(st->p)) {
         /* idle sessions leave memory for the store, so the table's share alone does not bound
-         * what one client keeps: the store counts its unexpired ones */
+         * what one client keeps: the store counts its unexpired ones. The count and the record
+         * it admits are one step for this client (another create of it waits here) */
+        unsigned stripe = 0;
+        for (size_t i = 0; i < sizeof owner->b; i++)
+            stripe = stripe * 31 + owner->b[i];
+        admit = &st->admit[stripe & 15];
+        pthread_mutex_lock(admit);
         long n;
         int64_t soonest, now = (int64_t)time(NULL);
         a->stored = persist_owned(st->p, ohex, now, stored_per_client, &n, &soonest);
         if (a->stored != PERSIST_OK || n >= stored_per_client) {
+            pthread_mutex_unlock(admit);
             if (a->stored == PERSIST_OK) {
+                /* a stored session counts through its expiry's second (persist.h) */
                 a->client_stored_full = 1;
-                a->retry_after_s = soonest > now ? (int)(soonest - now) : 1;
+                a->retry_after_s = soonest >= now ? (int)(soonest - now) + 1 : 1;
             }
             session_unref(s);
             return NULL;
@@ -381,6 +397,8 @@ session *store_create(store *st, int ttl_s, const rate_key *owner, int per_clien
         if ((a->stored = persist_create(st->p, &m)) != PERSIST_OK)
             ok = false;
     }
+    if (admit) /* counted from now on */
+        pthread_mutex_unlock(admit);
     s->touched = mono_now(); /* the store has its expiry */
     if (ok) {
         pthread_mutex_lock(&st->mu);

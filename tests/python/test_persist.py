@@ -667,6 +667,100 @@ def test_one_client_cannot_fill_the_store(store):
         d.stop()
 
 
+def test_concurrent_creates_do_not_pass_the_stored_count(store):
+    """The count of a client's stored sessions and the creation it admits are one step: creates
+    from one address at once get --max-stored-sessions-per-client sessions, no more (two counting
+    at the same time would both see room)."""
+    d = store_daemon(store, "--max-connections-per-client", "0",
+                     "--max-stored-sessions-per-client", "3")
+    n = 30
+    go, out = threading.Barrier(n), []
+
+    def one(c):
+        go.wait()
+        c.request("POST", "/v1/sessions", "{}", {"Content-Type": "application/json"})
+        r = c.getresponse()
+        r.read()
+        out.append(r.status)
+        c.close()
+
+    try:
+        host, port = d.url.split("//")[1].split(":")
+        conns = [http.client.HTTPConnection(host, int(port), timeout=30,
+                                            source_address=("127.0.0.11", 0)) for _ in range(n)]
+        for c in conns:                             # connected first: the requests come at once
+            c.connect()
+        threads = [threading.Thread(target=one, args=(c,)) for c in conns]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert sorted(out) == [201] * 3 + [429] * (n - 3), out
+        assert create_from(d, "127.0.0.11")[0] == 429
+    finally:
+        d.stop()
+
+
+def test_sessions_kept_alive_past_their_first_expiry_still_count(store):
+    """A stored session whose expiry moved on (a PATCHed TTL, changes while in use) still counts
+    for its client after the expiry it was created with: redis keeps the client's set alive as
+    long as the sessions it names."""
+    d = store_daemon(store, "--max-stored-sessions-per-client", "2")
+    try:
+        a, b = (adopt(d, requests.Session(), create_from(d, "127.0.0.12", ttl_s=2)[2])
+                for _ in range(2))
+        assert create_from(d, "127.0.0.12")[0] == 429
+        assert a.req("PATCH", json={"ttl_s": 600}).status_code == 200
+        end = time.time() + 5                       # past the 2 s TTL and its slack
+        while time.time() < end:                    # b in use: each change stores a later expiry
+            assert b.put_complex(TETS).status_code == 200
+            time.sleep(0.3)
+        st, ra, j = create_from(d, "127.0.0.12")
+        assert st == 429 and "max-stored-sessions-per-client" in j["detail"], j
+        assert 1 <= int(ra) <= 4, ra                # b's: TTL 2 s and its slack after its last use
+    finally:
+        d.stop()
+
+
+def test_retry_after_of_the_stored_count_is_enough(store):
+    """A client that waits the Retry-After of a 429 client-sessions (the stored count) finds its
+    soonest session expired: the store counts a session through its expiry's second."""
+    d = store_daemon(store, "--max-stored-sessions-per-client", "1")
+    try:
+        assert create_from(d, "127.0.0.13", ttl_s=1)[0] == 201
+        st, ra, j = create_from(d, "127.0.0.13")
+        assert st == 429 and "max-stored-sessions-per-client" in j["detail"], j
+        time.sleep(int(ra))
+        st, ra, j = create_from(d, "127.0.0.13")
+        assert st == 201, (ra, j)
+    finally:
+        d.stop()
+
+
+def test_a_client_set_in_redis_forgets_expired_sessions(tmp_path):
+    """Redis: the per-client set of session ids drops the ones whose sessions expired when it is
+    written, also with the count lifted (--max-stored-sessions-per-client 0, behind a proxy where
+    every session has one client): it does not grow with every session ever created."""
+    if not REDIS_SERVER:
+        pytest.skip("redis-server is not installed (tools/packages.txt lists it)")
+    r = RedisServer(tmp_path).start()
+    key = "subdivd:o:{047f00000e000000000000000000000000}"  # 127.0.0.14 (rate_key_of)
+    try:
+        for cap in ("0", "5"):
+            d = store_daemon(r, "--max-stored-sessions-per-client", cap)
+            try:
+                r.command("ZADD", key, "1", "0" * 32)   # a session that expired long ago
+                assert create_from(d, "127.0.0.14")[0] == 201
+                assert r.command("ZSCORE", key, "0" * 32) == b"$-1\r\n", cap
+                assert r.command("ZCARD", key) == b":%d\r\n" % (1 if cap == "0" else 2)
+                ttl = int(r.command("TTL", key)[1:].split(b"\r")[0])
+                assert ttl >= 600, ttl                  # the sessions' TTL at least
+            finally:
+                d.stop()
+    finally:
+        r.stop()
+
+
 def test_a_store_written_before_owners_is_opened(tmp_path):
     """An SQLite file of the schema before records kept their client: opened, its sessions
     served (they count for nobody), and new ones counted."""
