@@ -50,8 +50,9 @@ static const char *limit_method_name(int method)
 
 /* "limit_mask": the weights on points.ids (0 where the mask does not read a point); into *info
  * ("limit"): what found them and at which level, the tangent masks on the same points where the
- * point has one tangent plane, the points of the mask outside points.ids (none for a closed
- * block), and what the detail offsets of finer levels add (the constant terms) */
+ * point has one tangent plane, the points the mask or the tangent masks read outside points.ids
+ * (none for a closed block without tangents) with their weights, and what the detail offsets of
+ * finer levels add (the constant terms) */
 static json_t *limit_mask_json(const sd_analysis *an, const sd_limit_mask *lm, json_t **info)
 {
     *info = json_null();
@@ -63,10 +64,14 @@ static json_t *limit_mask_json(const sd_analysis *an, const sd_limit_mask *lm, j
         int k = 0;
         while (k < an->size && an->points[k] != lm->points[i])
             k++;
-        if (k == an->size) {
+        if (k == an->size) { /* with tangents, their weights there too (a boundary vertex's
+                                across mask reads interior neighbours, a corner's its first two) */
             if (lm->w[i] != 0 || (lm->t1 && (lm->t1[i] != 0 || lm->t2[i] != 0)))
-                json_array_append_new(extra, json_pack("{s:I, s:f}", "id", (json_int_t)lm->points[i],
-                                                       "weight", lm->w[i]));
+                json_array_append_new(
+                    extra, lm->t1 ? json_pack("{s:I, s:f, s:[f, f]}", "id", (json_int_t)lm->points[i],
+                                              "weight", lm->w[i], "tangents", lm->t1[i], lm->t2[i])
+                                  : json_pack("{s:I, s:f}", "id", (json_int_t)lm->points[i],
+                                              "weight", lm->w[i]));
             continue;
         }
         w[k] += lm->w[i];

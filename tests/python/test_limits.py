@@ -994,3 +994,45 @@ def test_convergence_nonmanifold_surface(tmp_path, rules):
     r = es[-3:, moving] / es[-4:-1, moving]
     assert (r <= 0.6).all(), r.max()
     assert es[-1].max() < 0.01 * es[0].max()
+
+
+def test_analysis_tangents_reach_outside_the_block(daemon, tmp_path, osd_loop):
+    """GET /analysis's tangents on an open surface with a corner tag: a boundary vertex's block
+    is the B-spline one (v and its two boundary neighbours), but OpenSubdiv's across-tangent mask
+    also reads the interior neighbours, and a corner's masks read its first two neighbours; those
+    weights are in `limit.outside[].tangents`. The limit normal t1 x t2 taken from both equals
+    Far::PrimvarRefinerReal<double>::Limit's (tests/peers/osd_loop.cpp) at every vertex that has
+    tangents, boundary and corner ones among them."""
+    rng = random.Random(7)
+    N = 4
+    xyz = [(i + rng.uniform(-.15, .15), j + rng.uniform(-.15, .15),
+            0.3 * math.sin(0.9 * i) * math.cos(0.7 * j) + rng.uniform(-.1, .1))
+           for i in range(N + 1) for j in range(N + 1)]
+    at = lambda i, j: i * (N + 1) + j
+    tris = []
+    for i in range(N):
+        for j in range(N):
+            a, b, c, d = at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)
+            tris += [(a, b, c), (a, c, d)]
+    corner = at(0, 2)  # a boundary vertex of three triangles, tagged as a corner
+    path = tmp_path / "patch.txt"
+    write(path, xyz, tris, [(corner, 10.0)])
+    _, _, want = parse(run([osd_loop, "-l", 0, "--limit", path]))
+    body = {"vertices": [list(p) for p in xyz], "simplices": [list(t) for t in tris]}
+    s = session(daemon, body, {"surface_weights": "loop"})
+    assert s.req("PUT", "/tags", json={"singular": [[corner]]}).status_code == 200
+    x = np.array(xyz)
+    seen = set()
+    for v in range(len(xyz)):
+        j = s.req("GET", "/analysis", params={"vertex": v}).json()
+        lim = j["limit"]
+        assert "tangents" in lim, v
+        t = [np.array(w) @ x[j["points"]["ids"]] for w in lim["tangents"]]
+        for o in lim["outside"]:
+            for k in range(2):
+                t[k] = t[k] + o.get("tangents", [0, 0])[k] * x[o["id"]]
+        n = np.cross(t[0], t[1])
+        np.testing.assert_allclose(n / np.linalg.norm(n), want[v], atol=1e-9, err_msg=f"vertex {v}")
+        if lim["outside"]:
+            seen.add(lim["method"])
+    assert seen == {"bspline", "fixed"}
