@@ -305,6 +305,23 @@ def test_get_complex_classes(daemon):
     assert j["rules"]["solid_scheme"] == "box" and j["tags"] == {"singular": []}
 
 
+def test_valence_counts_the_neighbours_the_rule_reads(daemon):
+    """docs/API.md: `valence` is the number of neighbours a point's rule reads — a surface
+    boundary vertex's two boundary neighbours whatever its interior ones, a corner none, an
+    interior Loop vertex its whole 1-ring."""
+    # a 3x3 grid of points (a fan of 8 triangles around the centre 4), corner tag on 0
+    v = [[x, y, 0] for y in range(3) for x in range(3)]
+    t = [[0, 1, 4], [1, 2, 4], [2, 5, 4], [5, 8, 4], [8, 7, 4], [7, 6, 4], [6, 3, 4], [3, 0, 4]]
+    s = Session(daemon)
+    assert s.put_complex({"vertices": v, "simplices": t}).status_code == 200
+    assert s.req("PUT", "/tags", json={"singular": [[0]]}).status_code == 200
+    cv = s.req("GET", "/complex").json()["classes"]["vertices"]
+    assert (cv[4]["rule"], cv[4]["valence"]) == ("loop", 8)
+    assert (cv[0]["rule"], cv[0]["valence"]) == ("corner", 0)
+    for i in (1, 2, 3, 5, 6, 7, 8):          # 1, 3, 5, 7 have 3 neighbours, one interior
+        assert (cv[i]["rule"], cv[i]["valence"]) == ("loop-boundary", 2), (i, cv[i])
+
+
 def test_rules_change_levels(daemon):
     body = complex_from_text(CUBE)
     s = Session(daemon)
