@@ -904,3 +904,42 @@ def test_client_edit_with_its_delta(daemon):
     nrm[d["indices"]] = d["normals"]
     np.testing.assert_array_equal(nrm, glb_arrays(s.level(2, parts="surfaces").content)["NORMAL"])
     s.delete()
+
+
+def test_client_events_open_when_called(daemon):
+    """Session.events() opens the stream when it is called, not at the first next(): a change
+    made after the call and before the iteration starts comes as an event (the stream began at
+    the version before it), a refusal raises at the call, and close() ends a stream never read
+    (its place among --max-listeners is freed)."""
+    body = complex_from_text(MIXED)
+    s = new_session(daemon, body)
+    c = subdiv.Client(daemon.url, timeout=30).session(s.id, s.token)
+    v = version_of(s)
+    it = c.events(timeout=30)
+    v1 = patch(s, {"moves": [{"index": 1, "position": moved(body["vertices"][1], 1)}]}, v)
+    got = []
+    t = threading.Thread(target=lambda: got.append(next(it)), daemon=True)
+    t.start()
+    t.join(5 * SLOW)   # heartbeats come every 15 s: a stream opened after the edit has nothing
+    assert got and got[0]["id"] == v1 and got[0]["data"]["kind"] == "edit", got
+    it.close()
+    with pytest.raises(subdiv.Unauthorized):
+        subdiv.Client(daemon.url, timeout=30).session(s.id, "not-the-token").events()
+    s.delete()
+    # --max-listeners (16): each call holds a place, the 17th is refused at once
+    s = new_session(daemon, body)
+    c = subdiv.Client(daemon.url, timeout=30).session(s.id, s.token)
+    streams = [c.events(timeout=30) for _ in range(16)]
+    with pytest.raises(subdiv.TooManyRequests):
+        c.events(timeout=30)
+    for st in streams:
+        st.close()
+    t0 = time.time()
+    while True:   # closed without being read: the places come free within about a second
+        try:
+            c.events(timeout=30).close()
+            break
+        except subdiv.TooManyRequests:
+            assert time.time() - t0 < 5 * SLOW, "closed streams still hold their places"
+            time.sleep(0.1)
+    s.delete()
