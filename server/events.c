@@ -175,20 +175,20 @@ void ev_publish(ev_hub *h, uint64_t version, const char *name, const char *data)
 
 void ev_close(ev_hub *h, const char *why)
 {
-    char data[160];
-    snprintf(data, sizeof data, "{\"reason\":\"%s\"}", why);
     char text[256];
-    int n = snprintf(text, sizeof text, "event: deleted\ndata: %s\n\n", data);
+    int n = why ? snprintf(text, sizeof text, "event: deleted\ndata: {\"reason\":\"%s\"}\n\n", why)
+                : 0;
     pthread_mutex_lock(&h->mu);
     if (!h->closed) {
         h->closed = true;
-        h->close_text = api_malloc((size_t)n + 1);
+        h->close_text = n ? api_malloc((size_t)n + 1) : NULL;
         if (h->close_text) {
             memcpy(h->close_text, text, (size_t)n + 1);
             h->close_len = (size_t)n;
         }
         for (ev_listener *l = h->listeners; l; l = l->next) {
-            deliver(l, text, (size_t)n);
+            if (n)
+                deliver(l, text, (size_t)n);
             l->ending = true;
         }
         pthread_cond_broadcast(&h->cv);

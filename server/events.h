@@ -8,7 +8,8 @@
  * it missed, or told `event: resync` when the ring no longer holds it. A listener's reader runs
  * in its connection's own thread (libmicrohttpd thread-per-connection) and blocks there on the
  * hub's condition variable, waking for events, for heartbeats (a comment line every
- * `heartbeat_s`) and for the end (`event: deleted` when the session is deleted or expires).
+ * `heartbeat_s`) and for the end (`event: deleted` when the session is deleted or expires; no
+ * event when the daemon drops its copy of a session to load it again from the store).
  */
 #ifndef SUBDIVD_EVENTS_H
 #define SUBDIVD_EVENTS_H
@@ -32,7 +33,9 @@ void ev_hub_unref(ev_hub *h);
 /* Publish one event: `id: version`, `event: name`, `data: data` (one line of JSON). Copies. */
 void ev_publish(ev_hub *h, uint64_t version, const char *name, const char *data);
 /* The session is gone: every listener gets `event: deleted` (data: {"reason": why}) and its
- * stream ends; later listeners get the same at once. */
+ * stream ends; later listeners get the same at once. With why NULL (the session is not gone: this
+ * daemon dropped its copy, to load it again from the durable store) the streams end without an
+ * event, and the clients reconnect with Last-Event-ID to the copy loaded again. */
 void ev_close(ev_hub *h, const char *why);
 
 /* A new listener, unless the hub has `max` already (*full set) or there is no memory (NULL).

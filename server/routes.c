@@ -224,7 +224,7 @@ static int store_refused(req *r, persist_rc rc, bool drop, api_problem *p)
     char why[256] = "";
     persist *ps = store_persist(r->srv->st);
     if (drop)
-        store_drop(r->srv->st, r->s);
+        store_drop(r->srv->st, r->s, rc == PERSIST_ABSENT);
     switch (rc) {
     case PERSIST_CONFLICT:
         return api_fail(p, 412, "stale-version", "another daemon changed this session first; "
@@ -918,7 +918,7 @@ static void h_edit(req *r)
             }
         } else if (rebuilt && persist_durable(store_persist(r->srv->st))) {
             api_model_unref(rebuilt); /* a failed edit whose undo failed: the store has the content */
-            store_drop(r->srv->st, r->s);
+            store_drop(r->srv->st, r->s, false);
         } else if (rebuilt) { /* a failed edit whose undo failed: the content before it, rebuilt */
             api_problem q = {0};
             api_embed_carry(m, rebuilt, &r->srv->cfg.limits, &q); /* what fits goes on */

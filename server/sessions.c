@@ -211,7 +211,7 @@ static int evict_empty_locked(store *st, const rate_key *owner)
             t->expires_at = exp;
         }
     }
-    return best >= 0 ? remove_at(st, best, any ? "reload" : "evicted") : 0;
+    return best >= 0 ? remove_at(st, best, any ? NULL : "evicted") : 0; /* stored: not gone */
 }
 
 /* Seconds until the soonest expiry of a resident session (of `owner`, unless NULL; >= 1).
@@ -602,7 +602,7 @@ session *store_get(store *st, const char *id, const char *token, store_miss *mis
         pthread_mutex_unlock(&found->mu);
         pthread_mutex_unlock(&found->write);
         if (rc == PERSIST_ABSENT || (rc == PERSIST_OK && stored != mine)) {
-            store_drop(st, found);
+            store_drop(st, found, rc == PERSIST_ABSENT);
             session_unref(found);
             found = NULL;
             if (rc == PERSIST_ABSENT)
@@ -622,18 +622,19 @@ session *store_get(store *st, const char *id, const char *token, store_miss *mis
     return found;
 }
 
-void store_drop(store *st, session *s)
+void store_drop(store *st, session *s, bool gone)
 {
     pthread_mutex_lock(&st->mu);
     for (int i = 0; i < st->n; i++)
         if (st->s[i] == s) {
-            remove_at(st, i, "reload");
+            remove_at(st, i, gone ? "deleted" : NULL);
             break;
         }
     pthread_mutex_unlock(&st->mu);
 }
 
-/* Take session i out of the store; its event listeners get `event: deleted` with `why`. */
+/* Take session i out of the store; its event listeners get `event: deleted` with `why`, or with
+ * why NULL (a resident copy dropped, the session still stored) their streams end without it. */
 static int remove_at(store *st, int i, const char *why)
 {
     session *s = st->s[i];

@@ -96,8 +96,10 @@ typedef enum store_miss {
 session *store_get(store *st, const char *id, const char *token, store_miss *miss, char *why,
                    size_t cap);
 /* Forget the resident copy of s (the durable store has the truth: after a write it refused, or
- * lost to another daemon); the next request loads it again. Its listeners are told "reload". */
-void store_drop(store *st, session *s);
+ * lost to another daemon); the next request loads it again. Its listeners' streams end: with
+ * `event: deleted` ("deleted") when `gone` (the store no longer has it), else without an event
+ * (they reconnect with Last-Event-ID to the copy loaded again). */
+void store_drop(store *st, session *s, bool gone);
 persist *store_persist(store *st);
 /* Remove from the store (the session lives on until its last reference goes). 0 if absent. */
 int store_remove(store *st, session *s);

@@ -19,6 +19,7 @@ import requests
 
 from conftest import REPO
 from daemon import SLOW, Daemon, Session, complex_from_text
+from redisd import REDIS_SERVER, RedisServer
 
 sys.path.insert(0, str(REPO / "clients" / "python"))
 import subdiv  # noqa: E402
@@ -904,3 +905,76 @@ def test_client_edit_with_its_delta(daemon):
     nrm[d["indices"]] = d["normals"]
     np.testing.assert_array_equal(nrm, glb_arrays(s.level(2, parts="surfaces").content)["NORMAL"])
     s.delete()
+
+
+def test_client_events_open_when_called(daemon):
+    """Session.events() opens the stream when it is called, not at the first next(): a change
+    made after the call and before the iteration starts comes as an event (the stream began at
+    the version before it), a refusal raises at the call, and close() ends a stream never read
+    (its place among --max-listeners is freed)."""
+    body = complex_from_text(MIXED)
+    s = new_session(daemon, body)
+    c = subdiv.Client(daemon.url, timeout=30).session(s.id, s.token)
+    v = version_of(s)
+    it = c.events(timeout=30)
+    v1 = patch(s, {"moves": [{"index": 1, "position": moved(body["vertices"][1], 1)}]}, v)
+    got = []
+    t = threading.Thread(target=lambda: got.append(next(it)), daemon=True)
+    t.start()
+    t.join(5 * SLOW)   # heartbeats come every 15 s: a stream opened after the edit has nothing
+    assert got and got[0]["id"] == v1 and got[0]["data"]["kind"] == "edit", got
+    it.close()
+    with pytest.raises(subdiv.Unauthorized):
+        subdiv.Client(daemon.url, timeout=30).session(s.id, "not-the-token").events()
+    s.delete()
+    # --max-listeners (16): each call holds a place, the 17th is refused at once
+    s = new_session(daemon, body)
+    c = subdiv.Client(daemon.url, timeout=30).session(s.id, s.token)
+    streams = [c.events(timeout=30) for _ in range(16)]
+    with pytest.raises(subdiv.TooManyRequests):
+        c.events(timeout=30)
+    for st in streams:
+        st.close()
+    t0 = time.time()
+    while True:   # closed without being read: the places come free within about a second
+        try:
+            c.events(timeout=30).close()
+            break
+        except subdiv.TooManyRequests:
+            assert time.time() - t0 < 5 * SLOW, "closed streams still hold their places"
+            time.sleep(0.1)
+    s.delete()
+
+
+def test_events_end_without_deleted_when_a_daemon_reloads(tmp_path):
+    """Two daemons on one redis store (docs/DEPLOY.md): an edit through one makes the other drop
+    its resident copy of the session at its next request and load the stored one. The session
+    is not gone, so that daemon's listeners are not told `event: deleted`: their streams end,
+    and a reconnect with Last-Event-ID is told to resync (it missed the other daemon's edit). A
+    session deleted through the other daemon is `deleted` for them."""
+    if not REDIS_SERVER:
+        pytest.skip("redis-server is not installed (tools/packages.txt lists it)")
+    redis = RedisServer(tmp_path).start()
+    a, b = Daemon("--store", redis.url), Daemon("--store", redis.url)
+    try:
+        body = complex_from_text(MIXED)
+        s = new_session(a, body)
+        v = version_of(s)
+        on_b = Session.__new__(Session)
+        on_b.http, on_b.id, on_b.token, on_b.auth = requests.Session(), s.id, s.token, s.auth
+        on_b.base = f"{b.url}/v1/sessions/{s.id}"
+        li = Listener(a, s)
+        assert li.wait_for(lambda e: False, timeout=0.3) is False   # its stream is open
+        patch(on_b, {"moves": [{"index": 1, "position": moved(body["vertices"][1], 1)}]}, v)
+        assert version_of(s) == v + 1          # a: the stored session, loaded again
+        assert li.done.wait(5 * SLOW), "the stream of the dropped copy did not end"
+        assert [e for e in li.events if e["event"] == "deleted"] == [], li.events
+        again = Listener(a, s, last_event_id=v)
+        assert again.wait_for(lambda e: e["event"] == "resync"), again.events
+        assert on_b.req("DELETE").status_code == 204
+        assert s.req("GET").status_code == 404   # a: gone from the store
+        assert again.wait_for(lambda e: e["event"] == "deleted"), again.events
+        assert [e["data"]["reason"] for e in again.events if e["event"] == "deleted"] == ["deleted"]
+    finally:
+        assert a.stop() == 0 and b.stop() == 0
+        redis.stop()

@@ -11,15 +11,16 @@ subdiv.meshes (mesh files -> complex bodies) and subdiv.cli (the command-line to
 # the daemon's version too (subdivd --version, info.version of api/openapi.json)
 __version__ = "1.0.0"
 
-from .client import ROUTES, Client, Session
+from .client import ROUTES, Client, EventStream, Session
 from .errors import (BadRequest, ClientError, Conflict, ContentTooLarge, Gone, MethodNotAllowed,
                      NotFound, NotImplementedByServer, PreconditionFailed, PreconditionRequired,
                      ProblemError, ServerError, ServiceUnavailable, SubdivError, TooManyRequests,
                      TransportError, Unauthorized, Unprocessable, UnsupportedMediaType, error_for)
 from .meshes import MeshError
 
-__all__ = ["__version__", "Client", "Session", "ROUTES", "MeshError", "SubdivError", "TransportError",
-           "ProblemError", "ClientError", "ServerError", "BadRequest", "Unauthorized", "NotFound",
-           "MethodNotAllowed", "Conflict", "Gone", "PreconditionFailed", "ContentTooLarge",
-           "UnsupportedMediaType", "Unprocessable", "PreconditionRequired", "TooManyRequests",
-           "NotImplementedByServer", "ServiceUnavailable", "error_for"]
+__all__ = ["__version__", "Client", "Session", "EventStream", "ROUTES", "MeshError",
+           "SubdivError", "TransportError", "ProblemError", "ClientError", "ServerError",
+           "BadRequest", "Unauthorized", "NotFound", "MethodNotAllowed", "Conflict", "Gone",
+           "PreconditionFailed", "ContentTooLarge", "UnsupportedMediaType", "Unprocessable",
+           "PreconditionRequired", "TooManyRequests", "NotImplementedByServer",
+           "ServiceUnavailable", "error_for"]

@@ -216,6 +216,64 @@ class Client:
         return s
 
 
+class EventStream:
+    """An open event stream (Session.events()): an iterator of the events, {"id", "event",
+    "data"}; close() ends it whether or not it was read (also at the end of a `with` block)."""
+
+    def __init__(self, response: requests.Response) -> None:
+        self._r = response
+        self._it = self._read()
+
+    def __iter__(self) -> EventStream:
+        return self
+
+    def __next__(self) -> JSON:
+        return next(self._it)
+
+    def __enter__(self) -> EventStream:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def close(self) -> None:
+        try:
+            self._it.close()
+        except ValueError:  # being read in another thread: it ends with the connection
+            pass
+        self._r.close()
+
+    def _read(self) -> Iterator[JSON]:
+        r = self._r
+        try:
+            ev: JSON = {}
+            data: List[str] = []
+            try:
+                for raw in r.iter_lines(chunk_size=1, decode_unicode=False):
+                    line = raw.decode("utf-8")
+                    if not line:
+                        if data or ev:
+                            ev["data"] = json.loads("\n".join(data)) if data else None
+                            ev.setdefault("event", "message")
+                            yield ev
+                        ev, data = {}, []
+                        continue
+                    if line.startswith(":"):
+                        continue
+                    field, _, value = line.partition(":")
+                    value = value[1:] if value.startswith(" ") else value
+                    if field == "data":
+                        data.append(value)
+                    elif field == "id":
+                        ev["id"] = int(value) if value.isdigit() else value
+                    elif field == "event":
+                        ev["event"] = value
+            except requests.RequestException as e:
+                raise TransportError(f"the event stream broke: {e}") from e
+        finally:
+            r.close()
+
+
 class Session:
     """One session of the daemon: `id`, `token`, and `version` (the last ETag seen)."""
 
@@ -639,45 +697,22 @@ class Session:
         return self._parse_delta_bin(r, [])
 
     def events(self, last_event_id: Optional[Version] = None, *,
-               timeout: Optional[float] = None) -> Iterator[JSON]:
-        """GET /events: an iterator of the session's events as dicts {"id", "event", "data"}
-        (data parsed as JSON): "version" after each change (data: version, kind, and for edits
-        updated_points), "resync" when `last_event_id` is too old to replay, "deleted" when the
-        session ends (the iterator ends with the stream). Heartbeat comments are skipped. Close
-        it with .close() (it is a generator). `timeout`: seconds without a byte (heartbeats
-        come every --sse-heartbeat seconds) before TransportError."""
+               timeout: Optional[float] = None) -> EventStream:
+        """GET /events: the session's event stream, open when this returns (a refusal raises
+        here: Unauthorized, NotFound, TooManyRequests beyond --max-listeners), so every change
+        after the call comes, however late the iteration starts. Iterate it for the events as
+        dicts {"id", "event", "data"} (data parsed as JSON): "version" after each change (data:
+        version, kind, and for edits updated_points), "resync" when `last_event_id` is too old
+        to replay, "deleted" when the session ends (the iteration ends with the stream).
+        Heartbeat comments are skipped. `.close()` it (or use it in a `with` block) to stop,
+        read or not. `timeout`: seconds without a byte (heartbeats come every --sse-heartbeat
+        seconds) before TransportError."""
         extra = {"Accept": "text/event-stream"}
         if last_event_id is not None:
             extra["Last-Event-ID"] = str(last_event_id)
         r = self.client.request("GET", self.url + "/events", headers=self.headers(extra=extra),
                                 stream=True, timeout=timeout or self.client.timeout)
-        try:
-            ev = {}
-            data = []
-            try:
-                for raw in r.iter_lines(chunk_size=1, decode_unicode=False):
-                    line = raw.decode("utf-8")
-                    if not line:
-                        if data or ev:
-                            ev["data"] = json.loads("\n".join(data)) if data else None
-                            ev.setdefault("event", "message")
-                            yield ev
-                        ev, data = {}, []
-                        continue
-                    if line.startswith(":"):
-                        continue
-                    field, _, value = line.partition(":")
-                    value = value[1:] if value.startswith(" ") else value
-                    if field == "data":
-                        data.append(value)
-                    elif field == "id":
-                        ev["id"] = int(value) if value.isdigit() else value
-                    elif field == "event":
-                        ev["event"] = value
-            except requests.RequestException as e:
-                raise TransportError(f"the event stream broke: {e}") from e
-        finally:
-            r.close()
+        return EventStream(r)
 
     def level_stats(self, level: int) -> JSON:
         """GET /levels/{L}/stats: counts per cell kind, bytes per format, seconds."""
