@@ -298,11 +298,14 @@ static void preflight(req *r, const char *allow)
     http_queue(r, 204, resp);
 }
 
-/* 405 naming the allowed methods in the Allow header. */
+/* 405 naming the allowed methods in the Allow header: the route's, and OPTIONS, which every
+ * resource answers (the same list as a preflight's Allow). */
 static void method_not_allowed(req *r, const api_problem *p, const char *allow)
 {
     struct MHD_Response *resp = http_problem_response(r, p);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_ALLOW, allow);
+    char methods[160];
+    snprintf(methods, sizeof methods, "%s, OPTIONS", allow);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_ALLOW, methods);
     http_queue(r, 405, resp);
 }
 

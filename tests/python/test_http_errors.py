@@ -310,6 +310,16 @@ def test_paths_and_methods(daemon):
     assert "POST" in r.headers["Allow"]
     check_problem(requests.put(daemon.url + "/healthz"), 405, None)
     check_problem(requests.post(daemon.url + "/", data=b"x"), 405, None)
+    # a 405's Allow is the resource's methods, OPTIONS included (RFC 9110 15.5.6: every route
+    # answers OPTIONS), the same list its preflight gives
+    s = Session(daemon)
+    for path, method in (("/v1/sessions", "DELETE"), ("/healthz", "PUT"), ("/", "POST"),
+                         (s.base[len(daemon.url):] + "/complex", "POST")):
+        refused = requests.request(method, daemon.url + path, headers=s.auth, data=b"x")
+        options = requests.options(daemon.url + path)
+        assert refused.status_code == 405 and options.status_code == 204, path
+        assert refused.headers["Allow"] == options.headers["Allow"], (path, refused.headers)
+        assert "OPTIONS" in refused.headers["Allow"].split(", ")
     # the detail names the method sent, an unknown one too (its token characters, cut at 20)
     for method, said in (("FOO", "FOO"), ("TRACE", "TRACE"), ("X" * 30, "X" * 20 + "...")):
         r = requests.request(method, daemon.url + "/v1/sessions")
