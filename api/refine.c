@@ -608,6 +608,21 @@ static int run_step(const api_model *cur, const rstep *S, int j, int place,
     return 0;
 }
 
+/* A refined complex that PUT /complex would refuse — typically a cell under its degeneracy test
+ * (DECISIONS 7: an edge shorter than 1e-12 of the bounding box's diagonal, a near-zero area or
+ * volume) — is the request's doing: named at /select, not at the /simplices or /vertices this
+ * request does not have (the core's reason names the refined complex's simplex or vertex, which
+ * the client never sees). */
+static int refused_result(api_problem *p)
+{
+    char why[sizeof p->detail];
+    snprintf(why, sizeof why, "%s", p->detail);
+    return api_fail_at(p, 422, "invalid-complex", "/select",
+                       "the refined complex would be one PUT /complex refuses: %s (numbered in "
+                       "the refined complex; a cell with an edge shorter than 1e-12 of the "
+                       "bounding box's diagonal is degenerate); refine less deep", why);
+}
+
 /* The most steps made (again) in one refinement: past it, the green cells left are kept. */
 #define RG_MAX_RUNS 64
 
@@ -706,6 +721,11 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
         rc = build_model(fin->in, &keep, &fin->tags, lim, out, p);
         api_model_unref(m);
     }
+    /* the only complexes validated here are refined ones (a step's, for subdivision placement,
+     * or the result) */
+    if (rc == 422 && p->slug && strcmp(p->slug, "invalid-complex") == 0 &&
+        (!p->nerrors || strncmp(p->errors[0].pointer, "/select", 7) != 0))
+        rc = refused_result(p);
     for (int k = 0; k <= 4; k++)
         rstep_clear(&st[k]);
     return rc;

@@ -461,3 +461,32 @@ def test_refine_limits_are_counted_before_the_result(daemon, limit, depth, reque
         assert s.req("GET").json()["version"] == 1
     finally:
         d.stop()
+
+
+@pytest.mark.parametrize("depth,place", [(2, "midpoint"), (4, "midpoint"), (1, "subdivision"),
+                                         (3, "subdivision")])
+def test_a_refinement_into_degenerate_cells_is_refused_at_the_selection(daemon, depth, place):
+    """PUT /complex refuses an edge shorter than 1e-12 of the bounding box's diagonal (DECISIONS
+    7). A unit tetrahedron next to a point 4e11 away passes (the bound is 0.4); refined to depth
+    2 its edges are 0.25 (depth 1 keeps 0.5; subdivision placement pulls a lone tetrahedron's new
+    points inwards, so its depth 1 is under the bound too). Such a refinement is refused as the
+    request's doing: a 422 invalid-complex at /select, not at a /simplices this request does
+    not have, and the session is unchanged."""
+    V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [4e11, 0, 0]]
+    s = Session(daemon)
+    assert s.put_complex({"vertices": V, "simplices": [[0, 1, 2, 3], [4]]}).status_code == 200
+    before = s.req("GET", "/complex").content
+    r = s.req("POST", "/refine", json={"select": {"simplices": [[0, 1, 2, 3]]}, "depth": depth,
+                                      "positions": place})
+    assert r.status_code == 422, r.text
+    j = r.json()
+    assert j["type"] == "/errors/invalid-complex", j
+    assert [e["pointer"] for e in j["errors"]] == ["/select"], j
+    assert "degenerate" in j["detail"] and "refined complex" in j["detail"], j
+    assert s.req("GET").json()["version"] == 1
+    assert s.req("GET", "/complex").content == before
+    # one step with midpoints stays above the bound
+    r = s.req("POST", "/refine", json={"select": {"simplices": [[0, 1, 2, 3]]},
+                                      "positions": "midpoint"})
+    assert r.status_code == 200, r.text
+    s.delete()
