@@ -64,10 +64,10 @@ static double tet_vol6(const double *xyz, const uint32_t *t)
 /* Is simplex `s` (n vertices) degenerate? Longest edge L: an edge shorter than tol*bbox, a
  * triangle of area < tol*L^2, a tetrahedron of volume < tol*L^3 are (orientation does not
  * matter). The one test of input and edits (core/edit.c). */
-bool sdi_simplex_degenerate(const double *xyz, const uint32_t *s, int n, double diag)
+int sdi_simplex_degenerate(const double *xyz, const uint32_t *s, int n, double diag)
 {
     if (n < 2)
-        return false;
+        return 0;
     double lmax = 0;
     for (int i = 0; i < n; i++)
         for (int j = i + 1; j < n; j++) {
@@ -75,7 +75,7 @@ bool sdi_simplex_degenerate(const double *xyz, const uint32_t *s, int n, double 
             sub3(d, xyz + 3 * (size_t)s[i], xyz + 3 * (size_t)s[j]);
             double l = sqrt(dot3(d, d));
             if (l <= SD_DEGENERATE_TOL * diag)
-                return true;
+                return SDI_SHORT_EDGE;
             if (l > lmax)
                 lmax = l;
         }
@@ -84,11 +84,20 @@ bool sdi_simplex_degenerate(const double *xyz, const uint32_t *s, int n, double 
         sub3(a, xyz + 3 * (size_t)s[1], xyz + 3 * (size_t)s[0]);
         sub3(b, xyz + 3 * (size_t)s[2], xyz + 3 * (size_t)s[0]);
         cross3(c, a, b);
-        return 0.5 * sqrt(dot3(c, c)) <= SD_DEGENERATE_TOL * lmax * lmax;
+        return 0.5 * sqrt(dot3(c, c)) <= SD_DEGENERATE_TOL * lmax * lmax ? SDI_FLAT : 0;
     }
     if (n == 4)
-        return fabs(tet_vol6(xyz, s)) / 6 <= SD_DEGENERATE_TOL * lmax * lmax * lmax;
-    return false;
+        return fabs(tet_vol6(xyz, s)) / 6 <= SD_DEGENERATE_TOL * lmax * lmax * lmax ? SDI_FLAT : 0;
+    return 0;
+}
+
+const char *sdi_degenerate_why(int code, int n)
+{
+    if (code == SDI_SHORT_EDGE)
+        return n == 2 ? "zero or near-zero length: below 1e-12 of the bounding box's diagonal"
+                      : "an edge of zero or near-zero length: below 1e-12 of the bounding box's "
+                        "diagonal";
+    return n == 3 ? "zero or near-zero area" : "zero or near-zero volume";
 }
 
 static const char *const kind_name[] = {"", "point", "edge", "triangle", "tetrahedron"};
@@ -143,11 +152,11 @@ static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint3
                     bad = SD_ERR_REPEATED;
                 }
         }
-        if (!bad && sdi_simplex_degenerate(xyz, t, n, diag)) {
+        int flat = bad ? 0 : sdi_simplex_degenerate(xyz, t, n, diag);
+        if (flat) {
             if (!why)
-                return sdi_fail(err, SD_ERR_DEGENERATE, s, -1,
-                               "simplex %u: degenerate %s (zero or near-zero %s)", s, kind_name[n],
-                               n == 2 ? "length" : n == 3 ? "area" : "volume");
+                return sdi_fail(err, SD_ERR_DEGENERATE, s, -1, "simplex %u: degenerate %s (%s)", s,
+                               kind_name[n], sdi_degenerate_why(flat, n));
             bad = SD_ERR_DEGENERATE;
         }
         if (why)

@@ -881,7 +881,6 @@ sd_result sd_complex_check_moves(sd_complex *c, size_t n, const uint32_t *idx, c
             if (idx[i] < nv && (xyz[3 * i + k] < lo0[k] || xyz[3 * i + k] > hi0[k]))
                 grew = (int)i + 1;
     static const char *const kind[] = {"", "", "edge", "triangle", "tetrahedron"};
-    static const char *const measure[] = {"", "", "length", "area", "volume"};
     sd_result rc = SD_OK;
     for (int k = SD_CELL_CURVE; k <= SD_CELL_TETRA && !rc; k++) {
         int size = sd_cell_size((sd_cell_kind)k);
@@ -896,15 +895,16 @@ sd_result sd_complex_check_moves(sd_complex *c, size_t n, const uint32_t *idx, c
                 const double *x = mark[v[j]] ? xyz + 3 * (size_t)(mark[v[j]] - 1) : p + 3 * (size_t)v[j];
                 memcpy(at + 3 * j, x, 3 * sizeof *x);
             }
-            if ((last || grew) && sdi_simplex_degenerate(at, local, size, diag)) {
+            int flat = last || grew ? sdi_simplex_degenerate(at, local, size, diag) : 0;
+            if (flat) {
                 char vs[64];
                 int w = 0;
                 for (int j = 0; j < size; j++)
                     w += snprintf(vs + w, sizeof vs - (size_t)w, j ? ", %u" : "%u", v[j]);
                 if (last)
                     rc = sdi_fail(err, SD_ERR_DEGENERATE, last - 1, -1,
-                                  "moving point %u there makes the %s [%s] degenerate (zero or "
-                                  "near-zero %s)", idx[last - 1], kind[size], vs, measure[size]);
+                                  "moving point %u there makes the %s [%s] degenerate (%s)",
+                                  idx[last - 1], kind[size], vs, sdi_degenerate_why(flat, size));
                 else
                     rc = sdi_fail(err, SD_ERR_DEGENERATE, grew - 1, -1,
                                   "moving point %u there makes the bounding box so large that the "

@@ -185,9 +185,13 @@ typedef struct sd_topo {
 static inline uint32_t sdi_tr(const sd_topo *t, uint32_t i) { return t->tr ? t->tr[i] : i; }
 
 /* complex.c: whether simplex s (n vertex ids into xyz) is degenerate — an edge shorter than
- * 1e-12 of `diag` (the bounding box's diagonal), an area or volume below 1e-12 of the longest
- * edge squared or cubed: the test of sd_complex_new and of sd_complex_check_moves. */
-bool sdi_simplex_degenerate(const double *xyz, const uint32_t *s, int n, double diag);
+ * 1e-12 of `diag` (the bounding box's diagonal: SDI_SHORT_EDGE), an area or volume below 1e-12
+ * of the longest edge squared or cubed (SDI_FLAT): the test of sd_complex_new and of
+ * sd_complex_check_moves; 0 when it is not. */
+enum { SDI_SHORT_EDGE = 1, SDI_FLAT = 2 };
+int sdi_simplex_degenerate(const double *xyz, const uint32_t *s, int n, double diag);
+/* Why a simplex of n vertices is degenerate (the code above), for a message. */
+const char *sdi_degenerate_why(int code, int n);
 
 /* topo.c: freeing the parts (all of them, the edges part, the faces part) */
 void sdi_topo_free(sd_mem *m, sd_topo *t);

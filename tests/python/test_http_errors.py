@@ -301,6 +301,21 @@ def test_auth_errors(daemon):
     check_problem(s.req("GET"), 404, None)
 
 
+@pytest.mark.parametrize("vertices,why", [
+    # an edge of 1 beside a point 4e12 away: short against the box (DECISIONS 7), not flat
+    ([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [4e12, 0, 0]], "an edge of zero or near-zero length"),
+    ([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1e-13], [2, 2, 2]], "zero or near-zero volume"),
+])
+def test_a_degenerate_simplex_is_named_for_its_test(daemon, vertices, why):
+    """The 422 says which test refused the simplex: an edge too short against the bounding box's
+    diagonal, or a volume too small against its longest edge (it said "near-zero volume" for
+    both)."""
+    s = Session(daemon)
+    r = s.put_complex({"vertices": vertices, "simplices": [[0, 1, 2, 3], [4]]})
+    check_problem(r, 422, "/simplices/0")
+    assert why in r.json()["detail"], r.json()
+
+
 def test_paths_and_methods(daemon):
     for path in ("/nowhere", "/v1", "/v1/sessions/", "/../../etc/passwd", "/v1/" + "a" * 5000):
         r = requests.get(daemon.url + path)
