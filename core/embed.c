@@ -33,8 +33,9 @@
  * the vertex's) while each vertex finds it within its share of the work, through a tree of the
  * boxes of the cells at the boundary from the first one that does not (a vertex far from a
  * curved solid) on; the distance is the exact point-tetrahedron distance (closest point on its
- * faces), skipped for cells whose box is farther than the best so far. Its coordinates then
- * extrapolate.
+ * faces), skipped for cells whose box is farther than the best so far; the lowest index wins
+ * among cells as near within 1e-12 of the cell's longest edge (IN_TOL, as on shared faces). Its
+ * coordinates then extrapolate.
  *
  * Bindings are stored by slot, the model's vertices in bucket order, so that the vertices an edit
  * moves (near each other in space) are near each other in memory whatever the model's order.
@@ -305,6 +306,7 @@ typedef struct grid {
     uint32_t *start;    /* nb + 1 */
     uint32_t *cell;     /* the cells of bucket b: cell[start[b] .. start[b+1]) */
     float *len;         /* per cell: its longest edge, rounded up */
+    double maxlen;      /* the largest of them */
     uint16_t (*box)[6]; /* per cell: its widened box, quantized (min xyz, max xyz) */
 } grid;
 
@@ -408,6 +410,7 @@ static sd_result grid_build(sd_mem *m, const cells *C, grid *g, sd_error *err)
                 double L = longest_edge(P);
                 float f = (float)L;
                 g->len[c] = (double)f < L ? nextafterf(f, FLT_MAX) : f;
+                g->maxlen = g->len[c] > g->maxlen ? g->len[c] : g->maxlen;
                 double pad = BOX_TOL * g->len[c];
                 for (int a = 0; a < 3; a++) {
                     double l = P[0][a], h = P[0][a];
@@ -493,8 +496,12 @@ static double box_dist2(const grid *g, uint32_t c, const double *p)
     return s;
 }
 
-/* Cell c as a candidate nearest to p: the best so far (*best, *bc) if nearer, or as near with a
- * lower index; its quantized box first, a cheap bound. */
+/* Cell c as a candidate nearest to p: the best so far (*best, squared, and *bc) if nearer, or
+ * as near with a lower index. "As near" is within IN_TOL of the cell's longest edge in distance,
+ * as for points on shared faces: a nearest point on an edge or a vertex is reached through the
+ * interior of a face for one cell and through the edge for another when p lies on the side of
+ * the edge's (vertex's) region, the same distance but for rounding. Its quantized box first, a
+ * cheap bound (widened by BOX_TOL, so a cell as near as the best is never skipped by it). */
 static inline void consider(const cells *C, const grid *g, const double *p, uint32_t c,
                             double *best, uint32_t *bc)
 {
@@ -503,9 +510,18 @@ static inline void consider(const cells *C, const grid *g, const double *p, uint
     const double *P[4];
     cell_pts(C, c, P);
     double q = tet_dist2(P, p);
-    if (q < *best || (q == *best && c < *bc)) {
+    if (*bc == NONE) {
         *best = q;
         *bc = c;
+        return;
+    }
+    double tol = IN_TOL * g->len[c], d = sqrt(q), db = sqrt(*best);
+    if (d < db - tol) { /* nearer */
+        *best = q;
+        *bc = c;
+    } else if (d <= db + tol) { /* as near */
+        *bc = c < *bc ? c : *bc;
+        *best = q < *best ? q : *best;
     }
 }
 
@@ -585,9 +601,9 @@ static uint32_t nearest_grid(const cells *C, const grid *g, const double *p, uin
 /* For a vertex outside every cell ("nearest"): a tree of boxes over the cells (median splits of
  * the cells' centroids along the widest axis, leaves of at most 4 cells; the boxes in float,
  * rounded outward), searched depth first, nearer child first, skipping a subtree whose box is
- * farther than the best cell so far (with a relative slack of 1e-12 for rounding, so every cell
- * as near as the best one is tested and the lowest index among equals wins, whatever the order
- * of the search). The distance to a box bounds the distance to its cells from below, so the
+ * farther than the best cell so far (with a relative slack of 1e-12 for rounding, and IN_TOL of
+ * the longest cell edge, the tolerance of "as near" in consider(), so every cell as near as the
+ * best one is tested and the lowest index among equals wins, whatever the order of the search). The distance to a box bounds the distance to its cells from below, so the
  * search is exact; far from the solid only the cells whose boxes reach toward the vertex are
  * looked at. ~36 bytes a cell of the tree, made only when a vertex outside needs it. */
 typedef struct bnode {
@@ -789,7 +805,7 @@ static uint32_t nearest_tree(const cells *C, const grid *g, const bvh *b, const 
     sd[top++] = node_dist2(&b->node[0], p);
     while (top > 0) {
         top--;
-        if (sd[top] > best * SLACK)
+        if (sd[top] > best * SLACK && sqrt(sd[top]) > sqrt(best) + IN_TOL * g->maxlen)
             continue;
         uint32_t at = stack[top];
         const bnode *nd = &b->node[at];

@@ -345,9 +345,11 @@ def test_nearest_far_from_a_curved_solid_and_its_bounded_search(daemon):
 def test_nearest_ties_go_to_the_lowest_cell(daemon):
     """A vertex outside whose nearest point is on a boundary edge is equally near every cell with
     that edge: it goes to the lowest-numbered of them (docs: "the lowest index among equals"),
-    whichever face of which cell its distance was computed through. Bent block, level 1: a
-    vertex 0.05 off the middle of each convex boundary edge, along the bisector of the two
-    faces' normals; after an edit each equals the extrapolation of the lowest cell holding that
+    whichever face of which cell its distance was computed through. Bent block, level 1: vertices
+    0.05 off the middle of each convex boundary edge, along the bisector of the two faces'
+    normals and along each normal (the sides of the edge's wedge: there the nearest point is
+    reached through a face's interior for one cell and through the edge for another, the same
+    distance but for rounding); after an edit each equals the extrapolation of the lowest cell holding that
     middle, found here (cells numbered as the level's JSON gives them: tetrahedra, then each
     octahedron's 4 around its major diagonal)."""
     import itertools
@@ -373,10 +375,11 @@ def test_nearest_ties_go_to_the_lowest_cell(daemon):
         w = next(v for v in f2 if v not in e)
         if np.dot(x[w] - x[e[0]], n1) >= -1e-9 or np.dot(n1, n2) > 0.999:
             continue                                   # flat or concave: no unique nearest edge
-        m, n = (x[e[0]] + x[e[1]]) / 2, n1 + n2
-        mids.append(m)
-        pts.append(m + 0.05 * n / np.linalg.norm(n))
-    assert len(pts) > 100
+        m = (x[e[0]] + x[e[1]]) / 2
+        for n in (n1 + n2, n1, n2):    # inside the edge's wedge, and on either side of it
+            mids.append(m)
+            pts.append(m + 0.05 * n / np.linalg.norm(n))
+    assert len(pts) > 300
     r = s.req("PUT", "/embedded/n", json={"vertices": np.array(pts).tolist(), "level": 1,
                                           "outside": "nearest"})
     assert r.status_code == 200, r.text
