@@ -150,11 +150,20 @@ int api_matrix_open(api_model *m, int level, const char *from, const char *forma
                     const api_limits *lim, const api_slot *slot, out_stream **out,
                     const char **ctype, api_problem *p);
 
+/* What a refinement did: the simplices split red and green, the steps made (a step made again
+ * when a later one takes back its green cells counts again), and whether the cap on steps left
+ * green cells that a later step split (their parents were not split red). */
+typedef struct api_refined {
+    uint64_t red, green;
+    int steps;
+    bool capped;
+} api_refined;
+
 /* POST /refine: red-green refinement of the control complex (000 Sec. 4.2) around the selected
  * simplices (by vertex lists), box or sphere (centroids), `depth` times, new points placed by
- * the subdivision rules or at midpoints. A new model; *red / *green count the split simplices. */
+ * the subdivision rules or at midpoints. A new model, and what was split into *done. */
 int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
-               uint64_t *red, uint64_t *green, api_problem *p);
+               api_refined *done, api_problem *p);
 
 /* Level from a path segment: 0..SD_MAX_LEVEL, else -1 + problem (400 not a number, 422 range). */
 int api_parse_level(const char *s, api_problem *p);

@@ -632,12 +632,12 @@ static int refused_result(api_problem *p)
  * step, which is made again (classic red-green refinement), so cells keep their shape however
  * deep the refinement goes. */
 int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_model **out,
-               uint64_t *red, uint64_t *green, api_problem *p)
+               api_refined *done, api_problem *p)
 {
     static const char *const keys[] = {"select", "depth", "positions", NULL};
     static const char *const placements[] = {"subdivision", "midpoint", NULL};
     *out = NULL;
-    *red = *green = 0;
+    memset(done, 0, sizeof *done);
     if (api_only_keys(body, "", keys, p))
         return p->status;
     if (!cur->in)
@@ -684,10 +684,14 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
         }
         /* green cells of the step before that this step splits: their parents go red there */
         bool again = false;
-        for (uint32_t s = 0; j > 0 && runs < RG_MAX_RUNS && s < st[j].in->ns; s++) {
+        for (uint32_t s = 0; j > 0 && s < st[j].in->ns; s++) {
             uint32_t g = st[j].gparent[s];
             if (!touched[s] || g == UINT32_MAX)
                 continue;
+            if (runs >= RG_MAX_RUNS) { /* no more steps: this green cell is split as it is */
+                done->capped = true;
+                break;
+            }
             if (!st[j - 1].up && !(st[j - 1].up = calloc((size_t)st[j - 1].in->ns + 1, 1))) {
                 rc = api_fail(p, 503, "out-of-memory", "out of memory");
                 break;
@@ -706,9 +710,10 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
     }
     free(sel.keys);
     for (int k = 1; !rc && k <= j; k++) {
-        *red += st[k].red;
-        *green += st[k].green;
+        done->red += st[k].red;
+        done->green += st[k].green;
     }
+    done->steps = runs;
     rstep *fin = &st[j];
     if (!rc && fin->in != cur->in && !keep_choices(cur, fin->in, fin->orig))
         rc = api_fail(p, 503, "out-of-memory", "out of memory");

@@ -738,7 +738,7 @@ static int op_refine(const api_model *cur, json_t *body, const api_packs *packs,
                      const api_limits *lim, api_model **next, json_t *answer, api_problem *p)
 {
     (void)packs;
-    uint64_t red, green;
+    api_refined done;
     size_t dropped = api_details_count(cur); /* their points do not exist in the refined complex */
     size_t tangents = 0;                      /* not carried (DECISIONS 47 (f)): the entries */
     if (cur->tags.ntt) {                      /* of the three lists, as GET /complex echoes them */
@@ -750,7 +750,7 @@ static int op_refine(const api_model *cur, json_t *body, const api_packs *packs,
             tangents += json_array_size(list);
         json_decref(echo);
     }
-    int rc = api_refine(cur, body, lim, next, &red, &green, p);
+    int rc = api_refine(cur, body, lim, next, &done, p);
     if (!rc && dropped)
         json_object_set_new(answer, "details_dropped", json_integer((json_int_t)dropped));
     if (!rc && tangents)
@@ -758,8 +758,10 @@ static int op_refine(const api_model *cur, json_t *body, const api_packs *packs,
     if (!rc) {
         if ((*next)->summary)
             json_object_set(answer, "summary", (*next)->summary);
-        json_object_set_new(answer, "refined", json_pack("{s:I, s:I}", "red", (json_int_t)red,
-                                                         "green", (json_int_t)green));
+        json_object_set_new(answer, "refined",
+                            json_pack("{s:I, s:I, s:i, s:b}", "red", (json_int_t)done.red, "green",
+                                      (json_int_t)done.green, "steps", done.steps, "capped",
+                                      done.capped));
     }
     return rc;
 }

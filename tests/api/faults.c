@@ -199,7 +199,8 @@ static void edit_and_refine(api_model **m)
 {
     api_problem p = {0};
     json_t *b = body(EDIT, &p);
-    uint64_t counts[SD_MAX_LEVEL + 1], red, green;
+    uint64_t counts[SD_MAX_LEVEL + 1];
+    api_refined refined;
     int nlev;
     api_limits lim = api_default_limits();
     api_model *rebuilt = NULL;
@@ -233,7 +234,7 @@ static void edit_and_refine(api_model **m)
     json_decref(b);
     memset(&p, 0, sizeof p);
     api_model *next = NULL;
-    if ((b = body(REFINE, &p)) && api_refine(*m, b, &lim, &next, &red, &green, &p))
+    if ((b = body(REFINE, &p)) && api_refine(*m, b, &lim, &next, &refined, &p))
         refused(&p, "api_refine");
     json_decref(b);
     if (next) {

@@ -290,10 +290,11 @@ static int one(const char *buf, size_t len, const api_limits *lim)
     } else {
         change_fn_t fns[] = {api_put_complex, api_put_rules, api_put_tags};
         int which = (int)fuzz_rnd(6);
-        uint64_t red, green, counts[SD_MAX_LEVEL + 1];
+        uint64_t counts[SD_MAX_LEVEL + 1];
+        api_refined refined;
         int levels;
         if (which == 3) { /* refinement: a new model like the changes */
-            if (api_refine(cur, b, lim, &next, &red, &green, &p))
+            if (api_refine(cur, b, lim, &next, &refined, &p))
                 check_problem(&p, "api_refine");
             else {
                 accepted = 1;

@@ -59,6 +59,7 @@ def test_refine_one_tetrahedron(daemon):
     assert r.status_code == 200, r.text
     j = r.json()
     assert j["version"] == 2 and j["refined"]["red"] == 1 and j["refined"]["green"] >= 1
+    assert j["refined"]["steps"] == 1 and j["refined"]["capped"] is False, j
     c = s.req("GET", "/complex").json()
     assert len(c["vertices"]) == len(body["vertices"]) + 6
     vol, area = volume_and_boundary(c)
@@ -353,6 +354,8 @@ def test_deep_refinement_keeps_the_cells_shape(daemon, place):
         r = s.req("POST", "/refine", json={"select": {"simplices": [t0]}, "depth": depth,
                                           "positions": place})
         assert r.status_code == 200, r.text
+        # depth steps, and more when a step is made again to take its green cells back
+        assert r.json()["refined"]["steps"] >= depth and not r.json()["refined"]["capped"], r.json()
         c = s.req("GET", "/complex").json()
         worst[depth] = min_quality(c)
         if place == "midpoint":
