@@ -493,3 +493,34 @@ def test_a_refinement_into_degenerate_cells_is_refused_at_the_selection(daemon, 
                                       "positions": "midpoint"})
     assert r.status_code == 200, r.text
     s.delete()
+
+
+def test_a_refinement_past_the_step_cap_says_so(daemon):
+    """At most 64 steps are made (a step made again to take back its green cells counts again):
+    one tetrahedron of a TetGen ball refined to depth 4 can need more. Past the cap the green
+    cells left are split as they are; the answer says so ("capped") and the result is still
+    conforming. The ball's tetrahedra are tried in turn until one needs the cap."""
+    from meshes import icosphere
+    v, f = icosphere(2)
+    s = Session(daemon)
+    assert s.put_complex({"vertices": v, "simplices": f, "fill": [{"surface": f}]}).status_code == 200
+    ball = s.req("GET", "/complex").json()
+    body = {"vertices": ball["vertices"], "simplices": ball["simplices"],
+            "diagonals": ball["diagonals"], "reoriented": ball["reoriented"]}
+    tets = [t for t in ball["simplices"] if len(t) == 4]
+    capped = None
+    for t in tets[::5]:
+        t_s = Session(daemon)
+        assert t_s.put_complex(body).status_code == 200
+        r = t_s.req("POST", "/refine", json={"select": {"simplices": [t]}, "depth": 4,
+                                              "positions": "midpoint"})
+        assert r.status_code == 200, r.text
+        done = r.json()["refined"]
+        assert 4 <= done["steps"] <= 64 and (not done["capped"] or done["steps"] == 64), done
+        if done["capped"]:
+            capped = t_s
+            break
+        t_s.delete()
+    assert capped is not None, "no tetrahedron of the ball needed more than 64 steps"
+    assert done["steps"] == 64
+    no_hanging_vertex(capped.req("GET", "/complex").json())
