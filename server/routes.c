@@ -892,10 +892,6 @@ static void h_edit(req *r)
             rc = api_edit_commit_by(m, b, version + 1, &r->srv->cfg.limits, &slot, &commit, counts,
                                     &levels, &rebuilt, &p);
         }
-        /* a new model (the edit moved what rules read) holds level 0 and what its finer moves
-         * computed: only those levels are there to fetch a delta of */
-        if (!rc && rebuilt)
-            levels = sd_complex_levels_computed(rebuilt->c);
         snprintf(up, sizeof up, "{");
         for (int l = 0; !rc && l < levels; l++) {
             size_t u = strlen(up);
