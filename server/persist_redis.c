@@ -338,26 +338,27 @@ static bool id_ok(const redis_backend *b, const char *id)
 
 static bool parse_i64(const redisReply *r, int64_t *out);
 
-/* Score id in its client's set with `until` (LUA_INDEX). Caller holds b->mu. */
+/* The key of a client's set of session ids; false (last_err) for an owner too long for it. */
+static bool owner_key(const redis_backend *b, const char *owner, char ko[KEY_CAP])
+{
+    if (strlen(owner) + 12 >= KEY_CAP) {
+        set_err(b, "bad client key");
+        return false;
+    }
+    snprintf(ko, KEY_CAP, "subdivd:o:{%s}", owner);
+    return true;
+}
+
+/* Score id in its client's set with `until` (LUA_INDEX, which answers 1). Caller holds b->mu. */
 static persist_rc index_locked(redis_backend *b, const char *owner, const char *id,
                                const char *until)
 {
     char ko[KEY_CAP], now[24];
-    snprintf(ko, sizeof ko, "subdivd:o:{%s}", owner);
+    if (!owner_key(b, owner, ko))
+        return PERSIST_UNAVAILABLE;
     snprintf(now, sizeof now, "%" PRId64, (int64_t)time(NULL));
     const char *keys[1] = {ko}, *args[3] = {id, until, now};
-    redisReply *r = eval_keys_locked(b, S_INDEX, 1, keys, 3, args, NULL);
-    persist_rc rc = PERSIST_OK;
-    if (!r)
-        return PERSIST_UNAVAILABLE;
-    if (r->type == REDIS_REPLY_ERROR)
-        rc = error_reply(b, id, r);
-    else if (r->type != REDIS_REPLY_INTEGER) {
-        set_err(b, "unexpected reply type %d", r->type);
-        rc = PERSIST_UNAVAILABLE;
-    }
-    freeReplyObject(r);
-    return rc;
+    return cas_rc(b, eval_keys_locked(b, S_INDEX, 1, keys, 3, args, NULL));
 }
 
 /* The answer of a script ending in LUA_RECOUNT: {owner, counted_until} is success, and the id's
@@ -502,7 +503,8 @@ static void owner_locked(redis_backend *b, const char *id, char *owner, size_t c
 static void unindex_locked(redis_backend *b, const char *owner, const char *id)
 {
     char ko[KEY_CAP];
-    snprintf(ko, sizeof ko, "subdivd:o:{%s}", owner);
+    if (!owner_key(b, owner, ko))
+        return;
     const char *argv[3] = {"ZREM", ko, id};
     size_t len[3] = {4, strlen(ko), strlen(id)};
     redisReply *r = exec_locked(b, 3, argv, len);
@@ -587,11 +589,8 @@ static persist_rc r_owned(void *vb, const char *owner, int64_t now, long enough,
 {
     redis_backend *b = vb;
     char ko[KEY_CAP], before[24];
-    if (strlen(owner) + 12 >= sizeof ko) {
-        set_err(b, "bad client key");
+    if (!owner_key(b, owner, ko))
         return PERSIST_UNAVAILABLE;
-    }
-    snprintf(ko, sizeof ko, "subdivd:o:{%s}", owner);
     snprintf(before, sizeof before, "(%" PRId64, now);
     const char *prune[4] = {"ZREMRANGEBYSCORE", ko, "-inf", before};
     size_t prl[4] = {16, strlen(ko), 4, strlen(before)};
@@ -855,12 +854,8 @@ static persist_rc r_probe(void *vb)
     const char *argv[5] = {"SET", "subdivd:probe", "1", "PX", "10000"};
     size_t len[5] = {3, 13, 1, 2, 5};
     pthread_mutex_lock(&b->mu);
-    redisReply *r = exec_locked(b, 5, argv, len);
+    persist_rc rc = command_locked(b, 5, argv, len);
     pthread_mutex_unlock(&b->mu);
-    if (!r)
-        return PERSIST_UNAVAILABLE;
-    persist_rc rc = r->type == REDIS_REPLY_ERROR ? error_reply(b, NULL, r) : PERSIST_OK;
-    freeReplyObject(r);
     return rc;
 }
 

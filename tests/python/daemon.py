@@ -5,6 +5,8 @@ SUBDIVD may point at another build of the daemon (make sanitize uses the ASan on
 The suites create many sessions quickly, all from 127.0.0.1, so a Daemon passes
 `--session-rate 1000000` unless its flags set --session-rate themselves (the hardening tests of
 the per-client rate do), and lifts the per-client caps of the table and the store likewise."""
+import http.client
+import json
 import os
 import pathlib
 import re
@@ -107,6 +109,18 @@ class Session:
 
     def delete(self):
         return self.req("DELETE")
+
+
+def create_from(d, src, ttl_s=600):
+    """POST /v1/sessions from the loopback address src: (status, Retry-After, body)."""
+    host, port = d.url.split("//")[1].split(":")
+    c = http.client.HTTPConnection(host, int(port), timeout=10, source_address=(src, 0))
+    c.request("POST", "/v1/sessions", json.dumps({"ttl_s": ttl_s}),
+              {"Content-Type": "application/json"})
+    r = c.getresponse()
+    out = (r.status, r.getheader("Retry-After"), json.loads(r.read() or b"null"))
+    c.close()
+    return out
 
 
 def complex_from_text(path):

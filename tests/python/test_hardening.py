@@ -3,7 +3,6 @@
 Attackers connect from other loopback addresses (127.0.0.2 and up) than the well-behaved client
 (127.0.0.1), so per-client limits apply to them only; every load here is bounded in time and
 count and stays on loopback. Each test failed on the daemon before the hardening change."""
-import http.client
 import json
 import os
 import re
@@ -17,7 +16,7 @@ import pytest
 import requests
 
 import daemon as daemon_mod
-from daemon import SLOW, Daemon, Session
+from daemon import SLOW, Daemon, Session, create_from
 from meshes import kuhn_grid
 
 CUBE_V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]]
@@ -289,17 +288,6 @@ def test_one_client_cannot_fill_the_session_table():
     client's own empty idle session makes room for it; its sessions going frees its share."""
     d = Daemon("--max-sessions", "8", "--session-rate", "1000", "--max-sessions-per-client", "2")
     try:
-        host, port = d.url.split("//")[1].split(":")
-
-        def create(src, ttl_s):
-            c = http.client.HTTPConnection(host, int(port), timeout=10, source_address=(src, 0))
-            c.request("POST", "/v1/sessions", json.dumps({"ttl_s": ttl_s}),
-                      {"Content-Type": "application/json"})
-            r = c.getresponse()
-            out = (r.status, r.getheader("Retry-After"), json.loads(r.read() or b"null"))
-            c.close()
-            return out
-
         def filled(j):
             s = Session.__new__(Session)
             s.d, s.http, s.id, s.token = d, requests.Session(), j["id"], j["token"]
@@ -307,24 +295,24 @@ def test_one_client_cannot_fill_the_session_table():
             assert s.put_complex({"vertices": CUBE_V, "simplices": CUBE_S}).status_code == 200
             return s
 
-        mine = [filled(create("127.0.0.5", ttl)[2]) for ttl in (3, 600)]
-        st, ra, j = create("127.0.0.5", 600)
+        mine = [filled(create_from(d, "127.0.0.5", ttl)[2]) for ttl in (3, 600)]
+        st, ra, j = create_from(d, "127.0.0.5", 600)
         assert st == 429 and j["type"].endswith("/client-sessions"), j
         assert "max-sessions-per-client" in j["detail"] and 1 <= int(ra) <= 3, (ra, j)
-        others = [create("127.0.0.6", 600) for _ in range(2)]
+        others = [create_from(d, "127.0.0.6", 600) for _ in range(2)]
         assert [o[0] for o in others] == [201, 201]          # the table itself has room
         time.sleep(int(ra) + 1.2)                            # its 3 s session expired
-        st, _, e1 = create("127.0.0.5", 600)
+        st, _, e1 = create_from(d, "127.0.0.5", 600)
         assert st == 201, e1
-        st, _, e2 = create("127.0.0.5", 600)                 # e1 (empty, idle) made room
+        st, _, e2 = create_from(d, "127.0.0.5", 600)                 # e1 (empty, idle) made room
         assert st == 201, e2
         gone = requests.get(f"{d.url}/v1/sessions/{e1['id']}",
                             headers={"Authorization": f"Bearer {e1['token']}"})
         assert gone.status_code == 404
         filled(e2)
-        assert create("127.0.0.5", 600)[0] == 429            # both hold a complex
+        assert create_from(d, "127.0.0.5", 600)[0] == 429            # both hold a complex
         assert mine[1].delete().status_code == 204
-        assert create("127.0.0.5", 600)[0] == 201            # a delete frees its share
+        assert create_from(d, "127.0.0.5", 600)[0] == 201            # a delete frees its share
     finally:
         d.stop()
 

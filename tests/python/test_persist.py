@@ -7,8 +7,6 @@ session before the save, or computed by a second daemon with the in-memory store
 same acknowledged requests were sent."""
 import hashlib
 import http.client
-import json
-import os
 import random
 import sqlite3
 import subprocess
@@ -18,7 +16,7 @@ import time
 import pytest
 import requests
 
-from daemon import SLOW, SUBDIVD, Daemon, Session
+from daemon import SLOW, SUBDIVD, Daemon, Session, create_from
 from redisd import REDIS_SERVER, RedisServer
 from test_fill import surface
 
@@ -611,18 +609,6 @@ def test_resident_and_stored_sessions_are_counted_apart(tmp_path):
             assert c.json()["vertices"][0][0] == float(i)
     finally:
         d.stop()
-
-
-def create_from(d, src, ttl_s=600):
-    """POST /v1/sessions from the loopback address src: (status, Retry-After, body)."""
-    host, port = d.url.split("//")[1].split(":")
-    c = http.client.HTTPConnection(host, int(port), timeout=10, source_address=(src, 0))
-    c.request("POST", "/v1/sessions", json.dumps({"ttl_s": ttl_s}),
-              {"Content-Type": "application/json"})
-    r = c.getresponse()
-    out = (r.status, r.getheader("Retry-After"), json.loads(r.read() or b"null"))
-    c.close()
-    return out
 
 
 def test_one_client_cannot_fill_the_store(store):
