@@ -376,13 +376,17 @@ static int parse_query(const api_model *m, const api_delta_query *q, uint64_t *s
         char name[API_MAX_ATTRIBUTE_NAME + 2];
         snprintf(name, sizeof name, "%.*s", (int)(n < sizeof name - 1 ? n : sizeof name - 1), a);
         int k = n < sizeof name - 1 && m->in ? api_input_find_attr(m->in, name) : -1;
+        if (k < 0 && n > API_MAX_ATTRIBUTE_NAME) /* not shown cut */
+            return api_fail_at(p, 422, "unknown-attribute", "attributes",
+                               "attributes: a name of %zu characters (attribute names have at "
+                               "most %d)", n, API_MAX_ATTRIBUTE_NAME);
         if (k < 0)
             return api_fail_at(p, 422, "unknown-attribute", "attributes",
-                               "no attribute \"%.40s\" in this complex", name);
+                               "attributes: no attribute \"%s\" in this complex", name);
         for (int i = 0; i < *nattrs; i++)
             if (attrs[i] == k) /* as GET /levels: docs/OUTPUTS.md */
                 return api_fail_at(p, 422, "repeated-attribute", "attributes",
-                                   "attributes: \"%.40s\" is named twice", name);
+                                   "attributes: \"%s\" is named twice", name);
         attrs[(*nattrs)++] = k;
         a = e ? e + 1 : NULL;
     }

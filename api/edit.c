@@ -439,7 +439,12 @@ int api_edit_commit_by(api_model *m, json_t *body, uint64_t version, const api_l
             api_ptr_key(ptr, sizeof ptr, "/attributes", name);
             int a = api_input_find_attr(in, name);
             if (a < 0) {
-                rc = api_fail_at(p, 422, "unknown-attribute", ptr, "no attribute \"%.40s\"", name);
+                rc = strlen(name) > API_MAX_ATTRIBUTE_NAME /* not shown cut */
+                         ? api_fail_at(p, 422, "unknown-attribute", ptr,
+                                       "no attribute: a name of %zu characters (attribute names "
+                                       "have at most %d)", strlen(name), API_MAX_ATTRIBUTE_NAME)
+                         : api_fail_at(p, 422, "unknown-attribute", ptr, "no attribute \"%s\"",
+                                       name);
                 break;
             }
             parts[np] = (edit_part){.channel = m->channel[a], .attr = a};

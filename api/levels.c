@@ -183,14 +183,19 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
     if (q->attributes) {
         const char *s = list_start(q->attributes);
         for (int r; (r = next_item(&s, item, sizeof item));) {
-            int a = r == 1 ? api_input_find_attr(in, item) : -1;
-            if (a < 0)
+            if (r != 1) /* refused, never cut: the item is not shown cut either */
                 return api_fail_at(p, 422, "unknown-attribute", "attributes",
-                                   "attributes: no attribute \"%.40s\" in this complex", item);
+                                   "attributes: an item longer than %d characters (attribute "
+                                   "names have at most %d)", (int)sizeof item - 1,
+                                   API_MAX_ATTRIBUTE_NAME);
+            int a = api_input_find_attr(in, item);
+            if (a < 0) /* the whole item: at most 63 characters */
+                return api_fail_at(p, 422, "unknown-attribute", "attributes",
+                                   "attributes: no attribute \"%s\" in this complex", item);
             for (int i = 0; i < rq->nattrs; i++)
                 if (rq->attrs[i].channel == m->channel[a]) /* docs/OUTPUTS.md */
                     return api_fail_at(p, 422, "repeated-attribute", "attributes",
-                                       "attributes: \"%.40s\" is named twice", item);
+                                       "attributes: \"%s\" is named twice", item);
             add_attr(m, rq, a);
         }
     } else
@@ -212,7 +217,7 @@ static int parse_query(const api_model *m, const api_level_query *q, out_request
         int a = api_input_find_attr(in, name);
         if (a < 0)
             return api_fail_at(p, 422, "unknown-attribute", "colormap",
-                               "colormap: no attribute \"%.40s\" in this complex", name);
+                               "colormap: no attribute \"%s\" in this complex", name);
         if (strcmp((*fmt)->name, "glb") && strcmp((*fmt)->name, "gltf")) /* COLOR_0 is glTF's */
             return api_fail_at(p, 422, "not-applicable", "colormap",
                                "colormap: applies to format glb and gltf only, not %s (VTK and "
