@@ -2,7 +2,7 @@
  *
  *     mpirun -n N subdivd-mpi refine INPUT.json|INPUT.txt --level L -o OUT.pvtu [--tags T.json]
  *            [--rules R.json] [--merge] [--halo K] [--max-memory BYTES] [--stats S.json]
- *            [--no-write] [-q]
+ *            [--no-write] [-q | -qq]
  *
  * Rank 0 reads the mesh as `subdivd refine` does (the same api/ handlers: PUT /rules, PUT
  * /complex, PUT /tags bodies; the same validation and errors), partitions it and sends every
@@ -17,7 +17,7 @@
  * piece or the index cannot be written, every rank removes the piece at its name. A rank
  * that dies outright is mpirun's to report (it then ends the others, non-zero).
  * Progress: one line per rank and phase on stderr, prefixed "subdivd-mpi: rank R/N" (-q: none
- * but errors and the summary). Test hook: SUBDIVD_MPI_FAIL_AT=R:N fails the N-th allocation of
+ * but errors and the summary; -qq: errors alone). Test hook: SUBDIVD_MPI_FAIL_AT=R:N fails the N-th allocation of
  * rank R from the refinement on (api_mem_fail_at), to test one rank failing alone.
  */
 #include "../api/buf.h"
@@ -52,7 +52,7 @@ static void usage(FILE *f)
 {
     fprintf(f, "usage: mpirun -n N subdivd-mpi refine INPUT.json --level L -o OUT.pvtu|OUT.vtu\n"
                "       [--tags T.json] [--rules R.json] [--merge] [--halo K] [--max-memory BYTES]\n"
-               "       [--stats S.json] [--no-write] [--one-at-a-time] [-q]\n"
+               "       [--stats S.json] [--no-write] [--one-at-a-time] [-q | -qq]\n"
                "INPUT, --tags and --rules are the bodies of PUT /complex, /tags and /rules\n"
                "(docs/API.md), or INPUT.txt the text format of docs/TEXT_FORMAT.md;\n"
                "`subdiv refine --mpi N` converts other mesh files first.\n");
@@ -91,7 +91,9 @@ static int parse_args(int argc, char **argv, args *a)
         else if (!strcmp(o, "--one-at-a-time"))
             a->one_at_a_time = 1;
         else if (!strcmp(o, "-q") || !strcmp(o, "--quiet"))
-            a->quiet = 1;
+            a->quiet = a->quiet > 1 ? 2 : 1;
+        else if (!strcmp(o, "-qq"))
+            a->quiet = 2;
         else if (o[0] == '-' && o[1]) {
             if (!rank_)
                 fprintf(stderr, "subdivd-mpi: unknown option %s\n", o);
@@ -652,12 +654,13 @@ static int run(const args *a)
             local += all[r].local_cells;
             owned += all[r].owned_cells;
         }
-        fprintf(stderr, "subdivd-mpi: level %d on %d ranks: compute %.2f s (CPU %.2f s on the "
-                        "slowest rank; read %.2f s apart), write %.2f s, peak memory %.1f MB on "
-                        "the largest rank, halo %.1f%% of the cells computed -> %s\n",
-                a->level, nranks_, comp, cpu, all[0].t_read, wr, rss / 1024.0,
-                local ? 100.0 * (double)(local - owned) / (double)local : 0.0,
-                a->nowrite ? "(not written)" : a->out);
+        if (a->quiet < 2)
+            fprintf(stderr, "subdivd-mpi: level %d on %d ranks: compute %.2f s (CPU %.2f s on the "
+                            "slowest rank; read %.2f s apart), write %.2f s, peak memory %.1f MB "
+                            "on the largest rank, halo %.1f%% of the cells computed -> %s\n",
+                    a->level, nranks_, comp, cpu, all[0].t_read, wr, rss / 1024.0,
+                    local ? 100.0 * (double)(local - owned) / (double)local : 0.0,
+                    a->nowrite ? "(not written)" : a->out);
         if (a->stats && write_stats(a, all, &piece) && !rc)
             rc = EXIT_USAGE; /* "a file" (docs/BATCH.md): the pieces stay, the stats are not */
     }

@@ -789,6 +789,12 @@ def test_cli_mpi_converts_and_runs(tmp_path):
                         str(tmp_path / "o.glb"), "--mpi", "2"], capture_output=True, text=True,
                        env=env)
     assert r.returncode == 2 and "--mpi writes one output" in r.stderr
+    # -q: no result lines (docs: "errors still"), rank 0's summary included; the output is made
+    r = subprocess.run([str(subdiv), "refine", str(mesh), "--level", "1", "-o",
+                        str(tmp_path / "q.pvtu"), "--mpi", "2", "-q"], capture_output=True,
+                       text=True, env=env, timeout=300)
+    assert r.returncode == 0 and r.stderr == "" and r.stdout == "", (r.stdout, r.stderr)
+    assert read(tmp_path / "q.pvtu").GetNumberOfCells() > 0
 
 
 def test_more_ranks_than_simplices(tmp_path, tmp_path_factory):

@@ -473,7 +473,9 @@ def cmd_refine_mpi(args):
             cmd += ["--tags", str(t)]
         if job.get("rules"):
             cmd += ["--rules", job["rules"]]
-        if args.quiet or args.progress == "none":
+        if args.quiet:  # no result lines: not even rank 0's summary
+            cmd.append("-qq")
+        elif args.progress == "none":
             cmd.append("-q")
         try:
             rc = subprocess.run(cmd).returncode
