@@ -97,6 +97,20 @@ static void observe(api_model *m)
     }
 }
 
+/* A model rebuilt from the store (its snapshot imported, its journal replayed): the stamps the
+ * replay left are not a history clients saw before the daemon restarted or loaded the session
+ * again (docs/SERVICE.md "Live edits"), so no delta reaches back before the model's version. */
+void api_delta_loaded(api_model *m)
+{
+    if (!m->c) /* no complex: no levels */
+        return;
+    observe(m);
+    uint64_t v = atomic_load(&m->version);
+    for (int l = 0; l <= SD_MAX_LEVEL; l++)
+        if (m->delta->lv[l].seen && m->delta->lv[l].base < v)
+            m->delta->lv[l].base = v;
+}
+
 /* ---- drawn triangles and normals ---------------------------------------------------------- */
 
 /* The vertices of drawn triangle t. */

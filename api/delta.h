@@ -51,6 +51,11 @@ void api_delta_report(api_delta_edit *de, sd_edit_report *rep);
 /* After a successful edit (m->version still the old one). */
 void api_delta_end_edit(api_model *m);
 
+/* After a model was rebuilt from the store (server/sessions.c), at its stored version: deltas
+ * since an older version are 410 (the delta history is not stored; the replay's stamps are not
+ * the history the clients saw). Called before the model is shared. */
+void api_delta_loaded(api_model *m);
+
 /* The query of GET /levels/{L}/delta (NULL = absent). */
 typedef struct api_delta_query {
     const char *since, *format, *attributes;

@@ -10,6 +10,7 @@
  */
 #include "sessions.h"
 #include "events.h"
+#include "../api/delta.h"
 #include "../api/embedded.h"
 #include "../api/handlers.h"
 #include "../api/mem.h"
@@ -473,6 +474,7 @@ static api_model *rebuild(const persist_loaded *l, const api_limits *lim, char *
         }
     }
     atomic_store(&m->version, l->meta.version);
+    api_delta_loaded(m); /* no delta reaches back across a load: docs/SERVICE.md "Live edits" */
     return m;
 }
 

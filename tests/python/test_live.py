@@ -339,6 +339,54 @@ def test_delta_410_after_an_edit_that_rebuilds_rules(daemon):
     s.delete()
 
 
+def test_edits_of_a_constrained_complex_are_new_models(daemon):
+    """Tangent-plane constraints (PUT /tags "tangents", under ying-zorin) read positions, so every
+    move of a position — far from the constrained vertex, or at a finer level — publishes a new
+    model (docs/API.md "Live edits"): deltas from before it are 410 and PATCH ?delta= says so;
+    an attribute edit stays an edit with a delta. The levels are those of a fresh session."""
+    V = [[float(x), 0.0, 0.1 * x * x] for x in range(-2, 3)]
+    T = []
+    for d in ((0.0, 1.0, 0.25), (0.15, -1.0, 0.6), (0.0, 0.2, 1.0)):   # three sheets on a curve
+        row = list(range(5))
+        for r in (1, 2):
+            nxt = []
+            for i in range(5):
+                nxt.append(len(V))
+                V.append([V[i][0] + r * d[0], V[i][1] + r * d[1], V[i][2] + r * d[2] + 0.07 * r])
+            T += [t for i in range(4) for t in ([row[i], row[i + 1], nxt[i + 1]],
+                                                 [row[i], nxt[i + 1], nxt[i]])]
+            row = nxt
+    body = with_attrs({"vertices": V, "simplices": T})
+    rules = {"nonmanifold_surface": "ying-zorin"}
+    tags = {"tangents": [{"vertex": 2, "triangle": T[4], "tangent": [0, 1, 0.5]}]}
+    s = new_session(daemon, body)
+    assert s.req("PUT", "/rules", json=rules).status_code == 200
+    assert s.req("PUT", "/tags", json=tags).status_code == 200
+    far = 34                                      # the outer row of the third sheet
+    for mv in ({"index": far, "position": moved(V[far], 0)},
+               {"index": 40, "level": 1, "position": [0.5, 2.0, 1.0]}):
+        before = snapshot(s, LEVEL)
+        v = before[1]["version"]
+        r = s.req("PATCH", "/control-points", json={"moves": [mv]},
+                  headers={"If-Match": f'"{v}"'}, params={"delta": LEVEL})
+        assert r.status_code == 200 and r.headers["Content-Type"] == "application/json", r.text
+        assert r.json()["version"] == v + 1 and r.json()["delta"]["status"] == 410
+        gone(s, LEVEL, v)
+    before = snapshot(s, LEVEL)
+    v = before[1]["version"]
+    patch(s, {"attributes": {"t": [{"index": 3, "value": 5.5}]}})
+    check_delta(s, LEVEL, before, snapshot(s, LEVEL), v, v + 1)
+    c = s.req("GET", "/complex").json()
+    fresh = new_session(daemon, dict(body, vertices=c["vertices"], details=c["details"],
+                                     attributes=c["attributes"]))
+    assert fresh.req("PUT", "/rules", json=rules).status_code == 200
+    assert fresh.req("PUT", "/tags", json=tags).status_code == 200
+    a, b = (x.level(LEVEL, format="json").json() for x in (s, fresh))
+    assert a["vertices"] == b["vertices"] and a["attributes"] == b["attributes"]
+    s.delete()
+    fresh.delete()
+
+
 @pytest.mark.parametrize("mesh", list(MESHES))
 def test_patch_answers_with_its_delta(daemon, mesh):
     """PATCH ?delta=L (one round trip for a dragging client): the answer is the delta of level L

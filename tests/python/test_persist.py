@@ -246,6 +246,48 @@ def test_restart_brings_sessions_back(store):
         d.stop()
 
 
+def test_no_delta_reaches_back_across_a_restart(store):
+    """docs/SERVICE.md "Live edits": the delta history is not stored, so after a restart a delta
+    since a version before it is 410 (refetch), also for a level the replay of the journal
+    computed itself (a move at a finer level computes the levels up to it first), and the same
+    for an embedded model's delta. Since the restored version and later, deltas work again."""
+    d = store_daemon(store)
+    try:
+        s = Session(d)
+        assert s.put_complex(TETS).status_code == 200
+        emb = {"vertices": [[0.3, 0.2, 0.2], [0.2, 0.3, 0.25], [0.25, 0.2, 0.3]], "level": 2,
+               "outside": "fixed"}
+        assert s.req("PUT", "/embedded/m", json=emb).status_code == 200
+        v = s.req("GET").json()["version"]
+        p2 = s.level(2, format="json").json()["vertices"]
+        # journal entries: a control-point move and a level-2 move (which computes level 2)
+        v1 = edit(s, [{"index": 4, "position": [1.1, 1, 1]}], v)
+        v2 = edit(s, [{"index": 7, "level": 2, "position": [c + 0.01 for c in p2[7]]}], v1)
+        for since in (v, v1):
+            assert s.req("GET", "/levels/2/delta", params={"since": since}).status_code == 200
+            assert s.req("GET", "/embedded/m/delta", params={"since": since}).status_code == 200
+        want = s.level(2).content
+    finally:
+        kill9(d)
+    d = store_daemon(store)
+    try:
+        t = on(d, s)
+        assert t.req("GET").json()["version"] == v2
+        for since in (v, v1):
+            for path in ("/levels/2/delta", "/embedded/m/delta"):
+                r = t.req("GET", path, params={"since": since})
+                assert r.status_code == 410, (path, since, r.text)
+                assert r.json()["type"].endswith("/delta-unavailable")
+        assert t.level(2).content == want
+        r = t.req("GET", "/levels/2/delta", params={"since": v2, "format": "json"})
+        assert r.status_code == 200 and r.json()["indices"] == []
+        v3 = edit(t, [{"index": 4, "position": [1.05, 1, 1]}], v2)
+        r = t.req("GET", "/levels/2/delta", params={"since": v2, "format": "json"})
+        assert r.status_code == 200 and r.json()["version"] == v3 and r.json()["indices"]
+    finally:
+        d.stop()
+
+
 def test_an_import_at_the_largest_version_restores_after_changes(tmp_path):
     """An import takes a version up to 2^52 (docs/API.md); the changes after it take the
     version past what an import takes, and the stored session still restores after a restart
