@@ -1,4 +1,4 @@
-"""An independent re-check of the rules on meshes the other suites do not use.
+"""The rules on meshes the other suites do not use.
 
 Expected values come from outside the code:
 - OpenSubdiv 3.5 (tests/peers/osd_loop.cpp) for Loop surfaces with Loop's weights: perturbed
