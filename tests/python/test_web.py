@@ -41,6 +41,7 @@ CHECKS = [
     "show_hide",         # solid boundary and cage toggles
     "attribute_colour",  # colormap=NAME:min:max and its legend
     "gltf_loader",       # the GLB in three.js's GLTFLoader: node/mesh per part, one POSITION, extras, linear COLOR_0
+    "edge_occlusion",    # a control edge inside the solid is not picked by a click (hidden), unless the boundary is hidden
     "crease_tag",        # clicking a control edge with the crease tool: PUT /tags 200, tagged
     "crease_colour",     # ... its rule turns to the crease's (curve) and so does its colour
     "crease_sharpness",  # the same edge at sharpness 0.5: one PUT /tags keeping the other tags; level changes

@@ -379,6 +379,78 @@ const pickableVertex = (pred) => page.evaluate((predSrc) => {
   return null;
 }, pred.toString());
 
+// 7b. picking an edge respects occlusion as picking a point does: a control edge inside the solid
+// (both ends interior points), clicked with the crease tool where no other edge is near on
+// screen, is not tagged (it is not drawn: the solid's surface hides it); with the solid boundary
+// hidden it is drawn and is the edge there.
+const sameEdge = (a, b) => [...a].sort((x, y) => x - y).join() === [...b].sort((x, y) => x - y).join();
+await step('edge_occlusion', async () => {
+  await page.check('input[name=tool][value=crease]');
+  // orbit (a drag over the background) to where the solid's edges are apart on screen; the view
+  // is put back afterwards
+  const view = await page.evaluate(() => {
+    const v = window.subdivd.viewer;
+    return { position: v.camera.position.toArray(), target: v.controls.target.toArray() };
+  });
+  const box = await (await page.$('#view canvas')).boundingBox();
+  await page.mouse.move(box.x + 60, box.y + 100);
+  await page.mouse.down();
+  for (let k = 1; k <= 4; k++) await page.mouse.move(box.x + 60 + 30 * k, box.y + 100);
+  await page.mouse.up();
+  await page.waitForTimeout(200);
+  const hidden = await page.evaluate(() => {
+    const app = window.subdivd, v = app.viewer, c = v.cage, r = v.canvas.getBoundingClientRect();
+    const dist = (p, e) => {
+      const a = v.toScreen(v.cagePosition(e.v[0])), b = v.toScreen(v.cagePosition(e.v[1]));
+      const dx = b.x - a.x, dy = b.y - a.y, L = dx * dx + dy * dy;
+      const t = L ? Math.max(0, Math.min(1, ((p.x - a.x) * dx + (p.y - a.y) * dy) / L)) : 0;
+      return Math.hypot(a.x + t * dx - p.x, a.y + t * dy - p.y);
+    };
+    for (const e of c.edges) {
+      if (!c.interior[e.v[0]] || !c.interior[e.v[1]]) continue;
+      const a = v.toScreen(v.cagePosition(e.v[0])), b = v.toScreen(v.cagePosition(e.v[1]));
+      for (let k = 1; k < 20; k++) { // a point along it (on screen)
+        const p = { x: a.x + (b.x - a.x) * k / 20, y: a.y + (b.y - a.y) * k / 20 };
+        if (p.x < 40 || p.x > r.width - 40 || p.y < 60 || p.y > r.height - 160) continue;
+        // no other edge within the crease tool's reach (7 px): a click there can only mean it
+        if (c.edges.some((f) => f !== e && dist(p, f) < 8)) continue;
+        return { edge: [...e.v], at: { x: r.left + p.x, y: r.top + p.y } };
+      }
+    }
+    return null;
+  });
+  if (!hidden) throw new Error('no control edge inside the solid, alone on screen, in this view');
+  const before = await snap();
+  const n = before.messages.length;
+  let puts = 0;
+  const count = (r) => { if (r.method() === 'PUT' && r.url().endsWith('/tags')) puts++; };
+  page.on('request', count);
+  await page.mouse.click(hidden.at.x, hidden.at.y);
+  await page.waitForTimeout(300);
+  await idle();
+  page.off('request', count);
+  const after = await snap();
+  const said = (await messagesSince(n)).map((m) => `${m.kind}: ${m.text}`).join(' | ');
+  const tagged = after.tags.some((t) => sameEdge(t, hidden.edge));
+  await page.uncheck('#show-solids');
+  const seen = await page.evaluate(({ at }) => {
+    const v = window.subdivd.viewer, r = v.canvas.getBoundingClientRect();
+    return v.edgeAt(at.x - r.left, at.y - r.top);
+  }, hidden);
+  await page.check('#show-solids');
+  await page.evaluate((view) => {
+    const v = window.subdivd.viewer;
+    v.camera.position.fromArray(view.position);
+    v.controls.target.fromArray(view.target);
+    v.controls.update();
+    v.requestRender();
+  }, view);
+  check('edge_occlusion', !tagged && puts === 0 && after.version === before.version && /No control edge/.test(said) &&
+    seen && sameEdge(seen, hidden.edge),
+    `edge ${hidden.edge} inside the solid clicked: PUT /tags ${puts}, tagged ${tagged}, said: ${said}; ` +
+    `with the solid boundary hidden the edge there is ${seen}`);
+});
+
 // 8. tag a crease by clicking a control edge: its rule (and colour) turns to the crease's
 let creased = null; // the edge step 8 tagged, where it is on screen, and the level's geometry
 await step(['crease_tag', 'crease_colour'], async () => {
@@ -419,7 +491,6 @@ await step(['crease_tag', 'crease_colour'], async () => {
 // sharpness field at 0.5 (one PUT /tags that keeps every other tag), its colour when colouring
 // by sharpness, the crease method selector, and creases by dihedral angle (the edges the page
 // tags equal those computed here from the complex, and go away again).
-const sameEdge = (a, b) => [...a].sort((x, y) => x - y).join() === [...b].sort((x, y) => x - y).join();
 // sRGB of the page's sharpness ramp (docs/WEB.md) at 0.5, and its grey for no sharpness
 const SHARP_AT_05 = [254, 225, 138], NO_SHARP = [154, 154, 154];
 const rgbNear = (png, x, y, c, r = 2) => {
