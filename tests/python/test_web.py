@@ -55,6 +55,7 @@ CHECKS = [
     "slice_follows_edits",  # the cut = the daemon's after a drag, an undo, a redo, an edit elsewhere
     "level_back",        # a level that cannot be fetched is said; the slider goes back to the level drawn
     "embed_model",       # an OBJ embedded in the solid follows a drag by its deltas, drawn = the daemon's
+    "second_tab_new_model",  # a model loaded in one tab is taken whole by the other (points, attributes, no undo)
     "file_open",         # an OBJ from disk
     "file_errors",       # a broken file and a refused one are explained
     "file_stl_msh",      # STL and Gmsh .msh from disk; the model selector shows the file
