@@ -41,6 +41,7 @@ CHECKS = [
     "show_hide",         # solid boundary and cage toggles
     "attribute_colour",  # colormap=NAME:min:max and its legend
     "gltf_loader",       # the GLB in three.js's GLTFLoader: node/mesh per part, one POSITION, extras, linear COLOR_0
+    "edge_occlusion",    # a control edge inside the solid is not picked by a click (hidden), unless the boundary is hidden
     "crease_tag",        # clicking a control edge with the crease tool: PUT /tags 200, tagged
     "crease_colour",     # ... its rule turns to the crease's (curve) and so does its colour
     "crease_sharpness",  # the same edge at sharpness 0.5: one PUT /tags keeping the other tags; level changes
@@ -54,6 +55,7 @@ CHECKS = [
     "slice_follows_edits",  # the cut = the daemon's after a drag, an undo, a redo, an edit elsewhere
     "level_back",        # a level that cannot be fetched is said; the slider goes back to the level drawn
     "embed_model",       # an OBJ embedded in the solid follows a drag by its deltas, drawn = the daemon's
+    "second_tab_new_model",  # a model loaded in one tab is taken whole by the other (points, attributes, no undo)
     "file_open",         # an OBJ from disk
     "file_errors",       # a broken file and a refused one are explained
     "file_stl_msh",      # STL and Gmsh .msh from disk; the model selector shows the file

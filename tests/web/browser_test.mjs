@@ -379,6 +379,78 @@ const pickableVertex = (pred) => page.evaluate((predSrc) => {
   return null;
 }, pred.toString());
 
+// 7b. picking an edge respects occlusion as picking a point does: a control edge inside the solid
+// (both ends interior points), clicked with the crease tool where no other edge is near on
+// screen, is not tagged (it is not drawn: the solid's surface hides it); with the solid boundary
+// hidden it is drawn and is the edge there.
+const sameEdge = (a, b) => [...a].sort((x, y) => x - y).join() === [...b].sort((x, y) => x - y).join();
+await step('edge_occlusion', async () => {
+  await page.check('input[name=tool][value=crease]');
+  // orbit (a drag over the background) to where the solid's edges are apart on screen; the view
+  // is put back afterwards
+  const view = await page.evaluate(() => {
+    const v = window.subdivd.viewer;
+    return { position: v.camera.position.toArray(), target: v.controls.target.toArray() };
+  });
+  const box = await (await page.$('#view canvas')).boundingBox();
+  await page.mouse.move(box.x + 60, box.y + 100);
+  await page.mouse.down();
+  for (let k = 1; k <= 4; k++) await page.mouse.move(box.x + 60 + 30 * k, box.y + 100);
+  await page.mouse.up();
+  await page.waitForTimeout(200);
+  const hidden = await page.evaluate(() => {
+    const app = window.subdivd, v = app.viewer, c = v.cage, r = v.canvas.getBoundingClientRect();
+    const dist = (p, e) => {
+      const a = v.toScreen(v.cagePosition(e.v[0])), b = v.toScreen(v.cagePosition(e.v[1]));
+      const dx = b.x - a.x, dy = b.y - a.y, L = dx * dx + dy * dy;
+      const t = L ? Math.max(0, Math.min(1, ((p.x - a.x) * dx + (p.y - a.y) * dy) / L)) : 0;
+      return Math.hypot(a.x + t * dx - p.x, a.y + t * dy - p.y);
+    };
+    for (const e of c.edges) {
+      if (!c.interior[e.v[0]] || !c.interior[e.v[1]]) continue;
+      const a = v.toScreen(v.cagePosition(e.v[0])), b = v.toScreen(v.cagePosition(e.v[1]));
+      for (let k = 1; k < 20; k++) { // a point along it (on screen)
+        const p = { x: a.x + (b.x - a.x) * k / 20, y: a.y + (b.y - a.y) * k / 20 };
+        if (p.x < 40 || p.x > r.width - 40 || p.y < 60 || p.y > r.height - 160) continue;
+        // no other edge within the crease tool's reach (7 px): a click there can only mean it
+        if (c.edges.some((f) => f !== e && dist(p, f) < 8)) continue;
+        return { edge: [...e.v], at: { x: r.left + p.x, y: r.top + p.y } };
+      }
+    }
+    return null;
+  });
+  if (!hidden) throw new Error('no control edge inside the solid, alone on screen, in this view');
+  const before = await snap();
+  const n = before.messages.length;
+  let puts = 0;
+  const count = (r) => { if (r.method() === 'PUT' && r.url().endsWith('/tags')) puts++; };
+  page.on('request', count);
+  await page.mouse.click(hidden.at.x, hidden.at.y);
+  await page.waitForTimeout(300);
+  await idle();
+  page.off('request', count);
+  const after = await snap();
+  const said = (await messagesSince(n)).map((m) => `${m.kind}: ${m.text}`).join(' | ');
+  const tagged = after.tags.some((t) => sameEdge(t, hidden.edge));
+  await page.uncheck('#show-solids');
+  const seen = await page.evaluate(({ at }) => {
+    const v = window.subdivd.viewer, r = v.canvas.getBoundingClientRect();
+    return v.edgeAt(at.x - r.left, at.y - r.top);
+  }, hidden);
+  await page.check('#show-solids');
+  await page.evaluate((view) => {
+    const v = window.subdivd.viewer;
+    v.camera.position.fromArray(view.position);
+    v.controls.target.fromArray(view.target);
+    v.controls.update();
+    v.requestRender();
+  }, view);
+  check('edge_occlusion', !tagged && puts === 0 && after.version === before.version && /No control edge/.test(said) &&
+    seen && sameEdge(seen, hidden.edge),
+    `edge ${hidden.edge} inside the solid clicked: PUT /tags ${puts}, tagged ${tagged}, said: ${said}; ` +
+    `with the solid boundary hidden the edge there is ${seen}`);
+});
+
 // 8. tag a crease by clicking a control edge: its rule (and colour) turns to the crease's
 let creased = null; // the edge step 8 tagged, where it is on screen, and the level's geometry
 await step(['crease_tag', 'crease_colour'], async () => {
@@ -419,7 +491,6 @@ await step(['crease_tag', 'crease_colour'], async () => {
 // sharpness field at 0.5 (one PUT /tags that keeps every other tag), its colour when colouring
 // by sharpness, the crease method selector, and creases by dihedral angle (the edges the page
 // tags equal those computed here from the complex, and go away again).
-const sameEdge = (a, b) => [...a].sort((x, y) => x - y).join() === [...b].sort((x, y) => x - y).join();
 // sRGB of the page's sharpness ramp (docs/WEB.md) at 0.5, and its grey for no sharpness
 const SHARP_AT_05 = [254, 225, 138], NO_SHARP = [154, 154, 154];
 const rgbNear = (png, x, y, c, r = 2) => {
@@ -763,6 +834,100 @@ await step('embed_model', async () => {
     `${cmp.differ} of ${3 * cmp.count} drawn floats differ from GET /embedded/model`);
 });
 
+// The drawn level's POSITION / NORMAL buffers against a fresh GET of the level (float32, bit for
+// bit), in the page: {version of the refetch, count, mismatches}.
+const compareWithRefetch = (pg, level) => pg.evaluate(async (level) => {
+  const app = window.subdivd;
+  const res = await fetch(`/v1/sessions/${app.session.id}/levels/${level}`, {
+    headers: { Authorization: `Bearer ${app.session.token}` }, cache: 'no-store' });
+  const buf = await res.arrayBuffer();
+  const dv = new DataView(buf);
+  const jlen = dv.getUint32(12, true);
+  const gltf = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 20, jlen)));
+  const bin = 20 + jlen + 8;
+  const attrs = gltf.meshes.flatMap((m) => m.primitives).find((p) => p.mode !== 4 || p.indices !== undefined).attributes;
+  const read = (name) => {
+    const a = gltf.accessors[attrs[name]], bv = gltf.bufferViews[a.bufferView];
+    return new Uint32Array(buf.slice(bin + (bv.byteOffset || 0) + (a.byteOffset || 0), bin + (bv.byteOffset || 0) + (a.byteOffset || 0) + a.count * 12));
+  };
+  const mine = app.levelBuffers(), s = app.snapshot();
+  const diff = (a, b) => {
+    if (!a || !b) return -1;
+    const bu = new Uint32Array(b.buffer, b.byteOffset, b.length);
+    if (a.length !== bu.length) return -2;
+    let n = 0;
+    for (let i = 0; i < a.length; i++) if (a[i] !== bu[i]) n++;
+    return n;
+  };
+  return { etag: res.headers.get('ETag'), shownVersion: s.shown.version, count: mine.count, distinct: mine.distinct,
+    position: diff(read('POSITION'), mine.position), normal: attrs.NORMAL === undefined ? -3 : diff(read('NORMAL'), mine.normal) };
+}, level);
+const equalToRefetch = (c) => c.position === 0 && c.normal === 0 && c.etag === `"${c.shownVersion}"`;
+
+// 11b. a second tab follows a new model loaded in the first: it takes it as a model of its own
+// — its control points, no attributes of the old one to colour by, nothing to undo (its undo
+// named the old model's points), the level drawn = a refetch — and says so
+await step('second_tab_new_model', async () => {
+  await page.selectOption('#example', (await page.$$eval('#example option', (os) => os.map((o) => o.value)))[0]);
+  await idle(`window.subdivd.snapshot().shown && window.subdivd.snapshot().shown.level === 2`);
+  const share = await page.$eval('#share', (a) => a.href);
+  const tab = await browser.newPage({ viewport: { width: 1000, height: 700 } });
+  tab.on('console', (m) => { if (m.type() === 'error') consoleErrors.push(`second tab: ${m.text()}`); });
+  let patches = 0;
+  tab.on('request', (r) => { if (r.method() === 'PATCH' && r.url().includes('/control-points')) patches++; });
+  try {
+    await tab.goto(share);
+    const ready = (extra) => tab.waitForFunction(`window.subdivd && window.subdivd.ready && window.subdivd.idle() && ${extra}`, null, { timeout: TIMEOUT });
+    await ready('window.subdivd.snapshot().shown && window.subdivd.snapshot().listening');
+    // a move in the second tab, so that it has something to undo
+    const at = await tab.evaluate(() => {
+      const app = window.subdivd, v = app.viewer, r = v.canvas.getBoundingClientRect();
+      for (let i = 0; i < v.cage.pos.length / 3; i++) {
+        const p = app.screenOf([i]);
+        if (v.vertexAt(p.x - r.left, p.y - r.top, 20) === i && p.x > r.left + 40 && p.x < r.right - 40 &&
+            p.y > r.top + 60 && p.y < r.bottom - 160) return p;
+      }
+      return null;
+    });
+    if (!at) throw new Error('no pickable control point in the second tab');
+    await tab.mouse.move(at.x, at.y);
+    await tab.mouse.down();
+    for (let k = 1; k <= 4; k++) await tab.mouse.move(at.x + 4 * k, at.y - 3 * k);
+    await tab.mouse.up();
+    await ready('window.subdivd.snapshot().undo === 1');
+    const b = await tab.evaluate(() => window.subdivd.snapshot());
+    const file = path.join(outdir, 'new_model.obj');
+    fs.writeFileSync(file, 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n');
+    await page.setInputFiles('#file', file);
+    await idle(`window.subdivd.snapshot().model === 'new_model.obj'`);
+    const v1 = (await snap()).version;
+    await ready(`window.subdivd.snapshot().shown.version === ${v1}`);
+    const a = await tab.evaluate(() => window.subdivd.snapshot());
+    const cmp = await compareWithRefetch(tab, a.shown.level);
+    const colours = await tab.$$eval('#color-mode option', (os) => os.map((o) => o.value));
+    const modelNote = await tab.$eval('#model-name', (e) => e.textContent);
+    const undoOff = await tab.$eval('#undo', (e) => e.disabled);
+    const said = a.messages.slice(b.messages.length).map((m) => `${m.kind}: ${m.text}`).join(' | ');
+    // Ctrl+Z in the second tab has nothing to undo: no PATCH goes to the new model
+    const sent = patches;
+    await tab.focus('#view canvas');
+    await tab.keyboard.press('Control+z');
+    await tab.waitForTimeout(300);
+    await ready('true');
+    const cage1 = (await snap()).controlPoints, cage2 = (await tab.evaluate(() => window.subdivd.snapshot())).controlPoints;
+    check('second_tab_new_model', a.controlPoints.length === 4 && !colours.some((c) => c.startsWith('attr:')) &&
+      /4 vertices, 4 simplices/.test(modelNote) && undoOff && a.undo === 0 && patches === sent &&
+      JSON.stringify(cage1) === JSON.stringify(cage2) && cmp.position === 0 && cmp.etag === `"${cmp.shownVersion}"` &&
+      /another tab/i.test(said) && !/error:/.test(said),
+      `second tab after the first loaded a 4-point OBJ: ${a.controlPoints.length} control points, colour choices ` +
+      `${colours}, “${modelNote}”, undo ${a.undo} (button disabled: ${undoOff}), PATCHes after Ctrl+Z ${patches - sent}, ` +
+      `control points as in the first tab: ${JSON.stringify(cage1) === JSON.stringify(cage2)}, ` +
+      `buffers vs refetch ${cmp.position} floats differ (ETag ${cmp.etag}, shown v${cmp.shownVersion}); said: ${said}`);
+  } finally {
+    await tab.close();
+  }
+});
+
 // 12. files from disk: an OBJ loads; a broken one and one the daemon refuses are explained
 await step(['file_open', 'file_errors'], async () => {
   const good = path.join(outdir, 'tetra_with_tail.obj');
@@ -885,35 +1050,6 @@ await step('session_recovery', async () => {
 });
 
 // ---- the live modeling loop (issue 15) ------------------------------------------------------
-// The drawn level's POSITION / NORMAL buffers against a fresh GET of the level (float32, bit for
-// bit), in the page: {version of the refetch, count, mismatches}.
-const compareWithRefetch = (pg, level) => pg.evaluate(async (level) => {
-  const app = window.subdivd;
-  const res = await fetch(`/v1/sessions/${app.session.id}/levels/${level}`, {
-    headers: { Authorization: `Bearer ${app.session.token}` }, cache: 'no-store' });
-  const buf = await res.arrayBuffer();
-  const dv = new DataView(buf);
-  const jlen = dv.getUint32(12, true);
-  const gltf = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 20, jlen)));
-  const bin = 20 + jlen + 8;
-  const attrs = gltf.meshes.flatMap((m) => m.primitives).find((p) => p.mode !== 4 || p.indices !== undefined).attributes;
-  const read = (name) => {
-    const a = gltf.accessors[attrs[name]], bv = gltf.bufferViews[a.bufferView];
-    return new Uint32Array(buf.slice(bin + (bv.byteOffset || 0) + (a.byteOffset || 0), bin + (bv.byteOffset || 0) + (a.byteOffset || 0) + a.count * 12));
-  };
-  const mine = app.levelBuffers(), s = app.snapshot();
-  const diff = (a, b) => {
-    if (!a || !b) return -1;
-    const bu = new Uint32Array(b.buffer, b.byteOffset, b.length);
-    if (a.length !== bu.length) return -2;
-    let n = 0;
-    for (let i = 0; i < a.length; i++) if (a[i] !== bu[i]) n++;
-    return n;
-  };
-  return { etag: res.headers.get('ETag'), shownVersion: s.shown.version, count: mine.count, distinct: mine.distinct,
-    position: diff(read('POSITION'), mine.position), normal: attrs.NORMAL === undefined ? -3 : diff(read('NORMAL'), mine.normal) };
-}, level);
-const equalToRefetch = (c) => c.position === 0 && c.normal === 0 && c.etag === `"${c.shownVersion}"`;
 
 // Requests the page sends, with the number of PATCHes in flight at once.
 const net = { log: [], patching: 0, maxPatching: 0 };

@@ -62,6 +62,13 @@ function levelRange(summary) {
   return { max: MAX_LEVEL, next: null };
 }
 
+// The summary levelRange reads (top simplices by dimension), from GET /complex.
+function summaryOf(complex) {
+  const summary = { simplices: {} };
+  for (const s of complex.simplices) summary.simplices[s.length - 1] = (summary.simplices[s.length - 1] || 0) + 1;
+  return summary;
+}
+
 // The address of a session for another tab: a fragment, which never reaches a server (nor its
 // logs); the model's name goes with it, so that tab names the model as this one does.
 const sessionLink = (id, token, name) =>
@@ -365,6 +372,19 @@ class App {
     if (this.selected) this.#showOverride(this.selected);
   }
 
+  // The session's complex was replaced elsewhere: the page takes it as a model of its own, as
+  // join() does (a refined model keeps its name; a new one is named by the session).
+  async #takeComplex(kind) {
+    const complex = await this.session.getComplex();
+    const name = kind === 'refine' ? this.model.name : `session ${this.session.id.slice(0, 8)}`;
+    this.#setModel(name, complex, summaryOf(complex));
+    this.complexVersion = this.cageVersion = this.session.version;
+    this.known = Math.max(this.known, this.session.version);
+    this.handleLevel = null;
+    this.info(kind === 'refine' ? 'The model was refined in another tab; its new control points are shown.'
+      : 'Another tab loaded a new model into this session; it is shown here.');
+  }
+
   async resync() {
     try {
       await this.run(() => this.#refreshComplex());
@@ -646,9 +666,7 @@ class App {
           }, 3000);
         }
         const complex = await this.session.getComplex();
-        const summary = { simplices: {} };
-        for (const s of complex.simplices) summary.simplices[s.length - 1] = (summary.simplices[s.length - 1] || 0) + 1;
-        this.#setModel(name || `session ${id.slice(0, 8)}`, complex, summary);
+        this.#setModel(name || `session ${id.slice(0, 8)}`, complex, summaryOf(complex));
         this.complexVersion = this.cageVersion = this.known = this.session.version;
         await this.#loadEmbedded(embedded); // drawn as the tab that embedded it drew it
         this.#listen();
@@ -884,7 +902,10 @@ class App {
         this.known = Math.max(this.known, v);
         this.run(async () => {
           if (this.complexVersion >= v) return; // ours, or already fetched
-          await this.#refreshComplex();
+          // a new complex (another tab loaded a model, or refined it): its points are numbered
+          // anew, so it is taken as a model of its own (attributes, levels offered, undo)
+          if (data.kind === 'complex' || data.kind === 'refine') await this.#takeComplex(data.kind);
+          else await this.#refreshComplex();
           this.requestLevel();
         }).catch((e) => this.error(e));
       },

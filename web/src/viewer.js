@@ -817,18 +817,31 @@ export class Viewer {
     return this.#pick(c.pos, c.pos.length / 3, c.interior, c.tol, x, y, radius);
   }
 
+  // The control edge under (x, y), or null: the nearest within `radius` whose point under the
+  // pointer is not behind the drawn surface (by more than the handles' tolerance, as #pick).
   edgeAt(x, y, radius = 7) {
     if (!this.cage) return null;
-    let best = null, bd = radius;
+    const cand = [];
     for (const e of this.cage.edges) {
       const a = this.toScreen(this.cagePosition(e.v[0])), b = this.toScreen(this.cagePosition(e.v[1]));
       if (a.behind || b.behind) continue;
       const dx = b.x - a.x, dy = b.y - a.y, L = dx * dx + dy * dy;
       const t = L ? Math.max(0, Math.min(1, ((x - a.x) * dx + (y - a.y) * dy) / L)) : 0;
       const d = Math.hypot(a.x + t * dx - x, a.y + t * dy - y);
-      if (d < bd) { bd = d; best = e.v; }
+      if (d < radius) cand.push({ v: e.v, d });
     }
-    return best;
+    if (!cand.length) return null;
+    cand.sort((p, q) => p.d - q.d);
+    const r = this.canvas.getBoundingClientRect();
+    const ray = new THREE.Raycaster();
+    ray.setFromCamera(new THREE.Vector2((x / r.width) * 2 - 1, -(y / r.height) * 2 + 1), this.camera);
+    const on = new THREE.Vector3();
+    for (const c of cand.slice(0, 16)) {
+      // the edge's point nearest the line of sight through the pointer
+      ray.ray.distanceSqToSegment(this.cagePosition(c.v[0]), this.cagePosition(c.v[1]), undefined, on);
+      if (!this.#occluded(on, this.cage.tol)) return c.v;
+    }
+    return null;
   }
 
   faceAt(x, y) {
