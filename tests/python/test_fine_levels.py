@@ -625,3 +625,64 @@ def test_a_rebuilding_edit_with_offsets_survives_a_restart(store):
         assert level_bytes(fresh) == {k: unversioned(b, k[1]) for k, b in before[0].items()}
     finally:
         assert d.stop() == 0
+
+
+def top_glb(s, level):
+    r = s.level(level)
+    assert r.status_code == 200, r.text
+    return r.content
+
+
+def test_a_replay_over_limits_or_memory_is_not_damage(tmp_path):
+    """A journal entry of a move at level 3 or 4 computes that level when it is replayed. A
+    daemon restarted with a lower --max-cells cannot, and one whose memory budget other sessions
+    hold cannot now: neither is damaged data. Under a lower limit the answer is a 503
+    `store-corrupt` that says so (not 'damaged data; DELETE it'), the holder may still delete it,
+    and a daemon with the old limits loads it bit for bit; with the budget in use it is a 503
+    `memory-budget` with Retry-After, and it loads once the memory is free."""
+    db = tmp_path / "s.db"
+    body = complex_from_text(CUBE)
+    d = Daemon("--store", f"sqlite:{db}")
+    try:
+        ss, want = [], []
+        for k, level in enumerate((3, 4, 4)):
+            s = new_session(d, body)
+            p = xyz(s, 3)                    # a vertex point keeps its index at level 4
+            patch(s, [{"index": 5 + k, "level": level, "position": shifted(p[5 + k], k)}])
+            ss.append(s)
+            want.append(top_glb(s, level))
+    finally:
+        d.proc.kill()
+        d.proc.wait()
+    a, b, c = ss
+    d = Daemon("--store", f"sqlite:{db}", "--max-cells", "50000")   # level 3 has 130 000
+    try:
+        r = on(d, a).req("GET")
+        assert r.status_code == 503 and r.json()["type"] == "/errors/store-corrupt", r.text
+        assert "damaged" not in r.json()["detail"] and "limits" in r.json()["detail"], r.text
+        assert any("cannot be replayed" in x and "50000" in x for x in d.log_lines)
+    finally:
+        assert d.stop() == 0
+    # the budget holds one session at level 4 (about 55 MB resident, 73 MB to build) but not two
+    d = Daemon("--store", f"sqlite:{db}", "--max-memory", "120000000", "--keep-memory", "0")
+    try:
+        assert on(d, b).req("GET").status_code == 200
+        r = on(d, c).req("GET")
+        assert r.status_code == 503 and r.json()["type"] == "/errors/memory-budget", r.text
+        assert int(r.headers["Retry-After"]) > 0 and "DELETE" not in r.json()["detail"], r.text
+        assert on(d, b).delete().status_code == 204
+        assert top_glb(on(d, c), 4) == want[2]
+        assert top_glb(on(d, a), 3) == want[0]
+    finally:
+        assert d.stop() == 0
+    d = Daemon("--store", f"sqlite:{db}", "--max-cells", "50000")
+    try:
+        assert on(d, c).delete().status_code == 204      # its holder lets it go unloaded
+    finally:
+        assert d.stop() == 0
+    d = Daemon("--store", f"sqlite:{db}")
+    try:
+        assert on(d, c).req("GET").status_code == 404
+        assert top_glb(on(d, a), 3) == want[0]
+    finally:
+        assert d.stop() == 0
