@@ -280,12 +280,24 @@ static int rebuilt_model(const api_model *m, const edit_part *parts, int np,
         sd_vertex_at *at = NULL;
         double *val = NULL;
         size_t nf = !rc && np && parts[0].attr < 0 ? fine_moves(&parts[0], &at, &val) : 0;
+        bool moved = false; /* the finer moves were refused (not the offsets put back) */
         if (!rc && (nf == SIZE_MAX ||
                     (sv->n && sd_complex_set_details((*out)->c, 0, sv->n, sv->at, sv->off, NULL,
                                                      &e)) ||
-                    (nf && sd_complex_move((*out)->c, 0, nf, at, val, NULL, &e)))) {
-            rc = nf == SIZE_MAX ? api_fail(p, 503, "out-of-memory", "out of memory")
-                                : api_fail_core(p, &e, NULL, NULL);
+                    (nf && (moved = sd_complex_move((*out)->c, 0, nf, at, val, NULL, &e))))) {
+            if (nf == SIZE_MAX)
+                rc = api_fail(p, 503, "out-of-memory", "out of memory");
+            else if (moved && e.item >= 0 && (size_t)e.item < nf) {
+                /* a finer move refused (its offset beyond 1e15): e.item counts the finer
+                 * moves alone; point at that move in the body, as an edit in place does */
+                size_t k = 0, i = 0;
+                for (; i < parts[0].n; i++)
+                    if (parts[0].at[i].level > 0 && k++ == (size_t)e.item)
+                        break;
+                e.item = (long)i;
+                rc = part_failed(&parts[0], m->in, &e, p);
+            } else
+                rc = api_fail_core(p, &e, NULL, NULL);
             api_model_unref(*out);
             *out = NULL;
         }

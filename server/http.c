@@ -412,12 +412,13 @@ static int early_auth(req *r)
                   r->seg_id);
         return 1;
     }
-    if (!r->s && miss == STORE_DAMAGED && !strcmp(r->rt->method, "DELETE") &&
+    if (!r->s && (miss == STORE_DAMAGED || miss == STORE_OVER_LIMITS || miss == STORE_BUSY) &&
+        !strcmp(r->rt->method, "DELETE") &&
         !strcmp(r->rt->pattern, "/v1/sessions/{id}")) { /* its holder may still let it go */
         persist_rc rc = persist_delete(store_persist(r->srv->st), r->seg_id);
         if (rc == PERSIST_OK || rc == PERSIST_ABSENT) {
-            log_line(r->srv, LOG_WARN, "session %.40s: deleted with its damaged data (%s)",
-                     r->seg_id, why);
+            log_line(r->srv, LOG_WARN, "session %.40s: deleted %s (%s)", r->seg_id,
+                     miss == STORE_DAMAGED ? "with its damaged data" : "without being rebuilt", why);
             http_queue(r, 204, http_empty());
             return 1;
         }
@@ -434,7 +435,15 @@ static int early_auth(req *r)
         if (miss == STORE_FULL)
             api_fail(&p, 429, "too-many-sessions", "session %.40s is stored, but every resident "
                      "session is in use; retry in a few seconds", r->seg_id);
-        else if (miss == STORE_CORRUPT)
+        else if (miss == STORE_BUSY) /* its data is whole: not corrupt, and no advice to delete */
+            api_fail(&p, 503, "memory-budget", "session %.40s is stored, but rebuilding it needs "
+                     "memory that is in use now; retry in a few seconds", r->seg_id);
+        else if (miss == STORE_OVER_LIMITS) {
+            api_fail(&p, 503, "store-corrupt", "session %.40s is stored whole, but rebuilding it "
+                     "needs more than this daemon's limits allow (the daemon's log says which); a "
+                     "daemon with the limits it was made under loads it", r->seg_id);
+            p.retry_after = 0;
+        } else if (miss == STORE_CORRUPT)
             api_fail(&p, 503, "store-corrupt", "session %.40s cannot be rebuilt from the store "
                      "(damaged data; the daemon's log says where)%s", r->seg_id,
                      damaged ? "; DELETE it to start afresh" : "");
@@ -442,7 +451,10 @@ static int early_auth(req *r)
             api_fail(&p, 503, "store-unavailable", "the session store cannot be read now");
         if (miss != STORE_FULL)
             log_line(r->srv, LOG_ERROR, "session %.40s: %s: %s", r->seg_id,
-                     miss == STORE_CORRUPT ? "store-corrupt" : "store-unavailable", why);
+                     miss == STORE_CORRUPT || miss == STORE_OVER_LIMITS ? "store-corrupt"
+                     : miss == STORE_BUSY                              ? "memory-budget"
+                                                                       : "store-unavailable",
+                     why);
         http_reply_problem(r, &p);
         return 1;
     }

@@ -420,9 +420,15 @@ session *store_create(store *st, int ttl_s, const rate_key *owner, int per_clien
 }
 
 /* The model a stored session had: its snapshot imported, its journal replayed (edits recompute,
- * so the levels are those it had). NULL with the reason in why. */
-static api_model *rebuild(const persist_loaded *l, const api_limits *lim, char *why, size_t cap)
+ * so the levels are those it had). NULL with the reason in why, and in *status the status of
+ * the import's or the replayed edit's refusal when that is not about the stored data: 503 when
+ * the memory it needs is in use now (a retry may load it), 413 when it needs more than this
+ * daemon's limits allow (a move at a finer level computes that level first: a daemon started
+ * with a lower --max-cells, say); 0 for data that cannot be read or applied (damaged). */
+static api_model *rebuild(const persist_loaded *l, const api_limits *lim, char *why, size_t cap,
+                          int *status)
 {
+    *status = 0;
     api_model *m = NULL;
     api_problem p = {0};
     uint64_t v = 0;
@@ -437,6 +443,7 @@ static api_model *rebuild(const persist_loaded *l, const api_limits *lim, char *
         int rc = api_import(doc, "", lim, LLONG_MAX, &m, &v, &p);
         json_decref(doc);
         if (rc) {
+            *status = p.status == 503 || p.status == 413 ? p.status : 0;
             snprintf(why, cap, "the snapshot of version %llu cannot be imported: %.160s%s%.60s",
                      (unsigned long long)l->snapshot_version, p.detail, p.nerrors ? " at " : "",
                      p.nerrors ? p.errors[0].pointer : "");
@@ -467,6 +474,7 @@ static api_model *rebuild(const persist_loaded *l, const api_limits *lim, char *
             m = rebuilt;
         }
         if (rc) {
+            *status = b && (p.status == 503 || p.status == 413) ? p.status : 0;
             snprintf(why, cap, "the edit of version %llu cannot be replayed: %.200s",
                      (unsigned long long)en->version, b ? p.detail : je.text);
             api_model_unref(m);
@@ -531,8 +539,9 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
         persist_loaded_free(&l);
         rc = PERSIST_ABSENT;
     }
+    int refused = 0; /* the rebuild's refusal that is not the data's (rebuild) */
     if (rc == PERSIST_OK) {
-        api_model *m = rebuild(&l, &st->lim, reason, sizeof reason);
+        api_model *m = rebuild(&l, &st->lim, reason, sizeof reason, &refused);
         if (!m)
             rc = PERSIST_CORRUPT; /* the record is whole: record stays true */
         else if (!(s = session_alloc(id, l.meta.token_hash, l.meta.ttl_s, (time_t)l.meta.created))) {
@@ -562,7 +571,10 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
         snprintf(reason, sizeof reason, "%s", l.why);
     pthread_mutex_unlock(lk);
     if (!s && rc != PERSIST_OK)
-        *miss = rc == PERSIST_CORRUPT ? (record ? STORE_DAMAGED : STORE_CORRUPT)
+        *miss = rc == PERSIST_CORRUPT ? (refused == 503   ? STORE_BUSY
+                                         : refused == 413 ? STORE_OVER_LIMITS
+                                         : record         ? STORE_DAMAGED
+                                                          : STORE_CORRUPT)
                 : rc == PERSIST_UNAVAILABLE ? STORE_UNAVAILABLE : STORE_NONE;
     if (why && cap)
         snprintf(why, cap, "%s", reason);

@@ -83,12 +83,17 @@ typedef enum store_miss {
     STORE_CORRUPT,            /* the stored session cannot be rebuilt (damaged data) */
     STORE_DAMAGED,            /* the same, but its record is whole and the token given is its own
                                  (or no token is asked for): it may still be deleted */
+    STORE_BUSY,               /* stored and whole, but rebuilding it needs memory that is in use
+                                 now (its import or a replayed edit was a 503): retry */
+    STORE_OVER_LIMITS,        /* stored and whole, but rebuilding it needs more than this daemon's
+                                 limits allow (a 413: a move at a level over --max-cells, say);
+                                 its holder may still delete it */
     STORE_FULL,               /* stored, but no room to make it resident (every session busy) */
     STORE_UNAUTHORIZED        /* stored, but the token given is not its own (nothing was loaded) */
 } store_miss;
 
 /* The live session with this id (new reference) or NULL with *miss (may be NULL) and, for
- * STORE_CORRUPT, STORE_DAMAGED and STORE_UNAVAILABLE, the reason in why (cap bytes; may be NULL; for the log,
+ * STORE_CORRUPT, STORE_DAMAGED, STORE_BUSY, STORE_OVER_LIMITS and STORE_UNAVAILABLE, the reason in why (cap bytes; may be NULL; for the log,
  * not for clients). Touches its idle clock (and, now and then, its expiry in the durable store).
  * A session that is not resident is loaded only for the holder of its `token` (NULL: anyone,
  * --no-auth); a resident one is returned whatever the token (the caller checks it). With a
