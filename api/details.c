@@ -98,7 +98,7 @@ int api_details_put(api_model *m, json_t *v, api_problem *p)
         if (!count[l]) {
             sd_counts c;
             sd_complex_counts(m->c, (int)l, &c);
-            count[l] = c.vertices < UINT32_MAX ? c.vertices : UINT32_MAX;
+            count[l] = c.vertices;
         }
         api_ptr_key(f, sizeof f, ptr, "index");
         x = json_object_get(o, "index");
@@ -111,6 +111,12 @@ int api_details_put(api_model *m, json_t *v, api_problem *p)
             rc = api_fail_at(p, 422, "out-of-range", f,
                              "point %lld is out of range (level %lld has %llu points)", k, l,
                              (unsigned long long)count[l]);
+            break;
+        }
+        if ((unsigned long long)k >= UINT32_MAX) { /* a level's indices are 32-bit */
+            rc = api_fail_at(p, 422, "out-of-range", f,
+                             "point %lld is past the 2^32 - 1 points a level's indices can name "
+                             "(level %lld has %llu points)", k, l, (unsigned long long)count[l]);
             break;
         }
         api_ptr_key(f, sizeof f, ptr, "offset");

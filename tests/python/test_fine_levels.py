@@ -684,3 +684,23 @@ def test_a_replay_over_limits_or_memory_is_not_damage(tmp_path):
         assert top_glb(on(d, a), 3) == want[0]
     finally:
         assert d.stop() == 0
+
+
+def test_a_detail_past_32_bit_indices_names_the_levels_true_count(daemon):
+    """A level-12 offset of one tetrahedron: the level has (n+1)(n+2)(n+3)/6 points with
+    n = 2^12 (the lattice points of a tetrahedron cut 2^12 times along each edge), more than
+    32-bit indices name; an index past 2^32 - 1 is refused and the detail gives the true count."""
+    n = 2 ** 12
+    points = (n + 1) * (n + 2) * (n + 3) // 6
+    assert points > 2 ** 32
+    s = Session(daemon)
+    body = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], "simplices": [[0, 1, 2, 3]],
+            "details": [{"level": 12, "index": 2 ** 32, "offset": [0, 0, 0]}]}
+    r = s.put_complex(body)
+    assert r.status_code == 422, r.text
+    p = r.json()
+    assert p["errors"][0]["pointer"] == "/details/0/index"
+    assert f"level 12 has {points} points" in p["detail"], p["detail"]
+    body["details"][0]["index"] = points
+    r = s.put_complex(body)
+    assert r.status_code == 422 and f"level 12 has {points} points" in r.json()["detail"]
