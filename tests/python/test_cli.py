@@ -470,3 +470,17 @@ def test_deform_moves_file_mistakes(daemon, tmp_path):
         assert not (tmp_path / "t.obj").exists()
     r = run(*args, "--moves", ffd / "moves.json")
     assert r.returncode == 0 and (tmp_path / "t.obj").read_text().startswith(("v ", "#")), r.stderr
+
+
+def test_spawned_daemon_that_does_not_start_says_why(tmp_path):
+    """--spawn with a flag the daemon refuses (or a store it cannot open): exit 3 and the
+    daemon's own message, not an empty "subdivd did not start:" (its stderr was read before it
+    had exited)."""
+    mesh = REPO / "examples" / "mixed.json"
+    args = ("refine", mesh, "--level", 1, "-o", tmp_path / "m.glb", "--spawn", "--subdivd", SUBDIVD)
+    r = run(*args, "--daemon-flag=--no-such-flag")
+    assert r.returncode == 3, r.stderr
+    assert 'unknown option "--no-such-flag"' in r.stderr and "usage:" not in r.stderr, r.stderr
+    r = run(*args, f"--daemon-flag=--store=sqlite:{tmp_path / 'missing' / 's.db'}")
+    assert r.returncode == 3 and "did not start" in r.stderr and "s.db" in r.stderr, r.stderr
+    assert not (tmp_path / "m.glb").exists()

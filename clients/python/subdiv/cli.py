@@ -183,9 +183,23 @@ class SpawnedDaemon:
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = self.proc.stdout.readline()
         if "http://" not in line:
+            # stdout closed: the daemon is exiting (a bad --daemon-flag, a busy port...); its
+            # stderr says why once it has
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                pass
             err = self.proc.stderr.read() if self.proc.poll() is not None else ""
             self.stop()
-            raise TransportError(f"subdivd did not start: {line.strip()} {err.strip()}")
+            lines = []
+            for x in err.strip().splitlines()[:3]:
+                if x.startswith("usage:"):   # after a bad flag: the message is enough
+                    break
+                lines.append(x.strip())
+            why = "; ".join(x for x in (line.strip(), *lines) if x)
+            code = self.proc.returncode
+            raise TransportError(f"subdivd did not start (exit {code}): {why}" if why else
+                                 f"subdivd did not start (exit {code})")
         self.url = line.split("http://", 1)[1].split("/", 1)[0]
         self.url = "http://" + self.url
         self.log = []
