@@ -409,3 +409,78 @@ def test_fill_takes_quads(tmp_path):
         return abs(u[0] * (w[1] * x[2] - w[2] * x[1]) - u[1] * (w[0] * x[2] - w[2] * x[0])
                    + u[2] * (w[0] * x[1] - w[1] * x[0])) / 6
     assert abs(sum(vol(t) for t in tets) - 1.0) < 1e-12
+
+
+def test_job_keys_override_defaults_in_either_spelling(daemon, tmp_path):
+    """clients/README.md: every key of a job may also be in `defaults`, and `outputs` may be
+    spelled `output`: a job's own `output` replaces the defaults' `outputs` (it was dropped for
+    them). A `save_complex` in a directory that does not exist yet is written there, as outputs
+    and `pvd` are (the job failed after its upload)."""
+    mesh = REPO / "examples" / "mixed.json"
+    jobs = {"defaults": {"level": 1, "outputs": ["all/{name}.vtu"]},
+            "jobs": [{"input": str(mesh), "output": "one/{name}.glb",
+                      "save_complex": "complexes/{name}-L{level}.json"},
+                     {"input": str(mesh), "name": "second"}]}
+    (tmp_path / "jobs.json").write_text(json.dumps(jobs))
+    r = run("batch", tmp_path / "jobs.json", "--url", daemon.url, "--progress", "none")
+    assert r.returncode == 0, r.stderr
+    assert "2 job(s): 2 done, 0 failed" in r.stderr
+    assert sorted(p.name for p in (tmp_path / "one").iterdir()) == ["mixed.glb"]
+    assert sorted(p.name for p in (tmp_path / "all").iterdir()) == ["mixed.vtu"]   # job 2 alone
+    assert (tmp_path / "one" / "mixed.glb").read_bytes()[:4] == b"glTF"
+    saved = json.loads((tmp_path / "complexes" / "mixed-L1.json").read_text())
+    assert len(saved["vertices"]) == 8 and saved["rules"] is not None   # GET /complex
+
+
+def test_quiet_prints_errors_alone(daemon, tmp_path):
+    """-q: no result lines and, unless --progress asks for them, no progress lines either (as
+    `refine --mpi N -q`, docs/BATCH.md): a successful run is silent on stderr (stderr is not a
+    terminal here, where progress defaulted to milestone lines even with -q); errors still show."""
+    mesh = REPO / "examples" / "mixed.json"
+    r = run("refine", mesh, "--level", 1, "-o", tmp_path / "m.glb", "--url", daemon.url, "-q")
+    assert r.returncode == 0 and r.stderr == "" and r.stdout == "", r.stderr
+    assert (tmp_path / "m.glb").exists()
+    r = run("refine", mesh, "--level", 1, "-o", tmp_path / "m.glb", "--url", daemon.url, "-q",
+            "--progress", "lines")           # asked for: progress, still no result line
+    assert r.returncode == 0 and "received" in r.stderr and "level 1 ->" not in r.stderr, r.stderr
+    r = run("refine", mesh, "--level", 13, "-o", tmp_path / "m.glb", "--url", daemon.url, "-q")
+    assert r.returncode == 1 and "level-out-of-range" in r.stderr and "sent" not in r.stderr
+    (tmp_path / "jobs.json").write_text(json.dumps({"jobs": [{"input": str(mesh), "level": 1,
+                                                             "output": str(tmp_path / "b.vtu")}]}))
+    r = run("batch", tmp_path / "jobs.json", "--url", daemon.url, "-q")
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+
+
+def test_deform_moves_file_mistakes(daemon, tmp_path):
+    """`subdiv deform --moves M.json` (a PATCH /control-points body or a list of them): a file
+    that is not JSON or not such bodies is a usage error (2) naming --moves, a body the daemon
+    refuses is exit 1 with its pointer; never a Python traceback."""
+    ffd = REPO / "examples" / "ffd"
+    args = ("deform", ffd / "block.json", "--embed", ffd / "torus.obj", "-o", tmp_path / "t.obj",
+            "--url", daemon.url, "-q")
+    for name, text, code, words in (("broken", "{", 2, ["--moves", "broken.json", "not JSON"]),
+                                    ("ints", "[1, 2]", 2, ["--moves", "ints.json"]),
+                                    ("member", '{"bogus": 1}', 1, ["unknown-field", "/bogus"]),
+                                    ("noposition", '{"moves": [{"index": 0}]}', 1,
+                                     ["/moves/0/position"])):
+        (tmp_path / f"{name}.json").write_text(text)
+        r = run(*args, "--moves", tmp_path / f"{name}.json")
+        assert r.returncode == code and "Traceback" not in r.stderr, (name, r.stderr)
+        assert all(w in r.stderr for w in words), (name, r.stderr)
+        assert not (tmp_path / "t.obj").exists()
+    r = run(*args, "--moves", ffd / "moves.json")
+    assert r.returncode == 0 and (tmp_path / "t.obj").read_text().startswith(("v ", "#")), r.stderr
+
+
+def test_spawned_daemon_that_does_not_start_says_why(tmp_path):
+    """--spawn with a flag the daemon refuses (or a store it cannot open): exit 3 and the
+    daemon's own message, not an empty "subdivd did not start:" (its stderr was read before it
+    had exited)."""
+    mesh = REPO / "examples" / "mixed.json"
+    args = ("refine", mesh, "--level", 1, "-o", tmp_path / "m.glb", "--spawn", "--subdivd", SUBDIVD)
+    r = run(*args, "--daemon-flag=--no-such-flag")
+    assert r.returncode == 3, r.stderr
+    assert 'unknown option "--no-such-flag"' in r.stderr and "usage:" not in r.stderr, r.stderr
+    r = run(*args, f"--daemon-flag=--store=sqlite:{tmp_path / 'missing' / 's.db'}")
+    assert r.returncode == 3 and "did not start" in r.stderr and "s.db" in r.stderr, r.stderr
+    assert not (tmp_path / "m.glb").exists()

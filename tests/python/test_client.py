@@ -499,3 +499,42 @@ def test_meshes_read_returns_what_its_docstring_says(tmp_path):
     assert sorted(tags) == [[0, 1], [3]]
     assert meshes.read(msh, singular_groups=["solid"])[1] == []      # chosen, no such cells
     assert meshes.read(msh, singular_groups=[])[1] is None
+
+
+def test_events_close_from_another_thread(client):
+    """clients/README.md: `.close()` stops an event stream, "read or not". A thread blocked in
+    the iteration (no event, the next heartbeat 15 s away) ends its loop at once, without an
+    exception, and close() itself does not wait for the heartbeat either."""
+    import time
+    s = client.create_session()
+    s.put_complex(MIXED)
+    ev = s.events()
+    seen, errors = [], []
+
+    def read():
+        try:
+            for e in ev:
+                seen.append(e)
+        except BaseException as e:  # noqa: B902 - any exception is the failure
+            errors.append(e)
+
+    t = threading.Thread(target=read, daemon=True)
+    t.start()
+    time.sleep(0.3)
+    t0 = time.time()
+    ev.close()
+    t.join(5)
+    assert not t.is_alive(), "the reading thread is still blocked after close()"
+    assert time.time() - t0 < 2, "close() waited for the next heartbeat"
+    assert errors == [] and seen == []
+    # a stream read to its end ("deleted"), then closed: the client's other requests go on
+    other = client.create_session()
+    ev = other.events()
+    other.delete()
+    assert [e["event"] for e in ev] == ["deleted"]
+    assert client.healthz() == {"status": "ok"}
+    ev.close()
+    for _ in range(3):
+        assert client.healthz() == {"status": "ok"}
+        assert s.info()["version"] == 1
+    s.delete()

@@ -85,6 +85,8 @@ class Progress:
     def __init__(self, mode="auto", stream=None, quiet=False):
         self.out = stream or sys.stderr
         self.quiet = quiet
+        if mode == "auto" and quiet:   # -q: errors alone (as --mpi's -q), unless --progress says
+            mode = "none"
         if mode == "auto":
             mode = "bar" if self.out.isatty() else "lines"
         self.mode = mode
@@ -181,9 +183,23 @@ class SpawnedDaemon:
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = self.proc.stdout.readline()
         if "http://" not in line:
+            # stdout closed: the daemon is exiting (a bad --daemon-flag, a busy port...); its
+            # stderr says why once it has
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                pass
             err = self.proc.stderr.read() if self.proc.poll() is not None else ""
             self.stop()
-            raise TransportError(f"subdivd did not start: {line.strip()} {err.strip()}")
+            lines = []
+            for x in err.strip().splitlines()[:3]:
+                if x.startswith("usage:"):   # after a bad flag: the message is enough
+                    break
+                lines.append(x.strip())
+            why = "; ".join(x for x in (line.strip(), *lines) if x)
+            code = self.proc.returncode
+            raise TransportError(f"subdivd did not start (exit {code}): {why}" if why else
+                                 f"subdivd did not start (exit {code})")
         self.url = line.split("http://", 1)[1].split("/", 1)[0]
         self.url = "http://" + self.url
         self.log = []
@@ -359,7 +375,9 @@ def run_job(client, job, progress, base=pathlib.Path(".")):
             progress.note(f"{name}: repaired: {repaired} simplices dropped")
         if job.get("save_complex"):
             sc = job["save_complex"]
-            with open(sc if os.path.isabs(sc) else base / sc, "w") as f:
+            sc = pathlib.Path(sc if os.path.isabs(sc) else base / sc)
+            sc.parent.mkdir(parents=True, exist_ok=True)
+            with open(sc, "w") as f:
                 json.dump(s.get_complex(), f)
         for out in outputs:
             pathlib.Path(out).parent.mkdir(parents=True, exist_ok=True)
@@ -528,11 +546,15 @@ def parse_jobs(path):
         if set(j) - JOB_KEYS:
             raise UsageError(f"{path}: /jobs/{i}: unknown member {sorted(set(j) - JOB_KEYS)[0]!r}; "
                              f"allowed: {', '.join(sorted(JOB_KEYS))}")
-        job = dict(defaults)
-        job.update(j)
-        if "output" in job:
-            o = job.pop("output")
-            job.setdefault("outputs", o if isinstance(o, list) else [o])
+        # "output" is "outputs" spelled for one file: the job's own (either spelling) replaces
+        # the defaults' (either spelling), as every other key does
+        job = {}
+        for layer in (defaults, j):
+            layer = dict(layer)
+            if "output" in layer:
+                o = layer.pop("output")
+                layer.setdefault("outputs", o if isinstance(o, list) else [o])
+            job.update(layer)
         opts = dict(defaults.get("options", {}))
         opts.update(j.get("options", {}))
         job["options"] = opts
@@ -612,8 +634,11 @@ def cmd_deform(args):
         body, tags = meshes.read(args.input)
         model, _ = meshes.read(args.embed)
         tris = [t for t in model["simplices"] if len(t) == 3]
-        moves = json.loads(pathlib.Path(args.moves).read_text()) if args.moves else []
+        moves = _load_json(args.moves, "--moves", pathlib.Path(".")) if args.moves else []
         moves = moves if isinstance(moves, list) else [moves]
+        if not all(isinstance(m, dict) for m in moves):
+            raise UsageError(f"--moves: {args.moves} holds a PATCH /control-points body "
+                             "({\"moves\": [...]}) or a list of them")
         with Connection(args) as client, client.create_session() as s:
             progress.begin(f"{args.input} + {args.embed}")
             s.put_complex(body, progress=progress)
@@ -621,8 +646,8 @@ def cmd_deform(args):
                 s.put_tags(tags)
             j = s.put_embedded("model", model["vertices"], tris or None, level=args.level,
                                outside=args.outside)
-            for m in moves:
-                s.edit(moves=m["moves"]) if "moves" in m else s.edit(**m)
+            for m in moves:   # sent as it is: the daemon names a wrong member (exit 1)
+                s._change("PATCH", "/control-points", m, True, None)
             out = s.get_embedded("model", fmt)
             data = out if isinstance(out, bytes) else (json.dumps(out) if fmt == "json" else out).encode()
             part = pathlib.Path(args.output + ".part")
@@ -650,7 +675,8 @@ def build_parser():
     g.add_argument("--progress", choices=("auto", "bar", "lines", "none"), default="auto",
                    help="progress on stderr: an updating line (bar, the default on a terminal), "
                    "milestone lines (lines, the default otherwise) or none")
-    g.add_argument("-q", "--quiet", action="store_true", help="no result lines (errors still)")
+    g.add_argument("-q", "--quiet", action="store_true", help="errors alone: no result lines, "
+                   "and no progress unless --progress names a mode")
     mesh = argparse.ArgumentParser(add_help=False)
     m = mesh.add_argument_group("mesh")
     m.add_argument("--fill", action="store_true", help="post the 2-D cells (triangles, split quads and polygons) as a TetGen fill surface")

@@ -26,6 +26,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import socket
 import threading
 import time
 from typing import Any, Callable, Dict, Iterator, List, Mapping, Optional, Sequence, Union
@@ -216,12 +217,24 @@ class Client:
         return s
 
 
+def _socket_of(response: requests.Response) -> Any:
+    """The socket a streamed response reads from (urllib3 1.26 and 2), or None."""
+    raw = getattr(response, "raw", None)
+    sock = getattr(getattr(raw, "_connection", None), "sock", None)
+    if sock is None:
+        fp = getattr(getattr(raw, "_fp", None), "fp", None)
+        sock = getattr(getattr(fp, "raw", None), "_sock", None)
+    return sock if hasattr(sock, "shutdown") else None
+
+
 class EventStream:
     """An open event stream (Session.events()): an iterator of the events, {"id", "event",
     "data"}; close() ends it whether or not it was read (also at the end of a `with` block)."""
 
     def __init__(self, response: requests.Response) -> None:
         self._r = response
+        self._closed = self._ended = False
+        self._sock = _socket_of(response)
         self._it = self._read()
 
     def __iter__(self) -> EventStream:
@@ -237,6 +250,14 @@ class EventStream:
         self.close()
 
     def close(self) -> None:
+        self._closed = True
+        # A read blocked in another thread holds the response's buffer until a byte comes (the
+        # next heartbeat): shutting the socket down wakes it at once, and it ends the iteration.
+        if self._sock is not None and not self._ended:
+            try:
+                self._sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
         try:
             self._it.close()
         except ValueError:  # being read in another thread: it ends with the connection
@@ -268,9 +289,18 @@ class EventStream:
                         ev["id"] = int(value) if value.isdigit() else value
                     elif field == "event":
                         ev["event"] = value
-            except requests.RequestException as e:
-                raise TransportError(f"the event stream broke: {e}") from e
+            except Exception as e:
+                if self._closed:  # close() from another thread: the iteration ends
+                    return
+                if isinstance(e, requests.RequestException):
+                    raise TransportError(f"the event stream broke: {e}") from e
+                raise
         finally:
+            self._ended = True
+            try:  # never back to the pool: close() may still shut this socket down
+                r.raw.close()
+            except Exception:
+                pass
             r.close()
 
 
