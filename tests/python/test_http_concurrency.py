@@ -10,6 +10,7 @@
 - A long computation in one session does not hold up another session's small requests nor the
   service endpoints, and the busy session reports its progress meanwhile.
 - Deleting a session while one of its levels streams neither crashes nor cuts other sessions.
+- A session with a request in flight (a slow download, a long computation) does not expire.
 """
 import json
 import threading
@@ -305,3 +306,44 @@ def test_delete_while_streaming():
         assert requests.get(d.url + "/healthz").status_code == 200
     finally:
         assert d.stop() == 0
+
+
+def test_a_session_in_use_does_not_expire():
+    """docs/SERVICE.md: idle sessions expire after their TTL. A session whose download is still
+    being sent, or whose request is still computing, is not idle: it stays while the request is
+    in flight and its TTL counts from the end of it; an event stream alone does not keep it."""
+    d = Daemon()
+    try:
+        ball = complex_from_text(REPO / "tests" / "cases" / "tetgen_ball" / "mesh.txt")
+        s = Session(d, ttl_s=1)
+        assert s.put_complex(ball).status_code == 200
+        assert s.level(3).status_code == 200
+        # a download read slowly for 2.5 s (its TTL 1 s, the sweep every 0.2 s); the level's VTK
+        # is some 30 MB, far more than the sockets buffer
+        r = s.req("GET", "/levels/3", params={"format": "vtk"}, stream=True)
+        assert r.status_code == 200
+        it = r.iter_content(65536)
+        got = len(next(it))
+        time.sleep(2.5)
+        got += sum(len(c) for c in it)
+        assert got == int(r.headers["Content-Length"])
+        assert s.req("GET").status_code == 200, "the session expired while its level was sent"
+        # a computation longer than the TTL: the session is there when its answer comes
+        t = time.time()
+        assert s.req("GET", "/levels/4/stats").status_code == 200
+        took = time.time() - t
+        assert s.req("GET").status_code == 200, \
+            f"the session expired as its {took:.2f} s computation ended"
+        # an event stream does not keep it: idle, it expires
+        events = requests.get(s.base + "/events", headers=s.auth, stream=True, timeout=30)
+        lines = []
+        for line in events.iter_lines(decode_unicode=True):
+            lines.append(line)
+            if line.startswith("data:"):
+                break
+        assert lines[-2:] == ["event: deleted", 'data: {"reason":"expired"}'], lines
+        assert s.req("GET").status_code == 404
+        assert d.alive()
+    finally:
+        assert d.stop() == 0
+
