@@ -11,6 +11,8 @@
   service endpoints, and the busy session reports its progress meanwhile.
 - Deleting a session while one of its levels streams neither crashes nor cuts other sessions.
 - A session with a request in flight (a slow download, a long computation) does not expire.
+- The memory-limit check of a level request, made beside a computation of the same session,
+  names the need of the state the session is in.
 """
 import json
 import threading
@@ -347,3 +349,40 @@ def test_a_session_in_use_does_not_expire():
     finally:
         assert d.stop() == 0
 
+
+def test_limit_check_beside_a_computation_of_the_same_session(tmp_path):
+    """A level request checks the session's memory limit (docs/SERVICE.md "Streaming and memory":
+    what the session holds plus the estimate of the levels it lacks) without waiting for a
+    computation of the same session. While another request computes levels 1..3, the session
+    holds what it held before and lacks what it lacked, so a refused request for level 4 names
+    the same need as before that computation started — not one that leaves out the levels the
+    computation has made but not yet handed over (the check read the core's count of levels,
+    which the computing thread writes as it goes, beside the session's bytes, published at the
+    end)."""
+    d = Daemon("--max-session-bytes", str(64 << 20))
+    try:
+        s = Session(d)
+        assert s.put_complex(complex_from_text(make_mesh_file(tmp_path, "cubes", 6))).status_code == 200
+        r = s.req("GET", "/levels/4/stats")   # 10 M cells: far over 64 MiB
+        assert r.status_code == 413 and r.json()["limit_name"] == "max_session_bytes", r.text
+        before = r.json()["detail"]
+        assert s.req("GET").json()["levels_cached"] == 1
+        done = []
+        th = threading.Thread(target=lambda: done.append(s.req("GET", "/levels/3/stats").status_code))
+        th.start()
+        seen = []
+        while th.is_alive():
+            j = s.req("GET").json()
+            if (j["progress"] or {}).get("state") != "computing":
+                continue
+            r = s.req("GET", "/levels/4/stats")
+            if s.req("GET").json()["levels_cached"] != 1:
+                break                               # the computation has handed its levels over
+            seen.append((r.status_code, r.json().get("detail")))
+        th.join(60)
+        assert done == [200]
+        assert seen, "no request fell within the computation"
+        assert all(x == (413, before) for x in seen), \
+            [x for x in seen if x != (413, before)][:3]
+    finally:
+        assert d.stop() == 0
