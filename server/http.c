@@ -834,6 +834,10 @@ static void mhd_log(void *cls, const char *fmt, va_list ap)
     for (size_t i = 0; i < sizeof routine / sizeof *routine; i++)
         if (!strncmp(msg, routine[i], strlen(routine[i])))
             level = LOG_DEBUG;
+    /* "Failed to send the response body for the request for `...'. Error: ...": a client that
+     * closed or reset its connection before the end of an answer (a download given up) */
+    if (!strncmp(msg, "Failed to send", 14) && strstr(msg, "closed by remote peer"))
+        level = LOG_DEBUG;
     log_line(srv, level, "http: %s", msg);
 }
 

@@ -13,6 +13,7 @@
 - A session with a request in flight (a slow download, a long computation) does not expire.
 - The memory-limit check of a level request, made beside a computation of the same session,
   names the need of the state the session is in.
+- Downloads given up half-way (closed or reset) log no warnings and change nothing.
 """
 import json
 import threading
@@ -384,5 +385,49 @@ def test_limit_check_beside_a_computation_of_the_same_session(tmp_path):
         assert seen, "no request fell within the computation"
         assert all(x == (413, before) for x in seen), \
             [x for x in seen if x != (413, before)][:3]
+    finally:
+        assert d.stop() == 0
+
+
+def test_downloads_given_up_are_not_warnings():
+    """docs/SERVICE.md "Hostile clients": libmicrohttpd's messages about clients that went away
+    are debug lines, not warnings. Clients that close or reset their connection in the middle of
+    a level download (a page closed, a batch client killed) leave the daemon and the session as
+    they were, and log no warning each (a flood of them would flood the log)."""
+    import socket
+    d = Daemon()
+    try:
+        s = Session(d)
+        ball = complex_from_text(REPO / "tests" / "cases" / "tetgen_ball" / "mesh.txt")
+        assert s.put_complex(ball).status_code == 200
+        whole = s.level(3).content
+        host, port = d.url.split("//")[1].split(":")
+
+        def give_up(k):
+            c = socket.create_connection((host, int(port)), timeout=30)
+            fmt = ("glb", "vtk", "json")[k % 3]
+            c.sendall(f"GET /v1/sessions/{s.id}/levels/3?format={fmt} HTTP/1.1\r\nHost: x\r\n"
+                      f"Authorization: Bearer {s.token}\r\n\r\n".encode())
+            got = 0
+            while got < 100000:
+                b = c.recv(65536)
+                assert b
+                got += len(b)
+            if k % 2:   # a reset rather than a close
+                c.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\0\0\0\0\0\0\0")
+            c.close()
+
+        threads = [threading.Thread(target=give_up, args=(k,)) for k in range(12)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(30)
+        deadline = time.time() + 10
+        while time.time() < deadline and sum("/levels/3 " in l for l in d.log_lines) < 13:
+            time.sleep(0.1)
+        assert s.level(3).content == whole
+        assert d.alive()
+        warnings = [l for l in d.log_lines if " warn " in l or " error " in l]
+        assert not warnings, warnings[:3]
     finally:
         assert d.stop() == 0
