@@ -56,7 +56,19 @@ int api_check_level_limits(api_model *m, int level, const api_limits *lim, api_p
                               "level %d has %llu cells, over the limit of %llu per level; ask for "
                               "a lower level or refine locally", level, (unsigned long long)cells,
                               (unsigned long long)lim->max_cells);
-    uint64_t need = atomic_load(&m->memory_bytes) + api_estimate_bytes(m->c, level);
+    /* what the session holds and the levels it has, as one pair: another request may be
+     * computing a level of this model (under m->lock, which this check does not take), and the
+     * core's own count of levels is that thread's to write; api_model_publish stores the levels,
+     * then the bytes, so levels read the same on both sides of the bytes belong with them */
+    int have, again;
+    uint64_t need;
+    do {
+        have = atomic_load(&m->levels_cached);
+        need = atomic_load(&m->memory_bytes);
+        again = atomic_load(&m->levels_cached);
+    } while (have != again);
+    for (int l = have; l <= level; l++)
+        need += sd_complex_estimate_level_bytes(m->c, l);
     if (need > lim->max_session_bytes)
         return api_fail_limit(p, "max_session_bytes", lim->max_session_bytes, need,
                               "level %d needs about %llu bytes, over the session limit of %llu; "

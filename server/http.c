@@ -81,12 +81,21 @@ static const char *intern_method(const char *m)
  * fresh page costs ~15 µs on a virtual machine). */
 #define TRIM_AFTER_BYTES (32u << 20)
 
+void http_session_done(req *r)
+{
+    if (r->s && r->using)
+        store_unuse(r->srv->st, r->s);
+    r->using = 0;
+    session_unref(r->s);
+    r->s = NULL;
+}
+
 void http_req_unref(req *r)
 {
     if (atomic_fetch_sub(&r->refs, 1) != 1)
         return;
     api_mem_meter *prev = api_mem_meter_set(&r->mem);
-    session_unref(r->s);
+    http_session_done(r);
     if (r->held)
         holds_give(r->srv->bodies, &r->client, r->held);
     api_free(r->body);
@@ -458,8 +467,11 @@ static int early_auth(req *r)
         http_reply_problem(r, &p);
         return 1;
     }
-    if (r->s && (r->srv->cfg.no_auth || session_token_ok(r->s, presented)))
+    if (r->s && (r->srv->cfg.no_auth || session_token_ok(r->s, presented))) {
+        session_use(r->s); /* its holder's request: the session does not expire until it ends */
+        r->using = 1;
         return 0;
+    }
     api_fail(&p, 401, "unauthorized",
              h || q ? "the bearer token does not match this session"
                     : "send the session's token as \"Authorization: Bearer <token>\"");
@@ -747,10 +759,8 @@ static enum MHD_Result serve(server *srv, req *r, const char *url, const char *m
     /* an answer made whole (no stream holds the request) needs the session no more: let it go
      * now, before libmicrohttpd sends the answer, so that a client's next request, or another
      * client's, never finds it still in use (a full session table would turn that one away) */
-    if (atomic_load(&r->refs) == 1) {
-        session_unref(r->s);
-        r->s = NULL;
-    }
+    if (atomic_load(&r->refs) == 1)
+        http_session_done(r);
     return MHD_YES;
 }
 
@@ -824,6 +834,10 @@ static void mhd_log(void *cls, const char *fmt, va_list ap)
     for (size_t i = 0; i < sizeof routine / sizeof *routine; i++)
         if (!strncmp(msg, routine[i], strlen(routine[i])))
             level = LOG_DEBUG;
+    /* "Failed to send the response body for the request for `...'. Error: ...": a client that
+     * closed or reset its connection before the end of an answer (a download given up) */
+    if (!strncmp(msg, "Failed to send", 14) && strstr(msg, "closed by remote peer"))
+        level = LOG_DEBUG;
     log_line(srv, level, "http: %s", msg);
 }
 

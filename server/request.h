@@ -68,6 +68,7 @@ struct req {
     int answered_raw;         /* answered on the socket itself (a chunked body over the limit) */
     double t0;
     session *s;
+    int using;                /* r->s counts this request in its in_use (session_use) */
     char seg_id[40];
     char seg_level[64];    /* {L}, or an embedded model's {name} */
     int status;
@@ -156,6 +157,8 @@ struct MHD_Response *http_problem_response(req *r, const api_problem *p);
 
 /* Drop a reference on r; the last frees it (and trims the heap after a big request). */
 void http_req_unref(req *r);
+/* Let the request's session go (r->s NULL after): its use ends (store_unuse) if it counted. */
+void http_session_done(req *r);
 
 /* ---- http.c: compute slots ---- */
 

@@ -641,8 +641,10 @@ static bool reload_unconditional(req *r, int attempt)
     session *again = store_get(r->srv->st, r->s->id, NULL, &miss, NULL, 0);
     if (!again)
         return false;
-    session_unref(r->s);
+    http_session_done(r);
     r->s = again;
+    session_use(again);
+    r->using = 1;
     return true;
 }
 
@@ -1310,6 +1312,10 @@ static const char *const EVENTS_KEYS[] = {"access_token", NULL};
  * dropped by the hub and never slows a change. */
 static void h_events(req *r)
 {
+    /* a listener does not keep its session: it expires idle as without one (`event: deleted`,
+     * reason expired, ends the stream) */
+    store_unuse(r->srv->st, r->s);
+    r->using = 0;
     uint64_t version, last = 0;
     api_model_unref(session_model(r->s, &version));
     const char *lei = http_header(r, "Last-Event-ID");

@@ -157,14 +157,16 @@ static bool unstored_use(session *s, int64_t *expires_at)
     return due;
 }
 
-/* Remove the sessions idle past their TTL (none computing). Caller holds st->mu. */
+/* Remove the sessions idle past their TTL (none with a request in flight: one computing, being
+ * changed, or whose answer is still being sent). Caller holds st->mu. */
 static int expire_locked(store *st, double now)
 {
     int gone = 0;
     for (int i = 0; i < st->n;) {
         session *s = st->s[i];
         pthread_mutex_lock(&s->mu);
-        int idle = now - s->last_used > s->ttl_s && atomic_load(&s->busy_level) < 0;
+        int idle = now - s->last_used > s->ttl_s && atomic_load(&s->busy_level) < 0 &&
+                   atomic_load(&s->in_use) == 0;
         pthread_mutex_unlock(&s->mu);
         if (idle)
             gone += remove_at(st, i, "expired");
@@ -260,6 +262,7 @@ static session *session_alloc(const char *id, const unsigned char hash[32], int 
     s->touched = -1e300; /* the first use writes the expiry (a loaded session's may be close) */
     s->created = created;
     atomic_init(&s->busy_level, -1);
+    atomic_init(&s->in_use, 0);
     return s;
 }
 
@@ -692,6 +695,22 @@ void store_foreach(store *st, void (*fn)(session *s, void *ud), void *ud)
     for (int i = 0; i < st->n; i++)
         fn(st->s[i], ud);
     pthread_mutex_unlock(&st->mu);
+}
+
+void session_use(session *s) { atomic_fetch_add(&s->in_use, 1); }
+
+void store_unuse(store *st, session *s)
+{
+    double now = mono_now();
+    pthread_mutex_lock(&s->mu);
+    s->last_used = now;
+    bool due = persist_durable(st->p) && now - s->touched > touch_every(s);
+    if (due)
+        s->touched = now;
+    pthread_mutex_unlock(&s->mu);
+    if (due)
+        persist_touch(st->p, s->id, session_stored_expiry(s));
+    atomic_fetch_sub(&s->in_use, 1);
 }
 
 void session_unref(session *s)

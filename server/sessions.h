@@ -31,7 +31,9 @@ typedef struct session {
     api_model *model;
     uint64_t version;
     _Atomic int ttl_s;        /* idle TTL, seconds (store_retime changes it) */
-    double last_used;         /* monotonic seconds */
+    double last_used;         /* monotonic seconds: when a request last came or ended (mu) */
+    atomic_int in_use;        /* requests of its holder handled or still streaming (event
+                                 streams aside): it does not expire meanwhile */
     time_t created;
     rate_key owner;           /* the client address that created it (has_owner) */
     bool has_owner;           /* created here (a session loaded from the store has none) */
@@ -113,6 +115,12 @@ int store_expire(store *st, double now);
 int store_count(store *st);
 /* Call fn for every live session under the store lock (metrics). */
 void store_foreach(store *st, void (*fn)(session *s, void *ud), void *ud);
+
+/* A request of s's holder starts (session_use) and ends, its answer sent (store_unuse): while
+ * one is in flight s does not expire, and its idle TTL counts from the end of the last one (with
+ * a durable store, the stored expiry follows as store_get's touches do). */
+void session_use(session *s);
+void store_unuse(store *st, session *s);
 
 void session_unref(session *s);
 /* The current model and version (model: new reference). */

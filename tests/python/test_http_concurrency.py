@@ -10,6 +10,10 @@
 - A long computation in one session does not hold up another session's small requests nor the
   service endpoints, and the busy session reports its progress meanwhile.
 - Deleting a session while one of its levels streams neither crashes nor cuts other sessions.
+- A session with a request in flight (a slow download, a long computation) does not expire.
+- The memory-limit check of a level request, made beside a computation of the same session,
+  names the need of the state the session is in.
+- Downloads given up half-way (closed or reset) log no warnings and change nothing.
 """
 import json
 import threading
@@ -303,5 +307,127 @@ def test_delete_while_streaming():
         assert s.req("GET").status_code == 404
         assert other.level(2, format="json").content == before
         assert requests.get(d.url + "/healthz").status_code == 200
+    finally:
+        assert d.stop() == 0
+
+
+def test_a_session_in_use_does_not_expire():
+    """docs/SERVICE.md: idle sessions expire after their TTL. A session whose download is still
+    being sent, or whose request is still computing, is not idle: it stays while the request is
+    in flight and its TTL counts from the end of it; an event stream alone does not keep it."""
+    d = Daemon()
+    try:
+        ball = complex_from_text(REPO / "tests" / "cases" / "tetgen_ball" / "mesh.txt")
+        s = Session(d, ttl_s=1)
+        assert s.put_complex(ball).status_code == 200
+        assert s.level(3).status_code == 200
+        # a download read slowly for 2.5 s (its TTL 1 s, the sweep every 0.2 s); the level's VTK
+        # is some 30 MB, far more than the sockets buffer
+        r = s.req("GET", "/levels/3", params={"format": "vtk"}, stream=True)
+        assert r.status_code == 200
+        it = r.iter_content(65536)
+        got = len(next(it))
+        time.sleep(2.5)
+        got += sum(len(c) for c in it)
+        assert got == int(r.headers["Content-Length"])
+        assert s.req("GET").status_code == 200, "the session expired while its level was sent"
+        # a computation longer than the TTL: the session is there when its answer comes
+        t = time.time()
+        assert s.req("GET", "/levels/4/stats").status_code == 200
+        took = time.time() - t
+        assert s.req("GET").status_code == 200, \
+            f"the session expired as its {took:.2f} s computation ended"
+        # an event stream does not keep it: idle, it expires
+        events = requests.get(s.base + "/events", headers=s.auth, stream=True, timeout=30)
+        lines = []
+        for line in events.iter_lines(decode_unicode=True):
+            lines.append(line)
+            if line.startswith("data:"):
+                break
+        assert lines[-2:] == ["event: deleted", 'data: {"reason":"expired"}'], lines
+        assert s.req("GET").status_code == 404
+        assert d.alive()
+    finally:
+        assert d.stop() == 0
+
+
+def test_limit_check_beside_a_computation_of_the_same_session(tmp_path):
+    """A level request checks the session's memory limit (docs/SERVICE.md "Streaming and memory":
+    what the session holds plus the estimate of the levels it lacks) without waiting for a
+    computation of the same session. While another request computes levels 1..3, the session
+    holds what it held before and lacks what it lacked, so a refused request for level 4 names
+    the same need as before that computation started — not one that leaves out the levels the
+    computation has made but not yet handed over (the check read the core's count of levels,
+    which the computing thread writes as it goes, beside the session's bytes, published at the
+    end)."""
+    d = Daemon("--max-session-bytes", str(64 << 20))
+    try:
+        s = Session(d)
+        assert s.put_complex(complex_from_text(make_mesh_file(tmp_path, "cubes", 6))).status_code == 200
+        r = s.req("GET", "/levels/4/stats")   # 10 M cells: far over 64 MiB
+        assert r.status_code == 413 and r.json()["limit_name"] == "max_session_bytes", r.text
+        before = r.json()["detail"]
+        assert s.req("GET").json()["levels_cached"] == 1
+        done = []
+        th = threading.Thread(target=lambda: done.append(s.req("GET", "/levels/3/stats").status_code))
+        th.start()
+        seen = []
+        while th.is_alive():
+            j = s.req("GET").json()
+            if (j["progress"] or {}).get("state") != "computing":
+                continue
+            r = s.req("GET", "/levels/4/stats")
+            if s.req("GET").json()["levels_cached"] != 1:
+                break                               # the computation has handed its levels over
+            seen.append((r.status_code, r.json().get("detail")))
+        th.join(60)
+        assert done == [200]
+        assert seen, "no request fell within the computation"
+        assert all(x == (413, before) for x in seen), \
+            [x for x in seen if x != (413, before)][:3]
+    finally:
+        assert d.stop() == 0
+
+
+def test_downloads_given_up_are_not_warnings():
+    """docs/SERVICE.md "Hostile clients": libmicrohttpd's messages about clients that went away
+    are debug lines, not warnings. Clients that close or reset their connection in the middle of
+    a level download (a page closed, a batch client killed) leave the daemon and the session as
+    they were, and log no warning each (a flood of them would flood the log)."""
+    import socket
+    d = Daemon()
+    try:
+        s = Session(d)
+        ball = complex_from_text(REPO / "tests" / "cases" / "tetgen_ball" / "mesh.txt")
+        assert s.put_complex(ball).status_code == 200
+        whole = s.level(3).content
+        host, port = d.url.split("//")[1].split(":")
+
+        def give_up(k):
+            c = socket.create_connection((host, int(port)), timeout=30)
+            fmt = ("glb", "vtk", "json")[k % 3]
+            c.sendall(f"GET /v1/sessions/{s.id}/levels/3?format={fmt} HTTP/1.1\r\nHost: x\r\n"
+                      f"Authorization: Bearer {s.token}\r\n\r\n".encode())
+            got = 0
+            while got < 100000:
+                b = c.recv(65536)
+                assert b
+                got += len(b)
+            if k % 2:   # a reset rather than a close
+                c.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\0\0\0\0\0\0\0")
+            c.close()
+
+        threads = [threading.Thread(target=give_up, args=(k,)) for k in range(12)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(30)
+        deadline = time.time() + 10
+        while time.time() < deadline and sum("/levels/3 " in l for l in d.log_lines) < 13:
+            time.sleep(0.1)
+        assert s.level(3).content == whole
+        assert d.alive()
+        warnings = [l for l in d.log_lines if " warn " in l or " error " in l]
+        assert not warnings, warnings[:3]
     finally:
         assert d.stop() == 0
