@@ -170,6 +170,36 @@ def test_session_paths_hash_on_the_id(tmp_path):
             d.stop()
 
 
+@needs_haproxy
+def test_haproxy_log_has_no_query(tmp_path):
+    """HAProxy's access log, like the daemons' own (docs/SERVICE.md "Starting"), writes the path
+    of a request, never its query: GET /events takes the bearer token as ?access_token= (an
+    EventSource cannot send headers), so a log of the request line would hold it."""
+    daemons = [Daemon() for _ in range(2)]
+    hap = None
+    try:
+        hap = HAProxy(tmp_path, [_addr(d) for d in daemons])
+        sid = "cd" * 16
+        secret = "Zq9xSecretTokenInTheQuery0123456789abcdefg"
+        for path in (f"/v1/sessions/{sid}/events?access_token={secret}",
+                     f"/v1/sessions/{sid}/levels/2?format=vtu&note={secret}",
+                     f"/healthz?{secret}"):
+            r = requests.get(hap.url + path, timeout=10)
+            assert r.status_code in (200, 400, 401, 404), (path, r.status_code, r.text)
+        deadline = time.time() + 10
+        while time.time() < deadline and hap.log().count(f"/v1/sessions/{sid}/") < 2:
+            time.sleep(0.1)
+        log = hap.log()
+        assert f'"GET /v1/sessions/{sid}/events HTTP/1.1"' in log, log
+        assert f'"GET /v1/sessions/{sid}/levels/2 HTTP/1.1"' in log, log
+        assert secret not in log, log
+    finally:
+        if hap:
+            hap.stop()
+        for d in daemons:
+            d.stop()
+
+
 def assert_retry_problem(r, status, slug):
     """An answer of HAProxy's own in the daemons' form (docs/SERVICE.md "Errors"): a
     problem+json of that status and type, with Retry-After."""
