@@ -199,6 +199,14 @@ persist_rc persist_owned(persist *p, const char *owner, int64_t now, long enough
     return p->ops ? noted_read(p, p->ops->owned(p->b, owner, now, enough, n, soonest)) : PERSIST_OK;
 }
 
+persist_rc persist_admit(persist *p, const char *owner, bool hold)
+{
+    if (!p->ops || !p->ops->admit)
+        return PERSIST_OK;
+    persist_rc rc = p->ops->admit(p->b, owner, hold);
+    return hold ? noted_read(p, rc) : rc;
+}
+
 void persist_last_failure(persist *p, char *why, size_t cap)
 {
     pthread_mutex_lock(&p->mu);

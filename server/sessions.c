@@ -372,10 +372,16 @@ session *store_create(store *st, int ttl_s, const rate_key *owner, int per_clien
             stripe = stripe * 31 + owner->b[i];
         admit = &st->admit[stripe & 15];
         pthread_mutex_lock(admit);
-        long n;
-        int64_t soonest, now = (int64_t)time(NULL);
-        a->stored = persist_owned(st->p, ohex, now, stored_per_client, &n, &soonest);
+        long n = 0;
+        int64_t soonest = 0, now = (int64_t)time(NULL);
+        /* and for every daemon on a shared store (its creates of this client wait there) */
+        a->stored = persist_admit(st->p, ohex, true);
+        bool held = a->stored == PERSIST_OK;
+        if (held)
+            a->stored = persist_owned(st->p, ohex, now, stored_per_client, &n, &soonest);
         if (a->stored != PERSIST_OK || n >= stored_per_client) {
+            if (held)
+                persist_admit(st->p, ohex, false);
             pthread_mutex_unlock(admit);
             if (a->stored == PERSIST_OK) {
                 /* a stored session counts through its expiry's second (persist.h) */
@@ -398,8 +404,10 @@ session *store_create(store *st, int ttl_s, const rate_key *owner, int per_clien
         if ((a->stored = persist_create(st->p, &m)) != PERSIST_OK)
             ok = false;
     }
-    if (admit) /* counted from now on */
+    if (admit) { /* counted from now on */
+        persist_admit(st->p, ohex, false);
         pthread_mutex_unlock(admit);
+    }
     s->touched = mono_now(); /* the store has its expiry */
     if (ok) {
         pthread_mutex_lock(&st->mu);

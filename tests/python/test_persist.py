@@ -729,6 +729,49 @@ def test_concurrent_creates_do_not_pass_the_stored_count(store):
         d.stop()
 
 
+@pytest.mark.skipif(not REDIS_SERVER, reason="redis-server is not installed")
+def test_concurrent_creates_through_two_daemons_do_not_pass_the_stored_count(tmp_path):
+    """docs/SERVICE.md: the daemons of one redis share a client's count of stored sessions, and
+    concurrent creates are counted one after the other, across the daemons too: creates from one
+    address sent at once to two daemons on one redis get --max-stored-sessions-per-client
+    sessions, no more (each daemon counting while the other creates would both see room)."""
+    redis = RedisServer(tmp_path).start()
+    ds = []
+    try:
+        ds = [store_daemon(redis, "--max-connections-per-client", "0",
+                           "--max-stored-sessions-per-client", "3") for _ in range(2)]
+        for rnd in range(8):
+            src, n = f"127.0.1.{rnd + 1}", 16
+            go, out = threading.Barrier(n), []
+
+            def one(c):
+                go.wait()
+                c.request("POST", "/v1/sessions", "{}", {"Content-Type": "application/json"})
+                r = c.getresponse()
+                r.read()
+                out.append(r.status)
+                c.close()
+
+            conns = []
+            for k in range(n):                      # half to each daemon
+                host, port = ds[k % 2].url.split("//")[1].split(":")
+                conns.append(http.client.HTTPConnection(host, int(port), timeout=30,
+                                                        source_address=(src, 0)))
+            for c in conns:
+                c.connect()
+            threads = [threading.Thread(target=one, args=(c,)) for c in conns]
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join()
+            assert sorted(out) == [201] * 3 + [429] * (n - 3), (rnd, out)
+            assert [create_from(d, src)[0] for d in ds] == [429, 429]
+    finally:
+        for d in ds:
+            d.stop()
+        redis.stop()
+
+
 def test_sessions_kept_alive_past_their_first_expiry_still_count(store):
     """A stored session whose expiry moved on (a PATCHed TTL, changes while in use) still counts
     for its client after the expiry it was created with: redis keeps the client's set alive as
