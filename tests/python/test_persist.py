@@ -772,6 +772,35 @@ def test_concurrent_creates_through_two_daemons_do_not_pass_the_stored_count(tmp
         redis.stop()
 
 
+@pytest.mark.skipif(not REDIS_SERVER, reason="redis-server is not installed")
+def test_a_daemon_started_before_redis_is_not_ready_until_it_is(tmp_path):
+    """docs/DEPLOY.md: a daemon may be started before redis is up. It finds the store unreachable
+    at start (it counts the stored sessions), says so in its log, and /readyz is 503
+    store-unavailable, so a balancer sends it nothing it could not store; once redis is up, a
+    probe write (at most every 5 s) makes it ready, and it creates sessions."""
+    redis = RedisServer(tmp_path)                   # its port, nothing listening on it yet
+    d = Daemon("--store", redis.url, wait_ready=False)
+    try:
+        deadline = time.time() + 5                  # the count follows the first line on stdout
+        while time.time() < deadline and not any("session store" in l for l in d.log_lines):
+            time.sleep(0.05)
+        r = requests.get(d.url + "/readyz", timeout=10)
+        assert r.status_code == 503 and r.json()["type"] == "/errors/store-unavailable", r.text
+        start = [l for l in d.log_lines if "session store" in l]
+        assert start and " warn " in start[0] and "Connection refused" in start[0], d.log_lines
+        assert not any("-1 session" in l for l in d.log_lines), d.log_lines
+        redis.start()
+        deadline = time.time() + 8
+        while time.time() < deadline and \
+                requests.get(d.url + "/readyz", timeout=10).status_code != 200:
+            time.sleep(0.2)
+        assert requests.get(d.url + "/readyz", timeout=10).status_code == 200
+        assert requests.post(d.url + "/v1/sessions", json={}, timeout=10).status_code == 201
+    finally:
+        d.stop()
+        redis.stop()
+
+
 def test_sessions_kept_alive_past_their_first_expiry_still_count(store):
     """A stored session whose expiry moved on (a PATCHed TTL, changes while in use) still counts
     for its client after the expiry it was created with: redis keeps the client's set alive as
