@@ -423,6 +423,44 @@ def test_two_daemons_edits_with_if_match_star_are_both_made(tmp_path):
 
 
 @needs_store
+def test_requests_at_once_on_a_copy_behind_are_answered_from_the_stored_state(tmp_path):
+    """docs/DEPLOY.md: a daemon whose resident copy is behind reads the stored session again
+    before it answers. Several requests reaching it at once (a client's reads and edits, after
+    HAProxy moved the session to it) are all answered from the stored state, not only the first:
+    the others, which find the first checking, look again once it is done."""
+    with two_daemons(tmp_path) as (daemons, http, sid, token, auth, version):
+        url = [f"{d.url}/v1/sessions/{sid}" for d in daemons]
+        bad = []
+        for rnd in range(12):
+            r = http[1].get(url[1] + "/complex", headers=auth, timeout=60)   # resident on n2
+            assert r.status_code == 200 and r.headers["ETag"] == f'"{version}"', r.text
+            for i in range(3):                                            # n1 moves on
+                r = _patch(http[0], url[0], token, version,
+                           [{"index": 4, "position": [1, 1, 1 + 0.01 * (3 * rnd + i)]}])
+                assert r.status_code == 200, r.text
+                version = r.json()["version"]
+            at = version
+
+            def one(k):
+                if k % 2:
+                    return requests.get(url[1] + "/complex", headers=auth, timeout=60)
+                return requests.patch(url[1] + "/control-points", timeout=60,
+                                      json={"moves": [{"index": 4, "position": [1, 1, 2 + 0.1 * k]}]},
+                                      headers=dict(auth, **{"If-Match": f'"{at}"'}))
+            out = at_once(one, 6)
+            got = [(o.request.method, o.status_code, o.headers.get("ETag")) for o in out]
+            gets = [g for g in got if g[0] == "GET"]
+            patches = [g for g in got if g[0] == "PATCH"]
+            # the reads show the stored version (or one of the edits sent with them), never the
+            # one n2 held; of the edits naming the stored version exactly one is made
+            if any(g[1] != 200 or int(g[2].strip('"')) < at for g in gets) or \
+                    sorted(p[1] for p in patches) != [200, 412, 412]:
+                bad.append((rnd, at, got))
+            version = at + 1
+        assert not bad, bad
+
+
+@needs_store
 def test_a_ttl_given_through_one_daemon_holds_on_the_other(tmp_path):
     """PATCH /v1/sessions/{id} {"ttl_s"} through one daemon: the other, which holds the session
     resident with its old TTL, takes the new one at its next request (as it takes a newer
