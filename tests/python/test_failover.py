@@ -200,6 +200,32 @@ def test_haproxy_log_has_no_query(tmp_path):
             d.stop()
 
 
+@needs_haproxy
+def test_haproxy_session_rate_counts_encoded_paths(tmp_path):
+    """The daemons read the path percent-decoded, so POST /v1/%73essions creates a session as
+    POST /v1/sessions does: HAProxy's limit of 30 new sessions a minute per client address
+    (the daemons run with theirs lifted, docs/DEPLOY.md) counts both spellings alike."""
+    daemons = [Daemon() for _ in range(2)]
+    hap = None
+    try:
+        hap = HAProxy(tmp_path, [_addr(d) for d in daemons])
+        from http.client import HTTPConnection
+        codes = []
+        for path in ["/v1/%73essions", "/v1/s%65ssions", "/v1/sessions"] * 11:
+            c = HTTPConnection("127.0.0.1", hap.port, timeout=10)
+            c.request("POST", path, "{}", {"Content-Type": "application/json"})  # sent as is
+            r = c.getresponse()
+            r.read()
+            codes.append(r.status)
+            c.close()
+        assert codes[:30] == [201] * 30 and codes[30:] == [429] * 3, codes
+    finally:
+        if hap:
+            hap.stop()
+        for d in daemons:
+            d.stop()
+
+
 def assert_retry_problem(r, status, slug):
     """An answer of HAProxy's own in the daemons' form (docs/SERVICE.md "Errors"): a
     problem+json of that status and type, with Retry-After."""
