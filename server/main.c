@@ -527,8 +527,16 @@ int main(int argc, char **argv)
              (unsigned long long)srv.cfg.max_memory);
     if (persist_durable(srv.persist)) {
         long n = persist_count(srv.persist, (int64_t)time(NULL));
-        log_line(&srv, LOG_INFO, "session store %s: %ld session(s) stored, loaded on first use",
-                 persist_name(srv.persist), n);
+        if (n >= 0)
+            log_line(&srv, LOG_INFO, "session store %s: %ld session(s) stored, loaded on first use",
+                     persist_name(srv.persist), n);
+        else { /* redis not up yet: /readyz says store-unavailable until a probe write works */
+            char why[320];
+            persist_last_failure(srv.persist, why, sizeof why);
+            log_line(&srv, LOG_WARN, "session store %s cannot be read (%s): not ready until it "
+                     "can be written; sessions are loaded on first use", persist_name(srv.persist),
+                     why);
+        }
     }
     double swept = mono_now();
     while (!stop_requested) {

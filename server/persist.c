@@ -189,7 +189,15 @@ void persist_loaded_free(persist_loaded *l)
 }
 
 long persist_expire(persist *p, int64_t now) { return p->ops ? p->ops->expire(p->b, now) : 0; }
-long persist_count(persist *p, int64_t now) { return p->ops ? p->ops->count(p->b, now) : 0; }
+long persist_count(persist *p, int64_t now)
+{
+    if (!p->ops)
+        return 0;
+    long n = p->ops->count(p->b, now);
+    if (n < 0) /* the store cannot be read: not ready until a probe write succeeds */
+        noted_read(p, PERSIST_UNAVAILABLE);
+    return n;
+}
 
 persist_rc persist_owned(persist *p, const char *owner, int64_t now, long enough, long *n,
                          int64_t *soonest)
@@ -197,6 +205,14 @@ persist_rc persist_owned(persist *p, const char *owner, int64_t now, long enough
     *n = 0;
     *soonest = 0;
     return p->ops ? noted_read(p, p->ops->owned(p->b, owner, now, enough, n, soonest)) : PERSIST_OK;
+}
+
+persist_rc persist_admit(persist *p, const char *owner, bool hold)
+{
+    if (!p->ops || !p->ops->admit)
+        return PERSIST_OK;
+    persist_rc rc = p->ops->admit(p->b, owner, hold);
+    return hold ? noted_read(p, rc) : rc;
 }
 
 void persist_last_failure(persist *p, char *why, size_t cap)

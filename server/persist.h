@@ -116,7 +116,13 @@ long persist_expire(persist *p, int64_t now);
  * have to look further (redis checks each session it counts). */
 persist_rc persist_owned(persist *p, const char *owner, int64_t now, long enough, long *n,
                          int64_t *soonest);
-/* Stored unexpired sessions (-1 if the store cannot say). */
+/* Hold (hold true) or let go of the admission of `owner`'s new sessions among every daemon on
+ * a shared store: between the two, its count (persist_owned) and the create that count admits
+ * are one step for all of them (redis: a key held with an expiry, waited for). PERSIST_OK at
+ * once when the store is not shared. */
+persist_rc persist_admit(persist *p, const char *owner, bool hold);
+/* Stored unexpired sessions (-1 if the store cannot say: then unavailable, as persist_healthy
+ * tells, until a probe write succeeds). */
 long persist_count(persist *p, int64_t now);
 /* Can the store be written? false with the reason (the last failure) in why: after a write or
  * read the store refused for want of space or of a connection, until a probe write succeeds

@@ -24,6 +24,10 @@ typedef struct persist_ops {
     long (*count)(void *b, int64_t now);
     persist_rc (*owned)(void *b, const char *owner, int64_t now, long enough, long *n,
                         int64_t *soonest);
+    /* hold (hold true) or let go of the admission of owner's new sessions among every daemon
+     * on the store, so that its count (owned) and the create it admits are one step; NULL when
+     * the process's own lock is enough (one daemon per store) */
+    persist_rc (*admit)(void *b, const char *owner, bool hold);
     /* the back end's own description of its last failure (after a non-OK return), "<where>:
      * <what>" (the file or the server, then what happened); last_what is the <what> alone */
     const char *(*last_error)(void *b);

@@ -25,6 +25,10 @@
  *                             written or counted; r_owned also checks each remaining member
  *                             against its record (deleted without the set being told, or a TTL
  *                             PATCHed shorter), so the count is exact.
+ *   subdivd:a:{OWNER}  string held (SET NX PX ADMIT_HOLD_MS, a random value) while one daemon
+ *                             counts the client's sessions and creates the one the count admits,
+ *                             so that creates of one client through several daemons are counted one
+ *                             after the other (r_admit); a holder that dies lets go when it expires.
  *
  * Every write that depends on the stored version is one Lua script (atomic on the server): it
  * reads the hash's version, answers -1 when the hash is gone (PERSIST_ABSENT), 0 when the version
@@ -55,6 +59,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/random.h>
 #include <sys/time.h>
 #include <time.h>
 
@@ -143,9 +148,14 @@ static const char LUA_INDEX[] =
     "redis.call('EXPIREAT', KEYS[1], top[2])\n"
     "return 1\n";
 
-enum { S_CREATE, S_SNAPSHOT, S_APPEND, S_TOUCH, S_DELETE, S_LOAD, S_INDEX, NSCRIPTS };
+/* KEYS: the admission key. ARGV: the value its holder set. Lets go only of one's own hold. */
+static const char LUA_UNADMIT[] =
+    "if redis.call('GET', KEYS[1]) == ARGV[1] then redis.call('DEL', KEYS[1]) end\n"
+    "return 1\n";
+
+enum { S_CREATE, S_SNAPSHOT, S_APPEND, S_TOUCH, S_DELETE, S_LOAD, S_INDEX, S_UNADMIT, NSCRIPTS };
 static const char *const SCRIPTS[NSCRIPTS] = {LUA_CREATE, LUA_SNAPSHOT, LUA_APPEND, LUA_TOUCH,
-                                              LUA_DELETE, LUA_LOAD,   LUA_INDEX};
+                                              LUA_DELETE, LUA_LOAD,   LUA_INDEX,  LUA_UNADMIT};
 
 typedef struct redis_backend {
     pthread_mutex_t mu;
@@ -578,6 +588,64 @@ static persist_rc command_locked(redis_backend *b, int argc, const char **argv, 
     return rc;
 }
 
+/* How long one admission may be held (a daemon that dies holding it blocks its client's creates
+ * this long), and how long another waits for it: longer, so a dead holder's expires first. */
+#define ADMIT_HOLD_MS 5000
+#define ADMIT_WAIT_MS 7000
+static _Thread_local char admit_value[33]; /* this thread's hold (the caller holds and lets go) */
+
+/* Hold (or let go of) the admission of owner's new sessions among every daemon on this redis. */
+static persist_rc r_admit(void *vb, const char *owner, bool hold)
+{
+    redis_backend *b = vb;
+    char ka[KEY_CAP];
+    if (strlen(owner) + 12 >= KEY_CAP) {
+        set_err(b, "bad client key");
+        return PERSIST_UNAVAILABLE;
+    }
+    snprintf(ka, KEY_CAP, "subdivd:a:{%s}", owner);
+    if (!hold) {
+        const char *keys[1] = {ka}, *args[1] = {admit_value};
+        pthread_mutex_lock(&b->mu);
+        redisReply *r = eval_keys_locked(b, S_UNADMIT, 1, keys, 1, args, NULL);
+        pthread_mutex_unlock(&b->mu);
+        persist_rc rc = !r ? PERSIST_UNAVAILABLE
+                           : r->type == REDIS_REPLY_ERROR ? error_reply(b, NULL, r) : PERSIST_OK;
+        if (r)
+            freeReplyObject(r);
+        return rc; /* a hold not let go expires by itself */
+    }
+    unsigned char rnd[16];
+    if (getrandom(rnd, sizeof rnd, 0) != (ssize_t)sizeof rnd) {
+        set_err(b, "no random bytes for the admission of a session");
+        return PERSIST_UNAVAILABLE;
+    }
+    for (int i = 0; i < 16; i++)
+        sprintf(admit_value + 2 * i, "%02x", rnd[i]);
+    char px[16];
+    snprintf(px, sizeof px, "%d", ADMIT_HOLD_MS);
+    const char *argv[6] = {"SET", ka, admit_value, "NX", "PX", px};
+    size_t len[6] = {3, strlen(ka), strlen(admit_value), 2, 2, strlen(px)};
+    struct timespec pause = {0, 5 * 1000 * 1000};
+    for (int waited_ms = 0;; waited_ms += 5) {
+        pthread_mutex_lock(&b->mu);
+        redisReply *r = exec_locked(b, 6, argv, len);
+        pthread_mutex_unlock(&b->mu);
+        if (!r)
+            return PERSIST_UNAVAILABLE;
+        int type = r->type;
+        persist_rc rc = type == REDIS_REPLY_ERROR ? error_reply(b, NULL, r) : PERSIST_OK;
+        freeReplyObject(r);
+        if (type != REDIS_REPLY_NIL) /* OK: held (or an error) */
+            return rc;
+        if (waited_ms >= ADMIT_WAIT_MS) {
+            set_err(b, "the admission of a new session of this client stayed held");
+            return PERSIST_UNAVAILABLE;
+        }
+        nanosleep(&pause, NULL); /* another daemon is admitting one of this client's */
+    }
+}
+
 #define OWNED_BATCH 64
 
 /* The client's set without the members whose score is past (expired sessions), the others each
@@ -963,6 +1031,7 @@ const persist_ops persist_redis_ops = {
     .expire = r_expire,
     .count = r_count,
     .owned = r_owned,
+    .admit = r_admit,
     .probe = r_probe,
     .last_error = r_last_error,
     .last_what = r_last_what,

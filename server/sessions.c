@@ -375,10 +375,16 @@ session *store_create(store *st, int ttl_s, const rate_key *owner, int per_clien
             stripe = stripe * 31 + owner->b[i];
         admit = &st->admit[stripe & 15];
         pthread_mutex_lock(admit);
-        long n;
-        int64_t soonest, now = (int64_t)time(NULL);
-        a->stored = persist_owned(st->p, ohex, now, stored_per_client, &n, &soonest);
+        long n = 0;
+        int64_t soonest = 0, now = (int64_t)time(NULL);
+        /* and for every daemon on a shared store (its creates of this client wait there) */
+        a->stored = persist_admit(st->p, ohex, true);
+        bool held = a->stored == PERSIST_OK;
+        if (held)
+            a->stored = persist_owned(st->p, ohex, now, stored_per_client, &n, &soonest);
         if (a->stored != PERSIST_OK || n >= stored_per_client) {
+            if (held)
+                persist_admit(st->p, ohex, false);
             pthread_mutex_unlock(admit);
             if (a->stored == PERSIST_OK) {
                 /* a stored session counts through its expiry's second (persist.h) */
@@ -401,8 +407,10 @@ session *store_create(store *st, int ttl_s, const rate_key *owner, int per_clien
         if ((a->stored = persist_create(st->p, &m)) != PERSIST_OK)
             ok = false;
     }
-    if (admit) /* counted from now on */
+    if (admit) { /* counted from now on */
+        persist_admit(st->p, ohex, false);
         pthread_mutex_unlock(admit);
+    }
     s->touched = mono_now(); /* the store has its expiry */
     if (ok) {
         pthread_mutex_lock(&st->mu);
@@ -584,6 +592,14 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
     return s;
 }
 
+static uint64_t version_of(session *s)
+{
+    pthread_mutex_lock(&s->mu);
+    uint64_t v = s->version;
+    pthread_mutex_unlock(&s->mu);
+    return v;
+}
+
 session *store_get(store *st, const char *id, const char *token, store_miss *miss, char *why,
                    size_t cap)
 {
@@ -607,17 +623,27 @@ session *store_get(store *st, const char *id, const char *token, store_miss *mis
     pthread_mutex_unlock(&st->mu);
     if (!persist_durable(st->p))
         return found;
-    if (found && persist_shared(st->p) && !pthread_mutex_trylock(&found->write)) {
-        /* another daemon may have changed it (a change of our own in flight holds the lock) */
+    if (found && persist_shared(st->p)) {
+        /* another daemon may have changed it. The lock is held by a change of our own in flight
+         * (stored before it is published: the stored version may be ahead of ours meanwhile) or
+         * by another request's check: when it is busy, a stored version other than ours is
+         * looked at again once the lock is free, never taken as it is nor let by */
+        bool locked = !pthread_mutex_trylock(&found->write);
         uint64_t stored = 0;
         int ttl = 0;
         persist_rc rc = persist_version(st->p, id, &stored, &ttl);
+        if (!locked && rc == PERSIST_OK && stored != version_of(found)) {
+            pthread_mutex_lock(&found->write);
+            locked = true;
+            rc = persist_version(st->p, id, &stored, &ttl);
+        }
         pthread_mutex_lock(&found->mu);
         uint64_t mine = found->version;
-        if (rc == PERSIST_OK && ttl > 0 && ttl != found->ttl_s)
+        if (locked && rc == PERSIST_OK && ttl > 0 && ttl != found->ttl_s)
             found->ttl_s = ttl; /* given by another daemon (PATCH): not a change of content */
         pthread_mutex_unlock(&found->mu);
-        pthread_mutex_unlock(&found->write);
+        if (locked)
+            pthread_mutex_unlock(&found->write);
         if (rc == PERSIST_ABSENT || (rc == PERSIST_OK && stored != mine)) {
             store_drop(st, found, rc == PERSIST_ABSENT);
             session_unref(found);

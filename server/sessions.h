@@ -75,7 +75,8 @@ typedef struct store_admission {
  * least recently used idle one (as above), else refused with client_full. With a durable store
  * the client may also have at most `stored_per_client` unexpired sessions in the store (0: any
  * number; idle ones leave memory but stay there), else refused with client_stored_full; the
- * count and the stored record it admits are one step per client (concurrent creates wait). */
+ * count and the stored record it admits are one step per client, for all the daemons of a shared
+ * store (concurrent creates wait: persist_admit). */
 session *store_create(store *st, int ttl_s, const rate_key *owner, int per_client,
                           int stored_per_client, store_admission *a);
 /* Why store_get found nothing. */

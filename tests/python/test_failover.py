@@ -170,6 +170,62 @@ def test_session_paths_hash_on_the_id(tmp_path):
             d.stop()
 
 
+@needs_haproxy
+def test_haproxy_log_has_no_query(tmp_path):
+    """HAProxy's access log, like the daemons' own (docs/SERVICE.md "Starting"), writes the path
+    of a request, never its query: GET /events takes the bearer token as ?access_token= (an
+    EventSource cannot send headers), so a log of the request line would hold it."""
+    daemons = [Daemon() for _ in range(2)]
+    hap = None
+    try:
+        hap = HAProxy(tmp_path, [_addr(d) for d in daemons])
+        sid = "cd" * 16
+        secret = "Zq9xSecretTokenInTheQuery0123456789abcdefg"
+        for path in (f"/v1/sessions/{sid}/events?access_token={secret}",
+                     f"/v1/sessions/{sid}/levels/2?format=vtu&note={secret}",
+                     f"/healthz?{secret}"):
+            r = requests.get(hap.url + path, timeout=10)
+            assert r.status_code in (200, 400, 401, 404), (path, r.status_code, r.text)
+        deadline = time.time() + 10
+        while time.time() < deadline and hap.log().count(f"/v1/sessions/{sid}/") < 2:
+            time.sleep(0.1)
+        log = hap.log()
+        assert f'"GET /v1/sessions/{sid}/events HTTP/1.1"' in log, log
+        assert f'"GET /v1/sessions/{sid}/levels/2 HTTP/1.1"' in log, log
+        assert secret not in log, log
+    finally:
+        if hap:
+            hap.stop()
+        for d in daemons:
+            d.stop()
+
+
+@needs_haproxy
+def test_haproxy_session_rate_counts_encoded_paths(tmp_path):
+    """The daemons read the path percent-decoded, so POST /v1/%73essions creates a session as
+    POST /v1/sessions does: HAProxy's limit of 30 new sessions a minute per client address
+    (the daemons run with theirs lifted, docs/DEPLOY.md) counts both spellings alike."""
+    daemons = [Daemon() for _ in range(2)]
+    hap = None
+    try:
+        hap = HAProxy(tmp_path, [_addr(d) for d in daemons])
+        from http.client import HTTPConnection
+        codes = []
+        for path in ["/v1/%73essions", "/v1/s%65ssions", "/v1/sessions"] * 11:
+            c = HTTPConnection("127.0.0.1", hap.port, timeout=10)
+            c.request("POST", path, "{}", {"Content-Type": "application/json"})  # sent as is
+            r = c.getresponse()
+            r.read()
+            codes.append(r.status)
+            c.close()
+        assert codes[:30] == [201] * 30 and codes[30:] == [429] * 3, codes
+    finally:
+        if hap:
+            hap.stop()
+        for d in daemons:
+            d.stop()
+
+
 def assert_retry_problem(r, status, slug):
     """An answer of HAProxy's own in the daemons' form (docs/SERVICE.md "Errors"): a
     problem+json of that status and type, with Retry-After."""
@@ -390,6 +446,44 @@ def test_two_daemons_edits_with_if_match_star_are_both_made(tmp_path):
                                 timeout=60)
                 assert c.headers["ETag"] == f'"{version}"'
                 assert [c.json()["vertices"][i] for i in (0, 4)] == spots
+
+
+@needs_store
+def test_requests_at_once_on_a_copy_behind_are_answered_from_the_stored_state(tmp_path):
+    """docs/DEPLOY.md: a daemon whose resident copy is behind reads the stored session again
+    before it answers. Several requests reaching it at once (a client's reads and edits, after
+    HAProxy moved the session to it) are all answered from the stored state, not only the first:
+    the others, which find the first checking, look again once it is done."""
+    with two_daemons(tmp_path) as (daemons, http, sid, token, auth, version):
+        url = [f"{d.url}/v1/sessions/{sid}" for d in daemons]
+        bad = []
+        for rnd in range(12):
+            r = http[1].get(url[1] + "/complex", headers=auth, timeout=60)   # resident on n2
+            assert r.status_code == 200 and r.headers["ETag"] == f'"{version}"', r.text
+            for i in range(3):                                            # n1 moves on
+                r = _patch(http[0], url[0], token, version,
+                           [{"index": 4, "position": [1, 1, 1 + 0.01 * (3 * rnd + i)]}])
+                assert r.status_code == 200, r.text
+                version = r.json()["version"]
+            at = version
+
+            def one(k):
+                if k % 2:
+                    return requests.get(url[1] + "/complex", headers=auth, timeout=60)
+                return requests.patch(url[1] + "/control-points", timeout=60,
+                                      json={"moves": [{"index": 4, "position": [1, 1, 2 + 0.1 * k]}]},
+                                      headers=dict(auth, **{"If-Match": f'"{at}"'}))
+            out = at_once(one, 6)
+            got = [(o.request.method, o.status_code, o.headers.get("ETag")) for o in out]
+            gets = [g for g in got if g[0] == "GET"]
+            patches = [g for g in got if g[0] == "PATCH"]
+            # the reads show the stored version (or one of the edits sent with them), never the
+            # one n2 held; of the edits naming the stored version exactly one is made
+            if any(g[1] != 200 or int(g[2].strip('"')) < at for g in gets) or \
+                    sorted(p[1] for p in patches) != [200, 412, 412]:
+                bad.append((rnd, at, got))
+            version = at + 1
+        assert not bad, bad
 
 
 @needs_store

@@ -729,6 +729,78 @@ def test_concurrent_creates_do_not_pass_the_stored_count(store):
         d.stop()
 
 
+@pytest.mark.skipif(not REDIS_SERVER, reason="redis-server is not installed")
+def test_concurrent_creates_through_two_daemons_do_not_pass_the_stored_count(tmp_path):
+    """docs/SERVICE.md: the daemons of one redis share a client's count of stored sessions, and
+    concurrent creates are counted one after the other, across the daemons too: creates from one
+    address sent at once to two daemons on one redis get --max-stored-sessions-per-client
+    sessions, no more (each daemon counting while the other creates would both see room)."""
+    redis = RedisServer(tmp_path).start()
+    ds = []
+    try:
+        ds = [store_daemon(redis, "--max-connections-per-client", "0",
+                           "--max-stored-sessions-per-client", "3") for _ in range(2)]
+        for rnd in range(8):
+            src, n = f"127.0.1.{rnd + 1}", 16
+            go, out = threading.Barrier(n), []
+
+            def one(c):
+                go.wait()
+                c.request("POST", "/v1/sessions", "{}", {"Content-Type": "application/json"})
+                r = c.getresponse()
+                r.read()
+                out.append(r.status)
+                c.close()
+
+            conns = []
+            for k in range(n):                      # half to each daemon
+                host, port = ds[k % 2].url.split("//")[1].split(":")
+                conns.append(http.client.HTTPConnection(host, int(port), timeout=30,
+                                                        source_address=(src, 0)))
+            for c in conns:
+                c.connect()
+            threads = [threading.Thread(target=one, args=(c,)) for c in conns]
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join()
+            assert sorted(out) == [201] * 3 + [429] * (n - 3), (rnd, out)
+            assert [create_from(d, src)[0] for d in ds] == [429, 429]
+    finally:
+        for d in ds:
+            d.stop()
+        redis.stop()
+
+
+@pytest.mark.skipif(not REDIS_SERVER, reason="redis-server is not installed")
+def test_a_daemon_started_before_redis_is_not_ready_until_it_is(tmp_path):
+    """docs/DEPLOY.md: a daemon may be started before redis is up. It finds the store unreachable
+    at start (it counts the stored sessions), says so in its log, and /readyz is 503
+    store-unavailable, so a balancer sends it nothing it could not store; once redis is up, a
+    probe write (at most every 5 s) makes it ready, and it creates sessions."""
+    redis = RedisServer(tmp_path)                   # its port, nothing listening on it yet
+    d = Daemon("--store", redis.url, wait_ready=False)
+    try:
+        deadline = time.time() + 5                  # the count follows the first line on stdout
+        while time.time() < deadline and not any("session store" in l for l in d.log_lines):
+            time.sleep(0.05)
+        r = requests.get(d.url + "/readyz", timeout=10)
+        assert r.status_code == 503 and r.json()["type"] == "/errors/store-unavailable", r.text
+        start = [l for l in d.log_lines if "session store" in l]
+        assert start and " warn " in start[0] and "Connection refused" in start[0], d.log_lines
+        assert not any("-1 session" in l for l in d.log_lines), d.log_lines
+        redis.start()
+        deadline = time.time() + 8
+        while time.time() < deadline and \
+                requests.get(d.url + "/readyz", timeout=10).status_code != 200:
+            time.sleep(0.2)
+        assert requests.get(d.url + "/readyz", timeout=10).status_code == 200
+        assert requests.post(d.url + "/v1/sessions", json={}, timeout=10).status_code == 201
+    finally:
+        d.stop()
+        redis.stop()
+
+
 def test_sessions_kept_alive_past_their_first_expiry_still_count(store):
     """A stored session whose expiry moved on (a PATCHed TTL, changes while in use) still counts
     for its client after the expiry it was created with: redis keeps the client's set alive as

@@ -145,5 +145,9 @@ def test_log_lines_and_metrics():
         for name in ("subdivd_request_duration_seconds", "subdivd_compute_seconds_total",
                      "subdivd_compute_total"):
             assert name in doc and f"# TYPE {name} " in text
+        # and every metric served is in the list of "Health and metrics"
+        section = doc.split("## Health and metrics", 1)[1].split("\n## ", 1)[0]
+        served = re.findall(r"^# TYPE (\w+) ", text, re.M)
+        assert served and not [n for n in served if f"`{n}" not in section], served
     finally:
         d.stop()
