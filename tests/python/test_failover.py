@@ -11,9 +11,11 @@
 
 The store tests need `subdivd --store` (the persistence integration); they skip while the daemon
 does not offer it. HAProxy's configuration is deploy/haproxy.cfg with only its `bind` line and
-its `server` addresses rewritten, so the test checks the file that is shipped.
+its `server` addresses rewritten (and, for daemons run with fewer connections, its `maxconn` and
+`timeout queue`), so the test checks the file that is shipped.
 """
 import contextlib
+import http.client
 import pathlib
 import re
 import shutil
@@ -51,10 +53,20 @@ needs_store = pytest.mark.skipif(
            "(the persistence integration has not landed)")
 
 
-def haproxy_config(front_port, servers):
+def haproxy_config(front_port, servers, maxconn=None, queue=None):
     """deploy/haproxy.cfg for this machine: the frontend on front_port, server n<k> at
-    servers[k-1] ("host:port") in every backend."""
+    servers[k-1] ("host:port") in every backend; with maxconn=(sessions, any) the two backends'
+    maxconn (for daemons run with fewer connections than the shipped 256) and with queue its
+    `timeout queue`."""
     text = CFG.read_text()
+    if maxconn:
+        text, n = re.subn(r"(?m)^(\s*default-server\b.*\bmaxconn )\d+", lambda m: m.group(1) + "@",
+                          text)
+        assert n == 2, "deploy/haproxy.cfg: a maxconn in each backend's default-server expected"
+        text = text.replace("@", str(maxconn[0]), 1).replace("@", str(maxconn[1]), 1)
+    if queue:
+        text, n = re.subn(r"(?m)^(\s*timeout queue )\S+", rf"\g<1>{queue}", text)
+        assert n == 1
     text, n = re.subn(r"(?m)^(\s*bind\s+)\S+", rf"\g<1>127.0.0.1:{front_port}", text)
     assert n == 1, "deploy/haproxy.cfg: one bind line expected"
     names = set()
@@ -71,10 +83,10 @@ def haproxy_config(front_port, servers):
 class HAProxy:
     """haproxy in the foreground (-db) with the generated configuration; its log in `log`."""
 
-    def __init__(self, directory, servers):
+    def __init__(self, directory, servers, **config):
         self.port = free_port()
         self.cfg = pathlib.Path(directory) / "haproxy.cfg"
-        self.cfg.write_text(haproxy_config(self.port, servers))
+        self.cfg.write_text(haproxy_config(self.port, servers, **config))
         chk = subprocess.run([HAPROXY, "-c", "-f", str(self.cfg)], capture_output=True, text=True)
         assert chk.returncode == 0, chk.stdout + chk.stderr
         self.logf = pathlib.Path(directory) / "haproxy.log"
@@ -546,3 +558,56 @@ def at_once(call, n=2):
     for t in th:
         t.join(60)
     return out
+
+
+@needs_haproxy
+@needs_store
+def test_a_daemon_full_of_event_streams_queues_requests_in_haproxy(tmp_path):
+    """Event streams hold a daemon's connections for as long as they are open. HAProxy opens at
+    most `maxconn` connections to a daemon (its --max-connections minus --connection-reserve,
+    over both backends): a request past them waits in HAProxy's queue and is served when a stream
+    ends, or after `timeout queue` is a 503 not-ready problem with Retry-After — where the daemon
+    would have refused the connection, a 502 page clients do not retry. Daemons of 10
+    connections, 2 kept in reserve: maxconn 6 + 2."""
+    redis = RedisServer(tmp_path).start()
+    daemons, hap, streams = [], None, []
+    try:
+        daemons = [Daemon("--store", redis.url, "--max-connections", "10",
+                          "--connection-reserve", "2", "--sse-heartbeat", "1") for _ in range(2)]
+        hap = HAProxy(tmp_path, [_addr(d) for d in daemons], maxconn=(6, 2), queue="3s")
+        r = requests.post(hap.url + "/v1/sessions", json={}, timeout=10)
+        assert r.status_code == 201, r.text
+        sid, auth = r.json()["id"], {"Authorization": f"Bearer {r.json()['token']}"}
+        base = f"{hap.url}/v1/sessions/{sid}"
+        for _ in range(6):   # the daemon's six connections of this backend, held
+            st = http.client.HTTPConnection("127.0.0.1", hap.port, timeout=30)
+            st.request("GET", f"/v1/sessions/{sid}/events", headers=auth)
+            assert st.getresponse().status == 200
+            streams.append(st)
+        # a seventh request waits: no answer while the streams are open, then 503 in the
+        # daemons' form
+        t0 = time.monotonic()
+        r = requests.get(base, headers=auth, timeout=30)
+        waited = time.monotonic() - t0
+        assert r.status_code == 503 and waited >= 2.5, (r.status_code, waited, r.text)
+        assert_retry_problem(r, 503, "not-ready")
+        # queued again, and served as soon as one stream ends
+        out = {}
+        th = threading.Thread(target=lambda: out.update(r=requests.get(base, headers=auth,
+                                                                       timeout=30)))
+        th.start()
+        time.sleep(0.5)
+        assert "r" not in out, "answered while every connection of the daemon was held"
+        streams.pop().close()   # HAProxy finds it closed at the next heartbeat (1 s)
+        th.join(10)
+        assert out["r"].status_code == 200, out["r"].text
+        # the streams held are still open and the daemon is served through the other backend
+        assert requests.get(hap.url + "/healthz", timeout=10).status_code == 200
+    finally:
+        for st in streams:
+            st.close()
+        if hap:
+            hap.stop()
+        for d in daemons:
+            d.stop()
+        redis.stop()
