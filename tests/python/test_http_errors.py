@@ -135,6 +135,8 @@ CASES = [
     ("body-on-get", "GET", "/complex", b'{"a":1}', J, 400, None),
     ("wrong-method", "POST", "/complex", TET, None, 405, None),
     ("patch-session-no-ttl", "PATCH", "", {}, None, 400, "/ttl_s"),
+    # an edit of nothing names the two members it takes (it had no pointer at all)
+    ("patch-edit-empty", "PATCH", "/control-points", {}, {"If-Match": '"1"'}, 400, "/moves"),
     ("put-session", "PUT", "", {}, None, 405, None),
     ("unknown-subpath", "GET", "/nothing", None, None, 404, None),
     ("stale-if-match", "PUT", "/complex", TET, {"If-Match": '"999"'}, 412, None),
