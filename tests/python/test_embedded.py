@@ -665,6 +665,17 @@ def test_an_import_with_a_damaged_binding_names_the_entry(daemon):
     assert requests.post(daemon.url + "/v1/sessions", json={"import": ex}).status_code == 201
 
 
+def test_a_models_delta_refuses_parameters_it_does_not_take(daemon):
+    """GET /embedded/{name}/delta takes since and format (docs/API.md, the OpenAPI document); a
+    model has no attributes, and attributes= was taken and ignored, whatever it named."""
+    s, v = session_with_model(daemon, model_points(5))
+    assert s.req("GET", "/embedded/m/delta", params={"since": v}).status_code == 200
+    for q in ({"attributes": "nope"}, {"attributes": ""}, {"parts": "solids"}):
+        r = s.req("GET", "/embedded/m/delta", params=dict({"since": v}, **q))
+        assert r.status_code == 400 and r.json()["type"] == "/errors/unknown-parameter", r.text
+        assert r.json()["errors"][0]["pointer"] == next(iter(q))
+
+
 def test_a_second_model_keeps_the_first_ones_delta(daemon):
     """PUT of another model is a new version, not a change of the level: deltas since before it
     are still answered."""
