@@ -140,8 +140,13 @@ int api_details_put(api_model *m, json_t *v, api_problem *p)
                 api_ptr_index(ptr, sizeof ptr, "/details", keys[i].k);
                 api_ptr_key(f, sizeof f, ptr, "index");
                 rc = api_fail_at(p, 422, "repeated-index", f,
-                                 "point %u of level %u has an offset twice (also /details/%zu)",
-                                 keys[i].index, keys[i].level, keys[i - 1].k);
+                                 "point %u of level %u has an offset twice", keys[i].index,
+                                 keys[i].level);
+                /* the other entry as a pointer of its own: an import prefixes it (a pointer in
+                 * the message would name the wrong place in an import's document) */
+                api_ptr_index(ptr, sizeof ptr, "/details", keys[i - 1].k);
+                api_ptr_key(f, sizeof f, ptr, "index");
+                api_add_error(p, f, "the same point");
             }
     }
     if (!rc && n)

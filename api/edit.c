@@ -465,8 +465,10 @@ int api_edit_commit_by(api_model *m, json_t *body, uint64_t version, const api_l
                 break;
         }
     api_free(seen);
-    if (!rc && !mv && !at)
-        rc = api_fail(p, 400, "missing-field", "give \"moves\" and/or \"attributes\"");
+    if (!rc && !mv && !at) {
+        rc = api_fail_at(p, 400, "missing-field", "/moves", "give \"moves\" and/or \"attributes\"");
+        api_add_error(p, "/attributes", "or this one");
+    }
     int top = 0; /* the finest level a move names: computed first, within the limits */
     for (size_t i = 0; !rc && mv && i < parts[0].n; i++)
         top = parts[0].at[i].level > top ? parts[0].at[i].level : top;

@@ -816,10 +816,22 @@ static int adopt_binding(api_model *m, api_embed_def *d, const uint32_t *idx, co
     sd_error err = {0};
     const sd_level *lv = sd_complex_level(m->c, d->level, &err);
     sd_allocator al = api_mem_core_allocator();
-    if (!lv || sd_embed_restore(lv, d->nv, idx, w, d->rest, &al, 0, &e.bind, &err))
-        rc = err.code == SD_ERR_NOMEM ? api_fail(p, 503, "out-of-memory", "out of memory")
-                                      : api_fail_at(p, 422, "outside", at, "model \"%s\": %s",
-                                                    d->name, err.message);
+    if (!lv || sd_embed_restore(lv, d->nv, idx, w, d->rest, &al, 0, &e.bind, &err)) {
+        char ptr[sizeof p->errors[0].pointer];
+        if (err.code == SD_ERR_NOMEM)
+            rc = api_fail(p, 503, "out-of-memory", "out of memory");
+        else if (lv && *at && err.code == SD_ERR_VALUE && err.item >= 0) {
+            /* a saved binding naming a point the level does not have, or weights that do not
+             * add up to 1: that entry (its index k when one is named), not "outside" */
+            if (err.field >= 0)
+                snprintf(ptr, sizeof ptr, "%s/%ld/%d", at, err.item, err.field);
+            else
+                snprintf(ptr, sizeof ptr, "%s/%ld", at, err.item);
+            rc = api_fail_at(p, 422, "out-of-range", ptr, "model \"%s\": %s", d->name,
+                             err.message);
+        } else
+            rc = api_fail_at(p, 422, "outside", at, "model \"%s\": %s", d->name, err.message);
+    }
     if (!rc) {
         for (uint32_t v = 0; v < d->nv; v++)
             e.outside += idx[4 * (size_t)v] == UINT32_MAX;
@@ -909,7 +921,7 @@ int api_embed_import(api_model *m, json_t *emb, const char *base, const api_limi
                            API_MAX_EMBEDDED);
     json_object_foreach(emb, name, v) {
         char at[160];
-        snprintf(at, sizeof at, "%s/%.48s", base, name);
+        api_ptr_key(at, sizeof at, base, name); /* escaped (RFC 6901), whole when it fits */
         api_embed_def *d = NULL;
         api_problem q = {0};
         json_t *def = json_is_object(v) ? json_copy(v) : json_incref(v), *binding = NULL;

@@ -20,16 +20,17 @@
 /* A non-negative decimal index below `n` from a query value; -1 + problem otherwise. */
 static long query_index(const char *s, uint32_t n, const char *name, api_problem *p)
 {
-    char *end;
+    char *end = NULL;
     errno = 0;
     long v = s && isdigit((unsigned char)*s) ? strtol(s, &end, 10) : -1;
-    if (v < 0 || *end || errno) {
-        api_fail_at(p, 400, "wrong-type", name, "%s must be a vertex index (a non-negative integer)",
-                    name);
+    if (v < 0 || *end) { /* a query value: bad-parameter, as since= and the other parameters */
+        api_fail_at(p, 400, "bad-parameter", name,
+                    "%s must be a vertex index (a non-negative integer)", name);
         return -1;
     }
-    if ((unsigned long)v >= n) {
-        api_fail_at(p, 422, "out-of-range", name, "vertex %ld out of range (%u vertices)", v, n);
+    if (errno || (unsigned long)v >= n) { /* digits past long's range are out of range too */
+        api_fail_at(p, 422, "out-of-range", name, "vertex %.*s%s out of range (%u vertices)",
+                    (int)(end - s < 24 ? end - s : 24), s, end - s > 24 ? "…" : "", n);
         return -1;
     }
     return v;

@@ -11,6 +11,7 @@
 #include "mem.h"
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 /* Depth of nesting, stopping as soon as it passes `max` (jansson itself allows 2048). */
@@ -178,9 +179,18 @@ int api_num_get_number(api_num v, const char *ptr, double maxabs, double *out, a
         return api_fail_at(p, 400, "wrong-type", ptr, "must be a number, not %s",
                            num_type_name(v));
     double x = api_num_value(v);
-    if (!isfinite(x) || fabs(x) > maxabs)
-        return api_fail_at(p, 422, "out-of-range", ptr, "%g exceeds the allowed magnitude %g", x,
+    if (!isfinite(x) || fabs(x) > maxabs) {
+        /* the shortest digits that read back as x: %g alone said "1e+15 exceeds the allowed
+         * magnitude 1e+15" of 1.0000001e15 */
+        char t[32];
+        for (int prec = 6; prec <= 17; prec++) {
+            snprintf(t, sizeof t, "%.*g", prec, x);
+            if (!isfinite(x) || strtod(t, NULL) == x)
+                break;
+        }
+        return api_fail_at(p, 422, "out-of-range", ptr, "%s exceeds the allowed magnitude %g", t,
                            maxabs);
+    }
     *out = x;
     return 0;
 }

@@ -1078,10 +1078,13 @@ sd_result sd_embed_restore(const sd_level *lv, size_t n, const uint32_t *idx, co
             continue;
         double sum = 0, mag = 0;
         for (int k = 0; k < 4; k++) {
-            if (idx[4 * i + k] >= nlv || !isfinite(w[4 * i + k]))
+            if (idx[4 * i + k] >= nlv)
                 return sdi_fail(err, SD_ERR_VALUE, (long)i, k, "model vertex %zu: level vertex "
-                                "%u or its weight is not one of level %u", i, idx[4 * i + k],
-                                sd_level_index(lv));
+                                "%u is not one of level %u (%u points)", i, idx[4 * i + k],
+                                sd_level_index(lv), nlv);
+            if (!isfinite(w[4 * i + k]))
+                return sdi_fail(err, SD_ERR_VALUE, (long)i, 4 + k, "model vertex %zu: weight %d "
+                                "is not finite", i, k);
             sum += w[4 * i + k];
             mag += fabs(w[4 * i + k]);
         }

@@ -746,7 +746,8 @@ sd_result sd_embed_bind(const sd_level *lv, const double *xyz, size_t n, sd_outs
 /* An embedding from a binding saved with sd_embed_weights (a session's export): per model
  * vertex its 4 level vertices and weights (idx[4i] = UINT32_MAX: a fixed vertex, kept at
  * rest[3i..]), checked against lv (indices in range, weights finite and summing to 1 within
- * 1e-9 of their magnitudes: SD_ERR_VALUE otherwise). The positions it gives are those of the embedding it was saved
+ * 1e-9 of their magnitudes: SD_ERR_VALUE otherwise, its item the model vertex and its field
+ * the entry of [i0..i3, w0..w3] at fault, -1 for the sum). The positions it gives are those of the embedding it was saved
  * from, bit for bit. */
 sd_result sd_embed_restore(const sd_level *lv, size_t n, const uint32_t *idx, const double *w,
                            const double *rest, const sd_allocator *alloc, size_t max_bytes,

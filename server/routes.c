@@ -1093,7 +1093,8 @@ static void matrix(req *r, api_model *m, int level)
 
 static void h_matrix(req *r) { with_level(r, matrix); }
 
-static const char *const DELTA_KEYS[] = {"since", "format", "attributes", NULL};
+/* an embedded model has no attributes: its delta takes since and format alone */
+static const char *const EMBED_DELTA_KEYS[] = {"since", "format", NULL};
 static const char *const LEVEL_DELTA_KEYS[] = {"since", "format", "attributes", "parts", NULL};
 
 /* GET /levels/{L}/delta: the points of a level the client holds that changed since a version
@@ -1381,7 +1382,7 @@ static const route ROUTES[] = {
     {"PUT", "/v1/sessions/{id}/embedded/{name}", h_put_embedded, 1, 2, EMBED_PUT_KEYS},
     {"GET", "/v1/sessions/{id}/embedded/{name}", h_get_embedded, 1, 0, EMBED_GET_KEYS},
     {"DELETE", "/v1/sessions/{id}/embedded/{name}", h_delete_embedded, 1, 0, NULL},
-    {"GET", "/v1/sessions/{id}/embedded/{name}/delta", h_embedded_delta, 1, 0, DELTA_KEYS},
+    {"GET", "/v1/sessions/{id}/embedded/{name}/delta", h_embedded_delta, 1, 0, EMBED_DELTA_KEYS},
     {"GET", "/v1/sessions/{id}/analysis", h_analysis, 1, 0, ANALYSIS_KEYS},
     {"GET", "/v1/sessions/{id}/matrices/{L}", h_matrix, 1, 0, MATRIX_KEYS},
     {"GET", "/healthz", h_healthz, 0, 0, NULL},

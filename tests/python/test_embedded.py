@@ -633,6 +633,49 @@ def test_an_import_with_a_model_and_no_complex_is_refused(daemon):
     assert requests.get(daemon.url + "/healthz").status_code == 200
 
 
+def test_an_import_with_a_damaged_binding_names_the_entry(daemon):
+    """A saved binding is checked against its level: a level point the level does not have, or
+    weights that do not add up to 1, is a 422 out-of-range at that entry of the document (it was
+    `outside`, the refusal of vertices outside every solid cell, at the whole binding). A model's
+    name goes into the pointers escaped (RFC 6901) and whole (it was cut at 48 characters)."""
+    s, _ = session_with_model(daemon, model_points(5))
+    ex = s.req("GET", "/export").json()
+
+    def refused(doc):
+        r = requests.post(daemon.url + "/v1/sessions", json={"import": doc})
+        assert r.status_code == 422 and r.headers["Content-Type"] == "application/problem+json", r.text
+        j = r.json()
+        return j["type"], j["errors"][0]["pointer"], j["detail"]
+
+    doc = json.loads(json.dumps(ex))
+    doc["embedded"]["m"]["binding"][3][2] = 1000000
+    t, ptr, detail = refused(doc)
+    assert (t, ptr) == ("/errors/out-of-range", "/import/embedded/m/binding/3/2"), detail
+    assert "1000000" in detail
+    doc = json.loads(json.dumps(ex))
+    doc["embedded"]["m"]["binding"][1][4:8] = [1, 1, 1, 1]
+    t, ptr, detail = refused(doc)
+    assert (t, ptr) == ("/errors/out-of-range", "/import/embedded/m/binding/1"), detail
+    assert "add up to 4" in detail
+    for name, escaped in (("a/b~c", "a~1b~0c"), ("n" * 64, "n" * 64)):
+        doc = json.loads(json.dumps(ex))
+        doc["embedded"][name] = doc["embedded"].pop("m")
+        t, ptr, _ = refused(doc)
+        assert (t, ptr) == ("/errors/invalid-name", "/import/embedded/" + escaped)
+    assert requests.post(daemon.url + "/v1/sessions", json={"import": ex}).status_code == 201
+
+
+def test_a_models_delta_refuses_parameters_it_does_not_take(daemon):
+    """GET /embedded/{name}/delta takes since and format (docs/API.md, the OpenAPI document); a
+    model has no attributes, and attributes= was taken and ignored, whatever it named."""
+    s, v = session_with_model(daemon, model_points(5))
+    assert s.req("GET", "/embedded/m/delta", params={"since": v}).status_code == 200
+    for q in ({"attributes": "nope"}, {"attributes": ""}, {"parts": "solids"}):
+        r = s.req("GET", "/embedded/m/delta", params=dict({"since": v}, **q))
+        assert r.status_code == 400 and r.json()["type"] == "/errors/unknown-parameter", r.text
+        assert r.json()["errors"][0]["pointer"] == next(iter(q))
+
+
 def test_a_second_model_keeps_the_first_ones_delta(daemon):
     """PUT of another model is a new version, not a change of the level: deltas since before it
     are still answered."""

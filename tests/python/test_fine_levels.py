@@ -704,3 +704,24 @@ def test_a_detail_past_32_bit_indices_names_the_levels_true_count(daemon):
     body["details"][0]["index"] = points
     r = s.put_complex(body)
     assert r.status_code == 422 and f"level 12 has {points} points" in r.json()["detail"]
+
+
+def test_a_repeated_detail_names_both_entries_in_the_document(daemon):
+    """A point given two offsets is a 422 repeated-index at the later entry, and the earlier one
+    is an error of its own with its pointer, so that an import's problem points at both in its
+    document (the message said "also /details/0", a place the import's body does not have)."""
+    tet = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], "simplices": [[0, 1, 2, 3]],
+           "details": [{"level": 1, "index": 2, "offset": [0, 0, 0.1]},
+                       {"level": 2, "index": 2, "offset": [0, 0, 0.1]},
+                       {"level": 1, "index": 2, "offset": [0, 0.1, 0]}]}
+    s = Session(daemon)
+    r = s.put_complex(tet)
+    assert r.status_code == 422 and r.json()["type"] == "/errors/repeated-index", r.text
+    assert [e["pointer"] for e in r.json()["errors"]] == ["/details/2/index", "/details/0/index"]
+    doc = {"format": "subdivd-session", "format_version": 1, "version": 3, "complex": tet,
+           "tags": {"singular": []}, "rules": {}, "embedded": {}}
+    r = s.http.post(daemon.url + "/v1/sessions", json={"import": doc})
+    assert r.status_code == 422 and r.json()["type"] == "/errors/repeated-index", r.text
+    assert [e["pointer"] for e in r.json()["errors"]] == ["/import/complex/details/2/index",
+                                                         "/import/complex/details/0/index"]
+    assert "/details/" not in r.json()["detail"]

@@ -74,6 +74,24 @@ def test_edge_block(daemon, k):
     assert mags == sorted(mags, reverse=True) and mags[1] < 1
 
 
+@pytest.mark.parametrize("params,status,slug", [
+    ({"vertex": "x"}, 400, "bad-parameter"), ({"vertex": "-1"}, 400, "bad-parameter"),
+    ({"edge": "0,x"}, 400, "bad-parameter"), ({"vertex": "1.0"}, 400, "bad-parameter"),
+    ({"vertex": "4294967296"}, 422, "out-of-range"),
+    ({"vertex": "99999999999999999999"}, 422, "out-of-range"),
+    ({"edge": "0,99999999999999999999"}, 422, "out-of-range")])
+def test_analysis_query_values(daemon, params, status, slug):
+    """vertex= and edge= are query parameters: a value that is not an index is a 400
+    bad-parameter (docs/SERVICE.md "Errors"; it was wrong-type, the slug of a body of the wrong
+    shape), and an index past every vertex is a 422 out-of-range whether or not it fits in a
+    machine integer (20 digits were a 400)."""
+    s = Session(daemon)
+    assert s.put_complex(bipyramid()).status_code == 200
+    r = s.req("GET", "/analysis", params=params)
+    assert r.status_code == status and r.json()["type"] == "/errors/" + slug, r.text
+    assert r.json()["errors"][0]["pointer"] == next(iter(params)), r.text
+
+
 @pytest.mark.parametrize("params,status,pointer", [
     ({}, 400, "vertex"), ({"vertex": 0, "edge": "0,1"}, 400, "vertex"), ({"vertex": "x"}, 400, "vertex"),
     ({"vertex": 99}, 422, "vertex"), ({"edge": "0"}, 400, "edge"), ({"edge": "1,2,3"}, 400, "edge"),

@@ -135,6 +135,8 @@ CASES = [
     ("body-on-get", "GET", "/complex", b'{"a":1}', J, 400, None),
     ("wrong-method", "POST", "/complex", TET, None, 405, None),
     ("patch-session-no-ttl", "PATCH", "", {}, None, 400, "/ttl_s"),
+    # an edit of nothing names the two members it takes (it had no pointer at all)
+    ("patch-edit-empty", "PATCH", "/control-points", {}, {"If-Match": '"1"'}, 400, "/moves"),
     ("put-session", "PUT", "", {}, None, 405, None),
     ("unknown-subpath", "GET", "/nothing", None, None, 404, None),
     ("stale-if-match", "PUT", "/complex", TET, {"If-Match": '"999"'}, 412, None),
@@ -394,3 +396,20 @@ def test_limits():
         assert s.req("GET").json()["version"] == 1
     finally:
         assert d.stop() == 0
+
+
+def test_a_magnitude_refusal_gives_the_value_as_sent(daemon):
+    """A number past its bound is named with the digits that tell it from the bound: 1.0000001e15
+    against 1e15 (it read "1e+15 exceeds the allowed magnitude 1e+15")."""
+    s = Session(daemon)
+    assert s.put_complex(TET).status_code == 200
+    r = s.req("PATCH", "/control-points", headers={"If-Match": '"1"'},
+              json={"moves": [{"index": 1, "position": [1.0000001e15, 0, 0]}]})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/moves/0/position/0", r.text
+    assert r.json()["detail"] == "1.0000001e+15 exceeds the allowed magnitude 1e+15", r.text
+    r = s.put_complex(cx(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, -1.0000001e15]]))
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/vertices/3/2", r.text
+    assert "= -1.0000001e+15 exceeds the allowed magnitude 1e+15" in r.json()["detail"], r.text
+    r = s.req("PATCH", "/control-points", headers={"If-Match": '"1"'},
+              json={"moves": [{"index": 1, "position": [0, 1e300, 0]}]})
+    assert r.json()["detail"] == "1e+300 exceeds the allowed magnitude 1e+15", r.text

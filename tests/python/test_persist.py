@@ -312,6 +312,9 @@ def test_an_import_at_the_largest_version_restores_after_changes(tmp_path):
         assert r.status_code == 200, r.text
         assert r.json()["version"] == 2 ** 52 + 3
         assert t.level(2, format="json").json()["vertices"] == want
+        # its export is past what an import takes (docs/API.md says so)
+        r = requests.post(d.url + "/v1/sessions", json={"import": t.req("GET", "/export").json()})
+        assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/import/version", r.text
     finally:
         d.stop()
 
