@@ -667,6 +667,24 @@ int api_refine(const api_model *cur, json_t *body, const api_limits *lim, api_mo
         else if (st[0].nov)
             memcpy(st[0].ov, cur->rules.overrides, st[0].nov * sizeof *st[0].ov);
     }
+    /* a bound of the result before any work: every selected simplex of k vertices ends as at
+     * least RED[k]^depth (its red descendants; upgrades and green cells taken back only add),
+     * every other simplex as at least one */
+    if (!rc && lim->max_simplices) {
+        static const uint64_t RED[5] = {1, 1, 2, 4, 8};
+        uint64_t least = 0;
+        for (uint32_t s = 0; s < cur->in->ns; s++) {
+            uint64_t n = 1;
+            for (long long d = 0; st[0].sel[s] && d < depth; d++)
+                n *= RED[cur->in->size[s]];
+            least += n;
+        }
+        if (least > lim->max_simplices)
+            rc = api_fail_limit(p, "max_simplices", lim->max_simplices, least,
+                                "the refined complex would have at least %llu simplices (the "
+                                "selection's red descendants at depth %lld alone); refine a "
+                                "smaller region or less deep", (unsigned long long)least, depth);
+    }
     int j = 0, runs = 0;
     while (!rc && j < depth) {
         rstep nx;

@@ -524,3 +524,30 @@ def test_a_refinement_past_the_step_cap_says_so(daemon):
     assert capped is not None, "no tetrahedron of the ball needed more than 64 steps"
     assert done["steps"] == 64
     no_hanging_vertex(capped.req("GET", "/complex").json())
+
+
+def test_a_refinement_past_the_limit_is_refused_before_any_step():
+    """The selection's own red descendants bound the result from below: a tetrahedron split red
+    to depth d ends as 8^d tetrahedra, every other simplex as at least one. One tetrahedron of
+    the 48 of a 2^3 Kuhn block to depth 4 makes at least 47 + 8^4 = 4143: past --max-simplices
+    4000 it is refused at once with that count (the steps themselves would have found out at the
+    fourth, after the three before were made, with the green cells around counted too)."""
+    d = Daemon("--max-simplices", "4000")
+    try:
+        s = Session(d)
+        body = kuhn_block(2)
+        assert s.put_complex(body).status_code == 200
+        t = s.req("GET", "/complex").json()["simplices"][20]
+        r = s.req("POST", "/refine", json={"select": {"simplices": [t]}, "depth": 4,
+                                           "positions": "midpoint"})
+        assert r.status_code == 413, r.text
+        j = r.json()
+        assert (j["limit_name"], j["limit"], j["requested"]) == ("max_simplices", 4000, 47 + 8 ** 4)
+        assert "at least 4143" in j["detail"]
+        assert s.req("GET").json()["version"] == 1
+        # within the bound: made (depth 3: 47 + 512 at least, with the green cells around)
+        r = s.req("POST", "/refine", json={"select": {"simplices": [t]}, "depth": 3,
+                                           "positions": "midpoint"})
+        assert r.status_code == 200, r.text
+    finally:
+        d.stop()
