@@ -1297,6 +1297,54 @@ await step('level_moves', async () => {
     `${s.handles.count} level-3 handles; PATCH ${JSON.stringify(body?.moves?.[0] ?? null)}; point ${pick.i} at the wanted position ` +
     `(float32): ${atWanted}; buffers vs refetch: ${cmp.position} position, ${cmp.normal} normal floats differ`);
 });
+// 18b. a point moved by keyboard alone: its number typed (Enter fills its coordinates), a new x
+// typed (Enter moves it): one PATCH of that point to exactly those coordinates, the level
+// follows by a delta (no level fetched again) and equals a refetch; Ctrl+Z puts it back; a
+// number no point has is said, and nothing is sent
+await step('keyboard_move', async () => {
+  const s = await snap();
+  const i = Math.min(5, s.controlPoints.length - 1), p0 = s.controlPoints[i];
+  const patches = [];
+  const onReq = (r) => { if (r.method() === 'PATCH' && r.url().includes('/control-points')) patches.push(r.postDataJSON()); };
+  page.on('request', onReq);
+  await page.focus('#move-index');
+  await page.keyboard.press('Control+a');
+  await page.keyboard.type(String(i));
+  await page.keyboard.press('Enter');
+  const filled = await page.evaluate(() => ['move-x', 'move-y', 'move-z'].map((id) => Number(document.getElementById(id).value)));
+  await page.keyboard.press('Tab');
+  const focused = await page.evaluate(() => document.activeElement?.id);
+  const x = p0[0] + 0.375;
+  await page.keyboard.press('Control+a');
+  await page.keyboard.type(String(x));
+  await page.keyboard.press('Enter');
+  await page.waitForFunction(`window.subdivd.idle() && window.subdivd.snapshot().undo === ${s.undo + 1} && window.subdivd.snapshot().shown.version === window.subdivd.snapshot().version`, null, { timeout: 60000 });
+  const a = await snap();
+  const cmp = await compareWithRefetch(page, a.shown.level);
+  const moved = a.controlPoints[i];
+  await page.focus('#view canvas');
+  await page.keyboard.press('Control+z');
+  await page.waitForFunction(`window.subdivd.idle() && window.subdivd.snapshot().redo === 1`, null, { timeout: 60000 });
+  const u = await snap();
+  const n = u.messages.length;
+  await page.focus('#move-index');
+  await page.keyboard.press('Control+a');
+  await page.keyboard.type(String(s.controlPoints.length + 100));
+  await page.focus('#move-x');
+  await page.keyboard.press('Enter');
+  const said = (await messagesSince(n)).map((m) => m.text).join(' | ');
+  page.off('request', onReq);
+  const sent = patches.map((b) => JSON.stringify(b.moves));
+  check('keyboard_move', filled.every((c, k) => c === p0[k]) && focused === 'move-x' &&
+    patches.length === 2 && patches[0].moves.length === 1 && patches[0].moves[0].index === i &&
+    moved[0] === x && moved[1] === p0[1] && moved[2] === p0[2] && a.shown.fetches === s.shown.fetches &&
+    cmp.position === 0 && (cmp.normal === 0 || cmp.normal === -3 /* a primitive without normals */) &&
+    cmp.etag === `"${cmp.shownVersion}"` && u.controlPoints[i].every((c, k) => c === p0[k]) &&
+    said.includes(`No point ${s.controlPoints.length + 100}`),
+    `fields ${filled} for point ${i} at ${p0}; Tab to ${focused}; PATCHes ${sent.join(' ; ')}; moved to ${moved}; ` +
+    `level fetches ${s.shown.fetches} -> ${a.shown.fetches}; vs refetch ${cmp.position} position, ${cmp.normal} normal floats differ; ` +
+    `undone to ${u.controlPoints[i]}; said: ${said}`);
+});
 // 16b. closing the tab that joined leaves the session open for the tab that started it
 if (page2) {
   await step('second_tab_close', async () => {

@@ -1148,6 +1148,44 @@ class App {
     this.queueMove(entry.level, entry.index, p, what);
   }
 
+  // ---- moving a point by keyboard: its number and new coordinates typed -------------------
+
+  // The point of the edit level's handles: its position now (level 0: the control point as the
+  // daemon has it; finer: the drawn float32 point), or null.
+  #handlePoint(i) {
+    const h = this.viewer.handles;
+    if (!h || !Number.isInteger(i) || i < 0 || i >= h.count) return null;
+    return h.level === 0 ? this.model.complex.vertices[i].slice() : this.viewer.handlePosition(i).toArray();
+  }
+
+  // Fill the fields with point i (picked, dragged or typed) and where it is.
+  #fillMoveFields(i, at = this.#handlePoint(i)) {
+    $('move-index').value = i;
+    if (!at) return;
+    ['move-x', 'move-y', 'move-z'].forEach((id, k) => { $(id).value = at[k]; });
+  }
+
+  moveExact() {
+    const h = this.viewer.handles, level = h?.level ?? 0;
+    const i = Number($('move-index').value);
+    const from = this.#handlePoint(i);
+    if ($('move-index').value === '' || !from) {
+      this.info(h ? `No point ${$('move-index').value} of level ${level}: the points are numbered 0 to ${h.count - 1}.` : 'No points to move yet.');
+      return;
+    }
+    const to = ['move-x', 'move-y', 'move-z'].map((id) => $(id).value.trim() === '' ? NaN : Number($(id).value));
+    if (!to.every(Number.isFinite)) {
+      this.info('Type the new x, y and z of the point as numbers.');
+      return;
+    }
+    if (to.every((x, k) => x === from[k])) return;
+    this.undoStack.push({ level, index: i, from, to });
+    this.redoStack = [];
+    this.#syncUndo();
+    this.#move({ level, index: i }, to, level ? `Moving point ${i} of level ${level}` : `Moving control point ${i}`);
+    if (this.slice.on) this.requestLevel(); // the slice is not part of a delta
+  }
+
   undo() {
     const e = this.undoStack.pop();
     if (!e) return;
@@ -1373,6 +1411,7 @@ class App {
     const from = v.handlePosition(i); // float32, for the drag plane
     const start = level === 0 ? this.model.complex.vertices[i].slice() : from.toArray();
     this.drag = { level, index: i, from, to: null, start };
+    this.#fillMoveFields(i, start);
     this.#hint(level ? `Moving point ${i} of level ${level}…` : `Moving control point ${i}…`);
   }
 
@@ -1396,6 +1435,7 @@ class App {
       if (this.viewer.canvas.hasPointerCapture(ev.pointerId)) this.viewer.canvas.releasePointerCapture(ev.pointerId);
       if (d.to && d.to.distanceTo(d.from) > 0) {
         this.undoStack.push({ level: d.level, index: d.index, from: d.start, to: d.to.toArray() });
+        this.#fillMoveFields(d.index, d.to.toArray());
         if (this.slice.on) this.requestLevel(); // the slice is not part of a delta
         this.redoStack = [];
         this.#syncUndo();
@@ -1533,6 +1573,19 @@ class App {
     c.addEventListener('pointerup', (ev) => this.onPointerUp(ev));
     c.addEventListener('pointercancel', (ev) => this.onPointerUp(ev));
 
+    $('move-apply').addEventListener('click', () => this.moveExact());
+    $('move-index').addEventListener('change', () => {
+      const i = Number($('move-index').value);
+      if (this.#handlePoint(i)) this.#fillMoveFields(i);
+    });
+    for (const id of ['move-index', 'move-x', 'move-y', 'move-z']) {
+      $(id).addEventListener('keydown', (ev) => {
+        if (ev.key !== 'Enter') return;
+        ev.preventDefault();
+        if (id === 'move-index') $('move-index').dispatchEvent(new Event('change')); // where it is
+        else this.moveExact();
+      });
+    }
     window.addEventListener('keydown', (ev) => {
       if (ev.target.matches?.('input[type=number], input[type=text]')) return;
       const mod = ev.ctrlKey || ev.metaKey;
