@@ -38,6 +38,7 @@ CHECKS = [
     "stats_shown",       # the panel shows the level's stats as GET /levels/2/stats has them
     "slice_colour",      # the slice in its own colour (not the solids')
     "cross_section",     # slice on (primitive present, picture changes), moved, off
+    "surface_inside",    # with the cut on, the embedded-surface tool tags a triangle inside the solid
     "show_hide",         # solid boundary and cage toggles
     "attribute_colour",  # colormap=NAME:min:max and its legend
     "gltf_loader",       # the GLB in three.js's GLTFLoader: node/mesh per part, one POSITION, extras, linear COLOR_0

@@ -245,6 +245,48 @@ await step(['cross_section', 'slice_colour'], async () => {
     `picture change on: ${sigDiff(before.signature, on.signature)}, moved: ${sigDiff(on.signature, moved.signature)}`);
 });
 
+// 5b. with the cross-section on, the embedded-surface tool reaches a triangle inside the solid
+// (a face of two tetrahedra) by a click on the cut, and tags it (a click again untags it)
+await step('surface_inside', async () => {
+  const tool = await page.evaluate(() => window.subdivd.tool);
+  await page.check('#xsec');
+  await idle('window.subdivd.snapshot().shown.query.slice !== undefined');
+  await page.check('input[name=tool][value=surface]');
+  const pick = await page.evaluate(() => {
+    const app = window.subdivd, v = app.viewer, r = v.canvas.getBoundingClientRect();
+    const key = (f) => [...f].sort((a, b) => a - b).join(',');
+    const count = new Map();
+    for (const s of app.model.complex.simplices) {
+      if (s.length !== 4) continue;
+      for (let k = 0; k < 4; k++) { const f = key(s.filter((_, j) => j !== k)); count.set(f, (count.get(f) || 0) + 1); }
+    }
+    for (let gy = 1; gy < 30; gy++)
+      for (let gx = 1; gx < 40; gx++) {
+        const x = (gx / 40) * r.width, y = (gy / 30) * r.height, f = v.faceAt(x, y);
+        if (f && count.get(key(f)) === 2) return { face: [...f].sort((a, b) => a - b), x: r.left + x, y: r.top + y };
+      }
+    return null;
+  });
+  let tagged = false, untagged = false;
+  const has = (sn) => sn.tags.some((t) => t.length === 3 && [...t].sort((a, b) => a - b).join(',') === pick.face.join(','));
+  if (pick) {
+    const b = await snap();
+    await page.mouse.click(pick.x, pick.y);
+    await idle(`window.subdivd.snapshot().version > ${b.version}`);
+    const a = await snap();
+    tagged = has(a);
+    await page.mouse.click(pick.x, pick.y);
+    await idle(`window.subdivd.snapshot().version > ${a.version}`);
+    untagged = !has(await snap());
+  }
+  await page.uncheck('#xsec');
+  await idle('window.subdivd.snapshot().shown.query.slice === undefined');
+  await page.check(`input[name=tool][value=${tool}]`);
+  check('surface_inside', !!pick && tagged && untagged,
+    pick ? `face ${pick.face} of two tetrahedra picked through the cut; tagged ${tagged}, untagged again ${untagged}` :
+      'no triangle inside the solid is picked anywhere on the cut');
+});
+
 // 6. show/hide: the solid boundary and the cage
 await step('show_hide', async () => {
   const all = await pixels();

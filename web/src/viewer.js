@@ -844,12 +844,17 @@ export class Viewer {
     return null;
   }
 
+  // The control triangle under (x, y), or null: the nearest the line of sight meets outside the
+  // cross-section's cut-away half, so with the cut on a click on it reaches the triangles inside
+  // a solid (an embedded surface's), not only the cage's outer ones.
   faceAt(x, y) {
     if (!this.cage) return null;
     const r = this.canvas.getBoundingClientRect();
     const ray = new THREE.Raycaster();
     ray.setFromCamera(new THREE.Vector2((x / r.width) * 2 - 1, -(y / r.height) * 2 + 1), this.camera);
-    const hit = ray.intersectObject(this.cage.faceMesh, false)[0];
+    const cut = this.slicing ? this.clipPlane : null, eps = 1e-3 * this.cage.tol;
+    const hit = ray.intersectObject(this.cage.faceMesh, false)
+      .find((h) => !cut || cut.distanceToPoint(h.point) >= -eps);
     return hit ? this.cage.faces[hit.faceIndex] : null;
   }
 
