@@ -17,6 +17,7 @@
 #include "rows.h"
 #include <ctype.h>
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -785,18 +786,22 @@ json_t *api_embed_export(const api_model *m)
                 json_array_append_new(row, json_real(w[k]));
             json_array_append_new(bj, row);
         }
-        json_object_set_new(o, d->name, json_pack("{s:o, s:o, s:i, s:s, s:o}", "vertices", vs,
+        json_object_set_new(o, d->name, json_pack("{s:o, s:o, s:i, s:s, s:I, s:o}", "vertices", vs,
                                                   "triangles", ts, "level", d->level, "outside",
-                                                  OUTSIDE[d->outside], "binding", bj));
+                                                  OUTSIDE[d->outside], "outside_vertices",
+                                                  (json_int_t)m->embed[i].outside, "binding", bj));
     }
     return o;
 }
 
 /* Put d into m's list with a given binding (idx, w: 4 per vertex, idx UINT32_MAX for a fixed
  * vertex) — one saved in a document, or carried from a model of the same topology — instead of
- * binding its rest shape anew. Problems point at `at`. */
+ * binding its rest shape anew. `outside` is the count of its vertices that were outside every
+ * cell when it was bound (a "nearest" one's extrapolate: its weights do not tell), or -1 for the
+ * fixed ones' count (a document that does not give it). Problems point at `at`. */
 static int adopt_binding(api_model *m, api_embed_def *d, const uint32_t *idx, const double *w,
-                         const char *at, const api_limits *lim, api_problem *p)
+                         long long outside, const char *at, const api_limits *lim,
+                         api_problem *p)
 {
     if (!m->c)
         return api_fail_at(p, 409, "no-complex", at, "embedded models need a complex with solids");
@@ -833,8 +838,10 @@ static int adopt_binding(api_model *m, api_embed_def *d, const uint32_t *idx, co
             rc = api_fail_at(p, 422, "outside", at, "model \"%s\": %s", d->name, err.message);
     }
     if (!rc) {
-        for (uint32_t v = 0; v < d->nv; v++)
+        for (uint32_t v = 0; outside < 0 && v < d->nv; v++)
             e.outside += idx[4 * (size_t)v] == UINT32_MAX;
+        if (outside >= 0)
+            e.outside = (size_t)outside;
         e.since = atomic_load(&m->version);
         atomic_fetch_add(&d->refs, 1);
         e.def = d;
@@ -848,10 +855,14 @@ static int adopt_binding(api_model *m, api_embed_def *d, const uint32_t *idx, co
 }
 
 /* A saved binding ([[i0, i1, i2, i3, w0, w1, w2, w3] | null per vertex]) of d into m's list. */
-static int restore(api_model *m, api_embed_def *d, json_t *b, const char *base,
+static int restore(api_model *m, api_embed_def *d, json_t *b, json_t *nout, const char *base,
                    const api_limits *lim, api_problem *p)
 {
-    char at[176];
+    char at[184];
+    long long outside = -1;
+    snprintf(at, sizeof at, "%s/outside_vertices", base);
+    if (nout && api_get_int(nout, at, 0, d->nv, &outside, p))
+        return p->status;
     snprintf(at, sizeof at, "%s/binding", base);
     if (!json_is_array(b) || json_array_size(b) != d->nv)
         return api_fail_at(p, 400, "wrong-type", at, "must be one entry per vertex (%u)", d->nv);
@@ -878,12 +889,14 @@ static int restore(api_model *m, api_embed_def *d, json_t *b, const char *base,
                 idx[4 * (size_t)v + k] = (uint32_t)x;
             snprintf(ck, sizeof ck, "%s/%d", ptr, 4 + k);
             if (!rc)
-                rc = api_get_number(json_array_get(row, (size_t)(4 + k)), ck, API_MAX_VALUE,
+                /* any finite weight: a "nearest" vertex far from a small cell extrapolates with
+                 * weights far beyond the coordinates' bound (their sum is checked when adopted) */
+                rc = api_get_number(json_array_get(row, (size_t)(4 + k)), ck, DBL_MAX,
                                     &w[4 * (size_t)v + k], p);
         }
     }
     if (!rc)
-        rc = adopt_binding(m, d, idx, w, at, lim, p);
+        rc = adopt_binding(m, d, idx, w, outside, at, lim, p);
     api_free(idx);
     api_free(w);
     return rc;
@@ -902,7 +915,7 @@ int api_embed_carry(const api_model *from, api_model *to, const api_limits *lim,
             if (!sd_embed_weights(e->bind, v, idx + 4 * (size_t)v, w + 4 * (size_t)v))
                 idx[4 * (size_t)v] = UINT32_MAX;
         if (!rc)
-            rc = adopt_binding(to, e->def, idx, w, "", lim, p);
+            rc = adopt_binding(to, e->def, idx, w, (long long)e->outside, "", lim, p);
         api_free(idx);
         api_free(w);
     }
@@ -924,19 +937,22 @@ int api_embed_import(api_model *m, json_t *emb, const char *base, const api_limi
         api_ptr_key(at, sizeof at, base, name); /* escaped (RFC 6901), whole when it fits */
         api_embed_def *d = NULL;
         api_problem q = {0};
-        json_t *def = json_is_object(v) ? json_copy(v) : json_incref(v), *binding = NULL;
+        json_t *def = json_is_object(v) ? json_copy(v) : json_incref(v), *binding = NULL, *nout = NULL;
         if (json_is_object(def) && (binding = json_object_get(def, "binding")))
             json_incref(binding), json_object_del(def, "binding");
+        if (json_is_object(def) && (nout = json_object_get(def, "outside_vertices")))
+            json_incref(nout), json_object_del(def, "outside_vertices");
         int rc = name_ok(name, &q) ? api_fail_at(p, 422, "invalid-name", at, "%s", q.detail)
                                    : parse_def(def, name, at, lim, &d, p);
         json_decref(def);
         json_t *unused = NULL;
         if (!rc && binding)
-            rc = restore(m, d, binding, at, lim, p);
+            rc = restore(m, d, binding, nout, at, lim, p);
         else if (!rc)
             rc = api_embed_put(m, d, atomic_load(&m->version), lim, NULL, NULL, &unused, p);
         json_decref(unused);
         json_decref(binding);
+        json_decref(nout);
         api_embed_def_unref(d);
         if (rc)
             return rc;

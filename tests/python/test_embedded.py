@@ -461,11 +461,17 @@ def test_changes_rebind_the_rest_shape_all_or_nothing(daemon):
     r = s.req("PUT", "/tags", json={"singular": [[0, 1]]})      # a new model: bound anew
     assert r.status_code == 200, r.text
     assert np.abs(deformed(s) - np.array(pts)).max() <= 1e-12
+    v = edit(s, [{"index": 0, "position": [0.05, 0.0, 0.0]}], r.json()["version"])
+    r = s.req("POST", "/refine", json={"select": {"simplices": [BLOCK["simplices"][4]]}, "depth": 1,
+                                       "positions": "midpoint"})    # a new complex: bound anew
+    assert r.status_code == 200, r.text
+    assert np.abs(deformed(s) - np.array(pts)).max() <= 1e-12
+    n = len(s.req("GET", "/complex").json()["vertices"])
     # a complex the model does not fit in: the change is refused, naming the model
     small = {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], "simplices": [[0, 1, 2, 3]]}
     r = s.put_complex(small)
     assert r.status_code == 422 and '"m"' in r.json()["detail"], r.text
-    assert len(s.req("GET", "/complex").json()["vertices"]) == len(BLOCK["vertices"])
+    assert len(s.req("GET", "/complex").json()["vertices"]) == n
 
 
 def test_export_import_and_restart_keep_embedded_models(daemon, tmp_path):
@@ -496,6 +502,24 @@ def test_export_import_and_restart_keep_embedded_models(daemon, tmp_path):
         assert np.array_equal(deformed(on(d, u)), before)
     finally:
         d.stop()
+
+
+def test_far_nearest_vertices_survive_export_and_import(daemon):
+    """A "nearest" vertex as far as coordinates go (1e15) from level-2 cells of edge ~0.3 has
+    weights ~1e16: the export is imported as it is (the weights were read with the coordinates'
+    bound of 1e15: a 422, and a stored session could not be rebuilt after a restart, 503), and
+    the import keeps the count of vertices outside (3 here, by construction; it counted the
+    fixed ones: 0)."""
+    pts = model_points(5) + [[1e15, 1e15, 1e15], [-1e14, 1, 0.5], [1, 1, 3]]
+    s, v = session_with_model(daemon, pts, outside="nearest")
+    edit(s, [{"index": 4, "position": [1.1, 0.9, 0.2]}], v)
+    ex = s.req("GET", "/export").json()
+    assert np.abs(ex["embedded"]["m"]["binding"][5][4:]).max() > 1e15
+    r = requests.post(daemon.url + "/v1/sessions", json={"import": ex})
+    assert r.status_code == 201, r.text
+    t = adopt(daemon, requests.Session(), r.json())
+    assert np.array_equal(deformed(t), deformed(s))
+    assert t.req("GET", "/embedded").json()["embedded"][0]["outside_vertices"] == 3
 
 
 def test_python_client(daemon):
@@ -720,6 +744,12 @@ def test_an_edit_that_builds_rules_again_keeps_the_models_where_they_are(daemon)
     assert np.array_equal(deformed(s), moved)
     edit(s, [{"index": c, "position": [11.0, 1.0, 1.0]}], v)   # back where it was posted
     assert np.abs(deformed(s) - np.array(pts)).max() <= 1e-12
+    # a "nearest" model's count of vertices outside is carried too (it was recounted as the
+    # fixed ones: 0)
+    r = s.req("PUT", "/embedded/n", json={"vertices": pts[:3] + [[11, 1, 5]], "outside": "nearest"})
+    assert r.status_code == 200 and r.json()["embedded"]["outside_vertices"] == 1, r.text
+    edit(s, [{"index": 3, "position": [1.0, 0.0, 0.0]}], r.json()["version"])  # rules built again
+    assert [e["outside_vertices"] for e in s.req("GET", "/embedded").json()["embedded"]] == [0, 1]
 
 
 def test_level_glb_with_parts_embedded(daemon, tmp_path):
