@@ -252,8 +252,9 @@ def tri_dist(p, a, b, c):
 
 def nearest_cell(x, tets, p):
     """The lowest-numbered of the cells nearest to p (outside all of them), by brute force: a
-    cell's distance is its nearest face's; cells within 1e-12 of the least are equally near
-    (they share the nearest point, computed through different faces)."""
+    cell's distance is its nearest face's; cells within 1e-12 of their longest edge of the least
+    are equally near (docs/SERVICE.md "Embedded models": they share the nearest point, computed
+    through different faces)."""
     P = x[tets]
     # only the cells whose box is no farther than the nearest corner of any cell can be nearest
     box = np.linalg.norm(np.maximum(np.maximum(P.min(axis=1) - p, p - P.max(axis=1)), 0), axis=1)
@@ -263,7 +264,9 @@ def nearest_cell(x, tets, p):
     for skip in range(4):
         a, b, c = (P[:, k] for k in range(4) if k != skip)
         d = np.minimum(d, tri_dist(p, a, b, c))
-    return int(cand[np.flatnonzero(d <= d.min() * (1 + 1e-12))[0]])
+    longest = np.max([np.linalg.norm(P[:, i] - P[:, j], axis=1)
+                      for i in range(4) for j in range(i + 1, 4)], axis=0)
+    return int(cand[np.flatnonzero(d <= d.min() + 1e-12 * longest)[0]])
 
 
 def icosphere_shell(k, r0=1.0, r1=1.2):
