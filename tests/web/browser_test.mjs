@@ -1053,7 +1053,7 @@ await step('keyboard_files', async () => {
   await page.keyboard.press('Tab');
   const first = await page.evaluate(() => document.activeElement.id);
   const outline = await page.$eval('label[for=file]', (l) => getComputedStyle(l).outlineStyle);
-  const chooser = page.waitForEvent('filechooser', { timeout: 5000 }).catch(() => null);
+  const chooser = page.waitForEvent('filechooser', { timeout: 20000 }).catch(() => null); // slow under load
   await page.keyboard.press('Space');
   const fc = await chooser;
   const good = path.join(outdir, 'keyboard.obj'), tetra = path.join(outdir, 'tetra_with_tail.obj');
