@@ -64,7 +64,7 @@ static int parse_args(int argc, char **argv, args *a)
     memset(a, 0, sizeof *a);
     a->level = -1;
     a->halo = -1; /* DECISIONS 44: 3 rings with tetrahedra and a non-manifold simplex, 2 with
-                   * either or Ying-Zorin's rules, else 1 */
+                   * either, Ying-Zorin's rules or Chaikin's with a semi-sharp edge, else 1 */
     const char *why = NULL;
     if (argc < 2 || strcmp(argv[1], "refine"))
         why = "the command is `refine`";

@@ -555,9 +555,19 @@ int mp_partition(api_model *m, int level, int nparts, int halo, mp_piece *pieces
         for (uint32_t v = 0; v < t0->nv && !nonmanifold; v++)
             nonmanifold = nm_type(t0->vnm[v]) != 0;
         bool solids = sd_level_num_cells(m->level0, SD_CELL_TETRA) != 0;
+        /* Chaikin's children of a semi-sharp edge read the other semi-sharp edges at its ends
+         * (docs/RULES.md), one level-0 edge beyond the star as G2's rows read classes: a rim
+         * vertex missing one makes an owned point wrong by level 2 with one ring. The solids'
+         * boundary rows read one edge of their level, so two rings stay enough with them. */
+        bool chaikin = false;
+        for (uint32_t i = 0; i < m->tags.nsh && m->rules.crease_method == SD_CREASE_CHAIKIN; i++) {
+            const api_sharp *x = &m->tags.sh[i];
+            chaikin |= x->nverts == 2 && x->value > 0 && x->value < 10;
+        }
         if (solids && nonmanifold)
             halo = 3;
-        else if (solids || nonmanifold || m->rules.nonmanifold_surface == SD_NMSURF_YING_ZORIN)
+        else if (solids || nonmanifold || chaikin ||
+                 m->rules.nonmanifold_surface == SD_NMSURF_YING_ZORIN)
             halo = 2;
         else
             halo = 1;
