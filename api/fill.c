@@ -330,7 +330,7 @@ int api_fill(json_t *fill, const api_packs *packs, api_input *in, const api_limi
             rc = api_fail_limit(p, "max_simplices", lim->max_simplices,
                                 (uint64_t)fmin(est + in->ns, 1e18),
                                 "the surface encloses %g; with max_volume %g TetGen would make at "
-                                "least %.0f tetrahedra, over the limit of %u simplices; use a larger "
+                                "least %.15g tetrahedra, over the limit of %u simplices; use a larger "
                                 "max_volume", s[k].volume, s[k].max_volume, est, lim->max_simplices);
             api_add_error(p, at, "%s", p->detail);
         }

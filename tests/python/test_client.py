@@ -467,6 +467,33 @@ def test_meshes_read_obj_and_off_records(tmp_path):
             meshes.read(tmp_path / name)
 
 
+def test_meshes_read_tetgen_and_cut_short_files(tmp_path):
+    """TetGen files are read here (meshio's reader loops forever on a .node or .ele without a
+    header line): comments anywhere, 1-based numbering, counts checked against the lines; a
+    binary .msh cut short, which meshio reads into a tetra block of 2-index rows, is a MeshError."""
+    from subdiv import meshes
+    (tmp_path / "a.node").write_text("# points\n4 3 0 1\n1 0 0 0 5  # marker\n2 1 0 0 5\n"
+                                     "3 0 1 0 5\n4 0 0 1 5\n")
+    (tmp_path / "a.ele").write_text("1 4 0\n1 1 2 4 3\n")
+    assert meshes.read(tmp_path / "a.ele")[0] == {
+        "vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], "simplices": [[0, 1, 3, 2]]}
+    (tmp_path / "a.ele").write_text("# no header\n\n")
+    r = subprocess.run([str(REPO / "build" / "subdiv"), "convert", str(tmp_path / "a.node"), "-o",
+                        str(tmp_path / "a.json")], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "a.ele: no header line" in r.stderr, r.stderr
+    (tmp_path / "a.ele").write_text("2 4 0\n1 1 2 3 4\n")
+    with pytest.raises(meshes.MeshError, match="2 tetrahedra announced, the file has 1"):
+        meshes.read(tmp_path / "a.node")
+    import meshio
+    import numpy as np
+    msh = tmp_path / "t.msh"
+    meshio.write(str(msh), meshio.Mesh(np.eye(4), [("tetra", np.array([[0, 1, 2, 3], [3, 2, 1, 0]]))]),
+                 file_format="gmsh", binary=True)
+    msh.write_bytes(msh.read_bytes()[:-40])      # into the second tetrahedron
+    with pytest.raises(meshes.MeshError, match="tetra cell 0 has 2 point indices"):
+        meshes.read(msh)
+
+
 def test_meshes_read_returns_what_its_docstring_says(tmp_path):
     """meshes.read: (body, tags) — vertices in file order, quads split into triangles, point data
     as attributes, tags None without chosen groups; with fill the 2-D cells move into "fill"."""

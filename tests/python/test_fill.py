@@ -368,6 +368,8 @@ def test_fill_limits():
         # estimated before TetGen runs: volume / max_volume over the simplex limit
         p = s.put_complex({"vertices": v, "fill": [{"surface": f, "max_volume": 1e-9}]}).json()
         assert (p["status"], p["limit_name"], p["errors"][0]["pointer"]) == (413, "max_simplices", "/fill/0/max_volume")
+        p = s.put_complex({"vertices": v, "fill": [{"surface": f, "max_volume": 1e-300}]}).json()
+        assert "at least 4.047" in p["detail"] and "e+300 tetrahedra" in p["detail"], p["detail"]  # not 301 digits
         # TetGen's result has more points than --max-vertices allows
         p = s.put_complex({"vertices": v, "fill": [{"surface": f, "max_volume": 0.01}]}).json()
         assert (p["status"], p["limit_name"], p["limit"]) == (413, "max_vertices", 200), p
@@ -430,6 +432,23 @@ def test_several_surfaces_and_summary_without_fill(daemon):
     # a complex without fill has no "fill" in its summary
     r = s.put_complex({"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], "simplices": [[0, 1, 2, 3]]})
     assert "fill" not in r.json()["summary"]
+
+
+def test_a_shell_inside_another_is_filled_not_a_cavity(daemon):
+    """Octahedra of radius 1 and 0.5, the inner one oriented inwards (a cavity's orientation):
+    the volume is the outer one's, 4/3; the inner triangles are faces between two tetrahedra and
+    the boundary of the tetrahedra is the outer octahedron (docs/SERVICE.md "Fill")."""
+    v, f = surface("octahedron")
+    body = {"vertices": v + [[x / 2 for x in p] for p in v],
+            "fill": [{"surface": f + [[a + 6, c + 6, b + 6] for a, b, c in f]}]}
+    s = Session(daemon)
+    r = s.put_complex(body)
+    assert r.status_code == 200, r.text
+    assert abs(r.json()["summary"]["fill"][0]["volume"] - 4 / 3) < 1e-12
+    faces = Counter(tuple(sorted(t[:k] + t[k + 1:])) for t in s.req("GET", "/complex").json()["simplices"]
+                    for k in range(4))
+    assert sorted(k for k, n in faces.items() if n == 1) == sorted(tuple(sorted(t)) for t in f)
+    assert all(faces[tuple(sorted(t))] == 2 for t in body["fill"][0]["surface"][8:])
 
 
 def test_fill_matches_openapi(daemon):

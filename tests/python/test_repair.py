@@ -97,6 +97,11 @@ def test_whole_complex_refusals_stay(daemon):
     assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/simplices/32/1"
     r = s.put_complex({"vertices": v, "simplices": [[0, 0, 1], [2, 2]], "repair": True})
     assert r.status_code == 422  # nothing left: no simplices
+    # a fill's tetrahedra are not repaired: one that repeats a posted one is the fill's 422
+    tet = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    r = s.put_complex({"vertices": tet, "simplices": [[0, 1, 2, 3]], "repair": True,
+                       "fill": [{"surface": [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]}]})
+    assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/fill/0", r.text
     assert s.req("GET").json()["version"] == 0
 
 

@@ -212,3 +212,23 @@ def test_meshfile_readers_agree_with_meshio(tmp_path, fmt, ext, opts):
     np.testing.assert_allclose(np.array(body["vertices"]), m.points, rtol=1e-6)
     want = sorted(tuple(int(i) for i in c) for block in m.cells for c in block.data)
     assert sorted(tuple(s) for s in body["simplices"]) == want
+
+
+def test_meshfile_readers_refuse_what_meshes_py_refuses(tmp_path):
+    """Files the page read wrongly without a word, as the CLI's reader reads them: an OFF counts
+    line without the edge count (the first vertex's x was taken for it), an OBJ index "3x" or
+    "1.5" (parseInt read 3 and 1), an ASCII STL cut short (the triangles before passed for the mesh)."""
+    script = tmp_path / "read.mjs"
+    script.write_text(READ_MESH % (REPO / "web" / "src" / "meshfile.js").as_uri())
+    cases = {"a.off": "OFF\n3 1\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "b.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3x\n",
+             "c.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1.5 2 3\n",
+             "d.stl": "solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
+                      "endloop\nendfacet\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n"}
+    out = {}
+    for name, text in cases.items():
+        (tmp_path / name).write_text(text)
+        r = subprocess.run(["node", str(script), str(tmp_path / name)], capture_output=True, text=True, timeout=60)
+        out[name] = r.stdout if r.returncode == 0 else r.stderr
+    assert json.loads(out["a.off"]) == {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "simplices": [[0, 1, 2]]}
+    assert 'line 4: bad vertex reference "3x"' in out["b.obj"] and '"1.5"' in out["c.obj"]
+    assert "line 11: the file ends inside a facet" in out["d.stl"]

@@ -25,7 +25,8 @@ export function parseObj(text, name = 'OBJ') {
   const lines = text.split(/\r?\n/);
   // OBJ indices are 1-based; negative ones count back from the latest vertex
   const index = (tok, ln) => {
-    const n = parseInt(tok.split('/')[0], 10);
+    const t = tok.split('/')[0];
+    const n = /^[+-]?\d+$/.test(t) ? Number(t) : NaN;
     if (!Number.isInteger(n) || n === 0) fail(name, ln, `bad vertex reference "${tok}"`);
     const i = n > 0 ? n - 1 : vertices.length + n;
     if (i < 0 || i >= vertices.length) fail(name, ln, `vertex ${n} is not defined yet`);
@@ -81,7 +82,7 @@ export function parseOff(text, name = 'OFF') {
   };
   if (toks.length && /^OFF$/i.test(toks[0][0])) p++;
   const nv = int(), nf = int();
-  int(); // edge count, unused
+  if (p < toks.length && toks[p][1] === toks[p - 1][1]) int(); // the edge count, optional, unused
   const vertices = [], simplices = [];
   for (let i = 0; i < nv; i++) {
     const w = [next(), next(), next()];
@@ -128,7 +129,7 @@ export function parseJson(text, name = 'JSON') {
 }
 
 // STL: triangles of corner coordinates; equal points (exactly equal coordinates) become one
-// vertex, numbered in order of first use. Binary when the size is 84 + 50 n for the n of its
+// vertex, numbered in order of first use. An ASCII solid without its "endsolid" is cut short. Binary when the size is 84 + 50 n for the n of its
 // header (an ASCII file starting "solid" can be binary too), else ASCII.
 export function parseStl(data, name = 'STL') {
   const vertices = [], simplices = [], ids = new Map();
@@ -154,20 +155,26 @@ export function parseStl(data, name = 'STL') {
     }
   } else {
     const text = typeof data === 'string' ? data : new TextDecoder().decode(bytes);
-    let corners = [];
+    let corners = [], open = 0, last = 0;
     text.split(/\r?\n/).forEach((raw, k) => {
       const w = raw.trim().split(/\s+/);
-      if (w[0] === 'vertex') {
+      if (w[0]) last = k + 1;
+      if (w[0] === 'solid') open = k + 1;
+      else if (w[0] === 'endsolid') open = 0;
+      else if (w[0] === 'vertex') {
         if (w.length < 4) fail(name, k + 1, 'a vertex needs x y z');
         const [x, y, z] = numbers(name, k + 1, w.slice(1, 4));
         corners.push(vertex(x, y, z));
-      } else if (w[0] === 'endloop') {
+      } else if (w[0] === 'endloop' || (w[0] === 'endfacet' && corners.length)) { // "outer loop" is optional
         if (corners.length !== 3) fail(name, k + 1, `a facet has ${corners.length} vertices, not 3`);
         simplices.push(corners);
         corners = [];
       }
     });
     if (!/^\s*solid/.test(text)) throw new Error(`${name}: neither ASCII STL (no "solid" at the start) nor binary STL (size is not 84 + 50 × the triangle count of its header)`);
+    // a file cut short: a facet or a solid not closed (the triangles before would pass for the mesh)
+    if (corners.length) fail(name, last, 'the file ends inside a facet (cut short?)');
+    if (open) fail(name, last, `the solid of line ${open} has no "endsolid" (cut short?)`);
   }
   if (!simplices.length) throw new Error(`${name}: no triangles`);
   return { vertices, simplices };

@@ -1,8 +1,9 @@
 """Mesh files -> PUT /complex bodies (clients read mesh files, the daemon takes JSON: docs/API.md).
 
-Formats: OBJ and OFF, read here (_read_obj, _read_off: OBJ points, polylines and faces, OFF faces
-of any size, which meshio's readers drop or refuse); STL, Gmsh .msh (2.2 and 4.1, ASCII or
-binary), VTK legacy .vtk, VTK XML .vtu, TetGen .node/.ele, read with meshio (Debian
+Formats: OBJ, OFF and TetGen .node/.ele, read here (_read_obj, _read_off, _read_tetgen: OBJ
+points, polylines and faces, OFF faces of any size, which meshio's readers drop or refuse;
+meshio's TetGen reader loops forever on a file without a header line); STL, Gmsh .msh (2.2
+and 4.1, ASCII or binary), VTK legacy .vtk, VTK XML .vtu, read with meshio (Debian
 python3-meshio); plus .json, a PUT /complex body used as it is. Cells become simplices: vertex,
 line, triangle and tetra as they are; quads and polygons are split into triangles around their
 first vertex; other cell kinds (hexahedra, wedges, pyramids, quadratic cells) are refused with
@@ -84,6 +85,9 @@ def read(path, *, fill=None, singular_groups=None):
             body["simplices"] = [s for s in body.get("simplices", []) if len(s) != 3]
             body.setdefault("fill", []).append(dict(fill, surface=tris))
         return body, None
+    if kind == "tetgen":
+        m = _read_tetgen(p.with_suffix(".node"), p.with_suffix(".ele"))
+        return from_meshio(m, path=str(path), fill=fill, singular_groups=singular_groups)
     if kind in ("obj", "off"):
         try:
             text = p.read_text()
@@ -244,14 +248,101 @@ def _read_off(text, path):
     return _mesh(points, cells)
 
 
-def _split(kind, cells, path):
+def _rows(path):
+    """The (line number, words) of a TetGen file's lines, "#" comments and blank lines left out."""
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise MeshError(f"{path}: no such file (TetGen meshes are a .node and an .ele "
+                        "file of the same name)") from None
+    except UnicodeDecodeError as e:
+        raise MeshError(f"{path}: not a text TetGen file: {e}") from e
+    rows = []
+    for no, line in enumerate(text.splitlines(), 1):
+        w = line.split("#", 1)[0].split()
+        if w:
+            rows.append((no, w))
+    return rows
+
+
+def _counts(path, rows, what, per_what, want):
+    """The header line's first two numbers (the count and the numbers per row) and the rows
+    after it, checked to hold the count of rows of that many numbers (further ones ignored)."""
+    if not rows:
+        raise MeshError(f"{path}: no header line \"<{what}> ...\": not a TetGen file")
+    no, w = rows[0]
+    try:
+        n, per = int(w[0]), int(w[1])
+    except (ValueError, IndexError):
+        raise MeshError(f"{path}: line {no}: the header is \"<{what}> ...\"") from None
+    if n < 1:
+        raise MeshError(f"{path}: line {no}: {n} {what}; at least 1 is needed")
+    if per != want:
+        raise MeshError(f"{path}: line {no}: {per_what} {per}; only {want} is read")
+    if len(rows) - 1 < n:
+        raise MeshError(f"{path}: {n} {what} announced, the file has {len(rows) - 1} lines of them")
+    return n, rows[1:n + 1]
+
+
+def _read_tetgen(node, ele):
+    """TetGen .node ("<points> 3 <attributes> <markers>", then "<i> x y z ...") and .ele
+    ("<tetrahedra> 4 <attributes>", then "<i> a b c d ..."); points numbered consecutively from
+    the first one's number (0 or 1), which the .ele's indices count from; "#" comments anywhere;
+    attributes and markers ignored."""
+    n, rows = _counts(node, _rows(node), "points", "dimension", 3)
+    points, base = [], None
+    for k, (no, w) in enumerate(rows):
+        try:
+            i = int(w[0])
+        except ValueError:
+            raise MeshError(f"{node}: line {no}: a point is \"<number> x y z\"") from None
+        base = i if base is None else base
+        if i != base + k:
+            raise MeshError(f"{node}: line {no}: point {i} should be number {base + k} "
+                            "(points are numbered consecutively)")
+        points.append(_xyz(w[1:], f"{node}: line {no}: a point is \"<number> x y z\""))
+    nt, rows = _counts(ele, _rows(ele), "tetrahedra", "nodes per tetrahedron", 4)
+    cells = []
+    for no, w in rows:
+        try:
+            idx = [int(x) - base for x in w[1:5]]
+        except ValueError:
+            idx = []
+        if len(idx) != 4:
+            raise MeshError(f"{ele}: line {no}: a tetrahedron is \"<number> a b c d\"")
+        if any(not 0 <= i < n for i in idx):
+            raise MeshError(f"{ele}: line {no}: a point number is not one of "
+                            f"{base}..{base + n - 1}")
+        cells.append(("tetra", idx))
+    return _mesh(points, cells)
+
+
+SIZES = {"vertex": 1, "line": 2, "triangle": 3, "tetra": 4, "quad": 4}
+
+
+def _cells(kind, cells, npoints, path):
+    """The cells of a block as lists of ints, each of the size its kind has (a binary file cut
+    short can leave meshio a tetra block of 2-number rows) and naming one of the points."""
+    out = []
+    for k, c in enumerate(cells):
+        c = [int(i) for i in c]
+        if len(c) != SIZES.get(kind, max(len(c), 3)):
+            raise MeshError(f"{path}: {kind} cell {k} has {len(c)} point indices; the file may "
+                            "be cut short or damaged")
+        if any(not 0 <= i < npoints for i in c):
+            raise MeshError(f"{path}: {kind} cell {k} names a point that is not one of the "
+                            f"{npoints} of the file")
+        out.append(c)
+    return out
+
+
+def _split(kind, cells, path, npoints):
     """Simplices of one meshio cell block."""
     if kind in ("vertex", "line", "triangle", "tetra"):
-        return [list(map(int, c)) for c in cells]
+        return _cells(kind, cells, npoints, path)
     if kind in ("quad",) or kind.startswith("polygon"):
         out = []
-        for c in cells:
-            c = list(map(int, c))
+        for c in _cells(kind, cells, npoints, path):
             out += [[c[0], c[i], c[i + 1]] for i in range(1, len(c) - 1)]
         return out
     raise MeshError(f"{path}: cells of kind {kind!r} are not simplices; the daemon takes points, "
@@ -263,8 +354,10 @@ def from_meshio(m, *, path="mesh", fill=None, singular_groups=None):
     verts = [[float(x) for x in (list(p) + [0.0, 0.0])[:3]] for p in m.points]
     if not verts:
         raise MeshError(f"{path}: the mesh has no points")
-    if any(not math.isfinite(x) for v in verts for x in v):
-        raise MeshError(f"{path}: the mesh has a non-finite coordinate")
+    for k, v in enumerate(verts):
+        if not all(math.isfinite(x) for x in v):
+            raise MeshError(f"{path}: point {k} (0-based, in file order) has a non-finite "
+                            f"coordinate: {v}")
     simplices, surface = [], []
     phys = m.cell_data.get("gmsh:physical")
     groups = {}  # physical tag -> name, for the chosen singular groups
@@ -283,7 +376,7 @@ def from_meshio(m, *, path="mesh", fill=None, singular_groups=None):
     tags = []
     dims = {"vertex": 0, "line": 1, "triangle": 2, "tetra": 3}
     for b, block in enumerate(m.cells):
-        s = _split(block.type, block.data, path)
+        s = _split(block.type, block.data, path, len(verts))
         if fill is not None and (block.type in ("triangle", "quad") or block.type.startswith("polygon")):
             surface += s
         else:
