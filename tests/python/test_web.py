@@ -71,6 +71,7 @@ CHECKS = [
     "delta_410",         # a change behind the page's back: 412, 410, the level fetched again, = refetch
     "level_moves",       # level-3 handles; a drag PATCHes "level": 3; buffers = refetch
     "keyboard_move",     # a point moved by typing its number and coordinates; delta; Ctrl+Z
+    "keyboard_move_loading",  # typed while the edit level's points load: nothing sent; then refilled
     "second_tab_close",  # closing the tab that joined leaves the session open for the first
     "tab_reload",        # a reload opens the tab's session again: same model, edits, offsets, TTL back to 1 h
     "tab_duplicate",     # a duplicated tab joins the session without owning it; closing it keeps the TTL

@@ -1387,6 +1387,54 @@ await step('keyboard_move', async () => {
     `level fetches ${s.shown.fetches} -> ${a.shown.fetches}; vs refetch ${cmp.position} position, ${cmp.normal} normal floats differ; ` +
     `undone to ${u.controlPoints[i]}; said: ${said}`);
 });
+// 18c. a keyboard move while the chosen edit level's points are still being fetched moves
+// nothing (the handles drawn are still the level before: its point of that number is another);
+// once they are there, the fields show that number's point of the new level, not the coordinates
+// filled or typed for the level before
+await step('keyboard_move_loading', async () => {
+  const s = await snap();
+  const L = s.shown.level - 1; // fetched for its handles (not the shown level)
+  if (L < 1) throw new Error(`shown level ${s.shown.level}: no finer level below it to fetch`);
+  let release;
+  const held = new Promise((r) => { release = r; });
+  const levelUrl = (u) => new URL(u).pathname.endsWith(`/levels/${L}`);
+  await page.route(levelUrl, async (route) => { await held; await route.continue(); });
+  const patches = [];
+  const onReq = (r) => { if (r.method() === 'PATCH' && r.url().includes('/control-points')) patches.push(r.postDataJSON()); };
+  page.on('request', onReq);
+  const n = s.messages.length;
+  const i = 5, p0 = s.controlPoints[i];
+  await page.selectOption('#edit-level', String(L));
+  const loading = (await snap()).handles.level;
+  await page.focus('#move-index');
+  await page.keyboard.press('Control+a');
+  await page.keyboard.type(String(i));
+  await page.keyboard.press('Enter'); // fills point 5 of the handles drawn (level 0)
+  const filled = await page.evaluate(() => ['move-x', 'move-y', 'move-z'].map((id) => Number(document.getElementById(id).value)));
+  await page.focus('#move-y');
+  await page.keyboard.press('Control+a');
+  await page.keyboard.type(String(p0[1] + 0.25));
+  await page.keyboard.press('Enter');
+  await new Promise((r) => setTimeout(r, 500));
+  const whileLoading = patches.length;
+  const said = (await messagesSince(n)).map((m) => m.text).join(' | ');
+  release();
+  await idle(`window.subdivd.snapshot().handles.level === ${L}`);
+  await page.unroute(levelUrl);
+  const after = await page.evaluate(() => ['move-index', 'move-x', 'move-y', 'move-z'].map((id) => document.getElementById(id).value));
+  const want = await page.evaluate((k) => window.subdivd.viewer.handlePosition(k).toArray(), i);
+  page.off('request', onReq);
+  await page.selectOption('#edit-level', '0');
+  await idle('window.subdivd.snapshot().handles.level === 0');
+  const u = await snap();
+  check('keyboard_move_loading', loading === 0 && filled.every((c, k) => c === p0[k]) && whileLoading === 0 &&
+    patches.length === 0 && said.includes(`level ${L} are still loading`) && after[0] === String(i) &&
+    after.slice(1).every((c, k) => Number(c) === want[k]) && u.undo === s.undo &&
+    u.controlPoints[i].every((c, k) => c === p0[k]),
+    `edit level ${L} chosen, handles drawn of level ${loading}; fields ${filled} for point ${i} at ${p0}; ` +
+    `PATCHes while loading ${whileLoading}, in all ${patches.length}; said: ${said}; once loaded the fields ` +
+    `${after} (point ${i} of level ${L} at ${want}); undo entries ${s.undo} -> ${u.undo}`);
+});
 // 16b. closing the tab that joined leaves the session open for the tab that started it
 if (page2) {
   await step('second_tab_close', async () => {

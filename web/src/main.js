@@ -106,6 +106,7 @@ class App {
     this.movePromise = null;
     this.editLevel = 0; // the level whose points the move tool drags
     this.handleLevel = null; // {level, version} of a level fetched for its handles (1 ≤ l < shown)
+    this.moveFieldsFor = null; // {model, level}: the handles whose point the move fields name
     this.known = 0; // the newest version heard of (answers, events)
     this.cageVersion = 0; // the version the drawn control points are at
     this.complexVersion = 0; // the version of the complex (tags, rules) held
@@ -736,6 +737,7 @@ class App {
       v.setHandles(l, attr, Viewer.interiorOf(attr.count, prims));
       this.#updateSession();
     }
+    this.#syncMoveFields();
   }
 
   // Bring what is drawn up to the newest version heard of, by deltas: the shown level, the
@@ -1161,12 +1163,41 @@ class App {
   // Fill the fields with point i (picked, dragged or typed) and where it is.
   #fillMoveFields(i, at = this.#handlePoint(i)) {
     $('move-index').value = i;
+    this.#moveFieldsNow();
     if (!at) return;
     ['move-x', 'move-y', 'move-z'].forEach((id, k) => { $(id).value = at[k]; });
   }
 
+  // The fields hold a point of these handles (a model and a level) from now on.
+  #moveFieldsNow() {
+    this.moveFieldsFor = { model: this.model, level: this.viewer.handles?.level ?? 0 };
+  }
+
+  // The handles changed (another edit level, a new model): the number now names another point,
+  // so its coordinates are that point's (emptied when there is no such point), not the ones
+  // filled or typed for the point it named before. true when the fields changed.
+  #syncMoveFields() {
+    const f = this.moveFieldsFor, h = this.viewer.handles;
+    if (!f || (f.model === this.model && f.level === (h?.level ?? 0))) return false;
+    const raw = $('move-index').value, i = raw === '' ? NaN : Number(raw), at = this.#handlePoint(i);
+    if (at) this.#fillMoveFields(i, at);
+    else {
+      ['move-x', 'move-y', 'move-z'].forEach((id) => { $(id).value = ''; });
+      this.#moveFieldsNow();
+    }
+    return true;
+  }
+
   moveExact() {
     const h = this.viewer.handles, level = h?.level ?? 0;
+    if (h && level !== this.editLevel) { // the edit level's points are still being fetched
+      this.info(`The points of level ${this.editLevel} are still loading: nothing was moved.`);
+      return;
+    }
+    if (this.#syncMoveFields()) {
+      this.info(`The fields now show point ${$('move-index').value} of level ${level} where it is: nothing was moved.`);
+      return;
+    }
     const i = Number($('move-index').value);
     const from = this.#handlePoint(i);
     if ($('move-index').value === '' || !from) {
@@ -1579,6 +1610,7 @@ class App {
       if (this.#handlePoint(i)) this.#fillMoveFields(i);
     });
     for (const id of ['move-index', 'move-x', 'move-y', 'move-z']) {
+      $(id).addEventListener('input', () => this.#moveFieldsNow()); // typed for these handles
       $(id).addEventListener('keydown', (ev) => {
         if (ev.key !== 'Enter') return;
         ev.preventDefault();
