@@ -611,3 +611,48 @@ def test_a_daemon_full_of_event_streams_queues_requests_in_haproxy(tmp_path):
         for d in daemons:
             d.stop()
         redis.stop()
+
+
+@needs_haproxy
+def test_a_daemon_that_closes_without_an_answer_is_a_502_problem(tmp_path):
+    """A daemon that dies while a request is on its way (here a stand-in that answers /readyz
+    and closes every other connection unanswered): HAProxy's 502 in the daemons' form, a
+    problem+json of type bad-gateway, without Retry-After (a change may have been made)."""
+    import socket
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(64)
+    port = srv.getsockname()[1]
+    stop = threading.Event()
+
+    def serve():
+        srv.settimeout(0.2)
+        while not stop.is_set():
+            try:
+                c, _ = srv.accept()
+            except OSError:
+                continue
+            with c:
+                c.settimeout(2)
+                try:
+                    head = c.recv(65536)
+                except OSError:
+                    continue
+                if head.startswith(b"GET /readyz "):
+                    c.sendall(b"HTTP/1.1 200 OK\r\nContent-Length: 0\r\nConnection: close\r\n\r\n")
+    th = threading.Thread(target=serve, daemon=True)
+    th.start()
+    hap = None
+    try:
+        hap = HAProxy(tmp_path, [f"127.0.0.1:{port}"] * 2)
+        r = requests.get(hap.url + "/v1/sessions/" + "ab" * 16, timeout=30)
+        assert r.status_code == 502, (r.status_code, r.text)
+        assert r.headers["Content-Type"] == "application/problem+json", r.headers
+        assert r.json()["type"] == "/errors/bad-gateway" and r.json()["status"] == 502, r.text
+        assert "Retry-After" not in r.headers
+    finally:
+        stop.set()
+        if hap:
+            hap.stop()
+        th.join(5)
+        srv.close()
