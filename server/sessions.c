@@ -21,6 +21,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/random.h>
+#include <time.h>
 
 /* A session's last use to write to the durable store once st->mu is released. */
 typedef struct pending_touch {
@@ -499,6 +500,25 @@ static api_model *rebuild(const persist_loaded *l, const api_limits *lim, char *
 
 /* Load session `id` from the durable store into the table (new reference), or NULL + *miss.
  * `token` (NULL: not checked) must be the session's before anything is rebuilt. */
+/* Room in the table for a session loaded from the store, waiting a moment when there is none: a
+ * request that has sent its answer holds its session until its connection's thread lets it go,
+ * which a client quick with its next request (on another connection) can beat — a table full of
+ * such sessions is full for a few milliseconds only. Up to 20 looks 10 ms apart; the caller holds
+ * st->mu on entry and on return. */
+static bool room_soon(store *st, store_admission *a)
+{
+    for (int k = 0;; k++) {
+        memset(a, 0, sizeof *a);
+        if (room_locked(st, NULL, 0, a))
+            return true;
+        if (k == 20)
+            return false;
+        unlock_store(st);
+        nanosleep(&(struct timespec){0, 10 * 1000 * 1000}, NULL);
+        pthread_mutex_lock(&st->mu);
+    }
+}
+
 static session *load(store *st, const char *id, const char *token, store_miss *miss, char *why,
                      size_t cap)
 {
@@ -518,7 +538,7 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
     }
     store_admission room = {0};
     pthread_mutex_lock(&st->mu); /* room first: a rebuild that cannot be kept is not made */
-    bool space = room_locked(st, NULL, 0, &room);
+    bool space = room_soon(st, &room);
     unlock_store(st);
     if (!space) {
         pthread_mutex_unlock(lk);
@@ -565,7 +585,7 @@ static session *load(store *st, const char *id, const char *token, store_miss *m
             s->has_owner = owner_of_hex(l.meta.owner, &s->owner); /* it counts for its client */
             store_admission a = {0};
             pthread_mutex_lock(&st->mu);
-            bool ok = room_locked(st, NULL, 0, &a);
+            bool ok = room_soon(st, &a);
             if (ok) {
                 atomic_fetch_add(&s->refs, 1);
                 st->s[st->n++] = s;
