@@ -94,6 +94,8 @@ static bool within_budget(atomic_size_t *on, size_t n)
                             (uint64_t)(meter->held_elsewhere > 0 ? meter->held_elsewhere : 0) + n;
             if (need > budget && need > meter->beyond)
                 meter->beyond = need;
+            if (need > meter->need)
+                meter->need = need;
         }
         return false;
     }

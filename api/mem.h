@@ -64,6 +64,8 @@ typedef struct api_mem_meter {
                          * blocks and reservations plus the request passed the whole budget
                          * (bytes: what it needed), else 0 */
     uint64_t moved;     /* bytes taken and given back in all, core blocks and reservations too */
+    uint64_t need;      /* the largest of what the thread held and asked for where the budget
+                         * refused it, past the whole budget or not (bytes) */
 } api_mem_meter;
 
 /* ---- the memory budget -------------------------------------------------------------------

@@ -153,6 +153,21 @@ static const api_problem *budget_problem(req *r, const api_problem *p, api_probl
                        (unsigned long long)r->mem.beyond, api_mem_budget());
         return q;
     }
+    /* nor when it does with what its own session holds, which it keeps while it runs */
+    uint64_t own = 0, v;
+    api_model *m = r->s && r->mem.need ? session_model(r->s, &v) : NULL;
+    if (m) {
+        own = atomic_load(&m->memory_bytes);
+        api_model_unref(m);
+    }
+    if (own && r->mem.need + own > api_mem_budget()) {
+        api_fail_limit(q, "max_memory", api_mem_budget(), r->mem.need + own,
+                       "the request needs over %llu bytes besides the %llu its session holds, "
+                       "more than the daemon's memory budget (--max-memory, %zu bytes) holds; "
+                       "send less or raise --max-memory", (unsigned long long)r->mem.need,
+                       (unsigned long long)own, api_mem_budget());
+        return q;
+    }
     api_fail(q, 503, "memory-budget", "the daemon's memory budget (--max-memory, %zu bytes) is in "
              "use by other requests and sessions; retry later (%s)", api_mem_budget(), p->detail);
     q->retry_after = 2;
