@@ -127,16 +127,10 @@ int api_crease_tags(const api_model *cur, json_t *v, api_tags *tags, api_problem
         return api_fail_at(p, 400, "wrong-type", "/crease_angle", "must be a number of degrees");
     double d = json_number_value(v);
     if (!(d >= 0 && d <= 180)) {
-        /* the value as sent: the fewest digits that read back as d (%g would print 180.0000001
-         * as the bound itself) */
         char num[32];
-        for (int digits = 6; digits <= 17; digits++) {
-            snprintf(num, sizeof num, "%.*g", digits, d);
-            if (strtod(num, NULL) == d)
-                break;
-        }
         return api_fail_at(p, 422, "out-of-range", "/crease_angle",
-                           "the crease angle is between 0 and 180 degrees, not %s", num);
+                           "the crease angle is between 0 and 180 degrees, not %s",
+                           sd_shortest(d, num));
     }
     if (!cur->in || !cur->level0)
         return api_fail_at(p, 409, "no-complex", "/crease_angle",

@@ -180,16 +180,9 @@ int api_num_get_number(api_num v, const char *ptr, double maxabs, double *out, a
                            num_type_name(v));
     double x = api_num_value(v);
     if (!isfinite(x) || fabs(x) > maxabs) {
-        /* the shortest digits that read back as x: %g alone said "1e+15 exceeds the allowed
-         * magnitude 1e+15" of 1.0000001e15 */
         char t[32];
-        for (int prec = 6; prec <= 17; prec++) {
-            snprintf(t, sizeof t, "%.*g", prec, x);
-            if (!isfinite(x) || strtod(t, NULL) == x)
-                break;
-        }
-        return api_fail_at(p, 422, "out-of-range", ptr, "%s exceeds the allowed magnitude %g", t,
-                           maxabs);
+        return api_fail_at(p, 422, "out-of-range", ptr, "%s exceeds the allowed magnitude %g",
+                           sd_shortest(x, t), maxabs);
     }
     *out = x;
     return 0;

@@ -22,8 +22,6 @@
  */
 #include "hash.h"
 #include <math.h>
-#include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
 
 #define SD_MAX_COORD 1e15
@@ -122,17 +120,11 @@ static sd_result validate(sd_mem *m, const double *xyz, uint32_t nv, const uint3
             double x = xyz[3 * (size_t)v + k];
             if (!isfinite(x))
                 return sdi_fail(err, SD_ERR_VALUE, v, k, "vertex %u: coordinate %d is not finite", v, k);
-            if (fabs(x) > SD_MAX_COORD) { /* the shortest digits that read back as x (%g
-                                            * gave "1e+15 exceeds ... 1e+15" of 1.0000001e15) */
+            if (fabs(x) > SD_MAX_COORD) {
                 char t[32];
-                for (int prec = 6; prec <= 17; prec++) {
-                    snprintf(t, sizeof t, "%.*g", prec, x);
-                    if (strtod(t, NULL) == x)
-                        break;
-                }
                 return sdi_fail(err, SD_ERR_VALUE, v, k,
                                "vertex %u: coordinate %d = %s exceeds the allowed magnitude %g", v, k,
-                               t, SD_MAX_COORD);
+                               sd_shortest(x, t), SD_MAX_COORD);
             }
             lo[k] = fmin(lo[k], x);
             hi[k] = fmax(hi[k], x);

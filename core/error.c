@@ -1,7 +1,19 @@
 /* error.c — filling the caller's sd_error, and the names of result codes. */
 #include "internal.h"
 #include <stdarg.h>
+#include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
+
+const char *sd_shortest(double x, char out[32])
+{
+    for (int prec = 6; prec <= 17; prec++) {
+        snprintf(out, 32, "%.*g", prec, x);
+        if (!isfinite(x) || strtod(out, NULL) == x)
+            break;
+    }
+    return out;
+}
 
 sd_result sdi_fail(sd_error *err, sd_result code, long item, int field, const char *fmt, ...)
 {

@@ -68,6 +68,10 @@ typedef struct sd_error {
 
 const char *sd_result_name(sd_result r);
 
+/* x in the fewest %g digits (6 to 17) that read back as x, for messages that quote a value
+ * (%g alone prints 1.0000001e15 as the bound 1e+15 it passes); out holds at least 32 bytes. */
+const char *sd_shortest(double x, char out[32]);
+
 /* SD_UNDER_ASAN: built with AddressSanitizer (gcc's and clang's spellings). The allocators
  * then use the C library's blocks, which it watches, and align or map none of their own. */
 #if defined(__SANITIZE_ADDRESS__)
