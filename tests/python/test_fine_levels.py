@@ -20,7 +20,7 @@ from scipy.sparse import csr_matrix
 
 from conftest import REPO
 from daemon import Daemon, Session, complex_from_text
-from redisd import REDIS_SERVER, RedisServer
+
 
 CUBE = REPO / "tests" / "cases" / "tetgen_cube" / "mesh.txt"
 MIXED = REPO / "examples" / "mixed.txt"
@@ -406,21 +406,8 @@ def test_one_bad_move_changes_nothing(daemon, mesh):
 
 # ---- restarts on the durable stores -------------------------------------------------------------
 
-def store_daemon(store):
-    spec = store.url if isinstance(store, RedisServer) else f"sqlite:{store}"
-    return Daemon("--store", spec)
-
-
-@pytest.fixture(params=["sqlite", "redis"])
-def store(request, tmp_path):
-    if request.param == "sqlite":
-        yield tmp_path / "s.db"
-        return
-    if not REDIS_SERVER:
-        pytest.skip("redis-server is not installed (tools/packages.txt lists it)")
-    r = RedisServer(tmp_path).start()
-    yield r
-    r.stop()
+# each durable store in turn, and a daemon on it: test_persist.py's
+from test_persist import store, store_daemon  # noqa: E402,F401  (store is a fixture)
 
 
 def on(daemon, s):
