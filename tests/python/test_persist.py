@@ -698,13 +698,9 @@ def test_one_client_cannot_fill_the_store(store):
         d.stop()
 
 
-def test_concurrent_creates_do_not_pass_the_stored_count(store):
-    """The count of a client's stored sessions and the creation it admits are one step: creates
-    from one address at once get --max-stored-sessions-per-client sessions, no more (two counting
-    at the same time would both see room)."""
-    d = store_daemon(store, "--max-connections-per-client", "0",
-                     "--max-stored-sessions-per-client", "3")
-    n = 30
+def creates_at_once(daemons, src, n):
+    """n POST /v1/sessions from address src let go at the same moment, spread over the daemons in
+    turn (each connected first, so the requests come at once): their statuses."""
     go, out = threading.Barrier(n), []
 
     def one(c):
@@ -715,17 +711,30 @@ def test_concurrent_creates_do_not_pass_the_stored_count(store):
         out.append(r.status)
         c.close()
 
+    conns = []
+    for k in range(n):
+        host, port = daemons[k % len(daemons)].url.split("//")[1].split(":")
+        conns.append(http.client.HTTPConnection(host, int(port), timeout=30,
+                                                source_address=(src, 0)))
+    for c in conns:
+        c.connect()
+    threads = [threading.Thread(target=one, args=(c,)) for c in conns]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return out
+
+
+def test_concurrent_creates_do_not_pass_the_stored_count(store):
+    """The count of a client's stored sessions and the creation it admits are one step: creates
+    from one address at once get --max-stored-sessions-per-client sessions, no more (two counting
+    at the same time would both see room)."""
+    d = store_daemon(store, "--max-connections-per-client", "0",
+                     "--max-stored-sessions-per-client", "3")
+    n = 30
     try:
-        host, port = d.url.split("//")[1].split(":")
-        conns = [http.client.HTTPConnection(host, int(port), timeout=30,
-                                            source_address=("127.0.0.11", 0)) for _ in range(n)]
-        for c in conns:                             # connected first: the requests come at once
-            c.connect()
-        threads = [threading.Thread(target=one, args=(c,)) for c in conns]
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join()
+        out = creates_at_once([d], "127.0.0.11", n)
         assert sorted(out) == [201] * 3 + [429] * (n - 3), out
         assert create_from(d, "127.0.0.11")[0] == 429
     finally:
@@ -745,28 +754,7 @@ def test_concurrent_creates_through_two_daemons_do_not_pass_the_stored_count(tmp
                            "--max-stored-sessions-per-client", "3") for _ in range(2)]
         for rnd in range(8):
             src, n = f"127.0.1.{rnd + 1}", 16
-            go, out = threading.Barrier(n), []
-
-            def one(c):
-                go.wait()
-                c.request("POST", "/v1/sessions", "{}", {"Content-Type": "application/json"})
-                r = c.getresponse()
-                r.read()
-                out.append(r.status)
-                c.close()
-
-            conns = []
-            for k in range(n):                      # half to each daemon
-                host, port = ds[k % 2].url.split("//")[1].split(":")
-                conns.append(http.client.HTTPConnection(host, int(port), timeout=30,
-                                                        source_address=(src, 0)))
-            for c in conns:
-                c.connect()
-            threads = [threading.Thread(target=one, args=(c,)) for c in conns]
-            for t in threads:
-                t.start()
-            for t in threads:
-                t.join()
+            out = creates_at_once(ds, src, n)             # half to each daemon
             assert sorted(out) == [201] * 3 + [429] * (n - 3), (rnd, out)
             assert [create_from(d, src)[0] for d in ds] == [429, 429]
     finally:
