@@ -120,6 +120,20 @@ def _addr(d):
     return d.url.split("//", 1)[1]
 
 
+@contextlib.contextmanager
+def haproxy_over_two(tmp_path):
+    """Two daemons (memory store) behind HAProxy: the HAProxy; all stopped after."""
+    daemons, hap = [Daemon() for _ in range(2)], None
+    try:
+        hap = HAProxy(tmp_path, [_addr(d) for d in daemons])
+        yield hap
+    finally:
+        if hap:
+            hap.stop()
+        for d in daemons:
+            d.stop()
+
+
 @pytest.fixture
 def cluster(tmp_path):
     """redis, two daemons on it, HAProxy in front: (haproxy, [daemon n1, daemon n2], redis)."""
@@ -187,10 +201,7 @@ def test_haproxy_log_has_no_query(tmp_path):
     """HAProxy's access log, like the daemons' own (docs/SERVICE.md "Starting"), writes the path
     of a request, never its query: GET /events takes the bearer token as ?access_token= (an
     EventSource cannot send headers), so a log of the request line would hold it."""
-    daemons = [Daemon() for _ in range(2)]
-    hap = None
-    try:
-        hap = HAProxy(tmp_path, [_addr(d) for d in daemons])
+    with haproxy_over_two(tmp_path) as hap:
         sid = "cd" * 16
         secret = "Zq9xSecretTokenInTheQuery0123456789abcdefg"
         for path in (f"/v1/sessions/{sid}/events?access_token={secret}",
@@ -205,11 +216,6 @@ def test_haproxy_log_has_no_query(tmp_path):
         assert f'"GET /v1/sessions/{sid}/events HTTP/1.1"' in log, log
         assert f'"GET /v1/sessions/{sid}/levels/2 HTTP/1.1"' in log, log
         assert secret not in log, log
-    finally:
-        if hap:
-            hap.stop()
-        for d in daemons:
-            d.stop()
 
 
 @needs_haproxy
@@ -217,25 +223,16 @@ def test_haproxy_session_rate_counts_encoded_paths(tmp_path):
     """The daemons read the path percent-decoded, so POST /v1/%73essions creates a session as
     POST /v1/sessions does: HAProxy's limit of 30 new sessions a minute per client address
     (the daemons run with theirs lifted, docs/DEPLOY.md) counts both spellings alike."""
-    daemons = [Daemon() for _ in range(2)]
-    hap = None
-    try:
-        hap = HAProxy(tmp_path, [_addr(d) for d in daemons])
-        from http.client import HTTPConnection
+    with haproxy_over_two(tmp_path) as hap:
         codes = []
         for path in ["/v1/%73essions", "/v1/s%65ssions", "/v1/sessions"] * 11:
-            c = HTTPConnection("127.0.0.1", hap.port, timeout=10)
+            c = http.client.HTTPConnection("127.0.0.1", hap.port, timeout=10)
             c.request("POST", path, "{}", {"Content-Type": "application/json"})  # sent as is
             r = c.getresponse()
             r.read()
             codes.append(r.status)
             c.close()
         assert codes[:30] == [201] * 30 and codes[30:] == [429] * 3, codes
-    finally:
-        if hap:
-            hap.stop()
-        for d in daemons:
-            d.stop()
 
 
 def assert_retry_problem(r, status, slug):
